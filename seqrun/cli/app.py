@@ -1,0 +1,20 @@
+"""The one typer application; command modules register themselves on it."""
+
+from __future__ import annotations
+
+import typer
+
+app = typer.Typer(
+    name="seqrun",
+    help="Declarative sequence runner for PowerCube robot arms (Schunk LWA 3).",
+    no_args_is_help=True,
+    rich_markup_mode=None,
+    pretty_exceptions_enable=False,
+    context_settings={"help_option_names": ["-h", "--help"]},
+    add_completion=False,
+)
+
+sim_app = typer.Typer(help="The simulated arm.", no_args_is_help=True)
+pose_app = typer.Typer(help="Predefined poses.", no_args_is_help=True)
+app.add_typer(sim_app, name="sim")
+app.add_typer(pose_app, name="pose")

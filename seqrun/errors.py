@@ -1,0 +1,98 @@
+"""Exceptions of seqrun.
+
+::
+
+    SeqrunError
+     ├── UserInputError            bad command-line input or file outside a sequence (exit 2)
+     ├── SequenceInvalid           a sequence/arm/pose file failed validation (exit 1);
+     │                             carries every SourceError at once
+     ├── BusError                  anything between us and the modules
+     │    ├── CodecError (ValueError)         a frame that is not valid PowerCube
+     │    ├── ModuleTimeoutError (TimeoutError)  no matching acknowledge in time
+     │    └── ModuleFaultError                a module reports ERROR/HALTED/TOW_ERROR/...
+     ├── PlanningError             ruckig refused the input
+     └── RunAborted                the executor stopped a run (fault, timeout, checkpoint)
+
+Messages are written for a test engineer at the arm: they name the module and its
+decoded state flags, the file and line, never a Python object.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+class SeqrunError(Exception):
+    """Root of all seqrun errors."""
+
+
+class UserInputError(SeqrunError):
+    """Bad command-line input (unknown pose, bad fault spec, missing file)."""
+
+
+@dataclass(frozen=True)
+class SourceError:
+    """One problem in a source file, at 1-based ``line`` and ``column``."""
+
+    file: str
+    line: int
+    column: int
+    message: str
+
+    def __str__(self) -> str:
+        return f"{self.file}:{self.line}:{self.column}: {self.message}"
+
+    def as_dict(self) -> dict:
+        return {"file": self.file, "line": self.line, "column": self.column,
+                "message": self.message}
+
+
+class SequenceInvalid(SeqrunError):
+    """A file failed validation; ``errors`` lists every problem found."""
+
+    def __init__(self, errors: list[SourceError]) -> None:
+        self.errors = list(errors)
+        super().__init__("\n".join(str(e) for e in self.errors))
+
+
+class BusError(SeqrunError):
+    """Communication with the modules failed."""
+
+
+class CodecError(BusError, ValueError):
+    """A frame that cannot be encoded or decoded (wrong length, unknown command, ...)."""
+
+
+class ModuleTimeoutError(BusError, TimeoutError):
+    """A module did not acknowledge a request in time."""
+
+    def __init__(self, module: int, what: str, timeout: float) -> None:
+        self.module = module
+        self.what = what
+        self.timeout = timeout
+        super().__init__(f"module {module}: no acknowledge to {what} within {timeout * 1000:.0f} ms")
+
+
+class ModuleFaultError(BusError):
+    """A module reports a fault; ``flags`` is its decoded state (a StateFlag)."""
+
+    def __init__(self, module: int, flags: object, detail: str = "") -> None:
+        self.module = module
+        self.flags = flags
+        name = getattr(flags, "describe", None)
+        text = name() if callable(name) else str(flags)
+        self.detail = detail
+        super().__init__(f"module {module}: {text}" + (f" ({detail})" if detail else ""))
+
+
+class PlanningError(SeqrunError):
+    """The trajectory planner could not plan a move."""
+
+
+class RunAborted(SeqrunError):
+    """The executor aborted a run; ``module`` names the culprit where there is one."""
+
+    def __init__(self, cause: str, message: str, module: int | None = None) -> None:
+        self.cause = cause
+        self.module = module
+        super().__init__(message)
