@@ -1,0 +1,163 @@
+"""Synchronized, jerk-limited joint trajectories with ruckig (pure: no I/O, no clock).
+
+Plans are made offline (``Ruckig(dofs)`` + ``calculate``) over the *active* joints only:
+locked joints and joints a step does not command are not part of the ruckig problem, so
+they can never move. All active joints arrive together (``Synchronization.Time``).
+
+Angles here are radians in user coordinates; the executor converts to module radians.
+ruckig's Community build ignores position limits and computes waypoints in the cloud, so
+limits are enforced by validation and every plan is a single state-to-state segment.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Mapping, Sequence
+
+import numpy as np
+from ruckig import (ControlInterface, InputParameter, Result, Ruckig, RuckigError,
+                    Synchronization, Trajectory)
+
+from seqrun.arm import ArmDescription
+from seqrun.errors import PlanningError
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Per-joint kinematic limits in rad/s, rad/s², rad/s³ (one entry per arm joint)."""
+
+    velocity: np.ndarray
+    acceleration: np.ndarray
+    jerk: np.ndarray
+
+    @classmethod
+    def from_arm(cls, arm: ArmDescription, *, velocity_scale: float = 1.0,
+                 acceleration_scale: float = 1.0, speed: float = 1.0,
+                 velocity_deg_s: Mapping[str, float] | None = None) -> "Limits":
+        """The arm's maxima × the step's scale factors × the run's speed override.
+
+        ``velocity_deg_s`` caps single joints (a step's per-joint velocity); it never
+        raises a joint above the arm's maximum.
+        """
+        if not (0 < speed <= 1 and 0 < velocity_scale <= 1 and 0 < acceleration_scale <= 1):
+            raise PlanningError("scale factors and speed must lie in (0, 1]")
+        vel = np.radians([j.max_velocity_deg_s for j in arm.joints]) * velocity_scale * speed
+        for name, cap in (velocity_deg_s or {}).items():
+            i = arm.index(name)
+            vel[i] = min(vel[i], math.radians(cap) * speed)
+        acc = np.radians([j.max_acceleration_deg_s2 for j in arm.joints]) * acceleration_scale * speed
+        jerk = np.radians([j.max_jerk_deg_s3 for j in arm.joints]) * acceleration_scale * speed
+        return cls(vel, acc, jerk)
+
+
+@dataclass
+class MovePlan:
+    """One synchronized segment. ``at(t)`` is clamped to [0, duration] (ruckig's is not)."""
+
+    active: tuple[int, ...]
+    start: np.ndarray
+    target: np.ndarray
+    duration: float
+    _trajectory: Trajectory = field(repr=False)
+
+    def at(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Position, velocity, acceleration of every arm joint at time ``t``."""
+        pos = self.target.copy() if t >= self.duration else self.start.copy()
+        vel = np.zeros_like(pos)
+        acc = np.zeros_like(pos)
+        if not self.active:
+            return pos, vel, acc
+        if t >= self.duration:
+            # Past the end ruckig extrapolates; the plan holds its final state instead.
+            return pos, vel, acc
+        p, v, a = self._trajectory.at_time(max(t, 0.0))
+        idx = list(self.active)
+        pos[idx], vel[idx], acc[idx] = p, v, a
+        return pos, vel, acc
+
+    def sample(self, times: Sequence[float]) -> np.ndarray:
+        """Positions at many times: shape (len(times), dof)."""
+        return np.array([self.at(t)[0] for t in times])
+
+    def peak_velocity(self, samples: int = 200) -> np.ndarray:
+        """Largest |velocity| of each joint over the plan (sampled)."""
+        if self.duration <= 0 or not self.active:
+            return np.zeros_like(self.start)
+        ts = np.linspace(0.0, self.duration, samples)
+        return np.max(np.abs(np.array([self.at(t)[1] for t in ts])), axis=0)
+
+
+def _input(active: Sequence[int], limits: Limits) -> InputParameter:
+    idx = list(active)
+    inp = InputParameter(len(idx))
+    # Whole lists only: ruckig's getters return copies, element assignment is lost.
+    inp.max_velocity = [float(x) for x in limits.velocity[idx]]
+    inp.max_acceleration = [float(x) for x in limits.acceleration[idx]]
+    inp.max_jerk = [float(x) for x in limits.jerk[idx]]
+    inp.synchronization = Synchronization.Time
+    return inp
+
+
+def _calculate(inp: InputParameter, dofs: int) -> Trajectory:
+    trajectory = Trajectory(dofs)
+    try:
+        result = Ruckig(dofs).calculate(inp, trajectory)
+    except RuckigError as exc:
+        raise PlanningError(f"trajectory planner refused the move: {exc}") from None
+    if result not in (Result.Working, Result.Finished):
+        raise PlanningError(f"trajectory planner failed: {result}")
+    return trajectory
+
+
+def plan_move(start: Sequence[float], target: Sequence[float], limits: Limits,
+              active: Sequence[int], *, start_velocity: Sequence[float] | None = None,
+              start_acceleration: Sequence[float] | None = None) -> MovePlan:
+    """Plan from ``start`` (with optional non-zero velocity/acceleration) to rest at
+    ``target``. Only ``active`` joints move; the others keep their start value."""
+    start_arr = np.asarray(start, dtype=float)
+    target_arr = start_arr.copy()
+    tgt = np.asarray(target, dtype=float)
+    active = tuple(i for i in active)
+    target_arr[list(active)] = tgt[list(active)]
+    if not np.all(np.isfinite(start_arr)) or not np.all(np.isfinite(target_arr)):
+        raise PlanningError("start and target must be finite numbers")
+    if not active:
+        return MovePlan(active, start_arr, target_arr, 0.0, Trajectory(1))
+    idx = list(active)
+    inp = _input(active, limits)
+    inp.current_position = [float(x) for x in start_arr[idx]]
+    zeros = [0.0] * len(idx)
+    inp.current_velocity = ([float(x) for x in np.asarray(start_velocity)[idx]]
+                            if start_velocity is not None else zeros)
+    inp.current_acceleration = ([float(x) for x in np.asarray(start_acceleration)[idx]]
+                                if start_acceleration is not None else zeros)
+    inp.target_position = [float(x) for x in target_arr[idx]]
+    inp.target_velocity = zeros
+    inp.target_acceleration = zeros
+    trajectory = _calculate(inp, len(idx))
+    return MovePlan(active, start_arr, target_arr, float(trajectory.duration), trajectory)
+
+
+def plan_stop(position: Sequence[float], velocity: Sequence[float],
+              acceleration: Sequence[float], limits: Limits,
+              active: Sequence[int]) -> MovePlan:
+    """A controlled stop: from the current state to zero velocity as fast as the limits
+    allow, each joint on its own (no synchronization needed to stop)."""
+    pos = np.asarray(position, dtype=float)
+    active = tuple(active)
+    if not active:
+        return MovePlan(active, pos.copy(), pos.copy(), 0.0, Trajectory(1))
+    idx = list(active)
+    inp = _input(active, limits)
+    inp.control_interface = ControlInterface.Velocity
+    inp.synchronization = Synchronization.No
+    inp.current_position = [float(x) for x in pos[idx]]
+    inp.current_velocity = [float(x) for x in np.asarray(velocity, dtype=float)[idx]]
+    inp.current_acceleration = [float(x) for x in np.asarray(acceleration, dtype=float)[idx]]
+    inp.target_velocity = [0.0] * len(idx)
+    inp.target_acceleration = [0.0] * len(idx)
+    trajectory = _calculate(inp, len(idx))
+    final = pos.copy()
+    final[idx] = trajectory.at_time(trajectory.duration)[0]
+    return MovePlan(active, pos.copy(), final, float(trajectory.duration), trajectory)
