@@ -1,0 +1,132 @@
+"""Exact length on the wire of a classic CAN data frame, and how long it occupies the bus.
+
+The simulator needs this to make a 1 Mbit/s bus as slow as the real one: an 8-byte
+acknowledge is not "about 100 µs", it is 111 to 135 bit times depending on how many
+stuff bits its identifier, data and CRC happen to need. Everything here is pure.
+
+Layout of a CAN 2.0A (11-bit identifier) data frame, in bit times::
+
+    SOF 1 | ID 11 | RTR 1 | IDE 1 | r0 1 | DLC 4 | DATA 8n | CRC 15      <- bit stuffed
+    CRC delimiter 1 | ACK slot 1 | ACK delimiter 1 | EOF 7 | intermission 3
+
+A CAN 2.0B (29-bit identifier) frame has ``ID 11 | SRR 1 | IDE 1 | ID 18 | RTR 1 | r1 1 |
+r0 1`` in place of ``ID | RTR | IDE | r0``. Remote frames carry a DLC but no data field.
+Stuffing: after five consecutive equal bits the transmitter inserts one bit of the
+opposite level, which itself counts towards the next run; it applies from SOF to the
+end of the CRC sequence. The CRC-15 (polynomial 0x4599) is computed over the unstuffed
+bits from SOF to the end of the data field.
+
+Not covered: CAN FD, error and overload frames, retransmissions, bus-off.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+CRC15_POLYNOMIAL = 0x4599
+#: CRC delimiter, ACK slot, ACK delimiter and the 7 bits of end of frame.
+TRAILER_BITS = 1 + 1 + 1 + 7
+#: Intermission between frames (the interframe space on an otherwise idle bus).
+INTERMISSION_BITS = 3
+
+
+def _bits(value: int, width: int) -> list[int]:
+    return [(value >> shift) & 1 for shift in range(width - 1, -1, -1)]
+
+
+def crc15(bits: Iterable[int]) -> int:
+    """CRC-15/CAN of a bit sequence (most significant bit first), as the controller computes it."""
+    crc = 0
+    for bit in bits:
+        feedback = bit ^ ((crc >> 14) & 1)
+        crc = (crc << 1) & 0x7FFF
+        if feedback:
+            crc ^= CRC15_POLYNOMIAL
+    return crc
+
+
+def unstuffed_bits(can_id: int, data: bytes = b"", *, extended: bool = False,
+                   remote: bool = False, dlc: int | None = None) -> list[int]:
+    """The bits from SOF to the end of the CRC sequence, before stuffing (0 = dominant).
+
+    :param dlc: only for remote frames, which announce a length without sending data.
+    :raises ValueError: identifier out of range, more than 8 data bytes, data in a remote frame.
+    """
+    data = bytes(data)
+    if len(data) > 8:
+        raise ValueError(f"a classic CAN frame carries at most 8 data bytes, got {len(data)}")
+    if remote and data:
+        raise ValueError("a remote frame carries no data bytes")
+    if dlc is None:
+        dlc = len(data)
+    elif not remote and dlc != len(data):
+        raise ValueError(f"dlc {dlc} does not match {len(data)} data bytes")
+    if not 0 <= dlc <= 8:
+        raise ValueError(f"dlc must be 0..8, got {dlc}")
+    rtr = 1 if remote else 0
+    bits = [0]  # SOF
+    if extended:
+        if not 0 <= can_id < 1 << 29:
+            raise ValueError(f"extended CAN id must be 0..0x1FFFFFFF, got {can_id:#x}")
+        bits += _bits(can_id >> 18, 11) + [1, 1]  # base id, SRR, IDE (both recessive)
+        bits += _bits(can_id & 0x3FFFF, 18) + [rtr, 0, 0]  # extension, RTR, r1, r0
+    else:
+        if not 0 <= can_id <= 0x7FF:
+            raise ValueError(f"standard CAN id must be 0..0x7FF, got {can_id:#x}")
+        bits += _bits(can_id, 11) + [rtr, 0, 0]  # RTR, IDE, r0
+    bits += _bits(dlc, 4)
+    for byte in data:
+        bits += _bits(byte, 8)
+    return bits + _bits(crc15(bits), 15)
+
+
+def stuff_bit_count(bits: Iterable[int]) -> int:
+    """How many stuff bits a transmitter inserts into ``bits``."""
+    count = 0
+    run_level = None
+    run_length = 0
+    for bit in bits:
+        if bit == run_level:
+            run_length += 1
+        else:
+            run_level, run_length = bit, 1
+        if run_length == 5:
+            count += 1
+            # The inserted bit has the opposite level and starts the next run.
+            run_level, run_length = 1 - bit, 1
+    return count
+
+
+def frame_bit_length(can_id: int, data: bytes = b"", *, extended: bool = False,
+                     remote: bool = False, dlc: int | None = None,
+                     intermission: bool = True) -> int:
+    """Bit times a data (or remote) frame occupies, stuff bits included.
+
+    With ``intermission=True`` (the default) the 3-bit interframe space is counted, so the
+    sum over back-to-back frames is the bus time they need.
+    """
+    bits = unstuffed_bits(can_id, data, extended=extended, remote=remote, dlc=dlc)
+    length = len(bits) + stuff_bit_count(bits) + TRAILER_BITS
+    return length + (INTERMISSION_BITS if intermission else 0)
+
+
+def frame_time(can_id: int, data: bytes = b"", bitrate: int = 1_000_000, *,
+               extended: bool = False, remote: bool = False, dlc: int | None = None,
+               intermission: bool = True) -> float:
+    """Seconds the frame occupies a bus at ``bitrate`` bit/s (see :func:`frame_bit_length`)."""
+    if bitrate <= 0:
+        raise ValueError(f"bitrate must be positive, got {bitrate}")
+    bits = frame_bit_length(can_id, data, extended=extended, remote=remote, dlc=dlc,
+                            intermission=intermission)
+    return bits / bitrate
+
+
+def bit_length_bounds(dlc: int, *, extended: bool = False) -> tuple[int, int]:
+    """(fewest, most) bit times of any data frame with ``dlc`` bytes, intermission included.
+
+    The most assumes a stuff bit after every fourth bit of the stuffed region, the usual
+    worst-case bound (135 bits for an 8-byte standard frame).
+    """
+    stuffed_region = (54 if extended else 34) + 8 * dlc
+    base = stuffed_region + TRAILER_BITS + INTERMISSION_BITS
+    return base, base + (stuffed_region - 1) // 4
