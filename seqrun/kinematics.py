@@ -1,0 +1,319 @@
+"""Forward kinematics of a serial revolute chain, vectorised over many configurations.
+
+Pure numpy, no I/O. The chain convention is the reference's (thesis 3.2)::
+
+    T(q) = B · Rz(q1) · F2·Rz(q2) · F3·Rz(q3) · … · Fn·Rz(qn) · E
+
+with ``B`` the mount-to-joint-1 frame, ``Fi`` the frame of joint i in joint i-1, ``E`` the
+flange-to-end-effector frame; every joint turns about its own z axis. Angles are radians in
+user coordinates (Totem = zeros), lengths millimetres.
+
+Every function takes configurations of shape ``(..., n)`` and returns ``(..., ...)`` with the
+same leading shape: a dry run evaluates thousands of samples in one call. The only Python
+loop runs over the n joints of the chain, never over samples.
+
+Orientation as roll/pitch/yaw is the reference's ZYX convention ``R = Rz(yaw) Ry(pitch)
+Rx(roll)``; it is singular at pitch = ±90°, so orientations are compared as rotation matrices
+(:func:`orientation_error`), never as angle triples.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, get_args
+
+import numpy as np
+
+from seqrun.arm import GuardPoint
+
+if TYPE_CHECKING:
+    from seqrun.arm import ArmDescription, Frame
+
+__all__ = [
+    "GUARD_POINT_FRAMES",
+    "Chain",
+    "Pose",
+    "fk",
+    "frame_transforms",
+    "jacobian",
+    "matrix_from_rpy",
+    "orientation_error",
+    "point_positions",
+    "pose_from_user_deg",
+    "rpy_from_matrix",
+]
+
+#: Which frame's origin each guard point is, as an index into :func:`frame_transforms`
+#: (0 = joint 1, ..., n-1 = joint n, n = tool). A joint frame's origin lies on that joint's
+#: axis, so it is the point the joint physically turns around: the shoulder is where joint 2
+#: (first pitch) sits, the elbow joint 4, the wrist joint 6 (wrist pitch), the flange joint 7
+#: (the reference's E goes "flange to end-effector", so joint 7's origin is the flange).
+#: These joint numbers are those of a 7-joint arm like the LWA 3.
+GUARD_POINT_FRAMES: dict[GuardPoint, int] = {
+    "shoulder": 1,
+    "elbow": 3,
+    "wrist": 5,
+    "flange": 6,
+}
+
+
+def _homogeneous(rotation: np.ndarray, translation: np.ndarray) -> np.ndarray:
+    frame = np.zeros(np.broadcast_shapes(rotation.shape[:-2], translation.shape[:-1]) + (4, 4))
+    frame[..., :3, :3] = rotation
+    frame[..., :3, 3] = translation
+    frame[..., 3, 3] = 1.0
+    return frame
+
+
+def _cos_sin_deg(angle_deg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """cos and sin of degrees, exact for quarter turns (cos 90° is 0, not 6e-17), because the
+    reference frames are quarter turns and exact zeros keep printed matrices clean."""
+    angle_deg = np.asarray(angle_deg, dtype=float)
+    quarter = np.remainder(angle_deg, 360.0) / 90.0
+    exact = quarter == np.round(quarter)
+    index = np.round(quarter).astype(int) % 4
+    cos = np.where(exact, np.array([1.0, 0.0, -1.0, 0.0])[index], np.cos(np.radians(angle_deg)))
+    sin = np.where(exact, np.array([0.0, 1.0, 0.0, -1.0])[index], np.sin(np.radians(angle_deg)))
+    return cos, sin
+
+
+def _frame_matrix(frame: Frame) -> np.ndarray:
+    cos, sin = _cos_sin_deg(np.asarray(frame.rpy_deg, dtype=float))
+    return _homogeneous(_rpy_matrix(cos, sin), np.asarray(frame.xyz_mm, dtype=float))
+
+
+def _readonly(array: np.ndarray) -> np.ndarray:
+    array = np.array(array, dtype=float)  # own copy, so freezing it cannot affect the caller
+    array.setflags(write=False)
+    return array
+
+
+@dataclass(frozen=True, eq=False)
+class Chain:
+    """The fixed geometry of a serial chain of revolute joints (4x4 homogeneous frames, mm).
+
+    ``links[k]`` is the frame of joint k+2 in the frame of joint k+1 (the reference's F2..Fn).
+    The arrays are read-only so that a chain shared between threads cannot change.
+    """
+
+    base: np.ndarray  # (4, 4) mount -> joint 1, before Rz(q1)
+    links: np.ndarray  # (n-1, 4, 4) F2 .. Fn
+    tool: np.ndarray  # (4, 4) joint n (flange) -> end-effector
+
+    def __post_init__(self) -> None:
+        base, links, tool = (_readonly(a) for a in (self.base, self.links, self.tool))
+        if base.shape != (4, 4) or tool.shape != (4, 4):
+            raise ValueError("base and tool must be 4x4 homogeneous frames")
+        if links.ndim != 3 or links.shape[1:] != (4, 4):
+            raise ValueError(f"links must have shape (n-1, 4, 4), not {links.shape}")
+        object.__setattr__(self, "base", base)
+        object.__setattr__(self, "links", links)
+        object.__setattr__(self, "tool", tool)
+
+    @property
+    def dof(self) -> int:
+        return len(self.links) + 1
+
+    @classmethod
+    def from_arm(cls, arm: ArmDescription) -> Chain:
+        kin = arm.kinematics
+        links = (np.stack([_frame_matrix(f) for f in kin.links]) if kin.links
+                 else np.zeros((0, 4, 4)))
+        return cls(base=_frame_matrix(kin.base), links=links, tool=_frame_matrix(kin.tool))
+
+
+def _rot_z(q: np.ndarray) -> np.ndarray:
+    """(...,) angles -> (..., 4, 4) pure rotations about z."""
+    c, s = np.cos(q), np.sin(q)
+    rot = np.zeros(q.shape + (4, 4))
+    rot[..., 0, 0] = c
+    rot[..., 0, 1] = -s
+    rot[..., 1, 0] = s
+    rot[..., 1, 1] = c
+    rot[..., 2, 2] = 1.0
+    rot[..., 3, 3] = 1.0
+    return rot
+
+
+def _joint_angles(chain: Chain, q_rad: np.ndarray | Sequence[float]) -> np.ndarray:
+    q = np.asarray(q_rad, dtype=float)
+    if q.ndim == 0 or q.shape[-1] != chain.dof:
+        raise ValueError(f"expected joint angles of shape (..., {chain.dof}), got {q.shape}")
+    return q
+
+
+def frame_transforms(chain: Chain, q_rad: np.ndarray | Sequence[float]) -> np.ndarray:
+    """Frames of joints 1..n (each after its own rotation), then the tool: ``(..., n+1, 4, 4)``.
+
+    Frame i is ``B · Rz(q1) · F2·Rz(q2) · … · Fi·Rz(qi)``; the last entry is :func:`fk`.
+    """
+    q = _joint_angles(chain, q_rad)
+    rotations = _rot_z(q)  # (..., n, 4, 4)
+    frames = np.empty(q.shape[:-1] + (chain.dof + 1, 4, 4))
+    current = chain.base @ rotations[..., 0, :, :]
+    frames[..., 0, :, :] = current
+    for k, link in enumerate(chain.links, start=1):
+        current = current @ (link @ rotations[..., k, :, :])
+        frames[..., k, :, :] = current
+    frames[..., chain.dof, :, :] = current @ chain.tool
+    return frames
+
+
+def fk(chain: Chain, q_rad: np.ndarray | Sequence[float]) -> np.ndarray:
+    """End-effector frame in the base frame, ``(..., 4, 4)``, translation in mm."""
+    q = _joint_angles(chain, q_rad)
+    rotations = _rot_z(q)
+    current = chain.base @ rotations[..., 0, :, :]
+    for k, link in enumerate(chain.links, start=1):
+        current = current @ (link @ rotations[..., k, :, :])
+    return current @ chain.tool
+
+
+def point_positions(chain: Chain, q_rad: np.ndarray | Sequence[float]) -> dict[GuardPoint, np.ndarray]:
+    """Positions (mm, ``(..., 3)``) of every guard point, see :data:`GUARD_POINT_FRAMES`.
+
+    The end-effector is the tool point (the origin of :func:`fk`).
+    """
+    needed = max(GUARD_POINT_FRAMES.values()) + 1
+    if chain.dof < needed:
+        raise ValueError(f"guard points are defined for arms with at least {needed} joints, "
+                         f"this chain has {chain.dof}")
+    frames = frame_transforms(chain, q_rad)
+    points: dict[GuardPoint, np.ndarray] = {
+        name: frames[..., index, :3, 3] for name, index in GUARD_POINT_FRAMES.items()}
+    points["end_effector"] = frames[..., chain.dof, :3, 3]
+    assert set(points) == set(get_args(GuardPoint)), "every GuardPoint needs a frame"
+    return points
+
+
+def rpy_from_matrix(rotation: np.ndarray) -> np.ndarray:
+    """Roll, pitch, yaw (rad, ``(..., 3)``, each in (-π, π]) of ``R = Rz(yaw) Ry(pitch) Rx(roll)``.
+
+    Accepts ``(..., 3, 3)`` or homogeneous ``(..., 4, 4)`` matrices. These are the reference's
+    formulas; at pitch = ±90° roll and yaw are not separable and the triple loses them (and
+    loses digits close to it): compare orientations with :func:`orientation_error`.
+    """
+    r = np.asarray(rotation, dtype=float)
+    roll = np.arctan2(r[..., 2, 1], r[..., 2, 2])
+    pitch = np.arctan2(-r[..., 2, 0], np.hypot(r[..., 0, 0], r[..., 1, 0]))
+    yaw = np.arctan2(r[..., 1, 0], r[..., 0, 0])
+    rpy = np.stack([roll, pitch, yaw], axis=-1)
+    # atan2(-0.0, -1) is -π: report half turns as +π whatever the sign of a zero entry,
+    # and a plain 0 instead of -0 (+ 0.0 turns -0.0 into 0.0).
+    return np.where(rpy == -np.pi, np.pi, rpy) + 0.0
+
+
+def matrix_from_rpy(rpy_rad: np.ndarray | Sequence[float]) -> np.ndarray:
+    """``Rz(yaw) Ry(pitch) Rx(roll)`` as ``(..., 3, 3)`` from roll, pitch, yaw ``(..., 3)`` rad."""
+    rpy = np.asarray(rpy_rad, dtype=float)
+    if rpy.shape[-1:] != (3,):
+        raise ValueError(f"expected (..., 3) roll/pitch/yaw, got shape {rpy.shape}")
+    return _rpy_matrix(np.cos(rpy), np.sin(rpy))
+
+
+def _rpy_matrix(cos: np.ndarray, sin: np.ndarray) -> np.ndarray:
+    """``Rz(yaw) Ry(pitch) Rx(roll)`` from cos and sin of (roll, pitch, yaw), ``(..., 3)``."""
+    cr, cp, cy = cos[..., 0], cos[..., 1], cos[..., 2]
+    sr, sp, sy = sin[..., 0], sin[..., 1], sin[..., 2]
+    rot = np.empty(cos.shape[:-1] + (3, 3))
+    rot[..., 0, 0] = cy * cp
+    rot[..., 0, 1] = cy * sp * sr - sy * cr
+    rot[..., 0, 2] = cy * sp * cr + sy * sr
+    rot[..., 1, 0] = sy * cp
+    rot[..., 1, 1] = sy * sp * sr + cy * cr
+    rot[..., 1, 2] = sy * sp * cr - cy * sr
+    rot[..., 2, 0] = -sp
+    rot[..., 2, 1] = cp * sr
+    rot[..., 2, 2] = cp * cr
+    return rot
+
+
+def orientation_error(rotation_a: np.ndarray, rotation_b: np.ndarray) -> np.ndarray:
+    """Angle (rad, in [0, π]) of the rotation ``Ra^T Rb`` that turns orientation a into b.
+
+    ``atan2(sin, cos)`` from the skew part and the trace keeps full precision at both ends,
+    where ``arccos((trace - 1) / 2)`` loses half the digits near 0 and near π.
+    Accepts ``(..., 3, 3)`` or homogeneous ``(..., 4, 4)`` matrices.
+    """
+    a = np.asarray(rotation_a, dtype=float)[..., :3, :3]
+    b = np.asarray(rotation_b, dtype=float)[..., :3, :3]
+    relative = np.einsum("...ki,...kj->...ij", a, b)  # Ra^T Rb
+    cos_angle = (np.trace(relative, axis1=-2, axis2=-1) - 1.0) / 2.0
+    skew = np.stack([relative[..., 2, 1] - relative[..., 1, 2],
+                     relative[..., 0, 2] - relative[..., 2, 0],
+                     relative[..., 1, 0] - relative[..., 0, 1]], axis=-1)
+    sin_angle = np.linalg.norm(skew, axis=-1) / 2.0
+    return np.arctan2(sin_angle, cos_angle)
+
+
+def jacobian(chain: Chain, q_rad: np.ndarray | Sequence[float]) -> np.ndarray:
+    """Geometric Jacobian of the end-effector in the base frame, ``(..., 6, n)``.
+
+    Rows 0-2: linear velocity (mm/rad), rows 3-5: angular velocity (rad/rad). Joint i turns
+    about the z axis of its frame, through that frame's origin.
+    """
+    frames = frame_transforms(chain, q_rad)
+    axes = frames[..., :-1, :3, 2]  # (..., n, 3)
+    origins = frames[..., :-1, :3, 3]  # (..., n, 3)
+    tip = frames[..., -1:, :3, 3]  # (..., 1, 3)
+    linear = np.cross(axes, tip - origins)  # (..., n, 3)
+    return np.concatenate([linear, axes], axis=-1).swapaxes(-1, -2)
+
+
+@dataclass(frozen=True, eq=False)
+class Pose:
+    """End-effector pose for people: position (mm), roll/pitch/yaw (deg), rotation matrix."""
+
+    position_mm: np.ndarray  # (3,)
+    rpy_deg: np.ndarray  # (3,)
+    rotation: np.ndarray  # (3, 3)
+
+
+#: Tolerance (deg) within which a value given for a locked joint counts as its locked value.
+LOCKED_TOLERANCE_DEG = 1e-6
+
+
+def user_joint_values(arm: ArmDescription,
+                      joints_deg: Sequence[float] | Mapping[str, float]) -> list[float]:
+    """All joint angles (deg, in arm order) from a full sequence or a name -> value mapping.
+
+    A mapping may leave out locked joints (they take their locked value); a value given for a
+    locked joint must equal it. Raises ``ValueError`` naming unknown, missing or wrong joints.
+    """
+    if isinstance(joints_deg, Mapping):
+        unknown = [name for name in joints_deg if name not in arm.joint_names]
+        if unknown:
+            raise ValueError(f"unknown joint(s) {', '.join(map(str, unknown))}; "
+                             f"the arm has {', '.join(arm.joint_names)}")
+        missing = [j.name for j in arm.joints if j.locked is None and j.name not in joints_deg]
+        if missing:
+            raise ValueError(f"missing joint(s) {', '.join(missing)}")
+        values = [float(joints_deg[j.name]) if j.name in joints_deg else float(j.locked)
+                  for j in arm.joints]
+    else:
+        values = [float(v) for v in joints_deg]
+        if len(values) != arm.dof:
+            raise ValueError(f"expected {arm.dof} joint angles ({', '.join(arm.joint_names)}), "
+                             f"got {len(values)}")
+    for joint, value in zip(arm.joints, values):
+        if not math.isfinite(value):
+            raise ValueError(f"{joint.name}: {value} is not a finite angle")
+        if joint.locked is not None and abs(value - joint.locked) > LOCKED_TOLERANCE_DEG:
+            raise ValueError(f"{joint.name} is locked at {joint.locked:g} deg, got {value:g}")
+    return values
+
+
+def pose_from_user_deg(arm: ArmDescription,
+                       joints_deg: Sequence[float] | Mapping[str, float]) -> Pose:
+    """End-effector pose of the arm at user-coordinate joint angles in degrees.
+
+    See :func:`user_joint_values` for what is accepted; raises ``ValueError`` otherwise.
+    """
+    q = np.radians(user_joint_values(arm, joints_deg))
+    frame = fk(Chain.from_arm(arm), q)
+    rotation = frame[:3, :3].copy()
+    return Pose(position_mm=frame[:3, 3].copy(),
+                rpy_deg=np.degrees(rpy_from_matrix(rotation)),
+                rotation=rotation)
