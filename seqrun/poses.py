@@ -111,7 +111,7 @@ def find_pose(name: str, poses_dir: str | Path) -> Path:
     if not Path(poses_dir).is_dir():
         raise UserInputError(f"unknown pose '{name}': pose directory {poses_dir} does not exist")
     known = ", ".join(poses) if poses else "none"
-    raise UserInputError(f"unknown pose '{name}' (poses in {poses_dir}: {known})")
+    raise UserInputError(f"unknown pose '{name}'; available poses: {known} (in {poses_dir})")
 
 
 def _stored_number(value: float) -> float:

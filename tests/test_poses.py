@@ -106,7 +106,7 @@ def test_pose_document_fills_a_locked_joint_left_out():
 def test_unknown_pose_lists_the_available_ones():
     with pytest.raises(UserInputError) as info:
         find_pose("nowhere", POSES)
-    assert str(info.value) == f"unknown pose 'nowhere' (poses in {POSES}: opsafe, park, totem)"
+    assert str(info.value) == f"unknown pose 'nowhere'; available poses: opsafe, park, totem (in {POSES})"
 
 
 def test_unknown_pose_in_a_missing_directory(tmp_path):
