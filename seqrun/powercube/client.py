@@ -267,6 +267,7 @@ class PowerCubeClient:
             self._check_open()
             self._drain_tainted({k for k in keys if k is not None})
             self._flush_queued()
+            self._service_watchdog(self.clock.now())
             pending: dict[AckKey, deque[int]] = {}
             deadlines: dict[int, float] = {}
             try:
