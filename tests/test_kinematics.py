@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import get_args
 
 import numpy as np
 import pytest
@@ -10,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from seqrun.arm import load_arm
+from seqrun.arm import GuardPoint, load_arm
 from seqrun.kinematics import (
     Chain,
     fk,
@@ -115,7 +116,7 @@ def test_guard_points_at_totem():
         "flange": [-0.006, -0.1, 1046.1],
         "end_effector": [-0.006, -0.1, 1083.0],
     }
-    assert set(points) == set(expected)
+    assert set(points) == set(expected) == set(get_args(GuardPoint))
     for name, position in expected.items():
         assert np.allclose(points[name], position, rtol=0, atol=1e-9), name
 
