@@ -433,6 +433,23 @@ def test_send_failure_becomes_bus_error(bus, client):
         client.read_position(1)
 
 
+def test_requests_sent_before_a_send_failure_are_tainted(bus, client):
+    values = iter([1.0, 5.0])
+
+    def handler(request):
+        if request.module == 1 and bus.fail_next_send is None and len(bus.sent) == 1:
+            bus.fail_next_send = can.CanOperationError("tx buffer full")
+        return [GetParamAck(request.module, request.param, next(values))]
+
+    bus.handler = handler
+    with pytest.raises(BusError, match="tx buffer full"):
+        client.transact([GetParam(1, ParamId.ACT_POS), GetParam(2, ParamId.ACT_POS)])
+    # The answer to the first (sent) request is still on its way: it must not be taken
+    # as the answer to the next read of the same parameter.
+    assert client.read_position(1) == 5.0
+    assert client.stats.stale_acks == 1
+
+
 def test_close_is_safe_twice_and_blocks_further_use(bus, clock):
     with PowerCubeClient(bus, clock, owns_bus=True) as client:
         client.read_position(1)

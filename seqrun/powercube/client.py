@@ -277,33 +277,42 @@ class PowerCubeClient:
                     if key is not None:
                         pending.setdefault(key, deque()).append(index)
                         deadlines[index] = self.clock.now() + timeout
-            except BusError:
+                self._collect(pending, deadlines, results, raise_on_timeout)
+            except BaseException:
+                # Whatever broke the exchange (a send error, a watchdog refresh that could
+                # not be sent, KeyboardInterrupt), unanswered requests may still be answered.
                 self._taint_all(pending)
                 raise
-            while deadlines:
-                # Stop at the first deadline when a timeout is an error; otherwise give
-                # every request its full time (scan).
-                stop = min(deadlines.values()) if raise_on_timeout else max(deadlines.values())
-                got = self._next_ack(stop)
-                if got is None:
-                    break
-                msg, ack = got
-                queue = pending.get(ack_key(ack))
-                if not queue:
-                    self._unsolicited(msg, ack)
-                    continue
-                index = queue.popleft()
-                if not queue:
-                    del pending[ack_key(ack)]
-                del deadlines[index]
-                results[index] = ack
-                self.stats.acks_matched += 1
             if deadlines:
                 self._taint_all(pending)
                 if raise_on_timeout:  # a silent id in a scan is not a timeout
                     self.stats.timeouts += len(deadlines)
                     raise self._timeout_error(requests, sorted(deadlines), timeout)
         return results
+
+    def _collect(self, pending: dict[AckKey, deque[int]], deadlines: dict[int, float],
+                 results: list[Ack | None], raise_on_timeout: bool) -> None:
+        """Match acks to ``pending`` until all are answered or the deadline has come;
+        answered requests leave ``pending`` and ``deadlines``."""
+        while deadlines:
+            # Stop at the first deadline when a timeout is an error; otherwise give every
+            # request its full time (scan).
+            stop = min(deadlines.values()) if raise_on_timeout else max(deadlines.values())
+            got = self._next_ack(stop)
+            if got is None:
+                return
+            msg, ack = got
+            key = ack_key(ack)
+            queue = pending.get(key)
+            if not queue:
+                self._unsolicited(msg, ack)
+                continue
+            index = queue.popleft()
+            if not queue:
+                del pending[key]
+            del deadlines[index]
+            results[index] = ack
+            self.stats.acks_matched += 1
 
     def _timeout_error(self, requests: Sequence[Request], missing: list[int],
                        timeout: float) -> ModuleTimeoutError:
