@@ -270,6 +270,18 @@ def test_late_ack_that_never_comes_delays_only_its_own_key(bus, client, clock):
     assert sends[2] >= t_timeout + quarantine - 1e-9
 
 
+def test_quarantine_scales_with_a_longer_exchange_timeout(bus, client):
+    # Timed out after 300 ms; answered after 500 ms, later than 4 default timeouts.
+    bus.handler = script(
+        lambda r: [Reply(GetParamAck(2, ParamId.ACT_POS, 1.0), 0.5)],
+        lambda r: [Reply(GetParamAck(2, ParamId.ACT_POS, 2.0), 0.001)],
+    )
+    with pytest.raises(ModuleTimeoutError):
+        client.transact([GetParam(2, ParamId.ACT_POS)], timeout=0.3)
+    assert client.read_position(2) == 2.0
+    assert client.stats.stale_acks == 1
+
+
 def test_late_ack_arriving_during_a_later_exchange_is_discarded_as_stale(bus, client):
     # Module 2's ActPos times out; its late answer arrives while module 3 is read.
     bus.handler = script(

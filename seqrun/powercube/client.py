@@ -19,8 +19,8 @@ Stale acknowledges (the protocol has no sequence numbers)
     1. A frame received *before* a request was sent is never its answer: every exchange
        first reads what is already queued (non-blocking) and discards it.
     2. When a request times out, its key is *tainted* for a quarantine window of
-       :attr:`~PowerCubeClient.QUARANTINE_TIMEOUTS` response timeouts, once per timed-out
-       request. An acknowledge with a tainted key that arrives while no request with that
+       :attr:`~PowerCubeClient.QUARANTINE_TIMEOUTS` response timeouts (the longer of the
+       exchange's and the default one), once per timed-out request. An acknowledge with a tainted key that arrives while no request with that
        key is pending is consumed as the late answer ("stale ack") and removes one taint.
     3. Before a request whose key is still tainted is sent, the client reads the bus until
        the taint is consumed by a late acknowledge or its window has passed.
@@ -281,10 +281,10 @@ class PowerCubeClient:
             except BaseException:
                 # Whatever broke the exchange (a send error, a watchdog refresh that could
                 # not be sent, KeyboardInterrupt), unanswered requests may still be answered.
-                self._taint_all(pending)
+                self._taint_all(pending, timeout)
                 raise
             if deadlines:
-                self._taint_all(pending)
+                self._taint_all(pending, timeout)
                 if raise_on_timeout:  # a silent id in a scan is not a timeout
                     self.stats.timeouts += len(deadlines)
                     raise self._timeout_error(requests, sorted(deadlines), timeout)
@@ -325,8 +325,10 @@ class PowerCubeClient:
         return ModuleTimeoutError(first.module, what, timeout)  # type: ignore[union-attr]
 
     # ------------------------------------------------------------------ stale-ack rules
-    def _taint_all(self, pending: dict[AckKey, deque[int]]) -> None:
-        until = self.clock.now() + self.QUARANTINE_TIMEOUTS * self.response_timeout
+    def _taint_all(self, pending: dict[AckKey, deque[int]], timeout: float) -> None:
+        # The window scales with the longer of the timeout used and the default one.
+        window = self.QUARANTINE_TIMEOUTS * max(timeout, self.response_timeout)
+        until = self.clock.now() + window
         for key, queue in pending.items():
             taint = self._taints.get(key)
             if taint is None:
