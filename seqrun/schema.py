@@ -1,0 +1,856 @@
+"""The sequence file format: pydantic models (the single source of truth) and the loader.
+
+A sequence file is a mapping with ``name``, ``description``, an optional ``arm`` and
+``steps``, a list whose items each name their step type by their single key::
+
+    # yaml-language-server: $schema=../docs/schema/sequence.schema.json
+    name: Op-safe
+    description: From a freshly powered-on arm in Park to the Op-safe pre-grasp pose.
+    steps:
+      - include: startup.yaml              # reset, home, set_limits
+      - move: totem                        # shorthand for {pose: totem}
+      - move: {pose: opsafe, velocity_scale: 0.5, label: Pre-grasp}
+      - wait: 2                            # shorthand for {seconds: 2}
+      - checkpoint:
+          position_mm: [-136.305, 510.761, 389.804]
+          rpy_deg: [-22.318, -27.505, 124.351]
+          position_tolerance_mm: 2
+          angle_tolerance_deg: 1
+
+Shorthand forms (each is in the JSON Schema exactly as accepted here):
+
+- ``- reset``, ``- home``, ``- halt``, ``- set_limits``: the step with its defaults;
+- ``reset``/``home``/``halt``: ``all`` or a list of joint names (``- halt: [j1, j2]``);
+- ``- move: totem`` / ``- checkpoint: opsafe``: a pose name;
+- ``- wait: 2``: seconds; ``- confirm: Is the desk clear?``: the prompt;
+- ``- include: startup.yaml``: the file.
+
+The models only check what a file says on its own (types, ranges, which keys go together);
+what depends on the arm (joint names, limits, velocities, the start-up order) is
+:mod:`seqrun.validation`. :func:`load_sequence` reads a file with its includes into a flat
+list of :class:`ResolvedStep`, each knowing its own ``file:line:col``.
+"""
+
+from __future__ import annotations
+
+import inspect
+import os
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Annotated, Any, ClassVar, Literal, Union
+
+from pydantic import (AfterValidator, BeforeValidator, ConfigDict, Discriminator, Field, Tag,
+                      TypeAdapter, ValidationError, model_validator)
+from pydantic_core import PydanticCustomError
+
+from seqrun.errors import SequenceInvalid, SourceError, UserInputError
+from seqrun.yamlsource import Document, FriendlyModel, Location, load_document, sort_errors
+
+__all__ = [
+    "BARE_STEPS",
+    "DEFAULT_ARM",
+    "MAX_INCLUDE_DEPTH",
+    "MAX_STEPS",
+    "PARAMS_MODELS",
+    "STEP_KINDS",
+    "CheckpointParams",
+    "ConfirmParams",
+    "HaltParams",
+    "HomeParams",
+    "IncludeParams",
+    "LoadedSequence",
+    "MoveParams",
+    "ResetParams",
+    "ResolvedStep",
+    "Sequence",
+    "SetLimitsParams",
+    "StepParams",
+    "WaitParams",
+    "find_project_root",
+    "load_sequence",
+    "sequence_json_schema",
+]
+
+#: Arm file of a sequence that names none, relative to the project root.
+DEFAULT_ARM = "arms/lwa3.yaml"
+#: Deepest chain of includes (a includes b includes c ...).
+MAX_INCLUDE_DEPTH = 16
+#: Most steps a sequence may expand to with its includes.
+MAX_STEPS = 10_000
+
+# --------------------------------------------------------------------------- value types
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+Scale = Annotated[float, Field(gt=0, le=1, allow_inf_nan=False)]
+
+_POSE_NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]*$")
+
+
+def _pose_name(value: str) -> str:
+    if not _POSE_NAME_RE.match(value):
+        raise PydanticCustomError(
+            "pose_name", "'{value}' is not a pose name (the name of a file in poses/ without "
+                         ".yaml: letters, digits, _ and -)", {"value": value})
+    return value
+
+
+JointName = Annotated[str, Field(min_length=1, description="A joint name of the arm file, "
+                                                           "e.g. j1.")]
+PoseName = Annotated[str, AfterValidator(_pose_name), Field(
+    json_schema_extra={"pattern": _POSE_NAME_RE.pattern},
+    description="Name of a pose file in the project's poses/ folder, without .yaml "
+                "(e.g. totem, park, opsafe).")]
+Vector3 = Annotated[list[Finite], Field(min_length=3, max_length=3)]
+LimitPair = Annotated[list[Finite], Field(min_length=2, max_length=2,
+                                          description="[min, max] in degrees.")]
+
+
+def _doc(model: type) -> str:
+    """A model's docstring as one line (for field descriptions)."""
+    return " ".join(inspect.cleandoc(model.__doc__ or "").split())
+
+
+def _either(pick, **choices: Any) -> Any:
+    """A union whose branch is chosen by ``pick(value)`` (a tag in ``choices``), so that a
+    wrong value gets the errors of one branch only. Tags contain ':' so they never look
+    like YAML keys when errors are located."""
+    members = tuple(Annotated[tp, Tag(tag)] for tag, tp in choices.items())
+    return Annotated[Union[members], Discriminator(pick)]  # type: ignore[valid-type]
+
+
+def _joints_pick(value: Any) -> str:
+    return "joints:all" if isinstance(value, str) else "joints:list"
+
+
+def _all_only(value: str) -> str:
+    if value != "all":
+        raise PydanticCustomError("all_or_joints", "expected 'all' or a list of joint names, "
+                                                   "got '{value}'", {"value": value})
+    return value
+
+
+AllWord = Annotated[str, AfterValidator(_all_only), Field(json_schema_extra={"const": "all"})]
+AllOrJoints = _either(_joints_pick, **{"joints:all": AllWord,
+                                       "joints:list": Annotated[list[JointName],
+                                                                Field(min_length=1)]})
+
+
+# --------------------------------------------------------------------------- models
+class _Model(FriendlyModel):
+    model_config = ConfigDict(extra="forbid", strict=True, frozen=True)
+
+
+class StepParams(_Model):
+    """Parameters every step has."""
+
+    kind: ClassVar[str] = ""
+    label: str | None = Field(
+        None, min_length=1,
+        description="Text shown to the operator for this step (default: a description "
+                    "generated from the step).")
+
+    @classmethod
+    def from_shorthand(cls, value: Any) -> StepParams:
+        """The full parameters of a shorthand value (overridden where there is one)."""
+        return value if isinstance(value, cls) else cls()
+
+
+class _ModulesParams(StepParams):
+    joints: AllOrJoints = Field(  # type: ignore[valid-type]
+        "all", description="'all' (one broadcast to every module) or a list of joint names "
+                           "(one command per module).")
+
+    @classmethod
+    def from_shorthand(cls, value: Any) -> StepParams:
+        if isinstance(value, cls):
+            return value
+        return cls() if value is None else cls(joints=value)
+
+
+class ResetParams(_ModulesParams):
+    """Reset: clears the modules' error state (and a Halt). Parameters can be written after it;
+    the first step of every start-up."""
+
+    kind: ClassVar[str] = "reset"
+    yaml_name: ClassVar[str] = "reset"
+
+
+class HomeParams(_ModulesParams):
+    """Home: enables the motors (audible click) without moving. The modules refuse motion
+    until Home; it needs Reset first."""
+
+    kind: ClassVar[str] = "home"
+    yaml_name: ClassVar[str] = "home"
+
+
+class HaltParams(_ModulesParams):
+    """Halt: stops at once; the modules then refuse motion until Reset."""
+
+    kind: ClassVar[str] = "halt"
+    yaml_name: ClassVar[str] = "halt"
+
+
+class SetLimitsParams(StepParams):
+    """Write the position limits (MinPos/MaxPos) into every joint's module, and the velocity
+    and acceleration limits (MaxVel/MaxAcc) of the joints named here. Values default to the
+    arm file's; overrides may only narrow them."""
+
+    kind: ClassVar[str] = "set_limits"
+    yaml_name: ClassVar[str] = "set_limits"
+    limits_deg: dict[JointName, LimitPair] = Field(
+        default_factory=dict,
+        description="Per-joint [min, max] in user degrees, e.g. {j1: [-170, 170]}; inside the "
+                    "arm file's limits. Joints not named get the arm file's limits.")
+    max_velocity_deg_s: dict[JointName, Positive] = Field(
+        default_factory=dict,
+        description="Per-joint MaxVel in deg/s, at most the arm file's maximum; written only "
+                    "for the joints named.")
+    max_acceleration_deg_s2: dict[JointName, Positive] = Field(
+        default_factory=dict,
+        description="Per-joint MaxAcc in deg/s^2, at most the arm file's maximum; written "
+                    "only for the joints named.")
+
+    @model_validator(mode="after")
+    def _ordered(self) -> SetLimitsParams:
+        bad = [f"{name}: min {lo:g} is not below max {hi:g}"
+               for name, (lo, hi) in self.limits_deg.items() if not lo < hi]
+        if bad:
+            raise ValueError("limits_deg " + "; ".join(bad))
+        return self
+
+    @classmethod
+    def from_shorthand(cls, value: Any) -> StepParams:
+        return value if isinstance(value, cls) else cls()
+
+
+def _exactly_one(*alternatives: str) -> dict:
+    return {"oneOf": [{"required": [name]} for name in alternatives]}
+
+
+class MoveParams(StepParams):
+    """Move the arm to a pose or to joint angles: one synchronized, jerk-limited motion in
+    which all commanded joints arrive together. Joints not named do not move."""
+
+    kind: ClassVar[str] = "move"
+    yaml_name: ClassVar[str] = "move"
+    model_config = ConfigDict(json_schema_extra=_exactly_one("pose", "joints"))
+
+    pose: PoseName | None = Field(  # type: ignore[valid-type]
+        None, description="Move every joint to this pose (a file in poses/), e.g. totem.")
+    joints: dict[JointName, Finite] | None = Field(
+        None, min_length=1,
+        description="Target angles of some joints in user degrees, e.g. {j1: 10, j4: -30}; "
+                    "the others stay where they are.")
+    relative: bool = Field(
+        False, description="true: the joints values are offsets from where the joints are.")
+    velocity_deg_s: dict[JointName, Positive] = Field(
+        default_factory=dict,
+        description="Velocity cap of single joints in deg/s (at most the arm's maximum).")
+    velocity_scale: Scale = Field(
+        1.0, description="Fraction (0, 1] of the arm's velocity limits to use.")
+    acceleration_scale: Scale = Field(
+        1.0, description="Fraction (0, 1] of the arm's acceleration and jerk limits to use.")
+    tolerance_deg: Positive | None = Field(
+        None, description="In-position tolerance per joint in degrees "
+                          "(default: the arm file's control.position_tolerance_deg).")
+    timeout_s: Positive | None = Field(
+        None, description="Time allowed for the whole move in seconds (default: the planned "
+                          "duration plus the arm file's control.settle_timeout_s).")
+
+    @model_validator(mode="after")
+    def _target(self) -> MoveParams:
+        if (self.pose is None) == (self.joints is None):
+            raise PydanticCustomError(
+                "move_target", "a move needs either 'pose' or 'joints'" if self.pose is None
+                else "a move takes either 'pose' or 'joints', not both")
+        if self.relative and self.joints is None:
+            raise PydanticCustomError("move_relative",
+                                      "'relative: true' needs 'joints' (a pose is absolute)")
+        return self
+
+    @classmethod
+    def from_shorthand(cls, value: Any) -> StepParams:
+        return value if isinstance(value, cls) else cls(pose=value)
+
+
+class WaitParams(StepParams):
+    """Wait a fixed time, or until every joint is in position."""
+
+    kind: ClassVar[str] = "wait"
+    yaml_name: ClassVar[str] = "wait"
+    model_config = ConfigDict(json_schema_extra=_exactly_one("seconds", "until"))
+
+    seconds: Positive | None = Field(None, description="Time to wait in seconds.")
+    until: Literal["in_position"] | None = Field(
+        None, description="in_position: wait until every joint is within tolerance_deg of its "
+                          "last target.")
+    tolerance_deg: Positive | None = Field(
+        None, description="For until: in_position; default the arm file's "
+                          "control.position_tolerance_deg.")
+    timeout_s: Positive | None = Field(
+        None, description="For until: in_position; default the arm file's "
+                          "control.settle_timeout_s.")
+
+    @model_validator(mode="after")
+    def _one(self) -> WaitParams:
+        if (self.seconds is None) == (self.until is None):
+            raise PydanticCustomError(
+                "wait_what", "a wait needs either 'seconds' or 'until'" if self.seconds is None
+                else "a wait takes either 'seconds' or 'until', not both")
+        if self.seconds is not None and (self.tolerance_deg is not None
+                                         or self.timeout_s is not None):
+            raise PydanticCustomError("wait_what", "tolerance_deg and timeout_s belong to "
+                                                   "'until: in_position', not to 'seconds'")
+        return self
+
+    @classmethod
+    def from_shorthand(cls, value: Any) -> StepParams:
+        return value if isinstance(value, cls) else cls(seconds=value)
+
+
+class CheckpointParams(StepParams):
+    """Check the measured end-effector pose (forward kinematics of the joints) against an
+    expected one; the run stops if it is off by more than the tolerances."""
+
+    kind: ClassVar[str] = "checkpoint"
+    yaml_name: ClassVar[str] = "checkpoint"
+    model_config = ConfigDict(json_schema_extra={"oneOf": [
+        {"required": ["pose"]}, {"required": ["position_mm", "rpy_deg"]}]})
+
+    pose: PoseName | None = Field(  # type: ignore[valid-type]
+        None, description="Expect the end-effector pose of this pose file.")
+    position_mm: Vector3 | None = Field(
+        None, description="Expected end-effector position [x, y, z] in mm (base frame).")
+    rpy_deg: Vector3 | None = Field(
+        None, description="Expected orientation [roll, pitch, yaw] in degrees, "
+                          "R = Rz(yaw) Ry(pitch) Rx(roll).")
+    position_tolerance_mm: Positive = Field(
+        7.0, description="Largest allowed distance from the expected position, mm. The "
+                         "default covers the worst case of a 0.2° in-position error on every "
+                         "joint of the LWA 3 at Op-safe (6.2 mm).")
+    angle_tolerance_deg: Positive = Field(
+        1.5, description="Largest allowed rotation angle between expected and measured "
+                         "orientation, degrees (default: covers 0.2° per joint, 1.2°).")
+
+    @model_validator(mode="after")
+    def _one(self) -> CheckpointParams:
+        explicit = self.position_mm is not None or self.rpy_deg is not None
+        if self.pose is not None and explicit:
+            raise PydanticCustomError("checkpoint_what", "a checkpoint takes either 'pose' or "
+                                                         "'position_mm' with 'rpy_deg', not both")
+        if self.pose is None and (self.position_mm is None or self.rpy_deg is None):
+            missing = "rpy_deg" if self.position_mm is not None else (
+                "position_mm" if self.rpy_deg is not None else "")
+            raise PydanticCustomError(
+                "checkpoint_what", f"a checkpoint with position_mm needs rpy_deg too"
+                if missing == "rpy_deg" else "a checkpoint with rpy_deg needs position_mm too"
+                if missing else "a checkpoint needs either 'pose' or 'position_mm' and 'rpy_deg'")
+        return self
+
+    @classmethod
+    def from_shorthand(cls, value: Any) -> StepParams:
+        return value if isinstance(value, cls) else cls(pose=value)
+
+
+class ConfirmParams(StepParams):
+    """Stop until the operator confirms (or declines, which ends the run)."""
+
+    kind: ClassVar[str] = "confirm"
+    yaml_name: ClassVar[str] = "confirm"
+    prompt: str = Field(min_length=1, description="The question or instruction shown to the "
+                                                  "operator, e.g. 'Is the desk clear?'.")
+
+    @classmethod
+    def from_shorthand(cls, value: Any) -> StepParams:
+        return value if isinstance(value, cls) else cls(prompt=value)
+
+
+class IncludeParams(StepParams):
+    """Run the steps of another sequence file here."""
+
+    kind: ClassVar[str] = "include"
+    yaml_name: ClassVar[str] = "include"
+    file: str = Field(min_length=1, pattern=r"\.ya?ml$",
+                      description="Path of the sequence to include, relative to this file; "
+                                  "it must stay inside the sequences folder.")
+
+    @classmethod
+    def from_shorthand(cls, value: Any) -> StepParams:
+        return value if isinstance(value, cls) else cls(file=value)
+
+
+#: Parameter model of each step type, in the order the docs list them.
+PARAMS_MODELS: dict[str, type[StepParams]] = {m.kind: m for m in (
+    ResetParams, HomeParams, HaltParams, SetLimitsParams, MoveParams, WaitParams,
+    CheckpointParams, ConfirmParams, IncludeParams)}
+STEP_KINDS: tuple[str, ...] = tuple(PARAMS_MODELS)
+#: Step types that may be written as a bare word (``- reset``).
+BARE_STEPS: tuple[str, ...] = ("reset", "home", "halt", "set_limits")
+
+
+# -- the one-key step mappings
+def _kind_pick(*, none: str | None = None, text: str | None = None, number: str | None = None,
+               items: str | None = None, params: str) -> Any:
+    def pick(value: Any) -> str:
+        if value is None and none:
+            return none
+        if isinstance(value, str) and text:
+            return text
+        if isinstance(value, (int, float)) and not isinstance(value, bool) and number:
+            return number
+        if isinstance(value, list) and items:
+            return items
+        return params
+    return pick
+
+
+def _modules_spec(model: type[StepParams]) -> Any:
+    k = model.kind
+    return _either(_kind_pick(none=f"{k}:default", text=f"{k}:all", items=f"{k}:list",
+                              params=f"{k}:params"),
+                   **{f"{k}:default": None, f"{k}:all": AllWord,
+                      f"{k}:list": Annotated[list[JointName], Field(min_length=1)],
+                      f"{k}:params": model})
+
+
+class _Step(_Model):
+    """One-key mapping ``{<kind>: <parameters or shorthand>}``."""
+
+    kind: ClassVar[str] = ""
+
+    def params(self) -> StepParams:
+        return PARAMS_MODELS[self.kind].from_shorthand(getattr(self, self.kind))
+
+
+class ResetStep(_Step):
+    """A reset step."""
+
+    kind: ClassVar[str] = "reset"
+    reset: _modules_spec(ResetParams) = Field(  # type: ignore[valid-type]
+        description=_doc(ResetParams) + " Shorthand: '- reset', 'reset: all', "
+                                          "'reset: [j1, j2]'.")
+
+
+class HomeStep(_Step):
+    """A home step."""
+
+    kind: ClassVar[str] = "home"
+    home: _modules_spec(HomeParams) = Field(  # type: ignore[valid-type]
+        description=_doc(HomeParams) + " Shorthand: '- home', 'home: all', "
+                                         "'home: [j1, j2]'.")
+
+
+class HaltStep(_Step):
+    """A halt step."""
+
+    kind: ClassVar[str] = "halt"
+    halt: _modules_spec(HaltParams) = Field(  # type: ignore[valid-type]
+        description=_doc(HaltParams) + " Shorthand: '- halt', 'halt: all', "
+                                         "'halt: [j1, j2]'.")
+
+
+class SetLimitsStep(_Step):
+    """A set_limits step."""
+
+    kind: ClassVar[str] = "set_limits"
+    set_limits: _either(_kind_pick(none="set_limits:default", params="set_limits:params"),
+                        **{"set_limits:default": None,
+                           "set_limits:params": SetLimitsParams}) = Field(
+        description=_doc(SetLimitsParams) + " Shorthand: '- set_limits' (the arm file's "
+                                              "values).")
+
+
+class MoveStep(_Step):
+    """A move step."""
+
+    kind: ClassVar[str] = "move"
+    move: _either(_kind_pick(text="move:pose", params="move:params"),
+                  **{"move:pose": PoseName, "move:params": MoveParams}) = Field(
+        description=_doc(MoveParams) + " Shorthand: 'move: totem' (a pose name).")
+
+
+class WaitStep(_Step):
+    """A wait step."""
+
+    kind: ClassVar[str] = "wait"
+    wait: _either(_kind_pick(number="wait:seconds", params="wait:params"),
+                  **{"wait:seconds": Positive, "wait:params": WaitParams}) = Field(
+        description=_doc(WaitParams) + " Shorthand: 'wait: 2' (seconds).")
+
+
+class CheckpointStep(_Step):
+    """A checkpoint step."""
+
+    kind: ClassVar[str] = "checkpoint"
+    checkpoint: _either(_kind_pick(text="checkpoint:pose", params="checkpoint:params"),
+                        **{"checkpoint:pose": PoseName,
+                           "checkpoint:params": CheckpointParams}) = Field(
+        description=_doc(CheckpointParams) + " Shorthand: 'checkpoint: opsafe' (a pose).")
+
+
+class ConfirmStep(_Step):
+    """A confirm step."""
+
+    kind: ClassVar[str] = "confirm"
+    confirm: _either(_kind_pick(text="confirm:prompt", params="confirm:params"),
+                     **{"confirm:prompt": Annotated[str, Field(min_length=1)],
+                        "confirm:params": ConfirmParams}) = Field(
+        description=_doc(ConfirmParams) + " Shorthand: 'confirm: Is the desk clear?'.")
+
+
+class IncludeStep(_Step):
+    """An include step."""
+
+    kind: ClassVar[str] = "include"
+    include: _either(_kind_pick(text="include:file", params="include:params"),
+                     **{"include:file": Annotated[str, Field(min_length=1,
+                                                             pattern=r"\.ya?ml$")],
+                        "include:params": IncludeParams}) = Field(
+        description=_doc(IncludeParams) + " Shorthand: 'include: startup.yaml'.")
+
+
+_STEP_MODELS: dict[str, type[_Step]] = {m.kind: m for m in (
+    ResetStep, HomeStep, HaltStep, SetLimitsStep, MoveStep, WaitStep, CheckpointStep,
+    ConfirmStep, IncludeStep)}
+assert tuple(_STEP_MODELS) == STEP_KINDS, "one step model per parameter model"
+
+BareStep = Annotated[Literal[BARE_STEPS], Field(  # type: ignore[valid-type]
+    description="A step with its default parameters: reset, home, halt or set_limits.")]
+
+
+def _closest(word: str, options: tuple[str, ...]) -> str:
+    import difflib
+
+    close = difflib.get_close_matches(word, options, n=1, cutoff=0.6)
+    return f"did you mean '{close[0]}'? " if close else ""
+
+
+def _check_step(value: Any) -> Any:
+    """Explain a step that is not a one-key mapping of a known type (before the union)."""
+    kinds = ", ".join(STEP_KINDS)
+    if isinstance(value, str):
+        if value in BARE_STEPS:
+            return value
+        if value in STEP_KINDS:
+            raise PydanticCustomError(
+                "step_needs_params", "step '{kind}' needs parameters, e.g. '- {example}'",
+                {"kind": value, "example": _EXAMPLES[value]})
+        raise PydanticCustomError(
+            "unknown_step", "unknown step type '{kind}' ({hint}expected one of: {kinds})",
+            {"kind": value, "hint": _closest(value, STEP_KINDS), "kinds": kinds})
+    if not isinstance(value, dict):
+        raise PydanticCustomError(
+            "step_shape", "a step is a mapping with one key naming its type, e.g. "
+                          "'- move: totem' (expected one of: {kinds})", {"kinds": kinds})
+    if len(value) != 1:
+        keys = ", ".join(str(k) for k in value)
+        hint = ""
+        if "label" in value:
+            hint = "; put label inside the step, e.g. '- move: {pose: totem, label: Up}'"
+        raise PydanticCustomError(
+            "step_shape", "a step has exactly one key, its type; this one has {n}: {keys}{hint}",
+            {"n": len(value), "keys": keys or "none", "hint": hint})
+    kind = next(iter(value))
+    if kind not in STEP_KINDS:
+        kind_text = str(kind)
+        raise PydanticCustomError(
+            "unknown_step", "unknown step type '{kind}' ({hint}expected one of: {kinds})",
+            {"kind": kind_text, "hint": _closest(kind_text, STEP_KINDS), "kinds": kinds})
+    return value
+
+
+_EXAMPLES = {"move": "move: totem", "wait": "wait: 2", "checkpoint": "checkpoint: opsafe",
+             "confirm": "confirm: Is the desk clear?", "include": "include: startup.yaml"}
+
+
+def _step_pick(value: Any) -> str | None:
+    if isinstance(value, str):
+        return "step:bare"
+    if isinstance(value, dict) and len(value) == 1:
+        return f"step:{next(iter(value))}"
+    if isinstance(value, _Step):
+        return f"step:{value.kind}"
+    return None
+
+
+Step = Annotated[
+    Union[(Annotated[BareStep, Tag("step:bare")],  # type: ignore[valid-type]
+           *(Annotated[m, Tag(f"step:{k}")] for k, m in _STEP_MODELS.items()))],
+    Discriminator(_step_pick),
+    BeforeValidator(_check_step),
+    Field(description="One step: a mapping with one key naming the step type "
+                      f"({', '.join(STEP_KINDS)}), or a bare {', '.join(BARE_STEPS)}."),
+]
+
+
+class Sequence(_Model):
+    """A seqrun sequence file: what the arm does, step by step."""
+
+    yaml_name: ClassVar[str] = "the sequence"
+    model_config = ConfigDict(title="seqrun sequence")
+
+    name: str = Field(min_length=1, description="Short name of the sequence, shown to the "
+                                                "operator and in run reports.")
+    description: str = Field(description="What the sequence does and when to use it.")
+    arm: str | None = Field(
+        None, min_length=1,
+        description=f"Arm file, relative to the project root (default {DEFAULT_ARM}). An "
+                    "included sequence must name the same arm or none.")
+    steps: list[Step] = Field(min_length=1, description="The steps, in order.")
+
+
+_STEP_ADAPTER: TypeAdapter[Any] = TypeAdapter(Step)
+
+
+def sequence_json_schema() -> dict:
+    """JSON Schema (2020-12) of sequence files, for editors (yaml-language-server)."""
+    schema = Sequence.model_json_schema()
+    return {"$schema": "https://json-schema.org/draft/2020-12/schema",
+            "$id": "https://seqrun.local/schema/sequence.schema.json", **schema}
+
+
+# --------------------------------------------------------------------------- loading
+@dataclass(frozen=True, eq=False)
+class ResolvedStep:
+    """One step of the flattened sequence (includes expanded).
+
+    ``number`` is 1-based in the flat list; ``location`` is where the step is written;
+    ``include_chain`` the include steps that led to it, outermost first.
+    """
+
+    number: int
+    kind: str
+    params: StepParams
+    location: Location
+    label: str | None = None
+    include_chain: tuple[Location, ...] = ()
+    document: Document | None = field(default=None, repr=False)
+    node: Any = field(default=None, repr=False)  # the parameters' YAML node
+
+    def where(self, *path: Any, key: bool = False) -> Location:
+        """Location of a parameter, e.g. ``where("joints", "j4")``; the step's own location
+        (or the nearest enclosing node) where the path is not written out (shorthand)."""
+        if self.document is None or self.node is None:
+            return self.location
+        return self.document.locate(path, start=self.node, key=key)
+
+    def error(self, message: str, *path: Any, key: bool = False) -> SourceError:
+        return self.where(*path, key=key).error(message)
+
+    @property
+    def title(self) -> str:
+        """What the operator sees: the label, or a short description of the step."""
+        return self.label or describe(self.kind, self.params)
+
+
+def describe(kind: str, params: StepParams) -> str:
+    """A one-line description of a step for people, e.g. ``move to pose totem``."""
+    if isinstance(params, (ResetParams, HomeParams, HaltParams)):
+        who = "all modules" if params.joints == "all" else ", ".join(params.joints)
+        return f"{kind} {who}"
+    if isinstance(params, MoveParams):
+        if params.pose is not None:
+            return f"move to pose {params.pose}"
+        sign = "by" if params.relative else "to"
+        return "move " + ", ".join(f"{j} {sign} {v:g}°" for j, v in (params.joints or {}).items())
+    if isinstance(params, WaitParams):
+        return (f"wait {params.seconds:g} s" if params.seconds is not None
+                else "wait until in position")
+    if isinstance(params, CheckpointParams):
+        return (f"checkpoint: pose {params.pose}" if params.pose is not None
+                else "checkpoint: end-effector pose")
+    if isinstance(params, ConfirmParams):
+        return f"confirm: {params.prompt}"
+    if isinstance(params, SetLimitsParams):
+        return "write joint limits"
+    if isinstance(params, IncludeParams):
+        return f"include {params.file}"
+    return kind
+
+
+@dataclass(frozen=True, eq=False)
+class LoadedSequence:
+    """A sequence file with its includes expanded into :attr:`steps`."""
+
+    path: Path
+    file: str
+    name: str
+    description: str
+    project_root: Path
+    poses_dir: Path
+    arm_path: Path
+    steps: tuple[ResolvedStep, ...]
+    files: tuple[Path, ...] = ()  # every file read, the top one first
+
+    @property
+    def location(self) -> Location:
+        return Location(self.file, 1, 1)
+
+
+def find_project_root(path: str | os.PathLike[str]) -> Path:
+    """Nearest ancestor of ``path`` holding an ``arms/`` or ``poses/`` folder; else the cwd."""
+    start = Path(path).resolve()
+    for folder in (start if start.is_dir() else start.parent, *start.parents):
+        if (folder / "arms").is_dir() or (folder / "poses").is_dir():
+            return folder
+    return Path.cwd().resolve()
+
+
+class _Loader:
+    def __init__(self, top: Path, root: Path) -> None:
+        self.root = root
+        self.poses_dir = root / "poses"
+        sequences = root / "sequences"
+        self.tree = sequences if top.is_relative_to(sequences) else top.parent
+        self.errors: list[SourceError] = []
+        self.steps: list[ResolvedStep] = []
+        self.files: list[Path] = []
+        self.arm_path: Path | None = None
+        self.pose_problems: dict[str, str | None] = {}
+
+    def load(self, path: Path, *, chain: tuple[Path, ...] = (),
+             include_chain: tuple[Location, ...] = (), include_step: Any = None) -> Any:
+        from seqrun.yamlsource import display_path
+
+        try:
+            doc = load_document(path, file=display_path(path))
+        except SequenceInvalid as exc:
+            self.errors.extend(exc.errors)
+            return None
+        except UserInputError as exc:
+            if include_step is None:
+                raise  # the file named on the command line
+            self.errors.append(include_step.error(str(exc)))
+            return None
+        self.files.append(path)
+        try:
+            seq = doc.validate(Sequence)
+        except SequenceInvalid as exc:
+            # Report every problem at once: go on with the steps that are valid on their own
+            # (their includes and poses are checked too); the file's errors are known.
+            self.errors.extend(exc.errors)
+            self._partial(doc, path, chain, include_chain)
+            return None
+        self._check_arm(doc, seq, top=not chain)
+        self._steps(doc, path, seq.steps, doc.items(doc.child(doc.root, "steps")), chain,
+                    include_chain)
+        return seq
+
+    def _partial(self, doc: Document, path: Path, chain: tuple[Path, ...],
+                 include_chain: tuple[Location, ...]) -> None:
+        if not chain:
+            self.arm_path = (self.root / DEFAULT_ARM).resolve()
+        data = doc.data.get("steps") if isinstance(doc.data, dict) else None
+        if not isinstance(data, list):
+            return
+        good, nodes = [], []
+        for item, node in zip(data, doc.items(doc.child(doc.root, "steps"))):
+            try:
+                good.append(_STEP_ADAPTER.validate_python(item))
+                nodes.append(node)
+            except ValidationError:
+                continue  # already reported by the whole-file validation
+        self._steps(doc, path, good, nodes, chain, include_chain)
+
+    def _steps(self, doc: Document, path: Path, steps: list, items: list,
+               chain: tuple[Path, ...], include_chain: tuple[Location, ...]) -> None:
+        for raw, node in zip(steps, items):
+            if len(self.steps) >= MAX_STEPS:
+                self.errors.append(doc.location(node).error(
+                    f"the sequence expands to more than {MAX_STEPS} steps with its includes"))
+                return
+            if isinstance(raw, str):
+                kind, params, params_node = raw, PARAMS_MODELS[raw](), node
+            else:
+                kind = raw.kind
+                params, params_node = raw.params(), doc.child(node, kind)
+            here = doc.location(node)
+            if isinstance(params, IncludeParams):
+                self._include(doc, path, params, params_node, here, chain + (path,),
+                              include_chain)
+                continue
+            step = ResolvedStep(number=len(self.steps) + 1, kind=kind, params=params,
+                                location=here, label=params.label, include_chain=include_chain,
+                                document=doc, node=params_node)
+            if isinstance(params, (MoveParams, CheckpointParams)) and params.pose is not None:
+                self._check_pose(step, params.pose)
+            self.steps.append(step)
+
+    def _check_arm(self, doc: Document, seq: Sequence, *, top: bool) -> None:
+        if top:
+            self.arm_path = (self.root / (seq.arm or DEFAULT_ARM)).resolve()
+            if seq.arm is not None and not self.arm_path.is_file():
+                self.errors.append(doc.error(("arm",), f"arm file '{seq.arm}' not found "
+                                                      f"(looked for {self.arm_path})"))
+            return
+        if seq.arm is not None and (self.root / seq.arm).resolve() != self.arm_path:
+            self.errors.append(doc.error(("arm",), f"this file names arm '{seq.arm}' but the "
+                                                  "sequence including it runs on "
+                                                  f"{self.arm_path}; remove 'arm' here or "
+                                                  "make it the same"))
+
+    def _include(self, doc: Document, path: Path, params: IncludeParams, node: Any,
+                 here: Location, chain: tuple[Path, ...],
+                 include_chain: tuple[Location, ...]) -> None:
+        def error(message: str) -> None:
+            self.errors.append(doc.error(("file",), message, start=node))
+
+        target = (path.parent / params.file).resolve()
+        if not target.is_relative_to(self.tree):
+            error(f"include '{params.file}' is outside the sequences folder {self.tree}; "
+                  "included files must stay inside it")
+            return
+        if target in chain:
+            names = " -> ".join(p.name for p in (*chain[chain.index(target):], target))
+            error(f"include loop: {names}")
+            return
+        if len(chain) >= MAX_INCLUDE_DEPTH:
+            error(f"includes nested more than {MAX_INCLUDE_DEPTH} deep")
+            return
+        if not target.is_file():
+            error(f"include '{params.file}': no such file ({target})")
+            return
+        self.load(target, chain=chain, include_chain=include_chain + (here,),
+                  include_step=doc.locate(("file",), start=node))
+
+    def _check_pose(self, step: ResolvedStep, name: str) -> None:
+        from seqrun.poses import find_pose, load_pose
+
+        if name not in self.pose_problems:
+            problem = None
+            try:
+                load_pose(find_pose(name, self.poses_dir))
+            except UserInputError as exc:
+                problem = str(exc)
+            except SequenceInvalid as exc:
+                self.errors.extend(exc.errors)
+                problem = f"pose '{name}' cannot be used: its file has errors"
+            self.pose_problems[name] = problem
+        if self.pose_problems[name] is not None:
+            self.errors.append(step.error(self.pose_problems[name], "pose"))
+
+
+def load_sequence(path: str | os.PathLike[str], *,
+                  project_root: str | os.PathLike[str] | None = None) -> LoadedSequence:
+    """Read a sequence file with its includes; every step keeps its own ``file:line:col``.
+
+    Poses come from ``<project root>/poses/`` (root: see :func:`find_project_root`); an
+    unknown pose is a located error listing the available ones. Raises
+    :class:`SequenceInvalid` with every error found, :class:`UserInputError` if the file
+    cannot be read.
+    """
+    from seqrun.yamlsource import display_path
+
+    path = Path(path)
+    top = path.resolve()
+    root = Path(project_root).resolve() if project_root is not None else find_project_root(top)
+    loader = _Loader(top, root)
+    seq = loader.load(top)
+    if loader.errors:
+        raise SequenceInvalid(sort_errors(loader.errors))
+    assert seq is not None and loader.arm_path is not None
+    return LoadedSequence(path=path, file=display_path(path), name=seq.name,
+                          description=seq.description, project_root=root,
+                          poses_dir=loader.poses_dir, arm_path=loader.arm_path,
+                          steps=tuple(loader.steps), files=tuple(loader.files))
