@@ -32,11 +32,18 @@ def _arm_schema() -> dict:
     return ArmDescription.model_json_schema()
 
 
+def _sequence_schema() -> dict:
+    from seqrun.schema import sequence_json_schema
+
+    return sequence_json_schema()
+
+
 #: File name in docs/schema/ -> function returning the schema (imports stay lazy, so one
 #: module that does not import yet does not stop the others from being generated).
 SCHEMAS: dict[str, Callable[[], dict]] = {
     "arm.schema.json": _arm_schema,
     "pose.schema.json": _pose_schema,
+    "sequence.schema.json": _sequence_schema,
 }
 
 
