@@ -1,0 +1,599 @@
+"""The executor: runs a validated sequence step by step against a PowerCube client.
+
+Safety rules it implements (docs/safety.md tells the operator's side):
+
+- Before the first motion it reads the arm and re-validates the sequence from the
+  measured start state; nothing moves if that fails.
+- Every cycle (``control.cycle_hz``) of a move or wait it reads every module (from the
+  extended acknowledges of the motion commands, or FPosStateDio reads) and checks state
+  flags, missing acknowledges, following error against the plan and the workspace guards.
+  Any fault -> Halt broadcast at once, the run ends with exit code 3.
+- Operator abort -> controlled stop (ruckig to zero velocity, streamed like a move), then
+  hold, exit code 130. A second abort, or :meth:`Executor.halt`, -> Halt broadcast.
+- Nothing restarts motion by itself: after a stop the executor only holds and reports.
+
+Control methods (:meth:`abort`, :meth:`halt`, :meth:`pause`, :meth:`resume`) may be called
+from any thread (signal handler, web console); the run loop acts on them within a cycle.
+Listeners receive structured events (plain dicts) for the log writer and displays.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time as _wall
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Iterable
+
+import numpy as np
+
+from seqrun import kinematics
+from seqrun.arm import ArmDescription
+from seqrun.clock import Clock
+from seqrun.errors import (BusError, ModuleFaultError, ModuleTimeoutError, PlanningError,
+                           RunAborted, SeqrunError)
+from seqrun.planner import Limits, MovePlan, plan_move, plan_stop
+from seqrun.powercube.codec import GetParam, SetMotion, SetParam
+from seqrun.powercube.protocol import MotionMode, ParamId, ShortState, StateFlag
+
+# Exit codes (shared with the CLI).
+EXIT_OK = 0
+EXIT_INVALID = 1
+EXIT_USAGE = 2
+EXIT_FAULT = 3
+EXIT_OPERATOR_ABORT = 130
+
+Listener = Callable[[dict], None]
+
+
+class OperatorAbort(SeqrunError):
+    """The operator asked to stop (controlled stop already done when raised)."""
+
+
+@dataclass
+class Measurement:
+    """One reading of the whole arm."""
+
+    t: float
+    user_deg: np.ndarray                 # every joint, user coordinates
+    short_state: dict[int, ShortState]   # per module id
+
+
+@dataclass
+class StepResult:
+    number: int
+    kind: str
+    label: str
+    location: str
+    status: str = "pending"              # passed | failed | aborted | skipped
+    started: float | None = None
+    finished: float | None = None
+    planned_duration_s: float | None = None
+    detail: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def duration_s(self) -> float | None:
+        if self.started is None or self.finished is None:
+            return None
+        return self.finished - self.started
+
+    def as_dict(self) -> dict:
+        return {"number": self.number, "kind": self.kind, "label": self.label,
+                "location": self.location, "status": self.status,
+                "duration_s": _round(self.duration_s),
+                "planned_duration_s": _round(self.planned_duration_s), **self.detail}
+
+
+@dataclass
+class RunResult:
+    status: str                          # passed | failed | aborted | invalid
+    exit_code: int
+    message: str
+    steps: list[StepResult]
+    started: float
+    finished: float
+    fault: dict[str, Any] | None = None
+    not_verified: list[str] = field(default_factory=list)
+    min_heights_mm: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def duration_s(self) -> float:
+        return self.finished - self.started
+
+    @property
+    def planned_duration_s(self) -> float:
+        return sum(s.planned_duration_s or 0.0 for s in self.steps)
+
+
+def _round(x: float | None, nd: int = 4) -> float | None:
+    return None if x is None else round(float(x), nd)
+
+
+class Executor:
+    """Runs resolved steps; see the module docstring for the safety rules."""
+
+    #: Proportional gain (1/s) of the velocity cap that pulls a lagging joint onto its plan.
+    CATCH_UP_GAIN = 10.0
+    #: Smallest TargetVel sent (deg/s): a zero cap would leave a joint short of its target.
+    MIN_COMMAND_VELOCITY_DEG_S = 1.0
+    #: Idempotent reads are retried this often when an acknowledge is lost (drop_acks).
+    READ_RETRIES = 1
+
+    def __init__(self, client, arm: ArmDescription, clock: Clock, *,
+                 poses_dir: Path | None = None, speed: float = 1.0,
+                 command_mode: str | None = None, cycle_hz: float | None = None,
+                 confirm: Callable[[str], bool] | None = None,
+                 before_step: Callable[[Any], bool] | None = None,
+                 listeners: Iterable[Listener] = (), dry_run: bool = False) -> None:
+        if not 0 < speed <= 1:
+            raise ValueError("speed must lie in (0, 1]")
+        self.client = client
+        self.arm = arm
+        self.clock = clock
+        self.poses_dir = poses_dir
+        self.speed = speed
+        self.command_mode = command_mode or arm.control.command_mode
+        self.cycle = 1.0 / (cycle_hz or arm.control.cycle_hz)
+        self.confirm = confirm
+        self.before_step = before_step
+        self.listeners: list[Listener] = list(listeners)
+        self.dry_run = dry_run
+        self.chain = kinematics.Chain.from_arm(arm)
+        self.offsets_deg = np.array([j.offset_deg for j in arm.joints])
+        self.modules = arm.module_ids
+        self.movable = [i for i, j in enumerate(arm.joints) if j.locked is None]
+        self.limits = Limits.from_arm(arm, speed=speed)
+        # Thread-safe control flags.
+        self._lock = threading.Lock()
+        self._abort_requests = 0
+        self._halt_requested = False
+        self._paused = threading.Event()
+        self.waiting_for_operator = False
+        # Run bookkeeping.
+        self._t0 = clock.now()
+        self.last: Measurement | None = None
+        self.commanded_deg: np.ndarray | None = None
+        self.min_heights_mm: dict[str, float] = {}
+        self.not_verified: list[str] = []
+        self._current_step: StepResult | None = None
+        self._move_limits = self.limits
+
+    # ------------------------------------------------------------------ control (any thread)
+    def abort(self, reason: str = "operator abort") -> None:
+        """First call: controlled stop. Second call: Halt."""
+        with self._lock:
+            self._abort_requests += 1
+            if self._abort_requests >= 2:
+                self._halt_requested = True
+        self._paused.clear()
+        self.emit("abort_requested", reason=reason, count=self._abort_requests)
+
+    def halt(self, reason: str = "halt requested") -> None:
+        """Immediate Halt (second Ctrl-C, SIGTERM, STOP button)."""
+        with self._lock:
+            self._halt_requested = True
+        self._paused.clear()
+        self.emit("halt_requested", reason=reason)
+
+    def pause(self) -> None:
+        self._paused.set()
+        self.emit("pause_requested")
+
+    def resume(self) -> None:
+        self._paused.clear()
+        self.emit("resumed")
+
+    @property
+    def abort_requested(self) -> bool:
+        return self._abort_requests > 0
+
+    # ------------------------------------------------------------------ events
+    def emit(self, type_: str, **data: Any) -> None:
+        event = {"t": round(self.clock.now() - self._t0, 6), "type": type_, **data}
+        if self._current_step is not None and "step" not in data:
+            event["step"] = self._current_step.number
+        for listener in self.listeners:
+            try:
+                listener(event)
+            except Exception as exc:  # a broken display must never stop a safe run
+                self.listeners.remove(listener)
+                self.emit("listener_failed", error=repr(exc))
+
+    # ------------------------------------------------------------------ conversions
+    def to_module_rad(self, user_deg: np.ndarray) -> np.ndarray:
+        return np.radians(np.asarray(user_deg) + self.offsets_deg)
+
+    def to_user_deg(self, module_rad: np.ndarray) -> np.ndarray:
+        return np.degrees(np.asarray(module_rad)) - self.offsets_deg
+
+    # ------------------------------------------------------------------ bus helpers
+    def _transact(self, requests: list, *, idempotent: bool = False) -> list:
+        attempts = 1 + (self.READ_RETRIES if idempotent else 0)
+        for attempt in range(attempts):
+            try:
+                return self.client.transact(requests)
+            except ModuleTimeoutError as exc:
+                if attempt + 1 >= attempts:
+                    raise
+                self.emit("retry", module=exc.module, what=exc.what)
+        raise AssertionError("unreachable")
+
+    def read_arm(self) -> Measurement:
+        """Read position and short state of every module (pipelined)."""
+        acks = self._transact([GetParam(m, ParamId.FPOS_STATE_DIO) for m in self.modules],
+                              idempotent=True)
+        module_rad = np.array([a.value.position for a in acks])
+        states = {m: ShortState(a.value.state) for m, a in zip(self.modules, acks)}
+        return self._measured(module_rad, states)
+
+    def _measured(self, module_rad: np.ndarray, states: dict[int, ShortState]) -> Measurement:
+        m = Measurement(self.clock.now(), self.to_user_deg(module_rad), states)
+        self.last = m
+        return m
+
+    def read_state_word(self, module: int) -> StateFlag:
+        return self.client.read_state(module)
+
+    def read_state_words(self, modules: list[int] | None = None) -> dict[int, StateFlag]:
+        """CubeState of several modules, pipelined."""
+        modules = self.modules if modules is None else modules
+        acks = self._transact([GetParam(m, ParamId.CUBE_STATE) for m in modules], idempotent=True)
+        return {m: StateFlag(a.value) for m, a in zip(modules, acks)}
+
+    def wait_for_states(self, modules: list[int] | None, ok: Callable[[StateFlag], bool],
+                        timeout_s: float, failure: str) -> dict[int, StateFlag]:
+        """Poll CubeState every cycle until ``ok`` holds for every module."""
+        deadline = self.clock.now() + timeout_s
+        while True:
+            self._check_halt_request()
+            states = self.read_state_words(modules)
+            bad = {m: f for m, f in states.items() if not ok(f)}
+            if not bad:
+                return states
+            if self.clock.now() >= deadline:
+                module, flags = next(iter(bad.items()))
+                raise ModuleFaultError(module, flags, failure)
+            self.clock.sleep(self.cycle)
+
+    # ------------------------------------------------------------------ checks
+    def check_states(self, m: Measurement, *, require_homed: bool = True) -> None:
+        """Raise ModuleFaultError for a module whose short state says NOT_OK."""
+        for module, state in m.short_state.items():
+            if state & ShortState.NOT_OK:
+                flags = self.read_state_word(module)
+                bad = flags & StateFlag.FAULTS
+                if bad or (require_homed and not flags & StateFlag.HOME_OK):
+                    raise ModuleFaultError(module, flags)
+
+    def check_guards(self, m: Measurement) -> None:
+        q = np.radians(m.user_deg)
+        points = kinematics.point_positions(self.chain, q)
+        for guard in self.arm.workspace.guards:
+            for name in guard.points:
+                z = float(points[name][2])
+                key = f"{guard.name}:{name}"
+                self.min_heights_mm[key] = min(self.min_heights_mm.get(key, math.inf), z)
+                if z < guard.min_z_mm:
+                    raise RunAborted("workspace_guard",
+                                     f"workspace guard '{guard.name}': {name} at z = {z:.1f} mm, "
+                                     f"below {guard.min_z_mm:.1f} mm")
+
+    def monitor(self) -> Measurement:
+        """One monitoring cycle without motion commands (waits, checkpoints)."""
+        self._check_halt_request()
+        m = self.read_arm()
+        self.check_states(m)
+        self.check_guards(m)
+        self.emit("measurement", joints_deg=_r(m.user_deg))
+        return m
+
+    def _check_halt_request(self) -> None:
+        if self._halt_requested:
+            raise RunAborted("operator_halt", "Halt requested by the operator")
+
+    # ------------------------------------------------------------------ motion
+    def move(self, target_deg: np.ndarray, active: list[int], limits: Limits, *,
+             tolerance_deg: float, timeout_s: float | None) -> dict[str, Any]:
+        """Plan from the measured state to ``target_deg`` and stream it; returns metrics."""
+        m = self.read_arm()
+        self.check_states(m)
+        self._move_limits = limits
+        start_deg = m.user_deg.copy()
+        moving = [i for i in active if abs(target_deg[i] - start_deg[i]) > 1e-9]
+        plan = plan_move(np.radians(start_deg), np.radians(target_deg), limits, moving)
+        self.commanded_deg = np.where(np.isin(np.arange(len(target_deg)), moving),
+                                      target_deg, start_deg)
+        self.emit("move_planned", duration_s=_round(plan.duration),
+                  start_deg=_r(start_deg), target_deg=_r(target_deg),
+                  joints=[self.arm.joints[i].name for i in moving])
+        if self._current_step is not None:
+            self._current_step.planned_duration_s = plan.duration
+        peak = np.zeros(len(target_deg))
+        t_move = self.clock.now()
+        if moving:
+            self._prepare_ramp(moving, limits)
+            # A step's timeout covers the whole move; the default allows the plan plus
+            # the arm's settle time.
+            deadline = (timeout_s if timeout_s is not None
+                        else plan.duration + self.arm.control.settle_timeout_s)
+            peak = self._stream(plan, moving, tolerance_deg, deadline, stop_on_abort=True)
+        elapsed = self.clock.now() - t_move
+        return {"planned_duration_s": plan.duration, "executed_duration_s": elapsed,
+                "peak_velocity_deg_s": _r(np.degrees(plan.peak_velocity())),
+                "peak_measured_velocity_deg_s": _r(peak)}
+
+    def _prepare_ramp(self, moving: list[int], limits: Limits) -> None:
+        if self.command_mode != "ramp":
+            return
+        # TargetAcc once per move: the module's own ramp must be able to follow the plan.
+        self._transact([SetParam(self.modules[i], ParamId.TARGET_ACC,
+                                 math.radians(self.arm.joints[i].max_acceleration_deg_s2))
+                        for i in moving])
+
+    def _setpoints(self, plan: MovePlan, t: float, moving: list[int],
+                   measured_deg: np.ndarray) -> list:
+        """Motion requests for one cycle at plan time ``t``."""
+        pos_now, _, _ = plan.at(t)
+        requests = []
+        if self.command_mode == "step":
+            nxt, _, _ = plan.at(t + self.cycle)
+            target = self.to_module_rad(np.degrees(nxt))
+            ms = max(1, int(round(self.cycle * 1000)))
+            for i in moving:
+                requests.append(SetMotion(self.modules[i], MotionMode.FSTEP_ACK,
+                                          float(target[i]), ms))
+            return requests
+        # Ramp (the facility's way): a position far enough ahead that the module's own
+        # braking curve never binds before the plan decelerates, with TargetVel following
+        # the plan's velocity plus a catch-up term for the measured lag.
+        _, vel_next, _ = plan.at(t + self.cycle)
+        for i in moving:
+            lead = self.limits.velocity[i] / (2 * self.limits.acceleration[i]) + 2 * self.cycle
+            ahead, _, _ = plan.at(t + lead)
+            direction = math.copysign(1.0, plan.target[i] - plan.start[i])
+            lag = (math.degrees(pos_now[i]) - measured_deg[i]) * direction
+            cap = abs(math.degrees(vel_next[i])) + self.CATCH_UP_GAIN * lag
+            cap = min(max(cap, self.MIN_COMMAND_VELOCITY_DEG_S),
+                      self.arm.joints[i].max_velocity_deg_s)
+            module = self.modules[i]
+            requests.append(SetParam(module, ParamId.TARGET_VEL, math.radians(cap)))
+            requests.append(SetMotion(module, MotionMode.FRAMP_ACK,
+                                      float(self.to_module_rad(np.degrees(ahead))[i])))
+        return requests
+
+    def _cycle(self, requests: list, moving: list[int]) -> Measurement:
+        """Send this cycle's motion requests plus reads of the other modules, pipelined."""
+        moving_modules = {self.modules[i] for i in moving}
+        reads = [GetParam(m, ParamId.FPOS_STATE_DIO) for m in self.modules if m not in moving_modules]
+        acks = self._transact(requests + reads)
+        positions: dict[int, float] = {}
+        states: dict[int, ShortState] = {}
+        for ack in acks:
+            if ack is None:
+                continue
+            value = getattr(ack, "value", None)
+            if hasattr(ack, "position") and hasattr(ack, "state"):   # extended motion ack
+                positions[ack.module], states[ack.module] = ack.position, ShortState(ack.state)
+            elif value is not None and hasattr(value, "position"):   # FPosStateDio read
+                positions[ack.module], states[ack.module] = value.position, ShortState(value.state)
+        module_rad = np.array([positions[m] for m in self.modules])
+        return self._measured(module_rad, states)
+
+    def _stream(self, plan: MovePlan, moving: list[int], tolerance_deg: float,
+                deadline: float, *, stop_on_abort: bool) -> np.ndarray:
+        """Stream ``plan`` cycle by cycle until every moving joint is in tolerance."""
+        t_start = self.clock.now()
+        bound = self.arm.control.max_following_error_deg
+        measured = self.last.user_deg if self.last is not None else np.degrees(plan.start)
+        prev = measured.copy()
+        prev_t = t_start
+        peak = np.zeros(len(measured))
+        k = 0
+        while True:
+            t_cycle = t_start + k * self.cycle
+            self.clock.sleep_until(t_cycle)
+            t = self.clock.now() - t_start
+            self._check_halt_request()
+            if stop_on_abort and (self._abort_requests or self._paused.is_set()):
+                self._controlled_stop(plan, t, moving)
+                if self._abort_requests:
+                    raise OperatorAbort("operator abort: controlled stop, arm holding")
+                self._wait_while_paused()
+                # Resumed: re-plan from where the arm stands to the same target.
+                m = self.read_arm()
+                plan = plan_move(np.radians(m.user_deg), plan.target, self._move_limits, moving)
+                t_start, k = self.clock.now(), 0
+                deadline = plan.duration + self.arm.control.settle_timeout_s
+                continue
+            m = self._cycle(self._setpoints(plan, t, moving, measured), moving)
+            measured = m.user_deg
+            self.check_states(m)
+            self.check_guards(m)
+            planned_deg = np.degrees(plan.at(t)[0])
+            error = np.abs(planned_deg - measured)
+            worst = int(np.argmax(error))
+            if error[worst] > bound and t <= plan.duration + self.arm.control.settle_timeout_s:
+                name = self.arm.joints[worst].name
+                raise RunAborted("following_error",
+                                 f"{name} (module {self.modules[worst]}) does not follow its plan: "
+                                 f"{error[worst]:.2f}° from the planned position (limit {bound}°)",
+                                 module=self.modules[worst])
+            dt = m.t - prev_t
+            if dt > 0:
+                peak = np.maximum(peak, np.abs(measured - prev) / dt)
+            prev, prev_t = measured.copy(), m.t
+            self.emit("setpoint", plan_t=round(t, 4), planned_deg=_r(planned_deg),
+                      measured_deg=_r(measured))
+            if t >= plan.duration:
+                final_error = np.abs(np.degrees(plan.target) - measured)[moving]
+                if np.all(final_error <= tolerance_deg):
+                    return peak
+                if t > deadline:
+                    i = moving[int(np.argmax(final_error))]
+                    raise RunAborted("timeout",
+                                     f"{self.arm.joints[i].name} (module {self.modules[i]}) not in "
+                                     f"position {deadline:.1f} s after the move started: "
+                                     f"{float(np.max(final_error)):.2f}° off (tolerance "
+                                     f"{tolerance_deg}°)", module=self.modules[i])
+            k += 1
+
+    def _controlled_stop(self, plan: MovePlan, t: float, moving: list[int]) -> None:
+        """ruckig to zero velocity from the plan's current state, streamed, then hold."""
+        pos, vel, acc = plan.at(t)
+        stop = plan_stop(pos, vel, acc, self.limits, moving)
+        self.emit("controlled_stop", duration_s=_round(stop.duration))
+        tol = self.arm.control.position_tolerance_deg
+        self._stream(stop, moving, max(tol, 0.5), stop.duration + 2.0, stop_on_abort=False)
+        self.emit("holding", joints_deg=_r(self.last.user_deg) if self.last else None)
+
+    def _wait_while_paused(self) -> None:
+        self.emit("paused")
+        while self._paused.is_set() and not self._abort_requests and not self._halt_requested:
+            self.monitor()
+            self.clock.sleep(self.cycle)
+        self._check_halt_request()
+        if self._abort_requests:
+            raise OperatorAbort("operator abort while paused")
+
+    def wait(self, seconds: float) -> None:
+        """Wait while monitoring every cycle (keeps faults and watchdog in view)."""
+        end = self.clock.now() + seconds
+        while self.clock.now() < end:
+            self.monitor()
+            if self._abort_requests:
+                raise OperatorAbort("operator abort during a wait")
+            self.clock.sleep(min(self.cycle, end - self.clock.now()))
+
+    def wait_in_position(self, tolerance_deg: float, timeout_s: float) -> float:
+        """Wait until every commanded joint is within tolerance; returns the time taken."""
+        start = self.clock.now()
+        target = self.commanded_deg
+        while True:
+            m = self.monitor()
+            if target is None:
+                return 0.0
+            err = np.abs(m.user_deg - target)[self.movable]
+            if np.all(err <= tolerance_deg):
+                return self.clock.now() - start
+            if self._abort_requests:
+                raise OperatorAbort("operator abort during a wait")
+            if self.clock.now() - start > timeout_s:
+                i = self.movable[int(np.argmax(err))]
+                raise RunAborted("timeout", f"{self.arm.joints[i].name} not in position within "
+                                 f"{timeout_s} s: {float(np.max(err)):.2f}° off", module=self.modules[i])
+            self.clock.sleep(self.cycle)
+
+    # ------------------------------------------------------------------ halt
+    def emergency_halt(self) -> bool:
+        """Broadcast Halt; returns False if even that could not be sent."""
+        try:
+            self.client.halt(None)
+            self.client.halt(None)  # twice: a Halt is cheap and a lost frame is not
+            return True
+        except BusError as exc:
+            self.emit("halt_failed", error=str(exc))
+            return False
+
+    # ------------------------------------------------------------------ run
+    def run(self, steps: list, *, first_step: int = 1) -> RunResult:
+        """Run resolved steps (``loaded.steps``) from step ``first_step`` (1-based)."""
+        from seqrun.steps import HANDLERS
+
+        self._t0 = self.clock.now()
+        results = [StepResult(s.number, s.kind, _label(s), _location(s)) for s in steps]
+        self.emit("run_started", steps=len(steps), first_step=first_step, speed=self.speed,
+                  command_mode=self.command_mode, dry_run=self.dry_run)
+        status, code, message, fault = "passed", EXIT_OK, "sequence completed", None
+        for step, result in zip(steps, results):
+            if step.number < first_step:
+                result.status = "skipped"
+                continue
+            self._current_step = result
+            try:
+                if self.before_step is not None and not self.before_step(step):
+                    raise OperatorAbort("operator declined the step")
+                self._check_halt_request()
+                if self._abort_requests:
+                    raise OperatorAbort("operator abort")
+                result.started = self.clock.now() - self._t0
+                self.emit("step_started", kind=step.kind, label=result.label,
+                          location=result.location)
+                detail = HANDLERS[step.kind](step, self) or {}
+                result.detail.update({k: v for k, v in detail.items()
+                                      if k != "planned_duration_s"})
+                if "planned_duration_s" in detail:
+                    result.planned_duration_s = detail["planned_duration_s"]
+                result.status = "passed"
+                result.finished = self.clock.now() - self._t0
+                self.emit("step_finished", status="passed",
+                          duration_s=_round(result.duration_s), **_jsonable(result.detail))
+            except OperatorAbort as exc:
+                status, code, message = "aborted", EXIT_OPERATOR_ABORT, str(exc)
+                if self._halt_requested:
+                    self.emergency_halt()
+                    message += "; Halt sent"
+                result.status = "aborted"
+                result.finished = self.clock.now() - self._t0
+                self.emit("operator_abort", message=message)
+                break
+            except (RunAborted, BusError, PlanningError) as exc:
+                halted = self.emergency_halt()
+                cause, module = _cause(exc)
+                if cause == "operator_halt":
+                    status, code = "aborted", EXIT_OPERATOR_ABORT
+                else:
+                    status, code = "failed", EXIT_FAULT
+                message = str(exc)
+                fault = {"cause": cause, "module": module, "message": message,
+                         "step": step.number, "halt_sent": halted}
+                result.status = "failed" if code == EXIT_FAULT else "aborted"
+                result.finished = self.clock.now() - self._t0
+                result.detail.setdefault("error", message)
+                self.emit("fault", **fault)
+                break
+        self._current_step = None
+        end = self.clock.now() - self._t0
+        run = RunResult(status, code, message, results, 0.0, end, fault,
+                        list(dict.fromkeys(self.not_verified)),
+                        {k: round(v, 1) for k, v in self.min_heights_mm.items()})
+        self.emit("run_finished", status=status, exit_code=code, message=message,
+                  duration_s=_round(run.duration_s),
+                  planned_duration_s=_round(run.planned_duration_s))
+        return run
+
+
+def _cause(exc: Exception) -> tuple[str, int | None]:
+    if isinstance(exc, RunAborted):
+        return exc.cause, exc.module
+    if isinstance(exc, ModuleTimeoutError):
+        return "no_acknowledge", exc.module
+    if isinstance(exc, ModuleFaultError):
+        return "module_fault", exc.module
+    if isinstance(exc, PlanningError):
+        return "planning", None
+    return "bus_error", getattr(exc, "module", None)
+
+
+def _label(step) -> str:
+    return getattr(step, "label", None) or step.kind
+
+
+def _location(step) -> str:
+    loc = step.location
+    return f"{loc.file}:{loc.line}:{loc.column}" if hasattr(loc, "file") else str(loc)
+
+
+def _r(a, nd: int = 3) -> list[float]:
+    return [round(float(x), nd) for x in a]
+
+
+def _jsonable(d: dict) -> dict:
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, np.ndarray):
+            v = _r(v)
+        elif isinstance(v, (np.floating,)):
+            v = float(v)
+        out[k] = v
+    return out

@@ -1,0 +1,16 @@
+"""halt: a deliberate stop written in the sequence (modules refuse motion until Reset)."""
+
+from __future__ import annotations
+
+from seqrun.steps._modules import addressed_modules
+
+
+def run(step, ex) -> dict:
+    modules = addressed_modules(step.params, ex.arm)
+    if modules is None:
+        ex.client.halt(None)
+    else:
+        for module in modules:
+            ex.client.halt(module)
+    ex.commanded_deg = None  # nothing is commanded any more
+    return {"modules": "all" if modules is None else modules}

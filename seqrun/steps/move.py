@@ -1,0 +1,24 @@
+"""move: one synchronized ruckig motion to a pose or to joint angles."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from seqrun.planner import Limits
+from seqrun.validation import resolve_move_target
+
+
+def run(step, ex) -> dict:
+    params = step.params
+    current = ex.read_arm()
+    current_deg = {j.name: float(v) for j, v in zip(ex.arm.joints, current.user_deg)}
+    target = resolve_move_target(params, current_deg, ex.arm, ex.poses_dir)
+    target_deg = np.array([target[j.name] for j in ex.arm.joints])
+    named = set(ex.arm.joint_names) if params.pose is not None else set(params.joints or {})
+    active = [i for i in ex.movable if ex.arm.joints[i].name in named]
+    limits = Limits.from_arm(ex.arm, velocity_scale=params.velocity_scale,
+                             acceleration_scale=params.acceleration_scale, speed=ex.speed,
+                             velocity_deg_s=params.velocity_deg_s)
+    tolerance = params.tolerance_deg or ex.arm.control.position_tolerance_deg
+    return ex.move(target_deg, active, limits, tolerance_deg=tolerance,
+                   timeout_s=params.timeout_s)
