@@ -1,0 +1,204 @@
+"""SimArm: the seven simulated modules of an LWA 3 behind one CAN connector, plus faults.
+
+:meth:`SimArm.handle_frame` is what the modules do with one frame from the wire: decode it
+with the shared codec (:mod:`seqrun.powercube.codec`), let the addressed module (or every
+module, for 0x100) act on it, and return the acknowledges, each ready to be sent
+``module_latency`` after the request was received. Frames that are not valid PowerCube
+requests — other ids, bad lengths, unknown commands, other modules' acks — are ignored,
+as a real module ignores them.
+
+Faults (:mod:`seqrun.sim.faults`) are applied when the arm's time passes their ``at``
+(seconds after the arm was created): the module is first simulated up to that instant,
+so a tow error at 2.5 s stops the joint where it was at 2.5 s, whoever looks first.
+
+Thread-safe: every public method holds one lock.
+"""
+
+from __future__ import annotations
+
+import random
+import threading
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+
+from seqrun.clock import Clock
+from seqrun.errors import CodecError
+from seqrun.powercube.codec import (
+    BroadcastRequest,
+    CommandAck,
+    decode_request,
+    encode,
+)
+from seqrun.powercube.protocol import StateFlag
+from seqrun.sim.faults import Fault, parse_faults
+from seqrun.sim.module import ModuleOptions, SimModule
+
+#: Seconds between the end of a request frame and its acknowledge being ready to send [I].
+DEFAULT_MODULE_LATENCY = 100e-6
+
+
+@dataclass(frozen=True)
+class Reply:
+    """An acknowledge a module wants to put on the bus from ``ready_at`` on."""
+
+    module: int
+    can_id: int
+    data: bytes
+    ready_at: float
+
+
+class SimArm:
+    """The simulated modules (ids ``modules``, default 1..7), all at position 0 (Park).
+
+    :param clock: the time base; ``at`` of faults counts from ``clock.now()`` at creation.
+    :param faults: :class:`~seqrun.sim.faults.Fault` objects or spec strings.
+    :param module_latency: request-to-ack processing time of every module (seconds).
+    :param seed: seeds the random loss of ``drop_acks`` faults (per module, so one
+        module's losses do not depend on the traffic of another).
+    :param options: behaviours no source confirms, see :class:`~seqrun.sim.module.ModuleOptions`.
+    :param positions: start positions (rad, module coordinates) instead of all zeros.
+    """
+
+    def __init__(self, clock: Clock, modules: Iterable[int] = range(1, 8),
+                 faults: Iterable[Fault | str] | str = (), *,
+                 module_latency: float = DEFAULT_MODULE_LATENCY, seed: int = 0,
+                 options: ModuleOptions | None = None,
+                 positions: Mapping[int, float] | Sequence[float] | None = None) -> None:
+        if module_latency < 0:
+            raise ValueError(f"module_latency must be >= 0, got {module_latency}")
+        self.clock = clock
+        self.start_time = clock.now()
+        self.module_latency = module_latency
+        self.seed = seed
+        self.options = options or ModuleOptions()
+        self._lock = threading.RLock()
+        self._modules = {m: SimModule(m, clock, options=self.options) for m in modules}
+        if not self._modules:
+            raise ValueError("a simulated arm needs at least one module")
+        self._pending: list[Fault] = []
+        self._silent: set[int] = set()  # no_ack
+        self._drop_rate: dict[int, float] = {}
+        self._rng = {m: random.Random(f"{seed}:{m}") for m in self._modules}
+        #: Every fault applied so far, with the time it was applied.
+        self.applied_faults: list[tuple[float, Fault]] = []
+        if positions is not None:
+            self.set_positions(positions)
+        for fault in parse_faults(faults):
+            self.inject(fault)
+
+    # -- inspection and set-up ------------------------------------------------------------
+
+    @property
+    def module_ids(self) -> list[int]:
+        return sorted(self._modules)
+
+    def module(self, module_id: int) -> SimModule:
+        """The simulated module ``module_id`` (for tests: state, parameters, position).
+
+        Faults due by now are applied first; a fault that becomes due later reaches the
+        module only through the arm (any arm method or frame), so look through the arm
+        after letting time pass.
+        """
+        with self._lock:
+            self._now(None)
+            try:
+                return self._modules[module_id]
+            except KeyError:
+                raise KeyError(f"the simulated arm has no module {module_id} "
+                               f"(modules {self.module_ids})") from None
+
+    def positions(self, t: float | None = None) -> dict[int, float]:
+        """Actual joint positions (rad, module coordinates) at ``t`` (default now)."""
+        with self._lock:
+            t = self._now(t)
+            return {m: module.position(t) for m, module in sorted(self._modules.items())}
+
+    def states(self, t: float | None = None) -> dict[int, StateFlag]:
+        """State words at ``t`` (default now)."""
+        with self._lock:
+            t = self._now(t)
+            return {m: module.state(t) for m, module in sorted(self._modules.items())}
+
+    def set_positions(self, positions: Mapping[int, float] | Sequence[float]) -> None:
+        """Put joints at rest at the given positions (rad), e.g. to start from a pose.
+
+        A sequence lists the modules in id order; a mapping names them.
+        """
+        with self._lock:
+            if not isinstance(positions, Mapping):
+                values = list(positions)
+                if len(values) != len(self._modules):
+                    raise ValueError(f"expected {len(self._modules)} positions, "
+                                     f"got {len(values)}")
+                positions = dict(zip(self.module_ids, values))
+            t = self._now(None)
+            for module_id, position in positions.items():
+                if module_id not in self._modules:
+                    raise KeyError(f"the simulated arm has no module {module_id}")
+                self._modules[module_id].set_position(float(position), t)
+
+    # -- faults ---------------------------------------------------------------------------
+
+    def inject(self, fault: Fault | str) -> None:
+        """Schedule a fault (``at`` seconds after the arm's start); a time already passed
+        applies it now."""
+        (fault,) = parse_faults(fault)
+        if fault.module is not None and fault.module not in self._modules:
+            raise ValueError(f"fault {fault.spec}: the simulated arm has no module "
+                             f"{fault.module} (modules {self.module_ids})")
+        with self._lock:
+            self._pending.append(fault)
+            self._pending.sort(key=lambda f: f.at)
+            self._apply_due_faults(self.clock.now())
+
+    def _apply_due_faults(self, t: float) -> None:
+        while self._pending and self.start_time + self._pending[0].at <= t:
+            fault = self._pending.pop(0)
+            when = self.start_time + fault.at
+            targets = self.module_ids if fault.module is None else [fault.module]
+            for module_id in targets:
+                self._modules[module_id].inject(fault.kind, when)
+                if fault.kind == "no_ack":
+                    self._silent.add(module_id)
+                elif fault.kind == "drop_acks":
+                    self._drop_rate[module_id] = float(fault.rate or 0.0)
+            self.applied_faults.append((when, fault))
+
+    def _now(self, t: float | None) -> float:
+        t = self.clock.now() if t is None else t
+        self._apply_due_faults(t)
+        return t
+
+    # -- the wire -------------------------------------------------------------------------
+
+    def handle_frame(self, can_id: int, data: bytes, t: float | None = None) -> list[Reply]:
+        """The modules receive one standard data frame (fully received at ``t``).
+
+        Returns the acknowledges, in the order the modules produce them.
+        """
+        with self._lock:
+            t = self._now(t)
+            try:
+                request = decode_request(can_id, bytes(data))
+            except CodecError:
+                return []  # not for us, or not PowerCube: a real module ignores it
+            if isinstance(request, BroadcastRequest):
+                for module in self._modules.values():
+                    module.handle(request, t)  # never acknowledged
+                return []
+            module = self._modules.get(request.module)
+            if module is None:
+                return []
+            ack = module.handle(request, t)
+            if ack is None or not self._ack_survives(request.module):
+                return []
+            ack_id, ack_data = encode(ack)
+            if isinstance(ack, CommandAck) and not self.options.command_ack_trailer:
+                ack_data = ack_data[:1]
+            return [Reply(request.module, ack_id, ack_data, t + self.module_latency)]
+
+    def _ack_survives(self, module_id: int) -> bool:
+        if module_id in self._silent:
+            return False
+        rate = self._drop_rate.get(module_id)
+        return rate is None or self._rng[module_id].random() >= rate

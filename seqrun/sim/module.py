@@ -1,0 +1,863 @@
+"""One simulated Schunk PRL (PowerCube) module: parameters, state word and motion.
+
+:class:`SimModule` answers decoded PowerCube requests (:mod:`seqrun.powercube.codec`) the
+way ``shared/reference/powercube-protocol.md`` says a module does, and moves its joint
+deterministically on a :class:`~seqrun.clock.Clock`. It has no thread: whenever it is
+touched it catches up to the requested time. Motion is piecewise constant acceleration,
+evaluated in closed form, so a ramp ends exactly at its target at exactly the planned time;
+events (end of a ramp or step, soft-limit crossing, watchdog expiry) are found exactly too,
+so the result never depends on how often the module was looked at.
+
+Behaviour (sources in the reference; **[I]** marks an assumption that is an option of
+:class:`ModuleOptions`):
+
+- Power-on: encoders at the given position (0 for an arm homed at Park), limits the
+  module's stored ones (:func:`default_parameters`), HOME_OK clear and the brake engaged
+  until Home [I: thesis 5.1; PRL drivers elsewhere saw HOME_OK at boot —
+  ``home_ok_at_power_on``]. Home sets HOME_OK without moving.
+- Motion (SetMotion) is refused before Home, while ERROR/HALTED or any other fault bit is
+  set, for current and loop modes (not simulated), and when it would take a module that is
+  at or beyond a soft limit further out. A refused command is still acknowledged and its
+  extended ack has NOT_OK [I: ``ack_refused_motion``].
+- FRAMP: a trapezoid re-planned from the current position *and* velocity, bounded by
+  min(TargetVel, MaxVel) and min(TargetAcc, MaxAcc), target clamped into [MinPos, MaxPos].
+  FSTEP: straight line to the (clamped) position in the given ms, INPROGRESS while
+  running; a step that arrives while one runs waits (FULLBUFFER) and a newer one replaces
+  the waiting one [I: ``step_buffering``]; a step is never faster than MaxVel (it takes
+  longer instead) [I]. FVEL: changes velocity at min(TargetAcc, MaxAcc)
+  [I: ``velocity_mode_acceleration``], clamped to MaxVel, and runs until a soft limit.
+- Crossing a soft limit outward: the module stops exactly at the limit with BEYOND_SOFT
+  plus ``soft_limit_flags`` [I: ERROR|HALTED]. A module that is outside its limits (for
+  example after MinPos was written above its position) has no fault because of that; it
+  accepts motion back towards its range only.
+- Halt: stops at once (velocity 0), HALTED, refuses motion until Reset. Reset clears
+  ERROR, HALTED, TOW_ERROR, COMM_ERROR, BEYOND_SOFT and CURLIMIT, and stops [I] any motion;
+  HOME_OK stays [I].
+- SYNC_MOTION in Config: a motion command is stored and starts at the StartMove broadcast
+  (0x0F); the newest stored command wins [I]. Without the bit 0x0F does nothing.
+- Watchdog: with WATCHDOG_ENABLE in Config the first refresh (broadcast or addressed 0x07)
+  arms it; ``watchdog_timeout`` [I: 50 ms] after the last refresh the module stops with
+  ``watchdog_flags`` [I: HALTED|ERROR|COMM_ERROR] and is disarmed until the next refresh.
+- Parameters: every id of :class:`~seqrun.powercube.protocol.ParamId` answers GetExtended
+  with its wire type. Writing a read-only one (DEF_*, ActPos, TargetPos, CubeState, ...) is
+  acknowledged and ignored [I] — e.g. TargetPos, which the thesis believed writable.
+  Integer twins (IMinPos, TargetVelInc, IPos, ...) convert with IncRatio (rad per tick).
+- Extended acks report the position and short state at receipt (before the command acts).
+- Config DISABLE_ACK suppresses every acknowledge [I, from the bit's name only].
+
+Not simulated: current control and current readings (Cur is a made-up, deterministic
+function of the motion), following-error monitoring (TOW_ERROR only as an injected fault),
+brake timing, homing travel, hard limits, temperatures and supply voltages (constants),
+parameter persistence (SaveParams is acknowledged), the state frame 0x060+id, the
+Internal (0x04) and SetIStep (0x0D) commands (the codec does not decode them).
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+from seqrun.clock import Clock
+from seqrun.powercube.codec import (
+    Ack,
+    BroadcastRequest,
+    CommandAck,
+    CommandRequest,
+    GetParam,
+    GetParamAck,
+    MotionAck,
+    MotionExtAck,
+    PosStateDio,
+    Request,
+    SetMotion,
+    SetParam,
+    SetParamAck,
+)
+from seqrun.powercube.protocol import (
+    PARAM_TYPES,
+    CommandId,
+    ConfigFlag,
+    MotionMode,
+    ParamId,
+    SetupFlag,
+    ShortState,
+    StateFlag,
+    WireType,
+)
+
+#: Joint limits a PRL module of this arm has stored at power-on (rad): narrower than the
+#: user limits, the thesis saw joint 1 stop at about -120 deg when told to go to -180.
+DEFAULT_POSITION_LIMIT = 2.0944
+#: DefCubeVersion; the ROS driver uses FSTEP on PRL modules from version 4638.
+DEFAULT_CUBE_VERSION = 0x4638
+
+_F = StateFlag
+#: Cleared by Reset (reference D.2).
+RESETTABLE = (_F.ERROR | _F.HALTED | _F.TOW_ERROR | _F.COMM_ERROR | _F.BEYOND_SOFT
+              | _F.CURLIMIT)
+_MOTION_BITS = (_F.MOTION | _F.RAMP_ACC | _F.RAMP_STEADY | _F.RAMP_DEC | _F.RAMP_END
+                | _F.INPROGRESS | _F.FULLBUFFER)
+#: Position tolerance (rad) below which a limit counts as reached, not crossed; targets are
+#: clamped exactly onto limits, so rounding must not turn "stopped at MinPos" into a fault.
+_LIMIT_EPS = 1e-9
+
+
+@dataclass(frozen=True)
+class ModuleOptions:
+    """The behaviours no source confirms ([I] in the reference), each one switchable."""
+
+    #: HOME_OK at power-on. False: motion is refused until Home (thesis 5.1, this arm).
+    home_ok_at_power_on: bool = False
+    #: Refused motion commands are still acknowledged (extended acks show NOT_OK).
+    ack_refused_motion: bool = True
+    #: Command acks are ``[cmd, 0x64]`` (DLC 2); False sends ``[cmd]`` only.
+    command_ack_trailer: bool = True
+    #: An addressed WatchdogRefresh ``0x0E0+m : [07]`` is acknowledged like other commands.
+    ack_addressed_watchdog: bool = True
+    #: Seconds without refresh before an armed watchdog stops the module.
+    watchdog_timeout: float = 0.050
+    #: State set when the watchdog expires.
+    watchdog_flags: StateFlag = _F.HALTED | _F.ERROR | _F.COMM_ERROR
+    #: State set (besides BEYOND_SOFT) when the joint crosses a soft limit.
+    soft_limit_flags: StateFlag = _F.ERROR | _F.HALTED
+    #: FVEL changes velocity at min(TargetAcc, MaxAcc); False jumps to the new velocity.
+    velocity_mode_acceleration: bool = True
+    #: FSTEP while a step runs waits for it (FULLBUFFER); False replaces it at once.
+    step_buffering: bool = True
+    #: Config DISABLE_ACK suppresses acknowledges.
+    honour_disable_ack: bool = True
+
+
+def default_parameters(module_id: int) -> dict[ParamId, float | int]:
+    """Stored parameters of a PRL module of this arm at power-on (all values [I] unless
+    the reference gives them: version 0x4638, 1 Mbit/s, PRL setup bits, address)."""
+    max_cur = {1: 12.0, 2: 12.0, 3: 8.0, 4: 8.0, 5: 4.0, 6: 4.0, 7: 2.5}.get(module_id, 4.0)
+    pulses_per_turn, gear_ratio = 4096, 101.0
+    values: dict[ParamId, float | int] = {
+        ParamId.DEF_GEAR_RATIO: gear_ratio,
+        ParamId.DEF_MIN_POS: -DEFAULT_POSITION_LIMIT,
+        ParamId.DEF_MAX_POS: DEFAULT_POSITION_LIMIT,
+        ParamId.DEF_MAX_DELTA_POS: 0.1,
+        ParamId.DEF_MAX_DELTA_VEL: 0.5,
+        ParamId.DEF_CUR_RATIO: 1.0,
+        ParamId.DEF_MAX_VEL: 2.0,  # rad/s, the URDF's velocity limit for every LWA joint
+        ParamId.DEF_MAX_ACC: 2.0,
+        ParamId.DEF_MAX_CUR: max_cur,
+        ParamId.DEF_HOME_VEL: 0.1,
+        ParamId.DEF_HOME_ACC: 0.5,
+        ParamId.DEF_CUBE_SERIAL: 41000 + module_id,
+        ParamId.DEF_CONFIG: int(ConfigFlag.BRAKE_PRESENT | ConfigFlag.BRAKE_AT_POWERON),
+        ParamId.DEF_PULSES_PER_TURN: pulses_per_turn,
+        ParamId.DEF_CUBE_VERSION: DEFAULT_CUBE_VERSION,
+        ParamId.DEF_BRAKE_TIMEOUT: 500,
+        ParamId.DEF_ADDRESS: module_id,
+        ParamId.DEF_PRIM_BAUD: 3,  # 1000 kbit/s
+        ParamId.DEF_SCND_BAUD: 3,
+        ParamId.DEF_C0: 20, ParamId.DEF_DAMP: 4, ParamId.DEF_A0: 3,
+        ParamId.DEF_BURN_COUNT: 1,
+        ParamId.SETUP: int(SetupFlag.ABSOLUTE | SetupFlag.CAN),
+        ParamId.INC_RATIO: 2 * math.pi / (pulses_per_turn * gear_ratio),  # rad per tick
+        ParamId.MAX_DELTA_POS: 0.1,
+        ParamId.MIN_POS: -DEFAULT_POSITION_LIMIT,
+        ParamId.MAX_POS: DEFAULT_POSITION_LIMIT,
+        ParamId.MAX_VEL: 2.0,
+        ParamId.MAX_ACC: 2.0,
+        ParamId.MAX_CUR: max_cur,
+        # Without a TargetVel the thesis calls a FRAMP "not safe", i.e. it moves fast.
+        ParamId.TARGET_VEL: 2.0,
+        ParamId.TARGET_ACC: 2.0,
+        ParamId.ACT_C0: 20, ParamId.ACT_DAMP: 4, ParamId.ACT_A0: 3,
+        ParamId.FHOME_VEL: 0.1,
+        ParamId.MIN_LOGIC: 18.0, ParamId.MAX_LOGIC: 30.0,
+        ParamId.MIN_MOTOR: 18.0, ParamId.MAX_MOTOR: 30.0,
+        ParamId.NOM_CUR: max_cur / 2, ParamId.HMAX_CUR: max_cur,
+        ParamId.CURRENT_LIMIT: max_cur,
+        ParamId.MOT_SUPPLY: 24.0, ParamId.LOGIC_SUPPLY: 24.0, ParamId.TEMP: 30.0,
+    }
+    values[ParamId.CONFIG] = values[ParamId.DEF_CONFIG]
+    return values
+
+
+#: Parameters SetExtended changes (R/W in the reference); writes to any other are
+#: acknowledged and ignored.
+WRITABLE_PARAMS: frozenset[ParamId] = frozenset({
+    ParamId.DEF_PRIM_BAUD, ParamId.DEF_SCND_BAUD, ParamId.DIO_SETUP, ParamId.TARGET_POS_INC,
+    ParamId.TARGET_VEL_INC, ParamId.TARGET_ACC_INC, ParamId.HOME_OFFSET_INC, ParamId.CONFIG,
+    ParamId.INC_RATIO, ParamId.MAX_DELTA_POS, ParamId.MIN_POS, ParamId.MAX_POS,
+    ParamId.MAX_VEL, ParamId.MAX_ACC, ParamId.MAX_CUR, ParamId.TARGET_VEL, ParamId.TARGET_ACC,
+    ParamId.ACT_C0, ParamId.ACT_DAMP, ParamId.ACT_A0, ParamId.HOME_OFFSET,
+    ParamId.IMAX_DELTA_POS, ParamId.IMIN_POS, ParamId.IMAX_POS, ParamId.IMAX_VEL,
+    ParamId.IMAX_ACC, ParamId.FHOME_VEL, ParamId.IHOME_VEL, ParamId.SYNC_TIME,
+    ParamId.LOAD_LIMIT, ParamId.MAX_LOAD_GRADIENT, ParamId.LOAD_DELTA_TIME,
+    ParamId.MIN_LOGIC, ParamId.MAX_LOGIC, ParamId.MIN_MOTOR, ParamId.MAX_MOTOR,
+    ParamId.NOM_CUR, ParamId.HMAX_CUR, ParamId.LOGIC_UNDERSHOOT_TIME,
+    ParamId.LOGIC_OVERSHOOT_TIME, ParamId.MOTOR_UNDERSHOOT_TIME,
+    ParamId.MOTOR_OVERSHOOT_TIME, ParamId.NOM_CUR_OVERSHOOT_TIME,
+    ParamId.HMAX_CUR_OVERSHOOT_TIME, ParamId.KP_PWM_LIMIT, ParamId.CURRENT_LIMIT,
+})
+
+#: Integer (tick) parameters that are views of a float one: value_ticks = value / IncRatio.
+_TICK_TWINS: dict[ParamId, ParamId] = {
+    ParamId.TARGET_POS_INC: ParamId.TARGET_POS, ParamId.TARGET_VEL_INC: ParamId.TARGET_VEL,
+    ParamId.TARGET_ACC_INC: ParamId.TARGET_ACC, ParamId.IMAX_DELTA_POS: ParamId.MAX_DELTA_POS,
+    ParamId.IMIN_POS: ParamId.MIN_POS, ParamId.IMAX_POS: ParamId.MAX_POS,
+    ParamId.IMAX_VEL: ParamId.MAX_VEL, ParamId.IMAX_ACC: ParamId.MAX_ACC,
+    ParamId.IHOME_VEL: ParamId.FHOME_VEL, ParamId.IPOS: ParamId.ACT_POS,
+    ParamId.POS_COUNT: ParamId.ACT_POS, ParamId.IVEL: ParamId.ACT_VEL,
+    ParamId.IDELTA_POS: ParamId.DELTA_POS,
+}
+
+_RAMP_MODES = {MotionMode.FRAMP, MotionMode.IRAMP}
+_STEP_MODES = {MotionMode.FSTEP, MotionMode.ISTEP}
+_VELOCITY_MODES = {MotionMode.FVEL, MotionMode.IVEL}
+
+
+# --------------------------------------------------------------------------------------
+# Motion profiles: piecewise constant acceleration from a start state
+
+
+@dataclass
+class _Segment:
+    t_start: float  # seconds after the profile start
+    duration: float  # may be inf (velocity mode cruise)
+    p: float
+    v: float
+    a: float
+    phase: StateFlag  # RAMP_ACC / RAMP_STEADY / RAMP_DEC, or 0 for steps
+
+
+@dataclass
+class _Profile:
+    """A motion from ``(p0, v0)`` at ``t0``; ``target`` is where it ends exactly (None for
+    velocity mode, which runs until a soft limit or a new command)."""
+
+    kind: str  # "ramp" | "step" | "velocity"
+    t0: float
+    segments: list[_Segment]
+    target: float | None
+    end: float = field(init=False)
+
+    def __post_init__(self) -> None:
+        last = self.segments[-1]
+        self.end = self.t0 + last.t_start + last.duration
+
+    def sample(self, t: float) -> tuple[float, float, _Segment]:
+        """Position and velocity at ``t`` (t0 <= t <= end)."""
+        tau = t - self.t0
+        segment = self.segments[0]
+        for candidate in self.segments:
+            if candidate.t_start <= tau:
+                segment = candidate
+            else:
+                break
+        d = min(max(tau - segment.t_start, 0.0), segment.duration)
+        if self.target is not None and t >= self.end:
+            return self.target, 0.0, segment
+        return segment.p + segment.v * d + 0.5 * segment.a * d * d, segment.v + segment.a * d, segment
+
+
+def _build_profile(kind: str, t0: float, p0: float, v0: float,
+                   pieces: list[tuple[float, float]], target: float | None) -> _Profile:
+    segments = []
+    tau, p, v = 0.0, p0, v0
+    for duration, a in pieces:
+        if kind == "step":
+            phase = StateFlag(0)
+        elif a == 0:
+            phase = _F.RAMP_STEADY
+        else:
+            # Accelerating if |v| grows over the segment (judged at its middle).
+            middle = v + a * (duration / 2 if math.isfinite(duration) else 1.0)
+            phase = _F.RAMP_ACC if a * middle > 0 else _F.RAMP_DEC
+        segments.append(_Segment(tau, duration, p, v, a, phase))
+        if math.isfinite(duration):
+            p, v = p + v * duration + 0.5 * a * duration * duration, v + a * duration
+            tau += duration
+    return _Profile(kind, t0, segments, target)
+
+
+def plan_ramp(p0: float, v0: float, target: float, vmax: float, amax: float
+              ) -> list[tuple[float, float]]:
+    """Trapezoid (or triangle) from position ``p0`` moving at ``v0`` to rest at ``target``.
+
+    Returns ``[(duration, acceleration), ...]``. If the module moves away from the target,
+    or too fast to stop before it, it first brakes to rest and then ramps back; if it is
+    faster than ``vmax`` it first slows down to ``vmax``.
+    """
+    pieces: list[tuple[float, float]] = []
+    distance = target - p0
+    if v0 != 0 and (v0 * distance < 0 or v0 * v0 / (2 * amax) > abs(distance) + 1e-12):
+        brake = abs(v0) / amax
+        pieces.append((brake, -math.copysign(amax, v0)))
+        p0 += v0 * brake / 2
+        v0 = 0.0
+        distance = target - p0
+    if abs(distance) <= 1e-12:
+        return pieces or [(0.0, 0.0)]
+    sign = math.copysign(1.0, distance)
+    distance = abs(distance)
+    speed = v0 * sign  # >= 0 here
+    if speed > vmax:
+        peak = vmax
+        first = ((speed - peak) / amax, -sign * amax)
+        d1 = (speed * speed - peak * peak) / (2 * amax)
+    else:
+        peak = min(vmax, math.sqrt(amax * distance + speed * speed / 2))
+        first = ((peak - speed) / amax, sign * amax)
+        d1 = (peak * peak - speed * speed) / (2 * amax)
+    d3 = peak * peak / (2 * amax)
+    cruise = max(distance - d1 - d3, 0.0) / peak
+    for duration, a in (first, (cruise, 0.0), (peak / amax, -sign * amax)):
+        if duration > 0:
+            pieces.append((duration, a))
+    return pieces
+
+
+def _first_exit(segment: _Segment, tau_from: float, tau_to: float, lo: float, hi: float
+                ) -> tuple[float, float] | None:
+    """Earliest ``(tau, limit)`` in [tau_from, tau_to] (segment-local) where the motion
+    passes a limit *outward*; None if it does not."""
+    best: tuple[float, float] | None = None
+    p, v, a = segment.p, segment.v, segment.a
+    for level, limit, direction in ((lo - _LIMIT_EPS, lo, -1.0), (hi + _LIMIT_EPS, hi, 1.0)):
+        # Already beyond this limit and heading further out: stop at once.
+        p_from = p + v * tau_from + 0.5 * a * tau_from * tau_from
+        v_from = v + a * tau_from
+        if (p_from - level) * direction > 0 and (v_from * direction > 0
+                                                 or (v_from == 0 and a * direction > 0)):
+            return tau_from, limit
+        if a == 0:
+            roots = [(level - p) / v] if v != 0 else []
+        else:
+            disc = v * v + 2 * a * (level - p)
+            if disc < 0:
+                continue
+            root = math.sqrt(disc)
+            roots = [(-v - root) / a, (-v + root) / a]
+        for tau in sorted(roots):
+            if tau_from <= tau <= tau_to and (v + a * tau) * direction > 0:
+                if best is None or tau < best[0]:
+                    best = (tau, limit)
+                break
+    return best
+
+
+# --------------------------------------------------------------------------------------
+# The module
+
+
+@dataclass
+class _HeldMotion:
+    """A motion command waiting for the StartMove broadcast (Config SYNC_MOTION)."""
+
+    mode: MotionMode
+    value: float  # rad, rad/s (already converted from ticks)
+    time_ms: int | None
+    vmax: float
+    amax: float
+
+
+class SimModule:
+    """One PRL module. Call :meth:`handle` with decoded requests; it returns the ack (or None).
+
+    ``t`` arguments default to ``clock.now()``; a time earlier than the module's own
+    (a late caller) is treated as the module's current time.
+    """
+
+    def __init__(self, module_id: int, clock: Clock, *, position: float = 0.0,
+                 options: ModuleOptions | None = None,
+                 parameters: Mapping[ParamId, float | int] | None = None) -> None:
+        self.module_id = module_id
+        self.clock = clock
+        self.options = options or ModuleOptions()
+        self._params = default_parameters(module_id)
+        self._params.update(parameters or {})
+        for param, value in self._params.items():  # the module stores float32
+            if PARAM_TYPES[param] is WireType.F32:
+                self._params[param] = _f32(float(value))
+        self._t = clock.now()
+        self._rest = float(position)  # position while no profile runs
+        self._profile: _Profile | None = None
+        self._buffered_step: tuple[float, float] | None = None  # (target, seconds)
+        self._held: _HeldMotion | None = None
+        self._flags = _F.BRAKEACTIVE
+        if self.options.home_ok_at_power_on:
+            self._flags = _F.HOME_OK
+        self._watchdog_deadline: float | None = None
+        self._stuck_at: float | None = None
+        self._dead = False
+        self._last_target = float(position)
+        self._saved_position = float(position)
+
+    def __repr__(self) -> str:
+        return (f"<SimModule {self.module_id} pos={self.position():.4f} "
+                f"state={self.state().describe()}>")
+
+    # -- time ----------------------------------------------------------------------
+
+    def _time(self, t: float | None) -> float:
+        return self.clock.now() if t is None else t
+
+    def advance(self, t: float | None = None) -> None:
+        """Simulate up to ``t``, handling every event (ramp end, soft limit, watchdog)
+        exactly when it happens."""
+        t = self._time(t)
+        while self._t < t:
+            event_time, event = self._next_event(t)
+            if event is None:
+                self._t = t
+                return
+            self._t = max(self._t, event_time)
+            event()
+
+    def _next_event(self, horizon: float):
+        if self._dead:
+            return None, None
+        candidates = []
+        if self._watchdog_deadline is not None:
+            candidates.append((self._watchdog_deadline, self._watchdog_expired))
+        profile = self._profile
+        if profile is not None:
+            if profile.end <= horizon:
+                candidates.append((profile.end, self._profile_finished))
+            if self._stuck_at is None:
+                exit_ = self._limit_exit(profile, min(horizon, profile.end))
+                if exit_ is not None:
+                    at, limit = exit_
+                    candidates.append((at, lambda: self._soft_limit_reached(limit)))
+        candidates = [c for c in candidates if c[0] <= horizon]
+        if not candidates:
+            return None, None
+        return min(candidates, key=lambda c: c[0])
+
+    def _limit_exit(self, profile: _Profile, until: float) -> tuple[float, float] | None:
+        lo, hi = self._params[ParamId.MIN_POS], self._params[ParamId.MAX_POS]
+        tau_now, tau_end = self._t - profile.t0, until - profile.t0
+        for segment in profile.segments:
+            seg_end = segment.t_start + segment.duration
+            if seg_end < tau_now:
+                continue
+            if segment.t_start > tau_end:
+                break
+            hit = _first_exit(segment, max(tau_now, segment.t_start) - segment.t_start,
+                              min(tau_end, seg_end) - segment.t_start, lo, hi)
+            if hit is not None:
+                return profile.t0 + segment.t_start + hit[0], hit[1]
+        return None
+
+    # -- events ----------------------------------------------------------------------
+
+    def _profile_finished(self) -> None:
+        profile = self._profile
+        assert profile is not None
+        self._rest, _, _ = profile.sample(profile.end)
+        self._profile = None
+        if self._buffered_step is not None:
+            target, seconds = self._buffered_step
+            self._buffered_step = None
+            self._start_step(target, seconds)
+
+    def _soft_limit_reached(self, limit: float) -> None:
+        self._stop(_F.BEYOND_SOFT | self.options.soft_limit_flags, at=limit)
+
+    def _watchdog_expired(self) -> None:
+        self._watchdog_deadline = None
+        self._stop(self.options.watchdog_flags)
+
+    def _stop(self, flags: StateFlag = StateFlag(0), at: float | None = None) -> None:
+        """Stop at once (velocity 0) at the current or the given position, add ``flags``."""
+        self._rest = self._actual_position() if at is None else at
+        if self._stuck_at is not None:
+            self._stuck_at = self._rest
+        self._profile = None
+        self._buffered_step = None
+        self._held = None
+        self._flags |= flags
+
+    # -- state -----------------------------------------------------------------------
+
+    def _commanded(self) -> tuple[float, float, _Segment | None]:
+        if self._profile is None:
+            return self._rest, 0.0, None
+        return self._profile.sample(self._t)
+
+    def _actual_position(self) -> float:
+        if self._stuck_at is not None:
+            return self._stuck_at
+        return self._commanded()[0]
+
+    def _actual_velocity(self) -> float:
+        if self._stuck_at is not None:
+            return 0.0
+        return self._commanded()[1]
+
+    def _state_now(self) -> StateFlag:
+        state = self._flags & ~_MOTION_BITS
+        profile = self._profile
+        if profile is None:
+            return state | _F.RAMP_END
+        _, _, segment = profile.sample(self._t)
+        state |= _F.MOTION
+        if profile.kind == "step":
+            state |= _F.INPROGRESS
+            if self._buffered_step is not None:
+                state |= _F.FULLBUFFER
+        else:
+            state |= segment.phase
+        return state
+
+    def _short_state_now(self) -> ShortState:
+        state = self._state_now()
+        short = ShortState(0)
+        if state & (_F.ERROR | _F.HALTED) or not state & _F.HOME_OK:
+            short |= ShortState.NOT_OK
+        for flag, bit in ((_F.SWR, ShortState.SWR), (_F.SW1, ShortState.SW1),
+                          (_F.SW2, ShortState.SW2), (_F.MOTION, ShortState.MOTION),
+                          (_F.RAMP_END, ShortState.RAMP_END),
+                          (_F.INPROGRESS, ShortState.INPROGRESS),
+                          (_F.FULLBUFFER, ShortState.FULLBUFFER)):
+            if state & flag:
+                short |= bit
+        return short
+
+    def _dio(self) -> int:
+        return int(self._params.get(ParamId.DIO_SETUP, 0)) & 0xFF
+
+    def state(self, t: float | None = None) -> StateFlag:
+        """The 32-bit state word (CubeState) at ``t``."""
+        self.advance(t)
+        return self._state_now()
+
+    def short_state(self, t: float | None = None) -> ShortState:
+        self.advance(t)
+        return self._short_state_now()
+
+    def position(self, t: float | None = None) -> float:
+        """Actual joint position (rad, module coordinates) at ``t``."""
+        self.advance(t)
+        return self._actual_position()
+
+    def velocity(self, t: float | None = None) -> float:
+        self.advance(t)
+        return self._actual_velocity()
+
+    def parameter(self, param: ParamId, t: float | None = None) -> float | int | PosStateDio:
+        """What GetExtended ``param`` would answer at ``t``."""
+        self.advance(t)
+        return self._read(param)
+
+    @property
+    def is_dead(self) -> bool:
+        """True once the module went missing (unplugged): it never answers again."""
+        return self._dead
+
+    def set_position(self, position: float, t: float | None = None) -> None:
+        """Put the joint at ``position`` at rest (a test's starting pose); keeps the state."""
+        self.advance(t)
+        self._profile = None
+        self._buffered_step = None
+        self._held = None
+        self._rest = float(position)
+        self._last_target = float(position)
+        if self._stuck_at is not None:
+            self._stuck_at = self._rest
+
+    # -- faults (see seqrun.sim.faults) ------------------------------------------------
+
+    def inject(self, kind: str, t: float | None = None) -> None:
+        """Apply a fault that changes the module itself (tow_error, halt, stuck, missing).
+
+        Faults about acknowledges (no_ack, drop_acks) are the arm's business.
+        """
+        self.advance(t)
+        if kind == "tow_error":
+            self._stop(_F.ERROR | _F.TOW_ERROR | _F.HALTED)
+        elif kind == "halt":
+            self._stop(_F.HALTED)
+        elif kind == "stuck":
+            self._stuck_at = self._actual_position()
+        elif kind == "missing":
+            self._stop()
+            self._watchdog_deadline = None
+            self._dead = True
+        elif kind not in ("no_ack", "drop_acks"):
+            raise ValueError(f"unknown fault kind {kind!r}")
+
+    # -- requests ----------------------------------------------------------------------
+
+    def handle(self, request: Request, t: float | None = None) -> Ack | None:
+        """Process one decoded request at ``t``; returns its acknowledge, or None
+        (broadcasts, suppressed acks, a missing module)."""
+        self.advance(t)
+        if self._dead:
+            return None
+        if isinstance(request, BroadcastRequest):
+            self._broadcast(request)
+            return None
+        if isinstance(request, GetParam):
+            ack: Ack | None = GetParamAck(self.module_id, request.param, self._read(request.param))
+        elif isinstance(request, SetParam):
+            self._write(request.param, request.value)
+            ack = SetParamAck(self.module_id, request.param)
+        elif isinstance(request, SetMotion):
+            ack = self._motion(request)
+        elif isinstance(request, CommandRequest):
+            ack = self._command(request.command)
+        else:
+            return None
+        if (self.options.honour_disable_ack
+                and int(self._params[ParamId.CONFIG]) & ConfigFlag.DISABLE_ACK):
+            return None
+        return ack
+
+    def _broadcast(self, request: BroadcastRequest) -> None:
+        command = request.command
+        if command in (CommandId.RESET, CommandId.HOME, CommandId.HALT):
+            self._command(command)
+        elif command == CommandId.WATCHDOG_REFRESH:
+            self._refresh_watchdog()
+        elif command == CommandId.START_MOVE:
+            held, self._held = self._held, None
+            if held is not None and not self._refusal(held.mode, held.value):
+                self._execute(held)
+        elif command == CommandId.SAVE_POS_ALL:
+            self._saved_position = self._actual_position()
+        # SetBaudAll: accepted, the simulated bus keeps its bitrate.
+
+    def _command(self, command: CommandId) -> Ack | None:
+        if command == CommandId.RESET:
+            self._stop()
+            self._flags &= ~RESETTABLE
+            self._watchdog_deadline = None
+        elif command == CommandId.HOME:
+            # A PRL has absolute encoders: Home enables the motor (the click), no travel.
+            if not self._flags & (_F.ERROR | _F.HALTED):
+                self._flags = (self._flags | _F.HOME_OK) & ~_F.BRAKEACTIVE
+        elif command == CommandId.HALT:
+            self._stop(_F.HALTED)
+        elif command == CommandId.WATCHDOG_REFRESH:
+            self._refresh_watchdog()
+            if not self.options.ack_addressed_watchdog:
+                return None
+        # TOGGLE_HOME, RECALC_PID, SAVE_PARAMS, RESET_TIME: acknowledged, no simulated effect.
+        return CommandAck(self.module_id, command)
+
+    def _refresh_watchdog(self) -> None:
+        if int(self._params[ParamId.CONFIG]) & ConfigFlag.WATCHDOG_ENABLE:
+            self._watchdog_deadline = self._t + self.options.watchdog_timeout
+
+    # -- parameters ----------------------------------------------------------------------
+
+    def _inc_ratio(self) -> float:
+        ratio = float(self._params[ParamId.INC_RATIO])
+        return ratio if ratio > 0 else 1.0
+
+    def _read(self, param: ParamId) -> float | int | PosStateDio:
+        wire = PARAM_TYPES[param]
+        if param in _TICK_TWINS:
+            value = float(self._read(_TICK_TWINS[param]))  # type: ignore[arg-type]
+            return _fit_int(round(value / self._inc_ratio()), wire)
+        if param == ParamId.FPOS_STATE_DIO:
+            return PosStateDio(_f32(self._actual_position()), self._short_state_now(),
+                               self._dio())
+        live = self._live_value(param)
+        value = live if live is not None else self._params.get(param, 0)
+        if wire is WireType.F32:
+            return _f32(float(value))
+        return _fit_int(int(value), wire)
+
+    def _live_value(self, param: ParamId) -> float | int | None:
+        if param in (ParamId.ACT_POS, ParamId.ACT_POS_PREV):
+            return self._actual_position()
+        if param == ParamId.ACT_VEL:
+            return self._actual_velocity()
+        if param in (ParamId.IPOL_POS, ParamId.IPOL_VEL, ParamId.DELTA_POS):
+            commanded, velocity, _ = self._commanded()
+            if param == ParamId.IPOL_POS:
+                return commanded
+            if param == ParamId.IPOL_VEL:
+                return velocity
+            return commanded - self._actual_position()
+        if param == ParamId.CUBE_STATE:
+            return int(self._state_now())
+        if param == ParamId.TARGET_POS:
+            return self._last_target
+        if param == ParamId.FSAVE_POS:
+            return self._saved_position
+        if param == ParamId.MOVE_MODE:
+            return int(self._profile_mode())
+        if param in (ParamId.CUR, ParamId.MOT_CUR):
+            return self._current()
+        if param in (ParamId.RAW_CUR, ParamId.RAW_MOT_CUR):
+            max_cur = float(self._params[ParamId.MAX_CUR]) or 1.0
+            return round(500 * self._current() / max_cur)
+        return None
+
+    def _profile_mode(self) -> MotionMode | int:
+        if self._profile is None:
+            return 0
+        return {"ramp": MotionMode.FRAMP, "step": MotionMode.FSTEP,
+                "velocity": MotionMode.FVEL}[self._profile.kind]
+
+    def _current(self) -> float:
+        """Not a motor model: a deterministic stand-in that is 0 at rest and grows with
+        acceleration and speed, so readings change while the joint moves."""
+        if self._profile is None or self._stuck_at is not None:
+            return 0.0
+        _, velocity, segment = self._profile.sample(self._t)
+        max_cur = float(self._params[ParamId.MAX_CUR])
+        amax = float(self._params[ParamId.MAX_ACC]) or 1.0
+        vmax = float(self._params[ParamId.MAX_VEL]) or 1.0
+        return max_cur * (0.3 * segment.a / amax + 0.1 * velocity / vmax)
+
+    def _write(self, param: ParamId, value: float | int) -> None:
+        if param not in WRITABLE_PARAMS:
+            return  # acknowledged, ignored (read-only on the module)
+        if param in _TICK_TWINS:
+            param, value = _TICK_TWINS[param], value * self._inc_ratio()
+        if param == ParamId.TARGET_POS:
+            return  # TargetPosInc: no effect in the simulation
+        if PARAM_TYPES[param] is WireType.F32:
+            value = _f32(float(value))
+        self._params[param] = value
+        if param == ParamId.CONFIG and not int(value) & ConfigFlag.WATCHDOG_ENABLE:
+            self._watchdog_deadline = None
+
+    # -- motion --------------------------------------------------------------------------
+
+    def _limits(self) -> tuple[float, float]:
+        return float(self._params[ParamId.MIN_POS]), float(self._params[ParamId.MAX_POS])
+
+    def _motion(self, request: SetMotion) -> Ack | None:
+        mode = request.mode
+        base = mode.without_ext_ack()
+        position_at_receipt = self._actual_position()
+        short_at_receipt = self._short_state_now()
+        value = float(request.value)
+        if not base.is_float:
+            value *= self._inc_ratio()  # ticks, ticks/s -> rad, rad/s
+        refusal = self._refusal(base, value)
+        if refusal is None:
+            motion = _HeldMotion(base, value, request.time_ms,
+                                 vmax=min(float(self._params[ParamId.TARGET_VEL]),
+                                          float(self._params[ParamId.MAX_VEL])),
+                                 amax=min(float(self._params[ParamId.TARGET_ACC]),
+                                          float(self._params[ParamId.MAX_ACC])))
+            if int(self._params[ParamId.CONFIG]) & ConfigFlag.SYNC_MOTION:
+                self._held = motion
+            else:
+                self._execute(motion)
+        elif not self.options.ack_refused_motion:
+            return None
+        if not mode.is_extended_ack:
+            return MotionAck(self.module_id, mode)
+        state = short_at_receipt | (ShortState.NOT_OK if refusal else ShortState(0))
+        position: float | int = _f32(position_at_receipt)
+        if not mode.is_float:
+            position = _fit_int(round(position_at_receipt / self._inc_ratio()), WireType.I32)
+        return MotionExtAck(self.module_id, mode, position, state, self._dio())
+
+    def _refusal(self, mode: MotionMode, value: float) -> str | None:
+        """Why the module does not accept this motion now, or None."""
+        if self._flags & StateFlag.FAULTS:
+            return f"module in {(self._flags & StateFlag.FAULTS).describe()}"
+        if not self._flags & _F.HOME_OK:
+            return "not homed"
+        if mode not in _RAMP_MODES | _STEP_MODES | _VELOCITY_MODES:
+            return f"{mode.name} is not simulated"
+        if not math.isfinite(value):
+            return "value is not finite"
+        position = self._actual_position()
+        lo, hi = self._limits()
+        if mode in _VELOCITY_MODES:
+            if (value < 0 and position <= lo) or (value > 0 and position >= hi):
+                return "would move further beyond a soft limit"
+        else:
+            target = min(max(value, lo), hi)
+            # Clamped targets always lie inside, so this only refuses a limit pair that
+            # is inverted (MinPos > MaxPos) and would push the joint outward.
+            if (target < position and position <= lo) or (target > position and position >= hi):
+                return "would move further beyond a soft limit"
+        if mode in _RAMP_MODES | _VELOCITY_MODES:
+            vmax = min(float(self._params[ParamId.TARGET_VEL]), float(self._params[ParamId.MAX_VEL]))
+            amax = min(float(self._params[ParamId.TARGET_ACC]), float(self._params[ParamId.MAX_ACC]))
+            if amax <= 0 or (mode in _RAMP_MODES and vmax <= 0):
+                return "TargetVel/TargetAcc or MaxVel/MaxAcc is zero"
+        return None
+
+    def _execute(self, motion: _HeldMotion) -> None:
+        """Start an accepted motion now (at ``self._t``)."""
+        lo, hi = self._limits()
+        # Plans start from the setpoint (position and velocity); for a stuck joint that is
+        # where the controller believes it is, not where the joint is.
+        position, velocity, _ = self._commanded()
+        if motion.mode in _STEP_MODES:
+            target = min(max(motion.value, lo), hi)
+            seconds = (motion.time_ms or 0) / 1000.0
+            self._last_target = target
+            running_step = self._profile is not None and self._profile.kind == "step"
+            if running_step and self.options.step_buffering:
+                self._buffered_step = (target, seconds)
+            else:
+                self._buffered_step = None
+                self._start_step(target, seconds)
+            return
+        self._buffered_step = None
+        if motion.mode in _RAMP_MODES:
+            target = min(max(motion.value, lo), hi)
+            self._last_target = target
+            pieces = plan_ramp(position, velocity, target, motion.vmax, motion.amax)
+            self._start(_build_profile("ramp", self._t, position, velocity, pieces, target))
+        else:
+            vmax = float(self._params[ParamId.MAX_VEL])
+            wanted = min(max(motion.value, -vmax), vmax)
+            if self.options.velocity_mode_acceleration:
+                change = abs(wanted - velocity) / motion.amax
+                accel = math.copysign(motion.amax, wanted - velocity)
+                pieces = [(change, accel)] if change > 0 else []
+            else:
+                pieces, velocity = [], wanted
+            if wanted != 0:
+                pieces.append((math.inf, 0.0))
+                self._start(_build_profile("velocity", self._t, position, velocity, pieces, None))
+            elif pieces:
+                stop_at = position + velocity * pieces[0][0] / 2
+                self._start(_build_profile("velocity", self._t, position, velocity, pieces, stop_at))
+            else:
+                self._start(None, rest=position)
+
+    def _start_step(self, target: float, seconds: float) -> None:
+        position = self._commanded()[0]
+        vmax = float(self._params[ParamId.MAX_VEL])
+        distance = target - position
+        if vmax > 0:
+            seconds = max(seconds, abs(distance) / vmax)
+        if seconds <= 0:
+            self._start(None, rest=target)
+            return
+        self._start(_build_profile("step", self._t, position, distance / seconds,
+                                   [(seconds, 0.0)], target))
+
+    def _start(self, profile: _Profile | None, rest: float | None = None) -> None:
+        if profile is not None and profile.end <= self._t:  # nothing to do: already there
+            rest, profile = profile.sample(profile.end)[0], None
+        self._profile = profile
+        if profile is None and rest is not None:
+            self._rest = rest
+
+
+def _f32(value: float) -> float:
+    """Round to float32 like the module's arithmetic (and the wire)."""
+    try:
+        return struct.unpack("<f", struct.pack("<f", value))[0]
+    except OverflowError:
+        return math.copysign(math.inf, value)
+
+
+def _fit_int(value: int, wire: WireType) -> int:
+    lo, hi = wire.minimum, wire.maximum
+    if lo is None or hi is None:
+        return value
+    return min(max(value, lo), hi)

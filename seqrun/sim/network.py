@@ -1,0 +1,320 @@
+"""SimNetwork: the shared CAN wire between host endpoints and the simulated arm.
+
+Every frame occupies the bus for its exact wire time (:mod:`seqrun.can_timing`: stuff
+bits, CRC, EOF and intermission at the configured bitrate); frames go out one at a time.
+When the bus becomes free, the frames that are ready compete and the lowest identifier
+wins, as in CAN arbitration (standard before extended with the same base id); each node
+sends its own frames in order (a FIFO transmit queue). So the modules' acks (0x0A0+m)
+overtake requests still waiting in the host's queue, exactly as on the real bus.
+
+A frame is *delivered* at the end of its end-of-frame field (before the intermission):
+every other endpoint (and, with ``receive_own``, the sender) gets it with that
+``timestamp``, and the arm receives it at that instant; the arm's acknowledges become
+ready ``module_latency`` later and join the competition for the wire.
+
+Time is a :class:`~seqrun.clock.Clock`. Nothing runs by itself: the wire is simulated up
+to "now" whenever an endpoint sends or receives. With a virtual clock, waiting for a frame
+*advances* the clock to the next event instead of sleeping. Thread-safe: one condition
+variable guards everything, so endpoints in several threads (the socketcand server) share
+one wire in real time.
+
+Not simulated: error frames, ACK errors (a frame always finds a receiver), bus-off,
+retransmission, bit errors, CAN FD.
+"""
+
+from __future__ import annotations
+
+import itertools
+import threading
+from collections import deque
+from dataclasses import dataclass, replace
+
+from seqrun.can_timing import INTERMISSION_BITS, frame_bit_length
+from seqrun.clock import Clock
+from seqrun.errors import BusError
+from seqrun.sim.arm import SimArm
+
+#: Frames a host endpoint may have waiting for the wire before ``send`` waits [I].
+DEFAULT_TX_QUEUE_SIZE = 256
+
+
+class NetworkClosedError(BusError):
+    """The endpoint (or its network) was closed."""
+
+
+class TransmitTimeoutError(BusError):
+    """``send`` found the transmit queue full until its timeout ran out."""
+
+
+@dataclass(frozen=True)
+class WireFrame:
+    """A classic CAN frame on the simulated wire; ``timestamp`` is the delivery time."""
+
+    can_id: int
+    data: bytes = b""
+    is_extended: bool = False
+    is_remote: bool = False
+    #: Length code of a remote frame (data frames: ``len(data)``).
+    dlc: int | None = None
+    timestamp: float = 0.0
+    #: Name of the transmitting endpoint or ``"moduleN"``; set by the network.
+    sender: str = ""
+
+    @property
+    def length(self) -> int:
+        return self.dlc if self.is_remote and self.dlc is not None else len(self.data)
+
+
+def _arbitration_key(frame: WireFrame) -> tuple[int, int, int, int, int]:
+    """Orders frames as bitwise arbitration does (dominant 0 wins)."""
+    if frame.is_extended:
+        base, extension = frame.can_id >> 18, frame.can_id & 0x3FFFF
+        return (base, 1, 1, extension, int(frame.is_remote))  # SRR and IDE recessive
+    return (frame.can_id, int(frame.is_remote), 0, 0, 0)
+
+
+@dataclass
+class _Pending:
+    frame: WireFrame
+    ready_at: float
+    seq: int
+    key: tuple[int, int, int, int, int]
+    #: Bus time until delivery (end of EOF) and until the bus is free again.
+    to_delivery: float
+    occupancy: float
+
+
+class _Node:
+    """A transmitter: a host endpoint or one module."""
+
+    def __init__(self, name: str, is_module: bool = False) -> None:
+        self.name = name
+        self.is_module = is_module
+        self.queue: deque[_Pending] = deque()
+
+
+@dataclass
+class _InFlight:
+    node: _Node
+    pending: _Pending
+    start: float
+    end: float  # delivery time
+
+
+class Endpoint:
+    """One host connection to the wire (a :class:`~seqrun.sim.bus.SimBus`, a socketcand
+    client). Receives every frame other endpoints send and every module reply."""
+
+    def __init__(self, network: SimNetwork, name: str, receive_own: bool,
+                 tx_queue_size: int) -> None:
+        self.network = network
+        self.name = name
+        self.receive_own = receive_own
+        self.tx_queue_size = tx_queue_size
+        self._node = _Node(name)
+        self._inbox: deque[WireFrame] = deque()
+        self.closed = False
+
+    def __repr__(self) -> str:
+        return f"<Endpoint {self.name} on {self.network!r}>"
+
+    def send(self, frame: WireFrame, timeout: float | None = None) -> None:
+        """Queue ``frame`` for the wire at the clock's now. Waits (on the clock) only while
+        ``tx_queue_size`` frames of this endpoint are still waiting; never forever, since
+        the simulated wire always drains.
+
+        :raises ValueError: the frame cannot exist on a classic CAN bus.
+        :raises TransmitTimeoutError: the queue stayed full for ``timeout`` seconds.
+        """
+        self.network._send(self, frame, timeout)
+
+    def receive(self, deadline: float | None) -> WireFrame | None:
+        """The next frame delivered to this endpoint, waiting until ``deadline`` (clock
+        time; None = no limit). A virtual clock is advanced to the delivery time (or to the
+        deadline when nothing comes)."""
+        return self.network._receive(self, deadline)
+
+    def pending(self) -> int:
+        """Frames received and not yet taken."""
+        with self.network._cond:
+            return len(self._inbox)
+
+    def close(self) -> None:
+        """Detach from the wire; frames not yet on it are dropped. Safe to call twice."""
+        self.network._detach(self)
+
+
+class SimNetwork:
+    """The wire: host endpoints (:meth:`attach`) plus the modules of ``arm``.
+
+    :param bitrate: bit/s; sets every frame's duration.
+    """
+
+    def __init__(self, clock: Clock, arm: SimArm, bitrate: int = 1_000_000) -> None:
+        if bitrate <= 0:
+            raise ValueError(f"bitrate must be positive, got {bitrate}")
+        self.clock = clock
+        self.arm = arm
+        self.bitrate = int(bitrate)
+        self._cond = threading.Condition(threading.RLock())
+        self._endpoints: list[Endpoint] = []
+        self._module_nodes: dict[int, _Node] = {}
+        self._nodes: list[_Node] = []
+        self._seq = itertools.count()
+        self._names = itertools.count(1)
+        self._in_flight: _InFlight | None = None
+        self._bus_free_at = clock.now()
+        #: Statistics: frames that went over the wire and the bus time they used (with
+        #: intermission).
+        self.frames_transmitted = 0
+        self.busy_time = 0.0
+
+    def __repr__(self) -> str:
+        return f"<SimNetwork {self.bitrate} bit/s, {len(self._endpoints)} endpoints>"
+
+    # -- endpoints --------------------------------------------------------------------------
+
+    def attach(self, *, receive_own: bool = False, name: str | None = None,
+               tx_queue_size: int = DEFAULT_TX_QUEUE_SIZE) -> Endpoint:
+        """A new host connection to the wire."""
+        if tx_queue_size < 1:
+            raise ValueError(f"tx_queue_size must be >= 1, got {tx_queue_size}")
+        with self._cond:
+            endpoint = Endpoint(self, name or f"host{next(self._names)}", receive_own,
+                                tx_queue_size)
+            self._endpoints.append(endpoint)
+            self._nodes.append(endpoint._node)
+            return endpoint
+
+    @property
+    def endpoint_count(self) -> int:
+        with self._cond:
+            return len(self._endpoints)
+
+    def _detach(self, endpoint: Endpoint) -> None:
+        with self._cond:
+            if endpoint.closed:
+                return
+            endpoint.closed = True
+            self._endpoints.remove(endpoint)
+            self._nodes.remove(endpoint._node)
+            endpoint._node.queue.clear()
+            self._cond.notify_all()
+
+    # -- timing -------------------------------------------------------------------------------
+
+    def frame_durations(self, frame: WireFrame) -> tuple[float, float]:
+        """(seconds until delivery, seconds the bus is occupied) for ``frame``."""
+        bits = frame_bit_length(frame.can_id, frame.data, extended=frame.is_extended,
+                                remote=frame.is_remote, dlc=frame.dlc if frame.is_remote else None)
+        return (bits - INTERMISSION_BITS) / self.bitrate, bits / self.bitrate
+
+    def run_until(self, t: float | None = None) -> None:
+        """Simulate the wire up to ``t`` (default now); for tests and tools."""
+        with self._cond:
+            self._advance(self.clock.now() if t is None else t)
+
+    def _advance(self, horizon: float) -> None:
+        """Process every event up to ``horizon``; lock held."""
+        delivered = False
+        while True:
+            flight = self._in_flight
+            if flight is not None:
+                if flight.end > horizon:
+                    break
+                self._in_flight = None
+                self._deliver(flight)
+                delivered = True
+                continue
+            heads = [(node, node.queue[0]) for node in self._nodes if node.queue]
+            if not heads:
+                break
+            start = max(self._bus_free_at, min(p.ready_at for _, p in heads))
+            if start > horizon:
+                break
+            node, pending = min(((n, p) for n, p in heads if p.ready_at <= start),
+                                key=lambda np: (np[1].key, np[1].seq))
+            node.queue.popleft()
+            self._in_flight = _InFlight(node, pending, start, start + pending.to_delivery)
+            self._bus_free_at = start + pending.occupancy
+            self.frames_transmitted += 1
+            self.busy_time += pending.occupancy
+        if delivered:
+            self._cond.notify_all()
+
+    def _next_event_time(self) -> float | None:
+        if self._in_flight is not None:
+            return self._in_flight.end
+        ready = [node.queue[0].ready_at for node in self._nodes if node.queue]
+        return max(self._bus_free_at, min(ready)) if ready else None
+
+    def _deliver(self, flight: _InFlight) -> None:
+        frame = replace(flight.pending.frame, timestamp=flight.end)
+        for endpoint in self._endpoints:
+            if endpoint._node is not flight.node or endpoint.receive_own:
+                endpoint._inbox.append(frame)
+        if flight.node.is_module or frame.is_extended or frame.is_remote:
+            return  # the modules speak 11-bit data frames and ignore each other's acks
+        for reply in self.arm.handle_frame(frame.can_id, frame.data, flight.end):
+            node = self._module_nodes.get(reply.module)
+            if node is None:
+                node = self._module_nodes[reply.module] = _Node(f"module{reply.module}", is_module=True)
+                self._nodes.append(node)
+            self._queue(node, WireFrame(reply.can_id, reply.data, sender=node.name),
+                        reply.ready_at)
+
+    def _queue(self, node: _Node, frame: WireFrame, ready_at: float) -> None:
+        to_delivery, occupancy = self.frame_durations(frame)
+        node.queue.append(_Pending(frame, ready_at, next(self._seq), _arbitration_key(frame),
+                                   to_delivery, occupancy))
+
+    # -- endpoint operations (called through Endpoint) ------------------------------------------
+
+    def _wait(self, deadline: float | None) -> None:
+        """Let time pass until the next wire event, ``deadline``, or another thread's
+        activity, whichever is first. Lock held."""
+        now = self.clock.now()
+        wake = self._next_event_time()
+        if deadline is not None:
+            wake = deadline if wake is None else min(wake, deadline)
+        if self.clock.is_virtual:
+            if wake is None:
+                self._cond.wait()  # nothing scheduled: only another thread can change that
+            else:
+                self.clock.sleep_until(wake)
+        else:
+            self._cond.wait(None if wake is None else max(wake - now, 0.0))
+
+    def _send(self, endpoint: Endpoint, frame: WireFrame, timeout: float | None) -> None:
+        self.frame_durations(frame)  # raises ValueError for a frame CAN cannot carry
+        with self._cond:
+            if endpoint.closed:
+                raise NetworkClosedError(f"{endpoint.name} is closed")
+            now = self.clock.now()
+            self._advance(now)
+            deadline = None if timeout is None else now + timeout
+            while len(endpoint._node.queue) >= endpoint.tx_queue_size:
+                if deadline is not None and self.clock.now() >= deadline:
+                    raise TransmitTimeoutError(
+                        f"{endpoint.name}: transmit queue full ({endpoint.tx_queue_size} "
+                        f"frames) for {timeout} s")
+                self._wait(deadline)
+                if endpoint.closed:
+                    raise NetworkClosedError(f"{endpoint.name} is closed")
+                self._advance(self.clock.now())
+            self._queue(endpoint._node, replace(frame, timestamp=0.0, sender=endpoint.name),
+                        self.clock.now())
+            self._cond.notify_all()
+
+    def _receive(self, endpoint: Endpoint, deadline: float | None) -> WireFrame | None:
+        with self._cond:
+            while True:
+                if endpoint.closed:
+                    raise NetworkClosedError(f"{endpoint.name} is closed")
+                now = self.clock.now()
+                self._advance(now)
+                if endpoint._inbox:
+                    return endpoint._inbox.popleft()
+                if deadline is not None and now >= deadline:
+                    return None
+                self._wait(deadline)
