@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import json
 import math
-from pathlib import Path
 from typing import Annotated, Any, ClassVar
 
 import numpy as np
@@ -20,14 +19,8 @@ from typer.core import TyperCommand
 
 from seqrun.arm import DEFAULT_ARM
 from seqrun.cli.app import app
-from seqrun.cli.pose import (
-    ArmOption,
-    PosesDirOption,
-    format_numbers,
-    load_arm_file,
-    load_named_pose,
-    user_errors,
-)
+from seqrun.cli.common import ArmOption, PosesDirOption, load_arm_file, user_errors
+from seqrun.cli.pose import format_numbers, load_named_pose
 from seqrun.errors import UserInputError
 from seqrun.kinematics import Pose, pose_from_user_deg
 from seqrun.poses import DEFAULT_POSES_DIR

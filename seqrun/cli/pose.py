@@ -1,20 +1,15 @@
-"""``seqrun pose list`` and ``seqrun pose show NAME``: the named poses in ``poses/``.
-
-Also the small pieces every arm/pose command shares (``--arm`` and ``--poses-dir`` options,
-the user-error boundary); ``pose save`` (it needs the bus) joins this module later.
-"""
+"""``seqrun pose list``, ``seqrun pose show NAME`` and ``seqrun pose save NAME``."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
-from typing import Annotated, NoReturn
+from typing import Annotated
 
 import typer
 
-from seqrun.arm import DEFAULT_ARM, ArmDescription, load_arm
+from seqrun.arm import DEFAULT_ARM
 from seqrun.cli.app import pose_app
+from seqrun.cli.common import (EXIT_INVALID, ArmOption, PosesDirOption, load_arm_file, user_errors)
 from seqrun.errors import SequenceInvalid, UserInputError
 from seqrun.poses import (
     DEFAULT_POSES_DIR,
@@ -25,40 +20,6 @@ from seqrun.poses import (
     find_pose,
     load_pose,
 )
-
-ArmOption = Annotated[Path, typer.Option("--arm", metavar="FILE", help="Arm description file.")]
-PosesDirOption = Annotated[Path, typer.Option(
-    "--poses-dir", metavar="DIR", help="Directory of pose files (<name>.yaml).")]
-
-#: Exit codes (seqrun.errors): bad command-line input 2, an invalid file 1.
-EXIT_USAGE = 2
-EXIT_INVALID = 1
-
-
-def fail(message: str, code: int = EXIT_USAGE) -> NoReturn:
-    """One line on stderr and the exit code; the user never sees a traceback."""
-    typer.echo(f"error: {message}", err=True)
-    raise typer.Exit(code)
-
-
-@contextmanager
-def user_errors() -> Iterator[None]:
-    """Turn the user's mistakes (bad input, invalid files) into messages and exit codes."""
-    try:
-        yield
-    except UserInputError as exc:
-        fail(str(exc))
-    except SequenceInvalid as exc:
-        for error in exc.errors:
-            typer.echo(f"error: {error}", err=True)
-        raise typer.Exit(EXIT_INVALID) from None
-
-
-def load_arm_file(path: Path) -> ArmDescription:
-    if not path.is_file():
-        raise UserInputError(f"arm file {path} not found (give one with --arm FILE)")
-    return load_arm(path)
-
 
 def load_named_pose(name: str, poses_dir: Path) -> PoseFile:
     return load_pose(find_pose(name, poses_dir))
