@@ -214,8 +214,13 @@ class SimNetwork:
         with self._cond:
             self._advance(self.clock.now() if t is None else t)
 
-    def _advance(self, horizon: float) -> None:
-        """Process every event up to ``horizon``; lock held."""
+    def _advance(self, horizon: float, *, start_at_horizon: bool = True) -> None:
+        """Process every event up to ``horizon``; lock held.
+
+        ``start_at_horizon=False`` leaves a frame that would start exactly at ``horizon``
+        waiting, so that frames other nodes queue at that same instant still compete with
+        it in arbitration (``send`` uses this).
+        """
         delivered = False
         while True:
             flight = self._in_flight
@@ -230,7 +235,7 @@ class SimNetwork:
             if not heads:
                 break
             start = max(self._bus_free_at, min(p.ready_at for _, p in heads))
-            if start > horizon:
+            if start > horizon or (start == horizon and not start_at_horizon):
                 break
             node, pending = min(((n, p) for n, p in heads if p.ready_at <= start),
                                 key=lambda np: (np[1].key, np[1].seq))
@@ -291,7 +296,7 @@ class SimNetwork:
             if endpoint.closed:
                 raise NetworkClosedError(f"{endpoint.name} is closed")
             now = self.clock.now()
-            self._advance(now)
+            self._advance(now, start_at_horizon=False)
             deadline = None if timeout is None else now + timeout
             while len(endpoint._node.queue) >= endpoint.tx_queue_size:
                 if deadline is not None and self.clock.now() >= deadline:
