@@ -1,0 +1,69 @@
+"""``seqrun sim serve``: the simulated LWA 3 as a socketcand server for other processes.
+
+    seqrun sim serve                                   # 127.0.0.1:29536, channel can0
+    seqrun sim serve --port 29600 --fault 4:tow_error@2.5 --fault 3:drop_acks=0.3@0
+
+Connect with python-can: ``can.Bus(interface="socketcand", host="127.0.0.1",
+port=29536, channel="can0")``. Runs in real time until Ctrl-C.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+import typer
+
+from seqrun.cli.app import sim_app
+from seqrun.cli.common import fail
+
+
+@sim_app.command("serve")
+def serve(
+    port: Annotated[int, typer.Option(help="TCP port to listen on.")] = 29536,
+    host: Annotated[str, typer.Option(
+        help="Loopback address to bind (127.0.0.1, ::1 or localhost only).")] = "127.0.0.1",
+    channel: Annotated[str, typer.Option(help="socketcand channel name clients open.")] = "can0",
+    fault: Annotated[list[str] | None, typer.Option(
+        "--fault", metavar="SPEC",
+        help="Inject a fault MODULE:KIND[=RATE]@SECONDS, e.g. 4:tow_error@2.5, all:halt@1, "
+             "3:drop_acks=0.3@0. Repeatable. Kinds: tow_error, halt, no_ack, drop_acks, "
+             "stuck, missing.")] = None,
+    bitrate: Annotated[int, typer.Option(help="Bit rate of the simulated bus, bit/s.")]
+    = 1_000_000,
+) -> None:
+    """Serve a simulated LWA 3 (7 modules at Park, real time) over socketcand."""
+    from seqrun.clock import RealClock
+    from seqrun.sim.arm import SimArm
+    from seqrun.sim.faults import parse_faults
+    from seqrun.sim.network import SimNetwork
+    from seqrun.sim.socketcand import SocketcandServer
+
+    try:
+        faults = parse_faults(fault or [])
+    except ValueError as exc:
+        fail(str(exc))
+    if not 0 <= port <= 65535:
+        fail(f"--port {port}: must be 0..65535")
+    if bitrate <= 0:
+        fail(f"--bitrate {bitrate}: must be positive")
+    clock = RealClock()
+    network = SimNetwork(clock, SimArm(clock, faults=faults), bitrate)
+    try:
+        server = SocketcandServer(network, host=host, port=port, channel=channel)
+    except ValueError as exc:
+        fail(str(exc))
+    except OSError as exc:
+        fail(f"cannot listen on {host}:{port}: {exc.strerror or exc}")
+    typer.echo(f"simulated LWA 3 (modules 1-7, {bitrate} bit/s) on socketcand "
+               f"{server.host}:{server.port}, channel {channel}")
+    for item in faults:
+        typer.echo(f"  fault {item.spec}")
+    typer.echo(f'  python-can: can.Bus(interface="socketcand", host="{server.host}", '
+               f'port={server.port}, channel="{channel}")')
+    typer.echo("Ctrl-C to stop.")
+    try:
+        server.serve_forever()
+    except KeyboardInterrupt:
+        typer.echo("stopping")
+    finally:
+        server.shutdown()
