@@ -47,7 +47,8 @@ def serve(
     if bitrate <= 0:
         fail(f"--bitrate {bitrate}: must be positive")
     clock = RealClock()
-    network = SimNetwork(clock, SimArm(clock, faults=faults), bitrate)
+    # No spinning: TCP adds more latency than a late wake-up, and clients may be many.
+    network = SimNetwork(clock, SimArm(clock, faults=faults), bitrate, spin_window=0.0)
     try:
         server = SocketcandServer(network, host=host, port=port, channel=channel)
     except ValueError as exc:

@@ -99,6 +99,11 @@ RESETTABLE = (_F.ERROR | _F.HALTED | _F.TOW_ERROR | _F.COMM_ERROR | _F.BEYOND_SO
               | _F.CURLIMIT)
 _MOTION_BITS = (_F.MOTION | _F.RAMP_ACC | _F.RAMP_STEADY | _F.RAMP_DEC | _F.RAMP_END
                 | _F.INPROGRESS | _F.FULLBUFFER)
+_MOTION_MASK = int(_MOTION_BITS)
+_MOTION, _RAMP_END = int(_F.MOTION), int(_F.RAMP_END)
+_INPROGRESS, _FULLBUFFER = int(_F.INPROGRESS), int(_F.FULLBUFFER)
+_ERROR_OR_HALTED, _HOME_OK = int(_F.ERROR | _F.HALTED), int(_F.HOME_OK)
+_SHORT_STATES = [ShortState(i) for i in range(256)]
 #: Position tolerance (rad) below which a limit counts as reached, not crossed; targets are
 #: clamped exactly onto limits, so rounding must not turn "stopped at MinPos" into a fault.
 _LIMIT_EPS = 1e-9
@@ -493,34 +498,37 @@ class SimModule:
             return 0.0
         return self._commanded()[1]
 
-    def _state_now(self) -> StateFlag:
-        state = self._flags & ~_MOTION_BITS
+    def _state_bits(self) -> int:
+        # Plain ints on this path: it runs for every FPosStateDio read, and IntFlag
+        # arithmetic costs microseconds per operation.
+        state = int(self._flags) & ~_MOTION_MASK
         profile = self._profile
         if profile is None:
-            return state | _F.RAMP_END
+            return state | _RAMP_END
         _, _, segment = profile.sample(self._t)
-        state |= _F.MOTION
+        state |= _MOTION
         if profile.kind == "step":
-            state |= _F.INPROGRESS
-            if self._buffered_step is not None:
-                state |= _F.FULLBUFFER
+            state |= _INPROGRESS | (_FULLBUFFER if self._buffered_step is not None else 0)
         else:
-            state |= segment.phase
+            state |= int(segment.phase)
         return state
 
+    def _state_now(self) -> StateFlag:
+        return StateFlag(self._state_bits())
+
     def _short_state_now(self) -> ShortState:
-        state = self._state_now()
-        short = ShortState(0)
-        if state & (_F.ERROR | _F.HALTED) or not state & _F.HOME_OK:
-            short |= ShortState.NOT_OK
-        for flag, bit in ((_F.SWR, ShortState.SWR), (_F.SW1, ShortState.SW1),
-                          (_F.SW2, ShortState.SW2), (_F.MOTION, ShortState.MOTION),
-                          (_F.RAMP_END, ShortState.RAMP_END),
-                          (_F.INPROGRESS, ShortState.INPROGRESS),
-                          (_F.FULLBUFFER, ShortState.FULLBUFFER)):
-            if state & flag:
-                short |= bit
-        return short
+        state = self._state_bits()
+        short = 0x01 if state & _ERROR_OR_HALTED or not state & _HOME_OK else 0
+        short |= (state >> 5) & 0x0E  # SWR, SW1, SW2 (0x40, 0x80, 0x100) -> 0x02, 0x04, 0x08
+        if state & _MOTION:
+            short |= 0x10
+        if state & _RAMP_END:
+            short |= 0x20
+        if state & _INPROGRESS:
+            short |= 0x40
+        if state & _FULLBUFFER:
+            short |= 0x80
+        return _SHORT_STATES[short]
 
     def _dio(self) -> int:
         return int(self._params.get(ParamId.DIO_SETUP, 0)) & 0xFF

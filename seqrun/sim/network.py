@@ -24,10 +24,12 @@ retransmission, bit errors, CAN FD.
 
 from __future__ import annotations
 
+import functools
 import itertools
 import threading
+import time
 from collections import deque
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 from seqrun.can_timing import INTERMISSION_BITS, frame_bit_length
 from seqrun.clock import Clock
@@ -36,6 +38,8 @@ from seqrun.sim.arm import SimArm
 
 #: Frames a host endpoint may have waiting for the wire before ``send`` waits [I].
 DEFAULT_TX_QUEUE_SIZE = 256
+#: See :attr:`SimNetwork.spin_window`.
+DEFAULT_SPIN_WINDOW = 0.0005
 
 
 class NetworkClosedError(BusError):
@@ -46,7 +50,7 @@ class TransmitTimeoutError(BusError):
     """``send`` found the transmit queue full until its timeout ran out."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class WireFrame:
     """A classic CAN frame on the simulated wire; ``timestamp`` is the delivery time."""
 
@@ -63,6 +67,14 @@ class WireFrame:
     @property
     def length(self) -> int:
         return self.dlc if self.is_remote and self.dlc is not None else len(self.data)
+
+
+@functools.lru_cache(maxsize=4096)
+def _bit_length(can_id: int, data: bytes, extended: bool, remote: bool,
+                dlc: int | None) -> int:
+    # Cached: computing stuffing and CRC bit by bit costs ~20 µs of Python, and a bus
+    # mostly carries the same requests and acks over and over.
+    return frame_bit_length(can_id, data, extended=extended, remote=remote, dlc=dlc)
 
 
 def _arbitration_key(frame: WireFrame) -> tuple[int, int, int, int, int]:
@@ -148,12 +160,18 @@ class SimNetwork:
     """The wire: host endpoints (:meth:`attach`) plus the modules of ``arm``.
 
     :param bitrate: bit/s; sets every frame's duration.
+    :param spin_window: see the attribute of that name.
     """
 
-    def __init__(self, clock: Clock, arm: SimArm, bitrate: int = 1_000_000) -> None:
+    def __init__(self, clock: Clock, arm: SimArm, bitrate: int = 1_000_000, *,
+                 spin_window: float = DEFAULT_SPIN_WINDOW) -> None:
         if bitrate <= 0:
             raise ValueError(f"bitrate must be positive, got {bitrate}")
         self.clock = clock
+        #: Real time only: the last ``spin_window`` seconds before a wire event a receiver
+        #: busy-waits (yielding the GIL) instead of sleeping, because a sleeping thread
+        #: wakes 50-100 µs late — as long as a whole request frame. 0 never spins.
+        self.spin_window = spin_window
         self.arm = arm
         self.bitrate = int(bitrate)
         self._cond = threading.Condition(threading.RLock())
@@ -204,9 +222,12 @@ class SimNetwork:
     # -- timing -------------------------------------------------------------------------------
 
     def frame_durations(self, frame: WireFrame) -> tuple[float, float]:
-        """(seconds until delivery, seconds the bus is occupied) for ``frame``."""
-        bits = frame_bit_length(frame.can_id, frame.data, extended=frame.is_extended,
-                                remote=frame.is_remote, dlc=frame.dlc if frame.is_remote else None)
+        """(seconds until delivery, seconds the bus is occupied) for ``frame``.
+
+        :raises ValueError: a frame classic CAN cannot carry.
+        """
+        bits = _bit_length(frame.can_id, frame.data, frame.is_extended, frame.is_remote,
+                           frame.dlc if frame.is_remote else None)
         return (bits - INTERMISSION_BITS) / self.bitrate, bits / self.bitrate
 
     def run_until(self, t: float | None = None) -> None:
@@ -254,7 +275,9 @@ class SimNetwork:
         return max(self._bus_free_at, min(ready)) if ready else None
 
     def _deliver(self, flight: _InFlight) -> None:
-        frame = replace(flight.pending.frame, timestamp=flight.end)
+        sent = flight.pending.frame
+        frame = WireFrame(sent.can_id, sent.data, sent.is_extended, sent.is_remote, sent.dlc,
+                          flight.end, sent.sender)
         for endpoint in self._endpoints:
             if endpoint._node is not flight.node or endpoint.receive_own:
                 endpoint._inbox.append(frame)
@@ -268,18 +291,24 @@ class SimNetwork:
             self._queue(node, WireFrame(reply.can_id, reply.data, sender=node.name),
                         reply.ready_at)
 
-    def _queue(self, node: _Node, frame: WireFrame, ready_at: float) -> None:
-        to_delivery, occupancy = self.frame_durations(frame)
+    def _queue(self, node: _Node, frame: WireFrame, ready_at: float,
+               durations: tuple[float, float] | None = None) -> None:
+        to_delivery, occupancy = durations or self.frame_durations(frame)
         node.queue.append(_Pending(frame, ready_at, next(self._seq), _arbitration_key(frame),
                                    to_delivery, occupancy))
 
     # -- endpoint operations (called through Endpoint) ------------------------------------------
 
-    def _wait(self, deadline: float | None) -> None:
+    def _wait(self, deadline: float | None) -> float | None:
         """Let time pass until the next wire event, ``deadline``, or another thread's
-        activity, whichever is first. Lock held."""
+        activity, whichever is first. Lock held.
+
+        In real time, returns the time of a wire event less than ``spin_window`` away for
+        the caller to spin towards *after releasing the lock* (see :meth:`_spin`).
+        """
         now = self.clock.now()
-        wake = self._next_event_time()
+        event = self._next_event_time()
+        wake = event
         if deadline is not None:
             wake = deadline if wake is None else min(wake, deadline)
         if self.clock.is_virtual:
@@ -287,11 +316,25 @@ class SimNetwork:
                 self._cond.wait()  # nothing scheduled: only another thread can change that
             else:
                 self.clock.sleep_until(wake)
-        else:
-            self._cond.wait(None if wake is None else max(wake - now, 0.0))
+            return None
+        if wake is None:
+            self._cond.wait()
+            return None
+        remaining = wake - now
+        if self.spin_window > 0 and wake == event:
+            if remaining <= self.spin_window:
+                return wake
+            remaining -= self.spin_window  # wake up early, spin the rest
+        self._cond.wait(max(remaining, 0.0))
+        return None
+
+    def _spin(self, until: float) -> None:
+        """Busy-wait (yielding the GIL) until ``until``; lock not held."""
+        while self.clock.now() < until:
+            time.sleep(0)
 
     def _send(self, endpoint: Endpoint, frame: WireFrame, timeout: float | None) -> None:
-        self.frame_durations(frame)  # raises ValueError for a frame CAN cannot carry
+        durations = self.frame_durations(frame)  # ValueError for a frame CAN cannot carry
         with self._cond:
             if endpoint.closed:
                 raise NetworkClosedError(f"{endpoint.name} is closed")
@@ -303,17 +346,19 @@ class SimNetwork:
                     raise TransmitTimeoutError(
                         f"{endpoint.name}: transmit queue full ({endpoint.tx_queue_size} "
                         f"frames) for {timeout} s")
-                self._wait(deadline)
+                if self._wait(deadline) is not None:
+                    self._cond.wait(0)  # rare: sleep-wait is precise enough here
                 if endpoint.closed:
                     raise NetworkClosedError(f"{endpoint.name} is closed")
                 self._advance(self.clock.now())
-            self._queue(endpoint._node, replace(frame, timestamp=0.0, sender=endpoint.name),
-                        self.clock.now())
+            frame = WireFrame(frame.can_id, bytes(frame.data), frame.is_extended,
+                              frame.is_remote, frame.dlc, 0.0, endpoint.name)
+            self._queue(endpoint._node, frame, self.clock.now(), durations)
             self._cond.notify_all()
 
     def _receive(self, endpoint: Endpoint, deadline: float | None) -> WireFrame | None:
-        with self._cond:
-            while True:
+        while True:
+            with self._cond:
                 if endpoint.closed:
                     raise NetworkClosedError(f"{endpoint.name} is closed")
                 now = self.clock.now()
@@ -322,4 +367,6 @@ class SimNetwork:
                     return endpoint._inbox.popleft()
                 if deadline is not None and now >= deadline:
                     return None
-                self._wait(deadline)
+                spin_until = self._wait(deadline)
+            if spin_until is not None:
+                self._spin(spin_until)
