@@ -45,7 +45,8 @@ from pydantic import (AfterValidator, BeforeValidator, ConfigDict, Discriminator
 from pydantic_core import PydanticCustomError
 
 from seqrun.errors import SequenceInvalid, SourceError, UserInputError
-from seqrun.yamlsource import Document, FriendlyModel, Location, load_document, sort_errors
+from seqrun.yamlsource import (Document, FriendlyModel, Location, display_path, load_document,
+                               sort_errors)
 
 __all__ = [
     "BARE_STEPS",
@@ -392,7 +393,14 @@ BARE_STEPS: tuple[str, ...] = ("reset", "home", "halt", "set_limits")
 # -- the one-key step mappings
 def _kind_pick(*, none: str | None = None, text: str | None = None, number: str | None = None,
                items: str | None = None, params: str) -> Any:
+    """Choose the branch of a step's value: a mapping is the full parameters; anything else
+    goes to the shorthand that fits it, else to the first shorthand there is (so that
+    ``confirm: 42`` says "expected text", not "expected a mapping")."""
+    shorthand = text or number or items
+
     def pick(value: Any) -> str:
+        if isinstance(value, (dict, StepParams)):
+            return params
         if value is None and none:
             return none
         if isinstance(value, str) and text:
@@ -401,7 +409,7 @@ def _kind_pick(*, none: str | None = None, text: str | None = None, number: str 
             return number
         if isinstance(value, list) and items:
             return items
-        return params
+        return shorthand or none or params
     return pick
 
 
@@ -629,9 +637,10 @@ class ResolvedStep:
     node: Any = field(default=None, repr=False)  # the parameters' YAML node
 
     def where(self, *path: Any, key: bool = False) -> Location:
-        """Location of a parameter, e.g. ``where("joints", "j4")``; the step's own location
-        (or the nearest enclosing node) where the path is not written out (shorthand)."""
-        if self.document is None or self.node is None:
+        """Location of a parameter, e.g. ``where("joints", "j4")``; without a path, the step's
+        own location. Where the path is not written out (shorthand), the nearest enclosing
+        value."""
+        if not path or self.document is None or self.node is None:
             return self.location
         return self.document.locate(path, start=self.node, key=key)
 
@@ -711,8 +720,6 @@ class _Loader:
 
     def load(self, path: Path, *, chain: tuple[Path, ...] = (),
              include_chain: tuple[Location, ...] = (), include_step: Any = None) -> Any:
-        from seqrun.yamlsource import display_path
-
         try:
             doc = load_document(path, file=display_path(path))
         except SequenceInvalid as exc:
@@ -798,8 +805,8 @@ class _Loader:
 
         target = (path.parent / params.file).resolve()
         if not target.is_relative_to(self.tree):
-            error(f"include '{params.file}' is outside the sequences folder {self.tree}; "
-                  "included files must stay inside it")
+            error(f"include '{params.file}' is outside the sequences folder "
+                  f"{display_path(self.tree)}; included files must stay inside it")
             return
         if target in chain:
             names = " -> ".join(p.name for p in (*chain[chain.index(target):], target))
@@ -840,8 +847,6 @@ def load_sequence(path: str | os.PathLike[str], *,
     :class:`SequenceInvalid` with every error found, :class:`UserInputError` if the file
     cannot be read.
     """
-    from seqrun.yamlsource import display_path
-
     path = Path(path)
     top = path.resolve()
     root = Path(project_root).resolve() if project_root is not None else find_project_root(top)

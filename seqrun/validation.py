@@ -315,6 +315,7 @@ class _Validator:
 
         # targets inside the limits in force; a joint outside may only come back inside
         target = {n: s.position for n, s in self.joints.items()}
+        refused: set[str] = set()  # targets outside: not tracked (no cascade of findings)
         for name in names:
             state = self.joints[name]
             value = state.position + given[name] if params.relative else given[name]
@@ -324,6 +325,7 @@ class _Validator:
                 state.limits) == tuple(state.joint.limits_deg) else "the limits written by " \
                 "set_limits"
             if not lo <= value <= hi:
+                refused.add(name)
                 how = (f" ({_f(state.position)}° {'+' if given[name] >= 0 else '-'} "
                        f"{_f(abs(given[name]))}°)" if params.relative else "")
                 self.errors.append(step.error(
@@ -337,6 +339,8 @@ class _Validator:
                     f"{_range(lo, hi)}; this move brings it back inside", *where[name]))
         self._guards(step, target)
         for name in names:
+            if name in refused:
+                continue
             state = self.joints[name]
             if target[name] != state.position:
                 state.at_start = False
@@ -397,15 +401,16 @@ class _Validator:
         path = np.radians(start + (end - start) * fractions)
         points = point_positions(self._chain, path)
         for guard in guards:
-            for point in guard.points:
-                heights = points[point][:, 2]
-                i = int(np.argmin(heights))
-                if heights[i] < guard.min_z_mm:
-                    self.errors.append(step.error(
-                        f"this move takes the {point.replace('_', '-')} down to z = "
-                        f"{_f(heights[i])} mm ({round(float(fractions[i, 0]) * 100):d}% of the "
-                        f"way, straight line in joint space), below the '{guard.name}' guard "
-                        f"at {_f(guard.min_z_mm)} mm"))
+            # one error per guard: the watched point that goes lowest, where it is lowest
+            lowest = min(guard.points, key=lambda p: float(points[p][:, 2].min()))
+            heights = points[lowest][:, 2]
+            i = int(np.argmin(heights))
+            if heights[i] < guard.min_z_mm:
+                self.errors.append(step.error(
+                    f"this move takes the {lowest.replace('_', '-')} down to z = "
+                    f"{_f(heights[i])} mm ({round(float(fractions[i, 0]) * 100):d}% of the "
+                    f"way, straight line in joint space), below the '{guard.name}' guard "
+                    f"at {_f(guard.min_z_mm)} mm"))
 
     def checkpoint(self, step: ResolvedStep, params: CheckpointParams) -> None:
         from seqrun.kinematics import orientation_error, pose_from_user_deg
@@ -436,11 +441,19 @@ class _Validator:
         for step in self.loaded.steps:
             handler = handlers.get(step.kind)
             if handler is not None:
+                errors, notes = len(self.errors), len(self.notes)
                 handler(step, step.params)  # type: ignore[operator]
+                # a step's findings in the order they appear in its text
+                self.errors[errors:] = sorted(self.errors[errors:], key=_position)
+                self.notes[notes:] = sorted(self.notes[notes:], key=_position)
         final = {n: s.position for n, s in self.joints.items()}
         # In step order (a step of an included file comes where it runs), duplicates dropped.
         return ValidationResult(list(dict.fromkeys(self.errors)),
                                 list(dict.fromkeys(self.notes)), final)
+
+
+def _position(item: SourceError) -> tuple[int, int]:
+    return item.line, item.column
 
 
 def validate_sequence(loaded: LoadedSequence, arm: ArmDescription,

@@ -431,6 +431,49 @@ def read_text(path: Path, file: str) -> str:
     return text
 
 
+#: PyYAML's problem texts that a test engineer would not understand, reworded.
+_SYNTAX_HINTS = {
+    "expected <block end>, but found '<block mapping start>'":
+        "bad indentation: this line does not line up with the keys above it",
+    "expected <block end>, but found '<block sequence start>'":
+        "bad indentation: this list item does not line up with the items above it",
+    "expected <block end>, but found '-'":
+        "bad indentation: this list item does not line up with the items above it",
+    "expected <block end>":
+        "bad indentation, or a missing '-' or ':' before this",
+    "mapping values are not allowed here":
+        "unexpected ':' (a text containing ': ' must be quoted; a nested mapping starts on "
+        "a new, further indented line)",
+    "found unexpected end of stream":
+        "the file ends inside a quoted text (a closing quote is missing)",
+    "expected ',' or '}', but got '<stream end>'":
+        "the file ends inside { ... }: a closing '}' is missing",
+    "expected ',' or ']', but got '<stream end>'":
+        "the file ends inside [ ... ]: a closing ']' is missing",
+    "could not find expected ':'":
+        "expected ':' after a key (or the line before is not finished)",
+}
+
+
+#: PyYAML's context texts, as "(<this> line N)".
+_SYNTAX_CONTEXTS = {
+    "while parsing a block mapping": "in the mapping that starts at",
+    "while parsing a block collection": "in the list that starts at",
+    "while parsing a flow mapping": "in the '{' of",
+    "while parsing a flow sequence": "in the '[' of",
+    "while scanning a quoted scalar": "the quoted text starts at",
+    "while scanning a simple key": "in the key at",
+}
+
+
+def _syntax_key(problem: str) -> str:
+    if problem in _SYNTAX_HINTS:
+        return problem
+    if problem.startswith("expected <block end>"):
+        return "expected <block end>"
+    return problem
+
+
 def _syntax_error(file: str, exc: yaml.YAMLError, text: str) -> SourceError:
     if isinstance(exc, yaml.reader.ReaderError):
         pos = exc.position
@@ -444,8 +487,11 @@ def _syntax_error(file: str, exc: yaml.YAMLError, text: str) -> SourceError:
         problem = exc.problem or exc.context or "invalid YAML"
         if problem == "but found another document":
             problem = "only one YAML document per file: found a second one ('---')"
-        elif exc.context and exc.context_mark is not None and exc.context_mark is not mark:
-            problem = f"{problem} ({exc.context} at line {exc.context_mark.line + 1})"
+        else:
+            problem = _SYNTAX_HINTS.get(_syntax_key(problem), problem)
+            if exc.context and exc.context_mark is not None and exc.context_mark is not mark:
+                what = _SYNTAX_CONTEXTS.get(exc.context, exc.context + " at")
+                problem = f"{problem} ({what} line {exc.context_mark.line + 1})"
         if "'\\t'" in problem:
             problem += "; YAML does not allow tabs for indentation"
         if mark is not None:
@@ -608,7 +654,14 @@ class FriendlyModel(BaseModel):
             details: list[Any] = []
             changed = False
             for err in exc.errors(include_url=False):
-                if err["type"] == "extra_forbidden" and len(err["loc"]) == 1:
+                if err["type"] == "missing" and len(err["loc"]) == 1 and cls.yaml_name:
+                    details.append(InitErrorDetails(
+                        type=PydanticCustomError("missing_key", "{text}", {
+                            "text": f"missing required key '{err['loc'][0]}' in "
+                                    f"{cls.yaml_name}"}),
+                        loc=err["loc"], input=err["input"]))
+                    changed = True
+                elif err["type"] == "extra_forbidden" and len(err["loc"]) == 1:
                     details.append(InitErrorDetails(
                         type=PydanticCustomError("unknown_key", "{text}",
                                                  {"text": cls.unknown_key_message(
