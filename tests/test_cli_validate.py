@@ -1,0 +1,160 @@
+"""``seqrun validate`` and ``seqrun schema`` through typer's CliRunner, and as a process."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+import seqrun.cli.validate  # noqa: F401  (registers `validate` and `schema`)
+from seqrun.cli.app import app
+from seqrun.schema import sequence_json_schema
+from seqrun.yamlsource import display_path
+
+ROOT = Path(__file__).resolve().parents[1]
+BAD = ROOT / "tests" / "data" / "bad"
+SHIPPED = ["startup", "totem", "opsafe", "park", "shutdown"]
+
+runner = CliRunner()
+
+
+def run(*args: str):
+    return runner.invoke(app, [str(a) for a in args])
+
+
+def no_crash(result) -> None:
+    assert result.exception is None or isinstance(result.exception, SystemExit), (
+        result.exception)
+    assert "Traceback" not in result.output
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_shipped_files_are_valid(name):
+    path = ROOT / "sequences" / f"{name}.yaml"
+    result = run("validate", path)
+    no_crash(result)
+    assert result.exit_code == 0, result.output
+    assert result.stdout.splitlines()[-1].startswith(f"{display_path(path)}: valid (")
+
+
+def test_human_output_errors_then_notes_then_summary():
+    path = BAD / "velocity_above_max.yaml"
+    result = run("validate", path)
+    assert result.exit_code == 1
+    file = display_path(path)
+    assert result.stdout.splitlines() == [
+        f"{file}:9:28: velocity_deg_s of j1 45 deg/s is above its maximum 30 deg/s (from the "
+        "arm file)",
+        f"{file}:8:13: note: j4 starts at -120.32°, 0.32° outside its limit -120…120; this "
+        "move brings it back inside",
+        f"{file}: invalid (1 error, 1 note)",
+    ]
+
+
+def test_json_output():
+    path = BAD / "out_of_limit.yaml"
+    result = run("validate", path, "--json")
+    assert result.exit_code == 1
+    assert json.loads(result.stdout) == {
+        "valid": False,
+        "errors": [{"file": display_path(path), "line": 7, "column": 33,
+                    "message": "j2 target 130° is outside its limits -120…120"}],
+        "notes": [],  # j4 is still outside, but this move does not command it
+    }
+
+
+def test_json_output_of_a_valid_file_has_the_notes():
+    result = run("validate", ROOT / "sequences" / "opsafe.yaml", "--json")
+    assert result.exit_code == 0
+    report = json.loads(result.stdout)
+    assert report["valid"] is True and report["errors"] == []
+    [note] = report["notes"]
+    assert set(note) == {"file", "line", "column", "message"}
+    assert note["message"].startswith("j4 starts at -120.32°")
+
+
+def test_start_option():
+    path = ROOT / "sequences" / "opsafe.yaml"
+    result = run("validate", path, "--start", "totem")
+    assert result.exit_code == 0
+    assert "note:" not in result.stdout  # from Totem nothing is outside its limits
+
+
+def test_arm_option(tmp_path):
+    text = (ROOT / "arms" / "lwa3.yaml").read_text()
+    slow = tmp_path / "slow.yaml"
+    slow.write_text(text.replace("max_velocity_deg_s: 30", "max_velocity_deg_s: 10"))
+    path = ROOT / "sequences" / "opsafe.yaml"
+    assert run("validate", path, "--arm", slow).exit_code == 0
+    result = run("validate", BAD / "velocity_above_max.yaml", "--arm", slow)
+    assert "above its maximum 10 deg/s" in result.stdout
+
+
+def test_invalid_arm_file_is_located(tmp_path):
+    broken = tmp_path / "arm.yaml"
+    broken.write_text("name: x\njoints: []\nkinematics: nope\n")
+    result = run("validate", ROOT / "sequences" / "startup.yaml", "--arm", broken)
+    no_crash(result)
+    assert result.exit_code == 1
+    assert result.stdout.splitlines()[0].startswith(f"{display_path(broken)}:2:9: ")
+
+
+@pytest.mark.parametrize("args, message", [
+    (["nope.yaml"], "error: nope.yaml: no such file"),
+    ([str(ROOT / "sequences")], "is a directory"),
+    ([str(ROOT / "sequences" / "opsafe.yaml"), "--start", "nowhere"],
+     "error: start pose: unknown pose 'nowhere'"),
+    ([str(ROOT / "sequences" / "opsafe.yaml"), "--arm", "nope.yaml"],
+     "error: arm file nope.yaml not found"),
+])
+def test_unusable_input_is_one_line_and_exit_2(args, message):
+    result = run("validate", *args)
+    no_crash(result)
+    assert result.exit_code == 2
+    assert result.stdout == ""
+    assert len(result.stderr.splitlines()) == 1 and message in result.stderr
+
+
+@pytest.mark.parametrize("path", sorted(BAD.glob("*.yaml")), ids=lambda p: p.name)
+def test_every_bad_file_exits_1_with_located_lines(path):
+    result = run("validate", path)
+    no_crash(result)
+    assert result.exit_code == 1
+    lines = result.stdout.splitlines()
+    assert lines[-1].endswith(")") and ": invalid (" in lines[-1]
+    for line in lines[:-1]:
+        file, line_no, column, message = line.split(":", 3)
+        assert int(line_no) >= 1 and int(column) >= 1 and message.strip()
+        assert Path(file).name.endswith(".yaml")
+
+
+def test_schema_command_prints_the_sequence_schema():
+    result = run("schema")
+    assert result.exit_code == 0
+    assert json.loads(result.stdout) == sequence_json_schema()
+    committed = (ROOT / "docs" / "schema" / "sequence.schema.json").read_text()
+    assert result.stdout == committed
+
+
+@pytest.mark.parametrize("kind, title", [("arm", "ArmDescription"), ("pose", "PoseFile")])
+def test_schema_command_other_formats(kind, title):
+    result = run("schema", kind)
+    assert result.exit_code == 0 and json.loads(result.stdout)["title"] == title
+
+
+def test_as_a_process_no_traceback_for_hostile_input(tmp_path):
+    hostile = tmp_path / "hostile.yaml"
+    hostile.write_bytes((BAD / "python_tag.yaml").read_bytes())
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    proc = subprocess.run([sys.executable, "-m", "seqrun", "validate", str(hostile)],
+                          capture_output=True, text=True, cwd=tmp_path, env=env, timeout=60)
+    assert proc.returncode == 1
+    assert "Traceback" not in proc.stderr + proc.stdout
+    assert proc.stdout.splitlines()[0] == (
+        "hostile.yaml:5:14: tag '!!python/object/apply:os.system' is not allowed: seqrun files "
+        "are plain YAML")
