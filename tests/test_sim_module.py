@@ -490,3 +490,27 @@ def test_missing_module_never_answers_and_freezes(clock):
     module.handle(BroadcastRequest(CommandId.HALT))
     clock.advance(2.0)
     assert module.position() == 0.375 and not module.state() & F.HALTED
+
+
+def test_integer_modes_use_ticks(clock):
+    module = homed(clock)
+    ratio = module.parameter(ParamId.INC_RATIO)  # rad per tick
+    ticks = 20000
+    ack = module.handle(SetMotion(1, MotionMode.IRAMP_ACK, ticks))
+    assert ack.position == 0 and ack.state == S.RAMP_END
+    clock.advance(5.0)
+    assert module.position() == pytest.approx(ticks * ratio)
+    assert module.parameter(ParamId.IPOS) == ticks
+    module.handle(SetMotion(1, MotionMode.IVEL, -ticks))  # ticks/s
+    clock.advance(0.5)
+    assert module.velocity() == pytest.approx(-ticks * ratio)
+
+
+def test_current_mode_is_not_simulated_and_refused(clock):
+    module = homed(clock)
+    ack = module.handle(SetMotion(1, MotionMode.FCUR_ACK, 1.0))
+    assert ack.state & S.NOT_OK
+    ack = module.handle(SetMotion(1, MotionMode.ICUR, 100))
+    assert ack == MotionAck(1, MotionMode.ICUR)
+    clock.advance(1.0)
+    assert module.position() == 0.0
