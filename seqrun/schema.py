@@ -96,6 +96,20 @@ def _pose_name(value: str) -> str:
     return value
 
 
+_YAML_FILE_RE = re.compile(r"\.ya?ml$")
+
+
+def _yaml_file(value: str) -> str:
+    if not _YAML_FILE_RE.search(value):
+        raise PydanticCustomError("include_file", "an include names a sequence file ending in "
+                                                  ".yaml, got '{value}'", {"value": value})
+    return value
+
+
+IncludeFile = Annotated[str, Field(min_length=1), AfterValidator(_yaml_file), Field(
+    json_schema_extra={"pattern": _YAML_FILE_RE.pattern},
+    description="Path of the sequence to include, relative to this file; it must stay "
+                "inside the sequences folder.")]
 JointName = Annotated[str, Field(min_length=1, description="A joint name of the arm file, "
                                                            "e.g. j1.")]
 PoseName = Annotated[str, AfterValidator(_pose_name), Field(
@@ -372,9 +386,10 @@ class IncludeParams(StepParams):
 
     kind: ClassVar[str] = "include"
     yaml_name: ClassVar[str] = "include"
-    file: str = Field(min_length=1, pattern=r"\.ya?ml$",
-                      description="Path of the sequence to include, relative to this file; "
-                                  "it must stay inside the sequences folder.")
+    file: IncludeFile = Field(  # type: ignore[valid-type]
+        description="Path of the sequence to include, relative to this file; it must stay "
+                    "inside the sequences folder (the project's sequences/, else the folder "
+                    "of the file given to seqrun).")
 
     @classmethod
     def from_shorthand(cls, value: Any) -> StepParams:
@@ -512,8 +527,7 @@ class IncludeStep(_Step):
 
     kind: ClassVar[str] = "include"
     include: _either(_kind_pick(text="include:file", params="include:params"),
-                     **{"include:file": Annotated[str, Field(min_length=1,
-                                                             pattern=r"\.ya?ml$")],
+                     **{"include:file": IncludeFile,
                         "include:params": IncludeParams}) = Field(
         description=_doc(IncludeParams) + " Shorthand: 'include: startup.yaml'.")
 
@@ -859,3 +873,135 @@ def load_sequence(path: str | os.PathLike[str], *,
                           description=seq.description, project_root=root,
                           poses_dir=loader.poses_dir, arm_path=loader.arm_path,
                           steps=tuple(loader.steps), files=tuple(loader.files))
+
+
+# --------------------------------------------------------------------------- reference docs
+_REFERENCE_INTRO = """\
+# Sequence files
+
+<!-- Generated from the models in seqrun/schema.py by `seqrun schema --markdown`;
+     do not edit by hand (tests/test_schema.py checks it is up to date). -->
+
+A sequence file says what the arm does, step by step. Editors with yaml-language-server
+check it as you type when its first line names the schema:
+
+```yaml
+# yaml-language-server: $schema=../docs/schema/sequence.schema.json
+name: Op-safe
+description: From a freshly powered-on arm in Park to the Op-safe pre-grasp pose.
+steps:
+  - include: startup.yaml                 # reset, home, set_limits
+  - confirm: Is the space around the arm clear?
+  - move: {pose: totem, velocity_scale: 0.5, label: Up to Totem}
+  - move: {pose: opsafe, velocity_scale: 0.5}
+  - wait: {until: in_position}
+  - checkpoint: {pose: opsafe}
+```
+
+`seqrun validate FILE` checks a file and its includes without moving anything:
+`file:line:col: message` for each problem, exit 0 (valid), 1 (invalid) or 2 (unusable input).
+
+## The file
+
+| key | | |
+|---|---|---|
+{top}
+
+Each step is a mapping with one key, the step type; its value holds the step's parameters.
+Every step takes an optional `label`, the text the operator sees.
+
+## YAML as seqrun reads it
+
+- YAML 1.2 values: only `true`/`false` are booleans (`yes`, `no`, `on`, `off` stay words, and
+  where `true`/`false` is expected they are an error); `010` is ten; `1:30` is text, not 90.
+- `.nan`, `.inf` are refused wherever a number is expected.
+- A key given twice is an error (plain YAML silently keeps the last one).
+- No tags (`!!python/...`, `!custom`, ...), no merge keys (`<<`), one document per file;
+  anchors and aliases are fine within limits.
+
+## Rules checked against the arm
+
+- Start-up order: `reset` before `home` and before `set_limits`; `home` and `set_limits`
+  before the first `move`; `reset` again after a `halt`.
+- Joints must exist; the locked joint (j3) is never commanded.
+- Every commanded target lies inside the joint limits in force. A joint that starts outside
+  them (Park's j4 at -120.32° against -120…120) may only move back inside (a note).
+- Velocities and limit overrides stay within the arm file's maxima.
+- Workspace guards of the arm file hold along each move (straight line in joint space).
+- A checkpoint must agree with the end-effector of the joints tracked so far.
+- Validation starts from Park (`--start POSE` to choose another pose).
+
+## Steps
+"""
+
+
+def _type_text(prop: dict, defs: dict) -> str:
+    if "$ref" in prop:
+        return "mapping"
+    if "anyOf" in prop:
+        kinds = [_type_text(p, defs) for p in prop["anyOf"] if p.get("type") != "null"]
+        return " or ".join(kinds)
+    if "oneOf" in prop:
+        return " or ".join(_type_text(p, defs) for p in prop["oneOf"])
+    if "const" in prop:
+        return f"`{prop['const']}`"
+    if "enum" in prop:
+        return " or ".join(f"`{v}`" for v in prop["enum"])
+    kind = prop.get("type")
+    if kind == "array":
+        items = _type_text(prop.get("items", {}), defs)
+        n = prop.get("minItems")
+        if n is not None and n == prop.get("maxItems"):
+            return f"[{n} × {items}]"
+        return f"list of {items}"
+    if kind == "object":
+        return f"{{joint: {_type_text(prop.get('additionalProperties', {}), defs)}}}"
+    bounds = []
+    if "exclusiveMinimum" in prop:
+        bounds.append(f"> {prop['exclusiveMinimum']}")
+    if "maximum" in prop:
+        bounds.append(f"≤ {prop['maximum']}")
+    text = {"number": "number", "string": "text", "boolean": "true/false",
+            "integer": "whole number"}.get(kind, "value")
+    return text + (" " + ", ".join(bounds) if bounds else "")
+
+
+def reference_markdown() -> str:
+    """The sequence format reference (docs/sequence-format.md), from the models."""
+    schema = sequence_json_schema()
+    defs = schema["$defs"]
+
+    def rows(definition: dict) -> str:
+        required = set(definition.get("required", []))
+        lines = []
+        props = definition["properties"]
+        for key in sorted(props, key=lambda k: k == "label"):  # label last
+            prop = props[key]
+            if key == "steps":
+                lines.append(f"| `steps` | list of steps (below) — required | "
+                             f"{prop.get('description', '')} |")
+                continue
+            default = ("required" if key in required else
+                       "" if prop.get("default") in (None, {}) else
+                       f"default `{json_dumps(prop['default'])}`")
+            lines.append(f"| `{key}` | {_type_text(prop, defs)}"
+                         f"{' — ' + default if default else ''} | "
+                         f"{prop.get('description', '')} |")
+        return "\n".join(lines)
+
+    from json import dumps as json_dumps
+
+    parts = [_REFERENCE_INTRO.replace("{top}", rows(schema))]
+    for kind, model in PARAMS_MODELS.items():
+        step = defs[_STEP_MODELS[kind].__name__]["properties"][kind]
+        parts.append(f"### `{kind}`\n\n{_doc(model)}\n")
+        shorthand = step["description"].split(" Shorthand: ", 1)
+        if len(shorthand) == 2:
+            parts.append(f"Shorthand: {shorthand[1]}\n")
+        definition = defs[model.__name__]
+        if "oneOf" in definition:
+            choices = [" + ".join(f"`{k}`" for k in alt["required"])
+                       for alt in definition["oneOf"]]
+            parts.append(f"Give exactly one of: {' or '.join(choices)}.\n")
+        parts.append("| key | type | |\n|---|---|---|\n" + rows(definition) + "\n")
+    return "\n".join(parts)

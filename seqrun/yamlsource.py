@@ -510,11 +510,7 @@ def load_document(path: str | os.PathLike[str], *, file: str | None = None) -> D
     file = file if file is not None else display_path(path)
     text = read_text(path, file)
     try:
-        loader = _Loader(text)
-        try:
-            root = loader.get_single_node()
-        finally:
-            loader.dispose()
+        root = yaml.compose(text, Loader=_Loader)  # nodes only: nothing is constructed
     except _Problem as exc:
         raise SequenceInvalid([_problem_error(file, exc)]) from None
     except yaml.YAMLError as exc:
@@ -678,7 +674,7 @@ class FriendlyModel(BaseModel):
 
     @classmethod
     def unknown_key_message(cls, key: str) -> str:
-        allowed = list(cls.model_fields)
+        allowed = sorted(cls.model_fields, key=lambda name: name == "label")  # label last
         where = f" in {cls.yaml_name}" if cls.yaml_name else ""
         close = difflib.get_close_matches(key, allowed, n=1, cutoff=0.6)
         hint = f"did you mean '{close[0]}'? " if close else ""

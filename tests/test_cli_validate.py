@@ -158,3 +158,9 @@ def test_as_a_process_no_traceback_for_hostile_input(tmp_path):
     assert proc.stdout.splitlines()[0] == (
         "hostile.yaml:5:14: tag '!!python/object/apply:os.system' is not allowed: seqrun files "
         "are plain YAML")
+
+
+def test_schema_markdown_is_the_committed_reference():
+    result = run("schema", "--markdown")
+    assert result.exit_code == 0
+    assert result.stdout == (ROOT / "docs" / "sequence-format.md").read_text(encoding="utf-8")

@@ -111,7 +111,7 @@ def test_step_titles_use_the_label_or_describe_the_step(project):
     ("- {move: totem, label: x}\n", 4, 3, ["exactly one key", "put label inside"]),
     ("- 5\n", 4, 3, ["a step is a mapping with one key"]),
     ("- move: {pose: totem, velocty: 3}\n", 4, 23, ["unknown key 'velocty' in move",
-                                                   "allowed: label, pose, joints"]),
+                                                   "allowed: pose, joints,", "label)"]),
     ("- move: {label: x}\n", 4, 9, ["a move needs either 'pose' or 'joints'"]),
     ("- move: {pose: totem, joints: {j1: 1}}\n", 4, 9, ["not both"]),
     ("- move: {pose: totem, relative: true}\n", 4, 9, ["'relative: true' needs 'joints'"]),
@@ -132,7 +132,10 @@ def test_step_titles_use_the_label_or_describe_the_step(project):
     ("- halt: []\n", 4, 9, ["must not be empty"]),
     ("- confirm: ''\n", 4, 12, ["must not be empty"]),
     ("- confirm: 42\n", 4, 12, ["expected text, got 42"]),
-    ("- include: other.txt\n", 4, 12, ["String should match pattern"]),
+    ("- include: other.txt\n", 4, 12, ["an include names a sequence file ending in .yaml, "
+                                        "got 'other.txt'"]),
+    ("- include: {file: x.yml, lable: y}\n", 4, 26, ["unknown key 'lable' in include (did "
+                                                     "you mean 'label'? allowed: file, label)"]),
     ("- reset: {label: ''}\n", 4, 18, ["must not be empty"]),
 ])
 def test_step_errors_are_located_and_explained(project, steps, line, col, words):
@@ -355,3 +358,14 @@ def test_models_are_strict():
 def test_display_names_are_relative_to_the_cwd():
     assert display_path(ROOT / "sequences" / "opsafe.yaml") in (
         "sequences/opsafe.yaml", str(ROOT / "sequences" / "opsafe.yaml"))
+
+
+def test_committed_reference_docs_match_the_models():
+    from seqrun.schema import reference_markdown
+
+    committed = (ROOT / "docs" / "sequence-format.md").read_text(encoding="utf-8")
+    assert committed == reference_markdown(), (
+        "docs/sequence-format.md is stale; run: seqrun schema --markdown > "
+        "docs/sequence-format.md")
+    for kind in STEP_KINDS:
+        assert f"### `{kind}`" in committed

@@ -4,6 +4,7 @@
     seqrun validate sequences/opsafe.yaml --json
     seqrun validate my.yaml --start totem --arm arms/lwa3.yaml
     seqrun schema > sequence.schema.json
+    seqrun schema --markdown > docs/sequence-format.md
 
 Human output: one line per error, ``file:line:col: message``, then the notes
 (``file:line:col: note: message``), then a summary line. ``--json`` prints one object
@@ -145,8 +146,16 @@ class SchemaKind(str, Enum):
 def schema_command(
     kind: Annotated[SchemaKind, typer.Argument(
         help="Which file format: sequence (default), arm or pose.")] = SchemaKind.sequence,
+    markdown: Annotated[bool, typer.Option(
+        "--markdown", help="Print the sequence format reference (docs/sequence-format.md) "
+                           "instead.")] = False,
 ) -> None:
     """Print the JSON Schema of a file format (sequence files by default)."""
+    if markdown:
+        from seqrun.schema import reference_markdown
+
+        typer.echo(reference_markdown(), nl=False)
+        return
     if kind is SchemaKind.sequence:
         schema = sequence_json_schema()
     elif kind is SchemaKind.arm:
