@@ -30,7 +30,7 @@ from seqrun.can_timing import frame_bit_length  # noqa: E402
 from seqrun.clock import Clock, RealClock, VirtualClock  # noqa: E402
 from seqrun.powercube.client import PowerCubeClient  # noqa: E402
 from seqrun.powercube.codec import GetParam, GetParamAck, PosStateDio, encode  # noqa: E402
-from seqrun.powercube.protocol import MotionMode, ParamId  # noqa: E402
+from seqrun.powercube.protocol import ParamId  # noqa: E402
 from seqrun.sim.bus import SimBus  # noqa: E402
 
 MODULES = range(1, 8)

@@ -117,10 +117,10 @@ def test_extended_and_remote_frames():
 @pytest.mark.parametrize(
     "kwargs, message",
     [
-        (dict(can_id=0x800, data=b""), "standard CAN id must be 0..0x7FF"),
-        (dict(can_id=1, data=bytes(9)), "at most 8 data bytes"),
-        (dict(can_id=1, data=b"\x01", remote=True), "no data bytes"),
-        (dict(can_id=1 << 29, data=b"", extended=True), "extended CAN id"),
+        ({"can_id": 0x800, "data": b""}, "standard CAN id must be 0..0x7FF"),
+        ({"can_id": 1, "data": bytes(9)}, "at most 8 data bytes"),
+        ({"can_id": 1, "data": b"\x01", "remote": True}, "no data bytes"),
+        ({"can_id": 1 << 29, "data": b"", "extended": True}, "extended CAN id"),
     ],
 )
 def test_rejects_impossible_frames(kwargs, message):

@@ -43,8 +43,8 @@ def test_parse_several_specs_in_one_string():
     ("0:halt@1", "module must be 1..31 or 'all', got 0"),
     ("32:halt@1", "module must be 1..31 or 'all', got 32"),
     ("x:halt@1", "module must be 1..31 or 'all', got 'x'"),
-    ("4:explode@1", "unknown kind 'explode' (one of tow_error, halt, no_ack, drop_acks, "
-                    "stuck, missing)"),
+    ("4:explode@1", ("unknown kind 'explode' (one of tow_error, halt, no_ack, drop_acks, "
+                     "stuck, missing)")),
     ("4:halt", "missing '@SECONDS'"),
     ("4:halt@-1", "time must be >= 0 seconds, got -1"),
     ("4:halt@soon", "time must be seconds, got 'soon'"),

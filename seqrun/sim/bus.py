@@ -36,7 +36,7 @@ import can
 from can import BusABC, CanInitializationError, CanOperationError, Message
 
 from seqrun.clock import Clock, RealClock
-from seqrun.sim.arm import DEFAULT_MODULE_LATENCY, SimArm
+from seqrun.sim.arm import SimArm
 from seqrun.sim.faults import Fault, parse_faults
 from seqrun.sim.module import ModuleOptions
 from seqrun.sim.network import (
@@ -156,7 +156,7 @@ class SimBus(BusABC):
         channel = "arm0" if channel is None else str(channel)
         try:
             fault_list = parse_faults(faults)
-        except ValueError as exc:
+        except (TypeError, ValueError) as exc:
             raise CanInitializationError(str(exc)) from None
         arm_kwargs = {"module_latency": module_latency, "seed": seed, "options": options,
                       "positions": positions,

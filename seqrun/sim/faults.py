@@ -140,5 +140,5 @@ def parse_faults(specs: str | Fault | Iterable[str | Fault] | None) -> list[Faul
         elif isinstance(item, str):
             faults.extend(parse_fault_spec(part) for part in re.split(r"[,\s]+", item) if part)
         else:
-            raise ValueError(f"a fault must be a Fault or a spec string, got {item!r}")
+            raise TypeError(f"a fault must be a Fault or a spec string, got {item!r}")
     return faults

@@ -99,6 +99,7 @@ RESETTABLE = (_F.ERROR | _F.HALTED | _F.TOW_ERROR | _F.COMM_ERROR | _F.BEYOND_SO
               | _F.CURLIMIT)
 _MOTION_BITS = (_F.MOTION | _F.RAMP_ACC | _F.RAMP_STEADY | _F.RAMP_DEC | _F.RAMP_END
                 | _F.INPROGRESS | _F.FULLBUFFER)
+_NO_FLAGS = StateFlag(0)
 _MOTION_MASK = int(_MOTION_BITS)
 _MOTION, _RAMP_END = int(_F.MOTION), int(_F.RAMP_END)
 _INPROGRESS, _FULLBUFFER = int(_F.INPROGRESS), int(_F.FULLBUFFER)
@@ -260,7 +261,8 @@ class _Profile:
         d = min(max(tau - segment.t_start, 0.0), segment.duration)
         if self.target is not None and t >= self.end:
             return self.target, 0.0, segment
-        return segment.p + segment.v * d + 0.5 * segment.a * d * d, segment.v + segment.a * d, segment
+        position = segment.p + segment.v * d + 0.5 * segment.a * d * d
+        return position, segment.v + segment.a * d, segment
 
 
 def _build_profile(kind: str, t0: float, p0: float, v0: float,
@@ -471,7 +473,7 @@ class SimModule:
         self._watchdog_deadline = None
         self._stop(self.options.watchdog_flags)
 
-    def _stop(self, flags: StateFlag = StateFlag(0), at: float | None = None) -> None:
+    def _stop(self, flags: StateFlag = _NO_FLAGS, at: float | None = None) -> None:
         """Stop at once (velocity 0) at the current or the given position, add ``flags``."""
         self._rest = self._actual_position() if at is None else at
         if self._stuck_at is not None:
@@ -720,7 +722,7 @@ class SimModule:
         vmax = float(self._params[ParamId.MAX_VEL]) or 1.0
         return max_cur * (0.3 * segment.a / amax + 0.1 * velocity / vmax)
 
-    def _write(self, param: ParamId, value: float | int) -> None:
+    def _write(self, param: ParamId, value: float) -> None:
         if param not in WRITABLE_PARAMS:
             return  # acknowledged, ignored (read-only on the module)
         if param in _TICK_TWINS:
@@ -786,11 +788,13 @@ class SimModule:
             target = min(max(value, lo), hi)
             # Clamped targets always lie inside, so this only refuses a limit pair that
             # is inverted (MinPos > MaxPos) and would push the joint outward.
-            if (target < position and position <= lo) or (target > position and position >= hi):
+            if target < position <= lo or target > position >= hi:
                 return "would move further beyond a soft limit"
         if mode in _RAMP_MODES | _VELOCITY_MODES:
-            vmax = min(float(self._params[ParamId.TARGET_VEL]), float(self._params[ParamId.MAX_VEL]))
-            amax = min(float(self._params[ParamId.TARGET_ACC]), float(self._params[ParamId.MAX_ACC]))
+            vmax = min(float(self._params[ParamId.TARGET_VEL]),
+                       float(self._params[ParamId.MAX_VEL]))
+            amax = min(float(self._params[ParamId.TARGET_ACC]),
+                       float(self._params[ParamId.MAX_ACC]))
             if amax <= 0 or (mode in _RAMP_MODES and vmax <= 0):
                 return "TargetVel/TargetAcc or MaxVel/MaxAcc is zero"
         return None
@@ -832,7 +836,8 @@ class SimModule:
                 self._start(_build_profile("velocity", self._t, position, velocity, pieces, None))
             elif pieces:
                 stop_at = position + velocity * pieces[0][0] / 2
-                self._start(_build_profile("velocity", self._t, position, velocity, pieces, stop_at))
+                self._start(_build_profile("velocity", self._t, position, velocity, pieces,
+                                           stop_at))
             else:
                 self._start(None, rest=position)
 

@@ -286,7 +286,8 @@ class SimNetwork:
         for reply in self.arm.handle_frame(frame.can_id, frame.data, flight.end):
             node = self._module_nodes.get(reply.module)
             if node is None:
-                node = self._module_nodes[reply.module] = _Node(f"module{reply.module}", is_module=True)
+                node = _Node(f"module{reply.module}", is_module=True)
+                self._module_nodes[reply.module] = node
                 self._nodes.append(node)
             self._queue(node, WireFrame(reply.can_id, reply.data, sender=node.name),
                         reply.ready_at)

@@ -39,6 +39,7 @@ import re
 import socket
 import threading
 import time
+from typing import Self
 
 from seqrun.sim.network import Endpoint, NetworkClosedError, SimNetwork, WireFrame
 
@@ -73,7 +74,7 @@ def format_frame(frame: WireFrame, wall_timestamp: float) -> str:
     """``< frame ID SECS.USECS DATA >`` as socketcand sends it."""
     can_id = f"{frame.can_id:08X}" if frame.is_extended else f"{frame.can_id:03X}"
     seconds = int(wall_timestamp)
-    micros = int(round((wall_timestamp - seconds) * 1e6))
+    micros = round((wall_timestamp - seconds) * 1e6)
     if micros == 1_000_000:
         seconds, micros = seconds + 1, 0
     return f"< frame {can_id} {seconds}.{micros:06d} {frame.data.hex().upper()} >"
@@ -233,7 +234,7 @@ class SocketcandServer:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
-    def __enter__(self) -> SocketcandServer:
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc_info: object) -> None:
