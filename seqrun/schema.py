@@ -817,7 +817,12 @@ class _Loader:
         def error(message: str) -> None:
             self.errors.append(doc.error(("file",), message, start=node))
 
-        target = (path.parent / params.file).resolve()
+        try:
+            target = (path.parent / params.file).resolve()
+        except (OSError, RuntimeError, ValueError) as exc:  # symlink loop, NUL byte, ...
+            shown = params.file if params.file.isprintable() else ascii(params.file)[1:-1]
+            error(f"include '{shown}': cannot resolve the path ({exc})")
+            return
         if not target.is_relative_to(self.tree):
             error(f"include '{params.file}' is outside the sequences folder "
                   f"{display_path(self.tree)}; included files must stay inside it")
@@ -862,7 +867,10 @@ def load_sequence(path: str | os.PathLike[str], *,
     cannot be read.
     """
     path = Path(path)
-    top = path.resolve()
+    try:
+        top = path.resolve()
+    except (OSError, RuntimeError, ValueError) as exc:  # symlink loop, NUL byte, ...
+        raise UserInputError(f"{path}: cannot resolve the path ({exc})") from None
     root = Path(project_root).resolve() if project_root is not None else find_project_root(top)
     loader = _Loader(top, root)
     seq = loader.load(top)

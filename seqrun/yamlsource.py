@@ -110,7 +110,7 @@ def display_path(path: str | os.PathLike[str]) -> str:
     try:
         absolute = p.resolve()
         return str(absolute.relative_to(Path.cwd().resolve()))
-    except (ValueError, OSError):
+    except (ValueError, OSError, RuntimeError):  # elsewhere, or unresolvable (symlink loop)
         return str(p)
 
 
@@ -403,17 +403,22 @@ def sort_errors(errors: list[SourceError]) -> list[SourceError]:
 
 def read_text(path: Path, file: str) -> str:
     """The file's text: UTF-8, at most :data:`MAX_FILE_BYTES`, a leading BOM dropped."""
+    path = Path(path)
     try:
-        data = Path(path).read_bytes()
+        if path.is_dir():
+            raise UserInputError(f"{file}: is a directory, not a file")
+        if path.exists() and not path.is_file():
+            raise UserInputError(f"{file}: not a regular file")
+        with path.open("rb") as stream:  # never more than the limit, whatever the file is
+            data = stream.read(MAX_FILE_BYTES + 1)
     except FileNotFoundError:
         raise UserInputError(f"{file}: no such file") from None
-    except IsADirectoryError:
-        raise UserInputError(f"{file}: is a directory, not a file") from None
-    except OSError as exc:
-        raise UserInputError(f"{file}: cannot read it ({exc.strerror or exc})") from None
+    except (OSError, ValueError) as exc:
+        reason = getattr(exc, "strerror", None) or str(exc)
+        raise UserInputError(f"{file}: cannot read it ({reason})") from None
     if len(data) > MAX_FILE_BYTES:
-        raise SequenceInvalid([SourceError(file, 1, 1, f"file too large ({len(data)} bytes; "
-                                                        f"the limit is {MAX_FILE_BYTES})")])
+        raise SequenceInvalid([SourceError(file, 1, 1, f"file too large (more than "
+                                                        f"{MAX_FILE_BYTES} bytes)")])
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as exc:

@@ -369,3 +369,23 @@ def test_committed_reference_docs_match_the_models():
         "docs/sequence-format.md")
     for kind in STEP_KINDS:
         assert f"### `{kind}`" in committed
+
+
+def test_unresolvable_include_paths_are_located(project):
+    sequences = project / "sequences"
+    (sequences / "l1.yaml").symlink_to(sequences / "l2.yaml")
+    (sequences / "l2.yaml").symlink_to(sequences / "l1.yaml")
+    path = write(sequences, "s.yaml", seq('- include: "a\\0.yaml"\n- include: l1.yaml\n'))
+    errors = load_errors(path)
+    assert [(line, col) for _, line, col, _ in errors] == [(4, 12), (5, 12)]
+    assert errors[0][3] == "include 'a\\x00.yaml': cannot resolve the path (embedded null byte)"
+    assert "cannot resolve the path" in errors[1][3] and "l1.yaml" in errors[1][3]
+
+
+def test_unusable_top_files_are_user_input_errors(project):
+    loop = project / "sequences" / "loop.yaml"
+    loop.symlink_to(loop)
+    with pytest.raises(UserInputError, match="cannot resolve the path"):
+        load_sequence(loop)
+    with pytest.raises(UserInputError, match="not a regular file"):
+        load_sequence("/dev/null")
