@@ -18,6 +18,8 @@ frame due within the timeout and advances the clock to its delivery time, or adv
 the clock by the whole timeout and returns None — it never spins on wall-clock time as
 ``BusABC.recv`` would. With the default :class:`~seqrun.clock.RealClock` it blocks in real
 time until a frame is due. ``Message.timestamp`` is the delivery time on that clock.
+``recv(None)`` on a virtual clock with nothing on its way waits (really) for another
+thread to send — in a single-threaded test that is forever, as on an idle real bus.
 ``send`` does not wait, except while 256 of this bus's frames are still queued for the
 wire; then it waits (on the clock) for room, never forever.
 
