@@ -79,6 +79,12 @@ class CanSettings(_Strict):
 class Control(_Strict):
     cycle_hz: Annotated[float, Field(ge=10, le=500)] = 100
     command_mode: Literal["ramp", "step"] = "ramp"
+    tracking_reserve: Annotated[float, Field(ge=0, lt=0.5)] = Field(
+        0.05, description="Fraction of each velocity limit kept out of the plans so that a "
+                          "lagging joint can catch up with its plan without exceeding the limit.")
+    module_acceleration_factor: Annotated[float, Field(ge=1, le=3)] = Field(
+        1.5, description="TargetAcc sent to the modules as a multiple of the plan's "
+                         "acceleration limit: the modules' own ramps must be able to follow.")
     max_following_error_deg: Positive = 4.0
     position_tolerance_deg: Positive = 0.2
     settle_timeout_s: Positive = 3.0

@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 import threading
 import time as _wall
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
@@ -34,8 +34,9 @@ from seqrun.clock import Clock
 from seqrun.errors import (BusError, ModuleFaultError, ModuleTimeoutError, PlanningError,
                            RunAborted, SeqrunError)
 from seqrun.planner import Limits, MovePlan, plan_move, plan_stop
-from seqrun.powercube.codec import GetParam, SetMotion, SetParam
-from seqrun.powercube.protocol import MotionMode, ParamId, ShortState, StateFlag
+from seqrun.powercube.codec import (BroadcastRequest, GetParam, GetParamAck, MotionExtAck,
+                                    SetMotion, SetParam)
+from seqrun.powercube.protocol import ConfigFlag, MotionMode, ParamId, ShortState, StateFlag
 
 # Exit codes (shared with the CLI).
 EXIT_OK = 0
@@ -96,6 +97,7 @@ class RunResult:
     fault: dict[str, Any] | None = None
     not_verified: list[str] = field(default_factory=list)
     min_heights_mm: dict[str, float] = field(default_factory=dict)
+    extra: dict[str, Any] = field(default_factory=dict)
 
     @property
     def duration_s(self) -> float:
@@ -158,6 +160,8 @@ class Executor:
         self.not_verified: list[str] = []
         self._current_step: StepResult | None = None
         self._move_limits = self.limits
+        self._keeper: threading.Thread | None = None
+        self._keeper_stop = threading.Event()
 
     # ------------------------------------------------------------------ control (any thread)
     def abort(self, reason: str = "operator abort") -> None:
@@ -220,12 +224,17 @@ class Executor:
         raise AssertionError("unreachable")
 
     def read_arm(self) -> Measurement:
-        """Read position and short state of every module (pipelined)."""
-        acks = self._transact([GetParam(m, ParamId.FPOS_STATE_DIO) for m in self.modules],
-                              idempotent=True)
-        module_rad = np.array([a.value.position for a in acks])
-        states = {m: ShortState(a.value.state) for m, a in zip(self.modules, acks)}
-        return self._measured(module_rad, states)
+        """Read position and short state of every module (pipelined, lost reads retried)."""
+        return self._cycle([], [])
+
+    def _reads(self, module: int) -> list[GetParam]:
+        """How to read a module this cycle: FPosStateDio, or — while that request is in
+        quarantine after a lost acknowledge — ActPos and CubeState, which tell the same and
+        need not wait for the quarantine."""
+        primary = GetParam(module, ParamId.FPOS_STATE_DIO)
+        if not self.client.is_tainted(primary):
+            return [primary]
+        return [GetParam(module, ParamId.ACT_POS), GetParam(module, ParamId.CUBE_STATE)]
 
     def _measured(self, module_rad: np.ndarray, states: dict[int, ShortState]) -> Measurement:
         m = Measurement(self.clock.now(), self.to_user_deg(module_rad), states)
@@ -253,7 +262,7 @@ class Executor:
                 return states
             if self.clock.now() >= deadline:
                 module, flags = next(iter(bad.items()))
-                raise ModuleFaultError(module, flags, failure)
+                raise self.module_fault(module, flags, failure)
             self.clock.sleep(self.cycle)
 
     # ------------------------------------------------------------------ checks
@@ -264,7 +273,23 @@ class Executor:
                 flags = self.read_state_word(module)
                 bad = flags & StateFlag.FAULTS
                 if bad or (require_homed and not flags & StateFlag.HOME_OK):
-                    raise ModuleFaultError(module, flags)
+                    raise self.module_fault(module, flags)
+
+    #: Most specific first: the cause named in the report.
+    _FAULT_CAUSES = ("TOW_ERROR", "BEYOND_HARD", "BEYOND_SOFT", "POWERFAULT", "COMM_ERROR",
+                     "CPU_OVERLOAD", "HALTED", "ERROR")
+
+    def module_fault(self, module: int, flags: StateFlag, context: str = "") -> RunAborted:
+        """A RunAborted naming the module, its joint and the decoded fault flags."""
+        faults = StateFlag(flags & StateFlag.FAULTS)
+        cause = next((name.lower() for name in self._FAULT_CAUSES
+                      if faults & StateFlag[name]), "not_homed")
+        joint = self.arm.joint_names[self.modules.index(module)] if module in self.modules else "?"
+        what = faults.describe() if faults else "not homed (HOME_OK clear)"
+        text = f"module {module} ({joint}): {what}"
+        if context:
+            text += f" {context}"
+        return RunAborted(cause, f"{text} [state {StateFlag(flags).describe()}]", module=module)
 
     def check_guards(self, m: Measurement) -> None:
         q = np.radians(m.user_deg)
@@ -327,9 +352,9 @@ class Executor:
         if self.command_mode != "ramp":
             return
         # TargetAcc once per move: the module's own ramp must be able to follow the plan.
+        factor = self.arm.control.module_acceleration_factor
         self._transact([SetParam(self.modules[i], ParamId.TARGET_ACC,
-                                 math.radians(self.arm.joints[i].max_acceleration_deg_s2))
-                        for i in moving])
+                                 float(limits.acceleration[i] * factor)) for i in moving])
 
     def _setpoints(self, plan: MovePlan, t: float, moving: list[int],
                    measured_deg: np.ndarray) -> list:
@@ -363,20 +388,39 @@ class Executor:
         return requests
 
     def _cycle(self, requests: list, moving: list[int]) -> Measurement:
-        """Send this cycle's motion requests plus reads of the other modules, pipelined."""
+        """Send this cycle's motion requests plus reads of the other modules, pipelined.
+
+        A lost answer to a motion command is a fault (we cannot know what the module
+        does); a lost read is retried once by the other read path (a read changes nothing
+        on the module), so a rare lost acknowledge does not stop the arm.
+        """
         moving_modules = {self.modules[i] for i in moving}
-        reads = [GetParam(m, ParamId.FPOS_STATE_DIO) for m in self.modules if m not in moving_modules]
-        acks = self._transact(requests + reads)
+        reads = [r for m in self.modules if m not in moving_modules for r in self._reads(m)]
+        batch = requests + reads
+        acks = self.client.transact_partial(batch)
+        lost = [i for i, (r, a) in enumerate(zip(batch, acks)) if a is None and _acked(r)]
+        if any(not isinstance(batch[i], GetParam) for i in lost):
+            bad = next(batch[i] for i in lost if not isinstance(batch[i], GetParam))
+            raise ModuleTimeoutError(bad.module, _describe_request(bad),
+                                     self.client.response_timeout)
+        if lost:
+            modules = list(dict.fromkeys(batch[i].module for i in lost))
+            self.emit("retry", modules=modules, what="read")
+            retry = [r for m in modules for r in self._reads(m)]
+            batch, acks = batch + retry, acks + self._transact(retry)
         positions: dict[int, float] = {}
         states: dict[int, ShortState] = {}
         for ack in acks:
-            if ack is None:
-                continue
-            value = getattr(ack, "value", None)
-            if hasattr(ack, "position") and hasattr(ack, "state"):   # extended motion ack
+            if isinstance(ack, MotionExtAck):
                 positions[ack.module], states[ack.module] = ack.position, ShortState(ack.state)
-            elif value is not None and hasattr(value, "position"):   # FPosStateDio read
-                positions[ack.module], states[ack.module] = value.position, ShortState(value.state)
+            elif isinstance(ack, GetParamAck):
+                if ack.param == ParamId.FPOS_STATE_DIO:
+                    positions[ack.module] = ack.value.position
+                    states[ack.module] = ShortState(ack.value.state)
+                elif ack.param == ParamId.ACT_POS:
+                    positions[ack.module] = float(ack.value)
+                elif ack.param == ParamId.CUBE_STATE:
+                    states[ack.module] = _short_state(StateFlag(ack.value))
         module_rad = np.array([positions[m] for m in self.modules])
         return self._measured(module_rad, states)
 
@@ -436,7 +480,9 @@ class Executor:
                                      f"position {deadline:.1f} s after the move started: "
                                      f"{float(np.max(final_error)):.2f}° off (tolerance "
                                      f"{tolerance_deg}°)", module=self.modules[i])
-            k += 1
+            # Next cycle slot; slots missed while waiting on the bus are skipped, not
+            # made up in a burst.
+            k = max(k + 1, math.ceil((self.clock.now() - t_start) / self.cycle))
 
     def _controlled_stop(self, plan: MovePlan, t: float, moving: list[int]) -> None:
         """ruckig to zero velocity from the plan's current state, streamed, then hold."""
@@ -496,15 +542,110 @@ class Executor:
             return False
 
     # ------------------------------------------------------------------ run
-    def run(self, steps: list, *, first_step: int = 1) -> RunResult:
-        """Run resolved steps (``loaded.steps``) from step ``first_step`` (1-based)."""
+    # ------------------------------------------------------------------ preflight
+    def preflight(self, loaded, first_step: int = 1):
+        """Read the arm and validate the sequence (from ``first_step``) from the measured
+        state. Returns the ValidationResult; only reads reach the bus."""
+        from seqrun.validation import validate_sequence
+
+        m = self.read_arm()
+        states = self.read_state_words()
+        limits = self._transact([GetParam(j.module, p) for j in self.arm.joints
+                                 for p in (ParamId.MIN_POS, ParamId.MAX_POS)], idempotent=True)
+        written = all(
+            abs(float(lo.value) - j.to_module_rad(j.limits_deg[0])) < 1e-5
+            and abs(float(hi.value) - j.to_module_rad(j.limits_deg[1])) < 1e-5
+            for j, lo, hi in zip(self.arm.joints, limits[0::2], limits[1::2]))
+        ready = all(f & StateFlag.HOME_OK and not f & StateFlag.FAULTS for f in states.values())
+        started = ready and written
+        start_deg = {j.name: float(v) for j, v in zip(self.arm.joints, m.user_deg)}
+        result = validate_sequence(replace(loaded, steps=tuple(loaded.steps[first_step - 1:])),
+                                   self.arm, start_deg, started=started)
+        if first_step > 1:
+            before = validate_sequence(replace(loaded, steps=tuple(loaded.steps[:first_step - 1])),
+                                       self.arm)
+            tol = max(1.0, 5 * self.arm.control.position_tolerance_deg)
+            for j in self.arm.joints:
+                expected = before.final_deg.get(j.name)
+                if expected is not None and abs(expected - start_deg[j.name]) > tol:
+                    result.errors.append(loaded.steps[first_step - 1].location.error(
+                        f"--from {first_step}: the arm is not where this step expects it: "
+                        f"{j.name} at {start_deg[j.name]:.2f}°, expected {expected:.2f}° "
+                        f"(after steps 1-{first_step - 1})"))
+        self.emit("preflight", start_deg=_r(m.user_deg), homed=ready, limits_written=written,
+                  states={str(k): v.describe() for k, v in states.items()},
+                  errors=[str(e) for e in result.errors], notes=[str(n) for n in result.notes])
+        return result
+
+    def _enable_watchdog(self) -> None:
+        """Arm the modules' watchdogs (read-modify-write of Config) and keep them fed."""
+        wd = self.arm.can.watchdog
+        if not wd.enabled:
+            return
+        self.client.watchdog_period = wd.refresh_period_s
+        configs = self._transact([GetParam(m, ParamId.CONFIG) for m in self.modules],
+                                 idempotent=True)
+        self._transact([SetParam(m, ParamId.CONFIG, int(a.value) | ConfigFlag.WATCHDOG_ENABLE)
+                        for m, a in zip(self.modules, configs)])
+        self.client.refresh_watchdog()
+        if not self.clock.is_virtual:
+            self._keeper_stop.clear()
+            self._keeper = threading.Thread(target=self._keep_watchdog, daemon=True,
+                                             name="seqrun-watchdog")
+            self._keeper.start()
+        self.emit("watchdog_enabled", refresh_period_s=wd.refresh_period_s)
+
+    def _keep_watchdog(self) -> None:
+        # Covers the times the run loop is not on the bus (operator prompts).
+        period = self.arm.can.watchdog.refresh_period_s / 2
+        while not self._keeper_stop.wait(period):
+            try:
+                self.client.service()
+            except BusError:
+                return
+
+    def _disable_watchdog(self) -> None:
+        """After a clean end the arm keeps holding: clear WATCHDOG_ENABLE again."""
+        if not self.arm.can.watchdog.enabled:
+            return
+        self._keeper_stop.set()
+        try:
+            configs = self._transact([GetParam(m, ParamId.CONFIG) for m in self.modules],
+                                     idempotent=True)
+            self._transact([SetParam(m, ParamId.CONFIG,
+                                     int(a.value) & ~int(ConfigFlag.WATCHDOG_ENABLE))
+                            for m, a in zip(self.modules, configs)])
+            self.client.watchdog_period = None
+            self.emit("watchdog_disabled")
+        except BusError as exc:
+            self.emit("watchdog_disable_failed", error=str(exc))
+
+    # ------------------------------------------------------------------ run
+    def run(self, loaded, *, first_step: int = 1) -> RunResult:
+        """Preflight, then run the steps of ``loaded`` from ``first_step`` (1-based)."""
         from seqrun.steps import HANDLERS
 
         self._t0 = self.clock.now()
+        steps = list(loaded.steps)
         results = [StepResult(s.number, s.kind, _label(s), _location(s)) for s in steps]
         self.emit("run_started", steps=len(steps), first_step=first_step, speed=self.speed,
                   command_mode=self.command_mode, dry_run=self.dry_run)
         status, code, message, fault = "passed", EXIT_OK, "sequence completed", None
+        try:
+            check = self.preflight(loaded, first_step)
+            if check.errors:
+                return self._finish(results, "invalid", EXIT_INVALID,
+                                    "not valid from the arm's measured state: "
+                                    + "; ".join(str(e) for e in check.errors), None,
+                                    errors=[e.as_dict() for e in check.errors])
+            self._enable_watchdog()
+        except (BusError, RunAborted) as exc:
+            halted = self.emergency_halt()
+            cause, module = _cause(exc)
+            fault = {"cause": cause, "module": module, "message": str(exc), "step": None,
+                     "halt_sent": halted}
+            self.emit("fault", **fault)
+            return self._finish(results, "failed", EXIT_FAULT, str(exc), fault)
         for step, result in zip(steps, results):
             if step.number < first_step:
                 result.status = "skipped"
@@ -527,7 +668,9 @@ class Executor:
                 result.status = "passed"
                 result.finished = self.clock.now() - self._t0
                 self.emit("step_finished", status="passed",
-                          duration_s=_round(result.duration_s), **_jsonable(result.detail))
+                          duration_s=_round(result.duration_s),
+                          planned_duration_s=_round(result.planned_duration_s),
+                          **_jsonable(result.detail))
             except OperatorAbort as exc:
                 status, code, message = "aborted", EXIT_OPERATOR_ABORT, str(exc)
                 if self._halt_requested:
@@ -553,14 +696,47 @@ class Executor:
                 self.emit("fault", **fault)
                 break
         self._current_step = None
+        if code in (EXIT_OK, EXIT_OPERATOR_ABORT) and not self._halt_requested:
+            self._disable_watchdog()
+        else:
+            self._keeper_stop.set()
+        return self._finish(results, status, code, message, fault)
+
+    def _finish(self, results: list[StepResult], status: str, code: int, message: str,
+                fault: dict | None, **extra: Any) -> RunResult:
         end = self.clock.now() - self._t0
         run = RunResult(status, code, message, results, 0.0, end, fault,
                         list(dict.fromkeys(self.not_verified)),
                         {k: round(v, 1) for k, v in self.min_heights_mm.items()})
+        run.extra = extra
         self.emit("run_finished", status=status, exit_code=code, message=message,
                   duration_s=_round(run.duration_s),
-                  planned_duration_s=_round(run.planned_duration_s))
+                  planned_duration_s=_round(run.planned_duration_s), **extra)
         return run
+
+
+def _short_state(flags: StateFlag) -> ShortState:
+    """The short state a module would report for this state word (table B.3)."""
+    short = ShortState(0)
+    if flags & (StateFlag.ERROR | StateFlag.HALTED) or not flags & StateFlag.HOME_OK:
+        short |= ShortState.NOT_OK
+    if flags & StateFlag.MOTION:
+        short |= ShortState.MOTION
+    if flags & StateFlag.RAMP_END:
+        short |= ShortState.RAMP_END
+    return short
+
+
+def _describe_request(request) -> str:
+    if isinstance(request, SetMotion):
+        return f"SetMotion {request.mode.name}"
+    if isinstance(request, (SetParam, GetParam)):
+        return f"{type(request).__name__} {request.param.name}"
+    return type(request).__name__
+
+
+def _acked(request) -> bool:
+    return not isinstance(request, BroadcastRequest)
 
 
 def _cause(exc: Exception) -> tuple[str, int | None]:
@@ -576,7 +752,7 @@ def _cause(exc: Exception) -> tuple[str, int | None]:
 
 
 def _label(step) -> str:
-    return getattr(step, "label", None) or step.kind
+    return getattr(step, "title", None) or step.kind
 
 
 def _location(step) -> str:

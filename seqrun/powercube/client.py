@@ -256,6 +256,20 @@ class PowerCubeClient:
         """
         return self._exchange(requests, timeout, raise_on_timeout=True)
 
+    def is_tainted(self, request: Request) -> bool:
+        """True while ``request``'s acknowledge key is in quarantine (sending it now would
+        first wait for the quarantine to pass)."""
+        key = expected_ack_key(request)
+        with self._lock:
+            taint = self._taints.get(key) if key is not None else None
+            return taint is not None and taint.until > self.clock.now()
+
+    def transact_partial(self, requests: Sequence[Request], timeout: float | None = None
+                         ) -> list[Ack | None]:
+        """Like :meth:`transact`, but an unanswered request gives None instead of raising
+        (its key is tainted all the same). Lets a caller retry only what is safe to retry."""
+        return self._exchange(requests, timeout, raise_on_timeout=False)
+
     def _exchange(self, requests: Sequence[Request], timeout: float | None, *,
                   raise_on_timeout: bool) -> list[Ack | None]:
         timeout = self.response_timeout if timeout is None else float(timeout)

@@ -1,0 +1,166 @@
+"""``seqrun run FILE``: run a sequence on the arm (or the built-in simulator).
+
+Exit codes: 0 success, 1 invalid sequence (no motion), 2 usage error, 3 aborted by a fault,
+timeout or failed checkpoint (arm halted), 130 operator abort (controlled stop).
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+from contextlib import ExitStack, nullcontext
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+from rich.console import Console
+
+from seqrun import __version__
+from seqrun.cli.app import app
+from seqrun.cli.common import fail, load_arm_file, user_errors
+from seqrun.cli.display import LiveDisplay, PlainDisplay
+from seqrun.connection import open_connection, parse_bus_kwargs, parse_faults
+from seqrun.executor import EXIT_OPERATOR_ABORT, Executor
+from seqrun.powercube.client import PowerCubeClient
+from seqrun.runlog import RunLog, default_run_dir
+from seqrun.schema import load_sequence
+
+Interface = Annotated[Optional[str], typer.Option(
+    "-i", "--interface", help="python-can interface (socketcan, ixxat, pcan, socketcand, ...). "
+                              "Default: python-can's configuration, else the simulator.")]
+Channel = Annotated[Optional[str], typer.Option("-c", "--channel", help="CAN channel.")]
+Bitrate = Annotated[Optional[int], typer.Option("-b", "--bitrate", help="Bit rate in bit/s "
+                                                "(default: the arm file's).")]
+BusKwargs = Annotated[Optional[list[str]], typer.Option(
+    "--bus-kwargs", metavar="KEY=VALUE", help="Extra python-can bus arguments (repeatable).")]
+
+
+def _ask(console: Console, question: str, assume_yes: bool) -> bool:
+    """Ask the operator; EOF on stdin (no operator) is a no."""
+    if assume_yes:
+        console.print(f"{question} [yes: --yes]", highlight=False)
+        return True
+    console.print(f"{question} [y/N] ", end="", highlight=False)
+    try:
+        answer = sys.stdin.readline()
+    except KeyboardInterrupt:
+        return False
+    return answer.strip().lower() in ("y", "yes")
+
+
+@app.command("run")
+def run_command(
+    file: Annotated[Path, typer.Argument(help="Sequence file (YAML).")],
+    interface: Interface = None,
+    channel: Channel = None,
+    bitrate: Bitrate = None,
+    bus_kwargs: BusKwargs = None,
+    sim: Annotated[bool, typer.Option("--sim", help="Force the built-in simulator.")] = False,
+    sim_fault: Annotated[Optional[list[str]], typer.Option(
+        "--sim-fault", metavar="SPEC", help="Inject a simulator fault, MODULE:KIND@SECONDS "
+        "(e.g. 4:tow_error@2.5, all:halt@3, 3:drop_acks=0.3@0); repeatable.")] = None,
+    speed: Annotated[float, typer.Option("--speed", help="Scale velocities and accelerations, "
+                                                         "0 < F <= 1.")] = 1.0,
+    step: Annotated[bool, typer.Option("--step", help="Ask before each step.")] = False,
+    from_step: Annotated[int, typer.Option("--from", metavar="N", help="Start at step N "
+                                           "(after checking the arm is where N expects it).")] = 1,
+    yes: Annotated[bool, typer.Option("--yes", "-y", help="Do not ask before moving a real "
+                                      "arm; answer yes to confirm steps.")] = False,
+    log_dir: Annotated[Optional[Path], typer.Option("--log-dir", metavar="DIR",
+                                                    help="Run folder (default runs/<time>-<name>/).")] = None,
+    arm_file: Annotated[Optional[Path], typer.Option("--arm", metavar="FILE",
+                                                     help="Arm file (default: the sequence's).")] = None,
+    command_mode: Annotated[Optional[str], typer.Option(
+        "--command-mode", help="ramp (TargetVel + FRAMP, default) or step (FSTEP).")] = None,
+    plain: Annotated[bool, typer.Option("--plain", help="Plain line output instead of the "
+                                                        "live view.")] = False,
+) -> None:
+    """Run a sequence: validate, read the arm, re-validate from where it stands, move."""
+    console = Console(stderr=False)
+    with user_errors():
+        if not 0 < speed <= 1:
+            fail(f"--speed must lie in (0, 1], got {speed:g}")
+        if command_mode not in (None, "ramp", "step"):
+            fail(f"--command-mode must be ramp or step, got '{command_mode}'")
+        if not file.is_file():
+            fail(f"sequence file {file} not found")
+        faults = parse_faults(sim_fault or [])
+        extra = parse_bus_kwargs(bus_kwargs or [])
+        loaded = load_sequence(file)                     # invalid file -> exit 1, no bus
+        arm = load_arm_file(arm_file or loaded.arm_path)
+        if not 1 <= from_step <= len(loaded.steps):
+            fail(f"--from {from_step}: the sequence has steps 1-{len(loaded.steps)}")
+        connection = open_connection(interface=interface, channel=channel, bitrate=bitrate,
+                                     bus_kwargs=extra, force_sim=sim, faults=faults,
+                                     default_bitrate=arm.can.bitrate)
+    style = "bold black on yellow" if connection.is_simulator else "bold white on red"
+    console.print(f" {connection.description} ", style=style, highlight=False)
+    if not connection.is_simulator and not _ask(
+            console, f"Run '{loaded.name}' on the REAL arm?", yes):
+        console.print("Not started: the operator declined. Nothing was sent.")
+        connection.close()
+        raise typer.Exit(EXIT_OPERATOR_ABORT)
+
+    folder = log_dir or default_run_dir(loaded.name)
+    client = PowerCubeClient(connection.bus, connection.clock,
+                             response_timeout=arm.can.response_timeout_s)
+    log = RunLog(folder, {"sequence": loaded.name, "file": str(file), "arm": arm.name,
+                          "bus": connection.description, "simulator": connection.is_simulator,
+                          "faults": [f.spec for f in faults], "speed": speed,
+                          "first_step": from_step, "seqrun": __version__})
+    client.add_frame_listener(log.on_frame)
+
+    def confirm(prompt: str) -> bool:
+        return _ask(console, prompt, yes)
+
+    def before_step(s) -> bool:
+        return _ask(console, f"Run step {s.number}: {s.title}?", False) if step else True
+
+    executor = Executor(client, arm, connection.clock, poses_dir=loaded.poses_dir, speed=speed,
+                        command_mode=command_mode, confirm=confirm, before_step=before_step,
+                        listeners=[log.on_event])
+    interrupts = 0
+
+    def on_sigint(signum, frame) -> None:
+        nonlocal interrupts
+        interrupts += 1
+        if interrupts == 1:
+            executor.abort("Ctrl-C: controlled stop")
+            if executor.waiting_for_operator:
+                raise KeyboardInterrupt
+        else:
+            executor.halt("second Ctrl-C: Halt")
+
+    def on_sigterm(signum, frame) -> None:
+        executor.halt("SIGTERM: Halt")
+
+    live = console.is_terminal and not plain
+    title = f"seqrun: {loaded.name}"
+    display = (LiveDisplay(console, executor, title, connection.description, len(loaded.steps))
+               if live else PlainDisplay(console, len(loaded.steps)))
+    executor.listeners.append(display)
+    result = None
+    old_int = signal.signal(signal.SIGINT, on_sigint)
+    old_term = signal.signal(signal.SIGTERM, on_sigterm)
+    try:
+        with ExitStack() as stack:
+            stack.enter_context(display if live else nullcontext())
+            result = executor.run(loaded, first_step=from_step)
+    finally:
+        signal.signal(signal.SIGINT, old_int)
+        signal.signal(signal.SIGTERM, old_term)
+        if result is not None:
+            log.finish(result)
+        log.close()
+        client.close()
+        connection.close()
+    colour = "green" if result.exit_code == 0 else "red"
+    console.print(f"[{colour}]{result.status.upper()}[/{colour}] (exit {result.exit_code}): "
+                  f"{result.message}", highlight=False)
+    if result.extra.get("errors"):
+        for error in result.extra["errors"]:
+            console.print(f"  {error['file']}:{error['line']}:{error['column']}: "
+                          f"{error['message']}", highlight=False)
+    console.print(f"duration {result.duration_s:.2f} s, planned motion "
+                  f"{result.planned_duration_s:.2f} s; log: {folder}", highlight=False)
+    raise typer.Exit(result.exit_code)
