@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Annotated, NoReturn
+from typing import Annotated, NoReturn, Optional
 
 import typer
 
@@ -46,3 +46,31 @@ def load_arm_file(path: Path) -> ArmDescription:
     return load_arm(path)
 
 
+
+
+# Bus selection, shared by every command that talks to the arm (python-can's own flags).
+InterfaceOption = Annotated[Optional[str], typer.Option(
+    "-i", "--interface", help="python-can interface (socketcan, ixxat, pcan, socketcand, ...). "
+                              "Default: python-can's configuration, else the simulator.")]
+ChannelOption = Annotated[Optional[str], typer.Option("-c", "--channel", help="CAN channel.")]
+BitrateOption = Annotated[Optional[int], typer.Option(
+    "-b", "--bitrate", help="Bit rate in bit/s (default: the arm file's).")]
+BusKwargsOption = Annotated[Optional[list[str]], typer.Option(
+    "--bus-kwargs", metavar="KEY=VALUE", help="Extra python-can bus arguments (repeatable).")]
+SimOption = Annotated[bool, typer.Option("--sim", help="Force the built-in simulator.")]
+
+
+def connect(arm: ArmDescription, interface: Optional[str], channel: Optional[str],
+            bitrate: Optional[int], bus_kwargs: Optional[list[str]], sim: bool,
+            faults: Optional[list[str]] = None):
+    """Open the bus and a PowerCubeClient on it: ``(connection, client)``."""
+    from seqrun.connection import open_connection, parse_bus_kwargs, parse_faults
+    from seqrun.powercube.client import PowerCubeClient
+
+    connection = open_connection(interface=interface, channel=channel, bitrate=bitrate,
+                                 bus_kwargs=parse_bus_kwargs(bus_kwargs or []), force_sim=sim,
+                                 faults=parse_faults(faults or []),
+                                 default_bitrate=arm.can.bitrate)
+    client = PowerCubeClient(connection.bus, connection.clock,
+                             response_timeout=arm.can.response_timeout_s)
+    return connection, client

@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Optional
 
 import typer
 
 from seqrun.arm import DEFAULT_ARM
 from seqrun.cli.app import pose_app
-from seqrun.cli.common import (EXIT_INVALID, ArmOption, PosesDirOption, load_arm_file, user_errors)
+from seqrun.cli.common import (BitrateOption, BusKwargsOption, ChannelOption, InterfaceOption,
+                               SimOption, connect, fail,
+                               EXIT_INVALID, ArmOption, PosesDirOption, load_arm_file, user_errors)
 from seqrun.errors import SequenceInvalid, UserInputError
 from seqrun.poses import (
     DEFAULT_POSES_DIR,
@@ -74,3 +76,48 @@ def show_pose(
                    err=True)
     if problems:
         raise typer.Exit(EXIT_INVALID)
+
+
+@pose_app.command("save")
+def save_pose_command(
+    name: Annotated[str, typer.Argument(help="Pose name (file name without .yaml).")],
+    output: Annotated[Optional[Path], typer.Option(
+        "-o", "--output", metavar="FILE", help="Pose file to write (default poses/NAME.yaml).")] = None,
+    description: Annotated[str, typer.Option("--description", "-d",
+                                             help="What the pose is for.")] = "",
+    force: Annotated[bool, typer.Option("--force", help="Overwrite an existing file.")] = False,
+    poses_dir: PosesDirOption = DEFAULT_POSES_DIR,
+    arm_file: ArmOption = DEFAULT_ARM, interface: InterfaceOption = None,
+    channel: ChannelOption = None, bitrate: BitrateOption = None,
+    bus_kwargs: BusKwargsOption = None, sim: SimOption = False,
+) -> None:
+    """Read the arm's joints and write them as a pose file (with the FK pose and the time)."""
+    from datetime import datetime, timezone
+
+    from seqrun.errors import BusError
+    from seqrun.poses import pose_document, save_pose
+
+    with user_errors():
+        arm = load_arm_file(arm_file)
+        path = output or (poses_dir / f"{name}.yaml")
+        if path.exists() and not force:
+            fail(f"{path} exists (use --force to overwrite)")
+        connection, client = connect(arm, interface, channel, bitrate, bus_kwargs, sim)
+    try:
+        readings = client.read_arm(arm.module_ids)
+    except BusError as exc:
+        fail(f"cannot read the arm: {exc}", 3)
+    finally:
+        client.close()
+        connection.close()
+    joints = {j.name: round(j.to_user_deg(r.position), 3)
+              for j, r in zip(arm.joints, readings) if j.locked is None}
+    with user_errors():
+        try:
+            pose = pose_document(name, arm, joints, description=description, source="arm",
+                                 saved_at=datetime.now(timezone.utc).replace(microsecond=0))
+        except ValueError as exc:
+            fail(str(exc))
+        path.parent.mkdir(parents=True, exist_ok=True)
+        save_pose(path, pose)
+    typer.echo(f"saved {path}: " + ", ".join(f"{k} {v:g}" for k, v in pose.joints_deg.items()))
