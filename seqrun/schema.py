@@ -40,13 +40,28 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any, ClassVar, Literal, Union
 
-from pydantic import (AfterValidator, BeforeValidator, ConfigDict, Discriminator, Field, Tag,
-                      TypeAdapter, ValidationError, model_validator)
+from pydantic import (
+    AfterValidator,
+    BeforeValidator,
+    ConfigDict,
+    Discriminator,
+    Field,
+    Tag,
+    TypeAdapter,
+    ValidationError,
+    model_validator,
+)
 from pydantic_core import PydanticCustomError
 
 from seqrun.errors import SequenceInvalid, SourceError, UserInputError
-from seqrun.yamlsource import (Document, FriendlyModel, Location, display_path, load_document,
-                               sort_errors)
+from seqrun.yamlsource import (
+    Document,
+    FriendlyModel,
+    Location,
+    display_path,
+    load_document,
+    sort_errors,
+)
 
 __all__ = [
     "BARE_STEPS",
@@ -131,7 +146,7 @@ def _either(pick, **choices: Any) -> Any:
     wrong value gets the errors of one branch only. Tags contain ':' so they never look
     like YAML keys when errors are located."""
     members = tuple(Annotated[tp, Tag(tag)] for tag, tp in choices.items())
-    return Annotated[Union[members], Discriminator(pick)]  # type: ignore[valid-type]
+    return Annotated[Union[members], Discriminator(pick)]  # type: ignore[valid-type]  # noqa: UP007
 
 
 def _joints_pick(value: Any) -> str:
@@ -358,7 +373,7 @@ class CheckpointParams(StepParams):
             missing = "rpy_deg" if self.position_mm is not None else (
                 "position_mm" if self.rpy_deg is not None else "")
             raise PydanticCustomError(
-                "checkpoint_what", f"a checkpoint with position_mm needs rpy_deg too"
+                "checkpoint_what", "a checkpoint with position_mm needs rpy_deg too"
                 if missing == "rpy_deg" else "a checkpoint with rpy_deg needs position_mm too"
                 if missing else "a checkpoint needs either 'pose' or 'position_mm' and 'rpy_deg'")
         return self

@@ -34,9 +34,16 @@ import numpy as np
 
 from seqrun.arm import ArmDescription, Joint
 from seqrun.errors import SequenceInvalid, SourceError, UserInputError
-from seqrun.schema import (CheckpointParams, HaltParams, HomeParams, LoadedSequence, MoveParams,
-                           ResetParams, ResolvedStep, SetLimitsParams)
-from seqrun.yamlsource import sort_errors
+from seqrun.schema import (
+    CheckpointParams,
+    HaltParams,
+    HomeParams,
+    LoadedSequence,
+    MoveParams,
+    ResetParams,
+    ResolvedStep,
+    SetLimitsParams,
+)
 
 __all__ = [
     "GUARD_SAMPLES",

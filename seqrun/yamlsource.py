@@ -127,7 +127,7 @@ class _Problem(Exception):
 class _Alias:
     """An alias use (``*name``) in the node tree: the anchored node plus where it was used."""
 
-    __slots__ = ("target", "start_mark", "name")
+    __slots__ = ("name", "start_mark", "target")
 
     def __init__(self, target: Node, start_mark: yaml.Mark, name: str) -> None:
         self.target = target
@@ -145,7 +145,7 @@ class _Loader(yaml.SafeLoader):
         self._depth = 0
         self._alias_uses = 0
 
-    def compose_node(self, parent, index):  # noqa: ANN001 - PyYAML signature
+    def compose_node(self, parent, index):
         if self.check_event(AliasEvent):
             event = self.peek_event()
             self._alias_uses += 1
@@ -429,8 +429,7 @@ def read_text(path: Path, file: str) -> str:
         raise SequenceInvalid([SourceError(
             file, line, column, f"not UTF-8 text: byte 0x{data[pos]:02x} cannot be decoded "
                                 "(save the file as UTF-8)")]) from None
-    if text.startswith("\ufeff"):
-        text = text[1:]
+    text = text.removeprefix("\ufeff")
     if not text.strip():
         raise SequenceInvalid([SourceError(file, 1, 1, "the file is empty")])
     return text

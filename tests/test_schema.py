@@ -9,10 +9,22 @@ from pathlib import Path
 import pytest
 
 from seqrun.errors import SequenceInvalid, UserInputError
-from seqrun.schema import (PARAMS_MODELS, STEP_KINDS, CheckpointParams, ConfirmParams,
-                           HaltParams, MoveParams, ResetParams, Sequence, SetLimitsParams,
-                           WaitParams, describe, find_project_root, load_sequence,
-                           sequence_json_schema)
+from seqrun.schema import (
+    PARAMS_MODELS,
+    STEP_KINDS,
+    CheckpointParams,
+    ConfirmParams,
+    HaltParams,
+    MoveParams,
+    ResetParams,
+    Sequence,
+    SetLimitsParams,
+    WaitParams,
+    describe,
+    find_project_root,
+    load_sequence,
+    sequence_json_schema,
+)
 from seqrun.yamlsource import display_path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -132,10 +144,10 @@ def test_step_titles_use_the_label_or_describe_the_step(project):
     ("- halt: []\n", 4, 9, ["must not be empty"]),
     ("- confirm: ''\n", 4, 12, ["must not be empty"]),
     ("- confirm: 42\n", 4, 12, ["expected text, got 42"]),
-    ("- include: other.txt\n", 4, 12, ["an include names a sequence file ending in .yaml, "
-                                        "got 'other.txt'"]),
-    ("- include: {file: x.yml, lable: y}\n", 4, 26, ["unknown key 'lable' in include (did "
-                                                     "you mean 'label'? allowed: file, label)"]),
+    ("- include: other.txt\n", 4, 12, [("an include names a sequence file ending in .yaml, "
+                                        "got 'other.txt'")]),
+    ("- include: {file: x.yml, lable: y}\n", 4, 26, [("unknown key 'lable' in include (did "
+                                                     "you mean 'label'? allowed: file, label)")]),
     ("- reset: {label: ''}\n", 4, 18, ["must not be empty"]),
 ])
 def test_step_errors_are_located_and_explained(project, steps, line, col, words):
@@ -152,8 +164,8 @@ def test_top_level_errors(project):
         ("s.yaml", 1, 1, "missing required key 'description' in the sequence"),
         ("s.yaml", 1, 7, "must not be empty"),
         ("s.yaml", 2, 8, "must not be empty"),
-        ("s.yaml", 3, 1, "unknown key 'nmae' in the sequence (did you mean 'name'? allowed: "
-                         "name, description, arm, steps)"),
+        ("s.yaml", 3, 1, ("unknown key 'nmae' in the sequence (did you mean 'name'? allowed: "
+                         "name, description, arm, steps)")),
     ]
 
 
@@ -293,8 +305,7 @@ def test_step_where_finds_parameter_locations(project):
 
 # --------------------------------------------------------------------------- JSON Schema
 def _objects(schema):
-    for name, definition in schema.get("$defs", {}).items():
-        yield name, definition
+    yield from schema.get("$defs", {}).items()
     yield "Sequence", schema
 
 
@@ -349,9 +360,11 @@ def test_shipped_files_point_at_the_schema():
 
 
 def test_models_are_strict():
-    with pytest.raises(Exception):
+    from pydantic import ValidationError
+
+    with pytest.raises(ValidationError):
         Sequence.model_validate({"name": "x", "description": "y", "steps": [{"wait": "2"}]})
-    with pytest.raises(Exception):
+    with pytest.raises(ValidationError):
         MoveParams.model_validate({"joints": {"j1": 1}, "relative": "yes"})
 
 

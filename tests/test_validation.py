@@ -18,8 +18,13 @@ from seqrun.cli.validate import static_check
 from seqrun.errors import SequenceInvalid, SourceError, UserInputError
 from seqrun.kinematics import Chain, matrix_from_rpy, point_positions, pose_from_user_deg
 from seqrun.schema import CheckpointParams, MoveParams, load_sequence
-from seqrun.validation import (commanded_joints, park_deg, resolve_checkpoint,
-                               resolve_move_target, validate_sequence)
+from seqrun.validation import (
+    commanded_joints,
+    park_deg,
+    resolve_checkpoint,
+    resolve_move_target,
+    validate_sequence,
+)
 from seqrun.yamlsource import display_path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -66,8 +71,8 @@ EXPECTED = {
     ],
     "unknown_step.yaml": [("unknown_step.yaml", 5, 5,
                            ["unknown step type 'mvoe'", "did you mean 'move'",
-                            "expected one of: reset, home, halt, set_limits, move, wait, "
-                            "checkpoint, confirm, include"])],
+                            ("expected one of: reset, home, halt, set_limits, move, wait, "
+                            "checkpoint, confirm, include")])],
     "unknown_key.yaml": [("unknown_key.yaml", 9, 7, ["unknown key 'velocty' in move",
                                                      "velocity_deg_s"])],
     "nan.yaml": [("nan.yaml", 7, 25, ["expected a finite number, got .nan"])],
@@ -131,8 +136,8 @@ def test_shipped_motion_sequences_start_with_startup_and_note_park_j4(name):
     assert [s.kind for s in loaded.steps[:3]] == ["reset", "home", "set_limits"]
     result = validate_sequence(loaded, ARM, PARK)
     assert [n.message for n in result.notes] == [
-        "j4 starts at -120.32°, 0.32° outside its limit -120…120; this move brings it back "
-        "inside"]
+        ("j4 starts at -120.32°, 0.32° outside its limit -120…120; this move brings it back "
+        "inside")]
 
 
 def test_opsafe_goes_via_totem_and_its_checkpoint_is_the_fk_of_opsafe():
@@ -217,11 +222,11 @@ def test_started_arm_needs_no_startup(project):
 # --------------------------------------------------------------------------- start-up order
 @pytest.mark.parametrize("steps, line, message", [
     ("- reset\n- home\n- move: totem\n", 6,
-     "move before set_limits: write the joint limits first (the modules' stored limits are "
-     "narrower than the arm file's)"),
+     ("move before set_limits: write the joint limits first (the modules' stored limits are "
+     "narrower than the arm file's)")),
     ("- home\n- reset\n- set_limits\n", 4,
-     "home before reset: reset the modules first (Reset clears the error state they power "
-     "up with)"),
+     ("home before reset: reset the modules first (Reset clears the error state they power "
+     "up with)")),
     ("- set_limits\n- reset\n- home\n", 4,
      "set_limits before reset: the modules accept parameters only after Reset"),
     ("- move: totem\n", 4,
@@ -246,8 +251,8 @@ def test_reset_after_halt_allows_motion_again(project):
 def test_per_joint_commands_check_names_and_the_locked_joint(project):
     result = validate(project, "- reset: [j1, j3, j9]\n")
     assert [(e.line, e.column, e.message) for e in result.errors] == [
-        (4, 15, "j3 is locked at 0°: a reset of a locked joint is not allowed (seqrun never "
-                "commands it)"),
+        (4, 15, ("j3 is locked at 0°: a reset of a locked joint is not allowed (seqrun never "
+                "commands it)")),
         (4, 19, "unknown joint 'j9' (the arm has j1, j2, j3, j4, j5, j6, j7)")]
 
 
@@ -286,16 +291,16 @@ def test_set_limits_overrides(project):
         """
     result = validate(project, textwrap.dedent(steps))
     assert [(e.line, e.column, e.message) for e in result.errors] == [
-        (7, 22, "limits_deg of j1 -190…90 go beyond the arm's limits -180…180; an override "
-                "may only narrow them"),
-        (7, 51, "j3 is locked at 0°: writing limits to a locked joint is not allowed (seqrun "
-                "never commands it)"),
+        (7, 22, ("limits_deg of j1 -190…90 go beyond the arm's limits -180…180; an override "
+                "may only narrow them")),
+        (7, 51, ("j3 is locked at 0°: writing limits to a locked joint is not allowed (seqrun "
+                "never commands it)")),
         (8, 38, "max_velocity_deg_s of j2 40 deg/s is above the arm's maximum 30 deg/s"),
-        (9, 35, "max_acceleration_deg_s2 of j2 100 deg/s^2 is above the arm's maximum 60 "
-                "deg/s^2"),
+        (9, 35, ("max_acceleration_deg_s2 of j2 100 deg/s^2 is above the arm's maximum 60 "
+                "deg/s^2")),
         (10, 23, "j2 target 110° is outside the limits written by set_limits -100…100"),
-        (10, 50, "velocity_deg_s of j1 20 deg/s is above its maximum 10 deg/s (from "
-                 f"set_limits at {display_path(project / 'sequences' / 's.yaml')}:6:3)"),
+        (10, 50, ("velocity_deg_s of j1 20 deg/s is above its maximum 10 deg/s (from "
+                 f"set_limits at {display_path(project / 'sequences' / 's.yaml')}:6:3)")),
     ]
 
 

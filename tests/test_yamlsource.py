@@ -213,8 +213,8 @@ class Outer(FriendlyModel):
     model_config = ConfigDict(extra="forbid", strict=True)
     yaml_name = "the file"
     name: str
-    items: list[Inner] = []
-    table: dict[str, float] = {}
+    items: list[Inner] = Field(default_factory=list)
+    table: dict[str, float] = Field(default_factory=dict)
 
 
 def test_errors_point_at_the_value_and_read_well(tmp_path):
@@ -231,10 +231,10 @@ table: {a: 1, 3: 2}
         (1, 7, "expected text, got 12 (put it in quotes if you mean text)"),
         (3, 12, "must be greater than 0, got -1"),
         (4, 12, "expected a finite number, got .nan (NaN and infinity are not allowed)"),
-        (5, 9, "expected true or false, got 'yes' (seqrun reads YAML 1.2: yes/no/on/off are "
-               "words, not booleans)"),
-        (6, 13, "expected a number, got '1:30' (seqrun reads YAML 1.2: '1:30' is text, not the "
-                "base-60 number 90; write the value in degrees or seconds)"),
+        (5, 9, ("expected true or false, got 'yes' (seqrun reads YAML 1.2: yes/no/on/off are "
+               "words, not booleans)")),
+        (6, 13, ("expected a number, got '1:30' (seqrun reads YAML 1.2: '1:30' is text, not the "
+                "base-60 number 90; write the value in degrees or seconds)")),
         (7, 15, "expected text, got 3 (put it in quotes if you mean text)"),
     ]
 
@@ -247,8 +247,8 @@ def test_missing_key_points_at_the_parent_mapping(tmp_path):
 def test_unknown_key_points_at_the_key_and_suggests(tmp_path):
     path = write(tmp_path, "name: x\nnmae: y\nitems:\n  - {speed: 1, sped: 2}\n")
     assert errors_of(path, Outer) == [
-        (2, 1, "unknown key 'nmae' in the file (did you mean 'name'? allowed: name, items, "
-               "table)"),
+        (2, 1, ("unknown key 'nmae' in the file (did you mean 'name'? allowed: name, items, "
+               "table)")),
         (4, 16, "unknown key 'sped' in items item 1"),
     ]
 
