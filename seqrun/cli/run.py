@@ -8,39 +8,31 @@ from __future__ import annotations
 
 import signal
 import sys
-from contextlib import ExitStack, nullcontext
 from pathlib import Path
 from typing import Annotated, Optional
 
 import typer
 from rich.console import Console
 
-from seqrun import __version__
 from seqrun.cli.app import app
-from seqrun.cli.common import fail, load_arm_file, user_errors
+from seqrun.cli.common import (BitrateOption, BusKwargsOption, ChannelOption, InterfaceOption,
+                               SimOption, fail, load_arm_file, user_errors)
 from seqrun.cli.display import LiveDisplay, PlainDisplay
 from seqrun.connection import open_connection, parse_bus_kwargs, parse_faults
-from seqrun.executor import EXIT_OPERATOR_ABORT, Executor
-from seqrun.powercube.client import PowerCubeClient
-from seqrun.runlog import RunLog, default_run_dir
+from seqrun.clock import VirtualClock
+from seqrun.executor import EXIT_OPERATOR_ABORT
+from seqrun.runlog import default_run_dir
+from seqrun.runner import run_sequence
 from seqrun.schema import load_sequence
 
-Interface = Annotated[Optional[str], typer.Option(
-    "-i", "--interface", help="python-can interface (socketcan, ixxat, pcan, socketcand, ...). "
-                              "Default: python-can's configuration, else the simulator.")]
-Channel = Annotated[Optional[str], typer.Option("-c", "--channel", help="CAN channel.")]
-Bitrate = Annotated[Optional[int], typer.Option("-b", "--bitrate", help="Bit rate in bit/s "
-                                                "(default: the arm file's).")]
-BusKwargs = Annotated[Optional[list[str]], typer.Option(
-    "--bus-kwargs", metavar="KEY=VALUE", help="Extra python-can bus arguments (repeatable).")]
 
 
 def _ask(console: Console, question: str, assume_yes: bool) -> bool:
     """Ask the operator; EOF on stdin (no operator) is a no."""
     if assume_yes:
-        console.print(f"{question} [yes: --yes]", highlight=False)
+        console.print(f"{question} yes (--yes)", highlight=False, markup=False)
         return True
-    console.print(f"{question} [y/N] ", end="", highlight=False)
+    console.print(f"{question} [y/N] ", end="", highlight=False, markup=False)
     try:
         answer = sys.stdin.readline()
     except KeyboardInterrupt:
@@ -51,11 +43,11 @@ def _ask(console: Console, question: str, assume_yes: bool) -> bool:
 @app.command("run")
 def run_command(
     file: Annotated[Path, typer.Argument(help="Sequence file (YAML).")],
-    interface: Interface = None,
-    channel: Channel = None,
-    bitrate: Bitrate = None,
-    bus_kwargs: BusKwargs = None,
-    sim: Annotated[bool, typer.Option("--sim", help="Force the built-in simulator.")] = False,
+    interface: InterfaceOption = None,
+    channel: ChannelOption = None,
+    bitrate: BitrateOption = None,
+    bus_kwargs: BusKwargsOption = None,
+    sim: SimOption = False,
     sim_fault: Annotated[Optional[list[str]], typer.Option(
         "--sim-fault", metavar="SPEC", help="Inject a simulator fault, MODULE:KIND@SECONDS "
         "(e.g. 4:tow_error@2.5, all:halt@3, 3:drop_acks=0.3@0); repeatable.")] = None,
@@ -74,6 +66,9 @@ def run_command(
         "--command-mode", help="ramp (TargetVel + FRAMP, default) or step (FSTEP).")] = None,
     plain: Annotated[bool, typer.Option("--plain", help="Plain line output instead of the "
                                                         "live view.")] = False,
+    virtual_time: Annotated[bool, typer.Option(
+        "--virtual-time", help="Simulator only: run in virtual time, as fast as possible "
+                               "(full run folder; used by CI and the tests).")] = False,
 ) -> None:
     """Run a sequence: validate, read the arm, re-validate from where it stands, move."""
     console = Console(stderr=False)
@@ -90,9 +85,15 @@ def run_command(
         arm = load_arm_file(arm_file or loaded.arm_path)
         if not 1 <= from_step <= len(loaded.steps):
             fail(f"--from {from_step}: the sequence has steps 1-{len(loaded.steps)}")
+        if virtual_time and not (sim or faults or not (interface or channel or extra)):
+            fail("--virtual-time needs the simulator")
         connection = open_connection(interface=interface, channel=channel, bitrate=bitrate,
                                      bus_kwargs=extra, force_sim=sim, faults=faults,
-                                     default_bitrate=arm.can.bitrate)
+                                     default_bitrate=arm.can.bitrate,
+                                     clock=VirtualClock() if virtual_time else None)
+        if virtual_time and not connection.is_simulator:
+            connection.close()
+            fail("--virtual-time needs the simulator")
     style = "bold black on yellow" if connection.is_simulator else "bold white on red"
     console.print(f" {connection.description} ", style=style, highlight=False)
     if not connection.is_simulator and not _ask(
@@ -102,13 +103,6 @@ def run_command(
         raise typer.Exit(EXIT_OPERATOR_ABORT)
 
     folder = log_dir or default_run_dir(loaded.name)
-    client = PowerCubeClient(connection.bus, connection.clock,
-                             response_timeout=arm.can.response_timeout_s)
-    log = RunLog(folder, {"sequence": loaded.name, "file": str(file), "arm": arm.name,
-                          "bus": connection.description, "simulator": connection.is_simulator,
-                          "faults": [f.spec for f in faults], "speed": speed,
-                          "first_step": from_step, "seqrun": __version__})
-    client.add_frame_listener(log.on_frame)
 
     def confirm(prompt: str) -> bool:
         return _ask(console, prompt, yes)
@@ -116,14 +110,15 @@ def run_command(
     def before_step(s) -> bool:
         return _ask(console, f"Run step {s.number}: {s.title}?", False) if step else True
 
-    executor = Executor(client, arm, connection.clock, poses_dir=loaded.poses_dir, speed=speed,
-                        command_mode=command_mode, confirm=confirm, before_step=before_step,
-                        listeners=[log.on_event])
     interrupts = 0
+    holder: dict = {}
 
     def on_sigint(signum, frame) -> None:
         nonlocal interrupts
         interrupts += 1
+        executor = holder.get("executor")
+        if executor is None:
+            raise KeyboardInterrupt
         if interrupts == 1:
             executor.abort("Ctrl-C: controlled stop")
             if executor.waiting_for_operator:
@@ -132,28 +127,36 @@ def run_command(
             executor.halt("second Ctrl-C: Halt")
 
     def on_sigterm(signum, frame) -> None:
-        executor.halt("SIGTERM: Halt")
+        executor = holder.get("executor")
+        if executor is not None:
+            executor.halt("SIGTERM: Halt")
 
     live = console.is_terminal and not plain
-    title = f"seqrun: {loaded.name}"
-    display = (LiveDisplay(console, executor, title, connection.description, len(loaded.steps))
-               if live else PlainDisplay(console, len(loaded.steps)))
-    executor.listeners.append(display)
-    result = None
+    displays: list = []
+
+    def attach(executor) -> None:
+        holder["executor"] = executor
+        display = (LiveDisplay(console, executor, f"seqrun: {loaded.name}",
+                               connection.description, len(loaded.steps))
+                   if live else PlainDisplay(console, len(loaded.steps)))
+        executor.listeners.append(display)
+        displays.append(display)
+        if live:
+            display.__enter__()
+
     old_int = signal.signal(signal.SIGINT, on_sigint)
     old_term = signal.signal(signal.SIGTERM, on_sigterm)
     try:
-        with ExitStack() as stack:
-            stack.enter_context(display if live else nullcontext())
-            result = executor.run(loaded, first_step=from_step)
+        outcome = run_sequence(loaded, arm, connection, log_dir=folder, file=str(file),
+                               speed=speed, first_step=from_step, command_mode=command_mode,
+                               confirm=confirm, before_step=before_step, on_executor=attach)
     finally:
+        if live and displays:
+            displays[0].__exit__(None, None, None)
         signal.signal(signal.SIGINT, old_int)
         signal.signal(signal.SIGTERM, old_term)
-        if result is not None:
-            log.finish(result)
-        log.close()
-        client.close()
         connection.close()
+    result = outcome.result
     colour = "green" if result.exit_code == 0 else "red"
     console.print(f"[{colour}]{result.status.upper()}[/{colour}] (exit {result.exit_code}): "
                   f"{result.message}", highlight=False)

@@ -1,0 +1,83 @@
+"""One run, assembled: bus connection -> PowerCube client -> run folder -> executor.
+
+The CLI (``seqrun run``), the dry run (``seqrun validate``) and the end-to-end tests all go
+through :func:`run_sequence`, so what the tests prove is what the operator runs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Iterable
+
+from seqrun import __version__
+from seqrun.arm import ArmDescription
+from seqrun.connection import Connection
+from seqrun.executor import Executor, Listener, RunResult
+from seqrun.powercube.client import PowerCubeClient
+from seqrun.runlog import RunLog
+from seqrun.schema import LoadedSequence
+
+
+@dataclass
+class RunOutcome:
+    result: RunResult
+    report: dict | None
+    log_dir: Path | None
+    executor: Executor
+
+
+def build_executor(loaded: LoadedSequence, arm: ArmDescription, connection: Connection, *,
+                   speed: float = 1.0, command_mode: str | None = None,
+                   cycle_hz: float | None = None,
+                   confirm: Callable[[str], bool] | None = None,
+                   before_step: Callable | None = None,
+                   listeners: Iterable[Listener] = (), dry_run: bool = False
+                   ) -> tuple[Executor, PowerCubeClient]:
+    client = PowerCubeClient(connection.bus, connection.clock,
+                             response_timeout=arm.can.response_timeout_s)
+    executor = Executor(client, arm, connection.clock, poses_dir=loaded.poses_dir, speed=speed,
+                        command_mode=command_mode, cycle_hz=cycle_hz, confirm=confirm,
+                        before_step=before_step, listeners=list(listeners), dry_run=dry_run)
+    return executor, client
+
+
+def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connection, *,
+                 log_dir: Path | None, file: str | None = None, speed: float = 1.0,
+                 first_step: int = 1, command_mode: str | None = None,
+                 cycle_hz: float | None = None,
+                 confirm: Callable[[str], bool] | None = None,
+                 before_step: Callable | None = None,
+                 listeners: Iterable[Listener] = (), dry_run: bool = False,
+                 on_executor: Callable[[Executor], None] | None = None) -> RunOutcome:
+    """Run ``loaded`` on ``connection``; writes the run folder when ``log_dir`` is given.
+
+    ``on_executor`` is called with the executor before the run starts (signal handlers,
+    displays and tests hook in there). The connection is not closed.
+    """
+    executor, client = build_executor(loaded, arm, connection, speed=speed,
+                                      command_mode=command_mode, cycle_hz=cycle_hz,
+                                      confirm=confirm, before_step=before_step,
+                                      listeners=listeners, dry_run=dry_run)
+    log = None
+    if log_dir is not None:
+        log = RunLog(log_dir, {"sequence": loaded.name, "file": file or loaded.file,
+                               "arm": arm.name, "bus": connection.description,
+                               "simulator": connection.is_simulator,
+                               "faults": [f.spec for f in connection.faults], "speed": speed,
+                               "first_step": first_step, "seqrun": __version__})
+        client.add_frame_listener(log.on_frame)
+        executor.listeners.insert(0, log.on_event)
+    if on_executor is not None:
+        on_executor(executor)
+    result = None
+    report = None
+    try:
+        result = executor.run(loaded, first_step=first_step)
+    finally:
+        if log is not None:
+            if result is not None:
+                report = log.finish(result)
+            log.close()
+        client.close()
+    return RunOutcome(result, report, log_dir, executor)
