@@ -78,6 +78,10 @@ class CanSettings(_Strict):
 
 class Control(_Strict):
     cycle_hz: Annotated[float, Field(ge=10, le=500)] = 100
+    dry_run_cycle_hz: Annotated[float, Field(ge=5, le=500)] = Field(
+        10, description="Control-loop rate of dry runs (seqrun validate). The modules' ramps "
+                        "interpolate between setpoints, so a slower stream changes simulated "
+                        "durations by about a cycle and makes dry runs far faster.")
     command_mode: Literal["ramp", "step"] = "ramp"
     tracking_reserve: Annotated[float, Field(ge=0, lt=0.5)] = Field(
         0.05, description="Fraction of each velocity limit kept out of the plans so that a "

@@ -79,7 +79,8 @@ def resolve_config(interface: str | None, channel: str | None, bitrate: int | No
 def open_connection(*, interface: str | None = None, channel: str | None = None,
                     bitrate: int | None = None, bus_kwargs: Mapping[str, Any] | None = None,
                     force_sim: bool = False, faults: Sequence[Fault] = (),
-                    clock: Clock | None = None, sim_positions: Sequence[float] | None = None,
+                    clock: Clock | None = None,
+                    sim_positions: Mapping[int, float] | Sequence[float] | None = None,
                     default_bitrate: int = 1_000_000) -> Connection:
     """Open the bus the operator asked for (see the module docstring)."""
     config = {} if force_sim else resolve_config(interface, channel, bitrate, bus_kwargs)
@@ -90,7 +91,7 @@ def open_connection(*, interface: str | None = None, channel: str | None = None,
         name = str(config.get("channel") or f"seqrun-{next(_sim_channels)}")
         bus = SimBus(channel=name, clock=clock, faults=list(faults),
                      bitrate=bitrate or config.get("bitrate") or default_bitrate,
-                     positions=list(sim_positions) if sim_positions is not None else None)
+                     positions=sim_positions)
         kind = "virtual time" if clock.is_virtual else "real time"
         return Connection(bus, clock, True,
                           f"SIMULATOR ({kind}): simulated LWA 3 on '{name}', "

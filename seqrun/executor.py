@@ -119,6 +119,8 @@ class Executor:
     CATCH_UP_GAIN = 10.0
     #: Smallest TargetVel sent (deg/s): a zero cap would leave a joint short of its target.
     MIN_COMMAND_VELOCITY_DEG_S = 1.0
+    #: TargetVel resolution (deg/s); a write that would not change it is not sent.
+    TARGET_VEL_QUANTUM_DEG_S = 0.1
     #: Idempotent reads are retried this often when an acknowledge is lost (drop_acks).
     READ_RETRIES = 1
 
@@ -162,6 +164,8 @@ class Executor:
         self._move_limits = self.limits
         self._keeper: threading.Thread | None = None
         self._keeper_stop = threading.Event()
+        #: Last TargetVel written per module (deg/s); forgotten at every move start.
+        self._sent_target_vel: dict[int, float] = {}
 
     # ------------------------------------------------------------------ control (any thread)
     def abort(self, reason: str = "operator abort") -> None:
@@ -349,6 +353,7 @@ class Executor:
                 "peak_measured_velocity_deg_s": _r(peak)}
 
     def _prepare_ramp(self, moving: list[int], limits: Limits) -> None:
+        self._sent_target_vel.clear()  # a module may have been reset or written meanwhile
         if self.command_mode != "ramp":
             return
         # TargetAcc once per move: the module's own ramp must be able to follow the plan.
@@ -373,16 +378,25 @@ class Executor:
         # braking curve never binds before the plan decelerates, with TargetVel following
         # the plan's velocity plus a catch-up term for the measured lag.
         _, vel_next, _ = plan.at(t + self.cycle)
+        # Catch-up may use the reserve the plan left, never more than the move allows.
+        ceiling = np.degrees(self._move_limits.velocity) / (1 - self.arm.control.tracking_reserve)
+        # A slow loop must correct gently or it overshoots its own correction.
+        gain = min(self.CATCH_UP_GAIN, 0.5 / self.cycle)
         for i in moving:
             lead = self.limits.velocity[i] / (2 * self.limits.acceleration[i]) + 2 * self.cycle
             ahead, _, _ = plan.at(t + lead)
             direction = math.copysign(1.0, plan.target[i] - plan.start[i])
             lag = (math.degrees(pos_now[i]) - measured_deg[i]) * direction
-            cap = abs(math.degrees(vel_next[i])) + self.CATCH_UP_GAIN * lag
-            cap = min(max(cap, self.MIN_COMMAND_VELOCITY_DEG_S),
+            cap = abs(math.degrees(vel_next[i])) + gain * lag
+            cap = min(max(cap, self.MIN_COMMAND_VELOCITY_DEG_S), ceiling[i],
                       self.arm.joints[i].max_velocity_deg_s)
+            # TargetVel only when it changes by more than the quantum: at cruise the
+            # velocity is steady and the write would only load the bus.
+            cap = round(cap / self.TARGET_VEL_QUANTUM_DEG_S) * self.TARGET_VEL_QUANTUM_DEG_S
             module = self.modules[i]
-            requests.append(SetParam(module, ParamId.TARGET_VEL, math.radians(cap)))
+            if self._sent_target_vel.get(module) != cap:
+                requests.append(SetParam(module, ParamId.TARGET_VEL, math.radians(cap)))
+                self._sent_target_vel[module] = cap
             requests.append(SetMotion(module, MotionMode.FRAMP_ACK,
                                       float(self.to_module_rad(np.degrees(ahead))[i])))
         return requests

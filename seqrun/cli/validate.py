@@ -49,7 +49,7 @@ class StaticCheck:
 
 
 def static_check(file: Path, *, start: str | None = None,
-                 arm_file: Path | None = None) -> StaticCheck:
+                 arm_file: Path | None = None, started: bool = False) -> StaticCheck:
     """Load ``file`` (with includes), its arm and the start pose, and validate statically.
 
     Invalid files (the sequence, an included one, the arm file, a pose file) end up in
@@ -80,7 +80,8 @@ def static_check(file: Path, *, start: str | None = None,
     except SequenceInvalid as exc:
         check.errors = list(exc.errors)
         return check
-    result: ValidationResult = validate_sequence(check.loaded, check.arm, check.start_deg)
+    result: ValidationResult = validate_sequence(check.loaded, check.arm, check.start_deg,
+                                                 started=started)
     check.errors, check.notes = result.errors, result.notes
     return check
 
@@ -111,6 +112,41 @@ def print_report(check: StaticCheck, file: Path, *, as_json: bool) -> None:
         typer.echo(f"{name}: invalid ({count} error{'s' * (count != 1)}{notes})")
 
 
+def print_dry_run(run, loaded, arm) -> None:
+    """Human report of a dry run: per step planned vs simulated, peaks, heights, checks."""
+    r = run.result
+    verdict = "passed" if run.passed else f"FAILED ({r.status})"
+    typer.echo(f"dry run from {run.start_pose} (simulator, virtual time, {run.cycle_hz:g} Hz "
+               f"loop): {verdict} - {run.simulated_s:.2f} s simulated in {run.wall_s:.2f} s "
+               f"({run.speedup:.0f}x real time)")
+    limits = {j.name: j.max_velocity_deg_s for j in arm.joints}
+    for s in r.steps:
+        planned = "" if s.planned_duration_s is None else f"planned {s.planned_duration_s:6.2f} s, "
+        took = "not run" if s.duration_s is None else f"simulated {s.duration_s:6.2f} s"
+        typer.echo(f"  {s.number:2d} {s.status:7s} {s.label[:44]:44s} {planned}{took}")
+        peak = s.detail.get("peak_measured_velocity_deg_s")
+        if peak:
+            moving = [f"{n} {v:.1f}/{limits[n]:g}" for n, v in zip(arm.joint_names, peak) if v > 0.05]
+            typer.echo(f"       peak joint velocity (deg/s, of limit): {', '.join(moving)}")
+        if "position_error_mm" in s.detail:
+            d = s.detail
+            typer.echo(f"       checkpoint: expected {d['expected_position_mm']} mm, reached "
+                       f"{d['reached_position_mm']} mm: {d['position_error_mm']} mm / "
+                       f"{d['angle_error_deg']} deg (tolerance {d['position_tolerance_mm']} mm / "
+                       f"{d['angle_tolerance_deg']} deg)")
+    guards = {g.name: g.min_z_mm for g in arm.workspace.guards}
+    for key, z in r.min_heights_mm.items():
+        guard, point = key.split(":", 1)
+        typer.echo(f"  lowest {point}: {z:.1f} mm above the base plane (guard '{guard}': "
+                   f"{guards.get(guard, float('nan')):g} mm)")
+    if r.fault:
+        typer.echo(f"  fault: {r.fault['message']}")
+    for error in r.extra.get("errors", []):
+        typer.echo(f"{error['file']}:{error['line']}:{error['column']}: {error['message']}")
+    for item in run.as_dict()["not_verified"]:
+        typer.echo(f"  not verified: {item}")
+
+
 @app.command("validate")
 def validate_command(
     file: Annotated[Path, typer.Argument(metavar="FILE", help="Sequence file (YAML).")],
@@ -122,18 +158,49 @@ def validate_command(
         "--arm", metavar="FILE",
         help="Arm description file (default: the sequence's 'arm', else arms/lwa3.yaml under "
              "the project root).")] = None,
+    static: Annotated[bool, typer.Option(
+        "--static", help="Only the static checks, no dry run.")] = False,
+    started: Annotated[bool, typer.Option(
+        "--started", help="The modules are already reset, homed and limited (for sequences "
+                          "that do not include the start-up).")] = False,
+    speed: Annotated[float, typer.Option("--speed", help="Speed override of the dry run, "
+                                                         "0 < F <= 1.")] = 1.0,
+    cycle_hz: Annotated[float | None, typer.Option(
+        "--cycle-hz", help="Control-loop rate of the dry run (default: the arm file's "
+                           "control.dry_run_cycle_hz).")] = None,
 ) -> None:
-    """Check a sequence file and its includes against the arm, without moving anything.
+    """Check a sequence file and its includes against the arm, then dry-run it on the
+    simulator at virtual time. Nothing is sent to a real bus.
 
     Exit 0 if valid, 1 if not, 2 if the input cannot be used.
     """
+    if not 0 < speed <= 1:
+        _fail(f"--speed must lie in (0, 1], got {speed:g}")
+    if cycle_hz is not None and not 5 <= cycle_hz <= 500:
+        _fail(f"--cycle-hz must lie in [5, 500], got {cycle_hz:g}")
     try:
-        check = static_check(file, start=start, arm_file=arm_file)
+        check = static_check(file, start=start, arm_file=arm_file, started=started)
     except UserInputError as exc:
         _fail(str(exc))
         return
-    print_report(check, file, as_json=as_json)
-    raise typer.Exit(EXIT_VALID if check.valid else EXIT_INVALID)
+    run = None
+    if check.valid and not static:
+        from seqrun.dryrun import dry_run
+
+        run = dry_run(check.loaded, check.arm, check.start_deg, start_pose=start or START_POSE,
+                      started=started, speed=speed, cycle_hz=cycle_hz)
+    valid = check.valid and (run is None or run.passed)
+    if as_json:
+        typer.echo(json.dumps({"valid": valid,
+                               "errors": [e.as_dict() for e in check.errors],
+                               "notes": [n.as_dict() for n in check.notes],
+                               "dry_run": run.as_dict() if run is not None else None},
+                              indent=2, ensure_ascii=False))
+    else:
+        print_report(check, file, as_json=False)
+        if run is not None:
+            print_dry_run(run, check.loaded, check.arm)
+    raise typer.Exit(EXIT_VALID if valid else EXIT_INVALID)
 
 
 class SchemaKind(str, Enum):

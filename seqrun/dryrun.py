@@ -1,0 +1,117 @@
+"""The dry run: the real executor against the simulated arm at virtual time.
+
+Nothing here opens a real bus: the connection is always the built-in simulator, on a
+:class:`~seqrun.clock.VirtualClock`, started in the given pose. The executor, planner,
+client, codec and simulated wire are the ones a real run uses; the only difference is the
+control-loop rate (``control.dry_run_cycle_hz``): the modules' own ramps interpolate between
+setpoints, so a slower stream changes the simulated durations by about one cycle while
+making the dry run far faster than real time.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+from seqrun.arm import ArmDescription
+from seqrun.clock import VirtualClock
+from seqrun.connection import open_connection
+from seqrun.executor import RunResult
+from seqrun.powercube.client import PowerCubeClient
+from seqrun.powercube.codec import SetParam
+from seqrun.powercube.protocol import ParamId
+from seqrun.runner import run_sequence
+from seqrun.schema import LoadedSequence
+
+#: Checks a simulator cannot make for the operator, listed in every dry-run report.
+ALWAYS_UNVERIFIED = (
+    "collisions other than the workspace guards (guard points are joint axes, not housings)",
+    "the real modules' tracking and timing (the dry run uses the simulated PRL model)",
+)
+
+
+@dataclass
+class DryRun:
+    result: RunResult
+    start_pose: str
+    cycle_hz: float
+    wall_s: float
+    events: list[dict] = field(default_factory=list, repr=False)
+
+    @property
+    def passed(self) -> bool:
+        return self.result.exit_code == 0
+
+    @property
+    def simulated_s(self) -> float:
+        return self.result.duration_s
+
+    @property
+    def speedup(self) -> float:
+        return self.simulated_s / self.wall_s if self.wall_s > 0 else math.inf
+
+    def as_dict(self) -> dict[str, Any]:
+        r = self.result
+        return {
+            "passed": self.passed, "status": r.status, "message": r.message,
+            "start_pose": self.start_pose, "cycle_hz": self.cycle_hz,
+            "simulated_s": round(self.simulated_s, 4),
+            "planned_motion_s": round(r.planned_duration_s, 4),
+            "wall_s": round(self.wall_s, 4), "speedup": round(self.speedup, 1),
+            "steps": [s.as_dict() for s in r.steps],
+            "min_heights_mm": r.min_heights_mm,
+            "fault": r.fault,
+            "not_verified": list(r.not_verified) + list(ALWAYS_UNVERIFIED),
+            **({"errors": r.extra["errors"]} if r.extra.get("errors") else {}),
+        }
+
+
+def _prepare_started(connection, arm: ArmDescription) -> None:
+    """Bring the simulated modules to 'started' (reset, homed, limits written)."""
+    client = PowerCubeClient(connection.bus, connection.clock)
+    try:
+        client.reset(None)
+        client.home(None)
+        client.transact([SetParam(j.module, p, j.to_module_rad(v))
+                         for j in arm.joints
+                         for p, v in ((ParamId.MIN_POS, j.limits_deg[0]),
+                                      (ParamId.MAX_POS, j.limits_deg[1]))])
+    finally:
+        client.close()
+
+
+def dry_run(loaded: LoadedSequence, arm: ArmDescription, start_deg: Mapping[str, float], *,
+            start_pose: str = "park", started: bool = False, speed: float = 1.0,
+            cycle_hz: float | None = None, command_mode: str | None = None) -> DryRun:
+    """Run ``loaded`` on a simulated arm standing at ``start_deg`` (user degrees).
+
+    ``started``: the simulated modules are reset, homed and limited before the run (for
+    sequences written for an arm that is already up).
+    """
+    clock = VirtualClock()
+    positions = {j.module: j.to_module_rad(start_deg[j.name]) for j in arm.joints}
+    connection = open_connection(force_sim=True, clock=clock, sim_positions=positions,
+                                 default_bitrate=arm.can.bitrate)
+    hz = cycle_hz or arm.control.dry_run_cycle_hz
+    events: list[dict] = []
+    try:
+        if started:
+            _prepare_started(connection, arm)
+        wall = time.perf_counter()
+        outcome = run_sequence(loaded, arm, connection, log_dir=None, speed=speed,
+                               cycle_hz=hz, command_mode=command_mode, confirm=None,
+                               listeners=[_keep_summary(events)], dry_run=True)
+        wall = time.perf_counter() - wall
+    finally:
+        connection.close()
+    return DryRun(outcome.result, start_pose, hz, wall, events)
+
+
+def _keep_summary(events: list[dict]):
+    """Keep the events a report needs (not the per-cycle ones)."""
+    def listener(event: dict) -> None:
+        if event["type"] not in ("setpoint", "measurement"):
+            events.append(event)
+    return listener
