@@ -1,0 +1,72 @@
+"""Dry-run speed: simulated seconds of sequences/opsafe.yaml per wall second.
+
+Runs the real executor through the real client and codec against the simulated arm on a
+VirtualClock (what ``seqrun validate`` does), ``--runs`` times after one warm-up run, and
+prints the median wall time and speedup = simulated duration / wall time.
+
+Run: ``.venv/bin/python bench/perf_dryrun.py [--runs 7] [--profile] [--sequence FILE]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import cProfile
+import pstats
+import statistics
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from seqrun.arm import load_arm  # noqa: E402
+from seqrun.clock import VirtualClock  # noqa: E402
+from seqrun.executor import Executor  # noqa: E402
+from seqrun.powercube.client import PowerCubeClient  # noqa: E402
+from seqrun.schema import load_sequence  # noqa: E402
+from seqrun.sim.bus import SimBus  # noqa: E402
+
+
+def one(loaded, arm, i: int):
+    clock = VirtualClock()
+    bus = SimBus(channel=f"perf{i}", clock=clock)
+    client = PowerCubeClient(bus, clock)
+    ex = Executor(client, arm, clock, poses_dir=loaded.poses_dir, dry_run=True, cycle_hz=10)
+    w = time.perf_counter()
+    res = ex.run(loaded)
+    w = time.perf_counter() - w
+    bus.shutdown()
+    return res, w
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--runs", type=int, default=15)
+    parser.add_argument("--profile", action="store_true", help="cProfile top 25 by tottime")
+    parser.add_argument("--sequence", default="sequences/opsafe.yaml")
+    args = parser.parse_args()
+
+    loaded = load_sequence(args.sequence)
+    arm = load_arm(loaded.arm_path)
+    one(loaded, arm, 0)  # warm-up (imports, caches)
+    if args.profile:
+        profiler = cProfile.Profile()
+        profiler.enable()
+        res, w = one(loaded, arm, 1)
+        profiler.disable()
+        pstats.Stats(profiler).sort_stats("tottime").print_stats(25)
+        print(f"profiled run: {res.duration_s:.3f} s simulated in {w:.3f} s wall")
+        return 0
+    walls = []
+    for i in range(args.runs):
+        res, w = one(loaded, arm, i + 1)
+        walls.append(w)
+    wall = statistics.median(walls)
+    print(f"{args.sequence}: {res.duration_s:.3f} s simulated, median wall {wall * 1e3:.1f} ms "
+          f"over {args.runs} warm runs (min {min(walls) * 1e3:.1f}, max {max(walls) * 1e3:.1f})")
+    print(f"speedup: {res.duration_s / wall:.1f}x real time")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
