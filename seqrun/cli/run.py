@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import signal
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Annotated, Optional
 
@@ -20,7 +21,7 @@ from seqrun.cli.common import (BitrateOption, BusKwargsOption, ChannelOption, In
 from seqrun.cli.display import LiveDisplay, PlainDisplay
 from seqrun.connection import open_connection, parse_bus_kwargs, parse_faults
 from seqrun.clock import VirtualClock
-from seqrun.executor import EXIT_OPERATOR_ABORT
+from seqrun.executor import EXIT_INVALID, EXIT_OPERATOR_ABORT
 from seqrun.runlog import default_run_dir
 from seqrun.runner import run_sequence
 from seqrun.schema import load_sequence
@@ -38,6 +39,20 @@ def _ask(console: Console, question: str, assume_yes: bool) -> bool:
     except KeyboardInterrupt:
         return False
     return answer.strip().lower() in ("y", "yes")
+
+
+def static_validation(loaded, arm, start: str | None, started: bool, from_step: int):
+    """Validation from the assumed start (Park, freshly powered on, unless told otherwise).
+    With ``--from N`` the steps before N are only tracked, to know where step N starts."""
+    from seqrun.validation import START_POSE, pose_joints_deg, validate_sequence
+
+    start_deg = pose_joints_deg(start or START_POSE, loaded.poses_dir)
+    if from_step == 1:
+        return validate_sequence(loaded, arm, start_deg, started=started)
+    before = validate_sequence(replace(loaded, steps=tuple(loaded.steps[:from_step - 1])),
+                               arm, start_deg, started=started)
+    return validate_sequence(replace(loaded, steps=tuple(loaded.steps[from_step - 1:])), arm,
+                             before.final_deg, started=True)
 
 
 @app.command("run")
@@ -66,6 +81,12 @@ def run_command(
         "--command-mode", help="ramp (TargetVel + FRAMP, default) or step (FSTEP).")] = None,
     plain: Annotated[bool, typer.Option("--plain", help="Plain line output instead of the "
                                                         "live view.")] = False,
+    start: Annotated[Optional[str], typer.Option(
+        "--start", metavar="POSE", help="Pose the static validation assumes the arm starts in "
+        "(default park: freshly powered on). The run re-validates from the measured state.")] = None,
+    started: Annotated[bool, typer.Option(
+        "--started", help="Static validation assumes the modules are already reset, homed "
+                          "and limited (sequences without the start-up).")] = False,
     virtual_time: Annotated[bool, typer.Option(
         "--virtual-time", help="Simulator only: run in virtual time, as fast as possible "
                                "(full run folder; used by CI and the tests).")] = False,
@@ -85,8 +106,21 @@ def run_command(
         arm = load_arm_file(arm_file or loaded.arm_path)
         if not 1 <= from_step <= len(loaded.steps):
             fail(f"--from {from_step}: the sequence has steps 1-{len(loaded.steps)}")
+        # Static validation before the bus is even opened; the executor validates again
+        # from the measured state before the first motion.
+        static = static_validation(loaded, arm, start, started, from_step)
+        if static.errors:
+            for error in static.errors:
+                typer.echo(str(error), err=True)
+            typer.echo(f"{loaded.file}: invalid ({len(static.errors)} error"
+                       f"{'s' * (len(static.errors) != 1)}); nothing was sent", err=True)
+            raise typer.Exit(EXIT_INVALID)
         if virtual_time and not (sim or faults or not (interface or channel or extra)):
             fail("--virtual-time needs the simulator")
+        for fault in faults:  # the simulated arm has the arm file's modules
+            if fault.module is not None and fault.module not in arm.module_ids:
+                fail(f"--sim-fault '{fault.spec}': the arm has no module {fault.module} "
+                     f"(modules {', '.join(map(str, arm.module_ids))})")
         connection = open_connection(interface=interface, channel=channel, bitrate=bitrate,
                                      bus_kwargs=extra, force_sim=sim, faults=faults,
                                      default_bitrate=arm.can.bitrate,
@@ -103,6 +137,11 @@ def run_command(
         raise typer.Exit(EXIT_OPERATOR_ABORT)
 
     folder = log_dir or default_run_dir(loaded.name)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)  # an unusable --log-dir: exit 2, nothing sent
+    except OSError as exc:
+        connection.close()
+        fail(f"cannot create the run folder {folder}: {exc.strerror or exc}")
 
     def confirm(prompt: str) -> bool:
         return _ask(console, prompt, yes)
