@@ -92,7 +92,10 @@ class PlanningError(SeqrunError):
 class RunAborted(SeqrunError):
     """The executor aborted a run; ``module`` names the culprit where there is one."""
 
-    def __init__(self, cause: str, message: str, module: int | None = None) -> None:
+    def __init__(self, cause: str, message: str, module: int | None = None,
+                 detail: dict | None = None) -> None:
         self.cause = cause
         self.module = module
+        #: Measured values for the step's report entry (e.g. a checkpoint's errors).
+        self.detail = detail or {}
         super().__init__(message)

@@ -216,7 +216,8 @@ class Executor:
         return np.degrees(np.asarray(module_rad)) - self.offsets_deg
 
     # ------------------------------------------------------------------ bus helpers
-    def _transact(self, requests: list, *, idempotent: bool = False) -> list:
+    def transact(self, requests: list, *, idempotent: bool = False) -> list:
+        """``client.transact``; ``idempotent`` requests (reads) get one retry."""
         attempts = 1 + (self.READ_RETRIES if idempotent else 0)
         for attempt in range(attempts):
             try:
@@ -251,7 +252,7 @@ class Executor:
     def read_state_words(self, modules: list[int] | None = None) -> dict[int, StateFlag]:
         """CubeState of several modules, pipelined."""
         modules = self.modules if modules is None else modules
-        acks = self._transact([GetParam(m, ParamId.CUBE_STATE) for m in modules], idempotent=True)
+        acks = self.transact([GetParam(m, ParamId.CUBE_STATE) for m in modules], idempotent=True)
         return {m: StateFlag(a.value) for m, a in zip(modules, acks)}
 
     def wait_for_states(self, modules: list[int] | None, ok: Callable[[StateFlag], bool],
@@ -358,7 +359,7 @@ class Executor:
             return
         # TargetAcc once per move: the module's own ramp must be able to follow the plan.
         factor = self.arm.control.module_acceleration_factor
-        self._transact([SetParam(self.modules[i], ParamId.TARGET_ACC,
+        self.transact([SetParam(self.modules[i], ParamId.TARGET_ACC,
                                  float(limits.acceleration[i] * factor)) for i in moving])
 
     def _setpoints(self, plan: MovePlan, t: float, moving: list[int],
@@ -421,7 +422,7 @@ class Executor:
             modules = list(dict.fromkeys(batch[i].module for i in lost))
             self.emit("retry", modules=modules, what="read")
             retry = [r for m in modules for r in self._reads(m)]
-            batch, acks = batch + retry, acks + self._transact(retry)
+            batch, acks = batch + retry, acks + self.transact(retry)
         positions: dict[int, float] = {}
         states: dict[int, ShortState] = {}
         for ack in acks:
@@ -564,7 +565,7 @@ class Executor:
 
         m = self.read_arm()
         states = self.read_state_words()
-        limits = self._transact([GetParam(j.module, p) for j in self.arm.joints
+        limits = self.transact([GetParam(j.module, p) for j in self.arm.joints
                                  for p in (ParamId.MIN_POS, ParamId.MAX_POS)], idempotent=True)
         written = all(
             abs(float(lo.value) - j.to_module_rad(j.limits_deg[0])) < 1e-5
@@ -597,9 +598,9 @@ class Executor:
         if not wd.enabled:
             return
         self.client.watchdog_period = wd.refresh_period_s
-        configs = self._transact([GetParam(m, ParamId.CONFIG) for m in self.modules],
+        configs = self.transact([GetParam(m, ParamId.CONFIG) for m in self.modules],
                                  idempotent=True)
-        self._transact([SetParam(m, ParamId.CONFIG, int(a.value) | ConfigFlag.WATCHDOG_ENABLE)
+        self.transact([SetParam(m, ParamId.CONFIG, int(a.value) | ConfigFlag.WATCHDOG_ENABLE)
                         for m, a in zip(self.modules, configs)])
         self.client.refresh_watchdog()
         if not self.clock.is_virtual:
@@ -624,9 +625,9 @@ class Executor:
             return
         self._keeper_stop.set()
         try:
-            configs = self._transact([GetParam(m, ParamId.CONFIG) for m in self.modules],
+            configs = self.transact([GetParam(m, ParamId.CONFIG) for m in self.modules],
                                      idempotent=True)
-            self._transact([SetParam(m, ParamId.CONFIG,
+            self.transact([SetParam(m, ParamId.CONFIG,
                                      int(a.value) & ~int(ConfigFlag.WATCHDOG_ENABLE))
                             for m, a in zip(self.modules, configs)])
             self.client.watchdog_period = None
@@ -706,6 +707,7 @@ class Executor:
                          "step": step.number, "halt_sent": halted}
                 result.status = "failed" if code == EXIT_FAULT else "aborted"
                 result.finished = self.clock.now() - self._t0
+                result.detail.update(_jsonable(getattr(exc, "detail", None) or {}))
                 result.detail.setdefault("error", message)
                 self.emit("fault", **fault)
                 break

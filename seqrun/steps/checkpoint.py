@@ -28,9 +28,8 @@ def run(step, ex) -> dict:
     }
     ex.emit("checkpoint", **detail)
     if pos_err > pos_tol or ang_err > ang_tol:
-        step_detail = ex._current_step.detail if ex._current_step is not None else {}
-        step_detail.update(detail)
         raise RunAborted("checkpoint",
                          f"checkpoint failed: end-effector {pos_err:.2f} mm (tolerance {pos_tol} mm) "
-                         f"and {ang_err:.3f}° (tolerance {ang_tol}°) from the expected pose")
+                         f"and {ang_err:.3f}° (tolerance {ang_tol}°) from the expected pose",
+                         detail=detail)
     return detail

@@ -25,8 +25,8 @@ def run(step, ex) -> dict:
         if joint.name in params.max_acceleration_deg_s2:
             writes.append((joint.module, ParamId.MAX_ACC,
                            math.radians(params.max_acceleration_deg_s2[joint.name])))
-    ex._transact([SetParam(m, p, v) for m, p, v in writes])
-    acks = ex._transact([GetParam(m, p) for m, p, _ in writes], idempotent=True)
+    ex.transact([SetParam(m, p, v) for m, p, v in writes])
+    acks = ex.transact([GetParam(m, p) for m, p, _ in writes], idempotent=True)
     for (module, param, value), ack in zip(writes, acks):
         if abs(float(ack.value) - value) > READBACK_TOLERANCE_RAD:
             raise RunAborted("limits_not_written",
