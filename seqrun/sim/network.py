@@ -77,27 +77,40 @@ def _bit_length(can_id: int, data: bytes, extended: bool, remote: bool,
     return frame_bit_length(can_id, data, extended=extended, remote=remote, dlc=dlc)
 
 
-def _arbitration_key(frame: WireFrame) -> tuple[int, int, int, int, int]:
-    """Orders frames as bitwise arbitration does (dominant 0 wins)."""
+def _arbitration_key(frame: WireFrame) -> int:
+    """Orders frames as bitwise arbitration does (dominant 0 wins): the fields of the
+    arbitration field in wire order — base id (11 bits), RTR resp. SRR, IDE, extension
+    (18 bits), RTR of an extended frame — packed into one integer, so that comparing keys
+    compares those fields one after the other."""
     if frame.is_extended:
         base, extension = frame.can_id >> 18, frame.can_id & 0x3FFFF
-        return (base, 1, 1, extension, int(frame.is_remote))  # SRR and IDE recessive
-    return (frame.can_id, int(frame.is_remote), 0, 0, 0)
+        # SRR and IDE recessive
+        return base << 21 | 1 << 20 | 1 << 19 | extension << 1 | int(frame.is_remote)
+    return frame.can_id << 21 | int(frame.is_remote) << 20
 
 
-@dataclass
+#: ``_Pending.rank`` = arbitration key << _SEQ_BITS | sequence number: frames with equal
+#: keys (one node's, or two nodes sending the same identifier) go in queueing order.
+_SEQ_BITS = 64
+
+
 class _Pending:
-    frame: WireFrame
-    ready_at: float
-    seq: int
-    key: tuple[int, int, int, int, int]
-    #: Bus time until delivery (end of EOF) and until the bus is free again.
-    to_delivery: float
-    occupancy: float
+    __slots__ = ("frame", "ready_at", "rank", "to_delivery", "occupancy")
+
+    def __init__(self, frame: WireFrame, ready_at: float, rank: int, to_delivery: float,
+                 occupancy: float) -> None:
+        self.frame = frame
+        self.ready_at = ready_at
+        self.rank = rank
+        #: Bus time until delivery (end of EOF) and until the bus is free again.
+        self.to_delivery = to_delivery
+        self.occupancy = occupancy
 
 
 class _Node:
     """A transmitter: a host endpoint or one module."""
+
+    __slots__ = ("name", "is_module", "queue")
 
     def __init__(self, name: str, is_module: bool = False) -> None:
         self.name = name
@@ -105,12 +118,14 @@ class _Node:
         self.queue: deque[_Pending] = deque()
 
 
-@dataclass
 class _InFlight:
-    node: _Node
-    pending: _Pending
-    start: float
-    end: float  # delivery time
+    __slots__ = ("node", "pending", "start", "end")
+
+    def __init__(self, node: _Node, pending: _Pending, start: float, end: float) -> None:
+        self.node = node
+        self.pending = pending
+        self.start = start
+        self.end = end  # delivery time
 
 
 class Endpoint:
@@ -148,7 +163,7 @@ class Endpoint:
 
     def pending(self) -> int:
         """Frames received and not yet taken."""
-        with self.network._cond:
+        with self.network._lock:
             return len(self._inbox)
 
     def close(self) -> None:
@@ -174,10 +189,15 @@ class SimNetwork:
         self.spin_window = spin_window
         self.arm = arm
         self.bitrate = int(bitrate)
-        self._cond = threading.Condition(threading.RLock())
+        # ``with self._lock`` is ``with self._cond`` without Condition's Python-level
+        # __enter__/__exit__ (the lock is entered several times per frame).
+        self._lock = threading.RLock()
+        self._cond = threading.Condition(self._lock)
         self._endpoints: list[Endpoint] = []
         self._module_nodes: dict[int, _Node] = {}
         self._nodes: list[_Node] = []
+        #: The nodes whose queue is not empty (any order: the competition picks by rank).
+        self._active: list[_Node] = []
         self._seq = itertools.count()
         self._names = itertools.count(1)
         self._in_flight: _InFlight | None = None
@@ -197,7 +217,7 @@ class SimNetwork:
         """A new host connection to the wire."""
         if tx_queue_size < 1:
             raise ValueError(f"tx_queue_size must be >= 1, got {tx_queue_size}")
-        with self._cond:
+        with self._lock:
             endpoint = Endpoint(self, name or f"host{next(self._names)}", receive_own,
                                 tx_queue_size)
             self._endpoints.append(endpoint)
@@ -206,17 +226,19 @@ class SimNetwork:
 
     @property
     def endpoint_count(self) -> int:
-        with self._cond:
+        with self._lock:
             return len(self._endpoints)
 
     def _detach(self, endpoint: Endpoint) -> None:
-        with self._cond:
+        with self._lock:
             if endpoint.closed:
                 return
             endpoint.closed = True
             self._endpoints.remove(endpoint)
             self._nodes.remove(endpoint._node)
             endpoint._node.queue.clear()
+            if endpoint._node in self._active:
+                self._active.remove(endpoint._node)
             self._cond.notify_all()
 
     # -- timing -------------------------------------------------------------------------------
@@ -232,7 +254,7 @@ class SimNetwork:
 
     def run_until(self, t: float | None = None) -> None:
         """Simulate the wire up to ``t`` (default now); for tests and tools."""
-        with self._cond:
+        with self._lock:
             self._advance(self.clock.now() if t is None else t)
 
     def _advance(self, horizon: float, *, start_at_horizon: bool = True) -> None:
@@ -242,26 +264,45 @@ class SimNetwork:
         waiting, so that frames other nodes queue at that same instant still compete with
         it in arbitration (``send`` uses this).
         """
+        flight = self._in_flight
+        if flight is not None and flight.end > horizon:
+            return  # the frame on the wire is the next event, and it lies ahead
+        active = self._active
         delivered = False
         while True:
-            flight = self._in_flight
             if flight is not None:
                 if flight.end > horizon:
                     break
                 self._in_flight = None
                 self._deliver(flight)
                 delivered = True
-                continue
-            heads = [(node, node.queue[0]) for node in self._nodes if node.queue]
-            if not heads:
+            if not active:
                 break
-            start = max(self._bus_free_at, min(p.ready_at for _, p in heads))
+            # The bus is free from _bus_free_at; the frames ready by then (or, if none is,
+            # those ready first) compete and the lowest rank wins.
+            if len(active) == 1:
+                node = active[0]
+                pending = node.queue[0]
+                start = pending.ready_at
+                if start < self._bus_free_at:
+                    start = self._bus_free_at
+            else:
+                start = min([n.queue[0].ready_at for n in active])
+                if start < self._bus_free_at:
+                    start = self._bus_free_at
+                pending = None
+                for n in active:
+                    head = n.queue[0]
+                    if head.ready_at <= start and (pending is None or head.rank < pending.rank):
+                        node, pending = n, head
             if start > horizon or (start == horizon and not start_at_horizon):
                 break
-            node, pending = min(((n, p) for n, p in heads if p.ready_at <= start),
-                                key=lambda np: (np[1].key, np[1].seq))
-            node.queue.popleft()
-            self._in_flight = _InFlight(node, pending, start, start + pending.to_delivery)
+            queue = node.queue
+            queue.popleft()
+            if not queue:
+                active.remove(node)
+            flight = self._in_flight = _InFlight(node, pending, start,
+                                                 start + pending.to_delivery)
             self._bus_free_at = start + pending.occupancy
             self.frames_transmitted += 1
             self.busy_time += pending.occupancy
@@ -271,17 +312,21 @@ class SimNetwork:
     def _next_event_time(self) -> float | None:
         if self._in_flight is not None:
             return self._in_flight.end
-        ready = [node.queue[0].ready_at for node in self._nodes if node.queue]
-        return max(self._bus_free_at, min(ready)) if ready else None
+        active = self._active
+        if not active:
+            return None
+        ready = min([node.queue[0].ready_at for node in active])
+        return ready if ready > self._bus_free_at else self._bus_free_at
 
     def _deliver(self, flight: _InFlight) -> None:
         sent = flight.pending.frame
         frame = WireFrame(sent.can_id, sent.data, sent.is_extended, sent.is_remote, sent.dlc,
                           flight.end, sent.sender)
+        sender = flight.node
         for endpoint in self._endpoints:
-            if endpoint._node is not flight.node or endpoint.receive_own:
+            if endpoint._node is not sender or endpoint.receive_own:
                 endpoint._inbox.append(frame)
-        if flight.node.is_module or frame.is_extended or frame.is_remote:
+        if sender.is_module or frame.is_extended or frame.is_remote:
             return  # the modules speak 11-bit data frames and ignore each other's acks
         for reply in self.arm.handle_frame(frame.can_id, frame.data, flight.end):
             node = self._module_nodes.get(reply.module)
@@ -295,8 +340,12 @@ class SimNetwork:
     def _queue(self, node: _Node, frame: WireFrame, ready_at: float,
                durations: tuple[float, float] | None = None) -> None:
         to_delivery, occupancy = durations or self.frame_durations(frame)
-        node.queue.append(_Pending(frame, ready_at, next(self._seq), _arbitration_key(frame),
-                                   to_delivery, occupancy))
+        queue = node.queue
+        if not queue:
+            self._active.append(node)
+        queue.append(_Pending(frame, ready_at,
+                              _arbitration_key(frame) << _SEQ_BITS | next(self._seq),
+                              to_delivery, occupancy))
 
     # -- endpoint operations (called through Endpoint) ------------------------------------------
 
@@ -336,7 +385,7 @@ class SimNetwork:
 
     def _send(self, endpoint: Endpoint, frame: WireFrame, timeout: float | None) -> None:
         durations = self.frame_durations(frame)  # ValueError for a frame CAN cannot carry
-        with self._cond:
+        with self._lock:
             if endpoint.closed:
                 raise NetworkClosedError(f"{endpoint.name} is closed")
             now = self.clock.now()
@@ -358,16 +407,21 @@ class SimNetwork:
             self._cond.notify_all()
 
     def _receive(self, endpoint: Endpoint, deadline: float | None) -> WireFrame | None:
+        clock = self.clock
+        inbox = endpoint._inbox
         while True:
-            with self._cond:
-                if endpoint.closed:
-                    raise NetworkClosedError(f"{endpoint.name} is closed")
-                now = self.clock.now()
-                self._advance(now)
-                if endpoint._inbox:
-                    return endpoint._inbox.popleft()
-                if deadline is not None and now >= deadline:
-                    return None
-                spin_until = self._wait(deadline)
-            if spin_until is not None:
-                self._spin(spin_until)
+            with self._lock:
+                while True:
+                    if endpoint.closed:
+                        raise NetworkClosedError(f"{endpoint.name} is closed")
+                    now = clock.now()
+                    self._advance(now)
+                    if inbox:
+                        return inbox.popleft()
+                    if deadline is not None and now >= deadline:
+                        return None
+                    # (waiting releases the lock, as does spinning, below)
+                    spin_until = self._wait(deadline)
+                    if spin_until is not None:
+                        break
+            self._spin(spin_until)
