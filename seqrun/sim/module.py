@@ -105,6 +105,9 @@ _MOTION, _RAMP_END = int(_F.MOTION), int(_F.RAMP_END)
 _INPROGRESS, _FULLBUFFER = int(_F.INPROGRESS), int(_F.FULLBUFFER)
 _ERROR_OR_HALTED, _HOME_OK = int(_F.ERROR | _F.HALTED), int(_F.HOME_OK)
 _SHORT_STATES = [ShortState(i) for i in range(256)]
+_FAULTS, _NOT_OK = int(StateFlag.FAULTS), int(ShortState.NOT_OK)
+_DISABLE_ACK, _WATCHDOG_ENABLE = int(ConfigFlag.DISABLE_ACK), int(ConfigFlag.WATCHDOG_ENABLE)
+_SYNC_MOTION = int(ConfigFlag.SYNC_MOTION)
 #: Position tolerance (rad) below which a limit counts as reached, not crossed; targets are
 #: clamped exactly onto limits, so rounding must not turn "stopped at MinPos" into a fault.
 _LIMIT_EPS = 1e-9
@@ -215,9 +218,14 @@ _TICK_TWINS: dict[ParamId, ParamId] = {
     ParamId.IDELTA_POS: ParamId.DELTA_POS,
 }
 
+#: Event kinds of SimModule._next_event.
+_WATCHDOG, _PROFILE_END, _SOFT_LIMIT = "watchdog", "profile end", "soft limit"
+
 _RAMP_MODES = {MotionMode.FRAMP, MotionMode.IRAMP}
 _STEP_MODES = {MotionMode.FSTEP, MotionMode.ISTEP}
 _VELOCITY_MODES = {MotionMode.FVEL, MotionMode.IVEL}
+_SIMULATED_MODES = frozenset(_RAMP_MODES | _STEP_MODES | _VELOCITY_MODES)
+_RAMP_OR_VELOCITY_MODES = frozenset(_RAMP_MODES | _VELOCITY_MODES)
 
 
 # --------------------------------------------------------------------------------------
@@ -336,14 +344,17 @@ def _first_exit(segment: _Segment, tau_from: float, tau_to: float, lo: float, hi
                                                  or (v_from == 0 and a * direction > 0)):
             return tau_from, limit
         if a == 0:
-            roots = [(level - p) / v] if v != 0 else []
+            if v == 0:
+                continue
+            roots: tuple[float, ...] = ((level - p) / v,)
         else:
             disc = v * v + 2 * a * (level - p)
             if disc < 0:
                 continue
             root = math.sqrt(disc)
-            roots = [(-v - root) / a, (-v + root) / a]
-        for tau in sorted(roots):
+            first, second = (-v - root) / a, (-v + root) / a
+            roots = (second, first) if second < first else (first, second)  # sorted()
+        for tau in roots:
             if tau_from <= tau <= tau_to and (v + a * tau) * direction > 0:
                 if best is None or tau < best[0]:
                     best = (tau, limit)
@@ -410,34 +421,47 @@ class SimModule:
     def advance(self, t: float | None = None) -> None:
         """Simulate up to ``t``, handling every event (ramp end, soft limit, watchdog)
         exactly when it happens."""
-        t = self._time(t)
+        if t is None:
+            t = self.clock.now()
         while self._t < t:
-            event_time, event = self._next_event(t)
+            if self._profile is None and self._watchdog_deadline is None:
+                self._t = t  # nothing can happen (the common case between commands)
+                return
+            event_time, event, limit = self._next_event(t)
             if event is None:
                 self._t = t
                 return
-            self._t = max(self._t, event_time)
-            event()
+            if event_time > self._t:
+                self._t = event_time
+            if event is _SOFT_LIMIT:
+                self._soft_limit_reached(limit)
+            elif event is _PROFILE_END:
+                self._profile_finished()
+            else:
+                self._watchdog_expired()
 
-    def _next_event(self, horizon: float):
+    def _next_event(self, horizon: float) -> tuple[float, str | None, float]:
+        """(time, kind, limit) of the first event up to ``horizon``; kind None if none.
+        Of events at the same time, the watchdog comes first, then the end of the
+        profile, then a soft limit."""
         if self._dead:
-            return None, None
-        candidates = []
-        if self._watchdog_deadline is not None:
-            candidates.append((self._watchdog_deadline, self._watchdog_expired))
+            return 0.0, None, 0.0
+        best_time, best, best_limit = 0.0, None, 0.0
+        deadline = self._watchdog_deadline
+        if deadline is not None and deadline <= horizon:
+            best_time, best = deadline, _WATCHDOG
         profile = self._profile
         if profile is not None:
-            if profile.end <= horizon:
-                candidates.append((profile.end, self._profile_finished))
+            end = profile.end
+            if end <= horizon and (best is None or end < best_time):
+                best_time, best = end, _PROFILE_END
             if self._stuck_at is None:
-                exit_ = self._limit_exit(profile, min(horizon, profile.end))
+                exit_ = self._limit_exit(profile, horizon if horizon <= end else end)
                 if exit_ is not None:
                     at, limit = exit_
-                    candidates.append((at, lambda: self._soft_limit_reached(limit)))
-        candidates = [c for c in candidates if c[0] <= horizon]
-        if not candidates:
-            return None, None
-        return min(candidates, key=lambda c: c[0])
+                    if at <= horizon and (best is None or at < best_time):
+                        best_time, best, best_limit = at, _SOFT_LIMIT, limit
+        return best_time, best, best_limit
 
     def _limit_exit(self, profile: _Profile, until: float) -> tuple[float, float] | None:
         lo, hi = self._params[ParamId.MIN_POS], self._params[ParamId.MAX_POS]
@@ -618,7 +642,7 @@ class SimModule:
         else:
             return None
         if (self.options.honour_disable_ack
-                and int(self._params[ParamId.CONFIG]) & ConfigFlag.DISABLE_ACK):
+                and int(self._params[ParamId.CONFIG]) & _DISABLE_ACK):
             return None
         return ack
 
@@ -655,7 +679,7 @@ class SimModule:
         return CommandAck(self.module_id, command)
 
     def _refresh_watchdog(self) -> None:
-        if int(self._params[ParamId.CONFIG]) & ConfigFlag.WATCHDOG_ENABLE:
+        if int(self._params[ParamId.CONFIG]) & _WATCHDOG_ENABLE:
             self._watchdog_deadline = self._t + self.options.watchdog_timeout
 
     # -- parameters ----------------------------------------------------------------------
@@ -755,7 +779,7 @@ class SimModule:
                                           float(self._params[ParamId.MAX_VEL])),
                                  amax=min(float(self._params[ParamId.TARGET_ACC]),
                                           float(self._params[ParamId.MAX_ACC])))
-            if int(self._params[ParamId.CONFIG]) & ConfigFlag.SYNC_MOTION:
+            if int(self._params[ParamId.CONFIG]) & _SYNC_MOTION:
                 self._held = motion
             else:
                 self._execute(motion)
@@ -763,7 +787,7 @@ class SimModule:
             return None
         if not mode.is_extended_ack:
             return MotionAck(self.module_id, mode)
-        state = short_at_receipt | (ShortState.NOT_OK if refusal else ShortState(0))
+        state = _SHORT_STATES[int(short_at_receipt) | (_NOT_OK if refusal else 0)]
         position: float | int = _f32(position_at_receipt)
         if not mode.is_float:
             position = _fit_int(round(position_at_receipt / self._inc_ratio()), WireType.I32)
@@ -771,11 +795,12 @@ class SimModule:
 
     def _refusal(self, mode: MotionMode, value: float) -> str | None:
         """Why the module does not accept this motion now, or None."""
-        if self._flags & StateFlag.FAULTS:
+        flags = int(self._flags)
+        if flags & _FAULTS:
             return f"module in {(self._flags & StateFlag.FAULTS).describe()}"
-        if not self._flags & _F.HOME_OK:
+        if not flags & _HOME_OK:
             return "not homed"
-        if mode not in _RAMP_MODES | _STEP_MODES | _VELOCITY_MODES:
+        if mode not in _SIMULATED_MODES:
             return f"{mode.name} is not simulated"
         if not math.isfinite(value):
             return "value is not finite"
@@ -790,7 +815,7 @@ class SimModule:
             # is inverted (MinPos > MaxPos) and would push the joint outward.
             if target < position <= lo or target > position >= hi:
                 return "would move further beyond a soft limit"
-        if mode in _RAMP_MODES | _VELOCITY_MODES:
+        if mode in _RAMP_OR_VELOCITY_MODES:
             vmax = min(float(self._params[ParamId.TARGET_VEL]),
                        float(self._params[ParamId.MAX_VEL]))
             amax = min(float(self._params[ParamId.TARGET_ACC]),
