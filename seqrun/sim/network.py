@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import functools
 import itertools
+import math
 import threading
 import time
 from collections import deque
@@ -267,47 +268,85 @@ class SimNetwork:
         flight = self._in_flight
         if flight is not None and flight.end > horizon:
             return  # the frame on the wire is the next event, and it lies ahead
-        active = self._active
         delivered = False
         while True:
-            if flight is not None:
-                if flight.end > horizon:
+            if flight is None:
+                flight = self._start_next(horizon, start_at_horizon)
+                if flight is None:
                     break
-                self._in_flight = None
-                self._deliver(flight)
-                delivered = True
-            if not active:
+            if flight.end > horizon:
                 break
-            # The bus is free from _bus_free_at; the frames ready by then (or, if none is,
-            # those ready first) compete and the lowest rank wins.
-            if len(active) == 1:
-                node = active[0]
-                pending = node.queue[0]
-                start = pending.ready_at
-                if start < self._bus_free_at:
-                    start = self._bus_free_at
-            else:
-                start = min([n.queue[0].ready_at for n in active])
-                if start < self._bus_free_at:
-                    start = self._bus_free_at
-                pending = None
-                for n in active:
-                    head = n.queue[0]
-                    if head.ready_at <= start and (pending is None or head.rank < pending.rank):
-                        node, pending = n, head
-            if start > horizon or (start == horizon and not start_at_horizon):
-                break
-            queue = node.queue
-            queue.popleft()
-            if not queue:
-                active.remove(node)
-            flight = self._in_flight = _InFlight(node, pending, start,
-                                                 start + pending.to_delivery)
-            self._bus_free_at = start + pending.occupancy
-            self.frames_transmitted += 1
-            self.busy_time += pending.occupancy
+            self._in_flight = None
+            self._deliver(flight)
+            delivered = True
+            flight = None
         if delivered:
             self._cond.notify_all()
+
+    def _run_until_received(self, inbox: deque[WireFrame], horizon: float) -> float | None:
+        """Virtual time: :meth:`_advance` towards ``horizon``, but stop at the delivery that
+        puts a frame into ``inbox``. Returns the time of the last event processed (None:
+        none), where a clock stepping from event to event would stand. Lock held.
+
+        Same events in the same order as stepping the clock to every event and advancing
+        to it: a delivery is never followed by another event at the same instant (the
+        intermission keeps the bus busy), and the simulation reads no clock.
+        """
+        last = None
+        flight = self._in_flight
+        delivered = False
+        while True:
+            if flight is None:
+                flight = self._start_next(horizon, True)
+                if flight is None:
+                    break
+                last = flight.start
+            if flight.end > horizon:
+                break
+            self._in_flight = None
+            self._deliver(flight)
+            delivered = True
+            last = flight.end
+            flight = None
+            if inbox:
+                break
+        if delivered:
+            self._cond.notify_all()
+        return last
+
+    def _start_next(self, horizon: float, start_at_horizon: bool) -> _InFlight | None:
+        """Put the next frame on the idle wire if it starts by ``horizon``; lock held."""
+        active = self._active
+        if not active:
+            return None
+        # The bus is free from _bus_free_at; the frames ready by then (or, if none is,
+        # those ready first) compete and the lowest rank wins.
+        if len(active) == 1:
+            node = active[0]
+            pending = node.queue[0]
+            start = pending.ready_at
+            if start < self._bus_free_at:
+                start = self._bus_free_at
+        else:
+            start = min([n.queue[0].ready_at for n in active])
+            if start < self._bus_free_at:
+                start = self._bus_free_at
+            pending = None
+            for n in active:
+                head = n.queue[0]
+                if head.ready_at <= start and (pending is None or head.rank < pending.rank):
+                    node, pending = n, head
+        if start > horizon or (start == horizon and not start_at_horizon):
+            return None
+        queue = node.queue
+        queue.popleft()
+        if not queue:
+            active.remove(node)
+        flight = self._in_flight = _InFlight(node, pending, start, start + pending.to_delivery)
+        self._bus_free_at = start + pending.occupancy
+        self.frames_transmitted += 1
+        self.busy_time += pending.occupancy
+        return flight
 
     def _next_event_time(self) -> float | None:
         if self._in_flight is not None:
@@ -409,6 +448,8 @@ class SimNetwork:
     def _receive(self, endpoint: Endpoint, deadline: float | None) -> WireFrame | None:
         clock = self.clock
         inbox = endpoint._inbox
+        if clock.is_virtual:
+            return self._receive_virtual(endpoint, deadline)
         while True:
             with self._lock:
                 while True:
@@ -425,3 +466,32 @@ class SimNetwork:
                     if spin_until is not None:
                         break
             self._spin(spin_until)
+
+    def _receive_virtual(self, endpoint: Endpoint, deadline: float | None
+                         ) -> WireFrame | None:
+        """:meth:`_receive` on a virtual clock: the wire runs event by event up to the
+        frame for ``endpoint`` (or ``deadline``) in one go, and the clock moves to where
+        it stops, as if it had been stepped to every event in between."""
+        clock = self.clock
+        inbox = endpoint._inbox
+        horizon = math.inf if deadline is None else deadline
+        with self._lock:
+            while True:
+                if endpoint.closed:
+                    raise NetworkClosedError(f"{endpoint.name} is closed")
+                now = clock.now()
+                self._advance(now)
+                if inbox:
+                    return inbox.popleft()
+                if deadline is not None and now >= deadline:
+                    return None
+                last = self._run_until_received(inbox, horizon)
+                if inbox:
+                    clock.sleep_until(last)
+                    return inbox.popleft()
+                if deadline is not None:
+                    clock.sleep_until(deadline)
+                    continue  # (returns None: nothing came by the deadline)
+                if last is not None:
+                    clock.sleep_until(last)
+                self._cond.wait()  # nothing scheduled: only another thread can change that
