@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 import threading
-import time as _wall
+import traceback
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable, Iterable
@@ -34,9 +34,10 @@ from seqrun.clock import Clock
 from seqrun.errors import (BusError, ModuleFaultError, ModuleTimeoutError, PlanningError,
                            RunAborted, SeqrunError)
 from seqrun.planner import Limits, MovePlan, plan_move, plan_stop
+from seqrun.setpoints import setpoint_law
 from seqrun.powercube.codec import (BroadcastRequest, GetParam, GetParamAck, MotionExtAck,
                                     SetMotion, SetParam)
-from seqrun.powercube.protocol import ConfigFlag, MotionMode, ParamId, ShortState, StateFlag
+from seqrun.powercube.protocol import ConfigFlag, ParamId, ShortState, StateFlag
 
 # Exit codes (shared with the CLI).
 EXIT_OK = 0
@@ -115,12 +116,6 @@ def _round(x: float | None, nd: int = 4) -> float | None:
 class Executor:
     """Runs resolved steps; see the module docstring for the safety rules."""
 
-    #: Proportional gain (1/s) of the velocity cap that pulls a lagging joint onto its plan.
-    CATCH_UP_GAIN = 10.0
-    #: Smallest TargetVel sent (deg/s): a zero cap would leave a joint short of its target.
-    MIN_COMMAND_VELOCITY_DEG_S = 1.0
-    #: TargetVel resolution (deg/s); a write that would not change it is not sent.
-    TARGET_VEL_QUANTUM_DEG_S = 0.1
     #: Idempotent reads are retried this often when an acknowledge is lost (drop_acks).
     READ_RETRIES = 1
 
@@ -148,6 +143,7 @@ class Executor:
         self.modules = arm.module_ids
         self.movable = [i for i, j in enumerate(arm.joints) if j.locked is None]
         self.limits = Limits.from_arm(arm, speed=speed)
+        self.setpoints = setpoint_law(self.command_mode, arm, self.cycle, self.limits)
         # Thread-safe control flags.
         self._lock = threading.Lock()
         self._abort_requests = 0
@@ -164,8 +160,6 @@ class Executor:
         self._move_limits = self.limits
         self._keeper: threading.Thread | None = None
         self._keeper_stop = threading.Event()
-        #: Last TargetVel written per module (deg/s); forgotten at every move start.
-        self._sent_target_vel: dict[int, float] = {}
 
     # ------------------------------------------------------------------ control (any thread)
     def abort(self, reason: str = "operator abort") -> None:
@@ -342,7 +336,9 @@ class Executor:
         peak = np.zeros(len(target_deg))
         t_move = self.clock.now()
         if moving:
-            self._prepare_ramp(moving, limits)
+            start = self.setpoints.start(moving, limits)
+            if start:
+                self.transact(start)
             # A step's timeout covers the whole move; the default allows the plan plus
             # the arm's settle time.
             deadline = (timeout_s if timeout_s is not None
@@ -352,55 +348,6 @@ class Executor:
         return {"planned_duration_s": plan.duration, "executed_duration_s": elapsed,
                 "peak_velocity_deg_s": _r(np.degrees(plan.peak_velocity())),
                 "peak_measured_velocity_deg_s": _r(peak)}
-
-    def _prepare_ramp(self, moving: list[int], limits: Limits) -> None:
-        self._sent_target_vel.clear()  # a module may have been reset or written meanwhile
-        if self.command_mode != "ramp":
-            return
-        # TargetAcc once per move: the module's own ramp must be able to follow the plan.
-        factor = self.arm.control.module_acceleration_factor
-        self.transact([SetParam(self.modules[i], ParamId.TARGET_ACC,
-                                 float(limits.acceleration[i] * factor)) for i in moving])
-
-    def _setpoints(self, plan: MovePlan, t: float, moving: list[int],
-                   measured_deg: np.ndarray) -> list:
-        """Motion requests for one cycle at plan time ``t``."""
-        pos_now, _, _ = plan.at(t)
-        requests = []
-        if self.command_mode == "step":
-            nxt, _, _ = plan.at(t + self.cycle)
-            target = self.to_module_rad(np.degrees(nxt))
-            ms = max(1, int(round(self.cycle * 1000)))
-            for i in moving:
-                requests.append(SetMotion(self.modules[i], MotionMode.FSTEP_ACK,
-                                          float(target[i]), ms))
-            return requests
-        # Ramp (the facility's way): a position far enough ahead that the module's own
-        # braking curve never binds before the plan decelerates, with TargetVel following
-        # the plan's velocity plus a catch-up term for the measured lag.
-        _, vel_next, _ = plan.at(t + self.cycle)
-        # Catch-up may use the reserve the plan left, never more than the move allows.
-        ceiling = np.degrees(self._move_limits.velocity) / (1 - self.arm.control.tracking_reserve)
-        # A slow loop must correct gently or it overshoots its own correction.
-        gain = min(self.CATCH_UP_GAIN, 0.5 / self.cycle)
-        for i in moving:
-            lead = self.limits.velocity[i] / (2 * self.limits.acceleration[i]) + 2 * self.cycle
-            ahead, _, _ = plan.at(t + lead)
-            direction = math.copysign(1.0, plan.target[i] - plan.start[i])
-            lag = (math.degrees(pos_now[i]) - measured_deg[i]) * direction
-            cap = abs(math.degrees(vel_next[i])) + gain * lag
-            cap = min(max(cap, self.MIN_COMMAND_VELOCITY_DEG_S), ceiling[i],
-                      self.arm.joints[i].max_velocity_deg_s)
-            # TargetVel only when it changes by more than the quantum: at cruise the
-            # velocity is steady and the write would only load the bus.
-            cap = round(cap / self.TARGET_VEL_QUANTUM_DEG_S) * self.TARGET_VEL_QUANTUM_DEG_S
-            module = self.modules[i]
-            if self._sent_target_vel.get(module) != cap:
-                requests.append(SetParam(module, ParamId.TARGET_VEL, math.radians(cap)))
-                self._sent_target_vel[module] = cap
-            requests.append(SetMotion(module, MotionMode.FRAMP_ACK,
-                                      float(self.to_module_rad(np.degrees(ahead))[i])))
-        return requests
 
     def _cycle(self, requests: list, moving: list[int]) -> Measurement:
         """Send this cycle's motion requests plus reads of the other modules, pipelined.
@@ -465,7 +412,7 @@ class Executor:
                 t_start, k = self.clock.now(), 0
                 deadline = plan.duration + self.arm.control.settle_timeout_s
                 continue
-            m = self._cycle(self._setpoints(plan, t, moving, measured), moving)
+            m = self._cycle(self.setpoints.cycle(plan, t, moving, measured), moving)
             measured = m.user_deg
             self.check_states(m)
             self.check_guards(m)
@@ -654,7 +601,7 @@ class Executor:
                                     + "; ".join(str(e) for e in check.errors), None,
                                     errors=[e.as_dict() for e in check.errors])
             self._enable_watchdog()
-        except (BusError, RunAborted) as exc:
+        except Exception as exc:  # noqa: BLE001 - nothing moves yet, but be sure
             halted = self.emergency_halt()
             cause, module = _cause(exc)
             fault = {"cause": cause, "module": module, "message": str(exc), "step": None,
@@ -695,9 +642,13 @@ class Executor:
                 result.finished = self.clock.now() - self._t0
                 self.emit("operator_abort", message=message)
                 break
-            except (RunAborted, BusError, PlanningError) as exc:
+            except Exception as exc:  # noqa: BLE001 - every failure, even a bug, halts
                 halted = self.emergency_halt()
                 cause, module = _cause(exc)
+                if cause == "internal_error":
+                    self.emit("internal_error", traceback=traceback.format_exc())
+                    exc = RunAborted(cause, f"internal error ({type(exc).__name__}: {exc}); "
+                                            "the arm was halted; the traceback is in the event log")
                 if cause == "operator_halt":
                     status, code = "aborted", EXIT_OPERATOR_ABORT
                 else:
@@ -764,7 +715,9 @@ def _cause(exc: Exception) -> tuple[str, int | None]:
         return "module_fault", exc.module
     if isinstance(exc, PlanningError):
         return "planning", None
-    return "bus_error", getattr(exc, "module", None)
+    if isinstance(exc, BusError):
+        return "bus_error", getattr(exc, "module", None)
+    return "internal_error", None
 
 
 def _label(step) -> str:

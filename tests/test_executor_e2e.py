@@ -295,3 +295,21 @@ def test_cli_run_virtual_time_end_to_end(tmp_path):
     assert result.exit_code == 0, result.output
     assert "PASSED (exit 0)" in result.output and "Traceback" not in result.output
     assert json.loads((tmp_path / "run" / "report.json").read_text())["status"] == "passed"
+
+
+def test_an_unexpected_error_in_a_step_halts_and_is_reported_without_traceback(tmp_path,
+                                                                              monkeypatch):
+    from seqrun import steps
+
+    def broken(step, ex):
+        raise ZeroDivisionError("simulated bug")
+    monkeypatch.setitem(steps.HANDLERS, "wait", broken)
+    result = CliRunner().invoke(app, ["run", str(ROOT / "sequences" / "opsafe.yaml"),
+                                      "--virtual-time", "--yes", "--plain",
+                                      "--log-dir", str(tmp_path / "run")])
+    assert result.exit_code == EXIT_FAULT
+    assert "internal error (ZeroDivisionError: simulated bug)" in result.output
+    assert "Traceback" not in result.output
+    assert any(is_halt(m) for m in frames(tmp_path / "run"))
+    [internal] = [e for e in events(tmp_path / "run") if e["type"] == "internal_error"]
+    assert "ZeroDivisionError" in internal["traceback"]
