@@ -230,12 +230,16 @@ class SimBus(BusABC):
         if msg.is_error_frame:
             raise CanOperationError("seqrun-sim: error frames cannot be sent")
         data = bytes(msg.data or b"")
+        # Stamped with this endpoint as the sender, as the wire would, so it is not copied.
+        sender = self._endpoint.name
         if msg.is_remote_frame:
-            frame = WireFrame(msg.arbitration_id, b"", msg.is_extended_id, True, msg.dlc)
+            frame = WireFrame(msg.arbitration_id, b"", msg.is_extended_id, True, msg.dlc,
+                              0.0, sender)
         else:
             if msg.dlc != len(data):
                 raise CanOperationError(f"dlc {msg.dlc} does not match {len(data)} data bytes")
-            frame = WireFrame(msg.arbitration_id, data, msg.is_extended_id)
+            frame = WireFrame(msg.arbitration_id, data, msg.is_extended_id, False, None, 0.0,
+                              sender)
         try:
             self._endpoint.send(frame, timeout)
         except ValueError as exc:

@@ -281,7 +281,7 @@ class SimNetwork:
             delivered = True
             flight = None
         if delivered:
-            self._cond.notify_all()
+            self._notify_all()
 
     def _run_until_received(self, inbox: deque[WireFrame], horizon: float) -> float | None:
         """Virtual time: :meth:`_advance` towards ``horizon``, but stop at the delivery that
@@ -311,7 +311,7 @@ class SimNetwork:
             if inbox:
                 break
         if delivered:
-            self._cond.notify_all()
+            self._notify_all()
         return last
 
     def _start_next(self, horizon: float, start_at_horizon: bool) -> _InFlight | None:
@@ -386,6 +386,12 @@ class SimNetwork:
                               _arbitration_key(frame) << _SEQ_BITS | next(self._seq),
                               to_delivery, occupancy))
 
+    def _notify_all(self) -> None:
+        """Wake the threads waiting on the wire; lock held. Skips Condition.notify_all's
+        Python-level work when nobody waits (waiters register under the lock we hold)."""
+        if self._cond._waiters:  # type: ignore[attr-defined]
+            self._cond.notify_all()
+
     # -- endpoint operations (called through Endpoint) ------------------------------------------
 
     def _wait(self, deadline: float | None) -> float | None:
@@ -440,10 +446,12 @@ class SimNetwork:
                 if endpoint.closed:
                     raise NetworkClosedError(f"{endpoint.name} is closed")
                 self._advance(self.clock.now())
-            frame = WireFrame(frame.can_id, bytes(frame.data), frame.is_extended,
-                              frame.is_remote, frame.dlc, 0.0, endpoint.name)
+            if frame.sender != endpoint.name or type(frame.data) is not bytes:
+                # (a queued frame's timestamp is never seen: delivery stamps a new one)
+                frame = WireFrame(frame.can_id, bytes(frame.data), frame.is_extended,
+                                  frame.is_remote, frame.dlc, 0.0, endpoint.name)
             self._queue(endpoint._node, frame, self.clock.now(), durations)
-            self._cond.notify_all()
+            self._notify_all()
 
     def _receive(self, endpoint: Endpoint, deadline: float | None) -> WireFrame | None:
         clock = self.clock
