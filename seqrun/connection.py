@@ -98,14 +98,16 @@ def open_connection(*, interface: str | None = None, channel: str | None = None,
                           f"{bus.bitrate} bit/s - no hardware is moved", list(faults))
     if faults:
         raise UserInputError("--sim-fault only applies to the simulator (no -i/-c, or --sim)")
-    if config["interface"] == "socketcand":
-        config.setdefault("host", "127.0.0.1")
-        config.setdefault("port", DEFAULT_SOCKETCAND_PORT)
-        config.setdefault("channel", "can0")
+    if config["interface"] == "socketcand":  # python-can's config gives channel=None
+        for key, value in (("host", "127.0.0.1"), ("port", DEFAULT_SOCKETCAND_PORT),
+                           ("channel", "can0")):
+            if config.get(key) is None:
+                config[key] = value
     config.setdefault("bitrate", default_bitrate)
     try:
         bus = can.Bus(**config)
-    except (can.CanError, OSError, ValueError, ImportError) as exc:
+    # TypeError: --bus-kwargs the interface does not take
+    except (can.CanError, OSError, ValueError, TypeError, ImportError) as exc:
         raise UserInputError(f"cannot open CAN interface '{config['interface']}' "
                              f"channel '{config.get('channel')}': {exc}") from None
     desc = (f"CAN interface '{config['interface']}' channel '{config.get('channel')}' "

@@ -849,7 +849,12 @@ class _Loader:
         if len(chain) >= MAX_INCLUDE_DEPTH:
             error(f"includes nested more than {MAX_INCLUDE_DEPTH} deep")
             return
-        if not target.is_file():
+        try:
+            is_file = target.is_file()
+        except OSError as exc:  # name too long, permission denied, ...
+            error(f"include '{params.file}': cannot use the path ({exc.strerror or exc})")
+            return
+        if not is_file:
             error(f"include '{params.file}': no such file ({target})")
             return
         self.load(target, chain=chain, include_chain=include_chain + (here,),
@@ -884,9 +889,10 @@ def load_sequence(path: str | os.PathLike[str], *,
     path = Path(path)
     try:
         top = path.resolve()
+        root = (Path(project_root).resolve() if project_root is not None
+                else find_project_root(top))
     except (OSError, RuntimeError, ValueError) as exc:  # symlink loop, NUL byte, ...
         raise UserInputError(f"{path}: cannot resolve the path ({exc})") from None
-    root = Path(project_root).resolve() if project_root is not None else find_project_root(top)
     loader = _Loader(top, root)
     seq = loader.load(top)
     if loader.errors:

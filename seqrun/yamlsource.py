@@ -73,6 +73,9 @@ MAX_DEPTH = 64
 MAX_ALIAS_USES = 200
 #: Most values a document may expand to once aliases are followed (billion-laughs guard).
 MAX_EXPANDED_NODES = 100_000
+#: Longest integer literal read (a float's range ends near 1e308; Python converts and
+#: prints at most 4300 digits).
+MAX_INT_CHARS = 400
 
 _CORE = "tag:yaml.org,2002:"
 STR, INT, FLOAT, BOOL, NULL = (_CORE + t for t in ("str", "int", "float", "bool", "null"))
@@ -193,9 +196,10 @@ def _scalar(node: ScalarNode) -> Any:
     if tag == NULL:
         return None
     if tag == INT:
-        if text[:2] in ("0o", "0x"):
-            return int(text, 0)
-        return int(text, 10)
+        if len(text) > MAX_INT_CHARS:  # Python would refuse to convert or print it
+            raise _Problem(node.start_mark, f"a whole number of {len(text)} characters is "
+                                            f"too long (at most {MAX_INT_CHARS})")
+        return int(text, 0) if text[:2] in ("0o", "0x") else int(text, 10)
     lowered = text.lower()
     if lowered.endswith(".inf"):
         return -math.inf if lowered.startswith("-") else math.inf

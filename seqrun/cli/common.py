@@ -34,6 +34,8 @@ def user_errors() -> Iterator[None]:
         yield
     except UserInputError as exc:
         fail(str(exc))
+    except OSError as exc:  # a path the system refuses (name too long, permission, ...)
+        fail(f"{exc.filename}: {exc.strerror or exc}" if exc.filename else str(exc))
     except SequenceInvalid as exc:
         for error in exc.errors:
             typer.echo(f"error: {error}", err=True)

@@ -48,7 +48,11 @@ def serve(
         fail(f"--bitrate {bitrate}: must be positive")
     clock = RealClock()
     # No spinning: TCP adds more latency than a late wake-up, and clients may be many.
-    network = SimNetwork(clock, SimArm(clock, faults=faults), bitrate, spin_window=0.0)
+    try:
+        arm = SimArm(clock, faults=faults)
+    except ValueError as exc:  # a fault for a module the arm does not have
+        fail(str(exc))
+    network = SimNetwork(clock, arm, bitrate, spin_window=0.0)
     try:
         server = SocketcandServer(network, host=host, port=port, channel=channel)
     except ValueError as exc:

@@ -183,6 +183,9 @@ def validate_command(
     except UserInputError as exc:
         _fail(str(exc))
         return
+    except OSError as exc:  # a path the system refuses (name too long, permission, ...)
+        _fail(f"{exc.filename}: {exc.strerror or exc}")
+        return
     run = None
     if check.valid and not static:
         from seqrun.dryrun import dry_run
