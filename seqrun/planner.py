@@ -68,18 +68,28 @@ class MovePlan:
 
     def at(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Position, velocity, acceleration of every arm joint at time ``t``."""
+        # Called every control cycle: new arrays each call (callers may keep or modify
+        # them), but np.zeros instead of the Python-level zeros_like, and the active
+        # joints' index array made once per ``active`` tuple.
         pos = self.target.copy() if t >= self.duration else self.start.copy()
-        vel = np.zeros_like(pos)
-        acc = np.zeros_like(pos)
+        vel = np.zeros(pos.shape, pos.dtype)
+        acc = np.zeros(pos.shape, pos.dtype)
         if not self.active:
             return pos, vel, acc
         if t >= self.duration:
             # Past the end ruckig extrapolates; the plan holds its final state instead.
             return pos, vel, acc
         p, v, a = self._trajectory.at_time(max(t, 0.0))
-        idx = list(self.active)
+        idx = self._index()
         pos[idx], vel[idx], acc[idx] = p, v, a
         return pos, vel, acc
+
+    def _index(self) -> np.ndarray:
+        cached = self.__dict__.get("_index_cache")
+        if cached is None or cached[0] is not self.active:
+            cached = self.__dict__["_index_cache"] = (
+                self.active, np.array(self.active, dtype=np.intp))
+        return cached[1]
 
     def sample(self, times: Sequence[float]) -> np.ndarray:
         """Positions at many times: shape (len(times), dof)."""
