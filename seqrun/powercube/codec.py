@@ -219,6 +219,13 @@ _MOTION_VALUE_LAYOUT = {
     (True, True): _MOTION_F_TIME,
     (False, True): _MOTION_I_TIME,
 }
+#: mode value -> (mode, is_float, has_time, is_extended_ack, request struct): the mode's
+#: properties looked up once (each is a property call and a set lookup).
+_MODE_INFO = {m.value: (m, m.is_float, m.has_time, m.is_extended_ack,
+                        _MOTION_VALUE_LAYOUT[m.is_float, m.has_time]) for m in MotionMode}
+_ICUR_MODES = frozenset({MotionMode.ICUR, MotionMode.ICUR_ACK})
+_F32, _F32_U8_U8 = WireType.F32, WireType.F32_U8_U8
+_I32_MIN, _I32_MAX = -(2**31), 2**31 - 1
 
 
 # --------------------------------------------------------------------------------------
@@ -253,16 +260,28 @@ def _check_float(value: object, what: str) -> float:
 _F32_MAX = struct.unpack("<f", b"\xff\xff\x7f\x7f")[0]
 
 
-def _pack_value(wire: WireType, value: object, what: str) -> tuple:
-    if wire is WireType.F32:
-        return (_check_float(value, what),)
-    if wire is WireType.F32_U8_U8:
+def _pack_value(wire: WireType, value: object, param: ParamId) -> tuple:
+    """The struct values of a parameter value; ``param`` names it in errors."""
+    # Fast paths for valid floats and bytes (the checks below would pass them unchanged);
+    # the names for the messages are only made when a check fails.
+    if wire is _F32:
+        if type(value) is float and -_F32_MAX <= value <= _F32_MAX:
+            return (value,)
+        return (_check_float(value, param.name),)
+    if wire is _F32_U8_U8:
         if not isinstance(value, PosStateDio):
-            raise CodecError(f"{what} must be a PosStateDio, got {value!r}")
-        return (_check_float(value.position, f"{what} position"),
-                _check_int(int(value.state), 0, 255, f"{what} state"),
-                _check_int(value.dio, 0, 255, f"{what} dio"))
-    return (_check_int(value, wire.minimum, wire.maximum, what),)  # type: ignore[arg-type]
+            raise CodecError(f"{param.name} must be a PosStateDio, got {value!r}")
+        position = value.position
+        if not (type(position) is float and -_F32_MAX <= position <= _F32_MAX):
+            position = _check_float(position, f"{param.name} position")
+        state = int(value.state)
+        if not (type(state) is int and 0 <= state <= 255):
+            state = _check_int(state, 0, 255, f"{param.name} state")
+        dio = value.dio
+        if not (type(dio) is int and 0 <= dio <= 255):
+            dio = _check_int(dio, 0, 255, f"{param.name} dio")
+        return (position, state, dio)
+    return (_check_int(value, wire.minimum, wire.maximum, param.name),)  # type: ignore
 
 
 def _param(param: object) -> tuple[ParamId, WireType, struct.Struct]:
@@ -275,6 +294,14 @@ def _param(param: object) -> tuple[ParamId, WireType, struct.Struct]:
 def _mode(mode: object) -> MotionMode:
     try:
         return _MODES[mode]  # type: ignore[index]
+    except (KeyError, TypeError):
+        raise CodecError(f"unknown motion mode {_hex(mode)}") from None
+
+
+def _mode_info(mode: object) -> tuple[MotionMode, bool, bool, bool, struct.Struct]:
+    """(mode, is_float, has_time, is_extended_ack, request struct); errors as :func:`_mode`."""
+    try:
+        return _MODE_INFO[mode]  # type: ignore[index]
     except (KeyError, TypeError):
         raise CodecError(f"unknown motion mode {_hex(mode)}") from None
 
@@ -332,21 +359,22 @@ def _encode_get(msg: GetParam) -> tuple[int, bytes]:
 
 def _encode_set(msg: SetParam) -> tuple[int, bytes]:
     param, wire, layout = _param(msg.param)
-    if wire is WireType.F32_U8_U8:
+    if wire is _F32_U8_U8:
         raise CodecError(f"parameter {param.name} is read only")
-    values = _pack_value(wire, msg.value, param.name)
+    values = _pack_value(wire, msg.value, param)
     return SET_BASE + _check_module(msg.module), layout.pack(_SET_EXTENDED, param, *values)
 
 
 def _encode_motion(msg: SetMotion) -> tuple[int, bytes]:
-    mode = _mode(msg.mode)
+    mode, is_float, has_time, _, layout = _mode_info(msg.mode)
     can_id = SET_BASE + _check_module(msg.module)
-    if mode.is_float:
-        value: float | int = _check_float(msg.value, f"{mode.name} value")
-    else:
-        value = _check_int(msg.value, -(2**31), 2**31 - 1, f"{mode.name} value")
-    layout = _MOTION_VALUE_LAYOUT[mode.is_float, mode.has_time]
-    if mode.has_time:
+    value = msg.value
+    if is_float:
+        if not (type(value) is float and -_F32_MAX <= value <= _F32_MAX):
+            value = _check_float(value, f"{mode.name} value")
+    elif not (type(value) is int and _I32_MIN <= value <= _I32_MAX):
+        value = _check_int(value, _I32_MIN, _I32_MAX, f"{mode.name} value")
+    if has_time:
         if msg.time_ms is None:
             raise CodecError(f"{mode.name} needs a time in ms")
         time_ms = _check_int(msg.time_ms, 0, 0xFFFF, f"{mode.name} time_ms")
@@ -369,7 +397,7 @@ def _encode_set_ack(msg: SetParamAck) -> tuple[int, bytes]:
 
 def _encode_get_ack(msg: GetParamAck) -> tuple[int, bytes]:
     param, wire, layout = _param(msg.param)
-    values = _pack_value(wire, msg.value, param.name)
+    values = _pack_value(wire, msg.value, param)
     return ACK_BASE + _check_module(msg.module), layout.pack(_GET_EXTENDED, param, *values)
 
 
@@ -381,16 +409,22 @@ def _encode_motion_ack(msg: MotionAck) -> tuple[int, bytes]:
 
 
 def _encode_motion_ext_ack(msg: MotionExtAck) -> tuple[int, bytes]:
-    mode = _mode(msg.mode)
-    if not mode.is_extended_ack:
+    mode, is_float, _, is_extended_ack, _ = _mode_info(msg.mode)
+    if not is_extended_ack:
         raise CodecError(f"{mode.name} is acknowledged with a plain MotionAck")
-    state = _check_int(int(msg.state), 0, 255, "short state")
-    dio = _check_int(msg.dio, 0, 255, "dio")
-    if mode.is_float:
-        data = _EXT_ACK_F.pack(_SET_MOTION, mode, _check_float(msg.position, "position"),
-                               state, dio)
+    state = int(msg.state)
+    if not (type(state) is int and 0 <= state <= 255):
+        state = _check_int(state, 0, 255, "short state")
+    dio = msg.dio
+    if not (type(dio) is int and 0 <= dio <= 255):
+        dio = _check_int(dio, 0, 255, "dio")
+    position = msg.position
+    if is_float:
+        if not (type(position) is float and -_F32_MAX <= position <= _F32_MAX):
+            position = _check_float(position, "position")
+        data = _EXT_ACK_F.pack(_SET_MOTION, mode, position, state, dio)
     else:
-        position = _check_int(msg.position, -(2**31), 2**31 - 1, "position")
+        position = _check_int(position, _I32_MIN, _I32_MAX, "position")
         data = _EXT_ACK_I.pack(_SET_MOTION, mode, position, state, dio)
     return ACK_BASE + _check_module(msg.module), data
 
@@ -414,7 +448,7 @@ _ENCODERS = {
 
 
 def _unpack_value(wire: WireType, layout: struct.Struct, data: bytes):
-    if wire is WireType.F32_U8_U8:
+    if wire is _F32_U8_U8:
         _, _, position, state, dio = layout.unpack_from(data)
         return PosStateDio(position, _SHORT_STATES[state], dio)
     return layout.unpack_from(data)[2]
@@ -479,7 +513,7 @@ def _decode_set_param(module: int, data: bytes) -> SetParam:
     if len(data) < 2:
         raise CodecError(f"module {module}: SetExtended without parameter id")
     param, wire, layout = _param(data[1])
-    if wire is WireType.F32_U8_U8:
+    if wire is _F32_U8_U8:
         raise CodecError(f"module {module}: parameter {param.name} is read only")
     if len(data) != layout.size:
         raise CodecError(f"module {module}: SetExtended {param.name} needs {layout.size} "
@@ -490,14 +524,13 @@ def _decode_set_param(module: int, data: bytes) -> SetParam:
 def _decode_set_motion(module: int, data: bytes) -> SetMotion:
     if len(data) < 2:
         raise CodecError(f"module {module}: SetMotion without mode")
-    mode = _mode(data[1])
-    layout = _MOTION_VALUE_LAYOUT[mode.is_float, mode.has_time]
-    if mode in (MotionMode.ICUR, MotionMode.ICUR_ACK) and len(data) == _MOTION_I16.size:
+    mode, _, has_time, _, layout = _mode_info(data[1])
+    if mode in _ICUR_MODES and len(data) == _MOTION_I16.size:
         return SetMotion(module, mode, _MOTION_I16.unpack(data)[2])
     if len(data) != layout.size:
         raise CodecError(f"module {module}: SetMotion {mode.name} needs {layout.size} bytes, "
                          f"got {_hexdata(data)}")
-    if mode.has_time:
+    if has_time:
         _, _, value, time_ms = layout.unpack(data)
         return SetMotion(module, mode, value, time_ms)
     return SetMotion(module, mode, layout.unpack(data)[2])
@@ -528,13 +561,13 @@ def decode_ack(can_id: int, data: bytes) -> Ack:
     if command == _SET_MOTION:
         if len(data) < 2:
             raise CodecError(f"module {module}: SetMotion ack without mode")
-        mode = _mode(data[1])
-        if not mode.is_extended_ack:
+        mode, is_float, _, is_extended_ack, _ = _mode_info(data[1])
+        if not is_extended_ack:
             return MotionAck(module, mode)
         if len(data) < _EXT_ACK_F.size:
             raise CodecError(f"module {module}: {mode.name} ack needs 8 bytes, got "
                              f"{_hexdata(data)}")
-        layout = _EXT_ACK_F if mode.is_float else _EXT_ACK_I
+        layout = _EXT_ACK_F if is_float else _EXT_ACK_I
         _, _, position, state, dio = layout.unpack_from(data)
         return MotionExtAck(module, mode, position, _SHORT_STATES[state], dio)
     if command == _SET_EXTENDED:
