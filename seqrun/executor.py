@@ -367,8 +367,19 @@ class Executor:
                                      self.client.response_timeout)
         if lost:
             modules = list(dict.fromkeys(batch[i].module for i in lost))
-            self.emit("retry", modules=modules, what="read")
             retry = [r for m in modules for r in self._reads(m)]
+            # The retry must go out at once: a request still in quarantine would first
+            # wait it out (up to 4 response timeouts) while the joints move unwatched. Both
+            # read paths of a module lost within one quarantine is a fault.
+            blocked = next((r for r in retry if self.client.is_tainted(r)), None)
+            if blocked is not None:
+                bad = next(batch[i] for i in lost if batch[i].module == blocked.module)
+                lost_ack = ModuleTimeoutError(bad.module, _describe_request(bad),
+                                              self.client.response_timeout)
+                raise RunAborted("no_acknowledge", f"{lost_ack}; not retried: its other read "
+                                 "path is still in quarantine after an earlier lost "
+                                 "acknowledge", module=bad.module)
+            self.emit("retry", modules=modules, what="read")
             batch, acks = batch + retry, acks + self.transact(retry)
         positions: dict[int, float] = {}
         states: dict[int, ShortState] = {}
@@ -544,7 +555,9 @@ class Executor:
         wd = self.arm.can.watchdog
         if not wd.enabled:
             return
-        self.client.watchdog_period = wd.refresh_period_s
+        # Due at half the period: a refresh sent late (a loaded host, the GIL) still comes
+        # within refresh_period_s of the last one, well inside the modules' timeout.
+        self.client.watchdog_period = wd.refresh_period_s / 2
         configs = self.transact([GetParam(m, ParamId.CONFIG) for m in self.modules],
                                  idempotent=True)
         self.transact([SetParam(m, ParamId.CONFIG, int(a.value) | ConfigFlag.WATCHDOG_ENABLE)
@@ -559,7 +572,7 @@ class Executor:
 
     def _keep_watchdog(self) -> None:
         # Covers the times the run loop is not on the bus (operator prompts).
-        period = self.arm.can.watchdog.refresh_period_s / 2
+        period = self.arm.can.watchdog.refresh_period_s / 4
         while not self._keeper_stop.wait(period):
             try:
                 self.client.service()
