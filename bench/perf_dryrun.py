@@ -23,13 +23,13 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from seqrun.arm import load_arm  # noqa: E402
-from seqrun.clock import VirtualClock  # noqa: E402
-from seqrun.executor import Executor  # noqa: E402
-from seqrun.powercube.client import PowerCubeClient  # noqa: E402
-from seqrun.schema import load_sequence  # noqa: E402
-from seqrun.sim import network  # noqa: E402
-from seqrun.sim.bus import SimBus  # noqa: E402
+from seqrun.arm import load_arm
+from seqrun.clock import VirtualClock
+from seqrun.executor import Executor
+from seqrun.powercube.client import PowerCubeClient
+from seqrun.schema import load_sequence
+from seqrun.sim import network
+from seqrun.sim.bus import SimBus
 
 
 def one(loaded, arm, i: int, cold: bool = False):

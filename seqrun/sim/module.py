@@ -100,6 +100,7 @@ RESETTABLE = (_F.ERROR | _F.HALTED | _F.TOW_ERROR | _F.COMM_ERROR | _F.BEYOND_SO
 _MOTION_BITS = (_F.MOTION | _F.RAMP_ACC | _F.RAMP_STEADY | _F.RAMP_DEC | _F.RAMP_END
                 | _F.INPROGRESS | _F.FULLBUFFER)
 _NO_FLAGS = StateFlag(0)
+_RAMP_ACC_FLAG, _RAMP_STEADY_FLAG, _RAMP_DEC_FLAG = _F.RAMP_ACC, _F.RAMP_STEADY, _F.RAMP_DEC
 _MOTION_MASK = int(_MOTION_BITS)
 _MOTION, _RAMP_END = int(_F.MOTION), int(_F.RAMP_END)
 _INPROGRESS, _FULLBUFFER = int(_F.INPROGRESS), int(_F.FULLBUFFER)
@@ -279,13 +280,13 @@ def _build_profile(kind: str, t0: float, p0: float, v0: float,
     tau, p, v = 0.0, p0, v0
     for duration, a in pieces:
         if kind == "step":
-            phase = StateFlag(0)
+            phase = _NO_FLAGS
         elif a == 0:
-            phase = _F.RAMP_STEADY
+            phase = _RAMP_STEADY_FLAG
         else:
             # Accelerating if |v| grows over the segment (judged at its middle).
             middle = v + a * (duration / 2 if math.isfinite(duration) else 1.0)
-            phase = _F.RAMP_ACC if a * middle > 0 else _F.RAMP_DEC
+            phase = _RAMP_ACC_FLAG if a * middle > 0 else _RAMP_DEC_FLAG
         segments.append(_Segment(tau, duration, p, v, a, phase))
         if math.isfinite(duration):
             p, v = p + v * duration + 0.5 * a * duration * duration, v + a * duration
@@ -377,6 +378,35 @@ class _HeldMotion:
     amax: float
 
 
+#: ParamId members as module constants: the SimModule methods run for every frame,
+#: and an Enum class attribute costs several times a global lookup.
+_P_ACT_POS = ParamId.ACT_POS
+_P_ACT_POS_PREV = ParamId.ACT_POS_PREV
+_P_ACT_VEL = ParamId.ACT_VEL
+_P_CONFIG = ParamId.CONFIG
+_P_CUBE_STATE = ParamId.CUBE_STATE
+_P_CUR = ParamId.CUR
+_P_DELTA_POS = ParamId.DELTA_POS
+_P_DIO_SETUP = ParamId.DIO_SETUP
+_P_FPOS_STATE_DIO = ParamId.FPOS_STATE_DIO
+_P_FSAVE_POS = ParamId.FSAVE_POS
+_P_INC_RATIO = ParamId.INC_RATIO
+_P_IPOL_POS = ParamId.IPOL_POS
+_P_IPOL_VEL = ParamId.IPOL_VEL
+_P_MAX_ACC = ParamId.MAX_ACC
+_P_MAX_CUR = ParamId.MAX_CUR
+_P_MAX_POS = ParamId.MAX_POS
+_P_MAX_VEL = ParamId.MAX_VEL
+_P_MIN_POS = ParamId.MIN_POS
+_P_MOT_CUR = ParamId.MOT_CUR
+_P_MOVE_MODE = ParamId.MOVE_MODE
+_P_RAW_CUR = ParamId.RAW_CUR
+_P_RAW_MOT_CUR = ParamId.RAW_MOT_CUR
+_P_TARGET_ACC = ParamId.TARGET_ACC
+_P_TARGET_POS = ParamId.TARGET_POS
+_P_TARGET_VEL = ParamId.TARGET_VEL
+
+
 class SimModule:
     """One PRL module. Call :meth:`handle` with decoded requests; it returns the ack (or None).
 
@@ -431,7 +461,7 @@ class SimModule:
             if event is None:
                 self._t = t
                 return
-            if event_time > self._t:
+            if event_time > self._t:  # noqa: PLR1730 (as max(), without the call)
                 self._t = event_time
             if event is _SOFT_LIMIT:
                 self._soft_limit_reached(limit)
@@ -456,7 +486,8 @@ class SimModule:
             if end <= horizon and (best is None or end < best_time):
                 best_time, best = end, _PROFILE_END
             if self._stuck_at is None:
-                exit_ = self._limit_exit(profile, horizon if horizon <= end else end)
+                until = horizon if horizon <= end else end  # noqa: FURB136 (min(), no call)
+                exit_ = self._limit_exit(profile, until)
                 if exit_ is not None:
                     at, limit = exit_
                     if at <= horizon and (best is None or at < best_time):
@@ -464,7 +495,7 @@ class SimModule:
         return best_time, best, best_limit
 
     def _limit_exit(self, profile: _Profile, until: float) -> tuple[float, float] | None:
-        lo, hi = self._params[ParamId.MIN_POS], self._params[ParamId.MAX_POS]
+        lo, hi = self._params[_P_MIN_POS], self._params[_P_MAX_POS]
         tau_now, tau_end = self._t - profile.t0, until - profile.t0
         for segment in profile.segments:
             seg_end = segment.t_start + segment.duration
@@ -557,7 +588,7 @@ class SimModule:
         return _SHORT_STATES[short]
 
     def _dio(self) -> int:
-        return int(self._params.get(ParamId.DIO_SETUP, 0)) & 0xFF
+        return int(self._params.get(_P_DIO_SETUP, 0)) & 0xFF
 
     def state(self, t: float | None = None) -> StateFlag:
         """The 32-bit state word (CubeState) at ``t``."""
@@ -642,7 +673,7 @@ class SimModule:
         else:
             return None
         if (self.options.honour_disable_ack
-                and int(self._params[ParamId.CONFIG]) & _DISABLE_ACK):
+                and int(self._params[_P_CONFIG]) & _DISABLE_ACK):
             return None
         return ack
 
@@ -679,13 +710,13 @@ class SimModule:
         return CommandAck(self.module_id, command)
 
     def _refresh_watchdog(self) -> None:
-        if int(self._params[ParamId.CONFIG]) & _WATCHDOG_ENABLE:
+        if int(self._params[_P_CONFIG]) & _WATCHDOG_ENABLE:
             self._watchdog_deadline = self._t + self.options.watchdog_timeout
 
     # -- parameters ----------------------------------------------------------------------
 
     def _inc_ratio(self) -> float:
-        ratio = float(self._params[ParamId.INC_RATIO])
+        ratio = float(self._params[_P_INC_RATIO])
         return ratio if ratio > 0 else 1.0
 
     def _read(self, param: ParamId) -> float | int | PosStateDio:
@@ -693,7 +724,7 @@ class SimModule:
         if param in _TICK_TWINS:
             value = float(self._read(_TICK_TWINS[param]))  # type: ignore[arg-type]
             return _fit_int(round(value / self._inc_ratio()), wire)
-        if param == ParamId.FPOS_STATE_DIO:
+        if param == _P_FPOS_STATE_DIO:
             return PosStateDio(_f32(self._actual_position()), self._short_state_now(),
                                self._dio())
         live = self._live_value(param)
@@ -703,29 +734,29 @@ class SimModule:
         return _fit_int(int(value), wire)
 
     def _live_value(self, param: ParamId) -> float | int | None:
-        if param in (ParamId.ACT_POS, ParamId.ACT_POS_PREV):
+        if param in (_P_ACT_POS, _P_ACT_POS_PREV):
             return self._actual_position()
-        if param == ParamId.ACT_VEL:
+        if param == _P_ACT_VEL:
             return self._actual_velocity()
-        if param in (ParamId.IPOL_POS, ParamId.IPOL_VEL, ParamId.DELTA_POS):
+        if param in (_P_IPOL_POS, _P_IPOL_VEL, _P_DELTA_POS):
             commanded, velocity, _ = self._commanded()
-            if param == ParamId.IPOL_POS:
+            if param == _P_IPOL_POS:
                 return commanded
-            if param == ParamId.IPOL_VEL:
+            if param == _P_IPOL_VEL:
                 return velocity
             return commanded - self._actual_position()
-        if param == ParamId.CUBE_STATE:
+        if param == _P_CUBE_STATE:
             return int(self._state_now())
-        if param == ParamId.TARGET_POS:
+        if param == _P_TARGET_POS:
             return self._last_target
-        if param == ParamId.FSAVE_POS:
+        if param == _P_FSAVE_POS:
             return self._saved_position
-        if param == ParamId.MOVE_MODE:
+        if param == _P_MOVE_MODE:
             return int(self._profile_mode())
-        if param in (ParamId.CUR, ParamId.MOT_CUR):
+        if param in (_P_CUR, _P_MOT_CUR):
             return self._current()
-        if param in (ParamId.RAW_CUR, ParamId.RAW_MOT_CUR):
-            max_cur = float(self._params[ParamId.MAX_CUR]) or 1.0
+        if param in (_P_RAW_CUR, _P_RAW_MOT_CUR):
+            max_cur = float(self._params[_P_MAX_CUR]) or 1.0
             return round(500 * self._current() / max_cur)
         return None
 
@@ -741,9 +772,9 @@ class SimModule:
         if self._profile is None or self._stuck_at is not None:
             return 0.0
         _, velocity, segment = self._profile.sample(self._t)
-        max_cur = float(self._params[ParamId.MAX_CUR])
-        amax = float(self._params[ParamId.MAX_ACC]) or 1.0
-        vmax = float(self._params[ParamId.MAX_VEL]) or 1.0
+        max_cur = float(self._params[_P_MAX_CUR])
+        amax = float(self._params[_P_MAX_ACC]) or 1.0
+        vmax = float(self._params[_P_MAX_VEL]) or 1.0
         return max_cur * (0.3 * segment.a / amax + 0.1 * velocity / vmax)
 
     def _write(self, param: ParamId, value: float) -> None:
@@ -751,18 +782,18 @@ class SimModule:
             return  # acknowledged, ignored (read-only on the module)
         if param in _TICK_TWINS:
             param, value = _TICK_TWINS[param], value * self._inc_ratio()
-        if param == ParamId.TARGET_POS:
+        if param == _P_TARGET_POS:
             return  # TargetPosInc: no effect in the simulation
         if PARAM_TYPES[param] is WireType.F32:
             value = _f32(float(value))
         self._params[param] = value
-        if param == ParamId.CONFIG and not int(value) & ConfigFlag.WATCHDOG_ENABLE:
+        if param == _P_CONFIG and not int(value) & ConfigFlag.WATCHDOG_ENABLE:
             self._watchdog_deadline = None
 
     # -- motion --------------------------------------------------------------------------
 
     def _limits(self) -> tuple[float, float]:
-        return float(self._params[ParamId.MIN_POS]), float(self._params[ParamId.MAX_POS])
+        return float(self._params[_P_MIN_POS]), float(self._params[_P_MAX_POS])
 
     def _motion(self, request: SetMotion) -> Ack | None:
         mode = request.mode
@@ -775,11 +806,11 @@ class SimModule:
         refusal = self._refusal(base, value)
         if refusal is None:
             motion = _HeldMotion(base, value, request.time_ms,
-                                 vmax=min(float(self._params[ParamId.TARGET_VEL]),
-                                          float(self._params[ParamId.MAX_VEL])),
-                                 amax=min(float(self._params[ParamId.TARGET_ACC]),
-                                          float(self._params[ParamId.MAX_ACC])))
-            if int(self._params[ParamId.CONFIG]) & _SYNC_MOTION:
+                                 vmax=min(float(self._params[_P_TARGET_VEL]),
+                                          float(self._params[_P_MAX_VEL])),
+                                 amax=min(float(self._params[_P_TARGET_ACC]),
+                                          float(self._params[_P_MAX_ACC])))
+            if int(self._params[_P_CONFIG]) & _SYNC_MOTION:
                 self._held = motion
             else:
                 self._execute(motion)
@@ -816,10 +847,10 @@ class SimModule:
             if target < position <= lo or target > position >= hi:
                 return "would move further beyond a soft limit"
         if mode in _RAMP_OR_VELOCITY_MODES:
-            vmax = min(float(self._params[ParamId.TARGET_VEL]),
-                       float(self._params[ParamId.MAX_VEL]))
-            amax = min(float(self._params[ParamId.TARGET_ACC]),
-                       float(self._params[ParamId.MAX_ACC]))
+            vmax = min(float(self._params[_P_TARGET_VEL]),
+                       float(self._params[_P_MAX_VEL]))
+            amax = min(float(self._params[_P_TARGET_ACC]),
+                       float(self._params[_P_MAX_ACC]))
             if amax <= 0 or (mode in _RAMP_MODES and vmax <= 0):
                 return "TargetVel/TargetAcc or MaxVel/MaxAcc is zero"
         return None
@@ -848,7 +879,7 @@ class SimModule:
             pieces = plan_ramp(position, velocity, target, motion.vmax, motion.amax)
             self._start(_build_profile("ramp", self._t, position, velocity, pieces, target))
         else:
-            vmax = float(self._params[ParamId.MAX_VEL])
+            vmax = float(self._params[_P_MAX_VEL])
             wanted = min(max(motion.value, -vmax), vmax)
             if self.options.velocity_mode_acceleration:
                 change = abs(wanted - velocity) / motion.amax
@@ -868,7 +899,7 @@ class SimModule:
 
     def _start_step(self, target: float, seconds: float) -> None:
         position = self._commanded()[0]
-        vmax = float(self._params[ParamId.MAX_VEL])
+        vmax = float(self._params[_P_MAX_VEL])
         distance = target - position
         if vmax > 0:
             seconds = max(seconds, abs(distance) / vmax)

@@ -96,7 +96,7 @@ _SEQ_BITS = 64
 
 
 class _Pending:
-    __slots__ = ("frame", "ready_at", "rank", "to_delivery", "occupancy")
+    __slots__ = ("frame", "occupancy", "rank", "ready_at", "to_delivery")
 
     def __init__(self, frame: WireFrame, ready_at: float, rank: int, to_delivery: float,
                  occupancy: float) -> None:
@@ -111,7 +111,7 @@ class _Pending:
 class _Node:
     """A transmitter: a host endpoint or one module."""
 
-    __slots__ = ("name", "is_module", "queue")
+    __slots__ = ("is_module", "name", "queue")
 
     def __init__(self, name: str, is_module: bool = False) -> None:
         self.name = name
@@ -120,7 +120,7 @@ class _Node:
 
 
 class _InFlight:
-    __slots__ = ("node", "pending", "start", "end")
+    __slots__ = ("end", "node", "pending", "start")
 
     def __init__(self, node: _Node, pending: _Pending, start: float, end: float) -> None:
         self.node = node
@@ -325,11 +325,11 @@ class SimNetwork:
             node = active[0]
             pending = node.queue[0]
             start = pending.ready_at
-            if start < self._bus_free_at:
+            if start < self._bus_free_at:  # noqa: PLR1730 (no max() call on this path)
                 start = self._bus_free_at
         else:
             start = min([n.queue[0].ready_at for n in active])
-            if start < self._bus_free_at:
+            if start < self._bus_free_at:  # noqa: PLR1730
                 start = self._bus_free_at
             pending = None
             for n in active:
@@ -355,7 +355,7 @@ class SimNetwork:
         if not active:
             return None
         ready = min([node.queue[0].ready_at for node in active])
-        return ready if ready > self._bus_free_at else self._bus_free_at
+        return ready if ready > self._bus_free_at else self._bus_free_at  # noqa: FURB136
 
     def _deliver(self, flight: _InFlight) -> None:
         sent = flight.pending.frame
