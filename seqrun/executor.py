@@ -385,11 +385,11 @@ class Executor:
         states: dict[int, ShortState] = {}
         for ack in acks:
             if isinstance(ack, MotionExtAck):
-                positions[ack.module], states[ack.module] = ack.position, ShortState(ack.state)
+                positions[ack.module], states[ack.module] = ack.position, ack.state
             elif isinstance(ack, GetParamAck):
                 if ack.param == ParamId.FPOS_STATE_DIO:
                     positions[ack.module] = ack.value.position
-                    states[ack.module] = ShortState(ack.value.state)
+                    states[ack.module] = ack.value.state
                 elif ack.param == ParamId.ACT_POS:
                     positions[ack.module] = float(ack.value)
                 elif ack.param == ParamId.CUBE_STATE:

@@ -101,7 +101,7 @@ class RampSetpoints(_Law):
         for i in moving:
             lead = (self.run_limits.velocity[i] / (2 * self.run_limits.acceleration[i])
                     + 2 * self.cycle_s)
-            ahead = plan.at(t + lead)[0]
+            ahead = self.module_rad(plan.at(t + lead)[0])
             direction = math.copysign(1.0, plan.target[i] - plan.start[i])
             lag = (math.degrees(pos_now[i]) - measured_deg[i]) * direction
             cap = abs(math.degrees(vel_next[i])) + gain * lag
@@ -115,7 +115,7 @@ class RampSetpoints(_Law):
                 requests.append(SetParam(module, ParamId.TARGET_VEL, math.radians(cap)))
                 self._sent_target_vel[module] = cap
             requests.append(SetMotion(module, MotionMode.FRAMP_ACK,
-                                      float(self.module_rad(ahead)[i])))
+                                      float(ahead[i])))
         return requests
 
 

@@ -25,6 +25,7 @@ with the executor.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -89,9 +90,18 @@ def _range(lo: float, hi: float) -> str:
 def pose_joints_deg(name: str, poses_dir: str | Path) -> dict[str, float]:
     """Joint angles of pose ``name`` (user degrees). Raises :class:`UserInputError` for an
     unknown pose, :class:`SequenceInvalid` for a broken pose file."""
-    from seqrun.poses import find_pose, load_pose
+    from seqrun.poses import find_pose
 
-    return dict(load_pose(find_pose(name, poses_dir)).joints_deg)
+    path = find_pose(name, poses_dir)
+    return dict(_pose_joints(path, path.stat().st_mtime_ns))
+
+
+@functools.lru_cache(maxsize=64)
+def _pose_joints(path: Path, mtime_ns: int) -> tuple[tuple[str, float], ...]:
+    # Keyed on the file's mtime: a pose file edited between runs is read again.
+    from seqrun.poses import load_pose
+
+    return tuple(load_pose(path).joints_deg.items())
 
 
 def park_deg(poses_dir: str | Path) -> dict[str, float]:

@@ -259,6 +259,8 @@ class PowerCubeClient:
     def is_tainted(self, request: Request) -> bool:
         """True while ``request``'s acknowledge key is in quarantine (sending it now would
         first wait for the quarantine to pass)."""
+        if not self._taints:  # the common case: nothing in quarantine, no lock needed
+            return False
         key = expected_ack_key(request)
         with self._lock:
             taint = self._taints.get(key) if key is not None else None
