@@ -99,8 +99,11 @@ def open_connection(*, interface: str | None = None, channel: str | None = None,
     if faults:
         raise UserInputError("--sim-fault only applies to the simulator (no -i/-c, or --sim)")
     if config["interface"] == "socketcand":  # python-can's config gives channel=None
+        # tcp_tune: TCP_NODELAY + TCP_QUICKACK. Without it Nagle holds a frame back until
+        # the previous one is acknowledged, and a delayed ACK takes 40 ms: enough for a
+        # late acknowledge, or a watchdog refresh that comes too late.
         for key, value in (("host", "127.0.0.1"), ("port", DEFAULT_SOCKETCAND_PORT),
-                           ("channel", "can0")):
+                           ("channel", "can0"), ("tcp_tune", True)):
             if config.get(key) is None:
                 config[key] = value
     config.setdefault("bitrate", default_bitrate)
