@@ -190,6 +190,20 @@ class Executor:
     def abort_requested(self) -> bool:
         return self._abort_requests > 0
 
+    def ask_operator(self, question: Callable[[Any], bool], arg: Any) -> bool:
+        """Ask the operator; while asking, Ctrl-C may interrupt the question."""
+        self.waiting_for_operator = True
+        try:
+            return question(arg)
+        finally:
+            self.waiting_for_operator = False
+
+    def on_discard(self, msg, reason) -> None:
+        """Client callback: a received frame was not used as an answer (stale, foreign,
+        malformed); it goes into the event log."""
+        self.emit("frame_discarded", can_id=f"0x{msg.arbitration_id:03X}",
+                  data=bytes(msg.data).hex(" "), reason=str(getattr(reason, "value", reason)))
+
     # ------------------------------------------------------------------ events
     def emit(self, type_: str, **data: Any) -> None:
         event = {"t": round(self.clock.now() - self._t0, 6), "type": type_, **data}
@@ -627,7 +641,7 @@ class Executor:
                 continue
             self._current_step = result
             try:
-                if self.before_step is not None and not self.before_step(step):
+                if self.before_step is not None and not self.ask_operator(self.before_step, step):
                     raise OperatorAbort("operator declined the step")
                 self._check_halt_request()
                 if self._abort_requests:

@@ -39,6 +39,7 @@ def build_executor(loaded: LoadedSequence, arm: ArmDescription, connection: Conn
     executor = Executor(client, arm, connection.clock, poses_dir=loaded.poses_dir, speed=speed,
                         command_mode=command_mode, cycle_hz=cycle_hz, confirm=confirm,
                         before_step=before_step, listeners=list(listeners), dry_run=dry_run)
+    client.on_discard = executor.on_discard
     return executor, client
 
 

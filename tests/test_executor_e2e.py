@@ -313,3 +313,29 @@ def test_an_unexpected_error_in_a_step_halts_and_is_reported_without_traceback(t
     assert any(is_halt(m) for m in frames(tmp_path / "run"))
     [internal] = [e for e in events(tmp_path / "run") if e["type"] == "internal_error"]
     assert "ZeroDivisionError" in internal["traceback"]
+
+
+def test_frames_that_answer_nothing_are_logged_as_discarded(tmp_path):
+    from seqrun.sim.bus import SimBus
+
+    loaded = load_sequence(ROOT / "sequences" / "totem.yaml")
+    arm = load_arm(loaded.arm_path)
+    connection = open_connection(force_sim=True, clock=VirtualClock())
+    intruder = SimBus(channel=connection.bus.channel, clock=connection.clock)
+
+    def inject_once(executor):
+        def listener(event):
+            if event["type"] == "setpoint" and not getattr(listener, "done", False):
+                listener.done = True   # an ack of a CubeState read nobody asked for
+                intruder.send(can.Message(arbitration_id=0x0A5, is_extended_id=False,
+                                          data=[0x0A, 0x27, 0x02, 0x80, 0, 0]))
+        executor.listeners.append(listener)
+    try:
+        outcome = run_sequence(loaded, arm, connection, log_dir=tmp_path / "run",
+                               confirm=lambda p: True, on_executor=inject_once)
+    finally:
+        intruder.shutdown()
+        connection.close()
+    assert outcome.result.exit_code == EXIT_OK
+    [discarded] = [e for e in events(tmp_path / "run") if e["type"] == "frame_discarded"]
+    assert discarded["can_id"] == "0x0A5" and discarded["data"].startswith("0a 27")

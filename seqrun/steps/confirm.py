@@ -10,11 +10,6 @@ def run(step, ex) -> dict:
     if ex.confirm is None:  # dry run: nobody to ask
         ex.not_verified.append(f"step {step.number}: operator confirmation '{prompt}' (assumed yes)")
         return {"confirmed": "assumed (dry run)"}
-    ex.waiting_for_operator = True
-    try:
-        ok = ex.confirm(prompt)
-    finally:
-        ex.waiting_for_operator = False
-    if not ok:
+    if not ex.ask_operator(ex.confirm, prompt):
         raise OperatorAbort(f"operator declined: {prompt}")
     return {"confirmed": True}
