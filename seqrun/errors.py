@@ -30,6 +30,11 @@ class UserInputError(SeqrunError):
     """Bad command-line input (unknown pose, bad fault spec, missing file)."""
 
 
+#: What str.splitlines() breaks at, shown as escapes in an error line.
+_LINE_BREAKS = {c: repr(chr(c))[1:-1] for c in (0x0A, 0x0B, 0x0C, 0x0D, 0x1C, 0x1D, 0x1E,
+                                                  0x85, 0x2028, 0x2029)}
+
+
 @dataclass(frozen=True)
 class SourceError:
     """One problem in a source file, at 1-based ``line`` and ``column``."""
@@ -39,8 +44,8 @@ class SourceError:
     column: int
     message: str
 
-    def __str__(self) -> str:
-        return f"{self.file}:{self.line}:{self.column}: {self.message}"
+    def __str__(self) -> str:  # one line, whatever the file name or a quoted value holds
+        return f"{self.file}:{self.line}:{self.column}: {self.message}".translate(_LINE_BREAKS)
 
     def as_dict(self) -> dict:
         return {"file": self.file, "line": self.line, "column": self.column,
