@@ -27,7 +27,6 @@ import itertools
 import json
 import os
 import re
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from unittest import mock
@@ -393,8 +392,8 @@ def test_generated_hostile_files(tmp_path, places):
 
 
 # ----------------------------------------------------------------------------- random files
-_MARKER_DIR = Path(tempfile.mkdtemp(prefix="seqrun-fuzz-"))
-_FUZZ_MARKER = _MARKER_DIR / "pwned-fuzz"
+#: Created in the cwd (the sandbox) by the payloads below, if anything ever ran them.
+_FUZZ_MARKER = "pwned-fuzz"
 
 _VALID = ["reset", "home", "set_limits", "halt", "move: totem", "move: park",
           "move: {pose: opsafe, velocity_scale: 0.5}", "move: {joints: {j1: 5}}",
@@ -487,27 +486,29 @@ def sequence_texts(draw) -> str:
     return text
 
 
-_fuzz_root = Path(tempfile.mkdtemp(prefix="seqrun-fuzz-project-"))
-_FUZZ_SEQS = make_project(_fuzz_root / "project")
-_FUZZ_SANDBOX = _fuzz_root / "cwd"
-_FUZZ_SANDBOX.mkdir()
-_FUZZ_LOGS = _fuzz_root / "logs"
-_FUZZ_LOGS.mkdir()
+@pytest.fixture(scope="module")
+def fuzz_places(tmp_path_factory):
+    root = tmp_path_factory.mktemp("fuzz")
+    seqs = make_project(root / "project")
+    (root / "cwd").mkdir()
+    (root / "logs").mkdir()
+    return seqs, root / "cwd", root / "logs"
 
 
 @settings(max_examples=int(os.environ.get("SEQRUN_FUZZ_EXAMPLES", "80")), deadline=None,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 @given(text=sequence_texts(), as_bytes=st.booleans())
-def test_random_sequence_files(text, as_bytes):
+def test_random_sequence_files(fuzz_places, text, as_bytes):
     """Random documents from fragments: valid steps, wrong types, unknown keys, deep
     nesting, huge/NaN/inf numbers, odd unicode, anchors and aliases, tags."""
-    path = _FUZZ_SEQS / "s.yaml"
+    seqs, sandbox, logs = fuzz_places
+    path = seqs / "s.yaml"
     # As text (surrogates kept as the bytes an editor would write) or as Latin-1 bytes.
     data = (text.encode("latin-1", errors="replace") if as_bytes
             else text.encode("utf-8", errors="surrogatepass"))
     path.write_bytes(data)
-    expected, v, r = check_file(path, sandbox=_FUZZ_SANDBOX, logs=_FUZZ_LOGS,
-                                markers=(_FUZZ_MARKER,))
+    expected, v, r = check_file(path, sandbox=sandbox, logs=logs,
+                                markers=(sandbox / _FUZZ_MARKER,))
     event(f"verdict {expected}, run exit {r.exit_code}")
     if expected == "valid":
         # The dry run of `validate` predicts the run (both: the executor on the simulator).
