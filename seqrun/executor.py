@@ -318,10 +318,11 @@ class Executor:
                                      f"below {guard.min_z_mm:.1f} mm")
 
     def monitor(self) -> Measurement:
-        """One monitoring cycle without motion commands (waits, checkpoints)."""
+        """One monitoring cycle without motion commands (waits, checkpoints). A module
+        that is not homed yet is no fault here: nothing is commanded to move."""
         self._check_halt_request()
         m = self.read_arm()
-        self.check_states(m)
+        self.check_states(m, require_homed=False)
         self.check_guards(m)
         self.emit("measurement", joints_deg=_r(m.user_deg))
         return m

@@ -119,7 +119,9 @@ def _calculate(inp: InputParameter, dofs: int) -> Trajectory:
     try:
         result = Ruckig(dofs).calculate(inp, trajectory)
     except RuckigError as exc:
-        raise PlanningError(f"trajectory planner refused the move: {exc}") from None
+        # ruckig's message is a multi-line dump of its input; the first line says why.
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise PlanningError(f"trajectory planner refused the move: {first}") from None
     if result not in (Result.Working, Result.Finished):
         raise PlanningError(f"trajectory planner failed: {result}")
     return trajectory

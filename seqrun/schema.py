@@ -98,7 +98,8 @@ MAX_STEPS = 10_000
 # --------------------------------------------------------------------------- value types
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
-Scale = Annotated[float, Field(gt=0, le=1, allow_inf_nan=False)]
+# At least 1 %: below that a move takes hours and the planner's numbers degenerate.
+Scale = Annotated[float, Field(ge=0.01, le=1, allow_inf_nan=False)]
 
 _POSE_NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]*$")
 
@@ -278,9 +279,9 @@ class MoveParams(StepParams):
         default_factory=dict,
         description="Velocity cap of single joints in deg/s (at most the arm's maximum).")
     velocity_scale: Scale = Field(
-        1.0, description="Fraction (0, 1] of the arm's velocity limits to use.")
+        1.0, description="Fraction [0.01, 1] of the arm's velocity limits to use.")
     acceleration_scale: Scale = Field(
-        1.0, description="Fraction (0, 1] of the arm's acceleration and jerk limits to use.")
+        1.0, description="Fraction [0.01, 1] of the arm's acceleration and jerk limits to use.")
     tolerance_deg: Positive | None = Field(
         None, description="In-position tolerance per joint in degrees "
                           "(default: the arm file's control.position_tolerance_deg).")

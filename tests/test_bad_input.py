@@ -253,7 +253,7 @@ HOSTILE_FILES = {
     "custom_include_tag.yaml": ("invalid", "tag '!include' is not allowed"),
     "huge_numbers.yaml": ("invalid", "expected a finite number, got .inf"),
     "nan_inf_everywhere.yaml": ("invalid", "expected a finite number"),
-    "tiny_numbers.yaml": ("invalid", "must be greater than 0, got 0"),
+    "tiny_numbers.yaml": ("invalid", "must be at least 0.01, got 0"),
     "unknown_keys.yaml": ("invalid", "unknown key 'arm_file'"),
     "bidi_key.yaml": ("invalid", "unknown key 'st\u202espe'"),
     "utf16.yaml": ("invalid", "not UTF-8 text"),

@@ -128,7 +128,7 @@ def test_step_titles_use_the_label_or_describe_the_step(project):
     ("- move: {pose: totem, joints: {j1: 1}}\n", 4, 9, ["not both"]),
     ("- move: {pose: totem, relative: true}\n", 4, 9, ["'relative: true' needs 'joints'"]),
     ("- move: {joints: {}}\n", 4, 18, ["must not be empty"]),
-    ("- move: {joints: {j1: 1}, velocity_scale: 0}\n", 4, 43, ["greater than 0"]),
+    ("- move: {joints: {j1: 1}, velocity_scale: 0}\n", 4, 43, ["at least 0.01"]),
     ("- move: {joints: {j1: 1}, acceleration_scale: 2}\n", 4, 47, ["at most 1, got 2"]),
     ("- move: {joints: {j1: 1}, tolerance_deg: -0.1}\n", 4, 42, ["greater than 0"]),
     ("- move: ../etc/passwd\n", 4, 9, ["is not a pose name"]),
@@ -325,7 +325,7 @@ def test_json_schema_is_exact_and_documented():
                      ["reset", "home", "halt", "set_limits"], "type": "string"}]
     move = schema["$defs"]["MoveParams"]
     assert move["oneOf"] == [{"required": ["pose"]}, {"required": ["joints"]}]
-    assert move["properties"]["velocity_scale"]["exclusiveMinimum"] == 0
+    assert move["properties"]["velocity_scale"]["minimum"] == 0.01
     assert move["properties"]["velocity_scale"]["maximum"] == 1
 
 
