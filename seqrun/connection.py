@@ -10,6 +10,7 @@ and the caller prints a banner saying so.
 from __future__ import annotations
 
 import itertools
+import socket
 from dataclasses import dataclass, field
 from typing import Any, Iterable, Mapping, Sequence
 
@@ -76,6 +77,16 @@ def resolve_config(interface: str | None, channel: str | None, bitrate: int | No
         raise UserInputError(f"unknown CAN interface: {exc}") from None
 
 
+def _probe_tcp(host: str, port: int, timeout: float = 2.0) -> None:
+    """python-can's socketcand client retries a refused connection for 10 s, logging a
+    warning each time; one probe first turns "nobody there" into one clear line."""
+    try:
+        socket.create_connection((host, port), timeout=timeout).close()
+    except OSError as exc:
+        raise UserInputError(f"no socketcand server at {host}:{port} ({exc.strerror or exc}); "
+                             "start the simulated arm with 'seqrun sim serve'") from None
+
+
 def open_connection(*, interface: str | None = None, channel: str | None = None,
                     bitrate: int | None = None, bus_kwargs: Mapping[str, Any] | None = None,
                     force_sim: bool = False, faults: Sequence[Fault] = (),
@@ -106,6 +117,7 @@ def open_connection(*, interface: str | None = None, channel: str | None = None,
                            ("channel", "can0"), ("tcp_tune", True)):
             if config.get(key) is None:
                 config[key] = value
+        _probe_tcp(str(config["host"]), int(config["port"]))
     config.setdefault("bitrate", default_bitrate)
     try:
         bus = can.Bus(**config)

@@ -361,6 +361,8 @@ def _kill_mid_move_once(tmp_path: Path, watchdog: bool):
         runner.wait(timeout=10)
         last = [e for e in events(folder) if e["type"] == "setpoint"][-1]
         assert server.poll() is None, "the simulator died with the runner"
+        # Observe once the modules' watchdog timeout (50 ms) has certainly passed.
+        time.sleep(0.2)
         return last["measured_deg"][0], observe(port, 1.5)
     finally:
         if runner is not None:

@@ -23,7 +23,7 @@ Protocol — the subset of socketcand's ASCII protocol python-can's client uses,
 python-can reads each handshake answer with a single ``recv()`` and compares it exactly,
 so the server sends nothing unasked until ``rawmode`` has been answered, and holds the
 first frames back for ``RAWMODE_GRACE`` seconds so they cannot arrive glued to that
-``< ok >``. Frame timestamps are wall-clock (epoch) seconds like socketcand's, converted
+``< ok >`` — or until the client's first ``send``, which shows it has read it. Frame timestamps are wall-clock (epoch) seconds like socketcand's, converted
 from the simulation's monotonic delivery times.
 
 Only loopback addresses are served: the simulator has no authentication and speaks for a
@@ -107,6 +107,8 @@ class _Session:
         self.opened = False
         self._send_lock = threading.Lock()
         self._closed = threading.Event()
+        #: Set once the client shows it has read the handshake (its first ``send``).
+        self._handshake_read = threading.Event()
         self.reader = threading.Thread(target=self._read_loop, daemon=True,
                                        name=f"socketcand-read-{peer}")
         self.writer: threading.Thread | None = None
@@ -182,6 +184,8 @@ class _Session:
             if self.endpoint is None:
                 self._write("< error not in raw mode >")
                 return
+            # A client that sends has read the rawmode "< ok >": no need to hold frames back.
+            self._handshake_read.set()
             try:
                 self.endpoint.send(parse_send(args), timeout=1.0)
             except (ValueError, NetworkClosedError) as exc:
@@ -195,7 +199,7 @@ class _Session:
         endpoint = self.endpoint
         assert endpoint is not None
         clock = self.server.network.clock
-        time.sleep(RAWMODE_GRACE)
+        self._handshake_read.wait(RAWMODE_GRACE)
         try:
             while not self._closed.is_set():
                 frame = endpoint.receive(clock.now() + _POLL)
