@@ -209,10 +209,12 @@ class Executor:
         event = {"t": round(self.clock.now() - self._t0, 6), "type": type_, **data}
         if self._current_step is not None and "step" not in data:
             event["step"] = self._current_step.number
-        for listener in self.listeners:
+        for listener in list(self.listeners):
             try:
                 listener(event)
-            except Exception as exc:  # a broken display must never stop a safe run
+            # A broken display must never stop a run: rich, for one, answers a closed
+            # stdout pipe with SystemExit from inside the listener.
+            except (Exception, SystemExit) as exc:
                 self.listeners.remove(listener)
                 self.emit("listener_failed", error=repr(exc))
 
@@ -690,6 +692,13 @@ class Executor:
                 result.detail.setdefault("error", message)
                 self.emit("fault", **fault)
                 break
+            except BaseException as exc:
+                # Anything else leaving a step (KeyboardInterrupt, SystemExit) still halts
+                # the arm before it propagates.
+                halted = self.emergency_halt()
+                self.emit("fault", cause="interrupted", module=None, message=repr(exc),
+                          step=step.number, halt_sent=halted)
+                raise
         self._current_step = None
         if code in (EXIT_OK, EXIT_OPERATOR_ABORT) and not self._halt_requested:
             self._disable_watchdog()

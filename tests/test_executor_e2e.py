@@ -339,3 +339,29 @@ def test_frames_that_answer_nothing_are_logged_as_discarded(tmp_path):
     assert outcome.result.exit_code == EXIT_OK
     [discarded] = [e for e in events(tmp_path / "run") if e["type"] == "frame_discarded"]
     assert discarded["can_id"] == "0x0A5" and discarded["data"].startswith("0a 27")
+
+
+def test_a_display_that_raises_systemexit_cannot_end_the_run(tmp_path):
+    """rich answers a closed stdout pipe with SystemExit from inside the listener."""
+    def broken_display(executor):
+        def listener(event):
+            if event["type"] == "setpoint":
+                raise SystemExit(1)
+        executor.listeners.append(listener)
+
+    outcome, sim, _ = run("totem", tmp_path, on_executor=broken_display)
+    assert outcome.result.exit_code == EXIT_OK
+    assert any(e["type"] == "listener_failed" for e in events(outcome.log_dir))
+
+
+def test_keyboardinterrupt_escaping_a_step_still_halts(tmp_path, monkeypatch):
+    from seqrun import steps
+
+    def interrupted(step, ex):
+        raise KeyboardInterrupt
+    monkeypatch.setitem(steps.HANDLERS, "wait", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        run("opsafe", tmp_path)
+    trace = frames(tmp_path / "run")
+    assert any(is_halt(m) for m in trace)
+    assert [e for e in events(tmp_path / "run") if e["type"] == "fault"][0]["cause"] == "interrupted"

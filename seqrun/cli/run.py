@@ -7,6 +7,7 @@ Ctrl-C or SIGTERM halts instead).
 
 from __future__ import annotations
 
+import os
 import signal
 import sys
 from dataclasses import replace
@@ -88,6 +89,11 @@ def run_command(
     started: Annotated[bool, typer.Option(
         "--started", help="Static validation assumes the modules are already reset, homed "
                           "and limited (sequences without the start-up).")] = False,
+    rt_priority: Annotated[Optional[int], typer.Option(
+        "--rt-priority", metavar="N", min=1, max=99,
+        help="Run the control loop with real-time scheduling (SCHED_FIFO priority N; needs "
+             "the right to, e.g. root or CAP_SYS_NICE). Keeps the 100 Hz loop on time on a "
+             "busy host.")] = None,
     virtual_time: Annotated[bool, typer.Option(
         "--virtual-time", help="Simulator only: run in virtual time, as fast as possible "
                                "(full run folder; used by CI and the tests).")] = False,
@@ -138,6 +144,14 @@ def run_command(
         raise typer.Exit(EXIT_OPERATOR_ABORT)
 
     folder = log_dir or default_run_dir(loaded.name)
+    if rt_priority is not None:
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(rt_priority))
+            console.print(f"real-time scheduling: SCHED_FIFO priority {rt_priority}",
+                          highlight=False)
+        except (OSError, AttributeError) as exc:
+            console.print(f"warning: real-time scheduling not available ({exc}); running at "
+                          "normal priority", style="yellow", highlight=False)
     try:
         folder.mkdir(parents=True, exist_ok=True)  # an unusable --log-dir: exit 2, nothing sent
     except OSError as exc:
