@@ -94,6 +94,8 @@ class LiveDisplay:
                 self.message, self.message_style = event["message"], "bold red"
             elif kind in ("controlled_stop", "abort_requested", "halt_requested", "paused"):
                 self.message = kind.replace("_", " ")
+                if kind == "controlled_stop":
+                    self.move_duration = None   # the move's progress ends where it stopped
             elif kind == "run_finished":
                 style = "bold green" if event["exit_code"] == 0 else "bold red"
                 self.message, self.message_style = f"{event['status']}: {event['message']}", style
@@ -125,8 +127,10 @@ class LiveDisplay:
             parts: list[Any] = [Text(self.step_text, style="bold")]
             if self.move_duration:
                 done = min(self.move_t, self.move_duration)
-                parts.append(ProgressBar(total=self.move_duration, completed=done, width=50))
-                parts.append(Text(f"{done:.1f} / {self.move_duration:.1f} s"))
+                bar = Table.grid(padding=(0, 1))
+                bar.add_row(ProgressBar(total=self.move_duration, completed=done, width=50),
+                            Text(f"{done:.1f} / {self.move_duration:.1f} s"))
+                parts.append(bar)
             parts.append(table)
             if m is not None:
                 pose = kinematics.fk(self.ex.chain, np.radians(m.user_deg))
