@@ -282,7 +282,8 @@ class Executor:
 
     # ------------------------------------------------------------------ checks
     def check_states(self, m: Measurement, *, require_homed: bool = True) -> None:
-        """Raise ModuleFaultError for a module whose short state says NOT_OK."""
+        """Raise a RunAborted naming module and flags for a module whose short state says
+        NOT_OK and whose state word shows a fault (or, with ``require_homed``, no HOME_OK)."""
         for module, state in m.short_state.items():
             if state & ShortState.NOT_OK:
                 flags = self.read_state_word(module)
