@@ -365,3 +365,18 @@ def test_keyboardinterrupt_escaping_a_step_still_halts(tmp_path, monkeypatch):
     trace = frames(tmp_path / "run")
     assert any(is_halt(m) for m in trace)
     assert [e for e in events(tmp_path / "run") if e["type"] == "fault"][0]["cause"] == "interrupted"
+
+
+def test_step_mode_asks_before_each_step_and_a_no_ends_the_run(tmp_path):
+    args = ["run", str(ROOT / "sequences" / "totem.yaml"), "--virtual-time", "--yes", "--plain",
+            "--step"]
+    # Yes to the three start-up steps and the confirm step, no to the move.
+    declined = CliRunner().invoke(app, args + ["--log-dir", str(tmp_path / "no")],
+                                  input="y\ny\ny\ny\nn\n")
+    assert declined.exit_code == EXIT_OPERATOR_ABORT, declined.output
+    assert "Run step 5: Up to Totem" in declined.output
+    assert not any(is_motion(m) for m in frames(tmp_path / "no"))
+    accepted = CliRunner().invoke(app, args + ["--log-dir", str(tmp_path / "yes")],
+                                  input="y\n" * 6)
+    assert accepted.exit_code == EXIT_OK, accepted.output
+    assert accepted.output.count("Run step ") == 6
