@@ -19,15 +19,14 @@ from rich.table import Table
 
 from seqrun.arm import DEFAULT_ARM
 from seqrun.cli.app import app
-from seqrun.cli.common import (ArmOption, BitrateOption, BusKwargsOption, ChannelOption,
-                               InterfaceOption, SimOption, connect, fail, load_arm_file,
-                               user_errors)
+from seqrun.cli.common import (EXIT_FAULT, ArmOption, BitrateOption, BusKwargsOption,
+                               ChannelOption, InterfaceOption, SimOption, connect, fail,
+                               load_arm_file, user_errors)
 from seqrun.errors import BusError
 from seqrun.kinematics import Chain, fk, rpy_from_matrix
 from seqrun.powercube.codec import GetParam
 from seqrun.powercube.protocol import ParamId, StateFlag
 
-EXIT_BUS = 3
 
 
 def read_status(client, arm) -> dict:
@@ -68,7 +67,8 @@ def _table(status: dict, title: str) -> Table:
 def status_command(
     watch: Annotated[bool, typer.Option("--watch", help="Refresh until Ctrl-C.")] = False,
     as_json: Annotated[bool, typer.Option("--json", help="Machine-readable output.")] = False,
-    period: Annotated[float, typer.Option("--period", help="Refresh period with --watch, s.")] = 0.2,
+    period: Annotated[float, typer.Option(
+        "--period", help="Refresh period with --watch, s.")] = 0.2,
     arm_file: ArmOption = DEFAULT_ARM, interface: InterfaceOption = None,
     channel: ChannelOption = None, bitrate: BitrateOption = None,
     bus_kwargs: BusKwargsOption = None, sim: SimOption = False,
@@ -96,7 +96,7 @@ def status_command(
         pass
     except BusError as exc:
         console.print(f"error: {exc}", style="red", highlight=False)
-        raise typer.Exit(EXIT_BUS) from None
+        raise typer.Exit(EXIT_FAULT) from None
     finally:
         client.close()
         connection.close()
@@ -110,7 +110,7 @@ def _broadcast(what: str, arm_file, interface, channel, bitrate, bus_kwargs, sim
         getattr(client, what)(None)
         typer.echo(f"{what.capitalize()} broadcast sent ({connection.description})")
     except BusError as exc:
-        fail(f"{what} not sent: {exc}", EXIT_BUS)
+        fail(f"{what} not sent: {exc}", EXIT_FAULT)
     finally:
         client.close()
         connection.close()

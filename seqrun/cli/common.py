@@ -11,14 +11,13 @@ import typer
 
 from seqrun.arm import ArmDescription, load_arm
 from seqrun.errors import SequenceInvalid, UserInputError
+# Exit codes have one definition, in the executor (re-exported for the commands).
+from seqrun.executor import EXIT_FAULT, EXIT_INVALID, EXIT_OK, EXIT_USAGE  # noqa: F401
 
 ArmOption = Annotated[Path, typer.Option("--arm", metavar="FILE", help="Arm description file.")]
 PosesDirOption = Annotated[Path, typer.Option(
     "--poses-dir", metavar="DIR", help="Directory of pose files (<name>.yaml).")]
 
-#: Exit codes (seqrun.errors): bad command-line input 2, an invalid file 1.
-EXIT_USAGE = 2
-EXIT_INVALID = 1
 
 
 def fail(message: str, code: int = EXIT_USAGE) -> NoReturn:

@@ -25,12 +25,11 @@ import typer
 
 from seqrun.arm import ArmDescription
 from seqrun.cli.app import app
+from seqrun.cli.common import EXIT_INVALID, EXIT_OK, fail
 from seqrun.errors import SequenceInvalid, SourceError, UserInputError
 from seqrun.schema import LoadedSequence, load_sequence, sequence_json_schema
 from seqrun.validation import START_POSE, ValidationResult, pose_joints_deg, validate_sequence
 
-#: Exit codes of this command.
-EXIT_VALID, EXIT_INVALID, EXIT_USAGE = 0, 1, 2
 
 
 @dataclass
@@ -86,11 +85,6 @@ def static_check(file: Path, *, start: str | None = None,
     return check
 
 
-def _fail(message: str) -> None:
-    typer.echo(f"error: {message}", err=True)
-    raise typer.Exit(EXIT_USAGE)
-
-
 def print_report(check: StaticCheck, file: Path, *, as_json: bool) -> None:
     if as_json:
         typer.echo(json.dumps({"valid": check.valid,
@@ -126,7 +120,8 @@ def print_dry_run(run, loaded, arm) -> None:
         typer.echo(f"  {s.number:2d} {s.status:7s} {s.label[:44]:44s} {planned}{took}")
         peak = s.detail.get("peak_measured_velocity_deg_s")
         if peak:
-            moving = [f"{n} {v:.1f}/{limits[n]:g}" for n, v in zip(arm.joint_names, peak) if v > 0.05]
+            moving = [f"{n} {v:.1f}/{limits[n]:g}"
+                      for n, v in zip(arm.joint_names, peak) if v > 0.05]
             typer.echo(f"       peak joint velocity (deg/s, of limit): {', '.join(moving)}")
         if "position_error_mm" in s.detail:
             d = s.detail
@@ -175,16 +170,16 @@ def validate_command(
     Exit 0 if valid, 1 if not, 2 if the input cannot be used.
     """
     if not 0 < speed <= 1:
-        _fail(f"--speed must lie in (0, 1], got {speed:g}")
+        fail(f"--speed must lie in (0, 1], got {speed:g}")
     if cycle_hz is not None and not 5 <= cycle_hz <= 500:
-        _fail(f"--cycle-hz must lie in [5, 500], got {cycle_hz:g}")
+        fail(f"--cycle-hz must lie in [5, 500], got {cycle_hz:g}")
     try:
         check = static_check(file, start=start, arm_file=arm_file, started=started)
     except UserInputError as exc:
-        _fail(str(exc))
+        fail(str(exc))
         return
     except OSError as exc:  # a path the system refuses (name too long, permission, ...)
-        _fail(f"{exc.filename}: {exc.strerror or exc}")
+        fail(f"{exc.filename}: {exc.strerror or exc}")
         return
     run = None
     if check.valid and not static:
@@ -203,7 +198,7 @@ def validate_command(
         print_report(check, file, as_json=False)
         if run is not None:
             print_dry_run(run, check.loaded, check.arm)
-    raise typer.Exit(EXIT_VALID if valid else EXIT_INVALID)
+    raise typer.Exit(EXIT_OK if valid else EXIT_INVALID)
 
 
 class SchemaKind(str, Enum):
