@@ -60,6 +60,8 @@ class Measurement:
     t: float
     user_deg: np.ndarray                 # every joint, user coordinates
     short_state: dict[int, ShortState]   # per module id
+    #: Full state words, where this reading includes them (after home/reset/halt, a fault).
+    state_words: dict[int, StateFlag] | None = None
 
 
 @dataclass
@@ -137,6 +139,9 @@ class Executor:
         self.confirm = confirm
         self.before_step = before_step
         self.listeners: list[Listener] = list(listeners)
+        #: Called with the slack (seconds) before the loop sleeps until its next cycle: the
+        #: live view renders there, on the loop's own thread, only when it has time.
+        self.idle_hooks: list[Callable[[float], None]] = []
         self.dry_run = dry_run
         self.chain = kinematics.Chain.from_arm(arm)
         self.offsets_deg = np.array([j.offset_deg for j in arm.joints])
@@ -218,6 +223,36 @@ class Executor:
                 self.listeners.remove(listener)
                 self.emit("listener_failed", error=repr(exc))
 
+    def _idle_until(self, t: float) -> None:
+        """Sleep until ``t``; the idle hooks may use the slack first."""
+        for hook in list(self.idle_hooks):
+            slack = t - self.clock.now()
+            if slack <= 0:
+                break
+            try:
+                hook(slack)
+            except (Exception, SystemExit) as exc:  # a broken display never stops a run
+                self.idle_hooks.remove(hook)
+                self.emit("listener_failed", error=repr(exc))
+        self.clock.sleep_until(t)
+
+    def _idle(self, seconds: float) -> None:
+        self._idle_until(self.clock.now() + seconds)
+
+    def refresh_measurement(self, after: str) -> None:
+        """Read the whole arm, state words included, and emit it: after a step that changes
+        the modules without moving them (home, reset, halt) and after a fault's Halt, so the
+        display and the event log show the modules' state, not the last motion cycle's."""
+        try:
+            m = self.read_arm()
+            words = self.read_state_words()
+        except BusError as exc:
+            self.emit("measurement_failed", after=after, error=str(exc))
+            return
+        self.last = replace(m, state_words=words)
+        self.emit("measurement", after=after, joints_deg=_r(m.user_deg),
+                  states={str(k): v.describe() for k, v in words.items()})
+
     # ------------------------------------------------------------------ conversions
     def to_module_rad(self, user_deg: np.ndarray) -> np.ndarray:
         return np.radians(np.asarray(user_deg) + self.offsets_deg)
@@ -278,7 +313,7 @@ class Executor:
             if self.clock.now() >= deadline:
                 module, flags = next(iter(bad.items()))
                 raise self.module_fault(module, flags, failure)
-            self.clock.sleep(self.cycle)
+            self._idle(self.cycle)
 
     # ------------------------------------------------------------------ checks
     def check_states(self, m: Measurement, *, require_homed: bool = True) -> None:
@@ -427,7 +462,7 @@ class Executor:
         k = 0
         while True:
             t_cycle = t_start + k * self.cycle
-            self.clock.sleep_until(t_cycle)
+            self._idle_until(t_cycle)
             t = self.clock.now() - t_start
             self._check_halt_request()
             if stop_on_abort and (self._abort_requests or self._paused.is_set()):
@@ -488,7 +523,7 @@ class Executor:
         self.emit("paused")
         while self._paused.is_set() and not self._abort_requests and not self._halt_requested:
             self.monitor()
-            self.clock.sleep(self.cycle)
+            self._idle(self.cycle)
         self._check_halt_request()
         if self._abort_requests:
             raise OperatorAbort("operator abort while paused")
@@ -500,7 +535,7 @@ class Executor:
             self.monitor()
             if self._abort_requests:
                 raise OperatorAbort("operator abort during a wait")
-            self.clock.sleep(min(self.cycle, end - self.clock.now()))
+            self._idle(min(self.cycle, end - self.clock.now()))
 
     def wait_in_position(self, tolerance_deg: float, timeout_s: float) -> float:
         """Wait until every commanded joint is within tolerance; returns the time taken."""
@@ -519,7 +554,7 @@ class Executor:
                 i = self.movable[int(np.argmax(err))]
                 raise RunAborted("timeout", f"{self.arm.joints[i].name} not in position within "
                                  f"{timeout_s} s: {float(np.max(err)):.2f}° off", module=self.modules[i])
-            self.clock.sleep(self.cycle)
+            self._idle(self.cycle)
 
     # ------------------------------------------------------------------ halt
     def emergency_halt(self) -> bool:
@@ -638,6 +673,8 @@ class Executor:
             fault = {"cause": cause, "module": module, "message": str(exc), "step": None,
                      "halt_sent": halted}
             self.emit("fault", **fault)
+            if halted:
+                self.refresh_measurement("halt")
             return self._finish(results, "failed", EXIT_FAULT, str(exc), fault)
         for step, result in zip(steps, results):
             if step.number < first_step:
@@ -667,7 +704,8 @@ class Executor:
             except OperatorAbort as exc:
                 status, code, message = "aborted", EXIT_OPERATOR_ABORT, str(exc)
                 if self._halt_requested:
-                    self.emergency_halt()
+                    if self.emergency_halt():
+                        self.refresh_measurement("halt")
                     message += "; Halt sent"
                 result.status = "aborted"
                 result.finished = self.clock.now() - self._t0
@@ -692,6 +730,8 @@ class Executor:
                 result.detail.update(_jsonable(getattr(exc, "detail", None) or {}))
                 result.detail.setdefault("error", message)
                 self.emit("fault", **fault)
+                if halted:
+                    self.refresh_measurement("halt")
                 break
             except BaseException as exc:
                 # Anything else leaving a step (KeyboardInterrupt, SystemExit) still halts

@@ -1,13 +1,22 @@
 """What the operator sees during a run: a rich live view on a terminal, plain lines otherwise.
 
-Both are executor listeners; they only read events and the executor's last measurement,
-so a slow terminal can never hold up the control loop (rich refreshes from its own thread).
+Both are executor listeners: a listener only records the event. The live view renders from
+the control loop's own idle time (:attr:`Executor.idle_hooks`: called with the slack before
+the loop sleeps until its next cycle), at most 10 times a second and only when the slack is
+longer than a render takes, so the display can neither delay a cycle nor compete with the
+loop from a thread of its own. While the operator is asked something the live view is off
+and the question is an ordinary line where the cursor is (:meth:`LiveDisplay.asking`).
+
+Everything the user wrote (labels, prompts) and every message is printed literally: rich
+markup is never interpreted in it.
 """
 
 from __future__ import annotations
 
-import threading
-from typing import Any
+import time
+from contextlib import contextmanager
+from datetime import datetime
+from typing import Any, Iterator
 
 import numpy as np
 from rich.console import Console, Group
@@ -18,10 +27,26 @@ from rich.table import Table
 from rich.text import Text
 
 from seqrun import kinematics
+from seqrun.powercube.protocol import ShortState, StateFlag
 
 
-def _fmt_duration(x: float | None) -> str:
-    return "-" if x is None else f"{x:.2f} s"
+def fixed(x: float, decimals: int = 2, width: int = 0) -> str:
+    """``x`` with ``decimals`` places; never ``-0.00``."""
+    value = round(float(x), decimals)
+    if value == 0:
+        value = 0.0
+    return f"{value:{width}.{decimals}f}"
+
+
+def halt_line(event: dict) -> str | None:
+    """The line a fault event earns on the screen: Halt sent (when, why) or not."""
+    if event.get("type") != "fault" or "halt_sent" not in event:
+        return None
+    cause = event.get("cause") or "fault"
+    when = f"{datetime.now().strftime('%H:%M:%S')}, t = {fixed(event.get('t', 0.0))} s"
+    if event["halt_sent"]:
+        return f"HALT sent at {when}: {cause}: {event.get('message', '')}"
+    return f"HALT could NOT be sent ({when}): {cause}: {event.get('message', '')}"
 
 
 class PlainDisplay:
@@ -31,28 +56,39 @@ class PlainDisplay:
         self.console = console
         self.total = total
 
+    def _print(self, text: str, **style: Any) -> None:
+        self.console.print(text, highlight=False, markup=False, **style)
+
     def __call__(self, event: dict) -> None:
         kind = event["type"]
         if kind == "step_started":
-            self.console.print(f"[{event.get('step')}/{self.total}] {event['label']} "
-                               f"({event['location']})", highlight=False)
+            self._print(f"[{event.get('step')}/{self.total}] {event['label']} "
+                        f"({event['location']})")
         elif kind == "step_finished":
             extra = ""
             if "executed_duration_s" in event:
-                extra = (f" in {event['executed_duration_s']:.2f} s (planned "
-                         f"{event.get('planned_duration_s') or 0:.2f} s)")
+                extra = (f" in {fixed(event['executed_duration_s'])} s (planned "
+                         f"{fixed(event.get('planned_duration_s') or 0)} s)")
             if "position_error_mm" in event:
-                extra = (f": {event['position_error_mm']:.2f} mm, "
-                         f"{event['angle_error_deg']:.3f}° from the expected pose")
-            self.console.print(f"      passed{extra}", highlight=False)
+                extra = (f": {fixed(event['position_error_mm'])} mm, "
+                         f"{fixed(event['angle_error_deg'], 3)}° from the expected pose")
+            self._print(f"      passed{extra}")
         elif kind in ("fault", "operator_abort", "controlled_stop", "holding", "halt_requested",
                       "abort_requested"):
             text = event.get("message") or event.get("reason") or kind.replace("_", " ")
-            self.console.print(f"  !!  {kind.replace('_', ' ')}: {text}", highlight=False)
+            self._print(f"  !!  {kind.replace('_', ' ')}: {text}")
+            line = halt_line(event)
+            if line is not None:
+                self._print(f"  !!  {line}")
 
 
 class LiveDisplay:
     """Step n/N, a progress bar per move, the joint table and the end-effector pose."""
+
+    #: Renders at most this often (seconds).
+    INTERVAL = 0.1
+    #: Margin kept free before the next cycle, on top of the expected render time.
+    MARGIN = 0.001
 
     def __init__(self, console: Console, executor, title: str, bus: str, total: int) -> None:
         self.console = console
@@ -65,40 +101,91 @@ class LiveDisplay:
         self.move_t = 0.0
         self.message = ""
         self.message_style = "yellow"
+        self.halt_text = ""
         self.target: np.ndarray | None = None
         self._prev: tuple[float, np.ndarray] | None = None
         self._velocity = np.zeros(executor.arm.dof)
-        self._lock = threading.Lock()
-        self.live = Live(self, console=console, refresh_per_second=10, transient=False)
+        self._last_render = -1e9
+        self._render_cost = 0.005  # seconds; learnt from the renders
+        self.live: Live | None = None
+
+    # -------------------------------------------------------------- live on / off
+    def _start(self) -> None:
+        # A fresh Live each time: its cursor bookkeeping must not reach above the lines
+        # printed while it was off (the operator's question and answer).
+        self.live = Live(self, console=self.console, auto_refresh=False, transient=True)
+        self.live.start(refresh=True)
+        self._last_render = time.monotonic()
+
+    def _stop(self) -> None:
+        if self.live is not None:
+            self.live.stop()  # transient: the panel goes, the lines above it stay
+            self.live = None
 
     def __enter__(self) -> "LiveDisplay":
-        self.live.__enter__()
+        self.ex.idle_hooks.append(self.on_idle)
+        self._start()
         return self
 
     def __exit__(self, *exc: Any) -> None:
-        self.live.__exit__(*exc)
+        if self.on_idle in self.ex.idle_hooks:
+            self.ex.idle_hooks.remove(self.on_idle)
+        self._stop()
+        self.console.print(self)  # the final state stays on the screen
 
+    @contextmanager
+    def asking(self, context: str | None = None) -> Iterator[None]:
+        """The live view is off while the operator answers a question printed as a line."""
+        if context is not None:
+            self.step_text = context
+        self._stop()
+        try:
+            yield
+        finally:
+            self._start()
+
+    # -------------------------------------------------------------- rendering
+    def on_idle(self, slack: float) -> None:
+        """Executor idle hook: render when due and when it fits into the slack."""
+        now = time.monotonic()
+        if self.live is None or now - self._last_render < self.INTERVAL:
+            return
+        if slack < self._render_cost + self.MARGIN:
+            return
+        self.refresh()
+        cost = time.monotonic() - now
+        self._render_cost = 0.7 * self._render_cost + 0.3 * cost
+
+    def refresh(self) -> None:
+        if self.live is not None:
+            self.live.refresh()
+        self._last_render = time.monotonic()
+
+    # -------------------------------------------------------------- events
     def __call__(self, event: dict) -> None:
+        # No lock: events, idle hooks and renders all run on the control loop's thread
+        # (a signal handler that emits only sets fields).
         kind = event["type"]
-        with self._lock:
-            if kind == "step_started":
-                self.step_text = f"step {event.get('step')}/{self.total}: {event['label']}"
-                self.move_duration = None
-            elif kind == "move_planned":
-                self.move_duration = event["duration_s"]
-                self.move_t = 0.0
-                self.target = np.array(event["target_deg"])
-            elif kind == "setpoint":
-                self.move_t = event["plan_t"]
-            elif kind in ("fault", "operator_abort"):
-                self.message, self.message_style = event["message"], "bold red"
-            elif kind in ("controlled_stop", "abort_requested", "halt_requested", "paused"):
-                self.message = kind.replace("_", " ")
-                if kind == "controlled_stop":
-                    self.move_duration = None   # the move's progress ends where it stopped
-            elif kind == "run_finished":
-                style = "bold green" if event["exit_code"] == 0 else "bold red"
-                self.message, self.message_style = f"{event['status']}: {event['message']}", style
+        if kind == "step_started":
+            self.step_text = f"step {event.get('step')}/{self.total}: {event['label']}"
+            self.move_duration = None
+        elif kind == "move_planned":
+            self.move_duration = event["duration_s"]
+            self.move_t = 0.0
+            self.target = np.array(event["target_deg"])
+        elif kind == "setpoint":
+            self.move_t = event["plan_t"]
+        elif kind in ("fault", "operator_abort"):
+            self.message, self.message_style = event["message"], "bold red"
+            self.halt_text = halt_line(event) or self.halt_text
+            self.move_duration = None
+        elif kind in ("controlled_stop", "abort_requested", "halt_requested", "paused"):
+            self.message = kind.replace("_", " ")
+            if kind == "controlled_stop":
+                self.move_duration = None   # the move's progress ends where it stopped
+        elif kind == "run_finished":
+            style = "bold green" if event["exit_code"] == 0 else "bold red"
+            self.message, self.message_style = f"{event['status']}: {event['message']}", style
 
     def _update_velocity(self) -> None:
         m = self.ex.last
@@ -108,37 +195,51 @@ class LiveDisplay:
             self._velocity = (m.user_deg - self._prev[1]) / (m.t - self._prev[0])
         self._prev = (m.t, m.user_deg.copy())
 
-    def __rich__(self) -> Panel:
-        with self._lock:
-            self._update_velocity()
-            m = self.ex.last
-            table = Table(expand=False, box=None, padding=(0, 2))
-            for col in ("joint", "position °", "velocity °/s", "target °", "state"):
-                table.add_column(col, justify="right" if "°" in col else "left")
-            for i, joint in enumerate(self.ex.arm.joints):
-                pos = f"{m.user_deg[i]:8.2f}" if m is not None else "-"
-                vel = f"{self._velocity[i]:7.2f}" if m is not None else "-"
-                tgt = f"{self.target[i]:8.2f}" if self.target is not None else "-"
-                state = "-"
-                if m is not None and joint.module in m.short_state:
-                    state = m.short_state[joint.module].describe()
-                name = joint.name + (" (locked)" if joint.locked is not None else "")
-                table.add_row(name, pos, vel, tgt, state)
-            parts: list[Any] = [Text(self.step_text, style="bold")]
-            if self.move_duration:
-                done = min(self.move_t, self.move_duration)
-                bar = Table.grid(padding=(0, 1))
-                bar.add_row(ProgressBar(total=self.move_duration, completed=done, width=50),
-                            Text(f"{done:.1f} / {self.move_duration:.1f} s"))
-                parts.append(bar)
-            parts.append(table)
-            if m is not None:
-                pose = kinematics.fk(self.ex.chain, np.radians(m.user_deg))
-                rpy = np.degrees(kinematics.rpy_from_matrix(pose[:3, :3]))
-                x, y, z = pose[:3, 3]
-                parts.append(Text(f"end-effector  x {x:8.1f}  y {y:8.1f}  z {z:8.1f} mm   "
-                                  f"roll {rpy[0]:7.2f}  pitch {rpy[1]:7.2f}  yaw {rpy[2]:7.2f} °"))
-            if self.message:
-                parts.append(Text(self.message, style=self.message_style))
-            return Panel(Group(*parts), title=self.title, subtitle=self.bus)
+    @staticmethod
+    def _state(m, module: int) -> tuple[str, bool]:
+        """The module's state text and whether it is moving, from the freshest reading."""
+        if m.state_words is not None and module in m.state_words:
+            word = m.state_words[module]
+            return word.describe(), bool(word & StateFlag.MOTION)
+        if module in m.short_state:
+            short = m.short_state[module]
+            return short.describe(), bool(short & ShortState.MOTION)
+        return "-", False
 
+    def __rich__(self) -> Panel:
+        self._update_velocity()
+        m = self.ex.last
+        table = Table(expand=False, box=None, padding=(0, 2))
+        for col in ("joint", "position °", "velocity °/s", "target °", "state"):
+            table.add_column(col, justify="right" if "°" in col else "left")
+        for i, joint in enumerate(self.ex.arm.joints):
+            pos = vel = state = "-"
+            if m is not None:
+                state, moving = self._state(m, joint.module)
+                pos = fixed(m.user_deg[i], 2, 8)
+                # A module that does not report motion stands still (Halt, end of ramp);
+                # a difference quotient across the last render would say otherwise.
+                vel = fixed(self._velocity[i] if moving else 0.0, 2, 7)
+            tgt = fixed(self.target[i], 2, 8) if self.target is not None else "-"
+            name = joint.name + (" (locked)" if joint.locked is not None else "")
+            table.add_row(name, pos, vel, tgt, Text(state))
+        parts: list[Any] = [Text(self.step_text, style="bold")]
+        if self.move_duration:
+            done = min(self.move_t, self.move_duration)
+            bar = Table.grid(padding=(0, 1))
+            bar.add_row(ProgressBar(total=self.move_duration, completed=done, width=50),
+                        Text(f"{done:.1f} / {self.move_duration:.1f} s"))
+            parts.append(bar)
+        parts.append(table)
+        if m is not None:
+            pose = kinematics.fk(self.ex.chain, np.radians(m.user_deg))
+            rpy = np.degrees(kinematics.rpy_from_matrix(pose[:3, :3]))
+            x, y, z = pose[:3, 3]
+            parts.append(Text(f"end-effector  x {fixed(x, 1, 8)}  y {fixed(y, 1, 8)}  "
+                              f"z {fixed(z, 1, 8)} mm   roll {fixed(rpy[0], 2, 7)}  "
+                              f"pitch {fixed(rpy[1], 2, 7)}  yaw {fixed(rpy[2], 2, 7)} °"))
+        if self.halt_text:
+            parts.append(Text(self.halt_text, style="bold white on red"))
+        if self.message:
+            parts.append(Text(self.message, style=self.message_style))
+        return Panel(Group(*parts), title=Text(self.title), subtitle=Text(self.bus))

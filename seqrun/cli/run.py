@@ -16,6 +16,7 @@ from typing import Annotated, Optional
 
 import typer
 from rich.console import Console
+from rich.text import Text
 
 from seqrun.cli.app import app
 from seqrun.cli.common import (BitrateOption, BusKwargsOption, ChannelOption, InterfaceOption,
@@ -33,14 +34,24 @@ from seqrun.schema import load_sequence
 def _ask(console: Console, question: str, assume_yes: bool) -> bool:
     """Ask the operator; EOF on stdin (no operator) is a no."""
     if assume_yes:
-        console.print(f"{question} yes (--yes)", highlight=False, markup=False)
+        console.print(f"{question} yes (--yes)", highlight=False, markup=False, soft_wrap=True)
         return True
-    console.print(f"{question} [y/N] ", end="", highlight=False, markup=False)
+    console.print(f"{question} [y/N] ", end="", highlight=False, markup=False, soft_wrap=True)
     try:
         answer = sys.stdin.readline()
     except KeyboardInterrupt:
         return False
     return answer.strip().lower() in ("y", "yes")
+
+
+def _ask_shown(console: Console, displays: list, question: str, assume_yes: bool, *,
+               context: str | None = None) -> bool:
+    """:func:`_ask` where the operator looks: the live view (if any) is off meanwhile, so
+    its redraw cannot erase the question."""
+    if not displays or not hasattr(displays[0], "asking"):
+        return _ask(console, question, assume_yes)
+    with displays[0].asking(context):
+        return _ask(console, question, assume_yes)
 
 
 def static_validation(loaded, arm, start: str | None, started: bool, from_step: int):
@@ -136,7 +147,7 @@ def run_command(
             connection.close()
             fail("--virtual-time needs the simulator")
     style = "bold black on yellow" if connection.is_simulator else "bold white on red"
-    console.print(f" {connection.description} ", style=style, highlight=False)
+    console.print(f" {connection.description} ", style=style, highlight=False, markup=False)
     if not connection.is_simulator and not _ask(
             console, f"Run '{loaded.name}' on the REAL arm?", yes):
         console.print("Not started: the operator declined. Nothing was sent.")
@@ -151,18 +162,24 @@ def run_command(
                           highlight=False)
         except (OSError, AttributeError) as exc:
             console.print(f"warning: real-time scheduling not available ({exc}); running at "
-                          "normal priority", style="yellow", highlight=False)
+                          "normal priority", style="yellow", highlight=False, markup=False)
     try:
         folder.mkdir(parents=True, exist_ok=True)  # an unusable --log-dir: exit 2, nothing sent
     except OSError as exc:
         connection.close()
         fail(f"cannot create the run folder {folder}: {exc.strerror or exc}")
 
+    displays: list = []
+
     def confirm(prompt: str) -> bool:
-        return _ask(console, prompt, yes)
+        return _ask_shown(console, displays, prompt, yes)
 
     def before_step(s) -> bool:
-        return _ask(console, f"Run step {s.number}: {s.title}?", False) if step else True
+        if not step:
+            return True
+        return _ask_shown(console, displays, f"Run step {s.number}/{len(loaded.steps)}: "
+                          f"{s.title}?", False,
+                          context=f"step {s.number}/{len(loaded.steps)}: {s.title} (asking)")
 
     interrupts = 0
     holder: dict = {}
@@ -186,7 +203,6 @@ def run_command(
             executor.halt("SIGTERM: Halt")
 
     live = console.is_terminal and not plain
-    displays: list = []
 
     def attach(executor) -> None:
         holder["executor"] = executor
@@ -212,12 +228,13 @@ def run_command(
         connection.close()
     result = outcome.result
     colour = "green" if result.exit_code == 0 else "red"
-    console.print(f"[{colour}]{result.status.upper()}[/{colour}] (exit {result.exit_code}): "
-                  f"{result.message}", highlight=False)
+    console.print(Text.assemble((result.status.upper(), colour),
+                                f" (exit {result.exit_code}): {result.message}"), highlight=False)
     if result.extra.get("errors"):
         for error in result.extra["errors"]:
             console.print(f"  {error['file']}:{error['line']}:{error['column']}: "
-                          f"{error['message']}", highlight=False)
+                          f"{error['message']}", highlight=False, markup=False)
     console.print(f"duration {result.duration_s:.2f} s, planned motion "
-                  f"{result.planned_duration_s:.2f} s; log: {folder}", highlight=False)
+                  f"{result.planned_duration_s:.2f} s; log: {folder}", highlight=False,
+                  markup=False)
     raise typer.Exit(result.exit_code)

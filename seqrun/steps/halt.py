@@ -13,4 +13,5 @@ def run(step, ex) -> dict:
         for module in modules:
             ex.client.halt(module)
     ex.commanded_deg = None  # nothing is commanded any more
+    ex.refresh_measurement("halt")
     return {"modules": "all" if modules is None else modules}
