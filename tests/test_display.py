@@ -1,0 +1,153 @@
+"""What the operator's screen shows, rendered to a string (rich Console(record=True)).
+
+Runs are at virtual time on the simulator; the live view is rendered after the run, as the
+operator's screen is left when the run ends.
+"""
+
+from __future__ import annotations
+
+import io
+import re
+import shutil
+from pathlib import Path
+
+import pytest
+from rich.console import Console
+
+from seqrun.arm import load_arm
+from seqrun.cli.display import LiveDisplay, PlainDisplay, fixed
+from seqrun.clock import VirtualClock
+from seqrun.connection import open_connection
+from seqrun.executor import EXIT_FAULT, EXIT_OK
+from seqrun.runner import run_sequence
+from seqrun.schema import load_sequence
+from seqrun.sim.faults import parse_fault_spec
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def console() -> Console:
+    return Console(record=True, file=io.StringIO(), width=160, color_system=None)
+
+
+def project(tmp_path: Path, name: str, steps: str) -> Path:
+    root = tmp_path / "project"
+    (root / "sequences").mkdir(parents=True, exist_ok=True)
+    for folder in ("arms", "poses"):
+        if not (root / folder).exists():
+            shutil.copytree(ROOT / folder, root / folder)
+    shutil.copy(ROOT / "sequences" / "startup.yaml", root / "sequences")
+    path = root / "sequences" / f"{name}.yaml"
+    path.write_text(f"name: {name}\ndescription: a test\nsteps:\n{steps}", encoding="utf-8")
+    return path
+
+
+def run_with_displays(path: Path, tmp_path: Path, faults=()):
+    """Run ``path`` with a live view (never started: rendered afterwards) and the plain
+    display; returns (outcome, live view, live console, plain console)."""
+    loaded = load_sequence(path)
+    arm = load_arm(loaded.arm_path)
+    connection = open_connection(force_sim=True, clock=VirtualClock(),
+                                 faults=[parse_fault_spec(f) for f in faults])
+    live_console, plain_console = console(), console()
+    views = {}
+
+    def attach(executor):
+        views["live"] = LiveDisplay(live_console, executor, f"seqrun: {loaded.name}", "sim",
+                                    len(loaded.steps))
+        executor.listeners += [views["live"], PlainDisplay(plain_console, len(loaded.steps))]
+
+    try:
+        outcome = run_sequence(loaded, arm, connection, log_dir=tmp_path / "run",
+                               confirm=lambda prompt: True, on_executor=attach)
+    finally:
+        connection.close()
+    return outcome, views["live"], live_console, plain_console
+
+
+def rows(text: str) -> dict[str, str]:
+    """The joint table's rows by joint name."""
+    out = {}
+    for line in text.splitlines():
+        m = re.match(r"\W*(j\d)\b(.*)$", line.strip("│ "))
+        if m:
+            out[m.group(1)] = m.group(2)
+    return out
+
+
+def test_after_home_every_joint_shows_the_modules_state_not_the_last_cycle(tmp_path):
+    path = project(tmp_path, "home", "  - reset: {}\n  - home: {}\n")
+    outcome, view, live_console, _ = run_with_displays(path, tmp_path)
+    assert outcome.result.exit_code == EXIT_OK
+    live_console.print(view)
+    table = rows(live_console.export_text())
+    assert len(table) == 7
+    for joint, row in table.items():
+        assert "HOME_OK" in row and "NOT_OK" not in row, (joint, row)
+
+
+def test_after_a_fault_the_screen_says_halt_sent_and_nothing_moves(tmp_path):
+    path = project(tmp_path, "fault", "  - include: startup.yaml\n"
+                                      "  - move: {joints: {j1: 40, j2: -60}, velocity_deg_s: {j1: 10, j2: 10},"
+                                      " label: Long move}\n")
+    outcome, view, live_console, plain_console = run_with_displays(
+        path, tmp_path, faults=["2:tow_error@2"])
+    result = outcome.result
+    assert result.exit_code == EXIT_FAULT and result.fault["halt_sent"]
+    live_console.print(view)
+    screen = live_console.export_text()
+    table = rows(screen)
+    for joint, row in table.items():
+        assert "MOTION" not in row, (joint, row)
+        assert "HALTED" in row, (joint, row)
+        velocity = row.split()[1]
+        assert velocity == "0.00", (joint, row)
+    halt = [line for line in screen.splitlines() if "HALT sent at" in line]
+    assert len(halt) == 1
+    assert re.search(r"HALT sent at \d\d:\d\d:\d\d, t = \d+\.\d\d s: tow_error: module 2 "
+                     r"\(j2\)", halt[0]), halt[0]
+    # The plain display says it too, and keeps the message's [state ...] part.
+    plain = plain_console.export_text()
+    assert "HALT sent at" in plain and "tow_error" in plain
+    assert "[state " in plain
+
+
+def test_labels_and_messages_are_printed_literally(tmp_path):
+    """Rich markup in a label or message is text: '[/bold] up' used to raise MarkupError,
+    drop the display and silence every later fault line; '[state …]' was swallowed."""
+    path = project(tmp_path, "markup",
+                   "  - include: startup.yaml\n"
+                   "  - move: {joints: {j1: 40}, velocity_deg_s: {j1: 10}, label: '[/bold] up'}\n"
+                   "  - move: {joints: {j1: 0}, label: '[red]down[/red] [ruckig]'}\n")
+    outcome, view, live_console, plain_console = run_with_displays(
+        path, tmp_path, faults=["1:tow_error@2"])
+    assert outcome.result.exit_code == EXIT_FAULT
+    plain = plain_console.export_text()
+    assert "[4/5] [/bold] up (" in plain
+    fault_lines = [line for line in plain.splitlines() if "!!  fault:" in line]
+    assert len(fault_lines) == 1 and "[state " in fault_lines[0]
+    assert not any(e["type"] == "listener_failed" for e in _events(tmp_path))
+    live_console.print(view)
+    screen = live_console.export_text()
+    assert "[state " in screen
+
+
+def _events(tmp_path: Path) -> list[dict]:
+    import json
+    return [json.loads(line) for line in
+            (tmp_path / "run" / "events.jsonl").read_text().splitlines()]
+
+
+def test_a_fault_message_is_printed_literally():
+    c = console()
+    PlainDisplay(c, 3)({"type": "fault", "message": "[ruckig] cannot plan [bold]x",
+                        "cause": "planning", "halt_sent": True, "t": 1.0})
+    text = c.export_text()
+    assert "fault: [ruckig] cannot plan [bold]x" in text
+    assert "HALT sent at" in text and "planning: [ruckig] cannot plan [bold]x" in text
+
+
+@pytest.mark.parametrize("value, text", [(-0.0001, "0.00"), (-0.004, "0.00"), (0.0, "0.00"),
+                                         (-0.006, "-0.01"), (1.005, "1.00"), (-2.5, "-2.50")])
+def test_fixed_never_prints_minus_zero(value, text):
+    assert fixed(value).strip() == text
