@@ -154,7 +154,7 @@ class ArmDescription(_Strict):
 
 
 #: Arm file used when a sequence names none (relative to the project root / cwd).
-DEFAULT_ARM = Path("arms/lwa3.yaml")
+from seqrun.defaults import DEFAULT_ARM  # noqa: E402,F401  (re-exported)
 
 
 def load_arm(path: str | Path) -> ArmDescription:

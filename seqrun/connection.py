@@ -12,14 +12,15 @@ from __future__ import annotations
 import itertools
 import socket
 from dataclasses import dataclass, field
-from typing import Any, Iterable, Mapping, Sequence
-
-import can
+from typing import TYPE_CHECKING, Any, Iterable, Mapping, Sequence
 
 from seqrun.clock import Clock, RealClock
 from seqrun.errors import UserInputError
-from seqrun.sim.bus import SimBus
-from seqrun.sim.faults import Fault, parse_fault_spec
+
+if TYPE_CHECKING:  # python-can (and its can.io: asyncio, ssl, sqlite3) only when a bus opens
+    import can
+
+    from seqrun.sim.faults import Fault
 
 #: The interface name of the simulator (the python-can plugin).
 SIM_INTERFACE = "seqrun-sim"
@@ -43,6 +44,8 @@ class Connection:
 
 def parse_bus_kwargs(items: Sequence[str]) -> dict[str, Any]:
     """``["host=127.0.0.1", "port=29536"]`` -> dict, values cast like python-can's config."""
+    import can
+
     out: dict[str, Any] = {}
     for item in items:
         key, sep, value = item.partition("=")
@@ -53,6 +56,8 @@ def parse_bus_kwargs(items: Sequence[str]) -> dict[str, Any]:
 
 
 def parse_faults(specs: Iterable[str]) -> list[Fault]:
+    from seqrun.sim.faults import parse_fault_spec
+
     faults = []
     for spec in specs:
         try:
@@ -65,6 +70,8 @@ def parse_faults(specs: Iterable[str]) -> list[Fault]:
 def resolve_config(interface: str | None, channel: str | None, bitrate: int | None,
                    bus_kwargs: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """python-can's merged configuration (command line first, then env/config files)."""
+    import can
+
     given: dict[str, Any] = {k: v for k, v in (("interface", interface), ("channel", channel),
                                                ("bitrate", bitrate)) if v is not None}
     given.update(bus_kwargs or {})
@@ -94,6 +101,10 @@ def open_connection(*, interface: str | None = None, channel: str | None = None,
                     sim_positions: Mapping[int, float] | Sequence[float] | None = None,
                     default_bitrate: int = 1_000_000) -> Connection:
     """Open the bus the operator asked for (see the module docstring)."""
+    import can
+
+    from seqrun.sim.bus import SimBus
+
     config = {} if force_sim else resolve_config(interface, channel, bitrate, bus_kwargs)
     if force_sim or not config.get("interface") or config["interface"] == SIM_INTERFACE:
         if force_sim and (interface or channel or bus_kwargs):

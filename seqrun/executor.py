@@ -39,12 +39,9 @@ from seqrun.powercube.codec import (BroadcastRequest, GetParam, GetParamAck, Mot
                                     SetMotion, SetParam)
 from seqrun.powercube.protocol import ConfigFlag, ParamId, ShortState, StateFlag
 
-# Exit codes (shared with the CLI).
-EXIT_OK = 0
-EXIT_INVALID = 1
-EXIT_USAGE = 2
-EXIT_FAULT = 3
-EXIT_OPERATOR_ABORT = 130
+# Exit codes (shared with the CLI; defined where the CLI can read them without the executor).
+from seqrun.defaults import (EXIT_FAULT, EXIT_INVALID, EXIT_OK,  # noqa: E402,F401
+                             EXIT_OPERATOR_ABORT, EXIT_USAGE)
 
 Listener = Callable[[dict], None]
 
@@ -239,13 +236,20 @@ class Executor:
     def _idle(self, seconds: float) -> None:
         self._idle_until(self.clock.now() + seconds)
 
-    def refresh_measurement(self, after: str) -> None:
-        """Read the whole arm, state words included, and emit it: after a step that changes
-        the modules without moving them (home, reset, halt) and after a fault's Halt, so the
-        display and the event log show the modules' state, not the last motion cycle's."""
+    def refresh_measurement(self, after: str,
+                            words: dict[int, StateFlag] | None = None) -> None:
+        """Emit the arm's state after a step that changes the modules without moving them
+        (home, reset, halt) and after a fault's Halt, so the display and the event log show
+        the modules' state, not the last motion cycle's. ``words``: state words the step has
+        just read (home, reset: nothing moved, positions stand); otherwise the whole arm is
+        read, state words included."""
         try:
-            m = self.read_arm()
-            words = self.read_state_words()
+            if words is None or self.last is None:
+                m = self.read_arm()
+                words = self.read_state_words()
+            else:
+                m = self.last
+                words = {**(m.state_words or {}), **words}
         except BusError as exc:
             self.emit("measurement_failed", after=after, error=str(exc))
             return

@@ -38,7 +38,7 @@ __all__ = [
 ]
 
 #: Pose directory used when none is given (relative to the project root / cwd).
-DEFAULT_POSES_DIR = Path("poses")
+from seqrun.defaults import DEFAULT_POSES_DIR  # noqa: E402  (re-exported)
 
 #: First line of every pose file: editors with yaml-language-server validate against it.
 SCHEMA_COMMENT = "# yaml-language-server: $schema=../docs/schema/pose.schema.json"

@@ -60,7 +60,7 @@ __all__ = [
 #: Samples per move when checking workspace guards along the joint-space path.
 GUARD_SAMPLES = 64
 #: Name of the pose a freshly powered-on arm is in (the modules' zeros).
-START_POSE = "park"
+from seqrun.defaults import START_POSE  # noqa: E402,F401  (re-exported)
 
 
 @dataclass

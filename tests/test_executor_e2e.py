@@ -374,7 +374,7 @@ def test_step_mode_asks_before_each_step_and_a_no_ends_the_run(tmp_path):
     declined = CliRunner().invoke(app, args + ["--log-dir", str(tmp_path / "no")],
                                   input="y\ny\ny\ny\nn\n")
     assert declined.exit_code == EXIT_OPERATOR_ABORT, declined.output
-    assert "Run step 5: Up to Totem" in declined.output
+    assert "Run step 5/6: Up to Totem" in declined.output
     assert not any(is_motion(m) for m in frames(tmp_path / "no"))
     accepted = CliRunner().invoke(app, args + ["--log-dir", str(tmp_path / "yes")],
                                   input="y\n" * 6)

@@ -1,4 +1,9 @@
-"""``seqrun`` command line: one typer app (``app.py``), one module per command group."""
+"""``seqrun`` command line: one typer app (``app.py``), one module per command group.
+
+The command modules only define the commands (options, help); each command imports what it
+needs when it runs, so ``seqrun --help`` and the short commands do not pay for pydantic,
+numpy, ruckig or python-can (tests/test_startup.py holds this).
+"""
 
 from __future__ import annotations
 
@@ -6,6 +11,7 @@ import importlib
 import sys
 
 from seqrun.cli.app import app
+from seqrun.cli.output import guard_stdout
 
 #: Command modules; each registers its commands on :data:`app` when imported.
 COMMAND_MODULES = (
@@ -28,6 +34,7 @@ def _load_commands() -> None:
 
 
 def main(argv: list[str] | None = None) -> None:
+    guard_stdout()  # `seqrun … | head`: quiet exit 141, never a run ended by it
     _load_commands()
     app(args=argv if argv is not None else sys.argv[1:], prog_name="seqrun")
 

@@ -11,26 +11,30 @@ import math
 import time
 from typing import Annotated
 
-import numpy as np
-import typer
-from rich.console import Console
-from rich.live import Live
-from rich.table import Table
+from typing import TYPE_CHECKING
 
-from seqrun.arm import DEFAULT_ARM
+import typer
+
 from seqrun.cli.app import app
 from seqrun.cli.common import (EXIT_FAULT, ArmOption, BitrateOption, BusKwargsOption,
                                ChannelOption, InterfaceOption, SimOption, connect, fail,
                                load_arm_file, user_errors)
+from seqrun.defaults import DEFAULT_ARM
 from seqrun.errors import BusError
-from seqrun.kinematics import Chain, fk, rpy_from_matrix
-from seqrun.powercube.codec import GetParam
-from seqrun.powercube.protocol import ParamId, StateFlag
+
+if TYPE_CHECKING:
+    from rich.table import Table
 
 
 
 def read_status(client, arm) -> dict:
     """Joints (user degrees), velocities, state words and the end-effector pose."""
+    import numpy as np
+
+    from seqrun.kinematics import Chain, fk, rpy_from_matrix
+    from seqrun.powercube.codec import GetParam
+    from seqrun.powercube.protocol import ParamId, StateFlag
+
     requests = [GetParam(j.module, p) for j in arm.joints
                 for p in (ParamId.ACT_POS, ParamId.ACT_VEL, ParamId.CUBE_STATE)]
     acks = client.transact(requests)
@@ -51,6 +55,8 @@ def read_status(client, arm) -> dict:
 
 
 def _table(status: dict, title: str) -> Table:
+    from rich.table import Table
+
     table = Table(title=title)
     for col in ("joint", "module", "position °", "velocity °/s", "state"):
         table.add_column(col)
@@ -74,13 +80,17 @@ def status_command(
     bus_kwargs: BusKwargsOption = None, sim: SimOption = False,
 ) -> None:
     """Joints, state flags and end-effector pose (reads only; nothing moves)."""
+    from rich.live import Live
+
+    from seqrun.cli.output import make_console
+
     with user_errors():
         arm = load_arm_file(arm_file)
         connection, client = connect(arm, interface, channel, bitrate, bus_kwargs, sim)
-    console = Console()
+    console = make_console()
     try:
         if not as_json:
-            console.print(connection.description, style="bold", highlight=False)
+            console.print(connection.description, style="bold", highlight=False, markup=False)
         if not watch:
             status = read_status(client, arm)
             if as_json:
@@ -95,7 +105,7 @@ def status_command(
     except KeyboardInterrupt:
         pass
     except BusError as exc:
-        console.print(f"error: {exc}", style="red", highlight=False)
+        console.print(f"error: {exc}", style="red", highlight=False, markup=False)
         raise typer.Exit(EXIT_FAULT) from None
     finally:
         client.close()

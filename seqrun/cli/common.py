@@ -5,14 +5,16 @@ from __future__ import annotations
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Annotated, NoReturn, Optional
+from typing import TYPE_CHECKING, Annotated, NoReturn, Optional
 
 import typer
 
-from seqrun.arm import ArmDescription, load_arm
+# Exit codes have one definition (re-exported for the commands).
+from seqrun.defaults import EXIT_FAULT, EXIT_INVALID, EXIT_OK, EXIT_USAGE  # noqa: F401
 from seqrun.errors import SequenceInvalid, UserInputError
-# Exit codes have one definition, in the executor (re-exported for the commands).
-from seqrun.executor import EXIT_FAULT, EXIT_INVALID, EXIT_OK, EXIT_USAGE  # noqa: F401
+
+if TYPE_CHECKING:
+    from seqrun.arm import ArmDescription
 
 ArmOption = Annotated[Path, typer.Option("--arm", metavar="FILE", help="Arm description file.")]
 PosesDirOption = Annotated[Path, typer.Option(
@@ -44,6 +46,8 @@ def user_errors() -> Iterator[None]:
 def load_arm_file(path: Path) -> ArmDescription:
     if not path.is_file():
         raise UserInputError(f"arm file {path} not found (give one with --arm FILE)")
+    from seqrun.arm import load_arm  # pydantic: only for commands that read an arm file
+
     return load_arm(path)
 
 

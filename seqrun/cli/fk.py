@@ -11,19 +11,21 @@ from __future__ import annotations
 
 import json
 import math
-from typing import Annotated, Any, ClassVar
+from typing import TYPE_CHECKING, Annotated, Any, ClassVar
 
-import numpy as np
 import typer
 from typer.core import TyperCommand
 
-from seqrun.arm import DEFAULT_ARM
 from seqrun.cli.app import app
 from seqrun.cli.common import ArmOption, PosesDirOption, load_arm_file, user_errors
 from seqrun.cli.pose import format_numbers, load_named_pose
+from seqrun.defaults import DEFAULT_ARM, DEFAULT_POSES_DIR
 from seqrun.errors import UserInputError
-from seqrun.kinematics import Pose, pose_from_user_deg
-from seqrun.poses import DEFAULT_POSES_DIR
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from seqrun.kinematics import Pose
 
 _JSON_DECIMALS = 6  # 1 nm, 1e-6 deg: far below what the arm can do, and readable
 
@@ -98,6 +100,8 @@ def parse_angles(tokens: list[str], joint_names: list[str]) -> list[float]:
 
 
 def _rounded(values: np.ndarray) -> list:
+    import numpy as np
+
     # + 0.0 turns -0.0 into 0.0
     return (np.round(np.asarray(values, dtype=float), _JSON_DECIMALS) + 0.0).tolist()
 
@@ -130,6 +134,8 @@ def forward_kinematics(
 ) -> None:
     """End-effector pose (position mm, roll/pitch/yaw deg, rotation matrix) by forward
     kinematics, R = Rz(yaw) Ry(pitch) Rx(roll)."""
+    from seqrun.kinematics import pose_from_user_deg
+
     with user_errors():
         if deg is None and pose_name is None:
             raise UserInputError("give the joint angles with --deg Q1 ... Qn or a pose with "

@@ -3,37 +3,38 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import TYPE_CHECKING, Annotated, Optional
 
 import typer
 
-from seqrun.arm import DEFAULT_ARM
 from seqrun.cli.app import pose_app
 from seqrun.cli.common import (BitrateOption, BusKwargsOption, ChannelOption, InterfaceOption,
                                SimOption, connect, fail,
                                EXIT_INVALID, ArmOption, PosesDirOption, load_arm_file, user_errors)
+from seqrun.defaults import DEFAULT_ARM, DEFAULT_POSES_DIR
 from seqrun.errors import SequenceInvalid, UserInputError
-from seqrun.poses import (
-    DEFAULT_POSES_DIR,
-    NOTE_PREFIX,
-    PoseFile,
-    available_poses,
-    check_pose,
-    find_pose,
-    load_pose,
-)
+
+if TYPE_CHECKING:
+    from seqrun.poses import PoseFile
+
 
 def load_named_pose(name: str, poses_dir: Path) -> PoseFile:
+    from seqrun.poses import find_pose, load_pose
+
     return load_pose(find_pose(name, poses_dir))
 
 
 def format_numbers(values, decimals: int = 3) -> str:
-    return "[" + ", ".join(f"{float(v) + 0.0:.{decimals}f}" for v in values) + "]"
+    # Rounded first, then + 0.0: -0.0001 prints as 0.000, not -0.000.
+    return "[" + ", ".join(f"{round(float(v), decimals) + 0.0:.{decimals}f}"
+                           for v in values) + "]"
 
 
 @pose_app.command("list")
 def list_poses(poses_dir: PosesDirOption = DEFAULT_POSES_DIR) -> None:
     """List the pose files: name, source and description."""
+    from seqrun.poses import available_poses, load_pose
+
     with user_errors():
         poses = available_poses(poses_dir)
         if not poses:
@@ -56,6 +57,8 @@ def show_pose(
     arm_file: ArmOption = DEFAULT_ARM,
 ) -> None:
     """Show a pose and check it against the arm (exit 1 if it has problems)."""
+    from seqrun.poses import NOTE_PREFIX, check_pose
+
     with user_errors():
         pose = load_named_pose(name, poses_dir)
         arm = load_arm_file(arm_file)

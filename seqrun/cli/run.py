@@ -12,22 +12,17 @@ import signal
 import sys
 from dataclasses import replace
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import TYPE_CHECKING, Annotated, Optional
 
 import typer
-from rich.console import Console
-from rich.text import Text
 
 from seqrun.cli.app import app
 from seqrun.cli.common import (BitrateOption, BusKwargsOption, ChannelOption, InterfaceOption,
                                SimOption, fail, load_arm_file, user_errors)
-from seqrun.cli.display import LiveDisplay, PlainDisplay
-from seqrun.connection import open_connection, parse_bus_kwargs, parse_faults
-from seqrun.clock import VirtualClock
-from seqrun.executor import EXIT_INVALID, EXIT_OPERATOR_ABORT
-from seqrun.runlog import default_run_dir
-from seqrun.runner import run_sequence
-from seqrun.schema import load_sequence
+from seqrun.defaults import EXIT_INVALID, EXIT_OPERATOR_ABORT
+
+if TYPE_CHECKING:
+    from rich.console import Console
 
 
 
@@ -110,7 +105,19 @@ def run_command(
                                "(full run folder; used by CI and the tests).")] = False,
 ) -> None:
     """Run a sequence: validate, read the arm, re-validate from where it stands, move."""
-    console = Console(stderr=False)
+    # Imported here, not at the top: `seqrun --help` and the other commands stay light.
+    from rich.text import Text
+
+    from seqrun.cli.display import LiveDisplay, PlainDisplay
+    from seqrun.cli.output import keep_running_on_broken_pipe, make_console
+    from seqrun.clock import VirtualClock
+    from seqrun.connection import open_connection, parse_bus_kwargs, parse_faults
+    from seqrun.runlog import default_run_dir
+    from seqrun.runner import run_sequence
+    from seqrun.schema import load_sequence
+
+    keep_running_on_broken_pipe()  # a closed stdout never ends a run
+    console = make_console(stderr=False)
     with user_errors():
         if not 0 < speed <= 1:
             fail(f"--speed must lie in (0, 1], got {speed:g}")

@@ -19,16 +19,19 @@ import json
 from dataclasses import dataclass, field
 from enum import Enum
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from seqrun.arm import ArmDescription
 from seqrun.cli.app import app
 from seqrun.cli.common import EXIT_INVALID, EXIT_OK, fail
+from seqrun.defaults import START_POSE
 from seqrun.errors import SequenceInvalid, SourceError, UserInputError
-from seqrun.schema import LoadedSequence, load_sequence, sequence_json_schema
-from seqrun.validation import START_POSE, ValidationResult, pose_joints_deg, validate_sequence
+
+if TYPE_CHECKING:  # imported where used: `seqrun --help` stays light
+    from seqrun.arm import ArmDescription
+    from seqrun.schema import LoadedSequence
+    from seqrun.validation import ValidationResult
 
 
 
@@ -55,6 +58,8 @@ def static_check(file: Path, *, start: str | None = None,
     ``errors``; input that cannot be used at all raises :class:`UserInputError`.
     """
     from seqrun.arm import load_arm
+    from seqrun.schema import load_sequence
+    from seqrun.validation import pose_joints_deg, validate_sequence
 
     check = StaticCheck()
     try:
@@ -222,6 +227,8 @@ def schema_command(
         typer.echo(reference_markdown(), nl=False)
         return
     if kind is SchemaKind.sequence:
+        from seqrun.schema import sequence_json_schema
+
         schema = sequence_json_schema()
     elif kind is SchemaKind.arm:
         from seqrun.arm import ArmDescription as Model

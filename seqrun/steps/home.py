@@ -19,5 +19,5 @@ def run(step, ex) -> dict:
     states = ex.wait_for_states(
         modules, lambda f: bool(f & StateFlag.HOME_OK) and not f & StateFlag.FAULTS,
         HOME_TIMEOUT_S, "did not report HOME_OK after Home")
-    ex.refresh_measurement("home")
+    ex.refresh_measurement("home", states)
     return {"states": {str(m): f.describe() for m, f in states.items()}}

@@ -18,5 +18,5 @@ def run(step, ex) -> dict:
             ex.client.reset(module)
     states = ex.wait_for_states(modules, lambda f: not f & StateFlag.FAULTS,
                                 SETTLE_TIMEOUT_S, "still reports a fault after Reset")
-    ex.refresh_measurement("reset")
+    ex.refresh_measurement("reset", states)
     return {"states": {str(m): f.describe() for m, f in states.items()}}

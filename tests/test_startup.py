@@ -1,0 +1,100 @@
+"""Short commands import only what they use; stdout closed early is a quiet end.
+
+Which modules a command imports is asserted (``python -X importtime`` lists every import),
+not how long it takes: timings belong to bench/bench_startup.py.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
+
+
+def imported(*args: str) -> set[str]:
+    """Top-level packages imported by ``python -m seqrun ARGS``."""
+    proc = subprocess.run([sys.executable, "-X", "importtime", "-m", "seqrun", *args],
+                          cwd=ROOT, env=ENV, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    names = set()
+    for line in proc.stderr.splitlines():
+        if line.startswith("import time:") and "|" in line:
+            name = line.rsplit("|", 1)[1].strip()
+            names.add(name.split(".")[0])
+    assert "seqrun" in names  # the listing really is the import log
+    return names
+
+
+def test_help_imports_no_heavy_package():
+    assert not imported("--help") & {"can", "numpy", "ruckig", "pydantic", "rich", "yaml"}
+
+
+def test_sub_command_help_imports_no_bus_and_no_maths():
+    for command in ("run", "validate", "status", "fk"):
+        assert not imported(command, "--help") & {"can", "numpy", "ruckig"}, command
+
+
+def test_commands_without_a_bus_do_not_import_python_can():
+    """python-can's import pulls in asyncio, ssl and sqlite3 (can.io)."""
+    for args in (("fk", "--pose", "totem"), ("validate", "--static", "sequences/opsafe.yaml"),
+                 ("pose", "list")):
+        assert not imported(*args) & {"can", "asyncio", "ssl", "sqlite3"}, args
+
+
+def _head_one(args: list[str], cwd: Path = ROOT) -> tuple[int, str, str]:
+    """Run ``seqrun ARGS | head -1``: read one line, close the pipe, wait for the end."""
+    proc = subprocess.Popen([sys.executable, "-m", "seqrun", *args], cwd=cwd, env=ENV,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    first = proc.stdout.readline().decode()
+    proc.stdout.close()
+    _, err = proc.communicate(timeout=300)
+    return proc.returncode, first, err.decode()
+
+
+def test_a_closed_pipe_ends_a_command_quietly(tmp_path):
+    """`seqrun validate … | head -1`: exit 141 like other tools, nothing on stderr (it was
+    a silent exit 1, "invalid sequence")."""
+    (tmp_path / "sequences").mkdir()
+    shutil.copytree(ROOT / "arms", tmp_path / "arms")
+    shutil.copytree(ROOT / "poses", tmp_path / "poses")
+    steps = "".join("  - move: {joints: {j1: 500}}\n" for _ in range(1000))
+    (tmp_path / "sequences" / "big.yaml").write_text(
+        f"name: big\ndescription: two error lines per step\nsteps:\n{steps}")
+    # ~190 kB of error lines: far beyond the pipe's buffer
+    code, first, err = _head_one(["validate", "--static", "sequences/big.yaml"], tmp_path)
+    assert first.startswith("sequences/big.yaml:4:5: ")
+    assert code == 141, err
+    assert err == ""
+
+
+@pytest.mark.slow
+def test_a_closed_pipe_never_ends_a_run(tmp_path):
+    """A run goes on to its own end and exit code when its stdout goes away."""
+    folder = tmp_path / "run"
+    code, first, err = _head_one(["run", "--virtual-time", "--plain", "--log-dir", str(folder),
+                                  "sequences/opsafe.yaml", "--yes"])
+    assert first.strip()
+    assert "Traceback" not in err
+    report = json.loads((folder / "report.json").read_text())
+    assert report["status"] == "passed", report.get("message")
+    assert code == 0
+    assert all(s["status"] == "passed" for s in report["steps"])
+
+
+@pytest.mark.slow
+def test_a_closed_pipe_during_a_fault_still_halts_and_exits_3(tmp_path):
+    folder = tmp_path / "run"
+    code, _, err = _head_one(["run", "--virtual-time", "--plain", "--log-dir", str(folder),
+                              "--sim-fault", "4:tow_error@3", "sequences/opsafe.yaml", "--yes"])
+    assert "Traceback" not in err
+    report = json.loads((folder / "report.json").read_text())
+    assert report["status"] == "failed" and report["fault"]["halt_sent"] is True
+    assert code == 3
