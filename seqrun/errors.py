@@ -71,10 +71,12 @@ class CodecError(BusError, ValueError):
 class ModuleTimeoutError(BusError, TimeoutError):
     """A module did not acknowledge a request in time."""
 
-    def __init__(self, module: int, what: str, timeout: float) -> None:
+    def __init__(self, module: int, what: str, timeout: float, request: object = None) -> None:
         self.module = module
         self.what = what
         self.timeout = timeout
+        #: The request that went unanswered (for a message in the operator's units).
+        self.request = request
         super().__init__(f"module {module}: no acknowledge to {what} within {timeout * 1000:.0f} ms")
 
 

@@ -35,6 +35,7 @@ from seqrun.errors import (BusError, ModuleFaultError, ModuleTimeoutError, Plann
                            RunAborted, SeqrunError)
 from seqrun.planner import Limits, MovePlan, plan_move, plan_stop
 from seqrun.setpoints import setpoint_law
+from seqrun.usermessages import user_message
 from seqrun.powercube.codec import (BroadcastRequest, GetParam, GetParamAck, MotionExtAck,
                                     SetMotion, SetParam)
 from seqrun.powercube.protocol import ConfigFlag, ParamId, ShortState, StateFlag
@@ -675,12 +676,12 @@ class Executor:
         except Exception as exc:  # noqa: BLE001 - nothing moves yet, but be sure
             halted = self.emergency_halt()
             cause, module = _cause(exc)
-            fault = {"cause": cause, "module": module, "message": str(exc), "step": None,
-                     "halt_sent": halted}
+            fault = {"cause": cause, "module": module, "message": user_message(exc, self.arm),
+                     "step": None, "halt_sent": halted}
             self.emit("fault", **fault)
             if halted:
                 self.refresh_measurement("halt")
-            return self._finish(results, "failed", EXIT_FAULT, str(exc), fault)
+            return self._finish(results, "failed", EXIT_FAULT, fault["message"], fault)
         for step, result in zip(steps, results):
             if step.number < first_step:
                 result.status = "skipped"
@@ -727,7 +728,7 @@ class Executor:
                     status, code = "aborted", EXIT_OPERATOR_ABORT
                 else:
                     status, code = "failed", EXIT_FAULT
-                message = str(exc)
+                message = user_message(exc, self.arm)
                 fault = {"cause": cause, "module": module, "message": message,
                          "step": step.number, "halt_sent": halted}
                 result.status = "failed" if code == EXIT_FAULT else "aborted"

@@ -151,3 +151,37 @@ def test_a_fault_message_is_printed_literally():
                                          (-0.006, "-0.01"), (1.005, "1.00"), (-2.5, "-2.50")])
 def test_fixed_never_prints_minus_zero(value, text):
     assert fixed(value).strip() == text
+
+
+def test_a_fault_message_names_limits_in_user_degrees_not_module_radians(tmp_path):
+    """A module that stops answering while set_limits writes: the message used to read
+    'no acknowledge to SetExtended MIN_POS = -3.141592653589793'."""
+    path = project(tmp_path, "limits", "  - reset: {}\n  - home: {}\n"
+                                       "  - set_limits: {limits_deg: {j4: [-100, 100]}}\n")
+    first, *_ = run_with_displays(path, tmp_path / "a")
+    assert first.result.exit_code == EXIT_OK
+    started = next(e["t"] for e in _events(tmp_path / "a") if e["type"] == "step_started"
+                   and e["step"] == 3)
+    outcome, *_ = run_with_displays(path, tmp_path / "b",
+                                    faults=[f"4:missing@{started + 1e-6:.6f}"])
+    message = outcome.result.fault["message"]
+    assert outcome.result.exit_code == EXIT_FAULT
+    assert "SetExtended MIN_POS (j4) = -100.00°" in message, message
+    assert "3.14" not in message and "rad" not in message
+
+
+def test_request_descriptions_in_user_coordinates():
+    from seqrun.errors import ModuleTimeoutError
+    from seqrun.powercube.codec import SetMotion, SetParam
+    from seqrun.powercube.protocol import MotionMode, ParamId
+    from seqrun.usermessages import user_message
+
+    arm = load_arm(ROOT / "arms" / "lwa3.yaml")
+    j2 = arm.joint("j2")
+    exc = ModuleTimeoutError(j2.module, "whatever", 0.05,
+                             request=SetParam(j2.module, ParamId.MAX_POS, j2.to_module_rad(-1e-9)))
+    assert user_message(exc, arm) == (f"module {j2.module}: no acknowledge to SetExtended "
+                                      "MAX_POS (j2) = 0.00° within 50 ms")
+    exc = ModuleTimeoutError(j2.module, "x", 0.05, request=SetMotion(
+        j2.module, MotionMode.FRAMP_ACK, j2.to_module_rad(45.0)))
+    assert "SetMotion FRAMP_ACK (j2) 45.00°" in user_message(exc, arm)

@@ -338,7 +338,8 @@ class PowerCubeClient:
                         - {first.module})  # type: ignore[union-attr]
         if others:
             what += f" (modules {', '.join(map(str, others))} did not answer either)"
-        return ModuleTimeoutError(first.module, what, timeout)  # type: ignore[union-attr]
+        return ModuleTimeoutError(first.module, what, timeout,  # type: ignore[union-attr]
+                                  request=first)
 
     # ------------------------------------------------------------------ stale-ack rules
     def _taint_all(self, pending: dict[AckKey, deque[int]], timeout: float) -> None:

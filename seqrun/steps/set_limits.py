@@ -29,7 +29,14 @@ def run(step, ex) -> dict:
     acks = ex.transact([GetParam(m, p) for m, p, _ in writes], idempotent=True)
     for (module, param, value), ack in zip(writes, acks):
         if abs(float(ack.value) - value) > READBACK_TOLERANCE_RAD:
+            joint = next(j for j in ex.arm.joints if j.module == module)
+            if param in (ParamId.MIN_POS, ParamId.MAX_POS):  # user coordinates, degrees
+                read, wrote, unit = (joint.to_user_deg(float(ack.value)),
+                                     joint.to_user_deg(value), "°")
+            else:
+                read, wrote = math.degrees(float(ack.value)), math.degrees(value)
+                unit = "°/s" if param == ParamId.MAX_VEL else "°/s²"
             raise RunAborted("limits_not_written",
-                             f"module {module}: {param.name} reads back {ack.value:.6f} rad, "
-                             f"wrote {value:.6f} rad", module=module)
+                             f"module {module} ({joint.name}): {param.name} reads back "
+                             f"{read:.3f}{unit}, wrote {wrote:.3f}{unit}", module=module)
     return {"written": len(writes)}
