@@ -122,7 +122,10 @@ def junit_xml(suite: str, result: RunResult) -> str:
              f'<testsuites><testsuite name={quoteattr(suite)} tests="{len(result.steps)}" '
              f'failures="{failures}" skipped="{skipped}" time="{result.duration_s:.3f}">']
     for s in result.steps:
-        name = f"{s.number:02d} {s.kind}: {s.label}"
+        # A step without a label is described starting with its kind ("confirm: …",
+        # "move to pose …"): no second kind in front of it.
+        kind = "" if s.label.split(":")[0].split(" ")[0] == s.kind else f"{s.kind}: "
+        name = f"{s.number:02d} {kind}{s.label}"
         time = f"{s.duration_s:.3f}" if s.duration_s is not None else "0"
         lines.append(f'  <testcase classname={quoteattr(suite)} name={quoteattr(name)} '
                      f'file={quoteattr(s.location)} time="{time}">')

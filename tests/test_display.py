@@ -185,3 +185,29 @@ def test_request_descriptions_in_user_coordinates():
     exc = ModuleTimeoutError(j2.module, "x", 0.05, request=SetMotion(
         j2.module, MotionMode.FRAMP_ACK, j2.to_module_rad(45.0)))
     assert "SetMotion FRAMP_ACK (j2) 45.00°" in user_message(exc, arm)
+
+
+def test_junit_names_each_step_once(tmp_path):
+    import xml.etree.ElementTree as ET
+
+    path = project(tmp_path, "junit", "  - reset: {}\n  - confirm: Ready?\n"
+                                      "  - home: {label: Motors on}\n")
+    outcome, *_ = run_with_displays(path, tmp_path)
+    assert outcome.result.exit_code == EXIT_OK
+    suite = ET.parse(tmp_path / "run" / "junit.xml").getroot().find("testsuite")
+    names = [case.get("name") for case in suite.findall("testcase")]
+    assert names == ["01 reset all modules", "02 confirm: Ready?", "03 home: Motors on"]
+
+
+def test_no_minus_zero_in_pose_numbers_or_the_status_table():
+    from seqrun.cli.arm_commands import _table
+    from seqrun.cli.pose import format_numbers
+
+    assert format_numbers([-0.0001, -0.0004, 1.5]) == "[0.000, 0.000, 1.500]"
+    status = {"joints": [{"joint": "j1", "module": 1, "position_deg": -0.0002,
+                          "velocity_deg_s": -0.0001, "state": "HOME_OK", "fault": False}],
+              "end_effector": {"position_mm": [0.0, 0.0, 1000.0], "rpy_deg": [0.0, 0.0, 0.0]}}
+    c = console()
+    c.print(_table(status, "arm"))
+    text = c.export_text()
+    assert "-0.000" not in text and "0.000" in text

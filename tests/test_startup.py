@@ -98,3 +98,19 @@ def test_a_closed_pipe_during_a_fault_still_halts_and_exits_3(tmp_path):
     report = json.loads((folder / "report.json").read_text())
     assert report["status"] == "failed" and report["fault"]["halt_sent"] is True
     assert code == 3
+
+
+def test_piped_run_output_is_not_wrapped(tmp_path):
+    """Into a pipe, a long line stays one line (rich wrapped at 80 columns mid-sentence)."""
+    (tmp_path / "sequences").mkdir()
+    shutil.copytree(ROOT / "arms", tmp_path / "arms")
+    shutil.copytree(ROOT / "poses", tmp_path / "poses")
+    label = "A label long enough to need more than eighty columns on a terminal " * 2
+    (tmp_path / "sequences" / "long.yaml").write_text(
+        f"name: long\ndescription: a long label\nsteps:\n  - reset: {{label: {label.strip()}}}\n")
+    proc = subprocess.run([sys.executable, "-m", "seqrun", "run", "--virtual-time",
+                           "--log-dir", str(tmp_path / "run"), "sequences/long.yaml"],
+                          cwd=tmp_path, env=ENV, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert f"[1/1] {label.strip()} (" in proc.stdout
+    assert any(len(line) > 120 for line in proc.stdout.splitlines())

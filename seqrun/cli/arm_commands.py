@@ -57,12 +57,14 @@ def read_status(client, arm) -> dict:
 def _table(status: dict, title: str) -> Table:
     from rich.table import Table
 
+    from seqrun.cli.output import fixed
+
     table = Table(title=title)
     for col in ("joint", "module", "position °", "velocity °/s", "state"):
         table.add_column(col)
     for j in status["joints"]:
-        table.add_row(j["joint"], str(j["module"]), f"{j['position_deg']:.3f}",
-                      f"{j['velocity_deg_s']:.3f}", j["state"],
+        table.add_row(j["joint"], str(j["module"]), fixed(j["position_deg"], 3),
+                      fixed(j["velocity_deg_s"], 3), j["state"],
                       style="red" if j["fault"] else None)
     ee = status["end_effector"]
     table.caption = (f"end-effector {ee['position_mm']} mm, roll/pitch/yaw {ee['rpy_deg']} °")

@@ -27,15 +27,8 @@ from rich.table import Table
 from rich.text import Text
 
 from seqrun import kinematics
+from seqrun.cli.output import fixed
 from seqrun.powercube.protocol import ShortState, StateFlag
-
-
-def fixed(x: float, decimals: int = 2, width: int = 0) -> str:
-    """``x`` with ``decimals`` places; never ``-0.00``."""
-    value = round(float(x), decimals)
-    if value == 0:
-        value = 0.0
-    return f"{value:{width}.{decimals}f}"
 
 
 def halt_line(event: dict) -> str | None:

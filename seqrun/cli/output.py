@@ -74,6 +74,14 @@ def keep_running_on_broken_pipe() -> None:
         out.exit_on_break = False
 
 
+def fixed(x: float, decimals: int = 2, width: int = 0) -> str:
+    """``x`` with ``decimals`` places; never ``-0.00``."""
+    value = round(float(x), decimals)
+    if value == 0:
+        value = 0.0
+    return f"{value:{width}.{decimals}f}"
+
+
 def make_console(**kwargs: Any):
     """A rich Console on stdout; into a pipe or file it does not wrap lines."""
     from rich.console import Console
