@@ -4,7 +4,9 @@ Each command runs as ``python -m seqrun …`` (a fresh interpreter, as the ``seq
 does), ``--repeat`` times, interleaved; the table gives min and median wall time. For
 ``seqrun validate sequences/opsafe.yaml`` (dry run included) it also gives the simulated
 time the dry run reports and the ratio simulated / whole-process wall time (goal >= 50x).
-``python -c pass`` and ``python -c "import typer"`` are the floor any command pays.
+``python -c pass`` and ``python -c "import typer"`` are the floor any command pays. The CPU
+time (user + system) of each process is given too: on a loaded host it moves far less than
+the wall time.
 Goals: ``seqrun --help`` under 0.3 s.
 
 Run: ``.venv/bin/python bench/bench_startup.py [--repeat 7]``
@@ -15,6 +17,7 @@ from __future__ import annotations
 import argparse
 import os
 import re
+import resource
 import statistics
 import subprocess
 import sys
@@ -46,24 +49,30 @@ def main() -> None:
     info = machine()
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     times: dict[str, list[float]] = {name: [] for name in COMMANDS}
+    cpu: dict[str, list[float]] = {name: [] for name in COMMANDS}
     simulated: list[float] = []
     for _ in range(opts.repeat):
         for name, argv in COMMANDS.items():
+            before = resource.getrusage(resource.RUSAGE_CHILDREN)
             t0 = time.perf_counter()
             proc = subprocess.run(argv, cwd=ROOT, env=env, capture_output=True, text=True)
             times[name].append(time.perf_counter() - t0)
+            after = resource.getrusage(resource.RUSAGE_CHILDREN)
+            cpu[name].append(after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime)
             if proc.returncode != 0:
                 raise SystemExit(f"{name}: exit {proc.returncode}\n{proc.stderr}")
             match = SIMULATED.search(proc.stdout)
             if match and name == "seqrun validate opsafe":
                 simulated.append(float(match.group(1)))
     rows = {}
-    print(f"{'command':36s} {'min s':>7s} {'median s':>9s}")
+    print(f"{'command':36s} {'min s':>7s} {'median s':>9s} {'CPU median s':>13s}")
     for name, values in times.items():
         rows[name] = {"min_s": round(min(values), 3),
                       "median_s": round(statistics.median(values), 3),
+                      "cpu_median_s": round(statistics.median(cpu[name]), 3),
                       "runs_s": [round(v, 3) for v in values]}
-        print(f"{name:36s} {min(values):7.3f} {statistics.median(values):9.3f}")
+        print(f"{name:36s} {min(values):7.3f} {statistics.median(values):9.3f} "
+              f"{statistics.median(cpu[name]):13.3f}")
     result = {"machine": info, "repeat": opts.repeat, "commands": rows,
               "loadavg_at_end": [round(x, 2) for x in os.getloadavg()]}
     if simulated:
