@@ -211,3 +211,48 @@ def test_no_minus_zero_in_pose_numbers_or_the_status_table():
     c.print(_table(status, "arm"))
     text = c.export_text()
     assert "-0.000" not in text and "0.000" in text
+
+
+def test_the_live_view_renders_on_the_control_loop_thread_only(tmp_path):
+    """No display thread competes with the 100 Hz loop: every render of the live view runs
+    on the loop's thread, from the executor's idle time (issue: rich's 10 Hz refresh thread
+    took the interpreter lock from the loop)."""
+    import threading
+
+    path = project(tmp_path, "live", "  - include: startup.yaml\n"
+                                     "  - move: {joints: {j1: 20}, label: Up}\n")
+    loaded = load_sequence(path)
+    arm = load_arm(loaded.arm_path)
+    connection = open_connection(force_sim=True, clock=VirtualClock())
+    screen = Console(file=io.StringIO(), force_terminal=True, width=120)
+    renders: list[str] = []
+    threads_before = set(threading.enumerate())
+    threads_during: set = set()
+
+    class Recording(LiveDisplay):
+        INTERVAL = 0.0  # render in every idle slot with room for it
+
+        def __rich__(self):
+            renders.append(threading.current_thread().name)
+            threads_during.update(threading.enumerate())
+            return super().__rich__()
+
+    def attach(executor):
+        view = Recording(screen, executor, "live", "sim", len(loaded.steps))
+        executor.listeners.append(view)
+        view.__enter__()
+        views.append(view)
+
+    views: list = []
+    try:
+        outcome = run_sequence(loaded, arm, connection, log_dir=None,
+                               confirm=lambda prompt: True, on_executor=attach)
+    finally:
+        views[0].__exit__(None, None, None)
+        connection.close()
+    assert outcome.result.exit_code == EXIT_OK
+    assert len(renders) >= 5  # start, idle-time renders during the run, final
+    assert set(renders) == {threading.main_thread().name}
+    new_threads = {t for t in threads_during - threads_before
+                   if not t.name.startswith("seqrun")}  # the simulator's and watchdog's own
+    assert not new_threads, new_threads
