@@ -94,6 +94,7 @@ def test_step_mode_shows_every_question_in_turn(tmp_path):
             question = next(line for line in screen.splitlines() if f"Run step {n}/9:" in line)
             assert question.rstrip().endswith("[y/N]"), screen
             assert "preflight" not in screen
+            assert "??" not in question
             pane.answer("y")
             if n == 4:  # the confirm step asks its own question as well
                 pane.wait_for("Op-safe? [y/N]")

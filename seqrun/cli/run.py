@@ -184,8 +184,9 @@ def run_command(
     def before_step(s) -> bool:
         if not step:
             return True
+        mark = "" if s.title.endswith("?") else "?"
         return _ask_shown(console, displays, f"Run step {s.number}/{len(loaded.steps)}: "
-                          f"{s.title}?", False,
+                          f"{s.title}{mark}", False,
                           context=f"step {s.number}/{len(loaded.steps)}: {s.title} (asking)")
 
     interrupts = 0
