@@ -168,7 +168,9 @@ class Endpoint:
             return len(self._inbox)
 
     def close(self) -> None:
-        """Detach from the wire; frames not yet on it are dropped. Safe to call twice."""
+        """Detach from the wire: nothing more is received or accepted, but the frames
+        already accepted still go out, in order (a closing client's last Halt must reach
+        the modules). Safe to call twice."""
         self.network._detach(self)
 
 
@@ -237,9 +239,9 @@ class SimNetwork:
             endpoint.closed = True
             self._endpoints.remove(endpoint)
             self._nodes.remove(endpoint._node)
-            endpoint._node.queue.clear()
-            if endpoint._node in self._active:
-                self._active.remove(endpoint._node)
+            # Its queue stays in the competition for the wire: every frame accepted is
+            # delivered (at the time it would have been, whoever advances the wire next).
+            endpoint._inbox.clear()
             self._cond.notify_all()
 
     # -- timing -------------------------------------------------------------------------------
