@@ -20,6 +20,7 @@ from seqrun.clock import Clock, RealClock
 from seqrun.errors import UserInputError
 from seqrun.sim.bus import SimBus
 from seqrun.sim.faults import Fault, parse_fault_spec
+from seqrun.sim.options import SWITCHES as SIM_SWITCHES
 
 #: The interface name of the simulator (the python-can plugin).
 SIM_INTERFACE = "seqrun-sim"
@@ -75,6 +76,8 @@ def resolve_config(interface: str | None, channel: str | None, bitrate: int | No
         return dict(can.util.load_config(config=given))
     except can.CanInterfaceNotImplementedError as exc:
         raise UserInputError(f"unknown CAN interface: {exc}") from None
+    except (ValueError, TypeError) as exc:  # e.g. port=abc: "Port config must be a number!"
+        raise UserInputError(f"bad CAN configuration: {exc}") from None
 
 
 def _probe_tcp(host: str, port: int, timeout: float = 2.0) -> None:
@@ -96,13 +99,23 @@ def open_connection(*, interface: str | None = None, channel: str | None = None,
     """Open the bus the operator asked for (see the module docstring)."""
     config = {} if force_sim else resolve_config(interface, channel, bitrate, bus_kwargs)
     if force_sim or not config.get("interface") or config["interface"] == SIM_INTERFACE:
-        if force_sim and (interface or channel or bus_kwargs):
-            raise UserInputError("--sim cannot be combined with -i/-c/--bus-kwargs")
+        # Simulator switches (home_ok_at_power_on=true, ...) are the only --bus-kwargs
+        # the built-in simulator takes.
+        switches = {k: v for k, v in (bus_kwargs or {}).items() if k in SIM_SWITCHES}
+        if force_sim and (interface or channel):
+            raise UserInputError("--sim cannot be combined with -i/-c")
+        if others := sorted(set(bus_kwargs or {}) - set(switches)):
+            raise UserInputError(f"--bus-kwargs {', '.join(others)}: the built-in simulator "
+                                 "takes only its switches (e.g. home_ok_at_power_on=true); "
+                                 "name an interface with -i")
         clock = clock or RealClock()
         name = str(config.get("channel") or f"seqrun-{next(_sim_channels)}")
-        bus = SimBus(channel=name, clock=clock, faults=list(faults),
-                     bitrate=bitrate or config.get("bitrate") or default_bitrate,
-                     positions=sim_positions)
+        try:
+            bus = SimBus(channel=name, clock=clock, faults=list(faults),
+                         bitrate=bitrate or config.get("bitrate") or default_bitrate,
+                         positions=sim_positions, **switches)
+        except can.CanInitializationError as exc:
+            raise UserInputError(f"--bus-kwargs: {exc}") from None
         kind = "virtual time" if clock.is_virtual else "real time"
         return Connection(bus, clock, True,
                           f"SIMULATOR ({kind}): simulated LWA 3 on '{name}', "
@@ -117,7 +130,12 @@ def open_connection(*, interface: str | None = None, channel: str | None = None,
                            ("channel", "can0"), ("tcp_tune", True)):
             if config.get(key) is None:
                 config[key] = value
-        _probe_tcp(str(config["host"]), int(config["port"]))
+        try:
+            port = int(config["port"])
+        except (TypeError, ValueError):
+            raise UserInputError(f"socketcand port must be a number, got "
+                                 f"{config['port']!r}") from None
+        _probe_tcp(str(config["host"]), port)
     config.setdefault("bitrate", default_bitrate)
     try:
         bus = can.Bus(**config)

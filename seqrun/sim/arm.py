@@ -5,7 +5,9 @@ with the shared codec (:mod:`seqrun.powercube.codec`), let the addressed module 
 module, for 0x100) act on it, and return the acknowledges, each ready to be sent
 ``module_latency`` after the request was received. Frames that are not valid PowerCube
 requests — other ids, bad lengths, unknown commands, other modules' acks — are ignored,
-as a real module ignores them.
+as a real module ignores them. A GetExtended ``[0x0A, par]`` sent on the SET identifier
+0x0E0+m (the KTH driver looks for module 1 that way at every start) is answered like one
+on the GET identifier, on 0x0A0+m, as real modules do.
 
 Faults (:mod:`seqrun.sim.faults`) are applied when the arm's time passes their ``at``
 (seconds after the arm was created): the module is first simulated up to that instant,
@@ -29,12 +31,13 @@ from seqrun.powercube.codec import (
     decode_request,
     encode,
 )
-from seqrun.powercube.protocol import StateFlag
+from seqrun.powercube.protocol import GET_BASE, SET_BASE, StateFlag
 from seqrun.sim.faults import Fault, parse_faults
 from seqrun.sim.module import ModuleOptions, SimModule
 
 #: Seconds between the end of a request frame and its acknowledge being ready to send [I].
 DEFAULT_MODULE_LATENCY = 100e-6
+_GET_EXTENDED = 0x0A
 
 
 @dataclass(frozen=True)
@@ -178,6 +181,8 @@ class SimArm:
         """
         with self._lock:
             t = self._now(t)
+            if SET_BASE <= can_id < SET_BASE + 0x20 and data[:1] == bytes([_GET_EXTENDED]):
+                can_id = GET_BASE + (can_id - SET_BASE)  # a GetExtended on the SET id
             try:
                 request = decode_request(can_id, bytes(data))
             except CodecError:
