@@ -97,6 +97,7 @@ def open_connection(*, interface: str | None = None, channel: str | None = None,
                     sim_positions: Mapping[int, float] | Sequence[float] | None = None,
                     default_bitrate: int = 1_000_000) -> Connection:
     """Open the bus the operator asked for (see the module docstring)."""
+    response_timeout_s(None)  # a bad $SEQRUN_RESPONSE_TIMEOUT_MS: one line, before the bus
     config = {} if force_sim else resolve_config(interface, channel, bitrate, bus_kwargs)
     if force_sim or not config.get("interface") or config["interface"] == SIM_INTERFACE:
         # Simulator switches (home_ok_at_power_on=true, ...) are the only --bus-kwargs
@@ -146,3 +147,33 @@ def open_connection(*, interface: str | None = None, channel: str | None = None,
     desc = (f"CAN interface '{config['interface']}' channel '{config.get('channel')}' "
             f"at {config.get('bitrate')} bit/s")
     return Connection(bus, clock or RealClock(), False, desc)
+
+
+#: Environment variable that overrides the arm file's response timeout, in milliseconds.
+RESPONSE_TIMEOUT_ENV = "SEQRUN_RESPONSE_TIMEOUT_MS"
+
+
+def response_timeout_s(arm: Any, override_ms: float | None = None) -> float:
+    """Seconds to wait for each module's answer: ``override_ms`` (a command's
+    ``--response-timeout-ms``), else ``$SEQRUN_RESPONSE_TIMEOUT_MS``, else the arm file's
+    ``can.response_timeout_s``. A shared simulator on a loaded machine may need more than
+    the real arm's 50 ms. (``arm=None`` only checks the overrides; returns 0 if none.)
+
+    :raises UserInputError: a value that is not a positive number of milliseconds.
+    """
+    import os
+
+    source, value = "--response-timeout-ms", override_ms
+    if value is None and os.environ.get(RESPONSE_TIMEOUT_ENV, "").strip():
+        source, value = RESPONSE_TIMEOUT_ENV, os.environ[RESPONSE_TIMEOUT_ENV]
+    if value is None:
+        return float(arm.can.response_timeout_s) if arm is not None else 0.0
+    try:
+        ms = float(value)
+    except ValueError:
+        ms = float("nan")
+    if not 0 < ms <= 60_000:
+        raise UserInputError(f"{source} {value!r}: give milliseconds, more than 0 and at "
+                             "most 60000")
+    return ms / 1000.0
+

@@ -12,7 +12,7 @@ from typing import Callable, Iterable
 
 from seqrun import __version__
 from seqrun.arm import ArmDescription
-from seqrun.connection import Connection
+from seqrun.connection import Connection, response_timeout_s
 from seqrun.executor import Executor, Listener, RunResult
 from seqrun.powercube.client import PowerCubeClient
 from seqrun.runlog import RunLog
@@ -35,7 +35,9 @@ def build_executor(loaded: LoadedSequence, arm: ArmDescription, connection: Conn
                    listeners: Iterable[Listener] = (), dry_run: bool = False
                    ) -> tuple[Executor, PowerCubeClient]:
     client = PowerCubeClient(connection.bus, connection.clock,
-                             response_timeout=arm.can.response_timeout_s)
+                             # (a dry run keeps the arm file's: deterministic results)
+                             response_timeout=(arm.can.response_timeout_s if dry_run
+                                               else response_timeout_s(arm)))
     executor = Executor(client, arm, connection.clock, poses_dir=loaded.poses_dir, speed=speed,
                         command_mode=command_mode, cycle_hz=cycle_hz, confirm=confirm,
                         before_step=before_step, listeners=list(listeners), dry_run=dry_run)
