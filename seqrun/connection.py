@@ -20,7 +20,6 @@ from seqrun.clock import Clock, RealClock
 from seqrun.errors import UserInputError
 from seqrun.sim.bus import SimBus
 from seqrun.sim.faults import Fault, parse_fault_spec
-from seqrun.sim.options import SWITCHES as SIM_SWITCHES
 
 #: The interface name of the simulator (the python-can plugin).
 SIM_INTERFACE = "seqrun-sim"
@@ -102,6 +101,8 @@ def open_connection(*, interface: str | None = None, channel: str | None = None,
     if force_sim or not config.get("interface") or config["interface"] == SIM_INTERFACE:
         # Simulator switches (home_ok_at_power_on=true, ...) are the only --bus-kwargs
         # the built-in simulator takes.
+        from seqrun.sim.options import SWITCHES as SIM_SWITCHES
+
         switches = {k: v for k, v in (bus_kwargs or {}).items() if k in SIM_SWITCHES}
         if force_sim and (interface or channel):
             raise UserInputError("--sim cannot be combined with -i/-c")

@@ -154,3 +154,25 @@ def test_a_client_that_sends_and_hangs_up_at_once_still_gets_its_frames_out(serv
                             f"{states}")
     finally:
         driver.join()
+
+
+@pytest.mark.slow
+def test_a_client_that_reads_slowly_keeps_its_session(server):
+    """A watcher that does not read for a while (its socket buffers fill up) is served
+    late, never cut off: it then gets the answers to its next questions. (The server used
+    to give up on a write after 0.2 s and close the session; a python-can client does not
+    notice a closed session, and each of its later requests timed out.)"""
+    with can.Bus(interface="socketcand", host="127.0.0.1", port=server.port,
+                 channel="can0", ignore_config=True) as sleeper:
+        load(server, 25.0).join()  # 25 s of traffic this client does not read
+        while sleeper.recv(0) is not None:
+            pass
+        can_id, data = encode(GetParam(6, ParamId.DEF_CUBE_VERSION))
+        sleeper.send(can.Message(arbitration_id=can_id, data=data, is_extended_id=False))
+        deadline = time.monotonic() + 5
+        while time.monotonic() < deadline:
+            msg = sleeper.recv(0.5)
+            if msg is not None and msg.arbitration_id == 0x0A6:
+                break
+        else:
+            pytest.fail("no answer: the server closed the session of a slow reader")

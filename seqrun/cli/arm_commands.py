@@ -134,10 +134,12 @@ def status_command(
             _watch_json(client, arm, period, count)
             return
         status = None
-        with Live(console=console, refresh_per_second=10) as live:
+        # No auto-refresh thread: drawing the table between reads, never during one, keeps
+        # it from holding the interpreter while acknowledges wait to be read.
+        with Live(console=console, auto_refresh=False) as live:
             for _ in _refreshes(period, count):
                 status = read_status(client, arm, status, tolerate_loss=True)
-                live.update(_table(status, arm.name))
+                live.update(_table(status, arm.name), refresh=True)
     except KeyboardInterrupt:
         pass
     except BusError as exc:
