@@ -432,11 +432,25 @@ class PowerCubeClient:
 
     def _next_ack(self, until: float) -> tuple[can.Message, Ack] | None:
         """Read until the next decodable acknowledge, or None once ``until`` has come.
-        Refreshes the watchdog on the way."""
+        Refreshes the watchdog on the way.
+
+        At the deadline, what has already arrived is still read (without waiting): after a
+        host stall the acknowledges are queued although the deadline has passed, and they
+        were on the wire in time."""
+        late_reads = 0
         while True:
             now = self.clock.now()
             if now >= until:
-                return None
+                if late_reads >= self.MAX_FLUSH_FRAMES:
+                    return None  # a flood of other frames: give up as before
+                late_reads += 1
+                msg = self._recv_now()
+                if msg is None:
+                    return None
+                ack = self._decode(msg)
+                if ack is not None:
+                    return msg, ack
+                continue
             if self._service_watchdog(now):
                 continue
             wake = until if self._watchdog_due is None else min(until, self._watchdog_due)
