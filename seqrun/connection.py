@@ -10,6 +10,7 @@ and the caller prints a banner saying so.
 from __future__ import annotations
 
 import itertools
+import os
 import socket
 from dataclasses import dataclass, field
 from typing import Any, Iterable, Mapping, Sequence
@@ -20,6 +21,7 @@ from seqrun.clock import Clock, RealClock
 from seqrun.errors import UserInputError
 from seqrun.sim.bus import SimBus
 from seqrun.sim.faults import Fault, parse_fault_spec
+from seqrun.sim.module import SIM_OPTIONS_ENV, ModuleOptions, parse_module_options
 
 #: The interface name of the simulator (the python-can plugin).
 SIM_INTERFACE = "seqrun-sim"
@@ -50,6 +52,18 @@ def parse_bus_kwargs(items: Sequence[str]) -> dict[str, Any]:
             raise UserInputError(f"--bus-kwargs expects KEY=VALUE, got '{item}'")
         out[key.strip()] = can.util.cast_from_string(value.strip())
     return out
+
+
+def sim_options_from_env(environ: Mapping[str, str] | None = None) -> ModuleOptions | None:
+    """Simulator module options from ``SEQRUN_SIM_OPTIONS`` (None when unset), e.g.
+    ``SEQRUN_SIM_OPTIONS=framp_from_standstill seqrun run ...``."""
+    spec = (os.environ if environ is None else environ).get(SIM_OPTIONS_ENV, "").strip()
+    if not spec:
+        return None
+    try:
+        return parse_module_options(spec)
+    except ValueError as exc:
+        raise UserInputError(f"{SIM_OPTIONS_ENV}: {exc}") from None
 
 
 def parse_faults(specs: Iterable[str]) -> list[Fault]:
@@ -100,13 +114,15 @@ def open_connection(*, interface: str | None = None, channel: str | None = None,
             raise UserInputError("--sim cannot be combined with -i/-c/--bus-kwargs")
         clock = clock or RealClock()
         name = str(config.get("channel") or f"seqrun-{next(_sim_channels)}")
+        options = sim_options_from_env()
         bus = SimBus(channel=name, clock=clock, faults=list(faults),
                      bitrate=bitrate or config.get("bitrate") or default_bitrate,
-                     positions=sim_positions)
+                     positions=sim_positions, options=options)
         kind = "virtual time" if clock.is_virtual else "real time"
+        changed = "" if options is None else f", options {os.environ[SIM_OPTIONS_ENV].strip()}"
         return Connection(bus, clock, True,
                           f"SIMULATOR ({kind}): simulated LWA 3 on '{name}', "
-                          f"{bus.bitrate} bit/s - no hardware is moved", list(faults))
+                          f"{bus.bitrate} bit/s{changed} - no hardware is moved", list(faults))
     if faults:
         raise UserInputError("--sim-fault only applies to the simulator (no -i/-c, or --sim)")
     if config["interface"] == "socketcand":  # python-can's config gives channel=None

@@ -48,9 +48,13 @@ def serve(
         fail(f"--bitrate {bitrate}: must be positive")
     clock = RealClock()
     # No spinning: TCP adds more latency than a late wake-up, and clients may be many.
+    from seqrun.connection import sim_options_from_env
+    from seqrun.errors import UserInputError
+
     try:
-        arm = SimArm(clock, faults=faults)
-    except ValueError as exc:  # a fault for a module the arm does not have
+        arm = SimArm(clock, faults=faults, options=sim_options_from_env())
+    # a fault for a module the arm does not have; a bad SEQRUN_SIM_OPTIONS
+    except (ValueError, UserInputError) as exc:
         fail(str(exc))
     network = SimNetwork(clock, arm, bitrate, spin_window=0.0)
     try:

@@ -57,7 +57,7 @@ from __future__ import annotations
 import math
 import struct
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields, replace
 
 from seqrun.clock import Clock
 from seqrun.powercube.codec import (
@@ -138,6 +138,52 @@ class ModuleOptions:
     step_buffering: bool = True
     #: Config DISABLE_ACK suppresses acknowledges.
     honour_disable_ack: bool = True
+    #: A module drops (ignores, does not answer) an addressed request that arrives while
+    #: it is still busy with the previous one, i.e. before its acknowledge of that one has
+    #: been sent on the wire. Off: requests queue up. No driver sends a second request
+    #: before the answer, so real firmware was never seen doing either; on, it catches a
+    #: host that does. Broadcasts (Halt, watchdog, ...) are always taken.
+    drop_request_while_busy: bool = False
+    #: FRAMP does not blend: every FRAMP re-plans its trapezoid from standstill (v = 0) at
+    #: the current position instead of from the current velocity. No published driver
+    #: streams FRAMP, so real firmware behaviour is unconfirmed [I].
+    framp_from_standstill: bool = False
+
+
+#: Environment variable the command line reads simulator options from, e.g.
+#: ``SEQRUN_SIM_OPTIONS="framp_from_standstill drop_request_while_busy"``.
+SIM_OPTIONS_ENV = "SEQRUN_SIM_OPTIONS"
+
+
+def parse_module_options(spec: str, base: ModuleOptions | None = None) -> ModuleOptions:
+    """``"framp_from_standstill, watchdog_timeout=0.1, ack_refused_motion=false"`` ->
+    :class:`ModuleOptions` (a bare name means true; items separated by commas or spaces).
+
+    :raises ValueError: an unknown option or a value of the wrong kind (one line).
+    """
+    base = base or ModuleOptions()
+    known = {f.name: f for f in fields(ModuleOptions)}
+    changes: dict[str, object] = {}
+    for item in spec.replace(",", " ").split():
+        name, sep, text = item.partition("=")
+        name = name.strip()
+        if name not in known:
+            raise ValueError(f"unknown simulator option '{name}' (options: "
+                             f"{', '.join(sorted(known))})")
+        current = getattr(base, name)
+        try:
+            if isinstance(current, bool):
+                value: object = True if not sep else {"true": True, "1": True, "yes": True,
+                                                      "false": False, "0": False,
+                                                      "no": False}[text.strip().lower()]
+            elif isinstance(current, float):
+                value = float(text)
+            else:
+                raise ValueError("cannot be set from text")
+        except (KeyError, ValueError):
+            raise ValueError(f"simulator option '{item}': bad value") from None
+        changes[name] = value
+    return replace(base, **changes)
 
 
 def default_parameters(module_id: int) -> dict[ParamId, float | int]:
@@ -876,6 +922,8 @@ class SimModule:
         if motion.mode in _RAMP_MODES:
             target = min(max(motion.value, lo), hi)
             self._last_target = target
+            if self.options.framp_from_standstill:
+                velocity = 0.0
             pieces = plan_ramp(position, velocity, target, motion.vmax, motion.amax)
             self._start(_build_profile("ramp", self._t, position, velocity, pieces, target))
         else:
