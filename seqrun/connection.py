@@ -10,8 +10,10 @@ and the caller prints a banner saying so.
 from __future__ import annotations
 
 import itertools
+import logging
 import os
 import socket
+import sys
 from dataclasses import dataclass, field
 from typing import Any, Iterable, Mapping, Sequence
 
@@ -40,7 +42,10 @@ class Connection:
     faults: list[Fault] = field(default_factory=list)
 
     def close(self) -> None:
-        self.bus.shutdown()
+        try:
+            self.bus.shutdown()
+        except Exception as exc:  # noqa: BLE001 - a dead connection cannot be closed cleanly
+            logging.getLogger(__name__).debug("closing the bus failed: %r", exc)
 
 
 def parse_bus_kwargs(items: Sequence[str]) -> dict[str, Any]:
@@ -91,6 +96,33 @@ def resolve_config(interface: str | None, channel: str | None, bitrate: int | No
         raise UserInputError(f"unknown CAN interface: {exc}") from None
 
 
+class _OneLineHandler(logging.Handler):
+    """python-can logs some failures with a whole traceback (its socketcand client on a
+    lost connection); the operator gets the first line, once, and the run's own fault
+    line says what it means."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.WARNING)
+        self._seen: set[str] = set()
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            text = record.getMessage().split("Traceback (most recent call last)")[0]
+            line = (text.strip().splitlines() or [""])[0].strip()
+            if line and line not in self._seen:
+                self._seen.add(line)
+                sys.stderr.write(f"python-can: {line}\n")
+        except Exception:  # noqa: BLE001 - logging must never break a run
+            pass
+
+
+def _one_line_library_logs() -> None:
+    logger = logging.getLogger("can")
+    if not any(isinstance(h, _OneLineHandler) for h in logger.handlers):
+        logger.addHandler(_OneLineHandler())
+        logger.propagate = False
+
+
 def _probe_tcp(host: str, port: int, timeout: float = 2.0) -> None:
     """python-can's socketcand client retries a refused connection for 10 s, logging a
     warning each time; one probe first turns "nobody there" into one clear line."""
@@ -135,6 +167,7 @@ def open_connection(*, interface: str | None = None, channel: str | None = None,
                 config[key] = value
         _probe_tcp(str(config["host"]), int(config["port"]))
     config.setdefault("bitrate", default_bitrate)
+    _one_line_library_logs()
     try:
         bus = can.Bus(**config)
     # TypeError: --bus-kwargs the interface does not take

@@ -58,9 +58,9 @@ class HaltConfirmation:
         missing = ", ".join(f"{m} ({names[m]})" if m in names else str(m)
                             for m in self.modules_unconfirmed)
         if not self.sent:
-            text = f"Halt could NOT be sent; modules not halted: {missing}"
-        else:
-            text = f"Halt sent but NOT confirmed by module(s) {missing}"
+            return (f"Halt could NOT be sent ({self.error}): the modules may still be "
+                    "moving; use the emergency stop")
+        text = f"Halt sent but NOT confirmed by module(s) {missing}"
         return text + (f" ({self.error})" if self.error else "")
 
 

@@ -164,6 +164,12 @@ class PowerCubeClient:
     #: One request in flight per module (see :meth:`_send_ready`). False restores the
     #: old fully pipelined sending, for benchmarks and regression tests only.
     ONE_REQUEST_PER_MODULE = True
+    #: In an exchange that inspects its acknowledges (``on_ack``: a move cycle), at most
+    #: this many requests wait for their answers at a time. A few keep the wire busy
+    #: (request, ~100 µs module latency, answer); more would only fill the adapter's
+    #: transmit queue, where the Halt that an inspected acknowledge calls for would queue
+    #: behind them. Other exchanges (reads, scans) send everything at once.
+    MAX_IN_FLIGHT = 3
 
     def __init__(self, bus: can.BusABC, clock: Clock, *,
                  response_timeout: float = RESPONSE_TIMEOUT,
@@ -297,11 +303,12 @@ class PowerCubeClient:
             pending: dict[AckKey, deque[int]] = {}
             deadlines: dict[int, float] = {}
             held = deque(range(len(frames)))
+            window = self.MAX_IN_FLIGHT if on_ack is not None else len(frames)
             busy: dict[int, int] = {}  # module -> index of its unanswered request
             try:
                 while True:
                     self._send_ready(held, busy, requests, frames, keys, pending, deadlines,
-                                     timeout)
+                                     timeout, window)
                     if not held:
                         self._collect(pending, deadlines, results, raise_on_timeout,
                                       requests, on_ack, busy)
@@ -329,7 +336,7 @@ class PowerCubeClient:
     def _send_ready(self, held: deque[int], busy: dict[int, int],
                     requests: Sequence[Request], frames: list[tuple[int, bytes]],
                     keys: list[AckKey | None], pending: dict[AckKey, deque[int]],
-                    deadlines: dict[int, float], timeout: float) -> None:
+                    deadlines: dict[int, float], timeout: float, window: int) -> None:
         """Send every held request whose module has no unanswered request (one request in
         flight per module, as every published PowerCube driver does; a module may drop a
         request that arrives before it has answered the previous one). Requests to one
@@ -340,10 +347,11 @@ class PowerCubeClient:
         blocked = set(busy)
         barrier = False
         still: deque[int] = deque()
+        in_flight = len(deadlines)
         for index in held:
             module = getattr(requests[index], "module", None)  # None: a broadcast
             if barrier or (module in blocked and self.ONE_REQUEST_PER_MODULE) or (
-                    module is None and still):
+                    module is None and still) or in_flight >= window:
                 still.append(index)
                 if module is None:
                     barrier = True
@@ -357,6 +365,7 @@ class PowerCubeClient:
                 deadlines[index] = self.clock.now() + timeout
                 busy[module] = index  # type: ignore[index]
                 blocked.add(module)
+                in_flight += 1
         held.clear()
         held.extend(still)
 
@@ -767,7 +776,10 @@ _HALT_FRAME = encode(BroadcastRequest(CommandId.HALT, 0))
 
 
 def _what(exc: BaseException) -> str:
-    text = str(exc)
+    """One line naming the exception (python-can's socketcand client puts a whole
+    traceback into its CanError message: only the part before it is kept)."""
+    text = str(exc).split("Traceback (most recent call last)")[0].strip()
+    text = text.splitlines()[0].strip() if text else ""
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
