@@ -101,6 +101,9 @@ class RunResult:
     not_verified: list[str] = field(default_factory=list)
     min_heights_mm: dict[str, float] = field(default_factory=dict)
     extra: dict[str, Any] = field(default_factory=dict)
+    #: Modules that reported a fault (ERROR, HALTED, ...) when the run started, before
+    #: seqrun sent anything but reads: ``[{"module", "joint", "flags"}]``.
+    latched_at_start: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def duration_s(self) -> float:
@@ -128,7 +131,8 @@ class Executor:
                  command_mode: str | None = None, cycle_hz: float | None = None,
                  confirm: Callable[[str], bool] | None = None,
                  before_step: Callable[[Any], bool] | None = None,
-                 listeners: Iterable[Listener] = (), dry_run: bool = False) -> None:
+                 listeners: Iterable[Listener] = (), dry_run: bool = False,
+                 confirm_clear_latched: Callable[[str], bool] | None = None) -> None:
         if not 0 < speed <= 1:
             raise ValueError("speed must lie in (0, 1]")
         self.client = client
@@ -140,6 +144,12 @@ class Executor:
         self.cycle = 1.0 / (cycle_hz or arm.control.cycle_hz)
         self.confirm = confirm
         self.before_step = before_step
+        #: Asked before a Reset clears a fault the modules had latched before the run
+        #: (real hardware: someone may have pressed the emergency stop for a reason).
+        #: None: not asked (simulator, dry run); the fault is still reported.
+        self.confirm_clear_latched = confirm_clear_latched
+        self.latched_at_start: list[dict[str, Any]] = []
+        self._latched_cleared_ok = False
         self.listeners: list[Listener] = list(listeners)
         self.dry_run = dry_run
         self.chain = kinematics.Chain.from_arm(arm)
@@ -610,6 +620,7 @@ class Executor:
             and abs(float(hi.value) - j.to_module_rad(j.limits_deg[1])) < 1e-5
             for j, lo, hi in zip(self.arm.joints, limits[0::2], limits[1::2]))
         ready = all(f & StateFlag.HOME_OK and not f & StateFlag.FAULTS for f in states.values())
+        self._record_latched(states)
         started = ready and written
         start_deg = {j.name: float(v) for j, v in zip(self.arm.joints, m.user_deg)}
         result = validate_sequence(replace(loaded, steps=tuple(loaded.steps[first_step - 1:])),
@@ -629,6 +640,48 @@ class Executor:
                   states={str(k): v.describe() for k, v in states.items()},
                   errors=[str(e) for e in result.errors], notes=[str(n) for n in result.notes])
         return result
+
+    def _record_latched(self, states: dict[int, StateFlag]) -> None:
+        """Faults the modules report before the run sent anything but reads: told on the
+        terminal (event ``latched_fault``) and in the report, never cleared silently."""
+        names = dict(zip(self.modules, self.arm.joint_names))
+        self.latched_at_start = [
+            {"module": m, "joint": names.get(m, "?"),
+             "flags": StateFlag(f & StateFlag.FAULTS).describe(),
+             "state": StateFlag(f).describe()}
+            for m, f in sorted(states.items()) if f & StateFlag.FAULTS]
+        if self.latched_at_start:
+            self.emit("latched_fault", modules=self.latched_at_start,
+                      message=self.latched_message())
+
+    def latched_message(self) -> str:
+        which = "; ".join(f"module {e['module']} ({e['joint']}): {e['flags']}"
+                          for e in self.latched_at_start)
+        return (f"fault latched before this run (emergency stop pressed, or a previous "
+                f"run halted?): {which}")
+
+    def confirm_clearing_latched(self, modules: list[int] | None) -> None:
+        """Called by a Reset step before it clears faults: on real hardware a fault that
+        was latched before the run is cleared only when the operator says so (also with
+        ``--yes``); declining, or no answer, ends the run as an operator abort."""
+        if not self.latched_at_start or self._latched_cleared_ok:
+            return
+        affected = [e for e in self.latched_at_start
+                    if modules is None or e["module"] in modules]
+        if not affected:
+            return
+        if self.confirm_clear_latched is not None:
+            question = (self.latched_message() + ". This Reset clears it. Has the cause "
+                        "been checked, and may it be cleared?")
+            if not self.ask_operator(self.confirm_clear_latched, question):
+                raise OperatorAbort("operator did not clear the fault latched before the "
+                                    "run; nothing was reset")
+            self.emit("latched_fault_cleared", modules=[e["module"] for e in affected],
+                      confirmed_by="operator")
+        else:
+            self.emit("latched_fault_cleared", modules=[e["module"] for e in affected],
+                      confirmed_by="not asked (simulator)")
+        self._latched_cleared_ok = True
 
     def _enable_watchdog(self) -> None:
         """Arm the modules' watchdogs (read-modify-write of Config) and keep them fed."""
@@ -777,6 +830,7 @@ class Executor:
                         list(dict.fromkeys(self.not_verified)),
                         {k: round(v, 1) for k, v in self.min_heights_mm.items()})
         run.extra = extra
+        run.latched_at_start = list(self.latched_at_start)
         self.emit("run_finished", status=status, exit_code=code, message=message,
                   duration_s=_round(run.duration_s),
                   planned_duration_s=_round(run.planned_duration_s), **extra)
