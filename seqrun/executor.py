@@ -497,7 +497,8 @@ class Executor:
                 name = self.arm.joints[worst].name
                 raise RunAborted("following_error",
                                  f"{name} (module {self.modules[worst]}) does not follow its plan: "
-                                 f"{error[worst]:.2f}° from the planned position (limit {bound}°)",
+                                 f"{error[worst]:.2f}° from the planned position (limit {bound}°)"
+                                 + self._lag_diagnosis(plan, planned_deg, measured, moving),
                                  module=self.modules[worst])
             history.append((m.t, measured.copy()))
             while len(history) > 2 and m.t - history[1][0] >= self.PEAK_WINDOW_S:
@@ -521,6 +522,37 @@ class Executor:
             # Next cycle slot; slots missed while waiting on the bus are skipped, not
             # made up in a burst.
             k = max(k + 1, math.ceil((self.clock.now() - t_start) / self.cycle))
+
+    #: Below this share of its planned travel a lagging joint counts as hardly moving.
+    SLOW_SHARE = 0.5
+    #: Travel (deg) below which a joint counts as not moving at all.
+    STILL_DEG = 0.02
+
+    def _lag_diagnosis(self, plan: MovePlan, planned_deg: np.ndarray, measured: np.ndarray,
+                       moving: list[int]) -> str:
+        """The likely cause of a following error, for the operator: every moving joint
+        travelling the right way at a small share of its plan points at modules whose FRAMP
+        does not blend (each FRAMP restarts from standstill), one joint not moving at all
+        at a stuck or blocked joint."""
+        start = np.degrees(plan.start)
+        direction = np.sign(np.degrees(plan.target) - start)
+        planned = (planned_deg - start) * direction
+        done = (measured - start) * direction
+        shares = {i: done[i] / planned[i] for i in moving if planned[i] > self.STILL_DEG}
+        if not shares:
+            return ""
+        text = ", ".join(f"{self.arm.joints[i].name} {100 * r:.0f} %" for i, r in shares.items())
+        if (self.command_mode == "ramp" and len(shares) == len(moving)
+                and all(done[i] > self.STILL_DEG and r < self.SLOW_SHARE
+                        for i, r in shares.items())):
+            return (f"; the module does not seem to blend FRAMP commands: every moving joint "
+                    f"travels the right way at a small share of its plan ({text} of the "
+                    f"planned travel), as if each FRAMP started from standstill (see "
+                    f"docs/safety.md, 'FRAMP blending')")
+        still = [self.arm.joints[i].name for i in shares if abs(done[i]) <= self.STILL_DEG]
+        if still:
+            return f"; {', '.join(still)} did not move at all (stuck, blocked or not enabled?)"
+        return ""
 
     def _controlled_stop(self, plan: MovePlan, t: float, moving: list[int]) -> None:
         """ruckig to zero velocity from the plan's current state, streamed, then hold."""
