@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
 from typer.testing import CliRunner
 
 import seqrun.cli  # noqa: F401  (registers the commands)
@@ -88,3 +89,53 @@ def test_the_operator_is_not_asked_without_a_latched_fault(tmp_path):
     asked: list[str] = []
     outcome, _, _ = run("opsafe", tmp_path, confirm_clear_latched=asked.append)
     assert outcome.result.exit_code == 0 and asked == []
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.mark.slow
+def test_on_a_real_interface_even_yes_does_not_clear_a_latched_fault_unasked(tmp_path):
+    """Through socketcand the CLI cannot tell the simulator from an arm: it must ask, also
+    with --yes; without an operator (stdin at end of input) nothing is reset."""
+    import os
+    import socket
+    import subprocess
+    import sys
+    import time
+
+    port = _free_port()
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    server = subprocess.Popen([sys.executable, "-m", "seqrun", "sim", "serve", "--port",
+                               str(port), "--fault", "all:halt@0"], cwd=ROOT, env=env,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 20
+        while time.monotonic() < deadline:
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
+                break
+            except OSError:
+                time.sleep(0.1)
+        folder = tmp_path / "run"
+        proc = subprocess.run(
+            [sys.executable, "-m", "seqrun", "run", "sequences/opsafe.yaml", "-i", "socketcand",
+             "--bus-kwargs", f"port={port}", "--yes", "--plain", "--log-dir", str(folder)],
+            cwd=ROOT, env=env, stdin=subprocess.DEVNULL, capture_output=True, text=True,
+            timeout=120)
+    finally:
+        server.kill()
+        server.wait()
+    output = " ".join(proc.stdout.split())
+    assert proc.returncode == 130, proc.stdout + proc.stderr
+    assert "This Reset clears it" in output and "[y/N]" in output
+    report = json.loads((folder / "report.json").read_text())
+    assert report["status"] == "aborted"
+    assert len(report["latched_at_start"]) == 7
+    sent = [m for m in frames(folder) if not m.is_rx]
+    assert not any(m.data[:1] == b"\x00" for m in sent if 0x0E0 <= m.arbitration_id <= 0x100)
