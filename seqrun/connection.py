@@ -10,7 +10,10 @@ and the caller prints a banner saying so.
 from __future__ import annotations
 
 import itertools
+import logging
+import os
 import socket
+import sys
 from dataclasses import dataclass, field
 from typing import Any, Iterable, Mapping, Sequence
 
@@ -20,6 +23,8 @@ from seqrun.clock import Clock, RealClock
 from seqrun.errors import UserInputError
 from seqrun.sim.bus import SimBus
 from seqrun.sim.faults import Fault, parse_fault_spec
+from seqrun.sim.module import SIM_OPTIONS_ENV, ModuleOptions
+from seqrun.sim.options import parse_module_options
 
 #: The interface name of the simulator (the python-can plugin).
 SIM_INTERFACE = "seqrun-sim"
@@ -38,7 +43,10 @@ class Connection:
     faults: list[Fault] = field(default_factory=list)
 
     def close(self) -> None:
-        self.bus.shutdown()
+        try:
+            self.bus.shutdown()
+        except Exception as exc:  # noqa: BLE001 - a dead connection cannot be closed cleanly
+            logging.getLogger(__name__).debug("closing the bus failed: %r", exc)
 
 
 def parse_bus_kwargs(items: Sequence[str]) -> dict[str, Any]:
@@ -50,6 +58,18 @@ def parse_bus_kwargs(items: Sequence[str]) -> dict[str, Any]:
             raise UserInputError(f"--bus-kwargs expects KEY=VALUE, got '{item}'")
         out[key.strip()] = can.util.cast_from_string(value.strip())
     return out
+
+
+def sim_options_from_env(environ: Mapping[str, str] | None = None) -> ModuleOptions | None:
+    """Simulator module options from ``SEQRUN_SIM_OPTIONS`` (None when unset), e.g.
+    ``SEQRUN_SIM_OPTIONS=framp_from_standstill seqrun run ...``."""
+    spec = (os.environ if environ is None else environ).get(SIM_OPTIONS_ENV, "").strip()
+    if not spec:
+        return None
+    try:
+        return parse_module_options(spec)
+    except ValueError as exc:
+        raise UserInputError(f"{SIM_OPTIONS_ENV}: {exc}") from None
 
 
 def parse_faults(specs: Iterable[str]) -> list[Fault]:
@@ -77,6 +97,33 @@ def resolve_config(interface: str | None, channel: str | None, bitrate: int | No
         raise UserInputError(f"unknown CAN interface: {exc}") from None
     except (ValueError, TypeError) as exc:  # e.g. port=abc: "Port config must be a number!"
         raise UserInputError(f"bad CAN configuration: {exc}") from None
+
+
+class _OneLineHandler(logging.Handler):
+    """python-can logs some failures with a whole traceback (its socketcand client on a
+    lost connection); the operator gets the first line, once, and the run's own fault
+    line says what it means."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.WARNING)
+        self._seen: set[str] = set()
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            text = record.getMessage().split("Traceback (most recent call last)")[0]
+            line = (text.strip().splitlines() or [""])[0].strip()
+            if line and line not in self._seen:
+                self._seen.add(line)
+                sys.stderr.write(f"python-can: {line}\n")
+        except Exception:  # noqa: BLE001 - logging must never break a run
+            pass
+
+
+def _one_line_library_logs() -> None:
+    logger = logging.getLogger("can")
+    if not any(isinstance(h, _OneLineHandler) for h in logger.handlers):
+        logger.addHandler(_OneLineHandler())
+        logger.propagate = False
 
 
 def _probe_tcp(host: str, port: int, timeout: float = 2.0) -> None:
@@ -112,16 +159,18 @@ def open_connection(*, interface: str | None = None, channel: str | None = None,
                                  "name an interface with -i")
         clock = clock or RealClock()
         name = str(config.get("channel") or f"seqrun-{next(_sim_channels)}")
+        options = sim_options_from_env()  # SEQRUN_SIM_OPTIONS, then --bus-kwargs switches
         try:
             bus = SimBus(channel=name, clock=clock, faults=list(faults),
                          bitrate=bitrate or config.get("bitrate") or default_bitrate,
-                         positions=sim_positions, **switches)
+                         positions=sim_positions, options=options, **switches)
         except can.CanInitializationError as exc:
             raise UserInputError(f"--bus-kwargs: {exc}") from None
         kind = "virtual time" if clock.is_virtual else "real time"
+        changed = "" if options is None else f", options {os.environ[SIM_OPTIONS_ENV].strip()}"
         return Connection(bus, clock, True,
                           f"SIMULATOR ({kind}): simulated LWA 3 on '{name}', "
-                          f"{bus.bitrate} bit/s - no hardware is moved", list(faults))
+                          f"{bus.bitrate} bit/s{changed} - no hardware is moved", list(faults))
     if faults:
         raise UserInputError("--sim-fault only applies to the simulator (no -i/-c, or --sim)")
     if config["interface"] == "socketcand":  # python-can's config gives channel=None
@@ -139,6 +188,7 @@ def open_connection(*, interface: str | None = None, channel: str | None = None,
                                  f"{config['port']!r}") from None
         _probe_tcp(str(config["host"]), port)
     config.setdefault("bitrate", default_bitrate)
+    _one_line_library_logs()
     try:
         bus = can.Bus(**config)
     # TypeError: --bus-kwargs the interface does not take

@@ -32,7 +32,8 @@ def build_executor(loaded: LoadedSequence, arm: ArmDescription, connection: Conn
                    cycle_hz: float | None = None,
                    confirm: Callable[[str], bool] | None = None,
                    before_step: Callable | None = None,
-                   listeners: Iterable[Listener] = (), dry_run: bool = False
+                   listeners: Iterable[Listener] = (), dry_run: bool = False,
+                   confirm_clear_latched: Callable[[str], bool] | None = None
                    ) -> tuple[Executor, PowerCubeClient]:
     client = PowerCubeClient(connection.bus, connection.clock,
                              # (a dry run keeps the arm file's: deterministic results)
@@ -40,7 +41,8 @@ def build_executor(loaded: LoadedSequence, arm: ArmDescription, connection: Conn
                                                else response_timeout_s(arm)))
     executor = Executor(client, arm, connection.clock, poses_dir=loaded.poses_dir, speed=speed,
                         command_mode=command_mode, cycle_hz=cycle_hz, confirm=confirm,
-                        before_step=before_step, listeners=list(listeners), dry_run=dry_run)
+                        before_step=before_step, listeners=list(listeners), dry_run=dry_run,
+                        confirm_clear_latched=confirm_clear_latched)
     client.on_discard = executor.on_discard
     return executor, client
 
@@ -52,7 +54,8 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
                  confirm: Callable[[str], bool] | None = None,
                  before_step: Callable | None = None,
                  listeners: Iterable[Listener] = (), dry_run: bool = False,
-                 on_executor: Callable[[Executor], None] | None = None) -> RunOutcome:
+                 on_executor: Callable[[Executor], None] | None = None,
+                 confirm_clear_latched: Callable[[str], bool] | None = None) -> RunOutcome:
     """Run ``loaded`` on ``connection``; writes the run folder when ``log_dir`` is given.
 
     ``on_executor`` is called with the executor before the run starts (signal handlers,
@@ -61,7 +64,8 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
     executor, client = build_executor(loaded, arm, connection, speed=speed,
                                       command_mode=command_mode, cycle_hz=cycle_hz,
                                       confirm=confirm, before_step=before_step,
-                                      listeners=listeners, dry_run=dry_run)
+                                      listeners=listeners, dry_run=dry_run,
+                                      confirm_clear_latched=confirm_clear_latched)
     log = None
     if log_dir is not None:
         log = RunLog(log_dir, {"sequence": loaded.name, "file": file or loaded.file,

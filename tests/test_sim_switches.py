@@ -77,7 +77,7 @@ def test_home_ok_at_power_on_through_simbus_kwargs(clock):
 def test_bad_switch_values_are_refused_by_name(clock):
     with pytest.raises(can.CanInitializationError, match="home_ok_at_power_on: expected"):
         SimBus("bad-switch", clock=clock, home_ok_at_power_on="maybe", ignore_config=True)
-    with pytest.raises(ValueError, match="unknown simulator switch 'homed'"):
+    with pytest.raises(ValueError, match="unknown simulator option 'homed'"):
         module_options({"homed": True})
     assert module_options({"watchdog_timeout": "0.1"}).watchdog_timeout == 0.1
 

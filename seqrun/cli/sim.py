@@ -71,10 +71,15 @@ def serve(
         switches["home_ok_at_power_on"] = True
     if addressed_refresh_arms_watchdog:
         switches["addressed_refresh_arms_watchdog"] = True
-    try:
-        options = module_options(switches)
+    from seqrun.connection import sim_options_from_env
+    from seqrun.errors import UserInputError
+
+    try:  # SEQRUN_SIM_OPTIONS first, the flags on top
+        options = module_options(switches, sim_options_from_env())
     except ValueError as exc:
         fail(f"--module-option {exc}")
+    except UserInputError as exc:
+        fail(str(exc))
     clock = RealClock()
     # No spinning: TCP adds more latency than a late wake-up, and clients may be many.
     try:

@@ -82,6 +82,11 @@ class SimArm:
         self._silent: set[int] = set()  # no_ack
         self._drop_rate: dict[int, float] = {}
         self._rng = {m: random.Random(f"{seed}:{m}") for m in self._modules}
+        #: Acknowledges each module produced that have not been sent on the wire yet
+        #: (``drop_request_while_busy``).
+        self._unsent_acks: dict[int, int] = {m: 0 for m in self._modules}
+        #: Requests dropped because their module was busy: (time, module, can_id, data).
+        self.dropped_while_busy: list[tuple[float, int, int, bytes]] = []
         #: Every fault applied so far, with the time it was applied.
         self.applied_faults: list[tuple[float, Fault]] = []
         if positions is not None:
@@ -194,13 +199,24 @@ class SimArm:
             module = self._modules.get(request.module)
             if module is None:
                 return []
+            if self.options.drop_request_while_busy and self._unsent_acks[request.module]:
+                self.dropped_while_busy.append((t, request.module, can_id, bytes(data)))
+                return []
             ack = module.handle(request, t)
             if ack is None or not self._ack_survives(request.module):
                 return []
+            self._unsent_acks[request.module] += 1
             ack_id, ack_data = encode(ack)
             if isinstance(ack, CommandAck) and not self.options.command_ack_trailer:
                 ack_data = ack_data[:1]
             return [Reply(request.module, ack_id, ack_data, t + self.module_latency)]
+
+    def ack_sent(self, module_id: int) -> None:
+        """The wire reports that an acknowledge of ``module_id`` has been sent (delivered):
+        the module is no longer busy."""
+        with self._lock:
+            if self._unsent_acks.get(module_id):
+                self._unsent_acks[module_id] -= 1
 
     def _ack_survives(self, module_id: int) -> bool:
         if module_id in self._silent:

@@ -145,6 +145,21 @@ class ModuleOptions:
     step_buffering: bool = True
     #: Config DISABLE_ACK suppresses acknowledges.
     honour_disable_ack: bool = True
+    #: A module drops (ignores, does not answer) an addressed request that arrives while
+    #: it is still busy with the previous one, i.e. before its acknowledge of that one has
+    #: been sent on the wire. Off: requests queue up. No driver sends a second request
+    #: before the answer, so real firmware was never seen doing either; on, it catches a
+    #: host that does. Broadcasts (Halt, watchdog, ...) are always taken.
+    drop_request_while_busy: bool = False
+    #: FRAMP does not blend: every FRAMP re-plans its trapezoid from standstill (v = 0) at
+    #: the current position instead of from the current velocity. No published driver
+    #: streams FRAMP, so real firmware behaviour is unconfirmed [I].
+    framp_from_standstill: bool = False
+
+
+#: Environment variable the command line reads simulator options from, e.g.
+#: ``SEQRUN_SIM_OPTIONS="framp_from_standstill drop_request_while_busy"``.
+SIM_OPTIONS_ENV = "SEQRUN_SIM_OPTIONS"
 
 
 def default_parameters(module_id: int) -> dict[ParamId, float | int]:
@@ -888,6 +903,8 @@ class SimModule:
         if motion.mode in _RAMP_MODES:
             target = min(max(motion.value, lo), hi)
             self._last_target = target
+            if self.options.framp_from_standstill:
+                velocity = 0.0
             pieces = plan_ramp(position, velocity, target, motion.vmax, motion.amax)
             self._start(_build_profile("ramp", self._t, position, velocity, pieces, target))
         else:

@@ -35,6 +35,7 @@ from dataclasses import dataclass
 from seqrun.can_timing import INTERMISSION_BITS, frame_bit_length
 from seqrun.clock import Clock
 from seqrun.errors import BusError
+from seqrun.powercube.protocol import ACK_BASE
 from seqrun.sim.arm import SimArm
 
 #: Frames a host endpoint may have waiting for the wire before ``send`` waits [I].
@@ -367,8 +368,11 @@ class SimNetwork:
         for endpoint in self._endpoints:
             if endpoint._node is not sender or endpoint.receive_own:
                 endpoint._inbox.append(frame)
-        if sender.is_module or frame.is_extended or frame.is_remote:
-            return  # the modules speak 11-bit data frames and ignore each other's acks
+        if sender.is_module:
+            self.arm.ack_sent(frame.can_id - ACK_BASE)  # that module is free again
+            return  # the modules ignore each other's acks
+        if frame.is_extended or frame.is_remote:
+            return  # the modules speak 11-bit data frames
         for reply in self.arm.handle_frame(frame.can_id, frame.data, flight.end):
             node = self._module_nodes.get(reply.module)
             if node is None:

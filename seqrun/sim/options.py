@@ -55,7 +55,7 @@ def module_options(switches: Mapping[str, Any],
     changes = {}
     for name, value in switches.items():
         if name not in SWITCHES:
-            raise ValueError(f"unknown simulator switch {name!r} "
+            raise ValueError(f"unknown simulator option {name!r} "
                              f"(known: {', '.join(sorted(SWITCHES))})")
         changes[name] = _convert(name, value, getattr(base, name))
     return dataclasses.replace(base, **changes)
@@ -64,3 +64,17 @@ def module_options(switches: Mapping[str, Any],
 def pop_switches(kwargs: dict[str, Any]) -> dict[str, Any]:
     """Remove and return the entries of ``kwargs`` that name a switch."""
     return {name: kwargs.pop(name) for name in list(kwargs) if name in SWITCHES}
+
+
+def parse_module_options(spec: str, base: ModuleOptions | None = None) -> ModuleOptions:
+    """``"framp_from_standstill, watchdog_timeout=0.1, ack_refused_motion=false"`` ->
+    :class:`ModuleOptions` (``SEQRUN_SIM_OPTIONS``; a bare name means true; items separated
+    by commas or spaces).
+
+    :raises ValueError: an unknown option or a value of the wrong kind (one line).
+    """
+    switches: dict[str, Any] = {}
+    for item in spec.replace(",", " ").split():
+        name, sep, text = item.partition("=")
+        switches[name.strip()] = text.strip() if sep else True
+    return module_options(switches, base)
