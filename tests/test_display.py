@@ -104,8 +104,8 @@ def test_after_a_fault_the_screen_says_halt_sent_and_nothing_moves(tmp_path):
         assert velocity == "0.00", (joint, row)
     halt = [line for line in screen.splitlines() if "HALT sent at" in line]
     assert len(halt) == 1
-    assert re.search(r"HALT sent at \d\d:\d\d:\d\d, t = \d+\.\d\d s: tow_error: module 2 "
-                     r"\(j2\)", halt[0]), halt[0]
+    assert re.search(r"HALT sent at \d\d:\d\d:\d\d, t = \d+\.\d\d s \(confirmed by every "
+                     r"module\): tow_error: module 2 \(j2\)", halt[0]), halt[0]
     # The plain display says it too, and keeps the message's [state ...] part.
     plain = plain_console.export_text()
     assert "HALT sent at" in plain and "tow_error" in plain

@@ -30,14 +30,18 @@ from seqrun.powercube.protocol import ShortState, StateFlag
 
 
 def halt_line(event: dict) -> str | None:
-    """The line a fault event earns on the screen: Halt sent (when, why) or not."""
+    """The line a fault event earns on the screen: Halt sent (when, why, confirmed?)."""
     if event.get("type") != "fault" or "halt_sent" not in event:
         return None
     cause = event.get("cause") or "fault"
     when = f"{datetime.now().strftime('%H:%M:%S')}, t = {fixed(event.get('t', 0.0))} s"
-    if event["halt_sent"]:
-        return f"HALT sent at {when}: {cause}: {event.get('message', '')}"
-    return f"HALT could NOT be sent ({when}): {cause}: {event.get('message', '')}"
+    if not event["halt_sent"]:
+        return f"HALT could NOT be sent ({when}): {cause}: {event.get('message', '')}"
+    confirmed = event.get("halt_confirmed")
+    check = ("" if confirmed is None else " (confirmed by every module)" if confirmed
+             else f" (NOT confirmed by module(s) "
+                  f"{', '.join(map(str, event.get('modules_not_halted') or [])) or '?'})")
+    return f"HALT sent at {when}{check}: {cause}: {event.get('message', '')}"
 
 
 class PlainDisplay:
@@ -65,7 +69,7 @@ class PlainDisplay:
                          f"{fixed(event['angle_error_deg'], 3)}° from the expected pose")
             self._print(f"      passed{extra}")
         elif kind in ("fault", "operator_abort", "controlled_stop", "holding", "halt_requested",
-                      "abort_requested"):
+                      "abort_requested", "latched_fault", "halt_unconfirmed", "halt_failed"):
             text = event.get("message") or event.get("reason") or kind.replace("_", " ")
             self._print(f"  !!  {kind.replace('_', ' ')}: {text}")
             line = halt_line(event)
@@ -166,10 +170,12 @@ class LiveDisplay:
             self.target = np.array(event["target_deg"])
         elif kind == "setpoint":
             self.move_t = event["plan_t"]
-        elif kind in ("fault", "operator_abort"):
+        elif kind in ("fault", "operator_abort", "halt_unconfirmed", "halt_failed"):
             self.message, self.message_style = event["message"], "bold red"
             self.halt_text = halt_line(event) or self.halt_text
             self.move_duration = None
+        elif kind == "latched_fault":
+            self.message, self.message_style = event["message"], "bold yellow"
         elif kind in ("controlled_stop", "abort_requested", "halt_requested", "paused"):
             self.message = kind.replace("_", " ")
             if kind == "controlled_stop":
