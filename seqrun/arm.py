@@ -104,6 +104,17 @@ class Workspace(_Strict):
     guards: list[Guard] = []
 
 
+class Tool(_Strict):
+    """A tool centre point (TCP): where a Cartesian target of a sequence puts the tool."""
+
+    name: str = Field(min_length=1, description="Name used in sequences and `seqrun ik --tool`.")
+    xyz_mm: tuple[Finite, Finite, Finite] = Field(
+        description="TCP position in the end-effector frame (kinematics.tool), mm.")
+    rpy_deg: tuple[Finite, Finite, Finite] = Field(
+        (0.0, 0.0, 0.0), description="TCP orientation in the end-effector frame, roll/pitch/yaw "
+                                     "deg (R = Rz Ry Rx).")
+
+
 class ArmDescription(_Strict):
     name: str
     description: str = ""
@@ -112,6 +123,13 @@ class ArmDescription(_Strict):
     joints: list[Joint] = Field(min_length=1)
     kinematics: Kinematics
     workspace: Workspace = Workspace()
+    tools: list[Tool] = Field(
+        default_factory=list,
+        description="Named tool centre points. Cartesian targets (seqrun ik, move to a pose in "
+                    "mm) mean the tool; without a tool they mean the end-effector frame.")
+    default_tool: str | None = Field(
+        None, description="Tool used when a command or step names none (default: the "
+                          "end-effector frame itself).")
 
     @field_validator("joints")
     @classmethod
@@ -129,6 +147,28 @@ class ArmDescription(_Strict):
             raise ValueError(f"kinematics.links needs {len(self.joints) - 1} frames "
                              f"(one per joint after the first), has {len(self.kinematics.links)}")
         return self
+
+    @model_validator(mode="after")
+    def _tools_known(self) -> "ArmDescription":
+        names = [t.name for t in self.tools]
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise ValueError(f"duplicate tool name(s): {', '.join(dup)}")
+        if self.default_tool is not None and self.default_tool not in names:
+            raise ValueError(f"default_tool '{self.default_tool}' is not among the tools "
+                             f"({', '.join(names) or 'none defined'})")
+        return self
+
+    def tool(self, name: str | None) -> Tool | None:
+        """The named tool, the default tool for ``None``; None means the end-effector frame.
+        Raises ``KeyError`` for an unknown name."""
+        name = self.default_tool if name is None else name
+        if name is None:
+            return None
+        for tool in self.tools:
+            if tool.name == name:
+                return tool
+        raise KeyError(name)
 
     # Convenience views used everywhere.
     @property
