@@ -551,7 +551,7 @@ class Executor:
         started = ready and written
         start_deg = {j.name: float(v) for j, v in zip(self.arm.joints, m.user_deg)}
         result = validate_sequence(replace(loaded, steps=tuple(loaded.steps[first_step - 1:])),
-                                   self.arm, start_deg, started=started)
+                                   self.arm, start_deg, started=started, speed=self.speed)
         if first_step > 1:
             before = validate_sequence(replace(loaded, steps=tuple(loaded.steps[:first_step - 1])),
                                        self.arm)

@@ -957,7 +957,8 @@ Every step takes an optional `label`, the text the operator sees.
 - Every commanded target lies inside the joint limits in force. A joint that starts outside
   them (Park's j4 at -120.32° against -120…120) may only move back inside (a note).
 - Velocities and limit overrides stay within the arm file's maxima.
-- Workspace guards of the arm file hold along each move (straight line in joint space).
+- Workspace guards of the arm file hold along each move's planned trajectory (the ruckig plan
+  the run streams, sampled at 100 Hz); `seqrun validate` reports the smallest clearance of each move.
 - A checkpoint must agree with the end-effector of the joints tracked so far.
 - Validation starts from Park (`--start POSE` to choose another pose).
 

@@ -12,8 +12,9 @@ the offending value:
 - every commanded target inside the limits in force; a joint that *starts* outside
   (Park's j4 at -120.32° against -120…120) may only move back inside, which is a note;
 - velocities and limit overrides within the arm file's maxima;
-- workspace guards (``workspace.guards`` of the arm file) along each move, taken as a
-  straight line in joint space (the executor checks the real trajectory as it runs);
+- workspace guards (``workspace.guards`` of the arm file) along each move's ruckig plan,
+  the trajectory the executor streams (sampled at 100 Hz), with the smallest clearance of
+  every move in :attr:`ValidationResult.clearances`;
 - checkpoints that cannot pass: the end-effector of the tracked joints is compared with
   the expected pose.
 
@@ -34,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from seqrun.arm import ArmDescription, Joint
-from seqrun.errors import SequenceInvalid, SourceError, UserInputError
+from seqrun.errors import PlanningError, SequenceInvalid, SourceError, UserInputError
 from seqrun.schema import (
     CheckpointParams,
     HaltParams,
@@ -47,7 +48,8 @@ from seqrun.schema import (
 )
 
 __all__ = [
-    "GUARD_SAMPLES",
+    "PLAN_SAMPLE_S",
+    "Clearance",
     "ValidationResult",
     "commanded_joints",
     "park_deg",
@@ -57,10 +59,39 @@ __all__ = [
     "validate_sequence",
 ]
 
-#: Samples per move when checking workspace guards along the joint-space path.
-GUARD_SAMPLES = 64
 #: Name of the pose a freshly powered-on arm is in (the modules' zeros).
 START_POSE = "park"
+
+
+#: Sampling period (s) of a planned trajectory when guards are checked along it: the
+#: executor's control cycle at 100 Hz.
+PLAN_SAMPLE_S = 0.01
+
+
+@dataclass(frozen=True)
+class Clearance:
+    """The smallest distance to a guard along one move, and where it occurs."""
+
+    step: int
+    guard: str
+    point: str
+    z_mm: float
+    margin_mm: float          # z minus the guard's height: below 0 the move is refused
+    t_s: float                # plan time of the lowest sample
+    duration_s: float         # the move's planned duration
+
+    def as_dict(self) -> dict:
+        return {"step": self.step, "guard": self.guard, "point": self.point,
+                "z_mm": round(self.z_mm, 2), "margin_mm": round(self.margin_mm, 2),
+                "t_s": round(self.t_s, 3), "duration_s": round(self.duration_s, 3)}
+
+
+def plan_samples(plan, period_s: float = PLAN_SAMPLE_S) -> tuple[np.ndarray, np.ndarray]:
+    """Times and joint positions (rad, every joint) of a plan every ``period_s`` and at its
+    end: what a guard check along the real trajectory looks at."""
+    count = max(2, int(math.ceil(plan.duration / period_s)) + 1)
+    times = np.linspace(0.0, plan.duration, count)
+    return times, plan.sample(times)
 
 
 @dataclass
@@ -71,6 +102,8 @@ class ValidationResult:
     notes: list[SourceError] = field(default_factory=list)
     #: Joint positions after the last step (user degrees, every joint of the arm).
     final_deg: dict[str, float] = field(default_factory=dict)
+    #: Smallest guard clearance of each move (step number -> Clearance).
+    clearances: dict[int, "Clearance"] = field(default_factory=dict)
 
     @property
     def valid(self) -> bool:
@@ -197,6 +230,8 @@ class _Validator:
         self.notes: list[SourceError] = []
         self.joints: dict[str, _JointState] = {}
         self._chain = None
+        self.speed = 1.0  # the run's speed override: the plans guards are checked along
+        self.clearances: dict[int, Clearance] = {}
         for joint in arm.joints:
             position = joint.locked if joint.locked is not None else start_deg.get(joint.name)
             if position is None or not math.isfinite(position):
@@ -354,7 +389,7 @@ class _Validator:
                 self.notes.append(step.error(
                     f"{name} {verb} {_f(state.position)}°, {_f(outside)}° outside its limit "
                     f"{_range(lo, hi)}; this move brings it back inside", *where[name]))
-        self._guards(step, target)
+        self._guards_along_plan(step, params, target)
         for name in names:
             if name in refused:
                 continue
@@ -403,7 +438,37 @@ class _Validator:
                                                  if not s.locked]
         return "" if sorted(names) == sorted(everything) else f" ({', '.join(names)})"
 
-    def _guards(self, step: ResolvedStep, target: dict[str, float]) -> None:
+    def _guards_along_plan(self, step: ResolvedStep, params: MoveParams,
+                           target: dict[str, float]) -> None:
+        """Workspace guards along the trajectory the executor will stream: the ruckig plan
+        of this move (its limits and scales, the run's speed), sampled every
+        :data:`PLAN_SAMPLE_S` seconds. The plan's time-synchronized path is not the straight
+        line in joint space and can dip lower. Records the move's smallest clearance."""
+        from seqrun.planner import Limits, plan_move
+
+        names = self.arm.joint_names
+        start = np.array([self.joints[n].position for n in names])
+        end = np.array([target[n] for n in names])
+        moving = [i for i, j in enumerate(self.arm.joints)
+                  if j.locked is None and abs(end[i] - start[i]) > 1e-9]
+        if not moving:
+            return
+        try:
+            limits = Limits.from_arm(self.arm, velocity_scale=params.velocity_scale,
+                                     acceleration_scale=params.acceleration_scale,
+                                     speed=self.speed, velocity_deg_s={
+                                         n: v for n, v in params.velocity_deg_s.items()
+                                         if n in self.joints})
+            plan = plan_move(np.radians(start), np.radians(end), limits, moving)
+        except PlanningError as exc:
+            self.errors.append(step.error(f"this move cannot be planned: {exc}"))
+            return
+        self._check_path_guards(step, *plan_samples(plan), what="planned trajectory")
+
+    def _check_path_guards(self, step: ResolvedStep, times: np.ndarray, path_rad: np.ndarray,
+                           *, what: str) -> None:
+        """Guards along sampled joint configurations (rad) at ``times`` (s): one error per
+        guard, at the watched point that goes lowest; the smallest clearance is kept."""
         guards = self.arm.workspace.guards
         if not guards:
             return
@@ -411,23 +476,22 @@ class _Validator:
 
         if self._chain is None:
             self._chain = Chain.from_arm(self.arm)
-        names = self.arm.joint_names
-        start = np.array([self.joints[n].position for n in names])
-        end = np.array([target[n] for n in names])
-        fractions = np.linspace(0.0, 1.0, GUARD_SAMPLES + 1)[:, None]
-        path = np.radians(start + (end - start) * fractions)
-        points = point_positions(self._chain, path)
+        points = point_positions(self._chain, path_rad)
+        duration = float(times[-1]) if len(times) else 0.0
         for guard in guards:
-            # one error per guard: the watched point that goes lowest, where it is lowest
             lowest = min(guard.points, key=lambda p: float(points[p][:, 2].min()))
             heights = points[lowest][:, 2]
             i = int(np.argmin(heights))
+            clearance = Clearance(step.number, guard.name, lowest, float(heights[i]),
+                                  float(heights[i]) - guard.min_z_mm, float(times[i]), duration)
+            kept = self.clearances.get(step.number)
+            if kept is None or clearance.margin_mm < kept.margin_mm:
+                self.clearances[step.number] = clearance
             if heights[i] < guard.min_z_mm:
                 self.errors.append(step.error(
                     f"this move takes the {lowest.replace('_', '-')} down to z = "
-                    f"{_f(heights[i])} mm ({round(float(fractions[i, 0]) * 100):d}% of the "
-                    f"way, straight line in joint space), below the '{guard.name}' guard "
-                    f"at {_f(guard.min_z_mm)} mm"))
+                    f"{_f(heights[i])} mm (at {times[i]:.2f} s of {duration:.2f} s, {what}), "
+                    f"below the '{guard.name}' guard at {_f(guard.min_z_mm)} mm"))
 
     def checkpoint(self, step: ResolvedStep, params: CheckpointParams) -> None:
         from seqrun.kinematics import orientation_error, pose_from_user_deg
@@ -465,8 +529,10 @@ class _Validator:
                 self.notes[notes:] = sorted(self.notes[notes:], key=_position)
         final = {n: s.position for n, s in self.joints.items()}
         # In step order (a step of an included file comes where it runs), duplicates dropped.
-        return ValidationResult(list(dict.fromkeys(self.errors)),
-                                list(dict.fromkeys(self.notes)), final)
+        result = ValidationResult(list(dict.fromkeys(self.errors)),
+                                  list(dict.fromkeys(self.notes)), final)
+        result.clearances = dict(self.clearances)
+        return result
 
 
 def _position(item: SourceError) -> tuple[int, int]:
@@ -475,14 +541,17 @@ def _position(item: SourceError) -> tuple[int, int]:
 
 def validate_sequence(loaded: LoadedSequence, arm: ArmDescription,
                       start_deg: Mapping[str, float] | None = None, *,
-                      started: bool = False) -> ValidationResult:
+                      started: bool = False, speed: float = 1.0) -> ValidationResult:
     """Check a loaded sequence against ``arm`` starting at ``start_deg`` (user degrees;
     default the Park pose of the project's poses folder).
 
     ``started=True``: the modules are already reset, homed and have the arm file's limits
-    (the executor passes what it measured). Never raises for a bad sequence: everything
-    is in the result.
+    (the executor passes what it measured). ``speed``: the run's speed override, which
+    shapes the plans the guards are checked along. Never raises for a bad sequence:
+    everything is in the result.
     """
     if start_deg is None:
         start_deg = park_deg(loaded.poses_dir)
-    return _Validator(loaded, arm, start_deg, started).run()
+    validator = _Validator(loaded, arm, start_deg, started)
+    validator.speed = speed
+    return validator.run()

@@ -41,6 +41,8 @@ class StaticCheck:
     start_deg: dict[str, float] | None = None
     errors: list[SourceError] = field(default_factory=list)
     notes: list[SourceError] = field(default_factory=list)
+    #: Smallest guard clearance of each move along its planned trajectory.
+    clearances: list = field(default_factory=list)
 
     @property
     def valid(self) -> bool:
@@ -48,7 +50,8 @@ class StaticCheck:
 
 
 def static_check(file: Path, *, start: str | None = None,
-                 arm_file: Path | None = None, started: bool = False) -> StaticCheck:
+                 arm_file: Path | None = None, started: bool = False,
+                 speed: float = 1.0) -> StaticCheck:
     """Load ``file`` (with includes), its arm and the start pose, and validate statically.
 
     Invalid files (the sequence, an included one, the arm file, a pose file) end up in
@@ -80,8 +83,9 @@ def static_check(file: Path, *, start: str | None = None,
         check.errors = list(exc.errors)
         return check
     result: ValidationResult = validate_sequence(check.loaded, check.arm, check.start_deg,
-                                                 started=started)
+                                                 started=started, speed=speed)
     check.errors, check.notes = result.errors, result.notes
+    check.clearances = [result.clearances[n] for n in sorted(result.clearances)]
     return check
 
 
@@ -89,7 +93,8 @@ def print_report(check: StaticCheck, file: Path, *, as_json: bool) -> None:
     if as_json:
         typer.echo(json.dumps({"valid": check.valid,
                                "errors": [e.as_dict() for e in check.errors],
-                               "notes": [n.as_dict() for n in check.notes]},
+                               "notes": [n.as_dict() for n in check.notes],
+                               "clearances": [c.as_dict() for c in check.clearances]},
                               indent=2, ensure_ascii=False))
         return
     for error in check.errors:
@@ -101,9 +106,18 @@ def print_report(check: StaticCheck, file: Path, *, as_json: bool) -> None:
     if check.valid:
         steps = len(check.loaded.steps) if check.loaded is not None else 0
         typer.echo(f"{name}: valid ({steps} step{'s' * (steps != 1)}{notes})")
+        print_clearances(check)
     else:
         count = len(check.errors)
         typer.echo(f"{name}: invalid ({count} error{'s' * (count != 1)}{notes})")
+
+
+def print_clearances(check: StaticCheck) -> None:
+    """Per move: the smallest guard clearance along its planned trajectory, and where."""
+    for c in check.clearances:
+        typer.echo(f"  step {c.step}: lowest {c.point.replace('_', '-')} z = {c.z_mm:.1f} mm, "
+                   f"{c.margin_mm:+.1f} mm from the '{c.guard}' guard, at {c.t_s:.2f} s of "
+                   f"{c.duration_s:.2f} s (planned trajectory)")
 
 
 def print_dry_run(run, loaded, arm) -> None:
@@ -174,7 +188,8 @@ def validate_command(
     if cycle_hz is not None and not 5 <= cycle_hz <= 500:
         fail(f"--cycle-hz must lie in [5, 500], got {cycle_hz:g}")
     try:
-        check = static_check(file, start=start, arm_file=arm_file, started=started)
+        check = static_check(file, start=start, arm_file=arm_file, started=started,
+                             speed=speed)
     except UserInputError as exc:
         fail(str(exc))
         return
@@ -192,6 +207,7 @@ def validate_command(
         typer.echo(json.dumps({"valid": valid,
                                "errors": [e.as_dict() for e in check.errors],
                                "notes": [n.as_dict() for n in check.notes],
+                               "clearances": [c.as_dict() for c in check.clearances],
                                "dry_run": run.as_dict() if run is not None else None},
                               indent=2, ensure_ascii=False))
     else:
