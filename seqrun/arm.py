@@ -115,6 +115,28 @@ class Tool(_Strict):
                                      "deg (R = Rz Ry Rx).")
 
 
+class Cartesian(_Strict):
+    """Settings of end-effector targets and straight-line moves."""
+
+    min_manipulability: Annotated[float, Field(ge=0, allow_inf_nan=False)] = Field(
+        0.05, description="Smallest Yoshikawa manipulability sqrt(det(J Jᵀ)) allowed along a "
+                          "straight-line move (linear rows of J in units of 200 mm, so the "
+                          "number has no unit; the LWA 3 has 3.6 at Op-safe, 0 at Totem, "
+                          "0.09 with the elbow 2° from straight).")
+    ik_agreement_deg: Positive = Field(
+        1.0, description="At run time an end-effector target is solved again from the measured "
+                         "joints; a solution further than this (any joint, deg) from the "
+                         "validated one is a fault.")
+    linear_command_mode: Literal["ramp", "step"] = Field(
+        "step", description="How straight-line moves are streamed. step (FSTEP to the next "
+                            "sample every cycle) keeps the tool on the line (0.03 mm off over "
+                            "300 mm on the simulator); ramp's lookahead and minimum speed let "
+                            "slow joints run ahead of the others (2.8 mm).")
+    linear_sample_s: Annotated[float, Field(gt=0, le=0.1, allow_inf_nan=False)] = Field(
+        0.01, description="Sampling period of straight-line moves (s): every sample is solved "
+                          "and checked before the move runs.")
+
+
 class ArmDescription(_Strict):
     name: str
     description: str = ""
@@ -127,6 +149,7 @@ class ArmDescription(_Strict):
         default_factory=list,
         description="Named tool centre points. Cartesian targets (seqrun ik, move to a pose in "
                     "mm) mean the tool; without a tool they mean the end-effector frame.")
+    cartesian: Cartesian = Cartesian()
     default_tool: str | None = Field(
         None, description="Tool used when a command or step names none (default: the "
                           "end-effector frame itself).")

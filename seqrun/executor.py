@@ -160,6 +160,11 @@ class Executor:
         self._move_limits = self.limits
         self._keeper: threading.Thread | None = None
         self._keeper_stop = threading.Event()
+        #: Joint solutions of end-effector targets as validated from the measured start
+        #: (step number -> user degrees); the steps solve again and must land close.
+        self.validated_targets: dict[int, np.ndarray] = {}
+        #: Extra check of every streamed cycle (a straight-line move's deviation).
+        self.path_check: Callable[[Measurement], None] | None = None
 
     # ------------------------------------------------------------------ control (any thread)
     def abort(self, reason: str = "operator abort") -> None:
@@ -367,6 +372,43 @@ class Executor:
                 "peak_velocity_deg_s": _r(np.degrees(plan.peak_velocity())),
                 "peak_measured_velocity_deg_s": _r(peak)}
 
+    def follow(self, plan, *, tolerance_deg: float, timeout_s: float | None,
+               path_check: Callable[[Measurement], None] | None = None,
+               command_mode: str | None = None) -> dict[str, Any]:
+        """Stream a precomputed plan (a :class:`~seqrun.planner.SampledPlan`) that starts
+        where the arm stands; ``path_check`` runs on every cycle's measurement;
+        ``command_mode`` overrides the run's setpoint law for this plan."""
+        m = self.read_arm()
+        self.check_states(m)
+        moving = list(plan.active)
+        self.commanded_deg = np.degrees(plan.target)
+        self.emit("move_planned", duration_s=_round(plan.duration), start_deg=_r(m.user_deg),
+                  target_deg=_r(np.degrees(plan.target)),
+                  joints=[self.arm.joints[i].name for i in moving], sampled=True)
+        if self._current_step is not None:
+            self._current_step.planned_duration_s = plan.duration
+        peak = np.zeros(self.arm.dof)
+        t_move = self.clock.now()
+        if moving:
+            law = self.setpoints
+            if command_mode is not None and command_mode != self.command_mode:
+                self.setpoints = setpoint_law(command_mode, self.arm, self.cycle, self.limits)
+            deadline = (timeout_s if timeout_s is not None
+                        else plan.duration + self.arm.control.settle_timeout_s)
+            self.path_check = path_check
+            try:
+                start = self.setpoints.start(moving, self.limits)
+                if start:
+                    self.transact(start)
+                peak = self._stream(plan, moving, tolerance_deg, deadline, stop_on_abort=True)
+            finally:
+                self.path_check = None
+                self.setpoints = law
+        return {"planned_duration_s": plan.duration,
+                "executed_duration_s": self.clock.now() - t_move,
+                "peak_velocity_deg_s": _r(np.degrees(plan.peak_velocity())),
+                "peak_measured_velocity_deg_s": _r(peak)}
+
     def _cycle(self, requests: list, moving: list[int]) -> Measurement:
         """Send this cycle's motion requests plus reads of the other modules, pipelined.
 
@@ -445,6 +487,8 @@ class Executor:
             measured = m.user_deg
             self.check_states(m)
             self.check_guards(m)
+            if self.path_check is not None:
+                self.path_check(m)
             planned_deg = np.degrees(plan.at(t)[0])
             error = np.abs(planned_deg - measured)
             worst = int(np.argmax(error))
@@ -563,6 +607,7 @@ class Executor:
                         f"--from {first_step}: the arm is not where this step expects it: "
                         f"{j.name} at {start_deg[j.name]:.2f}°, expected {expected:.2f}° "
                         f"(after steps 1-{first_step - 1})"))
+        self.validated_targets = dict(getattr(result, "targets_deg", {}))
         self.emit("preflight", start_deg=_r(m.user_deg), homed=ready, limits_written=written,
                   states={str(k): v.describe() for k, v in states.items()},
                   errors=[str(e) for e in result.errors], notes=[str(n) for n in result.notes])

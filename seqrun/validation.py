@@ -104,6 +104,9 @@ class ValidationResult:
     final_deg: dict[str, float] = field(default_factory=dict)
     #: Smallest guard clearance of each move (step number -> Clearance).
     clearances: dict[int, "Clearance"] = field(default_factory=dict)
+    #: Joint solution (user degrees, every joint) of each end-effector target, by step number:
+    #: the run solves again from the measured joints and must land close to it.
+    targets_deg: dict[int, np.ndarray] = field(default_factory=dict)
 
     @property
     def valid(self) -> bool:
@@ -232,6 +235,7 @@ class _Validator:
         self._chain = None
         self.speed = 1.0  # the run's speed override: the plans guards are checked along
         self.clearances: dict[int, Clearance] = {}
+        self.targets_deg: dict[int, np.ndarray] = {}
         for joint in arm.joints:
             position = joint.locked if joint.locked is not None else start_deg.get(joint.name)
             if position is None or not math.isfinite(position):
@@ -336,6 +340,9 @@ class _Validator:
                 state.max_velocity_from = f"set_limits at {step.location}"
 
     def move(self, step: ResolvedStep, params: MoveParams) -> None:
+        if getattr(params, "position_mm", None) is not None:
+            self._move_to_tool_pose(step, params)
+            return
         # which joints, and where to
         if params.pose is not None:
             try:
@@ -493,6 +500,111 @@ class _Validator:
                     f"{_f(heights[i])} mm (at {times[i]:.2f} s of {duration:.2f} s, {what}), "
                     f"below the '{guard.name}' guard at {_f(guard.min_z_mm)} mm"))
 
+    # -- end-effector targets (seqrun/cartesian.py)
+    def _tool_target(self, step: ResolvedStep, params) -> np.ndarray | None:
+        """The step's tool target (4x4) from the tracked joints; None after an error."""
+        from seqrun.cartesian import resolve_target, solver_for, tool_pose
+
+        try:
+            solver = solver_for(self.arm, params.tool)
+        except KeyError:
+            names = ", ".join(t.name for t in self.arm.tools) or "none defined"
+            self.errors.append(step.error(f"unknown tool '{params.tool}' (the arm file's tools: "
+                                          f"{names})", "tool"))
+            return None
+        current = tool_pose(solver, self._tracked())
+        return resolve_target(current, params.position_mm, params.rpy_deg,
+                              relative=params.relative, frame=params.frame)
+
+    def _tracked(self) -> np.ndarray:
+        return np.array([self.joints[n].position for n in self.arm.joint_names])
+
+    def _unlocked_names(self) -> list[str]:
+        return [j.name for j in self.arm.joints if j.locked is None]
+
+    def _outside_limits(self, step: ResolvedStep, joints_deg: np.ndarray, what: str) -> bool:
+        """Errors for joints outside the limits in force (set_limits may narrow the arm's)."""
+        bad = False
+        for name in self._unlocked_names():
+            state = self.joints[name]
+            lo, hi = state.limits or state.joint.limits_deg
+            values = np.atleast_2d(joints_deg)[:, self.arm.index(name)]
+            worst = values[np.argmax(np.maximum(lo - values, values - hi))]
+            if not lo - 1e-9 <= worst <= hi + 1e-9:
+                bad = True
+                self.errors.append(step.error(
+                    f"{what} puts {name} at {_f(worst)}°, outside the limits in force "
+                    f"{_range(lo, hi)}", "position_mm"))
+        return bad
+
+    def _arrive(self, step: ResolvedStep, joints_deg: np.ndarray) -> None:
+        self.targets_deg[step.number] = np.asarray(joints_deg, dtype=float).copy()
+        for name in self._unlocked_names():
+            state = self.joints[name]
+            value = float(joints_deg[self.arm.index(name)])
+            if value != state.position:
+                state.at_start = False
+            state.position = value
+
+    def _solution_note(self, step: ResolvedStep, joints_deg: np.ndarray, extra: str = "") -> None:
+        values = ", ".join(f"{n} {_f(joints_deg[self.arm.index(n)])}°"
+                           for n in self._unlocked_names())
+        self.notes.append(step.error(f"end-effector target solved: {values}{extra}",
+                                     "position_mm"))
+
+    def _move_to_tool_pose(self, step: ResolvedStep, params: MoveParams) -> None:
+        """A move to an end-effector pose: IK from the tracked joints (the solution nearest
+        them), then the same checks as a move to those joints."""
+        from seqrun.cartesian import solver_for
+        from seqrun.ik import Unreachable
+
+        self._velocities(step, params)
+        self._motion_allowed(step, self._unlocked_names())
+        target = self._tool_target(step, params)
+        if target is None:
+            return
+        try:
+            solution = solver_for(self.arm, params.tool).solve(target, self._tracked())
+        except Unreachable as exc:
+            self.errors.append(step.error(f"end-effector target {exc}", "position_mm"))
+            return
+        joints = solution.joints_deg
+        if self._outside_limits(step, joints, "the end-effector target"):
+            return
+        self._solution_note(step, joints)
+        self._guards_along_plan(step, params, dict(zip(self.arm.joint_names, joints)))
+        self._arrive(step, joints)
+
+    def move_linear(self, step: ResolvedStep, params) -> None:
+        """A straight line of the tool: every sample solved and checked now (reachable,
+        limits, joint speeds, manipulability, guards along the samples)."""
+        from seqrun.cartesian import PathError, plan_linear
+
+        self._motion_allowed(step, self._unlocked_names())
+        target = self._tool_target(step, params)
+        if target is None:
+            return
+        keep = 1 - self.arm.control.tracking_reserve
+        max_velocity = np.array([self.joints[n].max_velocity for n in self.arm.joint_names]) * keep
+        try:
+            linear = plan_linear(
+                self.arm, params.tool, self._tracked(), target,
+                speed_mm_s=params.speed_mm_s * self.speed,
+                rotation_speed_deg_s=params.rotation_speed_deg_s * self.speed,
+                acceleration_mm_s2=params.acceleration_mm_s2 * self.speed,
+                jerk_mm_s3=params.jerk_mm_s3 * self.speed, max_velocity_deg_s=max_velocity)
+        except PathError as exc:
+            self.errors.append(step.error(f"straight line: {exc}", "position_mm"))
+            return
+        if self._outside_limits(step, linear.joints_deg[1:], "the straight line"):
+            return
+        self._check_path_guards(step, linear.plan.times, linear.plan.positions,
+                                what="straight line of the tool")
+        self._solution_note(step, linear.joints_deg[-1],
+                            f" ({linear.path.length_mm:.1f} mm in {linear.plan.duration:.2f} s, "
+                            f"smallest manipulability {linear.min_manipulability:.3f})")
+        self._arrive(step, linear.joints_deg[-1])
+
     def checkpoint(self, step: ResolvedStep, params: CheckpointParams) -> None:
         from seqrun.kinematics import orientation_error, pose_from_user_deg
 
@@ -518,7 +630,7 @@ class _Validator:
     def run(self) -> ValidationResult:
         handlers = {"reset": self.reset, "home": self.home, "halt": self.halt,
                     "set_limits": self.set_limits, "move": self.move,
-                    "checkpoint": self.checkpoint}
+                    "checkpoint": self.checkpoint, "move_linear": self.move_linear}
         for step in self.loaded.steps:
             handler = handlers.get(step.kind)
             if handler is not None:
@@ -532,6 +644,7 @@ class _Validator:
         result = ValidationResult(list(dict.fromkeys(self.errors)),
                                   list(dict.fromkeys(self.notes)), final)
         result.clearances = dict(self.clearances)
+        result.targets_deg = dict(self.targets_deg)
         return result
 
 
