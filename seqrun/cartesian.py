@@ -192,10 +192,20 @@ def plan_linear(arm: ArmDescription, tool: str | None, start_deg: Sequence[float
         try:
             joints[k] = solver.solve(path.frame_at(float(fractions[k])), joints[k - 1]).joints_deg
         except Unreachable as exc:
+            where = f"at {fractions[k] * 100:.0f}% of the way"
+            previous = joints[k - 1]
+            for i in solver.active:
+                joint = arm.joints[i]
+                lo, hi = joint.limits_deg
+                if hi - lo < 360 and min(previous[i] - lo, hi - previous[i]) < 0.5:
+                    bound = lo if previous[i] - lo < hi - previous[i] else hi
+                    raise PathError(f"{joint.name} reaches its limit {bound:g}° {where}: the "
+                                    "line cannot go on inside the joint limits",
+                                    float(fractions[k])) from None
             raise PathError(
-                f"the line leaves the workspace at {fractions[k] * 100:.0f}% of the way "
-                f"(no solution inside the joint limits; closest {exc.position_error_mm:.2f} mm "
-                "away)", float(fractions[k])) from None
+                f"the line leaves the workspace {where} (no solution next to the previous "
+                f"sample; closest {exc.position_error_mm:.2f} mm away)",
+                float(fractions[k])) from None
     limit = (max_velocity_deg_s if max_velocity_deg_s is not None else
              np.array([j.max_velocity_deg_s for j in arm.joints])
              * (1 - arm.control.tracking_reserve))

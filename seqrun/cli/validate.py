@@ -137,6 +137,13 @@ def print_dry_run(run, loaded, arm) -> None:
             moving = [f"{n} {v:.1f}/{limits[n]:g}"
                       for n, v in zip(arm.joint_names, peak) if v > 0.05]
             typer.echo(f"       peak joint velocity (deg/s, of limit): {', '.join(moving)}")
+        if "ik_solution_deg" in s.detail:
+            solved = ", ".join(f"{n} {v:.3f}" for n, v in zip(arm.joint_names,
+                                                              s.detail["ik_solution_deg"]))
+            typer.echo(f"       joint solution (deg): {solved}")
+        if "max_deviation_mm" in s.detail:
+            typer.echo(f"       straight line: {s.detail['length_mm']} mm, largest deviation "
+                       f"{s.detail['max_deviation_mm']} mm")
         if "position_error_mm" in s.detail:
             d = s.detail
             typer.echo(f"       checkpoint: expected {d['expected_position_mm']} mm, reached "
