@@ -155,6 +155,9 @@ class Executor:
         self.last: Measurement | None = None
         self.commanded_deg: np.ndarray | None = None
         self.min_heights_mm: dict[str, float] = {}
+        #: Smallest clearance seen per pair of link volumes / obstacles (the closest pair of
+        #: each cycle), mm.
+        self.min_distances_mm: dict[str, float] = {}
         self.not_verified: list[str] = []
         self._current_step: StepResult | None = None
         self._move_limits = self.limits
@@ -314,6 +317,7 @@ class Executor:
 
     def check_guards(self, m: Measurement) -> None:
         q = np.radians(m.user_deg)
+        self.check_geometry(q)
         points = kinematics.point_positions(self.chain, q)
         for guard in self.arm.workspace.guards:
             for name in guard.points:
@@ -324,6 +328,27 @@ class Executor:
                     raise RunAborted("workspace_guard",
                                      f"workspace guard '{guard.name}': {name} at z = {z:.1f} mm, "
                                      f"below {guard.min_z_mm:.1f} mm")
+
+    def check_geometry(self, q_rad: np.ndarray) -> None:
+        """Link volumes against the arm file's obstacles and each other (measured joints)."""
+        geometry = self.__dict__.get("_geometry")
+        if geometry is None:
+            from seqrun.geometry import Geometry
+
+            geometry = self.__dict__["_geometry"] = Geometry(self.arm)
+        if geometry.empty:
+            return
+        smallest = geometry.smallest(q_rad)
+        if smallest is None:
+            return
+        key = smallest.pair
+        self.min_distances_mm[key] = min(self.min_distances_mm.get(key, math.inf),
+                                         smallest.distance_mm)
+        if smallest.distance_mm < geometry.margin_mm:
+            a, b = smallest.pair.split("~", 1)
+            raise RunAborted("collision",
+                             f"geometry: {a} {smallest.distance_mm:.1f} mm from {b}, closer than "
+                             f"the margin {geometry.margin_mm:g} mm")
 
     def monitor(self) -> Measurement:
         """One monitoring cycle without motion commands (waits, checkpoints). A module

@@ -50,6 +50,7 @@ from seqrun.schema import (
 __all__ = [
     "PLAN_SAMPLE_S",
     "Clearance",
+    "Proximity",
     "ValidationResult",
     "commanded_joints",
     "park_deg",
@@ -86,6 +87,23 @@ class Clearance:
                 "t_s": round(self.t_s, 3), "duration_s": round(self.duration_s, 3)}
 
 
+@dataclass(frozen=True)
+class Proximity:
+    """The smallest clearance between link volumes and obstacles (or two links) along one
+    move, and where it occurs."""
+
+    step: int
+    pair: str                 # "wrist~desk", "column~forearm"
+    distance_mm: float        # surface to surface; negative: they overlap
+    t_s: float
+    duration_s: float
+
+    def as_dict(self) -> dict:
+        return {"step": self.step, "pair": self.pair,
+                "distance_mm": round(self.distance_mm, 2), "t_s": round(self.t_s, 3),
+                "duration_s": round(self.duration_s, 3)}
+
+
 def plan_samples(plan, period_s: float = PLAN_SAMPLE_S) -> tuple[np.ndarray, np.ndarray]:
     """Times and joint positions (rad, every joint) of a plan every ``period_s`` and at its
     end: what a guard check along the real trajectory looks at."""
@@ -107,6 +125,8 @@ class ValidationResult:
     #: Joint solution (user degrees, every joint) of each end-effector target, by step number:
     #: the run solves again from the measured joints and must land close to it.
     targets_deg: dict[int, np.ndarray] = field(default_factory=dict)
+    #: Smallest link-volume clearance of each move (step number -> Proximity).
+    proximities: dict[int, "Proximity"] = field(default_factory=dict)
 
     @property
     def valid(self) -> bool:
@@ -236,6 +256,7 @@ class _Validator:
         self.speed = 1.0  # the run's speed override: the plans guards are checked along
         self.clearances: dict[int, Clearance] = {}
         self.targets_deg: dict[int, np.ndarray] = {}
+        self.proximities: dict[int, Proximity] = {}
         for joint in arm.joints:
             position = joint.locked if joint.locked is not None else start_deg.get(joint.name)
             if position is None or not math.isfinite(position):
@@ -475,7 +496,9 @@ class _Validator:
     def _check_path_guards(self, step: ResolvedStep, times: np.ndarray, path_rad: np.ndarray,
                            *, what: str) -> None:
         """Guards along sampled joint configurations (rad) at ``times`` (s): one error per
-        guard, at the watched point that goes lowest; the smallest clearance is kept."""
+        guard, at the watched point that goes lowest; the smallest clearance is kept. Then
+        the link volumes against the obstacles and each other (:meth:`_check_path_geometry`)."""
+        self._check_path_geometry(step, times, path_rad, what=what)
         guards = self.arm.workspace.guards
         if not guards:
             return
@@ -499,6 +522,31 @@ class _Validator:
                     f"this move takes the {lowest.replace('_', '-')} down to z = "
                     f"{_f(heights[i])} mm (at {times[i]:.2f} s of {duration:.2f} s, {what}), "
                     f"below the '{guard.name}' guard at {_f(guard.min_z_mm)} mm"))
+
+    def _check_path_geometry(self, step: ResolvedStep, times: np.ndarray, path_rad: np.ndarray,
+                             *, what: str) -> None:
+        """Link capsules against obstacles and non-neighbouring links along the samples."""
+        if self.arm.geometry.capsules == []:
+            return
+        from seqrun.geometry import Geometry
+
+        if getattr(self, "_geometry", None) is None:
+            self._geometry = Geometry(self.arm)
+        smallest = self._geometry.smallest(path_rad)
+        if smallest is None:
+            return
+        duration = float(times[-1]) if len(times) else 0.0
+        at = float(times[smallest.index])
+        self.proximities[step.number] = Proximity(step.number, smallest.pair,
+                                                  smallest.distance_mm, at, duration)
+        margin = self._geometry.margin_mm
+        if smallest.distance_mm < margin:
+            a, b = smallest.pair.split("~", 1)
+            how = ("into" if smallest.distance_mm < 0 else "within "
+                   f"{_f(smallest.distance_mm)} mm of")
+            self.errors.append(step.error(
+                f"this move takes the {a} {how} the {b} (at {at:.2f} s of {duration:.2f} s, "
+                f"{what}); the arm file's geometry margin is {_f(margin)} mm"))
 
     # -- end-effector targets (seqrun/cartesian.py)
     def _tool_target(self, step: ResolvedStep, params) -> np.ndarray | None:
@@ -645,6 +693,7 @@ class _Validator:
                                   list(dict.fromkeys(self.notes)), final)
         result.clearances = dict(self.clearances)
         result.targets_deg = dict(self.targets_deg)
+        result.proximities = dict(self.proximities)
         return result
 
 

@@ -43,6 +43,8 @@ class StaticCheck:
     notes: list[SourceError] = field(default_factory=list)
     #: Smallest guard clearance of each move along its planned trajectory.
     clearances: list = field(default_factory=list)
+    #: Smallest link-volume clearance of each move (arm file geometry).
+    proximities: list = field(default_factory=list)
 
     @property
     def valid(self) -> bool:
@@ -86,6 +88,7 @@ def static_check(file: Path, *, start: str | None = None,
                                                  started=started, speed=speed)
     check.errors, check.notes = result.errors, result.notes
     check.clearances = [result.clearances[n] for n in sorted(result.clearances)]
+    check.proximities = [result.proximities[n] for n in sorted(result.proximities)]
     return check
 
 
@@ -94,7 +97,8 @@ def print_report(check: StaticCheck, file: Path, *, as_json: bool) -> None:
         typer.echo(json.dumps({"valid": check.valid,
                                "errors": [e.as_dict() for e in check.errors],
                                "notes": [n.as_dict() for n in check.notes],
-                               "clearances": [c.as_dict() for c in check.clearances]},
+                               "clearances": [c.as_dict() for c in check.clearances],
+                               "proximities": [p.as_dict() for p in check.proximities]},
                               indent=2, ensure_ascii=False))
         return
     for error in check.errors:
@@ -118,6 +122,10 @@ def print_clearances(check: StaticCheck) -> None:
         typer.echo(f"  step {c.step}: lowest {c.point.replace('_', '-')} z = {c.z_mm:.1f} mm, "
                    f"{c.margin_mm:+.1f} mm from the '{c.guard}' guard, at {c.t_s:.2f} s of "
                    f"{c.duration_s:.2f} s (planned trajectory)")
+    for p in check.proximities:
+        a, b = p.pair.split("~", 1)
+        typer.echo(f"  step {p.step}: closest {a} - {b} {p.distance_mm:.1f} mm (link volumes), "
+                   f"at {p.t_s:.2f} s of {p.duration_s:.2f} s")
 
 
 def print_dry_run(run, loaded, arm) -> None:
@@ -215,6 +223,7 @@ def validate_command(
                                "errors": [e.as_dict() for e in check.errors],
                                "notes": [n.as_dict() for n in check.notes],
                                "clearances": [c.as_dict() for c in check.clearances],
+                               "proximities": [p.as_dict() for p in check.proximities],
                                "dry_run": run.as_dict() if run is not None else None},
                               indent=2, ensure_ascii=False))
     else:

@@ -1,0 +1,194 @@
+"""Distances between the arm's links and the facility (pure numpy, no I/O).
+
+The links are capsules (a segment between two frame origins of the chain, and a radius);
+the facility's obstacles are planes (half-spaces), boxes and finite cylinders, all in the
+base frame; self-collision is checked between links that are not neighbours in the
+chain. Everything is vectorised over configurations: ``(..., dof)`` joint angles in,
+``(...)`` distances out, one Python loop over the (few) capsules and obstacles only.
+
+Distances are *clearances*: surface to surface, in mm, negative when they overlap. A
+capsule's distance to a convex obstacle is the smallest distance of its segment to the
+obstacle (a convex function along the segment, minimised by golden-section search)
+minus its radius.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from seqrun.arm import ArmDescription
+from seqrun.kinematics import Chain, frame_transforms, matrix_from_rpy
+
+__all__ = ["Clearance", "Geometry"]
+
+_GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0
+#: Golden-section steps along a segment: the bracket shrinks to 0.618^24 ≈ 1e-5 of it.
+_SEARCH_STEPS = 24
+
+
+@dataclass(frozen=True)
+class Clearance:
+    """The smallest clearance of one configuration and which pair it is."""
+
+    distance_mm: float
+    pair: str          # "forearm~desk", "column~wrist"
+    index: int         # sample index where it occurs (for a batch)
+
+
+def _point_box(points: np.ndarray, center: np.ndarray, rotation: np.ndarray,
+               half: np.ndarray) -> np.ndarray:
+    local = (points - center) @ rotation  # into the box frame
+    outside = np.maximum(np.abs(local) - half, 0.0)
+    inside = np.minimum(np.max(np.abs(local) - half, axis=-1), 0.0)
+    return np.linalg.norm(outside, axis=-1) + inside
+
+
+def _point_cylinder(points: np.ndarray, base: np.ndarray, axis: np.ndarray, radius: float,
+                    height: float) -> np.ndarray:
+    rel = points - base
+    along = rel @ axis
+    radial = np.linalg.norm(rel - along[..., None] * axis, axis=-1)
+    d_r = radial - radius
+    d_a = np.maximum(-along, along - height)
+    outside = np.hypot(np.maximum(d_r, 0.0), np.maximum(d_a, 0.0))
+    return outside + np.minimum(np.maximum(d_r, d_a), 0.0)
+
+
+def _segment_min(a: np.ndarray, b: np.ndarray, distance) -> np.ndarray:
+    """min over t in [0, 1] of distance(a + t (b - a)), for a convex ``distance``."""
+    lo = np.zeros(a.shape[:-1])
+    hi = np.ones(a.shape[:-1])
+    ab = b - a
+    x1 = hi - _GOLDEN * (hi - lo)
+    x2 = lo + _GOLDEN * (hi - lo)
+    f1 = distance(a + x1[..., None] * ab)
+    f2 = distance(a + x2[..., None] * ab)
+    for _ in range(_SEARCH_STEPS):
+        left = f1 < f2  # the minimum lies in [lo, x2]
+        hi = np.where(left, x2, hi)
+        lo = np.where(left, lo, x1)
+        x2n = np.where(left, x1, lo + _GOLDEN * (hi - lo))
+        x1n = np.where(left, hi - _GOLDEN * (hi - lo), x2)
+        f_new = distance(a + np.where(left, x1n, x2n)[..., None] * ab)
+        f1, f2 = np.where(left, f_new, f2), np.where(left, f1, f_new)
+        x1, x2 = x1n, x2n
+    ends = np.minimum(distance(a), distance(b))
+    return np.minimum(np.minimum(f1, f2), ends)
+
+
+def _segment_segment(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndarray
+                     ) -> np.ndarray:
+    """Closest distance between segments p1q1 and p2q2 (batched; Ericson 5.1.9)."""
+    d1, d2, r = q1 - p1, q2 - p2, p1 - p2
+    a = np.einsum("...i,...i", d1, d1)
+    e = np.einsum("...i,...i", d2, d2)
+    f = np.einsum("...i,...i", d2, r)
+    c = np.einsum("...i,...i", d1, r)
+    b = np.einsum("...i,...i", d1, d2)
+    denom = a * e - b * b
+    eps = 1e-12
+    safe_a = np.where(a > eps, a, 1.0)
+    safe_e = np.where(e > eps, e, 1.0)
+    # general case: closest points of the lines, s clamped, t from s, then s again
+    s = np.where(denom > eps, np.clip((b * f - c * e) / np.where(denom > eps, denom, 1.0),
+                                      0.0, 1.0), 0.0)
+    t = (b * s + f) / safe_e
+    s = np.where(t < 0, np.clip(-c / safe_a, 0, 1),
+                 np.where(t > 1, np.clip((b - c) / safe_a, 0, 1), s))
+    t = np.clip(t, 0.0, 1.0)
+    # degenerate segments (points)
+    first_point, second_point = a <= eps, e <= eps
+    s = np.where(second_point, np.clip(-c / safe_a, 0, 1), s)
+    t = np.where(second_point, 0.0, t)
+    t = np.where(first_point, np.clip(f / safe_e, 0, 1), t)
+    s = np.where(first_point, 0.0, s)
+    c1 = p1 + s[..., None] * d1
+    c2 = p2 + t[..., None] * d2
+    return np.linalg.norm(c1 - c2, axis=-1)
+
+
+class Geometry:
+    """Link capsules and obstacles of an arm description (``arm.geometry``)."""
+
+    def __init__(self, arm: ArmDescription) -> None:
+        spec = arm.geometry
+        self.arm = arm
+        self.chain = Chain.from_arm(arm)
+        self.margin_mm = spec.margin_mm
+        names = ["base"] + [j.name for j in arm.joints] + ["end_effector"]
+        self._frame = {name: i for i, name in enumerate(names)}
+        self.capsules = list(spec.capsules)
+        self.capsule_names = [c.name for c in self.capsules]
+        self._ends = np.array([[self._frame[c.start], self._frame[c.end]] for c in self.capsules],
+                              dtype=int).reshape(-1, 2)
+        self._radii = np.array([c.radius_mm for c in self.capsules], dtype=float)
+        # self-collision: links that are not neighbours in the list (chain order)
+        self.pairs = [(i, j) for i in range(len(self.capsules))
+                      for j in range(i + 2, len(self.capsules))
+                      if (self.capsules[i].name, self.capsules[j].name) not in spec.allowed_pairs
+                      and (self.capsules[j].name, self.capsules[i].name) not in spec.allowed_pairs]
+        self.obstacles = list(spec.obstacles)
+
+    @property
+    def empty(self) -> bool:
+        return not self.capsules
+
+    def endpoints(self, q_rad: np.ndarray) -> np.ndarray:
+        """Capsule segments ``(..., capsules, 2, 3)`` at joint angles (rad)."""
+        frames = frame_transforms(self.chain, q_rad)[..., :3, 3]  # (..., n+1, 3)
+        origin = np.zeros(frames.shape[:-2] + (1, 3))
+        points = np.concatenate([origin, frames], axis=-2)  # "base" = the mount, index 0
+        return points[..., self._ends, :]
+
+    def clearances(self, q_rad: np.ndarray) -> tuple[np.ndarray, list[str]]:
+        """Every pair's clearance (mm): ``(..., pairs)`` and the pair names."""
+        q = np.asarray(q_rad, dtype=float)
+        seg = self.endpoints(q)
+        columns: list[np.ndarray] = []
+        names: list[str] = []
+        for obstacle in self.obstacles:
+            for k, capsule in enumerate(self.capsules):
+                if capsule.name in obstacle.ignore_links:
+                    continue
+                a, b = seg[..., k, 0, :], seg[..., k, 1, :]
+                columns.append(self._obstacle_distance(obstacle, a, b) - self._radii[k])
+                names.append(f"{capsule.name}~{obstacle.name}")
+        for i, j in self.pairs:
+            d = _segment_segment(seg[..., i, 0, :], seg[..., i, 1, :],
+                                 seg[..., j, 0, :], seg[..., j, 1, :])
+            columns.append(d - self._radii[i] - self._radii[j])
+            names.append(f"{self.capsules[i].name}~{self.capsules[j].name}")
+        if not columns:
+            return np.full(q.shape[:-1] + (0,), np.inf), names
+        return np.stack(columns, axis=-1), names
+
+    def _obstacle_distance(self, obstacle, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        shape = obstacle.shape
+        if obstacle.kind == "plane":
+            normal = np.asarray(shape.normal, dtype=float)
+            normal = normal / np.linalg.norm(normal)
+            point = np.asarray(shape.point_mm, dtype=float)
+            return np.minimum((a - point) @ normal, (b - point) @ normal)
+        if obstacle.kind == "box":
+            center = np.asarray(shape.center_mm, dtype=float)
+            rotation = matrix_from_rpy(np.radians(shape.rpy_deg))
+            half = np.asarray(shape.size_mm, dtype=float) / 2.0
+            return _segment_min(a, b, lambda p: _point_box(p, center, rotation, half))
+        base = np.asarray(shape.base_mm, dtype=float)
+        axis = np.asarray(shape.axis, dtype=float)
+        axis = axis / np.linalg.norm(axis)
+        return _segment_min(a, b, lambda p: _point_cylinder(p, base, axis, shape.radius_mm,
+                                                            shape.height_mm))
+
+    def smallest(self, q_rad: np.ndarray) -> Clearance | None:
+        """The smallest clearance over a batch ``(k, dof)`` (or one configuration)."""
+        values, names = self.clearances(np.atleast_2d(q_rad))
+        if not names:
+            return None
+        flat = int(np.argmin(values))
+        index, pair = divmod(flat, values.shape[-1])
+        return Clearance(float(values.reshape(-1)[flat]), names[pair], index)
+
