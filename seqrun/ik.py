@@ -48,9 +48,11 @@ ANGLE_TOLERANCE_RAD = 1e-6
 #: Length (mm) that weighs one radian of orientation error against millimetres of position.
 ORIENTATION_WEIGHT_MM = 200.0
 #: Smallest damping (in (mm/rad)² units of JᵀWJ, whose entries are ~1e5 on the LWA 3).
-DAMPING_FLOOR = 1e-3
+DAMPING_FLOOR = 1e-6
 #: Null-space gain towards the seed (redundant chains), per iteration.
 NULL_SPACE_GAIN = 0.2
+#: Redundant chains: at most this many pose-keeping slides towards the seed once converged.
+POLISH_STEPS = 12
 
 
 class Unreachable(SeqrunError):
@@ -124,7 +126,7 @@ class IkSolver:
     def __init__(self, arm: ArmDescription, tool: str | None = None, *,
                  position_tolerance_mm: float = POSITION_TOLERANCE_MM,
                  angle_tolerance_rad: float = ANGLE_TOLERANCE_RAD,
-                 max_iterations: int = 60, restarts: int = 40) -> None:
+                 max_iterations: int = 100, restarts: int = 40) -> None:
         self.arm = arm
         self.chain = tool_chain(arm, tool)
         self.position_tolerance_mm = position_tolerance_mm
@@ -159,22 +161,46 @@ class IkSolver:
                 current = current @ _rz(math.radians(self.locked_deg[i]))
         self._pre = pre
         self._post = current @ chain.tool
+        self._pre_rows = [tuple(float(x) for x in (*f[:3, :3].ravel(), *f[:3, 3])) for f in pre]
 
     def forward(self, q_active: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Tool frame (4, 4), joint axes (m, 3) and joint origins (m, 3) in the base frame."""
-        m = len(self.active)
-        axes = np.empty((m, 3))
-        origins = np.empty((m, 3))
-        current = np.eye(4)
-        cos, sin = np.cos(q_active), np.sin(q_active)
-        for k in range(m):
-            current = current @ self._pre[k]
-            axes[k] = current[:3, 2]
-            origins[k] = current[:3, 3]
-            c0, c1 = current[:, 0].copy(), current[:, 1].copy()
-            current[:, 0] = cos[k] * c0 + sin[k] * c1  # current @ Rz(q): only columns 0, 1
-            current[:, 1] = cos[k] * c1 - sin[k] * c0
-        return current @ self._post, axes, origins
+        frame, axes, origins = self._kinematics(q_active)
+        return frame, np.array(axes), np.array(origins)
+
+    def _kinematics(self, q_active) -> tuple[np.ndarray, list, list]:
+        """:meth:`forward` in plain floats: for a 4x4 chain of six joints numpy's per-call
+        overhead costs ten times the arithmetic, and this runs every iteration."""
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
+        px = py = pz = 0.0
+        axes, origins = [], []
+        for (a00, a01, a02, a10, a11, a12, a20, a21, a22, ax, ay, az), angle in zip(
+                self._pre_rows, q_active):
+            px, py, pz = (px + r00 * ax + r01 * ay + r02 * az, py + r10 * ax + r11 * ay + r12 * az,
+                          pz + r20 * ax + r21 * ay + r22 * az)
+            r00, r01, r02 = (r00 * a00 + r01 * a10 + r02 * a20, r00 * a01 + r01 * a11 + r02 * a21,
+                             r00 * a02 + r01 * a12 + r02 * a22)
+            r10, r11, r12 = (r10 * a00 + r11 * a10 + r12 * a20, r10 * a01 + r11 * a11 + r12 * a21,
+                             r10 * a02 + r11 * a12 + r12 * a22)
+            r20, r21, r22 = (r20 * a00 + r21 * a10 + r22 * a20, r20 * a01 + r21 * a11 + r22 * a21,
+                             r20 * a02 + r21 * a12 + r22 * a22)
+            axes.append((r02, r12, r22))
+            origins.append((px, py, pz))
+            c, s = math.cos(angle), math.sin(angle)  # @ Rz(q): columns 0 and 1 only
+            r00, r01 = c * r00 + s * r01, c * r01 - s * r00
+            r10, r11 = c * r10 + s * r11, c * r11 - s * r10
+            r20, r21 = c * r20 + s * r21, c * r21 - s * r20
+        frame = np.array([[r00, r01, r02, px], [r10, r11, r12, py], [r20, r21, r22, pz],
+                          [0.0, 0.0, 0.0, 1.0]]) @ self._post
+        return frame, axes, origins
+
+    def _jacobian(self, frame: np.ndarray, axes: list, origins: list) -> np.ndarray:
+        tx, ty, tz = frame[0, 3], frame[1, 3], frame[2, 3]
+        columns = []
+        for (zx, zy, zz), (ox, oy, oz) in zip(axes, origins):
+            dx, dy, dz = tx - ox, ty - oy, tz - oz
+            columns.append((zy * dz - zz * dy, zz * dx - zx * dz, zx * dy - zy * dx, zx, zy, zz))
+        return np.array(columns).T
 
     def full_deg(self, q_active: np.ndarray) -> np.ndarray:
         q = self.locked_deg.copy()
@@ -188,8 +214,14 @@ class IkSolver:
         return e
 
     def _inside(self, q: np.ndarray) -> np.ndarray:
-        q = np.where(self.wraps, np.remainder(q - self.lower, 2 * math.pi) + self.lower, q)
+        out = self.wraps & ((q < self.lower) | (q > self.upper))
+        q = np.where(out, np.remainder(q - self.lower, 2 * math.pi) + self.lower, q)
         return np.clip(q, self.lower, self.upper)
+
+    def _towards(self, seed: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """seed - q, the short way round for joints that turn a full circle."""
+        diff = seed - q
+        return np.where(self.wraps, np.remainder(diff + math.pi, 2 * math.pi) - math.pi, diff)
 
     # ---------------------------------------------------------------- solving
     def _converged(self, e: np.ndarray) -> bool:
@@ -203,23 +235,35 @@ class IkSolver:
         m = len(q)
         redundant = m > 6
         identity = np.eye(m)
-        frame, axes, origins = self.forward(q)
+        frame, axes, origins = self._kinematics(q)
         e = self._error(frame, target)
         cost = 0.5 * float(e @ (w * e))
         boost = 1.0  # grows while steps fail to lower the error (classic LM back-off)
+        polish = 0
         for iteration in range(1, self.max_iterations + 1):
+            jac = self._jacobian(frame, axes, origins)
             if self._converged(e):
-                return q, e, iteration - 1, True
-            jac = np.empty((6, m))
-            jac[:3] = np.cross(axes, frame[:3, 3] - origins).T
-            jac[3:] = axes.T
+                if not redundant or polish >= POLISH_STEPS:
+                    return q, e, iteration - 1, True
+                # On the pose: slide along the self-motion towards the seed, so that the
+                # swivel ends near it rather than wherever convergence happened to stop.
+                pinv = jac.T @ np.linalg.inv(jac @ jac.T + 1e-9 * np.eye(6))
+                slide = (identity - pinv @ jac) @ self._towards(seed, q)
+                if float(np.max(np.abs(slide))) < 1e-4:
+                    return q, e, iteration - 1, True
+                polish += 1
+                q = self._inside(q + 0.5 * slide)
+                frame, axes, origins = self._kinematics(q)
+                e = self._error(frame, target)
+                cost = 0.5 * float(e @ (w * e))
+                continue
             jw = jac.T * w
             step = np.linalg.solve(jw @ jac + (boost * cost + DAMPING_FLOOR) * identity, jw @ e)
             if redundant:
                 pinv = jac.T @ np.linalg.inv(jac @ jac.T + 1e-9 * np.eye(6))
-                step += (identity - pinv @ jac) @ (NULL_SPACE_GAIN * (seed - q))
+                step += (identity - pinv @ jac) @ (NULL_SPACE_GAIN * self._towards(seed, q))
             candidate = self._inside(q + step)
-            frame_c, axes_c, origins_c = self.forward(candidate)
+            frame_c, axes_c, origins_c = self._kinematics(candidate)
             e_c = self._error(frame_c, target)
             cost_c = 0.5 * float(e_c @ (w * e_c))
             if cost_c >= cost and not self._converged(e_c):

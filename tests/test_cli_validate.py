@@ -67,6 +67,8 @@ def test_json_output():
     # the smallest guard clearance of each move along its planned trajectory
     assert all(set(c) == {"step", "guard", "point", "z_mm", "margin_mm", "t_s", "duration_s"}
                for c in report.pop("clearances"))
+    assert all(set(p) == {"step", "pair", "distance_mm", "t_s", "duration_s"}
+               for p in report.pop("proximities"))
     assert report == {
         "valid": False,
         "errors": [{"file": display_path(path), "line": 7, "column": 33,
