@@ -26,7 +26,7 @@ from seqrun.ik import ORIENTATION_WEIGHT_MM, IkSolver, Unreachable, _rotation_ve
 from seqrun.kinematics import jacobian
 from seqrun.planner import SampledPlan
 
-__all__ = ["LinearPath", "LinearPlan", "PathError", "manipulability", "plan_linear",
+__all__ = ["LinearPath", "LinearPlan", "PathError", "displacement", "manipulability", "plan_linear",
            "resolve_target", "solver_for"]
 
 
@@ -231,3 +231,10 @@ def plan_linear(arm: ArmDescription, tool: str | None, start_deg: Sequence[float
     plan = SampledPlan(active, times, np.radians(joints))
     return LinearPlan(plan, path, joints, float(measure[worst]), float(fractions[worst]),
                       np.max(velocity, axis=0))
+
+
+def displacement(before: np.ndarray, after: np.ndarray, frame: str) -> np.ndarray:
+    """How far the tool moved from ``before`` to ``after`` (4x4 frames), mm, expressed in the
+    base frame or in the tool's frame at ``before``."""
+    moved = after[:3, 3] - before[:3, 3]
+    return before[:3, :3].T @ moved if frame == "tool" else moved

@@ -166,6 +166,8 @@ class Executor:
         #: Joint solutions of end-effector targets as validated from the measured start
         #: (step number -> user degrees); the steps solve again and must land close.
         self.validated_targets: dict[int, np.ndarray] = {}
+        #: Measured joints where the last move started (relative checkpoints).
+        self.motion_start_deg: np.ndarray | None = None
         #: Extra check of every streamed cycle (a straight-line move's deviation).
         self.path_check: Callable[[Measurement], None] | None = None
 
@@ -372,6 +374,7 @@ class Executor:
         self.check_states(m)
         self._move_limits = limits
         start_deg = m.user_deg.copy()
+        self.motion_start_deg = start_deg.copy()  # for relative checkpoints
         moving = [i for i in active if abs(target_deg[i] - start_deg[i]) > 1e-9]
         plan = plan_move(np.radians(start_deg), np.radians(target_deg), limits, moving)
         self.commanded_deg = np.where(np.isin(np.arange(len(target_deg)), moving),
@@ -405,6 +408,7 @@ class Executor:
         ``command_mode`` overrides the run's setpoint law for this plan."""
         m = self.read_arm()
         self.check_states(m)
+        self.motion_start_deg = m.user_deg.copy()  # for relative checkpoints
         moving = list(plan.active)
         self.commanded_deg = np.degrees(plan.target)
         self.emit("move_planned", duration_s=_round(plan.duration), start_deg=_r(m.user_deg),

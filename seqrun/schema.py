@@ -436,10 +436,22 @@ class CheckpointParams(StepParams):
     kind: ClassVar[str] = "checkpoint"
     yaml_name: ClassVar[str] = "checkpoint"
     model_config = ConfigDict(json_schema_extra={"oneOf": [
-        {"required": ["pose"]}, {"required": ["position_mm", "rpy_deg"]}]})
+        {"required": ["pose"]}, {"required": ["position_mm", "rpy_deg"]},
+        {"required": ["moved_mm"]}]})
 
     pose: PoseName | None = Field(  # type: ignore[valid-type]
         None, description="Expect the end-effector pose of this pose file.")
+    moved_mm: Vector3 | None = Field(
+        None, description="Relative checkpoint: the tool moved by this [x, y, z] in mm during "
+                          "the last move before it (from where that move started), in the "
+                          "base or the tool frame (frame; tool: the tool's frame where the "
+                          "move started), e.g. [0, 0, -300] with frame: tool.")
+    frame: Literal["base", "tool"] = Field(
+        "base", description="With moved_mm: the frame the displacement is given in.")
+    tool: str | None = Field(None, min_length=1, description="With moved_mm: the arm file's "
+                                                             "tool (default: the arm's "
+                                                             "default_tool, else the "
+                                                             "end-effector frame).")
     position_mm: Vector3 | None = Field(
         None, description="Expected end-effector position [x, y, z] in mm (base frame).")
     rpy_deg: Vector3 | None = Field(
@@ -455,6 +467,15 @@ class CheckpointParams(StepParams):
 
     @model_validator(mode="after")
     def _one(self) -> CheckpointParams:
+        if self.moved_mm is not None:
+            others = [k for k in ("pose", "position_mm", "rpy_deg") if getattr(self, k) is not None]
+            if others:
+                raise PydanticCustomError("checkpoint_what", "a relative checkpoint (moved_mm) "
+                                          "takes no {others}", {"others": ", ".join(others)})
+            return self
+        if self.frame != "base" or self.tool is not None:
+            raise PydanticCustomError("checkpoint_what", "frame and tool belong to a relative "
+                                                         "checkpoint (moved_mm)")
         explicit = self.position_mm is not None or self.rpy_deg is not None
         if self.pose is not None and explicit:
             raise PydanticCustomError("checkpoint_what", "a checkpoint takes either 'pose' or "
@@ -800,6 +821,9 @@ def describe(kind: str, params: StepParams) -> str:
     if isinstance(params, WaitParams):
         return (f"wait {params.seconds:g} s" if params.seconds is not None
                 else "wait until in position")
+    if isinstance(params, CheckpointParams) and params.moved_mm is not None:
+        xyz = ", ".join(f"{v:g}" for v in params.moved_mm)
+        return f"checkpoint: the tool moved [{xyz}] mm ({params.frame} frame)"
     if isinstance(params, CheckpointParams):
         return (f"checkpoint: pose {params.pose}" if params.pose is not None
                 else "checkpoint: end-effector pose")

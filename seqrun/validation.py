@@ -257,6 +257,7 @@ class _Validator:
         self.clearances: dict[int, Clearance] = {}
         self.targets_deg: dict[int, np.ndarray] = {}
         self.proximities: dict[int, Proximity] = {}
+        self.motion_start_deg: np.ndarray | None = None  # where the last move started
         for joint in arm.joints:
             position = joint.locked if joint.locked is not None else start_deg.get(joint.name)
             if position is None or not math.isfinite(position):
@@ -548,6 +549,32 @@ class _Validator:
                 f"this move takes the {a} {how} the {b} (at {at:.2f} s of {duration:.2f} s, "
                 f"{what}); the arm file's geometry margin is {_f(margin)} mm"))
 
+    def _relative_checkpoint(self, step: ResolvedStep, params: CheckpointParams) -> None:
+        """'The tool moved 50 mm along z': the tracked tool pose now against where the last
+        move started."""
+        from seqrun.cartesian import displacement, solver_for, tool_pose
+
+        if self.motion_start_deg is None:
+            self.errors.append(step.error("a relative checkpoint (moved_mm) needs a move before "
+                                          "it", "moved_mm"))
+            return
+        try:
+            solver = solver_for(self.arm, params.tool)
+        except KeyError:
+            names = ", ".join(t.name for t in self.arm.tools) or "none defined"
+            self.errors.append(step.error(f"unknown tool '{params.tool}' (the arm file's tools: "
+                                          f"{names})", "tool"))
+            return
+        moved = displacement(tool_pose(solver, self.motion_start_deg),
+                             tool_pose(solver, self._tracked()), params.frame)
+        off = float(np.linalg.norm(moved - np.asarray(params.moved_mm)))
+        if off > params.position_tolerance_mm:
+            self.errors.append(step.error(
+                f"this checkpoint cannot pass: the last move takes the tool by "
+                f"[{', '.join(_f(v) for v in moved)}] mm ({params.frame} frame), {_f(off)} mm "
+                f"from the expected [{', '.join(_f(v) for v in params.moved_mm)}] "
+                f"(tolerance {_f(params.position_tolerance_mm)} mm)", "moved_mm"))
+
     # -- end-effector targets (seqrun/cartesian.py)
     def _tool_target(self, step: ResolvedStep, params) -> np.ndarray | None:
         """The step's tool target (4x4) from the tracked joints; None after an error."""
@@ -654,6 +681,9 @@ class _Validator:
         self._arrive(step, linear.joints_deg[-1])
 
     def checkpoint(self, step: ResolvedStep, params: CheckpointParams) -> None:
+        if getattr(params, "moved_mm", None) is not None:
+            self._relative_checkpoint(step, params)
+            return
         from seqrun.kinematics import orientation_error, pose_from_user_deg
 
         try:
@@ -683,6 +713,8 @@ class _Validator:
             handler = handlers.get(step.kind)
             if handler is not None:
                 errors, notes = len(self.errors), len(self.notes)
+                if step.kind in ("move", "move_linear"):
+                    self.motion_start_deg = self._tracked()
                 handler(step, step.params)  # type: ignore[operator]
                 # a step's findings in the order they appear in its text
                 self.errors[errors:] = sorted(self.errors[errors:], key=_position)

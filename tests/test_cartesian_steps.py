@@ -7,6 +7,7 @@ simulator at virtual time.
 
 from __future__ import annotations
 
+import re
 import textwrap
 from pathlib import Path
 
@@ -231,3 +232,39 @@ def test_path_deviation_is_the_distance_from_the_segment():
 def test_tool_pose_matches_forward_kinematics():
     solver = solver_for(ARM, None)
     assert tool_pose(solver, OPSAFE) == pytest.approx(fk(CHAIN, np.radians(OPSAFE)))
+
+
+# --------------------------------------------------------------------------- relative checkpoints
+APPROACH = UP + ("- move_linear: {position_mm: [0, 0, -100], relative: true, frame: tool, "
+                 "speed_mm_s: 20}\n")
+
+
+def test_relative_checkpoint_passes_validation_and_the_run(project):
+    steps = APPROACH + "- checkpoint: {moved_mm: [0, 0, -100], frame: tool, position_tolerance_mm: 0.5}\n"
+    loaded = load(project, steps)
+    assert validate_sequence(loaded, ARM, PARK).errors == []
+    run = dry_run(loaded, ARM, PARK)
+    assert run.result.exit_code == 0, run.result.message
+    detail = run.result.steps[-1].detail
+    assert detail["moved_mm"] == pytest.approx([0, 0, -100], abs=0.5)
+    assert detail["position_error_mm"] <= 0.5
+
+
+def test_relative_checkpoint_that_cannot_pass_is_located(project):
+    steps = APPROACH + "- checkpoint: {moved_mm: [0, 0, 100], frame: tool}\n"
+    result = validate_sequence(load(project, steps), ARM, PARK)
+    [error] = result.errors
+    assert (error.line, error.column) == (10, 26)  # moved_mm
+    # IK meets the line's end within 1e-3 mm: -99.999 or -100 as rounded to 3 decimals
+    assert re.match(r"this checkpoint cannot pass: the last move takes the tool by "
+                    r"\[0, 0, -(99\.999|100)\] mm \(tool frame\), (199\.999|200) mm from the "
+                    r"expected \[0, 0, 100\] \(tolerance 7 mm\)$", error.message), error.message
+
+
+def test_relative_checkpoint_in_the_base_frame(project):
+    steps = APPROACH + "- checkpoint: {moved_mm: [0, 0, -100]}\n"
+    result = validate_sequence(load(project, steps), ARM, PARK)
+    # the tool's z at Op-safe points mostly up-and-sideways, so in base coordinates the
+    # displacement is not [0, 0, -100]
+    [error] = result.errors
+    assert "(base frame)" in error.message
