@@ -2,8 +2,9 @@
 and each other (seqrun/geometry.py), single configurations and batched.
 
 Every pair's clearance is computed (``Geometry.clearances``) for N random configurations
-inside the joint limits; batched = one call for all N, single = one call per
-configuration. With ``--mock`` a box and a cylinder (a target mock and a pillar) are added
+inside the joint limits (batched: one call for all N); single = ``Geometry.smallest`` of
+one configuration, the run-time check of every control cycle (plain floats when every
+obstacle is a plane). With ``--mock`` a box and a cylinder (a target mock and a pillar) are added
 to the arm file's obstacles, so the golden-section search paths are timed too.
 
 Goal (issue 14): <= 100 µs per configuration batched. Times are wall-clock on one core
@@ -61,7 +62,7 @@ def main(argv: list[str] | None = None) -> int:
         batched.append((time.perf_counter() - t0) / args.n)
         t0 = time.perf_counter()
         for row in q[:200]:
-            geometry.clearances(row)
+            geometry.smallest(row)  # the run-time check of one measured configuration
         single.append((time.perf_counter() - t0) / 200)
     result = {"configurations": args.n, "pairs": len(names), "obstacles":
               [o.name for o in arm.geometry.obstacles], "load_average": os.getloadavg(),

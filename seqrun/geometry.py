@@ -127,6 +127,38 @@ def _segment_point(a: np.ndarray, b: np.ndarray, point: np.ndarray) -> np.ndarra
     return np.linalg.norm(a + t[..., None] * ab - point, axis=-1)
 
 
+def _segment_distance(p1, q1, p2, q2) -> float:
+    """:func:`_segment_segment` for one pair of segments given as float triples."""
+    d1 = (q1[0] - p1[0], q1[1] - p1[1], q1[2] - p1[2])
+    d2 = (q2[0] - p2[0], q2[1] - p2[1], q2[2] - p2[2])
+    r = (p1[0] - p2[0], p1[1] - p2[1], p1[2] - p2[2])
+    a = d1[0] * d1[0] + d1[1] * d1[1] + d1[2] * d1[2]
+    e = d2[0] * d2[0] + d2[1] * d2[1] + d2[2] * d2[2]
+    f = d2[0] * r[0] + d2[1] * r[1] + d2[2] * r[2]
+    eps = 1e-12
+    if a <= eps and e <= eps:
+        s = t = 0.0
+    elif a <= eps:
+        s, t = 0.0, min(max(f / e, 0.0), 1.0)
+    else:
+        c = d1[0] * r[0] + d1[1] * r[1] + d1[2] * r[2]
+        if e <= eps:
+            s, t = min(max(-c / a, 0.0), 1.0), 0.0
+        else:
+            b = d1[0] * d2[0] + d1[1] * d2[1] + d1[2] * d2[2]
+            denom = a * e - b * b
+            s = min(max((b * f - c * e) / denom, 0.0), 1.0) if denom > eps else 0.0
+            t = (b * s + f) / e
+            if t < 0.0:
+                s, t = min(max(-c / a, 0.0), 1.0), 0.0
+            elif t > 1.0:
+                s, t = min(max((b - c) / a, 0.0), 1.0), 1.0
+    x = p1[0] + s * d1[0] - p2[0] - t * d2[0]
+    y = p1[1] + s * d1[1] - p2[1] - t * d2[1]
+    z = p1[2] + s * d1[2] - p2[2] - t * d2[2]
+    return math.sqrt(x * x + y * y + z * z)
+
+
 def _segment_segment(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndarray
                      ) -> np.ndarray:
     """Closest distance between segments p1q1 and p2q2 (batched; Ericson 5.1.9)."""
@@ -191,6 +223,18 @@ class Geometry:
         self._pair_index = (np.array([i for i, _ in self.pairs], dtype=int),
                             np.array([j for _, j in self.pairs], dtype=int))
         self._names += [f"{self.capsules[i].name}~{self.capsules[j].name}" for i, j in self.pairs]
+        # plain-float copies for the single-configuration path
+        self._radii_list = self._radii.tolist()
+        frames = [self.chain.base, *self.chain.links]
+        self._rows = [tuple(float(x) for x in (*f[:3, :3].ravel(), *f[:3, 3])) for f in frames]
+        self._tool_xyz = tuple(float(x) for x in self.chain.tool[:3, 3])
+        self._planes_only = all(o.kind == "plane" for o in self.obstacles)
+        self._planes = {}
+        for o in self.obstacles:
+            if o.kind == "plane":
+                n = np.asarray(o.plane.normal, dtype=float)
+                n = n / np.linalg.norm(n)
+                self._planes[o.name] = (*n.tolist(), float(n @ np.asarray(o.plane.point_mm)))
 
     @property
     def empty(self) -> bool:
@@ -257,8 +301,66 @@ class Geometry:
             bound[near] = exact(a[near], b[near])
         return bound
 
+    def _origins(self, q) -> list[tuple[float, float, float]]:
+        """Frame origins (mount, joints 1..n, end-effector) of one configuration, in plain
+        floats: the run-time check does this every control cycle."""
+        rows = self._rows
+        (r00, r01, r02, r10, r11, r12, r20, r21, r22, px, py, pz) = rows[0]
+        points = [(0.0, 0.0, 0.0)]
+        for k, angle in enumerate(q):
+            if k:
+                a00, a01, a02, a10, a11, a12, a20, a21, a22, ax, ay, az = rows[k]
+                px, py, pz = (px + r00 * ax + r01 * ay + r02 * az,
+                              py + r10 * ax + r11 * ay + r12 * az,
+                              pz + r20 * ax + r21 * ay + r22 * az)
+                r00, r01, r02 = (r00 * a00 + r01 * a10 + r02 * a20,
+                                 r00 * a01 + r01 * a11 + r02 * a21,
+                                 r00 * a02 + r01 * a12 + r02 * a22)
+                r10, r11, r12 = (r10 * a00 + r11 * a10 + r12 * a20,
+                                 r10 * a01 + r11 * a11 + r12 * a21,
+                                 r10 * a02 + r11 * a12 + r12 * a22)
+                r20, r21, r22 = (r20 * a00 + r21 * a10 + r22 * a20,
+                                 r20 * a01 + r21 * a11 + r22 * a21,
+                                 r20 * a02 + r21 * a12 + r22 * a22)
+            points.append((px, py, pz))
+            c, s = math.cos(angle), math.sin(angle)
+            r00, r01 = c * r00 + s * r01, c * r01 - s * r00
+            r10, r11 = c * r10 + s * r11, c * r11 - s * r10
+            r20, r21 = c * r20 + s * r21, c * r21 - s * r20
+        ax, ay, az = self._tool_xyz
+        points.append((px + r00 * ax + r01 * ay + r02 * az, py + r10 * ax + r11 * ay + r12 * az,
+                       pz + r20 * ax + r21 * ay + r22 * az))
+        return points
+
+    def _smallest_one(self, q) -> Clearance:
+        """:meth:`smallest` of one configuration when every obstacle is a plane."""
+        points = self._origins(q)
+        seg = [(points[i], points[j]) for i, j in self._ends.tolist()]
+        best, best_name = math.inf, ""
+        column = 0
+        for obstacle, links in self._checked:
+            nx, ny, nz, offset = self._planes[obstacle.name]
+            for k in links.tolist():
+                (ax, ay, az), (bx, by, bz) = seg[k]
+                d = min(ax * nx + ay * ny + az * nz, bx * nx + by * ny + bz * nz) - offset
+                d -= self._radii_list[k]
+                if d < best:
+                    best, best_name = d, self._names[column]
+                column += 1
+        for i, j in self.pairs:
+            d = _segment_distance(*seg[i], *seg[j]) - self._radii_list[i] - self._radii_list[j]
+            if d < best:
+                best, best_name = d, self._names[column]
+            column += 1
+        return Clearance(best, best_name, 0)
+
     def smallest(self, q_rad: np.ndarray) -> Clearance | None:
         """The smallest clearance over a batch ``(k, dof)`` (or one configuration)."""
+        q = np.asarray(q_rad, dtype=float)
+        if not self._names:
+            return None
+        if q.ndim == 1 and self._planes_only:
+            return self._smallest_one(q.tolist())
         values, names = self.clearances(np.atleast_2d(q_rad))
         if not names:
             return None

@@ -247,7 +247,7 @@ def test_relative_checkpoint_passes_validation_and_the_run(project):
     assert run.result.exit_code == 0, run.result.message
     detail = run.result.steps[-1].detail
     assert detail["moved_mm"] == pytest.approx([0, 0, -100], abs=0.5)
-    assert detail["position_error_mm"] <= 0.5
+    assert detail["displacement_error_mm"] <= 0.5
 
 
 def test_relative_checkpoint_that_cannot_pass_is_located(project):

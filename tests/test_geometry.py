@@ -171,3 +171,13 @@ def test_the_run_halts_before_the_obstacle(project, monkeypatch):
     assert run.result.exit_code == 3
     assert run.result.fault["cause"] == "collision"
     assert "target_mock" in run.result.message
+
+
+@settings(max_examples=100, deadline=None)
+@given(q=arrays(np.float64, 7, elements=st.floats(-3.2, 3.2)))
+def test_single_configuration_fast_path_equals_the_batched_one(q):
+    values, names = GEOMETRY.clearances(q[None])
+    fast = GEOMETRY.smallest(q)
+    k = int(np.argmin(values[0]))
+    assert fast.distance_mm == pytest.approx(values[0, k], abs=1e-9)
+    assert fast.pair == names[k] or values[0, names.index(fast.pair)] == pytest.approx(values[0, k])

@@ -149,6 +149,12 @@ def print_dry_run(run, loaded, arm) -> None:
             solved = ", ".join(f"{n} {v:.3f}" for n, v in zip(arm.joint_names,
                                                               s.detail["ik_solution_deg"]))
             typer.echo(f"       joint solution (deg): {solved}")
+        if "moved_mm" in s.detail:
+            d = s.detail
+            typer.echo(f"       relative checkpoint: the tool moved {d['moved_mm']} mm "
+                       f"({d['frame']} frame), expected {d['expected_moved_mm']}: "
+                       f"{d['displacement_error_mm']} mm off (tolerance "
+                       f"{d['position_tolerance_mm']} mm)")
         if "max_deviation_mm" in s.detail:
             typer.echo(f"       straight line: {s.detail['length_mm']} mm, largest deviation "
                        f"{s.detail['max_deviation_mm']} mm")

@@ -51,7 +51,7 @@ def _relative(step, ex) -> dict:
     off = float(np.linalg.norm(moved - np.asarray(params.moved_mm)))
     detail = {"expected_moved_mm": [round(float(x), 3) for x in params.moved_mm],
               "moved_mm": [round(float(x), 3) for x in moved], "frame": params.frame,
-              "position_error_mm": round(off, 3),
+              "displacement_error_mm": round(off, 3),
               "position_tolerance_mm": params.position_tolerance_mm}
     ex.emit("checkpoint", **detail)
     if off > params.position_tolerance_mm:
