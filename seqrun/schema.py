@@ -1087,7 +1087,18 @@ Every step takes an optional `label`, the text the operator sees.
 - Velocities and limit overrides stay within the arm file's maxima.
 - Workspace guards of the arm file hold along each move's planned trajectory (the ruckig plan
   the run streams, sampled at 100 Hz); `seqrun validate` reports the smallest clearance of each move.
-- A checkpoint must agree with the end-effector of the joints tracked so far.
+- The arm file's link volumes (capsules) keep `geometry.margin_mm` from its obstacles and
+  from each other along each move, and the closest pair of each move is reported.
+- End-effector targets (`move` with `position_mm`, `move_linear`) are solved by inverse
+  kinematics from the joints tracked so far (the solution nearest them); an unreachable
+  target is an error at its `position_mm`. The run solves again from the measured joints
+  and stops (Halt) if that solution is more than `cartesian.ik_agreement_deg` from the
+  validated one. A straight line is sampled every `cartesian.linear_sample_s` and every
+  sample must be reachable, inside the limits in force, within the joint velocity limits
+  and away from singular configurations (`cartesian.min_manipulability`); during the run
+  the tool further than `max_deviation_mm` from the line is a fault.
+- A checkpoint must agree with the end-effector of the joints tracked so far; a relative
+  one (`moved_mm`) with how far the tool moved during the last move.
 - Validation starts from Park (`--start POSE` to choose another pose).
 
 ## Steps

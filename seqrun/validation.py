@@ -16,7 +16,10 @@ the offending value:
   the trajectory the executor streams (sampled at 100 Hz), with the smallest clearance of
   every move in :attr:`ValidationResult.clearances`;
 - checkpoints that cannot pass: the end-effector of the tracked joints is compared with
-  the expected pose.
+  the expected pose (relative checkpoints: with how far the tool moved in the last move);
+- the arm file's link volumes along each planned trajectory (:attr:`ValidationResult.proximities`);
+- end-effector targets solved by IK (:attr:`ValidationResult.targets_deg`) and straight
+  lines of the tool sampled and checked sample by sample (seqrun/cartesian.py).
 
 The executor runs it again with the measured start state (``start_deg``) and
 ``started=True`` when the modules report that they are reset, homed and limited.
