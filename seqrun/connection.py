@@ -36,6 +36,8 @@ class Connection:
     is_simulator: bool
     description: str
     faults: list[Fault] = field(default_factory=list)
+    #: The built-in simulator's power-on pose (its zero reference); None on other buses.
+    power_on_pose: str | None = None
 
     def close(self) -> None:
         self.bus.shutdown()
@@ -92,7 +94,8 @@ def open_connection(*, interface: str | None = None, channel: str | None = None,
                     force_sim: bool = False, faults: Sequence[Fault] = (),
                     clock: Clock | None = None,
                     sim_positions: Mapping[int, float] | Sequence[float] | None = None,
-                    default_bitrate: int = 1_000_000) -> Connection:
+                    default_bitrate: int = 1_000_000,
+                    power_on_pose: str | None = None) -> Connection:
     """Open the bus the operator asked for (see the module docstring)."""
     config = {} if force_sim else resolve_config(interface, channel, bitrate, bus_kwargs)
     if force_sim or not config.get("interface") or config["interface"] == SIM_INTERFACE:
@@ -102,11 +105,12 @@ def open_connection(*, interface: str | None = None, channel: str | None = None,
         name = str(config.get("channel") or f"seqrun-{next(_sim_channels)}")
         bus = SimBus(channel=name, clock=clock, faults=list(faults),
                      bitrate=bitrate or config.get("bitrate") or default_bitrate,
-                     positions=sim_positions)
+                     positions=sim_positions, power_on_pose=power_on_pose)
         kind = "virtual time" if clock.is_virtual else "real time"
         return Connection(bus, clock, True,
                           f"SIMULATOR ({kind}): simulated LWA 3 on '{name}', "
-                          f"{bus.bitrate} bit/s - no hardware is moved", list(faults))
+                          f"{bus.bitrate} bit/s - no hardware is moved", list(faults),
+                          power_on_pose=bus.arm.power_on_pose)
     if faults:
         raise UserInputError("--sim-fault only applies to the simulator (no -i/-c, or --sim)")
     if config["interface"] == "socketcand":  # python-can's config gives channel=None

@@ -72,7 +72,7 @@ def static_check(file: Path, *, start: str | None = None,
         return check
     pose = start or START_POSE
     try:
-        check.start_deg = pose_joints_deg(pose, check.loaded.poses_dir)
+        check.start_deg = pose_joints_deg(pose, check.loaded.pose_path or check.loaded.poses_dir)
     except UserInputError as exc:
         raise UserInputError(f"start pose: {exc}"
                              + ("" if start else " (choose one with --start POSE)")) from None
