@@ -231,7 +231,9 @@ def run_command(
 
     def attach(executor) -> None:
         holder["executor"] = executor
-        executor.record_zero = campaign_records.zero_recorder(arm, loaded)
+        # The built-in simulator keeps no record: its zero is its power-on pose.
+        executor.record_zero = (None if connection.is_simulator
+                                else campaign_records.zero_recorder(arm, loaded))
         display = (LiveDisplay(console, executor, f"seqrun: {loaded.name}",
                                connection.description, len(loaded.steps))
                    if live else PlainDisplay(console, len(loaded.steps)))

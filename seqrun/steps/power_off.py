@@ -29,7 +29,8 @@ def run(step, ex) -> dict:
     recorder = getattr(ex, "record_zero", None)
     if ex.dry_run or recorder is None:
         ex.not_verified.append(f"step {step.number}: the zero reference '{pose}' is not "
-                               "recorded (dry run)")
+                               "recorded (a dry run, or the built-in simulator, whose zero "
+                               "is its power-on pose)")
         return {**detail, "recorded": None}
     record = recorder(pose)
     ex.emit("zero_recorded", pose=pose, text=str(record))
