@@ -214,6 +214,8 @@ class Project:
         for path in candidates:
             if path.is_file():
                 return path.resolve()
+        if name is None and self.config is not None:
+            name = self.config.campaign.arm
         what = f"arm '{name}'" if name else "the arm"
         raise UserInputError(f"{what} not found (looked for "
                              + ", ".join(str(p) for p in candidates) + ")")

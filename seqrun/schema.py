@@ -852,6 +852,9 @@ class _Loader:
 
     def _check_arm(self, doc: Document, seq: Sequence, *, top: bool) -> None:
         if top:
+            if seq.arm is None:  # the campaign's arm: not found is bad input, one line
+                self.arm_path = self.project.arm_path(None)
+                return
             try:
                 self.arm_path = self.project.arm_path(seq.arm)
             except UserInputError:

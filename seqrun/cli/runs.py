@@ -13,6 +13,16 @@ from seqrun.cli.common import user_errors
 from seqrun.records import list_runs
 
 
+def _local(when: str | None) -> str:
+    """An ISO time as local 'YYYY-MM-DD HH:MM:SS'."""
+    from datetime import datetime
+
+    try:
+        return datetime.fromisoformat(str(when)).astimezone().strftime("%Y-%m-%d %H:%M:%S")
+    except ValueError:
+        return str(when or "-")[:19]
+
+
 @app.command("runs")
 def runs_command(
     as_json: Annotated[bool, typer.Option("--json", help="Machine-readable output.")] = False,
@@ -38,10 +48,10 @@ def runs_command(
     if not runs:
         typer.echo(f"no runs in {runs_dir}")
         return
-    typer.echo(f"{'when':25s} {'sequence':24s} {'result':10s} {'duration':>9s} {'exit':>4s}")
+    typer.echo(f"{'when':19s} {'sequence':24s} {'result':10s} {'duration':>9s} {'exit':>4s}")
     for run in runs:
         duration = run["duration_s"]
-        typer.echo(f"{str(run['when'] or '-')[:25]:25s} {str(run['sequence'] or '-')[:24]:24s} "
+        typer.echo(f"{_local(run['when']):19s} {str(run['sequence'] or '-')[:24]:24s} "
                    f"{str(run['result'] or '-')[:10]:10s} "
                    f"{'-' if duration is None else f'{duration:.2f} s':>9s} "
                    f"{'-' if run['exit_code'] is None else run['exit_code']:>4}")
