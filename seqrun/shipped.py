@@ -21,12 +21,12 @@ _CHECKOUT = Path(__file__).resolve().parent.parent
 
 def shipped_dir(kind: Kind) -> Path:
     """The folder of shipped ``kind`` files (a real directory either way)."""
-    try:
-        folder = importlib.resources.files(f"seqrun._shipped.{kind}")
-    except ModuleNotFoundError:  # a source checkout: the folders beside the package
-        return _CHECKOUT / kind
-    # Wheels install as plain files, so the traversable is a real directory.
-    return Path(str(folder))
+    # Through the regular package seqrun: its resources are plain files once installed
+    # (seqrun._shipped.<kind> itself is a namespace package, whose path is a multiplexed one).
+    installed = importlib.resources.files("seqrun").joinpath("_shipped", kind)
+    if installed.is_dir():
+        return Path(str(installed))
+    return _CHECKOUT / kind  # a source checkout: the folders beside the package
 
 
 def shipped_arm(name: str) -> Path | None:
