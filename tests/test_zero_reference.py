@@ -311,3 +311,21 @@ def test_power_on_at_an_unknown_pose_is_one_line(tmp_path):
                                       "--log-dir", str(tmp_path / "run")])
     assert result.exit_code == 2
     assert "is not a power-off pose" in result.output
+
+
+def test_status_and_pose_save_read_positions_with_the_recorded_zero():
+    """After a power-off in Totem the modules read 0 there: with the record the arm reads
+    as Totem (all zeros), not as Park."""
+    from seqrun.cli.zero import zero_for_reading
+
+    connection = hardware()
+    try:
+        arm, text = zero_for_reading(connection, ARM)
+        assert "zero: unknown (no zero reference recorded" in text
+        assert [j.offset_deg for j in arm.joints] == [j.offset_deg for j in ARM.joints]
+        ZeroStore.for_arm(ARM.name).set_record("totem", by="shutdown.yaml")
+        arm, text = zero_for_reading(connection, ARM)
+    finally:
+        connection.close()
+    assert text.startswith("zero: Totem, recorded ") and "not yet confirmed" in text
+    assert [j.to_user_deg(0.0) for j in arm.joints] == [0.0] * 7

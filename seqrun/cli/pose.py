@@ -104,6 +104,10 @@ def save_pose_command(
             fail(f"{path} exists (use --force to overwrite)")
         connection, client = connect(arm, interface, channel, bitrate, bus_kwargs, sim)
     try:
+        from seqrun.cli.zero import zero_for_reading
+
+        arm, zero_text = zero_for_reading(connection, arm)
+        typer.echo(zero_text)
         readings = client.read_arm(arm.module_ids)
     except BusError as exc:
         fail(f"cannot read the arm: {exc}", 3)

@@ -143,6 +143,13 @@ def print_dry_run(run, loaded, arm) -> None:
         typer.echo(f"  not verified: {item}")
 
 
+def _is_dir(path: Path) -> bool:
+    try:
+        return path.is_dir()
+    except OSError:  # a name the system refuses: reported when the file is read
+        return False
+
+
 @app.command("validate")
 def validate_command(
     files: Annotated[list[Path], typer.Argument(
@@ -182,7 +189,7 @@ def validate_command(
         fail(f"--speed must lie in (0, 1], got {speed:g}")
     if cycle_hz is not None and not 5 <= cycle_hz <= 500:
         fail(f"--cycle-hz must lie in [5, 500], got {cycle_hz:g}")
-    if len(files) != 1 or files[0].is_dir() or junit_file is not None:
+    if len(files) != 1 or _is_dir(files[0]) or junit_file is not None:
         from seqrun.cli.campaign_validate import report, validate_files
 
         try:

@@ -126,3 +126,20 @@ def zero_at_run_start(connection, arm, project, ask: Callable[[str], bool],
 
 
 __all__ = ["zero_at_run_start", "modules_homed", "BusError", "UserInputError"]
+
+
+def zero_for_reading(connection, arm, project=None):
+    """The arm with the zero reference in force for reading positions (status, pose save):
+    ``(arm, text)``. Never asks and never refuses (nothing moves); without a usable record
+    the text says the positions use the arm file's offsets."""
+    store = ZeroStore.for_arm(arm.name, project)
+    try:
+        homed = False if connection.is_simulator else modules_homed(connection, arm)
+        zero = zero_for_run(arm, store, homed=homed,
+                            simulator_pose=connection.power_on_pose if connection.is_simulator
+                            else None)
+    except (UserInputError, BusError) as exc:
+        return arm, (f"zero: unknown ({exc}); positions use the arm file's offsets "
+                     f"({arm.default_power_off or 'as written'})")
+    text = zero.text + (" (not yet confirmed at this power-on)" if zero.question else "")
+    return arm.with_zero_reference(zero.pose), text
