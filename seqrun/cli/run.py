@@ -169,14 +169,15 @@ def run_command(
     # a power-on, confirm) the recorded pose's offsets before anything moves.
     try:
         with user_errors():
-            zero = zero_at_run_start(connection, arm, loaded.project,
-                                     lambda question: _ask(console, question, yes),
-                                     lambda text: console.print(text, style="bold",
-                                                                highlight=False, markup=False))
+            try:
+                zero = zero_at_run_start(connection, arm, loaded.project,
+                                         lambda question: _ask(console, question, yes),
+                                         lambda text: console.print(text, style="bold",
+                                                                    highlight=False,
+                                                                    markup=False))
+            except BusError as exc:  # before user_errors: a timeout is no usage error
+                fail(f"cannot read the modules' state: {exc}", EXIT_FAULT)
             arm = arm.with_zero_reference(zero.pose)
-    except BusError as exc:
-        connection.close()
-        fail(f"cannot read the modules: {exc}", EXIT_FAULT)
     except BaseException:
         connection.close()
         raise

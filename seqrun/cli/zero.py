@@ -92,10 +92,19 @@ def modules_homed(connection, arm) -> bool:
     from seqrun.powercube.codec import GetParam
     from seqrun.powercube.protocol import ParamId, StateFlag
 
+    from seqrun.errors import ModuleTimeoutError
+
     client = PowerCubeClient(connection.bus, connection.clock,
                              response_timeout=arm.can.response_timeout_s)
     try:
-        acks = client.transact([GetParam(m, ParamId.CUBE_STATE) for m in arm.module_ids])
+        for attempt in range(3):  # a read is idempotent: a lost answer is asked again
+            try:
+                acks = client.transact([GetParam(m, ParamId.CUBE_STATE)
+                                        for m in arm.module_ids])
+                break
+            except ModuleTimeoutError:
+                if attempt == 2:
+                    raise
     finally:
         client.close()
     return all(StateFlag(a.value) & StateFlag.HOME_OK for a in acks)
