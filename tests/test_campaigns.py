@@ -210,3 +210,22 @@ def test_legacy_layout_still_finds_project_poses_first(tmp_path, monkeypatch):
     loaded = load_sequence(seq)
     assert loaded.pose_path[0] == (tmp_path / "proj" / "poses").resolve()
     assert loaded.arm_path == (shipped_dir("arms") / "lwa3.yaml").resolve()
+
+
+def test_pose_fk_and_status_work_from_an_empty_directory(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("SEQRUN_STATE_DIR", str(tmp_path / "state"))
+    listed = invoke("pose", "list")
+    assert listed.exit_code == 0 and "opsafe" in listed.output and "totem" in listed.output
+    assert invoke("fk", "--pose", "opsafe", "--json").exit_code == 0
+    status = invoke("status", "--sim", "--json")
+    assert status.exit_code == 0, status.output
+    assert json.loads(status.output)["joints"][1]["position_deg"] == -90.0  # at Park
+
+
+def test_a_campaigns_own_poses_are_listed_inside_it(campaign, monkeypatch):
+    write(campaign / "poses" / "mine.yaml",
+          (ROOT / "poses" / "opsafe.yaml").read_text().replace("name: opsafe", "name: mine"))
+    monkeypatch.chdir(campaign)
+    names = [line.split()[0] for line in invoke("pose", "list").output.splitlines()]
+    assert names == ["mine", "opsafe", "park", "totem"]

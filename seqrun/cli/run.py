@@ -232,6 +232,7 @@ def run_command(
 
     def attach(executor) -> None:
         holder["executor"] = executor
+        executor.emit("zero_reference", **zero.as_dict())  # for the log and any console
         # The built-in simulator keeps no record: its zero is its power-on pose.
         executor.record_zero = (None if connection.is_simulator
                                 else campaign_records.zero_recorder(arm, loaded))
