@@ -229,3 +229,15 @@ def test_a_campaigns_own_poses_are_listed_inside_it(campaign, monkeypatch):
     monkeypatch.chdir(campaign)
     names = [line.split()[0] for line in invoke("pose", "list").output.splitlines()]
     assert names == ["mine", "opsafe", "park", "totem"]
+
+
+def test_run_uses_the_campaigns_bus_settings(campaign):
+    config = campaign / "seqrun.toml"
+    config.write_text(config.read_text().replace(
+        '# interface = "ixxat"', 'interface = "socketcand"\nkwargs = {host = "127.0.0.1", '
+                                 'port = 9}'))
+    result = invoke("run", campaign / "sequences" / "first.yaml", "--yes", "--plain")
+    assert result.exit_code == 2
+    assert "no socketcand server at 127.0.0.1:9" in result.output
+    assert invoke("run", campaign / "sequences" / "first.yaml", "--yes", "--plain", "--sim",
+                  "--virtual-time").exit_code == 0  # --sim: the simulator all the same
