@@ -85,15 +85,18 @@ class ZeroRecord:
 class ZeroStore:
     """The zero-reference file of one arm (campaign file or per-arm state file)."""
 
-    def __init__(self, path: Path, arm_name: str) -> None:
+    def __init__(self, path: Path, arm_name: str, set_command: str = "seqrun zero set POSE") -> None:
         self.path = Path(path)
         self.arm_name = arm_name
+        #: The command an operator types to write this record.
+        self.set_command = set_command
 
     @classmethod
     def for_arm(cls, arm_name: str, project: Any = None) -> "ZeroStore":
         """The campaign's file when ``project`` is a campaign, else the per-arm state file."""
         if project is not None and getattr(project, "is_campaign", False):
-            return cls(project.root / ".seqrun" / "zero.json", arm_name)
+            return cls(project.root / ".seqrun" / "zero.json", arm_name,
+                       f"seqrun zero set POSE --project {project.root}")
         return cls(state_dir() / f"zero-{_slug(arm_name)}.json", arm_name)
 
     def _read(self) -> dict:
@@ -188,7 +191,7 @@ def zero_for_run(arm, store: ZeroStore, *, simulator_pose: str | None,
         return ZeroInForce(simulator_pose.lower(),
                            f"zero: {pose_title(simulator_pose)} (the simulator's power-on pose)",
                            "simulator", not homed)
-    how = ("say where the arm was powered off with 'seqrun zero set POSE' "
+    how = (f"say where the arm was powered off with '{store.set_command}' "
            f"(POSE: {', '.join(arm.power_off_poses)})")
     if homed and store.in_use is not None:
         record = store.in_use

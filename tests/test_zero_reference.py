@@ -329,3 +329,24 @@ def test_status_and_pose_save_read_positions_with_the_recorded_zero():
         connection.close()
     assert text.startswith("zero: Totem, recorded ") and "not yet confirmed" in text
     assert [j.to_user_deg(0.0) for j in arm.joints] == [0.0] * 7
+
+
+def test_a_campaign_keeps_its_own_record_and_says_how_to_set_it(tmp_path):
+    from seqrun.project import open_project
+
+    assert CliRunner().invoke(app, ["init", str(tmp_path / "camp")]).exit_code == 0
+    project = open_project(tmp_path / "camp")
+    connection = hardware()
+    try:
+        with pytest.raises(UserInputError) as info:
+            zero_at_run_start(connection, ARM, project, lambda q: True, print)
+        result = CliRunner().invoke(app, ["zero", "set", "totem", "--yes", "--project",
+                                          str(tmp_path / "camp")])
+        assert result.exit_code == 0, result.output
+        zero = zero_at_run_start(connection, ARM, project, lambda q: True, print)
+    finally:
+        connection.close()
+    assert f"'seqrun zero set POSE --project {project.root}'" in str(info.value)
+    assert zero.pose == "totem"
+    assert (project.root / ".seqrun" / "zero.json").is_file()
+    assert ".seqrun/" in (project.root / ".gitignore").read_text()
