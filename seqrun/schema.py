@@ -662,8 +662,10 @@ class Sequence(_Model):
     description: str = Field(description="What the sequence does and when to use it.")
     arm: str | None = Field(
         None, min_length=1,
-        description=f"Arm file, relative to the project root (default {DEFAULT_ARM}). An "
-                    "included sequence must name the same arm or none.")
+        description=f"Arm file, relative to the project root (default: the campaign's arm, "
+                    f"else {DEFAULT_ARM}), or the name of an arm (lwa3: the campaign's "
+                    "arms/lwa3.yaml, else the shipped one). An included sequence must name "
+                    "the same arm or none.")
     steps: list[Step] = Field(min_length=1, description="The steps, in order.")
 
 
