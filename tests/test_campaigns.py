@@ -241,3 +241,16 @@ def test_run_uses_the_campaigns_bus_settings(campaign):
     assert "no socketcand server at 127.0.0.1:9" in result.output
     assert invoke("run", campaign / "sequences" / "first.yaml", "--yes", "--plain", "--sim",
                   "--virtual-time").exit_code == 0  # --sim: the simulator all the same
+
+
+def test_a_sequence_may_name_its_arm_by_name_or_by_file(campaign):
+    seq = write(campaign / "sequences" / "named.yaml",
+                "name: N\ndescription: x\narm: lwa3\nsteps:\n  - wait: 1\n")
+    assert load_sequence(seq).arm_path == (shipped_dir("arms") / "lwa3.yaml").resolve()
+    own = write(campaign / "arms" / "lwa3.yaml", (ROOT / "arms" / "lwa3.yaml").read_text())
+    assert load_sequence(seq).arm_path == own.resolve()  # the campaign's comes first
+    seq.write_text(seq.read_text().replace("arm: lwa3", "arm: arms/other.yaml"))
+    with pytest.raises(SequenceInvalid) as info:
+        load_sequence(seq)
+    assert f"arm file 'arms/other.yaml' not found (looked for " \
+           f"{campaign.resolve() / 'arms' / 'other.yaml'})" in str(info.value.errors[0])
