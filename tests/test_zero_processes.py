@@ -61,30 +61,42 @@ def run_on(server: Server, env: dict, sequence: str, folder: Path, *extra: str, 
                   *extra, stdin=stdin)
 
 
+def stage(env: dict, server_args: tuple, sequence: str, folder: Path, *extra: str,
+          stdin: str = "", attempts: int = 3):
+    """Run ``sequence`` on a freshly powered-on simulated arm. A run that a loaded test
+    machine makes miss the 50 ms answer timeout (exit 3, "no acknowledge") is tried again
+    on a fresh arm, as test_signals does; any other outcome is returned as it is."""
+    for attempt in range(1, attempts + 1):
+        with Server(env, *server_args) as server:
+            result = run_on(server, env, sequence, folder / f"attempt{attempt}", *extra,
+                            stdin=stdin)
+        if not (result.returncode == 3 and "no acknowledge" in result.stdout):
+            return result
+    return result
+
+
 def test_shutdown_at_totem_then_start_up_then_a_wrong_record(tmp_path):
     env = environment(tmp_path / "state")
     # 1. An arm powered on at Park (recorded so), shut down: it ends in Totem, recorded.
-    with Server(env) as server:
-        assert server.pose == "park"
-        assert seqrun(env, "zero", "set", "park", "--yes").returncode == 0
-        down = run_on(server, env, "shutdown.yaml", tmp_path / "down", "--yes")
-        assert down.returncode == 0, down.stdout + down.stderr
-        assert "zero: Park, recorded " in flat(down.stdout)
+    assert seqrun(env, "zero", "set", "park", "--yes").returncode == 0
+    down = stage(env, (), "shutdown.yaml", tmp_path / "down", "--yes")
+    assert down.returncode == 0, down.stdout + down.stderr
+    assert "zero: Park, recorded " in flat(down.stdout)
     shown = seqrun(env, "zero", "show").stdout
     assert "record   Totem, recorded " in shown and "by shutdown.yaml" in shown
     # 2. Power on at Totem: the run shows the record, the operator confirms, it works.
-    with Server(env, "--power-on-at", "totem") as server:
-        up = run_on(server, env, "opsafe.yaml", tmp_path / "up", stdin="y\ny\ny\n")
-        assert up.returncode == 0, up.stdout + up.stderr
-        assert re.search(r"zero: Totem, recorded \S+ \S+ by shutdown\.yaml", flat(up.stdout))
-        assert "Does the arm stand in Totem now" in flat(up.stdout)
-        assert "PASSED" in flat(up.stdout)  # the Op-safe checkpoint, with Totem's offsets
+    up = stage(env, ("--power-on-at", "totem"), "opsafe.yaml", tmp_path / "up",
+               stdin="y\ny\ny\n")
+    assert up.returncode == 0, up.stdout + up.stderr
+    assert re.search(r"zero: Totem, recorded \S+ \S+ by shutdown\.yaml", flat(up.stdout))
+    assert "Does the arm stand in Totem now" in flat(up.stdout)
+    assert "PASSED" in flat(up.stdout)  # the Op-safe checkpoint, with Totem's offsets
     # 3. A wrong record (Park) for an arm powered on at Totem: the operator says no and
     #    nothing is sent; without the confirm the checks could not have seen it.
     assert seqrun(env, "zero", "set", "park", "--yes").returncode == 0
-    with Server(env, "--power-on-at", "totem") as server:
-        wrong = run_on(server, env, "totem.yaml", tmp_path / "wrong", stdin="y\nn\n")
-        assert wrong.returncode == 130, wrong.stdout + wrong.stderr
-        assert "Does the arm stand in Park now" in flat(wrong.stdout)
-        assert "Not started" in flat(wrong.stdout)
-        assert not (tmp_path / "wrong" / "trace.log").exists()
+    wrong = stage(env, ("--power-on-at", "totem"), "totem.yaml", tmp_path / "wrong",
+                  stdin="y\nn\n")
+    assert wrong.returncode == 130, wrong.stdout + wrong.stderr
+    assert "Does the arm stand in Park now" in flat(wrong.stdout)
+    assert "Not started" in flat(wrong.stdout)
+    assert not (tmp_path / "wrong" / "attempt1" / "trace.log").exists()
