@@ -78,6 +78,7 @@ __all__ = [
     "LoadedSequence",
     "MoveLinearParams",
     "MoveParams",
+    "PowerOffParams",
     "ResetParams",
     "ResolvedStep",
     "Sequence",
@@ -507,6 +508,23 @@ class ConfirmParams(StepParams):
         return value if isinstance(value, cls) else cls(prompt=value)
 
 
+class PowerOffParams(StepParams):
+    """End of a shutdown: check the arm stands in a power-off pose of the arm file, then
+    record that it is powered off there (its modules take their zero there)."""
+
+    kind: ClassVar[str] = "power_off"
+    yaml_name: ClassVar[str] = "power_off"
+    pose: PoseName = Field(description="A power-off pose of the arm file (power_off_poses), "
+                                       "e.g. totem.")
+    tolerance_deg: Positive | None = Field(
+        None, description="How far each joint may be from the pose, degrees (default the arm "
+                          "file's control.position_tolerance_deg).")
+
+    @classmethod
+    def from_shorthand(cls, value: Any) -> StepParams:
+        return value if isinstance(value, cls) else cls(pose=value)
+
+
 class IncludeParams(StepParams):
     """Run the steps of another sequence file here."""
 
@@ -525,7 +543,7 @@ class IncludeParams(StepParams):
 #: Parameter model of each step type, in the order the docs list them.
 PARAMS_MODELS: dict[str, type[StepParams]] = {m.kind: m for m in (
     ResetParams, HomeParams, HaltParams, SetLimitsParams, MoveParams, MoveLinearParams,
-    WaitParams, CheckpointParams, ConfirmParams, IncludeParams)}
+    WaitParams, CheckpointParams, ConfirmParams, PowerOffParams, IncludeParams)}
 STEP_KINDS: tuple[str, ...] = tuple(PARAMS_MODELS)
 #: Step types that may be written as a bare word (``- reset``).
 BARE_STEPS: tuple[str, ...] = ("reset", "home", "halt", "set_limits")
@@ -655,6 +673,16 @@ class ConfirmStep(_Step):
         description=_doc(ConfirmParams) + " Shorthand: 'confirm: Is the desk clear?'.")
 
 
+class PowerOffStep(_Step):
+    """A power_off step."""
+
+    kind: ClassVar[str] = "power_off"
+    power_off: _either(_kind_pick(text="power_off:pose", params="power_off:params"),
+                       **{"power_off:pose": PoseName,
+                          "power_off:params": PowerOffParams}) = Field(
+        description=_doc(PowerOffParams) + " Shorthand: 'power_off: totem'.")
+
+
 class IncludeStep(_Step):
     """An include step."""
 
@@ -667,7 +695,7 @@ class IncludeStep(_Step):
 
 _STEP_MODELS: dict[str, type[_Step]] = {m.kind: m for m in (
     ResetStep, HomeStep, HaltStep, SetLimitsStep, MoveStep, MoveLinearStep, WaitStep,
-    CheckpointStep, ConfirmStep, IncludeStep)}
+    CheckpointStep, ConfirmStep, PowerOffStep, IncludeStep)}
 assert tuple(_STEP_MODELS) == STEP_KINDS, "one step model per parameter model"
 
 BareStep = Annotated[Literal[BARE_STEPS], Field(  # type: ignore[valid-type]
@@ -717,8 +745,10 @@ def _check_step(value: Any) -> Any:
 
 _EXAMPLES = {"move": "move: totem",
              "move_linear": "move_linear: {position_mm: [0, 0, 50], relative: true, "
-                            "frame: tool, speed_mm_s: 10}", "wait": "wait: 2", "checkpoint": "checkpoint: opsafe",
-             "confirm": "confirm: Is the desk clear?", "include": "include: startup.yaml"}
+                            "frame: tool, speed_mm_s: 10}",
+             "wait": "wait: 2", "checkpoint": "checkpoint: opsafe",
+             "confirm": "confirm: Is the desk clear?", "include": "include: startup.yaml",
+             "power_off": "power_off: totem"}
 
 
 def _step_pick(value: Any) -> str | None:
@@ -752,8 +782,10 @@ class Sequence(_Model):
     description: str = Field(description="What the sequence does and when to use it.")
     arm: str | None = Field(
         None, min_length=1,
-        description=f"Arm file, relative to the project root (default {DEFAULT_ARM}). An "
-                    "included sequence must name the same arm or none.")
+        description=f"Arm file, relative to the project root (default: the campaign's arm, "
+                    f"else {DEFAULT_ARM}), or the name of an arm (lwa3: the campaign's "
+                    "arms/lwa3.yaml, else the shipped one). An included sequence must name "
+                    "the same arm or none.")
     steps: list[Step] = Field(min_length=1, description="The steps, in order.")
 
 
@@ -833,6 +865,8 @@ def describe(kind: str, params: StepParams) -> str:
         return "write joint limits"
     if isinstance(params, IncludeParams):
         return f"include {params.file}"
+    if isinstance(params, PowerOffParams):
+        return f"power off in {params.pose}"
     return kind
 
 
@@ -849,6 +883,10 @@ class LoadedSequence:
     arm_path: Path
     steps: tuple[ResolvedStep, ...]
     files: tuple[Path, ...] = ()  # every file read, the top one first
+    #: Where poses are looked up, first match wins (the campaign's, then the shipped).
+    pose_path: tuple[Path, ...] = ()
+    #: The campaign or project the sequence belongs to (seqrun.project.Project).
+    project: Any = None
 
     @property
     def location(self) -> Location:
@@ -865,11 +903,12 @@ def find_project_root(path: str | os.PathLike[str]) -> Path:
 
 
 class _Loader:
-    def __init__(self, top: Path, root: Path) -> None:
-        self.root = root
-        self.poses_dir = root / "poses"
-        sequences = root / "sequences"
-        self.tree = sequences if top.is_relative_to(sequences) else top.parent
+    def __init__(self, top: Path, project: Any) -> None:
+        self.project = project  # seqrun.project.Project: lookups of poses, arm, includes
+        self.root = project.root
+        self.poses_dir = project.poses_dir
+        self.pose_path = project.pose_path
+        self.tree = project.include_tree(top)
         self.errors: list[SourceError] = []
         self.steps: list[ResolvedStep] = []
         self.files: list[Path] = []
@@ -905,7 +944,7 @@ class _Loader:
     def _partial(self, doc: Document, path: Path, chain: tuple[Path, ...],
                  include_chain: tuple[Location, ...]) -> None:
         if not chain:
-            self.arm_path = (self.root / DEFAULT_ARM).resolve()
+            self.arm_path = self._arm(None)
         data = doc.data.get("steps") if isinstance(doc.data, dict) else None
         if not isinstance(data, list):
             return
@@ -944,16 +983,30 @@ class _Loader:
 
     def _check_arm(self, doc: Document, seq: Sequence, *, top: bool) -> None:
         if top:
-            self.arm_path = (self.root / (seq.arm or DEFAULT_ARM)).resolve()
-            if seq.arm is not None and not self.arm_path.is_file():
+            if seq.arm is None:  # the campaign's arm: not found is bad input, one line
+                self.arm_path = self.project.arm_path(None)
+                return
+            try:
+                self.arm_path = self.project.arm_path(seq.arm)
+            except UserInputError:
+                self.arm_path = self._arm(None)
+                looked = ", ".join(str(p) for p in self.project.arm_candidates(seq.arm))
                 self.errors.append(doc.error(("arm",), f"arm file '{seq.arm}' not found "
-                                                      f"(looked for {self.arm_path})"))
+                                                      f"(looked for {looked})"))
             return
-        if seq.arm is not None and (self.root / seq.arm).resolve() != self.arm_path:
+        if seq.arm is not None and self._arm(seq.arm) != self.arm_path:
             self.errors.append(doc.error(("arm",), f"this file names arm '{seq.arm}' but the "
                                                   "sequence including it runs on "
                                                   f"{self.arm_path}; remove 'arm' here or "
                                                   "make it the same"))
+
+    def _arm(self, name: str | None) -> Path:
+        """The arm file ``name`` means (the first candidate when none exists: the run
+        then says it is missing)."""
+        try:
+            return self.project.arm_path(name)
+        except UserInputError:
+            return self.project.arm_candidates(name)[0].resolve()
 
     def _include(self, doc: Document, path: Path, params: IncludeParams, node: Any,
                  here: Location, chain: tuple[Path, ...],
@@ -968,7 +1021,8 @@ class _Loader:
             error(f"include '{shown}': cannot resolve the path ({exc})")
             return
         if not target.is_relative_to(self.tree):
-            error(f"include '{params.file}' is outside the sequences folder "
+            what = "campaign folder" if self.project.is_campaign else "sequences folder"
+            error(f"include '{params.file}' is outside the {what} "
                   f"{display_path(self.tree)}; included files must stay inside it")
             return
         if target in chain:
@@ -995,7 +1049,7 @@ class _Loader:
         if name not in self.pose_problems:
             problem = None
             try:
-                load_pose(find_pose(name, self.poses_dir))
+                load_pose(find_pose(name, self.pose_path))
             except UserInputError as exc:
                 problem = str(exc)
             except SequenceInvalid as exc:
@@ -1010,19 +1064,23 @@ def load_sequence(path: str | os.PathLike[str], *,
                   project_root: str | os.PathLike[str] | None = None) -> LoadedSequence:
     """Read a sequence file with its includes; every step keeps its own ``file:line:col``.
 
-    Poses come from ``<project root>/poses/`` (root: see :func:`find_project_root`); an
+    Poses come from ``<project root>/poses/``, then the shipped poses; the project is the
+    nearest campaign (``seqrun.toml``) above the file, or ``project_root`` (``--project``),
+    else the nearest folder with ``arms/`` or ``poses/`` (see :mod:`seqrun.project`); an
     unknown pose is a located error listing the available ones. Raises
     :class:`SequenceInvalid` with every error found, :class:`UserInputError` if the file
     cannot be read.
     """
+    from seqrun.project import project_for
+
     path = Path(path)
     try:
         top = path.resolve()
-        root = (Path(project_root).resolve() if project_root is not None
-                else find_project_root(top))
+        project = project_for(top, Path(project_root) if project_root is not None else None)
     except (OSError, RuntimeError, ValueError) as exc:  # symlink loop, NUL byte, ...
         raise UserInputError(f"{path}: cannot resolve the path ({exc})") from None
-    loader = _Loader(top, root)
+    root = project.root
+    loader = _Loader(top, project)
     seq = loader.load(top)
     if loader.errors:
         raise SequenceInvalid(sort_errors(loader.errors))
@@ -1030,7 +1088,8 @@ def load_sequence(path: str | os.PathLike[str], *,
     return LoadedSequence(path=path, file=display_path(path), name=seq.name,
                           description=seq.description, project_root=root,
                           poses_dir=loader.poses_dir, arm_path=loader.arm_path,
-                          steps=tuple(loader.steps), files=tuple(loader.files))
+                          steps=tuple(loader.steps), files=tuple(loader.files),
+                          pose_path=tuple(loader.pose_path), project=project)
 
 
 # --------------------------------------------------------------------------- reference docs

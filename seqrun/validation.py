@@ -251,7 +251,7 @@ class _Validator:
                  start_deg: Mapping[str, float], started: bool) -> None:
         self.loaded = loaded
         self.arm = arm
-        self.poses_dir = loaded.poses_dir
+        self.poses_dir = loaded.pose_path or loaded.poses_dir
         self.errors: list[SourceError] = []
         self.notes: list[SourceError] = []
         self.joints: dict[str, _JointState] = {}
@@ -396,6 +396,10 @@ class _Validator:
         if not names:
             return
         self._motion_allowed(step, names)
+        if getattr(self, "powered_off", None) is not None:
+            self.errors.append(step.error(
+                f"move after power_off (at {self.powered_off.location}): the zero reference "
+                "is recorded for the pose the arm stands in; nothing may move after it"))
 
         # targets inside the limits in force; a joint outside may only come back inside
         target = {n: s.position for n, s in self.joints.items()}
@@ -708,10 +712,30 @@ class _Validator:
                 f"[{at}] mm, rpy [{rpy}]°, {_f(distance)} mm and {_f(angle)}° from the "
                 f"expected pose (tolerances {_f(pos_tol)} mm, {_f(ang_tol)}°)"))
 
+    def power_off(self, step: ResolvedStep, params) -> None:
+        """The pose must be a power-off pose of the arm, and where the moves before end."""
+        if params.pose not in self.arm.power_off_poses:
+            known = ", ".join(self.arm.power_off_poses) or "none"
+            self.errors.append(step.error(
+                f"'{params.pose}' is not a power-off pose of arm '{self.arm.name}' (its "
+                f"power-off poses: {known}; power_off_poses in the arm file)", "pose"))
+            return
+        target = self.arm.power_off_joints_deg(params.pose)
+        tolerance = params.tolerance_deg or self.arm.control.position_tolerance_deg
+        off = [f"{n} {_f(s.position)}° (pose {_f(target[n])}°)"
+               for n, s in self.joints.items()
+               if not s.locked and abs(s.position - target[n]) > tolerance]
+        if off:
+            self.errors.append(step.error(
+                f"this power_off cannot pass: after the moves before it the arm is not in "
+                f"{params.pose}: {', '.join(off)}"))
+        self.powered_off = step
+
     def run(self) -> ValidationResult:
         handlers = {"reset": self.reset, "home": self.home, "halt": self.halt,
                     "set_limits": self.set_limits, "move": self.move,
-                    "checkpoint": self.checkpoint, "move_linear": self.move_linear}
+                    "checkpoint": self.checkpoint, "move_linear": self.move_linear,
+                    "power_off": self.power_off}
         for step in self.loaded.steps:
             handler = handlers.get(step.kind)
             if handler is not None:
@@ -748,7 +772,7 @@ def validate_sequence(loaded: LoadedSequence, arm: ArmDescription,
     everything is in the result.
     """
     if start_deg is None:
-        start_deg = park_deg(loaded.poses_dir)
+        start_deg = park_deg(loaded.pose_path or loaded.poses_dir)
     validator = _Validator(loaded, arm, start_deg, started)
     validator.speed = speed
     return validator.run()
