@@ -43,10 +43,11 @@ def test_sub_command_help_imports_no_bus_and_no_maths():
 
 
 def test_commands_without_a_bus_do_not_import_python_can():
-    """python-can's import pulls in asyncio, ssl and sqlite3 (can.io)."""
+    """python-can's import pulls in asyncio, ssl and sqlite3 (can.io); ssl alone may come
+    from the standard library's xml.sax.saxutils (used by campaign validation)."""
     for args in (("fk", "--pose", "totem"), ("validate", "--static", "sequences/opsafe.yaml"),
                  ("pose", "list")):
-        assert not imported(*args) & {"can", "asyncio", "ssl", "sqlite3"}, args
+        assert not imported(*args) & {"can", "asyncio", "sqlite3"}, args
 
 
 def _head_one(args: list[str], cwd: Path = ROOT) -> tuple[int, str, str]:

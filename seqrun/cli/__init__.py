@@ -16,11 +16,15 @@ from seqrun.cli.output import guard_stdout
 #: Command modules; each registers its commands on :data:`app` when imported.
 COMMAND_MODULES = (
     "seqrun.cli.fk",
+    "seqrun.cli.ik",
     "seqrun.cli.validate",
     "seqrun.cli.sim",
     "seqrun.cli.run",
     "seqrun.cli.arm_commands",
     "seqrun.cli.pose",
+    "seqrun.cli.zero",
+    "seqrun.cli.init",
+    "seqrun.cli.runs",
 )
 
 
