@@ -36,6 +36,7 @@ from __future__ import annotations
 import inspect
 import os
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any, ClassVar, Literal, Union
@@ -66,6 +67,7 @@ from seqrun.yamlsource import (
 __all__ = [
     "BARE_STEPS",
     "DEFAULT_ARM",
+    "FrozenPose",
     "MAX_INCLUDE_DEPTH",
     "MAX_STEPS",
     "PARAMS_MODELS",
@@ -85,6 +87,7 @@ __all__ = [
     "WaitParams",
     "find_project_root",
     "load_sequence",
+    "load_sequence_partial",
     "sequence_json_schema",
 ]
 
@@ -665,6 +668,9 @@ class ResolvedStep:
     include_chain: tuple[Location, ...] = ()
     document: Document | None = field(default=None, repr=False)
     node: Any = field(default=None, repr=False)  # the parameters' YAML node
+    #: What the operator sees of each include in ``include_chain`` (its label, else
+    #: "include FILE"), outermost first.
+    include_labels: tuple[str, ...] = ()
 
     def where(self, *path: Any, key: bool = False) -> Location:
         """Location of a parameter, e.g. ``where("joints", "j4")``; without a path, the step's
@@ -721,10 +727,37 @@ class LoadedSequence:
     arm_path: Path
     steps: tuple[ResolvedStep, ...]
     files: tuple[Path, ...] = ()  # every file read, the top one first
+    #: Every pose the steps name, read once at load time: the run uses these, never the
+    #: files again (a pose file edited during a run changes nothing).
+    poses: Mapping[str, FrozenPose] = field(default_factory=dict)
+    #: SHA-256 of every sequence file read (same order as ``files``).
+    digests: tuple[str, ...] = ()
 
     @property
     def location(self) -> Location:
         return Location(self.file, 1, 1)
+
+    def inputs(self) -> list[dict[str, str]]:
+        """The files this sequence was validated from: ``{kind, file, sha256}`` each, for the
+        run folder (the arm file is added by whoever loaded the arm)."""
+        items = [{"kind": "sequence", "file": display_path(p), "sha256": d}
+                 for p, d in zip(self.files, self.digests)]
+        items += [{"kind": "pose", "file": pose.document.file, "sha256": pose.document.sha256}
+                  for pose in self.poses.values()]
+        return items
+
+
+@dataclass(frozen=True, eq=False)
+class FrozenPose:
+    """A pose file as it was read and validated (see :attr:`LoadedSequence.poses`)."""
+
+    name: str
+    pose: Any  # seqrun.poses.PoseFile
+    document: Document = field(repr=False)
+
+    @property
+    def joints_deg(self) -> dict[str, float]:
+        return dict(self.pose.joints_deg)
 
 
 def find_project_root(path: str | os.PathLike[str]) -> Path:
@@ -747,6 +780,10 @@ class _Loader:
         self.files: list[Path] = []
         self.arm_path: Path | None = None
         self.pose_problems: dict[str, str | None] = {}
+        self.poses: dict[str, FrozenPose] = {}
+        self.digests: list[str] = []
+        self.include_titles: dict[Location, str] = {}
+        self.top: Any = None  # the top file's data, when it could be read
 
     def load(self, path: Path, *, chain: tuple[Path, ...] = (),
              include_chain: tuple[Location, ...] = (), include_step: Any = None) -> Any:
@@ -761,6 +798,9 @@ class _Loader:
             self.errors.append(include_step.error(str(exc)))
             return None
         self.files.append(path)
+        self.digests.append(doc.sha256)
+        if not chain:
+            self.top = doc.data
         try:
             seq = doc.validate(Sequence)
         except SequenceInvalid as exc:
@@ -777,7 +817,9 @@ class _Loader:
     def _partial(self, doc: Document, path: Path, chain: tuple[Path, ...],
                  include_chain: tuple[Location, ...]) -> None:
         if not chain:
-            self.arm_path = (self.root / DEFAULT_ARM).resolve()
+            arm = doc.data.get("arm") if isinstance(doc.data, dict) else None
+            self.arm_path = (self.root / (arm if isinstance(arm, str) and arm
+                                          else DEFAULT_ARM)).resolve()
         data = doc.data.get("steps") if isinstance(doc.data, dict) else None
         if not isinstance(data, list):
             return
@@ -804,12 +846,15 @@ class _Loader:
                 params, params_node = raw.params(), doc.child(node, kind)
             here = doc.location(node)
             if isinstance(params, IncludeParams):
+                self.include_titles[here] = params.label or describe(kind, params)
                 self._include(doc, path, params, params_node, here, chain + (path,),
                               include_chain)
                 continue
             step = ResolvedStep(number=len(self.steps) + 1, kind=kind, params=params,
                                 location=here, label=params.label, include_chain=include_chain,
-                                document=doc, node=params_node)
+                                document=doc, node=params_node,
+                                include_labels=tuple(self.include_titles.get(loc, "include")
+                                                     for loc in include_chain))
             if isinstance(params, (MoveParams, CheckpointParams)) and params.pose is not None:
                 self._check_pose(step, params.pose)
             self.steps.append(step)
@@ -862,12 +907,13 @@ class _Loader:
                   include_step=doc.locate(("file",), start=node))
 
     def _check_pose(self, step: ResolvedStep, name: str) -> None:
-        from seqrun.poses import find_pose, load_pose
+        from seqrun.poses import PoseFile, find_pose
 
         if name not in self.pose_problems:
             problem = None
             try:
-                load_pose(find_pose(name, self.poses_dir))
+                document = load_document(find_pose(name, self.poses_dir))
+                self.poses[name] = FrozenPose(name, document.validate(PoseFile), document)
             except UserInputError as exc:
                 problem = str(exc)
             except SequenceInvalid as exc:
@@ -887,6 +933,20 @@ def load_sequence(path: str | os.PathLike[str], *,
     :class:`SequenceInvalid` with every error found, :class:`UserInputError` if the file
     cannot be read.
     """
+    loaded, errors = load_sequence_partial(path, project_root=project_root)
+    if errors:
+        raise SequenceInvalid(errors)
+    assert loaded is not None
+    return loaded
+
+
+def load_sequence_partial(path: str | os.PathLike[str], *,
+                          project_root: str | os.PathLike[str] | None = None
+                          ) -> tuple[LoadedSequence | None, list[SourceError]]:
+    """:func:`load_sequence` that keeps going: ``(loaded, errors)``, where ``loaded`` holds
+    the steps that are valid on their own (a step that fails its schema is left out) so
+    that the checks against the arm can still report on them; None if nothing of the top
+    file could be read. Raises :class:`UserInputError` if the file cannot be read."""
     path = Path(path)
     try:
         top = path.resolve()
@@ -896,13 +956,21 @@ def load_sequence(path: str | os.PathLike[str], *,
         raise UserInputError(f"{path}: cannot resolve the path ({exc})") from None
     loader = _Loader(top, root)
     seq = loader.load(top)
-    if loader.errors:
-        raise SequenceInvalid(sort_errors(loader.errors))
-    assert seq is not None and loader.arm_path is not None
-    return LoadedSequence(path=path, file=display_path(path), name=seq.name,
-                          description=seq.description, project_root=root,
+    errors = sort_errors(loader.errors)
+    if seq is not None:
+        name, description = seq.name, seq.description
+    elif isinstance(loader.top, dict):
+        name = loader.top.get("name") if isinstance(loader.top.get("name"), str) else top.stem
+        description = loader.top.get("description")
+        description = description if isinstance(description, str) else ""
+    else:
+        return None, errors
+    assert loader.arm_path is not None
+    return LoadedSequence(path=path, file=display_path(path), name=name or top.stem,
+                          description=description, project_root=root,
                           poses_dir=loader.poses_dir, arm_path=loader.arm_path,
-                          steps=tuple(loader.steps), files=tuple(loader.files))
+                          steps=tuple(loader.steps), files=tuple(loader.files),
+                          poses=dict(loader.poses), digests=tuple(loader.digests)), errors
 
 
 # --------------------------------------------------------------------------- reference docs

@@ -34,7 +34,8 @@ from pathlib import Path
 import numpy as np
 
 from seqrun.arm import ArmDescription, Joint
-from seqrun.errors import SequenceInvalid, SourceError, UserInputError
+from seqrun.errors import PlanningError, SequenceInvalid, SourceError, UserInputError
+from seqrun.limits import READBACK, LimitsInForce
 from seqrun.schema import (
     CheckpointParams,
     HaltParams,
@@ -44,12 +45,14 @@ from seqrun.schema import (
     ResetParams,
     ResolvedStep,
     SetLimitsParams,
+    WaitParams,
 )
 
 __all__ = [
     "GUARD_SAMPLES",
     "ValidationResult",
     "commanded_joints",
+    "format_number",
     "park_deg",
     "pose_joints_deg",
     "resolve_checkpoint",
@@ -78,9 +81,16 @@ class ValidationResult:
 
 
 # --------------------------------------------------------------------------- helpers
-def _f(value: float) -> str:
-    """A number for messages: at most 3 decimals, no trailing zeros, no '-0'."""
-    return f"{round(float(value), 3) + 0.0:g}"
+def format_number(value: float) -> str:
+    """A number for messages: at most 3 decimals, no trailing zeros, no '-0'; a number
+    below 0.001 keeps 3 significant digits (a tolerance of 1e-06 is not "0")."""
+    value = float(value)
+    if value != 0 and abs(value) < 0.001:
+        return f"{value:.3g}"
+    return f"{round(value, 3) + 0.0:g}"
+
+
+_f = format_number
 
 
 def _range(lo: float, hi: float) -> str:
@@ -109,22 +119,37 @@ def park_deg(poses_dir: str | Path) -> dict[str, float]:
     return pose_joints_deg(START_POSE, poses_dir)
 
 
+#: Where poses come from: the poses a sequence froze when it was loaded
+#: (:attr:`LoadedSequence.poses`, name -> FrozenPose or joint mapping), or a folder.
+PoseSource = Mapping | str | Path
+
+
+def _pose_deg(name: str, poses: PoseSource) -> dict[str, float]:
+    if isinstance(poses, Mapping):
+        if name not in poses:
+            raise UserInputError(f"pose '{name}' was not read with the sequence")
+        entry = poses[name]
+        return dict(getattr(entry, "joints_deg", entry))
+    return pose_joints_deg(name, poses)
+
+
 def commanded_joints(params: MoveParams, arm: ArmDescription,
-                     poses_dir: str | Path) -> list[str]:
+                     poses: PoseSource) -> list[str]:
     """The joints a move commands, in arm order: every unlocked joint of the pose, or the
     unlocked joints named in ``joints``. The others are not part of the motion."""
-    names = (pose_joints_deg(params.pose, poses_dir) if params.pose is not None
+    names = (_pose_deg(params.pose, poses) if params.pose is not None
              else params.joints or {})
     return [j.name for j in arm.joints if j.name in names and j.locked is None]
 
 
 def resolve_move_target(params: MoveParams, current_deg: Mapping[str, float],
-                        arm: ArmDescription, poses_dir: str | Path) -> dict[str, float]:
+                        arm: ArmDescription, poses: PoseSource) -> dict[str, float]:
     """Target of a move for every joint of the arm (user degrees, arm order).
 
     Joints the move does not name keep their ``current_deg`` value; ``relative`` values are
-    added to it; locked joints are always at their locked value. Raises
-    :class:`UserInputError` for an unknown pose or joint.
+    added to it; locked joints are always at their locked value. ``poses``: the sequence's
+    frozen poses (a run uses only these) or a pose folder. Raises :class:`UserInputError`
+    for an unknown pose or joint.
     """
     target: dict[str, float] = {}
     for joint in arm.joints:
@@ -135,7 +160,7 @@ def resolve_move_target(params: MoveParams, current_deg: Mapping[str, float],
         else:
             raise UserInputError(f"no current position for joint {joint.name}")
     if params.pose is not None:
-        given = pose_joints_deg(params.pose, poses_dir)
+        given = _pose_deg(params.pose, poses)
         relative = False
     else:
         given, relative = dict(params.joints or {}), params.relative
@@ -149,14 +174,14 @@ def resolve_move_target(params: MoveParams, current_deg: Mapping[str, float],
     return target
 
 
-def resolve_checkpoint(params: CheckpointParams, arm: ArmDescription, poses_dir: str | Path
+def resolve_checkpoint(params: CheckpointParams, arm: ArmDescription, poses: PoseSource
                        ) -> tuple[np.ndarray, np.ndarray, float, float]:
     """Expected end-effector of a checkpoint: ``(position_mm (3,), rotation (3, 3),
     position_tolerance_mm, angle_tolerance_deg)``."""
     from seqrun.kinematics import matrix_from_rpy, pose_from_user_deg
 
     if params.pose is not None:
-        joints = pose_joints_deg(params.pose, poses_dir)
+        joints = _pose_deg(params.pose, poses)
         joints = {j.name: (j.locked if j.locked is not None else joints.get(j.name, 0.0))
                   for j in arm.joints}
         pose = pose_from_user_deg(arm, joints)
@@ -178,8 +203,6 @@ class _JointState:
     homed: bool = False
     halted: bool = False
     limits: tuple[float, float] | None = None  # written MinPos/MaxPos
-    max_velocity: float = 0.0
-    max_velocity_from: str = "the arm file"
     at_start: bool = True  # still at its start position (for the wording of notes)
 
     @property
@@ -189,14 +212,22 @@ class _JointState:
 
 class _Validator:
     def __init__(self, loaded: LoadedSequence, arm: ArmDescription,
-                 start_deg: Mapping[str, float], started: bool) -> None:
+                 start_deg: Mapping[str, float], started: bool,
+                 module_limits: Mapping[str, tuple[float, float]] | None = None) -> None:
         self.loaded = loaded
         self.arm = arm
-        self.poses_dir = loaded.poses_dir
+        self.poses = loaded.poses
         self.errors: list[SourceError] = []
         self.notes: list[SourceError] = []
         self.joints: dict[str, _JointState] = {}
         self._chain = None
+        # Limits the file itself sets (arm file, its set_limits): exceeding them is an
+        # error. ``limits`` adds what the modules hold: moves are planned within it.
+        self.file_limits = LimitsInForce(arm)
+        self.limits = LimitsInForce(arm)
+        self.pose_checked: dict[str, bool] = {}  # pose name -> usable
+        self.pose_limit_findings: dict[str, dict[str, str]] = {}  # pose -> joint -> message
+        self.reported_pose_limits: set[tuple[str, str]] = set()
         for joint in arm.joints:
             position = joint.locked if joint.locked is not None else start_deg.get(joint.name)
             if position is None or not math.isfinite(position):
@@ -205,8 +236,7 @@ class _Validator:
                     f"start state: {joint.name} {what} (a finite angle is needed for every "
                     "unlocked joint)"))
                 position = 0.0
-            state = _JointState(joint, float(position),
-                                max_velocity=joint.max_velocity_deg_s)
+            state = _JointState(joint, float(position))
             if started:
                 state.reset = state.homed = True
                 state.limits = tuple(joint.limits_deg)  # type: ignore[assignment]
@@ -216,6 +246,57 @@ class _Validator:
             self.errors.append(loaded.location.error(
                 f"start state: unknown joint(s) {', '.join(map(str, unknown))} (the arm has "
                 f"{', '.join(arm.joint_names)})"))
+        if module_limits:
+            self.limits.read_back({n: v for n, v in module_limits.items() if n in self.joints})
+            for name, bound in ((n, self.limits.velocity(n)) for n in module_limits
+                                if n in self.joints):
+                if bound.source == READBACK:
+                    self.notes.append(loaded.location.error(
+                        f"{name}: its module holds MaxVel {_f(bound.value)} deg/s, below the "
+                        f"arm file's {_f(arm.joint(name).max_velocity_deg_s)} deg/s; moves "
+                        "are planned within it until a set_limits writes it"))
+            for name, bound in ((n, self.limits.acceleration(n)) for n in module_limits
+                                if n in self.joints):
+                if bound.source.startswith(READBACK):
+                    self.notes.append(loaded.location.error(
+                        f"{name}: its module holds MaxAcc {_f(module_limits[name][1])} "
+                        f"deg/s^2; moves are planned within {_f(bound.value)} deg/s^2 "
+                        f"({bound.source})"))
+
+    # -- pose files, checked against the arm where they are written
+    def _pose(self, step: ResolvedStep, name: str, *, target: bool) -> dict[str, float] | None:
+        """The frozen joints of pose ``name``; None if it cannot be used (reported)."""
+        frozen = self.poses.get(name)
+        if frozen is None:
+            return None  # unknown or broken pose file: reported when the sequence was loaded
+        if name not in self.pose_checked:
+            from seqrun.poses import pose_findings
+
+            usable = True
+            limits: dict[str, str] = {}
+            for finding in pose_findings(frozen.pose, self.arm):
+                error = frozen.document.error(finding.where, finding.message, key=finding.key)
+                if finding.note:
+                    limits[finding.joint or ""] = error
+                else:
+                    self.errors.append(error)
+                    usable = False
+            self.pose_checked[name] = usable
+            self.pose_limit_findings[name] = limits
+        if target:
+            # A move target outside the arm's limits is the pose file's error, reported at
+            # its line (once per pose; the steps that use it are named).
+            for joint, error in self.pose_limit_findings[name].items():
+                if (name, joint) in self.reported_pose_limits:
+                    continue
+                self.reported_pose_limits.add((name, joint))
+                lo, hi = self.arm.joint(joint).limits_deg
+                value = frozen.pose.joints_deg[joint]
+                self.errors.append(SourceError(
+                    error.file, error.line, error.column,
+                    f"{joint} {_f(value)}° is outside its limits {_range(lo, hi)}: pose "
+                    f"'{name}' cannot be a move target (used at {step.where('pose')})"))
+        return frozen.joints_deg if self.pose_checked[name] else None
 
     # -- common checks
     def _names(self, step: ResolvedStep, names: list[str] | dict, path: tuple,
@@ -295,28 +376,21 @@ class _Validator:
             override = params.limits_deg.get(name)
             state.limits = (tuple(override) if override is not None  # type: ignore[assignment]
                             else tuple(state.joint.limits_deg))
-            if name in params.max_velocity_deg_s:
-                state.max_velocity = min(params.max_velocity_deg_s[name],
-                                         state.joint.max_velocity_deg_s)
-                state.max_velocity_from = f"set_limits at {step.location}"
+        written = {key: {n: v for n, v in getattr(params, key).items()
+                         if n in self.joints and not self.joints[n].locked}
+                   for key in ("max_velocity_deg_s", "max_acceleration_deg_s2")}
+        for limits in (self.file_limits, self.limits):
+            limits.written(f"set_limits at {step.location}", written["max_velocity_deg_s"],
+                           written["max_acceleration_deg_s2"])
 
     def move(self, step: ResolvedStep, params: MoveParams) -> None:
         # which joints, and where to
+        pose_limits: dict[str, str] = {}
         if params.pose is not None:
-            try:
-                pose = pose_joints_deg(params.pose, self.poses_dir)
-            except (UserInputError, SequenceInvalid):
-                return  # reported when the sequence was loaded
-            for name, value in pose.items():
-                state = self.joints.get(name)
-                if state is None:
-                    self.errors.append(step.error(
-                        f"pose '{params.pose}' has joint '{name}', which the arm does not have",
-                        "pose"))
-                elif state.locked and abs(value - state.joint.locked) > 1e-6:
-                    self.errors.append(step.error(
-                        f"pose '{params.pose}' sets {name} to {_f(value)}°, but {name} is "
-                        f"locked at {_f(state.joint.locked)}°", "pose"))
+            pose = self._pose(step, params.pose, target=True)
+            if pose is None:
+                return  # its file has errors, reported there
+            pose_limits = self.pose_limit_findings.get(params.pose, {})
             names = [j.name for j in self.arm.joints if j.name in pose and j.locked is None]
             given = {n: float(pose[n]) for n in names}
             where = {n: ("pose",) for n in names}
@@ -341,7 +415,9 @@ class _Validator:
             source = "its limits" if state.limits is None or tuple(
                 state.limits) == tuple(state.joint.limits_deg) else "the limits written by " \
                 "set_limits"
-            if not lo <= value <= hi:
+            if name in pose_limits:
+                refused.add(name)  # outside the arm's limits: the pose file's error
+            elif not lo <= value <= hi:
                 refused.add(name)
                 how = (f" ({_f(state.position)}° {'+' if given[name] >= 0 else '-'} "
                        f"{_f(abs(given[name]))}°)" if params.relative else "")
@@ -355,6 +431,7 @@ class _Validator:
                     f"{name} {verb} {_f(state.position)}°, {_f(outside)}° outside its limit "
                     f"{_range(lo, hi)}; this move brings it back inside", *where[name]))
         self._guards(step, target)
+        self._timeout(step, params, target, [n for n in names if n not in refused])
         for name in names:
             if name in refused:
                 continue
@@ -366,13 +443,81 @@ class _Validator:
     def _velocities(self, step: ResolvedStep, params: MoveParams) -> None:
         for name in self._names(step, params.velocity_deg_s, ("velocity_deg_s",),
                                 as_keys=True, what="a velocity for"):
-            state = self.joints[name]
             value = params.velocity_deg_s[name]
-            if value > state.max_velocity:
+            bound = self.file_limits.velocity(name)
+            held = self.limits.velocity(name)
+            if value > bound.value:
                 self.errors.append(step.error(
                     f"velocity_deg_s of {name} {_f(value)} deg/s is above its maximum "
-                    f"{_f(state.max_velocity)} deg/s (from {state.max_velocity_from})",
+                    f"{_f(bound.value)} deg/s (from the {bound.source})"
+                    if bound.source == "arm file" else
+                    f"velocity_deg_s of {name} {_f(value)} deg/s is above its maximum "
+                    f"{_f(bound.value)} deg/s (from {bound.source})",
                     "velocity_deg_s", name))
+            elif value > held.value:
+                self.notes.append(step.error(
+                    f"velocity_deg_s of {name} {_f(value)} deg/s is above the MaxVel its "
+                    f"module holds, {_f(held.value)} deg/s ({held.source}): planned within "
+                    "that", "velocity_deg_s", name))
+
+    def _timeout(self, step: ResolvedStep, params: MoveParams, target: dict[str, float],
+                 names: list[str]) -> None:
+        """A move's ``timeout_s``: within the arm file's bound, and not shorter than the
+        move planned with the limits in force."""
+        if params.timeout_s is None:
+            return
+        if params.timeout_s > self.arm.control.max_wait_s:
+            self.errors.append(step.error(
+                f"timeout_s {_f(params.timeout_s)} s is longer than the arm file allows "
+                f"(control.max_wait_s = {_f(self.arm.control.max_wait_s)} s)", "timeout_s"))
+            return
+        duration = self._planned_duration(params, target, names)
+        if duration is not None and duration > params.timeout_s:
+            self.errors.append(step.error(
+                f"timeout_s {_f(params.timeout_s)} s is shorter than the move, planned to "
+                f"take {_f(duration)} s with the limits in force; give it more time or let "
+                "it default (the planned duration plus control.settle_timeout_s)",
+                "timeout_s"))
+
+    def _planned_duration(self, params: MoveParams, target: dict[str, float],
+                          names: list[str]) -> float | None:
+        from seqrun.planner import Limits, plan_move
+
+        order = self.arm.joint_names
+        start = [self.joints[n].position for n in order]
+        active = [order.index(n) for n in names
+                  if abs(target[n] - self.joints[n].position) > 1e-9]
+        velocity, acceleration = self.limits.maxima()
+        try:
+            limits = Limits.from_arm(self.arm, velocity_scale=params.velocity_scale,
+                                     acceleration_scale=params.acceleration_scale,
+                                     velocity_deg_s=params.velocity_deg_s,
+                                     max_velocity_deg_s=velocity,
+                                     max_acceleration_deg_s2=acceleration)
+            plan = plan_move(np.radians(start), np.radians([target[n] for n in order]),
+                             limits, active)
+        except (PlanningError, KeyError, ValueError):
+            return None  # what makes it unplannable is reported elsewhere
+        return plan.duration
+
+    def _after_halt(self, step: ResolvedStep, what: str) -> None:
+        """A wait or checkpoint reads the modules, which report HALTED until Reset: after
+        a halt it can only fail."""
+        halted = [s.joint.name for s in self.joints.values() if s.halted]
+        if halted:
+            self.errors.append(step.error(
+                f"{what} after halt{self._which(halted)}: the modules report HALTED until "
+                "Reset and this step reads them, so it can never pass; reset first"))
+
+    def wait(self, step: ResolvedStep, params: WaitParams) -> None:
+        self._after_halt(step, f"{step.kind}")
+        bound = self.arm.control.max_wait_s
+        for key in ("seconds", "timeout_s"):
+            value = getattr(params, key)
+            if value is not None and value > bound:
+                self.errors.append(step.error(
+                    f"{key} {_f(value)} s is longer than the arm file allows "
+                    f"(control.max_wait_s = {_f(bound)} s)", key))
 
     def _motion_allowed(self, step: ResolvedStep, names: list[str]) -> None:
         states = [self.joints[n] for n in names]
@@ -432,9 +577,12 @@ class _Validator:
     def checkpoint(self, step: ResolvedStep, params: CheckpointParams) -> None:
         from seqrun.kinematics import orientation_error, pose_from_user_deg
 
+        self._after_halt(step, "checkpoint")
+        if params.pose is not None and self._pose(step, params.pose, target=False) is None:
+            return  # unknown pose or its file has errors: reported already
         try:
             position, rotation, pos_tol, ang_tol = resolve_checkpoint(params, self.arm,
-                                                                      self.poses_dir)
+                                                                      self.poses)
         except (UserInputError, SequenceInvalid):
             return  # reported when the sequence was loaded
         except ValueError as exc:
@@ -454,7 +602,7 @@ class _Validator:
     def run(self) -> ValidationResult:
         handlers = {"reset": self.reset, "home": self.home, "halt": self.halt,
                     "set_limits": self.set_limits, "move": self.move,
-                    "checkpoint": self.checkpoint}
+                    "wait": self.wait, "checkpoint": self.checkpoint}
         for step in self.loaded.steps:
             handler = handlers.get(step.kind)
             if handler is not None:
@@ -475,14 +623,17 @@ def _position(item: SourceError) -> tuple[int, int]:
 
 def validate_sequence(loaded: LoadedSequence, arm: ArmDescription,
                       start_deg: Mapping[str, float] | None = None, *,
-                      started: bool = False) -> ValidationResult:
+                      started: bool = False,
+                      module_limits: Mapping[str, tuple[float, float]] | None = None
+                      ) -> ValidationResult:
     """Check a loaded sequence against ``arm`` starting at ``start_deg`` (user degrees;
     default the Park pose of the project's poses folder).
 
     ``started=True``: the modules are already reset, homed and have the arm file's limits
-    (the executor passes what it measured). Never raises for a bad sequence: everything
-    is in the result.
+    (the executor passes what it measured). ``module_limits``: MaxVel (deg/s) and MaxAcc
+    (deg/s^2) per joint as read back from the modules (moves are planned within them).
+    Never raises for a bad sequence: everything is in the result.
     """
     if start_deg is None:
         start_deg = park_deg(loaded.poses_dir)
-    return _Validator(loaded, arm, start_deg, started).run()
+    return _Validator(loaded, arm, start_deg, started, module_limits).run()

@@ -37,6 +37,7 @@ and every local tag (``!foo``) are located errors.
 from __future__ import annotations
 
 import difflib
+import hashlib
 import math
 import os
 import re
@@ -303,6 +304,8 @@ class Document:
     root: Node
     data: Any
     _index: dict[int, dict[Any, tuple[Node, Any]]] = field(repr=False, default_factory=dict)
+    #: SHA-256 (hex) of the bytes read: what a run records of the files it validated.
+    sha256: str = ""
 
     # -- locating
     def location(self, node: Any) -> Location:
@@ -407,6 +410,11 @@ def sort_errors(errors: list[SourceError]) -> list[SourceError]:
 
 def read_text(path: Path, file: str) -> str:
     """The file's text: UTF-8, at most :data:`MAX_FILE_BYTES`, a leading BOM dropped."""
+    return read_source(path, file)[0]
+
+
+def read_source(path: Path, file: str) -> tuple[str, str]:
+    """``(text, sha256 of the bytes)`` of a file, checked as :func:`read_text` says."""
     path = Path(path)
     try:
         if path.is_dir():
@@ -436,7 +444,7 @@ def read_text(path: Path, file: str) -> str:
     text = text.removeprefix("\ufeff")
     if not text.strip():
         raise SequenceInvalid([SourceError(file, 1, 1, "the file is empty")])
-    return text
+    return text, hashlib.sha256(data).hexdigest()
 
 
 #: PyYAML's problem texts that a test engineer would not understand, reworded.
@@ -516,7 +524,7 @@ def load_document(path: str | os.PathLike[str], *, file: str | None = None) -> D
     """
     path = Path(path)
     file = file if file is not None else display_path(path)
-    text = read_text(path, file)
+    text, digest = read_source(path, file)
     try:
         root = yaml.compose(text, Loader=_Loader)  # nodes only: nothing is constructed
     except _Problem as exc:
@@ -533,7 +541,8 @@ def load_document(path: str | os.PathLike[str], *, file: str | None = None) -> D
         raise SequenceInvalid([_problem_error(file, exc)]) from None
     if converter.problems:
         raise SequenceInvalid(sort_errors([_problem_error(file, p) for p in converter.problems]))
-    return Document(path=path, file=file, root=root, data=data, _index=converter.index)
+    return Document(path=path, file=file, root=root, data=data, _index=converter.index,
+                    sha256=digest)
 
 
 def _problem_error(file: str, exc: _Problem) -> SourceError:
