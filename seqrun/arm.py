@@ -120,10 +120,16 @@ class ArmDescription(_Strict):
     workspace: Workspace = Workspace()
     # SHA-256 of the file it was loaded from (recorded in run folders); not a file key.
     _sha256: str = PrivateAttr("")
+    _file: str = PrivateAttr("")
 
     @property
     def sha256(self) -> str:
         return self._sha256
+
+    @property
+    def source_file(self) -> str:
+        """The file it was loaded from, as messages name it ("" if built in code)."""
+        return self._file
 
     @field_validator("joints")
     @classmethod
@@ -176,5 +182,5 @@ def load_arm(path: str | Path) -> ArmDescription:
 
     document = load_document(Path(path))
     arm = document.validate(ArmDescription)
-    arm._sha256 = document.sha256
+    arm._sha256, arm._file = document.sha256, document.file
     return arm

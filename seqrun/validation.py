@@ -213,8 +213,12 @@ class _JointState:
 class _Validator:
     def __init__(self, loaded: LoadedSequence, arm: ArmDescription,
                  start_deg: Mapping[str, float], started: bool,
-                 module_limits: Mapping[str, tuple[float, float]] | None = None) -> None:
+                 module_limits: Mapping[str, tuple[float, float]] | None = None,
+                 incomplete: bool = False) -> None:
         self.loaded = loaded
+        # Steps were left out (they failed on their own): what depends on the steps before
+        # (start-up order, where the joints are) is not checked, the rest is.
+        self.incomplete = incomplete
         self.arm = arm
         self.poses = loaded.poses
         self.errors: list[SourceError] = []
@@ -333,7 +337,7 @@ class _Validator:
     def home(self, step: ResolvedStep, params: HomeParams) -> None:
         targets = self._modules(step, params.joints)
         not_reset = [s.joint.name for s in targets if not s.reset and not s.locked]
-        if not_reset:
+        if not_reset and not self.incomplete:
             self.errors.append(step.error(
                 f"home before reset{self._which(not_reset)}: reset the modules first (Reset "
                 "clears the error state they power up with)"))
@@ -347,7 +351,7 @@ class _Validator:
     def set_limits(self, step: ResolvedStep, params: SetLimitsParams) -> None:
         unlocked = [s for s in self.joints.values() if not s.locked]
         not_reset = [s.joint.name for s in unlocked if not s.reset]
-        if not_reset:
+        if not_reset and not self.incomplete:
             self.errors.append(step.error(
                 f"set_limits before reset{self._which(not_reset)}: the modules accept "
                 "parameters only after Reset"))
@@ -402,7 +406,8 @@ class _Validator:
         self._velocities(step, params)
         if not names:
             return
-        self._motion_allowed(step, names)
+        if not self.incomplete:
+            self._motion_allowed(step, names)
 
         # targets inside the limits in force; a joint outside may only come back inside
         target = {n: s.position for n, s in self.joints.items()}
@@ -417,6 +422,8 @@ class _Validator:
                 "set_limits"
             if name in pose_limits:
                 refused.add(name)  # outside the arm's limits: the pose file's error
+            elif params.relative and self.incomplete:
+                refused.add(name)  # where it starts is not known
             elif not lo <= value <= hi:
                 refused.add(name)
                 how = (f" ({_f(state.position)}° {'+' if given[name] >= 0 else '-'} "
@@ -430,7 +437,8 @@ class _Validator:
                 self.notes.append(step.error(
                     f"{name} {verb} {_f(state.position)}°, {_f(outside)}° outside its limit "
                     f"{_range(lo, hi)}; this move brings it back inside", *where[name]))
-        self._guards(step, target)
+        if not self.incomplete:
+            self._guards(step, target)
         self._timeout(step, params, target, [n for n in names if n not in refused])
         for name in names:
             if name in refused:
@@ -471,7 +479,7 @@ class _Validator:
                 f"timeout_s {_f(params.timeout_s)} s is longer than the arm file allows "
                 f"(control.max_wait_s = {_f(self.arm.control.max_wait_s)} s)", "timeout_s"))
             return
-        duration = self._planned_duration(params, target, names)
+        duration = None if self.incomplete else self._planned_duration(params, target, names)
         if duration is not None and duration > params.timeout_s:
             self.errors.append(step.error(
                 f"timeout_s {_f(params.timeout_s)} s is shorter than the move, planned to "
@@ -504,7 +512,7 @@ class _Validator:
         """A wait or checkpoint reads the modules, which report HALTED until Reset: after
         a halt it can only fail."""
         halted = [s.joint.name for s in self.joints.values() if s.halted]
-        if halted:
+        if halted and not self.incomplete:
             self.errors.append(step.error(
                 f"{what} after halt{self._which(halted)}: the modules report HALTED until "
                 "Reset and this step reads them, so it can never pass; reset first"))
@@ -588,6 +596,8 @@ class _Validator:
         except ValueError as exc:
             self.errors.append(step.error(f"checkpoint: {exc}", "pose"))
             return
+        if self.incomplete:
+            return  # where the joints are after the moves before is not known
         pose = pose_from_user_deg(self.arm, {n: s.position for n, s in self.joints.items()})
         distance = float(np.linalg.norm(pose.position_mm - position))
         angle = math.degrees(float(orientation_error(rotation, pose.rotation)))
@@ -624,16 +634,18 @@ def _position(item: SourceError) -> tuple[int, int]:
 def validate_sequence(loaded: LoadedSequence, arm: ArmDescription,
                       start_deg: Mapping[str, float] | None = None, *,
                       started: bool = False,
-                      module_limits: Mapping[str, tuple[float, float]] | None = None
-                      ) -> ValidationResult:
+                      module_limits: Mapping[str, tuple[float, float]] | None = None,
+                      incomplete: bool = False) -> ValidationResult:
     """Check a loaded sequence against ``arm`` starting at ``start_deg`` (user degrees;
     default the Park pose of the project's poses folder).
 
     ``started=True``: the modules are already reset, homed and have the arm file's limits
     (the executor passes what it measured). ``module_limits``: MaxVel (deg/s) and MaxAcc
     (deg/s^2) per joint as read back from the modules (moves are planned within them).
-    Never raises for a bad sequence: everything is in the result.
+    ``incomplete``: ``loaded`` lacks steps that failed on their own (see
+    :func:`seqrun.schema.load_sequence_partial`); the checks that depend on the steps before
+    (start-up order, positions: guards, checkpoints, relative targets) are skipped. Never raises for a bad sequence: everything is in the result.
     """
     if start_deg is None:
         start_deg = park_deg(loaded.poses_dir)
-    return _Validator(loaded, arm, start_deg, started, module_limits).run()
+    return _Validator(loaded, arm, start_deg, started, module_limits, incomplete).run()

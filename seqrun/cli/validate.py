@@ -25,9 +25,10 @@ import typer
 
 from seqrun.arm import ArmDescription
 from seqrun.cli.app import app
-from seqrun.cli.common import EXIT_INVALID, EXIT_OK, fail
+from seqrun.cli.common import EXIT_INVALID, EXIT_OK, EXIT_USAGE, fail
 from seqrun.errors import SequenceInvalid, SourceError, UserInputError
-from seqrun.schema import LoadedSequence, load_sequence, sequence_json_schema
+from seqrun.yamlsource import sort_errors
+from seqrun.schema import LoadedSequence, load_sequence_partial, sequence_json_schema
 from seqrun.validation import START_POSE, ValidationResult, pose_joints_deg, validate_sequence
 
 
@@ -57,10 +58,11 @@ def static_check(file: Path, *, start: str | None = None,
     from seqrun.arm import load_arm
 
     check = StaticCheck()
-    try:
-        check.loaded = load_sequence(file)
-    except SequenceInvalid as exc:
-        check.errors = list(exc.errors)
+    # Every problem in one pass: the steps that are valid on their own are still checked
+    # against the arm when others are not (the loader leaves the broken ones out).
+    check.loaded, load_errors = load_sequence_partial(file)
+    check.errors = list(load_errors)
+    if check.loaded is None:
         return check
     arm_path = arm_file if arm_file is not None else check.loaded.arm_path
     if not Path(arm_path).is_file():
@@ -68,7 +70,7 @@ def static_check(file: Path, *, start: str | None = None,
     try:
         check.arm = load_arm(arm_path)
     except SequenceInvalid as exc:
-        check.errors = list(exc.errors)
+        check.errors = sort_errors(check.errors + list(exc.errors))
         return check
     pose = start or START_POSE
     try:
@@ -77,11 +79,12 @@ def static_check(file: Path, *, start: str | None = None,
         raise UserInputError(f"start pose: {exc}"
                              + ("" if start else " (choose one with --start POSE)")) from None
     except SequenceInvalid as exc:
-        check.errors = list(exc.errors)
+        check.errors = sort_errors(check.errors + list(exc.errors))
         return check
     result: ValidationResult = validate_sequence(check.loaded, check.arm, check.start_deg,
-                                                 started=started)
-    check.errors, check.notes = result.errors, result.notes
+                                                 started=started, incomplete=bool(check.errors))
+    check.errors = sort_errors(check.errors + result.errors)
+    check.notes = result.notes
     return check
 
 
@@ -113,16 +116,31 @@ def print_dry_run(run, loaded, arm) -> None:
     typer.echo(f"dry run from {run.start_pose} (simulator, virtual time, {run.cycle_hz:g} Hz "
                f"loop): {verdict} - {run.simulated_s:.2f} s simulated in {run.wall_s:.2f} s "
                f"({run.speedup:.0f}x real time)")
-    limits = {j.name: j.max_velocity_deg_s for j in arm.joints}
+    arm_limits = {j.name: j.max_velocity_deg_s for j in arm.joints}
+    includes: tuple[str, ...] = ()
     for s in r.steps:
+        resolved = loaded.steps[s.number - 1] if 0 < s.number <= len(loaded.steps) else None
+        chain = resolved.include_labels if resolved is not None else ()
+        for depth, title in enumerate(chain):
+            if includes[:depth + 1] != chain[:depth + 1]:
+                typer.echo(f"     {'  ' * depth}{_cut(title, 60)}")
+        includes = chain
         planned = "" if s.planned_duration_s is None else f"planned {s.planned_duration_s:6.2f} s, "
         took = "not run" if s.duration_s is None else f"simulated {s.duration_s:6.2f} s"
-        typer.echo(f"  {s.number:2d} {s.status:7s} {s.label[:44]:44s} {planned}{took}")
+        label = ("  " * len(chain) + s.label)
+        typer.echo(f"  {s.number:2d} {s.status:7s} {_cut(label, 44):44s} {planned}{took}")
+        in_force = s.detail.get("limits_in_force") or {}
         peak = s.detail.get("peak_measured_velocity_deg_s")
         if peak:
+            limits = {n: in_force.get(n, {}).get("max_velocity_deg_s", arm_limits[n])
+                      for n in arm_limits}
             moving = [f"{n} {v:.1f}/{limits[n]:g}"
                       for n, v in zip(arm.joint_names, peak) if v > 0.05]
             typer.echo(f"       peak joint velocity (deg/s, of limit): {', '.join(moving)}")
+        for name, bound in in_force.items():
+            typer.echo(f"       limits in force for {name}: {bound['max_velocity_deg_s']:g} deg/s "
+                       f"({bound['velocity_from']}), {bound['max_acceleration_deg_s2']:g} "
+                       f"deg/s^2 ({bound['acceleration_from']})")
         if "position_error_mm" in s.detail:
             d = s.detail
             typer.echo(f"       checkpoint: expected {d['expected_position_mm']} mm, reached "
@@ -140,6 +158,20 @@ def print_dry_run(run, loaded, arm) -> None:
         typer.echo(f"{error['file']}:{error['line']}:{error['column']}: {error['message']}")
     for item in run.as_dict()["not_verified"]:
         typer.echo(f"  not verified: {item}")
+
+
+def _unusable(message: str, as_json: bool) -> None:
+    """Input that cannot be used at all: exit 2, with --json as a JSON object too."""
+    if as_json:
+        typer.echo(json.dumps({"valid": False, "errors": [{"message": message}], "notes": [],
+                               "dry_run": None}, indent=2, ensure_ascii=False))
+        raise typer.Exit(EXIT_USAGE)
+    fail(message)
+
+
+def _cut(text: str, width: int) -> str:
+    """``text`` in at most ``width`` characters; a cut one ends in "…"."""
+    return text if len(text) <= width else text[:width - 1] + "…"
 
 
 @app.command("validate")
@@ -176,10 +208,10 @@ def validate_command(
     try:
         check = static_check(file, start=start, arm_file=arm_file, started=started)
     except UserInputError as exc:
-        fail(str(exc))
+        _unusable(str(exc), as_json)
         return
     except OSError as exc:  # a path the system refuses (name too long, permission, ...)
-        fail(f"{exc.filename}: {exc.strerror or exc}")
+        _unusable(f"{exc.filename}: {exc.strerror or exc}", as_json)
         return
     run = None
     if check.valid and not static:
