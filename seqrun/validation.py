@@ -511,7 +511,7 @@ class _Validator:
     def _after_halt(self, step: ResolvedStep, what: str) -> None:
         """A wait or checkpoint reads the modules, which report HALTED until Reset: after
         a halt it can only fail."""
-        halted = [s.joint.name for s in self.joints.values() if s.halted]
+        halted = [s.joint.name for s in self.joints.values() if s.halted and not s.locked]
         if halted and not self.incomplete:
             self.errors.append(step.error(
                 f"{what} after halt{self._which(halted)}: the modules report HALTED until "
