@@ -65,6 +65,8 @@ def static_check(file: Path, *, start: str | None = None,
     if check.loaded is None:
         return check
     arm_path = arm_file if arm_file is not None else check.loaded.arm_path
+    if check.errors and arm_file is None and not Path(arm_path).is_file():
+        return check  # the file's own 'arm' is wrong: already among the errors
     if not Path(arm_path).is_file():
         raise UserInputError(f"arm file {arm_path} not found (give one with --arm FILE)")
     try:
