@@ -654,10 +654,11 @@ class Executor:
         try:
             check = self.preflight(loaded, first_step)
             if check.errors:
+                summary = "not valid from the arm's measured state"
                 return self._finish(results, "invalid", EXIT_INVALID,
-                                    "not valid from the arm's measured state: "
-                                    + "; ".join(str(e) for e in check.errors), None,
-                                    errors=[e.as_dict() for e in check.errors])
+                                    f"{summary}: " + "; ".join(str(e) for e in check.errors),
+                                    None, errors=[e.as_dict() for e in check.errors],
+                                    summary=summary)
             self._enable_watchdog()
         except Exception as exc:  # noqa: BLE001 - nothing moves yet, but be sure
             halted = self.emergency_halt()

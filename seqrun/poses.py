@@ -129,8 +129,15 @@ def pose_document(name: str, arm: ArmDescription,
     """A pose file for the arm at ``joints_deg`` (user degrees), end-effector by FK.
 
     Accepts what :func:`seqrun.kinematics.pose_from_user_deg` accepts (a locked joint may be
-    left out of a mapping); raises ``ValueError`` for unknown, missing or wrong joints.
+    left out of a mapping); raises ``ValueError`` for unknown, missing or wrong joints and
+    :class:`UserInputError` for a name that is not a pose name.
     """
+    import re
+
+    if not re.match(_POSE_NAME, name):
+        raise UserInputError(f"'{name}' is not a pose name: letters, digits, _ and -, "
+                             "starting with a letter or digit (it names the file "
+                             "poses/<name>.yaml)")
     pose = pose_from_user_deg(arm, joints_deg)
     if isinstance(joints_deg, Mapping):
         given = {n: joints_deg.get(n, j.locked) for n, j in zip(arm.joint_names, arm.joints)}

@@ -1103,3 +1103,85 @@ def reference_markdown() -> str:
             parts.append(f"Give exactly one of: {' or '.join(choices)}.\n")
         parts.append("| key | type | |\n|---|---|---|\n" + rows(definition) + "\n")
     return "\n".join(parts)
+
+
+def file_reference_markdown(model: type, title: str, intro: str) -> str:
+    """A reference of a file format given by a pydantic model (pose files, arm files): one
+    row per key, nested mappings as dotted keys, from the model's JSON Schema."""
+    schema = model.model_json_schema()
+    defs = schema.get("$defs", {})
+
+    def resolve(prop: dict) -> dict:
+        if "$ref" in prop:
+            return defs[prop["$ref"].rsplit("/", 1)[-1]]
+        if "allOf" in prop and len(prop["allOf"]) == 1:
+            return {**resolve(prop["allOf"][0]), **{k: v for k, v in prop.items()
+                                                   if k != "allOf"}}
+        return prop
+
+    def kind(prop: dict) -> str:
+        if "anyOf" in prop:
+            return " or ".join(kind(p) for p in prop["anyOf"] if p.get("type") != "null")
+        if "enum" in prop:
+            return " or ".join(f"`{v}`" for v in prop["enum"])
+        if "const" in prop:
+            return f"`{prop['const']}`"
+        if prop.get("type") == "array":
+            items = prop.get("prefixItems") or []
+            if items:
+                return f"[{len(items)} × {kind(items[0])}]"
+            return f"list of {kind(resolve(prop.get('items', {})))}"
+        if prop.get("type") == "object" and isinstance(prop.get("additionalProperties"), dict):
+            return f"{{name: {kind(resolve(prop['additionalProperties']))}}}"
+        if prop.get("format") == "date-time":
+            return "date and time (ISO 8601)"
+        return {"number": "number", "string": "text", "boolean": "true/false",
+                "integer": "whole number", "object": "mapping"}.get(prop.get("type", ""),
+                                                                     "value")
+
+    rows: list[str] = []
+
+    def walk(definition: dict, prefix: str) -> None:
+        required = set(definition.get("required", []))
+        for key, raw in definition.get("properties", {}).items():
+            prop = resolve(raw)
+            name = f"{prefix}{key}"
+            default = ("required" if key in required else
+                       "" if raw.get("default") in (None, "") or isinstance(
+                           raw.get("default"), (dict, list)) and key not in ("rpy_deg",) else
+                       f"default `{raw['default']}`")
+            description = raw.get("description") or prop.get("description") or ""
+            if prop.get("properties"):
+                rows.append(f"| `{name}` | mapping{' — ' + default if default else ''} | "
+                            f"{description} |")
+                walk(prop, name + ".")
+                continue
+            rows.append(f"| `{name}` | {kind(prop)}{' — ' + default if default else ''} | "
+                        f"{description} |")
+
+    walk(schema, "")
+    return (f"# {title}\n\n{intro}\n\n| key | type | |\n|---|---|---|\n" + "\n".join(rows)
+            + "\n")
+
+
+def pose_reference_markdown() -> str:
+    """The pose file reference (``seqrun schema pose --markdown``)."""
+    from seqrun.poses import PoseFile
+
+    return file_reference_markdown(
+        PoseFile, "Pose files",
+        "`poses/<name>.yaml`: a named joint configuration in user degrees (Totem = zeros). "
+        "It lists every joint of the arm, the locked one at its locked value; "
+        "`end_effector` is what forward kinematics gives for those joints and is checked "
+        "against them. `seqrun pose save NAME` writes one from the arm.")
+
+
+def arm_reference_markdown() -> str:
+    """The arm file reference (``seqrun schema arm --markdown``)."""
+    from seqrun.arm import ArmDescription
+
+    return file_reference_markdown(
+        ArmDescription, "Arm files",
+        "`arms/<name>.yaml`: every number about the arm (joints, limits, offsets, "
+        "kinematics, CAN and control-loop settings, workspace guards). Angles in degrees, "
+        "user coordinates.")

@@ -212,8 +212,10 @@ def run_command(
         connection.close()
     result = outcome.result
     colour = "green" if result.exit_code == 0 else "red"
+    # With a list of errors the message is a summary: each error is printed once, below.
+    message = result.extra.get("summary") or result.message
     console.print(f"[{colour}]{result.status.upper()}[/{colour}] (exit {result.exit_code}): "
-                  f"{result.message}", highlight=False)
+                  f"{message}", highlight=False)
     if result.extra.get("errors"):
         for error in result.extra["errors"]:
             console.print(f"  {error['file']}:{error['line']}:{error['column']}: "

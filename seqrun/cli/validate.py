@@ -246,14 +246,17 @@ def schema_command(
     kind: Annotated[SchemaKind, typer.Argument(
         help="Which file format: sequence (default), arm or pose.")] = SchemaKind.sequence,
     markdown: Annotated[bool, typer.Option(
-        "--markdown", help="Print the sequence format reference (docs/sequence-format.md) "
-                           "instead.")] = False,
+        "--markdown", help="Print the format's reference in Markdown instead (for sequences: "
+                           "docs/sequence-format.md).")] = False,
 ) -> None:
     """Print the JSON Schema of a file format (sequence files by default)."""
     if markdown:
-        from seqrun.schema import reference_markdown
+        from seqrun.schema import (arm_reference_markdown, pose_reference_markdown,
+                                   reference_markdown)
 
-        typer.echo(reference_markdown(), nl=False)
+        text = {SchemaKind.sequence: reference_markdown, SchemaKind.pose: pose_reference_markdown,
+                SchemaKind.arm: arm_reference_markdown}[kind]()
+        typer.echo(text, nl=False)
         return
     if kind is SchemaKind.sequence:
         schema = sequence_json_schema()
