@@ -1025,8 +1025,23 @@ Every step takes an optional `label`, the text the operator sees.
 - Every commanded target lies inside the joint limits in force. A joint that starts outside
   them (Park's j4 at -120.32° against -120…120) may only move back inside (a note).
 - Velocities and limit overrides stay within the arm file's maxima.
+- Every move is planned within the limits in force: the arm file's, those a `set_limits`
+  wrote, and the MaxVel/MaxAcc the modules still hold from before (read back before the
+  first motion; they stay stored in a module until written again or powered off). The
+  dry-run table and the run report say which limit applied and where it came from.
+- A move's `timeout_s` may not be shorter than the move as planned.
+- Waits (`seconds`, `timeout_s`) and move timeouts stay within the arm file's
+  `control.max_wait_s`; a dry run stops after `control.max_dry_run_s` of simulated time.
 - Workspace guards of the arm file hold along each move (straight line in joint space).
-- A checkpoint must agree with the end-effector of the joints tracked so far.
+- A checkpoint must agree with the end-effector of the joints tracked so far; a checkpoint
+  or a wait after a `halt` (and no `reset`) can never pass and is an error.
+- Every pose a step names is checked against the arm at the pose file's own lines: it lists
+  every joint (the locked one at its locked value), its `end_effector` agrees with forward
+  kinematics of its joints, and a pose used as a move target lies inside the joint limits.
+- Every problem is reported in one pass: a step that is wrong on its own is left out and
+  the others are still checked against the arm.
+- A run uses exactly what was validated: the sequence, its includes, the poses and the arm
+  file are read once; their SHA-256 is in the run report (`inputs`).
 - Validation starts from Park (`--start POSE` to choose another pose).
 
 ## Steps
