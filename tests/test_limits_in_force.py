@@ -153,3 +153,38 @@ def test_limits_in_force_take_the_narrowest_and_name_it():
     keep = 1 - ARM.control.tracking_reserve
     assert np.degrees(plan.velocity[ARM.index("j4")]) == pytest.approx(20.0 * keep)
     assert np.degrees(plan.acceleration[ARM.index("j4")]) == pytest.approx(30.0 / factor)
+
+
+def test_sim_serve_keeps_a_written_max_vel_for_the_next_client():
+    """`seqrun sim serve` is one simulated arm for all its clients: what one run wrote
+    (set_limits' MaxVel) is what the next run's preflight reads back."""
+    import can
+
+    from seqrun.clock import RealClock
+    from seqrun.sim.arm import SimArm
+    from seqrun.sim.network import SimNetwork
+    from seqrun.sim.socketcand import SocketcandServer
+
+    clock = RealClock()
+    network = SimNetwork(clock, SimArm(clock), spin_window=0.0)
+
+    def client_of(server):
+        bus = can.Bus(interface="socketcand", host="127.0.0.1", port=server.port,
+                      channel="can0", ignore_config=True)
+        return bus, PowerCubeClient(bus, clock, response_timeout=0.5)
+
+    with SocketcandServer(network, port=0, channel="can0") as server:
+        server.start()
+        bus, client = client_of(server)
+        try:
+            client.set_param(4, ParamId.MAX_VEL, math.radians(5.0))
+        finally:
+            client.close()
+            bus.shutdown()
+        bus, client = client_of(server)
+        try:
+            stored = client.get_param(4, ParamId.MAX_VEL)
+        finally:
+            client.close()
+            bus.shutdown()
+    assert math.degrees(float(stored)) == pytest.approx(5.0, abs=1e-4)
