@@ -31,6 +31,7 @@ __all__ = [
     "PoseFile",
     "PoseFinding",
     "available_poses",
+    "check_pose_name",
     "check_pose",
     "find_pose",
     "load_pose",
@@ -79,9 +80,10 @@ class PoseFile(_Strict):
                                   "the file is poses/<name>.yaml.")
     description: str = Field("", description="What the pose is for.")
     arm: str = Field(description="Name of the arm description the pose was made for.")
-    source: Literal["reference", "arm", "manual"] | None = Field(
+    source: Literal["reference", "arm", "simulator", "manual"] | None = Field(
         None, description="Where the joints come from: reference (documented values), "
-                          "arm (read from the modules), manual (typed in).")
+                          "arm (read from the modules), simulator (read from the "
+                          "simulated arm), manual (typed in).")
     saved_at: datetime | None = Field(None, description="When the pose was saved (ISO 8601).")
     joints_deg: dict[str, Finite] = Field(
         min_length=1,
@@ -122,6 +124,16 @@ def _stored_number(value: float) -> float:
     return round(float(value), _DECIMALS) + 0.0
 
 
+def check_pose_name(name: str) -> None:
+    """:class:`UserInputError` (one clear line) for a name a pose file cannot have."""
+    import re
+
+    if not re.match(_POSE_NAME, name):
+        raise UserInputError(f"'{name}' is not a pose name: letters, digits, _ and -, "
+                             "starting with a letter or digit (it names the file "
+                             "poses/<name>.yaml)")
+
+
 def pose_document(name: str, arm: ArmDescription,
                   joints_deg: Sequence[float] | Mapping[str, float],
                   description: str = "", source: str | None = None,
@@ -132,12 +144,7 @@ def pose_document(name: str, arm: ArmDescription,
     left out of a mapping); raises ``ValueError`` for unknown, missing or wrong joints and
     :class:`UserInputError` for a name that is not a pose name.
     """
-    import re
-
-    if not re.match(_POSE_NAME, name):
-        raise UserInputError(f"'{name}' is not a pose name: letters, digits, _ and -, "
-                             "starting with a letter or digit (it names the file "
-                             "poses/<name>.yaml)")
+    check_pose_name(name)
     pose = pose_from_user_deg(arm, joints_deg)
     if isinstance(joints_deg, Mapping):
         given = {n: joints_deg.get(n, j.locked) for n, j in zip(arm.joint_names, arm.joints)}
