@@ -134,7 +134,7 @@ def forward_kinematics(
 ) -> None:
     """End-effector pose (position mm, roll/pitch/yaw deg, rotation matrix) by forward
     kinematics, R = Rz(yaw) Ry(pitch) Rx(roll)."""
-    from seqrun.kinematics import pose_from_user_deg
+    from seqrun.kinematics import LOCKED_TOLERANCE_DEG, pose_from_user_deg
 
     with user_errors():
         if deg is None and pose_name is None:
@@ -147,8 +147,17 @@ def forward_kinematics(
             joints: list[float] | dict[str, float] = parse_angles(deg, arm.joint_names)
         else:
             joints = load_named_pose(pose_name, poses_dir).joints_deg
+        given = joints if isinstance(joints, dict) else dict(zip(arm.joint_names, joints))
+        off = [j for j in arm.joints if j.locked is not None and j.name in given
+               and abs(given[j.name] - j.locked) > LOCKED_TOLERANCE_DEG]
+        for joint in off:
+            # A maths command: compute what was asked, and say the arm would not do it.
+            typer.echo(f"note: {joint.name} is locked at {joint.locked:g} deg on the arm; "
+                       f"computed with {given[joint.name]:g} deg as given", err=True)
+        maths_arm = arm if not off else arm.model_copy(update={"joints": [
+            j.model_copy(update={"locked": None}) if j in off else j for j in arm.joints]})
         try:
-            pose = pose_from_user_deg(arm, joints)
+            pose = pose_from_user_deg(maths_arm, joints)
         except ValueError as exc:  # locked joint moved, unknown joint in a pose file, ...
             raise UserInputError(str(exc)) from None
     values = joints if isinstance(joints, dict) else dict(zip(arm.joint_names, joints))

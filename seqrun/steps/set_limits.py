@@ -39,4 +39,10 @@ def run(step, ex) -> dict:
             raise RunAborted("limits_not_written",
                              f"module {module} ({joint.name}): {param.name} reads back "
                              f"{read:.3f}{unit}, wrote {wrote:.3f}{unit}", module=module)
+    # From now on the modules hold these: later moves are planned within them.
+    ex.limits_in_force.written(f"set_limits at {step.location}",
+                               {n: v for n, v in params.max_velocity_deg_s.items()
+                                if ex.arm.joint(n).locked is None},
+                               {n: v for n, v in params.max_acceleration_deg_s2.items()
+                                if ex.arm.joint(n).locked is None})
     return {"written": len(writes)}
