@@ -35,6 +35,7 @@ from seqrun.errors import (BusError, ModuleFaultError, ModuleTimeoutError, Plann
                            RunAborted, SeqrunError)
 from seqrun.planner import Limits, MovePlan, plan_move, plan_stop
 from seqrun.setpoints import setpoint_law
+from seqrun.tracking import MoveTracking, velocity_window
 from seqrun.powercube.codec import (BroadcastRequest, GetParam, GetParamAck, MotionExtAck,
                                     SetMotion, SetParam)
 from seqrun.powercube.protocol import ConfigFlag, ParamId, ShortState, StateFlag
@@ -158,6 +159,7 @@ class Executor:
         self.not_verified: list[str] = []
         self._current_step: StepResult | None = None
         self._move_limits = self.limits
+        self._tracking: MoveTracking | None = None
         self._keeper: threading.Thread | None = None
         self._keeper_stop = threading.Event()
 
@@ -327,8 +329,12 @@ class Executor:
         m = self.read_arm()
         self.check_states(m, require_homed=False)
         self.check_guards(m)
-        self.emit("measurement", joints_deg=_r(m.user_deg))
+        self.emit("measurement", joints_deg=_r(m.user_deg), state=self._states(m))
         return m
+
+    def _states(self, m: Measurement) -> list[int]:
+        """The short state of every joint's module, for the event log (compact ints)."""
+        return [int(m.short_state.get(module, 0)) for module in self.modules]
 
     def _check_halt_request(self) -> None:
         if self._halt_requested:
@@ -346,12 +352,14 @@ class Executor:
         plan = plan_move(np.radians(start_deg), np.radians(target_deg), limits, moving)
         self.commanded_deg = np.where(np.isin(np.arange(len(target_deg)), moving),
                                       target_deg, start_deg)
+        velocity_limit = _r(np.degrees(limits.velocity))
         self.emit("move_planned", duration_s=_round(plan.duration),
                   start_deg=_r(start_deg), target_deg=_r(target_deg),
-                  joints=[self.arm.joints[i].name for i in moving])
+                  joints=[self.arm.joints[i].name for i in moving],
+                  velocity_limit_deg_s=velocity_limit)
         if self._current_step is not None:
             self._current_step.planned_duration_s = plan.duration
-        peak = np.zeros(len(target_deg))
+        self._tracking = MoveTracking(velocity_window(self.cycle))
         t_move = self.clock.now()
         if moving:
             start = self.setpoints.start(moving, limits)
@@ -361,11 +369,21 @@ class Executor:
             # the arm's settle time.
             deadline = (timeout_s if timeout_s is not None
                         else plan.duration + self.arm.control.settle_timeout_s)
-            peak = self._stream(plan, moving, tolerance_deg, deadline, stop_on_abort=True)
+            self._stream(plan, moving, tolerance_deg, deadline, stop_on_abort=True)
         elapsed = self.clock.now() - t_move
         return {"planned_duration_s": plan.duration, "executed_duration_s": elapsed,
+                "duration_ratio": _round(elapsed / plan.duration) if plan.duration > 0 else None,
                 "peak_velocity_deg_s": _r(np.degrees(plan.peak_velocity())),
-                "peak_measured_velocity_deg_s": _r(peak)}
+                "peak_measured_velocity_deg_s": [0.0] * len(target_deg),
+                "velocity_limit_deg_s": velocity_limit,
+                **self.tracking_figures(target_deg)}
+
+    def tracking_figures(self, target_deg=None) -> dict[str, Any]:
+        """The current move's tracking figures (seqrun/tracking.py) up to now."""
+        if self._tracking is None:
+            return {}
+        target = self.commanded_deg if target_deg is None else target_deg
+        return self._tracking.figures(target)
 
     def _cycle(self, requests: list, moving: list[int]) -> Measurement:
         """Send this cycle's motion requests plus reads of the other modules, pipelined.
@@ -416,14 +434,11 @@ class Executor:
         return self._measured(module_rad, states)
 
     def _stream(self, plan: MovePlan, moving: list[int], tolerance_deg: float,
-                deadline: float, *, stop_on_abort: bool) -> np.ndarray:
+                deadline: float, *, stop_on_abort: bool) -> None:
         """Stream ``plan`` cycle by cycle until every moving joint is in tolerance."""
         t_start = self.clock.now()
         bound = self.arm.control.max_following_error_deg
         measured = self.last.user_deg if self.last is not None else np.degrees(plan.start)
-        prev = measured.copy()
-        prev_t = t_start
-        peak = np.zeros(len(measured))
         k = 0
         while True:
             t_cycle = t_start + k * self.cycle
@@ -445,7 +460,8 @@ class Executor:
             measured = m.user_deg
             self.check_states(m)
             self.check_guards(m)
-            planned_deg = np.degrees(plan.at(t)[0])
+            planned_rad, planned_vel, _ = plan.at(t)
+            planned_deg = np.degrees(planned_rad)
             error = np.abs(planned_deg - measured)
             worst = int(np.argmax(error))
             if error[worst] > bound and t <= plan.duration + self.arm.control.settle_timeout_s:
@@ -454,16 +470,18 @@ class Executor:
                                  f"{name} (module {self.modules[worst]}) does not follow its plan: "
                                  f"{error[worst]:.2f}° from the planned position (limit {bound}°)",
                                  module=self.modules[worst])
-            dt = m.t - prev_t
-            if dt > 0:
-                peak = np.maximum(peak, np.abs(measured - prev) / dt)
-            prev, prev_t = measured.copy(), m.t
-            self.emit("setpoint", plan_t=round(t, 4), planned_deg=_r(planned_deg),
-                      measured_deg=_r(measured))
+            logged_planned, logged_measured = _r(planned_deg), _r(measured)
+            event_t = round(self.clock.now() - self._t0, 6)
+            if self._tracking is not None:
+                # The figures come from the logged values, so events.jsonl reproduces them.
+                self._tracking.add(event_t, logged_planned, logged_measured)
+            self.emit("setpoint", t=event_t, plan_t=round(t, 4), planned_deg=logged_planned,
+                      measured_deg=logged_measured,
+                      planned_vel_deg_s=_r(np.degrees(planned_vel), 2), state=self._states(m))
             if t >= plan.duration:
                 final_error = np.abs(np.degrees(plan.target) - measured)[moving]
                 if np.all(final_error <= tolerance_deg):
-                    return peak
+                    return
                 if t > deadline:
                     i = moving[int(np.argmax(final_error))]
                     raise RunAborted("timeout",
@@ -622,7 +640,10 @@ class Executor:
         steps = list(loaded.steps)
         results = [StepResult(s.number, s.kind, _label(s), _location(s)) for s in steps]
         self.emit("run_started", steps=len(steps), first_step=first_step, speed=self.speed,
-                  command_mode=self.command_mode, dry_run=self.dry_run)
+                  command_mode=self.command_mode, dry_run=self.dry_run,
+                  virtual_time=self.clock.is_virtual, cycle_s=self.cycle,
+                  velocity_window_s=velocity_window(self.cycle),
+                  arm=self.arm.model_dump(mode="json"))
         status, code, message, fault = "passed", EXIT_OK, "sequence completed", None
         try:
             check = self.preflight(loaded, first_step)
@@ -653,6 +674,7 @@ class Executor:
                 result.started = self.clock.now() - self._t0
                 self.emit("step_started", kind=step.kind, label=result.label,
                           location=result.location)
+                self._tracking = None
                 detail = HANDLERS[step.kind](step, self) or {}
                 result.detail.update({k: v for k, v in detail.items()
                                       if k != "planned_duration_s"})
@@ -671,6 +693,7 @@ class Executor:
                     message += "; Halt sent"
                 result.status = "aborted"
                 result.finished = self.clock.now() - self._t0
+                result.detail.update(self.tracking_figures())
                 self.emit("operator_abort", message=message)
                 break
             except Exception as exc:  # noqa: BLE001 - every failure, even a bug, halts
@@ -690,6 +713,7 @@ class Executor:
                 result.status = "failed" if code == EXIT_FAULT else "aborted"
                 result.finished = self.clock.now() - self._t0
                 result.detail.update(_jsonable(getattr(exc, "detail", None) or {}))
+                result.detail.update(self.tracking_figures())   # up to the fault
                 result.detail.setdefault("error", message)
                 self.emit("fault", **fault)
                 break
