@@ -27,9 +27,10 @@ _EDGE_S = 1e-9
 
 
 def velocity_window(cycle_s: float) -> float:
-    """The estimate's window for a control loop of period ``cycle_s``: at least two cycles
-    (a 10 Hz dry run has one sample per 100 ms)."""
-    return max(VELOCITY_WINDOW_S, 2.0 * cycle_s)
+    """The estimate's window for a control loop of period ``cycle_s``: at least two and a
+    half cycles (a 10 Hz dry run has one sample per 100 ms; the half keeps a window of
+    exactly two periods from losing a sample to microseconds of timing)."""
+    return max(VELOCITY_WINDOW_S, 2.5 * cycle_s)
 
 
 def windowed_velocity(t: np.ndarray, q: np.ndarray, window_s: float) -> np.ndarray:

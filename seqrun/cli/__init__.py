@@ -15,6 +15,7 @@ COMMAND_MODULES = (
     "seqrun.cli.run",
     "seqrun.cli.arm_commands",
     "seqrun.cli.pose",
+    "seqrun.cli.report",
 )
 
 

@@ -220,4 +220,7 @@ def run_command(
                           f"{error['message']}", highlight=False)
     console.print(f"duration {result.duration_s:.2f} s, planned motion "
                   f"{result.planned_duration_s:.2f} s; log: {folder}", highlight=False)
+    if outcome.report_error:
+        console.print(f"warning: report.html not written ({outcome.report_error}); "
+                      f"try: seqrun report {folder}", style="yellow", highlight=False)
     raise typer.Exit(result.exit_code)

@@ -163,6 +163,9 @@ def validate_command(
     cycle_hz: Annotated[float | None, typer.Option(
         "--cycle-hz", help="Control-loop rate of the dry run (default: the arm file's "
                            "control.dry_run_cycle_hz).")] = None,
+    report: Annotated[Path | None, typer.Option(
+        "--report", metavar="FILE", help="Write the dry run's report (HTML, plots, "
+                                         "self-contained) to FILE.")] = None,
 ) -> None:
     """Check a sequence file and its includes against the arm, then dry-run it on the
     simulator at virtual time. Nothing is sent to a real bus.
@@ -173,6 +176,9 @@ def validate_command(
         fail(f"--speed must lie in (0, 1], got {speed:g}")
     if cycle_hz is not None and not 5 <= cycle_hz <= 500:
         fail(f"--cycle-hz must lie in [5, 500], got {cycle_hz:g}")
+    if report is not None and (static or not report.parent.is_dir()):
+        fail("--report draws the dry run: leave out --static" if static
+             else f"--report {report}: no directory {report.parent}")
     try:
         check = static_check(file, start=start, arm_file=arm_file, started=started)
     except UserInputError as exc:
@@ -186,7 +192,9 @@ def validate_command(
         from seqrun.dryrun import dry_run
 
         run = dry_run(check.loaded, check.arm, check.start_deg, start_pose=start or START_POSE,
-                      started=started, speed=speed, cycle_hz=cycle_hz)
+                      started=started, speed=speed, cycle_hz=cycle_hz, report_html=report)
+        if run.report_error:
+            fail(f"cannot write the report: {run.report_error}")
     valid = check.valid and (run is None or run.passed)
     if as_json:
         typer.echo(json.dumps({"valid": valid,
@@ -198,6 +206,8 @@ def validate_command(
         print_report(check, file, as_json=False)
         if run is not None:
             print_dry_run(run, check.loaded, check.arm)
+        if run is not None and report is not None:
+            typer.echo(f"report: {report}")
     raise typer.Exit(EXIT_OK if valid else EXIT_INVALID)
 
 
