@@ -97,6 +97,9 @@ def run_command(
     virtual_time: Annotated[bool, typer.Option(
         "--virtual-time", help="Simulator only: run in virtual time, as fast as possible "
                                "(full run folder; used by CI and the tests).")] = False,
+    no_report: Annotated[bool, typer.Option(
+        "--no-report", help="Do not draw report.html after the run (bulk runs; "
+                            "'seqrun report RUN_DIR' draws it later).")] = False,
 ) -> None:
     """Run a sequence: validate, read the arm, re-validate from where it stands, move."""
     console = Console(stderr=False)
@@ -203,7 +206,8 @@ def run_command(
     try:
         outcome = run_sequence(loaded, arm, connection, log_dir=folder, file=str(file),
                                speed=speed, first_step=from_step, command_mode=command_mode,
-                               confirm=confirm, before_step=before_step, on_executor=attach)
+                               confirm=confirm, before_step=before_step, on_executor=attach,
+                               html_report=not no_report)
     finally:
         if live and displays:
             displays[0].__exit__(None, None, None)
