@@ -327,6 +327,19 @@ def test_report_is_not_drawn_into_the_runs_outcome(tmp_path, monkeypatch):
     assert (folder / "report.json").is_file() and not (folder / "report.html").exists()
 
 
+def test_no_report_leaves_the_page_out_and_report_draws_it_later(tmp_path):
+    folder = tmp_path / "run"
+    result = CliRunner().invoke(app, ["run", str(ROOT / "sequences" / "totem.yaml"),
+                                      "--virtual-time", "--yes", "--plain", "--no-report",
+                                      "--log-dir", str(folder)])
+    assert result.exit_code == 0, result.output
+    assert (folder / "report.json").is_file() and not (folder / "report.html").exists()
+    out = tmp_path / "elsewhere.html"
+    result = CliRunner().invoke(app, ["report", str(folder), "--out", str(out)])
+    assert result.exit_code == 0 and result.output.strip() == f"wrote {out}"
+    assert Page(out.read_text()).plots == TIME_PLOTS
+
+
 def test_loader_reads_the_series_in_time_order(clean_run):
     data = load_run(clean_run)
     s = data.series

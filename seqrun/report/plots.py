@@ -244,7 +244,8 @@ def _period_plot(data: RunData, periods: np.ndarray) -> Plot:
     ax.set_xlabel("control loop period (ms)", fontsize=8)
     ax.set_ylabel("cycles", fontsize=8)
     fig.suptitle("Control loop period", fontsize=10)
-    caption = (f"Time between consecutive cycles of a move: {stats['count']} periods, "
+    caption = (f"Time between consecutive cycles of a move (their readings in "
+               f"events.jsonl): {stats['count']} periods, "
                f"median {stats['median_ms']:.2f} ms, p99 {stats['p99_ms']:.2f} ms, "
                f"max {stats['max_ms']:.2f} ms.")
     if data.fault:
