@@ -159,6 +159,37 @@ def test_report_numbers_equal_a_recomputation_from_the_events(which, request):
             assert max(steps[step]["final_error_deg"]) <= ARM.control.position_tolerance_deg
 
 
+def test_an_aborted_move_has_its_figures_up_to_the_stop(tmp_path):
+    # Operator abort 2 s into the first move: controlled stop, exit 130. The move's step
+    # result carries the figures of what was streamed (the stop included), the page draws.
+    from seqrun.clock import VirtualClock
+    from seqrun.connection import open_connection
+    from seqrun.runner import run_sequence
+    from seqrun.schema import load_sequence
+
+    def abort_at_two_seconds(executor):
+        def listener(event):
+            if event["type"] == "setpoint" and event["plan_t"] >= 2.0 and event["step"] == 5:
+                executor.abort("test: operator abort")
+        executor.listeners.append(listener)
+
+    connection = open_connection(force_sim=True, clock=VirtualClock())
+    try:
+        outcome = run_sequence(load_sequence(OPSAFE), ARM, connection, log_dir=tmp_path / "run",
+                               confirm=lambda prompt: True, on_executor=abort_at_two_seconds)
+    finally:
+        connection.close()
+    assert outcome.result.exit_code == 130 and outcome.report_error is None
+    folder = outcome.log_dir
+    step = json.loads((folder / "report.json").read_text())["steps"][4]
+    assert step["status"] == "aborted"
+    expected = recompute(folder)[5]
+    for key, values in expected.items():
+        np.testing.assert_allclose(step[key], values, atol=1.5e-3, err_msg=key)
+    text, html = page(folder)
+    assert "ABORTED" in text and html.plots == TIME_PLOTS
+
+
 def test_report_html_of_a_clean_run_is_self_contained_with_every_plot(clean_run):
     text, html = page(clean_run)
     assert html.plots == TIME_PLOTS
@@ -216,7 +247,8 @@ def test_a_killed_run_still_gets_a_report(clean_run, tmp_path):
     folder = tmp_path / "killed"
     shutil.copytree(clean_run, folder)
     text = (folder / "events.jsonl").read_text()
-    (folder / "events.jsonl").write_text(text[:len(text) // 2])     # torn mid-line
+    junk = '{"t":0.5,"type":"setpoint","step":5}\n'     # a reading without joints
+    (folder / "events.jsonl").write_text(junk + text[:len(text) // 2])     # torn mid-line
     (folder / "report.json").write_text(json.dumps({"sequence": "Op-safe", "status": "running",
                                                     "exit_code": None}))
     (folder / "report.html").unlink()

@@ -109,12 +109,15 @@ def test_windowed_velocity_of_a_line_is_its_slope():
 @given(speed=st.floats(1.0, 40.0), jitter=st.floats(0.0, 0.006), seed=st.integers(0, 1000))
 def test_windowed_velocity_bounds_timestamp_jitter(speed, jitter, seed):
     # Positions sampled every 10 ms exactly, timestamps late by up to `jitter`: the
-    # estimate's error is bounded by about 2 * jitter / window, not jitter / cycle.
+    # estimate's relative error stays within a few jitter / window (Cauchy-Schwarz on the
+    # fit: sqrt(12) / 2 * jitter / window for a full window, twice that for the first
+    # half-full ones; ~2 seen in 3000 random trials), where one cycle's difference
+    # quotient is off by up to jitter / cycle = 8 jitter / window.
     rng = np.random.default_rng(seed)
     true_t = np.arange(0, 2, 0.01)
     t = true_t + rng.uniform(0, jitter, true_t.size)
     v = windowed_velocity(t, speed * true_t, 0.08)
-    assert np.nanmax(np.abs(v - speed)) <= speed * (2.2 * jitter / 0.08) + 1e-9
+    assert np.nanmax(np.abs(v - speed)) <= speed * (3.5 * jitter / 0.08) + 1e-9
 
 
 def test_windowed_velocity_matches_a_plain_fit_per_window():

@@ -251,10 +251,14 @@ def _empty_series(arm: ArmDescription | None) -> Series:
 
 
 def _series(events: list[dict], window_s: float, dof: int | None) -> Series:
-    samples = [e for e in events if e.get("type") in SAMPLE_EVENTS]
     if dof is None:
-        dof = next((len(e.get("measured_deg") or e.get("joints_deg") or [])
-                    for e in samples), 0)
+        dof = next((len(_joints(e)) for e in events
+                    if e.get("type") in SAMPLE_EVENTS and _joints(e)), 0)
+    # A reading without a full set of joints (another version, a hand-edited log) is left
+    # out rather than failing the whole report.
+    samples = [e for e in events if e.get("type") in SAMPLE_EVENTS
+               and isinstance(e.get("t"), (int, float)) and len(_joints(e)) == dof
+               and (e["type"] != "setpoint" or len(e.get("planned_deg") or ()) == dof)]
     n = len(samples)
     t = np.empty(n)
     step = np.zeros(n, int)
@@ -266,15 +270,13 @@ def _series(events: list[dict], window_s: float, dof: int | None) -> Series:
     for i, e in enumerate(samples):
         t[i] = e["t"]
         step[i] = e.get("step") or 0
+        measured[i] = _joints(e)
         if e["type"] == "setpoint":
             streamed[i] = True
             planned[i] = e["planned_deg"]
-            measured[i] = e["measured_deg"]
-            if "planned_vel_deg_s" in e:
+            if len(e.get("planned_vel_deg_s") or ()) == dof:
                 planned_vel[i] = e["planned_vel_deg_s"]
-        else:
-            measured[i] = e["joints_deg"]
-        if "state" in e:
+        if len(e.get("state") or ()) == dof:
             state[i] = e["state"]
     order = np.argsort(t, kind="stable")
     t, step, streamed = t[order], step[order], streamed[order]
@@ -282,3 +284,10 @@ def _series(events: list[dict], window_s: float, dof: int | None) -> Series:
                                              planned_vel[order], state[order])
     measured_vel = windowed_velocity(t, measured, window_s) if n else measured.copy()
     return Series(t, step, streamed, planned, measured, planned_vel, measured_vel, state)
+
+
+def _joints(event: dict) -> list:
+    """The measured joints of a reading (``measured_deg`` of a cycle, ``joints_deg`` of a
+    monitoring reading)."""
+    value = event.get("measured_deg", event.get("joints_deg"))
+    return value if isinstance(value, list) else []
