@@ -12,7 +12,7 @@ from typing import Callable, Iterable
 
 from seqrun import __version__
 from seqrun.arm import ArmDescription
-from seqrun.connection import Connection
+from seqrun.connection import Connection, response_timeout_s
 from seqrun.executor import Executor, Listener, RunResult
 from seqrun.powercube.client import PowerCubeClient
 from seqrun.runlog import RunLog
@@ -34,13 +34,17 @@ def build_executor(loaded: LoadedSequence, arm: ArmDescription, connection: Conn
                    cycle_hz: float | None = None,
                    confirm: Callable[[str], bool] | None = None,
                    before_step: Callable | None = None,
-                   listeners: Iterable[Listener] = (), dry_run: bool = False
+                   listeners: Iterable[Listener] = (), dry_run: bool = False,
+                   confirm_clear_latched: Callable[[str], bool] | None = None
                    ) -> tuple[Executor, PowerCubeClient]:
     client = PowerCubeClient(connection.bus, connection.clock,
-                             response_timeout=arm.can.response_timeout_s)
+                             # (a dry run keeps the arm file's: deterministic results)
+                             response_timeout=(arm.can.response_timeout_s if dry_run
+                                               else response_timeout_s(arm)))
     executor = Executor(client, arm, connection.clock, poses_dir=loaded.poses_dir, speed=speed,
                         command_mode=command_mode, cycle_hz=cycle_hz, confirm=confirm,
-                        before_step=before_step, listeners=list(listeners), dry_run=dry_run)
+                        before_step=before_step, listeners=list(listeners), dry_run=dry_run,
+                        confirm_clear_latched=confirm_clear_latched)
     client.on_discard = executor.on_discard
     return executor, client
 
@@ -53,6 +57,7 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
                  before_step: Callable | None = None,
                  listeners: Iterable[Listener] = (), dry_run: bool = False,
                  on_executor: Callable[[Executor], None] | None = None,
+                 confirm_clear_latched: Callable[[str], bool] | None = None,
                  html_report: bool = True) -> RunOutcome:
     """Run ``loaded`` on ``connection``; writes the run folder when ``log_dir`` is given,
     with report.html drawn after the run (``html_report``).
@@ -63,7 +68,8 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
     executor, client = build_executor(loaded, arm, connection, speed=speed,
                                       command_mode=command_mode, cycle_hz=cycle_hz,
                                       confirm=confirm, before_step=before_step,
-                                      listeners=listeners, dry_run=dry_run)
+                                      listeners=listeners, dry_run=dry_run,
+                                      confirm_clear_latched=confirm_clear_latched)
     log = None
     if log_dir is not None:
         log = RunLog(log_dir, {"sequence": loaded.name, "file": file or loaded.file,
