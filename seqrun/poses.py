@@ -31,6 +31,7 @@ __all__ = [
     "available_poses",
     "check_pose",
     "find_pose",
+    "pose_overrides",
     "load_pose",
     "pose_document",
     "pose_yaml",
@@ -96,23 +97,60 @@ def load_pose(path: str | Path) -> PoseFile:
     return load_model(Path(path), PoseFile)
 
 
-def available_poses(poses_dir: str | Path) -> dict[str, Path]:
-    """Pose name -> file for every ``*.yaml`` in ``poses_dir``, sorted by name."""
-    poses_dir = Path(poses_dir)
-    if not poses_dir.is_dir():
+PoseDirs = str | Path | Sequence[str | Path]
+
+
+def _search_path(poses_dir: PoseDirs) -> list[Path]:
+    """One folder, or a search path (first match wins: a campaign's, then the shipped)."""
+    if isinstance(poses_dir, (str, Path)):
+        return [Path(poses_dir)]
+    return [Path(p) for p in poses_dir]
+
+
+def _files(folder: Path) -> dict[str, Path]:
+    if not folder.is_dir():
         return {}
-    return {p.stem: p for p in sorted(poses_dir.glob("*.yaml")) if p.is_file()}
+    return {p.stem: p for p in sorted(folder.glob("*.yaml")) if p.is_file()}
 
 
-def find_pose(name: str, poses_dir: str | Path) -> Path:
-    """The file of pose ``name``; :class:`UserInputError` listing the known poses otherwise."""
+def available_poses(poses_dir: PoseDirs) -> dict[str, Path]:
+    """Pose name -> file for every ``*.yaml`` in ``poses_dir`` (a folder or a search path,
+    where the first folder that has a name wins), sorted by name."""
+    found: dict[str, Path] = {}
+    for folder in _search_path(poses_dir):
+        for name, path in _files(folder).items():
+            found.setdefault(name, path)
+    return dict(sorted(found.items()))
+
+
+def pose_overrides(poses_dir: PoseDirs) -> dict[str, tuple[Path, list[Path]]]:
+    """Poses defined in more than one folder of a search path: name -> (the file used,
+    the files it hides)."""
+    seen: dict[str, list[Path]] = {}
+    for folder in _search_path(poses_dir):
+        for name, path in _files(folder).items():
+            seen.setdefault(name, []).append(path)
+    return {name: (paths[0], paths[1:]) for name, paths in sorted(seen.items())
+            if len(paths) > 1}
+
+
+def find_pose(name: str, poses_dir: PoseDirs) -> Path:
+    """The file of pose ``name``; :class:`UserInputError` listing the known poses and the
+    folders searched otherwise."""
     poses = available_poses(poses_dir)
     if name in poses:
         return poses[name]
-    if not Path(poses_dir).is_dir():
-        raise UserInputError(f"unknown pose '{name}': pose directory {poses_dir} does not exist")
+    folders = _search_path(poses_dir)
+    if len(folders) == 1:
+        if not folders[0].is_dir():
+            raise UserInputError(f"unknown pose '{name}': pose directory {folders[0]} "
+                                 "does not exist")
+        where = f"in {folders[0]}"
+    else:
+        where = "searched " + ", ".join(
+            f"{f}" + ("" if f.is_dir() else " (does not exist)") for f in folders)
     known = ", ".join(poses) if poses else "none"
-    raise UserInputError(f"unknown pose '{name}'; available poses: {known} (in {poses_dir})")
+    raise UserInputError(f"unknown pose '{name}'; available poses: {known} ({where})")
 
 
 def _stored_number(value: float) -> float:

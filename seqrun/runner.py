@@ -41,7 +41,8 @@ def build_executor(loaded: LoadedSequence, arm: ArmDescription, connection: Conn
                              # (a dry run keeps the arm file's: deterministic results)
                              response_timeout=(arm.can.response_timeout_s if dry_run
                                                else response_timeout_s(arm)))
-    executor = Executor(client, arm, connection.clock, poses_dir=loaded.poses_dir, speed=speed,
+    executor = Executor(client, arm, connection.clock,
+                        poses_dir=loaded.pose_path or loaded.poses_dir, speed=speed,
                         command_mode=command_mode, cycle_hz=cycle_hz, confirm=confirm,
                         before_step=before_step, listeners=list(listeners), dry_run=dry_run,
                         confirm_clear_latched=confirm_clear_latched)
@@ -58,12 +59,14 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
                  listeners: Iterable[Listener] = (), dry_run: bool = False,
                  on_executor: Callable[[Executor], None] | None = None,
                  confirm_clear_latched: Callable[[str], bool] | None = None,
+                 meta: dict | None = None,
                  html_report: bool = True) -> RunOutcome:
     """Run ``loaded`` on ``connection``; writes the run folder when ``log_dir`` is given,
     with report.html drawn after the run (``html_report``).
 
     ``on_executor`` is called with the executor before the run starts (signal handlers,
-    displays and tests hook in there). The connection is not closed.
+    displays and tests hook in there); ``meta`` goes into report.json (e.g. the zero
+    reference). The connection is not closed.
     """
     executor, client = build_executor(loaded, arm, connection, speed=speed,
                                       command_mode=command_mode, cycle_hz=cycle_hz,
@@ -76,7 +79,8 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
                                "arm": arm.name, "bus": connection.description,
                                "simulator": connection.is_simulator,
                                "faults": [f.spec for f in connection.faults], "speed": speed,
-                               "first_step": first_step, "seqrun": __version__})
+                               "first_step": first_step, "seqrun": __version__,
+                               **(meta or {})})
         client.add_frame_listener(log.on_frame)
         executor.listeners.insert(0, log.on_event)
     if on_executor is not None:

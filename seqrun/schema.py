@@ -76,7 +76,9 @@ __all__ = [
     "HomeParams",
     "IncludeParams",
     "LoadedSequence",
+    "MoveLinearParams",
     "MoveParams",
+    "PowerOffParams",
     "ResetParams",
     "ResolvedStep",
     "Sequence",
@@ -259,13 +261,35 @@ def _exactly_one(*alternatives: str) -> dict:
     return {"oneOf": [{"required": [name]} for name in alternatives]}
 
 
+def _check_pose_target(params: Any, what: str) -> None:
+    """End-effector targets: position_mm alone with the pose keys (rpy_deg, frame, tool)."""
+    cartesian = [k for k in ("rpy_deg", "tool") if getattr(params, k) is not None]
+    if params.frame != "base":
+        cartesian.append("frame")
+    if params.position_mm is None:
+        if cartesian:
+            raise PydanticCustomError("move_target", "{keys} belong to an end-effector target: "
+                                      "give position_mm too", {"keys": ", ".join(cartesian)})
+        return
+    others = [k for k in ("pose", "joints") if getattr(params, k, None) is not None]
+    if others:
+        raise PydanticCustomError("move_target", "{what} takes either position_mm or {others}, "
+                                  "not both", {"what": what, "others": " or ".join(others)})
+    if not params.relative and params.rpy_deg is None:
+        raise PydanticCustomError("move_target", "an absolute end-effector target needs rpy_deg "
+                                                 "with position_mm")
+    if not params.relative and params.frame != "base":
+        raise PydanticCustomError("move_target", "frame: tool is for relative targets "
+                                                 "(relative: true)")
+
+
 class MoveParams(StepParams):
     """Move the arm to a pose or to joint angles: one synchronized, jerk-limited motion in
     which all commanded joints arrive together. Joints not named do not move."""
 
     kind: ClassVar[str] = "move"
     yaml_name: ClassVar[str] = "move"
-    model_config = ConfigDict(json_schema_extra=_exactly_one("pose", "joints"))
+    model_config = ConfigDict(json_schema_extra=_exactly_one("pose", "joints", "position_mm"))
 
     pose: PoseName | None = Field(  # type: ignore[valid-type]
         None, description="Move every joint to this pose (a file in poses/), e.g. totem.")
@@ -274,7 +298,23 @@ class MoveParams(StepParams):
         description="Target angles of some joints in user degrees, e.g. {j1: 10, j4: -30}; "
                     "the others stay where they are.")
     relative: bool = Field(
-        False, description="true: the joints values are offsets from where the joints are.")
+        False, description="true: the joints values (or position_mm/rpy_deg) are offsets from "
+                           "where the joints (or the tool) are.")
+    position_mm: Vector3 | None = Field(
+        None, description="Move the tool to this position [x, y, z] in mm (base frame), solved "
+                          "by inverse kinematics; with relative: true, the displacement, in "
+                          "the base or the tool frame (frame).")
+    rpy_deg: Vector3 | None = Field(
+        None, description="With position_mm: the tool orientation [roll, pitch, yaw] in degrees "
+                          "(R = Rz(yaw) Ry(pitch) Rx(roll)); required unless relative, where "
+                          "it is a rotation (default none).")
+    frame: Literal["base", "tool"] = Field(
+        "base", description="With relative position_mm: the frame the displacement is given "
+                            "in (tool: e.g. [0, 0, 50] is 50 mm along the tool's z axis).")
+    tool: str | None = Field(
+        None, min_length=1, description="With position_mm: the arm file's tool whose centre "
+                                        "point is moved (default: the arm's default_tool, "
+                                        "else the end-effector frame).")
     velocity_deg_s: dict[JointName, Positive] = Field(
         default_factory=dict,
         description="Velocity cap of single joints in deg/s (at most the arm's maximum).")
@@ -291,10 +331,13 @@ class MoveParams(StepParams):
 
     @model_validator(mode="after")
     def _target(self) -> MoveParams:
+        _check_pose_target(self, "a move")
+        if self.position_mm is not None:
+            return self
         if (self.pose is None) == (self.joints is None):
             raise PydanticCustomError(
-                "move_target", "a move needs either 'pose' or 'joints'" if self.pose is None
-                else "a move takes either 'pose' or 'joints', not both")
+                "move_target", "a move needs either 'pose', 'joints' or 'position_mm'"
+                if self.pose is None else "a move takes either 'pose' or 'joints', not both")
         if self.relative and self.joints is None:
             raise PydanticCustomError("move_relative",
                                       "'relative: true' needs 'joints' (a pose is absolute)")
@@ -303,6 +346,53 @@ class MoveParams(StepParams):
     @classmethod
     def from_shorthand(cls, value: Any) -> StepParams:
         return value if isinstance(value, cls) else cls(pose=value)
+
+
+class MoveLinearParams(StepParams):
+    """Move the tool in a straight line to an end-effector pose at a given speed (mm/s, and
+    deg/s for the rotation), as a densely sampled, jerk-limited joint trajectory. Every
+    sample is solved and checked before anything moves (reachable, joint and velocity
+    limits, away from singularities, the guards); during the run the tool's distance from
+    the line is measured and a fault beyond max_deviation_mm."""
+
+    kind: ClassVar[str] = "move_linear"
+    yaml_name: ClassVar[str] = "move_linear"
+
+    position_mm: Vector3 = Field(
+        description="Tool position at the end of the line [x, y, z] in mm (base frame); with "
+                    "relative: true, the displacement in the base or the tool frame (frame).")
+    rpy_deg: Vector3 | None = Field(
+        None, description="Tool orientation at the end [roll, pitch, yaw] in degrees; required "
+                          "unless relative (then a rotation, default none).")
+    relative: bool = Field(False, description="true: position_mm/rpy_deg are offsets from "
+                                              "where the tool is.")
+    frame: Literal["base", "tool"] = Field(
+        "base", description="With relative: the frame of the displacement (tool: [0, 0, 50] is "
+                            "50 mm along the tool's z axis).")
+    tool: str | None = Field(None, min_length=1, description="The arm file's tool that moves "
+                                                             "on the line (default: the arm's "
+                                                             "default_tool, else the "
+                                                             "end-effector frame).")
+    speed_mm_s: Positive = Field(description="Speed along the line, mm/s.")
+    rotation_speed_deg_s: Positive = Field(
+        10.0, description="Largest turning speed of the tool, deg/s.")
+    acceleration_mm_s2: Positive = Field(
+        50.0, description="Acceleration along the line, mm/s^2 (the rotation's scales alike).")
+    jerk_mm_s3: Positive = Field(500.0, description="Jerk along the line, mm/s^3.")
+    max_deviation_mm: Positive = Field(
+        1.0, description="Largest distance of the tool from the line during the run, mm; "
+                         "beyond it the arm is halted.")
+    tolerance_deg: Positive | None = Field(
+        None, description="In-position tolerance per joint at the end, degrees (default: the "
+                          "arm file's control.position_tolerance_deg).")
+    timeout_s: Positive | None = Field(
+        None, description="Time allowed for the whole move in seconds (default: the planned "
+                          "duration plus the arm file's control.settle_timeout_s).")
+
+    @model_validator(mode="after")
+    def _target(self) -> MoveLinearParams:
+        _check_pose_target(self, "a linear move")
+        return self
 
 
 class WaitParams(StepParams):
@@ -347,10 +437,22 @@ class CheckpointParams(StepParams):
     kind: ClassVar[str] = "checkpoint"
     yaml_name: ClassVar[str] = "checkpoint"
     model_config = ConfigDict(json_schema_extra={"oneOf": [
-        {"required": ["pose"]}, {"required": ["position_mm", "rpy_deg"]}]})
+        {"required": ["pose"]}, {"required": ["position_mm", "rpy_deg"]},
+        {"required": ["moved_mm"]}]})
 
     pose: PoseName | None = Field(  # type: ignore[valid-type]
         None, description="Expect the end-effector pose of this pose file.")
+    moved_mm: Vector3 | None = Field(
+        None, description="Relative checkpoint: the tool moved by this [x, y, z] in mm during "
+                          "the last move before it (from where that move started), in the "
+                          "base or the tool frame (frame; tool: the tool's frame where the "
+                          "move started), e.g. [0, 0, -300] with frame: tool.")
+    frame: Literal["base", "tool"] = Field(
+        "base", description="With moved_mm: the frame the displacement is given in.")
+    tool: str | None = Field(None, min_length=1, description="With moved_mm: the arm file's "
+                                                             "tool (default: the arm's "
+                                                             "default_tool, else the "
+                                                             "end-effector frame).")
     position_mm: Vector3 | None = Field(
         None, description="Expected end-effector position [x, y, z] in mm (base frame).")
     rpy_deg: Vector3 | None = Field(
@@ -366,6 +468,15 @@ class CheckpointParams(StepParams):
 
     @model_validator(mode="after")
     def _one(self) -> CheckpointParams:
+        if self.moved_mm is not None:
+            others = [k for k in ("pose", "position_mm", "rpy_deg") if getattr(self, k) is not None]
+            if others:
+                raise PydanticCustomError("checkpoint_what", "a relative checkpoint (moved_mm) "
+                                          "takes no {others}", {"others": ", ".join(others)})
+            return self
+        if self.frame != "base" or self.tool is not None:
+            raise PydanticCustomError("checkpoint_what", "frame and tool belong to a relative "
+                                                         "checkpoint (moved_mm)")
         explicit = self.position_mm is not None or self.rpy_deg is not None
         if self.pose is not None and explicit:
             raise PydanticCustomError("checkpoint_what", "a checkpoint takes either 'pose' or "
@@ -397,6 +508,23 @@ class ConfirmParams(StepParams):
         return value if isinstance(value, cls) else cls(prompt=value)
 
 
+class PowerOffParams(StepParams):
+    """End of a shutdown: check the arm stands in a power-off pose of the arm file, then
+    record that it is powered off there (its modules take their zero there)."""
+
+    kind: ClassVar[str] = "power_off"
+    yaml_name: ClassVar[str] = "power_off"
+    pose: PoseName = Field(description="A power-off pose of the arm file (power_off_poses), "
+                                       "e.g. totem.")
+    tolerance_deg: Positive | None = Field(
+        None, description="How far each joint may be from the pose, degrees (default the arm "
+                          "file's control.position_tolerance_deg).")
+
+    @classmethod
+    def from_shorthand(cls, value: Any) -> StepParams:
+        return value if isinstance(value, cls) else cls(pose=value)
+
+
 class IncludeParams(StepParams):
     """Run the steps of another sequence file here."""
 
@@ -414,8 +542,8 @@ class IncludeParams(StepParams):
 
 #: Parameter model of each step type, in the order the docs list them.
 PARAMS_MODELS: dict[str, type[StepParams]] = {m.kind: m for m in (
-    ResetParams, HomeParams, HaltParams, SetLimitsParams, MoveParams, WaitParams,
-    CheckpointParams, ConfirmParams, IncludeParams)}
+    ResetParams, HomeParams, HaltParams, SetLimitsParams, MoveParams, MoveLinearParams,
+    WaitParams, CheckpointParams, ConfirmParams, PowerOffParams, IncludeParams)}
 STEP_KINDS: tuple[str, ...] = tuple(PARAMS_MODELS)
 #: Step types that may be written as a bare word (``- reset``).
 BARE_STEPS: tuple[str, ...] = ("reset", "home", "halt", "set_limits")
@@ -509,6 +637,13 @@ class MoveStep(_Step):
         description=_doc(MoveParams) + " Shorthand: 'move: totem' (a pose name).")
 
 
+class MoveLinearStep(_Step):
+    """A move_linear step."""
+
+    kind: ClassVar[str] = "move_linear"
+    move_linear: MoveLinearParams = Field(description=_doc(MoveLinearParams))
+
+
 class WaitStep(_Step):
     """A wait step."""
 
@@ -538,6 +673,16 @@ class ConfirmStep(_Step):
         description=_doc(ConfirmParams) + " Shorthand: 'confirm: Is the desk clear?'.")
 
 
+class PowerOffStep(_Step):
+    """A power_off step."""
+
+    kind: ClassVar[str] = "power_off"
+    power_off: _either(_kind_pick(text="power_off:pose", params="power_off:params"),
+                       **{"power_off:pose": PoseName,
+                          "power_off:params": PowerOffParams}) = Field(
+        description=_doc(PowerOffParams) + " Shorthand: 'power_off: totem'.")
+
+
 class IncludeStep(_Step):
     """An include step."""
 
@@ -549,8 +694,8 @@ class IncludeStep(_Step):
 
 
 _STEP_MODELS: dict[str, type[_Step]] = {m.kind: m for m in (
-    ResetStep, HomeStep, HaltStep, SetLimitsStep, MoveStep, WaitStep, CheckpointStep,
-    ConfirmStep, IncludeStep)}
+    ResetStep, HomeStep, HaltStep, SetLimitsStep, MoveStep, MoveLinearStep, WaitStep,
+    CheckpointStep, ConfirmStep, PowerOffStep, IncludeStep)}
 assert tuple(_STEP_MODELS) == STEP_KINDS, "one step model per parameter model"
 
 BareStep = Annotated[Literal[BARE_STEPS], Field(  # type: ignore[valid-type]
@@ -598,8 +743,12 @@ def _check_step(value: Any) -> Any:
     return value
 
 
-_EXAMPLES = {"move": "move: totem", "wait": "wait: 2", "checkpoint": "checkpoint: opsafe",
-             "confirm": "confirm: Is the desk clear?", "include": "include: startup.yaml"}
+_EXAMPLES = {"move": "move: totem",
+             "move_linear": "move_linear: {position_mm: [0, 0, 50], relative: true, "
+                            "frame: tool, speed_mm_s: 10}",
+             "wait": "wait: 2", "checkpoint": "checkpoint: opsafe",
+             "confirm": "confirm: Is the desk clear?", "include": "include: startup.yaml",
+             "power_off": "power_off: totem"}
 
 
 def _step_pick(value: Any) -> str | None:
@@ -633,8 +782,10 @@ class Sequence(_Model):
     description: str = Field(description="What the sequence does and when to use it.")
     arm: str | None = Field(
         None, min_length=1,
-        description=f"Arm file, relative to the project root (default {DEFAULT_ARM}). An "
-                    "included sequence must name the same arm or none.")
+        description=f"Arm file, relative to the project root (default: the campaign's arm, "
+                    f"else {DEFAULT_ARM}), or the name of an arm (lwa3: the campaign's "
+                    "arms/lwa3.yaml, else the shipped one). An included sequence must name "
+                    "the same arm or none.")
     steps: list[Step] = Field(min_length=1, description="The steps, in order.")
 
 
@@ -688,6 +839,12 @@ def describe(kind: str, params: StepParams) -> str:
     if isinstance(params, (ResetParams, HomeParams, HaltParams)):
         who = "all modules" if params.joints == "all" else ", ".join(params.joints)
         return f"{kind} {who}"
+    if isinstance(params, (MoveParams, MoveLinearParams)) and params.position_mm is not None:
+        verb = "move in a line" if isinstance(params, MoveLinearParams) else "move the tool"
+        xyz = ", ".join(f"{v:g}" for v in params.position_mm)
+        if params.relative:
+            return f"{verb} by [{xyz}] mm ({params.frame} frame)"
+        return f"{verb} to [{xyz}] mm"
     if isinstance(params, MoveParams):
         if params.pose is not None:
             return f"move to pose {params.pose}"
@@ -696,6 +853,9 @@ def describe(kind: str, params: StepParams) -> str:
     if isinstance(params, WaitParams):
         return (f"wait {params.seconds:g} s" if params.seconds is not None
                 else "wait until in position")
+    if isinstance(params, CheckpointParams) and params.moved_mm is not None:
+        xyz = ", ".join(f"{v:g}" for v in params.moved_mm)
+        return f"checkpoint: the tool moved [{xyz}] mm ({params.frame} frame)"
     if isinstance(params, CheckpointParams):
         return (f"checkpoint: pose {params.pose}" if params.pose is not None
                 else "checkpoint: end-effector pose")
@@ -705,6 +865,8 @@ def describe(kind: str, params: StepParams) -> str:
         return "write joint limits"
     if isinstance(params, IncludeParams):
         return f"include {params.file}"
+    if isinstance(params, PowerOffParams):
+        return f"power off in {params.pose}"
     return kind
 
 
@@ -721,6 +883,10 @@ class LoadedSequence:
     arm_path: Path
     steps: tuple[ResolvedStep, ...]
     files: tuple[Path, ...] = ()  # every file read, the top one first
+    #: Where poses are looked up, first match wins (the campaign's, then the shipped).
+    pose_path: tuple[Path, ...] = ()
+    #: The campaign or project the sequence belongs to (seqrun.project.Project).
+    project: Any = None
 
     @property
     def location(self) -> Location:
@@ -737,11 +903,12 @@ def find_project_root(path: str | os.PathLike[str]) -> Path:
 
 
 class _Loader:
-    def __init__(self, top: Path, root: Path) -> None:
-        self.root = root
-        self.poses_dir = root / "poses"
-        sequences = root / "sequences"
-        self.tree = sequences if top.is_relative_to(sequences) else top.parent
+    def __init__(self, top: Path, project: Any) -> None:
+        self.project = project  # seqrun.project.Project: lookups of poses, arm, includes
+        self.root = project.root
+        self.poses_dir = project.poses_dir
+        self.pose_path = project.pose_path
+        self.tree = project.include_tree(top)
         self.errors: list[SourceError] = []
         self.steps: list[ResolvedStep] = []
         self.files: list[Path] = []
@@ -777,7 +944,7 @@ class _Loader:
     def _partial(self, doc: Document, path: Path, chain: tuple[Path, ...],
                  include_chain: tuple[Location, ...]) -> None:
         if not chain:
-            self.arm_path = (self.root / DEFAULT_ARM).resolve()
+            self.arm_path = self._arm(None)
         data = doc.data.get("steps") if isinstance(doc.data, dict) else None
         if not isinstance(data, list):
             return
@@ -816,16 +983,30 @@ class _Loader:
 
     def _check_arm(self, doc: Document, seq: Sequence, *, top: bool) -> None:
         if top:
-            self.arm_path = (self.root / (seq.arm or DEFAULT_ARM)).resolve()
-            if seq.arm is not None and not self.arm_path.is_file():
+            if seq.arm is None:  # the campaign's arm: not found is bad input, one line
+                self.arm_path = self.project.arm_path(None)
+                return
+            try:
+                self.arm_path = self.project.arm_path(seq.arm)
+            except UserInputError:
+                self.arm_path = self._arm(None)
+                looked = ", ".join(str(p) for p in self.project.arm_candidates(seq.arm))
                 self.errors.append(doc.error(("arm",), f"arm file '{seq.arm}' not found "
-                                                      f"(looked for {self.arm_path})"))
+                                                      f"(looked for {looked})"))
             return
-        if seq.arm is not None and (self.root / seq.arm).resolve() != self.arm_path:
+        if seq.arm is not None and self._arm(seq.arm) != self.arm_path:
             self.errors.append(doc.error(("arm",), f"this file names arm '{seq.arm}' but the "
                                                   "sequence including it runs on "
                                                   f"{self.arm_path}; remove 'arm' here or "
                                                   "make it the same"))
+
+    def _arm(self, name: str | None) -> Path:
+        """The arm file ``name`` means (the first candidate when none exists: the run
+        then says it is missing)."""
+        try:
+            return self.project.arm_path(name)
+        except UserInputError:
+            return self.project.arm_candidates(name)[0].resolve()
 
     def _include(self, doc: Document, path: Path, params: IncludeParams, node: Any,
                  here: Location, chain: tuple[Path, ...],
@@ -840,7 +1021,8 @@ class _Loader:
             error(f"include '{shown}': cannot resolve the path ({exc})")
             return
         if not target.is_relative_to(self.tree):
-            error(f"include '{params.file}' is outside the sequences folder "
+            what = "campaign folder" if self.project.is_campaign else "sequences folder"
+            error(f"include '{params.file}' is outside the {what} "
                   f"{display_path(self.tree)}; included files must stay inside it")
             return
         if target in chain:
@@ -867,7 +1049,7 @@ class _Loader:
         if name not in self.pose_problems:
             problem = None
             try:
-                load_pose(find_pose(name, self.poses_dir))
+                load_pose(find_pose(name, self.pose_path))
             except UserInputError as exc:
                 problem = str(exc)
             except SequenceInvalid as exc:
@@ -882,19 +1064,23 @@ def load_sequence(path: str | os.PathLike[str], *,
                   project_root: str | os.PathLike[str] | None = None) -> LoadedSequence:
     """Read a sequence file with its includes; every step keeps its own ``file:line:col``.
 
-    Poses come from ``<project root>/poses/`` (root: see :func:`find_project_root`); an
+    Poses come from ``<project root>/poses/``, then the shipped poses; the project is the
+    nearest campaign (``seqrun.toml``) above the file, or ``project_root`` (``--project``),
+    else the nearest folder with ``arms/`` or ``poses/`` (see :mod:`seqrun.project`); an
     unknown pose is a located error listing the available ones. Raises
     :class:`SequenceInvalid` with every error found, :class:`UserInputError` if the file
     cannot be read.
     """
+    from seqrun.project import project_for
+
     path = Path(path)
     try:
         top = path.resolve()
-        root = (Path(project_root).resolve() if project_root is not None
-                else find_project_root(top))
+        project = project_for(top, Path(project_root) if project_root is not None else None)
     except (OSError, RuntimeError, ValueError) as exc:  # symlink loop, NUL byte, ...
         raise UserInputError(f"{path}: cannot resolve the path ({exc})") from None
-    loader = _Loader(top, root)
+    root = project.root
+    loader = _Loader(top, project)
     seq = loader.load(top)
     if loader.errors:
         raise SequenceInvalid(sort_errors(loader.errors))
@@ -902,7 +1088,8 @@ def load_sequence(path: str | os.PathLike[str], *,
     return LoadedSequence(path=path, file=display_path(path), name=seq.name,
                           description=seq.description, project_root=root,
                           poses_dir=loader.poses_dir, arm_path=loader.arm_path,
-                          steps=tuple(loader.steps), files=tuple(loader.files))
+                          steps=tuple(loader.steps), files=tuple(loader.files),
+                          pose_path=tuple(loader.pose_path), project=project)
 
 
 # --------------------------------------------------------------------------- reference docs
@@ -957,8 +1144,20 @@ Every step takes an optional `label`, the text the operator sees.
 - Every commanded target lies inside the joint limits in force. A joint that starts outside
   them (Park's j4 at -120.32° against -120…120) may only move back inside (a note).
 - Velocities and limit overrides stay within the arm file's maxima.
-- Workspace guards of the arm file hold along each move (straight line in joint space).
-- A checkpoint must agree with the end-effector of the joints tracked so far.
+- Workspace guards of the arm file hold along each move's planned trajectory (the ruckig plan
+  the run streams, sampled at 100 Hz); `seqrun validate` reports the smallest clearance of each move.
+- The arm file's link volumes (capsules) keep `geometry.margin_mm` from its obstacles and
+  from each other along each move, and the closest pair of each move is reported.
+- End-effector targets (`move` with `position_mm`, `move_linear`) are solved by inverse
+  kinematics from the joints tracked so far (the solution nearest them); an unreachable
+  target is an error at its `position_mm`. The run solves again from the measured joints
+  and stops (Halt) if that solution is more than `cartesian.ik_agreement_deg` from the
+  validated one. A straight line is sampled every `cartesian.linear_sample_s` and every
+  sample must be reachable, inside the limits in force, within the joint velocity limits
+  and away from singular configurations (`cartesian.min_manipulability`); during the run
+  the tool further than `max_deviation_mm` from the line is a fault.
+- A checkpoint must agree with the end-effector of the joints tracked so far; a relative
+  one (`moved_mm`) with how far the tool moved during the last move.
 - Validation starts from Park (`--start POSE` to choose another pose).
 
 ## Steps

@@ -63,7 +63,13 @@ def test_json_output():
     path = BAD / "out_of_limit.yaml"
     result = run("validate", path, "--json")
     assert result.exit_code == 1
-    assert json.loads(result.stdout) == {
+    report = json.loads(result.stdout)
+    # the smallest guard clearance of each move along its planned trajectory
+    assert all(set(c) == {"step", "guard", "point", "z_mm", "margin_mm", "t_s", "duration_s"}
+               for c in report.pop("clearances"))
+    assert all(set(p) == {"step", "pair", "distance_mm", "t_s", "duration_s"}
+               for p in report.pop("proximities"))
+    assert report == {
         "valid": False,
         "errors": [{"file": display_path(path), "line": 7, "column": 33,
                     "message": "j2 target 130° is outside its limits -120…120"}],
@@ -110,7 +116,7 @@ def test_invalid_arm_file_is_located(tmp_path):
 
 @pytest.mark.parametrize("args, message", [
     (["nope.yaml"], "error: nope.yaml: no such file"),
-    ([str(ROOT / "sequences")], "is a directory"),
+    ([str(ROOT / "docs")], "no sequence files"),  # a folder: its sequences (campaigns)
     ([str(ROOT / "sequences" / "opsafe.yaml"), "--start", "nowhere"],
      "error: start pose: unknown pose 'nowhere'"),
     ([str(ROOT / "sequences" / "opsafe.yaml"), "--arm", "nope.yaml"],

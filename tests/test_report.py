@@ -206,6 +206,10 @@ def test_report_html_of_a_clean_run_is_self_contained_with_every_plot(clean_run)
     for key in ("position_tolerance_mm", "angle_tolerance_deg"):
         assert f"{checkpoint[key]:.3f}" in table or f"{checkpoint[key]:.4f}" in table
     assert str(checkpoint["expected_position_mm"][0]) in table
+    # The files the run used, with their sha256 (record.json), and the zero reference.
+    record = json.loads((clean_run / "record.json").read_text())
+    assert record["inputs"] and all(i["sha256"] in text for i in record["inputs"])
+    assert "inputs" in html.ids and "zero: Park" in text
     # Under a few MB for a 15-s run, and far under it.
     assert (clean_run / "report.html").stat().st_size < 1_500_000
 
@@ -258,6 +262,19 @@ def test_a_killed_run_still_gets_a_report(clean_run, tmp_path):
     assert "RUNNING" in html_text and "did not finish" in html_text
     assert "1 unreadable line(s)" in html_text
     assert html.plots == TIME_PLOTS
+
+
+def test_report_of_a_refused_run(tmp_path):
+    # A run refused by validation leaves report.json only: the page says why.
+    folder = tmp_path / "refused"
+    folder.mkdir()
+    (folder / "report.json").write_text(json.dumps({
+        "sequence": "bad", "status": "refused", "exit_code": 1, "message": "refused",
+        "errors": [{"file": "bad.yaml", "line": 3, "column": 7, "message": "unknown pose"}]}))
+    result = CliRunner().invoke(app, ["report", str(folder)])
+    assert result.exit_code == 0, result.output
+    text, html = page(folder)
+    assert "REFUSED" in text and "bad.yaml:3:7: unknown pose" in text and html.plots == []
 
 
 def test_report_command_errors_are_one_line(tmp_path):

@@ -10,11 +10,15 @@ from seqrun.cli.app import app
 #: Command modules; each registers its commands on :data:`app` when imported.
 COMMAND_MODULES = (
     "seqrun.cli.fk",
+    "seqrun.cli.ik",
     "seqrun.cli.validate",
     "seqrun.cli.sim",
     "seqrun.cli.run",
     "seqrun.cli.arm_commands",
     "seqrun.cli.pose",
+    "seqrun.cli.zero",
+    "seqrun.cli.init",
+    "seqrun.cli.runs",
     "seqrun.cli.report",
 )
 

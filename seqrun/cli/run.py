@@ -20,10 +20,13 @@ from rich.console import Console
 from seqrun.cli.app import app
 from seqrun.cli.common import (BitrateOption, BusKwargsOption, ChannelOption, InterfaceOption,
                                SimOption, fail, load_arm_file, user_errors)
+from seqrun.cli import campaign_records
 from seqrun.cli.display import LiveDisplay, PlainDisplay
+from seqrun.cli.zero import zero_at_run_start
 from seqrun.connection import open_connection, parse_bus_kwargs, parse_faults
 from seqrun.clock import VirtualClock
-from seqrun.executor import EXIT_INVALID, EXIT_OPERATOR_ABORT
+from seqrun.errors import BusError, SequenceInvalid
+from seqrun.executor import EXIT_FAULT, EXIT_INVALID, EXIT_OPERATOR_ABORT
 from seqrun.runlog import default_run_dir
 from seqrun.runner import run_sequence
 from seqrun.schema import load_sequence
@@ -48,7 +51,7 @@ def static_validation(loaded, arm, start: str | None, started: bool, from_step: 
     With ``--from N`` the steps before N are only tracked, to know where step N starts."""
     from seqrun.validation import START_POSE, pose_joints_deg, validate_sequence
 
-    start_deg = pose_joints_deg(start or START_POSE, loaded.poses_dir)
+    start_deg = pose_joints_deg(start or START_POSE, loaded.pose_path or loaded.poses_dir)
     if from_step == 1:
         return validate_sequence(loaded, arm, start_deg, started=started)
     before = validate_sequence(replace(loaded, steps=tuple(loaded.steps[:from_step - 1])),
@@ -97,6 +100,13 @@ def run_command(
     virtual_time: Annotated[bool, typer.Option(
         "--virtual-time", help="Simulator only: run in virtual time, as fast as possible "
                                "(full run folder; used by CI and the tests).")] = False,
+    project_dir: Annotated[Optional[Path], typer.Option(
+        "--project", metavar="DIR", help="Campaign folder (default: the nearest seqrun.toml "
+                                         "above the sequence).")] = None,
+    power_on_at: Annotated[Optional[str], typer.Option(
+        "--power-on-at", metavar="POSE", help="Simulator only: the power-off pose the "
+        "simulated arm was powered on at (default park); it is the run's zero reference.")]
+    = None,
     no_report: Annotated[bool, typer.Option(
         "--no-report", help="Do not draw report.html after the run (bulk runs; "
                             "'seqrun report RUN_DIR' draws it later).")] = False,
@@ -112,14 +122,23 @@ def run_command(
             fail(f"sequence file {file} not found")
         faults = parse_faults(sim_fault or [])
         extra = parse_bus_kwargs(bus_kwargs or [])
-        loaded = load_sequence(file)                     # invalid file -> exit 1, no bus
+        try:
+            loaded = load_sequence(file, project_root=project_dir)  # invalid -> exit 1, no bus
+        except SequenceInvalid as exc:
+            campaign_records.refuse_unloadable(file, project_dir, exc.errors, log_dir)
+            raise
         arm = load_arm_file(arm_file or loaded.arm_path)
+        if power_on_at is not None:
+            arm.power_off_pose(power_on_at)  # one of the arm's power-off poses
+        if not (interface or channel or bitrate or extra or sim):  # the campaign's bus
+            interface, channel, bitrate, extra = campaign_records.campaign_bus(loaded, extra)
         if not 1 <= from_step <= len(loaded.steps):
             fail(f"--from {from_step}: the sequence has steps 1-{len(loaded.steps)}")
         # Static validation before the bus is even opened; the executor validates again
         # from the measured state before the first motion.
         static = static_validation(loaded, arm, start, started, from_step)
         if static.errors:
+            campaign_records.refuse(loaded, arm_file or loaded.arm_path, static.errors, log_dir)
             for error in static.errors:
                 typer.echo(str(error), err=True)
             typer.echo(f"{loaded.file}: invalid ({len(static.errors)} error"
@@ -134,10 +153,14 @@ def run_command(
         connection = open_connection(interface=interface, channel=channel, bitrate=bitrate,
                                      bus_kwargs=extra, force_sim=sim, faults=faults,
                                      default_bitrate=arm.can.bitrate,
-                                     clock=VirtualClock() if virtual_time else None)
+                                     clock=VirtualClock() if virtual_time else None,
+                                     power_on_pose=power_on_at.lower() if power_on_at else None)
         if virtual_time and not connection.is_simulator:
             connection.close()
             fail("--virtual-time needs the simulator")
+        if power_on_at is not None and not connection.is_simulator:
+            connection.close()
+            fail("--power-on-at applies to the built-in simulator (seqrun sim serve has its own)")
     style = "bold black on yellow" if connection.is_simulator else "bold white on red"
     console.print(f" {connection.description} ", style=style, highlight=False)
     if not connection.is_simulator and not _ask(
@@ -145,8 +168,24 @@ def run_command(
         console.print("Not started: the operator declined. Nothing was sent.")
         connection.close()
         raise typer.Exit(EXIT_OPERATOR_ABORT)
+    # The modules' zeros are where they were powered off: use (and on real hardware after
+    # a power-on, confirm) the recorded pose's offsets before anything moves.
+    try:
+        with user_errors():
+            try:
+                zero = zero_at_run_start(connection, arm, loaded.project,
+                                         lambda question: _ask(console, question, yes),
+                                         lambda text: console.print(text, style="bold",
+                                                                    highlight=False,
+                                                                    markup=False))
+            except BusError as exc:  # before user_errors: a timeout is no usage error
+                fail(f"cannot read the modules' state: {exc}", EXIT_FAULT)
+            arm = arm.with_zero_reference(zero.pose)
+    except BaseException:
+        connection.close()
+        raise
 
-    folder = log_dir or default_run_dir(loaded.name)
+    folder = log_dir or default_run_dir(loaded.name, campaign_records.runs_dir(loaded))
     if rt_priority is not None:
         try:
             os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(rt_priority))
@@ -160,6 +199,9 @@ def run_command(
     except OSError as exc:
         connection.close()
         fail(f"cannot create the run folder {folder}: {exc.strerror or exc}")
+
+    campaign_records.record_run(folder, loaded, arm_file or loaded.arm_path,
+                                connection.description, zero)
 
     def confirm(prompt: str) -> bool:
         return _ask(console, prompt, yes)
@@ -197,6 +239,10 @@ def run_command(
 
     def attach(executor) -> None:
         holder["executor"] = executor
+        executor.emit("zero_reference", **zero.as_dict())  # for the log and any console
+        # The built-in simulator keeps no record: its zero is its power-on pose.
+        executor.record_zero = (None if connection.is_simulator
+                                else campaign_records.zero_recorder(arm, loaded))
         display = (LiveDisplay(console, executor, f"seqrun: {loaded.name}",
                                connection.description, len(loaded.steps))
                    if live else PlainDisplay(console, len(loaded.steps)))
@@ -213,6 +259,7 @@ def run_command(
                                confirm=confirm, before_step=before_step, on_executor=attach,
                                confirm_clear_latched=(None if connection.is_simulator
                                                       else confirm_clear_latched),
+                               meta={"zero": zero.as_dict()},
                                html_report=not no_report)
     finally:
         if live and displays:

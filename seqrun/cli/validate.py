@@ -41,6 +41,10 @@ class StaticCheck:
     start_deg: dict[str, float] | None = None
     errors: list[SourceError] = field(default_factory=list)
     notes: list[SourceError] = field(default_factory=list)
+    #: Smallest guard clearance of each move along its planned trajectory.
+    clearances: list = field(default_factory=list)
+    #: Smallest link-volume clearance of each move (arm file geometry).
+    proximities: list = field(default_factory=list)
 
     @property
     def valid(self) -> bool:
@@ -48,7 +52,8 @@ class StaticCheck:
 
 
 def static_check(file: Path, *, start: str | None = None,
-                 arm_file: Path | None = None, started: bool = False) -> StaticCheck:
+                 arm_file: Path | None = None, started: bool = False,
+                 speed: float = 1.0, project_dir: Path | None = None) -> StaticCheck:
     """Load ``file`` (with includes), its arm and the start pose, and validate statically.
 
     Invalid files (the sequence, an included one, the arm file, a pose file) end up in
@@ -58,7 +63,7 @@ def static_check(file: Path, *, start: str | None = None,
 
     check = StaticCheck()
     try:
-        check.loaded = load_sequence(file)
+        check.loaded = load_sequence(file, project_root=project_dir)
     except SequenceInvalid as exc:
         check.errors = list(exc.errors)
         return check
@@ -72,7 +77,7 @@ def static_check(file: Path, *, start: str | None = None,
         return check
     pose = start or START_POSE
     try:
-        check.start_deg = pose_joints_deg(pose, check.loaded.poses_dir)
+        check.start_deg = pose_joints_deg(pose, check.loaded.pose_path or check.loaded.poses_dir)
     except UserInputError as exc:
         raise UserInputError(f"start pose: {exc}"
                              + ("" if start else " (choose one with --start POSE)")) from None
@@ -80,8 +85,10 @@ def static_check(file: Path, *, start: str | None = None,
         check.errors = list(exc.errors)
         return check
     result: ValidationResult = validate_sequence(check.loaded, check.arm, check.start_deg,
-                                                 started=started)
+                                                 started=started, speed=speed)
     check.errors, check.notes = result.errors, result.notes
+    check.clearances = [result.clearances[n] for n in sorted(result.clearances)]
+    check.proximities = [result.proximities[n] for n in sorted(result.proximities)]
     return check
 
 
@@ -89,7 +96,9 @@ def print_report(check: StaticCheck, file: Path, *, as_json: bool) -> None:
     if as_json:
         typer.echo(json.dumps({"valid": check.valid,
                                "errors": [e.as_dict() for e in check.errors],
-                               "notes": [n.as_dict() for n in check.notes]},
+                               "notes": [n.as_dict() for n in check.notes],
+                               "clearances": [c.as_dict() for c in check.clearances],
+                               "proximities": [p.as_dict() for p in check.proximities]},
                               indent=2, ensure_ascii=False))
         return
     for error in check.errors:
@@ -101,9 +110,22 @@ def print_report(check: StaticCheck, file: Path, *, as_json: bool) -> None:
     if check.valid:
         steps = len(check.loaded.steps) if check.loaded is not None else 0
         typer.echo(f"{name}: valid ({steps} step{'s' * (steps != 1)}{notes})")
+        print_clearances(check)
     else:
         count = len(check.errors)
         typer.echo(f"{name}: invalid ({count} error{'s' * (count != 1)}{notes})")
+
+
+def print_clearances(check: StaticCheck) -> None:
+    """Per move: the smallest guard clearance along its planned trajectory, and where."""
+    for c in check.clearances:
+        typer.echo(f"  step {c.step}: lowest {c.point.replace('_', '-')} z = {c.z_mm:.1f} mm, "
+                   f"{c.margin_mm:+.1f} mm from the '{c.guard}' guard, at {c.t_s:.2f} s of "
+                   f"{c.duration_s:.2f} s (planned trajectory)")
+    for p in check.proximities:
+        a, b = p.pair.split("~", 1)
+        typer.echo(f"  step {p.step}: closest {a} - {b} {p.distance_mm:.1f} mm (link volumes), "
+                   f"at {p.t_s:.2f} s of {p.duration_s:.2f} s")
 
 
 def print_dry_run(run, loaded, arm) -> None:
@@ -123,6 +145,19 @@ def print_dry_run(run, loaded, arm) -> None:
             moving = [f"{n} {v:.1f}/{limits[n]:g}"
                       for n, v in zip(arm.joint_names, peak) if v > 0.05]
             typer.echo(f"       peak joint velocity (deg/s, of limit): {', '.join(moving)}")
+        if "ik_solution_deg" in s.detail:
+            solved = ", ".join(f"{n} {v:.3f}" for n, v in zip(arm.joint_names,
+                                                              s.detail["ik_solution_deg"]))
+            typer.echo(f"       joint solution (deg): {solved}")
+        if "moved_mm" in s.detail:
+            d = s.detail
+            typer.echo(f"       relative checkpoint: the tool moved {d['moved_mm']} mm "
+                       f"({d['frame']} frame), expected {d['expected_moved_mm']}: "
+                       f"{d['displacement_error_mm']} mm off (tolerance "
+                       f"{d['position_tolerance_mm']} mm)")
+        if "max_deviation_mm" in s.detail:
+            typer.echo(f"       straight line: {s.detail['length_mm']} mm, largest deviation "
+                       f"{s.detail['max_deviation_mm']} mm")
         if "position_error_mm" in s.detail:
             d = s.detail
             typer.echo(f"       checkpoint: expected {d['expected_position_mm']} mm, reached "
@@ -142,9 +177,18 @@ def print_dry_run(run, loaded, arm) -> None:
         typer.echo(f"  not verified: {item}")
 
 
+def _is_dir(path: Path) -> bool:
+    try:
+        return path.is_dir()
+    except OSError:  # a name the system refuses: reported when the file is read
+        return False
+
+
 @app.command("validate")
 def validate_command(
-    file: Annotated[Path, typer.Argument(metavar="FILE", help="Sequence file (YAML).")],
+    files: Annotated[list[Path], typer.Argument(
+        metavar="FILE|DIR...", help="Sequence file(s), pose files, or campaign folder(s): "
+                                    "several give one summary table.")],
     as_json: Annotated[bool, typer.Option("--json", help="Print the result as JSON.")] = False,
     start: Annotated[str | None, typer.Option(
         "--start", metavar="POSE",
@@ -163,7 +207,13 @@ def validate_command(
     cycle_hz: Annotated[float | None, typer.Option(
         "--cycle-hz", help="Control-loop rate of the dry run (default: the arm file's "
                            "control.dry_run_cycle_hz).")] = None,
-    report: Annotated[Path | None, typer.Option(
+    junit_file: Annotated[Path | None, typer.Option(
+        "--junit", metavar="FILE", help="Also write a JUnit report (one test per file; "
+                                        "gives the summary table).")] = None,
+    project_dir: Annotated[Path | None, typer.Option(
+        "--project", metavar="DIR", help="Campaign folder (default: the nearest seqrun.toml "
+                                         "above each file).")] = None,
+    report_file: Annotated[Path | None, typer.Option(
         "--report", metavar="FILE", help="Write the dry run's report (HTML, plots, "
                                          "self-contained) to FILE.")] = None,
 ) -> None:
@@ -176,11 +226,33 @@ def validate_command(
         fail(f"--speed must lie in (0, 1], got {speed:g}")
     if cycle_hz is not None and not 5 <= cycle_hz <= 500:
         fail(f"--cycle-hz must lie in [5, 500], got {cycle_hz:g}")
-    if report is not None and (static or not report.parent.is_dir()):
+    if report_file is not None and (static or not report_file.parent.is_dir()
+                                    or len(files) != 1 or _is_dir(files[0])):
         fail("--report draws the dry run: leave out --static" if static
-             else f"--report {report}: no directory {report.parent}")
+             else "--report draws one sequence's dry run: give one sequence file"
+             if len(files) != 1 or _is_dir(files[0])
+             else f"--report {report_file}: no directory {report_file.parent}")
+    if len(files) != 1 or _is_dir(files[0]) or junit_file is not None:
+        from seqrun.cli.campaign_validate import report, validate_files
+
+        try:
+            results = validate_files(files, start=start, arm_file=arm_file, started=started,
+                                     static=static, speed=speed, cycle_hz=cycle_hz,
+                                     project_dir=project_dir)
+            valid = report(results, as_json=as_json, junit_file=junit_file)
+        except UserInputError as exc:
+            fail(str(exc))
+        except OSError as exc:
+            fail(f"{exc.filename}: {exc.strerror or exc}")
+        raise typer.Exit(EXIT_OK if valid else EXIT_INVALID)
+    file = files[0]
     try:
-        check = static_check(file, start=start, arm_file=arm_file, started=started)
+        check = static_check(file, start=start, arm_file=arm_file, started=started,
+                             speed=speed, project_dir=project_dir)
+        if check.loaded is not None:
+            from seqrun.cli.campaign_validate import override_notes
+
+            check.notes = list(check.notes) + override_notes(check.loaded)
     except UserInputError as exc:
         fail(str(exc))
         return
@@ -192,7 +264,7 @@ def validate_command(
         from seqrun.dryrun import dry_run
 
         run = dry_run(check.loaded, check.arm, check.start_deg, start_pose=start or START_POSE,
-                      started=started, speed=speed, cycle_hz=cycle_hz, report_html=report)
+                      started=started, speed=speed, cycle_hz=cycle_hz, report_html=report_file)
         if run.report_error:
             fail(f"cannot write the report: {run.report_error}")
     valid = check.valid and (run is None or run.passed)
@@ -200,14 +272,16 @@ def validate_command(
         typer.echo(json.dumps({"valid": valid,
                                "errors": [e.as_dict() for e in check.errors],
                                "notes": [n.as_dict() for n in check.notes],
+                               "clearances": [c.as_dict() for c in check.clearances],
+                               "proximities": [p.as_dict() for p in check.proximities],
                                "dry_run": run.as_dict() if run is not None else None},
                               indent=2, ensure_ascii=False))
     else:
         print_report(check, file, as_json=False)
         if run is not None:
             print_dry_run(run, check.loaded, check.arm)
-        if run is not None and report is not None:
-            typer.echo(f"report: {report}")
+        if run is not None and report_file is not None:
+            typer.echo(f"report: {report_file}")
     raise typer.Exit(EXIT_OK if valid else EXIT_INVALID)
 
 

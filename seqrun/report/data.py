@@ -77,6 +77,8 @@ class RunData:
     trace: dict[str, int] | None       # frames sent / received, when trace.log is there
     run_started: dict[str, Any]
     torn_lines: int = 0                # unreadable lines in events.jsonl (a killed run)
+    #: record.json of the run folder (inputs with sha256, git state, zero), when written.
+    record: dict[str, Any] = field(default_factory=dict)
 
     @property
     def virtual_time(self) -> bool:
@@ -119,12 +121,15 @@ def load_run(folder: str | Path, *, arm: ArmDescription | None = None) -> RunDat
     if not folder.is_dir():
         raise UserInputError(f"{folder}: no such run folder")
     events_path = folder / "events.jsonl"
-    if not events_path.is_file():
-        raise UserInputError(f"{folder}: not a run folder (no events.jsonl)")
-    events, torn = read_events(events_path)
+    if not events_path.is_file() and not (folder / "report.json").is_file():
+        raise UserInputError(f"{folder}: not a run folder (no events.jsonl, no report.json)")
+    # A run refused by validation leaves report.json (and record.json) only.
+    events, torn = read_events(events_path) if events_path.is_file() else ([], 0)
     report = _read_json(folder / "report.json")
     trace = _trace_summary(folder / "trace.log")
-    return from_records(report, events, arm=arm, folder=folder, trace=trace, torn_lines=torn)
+    data = from_records(report, events, arm=arm, folder=folder, trace=trace, torn_lines=torn)
+    data.record = _read_json(folder / "record.json")
+    return data
 
 
 def read_events(path: Path) -> tuple[list[dict], int]:

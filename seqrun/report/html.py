@@ -108,7 +108,20 @@ def _summary(data: RunData, status: str) -> str:
                     "is shown")
     if data.torn_lines:
         bits.append(f"{data.torn_lines} unreadable line(s) in events.jsonl skipped")
-    return f"<p>{' · '.join(bits)}</p>" if bits else ""
+    errors = "".join(f"<li class=\"mono\">{_error_line(e)}</li>" for e in r.get("errors") or [])
+    return (f"<p>{' · '.join(bits)}</p>" if bits else "") + (f"<ul>{errors}</ul>" if errors else "")
+
+
+def _zero(zero: Any) -> Any:
+    """The zero reference as its one-line text when recorded with one."""
+    return zero.get("text") or zero if isinstance(zero, dict) else zero
+
+
+def _error_line(error: Any) -> str:
+    if isinstance(error, dict) and "message" in error:
+        where = ":".join(str(error[k]) for k in ("file", "line", "column") if k in error)
+        return escape(f"{where}: {error['message']}" if where else str(error["message"]))
+    return escape(str(error))
 
 
 def _fault(data: RunData) -> str:
@@ -141,7 +154,9 @@ def _identity(data: RunData) -> str:
         ("speed", r.get("speed", started.get("speed"))),
         ("injected simulator faults", ", ".join(r.get("faults") or []) or None),
         ("first step", r.get("first_step")),
-        ("zero reference", r.get("zero_reference", r.get("zero"))),
+        ("zero reference", _zero(r.get("zero_reference", r.get("zero", data.record.get("zero"))))),
+        ("campaign", data.record.get("campaign")),
+        ("campaign git", data.record.get("git")),
         ("result", r.get("status")), ("exit code", r.get("exit_code")),
         ("message", r.get("message")),
         ("start", r.get("start")), ("end", r.get("end")),
@@ -163,7 +178,7 @@ def _identity(data: RunData) -> str:
 
 
 def _inputs(data: RunData) -> str:
-    inputs = data.report.get("inputs")
+    inputs = data.report.get("inputs") or data.record.get("inputs")
     if not inputs:
         return ""
     rows = []
