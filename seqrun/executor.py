@@ -463,7 +463,7 @@ class Executor:
                   joints=[self.arm.joints[i].name for i in moving], sampled=True)
         if self._current_step is not None:
             self._current_step.planned_duration_s = plan.duration
-        peak = np.zeros(self.arm.dof)
+        self._tracking = MoveTracking(velocity_window(self.cycle))
         t_move = self.clock.now()
         if moving:
             law = self.setpoints
@@ -476,14 +476,16 @@ class Executor:
                 start = self.setpoints.start(moving, self.limits)
                 if start:
                     self.transact(start)
-                peak = self._stream(plan, moving, tolerance_deg, deadline, stop_on_abort=True)
+                self._stream(plan, moving, tolerance_deg, deadline, stop_on_abort=True)
             finally:
                 self.path_check = None
                 self.setpoints = law
-        return {"planned_duration_s": plan.duration,
-                "executed_duration_s": self.clock.now() - t_move,
+        elapsed = self.clock.now() - t_move
+        return {"planned_duration_s": plan.duration, "executed_duration_s": elapsed,
+                "duration_ratio": _round(elapsed / plan.duration) if plan.duration > 0 else None,
                 "peak_velocity_deg_s": _r(np.degrees(plan.peak_velocity())),
-                "peak_measured_velocity_deg_s": _r(peak)}
+                "peak_measured_velocity_deg_s": [0.0] * self.arm.dof,
+                **self.tracking_figures(np.degrees(plan.target))}
 
     def _cycle(self, requests: list, moving: list[int], *, halt_early: bool = False
                 ) -> Measurement:
