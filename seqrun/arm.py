@@ -12,7 +12,7 @@ import math
 from pathlib import Path
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, field_validator, model_validator
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
@@ -92,6 +92,12 @@ class Control(_Strict):
     max_following_error_deg: Positive = 4.0
     position_tolerance_deg: Positive = 0.2
     settle_timeout_s: Positive = 3.0
+    max_wait_s: Positive = Field(
+        600.0, description="Longest wait a sequence may ask for (wait seconds, timeout_s of "
+                           "waits and moves), s; a longer one is a validation error.")
+    max_dry_run_s: Positive = Field(
+        7200.0, description="Simulated time after which a dry run (seqrun validate) stops "
+                            "with an error, s: a bound on what one validation may cost.")
 
 
 class Guard(_Strict):
@@ -246,6 +252,18 @@ class ArmDescription(_Strict):
                         "default_power_off.")
     default_power_off: str | None = Field(
         None, description="The power-off pose whose offsets the joints' offset_deg are.")
+    # SHA-256 of the file it was loaded from (recorded in run folders); not a file key.
+    _sha256: str = PrivateAttr("")
+    _file: str = PrivateAttr("")
+
+    @property
+    def sha256(self) -> str:
+        return self._sha256
+
+    @property
+    def source_file(self) -> str:
+        """The file it was loaded from, as messages name it ("" if built in code)."""
+        return self._file
 
     @field_validator("joints")
     @classmethod
@@ -388,6 +406,9 @@ DEFAULT_ARM = Path("arms/lwa3.yaml")
 def load_arm(path: str | Path) -> ArmDescription:
     """Load and validate an arm file; raises :class:`seqrun.errors.SequenceInvalid`
     with ``file:line:col`` errors."""
-    from seqrun.yamlsource import load_model  # local import: yamlsource is a sibling layer
+    from seqrun.yamlsource import load_document  # local import: a sibling layer
 
-    return load_model(Path(path), ArmDescription)
+    document = load_document(Path(path))
+    arm = document.validate(ArmDescription)
+    arm._sha256, arm._file = document.sha256, document.file
+    return arm

@@ -80,7 +80,7 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
                                "simulator": connection.is_simulator,
                                "faults": [f.spec for f in connection.faults], "speed": speed,
                                "first_step": first_step, "seqrun": __version__,
-                               **(meta or {})})
+                               **(meta or {}), "inputs": _inputs(loaded, arm)})
         client.add_frame_listener(log.on_frame)
         executor.listeners.insert(0, log.on_event)
     if on_executor is not None:
@@ -112,3 +112,11 @@ def write_html_report(folder: Path) -> str | None:
     except Exception as exc:  # noqa: BLE001 - a report bug must not turn into a run failure
         return f"{type(exc).__name__}: {exc}"
 
+
+def _inputs(loaded: LoadedSequence, arm: ArmDescription) -> list[dict[str, str]]:
+    """Every file the run was validated from, with its SHA-256 as it was read: the run
+    uses these contents only (poses are frozen at load time, the arm is loaded once)."""
+    items = loaded.inputs()
+    if arm.sha256:
+        items.append({"kind": "arm", "file": arm.source_file, "sha256": arm.sha256})
+    return items

@@ -103,9 +103,10 @@ def save_pose_command(
     from datetime import datetime, timezone
 
     from seqrun.errors import BusError
-    from seqrun.poses import pose_document, save_pose
+    from seqrun.poses import check_pose_name, pose_document, save_pose
 
     with user_errors():
+        check_pose_name(name)  # before anything is opened
         arm = load_arm_file(arm_file)
         path = output or (poses_dir / f"{name}.yaml")
         if path.exists() and not force:

@@ -269,8 +269,10 @@ def run_command(
         connection.close()
     result = outcome.result
     colour = "green" if result.exit_code == 0 else "red"
+    # With a list of errors the message is a summary: each error is printed once, below.
+    message = result.extra.get("summary") or result.message
     console.print(f"[{colour}]{result.status.upper()}[/{colour}] (exit {result.exit_code}): "
-                  f"{result.message}", highlight=False)
+                  f"{message}", highlight=False)
     if result.latched_at_start:
         console.print("note: " + outcome.executor.latched_message()
                       + (" - cleared by the sequence's Reset" if result.exit_code == 0 else ""),

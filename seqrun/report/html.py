@@ -178,7 +178,15 @@ def _identity(data: RunData) -> str:
 
 
 def _inputs(data: RunData) -> str:
-    inputs = data.report.get("inputs") or data.record.get("inputs")
+    # report.json: the files as validated; record.json: the frozen copies. Both, once each.
+    inputs = list(data.report.get("inputs") or []) if isinstance(
+        data.report.get("inputs"), list) else data.report.get("inputs")
+    if isinstance(inputs, list) or not inputs:
+        inputs = list(inputs or [])
+        seen = {(i.get("sha256"), str(i.get("path") or i.get("file"))) for i in inputs
+                if isinstance(i, dict)}
+        inputs += [i for i in data.record.get("inputs") or [] if not isinstance(i, dict)
+                   or (i.get("sha256"), str(i.get("path") or i.get("file"))) not in seen]
     if not inputs:
         return ""
     rows = []
