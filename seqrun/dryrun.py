@@ -11,8 +11,10 @@ making the dry run far faster than real time.
 from __future__ import annotations
 
 import math
+import tempfile
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Mapping
 
 from seqrun.arm import ArmDescription
@@ -40,6 +42,8 @@ class DryRun:
     cycle_hz: float
     wall_s: float
     events: list[dict] = field(default_factory=list, repr=False)
+    #: Why the requested report could not be drawn (None: written or not asked for).
+    report_error: str | None = None
 
     @property
     def passed(self) -> bool:
@@ -86,14 +90,38 @@ def _prepare_started(connection, arm: ArmDescription) -> None:
 def dry_run(loaded: LoadedSequence, arm: ArmDescription, start_deg: Mapping[str, float], *,
             start_pose: str = "park", started: bool = False, speed: float = 1.0,
             cycle_hz: float | None = None, command_mode: str | None = None,
-            time_limit_s: float | None = None) -> DryRun:
+            time_limit_s: float | None = None,
+            report_html: Path | None = None) -> DryRun:
     """Run ``loaded`` on a simulated arm standing at ``start_deg`` (user degrees).
 
     ``started``: the simulated modules are reset, homed and limited before the run (for
     sequences written for an arm that is already up). ``time_limit_s`` (default the arm
     file's ``control.max_dry_run_s``): simulated time after which the dry run stops with
-    an error, so that no sequence makes validation run for ever.
+    an error, so that no sequence makes validation run for ever. ``report_html``: draw the
+    dry run's report there (the run is logged to a temporary run folder for it, which
+    costs time).
     """
+    if report_html is not None:
+        with tempfile.TemporaryDirectory(prefix="seqrun-dry-run-") as folder:
+            run = _dry_run(loaded, arm, start_deg, start_pose=start_pose, started=started,
+                           speed=speed, cycle_hz=cycle_hz, command_mode=command_mode,
+                           time_limit_s=time_limit_s, log_dir=Path(folder))
+            try:
+                from seqrun.report import write_html
+
+                write_html(folder, report_html)
+            except OSError as exc:
+                run.report_error = f"{report_html}: {exc.strerror or exc}"
+        return run
+    return _dry_run(loaded, arm, start_deg, start_pose=start_pose, started=started,
+                    speed=speed, cycle_hz=cycle_hz, command_mode=command_mode,
+                    time_limit_s=time_limit_s)
+
+
+def _dry_run(loaded: LoadedSequence, arm: ArmDescription, start_deg: Mapping[str, float], *,
+             start_pose: str, started: bool, speed: float, cycle_hz: float | None,
+             command_mode: str | None, time_limit_s: float | None = None,
+             log_dir: Path | None = None) -> DryRun:
     clock = VirtualClock()
     positions = {j.module: j.to_module_rad(start_deg[j.name]) for j in arm.joints}
     connection = open_connection(force_sim=True, clock=clock, sim_positions=positions,
@@ -104,10 +132,11 @@ def dry_run(loaded: LoadedSequence, arm: ArmDescription, start_deg: Mapping[str,
         if started:
             _prepare_started(connection, arm)
         wall = time.perf_counter()
-        outcome = run_sequence(loaded, arm, connection, log_dir=None, speed=speed,
+        outcome = run_sequence(loaded, arm, connection, log_dir=log_dir, speed=speed,
                                cycle_hz=hz, command_mode=command_mode, confirm=None,
                                listeners=[_keep_summary(events)], dry_run=True,
-                               on_executor=_bounded(time_limit_s or arm.control.max_dry_run_s))
+                               on_executor=_bounded(time_limit_s or arm.control.max_dry_run_s),
+                               html_report=False)
         wall = time.perf_counter() - wall
     finally:
         connection.close()

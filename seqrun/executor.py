@@ -19,7 +19,6 @@ Listeners receive structured events (plain dicts) for the log writer and display
 
 from __future__ import annotations
 
-import collections
 import math
 import threading
 import traceback
@@ -39,6 +38,7 @@ from seqrun.limits import LimitsInForce
 from seqrun.planner import Limits, MovePlan, plan_move, plan_stop
 from seqrun.setpoints import setpoint_law
 from seqrun.usermessages import user_message
+from seqrun.tracking import MoveTracking, velocity_window
 from seqrun.powercube.codec import (BroadcastRequest, GetParam, GetParamAck, MotionExtAck,
                                     SetMotion, SetParam)
 from seqrun.powercube.protocol import ConfigFlag, ParamId, ShortState, StateFlag
@@ -124,8 +124,6 @@ class Executor:
 
     #: Idempotent reads are retried this often when an acknowledge is lost (drop_acks).
     READ_RETRIES = 1
-    #: Shortest time base (s) of the measured peak velocity of a move.
-    PEAK_WINDOW_S = 0.05
 
     def __init__(self, client, arm: ArmDescription, clock: Clock, *,
                  poses_dir: Path | None = None, speed: float = 1.0,
@@ -186,6 +184,7 @@ class Executor:
         self.not_verified: list[str] = []
         self._current_step: StepResult | None = None
         self._move_limits = self.limits
+        self._tracking: MoveTracking | None = None
         self._keeper: threading.Thread | None = None
         self._keeper_stop = threading.Event()
         #: Joint solutions of end-effector targets as validated from the measured start
@@ -290,7 +289,9 @@ class Executor:
             self.emit("measurement_failed", after=after, error=str(exc))
             return
         self.last = replace(m, state_words=words)
-        self.emit("measurement", after=after, joints_deg=_r(m.user_deg),
+        short = [int(_short_state(words[module])) if module in words
+                 else int(m.short_state.get(module, 0)) for module in self.modules]
+        self.emit("measurement", after=after, joints_deg=_r(m.user_deg), state=short,
                   states={str(k): v.describe() for k, v in words.items()})
 
     # ------------------------------------------------------------------ conversions
@@ -440,8 +441,12 @@ class Executor:
         m = self.read_arm()
         self.check_states(m, require_homed=False)
         self.check_guards(m)
-        self.emit("measurement", joints_deg=_r(m.user_deg))
+        self.emit("measurement", joints_deg=_r(m.user_deg), state=self._states(m))
         return m
+
+    def _states(self, m: Measurement) -> list[int]:
+        """The short state of every joint's module, for the event log (compact ints)."""
+        return [int(m.short_state.get(module, 0)) for module in self.modules]
 
     def _check_halt_request(self) -> None:
         if self._halt_requested:
@@ -464,15 +469,17 @@ class Executor:
         plan = plan_move(np.radians(start_deg), np.radians(target_deg), limits, moving)
         self.commanded_deg = np.where(np.isin(np.arange(len(target_deg)), moving),
                                       target_deg, start_deg)
+        velocity_limit = _r(np.degrees(limits.velocity))
         self.emit("move_planned", duration_s=_round(plan.duration),
                   start_deg=_r(start_deg), target_deg=_r(target_deg),
-                  joints=[self.arm.joints[i].name for i in moving])
+                  joints=[self.arm.joints[i].name for i in moving],
+                  velocity_limit_deg_s=velocity_limit)
         if self._current_step is not None:
             self._current_step.planned_duration_s = plan.duration
         if timeout_s is not None and plan.duration > timeout_s:
             raise RunAborted("timeout", f"the move is planned to take {plan.duration:.3g} s, "
                              f"longer than its timeout_s {timeout_s:g} s; nothing was moved")
-        peak = np.zeros(len(target_deg))
+        self._tracking = MoveTracking(velocity_window(self.cycle))
         t_move = self.clock.now()
         if moving:
             start = self.setpoints.start(moving, limits)
@@ -482,11 +489,21 @@ class Executor:
             # the arm's settle time.
             deadline = (timeout_s if timeout_s is not None
                         else plan.duration + self.arm.control.settle_timeout_s)
-            peak = self._stream(plan, moving, tolerance_deg, deadline, stop_on_abort=True)
+            self._stream(plan, moving, tolerance_deg, deadline, stop_on_abort=True)
         elapsed = self.clock.now() - t_move
         return {"planned_duration_s": plan.duration, "executed_duration_s": elapsed,
+                "duration_ratio": _round(elapsed / plan.duration) if plan.duration > 0 else None,
                 "peak_velocity_deg_s": _r(np.degrees(plan.peak_velocity())),
-                "peak_measured_velocity_deg_s": _r(peak)}
+                "peak_measured_velocity_deg_s": [0.0] * len(target_deg),
+                "velocity_limit_deg_s": velocity_limit,
+                **self.tracking_figures(target_deg)}
+
+    def tracking_figures(self, target_deg=None) -> dict[str, Any]:
+        """The current move's tracking figures (seqrun/tracking.py) up to now."""
+        if self._tracking is None:
+            return {}
+        target = self.commanded_deg if target_deg is None else target_deg
+        return self._tracking.figures(target)
 
     def follow(self, plan, *, tolerance_deg: float, timeout_s: float | None,
                path_check: Callable[[Measurement], None] | None = None,
@@ -504,7 +521,7 @@ class Executor:
                   joints=[self.arm.joints[i].name for i in moving], sampled=True)
         if self._current_step is not None:
             self._current_step.planned_duration_s = plan.duration
-        peak = np.zeros(self.arm.dof)
+        self._tracking = MoveTracking(velocity_window(self.cycle))
         t_move = self.clock.now()
         if moving:
             law = self.setpoints
@@ -517,14 +534,16 @@ class Executor:
                 start = self.setpoints.start(moving, self.limits)
                 if start:
                     self.transact(start)
-                peak = self._stream(plan, moving, tolerance_deg, deadline, stop_on_abort=True)
+                self._stream(plan, moving, tolerance_deg, deadline, stop_on_abort=True)
             finally:
                 self.path_check = None
                 self.setpoints = law
-        return {"planned_duration_s": plan.duration,
-                "executed_duration_s": self.clock.now() - t_move,
+        elapsed = self.clock.now() - t_move
+        return {"planned_duration_s": plan.duration, "executed_duration_s": elapsed,
+                "duration_ratio": _round(elapsed / plan.duration) if plan.duration > 0 else None,
                 "peak_velocity_deg_s": _r(np.degrees(plan.peak_velocity())),
-                "peak_measured_velocity_deg_s": _r(peak)}
+                "peak_measured_velocity_deg_s": [0.0] * self.arm.dof,
+                **self.tracking_figures(np.degrees(plan.target))}
 
     def _cycle(self, requests: list, moving: list[int], *, halt_early: bool = False
                 ) -> Measurement:
@@ -585,16 +604,11 @@ class Executor:
         return self._measured(module_rad, states)
 
     def _stream(self, plan: MovePlan, moving: list[int], tolerance_deg: float,
-                deadline: float, *, stop_on_abort: bool) -> np.ndarray:
+                deadline: float, *, stop_on_abort: bool) -> None:
         """Stream ``plan`` cycle by cycle until every moving joint is in tolerance."""
         t_start = self.clock.now()
         bound = self.arm.control.max_following_error_deg
         measured = self.last.user_deg if self.last is not None else np.degrees(plan.start)
-        # Velocity from readings at least PEAK_WINDOW_S apart: within one cycle the modules
-        # are read at slightly different moments (one request in flight per module), and
-        # a single cycle's difference quotient would count that jitter as speed.
-        history = collections.deque([(t_start, measured.copy())])
-        peak = np.zeros(len(measured))
         k = 0
         while True:
             t_cycle = t_start + k * self.cycle
@@ -619,7 +633,8 @@ class Executor:
             self.check_guards(m)
             if self.path_check is not None:
                 self.path_check(m)
-            planned_deg = np.degrees(plan.at(t)[0])
+            planned_rad, planned_vel, _ = plan.at(t)
+            planned_deg = np.degrees(planned_rad)
             error = np.abs(planned_deg - measured)
             worst = int(np.argmax(error))
             if error[worst] > bound and t <= plan.duration + self.arm.control.settle_timeout_s:
@@ -629,18 +644,18 @@ class Executor:
                                  f"{error[worst]:.2f}° from the planned position (limit {bound}°)"
                                  + self._lag_diagnosis(plan, planned_deg, measured, moving),
                                  module=self.modules[worst])
-            history.append((m.t, measured.copy()))
-            while len(history) > 2 and m.t - history[1][0] >= self.PEAK_WINDOW_S:
-                history.popleft()
-            t_old, old = history[0]
-            if m.t - t_old >= self.PEAK_WINDOW_S or (t >= plan.duration and m.t > t_old):
-                peak = np.maximum(peak, np.abs(measured - old) / (m.t - t_old))
-            self.emit("setpoint", plan_t=round(t, 4), planned_deg=_r(planned_deg),
-                      measured_deg=_r(measured))
+            logged_planned, logged_measured = _r(planned_deg), _r(measured)
+            event_t = round(self.clock.now() - self._t0, 6)
+            if self._tracking is not None:
+                # The figures come from the logged values, so events.jsonl reproduces them.
+                self._tracking.add(event_t, logged_planned, logged_measured)
+            self.emit("setpoint", t=event_t, plan_t=round(t, 4), planned_deg=logged_planned,
+                      measured_deg=logged_measured,
+                      planned_vel_deg_s=_r(np.degrees(planned_vel), 2), state=self._states(m))
             if t >= plan.duration:
                 final_error = np.abs(np.degrees(plan.target) - measured)[moving]
                 if np.all(final_error <= tolerance_deg):
-                    return peak
+                    return
                 if t > deadline:
                     i = moving[int(np.argmax(final_error))]
                     raise RunAborted("timeout",
@@ -917,7 +932,10 @@ class Executor:
         steps = list(loaded.steps)
         results = [StepResult(s.number, s.kind, _label(s), _location(s)) for s in steps]
         self.emit("run_started", steps=len(steps), first_step=first_step, speed=self.speed,
-                  command_mode=self.command_mode, dry_run=self.dry_run)
+                  command_mode=self.command_mode, dry_run=self.dry_run,
+                  virtual_time=self.clock.is_virtual, cycle_s=self.cycle,
+                  velocity_window_s=velocity_window(self.cycle),
+                  arm=self.arm.model_dump(mode="json"))
         status, code, message, fault = "passed", EXIT_OK, "sequence completed", None
         try:
             check = self.preflight(loaded, first_step)
@@ -953,6 +971,7 @@ class Executor:
                           location=result.location,
                           **({"include": list(step.include_labels)}
                              if getattr(step, "include_labels", ()) else {}))
+                self._tracking = None
                 detail = HANDLERS[step.kind](step, self) or {}
                 result.detail.update({k: v for k, v in detail.items()
                                       if k != "planned_duration_s"})
@@ -972,6 +991,7 @@ class Executor:
                     message += "; Halt sent" + self._halt_note()
                 result.status = "aborted"
                 result.finished = self.clock.now() - self._t0
+                result.detail.update(self.tracking_figures())
                 self.emit("operator_abort", message=message)
                 break
             except Exception as exc:  # noqa: BLE001 - every failure, even a bug, halts
@@ -991,6 +1011,7 @@ class Executor:
                 result.status = "failed" if code == EXIT_FAULT else "aborted"
                 result.finished = self.clock.now() - self._t0
                 result.detail.update(_jsonable(getattr(exc, "detail", None) or {}))
+                result.detail.update(self.tracking_figures())   # up to the fault
                 result.detail.setdefault("error", message)
                 self.emit("fault", **fault)
                 self._show_state_after_halt()

@@ -25,6 +25,8 @@ class RunOutcome:
     report: dict | None
     log_dir: Path | None
     executor: Executor
+    #: Why report.html could not be written (the run's outcome stands either way).
+    report_error: str | None = None
 
 
 def build_executor(loaded: LoadedSequence, arm: ArmDescription, connection: Connection, *,
@@ -57,8 +59,10 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
                  listeners: Iterable[Listener] = (), dry_run: bool = False,
                  on_executor: Callable[[Executor], None] | None = None,
                  confirm_clear_latched: Callable[[str], bool] | None = None,
-                 meta: dict | None = None) -> RunOutcome:
-    """Run ``loaded`` on ``connection``; writes the run folder when ``log_dir`` is given.
+                 meta: dict | None = None,
+                 html_report: bool = True) -> RunOutcome:
+    """Run ``loaded`` on ``connection``; writes the run folder when ``log_dir`` is given,
+    with report.html drawn after the run (``html_report``).
 
     ``on_executor`` is called with the executor before the run starts (signal handlers,
     displays and tests hook in there); ``meta`` goes into report.json (e.g. the zero
@@ -91,7 +95,22 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
                 report = log.finish(result)
             log.close()
         client.close()
-    return RunOutcome(result, report, log_dir, executor)
+    report_error = None
+    if log is not None and html_report:
+        report_error = write_html_report(log_dir)
+    return RunOutcome(result, report, log_dir, executor, report_error)
+
+
+def write_html_report(folder: Path) -> str | None:
+    """Draw folder/report.html; returns why not instead of raising: the run is over and
+    its outcome (and exit code) must not depend on the report."""
+    try:
+        from seqrun.report import write_html
+
+        write_html(folder)
+        return None
+    except Exception as exc:  # noqa: BLE001 - a report bug must not turn into a run failure
+        return f"{type(exc).__name__}: {exc}"
 
 
 def _inputs(loaded: LoadedSequence, arm: ArmDescription) -> list[dict[str, str]]:

@@ -25,6 +25,7 @@ COMMAND_MODULES = (
     "seqrun.cli.zero",
     "seqrun.cli.init",
     "seqrun.cli.runs",
+    "seqrun.cli.report",
 )
 
 

@@ -111,6 +111,9 @@ def run_command(
         "--power-on-at", metavar="POSE", help="Simulator only: the power-off pose the "
         "simulated arm was powered on at (default park); it is the run's zero reference.")]
     = None,
+    no_report: Annotated[bool, typer.Option(
+        "--no-report", help="Do not draw report.html after the run (bulk runs; "
+                            "'seqrun report RUN_DIR' draws it later).")] = False,
 ) -> None:
     """Run a sequence: validate, read the arm, re-validate from where it stands, move."""
     # Imported here, not at the top: `seqrun --help` and the other commands stay light.
@@ -279,7 +282,8 @@ def run_command(
                                confirm=confirm, before_step=before_step, on_executor=attach,
                                confirm_clear_latched=(None if connection.is_simulator
                                                       else confirm_clear_latched),
-                               meta={"zero": zero.as_dict()})
+                               meta={"zero": zero.as_dict()},
+                               html_report=not no_report)
     finally:
         if live and displays:
             displays[0].__exit__(None, None, None)
@@ -303,4 +307,8 @@ def run_command(
     console.print(f"duration {result.duration_s:.2f} s, planned motion "
                   f"{result.planned_duration_s:.2f} s; log: {folder}", highlight=False,
                   markup=False)
+    if outcome.report_error:
+        console.print(f"warning: report.html not written ({outcome.report_error}); "
+                      f"try: seqrun report {folder}", style="yellow", highlight=False,
+                      markup=False)
     raise typer.Exit(result.exit_code)

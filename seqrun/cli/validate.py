@@ -251,6 +251,9 @@ def validate_command(
     project_dir: Annotated[Path | None, typer.Option(
         "--project", metavar="DIR", help="Campaign folder (default: the nearest seqrun.toml "
                                          "above each file).")] = None,
+    report_file: Annotated[Path | None, typer.Option(
+        "--report", metavar="FILE", help="Write the dry run's report (HTML, plots, "
+                                         "self-contained) to FILE.")] = None,
 ) -> None:
     """Check a sequence file and its includes against the arm, then dry-run it on the
     simulator at virtual time. Nothing is sent to a real bus.
@@ -261,6 +264,12 @@ def validate_command(
         fail(f"--speed must lie in (0, 1], got {speed:g}")
     if cycle_hz is not None and not 5 <= cycle_hz <= 500:
         fail(f"--cycle-hz must lie in [5, 500], got {cycle_hz:g}")
+    if report_file is not None and (static or not report_file.parent.is_dir()
+                                    or len(files) != 1 or _is_dir(files[0])):
+        fail("--report draws the dry run: leave out --static" if static
+             else "--report draws one sequence's dry run: give one sequence file"
+             if len(files) != 1 or _is_dir(files[0])
+             else f"--report {report_file}: no directory {report_file.parent}")
     if len(files) != 1 or _is_dir(files[0]) or junit_file is not None:
         from seqrun.cli.campaign_validate import report, validate_files
 
@@ -293,7 +302,9 @@ def validate_command(
         from seqrun.dryrun import dry_run
 
         run = dry_run(check.loaded, check.arm, check.start_deg, start_pose=start or START_POSE,
-                      started=started, speed=speed, cycle_hz=cycle_hz)
+                      started=started, speed=speed, cycle_hz=cycle_hz, report_html=report_file)
+        if run.report_error:
+            fail(f"cannot write the report: {run.report_error}")
     valid = check.valid and (run is None or run.passed)
     if as_json:
         typer.echo(json.dumps({"valid": valid,
@@ -307,6 +318,8 @@ def validate_command(
         print_report(check, file, as_json=False)
         if run is not None:
             print_dry_run(run, check.loaded, check.arm)
+        if run is not None and report_file is not None:
+            typer.echo(f"report: {report_file}")
     raise typer.Exit(EXIT_OK if valid else EXIT_INVALID)
 
 

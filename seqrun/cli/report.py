@@ -1,0 +1,45 @@
+"""``seqrun report RUN_DIR``: (re)draw a run folder's report.html, or export its CSV.
+
+    seqrun report runs/20261121-101500-Op-safe            # -> that folder's report.html
+    seqrun report runs/20261121-101500-Op-safe --out r.html
+    seqrun report runs/20261121-101500-Op-safe --csv exported/   # timeseries.csv, steps.csv
+
+A folder that is not a run folder is one ``error:`` line and exit 2.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from seqrun.cli.app import app
+from seqrun.cli.common import load_arm_file, user_errors
+
+
+@app.command("report")
+def report_command(
+    run_dir: Annotated[Path, typer.Argument(metavar="RUN_DIR", help="A run folder.")],
+    out: Annotated[Optional[Path], typer.Option(
+        "--out", "-o", metavar="FILE", help="Write the HTML here (default RUN_DIR/report.html)."
+    )] = None,
+    csv_dir: Annotated[Optional[Path], typer.Option(
+        "--csv", metavar="DIR", help="Export the time series as CSV into DIR instead of the "
+                                     "HTML (both with --out).")] = None,
+    arm_file: Annotated[Optional[Path], typer.Option(
+        "--arm", metavar="FILE", help="Arm file, for run folders of versions that did not "
+                                      "record the arm in events.jsonl.")] = None,
+) -> None:
+    """Draw the report of a run folder: report.html (self-contained, opens offline) with the
+    run's identity, per-step tracking figures, checkpoints and plots; or CSV files."""
+    from seqrun.report import export_csv, load_run, write_html
+
+    with user_errors():
+        arm = load_arm_file(arm_file) if arm_file is not None else None
+        data = load_run(run_dir, arm=arm)
+        if csv_dir is not None:
+            for path in export_csv(run_dir, csv_dir, data=data):
+                typer.echo(f"wrote {path}")
+        if csv_dir is None or out is not None:
+            typer.echo(f"wrote {write_html(run_dir, out, data=data)}")

@@ -1,0 +1,44 @@
+"""Reports of a run folder: report.html (plots as inline SVG) and CSV export.
+
+    data = load_run(folder)              # seqrun/report/data.py: the one loader
+    write_html(folder)                   # folder/report.html
+    export_csv(data, out_dir)            # timeseries.csv, steps.csv
+
+Only this package imports matplotlib, and only when a report is drawn; the executor emits
+the data (events.jsonl, report.json) and knows nothing of reports.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from seqrun.arm import ArmDescription
+from seqrun.report.data import RunData, load_run
+
+HTML_NAME = "report.html"
+
+
+def write_html(folder: str | Path, out: str | Path | None = None, *,
+               arm: ArmDescription | None = None, data: RunData | None = None) -> Path:
+    """Draw the report of run folder ``folder`` into ``out`` (default folder/report.html)."""
+    from seqrun.report.html import render_html
+    from seqrun.report.plots import render_plots
+
+    data = data if data is not None else load_run(folder, arm=arm)
+    target = Path(out) if out is not None else Path(folder) / HTML_NAME
+    page = render_html(data, render_plots(data))
+    tmp = target.with_name(target.name + ".tmp")
+    tmp.write_text(page, encoding="utf-8")
+    tmp.replace(target)
+    return target
+
+
+def export_csv(folder: str | Path, out_dir: str | Path, *, arm: ArmDescription | None = None,
+               data: RunData | None = None) -> list[Path]:
+    """Write the time series of run folder ``folder`` as CSV files into ``out_dir``."""
+    from seqrun.report.csvout import export_csv as _export
+
+    return _export(data if data is not None else load_run(folder, arm=arm), out_dir)
+
+
+__all__ = ["HTML_NAME", "RunData", "export_csv", "load_run", "write_html"]

@@ -1,0 +1,253 @@
+"""The report's plots, drawn with matplotlib (Agg, no display) and kept as inline SVG.
+
+Every plot against time shows the step boundaries (grey, numbered at the top) and the
+fault, if any (red, at its time). Long runs are decimated to an envelope of
+``MAX_POINTS`` points per line (:func:`seqrun.report.figures.decimate`), which keeps
+the page a few MB for a 10-minute run. Text is drawn as paths: the SVG needs no font.
+"""
+
+from __future__ import annotations
+
+import io
+import re
+from dataclasses import dataclass
+
+import numpy as np
+
+from seqrun.report.data import RunData
+from seqrun.report.figures import (decimate, guard_heights, loop_periods, period_stats,
+                                   step_spans)
+
+#: Points per plotted line at most (min/max envelope beyond).
+MAX_POINTS = 3000
+#: matplotlib drops path vertices closer than this (pixels) to the line: quantised noise
+#: (following errors in 0.001° steps) costs no bytes it could show.
+SIMPLIFY_THRESHOLD = 0.3
+
+PLANNED = dict(color="#7f7f7f", linestyle="--", linewidth=1.1, label="planned")
+MEASURED = dict(color="#1f77b4", linestyle="-", linewidth=1.0, label="measured")
+LIMIT = dict(color="#d62728", linestyle="--", linewidth=0.8, alpha=0.8)
+MOVE_LIMIT = dict(color="#ff7f0e", linestyle=":", linewidth=1.2)
+STEP_LINE = dict(color="#999999", linewidth=0.5, alpha=0.7)
+FAULT_LINE = dict(color="#d62728", linewidth=1.8)
+
+
+@dataclass
+class Plot:
+    id: str
+    title: str
+    caption: str
+    svg: str
+
+
+def render_plots(data: RunData) -> list[Plot]:
+    """Every plot of the report (none without samples or without the arm description)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    if data.arm is None or len(data.series) == 0:
+        return []
+    plots = [_joint_plot(data, i) for i in range(data.arm.dof)]
+    if data.arm.workspace.guards:
+        plots.append(_guard_plot(data))
+    if not data.virtual_time:
+        periods = loop_periods(data.series)
+        if periods.size:
+            plots.append(_period_plot(data, periods))
+    return plots
+
+
+# ---------------------------------------------------------------------------- helpers
+def _figure(height: float, rows: int = 1):
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(10, height))
+    # Fixed margins (inches) instead of a layout engine: the engine's extra draw pass
+    # doubled the time a report takes.
+    fig.subplots_adjust(left=0.8 / 10, right=1 - 0.15 / 10, top=1 - 0.45 / height,
+                        bottom=0.5 / height, hspace=0.18 if rows > 1 else 0.0)
+    axes = fig.subplots(rows, 1, sharex=True, squeeze=False)[:, 0]
+    for ax in axes:
+        ax.grid(True, linewidth=0.3, alpha=0.5)
+        ax.tick_params(labelsize=8)
+    return fig, axes
+
+
+def _to_svg(fig, name: str) -> str:
+    import matplotlib
+
+    buf = io.StringIO()
+    # A salt per plot: ids inside each SVG are reproducible and unique on the page.
+    with matplotlib.rc_context({"svg.hashsalt": f"seqrun-{name}", "svg.fonttype": "path",
+                                "path.simplify_threshold": SIMPLIFY_THRESHOLD}):
+        fig.savefig(buf, format="svg", metadata={"Date": None, "Creator": None})
+    svg = buf.getvalue()
+    svg = svg[svg.index("<svg"):]                       # drop the XML prolog and doctype
+    svg = re.sub(r"<metadata>.*?</metadata>\s*", "", svg, count=1, flags=re.S)
+    # Path data to 0.1 pt (the figure is 720 pt wide): halves the page, nothing visible.
+    svg = re.sub(r' d="([^"]*)"',
+                 lambda m: ' d="' + " ".join(_NUMBER.sub(_round, m.group(1)).split()) + '"', svg)
+    svg = re.sub(r">\s+<", "><", svg)        # indentation (no text nodes: text is paths)
+    # Scale with the page: keep the viewBox, let CSS set the size.
+    return re.sub(r'^<svg([^>]*?) width="[^"]*" height="[^"]*"', r'<svg\1', svg, count=1)
+
+
+_NUMBER = re.compile(r"-?\d+\.\d+")
+
+
+def _round(m: re.Match) -> str:
+    text = f"{float(m.group(0)):.1f}"
+    text = text[:-2] if text.endswith(".0") else text
+    return "0" if text == "-0" else text
+
+
+def _line(ax, t, y, style) -> None:
+    td, yd = decimate(t, y, MAX_POINTS)
+    ax.plot(td, yd, **style)
+
+
+def _time_axes(data: RunData, axes, name: str, *, label_steps: bool = True) -> None:
+    """Step boundaries, the fault and the x range on every axes of a time plot."""
+    spans = step_spans(data)
+    end = max([s[2] or s[1] for s in spans] + [float(data.series.t[-1])])
+    fault_t = (data.fault or {}).get("t")
+    starts = [start for _, start, _ in spans]
+    for k, ax in enumerate(axes):
+        # One collection for all boundaries: a line object per step and axes made long
+        # runs (hundreds of steps) slow to draw.
+        ax.vlines(starts, 0, 1, transform=ax.get_xaxis_transform(), **STEP_LINE)
+        if fault_t is not None:
+            # gid: the SVG group gets an id, so the marker can be found in the page.
+            ax.axvline(fault_t, **FAULT_LINE, label="fault", gid=f"{name}-fault-{k}")
+        ax.set_xlim(0, end * 1.01 if end > 0 else 1)
+    axes[-1].set_xlabel("time since run start (s)", fontsize=8)
+    if label_steps and spans:
+        _label_steps(axes[0], spans, end)
+    if fault_t is not None:
+        cause = (data.fault or {}).get("cause") or "fault"
+        right = fault_t > 0.6 * end          # label on the side with room
+        axes[0].annotate(f"fault: {cause}", xy=(fault_t, 1.0), xycoords=("data", "axes fraction"),
+                         xytext=(-4 if right else 4, 2), textcoords="offset points",
+                         ha="right" if right else "left", va="bottom", color="#d62728",
+                         fontsize=8, fontweight="bold")
+
+
+def _label_steps(ax, spans, end: float) -> None:
+    """Step numbers above the top axes; steps closer than 1.5 % of the run share a label,
+    and labels keep 4 % of the width apart (long runs: some lines go unnumbered)."""
+    groups: list[list] = []
+    for number, start, _ in spans:
+        if groups and start - groups[-1][0][1] < 0.015 * max(end, 1e-9):
+            groups[-1].append((number, start))
+        else:
+            groups.append([(number, start)])
+    last_x = -float("inf")
+    for group in groups:
+        if group[0][1] - last_x < 0.04 * max(end, 1e-9):
+            continue                     # no room: the line stays, the number goes
+        last_x = group[0][1]
+        first, last = group[0][0], group[-1][0]
+        text = str(first) if first == last else f"{first}-{last}"
+        ax.annotate(text, xy=(group[0][1], 1.0), xycoords=("data", "axes fraction"),
+                    xytext=(1, 2), textcoords="offset points", fontsize=7, color="#555555")
+
+
+# ---------------------------------------------------------------------------- plots
+def _joint_plot(data: RunData, i: int) -> Plot:
+    arm, s = data.arm, data.series
+    joint = arm.joints[i]
+    fig, (pos, vel, err) = _figure(6.4, rows=3)
+    _line(pos, s.t, s.planned[:, i], PLANNED)
+    _line(pos, s.t, s.measured[:, i], MEASURED)
+    lo, hi = joint.limits_deg
+    pos.axhline(lo, **LIMIT, label=f"limits {lo:g}/{hi:g}°")
+    pos.axhline(hi, **LIMIT)
+    pos.set_ylabel("position (°)", fontsize=8)
+
+    _line(vel, s.t, s.planned_vel[:, i], PLANNED)
+    _line(vel, s.t, s.measured_vel[:, i], MEASURED)
+    vmax = joint.max_velocity_deg_s
+    vel.axhline(vmax, **LIMIT, label=f"arm limit ±{vmax:g}°/s")
+    vel.axhline(-vmax, **LIMIT)
+    limits, begins, ends = [], [], []
+    for step in data.steps:
+        limit = (step.move or {}).get("velocity_limit_deg_s")
+        if not limit or step.started_t is None:
+            continue
+        end = step.finished_t if step.finished_t is not None else float(s.t[-1])
+        limits += [limit[i], -limit[i]]
+        begins += [step.started_t] * 2
+        ends += [end] * 2
+    if limits:
+        vel.hlines(limits, begins, ends, **MOVE_LIMIT, label="planner limit of the move")
+    vel.set_ylabel("velocity (°/s)", fontsize=8)
+
+    error = s.planned[:, i] - s.measured[:, i]
+    _line(err, s.t, error, dict(color="#2ca02c", linewidth=0.9,
+                                label="planned − measured"))
+    bound = arm.control.max_following_error_deg
+    worst = float(np.nanmax(np.abs(error))) if np.any(np.isfinite(error)) else 0.0
+    if worst > 0.25 * bound:
+        err.axhline(bound, **LIMIT, label=f"bound ±{bound:g}°")
+        err.axhline(-bound, **LIMIT)
+    err.set_ylabel("following error (°)", fontsize=8)
+
+    _time_axes(data, (pos, vel, err), f"plot-{joint.name}")
+    for ax in (pos, vel, err):
+        ax.legend(fontsize=7, loc="upper right", framealpha=0.7)
+    locked = f", locked at {joint.locked:g}°" if joint.locked is not None else ""
+    title = f"{joint.name} (module {joint.module}{locked})"
+    fig.suptitle(title, fontsize=10)
+    caption = (f"{joint.name}: position, velocity and following error, planned (dashed) vs "
+               f"measured; worst |planned − measured| {worst:.3f}° (bound {bound:g}°). "
+               "Measured velocity: windowed estimate over "
+               f"{data.velocity_window_s * 1e3:.0f} ms.")
+    return Plot(f"plot-{joint.name}", title, caption, _to_svg(fig, joint.name))
+
+
+def _guard_plot(data: RunData) -> Plot:
+    arm, s = data.arm, data.series
+    fig, (ax,) = _figure(3.6)
+    heights = guard_heights(arm, s.measured)
+    guard_colours = ["#d62728", "#8c564b", "#e377c2", "#7f7f7f"]
+    point_colours = ["#1f77b4", "#2ca02c", "#9467bd", "#17becf", "#bcbd22", "#ff7f0e"]
+    lines, k = [], 0
+    for g, guard in enumerate(arm.workspace.guards):
+        ax.axhline(guard.min_z_mm, color=guard_colours[g % len(guard_colours)],
+                   linestyle="-.", linewidth=1.2,
+                   label=f"guard '{guard.name}': {guard.min_z_mm:g} mm")
+        for point in guard.points:
+            z = heights[guard.name][point]
+            _line(ax, s.t, z, dict(color=point_colours[k % len(point_colours)], linewidth=1.1,
+                                   label=f"{point.replace('_', ' ')} ({guard.name})"))
+            k += 1
+            if z.size:
+                lines.append(f"{point} lowest {np.nanmin(z):.1f} mm")
+    ax.set_ylabel("height above the base plane (mm)", fontsize=8)
+    _time_axes(data, [ax], "plot-guards")
+    ax.legend(fontsize=7, loc="upper right", framealpha=0.7)
+    fig.suptitle("Guard points", fontsize=10)
+    caption = ("Height of every guarded point (forward kinematics of the measured joints) "
+               "against each guard's line; " + "; ".join(lines) + ".")
+    return Plot("plot-guards", "Guard points", caption, _to_svg(fig, "guards"))
+
+
+def _period_plot(data: RunData, periods: np.ndarray) -> Plot:
+    fig, (ax,) = _figure(3.0)
+    ms = periods * 1e3
+    ax.hist(ms, bins=80, color="#1f77b4")
+    ax.set_yscale("log")
+    if data.cycle_s:
+        ax.axvline(data.cycle_s * 1e3, **LIMIT, label=f"cycle {data.cycle_s * 1e3:g} ms")
+        ax.legend(fontsize=7, loc="upper right")
+    stats = period_stats(periods)
+    ax.set_xlabel("control loop period (ms)", fontsize=8)
+    ax.set_ylabel("cycles", fontsize=8)
+    fig.suptitle("Control loop period", fontsize=10)
+    caption = (f"Time between consecutive cycles of a move (their readings in "
+               f"events.jsonl): {stats['count']} periods, "
+               f"median {stats['median_ms']:.2f} ms, p99 {stats['p99_ms']:.2f} ms, "
+               f"max {stats['max_ms']:.2f} ms.")
+    if data.fault:
+        caption += " (Not a plot against time: the fault is marked on the others.)"
+    return Plot("plot-loop-period", "Control loop period", caption, _to_svg(fig, "period"))

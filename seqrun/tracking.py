@@ -1,0 +1,111 @@
+"""How well a move followed its plan: following error, final error, peak velocity (pure).
+
+The executor feeds one sample per control cycle (the values it also writes to the event
+log, so the figures in report.json can be recomputed from events.jsonl) and reads the
+figures when the move ends; the report recomputes the same series from the log.
+
+Velocity is a *windowed* estimate: the least-squares slope of the measured positions over
+the last ``window_s`` seconds of samples. One cycle's difference quotient is useless on a
+real host: a sample whose timestamp was taken late (the loop stalled after the answers
+arrived) and the punctual sample after it are a few milliseconds apart in time but a whole
+cycle apart in position, which turns a 15 °/s move into "50 °/s". Over a window of several
+cycles a few milliseconds of timestamp error change the slope by a few percent at most.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+#: Window of the velocity estimate at 100 Hz: 11 samples, jitter averaged out, lag 50 ms.
+VELOCITY_WINDOW_S = 0.1
+#: Estimates need samples spanning at least this fraction of the window.
+MIN_SPAN_FRACTION = 0.5
+#: Samples this close to the window's edge still count (float times of a virtual clock).
+_EDGE_S = 1e-9
+
+
+def velocity_window(cycle_s: float) -> float:
+    """The estimate's window for a control loop of period ``cycle_s``: at least two and a
+    half cycles (a 10 Hz dry run has one sample per 100 ms; the half keeps a window of
+    exactly two periods from losing a sample to microseconds of timing)."""
+    return max(VELOCITY_WINDOW_S, 2.5 * cycle_s)
+
+
+def windowed_velocity(t: np.ndarray, q: np.ndarray, window_s: float) -> np.ndarray:
+    """Least-squares slope of ``q`` (samples × joints, or samples) over the samples in
+    ``[t[k] - window_s, t[k]]`` for every sample ``k``; NaN where those samples span less
+    than ``MIN_SPAN_FRACTION`` of the window (the first samples of a series)."""
+    t = np.asarray(t, dtype=float)
+    q = np.asarray(q, dtype=float)
+    flat = q.ndim == 1
+    if flat:
+        q = q[:, None]
+    n = len(t)
+    v = np.full(q.shape, np.nan)
+    if n < 2:
+        return v[:, 0] if flat else v
+    first = np.searchsorted(t, t - window_s - _EDGE_S, side="left")
+    ok = (t - t[first]) >= MIN_SPAN_FRACTION * window_s - _EDGE_S
+    width = int(np.max(np.arange(n) - first)) + 1
+    # Gather each sample's window as a row (padded with the window's first sample,
+    # masked out): samples × width, vectorised over the whole series.
+    offsets = np.arange(width)[None, :]
+    index = first[:, None] + offsets
+    valid = index <= np.arange(n)[:, None]
+    index = np.where(valid, index, first[:, None])
+    tw = t[index]
+    count = valid.sum(axis=1)
+    t_mean = np.where(valid, tw, 0.0).sum(axis=1) / count
+    dt = np.where(valid, tw - t_mean[:, None], 0.0)
+    sxx = (dt * dt).sum(axis=1)
+    usable = ok & (sxx > 0)
+    for j in range(q.shape[1]):
+        qw = q[index, j]
+        q_mean = np.where(valid, qw, 0.0).sum(axis=1) / count
+        sxy = (dt * np.where(valid, qw - q_mean[:, None], 0.0)).sum(axis=1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            v[:, j] = np.where(usable, sxy / np.where(sxx > 0, sxx, 1.0), np.nan)
+    return v[:, 0] if flat else v
+
+
+def peak_abs(v: np.ndarray) -> np.ndarray:
+    """Largest |v| per joint, ignoring NaN (0 where there is no estimate at all)."""
+    v = np.abs(np.asarray(v, dtype=float))
+    if v.size == 0:
+        return np.zeros(v.shape[1:] if v.ndim > 1 else ())
+    return np.nan_to_num(np.max(np.where(np.isnan(v), -np.inf, v), axis=0), neginf=0.0)
+
+
+@dataclass
+class MoveTracking:
+    """The samples of one move (every streamed cycle, controlled stop included)."""
+
+    window_s: float
+    t: list[float] = field(default_factory=list)
+    planned: list[np.ndarray] = field(default_factory=list)
+    measured: list[np.ndarray] = field(default_factory=list)
+
+    def add(self, t: float, planned_deg, measured_deg) -> None:
+        self.t.append(float(t))
+        self.planned.append(np.asarray(planned_deg, dtype=float))
+        self.measured.append(np.asarray(measured_deg, dtype=float))
+
+    def figures(self, target_deg) -> dict[str, list[float]]:
+        """Per joint: largest |planned − measured|, final |target − measured| (at the last
+        sample) and the peak of the windowed measured velocity, rounded for the report."""
+        if not self.t:
+            return {}
+        planned = np.array(self.planned)
+        measured = np.array(self.measured)
+        velocity = windowed_velocity(np.array(self.t), measured, self.window_s)
+        return {
+            "max_following_error_deg": _r(np.max(np.abs(planned - measured), axis=0)),
+            "final_error_deg": _r(np.abs(np.asarray(target_deg, dtype=float) - measured[-1])),
+            "peak_measured_velocity_deg_s": _r(peak_abs(velocity)),
+        }
+
+
+def _r(a: np.ndarray, nd: int = 3) -> list[float]:
+    return [round(float(x), nd) for x in a]
