@@ -13,10 +13,11 @@ from typing import Callable, Iterable
 from seqrun import __version__
 from seqrun.arm import ArmDescription
 from seqrun.connection import Connection
-from seqrun.executor import Executor, Listener, RunResult
+from seqrun.executor import EXIT_FAULT, Executor, Listener, RunResult, StepResult
 from seqrun.powercube.client import PowerCubeClient
 from seqrun.runlog import RunLog
 from seqrun.schema import LoadedSequence
+from seqrun.stop_requests import StopRequests
 
 
 @dataclass
@@ -32,13 +33,15 @@ def build_executor(loaded: LoadedSequence, arm: ArmDescription, connection: Conn
                    cycle_hz: float | None = None,
                    confirm: Callable[[str], bool] | None = None,
                    before_step: Callable | None = None,
-                   listeners: Iterable[Listener] = (), dry_run: bool = False
+                   listeners: Iterable[Listener] = (), dry_run: bool = False,
+                   requests: StopRequests | None = None
                    ) -> tuple[Executor, PowerCubeClient]:
     client = PowerCubeClient(connection.bus, connection.clock,
                              response_timeout=arm.can.response_timeout_s)
     executor = Executor(client, arm, connection.clock, poses_dir=loaded.poses_dir, speed=speed,
                         command_mode=command_mode, cycle_hz=cycle_hz, confirm=confirm,
-                        before_step=before_step, listeners=list(listeners), dry_run=dry_run)
+                        before_step=before_step, listeners=list(listeners), dry_run=dry_run,
+                        requests=requests)
     client.on_discard = executor.on_discard
     return executor, client
 
@@ -50,23 +53,30 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
                  confirm: Callable[[str], bool] | None = None,
                  before_step: Callable | None = None,
                  listeners: Iterable[Listener] = (), dry_run: bool = False,
-                 on_executor: Callable[[Executor], None] | None = None) -> RunOutcome:
+                 on_executor: Callable[[Executor], None] | None = None,
+                 requests: StopRequests | None = None,
+                 warn: Callable[[str], None] | None = None) -> RunOutcome:
     """Run ``loaded`` on ``connection``; writes the run folder when ``log_dir`` is given.
 
-    ``on_executor`` is called with the executor before the run starts (signal handlers,
-    displays and tests hook in there). The connection is not closed.
+    ``on_executor`` is called with the executor before the run starts (displays and tests
+    hook in there); ``requests`` is the inbox signal handlers post stop requests to;
+    ``warn`` is told once when writing the run folder fails. The connection is not closed.
+    Whichever way the run ends (even by an exception), the run folder is finished.
     """
     executor, client = build_executor(loaded, arm, connection, speed=speed,
                                       command_mode=command_mode, cycle_hz=cycle_hz,
                                       confirm=confirm, before_step=before_step,
-                                      listeners=listeners, dry_run=dry_run)
+                                      listeners=listeners, dry_run=dry_run,
+                                      requests=requests)
     log = None
     if log_dir is not None:
         log = RunLog(log_dir, {"sequence": loaded.name, "file": file or loaded.file,
                                "arm": arm.name, "bus": connection.description,
                                "simulator": connection.is_simulator,
                                "faults": [f.spec for f in connection.faults], "speed": speed,
-                               "first_step": first_step, "seqrun": __version__})
+                               "first_step": first_step, "seqrun": __version__},
+                     clock=connection.clock,
+                     channel=getattr(connection.bus, "channel", None) or "can0", warn=warn)
         client.add_frame_listener(log.on_frame)
         executor.listeners.insert(0, log.on_event)
     if on_executor is not None:
@@ -75,6 +85,10 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
     report = None
     try:
         result = executor.run(loaded, first_step=first_step)
+    except BaseException as exc:
+        if log is not None:
+            log.finish(executor.interrupted_result or _unfinished(executor, loaded, exc))
+        raise
     finally:
         if log is not None:
             if result is not None:
@@ -82,3 +96,15 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
             log.close()
         client.close()
     return RunOutcome(result, report, log_dir, executor)
+
+
+def _unfinished(executor: Executor, loaded: LoadedSequence, exc: BaseException) -> RunResult:
+    """The result of a run an exception ended outside any step (the executor did not get
+    to say): failed, exit 3, whatever it was."""
+    steps = [StepResult(s.number, s.kind, getattr(s, "title", None) or s.kind,
+                        str(s.location)) for s in loaded.steps]
+    message = f"interrupted ({exc!r}) before the run could finish"
+    return RunResult("failed", EXIT_FAULT, message, steps, 0.0,
+                     executor.clock.now() - executor._t0,
+                     {"cause": "interrupted", "module": None, "message": message,
+                      "step": None, "halt_sent": False})

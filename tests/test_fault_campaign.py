@@ -91,6 +91,7 @@ from seqrun.cli.app import app
 from seqrun.errors import CodecError
 from seqrun.powercube.codec import GetParam, ack_key, decode_ack, decode_request, expected_ack_key
 from seqrun.powercube.protocol import ACK_BASE, BROADCAST_ID, GET_BASE, SET_BASE
+from seqrun.runlog import read_trace
 from seqrun.sim.faults import parse_fault_spec
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -144,7 +145,7 @@ class Run:
 
     @cached_property
     def trace(self) -> list[can.Message]:
-        return list(can.LogReader(str(self.folder / "trace.log")))
+        return read_trace(self.folder, run_clock=True)
 
     @cached_property
     def sent(self) -> list[can.Message]:

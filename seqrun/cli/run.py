@@ -8,11 +8,10 @@ Ctrl-C or SIGTERM halts instead).
 from __future__ import annotations
 
 import os
-import signal
 import sys
 from dataclasses import replace
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated, Callable, Optional
 
 import typer
 from rich.console import Console
@@ -21,26 +20,33 @@ from seqrun.cli.app import app
 from seqrun.cli.common import (BitrateOption, BusKwargsOption, ChannelOption, InterfaceOption,
                                SimOption, fail, load_arm_file, user_errors)
 from seqrun.cli.display import LiveDisplay, PlainDisplay
+from seqrun.cli.interrupts import RunSignals
 from seqrun.connection import open_connection, parse_bus_kwargs, parse_faults
 from seqrun.clock import VirtualClock
 from seqrun.executor import EXIT_INVALID, EXIT_OPERATOR_ABORT
-from seqrun.runlog import default_run_dir
+from seqrun.runlog import prepare_run_folder
 from seqrun.runner import run_sequence
 from seqrun.schema import load_sequence
+from seqrun.stop_requests import StopRequests
 
 
 
-def _ask(console: Console, question: str, assume_yes: bool) -> bool:
-    """Ask the operator; EOF on stdin (no operator) is a no."""
+def _ask(console: Console, question: str, assume_yes: bool,
+         read: Callable[[], str | None] | None = None) -> bool:
+    """Ask the operator; EOF on stdin (no operator) is a no. ``read`` returns None when
+    a signal interrupted the question (a no as well)."""
     if assume_yes:
         console.print(f"{question} yes (--yes)", highlight=False, markup=False)
         return True
     console.print(f"{question} [y/N] ", end="", highlight=False, markup=False)
-    try:
-        answer = sys.stdin.readline()
-    except KeyboardInterrupt:
-        return False
-    return answer.strip().lower() in ("y", "yes")
+    if read is None:
+        try:
+            answer = sys.stdin.readline()
+        except KeyboardInterrupt:
+            return False
+    else:
+        answer = read()
+    return answer is not None and answer.strip().lower() in ("y", "yes")
 
 
 def static_validation(loaded, arm, start: str | None, started: bool, from_step: int):
@@ -143,7 +149,6 @@ def run_command(
         connection.close()
         raise typer.Exit(EXIT_OPERATOR_ABORT)
 
-    folder = log_dir or default_run_dir(loaded.name)
     if rt_priority is not None:
         try:
             os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(rt_priority))
@@ -152,44 +157,31 @@ def run_command(
         except (OSError, AttributeError) as exc:
             console.print(f"warning: real-time scheduling not available ({exc}); running at "
                           "normal priority", style="yellow", highlight=False)
-    try:
-        folder.mkdir(parents=True, exist_ok=True)  # an unusable --log-dir: exit 2, nothing sent
+    try:  # an unusable --log-dir: exit 2, nothing sent; a used one gets a new folder inside
+        folder = prepare_run_folder(log_dir, loaded.name)
     except OSError as exc:
         connection.close()
-        fail(f"cannot create the run folder {folder}: {exc.strerror or exc}")
+        fail(f"cannot create the run folder {log_dir or 'in runs/'}: {exc.strerror or exc}")
+    if log_dir is not None and folder != log_dir:
+        console.print(f"{log_dir} holds an earlier run: this run goes to {folder}",
+                      highlight=False, markup=False)
+
+    # From here on signals only post stop requests (seqrun/cli/interrupts.py); the control
+    # loop acts on them, a question is answered "no".
+    requests = StopRequests()
+    signals = RunSignals(requests)
 
     def confirm(prompt: str) -> bool:
-        return _ask(console, prompt, yes)
+        return _ask(console, prompt, yes, signals.read_answer)
 
     def before_step(s) -> bool:
-        return _ask(console, f"Run step {s.number}: {s.title}?", False) if step else True
-
-    interrupts = 0
-    holder: dict = {}
-
-    def on_sigint(signum, frame) -> None:
-        nonlocal interrupts
-        interrupts += 1
-        executor = holder.get("executor")
-        if executor is None:
-            raise KeyboardInterrupt
-        if interrupts == 1:
-            executor.abort("Ctrl-C: controlled stop")
-            if executor.waiting_for_operator:
-                raise KeyboardInterrupt
-        else:
-            executor.halt("second Ctrl-C: Halt")
-
-    def on_sigterm(signum, frame) -> None:
-        executor = holder.get("executor")
-        if executor is not None:
-            executor.halt("SIGTERM: Halt")
+        return (_ask(console, f"Run step {s.number}: {s.title}?", False, signals.read_answer)
+                if step else True)
 
     live = console.is_terminal and not plain
     displays: list = []
 
     def attach(executor) -> None:
-        holder["executor"] = executor
         display = (LiveDisplay(console, executor, f"seqrun: {loaded.name}",
                                connection.description, len(loaded.steps))
                    if live else PlainDisplay(console, len(loaded.steps)))
@@ -198,26 +190,34 @@ def run_command(
         if live:
             display.__enter__()
 
-    old_int = signal.signal(signal.SIGINT, on_sigint)
-    old_term = signal.signal(signal.SIGTERM, on_sigterm)
+    def warn(text: str) -> None:
+        console.print(f"  !!  {text}", style="yellow", highlight=False, markup=False)
+
+    signals.install()
     try:
         outcome = run_sequence(loaded, arm, connection, log_dir=folder, file=str(file),
                                speed=speed, first_step=from_step, command_mode=command_mode,
-                               confirm=confirm, before_step=before_step, on_executor=attach)
+                               confirm=confirm, before_step=before_step, on_executor=attach,
+                               requests=requests, warn=warn)
     finally:
         if live and displays:
             displays[0].__exit__(None, None, None)
-        signal.signal(signal.SIGINT, old_int)
-        signal.signal(signal.SIGTERM, old_term)
+        signals.restore()
         connection.close()
     result = outcome.result
-    colour = "green" if result.exit_code == 0 else "red"
-    console.print(f"[{colour}]{result.status.upper()}[/{colour}] (exit {result.exit_code}): "
-                  f"{result.message}", highlight=False)
-    if result.extra.get("errors"):
-        for error in result.extra["errors"]:
-            console.print(f"  {error['file']}:{error['line']}:{error['column']}: "
-                          f"{error['message']}", highlight=False)
-    console.print(f"duration {result.duration_s:.2f} s, planned motion "
-                  f"{result.planned_duration_s:.2f} s; log: {folder}", highlight=False)
+    try:  # a terminal that is gone (SIGHUP) must not change the exit code
+        colour = "green" if result.exit_code == 0 else "red"
+        console.print(f"[{colour}]{result.status.upper()}[/{colour}] (exit {result.exit_code}): "
+                      f"{result.message}", highlight=False)
+        if result.extra.get("errors"):
+            for error in result.extra["errors"]:
+                console.print(f"  {error['file']}:{error['line']}:{error['column']}: "
+                              f"{error['message']}", highlight=False)
+        console.print(f"duration {result.duration_s:.2f} s, planned motion "
+                      f"{result.planned_duration_s:.2f} s; log: {folder}", highlight=False)
+        if outcome.report and outcome.report.get("log_errors"):
+            console.print(f"the run log is incomplete: {outcome.report['log_errors'][0]}",
+                          style="yellow", highlight=False, markup=False)
+    except (OSError, ValueError):
+        pass
     raise typer.Exit(result.exit_code)
