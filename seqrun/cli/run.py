@@ -164,7 +164,7 @@ def run_command(
         fail(f"cannot create the run folder {log_dir or 'in runs/'}: {exc.strerror or exc}")
     if log_dir is not None and folder != log_dir:
         console.print(f"{log_dir} holds an earlier run: this run goes to {folder}",
-                      highlight=False, markup=False)
+                      highlight=False, markup=False, soft_wrap=True)
 
     # From here on signals only post stop requests (seqrun/cli/interrupts.py); the control
     # loop acts on them, a question is answered "no".
@@ -191,7 +191,8 @@ def run_command(
             display.__enter__()
 
     def warn(text: str) -> None:
-        console.print(f"  !!  {text}", style="yellow", highlight=False, markup=False)
+        console.print(f"  !!  {text}", style="yellow", highlight=False, markup=False,
+                      soft_wrap=True)
 
     signals.install()
     try:
@@ -217,7 +218,7 @@ def run_command(
                       f"{result.planned_duration_s:.2f} s; log: {folder}", highlight=False)
         if outcome.report and outcome.report.get("log_errors"):
             console.print(f"the run log is incomplete: {outcome.report['log_errors'][0]}",
-                          style="yellow", highlight=False, markup=False)
+                          style="yellow", highlight=False, markup=False, soft_wrap=True)
     except (OSError, ValueError):
         pass
     raise typer.Exit(result.exit_code)
