@@ -120,7 +120,12 @@ class RunLog:
         self._failed_files: set[str] = set()
         self.started_iso = _now_iso()
         # One time base: a reading c of the run's clock happened at epoch0 + (c - clock0).
+        # At virtual time epoch0 is a whole second: the trace keeps microseconds, and with
+        # a whole-second origin every stamp rounds the same way in every run (the virtual
+        # times of two frames compare as exactly as the trace allows, run after run).
         self._epoch0 = time.time()
+        if clock is not None and getattr(clock, "is_virtual", False):
+            self._epoch0 = float(int(self._epoch0))
         self._clock0 = clock.now() if clock is not None else None
         self.time_base: dict[str, Any] = {}
         self.channel = str(channel) if channel is not None else "can0"
