@@ -501,6 +501,12 @@ def test_a_signal_at_any_moment_ends_the_run_with_a_finished_folder(tmp_path, na
     if name != "SIGINT":
         assert halts(trace(folder)), "no Halt sent"
         assert report["fault"]["halt_sent"]
+    # One time base in real time too: wall-clock stamps, one channel, events line up.
+    frames = list(can.LogReader(str(folder / "trace.log")))
+    started = events(folder)[0]
+    assert abs(frames[0].timestamp - started["start_epoch_s"]) < 1.0
+    assert abs(started["start_epoch_s"] - time.time()) < 120
+    assert {m.channel for m in frames} == {frames[0].channel}
 
 
 # ----------------------------------------------------------------------------- start-up
@@ -537,3 +543,42 @@ def test_ctrl_c_while_the_commands_load_is_one_line_and_exit_130(tmp_path):
     assert proc.returncode == 130, (out, err)
     assert "Traceback" not in err and "KeyboardInterrupt" not in err
     assert err.strip().splitlines() == ["seqrun: interrupted during start-up; nothing was sent"]
+
+
+SLOW_VALIDATION = """\
+import sys, time
+import seqrun.cli.run as run_module
+real = run_module.static_validation
+def slow(*args, **kwargs):
+    print("validating", flush=True)
+    time.sleep(5)
+    return real(*args, **kwargs)
+run_module.static_validation = slow
+from seqrun.entry import main
+main(sys.argv[1:])
+"""
+
+
+@pytest.mark.slow
+def test_ctrl_c_while_run_validates_is_one_line_and_exit_130(tmp_path):
+    """Before the run's handlers are in place click said "Aborted!", exit 1 (the code of
+    an invalid sequence)."""
+    sequence = make_project(tmp_path)
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    proc = subprocess.Popen([sys.executable, "-c", SLOW_VALIDATION, "run", str(sequence),
+                             "--sim", "--yes", "--plain", "--log-dir", str(tmp_path / "run")],
+                            cwd=tmp_path, env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline().strip() == "validating"
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=20)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=10)
+    assert proc.returncode == 130, (out, err)
+    assert "Traceback" not in err and "Aborted" not in err
+    assert err.strip().splitlines() == [
+        "seqrun run: interrupted (Ctrl-C) while the arm was not moving; nothing was sent"]
+    assert not (tmp_path / "run").exists()

@@ -7,6 +7,7 @@ Ctrl-C or SIGTERM halts instead).
 
 from __future__ import annotations
 
+import functools
 import os
 import sys
 from dataclasses import replace
@@ -63,7 +64,23 @@ def static_validation(loaded, arm, start: str | None, started: bool, from_step: 
                              before.final_deg, started=True)
 
 
+def _ctrl_c_outside_the_run_is_an_operator_abort(command):
+    """Before the run's own signal handlers are in place (validation, opening the bus, the
+    REAL-arm question) and after they are gone, Ctrl-C is a KeyboardInterrupt: one line,
+    exit 130 (click would say "Aborted!", exit 1: the code of an invalid sequence)."""
+    @functools.wraps(command)
+    def wrapper(*args, **kwargs):
+        try:
+            return command(*args, **kwargs)
+        except KeyboardInterrupt:
+            typer.echo("seqrun run: interrupted (Ctrl-C) while the arm was not moving; "
+                       "nothing was sent", err=True)
+            raise typer.Exit(EXIT_OPERATOR_ABORT) from None
+    return wrapper
+
+
 @app.command("run")
+@_ctrl_c_outside_the_run_is_an_operator_abort
 def run_command(
     file: Annotated[Path, typer.Argument(help="Sequence file (YAML).")],
     interface: InterfaceOption = None,
