@@ -31,6 +31,7 @@ from seqrun.clock import Clock, RealClock, VirtualClock  # noqa: E402
 from seqrun.powercube.client import PowerCubeClient  # noqa: E402
 from seqrun.powercube.codec import GetParam, GetParamAck, PosStateDio, encode  # noqa: E402
 from seqrun.powercube.protocol import ParamId  # noqa: E402
+from seqrun.sim.arm import DEFAULT_MODULE_LATENCY  # noqa: E402
 from seqrun.sim.bus import SimBus  # noqa: E402
 
 MODULES = range(1, 8)
@@ -72,6 +73,9 @@ def run(clock: Clock, seconds: float, moving: bool, channel: str) -> dict:
             "refreshes": count,
             "rate": count / sim_elapsed,
             "limit": BITRATE / bits,
+            # The true ceiling of a synchronous refresh: the wire time of its frames plus one
+            # module answer latency (the last ack cannot start before its request is in).
+            "ceiling": 1.0 / (bits / BITRATE + DEFAULT_MODULE_LATENCY),
             "bits": bits,
             "utilisation": (network.busy_time - busy_before) / sim_elapsed,
             "frames": network.frames_transmitted - frames_before,
@@ -93,7 +97,7 @@ def main() -> int:
     print(f"full-arm refresh (7 x FPosStateDio, 14 frames) at {BITRATE // 1000} kbit/s, "
           f"{'moving' if args.moving else 'resting'} arm")
     header = (f"{'clock':<13} {'refreshes':>9} {'rate /s':>9} {'bus limit /s':>12} "
-              f"{'of limit':>8} {'bus busy':>8} {'wall us/refresh':>15}")
+              f"{'of limit':>8} {'of ceiling':>10} {'bus busy':>8} {'wall us/refresh':>15}")
     print(header)
     print("-" * len(header))
     ok = True
@@ -101,10 +105,15 @@ def main() -> int:
         share = r["rate"] / r["limit"]
         ok &= share >= GOAL
         print(f"{name:<13} {r['refreshes']:>9} {r['rate']:>9.1f} {r['limit']:>12.1f} "
-              f"{share:>8.1%} {r['utilisation']:>8.1%} {r['wall_per_refresh_us']:>15.0f}")
+              f"{share:>8.1%} {r['rate'] / r['ceiling']:>10.1%} {r['utilisation']:>8.1%} "
+              f"{r['wall_per_refresh_us']:>15.0f}")
     print(f"bus limit: {rows[0][1]['bits']} bits per refresh (14 frames incl. stuffing and "
           f"intermission); frames counted on the wire: {rows[0][1]['frames']} "
           f"= 14 x {rows[0][1]['frames'] / rows[0][1]['refreshes']:.2f}")
+    ceiling = rows[0][1]["ceiling"]
+    print(f"ceiling: {ceiling:.1f} refreshes/s = {ceiling / rows[0][1]['limit']:.1%} of the bus "
+          f"limit: a refresh also waits one module answer latency "
+          f"({DEFAULT_MODULE_LATENCY * 1e6:.0f} us), which no pipelining hides")
     print(f"goal >= {GOAL:.0%} of the bus limit: {'met' if ok else 'NOT met'}")
     return 0 if ok else 1
 

@@ -12,7 +12,10 @@ One refresh = the position of every joint the reader uses, on the simulated LWA 
   state and dio) sent back to back, then the seven acknowledges collected (pipelined);
 - bus limit: ``bitrate / sum of the frames' bit lengths`` (``seqrun.can_timing``: stuff
   bits, CRC, EOF, intermission) of one seqrun refresh; the same bound is given for each
-  pattern's own frames. The modules' processing latency is not in it.
+  pattern's own frames. The modules' processing latency is not in it;
+- ceiling: the bus limit with one module answer latency (100 us) added per refresh: a
+  synchronous refresh cannot hide the last acknowledge's latency, so this (about 93 % of
+  the bus limit) is what a perfect host could reach.
 
 Each pattern runs in virtual time (the simulated arm alone: what the protocol allows) and
 in real time (this machine's Python with the simulator in the same process).
@@ -37,6 +40,7 @@ from seqrun.clock import RealClock, VirtualClock  # noqa: E402
 from seqrun.powercube.client import PowerCubeClient  # noqa: E402
 from seqrun.powercube.codec import GetParam, GetParamAck, PosStateDio, encode  # noqa: E402
 from seqrun.powercube.protocol import ParamId  # noqa: E402
+from seqrun.sim.arm import DEFAULT_MODULE_LATENCY  # noqa: E402
 from seqrun.sim.bus import SimBus  # noqa: E402
 
 ALL_MODULES = tuple(range(1, 8))
@@ -148,6 +152,9 @@ def main() -> int:
         print(f"{label:<48}{v['modules']:>8}{v['rate']:>12.3f}{r['rate']:>10.3f}"
               f"{r['rate'] / limit:>13.1%}{v['wire_limit']:>13.1f}"
               f"{r['rate'] / thesis_rate:>10.0f}x")
+    ceiling = 1.0 / (seqrun_bits / bitrate + DEFAULT_MODULE_LATENCY)
+    print(f"{'ceiling: bus limit + one module latency':<48}{7:>8}{ceiling:>12.1f}{ceiling:>10.1f}"
+          f"{ceiling / limit:>13.1%}{limit:>13.1f}{ceiling / thesis_rate:>10.0f}x")
     print(f"{'bus limit (7 x FPosStateDio, 14 frames)':<48}{7:>8}{limit:>12.1f}{limit:>10.1f}"
           f"{1:>13.1%}{limit:>13.1f}{limit / thesis_rate:>10.0f}x")
     print(f"\nbus limit: {seqrun_bits} bits per seqrun refresh (14 frames incl. stuffing and "
@@ -161,6 +168,8 @@ def main() -> int:
         "seconds": args.seconds,
         "command": "python bench/bench_telemetry.py " + " ".join(sys.argv[1:]),
         "bus_limit_per_s": round(limit, 2), "bus_limit_bits": seqrun_bits,
+        "ceiling_per_s": round(ceiling, 2),
+        "module_latency_s": DEFAULT_MODULE_LATENCY,
         "patterns": dict(PATTERNS), "results": rows})
     print(f"results: {RESULTS / 'telemetry.json'}")
     return 0
