@@ -177,7 +177,7 @@ class Executor:
         listener (safe in a signal handler); the run loop acts within a cycle."""
         self.requests.abort(reason)
 
-    def halt(self, reason: str = "halt requested", cause: str = OPERATOR_HALT) -> None:
+    def halt(self, reason: str = "STOP", cause: str = OPERATOR_HALT) -> None:
         """Immediate Halt (second Ctrl-C, SIGTERM, STOP button); like :meth:`abort` safe
         in a signal handler. A ``cause`` other than operator_halt ends the run as a fault."""
         self.requests.halt(reason, cause)
@@ -369,7 +369,7 @@ class Executor:
         if self._halt_requested:
             halt = self._halt
             if halt.cause == OPERATOR_HALT:
-                raise RunAborted(OPERATOR_HALT, "Halt requested by the operator")
+                raise RunAborted(OPERATOR_HALT, f"Halt requested by the operator ({halt.reason})")
             raise RunAborted(halt.cause, f"{halt.reason}: Halt")
 
     # ------------------------------------------------------------------ motion
@@ -725,7 +725,8 @@ class Executor:
                     # A Halt asked for while nothing moved (a question, between steps): it
                     # is sent and reported like any Halt.
                     halted = self.emergency_halt()
-                    message += "; Halt sent" if halted else "; Halt could not be sent"
+                    message += (f"; {self._halt.reason}: Halt "
+                                + ("sent" if halted else "could not be sent"))
                     cause = self._halt.cause
                     if cause != OPERATOR_HALT:
                         status, code = "failed", EXIT_FAULT

@@ -263,7 +263,7 @@ def test_a_halt_signal_at_a_question_then_end_of_input_reports_the_halt(tmp_path
     assert run.result.exit_code == code
     assert run.result.fault["cause"] == cause and run.result.fault["halt_sent"]
     report = assert_finished_folder(tmp_path / "run", code)
-    assert report["fault"]["cause"] == cause
+    assert report["fault"]["cause"] == cause and name in report["fault"]["message"]
     assert [m for m in read_trace(tmp_path / "run") if _is_halt(m)]
 
 

@@ -52,9 +52,9 @@ class RunSignals:
             if self.interrupts == 1:
                 self.requests.abort("Ctrl-C: controlled stop")
             else:
-                self.requests.halt("second Ctrl-C: Halt")
+                self.requests.halt("second Ctrl-C")
         elif signum == signal.SIGTERM:
-            self.requests.halt("SIGTERM: Halt")
+            self.requests.halt("SIGTERM")
         else:
             name = signal.Signals(signum).name
             what = " (terminal closed)" if name == "SIGHUP" else ""
