@@ -295,3 +295,29 @@ def test_an_exception_leaving_a_step_still_finishes_the_run_folder(tmp_path, mon
     report = assert_finished_folder(tmp_path / "run", EXIT_FAULT)
     assert report["status"] == "failed" and report["fault"]["cause"] == "interrupted"
     assert report["fault"]["halt_sent"]
+
+
+def test_ctrl_c_while_the_yes_answer_prints_ends_the_run_before_the_move(tmp_path):
+    """Issue: Ctrl-C while the --yes confirm line was printing escaped the question (a
+    KeyboardInterrupt out of the print): a Halt was sent and the report stayed running.
+    Now the signal is a request; the run stops before the next step, nothing moves."""
+    loaded = load_sequence(ROOT / "sequences" / "totem.yaml")
+    arm = load_arm(loaded.arm_path)
+    connection = open_connection(force_sim=True, clock=VirtualClock())
+    requests = StopRequests()
+    signals = RunSignals(requests)
+
+    def confirm_yes(prompt: str) -> bool:   # _ask with --yes: print, no read
+        signals.handle(signal.SIGINT)        # arrives in the middle of the print
+        return True
+
+    try:
+        run = run_sequence(loaded, arm, connection, log_dir=tmp_path / "run",
+                           confirm=confirm_yes, requests=requests)
+    finally:
+        connection.close()
+    assert run.result.exit_code == EXIT_OPERATOR_ABORT and run.result.fault is None
+    report = assert_finished_folder(tmp_path / "run", EXIT_OPERATOR_ABORT)
+    move = next(s for s in report["steps"] if s["kind"] == "move")
+    assert move["status"] == "aborted" and move["duration_s"] is None   # never started
+    assert not [m for m in read_trace(tmp_path / "run") if _is_halt(m)]
