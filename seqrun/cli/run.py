@@ -1,8 +1,8 @@
 """``seqrun run FILE``: run a sequence on the arm (or the built-in simulator).
 
 Exit codes: 0 success, 1 invalid sequence (no motion), 2 usage error, 3 aborted by a fault,
-timeout or failed checkpoint (arm halted), 130 operator abort (controlled stop; a second
-Ctrl-C or SIGTERM halts instead).
+timeout or failed checkpoint (arm halted), or by SIGHUP / SIGQUIT (Halt), 130 operator abort
+(controlled stop; a second Ctrl-C or SIGTERM halts instead). Signals: cli/interrupts.py.
 """
 
 from __future__ import annotations
