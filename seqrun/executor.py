@@ -19,6 +19,7 @@ Listeners receive structured events (plain dicts) for the log writer and display
 
 from __future__ import annotations
 
+import collections
 import math
 import threading
 import time
@@ -34,6 +35,7 @@ from seqrun.arm import ArmDescription
 from seqrun.clock import Clock
 from seqrun.errors import (BusError, ModuleFaultError, ModuleTimeoutError, PlanningError,
                            RunAborted, SeqrunError)
+from seqrun.halt import HaltConfirmation, halt_and_confirm
 from seqrun.planner import Limits, MovePlan, plan_move, plan_stop
 from seqrun.setpoints import setpoint_law
 from seqrun.stop_requests import OPERATOR_HALT, StopRequest, StopRequests
@@ -101,6 +103,9 @@ class RunResult:
     not_verified: list[str] = field(default_factory=list)
     min_heights_mm: dict[str, float] = field(default_factory=dict)
     extra: dict[str, Any] = field(default_factory=dict)
+    #: Modules that reported a fault (ERROR, HALTED, ...) when the run started, before
+    #: seqrun sent anything but reads: ``[{"module", "joint", "flags"}]``.
+    latched_at_start: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def duration_s(self) -> float:
@@ -120,6 +125,8 @@ class Executor:
 
     #: Idempotent reads are retried this often when an acknowledge is lost (drop_acks).
     READ_RETRIES = 1
+    #: Shortest time base (s) of the measured peak velocity of a move.
+    PEAK_WINDOW_S = 0.05
 
     def __init__(self, client, arm: ArmDescription, clock: Clock, *,
                  poses_dir: Path | None = None, speed: float = 1.0,
@@ -127,6 +134,7 @@ class Executor:
                  confirm: Callable[[str], bool] | None = None,
                  before_step: Callable[[Any], bool] | None = None,
                  listeners: Iterable[Listener] = (), dry_run: bool = False,
+                 confirm_clear_latched: Callable[[str], bool] | None = None,
                  requests: StopRequests | None = None) -> None:
         if not 0 < speed <= 1:
             raise ValueError("speed must lie in (0, 1]")
@@ -139,6 +147,12 @@ class Executor:
         self.cycle = 1.0 / (cycle_hz or arm.control.cycle_hz)
         self.confirm = confirm
         self.before_step = before_step
+        #: Asked before a Reset clears a fault the modules had latched before the run
+        #: (real hardware: someone may have pressed the emergency stop for a reason).
+        #: None: not asked (simulator, dry run); the fault is still reported.
+        self.confirm_clear_latched = confirm_clear_latched
+        self.latched_at_start: list[dict[str, Any]] = []
+        self._latched_cleared_ok = False
         self.listeners: list[Listener] = list(listeners)
         self.dry_run = dry_run
         self.chain = kinematics.Chain.from_arm(arm)
@@ -170,6 +184,8 @@ class Executor:
         self._move_limits = self.limits
         self._keeper: threading.Thread | None = None
         self._keeper_stop = threading.Event()
+        #: The emergency Halt of this run and what confirmed it (None: no Halt yet).
+        self.halt_result: HaltConfirmation | None = None
 
     # ------------------------------------------------------------------ control (any thread)
     def abort(self, reason: str = "operator abort") -> None:
@@ -326,6 +342,22 @@ class Executor:
                 if bad or (require_homed and not flags & StateFlag.HOME_OK):
                     raise self.module_fault(module, flags)
 
+    def _fault_after_halt(self, module: int, short: ShortState) -> RunAborted:
+        """The fault of a module whose acknowledge said NOT_OK during a move, named from
+        its state word (read after the Halt)."""
+        try:
+            flags = self.read_state_word(module)
+        except BusError as exc:
+            return RunAborted("module_fault", f"module {module}: NOT_OK in its acknowledge "
+                              f"[short state {short.describe()}]; its state word could not be "
+                              f"read: {exc}", module=module)
+        if flags & StateFlag.FAULTS or not flags & StateFlag.HOME_OK:
+            return self.module_fault(module, flags)
+        joint = self.arm.joint_names[self.modules.index(module)]
+        return RunAborted("motion_refused", f"module {module} ({joint}): refused a motion "
+                          f"command during the move (NOT_OK in its acknowledge) "
+                          f"[state {StateFlag(flags).describe()}]", module=module)
+
     #: Most specific first: the cause named in the report.
     _FAULT_CAUSES = ("TOW_ERROR", "BEYOND_HARD", "BEYOND_SOFT", "POWERFAULT", "COMM_ERROR",
                      "CPU_OVERLOAD", "HALTED", "ERROR")
@@ -405,18 +437,28 @@ class Executor:
                 "peak_velocity_deg_s": _r(np.degrees(plan.peak_velocity())),
                 "peak_measured_velocity_deg_s": _r(peak)}
 
-    def _cycle(self, requests: list, moving: list[int]) -> Measurement:
+    def _cycle(self, requests: list, moving: list[int], *, halt_early: bool = False
+                ) -> Measurement:
         """Send this cycle's motion requests plus reads of the other modules, pipelined.
 
         A lost answer to a motion command is a fault (we cannot know what the module
         does); a lost read is retried once by the other read path (a read changes nothing
         on the module), so a rare lost acknowledge does not stop the arm.
+
+        With ``halt_early`` (a move), every acknowledge is looked at as it arrives: the
+        first one that says NOT_OK halts the arm at once, before the rest of the batch is
+        collected; then the module's state word names the cause.
         """
         self._heartbeat = time.monotonic()
         moving_modules = {self.modules[i] for i in moving}
         reads = [r for m in self.modules if m not in moving_modules for r in self._reads(m)]
         batch = requests + reads
-        acks = self.client.transact_partial(batch)
+        try:
+            acks = self.client.transact_partial(
+                batch, on_ack=_raise_on_not_ok if halt_early else None)
+        except _NotOkAcknowledge as bad:
+            self.emergency_halt()
+            raise self._fault_after_halt(bad.module, bad.state) from None
         lost = [i for i, (r, a) in enumerate(zip(batch, acks)) if a is None and _acked(r)]
         if any(not isinstance(batch[i], GetParam) for i in lost):
             bad = next(batch[i] for i in lost if not isinstance(batch[i], GetParam))
@@ -460,8 +502,10 @@ class Executor:
         t_start = self.clock.now()
         bound = self.arm.control.max_following_error_deg
         measured = self.last.user_deg if self.last is not None else np.degrees(plan.start)
-        prev = measured.copy()
-        prev_t = t_start
+        # Velocity from readings at least PEAK_WINDOW_S apart: within one cycle the modules
+        # are read at slightly different moments (one request in flight per module), and
+        # a single cycle's difference quotient would count that jitter as speed.
+        history = collections.deque([(t_start, measured.copy())])
         peak = np.zeros(len(measured))
         k = 0
         while True:
@@ -480,7 +524,8 @@ class Executor:
                 t_start, k = self.clock.now(), 0
                 deadline = plan.duration + self.arm.control.settle_timeout_s
                 continue
-            m = self._cycle(self.setpoints.cycle(plan, t, moving, measured), moving)
+            m = self._cycle(self.setpoints.cycle(plan, t, moving, measured), moving,
+                            halt_early=True)
             measured = m.user_deg
             self.check_states(m)
             self.check_guards(m)
@@ -491,12 +536,15 @@ class Executor:
                 name = self.arm.joints[worst].name
                 raise RunAborted("following_error",
                                  f"{name} (module {self.modules[worst]}) does not follow its plan: "
-                                 f"{error[worst]:.2f}° from the planned position (limit {bound}°)",
+                                 f"{error[worst]:.2f}° from the planned position (limit {bound}°)"
+                                 + self._lag_diagnosis(plan, planned_deg, measured, moving),
                                  module=self.modules[worst])
-            dt = m.t - prev_t
-            if dt > 0:
-                peak = np.maximum(peak, np.abs(measured - prev) / dt)
-            prev, prev_t = measured.copy(), m.t
+            history.append((m.t, measured.copy()))
+            while len(history) > 2 and m.t - history[1][0] >= self.PEAK_WINDOW_S:
+                history.popleft()
+            t_old, old = history[0]
+            if m.t - t_old >= self.PEAK_WINDOW_S or (t >= plan.duration and m.t > t_old):
+                peak = np.maximum(peak, np.abs(measured - old) / (m.t - t_old))
             self.emit("setpoint", plan_t=round(t, 4), planned_deg=_r(planned_deg),
                       measured_deg=_r(measured))
             if t >= plan.duration:
@@ -513,6 +561,37 @@ class Executor:
             # Next cycle slot; slots missed while waiting on the bus are skipped, not
             # made up in a burst.
             k = max(k + 1, math.ceil((self.clock.now() - t_start) / self.cycle))
+
+    #: Below this share of its planned travel a lagging joint counts as hardly moving.
+    SLOW_SHARE = 0.5
+    #: Travel (deg) below which a joint counts as not moving at all.
+    STILL_DEG = 0.02
+
+    def _lag_diagnosis(self, plan: MovePlan, planned_deg: np.ndarray, measured: np.ndarray,
+                       moving: list[int]) -> str:
+        """The likely cause of a following error, for the operator: every moving joint
+        travelling the right way at a small share of its plan points at modules whose FRAMP
+        does not blend (each FRAMP restarts from standstill), one joint not moving at all
+        at a stuck or blocked joint."""
+        start = np.degrees(plan.start)
+        direction = np.sign(np.degrees(plan.target) - start)
+        planned = (planned_deg - start) * direction
+        done = (measured - start) * direction
+        shares = {i: done[i] / planned[i] for i in moving if planned[i] > self.STILL_DEG}
+        if not shares:
+            return ""
+        text = ", ".join(f"{self.arm.joints[i].name} {100 * r:.0f} %" for i, r in shares.items())
+        if (self.command_mode == "ramp" and len(shares) == len(moving)
+                and all(done[i] > self.STILL_DEG and r < self.SLOW_SHARE
+                        for i, r in shares.items())):
+            return (f"; the module does not seem to blend FRAMP commands: every moving joint "
+                    f"travels the right way at a small share of its plan ({text} of the "
+                    f"planned travel), as if each FRAMP started from standstill (see "
+                    f"docs/safety.md, 'FRAMP blending')")
+        still = [self.arm.joints[i].name for i in shares if abs(done[i]) <= self.STILL_DEG]
+        if still:
+            return f"; {', '.join(still)} did not move at all (stuck, blocked or not enabled?)"
+        return ""
 
     def _controlled_stop(self, plan: MovePlan, t: float, moving: list[int]) -> None:
         """ruckig to zero velocity from the plan's current state, streamed, then hold."""
@@ -562,14 +641,39 @@ class Executor:
 
     # ------------------------------------------------------------------ halt
     def emergency_halt(self) -> bool:
-        """Broadcast Halt; returns False if even that could not be sent."""
-        try:
-            self.client.halt(None)
-            self.client.halt(None)  # twice: a Halt is cheap and a lost frame is not
-            return True
-        except BusError as exc:
-            self.emit("halt_failed", error=str(exc))
-            return False
+        """Broadcast Halt before reading anything, then confirm it by reading every
+        module's state back (:func:`seqrun.halt.halt_and_confirm`). Done once per run: a
+        later call returns the first result. Returns whether the Halt was sent; the
+        confirmation is in :attr:`halt_result`."""
+        if self.halt_result is not None:
+            return self.halt_result.sent
+        result = self.halt_result = halt_and_confirm(self.client, self.modules)
+        names = dict(zip(self.modules, self.arm.joint_names))
+        if not result.sent:
+            self.emit("halt_failed", error=result.error, message=result.describe(names))
+        elif result.confirmed:
+            self.emit("halt_confirmed", modules=list(result.modules_confirmed),
+                      attempts=result.attempts, duration_s=_round(result.duration_s))
+        else:
+            self.emit("halt_unconfirmed", modules=list(result.modules_unconfirmed),
+                      attempts=result.attempts, duration_s=_round(result.duration_s),
+                      states={str(k): v for k, v in
+                                                        result.states.items()},
+                      message=result.describe(names))
+        return result.sent
+
+    def _halt_fields(self) -> dict[str, Any]:
+        """``halt_sent``, ``halt_confirmed``, ``modules_not_halted`` for a fault record."""
+        if self.halt_result is None:
+            return {"halt_sent": False, "halt_confirmed": False}
+        return self.halt_result.as_dict()
+
+    def _halt_note(self) -> str:
+        """What the operator must know about the Halt beyond "sent", or ''."""
+        result = self.halt_result
+        if result is None or result.confirmed:
+            return ""
+        return "; " + result.describe(dict(zip(self.modules, self.arm.joint_names)))
 
     # ------------------------------------------------------------------ run
     # ------------------------------------------------------------------ preflight
@@ -587,6 +691,7 @@ class Executor:
             and abs(float(hi.value) - j.to_module_rad(j.limits_deg[1])) < 1e-5
             for j, lo, hi in zip(self.arm.joints, limits[0::2], limits[1::2]))
         ready = all(f & StateFlag.HOME_OK and not f & StateFlag.FAULTS for f in states.values())
+        self._record_latched(states)
         started = ready and written
         start_deg = {j.name: float(v) for j, v in zip(self.arm.joints, m.user_deg)}
         result = validate_sequence(replace(loaded, steps=tuple(loaded.steps[first_step - 1:])),
@@ -606,6 +711,48 @@ class Executor:
                   states={str(k): v.describe() for k, v in states.items()},
                   errors=[str(e) for e in result.errors], notes=[str(n) for n in result.notes])
         return result
+
+    def _record_latched(self, states: dict[int, StateFlag]) -> None:
+        """Faults the modules report before the run sent anything but reads: told on the
+        terminal (event ``latched_fault``) and in the report, never cleared silently."""
+        names = dict(zip(self.modules, self.arm.joint_names))
+        self.latched_at_start = [
+            {"module": m, "joint": names.get(m, "?"),
+             "flags": StateFlag(f & StateFlag.FAULTS).describe(),
+             "state": StateFlag(f).describe()}
+            for m, f in sorted(states.items()) if f & StateFlag.FAULTS]
+        if self.latched_at_start:
+            self.emit("latched_fault", modules=self.latched_at_start,
+                      message=self.latched_message())
+
+    def latched_message(self) -> str:
+        which = "; ".join(f"module {e['module']} ({e['joint']}): {e['flags']}"
+                          for e in self.latched_at_start)
+        return (f"fault latched before this run (emergency stop pressed, or a previous "
+                f"run halted?): {which}")
+
+    def confirm_clearing_latched(self, modules: list[int] | None) -> None:
+        """Called by a Reset step before it clears faults: on real hardware a fault that
+        was latched before the run is cleared only when the operator says so (also with
+        ``--yes``); declining, or no answer, ends the run as an operator abort."""
+        if not self.latched_at_start or self._latched_cleared_ok:
+            return
+        affected = [e for e in self.latched_at_start
+                    if modules is None or e["module"] in modules]
+        if not affected:
+            return
+        if self.confirm_clear_latched is not None:
+            question = (self.latched_message() + ". This Reset clears it. Has the cause "
+                        "been checked, and may it be cleared?")
+            if not self.ask_operator(self.confirm_clear_latched, question):
+                raise OperatorAbort("operator did not clear the fault latched before the "
+                                    "run; nothing was reset")
+            self.emit("latched_fault_cleared", modules=[e["module"] for e in affected],
+                      confirmed_by="operator")
+        else:
+            self.emit("latched_fault_cleared", modules=[e["module"] for e in affected],
+                      confirmed_by="not asked (simulator)")
+        self._latched_cleared_ok = True
 
     def _enable_watchdog(self) -> None:
         """Arm the modules' watchdogs (read-modify-write of Config) and keep them fed."""
@@ -684,12 +831,13 @@ class Executor:
                                     errors=[e.as_dict() for e in check.errors])
             self._enable_watchdog()
         except Exception as exc:  # noqa: BLE001 - nothing moves yet, but be sure
-            halted = self.emergency_halt()
+            self.emergency_halt()
             cause, module = _cause(exc)
-            fault = {"cause": cause, "module": module, "message": str(exc), "step": None,
-                     "halt_sent": halted}
+            message = str(exc) + self._halt_note()
+            fault = {"cause": cause, "module": module, "message": message, "step": None,
+                     **self._halt_fields()}
             self.emit("fault", **fault)
-            return self._finish(results, "failed", EXIT_FAULT, str(exc), fault)
+            return self._finish(results, "failed", EXIT_FAULT, message, fault)
         for step, result in zip(steps, results):
             if step.number < first_step:
                 result.status = "skipped"
@@ -726,19 +874,20 @@ class Executor:
                     # is sent and reported like any Halt.
                     halted = self.emergency_halt()
                     message += (f"; {self._halt.reason}: Halt "
-                                + ("sent" if halted else "could not be sent"))
+                                + ("sent" if halted else "could not be sent")
+                                + self._halt_note())
                     cause = self._halt.cause
                     if cause != OPERATOR_HALT:
                         status, code = "failed", EXIT_FAULT
                     fault = {"cause": cause, "module": None, "message": message,
-                             "step": step.number, "halt_sent": halted}
+                             "step": step.number, **self._halt_fields()}
                     self.emit("fault", **fault)
                 result.status = "aborted"
                 result.finished = self.clock.now() - self._t0
                 self.emit("operator_abort", message=message)
                 break
             except Exception as exc:  # noqa: BLE001 - every failure, even a bug, halts
-                halted = self.emergency_halt()
+                self.emergency_halt()
                 cause, module = _cause(exc)
                 if cause == "internal_error":
                     self.emit("internal_error", traceback=traceback.format_exc())
@@ -748,9 +897,9 @@ class Executor:
                     status, code = "aborted", EXIT_OPERATOR_ABORT
                 else:
                     status, code = "failed", EXIT_FAULT
-                message = str(exc)
+                message = str(exc) + self._halt_note()
                 fault = {"cause": cause, "module": module, "message": message,
-                         "step": step.number, "halt_sent": halted}
+                         "step": step.number, **self._halt_fields()}
                 result.status = "failed" if code == EXIT_FAULT else "aborted"
                 result.finished = self.clock.now() - self._t0
                 result.detail.update(_jsonable(getattr(exc, "detail", None) or {}))
@@ -760,9 +909,9 @@ class Executor:
             except BaseException as exc:
                 # Anything else leaving a step (KeyboardInterrupt, SystemExit) still halts
                 # the arm before it propagates.
-                halted = self.emergency_halt()
+                self.emergency_halt()
                 fault = {"cause": "interrupted", "module": None, "message": repr(exc),
-                         "step": step.number, "halt_sent": halted}
+                         "step": step.number, **self._halt_fields()}
                 self.emit("fault", **fault)
                 result.status = "failed"
                 result.finished = self.clock.now() - self._t0
@@ -776,13 +925,13 @@ class Executor:
         self._current_step = None
         if code == EXIT_OK and self._halt_requested:
             # A Halt asked for after the last step: nothing moves, but it is sent as asked.
-            halted = self.emergency_halt()
+            self.emergency_halt()
             cause = self._halt.cause
             status, code = (("aborted", EXIT_OPERATOR_ABORT) if cause == OPERATOR_HALT
                             else ("failed", EXIT_FAULT))
-            message = f"{self._halt.reason} after the last step; Halt sent"
+            message = f"{self._halt.reason} after the last step; Halt sent" + self._halt_note()
             fault = {"cause": cause, "module": None, "message": message, "step": None,
-                     "halt_sent": halted}
+                     **self._halt_fields()}
             self.emit("fault", **fault)
         if code in (EXIT_OK, EXIT_OPERATOR_ABORT) and not self._halt_requested:
             self._disable_watchdog()
@@ -797,10 +946,34 @@ class Executor:
                         list(dict.fromkeys(self.not_verified)),
                         {k: round(v, 1) for k, v in self.min_heights_mm.items()})
         run.extra = extra
+        run.latched_at_start = list(self.latched_at_start)
         self.emit("run_finished", status=status, exit_code=code, message=message,
                   duration_s=_round(run.duration_s),
                   planned_duration_s=_round(run.planned_duration_s), **extra)
         return run
+
+
+class _NotOkAcknowledge(Exception):
+    """An acknowledge said NOT_OK (raised from inside the exchange to end it at once)."""
+
+    def __init__(self, module: int, state: ShortState) -> None:
+        super().__init__(f"module {module}: NOT_OK")
+        self.module = module
+        self.state = state
+
+
+def _raise_on_not_ok(request, ack) -> None:
+    """``on_ack`` inspector of a move cycle: the first NOT_OK ends the exchange."""
+    if isinstance(ack, MotionExtAck):
+        state = ack.state
+    elif isinstance(ack, GetParamAck) and ack.param == ParamId.FPOS_STATE_DIO:
+        state = ack.value.state
+    elif isinstance(ack, GetParamAck) and ack.param == ParamId.CUBE_STATE:
+        state = _short_state(StateFlag(ack.value))
+    else:
+        return
+    if state & ShortState.NOT_OK:
+        raise _NotOkAcknowledge(ack.module, ShortState(state))
 
 
 def _short_state(flags: StateFlag) -> ShortState:

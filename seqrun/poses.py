@@ -76,9 +76,10 @@ class PoseFile(_Strict):
                                   "the file is poses/<name>.yaml.")
     description: str = Field("", description="What the pose is for.")
     arm: str = Field(description="Name of the arm description the pose was made for.")
-    source: Literal["reference", "arm", "manual"] | None = Field(
+    source: Literal["reference", "arm", "simulator", "manual"] | None = Field(
         None, description="Where the joints come from: reference (documented values), "
-                          "arm (read from the modules), manual (typed in).")
+                          "arm (read from the modules), simulator (read from the "
+                          "simulated arm), manual (typed in).")
     saved_at: datetime | None = Field(None, description="When the pose was saved (ISO 8601).")
     joints_deg: dict[str, Finite] = Field(
         min_length=1,

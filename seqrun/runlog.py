@@ -200,6 +200,7 @@ class RunLog:
             "duration_s": round(result.duration_s, 4),
             "planned_duration_s": round(result.planned_duration_s, 4),
             "fault": result.fault,
+            "latched_at_start": result.latched_at_start,
             "steps": [s.as_dict() for s in result.steps],
             "checkpoints": [_checkpoint(s) for s in result.steps if s.kind == "checkpoint"
                             and s.status != "skipped"],

@@ -12,7 +12,7 @@ from typing import Callable, Iterable
 
 from seqrun import __version__
 from seqrun.arm import ArmDescription
-from seqrun.connection import Connection
+from seqrun.connection import Connection, response_timeout_s
 from seqrun.executor import EXIT_FAULT, Executor, Listener, RunResult, StepResult
 from seqrun.powercube.client import PowerCubeClient
 from seqrun.runlog import RunLog
@@ -34,14 +34,17 @@ def build_executor(loaded: LoadedSequence, arm: ArmDescription, connection: Conn
                    confirm: Callable[[str], bool] | None = None,
                    before_step: Callable | None = None,
                    listeners: Iterable[Listener] = (), dry_run: bool = False,
+                   confirm_clear_latched: Callable[[str], bool] | None = None,
                    requests: StopRequests | None = None
                    ) -> tuple[Executor, PowerCubeClient]:
     client = PowerCubeClient(connection.bus, connection.clock,
-                             response_timeout=arm.can.response_timeout_s)
+                             # (a dry run keeps the arm file's: deterministic results)
+                             response_timeout=(arm.can.response_timeout_s if dry_run
+                                               else response_timeout_s(arm)))
     executor = Executor(client, arm, connection.clock, poses_dir=loaded.poses_dir, speed=speed,
                         command_mode=command_mode, cycle_hz=cycle_hz, confirm=confirm,
                         before_step=before_step, listeners=list(listeners), dry_run=dry_run,
-                        requests=requests)
+                        confirm_clear_latched=confirm_clear_latched, requests=requests)
     client.on_discard = executor.on_discard
     return executor, client
 
@@ -54,6 +57,7 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
                  before_step: Callable | None = None,
                  listeners: Iterable[Listener] = (), dry_run: bool = False,
                  on_executor: Callable[[Executor], None] | None = None,
+                 confirm_clear_latched: Callable[[str], bool] | None = None,
                  requests: StopRequests | None = None,
                  warn: Callable[[str], None] | None = None) -> RunOutcome:
     """Run ``loaded`` on ``connection``; writes the run folder when ``log_dir`` is given.
@@ -67,6 +71,7 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
                                       command_mode=command_mode, cycle_hz=cycle_hz,
                                       confirm=confirm, before_step=before_step,
                                       listeners=listeners, dry_run=dry_run,
+                                      confirm_clear_latched=confirm_clear_latched,
                                       requests=requests)
     log = None
     if log_dir is not None:
@@ -107,4 +112,4 @@ def _unfinished(executor: Executor, loaded: LoadedSequence, exc: BaseException) 
     return RunResult("failed", EXIT_FAULT, message, steps, 0.0,
                      executor.clock.now() - executor._t0,
                      {"cause": "interrupted", "module": None, "message": message,
-                      "step": None, "halt_sent": False})
+                      "step": None, "halt_sent": False, "halt_confirmed": False})

@@ -97,11 +97,30 @@ def test_requests_use_standard_ids_and_exact_bytes(client, bus):
     assert all(not m.is_extended_id for m in bus.sent)
 
 
-def test_move_ramp_is_pipelined_and_returns_the_motion_ack(client, bus):
+def test_move_ramp_waits_for_each_answer_of_its_module_and_returns_the_motion_ack(client, bus):
     ack = client.move_ramp(2, 1.0, 0.5)
     assert ack == MotionAck(2, MotionMode.FRAMP)
     kinds = [kind for kind, _, _ in bus.events]
-    assert kinds == ["send", "send", "recv", "recv"]  # no TargetAcc when acc is None
+    # One request in flight per module (issue 9.3); no TargetAcc when acc is None.
+    assert kinds == ["send", "recv", "send", "recv"]
+
+
+def test_requests_to_other_modules_stay_pipelined_one_in_flight_per_module(client, bus):
+    requests = [SetParam(1, ParamId.TARGET_VEL, 0.1), SetMotion(1, MotionMode.FRAMP_ACK, 0.2),
+                SetParam(2, ParamId.TARGET_VEL, 0.1), SetMotion(2, MotionMode.FRAMP_ACK, 0.2),
+                GetParam(3, ParamId.FPOS_STATE_DIO)]
+    acks = client.transact(requests)
+    assert [a.module for a in acks] == [1, 1, 2, 2, 3]
+    in_flight: dict[int, int] = {}
+    for kind, _, msg in bus.events:
+        module = msg.arbitration_id & 0x1F
+        if kind == "send":
+            assert in_flight.get(module, 0) == 0, f"two requests in flight to module {module}"
+            in_flight[module] = 1
+        else:
+            in_flight[module] = 0
+    # The first three go out at once (one per module), before any answer.
+    assert [kind for kind, _, _ in bus.events][:3] == ["send"] * 3
 
 
 def test_move_ramp_ext_ack_returns_position_and_state(client, arm):
@@ -294,17 +313,18 @@ def test_late_ack_arriving_during_a_later_exchange_is_discarded_as_stale(bus, cl
     assert client.stats.stale_acks == 1
 
 
-def test_two_timeouts_of_one_key_need_two_stale_acks(bus, client):
+def test_a_request_held_behind_a_silent_one_to_its_module_is_never_sent(bus, client):
     bus.handler = script(
-        lambda r: [],
         lambda r: [],
         lambda r: [Reply(GetParamAck(2, ParamId.ACT_POS, 7.0), 0.001)],
     )
-    # Two silent requests in one batch: both keys tainted.
+    # Two requests to module 2 in one batch: the second waits for the first's answer
+    # (one request in flight per module), which never comes.
     with pytest.raises(ModuleTimeoutError):
-        client.transact([GetParam(2, ParamId.ACT_POS), GetParam(2, ParamId.ACT_POS)])
+        client.transact([GetParam(2, ParamId.ACT_POS), GetParam(2, ParamId.CUBE_STATE)])
+    assert len(bus.sent) == 1
     bus.inject(GetParamAck(2, ParamId.ACT_POS, 1.0), at=bus.clock.now() + 0.01)
-    # Only one late ack arrives; the second taint expires with the quarantine.
+    # The one late ack is consumed as stale; the next read gets its own answer.
     assert client.read_position(2) == 7.0
     assert client.stats.stale_acks == 1
 

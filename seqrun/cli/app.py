@@ -3,8 +3,20 @@
 from __future__ import annotations
 
 import typer
+from typer.core import TyperGroup
+
+from seqrun.cli.argv import expand_bus_kwargs
+
+
+class _SeqrunGroup(TyperGroup):
+    """Accepts python-can's ``--bus-kwargs K=V K=V`` (see :mod:`seqrun.cli.argv`)."""
+
+    def parse_args(self, ctx, args):  # type: ignore[no-untyped-def]
+        return super().parse_args(ctx, expand_bus_kwargs(args))
+
 
 app = typer.Typer(
+    cls=_SeqrunGroup,
     name="seqrun",
     help="Declarative sequence runner for PowerCube robot arms (Schunk LWA 3).",
     no_args_is_help=True,

@@ -2,14 +2,19 @@
 
 With no interface configured these talk to a fresh simulator (they say so); point them at
 a shared simulator with ``-i socketcand`` (``seqrun sim serve``) or at the real bus.
+``halt`` and ``reset`` succeed only when every module confirms (its state read back, see
+:mod:`seqrun.armcontrol`); ``status --watch`` survives lost answers (shown as stale).
 """
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
+import sys
 import time
-from typing import Annotated
+from collections.abc import Iterator
+from typing import Annotated, Optional
 
 import numpy as np
 import typer
@@ -19,29 +24,48 @@ from rich.table import Table
 
 from seqrun.arm import DEFAULT_ARM
 from seqrun.cli.app import app
+from seqrun.armcontrol import command_and_confirm
 from seqrun.cli.common import (EXIT_FAULT, ArmOption, BitrateOption, BusKwargsOption,
-                               ChannelOption, InterfaceOption, SimOption, connect, fail,
-                               load_arm_file, user_errors)
+                               ChannelOption, InterfaceOption, ResponseTimeoutOption,
+                               SimOption, connect, fail, load_arm_file, user_errors)
 from seqrun.errors import BusError
 from seqrun.kinematics import Chain, fk, rpy_from_matrix
 from seqrun.powercube.codec import GetParam
-from seqrun.powercube.protocol import ParamId, StateFlag
+from seqrun.powercube.protocol import CommandId, ParamId, StateFlag
 
 
 
-def read_status(client, arm) -> dict:
-    """Joints (user degrees), velocities, state words and the end-effector pose."""
+def read_status(client, arm, previous: dict | None = None, *,
+                tolerate_loss: bool = False) -> dict:
+    """Joints (user degrees), velocities, state words and the end-effector pose.
+
+    ``tolerate_loss`` (``--watch``): a request without an answer does not raise; its
+    joint keeps the values of ``previous`` (the last refresh) marked ``"stale": true``,
+    or None when there is no previous value.
+    """
     requests = [GetParam(j.module, p) for j in arm.joints
                 for p in (ParamId.ACT_POS, ParamId.ACT_VEL, ParamId.CUBE_STATE)]
-    acks = client.transact(requests)
+    acks = (client.transact_partial(requests) if tolerate_loss
+            else client.transact(requests))
+    before = {j["joint"]: j for j in (previous or {}).get("joints", [])}
     joints = []
     for k, joint in enumerate(arm.joints):
-        pos, vel, state = (a.value for a in acks[3 * k:3 * k + 3])
+        answers = acks[3 * k:3 * k + 3]
+        if any(a is None for a in answers):
+            old = before.get(joint.name)
+            joints.append({**(old or {"joint": joint.name, "module": joint.module,
+                                      "position_deg": None, "velocity_deg_s": None,
+                                      "state": None, "fault": False}), "stale": True})
+            continue
+        pos, vel, state = (a.value for a in answers)
         joints.append({"joint": joint.name, "module": joint.module,
                        "position_deg": round(joint.to_user_deg(float(pos)), 4),
                        "velocity_deg_s": round(math.degrees(float(vel)), 4),
                        "state": StateFlag(state).describe(),
-                       "fault": bool(StateFlag(state) & StateFlag.FAULTS)})
+                       "fault": bool(StateFlag(state) & StateFlag.FAULTS),
+                       "stale": False})
+    if any(j["position_deg"] is None for j in joints):
+        return {"joints": joints, "end_effector": None}
     q = np.radians([j["position_deg"] for j in joints])
     T = fk(Chain.from_arm(arm), q)
     return {"joints": joints,
@@ -50,33 +74,51 @@ def read_status(client, arm) -> dict:
                                          for x in np.degrees(rpy_from_matrix(T[:3, :3]))]}}
 
 
+def _number(value: float | None) -> str:
+    return "-" if value is None else f"{value + 0.0:.3f}"
+
+
 def _table(status: dict, title: str) -> Table:
     table = Table(title=title)
     for col in ("joint", "module", "position °", "velocity °/s", "state"):
         table.add_column(col)
     for j in status["joints"]:
-        table.add_row(j["joint"], str(j["module"]), f"{j['position_deg']:.3f}",
-                      f"{j['velocity_deg_s']:.3f}", j["state"],
-                      style="red" if j["fault"] else None)
+        stale = j.get("stale", False)
+        state = j["state"] or "-"
+        table.add_row(j["joint"], str(j["module"]), _number(j["position_deg"]),
+                      _number(j["velocity_deg_s"]),
+                      f"{state} (stale: no answer)" if stale else state,
+                      style="red" if j["fault"] else ("dim" if stale else None))
     ee = status["end_effector"]
-    table.caption = (f"end-effector {ee['position_mm']} mm, roll/pitch/yaw {ee['rpy_deg']} °")
+    table.caption = ("end-effector unknown (no answer yet)" if ee is None else
+                     f"end-effector {ee['position_mm']} mm, roll/pitch/yaw {ee['rpy_deg']} °")
     return table
 
 
 @app.command("status")
 def status_command(
     watch: Annotated[bool, typer.Option("--watch", help="Refresh until Ctrl-C.")] = False,
-    as_json: Annotated[bool, typer.Option("--json", help="Machine-readable output.")] = False,
+    as_json: Annotated[bool, typer.Option(
+        "--json", help="Machine-readable output (with --watch: one JSON object per line, "
+                       "per refresh).")] = False,
     period: Annotated[float, typer.Option(
         "--period", help="Refresh period with --watch, s.")] = 0.2,
+    count: Annotated[Optional[int], typer.Option(
+        "--count", min=1, help="With --watch: stop after this many refreshes.")] = None,
     arm_file: ArmOption = DEFAULT_ARM, interface: InterfaceOption = None,
     channel: ChannelOption = None, bitrate: BitrateOption = None,
     bus_kwargs: BusKwargsOption = None, sim: SimOption = False,
+    response_timeout_ms: ResponseTimeoutOption = None,
 ) -> None:
-    """Joints, state flags and end-effector pose (reads only; nothing moves)."""
+    """Joints, state flags and end-effector pose (reads only; nothing moves).
+
+    With --watch a lost answer does not end the watch: the joint shows its last value,
+    marked stale, and the next refresh asks again.
+    """
     with user_errors():
         arm = load_arm_file(arm_file)
-        connection, client = connect(arm, interface, channel, bitrate, bus_kwargs, sim)
+        connection, client = connect(arm, interface, channel, bitrate, bus_kwargs, sim,
+                                     response_timeout_ms=response_timeout_ms)
     console = Console()
     try:
         if not as_json:
@@ -88,10 +130,16 @@ def status_command(
             else:
                 console.print(_table(status, arm.name))
             return
-        with Live(console=console, refresh_per_second=10) as live:
-            while True:
-                live.update(_table(read_status(client, arm), arm.name))
-                time.sleep(period)
+        if as_json:
+            _watch_json(client, arm, period, count)
+            return
+        status = None
+        # No auto-refresh thread: drawing the table between reads, never during one, keeps
+        # it from holding the interpreter while acknowledges wait to be read.
+        with Live(console=console, auto_refresh=False) as live:
+            for _ in _refreshes(period, count):
+                status = read_status(client, arm, status, tolerate_loss=True)
+                live.update(_table(status, arm.name), refresh=True)
     except KeyboardInterrupt:
         pass
     except BusError as exc:
@@ -102,31 +150,67 @@ def status_command(
         connection.close()
 
 
-def _broadcast(what: str, arm_file, interface, channel, bitrate, bus_kwargs, sim) -> None:
+def _refreshes(period: float, count: int | None) -> Iterator[int]:
+    """Yields ``count`` times (None: forever), ``period`` seconds apart."""
+    for index in itertools.count() if count is None else range(count):
+        if index:
+            time.sleep(period)
+        yield index
+
+
+def _watch_json(client, arm, period: float, count: int | None) -> None:
+    """JSON lines: one object per refresh, flushed at once (for a pipe), with its time."""
+    status = None
+    for _ in _refreshes(period, count):
+        status = read_status(client, arm, status, tolerate_loss=True)
+        typer.echo(json.dumps({"time": round(time.time(), 3), **status}))
+        sys.stdout.flush()
+
+
+_COMMANDS = {"halt": CommandId.HALT, "reset": CommandId.RESET}
+
+
+def _broadcast(what: str, arm_file, interface, channel, bitrate, bus_kwargs, sim,
+               response_timeout_ms) -> None:
+    """Broadcast Halt or Reset, then confirm it module by module (exit 3 if not all do)."""
     with user_errors():
         arm = load_arm_file(arm_file)
-        connection, client = connect(arm, interface, channel, bitrate, bus_kwargs, sim)
+        connection, client = connect(arm, interface, channel, bitrate, bus_kwargs, sim,
+                                     response_timeout_ms=response_timeout_ms)
+    modules = [j.module for j in arm.joints]
     try:
-        getattr(client, what)(None)
-        typer.echo(f"{what.capitalize()} broadcast sent ({connection.description})")
+        result = command_and_confirm(client, _COMMANDS[what], modules)
     except BusError as exc:
         fail(f"{what} not sent: {exc}", EXIT_FAULT)
     finally:
         client.close()
         connection.close()
+    if not result.confirmed:
+        fail(f"{what} broadcast sent, but not confirmed by {result.describe_unconfirmed()} "
+             f"after {result.attempts} attempts ({connection.description})", EXIT_FAULT)
+    typer.echo(f"{what.capitalize()} confirmed by modules "
+               f"{', '.join(map(str, sorted(result.states)))} ({connection.description})")
 
 
 @app.command("halt")
 def halt_command(arm_file: ArmOption = DEFAULT_ARM, interface: InterfaceOption = None,
                  channel: ChannelOption = None, bitrate: BitrateOption = None,
-                 bus_kwargs: BusKwargsOption = None, sim: SimOption = False) -> None:
-    """Broadcast Halt: every module stops at once and refuses motion until Reset."""
-    _broadcast("halt", arm_file, interface, channel, bitrate, bus_kwargs, sim)
+                 bus_kwargs: BusKwargsOption = None, sim: SimOption = False,
+                 response_timeout_ms: ResponseTimeoutOption = None) -> None:
+    """Broadcast Halt: every module stops at once and refuses motion until Reset.
+    Confirmed by reading every module's state back (HALTED); exit 3 naming the modules
+    that did not confirm."""
+    _broadcast("halt", arm_file, interface, channel, bitrate, bus_kwargs, sim,
+               response_timeout_ms)
 
 
 @app.command("reset")
 def reset_command(arm_file: ArmOption = DEFAULT_ARM, interface: InterfaceOption = None,
                   channel: ChannelOption = None, bitrate: BitrateOption = None,
-                  bus_kwargs: BusKwargsOption = None, sim: SimOption = False) -> None:
-    """Broadcast Reset: clears ERROR/HALTED (motion still needs Home)."""
-    _broadcast("reset", arm_file, interface, channel, bitrate, bus_kwargs, sim)
+                  bus_kwargs: BusKwargsOption = None, sim: SimOption = False,
+                  response_timeout_ms: ResponseTimeoutOption = None) -> None:
+    """Broadcast Reset: clears ERROR/HALTED (motion still needs Home). Confirmed by reading
+    every module's state back (no ERROR, no HALTED); exit 3 naming the modules that did
+    not confirm."""
+    _broadcast("reset", arm_file, interface, channel, bitrate, bus_kwargs, sim,
+               response_timeout_ms)

@@ -59,19 +59,25 @@ BitrateOption = Annotated[Optional[int], typer.Option(
 BusKwargsOption = Annotated[Optional[list[str]], typer.Option(
     "--bus-kwargs", metavar="KEY=VALUE", help="Extra python-can bus arguments (repeatable).")]
 SimOption = Annotated[bool, typer.Option("--sim", help="Force the built-in simulator.")]
+ResponseTimeoutOption = Annotated[Optional[float], typer.Option(
+    "--response-timeout-ms", metavar="MS",
+    help="How long to wait for each module's answer (default: $SEQRUN_RESPONSE_TIMEOUT_MS, "
+         "else the arm file's can.response_timeout_s, 50 ms).")]
 
 
 def connect(arm: ArmDescription, interface: Optional[str], channel: Optional[str],
             bitrate: Optional[int], bus_kwargs: Optional[list[str]], sim: bool,
-            faults: Optional[list[str]] = None):
+            faults: Optional[list[str]] = None, *,
+            response_timeout_ms: Optional[float] = None):
     """Open the bus and a PowerCubeClient on it: ``(connection, client)``."""
-    from seqrun.connection import open_connection, parse_bus_kwargs, parse_faults
+    from seqrun.connection import (open_connection, parse_bus_kwargs, parse_faults,
+                                   response_timeout_s)
     from seqrun.powercube.client import PowerCubeClient
 
+    timeout = response_timeout_s(arm, response_timeout_ms)  # (checked before connecting)
     connection = open_connection(interface=interface, channel=channel, bitrate=bitrate,
                                  bus_kwargs=parse_bus_kwargs(bus_kwargs or []), force_sim=sim,
                                  faults=parse_faults(faults or []),
                                  default_bitrate=arm.can.bitrate)
-    client = PowerCubeClient(connection.bus, connection.clock,
-                             response_timeout=arm.can.response_timeout_s)
+    client = PowerCubeClient(connection.bus, connection.clock, response_timeout=timeout)
     return connection, client

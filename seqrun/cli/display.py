@@ -46,7 +46,7 @@ class PlainDisplay:
                          f"{event['angle_error_deg']:.3f}° from the expected pose")
             self.console.print(f"      passed{extra}", highlight=False)
         elif kind in ("fault", "operator_abort", "controlled_stop", "holding", "halt_requested",
-                      "abort_requested"):
+                      "abort_requested", "latched_fault", "halt_unconfirmed", "halt_failed"):
             text = event.get("message") or event.get("reason") or kind.replace("_", " ")
             self.console.print(f"  !!  {kind.replace('_', ' ')}: {text}", highlight=False)
 
@@ -90,8 +90,10 @@ class LiveDisplay:
                 self.target = np.array(event["target_deg"])
             elif kind == "setpoint":
                 self.move_t = event["plan_t"]
-            elif kind in ("fault", "operator_abort"):
+            elif kind in ("fault", "operator_abort", "halt_unconfirmed", "halt_failed"):
                 self.message, self.message_style = event["message"], "bold red"
+            elif kind == "latched_fault":
+                self.message, self.message_style = event["message"], "bold yellow"
             elif kind in ("controlled_stop", "abort_requested", "halt_requested", "paused"):
                 self.message = kind.replace("_", " ")
                 if kind == "controlled_stop":

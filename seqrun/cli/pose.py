@@ -91,7 +91,11 @@ def save_pose_command(
     channel: ChannelOption = None, bitrate: BitrateOption = None,
     bus_kwargs: BusKwargsOption = None, sim: SimOption = False,
 ) -> None:
-    """Read the arm's joints and write them as a pose file (with the FK pose and the time)."""
+    """Read the arm's joints and write them as a pose file (with the FK pose and the time).
+
+    Reads the arm on the configured bus; the built-in simulator only with --sim (its arm
+    always starts at Park, so a pose saved from it is marked source: simulator).
+    """
     from datetime import datetime, timezone
 
     from seqrun.errors import BusError
@@ -103,6 +107,13 @@ def save_pose_command(
         if path.exists() and not force:
             fail(f"{path} exists (use --force to overwrite)")
         connection, client = connect(arm, interface, channel, bitrate, bus_kwargs, sim)
+    if connection.is_simulator and not sim:
+        client.close()
+        connection.close()
+        fail("no CAN interface configured: pose save reads the arm on a bus (-i/-c or "
+             "python-can's configuration); give --sim to read the built-in simulator")
+    if connection.is_simulator:
+        typer.secho(connection.description, fg="yellow", bold=True, err=True)
     try:
         readings = client.read_arm(arm.module_ids)
     except BusError as exc:
@@ -114,7 +125,8 @@ def save_pose_command(
               for j, r in zip(arm.joints, readings) if j.locked is None}
     with user_errors():
         try:
-            pose = pose_document(name, arm, joints, description=description, source="arm",
+            pose = pose_document(name, arm, joints, description=description,
+                                 source="simulator" if connection.is_simulator else "arm",
                                  saved_at=datetime.now(timezone.utc).replace(microsecond=0))
         except ValueError as exc:
             fail(str(exc))

@@ -191,6 +191,10 @@ def run_command(
     def confirm(prompt: str) -> bool:
         return _ask(console, prompt, yes, signals.read_answer)
 
+    def confirm_clear_latched(question: str) -> bool:
+        # Asked even with --yes: someone may have pressed the emergency stop for a reason.
+        return _ask(console, question, False, signals.read_answer)
+
     def before_step(s) -> bool:
         return (_ask(console, f"Run step {s.number}: {s.title}?", False, signals.read_answer)
                 if step else True)
@@ -216,7 +220,9 @@ def run_command(
         outcome = run_sequence(loaded, arm, connection, log_dir=folder, file=str(file),
                                speed=speed, first_step=from_step, command_mode=command_mode,
                                confirm=confirm, before_step=before_step, on_executor=attach,
-                               requests=requests, warn=warn)
+                               requests=requests, warn=warn,
+                               confirm_clear_latched=(None if connection.is_simulator
+                                                      else confirm_clear_latched))
     finally:
         if live and displays:
             displays[0].__exit__(None, None, None)
@@ -227,6 +233,11 @@ def run_command(
         colour = "green" if result.exit_code == 0 else "red"
         console.print(f"[{colour}]{result.status.upper()}[/{colour}] (exit {result.exit_code}): "
                       f"{result.message}", highlight=False)
+        if result.latched_at_start:
+            console.print("note: " + outcome.executor.latched_message()
+                          + (" - cleared by the sequence's Reset" if result.exit_code == 0
+                             else ""),
+                          style="yellow", highlight=False, markup=False)
         if result.extra.get("errors"):
             for error in result.extra["errors"]:
                 console.print(f"  {error['file']}:{error['line']}:{error['column']}: "

@@ -2,6 +2,7 @@
 
     seqrun sim serve                                   # 127.0.0.1:29536, channel can0
     seqrun sim serve --port 29600 --fault 4:tow_error@2.5 --fault 3:drop_acks=0.3@0
+    seqrun sim serve --home-ok-at-power-on --addressed-refresh-arms-watchdog
 
 Connect with python-can: ``can.Bus(interface="socketcand", host="127.0.0.1",
 port=29536, channel="can0")``. Runs in real time until Ctrl-C.
@@ -30,12 +31,26 @@ def serve(
              "stuck, missing.")] = None,
     bitrate: Annotated[int, typer.Option(help="Bit rate of the simulated bus, bit/s.")]
     = 1_000_000,
+    home_ok_at_power_on: Annotated[bool, typer.Option(
+        "--home-ok-at-power-on",
+        help="Modules power on with HOME_OK set (as drivers that never home PRL modules "
+             "expect). Default: not homed until Home, as this facility's arm.")] = False,
+    addressed_refresh_arms_watchdog: Annotated[bool, typer.Option(
+        "--addressed-refresh-arms-watchdog",
+        help="Only an addressed WatchdogRefresh (0x0E0+m [07]) arms the watchdog, setting "
+             "its Config bit (KTH driver). Default: the Config bit, then any refresh.")]
+    = False,
+    module_option: Annotated[list[str] | None, typer.Option(
+        "--module-option", metavar="NAME=VALUE",
+        help="Any other simulator switch (ModuleOptions field), e.g. "
+             "watchdog_timeout=0.1. Repeatable.")] = None,
 ) -> None:
     """Serve a simulated LWA 3 (7 modules at Park, real time) over socketcand."""
     from seqrun.clock import RealClock
     from seqrun.sim.arm import SimArm
     from seqrun.sim.faults import parse_faults
     from seqrun.sim.network import SimNetwork
+    from seqrun.sim.options import module_options
     from seqrun.sim.socketcand import SocketcandServer
 
     try:
@@ -46,10 +61,29 @@ def serve(
         fail(f"--port {port}: must be 0..65535")
     if bitrate <= 0:
         fail(f"--bitrate {bitrate}: must be positive")
+    switches: dict[str, object] = {}
+    for item in module_option or []:
+        name, sep, value = item.partition("=")
+        if not sep or not name:
+            fail(f"--module-option expects NAME=VALUE, got '{item}'")
+        switches[name.strip()] = value.strip()
+    if home_ok_at_power_on:
+        switches["home_ok_at_power_on"] = True
+    if addressed_refresh_arms_watchdog:
+        switches["addressed_refresh_arms_watchdog"] = True
+    from seqrun.connection import sim_options_from_env
+    from seqrun.errors import UserInputError
+
+    try:  # SEQRUN_SIM_OPTIONS first, the flags on top
+        options = module_options(switches, sim_options_from_env())
+    except ValueError as exc:
+        fail(f"--module-option {exc}")
+    except UserInputError as exc:
+        fail(str(exc))
     clock = RealClock()
     # No spinning: TCP adds more latency than a late wake-up, and clients may be many.
     try:
-        arm = SimArm(clock, faults=faults)
+        arm = SimArm(clock, faults=faults, options=options)
     except ValueError as exc:  # a fault for a module the arm does not have
         fail(str(exc))
     network = SimNetwork(clock, arm, bitrate, spin_window=0.0)
@@ -63,6 +97,8 @@ def serve(
                f"{server.host}:{server.port}, channel {channel}")
     for item in faults:
         typer.echo(f"  fault {item.spec}")
+    for name, value in switches.items():
+        typer.echo(f"  switch {name}={getattr(options, name)}")
     typer.echo(f'  python-can: can.Bus(interface="socketcand", host="{server.host}", '
                f'port={server.port}, channel="{channel}")')
     typer.echo("Ctrl-C to stop.")

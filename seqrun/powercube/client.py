@@ -89,6 +89,8 @@ logger = logging.getLogger(__name__)
 
 FrameListener = Callable[[can.Message], None]
 DiscardCallback = Callable[[can.Message, str], None]
+#: ``on_ack(request, ack)`` of :meth:`PowerCubeClient.transact`; raising ends the exchange.
+AckInspector = Callable[[Request, Ack], None]
 
 
 class DiscardReason:
@@ -159,6 +161,15 @@ class PowerCubeClient:
     MAX_FLUSH_FRAMES = 1000
     #: Timeout handed to ``bus.send`` (seconds).
     SEND_TIMEOUT = 0.1
+    #: One request in flight per module (see :meth:`_send_ready`). False restores the
+    #: old fully pipelined sending, for benchmarks and regression tests only.
+    ONE_REQUEST_PER_MODULE = True
+    #: In an exchange that inspects its acknowledges (``on_ack``: a move cycle), at most
+    #: this many requests wait for their answers at a time. A few keep the wire busy
+    #: (request, ~100 µs module latency, answer); more would only fill the adapter's
+    #: transmit queue, where the Halt that an inspected acknowledge calls for would queue
+    #: behind them. Other exchanges (reads, scans) send everything at once.
+    MAX_IN_FLIGHT = 3
 
     def __init__(self, bus: can.BusABC, clock: Clock, *,
                  response_timeout: float = RESPONSE_TIMEOUT,
@@ -243,18 +254,22 @@ class PowerCubeClient:
                 self._unsolicited(*got)
 
     # ------------------------------------------------------------------ core exchange
-    def transact(self, requests: Sequence[Request], timeout: float | None = None
-                 ) -> list[Ack | None]:
+    def transact(self, requests: Sequence[Request], timeout: float | None = None, *,
+                 on_ack: AckInspector | None = None) -> list[Ack | None]:
         """Send all ``requests``, then collect their acknowledges (pipelined).
 
         :param timeout: per-request response timeout; default :attr:`response_timeout`.
+        :param on_ack: called as ``on_ack(request, ack)`` the moment each acknowledge is
+            matched; an exception it raises ends the exchange at once (the requests still
+            unanswered are tainted) and propagates, so a caller can act on the first bad
+            acknowledge without waiting for the rest of the batch.
         :return: one entry per request, in order; None for broadcasts.
         :raises ~seqrun.errors.ModuleTimeoutError: an acknowledge did not come in time
             (names the first such request's module; the others are tainted as well).
         :raises ~seqrun.errors.CodecError: a request cannot be encoded (nothing is sent).
         :raises ~seqrun.errors.BusError: the bus refused a frame or the client is closed.
         """
-        return self._exchange(requests, timeout, raise_on_timeout=True)
+        return self._exchange(requests, timeout, raise_on_timeout=True, on_ack=on_ack)
 
     def is_tainted(self, request: Request) -> bool:
         """True while ``request``'s acknowledge key is in quarantine (sending it now would
@@ -266,14 +281,15 @@ class PowerCubeClient:
             taint = self._taints.get(key) if key is not None else None
             return taint is not None and taint.until > self.clock.now()
 
-    def transact_partial(self, requests: Sequence[Request], timeout: float | None = None
-                         ) -> list[Ack | None]:
+    def transact_partial(self, requests: Sequence[Request], timeout: float | None = None, *,
+                         on_ack: AckInspector | None = None) -> list[Ack | None]:
         """Like :meth:`transact`, but an unanswered request gives None instead of raising
         (its key is tainted all the same). Lets a caller retry only what is safe to retry."""
-        return self._exchange(requests, timeout, raise_on_timeout=False)
+        return self._exchange(requests, timeout, raise_on_timeout=False, on_ack=on_ack)
 
     def _exchange(self, requests: Sequence[Request], timeout: float | None, *,
-                  raise_on_timeout: bool) -> list[Ack | None]:
+                  raise_on_timeout: bool, on_ack: AckInspector | None = None
+                  ) -> list[Ack | None]:
         timeout = self.response_timeout if timeout is None else float(timeout)
         # Encode everything first: a bad request in a batch sends nothing.
         frames = [encode(r) for r in requests]
@@ -286,14 +302,25 @@ class PowerCubeClient:
             self._service_watchdog(self.clock.now())
             pending: dict[AckKey, deque[int]] = {}
             deadlines: dict[int, float] = {}
+            held = deque(range(len(frames)))
+            window = self.MAX_IN_FLIGHT if on_ack is not None else len(frames)
+            busy: dict[int, int] = {}  # module -> index of its unanswered request
             try:
-                for index, (can_id, data) in enumerate(frames):
-                    self._send(can_id, data)
-                    key = keys[index]
-                    if key is not None:
-                        pending.setdefault(key, deque()).append(index)
-                        deadlines[index] = self.clock.now() + timeout
-                self._collect(pending, deadlines, results, raise_on_timeout)
+                while True:
+                    self._send_ready(held, busy, requests, frames, keys, pending, deadlines,
+                                     timeout, window)
+                    if not held:
+                        self._collect(pending, deadlines, results, raise_on_timeout,
+                                      requests, on_ack, busy)
+                        break
+                    # A request waits for its module's previous answer: collect until
+                    # some module is free again (or its request timed out).
+                    if self._collect(pending, deadlines, results, raise_on_timeout,
+                                     requests, on_ack, busy, stop_after_one=True):
+                        continue
+                    if raise_on_timeout:
+                        break  # the timeout is raised below; the held requests stay unsent
+                    self._expire_overdue(held, busy, requests, pending, deadlines, timeout)
             except BaseException:
                 # Whatever broke the exchange (a send error, a watchdog refresh that could
                 # not be sent, KeyboardInterrupt), unanswered requests may still be answered.
@@ -306,17 +333,84 @@ class PowerCubeClient:
                     raise self._timeout_error(requests, sorted(deadlines), timeout)
         return results
 
+    def _send_ready(self, held: deque[int], busy: dict[int, int],
+                    requests: Sequence[Request], frames: list[tuple[int, bytes]],
+                    keys: list[AckKey | None], pending: dict[AckKey, deque[int]],
+                    deadlines: dict[int, float], timeout: float, window: int) -> None:
+        """Send every held request whose module has no unanswered request (one request in
+        flight per module, as every published PowerCube driver does; a module may drop a
+        request that arrives before it has answered the previous one). Requests to one
+        module keep their order; a broadcast waits until everything before it is sent, and
+        everything after it waits for the broadcast."""
+        if not self.ONE_REQUEST_PER_MODULE:
+            busy = {}
+        blocked = set(busy)
+        barrier = False
+        still: deque[int] = deque()
+        in_flight = len(deadlines)
+        for index in held:
+            module = getattr(requests[index], "module", None)  # None: a broadcast
+            if barrier or (module in blocked and self.ONE_REQUEST_PER_MODULE) or (
+                    module is None and still) or in_flight >= window:
+                still.append(index)
+                if module is None:
+                    barrier = True
+                else:
+                    blocked.add(module)
+                continue
+            self._send(*frames[index])
+            key = keys[index]
+            if key is not None:
+                pending.setdefault(key, deque()).append(index)
+                deadlines[index] = self.clock.now() + timeout
+                busy[module] = index  # type: ignore[index]
+                blocked.add(module)
+                in_flight += 1
+        held.clear()
+        held.extend(still)
+
+    def _expire_overdue(self, held: deque[int], busy: dict[int, int],
+                        requests: Sequence[Request], pending: dict[AckKey, deque[int]],
+                        deadlines: dict[int, float], timeout: float) -> None:
+        """Give up on the requests whose deadline has passed (tainted as usual) and on the
+        held requests to the same modules: a module that did not answer one request of
+        the batch is not asked again in it (a lost read costs one timeout, not several)."""
+        now = self.clock.now()
+        silent = set()
+        for index in [i for i, d in deadlines.items() if d <= now]:
+            del deadlines[index]
+            module = requests[index].module  # type: ignore[union-attr]
+            silent.add(module)
+            busy.pop(module, None)
+            key = expected_ack_key(requests[index])
+            queue = pending[key]  # type: ignore[index]
+            queue.remove(index)
+            if not queue:
+                del pending[key]  # type: ignore[arg-type]
+            self._taint_all({key: deque([index])}, timeout)  # type: ignore[dict-item]
+        kept = [i for i in held if getattr(requests[i], "module", None) not in silent]
+        held.clear()
+        held.extend(kept)
+
     def _collect(self, pending: dict[AckKey, deque[int]], deadlines: dict[int, float],
-                 results: list[Ack | None], raise_on_timeout: bool) -> None:
+                 results: list[Ack | None], raise_on_timeout: bool,
+                 requests: Sequence[Request] | None = None,
+                 on_ack: AckInspector | None = None, busy: dict[int, int] | None = None,
+                 *, stop_after_one: bool = False) -> bool:
         """Match acks to ``pending`` until all are answered or the deadline has come;
-        answered requests leave ``pending`` and ``deadlines``."""
+        answered requests leave ``pending``, ``deadlines`` and ``busy``. With
+        ``stop_after_one``, return after the first match (True) or at the first deadline
+        (False)."""
         while deadlines:
             # Stop at the first deadline when a timeout is an error; otherwise give every
             # request its full time (scan).
-            stop = min(deadlines.values()) if raise_on_timeout else max(deadlines.values())
+            if stop_after_one or raise_on_timeout:
+                stop = min(deadlines.values())
+            else:
+                stop = max(deadlines.values())
             got = self._next_ack(stop)
             if got is None:
-                return
+                return False
             msg, ack = got
             key = ack_key(ack)
             queue = pending.get(key)
@@ -329,6 +423,13 @@ class PowerCubeClient:
             del deadlines[index]
             results[index] = ack
             self.stats.acks_matched += 1
+            if busy is not None:
+                busy.pop(ack.module, None)
+            if on_ack is not None:
+                on_ack(requests[index], ack)  # type: ignore[index]
+            if stop_after_one:
+                return True
+        return True
 
     def _timeout_error(self, requests: Sequence[Request], missing: list[int],
                        timeout: float) -> ModuleTimeoutError:
@@ -415,9 +516,11 @@ class PowerCubeClient:
                           is_rx=False, timestamp=self.clock.now())
         try:
             self.bus.send(msg, timeout=self.SEND_TIMEOUT)
-        except can.CanError as exc:
-            raise BusError(f"sending 0x{can_id:03X} [{data.hex(' ').upper()}] failed: {exc}"
-                           ) from exc
+        except Exception as exc:
+            # Not only can.CanError: a lost connection (socketcand server gone) raises
+            # BrokenPipeError/OSError from python-can, and every such failure is a bus fault.
+            raise BusError(f"sending 0x{can_id:03X} [{data.hex(' ').upper()}] failed: "
+                           f"{_what(exc)}") from exc
         self.stats.frames_sent += 1
         if can_id == BROADCAST_ID and data[:1] == b"\x07" and self._watchdog_period:
             self._watchdog_due = msg.timestamp + self._watchdog_period
@@ -432,11 +535,25 @@ class PowerCubeClient:
 
     def _next_ack(self, until: float) -> tuple[can.Message, Ack] | None:
         """Read until the next decodable acknowledge, or None once ``until`` has come.
-        Refreshes the watchdog on the way."""
+        Refreshes the watchdog on the way.
+
+        At the deadline, what has already arrived is still read (without waiting): after a
+        host stall the acknowledges are queued although the deadline has passed, and they
+        were on the wire in time."""
+        late_reads = 0
         while True:
             now = self.clock.now()
             if now >= until:
-                return None
+                if late_reads >= self.MAX_FLUSH_FRAMES:
+                    return None  # a flood of other frames: give up as before
+                late_reads += 1
+                msg = self._recv_now()
+                if msg is None:
+                    return None
+                ack = self._decode(msg)
+                if ack is not None:
+                    return msg, ack
+                continue
             if self._service_watchdog(now):
                 continue
             wake = until if self._watchdog_due is None else min(until, self._watchdog_due)
@@ -447,8 +564,14 @@ class PowerCubeClient:
             if ack is not None:
                 return msg, ack
 
+    def _bus_recv(self, timeout: float) -> can.Message | None:
+        try:
+            return self.bus.recv(timeout=timeout)
+        except Exception as exc:  # a lost connection is a bus fault, whatever raised it
+            raise BusError(f"receiving from the bus failed: {_what(exc)}") from exc
+
     def _recv(self, wake: float) -> can.Message | None:
-        msg = self.bus.recv(timeout=max(0.0, wake - self.clock.now()))
+        msg = self._bus_recv(max(0.0, wake - self.clock.now()))
         if msg is None:
             # A bus that does not know our virtual clock returns without advancing it.
             if self.clock.is_virtual and self.clock.now() < wake:
@@ -458,7 +581,7 @@ class PowerCubeClient:
         return msg
 
     def _recv_now(self) -> can.Message | None:
-        msg = self.bus.recv(timeout=0.0)
+        msg = self._bus_recv(0.0)
         if msg is not None:
             self._received(msg)
         return msg
@@ -517,6 +640,17 @@ class PowerCubeClient:
     def halt(self, module: int | None = None) -> None:
         """Emergency-stop one module, or all (broadcast, not acknowledged)."""
         self._command(CommandId.HALT, module)
+
+    def halt_now(self) -> None:
+        """Broadcast Halt ``[0x02, 0x00]`` at once: unlike :meth:`halt`, nothing queued on
+        the bus is read first (a flooded receive queue must not delay an emergency stop),
+        and no quarantine is waited for. Confirm it with :func:`seqrun.halt.halt_and_confirm`.
+
+        :raises ~seqrun.errors.BusError: the frame could not be sent.
+        """
+        with self._lock:
+            self._check_open()
+            self._send(*_HALT_FRAME)
 
     def refresh_watchdog(self) -> None:
         """Broadcast a watchdog refresh ``[0x07, 0x00]`` now."""
@@ -638,6 +772,15 @@ class PowerCubeClient:
 
 
 _WATCHDOG_FRAME = encode(BroadcastRequest(CommandId.WATCHDOG_REFRESH, 0))
+_HALT_FRAME = encode(BroadcastRequest(CommandId.HALT, 0))
+
+
+def _what(exc: BaseException) -> str:
+    """One line naming the exception (python-can's socketcand client puts a whole
+    traceback into its CanError message: only the part before it is kept)."""
+    text = str(exc).split("Traceback (most recent call last)")[0].strip()
+    text = text.splitlines()[0].strip() if text else ""
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
 def _describe(request: Request) -> str:

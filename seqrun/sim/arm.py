@@ -5,7 +5,9 @@ with the shared codec (:mod:`seqrun.powercube.codec`), let the addressed module 
 module, for 0x100) act on it, and return the acknowledges, each ready to be sent
 ``module_latency`` after the request was received. Frames that are not valid PowerCube
 requests — other ids, bad lengths, unknown commands, other modules' acks — are ignored,
-as a real module ignores them.
+as a real module ignores them. A GetExtended ``[0x0A, par]`` sent on the SET identifier
+0x0E0+m (the KTH driver looks for module 1 that way at every start) is answered like one
+on the GET identifier, on 0x0A0+m, as real modules do.
 
 Faults (:mod:`seqrun.sim.faults`) are applied when the arm's time passes their ``at``
 (seconds after the arm was created): the module is first simulated up to that instant,
@@ -29,12 +31,13 @@ from seqrun.powercube.codec import (
     decode_request,
     encode,
 )
-from seqrun.powercube.protocol import StateFlag
+from seqrun.powercube.protocol import GET_BASE, SET_BASE, StateFlag
 from seqrun.sim.faults import Fault, parse_faults
 from seqrun.sim.module import ModuleOptions, SimModule
 
 #: Seconds between the end of a request frame and its acknowledge being ready to send [I].
 DEFAULT_MODULE_LATENCY = 100e-6
+_GET_EXTENDED = 0x0A
 
 
 @dataclass(frozen=True)
@@ -79,6 +82,11 @@ class SimArm:
         self._silent: set[int] = set()  # no_ack
         self._drop_rate: dict[int, float] = {}
         self._rng = {m: random.Random(f"{seed}:{m}") for m in self._modules}
+        #: Acknowledges each module produced that have not been sent on the wire yet
+        #: (``drop_request_while_busy``).
+        self._unsent_acks: dict[int, int] = {m: 0 for m in self._modules}
+        #: Requests dropped because their module was busy: (time, module, can_id, data).
+        self.dropped_while_busy: list[tuple[float, int, int, bytes]] = []
         #: Every fault applied so far, with the time it was applied.
         self.applied_faults: list[tuple[float, Fault]] = []
         if positions is not None:
@@ -178,6 +186,8 @@ class SimArm:
         """
         with self._lock:
             t = self._now(t)
+            if SET_BASE <= can_id < SET_BASE + 0x20 and data[:1] == bytes([_GET_EXTENDED]):
+                can_id = GET_BASE + (can_id - SET_BASE)  # a GetExtended on the SET id
             try:
                 request = decode_request(can_id, bytes(data))
             except CodecError:
@@ -189,13 +199,24 @@ class SimArm:
             module = self._modules.get(request.module)
             if module is None:
                 return []
+            if self.options.drop_request_while_busy and self._unsent_acks[request.module]:
+                self.dropped_while_busy.append((t, request.module, can_id, bytes(data)))
+                return []
             ack = module.handle(request, t)
             if ack is None or not self._ack_survives(request.module):
                 return []
+            self._unsent_acks[request.module] += 1
             ack_id, ack_data = encode(ack)
             if isinstance(ack, CommandAck) and not self.options.command_ack_trailer:
                 ack_data = ack_data[:1]
             return [Reply(request.module, ack_id, ack_data, t + self.module_latency)]
+
+    def ack_sent(self, module_id: int) -> None:
+        """The wire reports that an acknowledge of ``module_id`` has been sent (delivered):
+        the module is no longer busy."""
+        with self._lock:
+            if self._unsent_acks.get(module_id):
+                self._unsent_acks[module_id] -= 1
 
     def _ack_survives(self, module_id: int) -> bool:
         if module_id in self._silent:

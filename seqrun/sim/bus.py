@@ -41,6 +41,7 @@ from seqrun.clock import Clock, RealClock
 from seqrun.sim.arm import SimArm
 from seqrun.sim.faults import Fault, parse_faults
 from seqrun.sim.module import ModuleOptions
+from seqrun.sim.options import module_options, pop_switches
 from seqrun.sim.network import (
     DEFAULT_TX_QUEUE_SIZE,
     Endpoint,
@@ -137,7 +138,9 @@ class SimBus(BusABC):
     :param receive_own_messages: also receive the frames this bus sends.
     :param module_latency: request-to-ack time of the modules (first bus only).
     :param seed: seed of ``drop_acks`` losses (first bus only).
-    :param options: :class:`~seqrun.sim.module.ModuleOptions` (first bus only).
+    :param options: :class:`~seqrun.sim.module.ModuleOptions` (first bus only); single
+        switches may also be given by name as keyword arguments
+        (``home_ok_at_power_on=True``, strings like "true" too, see :mod:`seqrun.sim.options`).
     :param positions: start positions in rad, module coordinates (first bus only).
     :param modules: module ids of the arm, default 1..7 (first bus only).
     :param tx_queue_size: frames that may wait for the wire before ``send`` waits.
@@ -158,6 +161,9 @@ class SimBus(BusABC):
         channel = "arm0" if channel is None else str(channel)
         try:
             fault_list = parse_faults(faults)
+            switches = pop_switches(kwargs)
+            if switches:
+                options = module_options(switches, options)
         except (TypeError, ValueError) as exc:
             raise CanInitializationError(str(exc)) from None
         arm_kwargs = {"module_latency": module_latency, "seed": seed, "options": options,

@@ -38,6 +38,8 @@ Behaviour (sources in the reference; **[I]** marks an assumption that is an opti
 - Watchdog: with WATCHDOG_ENABLE in Config the first refresh (broadcast or addressed 0x07)
   arms it; ``watchdog_timeout`` [I: 50 ms] after the last refresh the module stops with
   ``watchdog_flags`` [I: HALTED|ERROR|COMM_ERROR] and is disarmed until the next refresh.
+  [I: ``addressed_refresh_arms_watchdog``, the KTH driver's view: only an addressed
+  refresh arms it, setting WATCHDOG_ENABLE itself; broadcasts keep an armed one alive.]
 - Parameters: every id of :class:`~seqrun.powercube.protocol.ParamId` answers GetExtended
   with its wire type. Writing a read-only one (DEF_*, ActPos, TargetPos, CubeState, ...) is
   acknowledged and ignored [I] — e.g. TargetPos, which the thesis believed writable.
@@ -126,6 +128,11 @@ class ModuleOptions:
     command_ack_trailer: bool = True
     #: An addressed WatchdogRefresh ``0x0E0+m : [07]`` is acknowledged like other commands.
     ack_addressed_watchdog: bool = True
+    #: True: the first *addressed* WatchdogRefresh arms the watchdog (and sets
+    #: WATCHDOG_ENABLE in Config), whatever Config said; broadcast refreshes only keep an
+    #: armed watchdog alive (KTH driver). False: WATCHDOG_ENABLE in Config, and any refresh
+    #: arms it.
+    addressed_refresh_arms_watchdog: bool = False
     #: Seconds without refresh before an armed watchdog stops the module.
     watchdog_timeout: float = 0.050
     #: State set when the watchdog expires.
@@ -138,6 +145,21 @@ class ModuleOptions:
     step_buffering: bool = True
     #: Config DISABLE_ACK suppresses acknowledges.
     honour_disable_ack: bool = True
+    #: A module drops (ignores, does not answer) an addressed request that arrives while
+    #: it is still busy with the previous one, i.e. before its acknowledge of that one has
+    #: been sent on the wire. Off: requests queue up. No driver sends a second request
+    #: before the answer, so real firmware was never seen doing either; on, it catches a
+    #: host that does. Broadcasts (Halt, watchdog, ...) are always taken.
+    drop_request_while_busy: bool = False
+    #: FRAMP does not blend: every FRAMP re-plans its trapezoid from standstill (v = 0) at
+    #: the current position instead of from the current velocity. No published driver
+    #: streams FRAMP, so real firmware behaviour is unconfirmed [I].
+    framp_from_standstill: bool = False
+
+
+#: Environment variable the command line reads simulator options from, e.g.
+#: ``SEQRUN_SIM_OPTIONS="framp_from_standstill drop_request_while_busy"``.
+SIM_OPTIONS_ENV = "SEQRUN_SIM_OPTIONS"
 
 
 def default_parameters(module_id: int) -> dict[ParamId, float | int]:
@@ -703,13 +725,18 @@ class SimModule:
         elif command == CommandId.HALT:
             self._stop(_F.HALTED)
         elif command == CommandId.WATCHDOG_REFRESH:
-            self._refresh_watchdog()
+            self._refresh_watchdog(addressed=True)
             if not self.options.ack_addressed_watchdog:
                 return None
         # TOGGLE_HOME, RECALC_PID, SAVE_PARAMS, RESET_TIME: acknowledged, no simulated effect.
         return CommandAck(self.module_id, command)
 
-    def _refresh_watchdog(self) -> None:
+    def _refresh_watchdog(self, addressed: bool = False) -> None:
+        if self.options.addressed_refresh_arms_watchdog:
+            if addressed:
+                self._params[_P_CONFIG] = int(self._params[_P_CONFIG]) | _WATCHDOG_ENABLE
+            elif self._watchdog_deadline is None:
+                return  # a broadcast does not arm it
         if int(self._params[_P_CONFIG]) & _WATCHDOG_ENABLE:
             self._watchdog_deadline = self._t + self.options.watchdog_timeout
 
@@ -876,6 +903,8 @@ class SimModule:
         if motion.mode in _RAMP_MODES:
             target = min(max(motion.value, lo), hi)
             self._last_target = target
+            if self.options.framp_from_standstill:
+                velocity = 0.0
             pieces = plan_ramp(position, velocity, target, motion.vmax, motion.amax)
             self._start(_build_profile("ramp", self._t, position, velocity, pieces, target))
         else:

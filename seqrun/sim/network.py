@@ -35,6 +35,7 @@ from dataclasses import dataclass
 from seqrun.can_timing import INTERMISSION_BITS, frame_bit_length
 from seqrun.clock import Clock
 from seqrun.errors import BusError
+from seqrun.powercube.protocol import ACK_BASE
 from seqrun.sim.arm import SimArm
 
 #: Frames a host endpoint may have waiting for the wire before ``send`` waits [I].
@@ -168,7 +169,9 @@ class Endpoint:
             return len(self._inbox)
 
     def close(self) -> None:
-        """Detach from the wire; frames not yet on it are dropped. Safe to call twice."""
+        """Detach from the wire: nothing more is received or accepted, but the frames
+        already accepted still go out, in order (a closing client's last Halt must reach
+        the modules). Safe to call twice."""
         self.network._detach(self)
 
 
@@ -237,9 +240,9 @@ class SimNetwork:
             endpoint.closed = True
             self._endpoints.remove(endpoint)
             self._nodes.remove(endpoint._node)
-            endpoint._node.queue.clear()
-            if endpoint._node in self._active:
-                self._active.remove(endpoint._node)
+            # Its queue stays in the competition for the wire: every frame accepted is
+            # delivered (at the time it would have been, whoever advances the wire next).
+            endpoint._inbox.clear()
             self._cond.notify_all()
 
     # -- timing -------------------------------------------------------------------------------
@@ -365,8 +368,11 @@ class SimNetwork:
         for endpoint in self._endpoints:
             if endpoint._node is not sender or endpoint.receive_own:
                 endpoint._inbox.append(frame)
-        if sender.is_module or frame.is_extended or frame.is_remote:
-            return  # the modules speak 11-bit data frames and ignore each other's acks
+        if sender.is_module:
+            self.arm.ack_sent(frame.can_id - ACK_BASE)  # that module is free again
+            return  # the modules ignore each other's acks
+        if frame.is_extended or frame.is_remote:
+            return  # the modules speak 11-bit data frames
         for reply in self.arm.handle_frame(frame.can_id, frame.data, flight.end):
             node = self._module_nodes.get(reply.module)
             if node is None:

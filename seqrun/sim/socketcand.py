@@ -23,8 +23,21 @@ Protocol — the subset of socketcand's ASCII protocol python-can's client uses,
 python-can reads each handshake answer with a single ``recv()`` and compares it exactly,
 so the server sends nothing unasked until ``rawmode`` has been answered, and holds the
 first frames back for ``RAWMODE_GRACE`` seconds so they cannot arrive glued to that
-``< ok >`` — or until the client's first ``send``, which shows it has read it. Frame timestamps are wall-clock (epoch) seconds like socketcand's, converted
-from the simulation's monotonic delivery times.
+``< ok >`` — or until the client's first ``send``, which shows it has read it. Frame
+timestamps are wall-clock (epoch) seconds like socketcand's, converted from the
+simulation's monotonic delivery times.
+
+Whole elements: after the handshake every element is padded with leading blanks to a
+multiple of ``ELEMENT_ALIGN`` (64) bytes and written with one ``sendall`` (the frames
+waiting for a client go out together). A client that reads a power-of-two number of bytes
+at a time — python-can's reads 1024 — therefore never finds half an element at the end of
+a read (python-can would log "Got incomplete message" for each, which also garbles
+``python -m can.viewer``'s screen). Parsers look for the ``<``, so the blanks are harmless.
+
+Every frame a client sent is delivered, also when the client disconnects right after
+sending (a ``seqrun halt`` from a second terminal): the session reads its socket to the
+end, and a closed endpoint's frames still go out (:meth:`Endpoint.close`). Bytes that are
+not ASCII are answered with an ``< error ... >`` element; the session goes on.
 
 Only loopback addresses are served: the simulator has no authentication and speaks for a
 robot arm. Not implemented: broadcast-manager and control modes, ISO-TP, the UDP beacon,
@@ -36,11 +49,13 @@ from __future__ import annotations
 import ipaddress
 import logging
 import re
+import select
 import socket
 import threading
 import time
 from typing import Self
 
+from seqrun.errors import BusError
 from seqrun.sim.network import Endpoint, NetworkClosedError, SimNetwork, WireFrame
 
 logger = logging.getLogger(__name__)
@@ -50,6 +65,10 @@ DEFAULT_PORT = 29536
 RAWMODE_GRACE = 0.05
 _POLL = 0.2  # seconds between checks of the stop flag in blocking loops
 _ELEMENT = re.compile(r"<([^<>]*)>")
+#: Every element after the handshake is padded to a multiple of this many bytes.
+ELEMENT_ALIGN = 64
+#: Frames written to a client in one ``sendall`` at most.
+_MAX_BATCH = 256
 
 
 def check_loopback(host: str) -> str:
@@ -80,6 +99,12 @@ def format_frame(frame: WireFrame, wall_timestamp: float) -> str:
     return f"< frame {can_id} {seconds}.{micros:06d} {frame.data.hex().upper()} >"
 
 
+def pad_element(text: str) -> str:
+    """``text`` (one ``< ... >`` element) with leading blanks up to a multiple of
+    :data:`ELEMENT_ALIGN` characters, so element boundaries fall on read boundaries."""
+    return text.rjust(-(-len(text) // ELEMENT_ALIGN) * ELEMENT_ALIGN)
+
+
 def parse_send(words: list[str]) -> WireFrame:
     """The frame of a ``< send ID DLC DATA... >`` element (``words`` after "send").
 
@@ -97,7 +122,13 @@ def parse_send(words: list[str]) -> WireFrame:
 
 
 class _Session:
-    """One TCP client: reader thread (commands) and, in raw mode, writer thread (frames)."""
+    """One TCP client: reader thread (commands) and, in raw mode, writer thread (frames).
+
+    The reader owns the session's end: it reads the socket to its end (so every frame the
+    client sent is queued for the wire) and then closes. The writer only stops writing
+    when the client is gone, and never blocks on a timeout: a client that reads slowly
+    gets its frames late, never a closed session.
+    """
 
     def __init__(self, server: SocketcandServer, conn: socket.socket, peer: object) -> None:
         self.server = server
@@ -109,24 +140,37 @@ class _Session:
         self._closed = threading.Event()
         #: Set once the client shows it has read the handshake (its first ``send``).
         self._handshake_read = threading.Event()
+        #: Set once ``< rawmode >`` is answered: from then on every element is padded.
+        self._aligned = False
         self.reader = threading.Thread(target=self._read_loop, daemon=True,
                                        name=f"socketcand-read-{peer}")
         self.writer: threading.Thread | None = None
 
     def start(self) -> None:
-        self._write("< hi >")
+        self._send_text("< hi >")
         self.reader.start()
 
     def _write(self, text: str) -> None:
+        """One element from the reader thread (answers and errors)."""
+        self._send_text(pad_element(text) if self._aligned else text)
+
+    def _error(self, message: object) -> None:
+        # '<' and '>' would end the element early; the text may quote the client's bytes.
+        text = str(message).replace("<", "(").replace(">", ")")
+        self._write(f"< error {text} >")
+
+    def _send_text(self, text: str) -> None:
+        # backslashreplace: an element quoting a client's non-ASCII bytes stays ASCII.
+        data = text.encode("ascii", "backslashreplace")
         with self._send_lock:
-            self.conn.sendall(text.encode("ascii"))
+            self.conn.sendall(data)
 
     def close(self) -> None:
         if self._closed.is_set():
             return
         self._closed.set()
         if self.endpoint is not None:
-            self.endpoint.close()
+            self.endpoint.close()  # (its frames not yet on the wire still go out)
         try:
             self.conn.shutdown(socket.SHUT_RDWR)
         except OSError:
@@ -136,22 +180,23 @@ class _Session:
     def _read_loop(self) -> None:
         buffer = ""
         try:
-            self.conn.settimeout(_POLL)
             while not self._closed.is_set():
-                try:
-                    chunk = self.conn.recv(4096)
-                except TimeoutError:
+                # select, not a socket timeout: a timeout would also cut the writer's
+                # sendall short when the client reads slowly.
+                ready, _, _ = select.select([self.conn], [], [], _POLL)
+                if not ready:
                     continue
+                chunk = self.conn.recv(4096)
                 if not chunk:
                     break
-                buffer += chunk.decode("ascii", errors="replace")
+                buffer += chunk.decode("ascii", errors="backslashreplace")
                 while (match := _ELEMENT.search(buffer)) is not None:
                     buffer = buffer[match.end():]
                     self._command(match.group(1).split())
                 if len(buffer) > 4096:  # garbage without a closing '>'
-                    self._write("< error element too long >")
+                    self._error("element too long")
                     buffer = ""
-        except OSError as exc:
+        except (OSError, ValueError) as exc:  # (ValueError: select on a closed socket)
             if not self._closed.is_set():
                 logger.info("socketcand client %s: %s", self.peer, exc)
         finally:
@@ -160,40 +205,41 @@ class _Session:
 
     def _command(self, words: list[str]) -> None:
         if not words:
-            self._write("< error empty command >")
+            self._error("empty command")
             return
         verb, args = words[0], words[1:]
         if verb == "open":
             if args != [self.server.channel]:
-                self._write(f"< error could not open bus {' '.join(args) or '(none)'} >")
+                self._error(f"could not open bus {' '.join(args) or '(none)'}")
                 return
             self.opened = True
             self._write("< ok >")
         elif verb == "rawmode":
             if not self.opened:
-                self._write("< error open a bus first >")
+                self._error("open a bus first")
                 return
             if self.endpoint is None:
                 self.endpoint = self.server.network.attach(name=f"socketcand {self.peer}")
                 self.writer = threading.Thread(target=self._forward_loop, daemon=True,
                                                name=f"socketcand-write-{self.peer}")
-            self._write("< ok >")
+            self._write("< ok >")  # (unpadded: python-can compares it exactly)
+            self._aligned = True
             if not self.writer.is_alive():
                 self.writer.start()
         elif verb == "send":
             if self.endpoint is None:
-                self._write("< error not in raw mode >")
+                self._error("not in raw mode")
                 return
             # A client that sends has read the rawmode "< ok >": no need to hold frames back.
             self._handshake_read.set()
             try:
                 self.endpoint.send(parse_send(args), timeout=1.0)
-            except (ValueError, NetworkClosedError) as exc:
-                self._write(f"< error {exc} >")
+            except (ValueError, BusError) as exc:
+                self._error(exc)
         elif verb == "echo":
             self._write("< echo >")
         else:
-            self._write(f"< error unsupported command {verb} >")
+            self._error(f"unsupported command {verb}")
 
     def _forward_loop(self) -> None:
         endpoint = self.endpoint
@@ -203,13 +249,25 @@ class _Session:
         try:
             while not self._closed.is_set():
                 frame = endpoint.receive(clock.now() + _POLL)
-                if frame is None or frame.is_remote:
-                    continue
-                self._write(format_frame(frame, frame.timestamp + self.server.wall_offset))
-        except (OSError, NetworkClosedError):
+                parts: list[str] = []
+                # Everything already delivered goes out in one write: fewer system calls
+                # and thread switches when a client falls behind a busy wire.
+                while frame is not None:
+                    if not frame.is_remote:
+                        parts.append(pad_element(format_frame(
+                            frame, frame.timestamp + self.server.wall_offset)))
+                    if len(parts) >= _MAX_BATCH:
+                        break
+                    frame = endpoint.receive(clock.now())  # (no waiting)
+                if parts:
+                    self._send_text("".join(parts))
+        except NetworkClosedError:
             pass
-        finally:
-            self.close()
+        except OSError as exc:
+            # The client is gone; the reader sees that too, reads what it had sent and
+            # closes the session.
+            if not self._closed.is_set():
+                logger.info("socketcand client %s: %s", self.peer, exc)
 
 
 class SocketcandServer:

@@ -11,6 +11,7 @@ SETTLE_TIMEOUT_S = 1.0
 
 def run(step, ex) -> dict:
     modules = addressed_modules(step.params, ex.arm)
+    ex.confirm_clearing_latched(modules)  # a fault from before the run: ask first
     if modules is None:
         ex.client.reset(None)
     else:
