@@ -104,6 +104,118 @@ class Workspace(_Strict):
     guards: list[Guard] = []
 
 
+class Tool(_Strict):
+    """A tool centre point (TCP): where a Cartesian target of a sequence puts the tool."""
+
+    name: str = Field(min_length=1, description="Name used in sequences and `seqrun ik --tool`.")
+    xyz_mm: tuple[Finite, Finite, Finite] = Field(
+        description="TCP position in the end-effector frame (kinematics.tool), mm.")
+    rpy_deg: tuple[Finite, Finite, Finite] = Field(
+        (0.0, 0.0, 0.0), description="TCP orientation in the end-effector frame, roll/pitch/yaw "
+                                     "deg (R = Rz Ry Rx).")
+
+
+FramePoint = Annotated[str, Field(
+    min_length=1, description="A frame origin of the chain: base (the mount), a joint name "
+                              "(its axis point, e.g. j2) or end_effector.")]
+
+
+class Capsule(_Strict):
+    """A link volume: the segment between two frame origins, thickened by a radius."""
+
+    name: str = Field(min_length=1)
+    start: FramePoint
+    end: FramePoint
+    radius_mm: Positive
+
+
+class Plane(_Strict):
+    point_mm: tuple[Finite, Finite, Finite] = (0.0, 0.0, 0.0)
+    normal: tuple[Finite, Finite, Finite] = Field(
+        (0.0, 0.0, 1.0), description="Points out of the obstacle (into free space).")
+
+
+class Box(_Strict):
+    center_mm: tuple[Finite, Finite, Finite]
+    size_mm: tuple[Positive, Positive, Positive]
+    rpy_deg: tuple[Finite, Finite, Finite] = (0.0, 0.0, 0.0)
+
+
+class Cylinder(_Strict):
+    base_mm: tuple[Finite, Finite, Finite] = Field(description="Centre of one end face.")
+    axis: tuple[Finite, Finite, Finite] = (0.0, 0.0, 1.0)
+    radius_mm: Positive
+    height_mm: Positive
+
+
+class Obstacle(_Strict):
+    """A facility obstacle in the base frame: exactly one of plane, box, cylinder."""
+
+    name: str = Field(min_length=1)
+    plane: Plane | None = None
+    box: Box | None = None
+    cylinder: Cylinder | None = None
+    ignore_links: list[str] = Field(
+        default_factory=list, description="Capsules that touch it by design (the column "
+                                          "standing on the desk).")
+
+    @model_validator(mode="after")
+    def _one(self) -> "Obstacle":
+        given = [k for k in ("plane", "box", "cylinder") if getattr(self, k) is not None]
+        if len(given) != 1:
+            raise ValueError(f"obstacle {self.name}: give exactly one of plane, box, cylinder")
+        if self.plane is not None and not any(self.plane.normal):
+            raise ValueError(f"obstacle {self.name}: the plane's normal must not be zero")
+        if self.cylinder is not None and not any(self.cylinder.axis):
+            raise ValueError(f"obstacle {self.name}: the cylinder's axis must not be zero")
+        return self
+
+    @property
+    def kind(self) -> str:
+        return next(k for k in ("plane", "box", "cylinder") if getattr(self, k) is not None)
+
+    @property
+    def shape(self) -> Plane | Box | Cylinder:
+        return getattr(self, self.kind)
+
+
+class GeometrySpec(_Strict):
+    """Link volumes and facility obstacles, checked along every planned trajectory and
+    every control cycle (seqrun/geometry.py)."""
+
+    margin_mm: Annotated[float, Field(ge=0, allow_inf_nan=False)] = Field(
+        10.0, description="Smallest clearance allowed between any two checked surfaces, mm.")
+    capsules: list[Capsule] = Field(
+        default_factory=list, description="Link volumes in chain order; links that are not "
+                                          "neighbours in this list are checked against each "
+                                          "other (self-collision).")
+    obstacles: list[Obstacle] = Field(default_factory=list)
+    allowed_pairs: list[tuple[str, str]] = Field(
+        default_factory=list, description="Capsule pairs never checked against each other.")
+
+
+class Cartesian(_Strict):
+    """Settings of end-effector targets and straight-line moves."""
+
+    min_manipulability: Annotated[float, Field(ge=0, allow_inf_nan=False)] = Field(
+        0.05, description="Smallest Yoshikawa manipulability sqrt(det(J Jᵀ)) allowed along a "
+                          "straight-line move (linear rows of J in units of 200 mm, so the "
+                          "number has no unit; the LWA 3 has 3.6 at Op-safe, 0 at Totem, "
+                          "0.09 with the elbow 2° from straight).")
+    ik_agreement_deg: Positive = Field(
+        1.0, description="At run time an end-effector target is solved again from the measured "
+                         "joints; a solution further than this (any joint, deg) from the "
+                         "validated one is a fault.")
+    linear_command_mode: Literal["ramp", "step"] = Field(
+        "step", description="How straight-line moves are streamed. step (FSTEP to the next "
+                            "sample every cycle) keeps the tool on the line (0.03 mm off over "
+                            "300 mm on the simulator); ramp's lookahead and minimum speed let "
+                            "slow joints run ahead of the others (2.8 mm).")
+    linear_sample_s: Annotated[float, Field(gt=0, le=0.1, allow_inf_nan=False)] = Field(
+        0.01, description="Sampling period of straight-line moves (s): every sample is solved "
+                          "and checked before the move runs.")
+
+
 class ArmDescription(_Strict):
     name: str
     description: str = ""
@@ -112,6 +224,15 @@ class ArmDescription(_Strict):
     joints: list[Joint] = Field(min_length=1)
     kinematics: Kinematics
     workspace: Workspace = Workspace()
+    tools: list[Tool] = Field(
+        default_factory=list,
+        description="Named tool centre points. Cartesian targets (seqrun ik, move to a pose in "
+                    "mm) mean the tool; without a tool they mean the end-effector frame.")
+    cartesian: Cartesian = Cartesian()
+    geometry: GeometrySpec = GeometrySpec()
+    default_tool: str | None = Field(
+        None, description="Tool used when a command or step names none (default: the "
+                          "end-effector frame itself).")
 
     @field_validator("joints")
     @classmethod
@@ -129,6 +250,48 @@ class ArmDescription(_Strict):
             raise ValueError(f"kinematics.links needs {len(self.joints) - 1} frames "
                              f"(one per joint after the first), has {len(self.kinematics.links)}")
         return self
+
+    @model_validator(mode="after")
+    def _tools_known(self) -> "ArmDescription":
+        names = [t.name for t in self.tools]
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise ValueError(f"duplicate tool name(s): {', '.join(dup)}")
+        if self.default_tool is not None and self.default_tool not in names:
+            raise ValueError(f"default_tool '{self.default_tool}' is not among the tools "
+                             f"({', '.join(names) or 'none defined'})")
+        return self
+
+    @model_validator(mode="after")
+    def _geometry_names(self) -> "ArmDescription":
+        points = {"base", "end_effector", *self.joint_names}
+        capsules = [c.name for c in self.geometry.capsules]
+        for capsule in self.geometry.capsules:
+            for point in (capsule.start, capsule.end):
+                if point not in points:
+                    raise ValueError(f"capsule {capsule.name}: unknown frame '{point}' (base, "
+                                     f"{', '.join(self.joint_names)} or end_effector)")
+        names = capsules + [o.name for o in self.geometry.obstacles]
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise ValueError(f"duplicate capsule/obstacle name(s): {', '.join(dup)}")
+        for obstacle in self.geometry.obstacles:
+            unknown = [n for n in obstacle.ignore_links if n not in capsules]
+            if unknown:
+                raise ValueError(f"obstacle {obstacle.name}: unknown capsule(s) in ignore_links: "
+                                 f"{', '.join(unknown)}")
+        return self
+
+    def tool(self, name: str | None) -> Tool | None:
+        """The named tool, the default tool for ``None``; None means the end-effector frame.
+        Raises ``KeyError`` for an unknown name."""
+        name = self.default_tool if name is None else name
+        if name is None:
+            return None
+        for tool in self.tools:
+            if tool.name == name:
+                return tool
+        raise KeyError(name)
 
     # Convenience views used everywhere.
     @property

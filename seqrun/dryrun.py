@@ -27,7 +27,8 @@ from seqrun.schema import LoadedSequence
 
 #: Checks a simulator cannot make for the operator, listed in every dry-run report.
 ALWAYS_UNVERIFIED = (
-    "collisions other than the workspace guards (guard points are joint axes, not housings)",
+    "collisions beyond the arm file's link volumes and obstacles (its capsule radii are "
+    "estimates, not measured housings)",
     "the real modules' tracking and timing (the dry run uses the simulated PRL model)",
 )
 

@@ -179,11 +179,21 @@ class Executor:
         self.last: Measurement | None = None
         self.commanded_deg: np.ndarray | None = None
         self.min_heights_mm: dict[str, float] = {}
+        #: Smallest clearance seen per pair of link volumes / obstacles (the closest pair of
+        #: each cycle), mm.
+        self.min_distances_mm: dict[str, float] = {}
         self.not_verified: list[str] = []
         self._current_step: StepResult | None = None
         self._move_limits = self.limits
         self._keeper: threading.Thread | None = None
         self._keeper_stop = threading.Event()
+        #: Joint solutions of end-effector targets as validated from the measured start
+        #: (step number -> user degrees); the steps solve again and must land close.
+        self.validated_targets: dict[int, np.ndarray] = {}
+        #: Measured joints where the last move started (relative checkpoints).
+        self.motion_start_deg: np.ndarray | None = None
+        #: Extra check of every streamed cycle (a straight-line move's deviation).
+        self.path_check: Callable[[Measurement], None] | None = None
         #: The emergency Halt of this run and what confirmed it (None: no Halt yet).
         self.halt_result: HaltConfirmation | None = None
 
@@ -376,6 +386,7 @@ class Executor:
 
     def check_guards(self, m: Measurement) -> None:
         q = np.radians(m.user_deg)
+        self.check_geometry(q)
         points = kinematics.point_positions(self.chain, q)
         for guard in self.arm.workspace.guards:
             for name in guard.points:
@@ -386,6 +397,27 @@ class Executor:
                     raise RunAborted("workspace_guard",
                                      f"workspace guard '{guard.name}': {name} at z = {z:.1f} mm, "
                                      f"below {guard.min_z_mm:.1f} mm")
+
+    def check_geometry(self, q_rad: np.ndarray) -> None:
+        """Link volumes against the arm file's obstacles and each other (measured joints)."""
+        geometry = self.__dict__.get("_geometry")
+        if geometry is None:
+            from seqrun.geometry import Geometry
+
+            geometry = self.__dict__["_geometry"] = Geometry(self.arm)
+        if geometry.empty:
+            return
+        smallest = geometry.smallest(q_rad)
+        if smallest is None:
+            return
+        key = smallest.pair
+        self.min_distances_mm[key] = min(self.min_distances_mm.get(key, math.inf),
+                                         smallest.distance_mm)
+        if smallest.distance_mm < geometry.margin_mm:
+            a, b = smallest.pair.split("~", 1)
+            raise RunAborted("collision",
+                             f"geometry: {a} {smallest.distance_mm:.1f} mm from {b}, closer than "
+                             f"the margin {geometry.margin_mm:g} mm")
 
     def monitor(self) -> Measurement:
         """One monitoring cycle without motion commands (waits, checkpoints). A module
@@ -412,6 +444,7 @@ class Executor:
         self.check_states(m)
         self._move_limits = limits
         start_deg = m.user_deg.copy()
+        self.motion_start_deg = start_deg.copy()  # for relative checkpoints
         moving = [i for i in active if abs(target_deg[i] - start_deg[i]) > 1e-9]
         plan = plan_move(np.radians(start_deg), np.radians(target_deg), limits, moving)
         self.commanded_deg = np.where(np.isin(np.arange(len(target_deg)), moving),
@@ -434,6 +467,44 @@ class Executor:
             peak = self._stream(plan, moving, tolerance_deg, deadline, stop_on_abort=True)
         elapsed = self.clock.now() - t_move
         return {"planned_duration_s": plan.duration, "executed_duration_s": elapsed,
+                "peak_velocity_deg_s": _r(np.degrees(plan.peak_velocity())),
+                "peak_measured_velocity_deg_s": _r(peak)}
+
+    def follow(self, plan, *, tolerance_deg: float, timeout_s: float | None,
+               path_check: Callable[[Measurement], None] | None = None,
+               command_mode: str | None = None) -> dict[str, Any]:
+        """Stream a precomputed plan (a :class:`~seqrun.planner.SampledPlan`) that starts
+        where the arm stands; ``path_check`` runs on every cycle's measurement;
+        ``command_mode`` overrides the run's setpoint law for this plan."""
+        m = self.read_arm()
+        self.check_states(m)
+        self.motion_start_deg = m.user_deg.copy()  # for relative checkpoints
+        moving = list(plan.active)
+        self.commanded_deg = np.degrees(plan.target)
+        self.emit("move_planned", duration_s=_round(plan.duration), start_deg=_r(m.user_deg),
+                  target_deg=_r(np.degrees(plan.target)),
+                  joints=[self.arm.joints[i].name for i in moving], sampled=True)
+        if self._current_step is not None:
+            self._current_step.planned_duration_s = plan.duration
+        peak = np.zeros(self.arm.dof)
+        t_move = self.clock.now()
+        if moving:
+            law = self.setpoints
+            if command_mode is not None and command_mode != self.command_mode:
+                self.setpoints = setpoint_law(command_mode, self.arm, self.cycle, self.limits)
+            deadline = (timeout_s if timeout_s is not None
+                        else plan.duration + self.arm.control.settle_timeout_s)
+            self.path_check = path_check
+            try:
+                start = self.setpoints.start(moving, self.limits)
+                if start:
+                    self.transact(start)
+                peak = self._stream(plan, moving, tolerance_deg, deadline, stop_on_abort=True)
+            finally:
+                self.path_check = None
+                self.setpoints = law
+        return {"planned_duration_s": plan.duration,
+                "executed_duration_s": self.clock.now() - t_move,
                 "peak_velocity_deg_s": _r(np.degrees(plan.peak_velocity())),
                 "peak_measured_velocity_deg_s": _r(peak)}
 
@@ -529,6 +600,8 @@ class Executor:
             measured = m.user_deg
             self.check_states(m)
             self.check_guards(m)
+            if self.path_check is not None:
+                self.path_check(m)
             planned_deg = np.degrees(plan.at(t)[0])
             error = np.abs(planned_deg - measured)
             worst = int(np.argmax(error))
@@ -695,7 +768,7 @@ class Executor:
         started = ready and written
         start_deg = {j.name: float(v) for j, v in zip(self.arm.joints, m.user_deg)}
         result = validate_sequence(replace(loaded, steps=tuple(loaded.steps[first_step - 1:])),
-                                   self.arm, start_deg, started=started)
+                                   self.arm, start_deg, started=started, speed=self.speed)
         if first_step > 1:
             before = validate_sequence(replace(loaded, steps=tuple(loaded.steps[:first_step - 1])),
                                        self.arm)
@@ -707,6 +780,7 @@ class Executor:
                         f"--from {first_step}: the arm is not where this step expects it: "
                         f"{j.name} at {start_deg[j.name]:.2f}°, expected {expected:.2f}° "
                         f"(after steps 1-{first_step - 1})"))
+        self.validated_targets = dict(getattr(result, "targets_deg", {}))
         self.emit("preflight", start_deg=_r(m.user_deg), homed=ready, limits_written=written,
                   states={str(k): v.describe() for k, v in states.items()},
                   errors=[str(e) for e in result.errors], notes=[str(n) for n in result.notes])

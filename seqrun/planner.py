@@ -178,3 +178,67 @@ def plan_stop(position: Sequence[float], velocity: Sequence[float],
     final = pos.copy()
     final[idx] = trajectory.at_time(trajectory.duration)[0]
     return MovePlan(active, pos.copy(), final, float(trajectory.duration), trajectory)
+
+
+@dataclass
+class SampledPlan:
+    """A precomputed joint trajectory (e.g. a straight line of the tool, solved sample by
+    sample), streamed like a :class:`MovePlan`: same ``at``/``sample``/``peak_velocity``.
+
+    Between samples the positions are cubic Hermite interpolated with the velocities of
+    the samples (central differences), so position and velocity are continuous. ``at(t)``
+    is clamped to [0, duration] and holds the last sample after the end.
+    """
+
+    active: tuple[int, ...]
+    times: np.ndarray        # (k,) seconds, increasing, times[0] == 0
+    positions: np.ndarray    # (k, dof) user rad, every joint of the arm
+
+    def __post_init__(self) -> None:
+        self.times = np.asarray(self.times, dtype=float)
+        self.positions = np.asarray(self.positions, dtype=float)
+        if self.times.ndim != 1 or len(self.times) < 2 or self.positions.shape[0] != len(self.times):
+            raise PlanningError("a sampled plan needs at least two samples, one per time")
+        if not np.all(np.diff(self.times) > 0) or not np.all(np.isfinite(self.positions)):
+            raise PlanningError("a sampled plan needs increasing times and finite positions")
+        self.velocities = np.gradient(self.positions, self.times, axis=0)
+        self.velocities[0] = 0.0   # starts and ends at rest
+        self.velocities[-1] = 0.0
+
+    @property
+    def start(self) -> np.ndarray:
+        return self.positions[0]
+
+    @property
+    def target(self) -> np.ndarray:
+        return self.positions[-1]
+
+    @property
+    def duration(self) -> float:
+        return float(self.times[-1])
+
+    def at(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Position, velocity, acceleration of every arm joint at time ``t``."""
+        if t >= self.duration:
+            zeros = np.zeros(self.positions.shape[1])
+            return self.target.copy(), zeros, zeros.copy()
+        t = max(t, 0.0)
+        k = min(int(np.searchsorted(self.times, t, side="right")) - 1, len(self.times) - 2)
+        h = self.times[k + 1] - self.times[k]
+        u = (t - self.times[k]) / h
+        p0, p1 = self.positions[k], self.positions[k + 1]
+        m0, m1 = self.velocities[k] * h, self.velocities[k + 1] * h
+        u2, u3 = u * u, u * u * u
+        pos = ((2 * u3 - 3 * u2 + 1) * p0 + (u3 - 2 * u2 + u) * m0
+               + (-2 * u3 + 3 * u2) * p1 + (u3 - u2) * m1)
+        vel = ((6 * u2 - 6 * u) * p0 + (3 * u2 - 4 * u + 1) * m0
+               + (-6 * u2 + 6 * u) * p1 + (3 * u2 - 2 * u) * m1) / h
+        acc = ((12 * u - 6) * p0 + (6 * u - 4) * m0 + (-12 * u + 6) * p1
+               + (6 * u - 2) * m1) / (h * h)
+        return pos, vel, acc
+
+    def sample(self, times: Sequence[float]) -> np.ndarray:
+        return np.array([self.at(t)[0] for t in times])
+
+    def peak_velocity(self, samples: int = 200) -> np.ndarray:
+        return np.max(np.abs(self.velocities), axis=0)

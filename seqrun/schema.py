@@ -76,6 +76,7 @@ __all__ = [
     "HomeParams",
     "IncludeParams",
     "LoadedSequence",
+    "MoveLinearParams",
     "MoveParams",
     "ResetParams",
     "ResolvedStep",
@@ -259,13 +260,35 @@ def _exactly_one(*alternatives: str) -> dict:
     return {"oneOf": [{"required": [name]} for name in alternatives]}
 
 
+def _check_pose_target(params: Any, what: str) -> None:
+    """End-effector targets: position_mm alone with the pose keys (rpy_deg, frame, tool)."""
+    cartesian = [k for k in ("rpy_deg", "tool") if getattr(params, k) is not None]
+    if params.frame != "base":
+        cartesian.append("frame")
+    if params.position_mm is None:
+        if cartesian:
+            raise PydanticCustomError("move_target", "{keys} belong to an end-effector target: "
+                                      "give position_mm too", {"keys": ", ".join(cartesian)})
+        return
+    others = [k for k in ("pose", "joints") if getattr(params, k, None) is not None]
+    if others:
+        raise PydanticCustomError("move_target", "{what} takes either position_mm or {others}, "
+                                  "not both", {"what": what, "others": " or ".join(others)})
+    if not params.relative and params.rpy_deg is None:
+        raise PydanticCustomError("move_target", "an absolute end-effector target needs rpy_deg "
+                                                 "with position_mm")
+    if not params.relative and params.frame != "base":
+        raise PydanticCustomError("move_target", "frame: tool is for relative targets "
+                                                 "(relative: true)")
+
+
 class MoveParams(StepParams):
     """Move the arm to a pose or to joint angles: one synchronized, jerk-limited motion in
     which all commanded joints arrive together. Joints not named do not move."""
 
     kind: ClassVar[str] = "move"
     yaml_name: ClassVar[str] = "move"
-    model_config = ConfigDict(json_schema_extra=_exactly_one("pose", "joints"))
+    model_config = ConfigDict(json_schema_extra=_exactly_one("pose", "joints", "position_mm"))
 
     pose: PoseName | None = Field(  # type: ignore[valid-type]
         None, description="Move every joint to this pose (a file in poses/), e.g. totem.")
@@ -274,7 +297,23 @@ class MoveParams(StepParams):
         description="Target angles of some joints in user degrees, e.g. {j1: 10, j4: -30}; "
                     "the others stay where they are.")
     relative: bool = Field(
-        False, description="true: the joints values are offsets from where the joints are.")
+        False, description="true: the joints values (or position_mm/rpy_deg) are offsets from "
+                           "where the joints (or the tool) are.")
+    position_mm: Vector3 | None = Field(
+        None, description="Move the tool to this position [x, y, z] in mm (base frame), solved "
+                          "by inverse kinematics; with relative: true, the displacement, in "
+                          "the base or the tool frame (frame).")
+    rpy_deg: Vector3 | None = Field(
+        None, description="With position_mm: the tool orientation [roll, pitch, yaw] in degrees "
+                          "(R = Rz(yaw) Ry(pitch) Rx(roll)); required unless relative, where "
+                          "it is a rotation (default none).")
+    frame: Literal["base", "tool"] = Field(
+        "base", description="With relative position_mm: the frame the displacement is given "
+                            "in (tool: e.g. [0, 0, 50] is 50 mm along the tool's z axis).")
+    tool: str | None = Field(
+        None, min_length=1, description="With position_mm: the arm file's tool whose centre "
+                                        "point is moved (default: the arm's default_tool, "
+                                        "else the end-effector frame).")
     velocity_deg_s: dict[JointName, Positive] = Field(
         default_factory=dict,
         description="Velocity cap of single joints in deg/s (at most the arm's maximum).")
@@ -291,10 +330,13 @@ class MoveParams(StepParams):
 
     @model_validator(mode="after")
     def _target(self) -> MoveParams:
+        _check_pose_target(self, "a move")
+        if self.position_mm is not None:
+            return self
         if (self.pose is None) == (self.joints is None):
             raise PydanticCustomError(
-                "move_target", "a move needs either 'pose' or 'joints'" if self.pose is None
-                else "a move takes either 'pose' or 'joints', not both")
+                "move_target", "a move needs either 'pose', 'joints' or 'position_mm'"
+                if self.pose is None else "a move takes either 'pose' or 'joints', not both")
         if self.relative and self.joints is None:
             raise PydanticCustomError("move_relative",
                                       "'relative: true' needs 'joints' (a pose is absolute)")
@@ -303,6 +345,53 @@ class MoveParams(StepParams):
     @classmethod
     def from_shorthand(cls, value: Any) -> StepParams:
         return value if isinstance(value, cls) else cls(pose=value)
+
+
+class MoveLinearParams(StepParams):
+    """Move the tool in a straight line to an end-effector pose at a given speed (mm/s, and
+    deg/s for the rotation), as a densely sampled, jerk-limited joint trajectory. Every
+    sample is solved and checked before anything moves (reachable, joint and velocity
+    limits, away from singularities, the guards); during the run the tool's distance from
+    the line is measured and a fault beyond max_deviation_mm."""
+
+    kind: ClassVar[str] = "move_linear"
+    yaml_name: ClassVar[str] = "move_linear"
+
+    position_mm: Vector3 = Field(
+        description="Tool position at the end of the line [x, y, z] in mm (base frame); with "
+                    "relative: true, the displacement in the base or the tool frame (frame).")
+    rpy_deg: Vector3 | None = Field(
+        None, description="Tool orientation at the end [roll, pitch, yaw] in degrees; required "
+                          "unless relative (then a rotation, default none).")
+    relative: bool = Field(False, description="true: position_mm/rpy_deg are offsets from "
+                                              "where the tool is.")
+    frame: Literal["base", "tool"] = Field(
+        "base", description="With relative: the frame of the displacement (tool: [0, 0, 50] is "
+                            "50 mm along the tool's z axis).")
+    tool: str | None = Field(None, min_length=1, description="The arm file's tool that moves "
+                                                             "on the line (default: the arm's "
+                                                             "default_tool, else the "
+                                                             "end-effector frame).")
+    speed_mm_s: Positive = Field(description="Speed along the line, mm/s.")
+    rotation_speed_deg_s: Positive = Field(
+        10.0, description="Largest turning speed of the tool, deg/s.")
+    acceleration_mm_s2: Positive = Field(
+        50.0, description="Acceleration along the line, mm/s^2 (the rotation's scales alike).")
+    jerk_mm_s3: Positive = Field(500.0, description="Jerk along the line, mm/s^3.")
+    max_deviation_mm: Positive = Field(
+        1.0, description="Largest distance of the tool from the line during the run, mm; "
+                         "beyond it the arm is halted.")
+    tolerance_deg: Positive | None = Field(
+        None, description="In-position tolerance per joint at the end, degrees (default: the "
+                          "arm file's control.position_tolerance_deg).")
+    timeout_s: Positive | None = Field(
+        None, description="Time allowed for the whole move in seconds (default: the planned "
+                          "duration plus the arm file's control.settle_timeout_s).")
+
+    @model_validator(mode="after")
+    def _target(self) -> MoveLinearParams:
+        _check_pose_target(self, "a linear move")
+        return self
 
 
 class WaitParams(StepParams):
@@ -347,10 +436,22 @@ class CheckpointParams(StepParams):
     kind: ClassVar[str] = "checkpoint"
     yaml_name: ClassVar[str] = "checkpoint"
     model_config = ConfigDict(json_schema_extra={"oneOf": [
-        {"required": ["pose"]}, {"required": ["position_mm", "rpy_deg"]}]})
+        {"required": ["pose"]}, {"required": ["position_mm", "rpy_deg"]},
+        {"required": ["moved_mm"]}]})
 
     pose: PoseName | None = Field(  # type: ignore[valid-type]
         None, description="Expect the end-effector pose of this pose file.")
+    moved_mm: Vector3 | None = Field(
+        None, description="Relative checkpoint: the tool moved by this [x, y, z] in mm during "
+                          "the last move before it (from where that move started), in the "
+                          "base or the tool frame (frame; tool: the tool's frame where the "
+                          "move started), e.g. [0, 0, -300] with frame: tool.")
+    frame: Literal["base", "tool"] = Field(
+        "base", description="With moved_mm: the frame the displacement is given in.")
+    tool: str | None = Field(None, min_length=1, description="With moved_mm: the arm file's "
+                                                             "tool (default: the arm's "
+                                                             "default_tool, else the "
+                                                             "end-effector frame).")
     position_mm: Vector3 | None = Field(
         None, description="Expected end-effector position [x, y, z] in mm (base frame).")
     rpy_deg: Vector3 | None = Field(
@@ -366,6 +467,15 @@ class CheckpointParams(StepParams):
 
     @model_validator(mode="after")
     def _one(self) -> CheckpointParams:
+        if self.moved_mm is not None:
+            others = [k for k in ("pose", "position_mm", "rpy_deg") if getattr(self, k) is not None]
+            if others:
+                raise PydanticCustomError("checkpoint_what", "a relative checkpoint (moved_mm) "
+                                          "takes no {others}", {"others": ", ".join(others)})
+            return self
+        if self.frame != "base" or self.tool is not None:
+            raise PydanticCustomError("checkpoint_what", "frame and tool belong to a relative "
+                                                         "checkpoint (moved_mm)")
         explicit = self.position_mm is not None or self.rpy_deg is not None
         if self.pose is not None and explicit:
             raise PydanticCustomError("checkpoint_what", "a checkpoint takes either 'pose' or "
@@ -414,8 +524,8 @@ class IncludeParams(StepParams):
 
 #: Parameter model of each step type, in the order the docs list them.
 PARAMS_MODELS: dict[str, type[StepParams]] = {m.kind: m for m in (
-    ResetParams, HomeParams, HaltParams, SetLimitsParams, MoveParams, WaitParams,
-    CheckpointParams, ConfirmParams, IncludeParams)}
+    ResetParams, HomeParams, HaltParams, SetLimitsParams, MoveParams, MoveLinearParams,
+    WaitParams, CheckpointParams, ConfirmParams, IncludeParams)}
 STEP_KINDS: tuple[str, ...] = tuple(PARAMS_MODELS)
 #: Step types that may be written as a bare word (``- reset``).
 BARE_STEPS: tuple[str, ...] = ("reset", "home", "halt", "set_limits")
@@ -509,6 +619,13 @@ class MoveStep(_Step):
         description=_doc(MoveParams) + " Shorthand: 'move: totem' (a pose name).")
 
 
+class MoveLinearStep(_Step):
+    """A move_linear step."""
+
+    kind: ClassVar[str] = "move_linear"
+    move_linear: MoveLinearParams = Field(description=_doc(MoveLinearParams))
+
+
 class WaitStep(_Step):
     """A wait step."""
 
@@ -549,8 +666,8 @@ class IncludeStep(_Step):
 
 
 _STEP_MODELS: dict[str, type[_Step]] = {m.kind: m for m in (
-    ResetStep, HomeStep, HaltStep, SetLimitsStep, MoveStep, WaitStep, CheckpointStep,
-    ConfirmStep, IncludeStep)}
+    ResetStep, HomeStep, HaltStep, SetLimitsStep, MoveStep, MoveLinearStep, WaitStep,
+    CheckpointStep, ConfirmStep, IncludeStep)}
 assert tuple(_STEP_MODELS) == STEP_KINDS, "one step model per parameter model"
 
 BareStep = Annotated[Literal[BARE_STEPS], Field(  # type: ignore[valid-type]
@@ -598,7 +715,9 @@ def _check_step(value: Any) -> Any:
     return value
 
 
-_EXAMPLES = {"move": "move: totem", "wait": "wait: 2", "checkpoint": "checkpoint: opsafe",
+_EXAMPLES = {"move": "move: totem",
+             "move_linear": "move_linear: {position_mm: [0, 0, 50], relative: true, "
+                            "frame: tool, speed_mm_s: 10}", "wait": "wait: 2", "checkpoint": "checkpoint: opsafe",
              "confirm": "confirm: Is the desk clear?", "include": "include: startup.yaml"}
 
 
@@ -688,6 +807,12 @@ def describe(kind: str, params: StepParams) -> str:
     if isinstance(params, (ResetParams, HomeParams, HaltParams)):
         who = "all modules" if params.joints == "all" else ", ".join(params.joints)
         return f"{kind} {who}"
+    if isinstance(params, (MoveParams, MoveLinearParams)) and params.position_mm is not None:
+        verb = "move in a line" if isinstance(params, MoveLinearParams) else "move the tool"
+        xyz = ", ".join(f"{v:g}" for v in params.position_mm)
+        if params.relative:
+            return f"{verb} by [{xyz}] mm ({params.frame} frame)"
+        return f"{verb} to [{xyz}] mm"
     if isinstance(params, MoveParams):
         if params.pose is not None:
             return f"move to pose {params.pose}"
@@ -696,6 +821,9 @@ def describe(kind: str, params: StepParams) -> str:
     if isinstance(params, WaitParams):
         return (f"wait {params.seconds:g} s" if params.seconds is not None
                 else "wait until in position")
+    if isinstance(params, CheckpointParams) and params.moved_mm is not None:
+        xyz = ", ".join(f"{v:g}" for v in params.moved_mm)
+        return f"checkpoint: the tool moved [{xyz}] mm ({params.frame} frame)"
     if isinstance(params, CheckpointParams):
         return (f"checkpoint: pose {params.pose}" if params.pose is not None
                 else "checkpoint: end-effector pose")
@@ -957,8 +1085,20 @@ Every step takes an optional `label`, the text the operator sees.
 - Every commanded target lies inside the joint limits in force. A joint that starts outside
   them (Park's j4 at -120.32° against -120…120) may only move back inside (a note).
 - Velocities and limit overrides stay within the arm file's maxima.
-- Workspace guards of the arm file hold along each move (straight line in joint space).
-- A checkpoint must agree with the end-effector of the joints tracked so far.
+- Workspace guards of the arm file hold along each move's planned trajectory (the ruckig plan
+  the run streams, sampled at 100 Hz); `seqrun validate` reports the smallest clearance of each move.
+- The arm file's link volumes (capsules) keep `geometry.margin_mm` from its obstacles and
+  from each other along each move, and the closest pair of each move is reported.
+- End-effector targets (`move` with `position_mm`, `move_linear`) are solved by inverse
+  kinematics from the joints tracked so far (the solution nearest them); an unreachable
+  target is an error at its `position_mm`. The run solves again from the measured joints
+  and stops (Halt) if that solution is more than `cartesian.ik_agreement_deg` from the
+  validated one. A straight line is sampled every `cartesian.linear_sample_s` and every
+  sample must be reachable, inside the limits in force, within the joint velocity limits
+  and away from singular configurations (`cartesian.min_manipulability`); during the run
+  the tool further than `max_deviation_mm` from the line is a fault.
+- A checkpoint must agree with the end-effector of the joints tracked so far; a relative
+  one (`moved_mm`) with how far the tool moved during the last move.
 - Validation starts from Park (`--start POSE` to choose another pose).
 
 ## Steps

@@ -12,10 +12,14 @@ the offending value:
 - every commanded target inside the limits in force; a joint that *starts* outside
   (Park's j4 at -120.32° against -120…120) may only move back inside, which is a note;
 - velocities and limit overrides within the arm file's maxima;
-- workspace guards (``workspace.guards`` of the arm file) along each move, taken as a
-  straight line in joint space (the executor checks the real trajectory as it runs);
+- workspace guards (``workspace.guards`` of the arm file) along each move's ruckig plan,
+  the trajectory the executor streams (sampled at 100 Hz), with the smallest clearance of
+  every move in :attr:`ValidationResult.clearances`;
 - checkpoints that cannot pass: the end-effector of the tracked joints is compared with
-  the expected pose.
+  the expected pose (relative checkpoints: with how far the tool moved in the last move);
+- the arm file's link volumes along each planned trajectory (:attr:`ValidationResult.proximities`);
+- end-effector targets solved by IK (:attr:`ValidationResult.targets_deg`) and straight
+  lines of the tool sampled and checked sample by sample (seqrun/cartesian.py).
 
 The executor runs it again with the measured start state (``start_deg``) and
 ``started=True`` when the modules report that they are reset, homed and limited.
@@ -34,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from seqrun.arm import ArmDescription, Joint
-from seqrun.errors import SequenceInvalid, SourceError, UserInputError
+from seqrun.errors import PlanningError, SequenceInvalid, SourceError, UserInputError
 from seqrun.schema import (
     CheckpointParams,
     HaltParams,
@@ -47,7 +51,9 @@ from seqrun.schema import (
 )
 
 __all__ = [
-    "GUARD_SAMPLES",
+    "PLAN_SAMPLE_S",
+    "Clearance",
+    "Proximity",
     "ValidationResult",
     "commanded_joints",
     "park_deg",
@@ -57,10 +63,56 @@ __all__ = [
     "validate_sequence",
 ]
 
-#: Samples per move when checking workspace guards along the joint-space path.
-GUARD_SAMPLES = 64
 #: Name of the pose a freshly powered-on arm is in (the modules' zeros).
 START_POSE = "park"
+
+
+#: Sampling period (s) of a planned trajectory when guards are checked along it: the
+#: executor's control cycle at 100 Hz.
+PLAN_SAMPLE_S = 0.01
+
+
+@dataclass(frozen=True)
+class Clearance:
+    """The smallest distance to a guard along one move, and where it occurs."""
+
+    step: int
+    guard: str
+    point: str
+    z_mm: float
+    margin_mm: float          # z minus the guard's height: below 0 the move is refused
+    t_s: float                # plan time of the lowest sample
+    duration_s: float         # the move's planned duration
+
+    def as_dict(self) -> dict:
+        return {"step": self.step, "guard": self.guard, "point": self.point,
+                "z_mm": round(self.z_mm, 2), "margin_mm": round(self.margin_mm, 2),
+                "t_s": round(self.t_s, 3), "duration_s": round(self.duration_s, 3)}
+
+
+@dataclass(frozen=True)
+class Proximity:
+    """The smallest clearance between link volumes and obstacles (or two links) along one
+    move, and where it occurs."""
+
+    step: int
+    pair: str                 # "wrist~desk", "column~forearm"
+    distance_mm: float        # surface to surface; negative: they overlap
+    t_s: float
+    duration_s: float
+
+    def as_dict(self) -> dict:
+        return {"step": self.step, "pair": self.pair,
+                "distance_mm": round(self.distance_mm, 2), "t_s": round(self.t_s, 3),
+                "duration_s": round(self.duration_s, 3)}
+
+
+def plan_samples(plan, period_s: float = PLAN_SAMPLE_S) -> tuple[np.ndarray, np.ndarray]:
+    """Times and joint positions (rad, every joint) of a plan every ``period_s`` and at its
+    end: what a guard check along the real trajectory looks at."""
+    count = max(2, int(math.ceil(plan.duration / period_s)) + 1)
+    times = np.linspace(0.0, plan.duration, count)
+    return times, plan.sample(times)
 
 
 @dataclass
@@ -71,6 +123,13 @@ class ValidationResult:
     notes: list[SourceError] = field(default_factory=list)
     #: Joint positions after the last step (user degrees, every joint of the arm).
     final_deg: dict[str, float] = field(default_factory=dict)
+    #: Smallest guard clearance of each move (step number -> Clearance).
+    clearances: dict[int, "Clearance"] = field(default_factory=dict)
+    #: Joint solution (user degrees, every joint) of each end-effector target, by step number:
+    #: the run solves again from the measured joints and must land close to it.
+    targets_deg: dict[int, np.ndarray] = field(default_factory=dict)
+    #: Smallest link-volume clearance of each move (step number -> Proximity).
+    proximities: dict[int, "Proximity"] = field(default_factory=dict)
 
     @property
     def valid(self) -> bool:
@@ -197,6 +256,11 @@ class _Validator:
         self.notes: list[SourceError] = []
         self.joints: dict[str, _JointState] = {}
         self._chain = None
+        self.speed = 1.0  # the run's speed override: the plans guards are checked along
+        self.clearances: dict[int, Clearance] = {}
+        self.targets_deg: dict[int, np.ndarray] = {}
+        self.proximities: dict[int, Proximity] = {}
+        self.motion_start_deg: np.ndarray | None = None  # where the last move started
         for joint in arm.joints:
             position = joint.locked if joint.locked is not None else start_deg.get(joint.name)
             if position is None or not math.isfinite(position):
@@ -301,6 +365,9 @@ class _Validator:
                 state.max_velocity_from = f"set_limits at {step.location}"
 
     def move(self, step: ResolvedStep, params: MoveParams) -> None:
+        if getattr(params, "position_mm", None) is not None:
+            self._move_to_tool_pose(step, params)
+            return
         # which joints, and where to
         if params.pose is not None:
             try:
@@ -354,7 +421,7 @@ class _Validator:
                 self.notes.append(step.error(
                     f"{name} {verb} {_f(state.position)}°, {_f(outside)}° outside its limit "
                     f"{_range(lo, hi)}; this move brings it back inside", *where[name]))
-        self._guards(step, target)
+        self._guards_along_plan(step, params, target)
         for name in names:
             if name in refused:
                 continue
@@ -403,7 +470,39 @@ class _Validator:
                                                  if not s.locked]
         return "" if sorted(names) == sorted(everything) else f" ({', '.join(names)})"
 
-    def _guards(self, step: ResolvedStep, target: dict[str, float]) -> None:
+    def _guards_along_plan(self, step: ResolvedStep, params: MoveParams,
+                           target: dict[str, float]) -> None:
+        """Workspace guards along the trajectory the executor will stream: the ruckig plan
+        of this move (its limits and scales, the run's speed), sampled every
+        :data:`PLAN_SAMPLE_S` seconds. The plan's time-synchronized path is not the straight
+        line in joint space and can dip lower. Records the move's smallest clearance."""
+        from seqrun.planner import Limits, plan_move
+
+        names = self.arm.joint_names
+        start = np.array([self.joints[n].position for n in names])
+        end = np.array([target[n] for n in names])
+        moving = [i for i, j in enumerate(self.arm.joints)
+                  if j.locked is None and abs(end[i] - start[i]) > 1e-9]
+        if not moving:
+            return
+        try:
+            limits = Limits.from_arm(self.arm, velocity_scale=params.velocity_scale,
+                                     acceleration_scale=params.acceleration_scale,
+                                     speed=self.speed, velocity_deg_s={
+                                         n: v for n, v in params.velocity_deg_s.items()
+                                         if n in self.joints})
+            plan = plan_move(np.radians(start), np.radians(end), limits, moving)
+        except PlanningError as exc:
+            self.errors.append(step.error(f"this move cannot be planned: {exc}"))
+            return
+        self._check_path_guards(step, *plan_samples(plan), what="planned trajectory")
+
+    def _check_path_guards(self, step: ResolvedStep, times: np.ndarray, path_rad: np.ndarray,
+                           *, what: str) -> None:
+        """Guards along sampled joint configurations (rad) at ``times`` (s): one error per
+        guard, at the watched point that goes lowest; the smallest clearance is kept. Then
+        the link volumes against the obstacles and each other (:meth:`_check_path_geometry`)."""
+        self._check_path_geometry(step, times, path_rad, what=what)
         guards = self.arm.workspace.guards
         if not guards:
             return
@@ -411,25 +510,183 @@ class _Validator:
 
         if self._chain is None:
             self._chain = Chain.from_arm(self.arm)
-        names = self.arm.joint_names
-        start = np.array([self.joints[n].position for n in names])
-        end = np.array([target[n] for n in names])
-        fractions = np.linspace(0.0, 1.0, GUARD_SAMPLES + 1)[:, None]
-        path = np.radians(start + (end - start) * fractions)
-        points = point_positions(self._chain, path)
+        points = point_positions(self._chain, path_rad)
+        duration = float(times[-1]) if len(times) else 0.0
         for guard in guards:
-            # one error per guard: the watched point that goes lowest, where it is lowest
             lowest = min(guard.points, key=lambda p: float(points[p][:, 2].min()))
             heights = points[lowest][:, 2]
             i = int(np.argmin(heights))
+            clearance = Clearance(step.number, guard.name, lowest, float(heights[i]),
+                                  float(heights[i]) - guard.min_z_mm, float(times[i]), duration)
+            kept = self.clearances.get(step.number)
+            if kept is None or clearance.margin_mm < kept.margin_mm:
+                self.clearances[step.number] = clearance
             if heights[i] < guard.min_z_mm:
                 self.errors.append(step.error(
                     f"this move takes the {lowest.replace('_', '-')} down to z = "
-                    f"{_f(heights[i])} mm ({round(float(fractions[i, 0]) * 100):d}% of the "
-                    f"way, straight line in joint space), below the '{guard.name}' guard "
-                    f"at {_f(guard.min_z_mm)} mm"))
+                    f"{_f(heights[i])} mm (at {times[i]:.2f} s of {duration:.2f} s, {what}), "
+                    f"below the '{guard.name}' guard at {_f(guard.min_z_mm)} mm"))
+
+    def _check_path_geometry(self, step: ResolvedStep, times: np.ndarray, path_rad: np.ndarray,
+                             *, what: str) -> None:
+        """Link capsules against obstacles and non-neighbouring links along the samples."""
+        if self.arm.geometry.capsules == []:
+            return
+        from seqrun.geometry import Geometry
+
+        if getattr(self, "_geometry", None) is None:
+            self._geometry = Geometry(self.arm)
+        smallest = self._geometry.smallest(path_rad)
+        if smallest is None:
+            return
+        duration = float(times[-1]) if len(times) else 0.0
+        at = float(times[smallest.index])
+        self.proximities[step.number] = Proximity(step.number, smallest.pair,
+                                                  smallest.distance_mm, at, duration)
+        margin = self._geometry.margin_mm
+        if smallest.distance_mm < margin:
+            a, b = smallest.pair.split("~", 1)
+            how = ("into" if smallest.distance_mm < 0 else "within "
+                   f"{_f(smallest.distance_mm)} mm of")
+            self.errors.append(step.error(
+                f"this move takes the {a} {how} the {b} (at {at:.2f} s of {duration:.2f} s, "
+                f"{what}); the arm file's geometry margin is {_f(margin)} mm"))
+
+    def _relative_checkpoint(self, step: ResolvedStep, params: CheckpointParams) -> None:
+        """'The tool moved 50 mm along z': the tracked tool pose now against where the last
+        move started."""
+        from seqrun.cartesian import displacement, solver_for, tool_pose
+
+        if self.motion_start_deg is None:
+            self.errors.append(step.error("a relative checkpoint (moved_mm) needs a move before "
+                                          "it", "moved_mm"))
+            return
+        try:
+            solver = solver_for(self.arm, params.tool)
+        except KeyError:
+            names = ", ".join(t.name for t in self.arm.tools) or "none defined"
+            self.errors.append(step.error(f"unknown tool '{params.tool}' (the arm file's tools: "
+                                          f"{names})", "tool"))
+            return
+        moved = displacement(tool_pose(solver, self.motion_start_deg),
+                             tool_pose(solver, self._tracked()), params.frame)
+        off = float(np.linalg.norm(moved - np.asarray(params.moved_mm)))
+        if off > params.position_tolerance_mm:
+            self.errors.append(step.error(
+                f"this checkpoint cannot pass: the last move takes the tool by "
+                f"[{', '.join(_f(v) for v in moved)}] mm ({params.frame} frame), {_f(off)} mm "
+                f"from the expected [{', '.join(_f(v) for v in params.moved_mm)}] "
+                f"(tolerance {_f(params.position_tolerance_mm)} mm)", "moved_mm"))
+
+    # -- end-effector targets (seqrun/cartesian.py)
+    def _tool_target(self, step: ResolvedStep, params) -> np.ndarray | None:
+        """The step's tool target (4x4) from the tracked joints; None after an error."""
+        from seqrun.cartesian import resolve_target, solver_for, tool_pose
+
+        try:
+            solver = solver_for(self.arm, params.tool)
+        except KeyError:
+            names = ", ".join(t.name for t in self.arm.tools) or "none defined"
+            self.errors.append(step.error(f"unknown tool '{params.tool}' (the arm file's tools: "
+                                          f"{names})", "tool"))
+            return None
+        current = tool_pose(solver, self._tracked())
+        return resolve_target(current, params.position_mm, params.rpy_deg,
+                              relative=params.relative, frame=params.frame)
+
+    def _tracked(self) -> np.ndarray:
+        return np.array([self.joints[n].position for n in self.arm.joint_names])
+
+    def _unlocked_names(self) -> list[str]:
+        return [j.name for j in self.arm.joints if j.locked is None]
+
+    def _outside_limits(self, step: ResolvedStep, joints_deg: np.ndarray, what: str) -> bool:
+        """Errors for joints outside the limits in force (set_limits may narrow the arm's)."""
+        bad = False
+        for name in self._unlocked_names():
+            state = self.joints[name]
+            lo, hi = state.limits or state.joint.limits_deg
+            values = np.atleast_2d(joints_deg)[:, self.arm.index(name)]
+            worst = values[np.argmax(np.maximum(lo - values, values - hi))]
+            if not lo - 1e-9 <= worst <= hi + 1e-9:
+                bad = True
+                self.errors.append(step.error(
+                    f"{what} puts {name} at {_f(worst)}°, outside the limits in force "
+                    f"{_range(lo, hi)}", "position_mm"))
+        return bad
+
+    def _arrive(self, step: ResolvedStep, joints_deg: np.ndarray) -> None:
+        self.targets_deg[step.number] = np.asarray(joints_deg, dtype=float).copy()
+        for name in self._unlocked_names():
+            state = self.joints[name]
+            value = float(joints_deg[self.arm.index(name)])
+            if value != state.position:
+                state.at_start = False
+            state.position = value
+
+    def _solution_note(self, step: ResolvedStep, joints_deg: np.ndarray, extra: str = "") -> None:
+        values = ", ".join(f"{n} {_f(joints_deg[self.arm.index(n)])}°"
+                           for n in self._unlocked_names())
+        self.notes.append(step.error(f"end-effector target solved: {values}{extra}",
+                                     "position_mm"))
+
+    def _move_to_tool_pose(self, step: ResolvedStep, params: MoveParams) -> None:
+        """A move to an end-effector pose: IK from the tracked joints (the solution nearest
+        them), then the same checks as a move to those joints."""
+        from seqrun.cartesian import solver_for
+        from seqrun.ik import Unreachable
+
+        self._velocities(step, params)
+        self._motion_allowed(step, self._unlocked_names())
+        target = self._tool_target(step, params)
+        if target is None:
+            return
+        try:
+            solution = solver_for(self.arm, params.tool).solve(target, self._tracked())
+        except Unreachable as exc:
+            self.errors.append(step.error(f"end-effector target {exc}", "position_mm"))
+            return
+        joints = solution.joints_deg
+        if self._outside_limits(step, joints, "the end-effector target"):
+            return
+        self._solution_note(step, joints)
+        self._guards_along_plan(step, params, dict(zip(self.arm.joint_names, joints)))
+        self._arrive(step, joints)
+
+    def move_linear(self, step: ResolvedStep, params) -> None:
+        """A straight line of the tool: every sample solved and checked now (reachable,
+        limits, joint speeds, manipulability, guards along the samples)."""
+        from seqrun.cartesian import PathError, plan_linear
+
+        self._motion_allowed(step, self._unlocked_names())
+        target = self._tool_target(step, params)
+        if target is None:
+            return
+        keep = 1 - self.arm.control.tracking_reserve
+        max_velocity = np.array([self.joints[n].max_velocity for n in self.arm.joint_names]) * keep
+        try:
+            linear = plan_linear(
+                self.arm, params.tool, self._tracked(), target,
+                speed_mm_s=params.speed_mm_s * self.speed,
+                rotation_speed_deg_s=params.rotation_speed_deg_s * self.speed,
+                acceleration_mm_s2=params.acceleration_mm_s2 * self.speed,
+                jerk_mm_s3=params.jerk_mm_s3 * self.speed, max_velocity_deg_s=max_velocity)
+        except PathError as exc:
+            self.errors.append(step.error(f"straight line: {exc}", "position_mm"))
+            return
+        if self._outside_limits(step, linear.joints_deg[1:], "the straight line"):
+            return
+        self._check_path_guards(step, linear.plan.times, linear.plan.positions,
+                                what="straight line of the tool")
+        self._solution_note(step, linear.joints_deg[-1],
+                            f" ({linear.path.length_mm:.1f} mm in {linear.plan.duration:.2f} s, "
+                            f"smallest manipulability {linear.min_manipulability:.3f})")
+        self._arrive(step, linear.joints_deg[-1])
 
     def checkpoint(self, step: ResolvedStep, params: CheckpointParams) -> None:
+        if getattr(params, "moved_mm", None) is not None:
+            self._relative_checkpoint(step, params)
+            return
         from seqrun.kinematics import orientation_error, pose_from_user_deg
 
         try:
@@ -454,19 +711,25 @@ class _Validator:
     def run(self) -> ValidationResult:
         handlers = {"reset": self.reset, "home": self.home, "halt": self.halt,
                     "set_limits": self.set_limits, "move": self.move,
-                    "checkpoint": self.checkpoint}
+                    "checkpoint": self.checkpoint, "move_linear": self.move_linear}
         for step in self.loaded.steps:
             handler = handlers.get(step.kind)
             if handler is not None:
                 errors, notes = len(self.errors), len(self.notes)
+                if step.kind in ("move", "move_linear"):
+                    self.motion_start_deg = self._tracked()
                 handler(step, step.params)  # type: ignore[operator]
                 # a step's findings in the order they appear in its text
                 self.errors[errors:] = sorted(self.errors[errors:], key=_position)
                 self.notes[notes:] = sorted(self.notes[notes:], key=_position)
         final = {n: s.position for n, s in self.joints.items()}
         # In step order (a step of an included file comes where it runs), duplicates dropped.
-        return ValidationResult(list(dict.fromkeys(self.errors)),
-                                list(dict.fromkeys(self.notes)), final)
+        result = ValidationResult(list(dict.fromkeys(self.errors)),
+                                  list(dict.fromkeys(self.notes)), final)
+        result.clearances = dict(self.clearances)
+        result.targets_deg = dict(self.targets_deg)
+        result.proximities = dict(self.proximities)
+        return result
 
 
 def _position(item: SourceError) -> tuple[int, int]:
@@ -475,14 +738,17 @@ def _position(item: SourceError) -> tuple[int, int]:
 
 def validate_sequence(loaded: LoadedSequence, arm: ArmDescription,
                       start_deg: Mapping[str, float] | None = None, *,
-                      started: bool = False) -> ValidationResult:
+                      started: bool = False, speed: float = 1.0) -> ValidationResult:
     """Check a loaded sequence against ``arm`` starting at ``start_deg`` (user degrees;
     default the Park pose of the project's poses folder).
 
     ``started=True``: the modules are already reset, homed and have the arm file's limits
-    (the executor passes what it measured). Never raises for a bad sequence: everything
-    is in the result.
+    (the executor passes what it measured). ``speed``: the run's speed override, which
+    shapes the plans the guards are checked along. Never raises for a bad sequence:
+    everything is in the result.
     """
     if start_deg is None:
         start_deg = park_deg(loaded.poses_dir)
-    return _Validator(loaded, arm, start_deg, started).run()
+    validator = _Validator(loaded, arm, start_deg, started)
+    validator.speed = speed
+    return validator.run()

@@ -63,7 +63,13 @@ def test_json_output():
     path = BAD / "out_of_limit.yaml"
     result = run("validate", path, "--json")
     assert result.exit_code == 1
-    assert json.loads(result.stdout) == {
+    report = json.loads(result.stdout)
+    # the smallest guard clearance of each move along its planned trajectory
+    assert all(set(c) == {"step", "guard", "point", "z_mm", "margin_mm", "t_s", "duration_s"}
+               for c in report.pop("clearances"))
+    assert all(set(p) == {"step", "pair", "distance_mm", "t_s", "duration_s"}
+               for p in report.pop("proximities"))
+    assert report == {
         "valid": False,
         "errors": [{"file": display_path(path), "line": 7, "column": 33,
                     "message": "j2 target 130° is outside its limits -120…120"}],

@@ -124,7 +124,7 @@ def test_step_titles_use_the_label_or_describe_the_step(project):
     ("- 5\n", 4, 3, ["a step is a mapping with one key"]),
     ("- move: {pose: totem, velocty: 3}\n", 4, 23, ["unknown key 'velocty' in move",
                                                    "allowed: pose, joints,", "label)"]),
-    ("- move: {label: x}\n", 4, 9, ["a move needs either 'pose' or 'joints'"]),
+    ("- move: {label: x}\n", 4, 9, ["a move needs either 'pose', 'joints' or 'position_mm'"]),
     ("- move: {pose: totem, joints: {j1: 1}}\n", 4, 9, ["not both"]),
     ("- move: {pose: totem, relative: true}\n", 4, 9, ["'relative: true' needs 'joints'"]),
     ("- move: {joints: {}}\n", 4, 18, ["must not be empty"]),
@@ -324,7 +324,8 @@ def test_json_schema_is_exact_and_documented():
     assert bare == [{"description": bare[0]["description"], "enum":
                      ["reset", "home", "halt", "set_limits"], "type": "string"}]
     move = schema["$defs"]["MoveParams"]
-    assert move["oneOf"] == [{"required": ["pose"]}, {"required": ["joints"]}]
+    assert move["oneOf"] == [{"required": ["pose"]}, {"required": ["joints"]},
+                            {"required": ["position_mm"]}]
     assert move["properties"]["velocity_scale"]["minimum"] == 0.01
     assert move["properties"]["velocity_scale"]["maximum"] == 1
 

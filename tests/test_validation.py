@@ -31,6 +31,8 @@ ROOT = Path(__file__).resolve().parents[1]
 BAD = ROOT / "tests" / "data" / "bad"
 POSES = ROOT / "poses"
 ARM = load_arm(ROOT / "arms" / "lwa3.yaml")
+NO_GEOMETRY = ARM.model_copy(update={"geometry": ARM.geometry.model_copy(
+    update={"capsules": [], "obstacles": []})})
 PARK = park_deg(POSES)
 TOTEM = {name: 0.0 for name in ARM.joint_names}
 SHIPPED = ["startup", "totem", "opsafe", "park", "shutdown"]
@@ -46,11 +48,12 @@ def project(tmp_path):
     return tmp_path
 
 
-def validate(project: Path, steps: str, start=None, started=False):
+def validate(project: Path, steps: str, start=None, started=False, arm=None):
     path = project / "sequences" / "s.yaml"
     path.write_text("name: T\ndescription: test\nsteps:\n" + textwrap.dedent(steps))
     loaded = load_sequence(path)
-    return validate_sequence(loaded, ARM, PARK if start is None else start, started=started)
+    return validate_sequence(loaded, arm or ARM, PARK if start is None else start,
+                             started=started)
 
 
 def where(items: list[SourceError]) -> list[tuple[int, int]]:
@@ -71,7 +74,7 @@ EXPECTED = {
     ],
     "unknown_step.yaml": [("unknown_step.yaml", 5, 5,
                            ["unknown step type 'mvoe'", "did you mean 'move'",
-                            ("expected one of: reset, home, halt, set_limits, move, wait, "
+                            ("expected one of: reset, home, halt, set_limits, move, move_linear, wait, "
                             "checkpoint, confirm, include")])],
     "unknown_key.yaml": [("unknown_key.yaml", 9, 7, ["unknown key 'velocty' in move",
                                                      "velocity_deg_s"])],
@@ -175,7 +178,8 @@ def test_direct_route_would_pass_static_validation(project):
 
 # --------------------------------------------------------------------------- start state
 def test_start_outside_limits_is_a_note_at_the_move(project):
-    result = validate(project, STARTUP + "- move: {joints: {j4: -100}}\n")
+    # (the link volumes are left out: this move takes the forearm's capsule into the desk)
+    result = validate(project, STARTUP + "- move: {joints: {j4: -100}}\n", arm=NO_GEOMETRY)
     assert result.errors == []
     [note] = result.notes
     assert (note.line, note.column) == (7, 23)
@@ -306,7 +310,9 @@ def test_set_limits_overrides(project):
 
 def test_workspace_guard_along_a_move(project):
     result = validate(project, STARTUP + "- move: totem\n- move: {joints: {j2: 90, j4: 90}}\n")
-    [error] = result.errors
+    # the link volumes find it too: the hand goes into the desk
+    collision, error = result.errors
+    assert collision.message.startswith("this move takes the hand into the desk")
     assert (error.line, error.column) == (8, 3)
     assert error.message.startswith("this move takes the end-effector down to z = -155")
     assert "below the 'desk' guard at 10 mm" in error.message

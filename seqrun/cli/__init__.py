@@ -10,6 +10,7 @@ from seqrun.cli.app import app
 #: Command modules; each registers its commands on :data:`app` when imported.
 COMMAND_MODULES = (
     "seqrun.cli.fk",
+    "seqrun.cli.ik",
     "seqrun.cli.validate",
     "seqrun.cli.sim",
     "seqrun.cli.run",

@@ -41,6 +41,10 @@ class StaticCheck:
     start_deg: dict[str, float] | None = None
     errors: list[SourceError] = field(default_factory=list)
     notes: list[SourceError] = field(default_factory=list)
+    #: Smallest guard clearance of each move along its planned trajectory.
+    clearances: list = field(default_factory=list)
+    #: Smallest link-volume clearance of each move (arm file geometry).
+    proximities: list = field(default_factory=list)
 
     @property
     def valid(self) -> bool:
@@ -48,7 +52,8 @@ class StaticCheck:
 
 
 def static_check(file: Path, *, start: str | None = None,
-                 arm_file: Path | None = None, started: bool = False) -> StaticCheck:
+                 arm_file: Path | None = None, started: bool = False,
+                 speed: float = 1.0) -> StaticCheck:
     """Load ``file`` (with includes), its arm and the start pose, and validate statically.
 
     Invalid files (the sequence, an included one, the arm file, a pose file) end up in
@@ -80,8 +85,10 @@ def static_check(file: Path, *, start: str | None = None,
         check.errors = list(exc.errors)
         return check
     result: ValidationResult = validate_sequence(check.loaded, check.arm, check.start_deg,
-                                                 started=started)
+                                                 started=started, speed=speed)
     check.errors, check.notes = result.errors, result.notes
+    check.clearances = [result.clearances[n] for n in sorted(result.clearances)]
+    check.proximities = [result.proximities[n] for n in sorted(result.proximities)]
     return check
 
 
@@ -89,7 +96,9 @@ def print_report(check: StaticCheck, file: Path, *, as_json: bool) -> None:
     if as_json:
         typer.echo(json.dumps({"valid": check.valid,
                                "errors": [e.as_dict() for e in check.errors],
-                               "notes": [n.as_dict() for n in check.notes]},
+                               "notes": [n.as_dict() for n in check.notes],
+                               "clearances": [c.as_dict() for c in check.clearances],
+                               "proximities": [p.as_dict() for p in check.proximities]},
                               indent=2, ensure_ascii=False))
         return
     for error in check.errors:
@@ -101,9 +110,22 @@ def print_report(check: StaticCheck, file: Path, *, as_json: bool) -> None:
     if check.valid:
         steps = len(check.loaded.steps) if check.loaded is not None else 0
         typer.echo(f"{name}: valid ({steps} step{'s' * (steps != 1)}{notes})")
+        print_clearances(check)
     else:
         count = len(check.errors)
         typer.echo(f"{name}: invalid ({count} error{'s' * (count != 1)}{notes})")
+
+
+def print_clearances(check: StaticCheck) -> None:
+    """Per move: the smallest guard clearance along its planned trajectory, and where."""
+    for c in check.clearances:
+        typer.echo(f"  step {c.step}: lowest {c.point.replace('_', '-')} z = {c.z_mm:.1f} mm, "
+                   f"{c.margin_mm:+.1f} mm from the '{c.guard}' guard, at {c.t_s:.2f} s of "
+                   f"{c.duration_s:.2f} s (planned trajectory)")
+    for p in check.proximities:
+        a, b = p.pair.split("~", 1)
+        typer.echo(f"  step {p.step}: closest {a} - {b} {p.distance_mm:.1f} mm (link volumes), "
+                   f"at {p.t_s:.2f} s of {p.duration_s:.2f} s")
 
 
 def print_dry_run(run, loaded, arm) -> None:
@@ -123,6 +145,19 @@ def print_dry_run(run, loaded, arm) -> None:
             moving = [f"{n} {v:.1f}/{limits[n]:g}"
                       for n, v in zip(arm.joint_names, peak) if v > 0.05]
             typer.echo(f"       peak joint velocity (deg/s, of limit): {', '.join(moving)}")
+        if "ik_solution_deg" in s.detail:
+            solved = ", ".join(f"{n} {v:.3f}" for n, v in zip(arm.joint_names,
+                                                              s.detail["ik_solution_deg"]))
+            typer.echo(f"       joint solution (deg): {solved}")
+        if "moved_mm" in s.detail:
+            d = s.detail
+            typer.echo(f"       relative checkpoint: the tool moved {d['moved_mm']} mm "
+                       f"({d['frame']} frame), expected {d['expected_moved_mm']}: "
+                       f"{d['displacement_error_mm']} mm off (tolerance "
+                       f"{d['position_tolerance_mm']} mm)")
+        if "max_deviation_mm" in s.detail:
+            typer.echo(f"       straight line: {s.detail['length_mm']} mm, largest deviation "
+                       f"{s.detail['max_deviation_mm']} mm")
         if "position_error_mm" in s.detail:
             d = s.detail
             typer.echo(f"       checkpoint: expected {d['expected_position_mm']} mm, reached "
@@ -174,7 +209,8 @@ def validate_command(
     if cycle_hz is not None and not 5 <= cycle_hz <= 500:
         fail(f"--cycle-hz must lie in [5, 500], got {cycle_hz:g}")
     try:
-        check = static_check(file, start=start, arm_file=arm_file, started=started)
+        check = static_check(file, start=start, arm_file=arm_file, started=started,
+                             speed=speed)
     except UserInputError as exc:
         fail(str(exc))
         return
@@ -192,6 +228,8 @@ def validate_command(
         typer.echo(json.dumps({"valid": valid,
                                "errors": [e.as_dict() for e in check.errors],
                                "notes": [n.as_dict() for n in check.notes],
+                               "clearances": [c.as_dict() for c in check.clearances],
+                               "proximities": [p.as_dict() for p in check.proximities],
                                "dry_run": run.as_dict() if run is not None else None},
                               indent=2, ensure_ascii=False))
     else:

@@ -9,7 +9,8 @@ from __future__ import annotations
 
 from typing import Any, Callable
 
-from seqrun.steps import checkpoint, confirm, halt, home, move, reset, set_limits, wait
+from seqrun.steps import (checkpoint, confirm, halt, home, move, move_tool, reset, set_limits,
+                          wait)
 
 Handler = Callable[[Any, Any], "dict | None"]
 
@@ -19,6 +20,7 @@ HANDLERS: dict[str, Handler] = {
     "halt": halt.run,
     "set_limits": set_limits.run,
     "move": move.run,
+    "move_linear": move_tool.run_linear,
     "wait": wait.run,
     "checkpoint": checkpoint.run,
     "confirm": confirm.run,

@@ -12,6 +12,8 @@ from seqrun.validation import resolve_checkpoint
 
 
 def run(step, ex) -> dict:
+    if getattr(step.params, "moved_mm", None) is not None:
+        return _relative(step, ex)
     position, rotation, pos_tol, ang_tol = resolve_checkpoint(step.params, ex.arm, ex.poses_dir)
     measured = ex.monitor()
     T = kinematics.fk(ex.chain, np.radians(measured.user_deg))
@@ -32,4 +34,30 @@ def run(step, ex) -> dict:
                          f"checkpoint failed: end-effector {pos_err:.2f} mm (tolerance {pos_tol} mm) "
                          f"and {ang_err:.3f}° (tolerance {ang_tol}°) from the expected pose",
                          detail=detail)
+    return detail
+
+
+def _relative(step, ex) -> dict:
+    """'The tool moved [x, y, z] mm' since the last move started (measured joints)."""
+    from seqrun.cartesian import displacement, solver_for, tool_pose
+
+    params = step.params
+    measured = ex.monitor()
+    if ex.motion_start_deg is None:
+        raise RunAborted("checkpoint", "relative checkpoint: no move before it in this run")
+    solver = solver_for(ex.arm, params.tool)
+    moved = displacement(tool_pose(solver, ex.motion_start_deg),
+                         tool_pose(solver, measured.user_deg), params.frame)
+    off = float(np.linalg.norm(moved - np.asarray(params.moved_mm)))
+    detail = {"expected_moved_mm": [round(float(x), 3) for x in params.moved_mm],
+              "moved_mm": [round(float(x), 3) for x in moved], "frame": params.frame,
+              "displacement_error_mm": round(off, 3),
+              "position_tolerance_mm": params.position_tolerance_mm}
+    ex.emit("checkpoint", **detail)
+    if off > params.position_tolerance_mm:
+        raise RunAborted("checkpoint",
+                         f"relative checkpoint failed: the tool moved {detail['moved_mm']} mm "
+                         f"({params.frame} frame), {off:.3f} mm from the expected "
+                         f"{detail['expected_moved_mm']} (tolerance "
+                         f"{params.position_tolerance_mm} mm)", detail=detail)
     return detail

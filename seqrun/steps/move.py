@@ -10,6 +10,10 @@ from seqrun.validation import resolve_move_target
 
 def run(step, ex) -> dict:
     params = step.params
+    if getattr(params, "position_mm", None) is not None:  # an end-effector target
+        from seqrun.steps.move_tool import run_pose
+
+        return run_pose(step, ex)
     current = ex.read_arm()
     current_deg = {j.name: float(v) for j, v in zip(ex.arm.joints, current.user_deg)}
     target = resolve_move_target(params, current_deg, ex.arm, ex.poses_dir)
