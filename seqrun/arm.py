@@ -12,7 +12,7 @@ import math
 from pathlib import Path
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, field_validator, model_validator
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
@@ -92,6 +92,12 @@ class Control(_Strict):
     max_following_error_deg: Positive = 4.0
     position_tolerance_deg: Positive = 0.2
     settle_timeout_s: Positive = 3.0
+    max_wait_s: Positive = Field(
+        600.0, description="Longest wait a sequence may ask for (wait seconds, timeout_s of "
+                           "waits and moves), s; a longer one is a validation error.")
+    max_dry_run_s: Positive = Field(
+        7200.0, description="Simulated time after which a dry run (seqrun validate) stops "
+                            "with an error, s: a bound on what one validation may cost.")
 
 
 class Guard(_Strict):
@@ -214,6 +220,13 @@ class Cartesian(_Strict):
     linear_sample_s: Annotated[float, Field(gt=0, le=0.1, allow_inf_nan=False)] = Field(
         0.01, description="Sampling period of straight-line moves (s): every sample is solved "
                           "and checked before the move runs.")
+class PowerOffPose(_Strict):
+    """A pose the arm may be powered off in: the modules take it as their encoder zero."""
+
+    description: str = ""
+    offsets_deg: dict[str, Finite] = Field(
+        description="module position minus user position of every joint, degrees, while the "
+                    "modules were powered off in this pose (the pose itself is user = -offset).")
 
 
 class ArmDescription(_Strict):
@@ -233,6 +246,24 @@ class ArmDescription(_Strict):
     default_tool: str | None = Field(
         None, description="Tool used when a command or step names none (default: the "
                           "end-effector frame itself).")
+    power_off_poses: dict[str, PowerOffPose] = Field(
+        {}, description="The poses the arm may be powered off in (its zero references), each "
+                        "with its offsets. The joints' offset_deg are those of "
+                        "default_power_off.")
+    default_power_off: str | None = Field(
+        None, description="The power-off pose whose offsets the joints' offset_deg are.")
+    # SHA-256 of the file it was loaded from (recorded in run folders); not a file key.
+    _sha256: str = PrivateAttr("")
+    _file: str = PrivateAttr("")
+
+    @property
+    def sha256(self) -> str:
+        return self._sha256
+
+    @property
+    def source_file(self) -> str:
+        """The file it was loaded from, as messages name it ("" if built in code)."""
+        return self._file
 
     @field_validator("joints")
     @classmethod
@@ -293,6 +324,58 @@ class ArmDescription(_Strict):
                 return tool
         raise KeyError(name)
 
+    @model_validator(mode="after")
+    def _power_off_poses_match_joints(self) -> "ArmDescription":
+        names = self.joint_names
+        for pose, entry in self.power_off_poses.items():
+            missing = [n for n in names if n not in entry.offsets_deg]
+            unknown = [n for n in entry.offsets_deg if n not in names]
+            if missing or unknown:
+                raise ValueError(f"power_off_poses.{pose}.offsets_deg needs exactly the joints "
+                                 f"{', '.join(names)}" + (f"; missing {', '.join(missing)}"
+                                                          if missing else "")
+                                 + (f"; unknown {', '.join(unknown)}" if unknown else ""))
+        if self.default_power_off is not None:
+            entry = self.power_off_poses.get(self.default_power_off)
+            if entry is None:
+                raise ValueError(f"default_power_off '{self.default_power_off}' is not one of "
+                                 f"power_off_poses ({', '.join(self.power_off_poses) or 'none'})")
+            differ = [j.name for j in self.joints
+                      if not math.isclose(j.offset_deg, entry.offsets_deg[j.name], abs_tol=1e-9)]
+            if differ:
+                raise ValueError(f"the joints' offset_deg must be those of default_power_off "
+                                 f"'{self.default_power_off}'; {', '.join(differ)} differ")
+        return self
+
+    # Zero references: which offsets are in force depends on where the arm was powered off.
+    def power_off_pose(self, name: str) -> PowerOffPose:
+        """The power-off pose ``name`` (case-insensitive); UserInputError naming the known ones."""
+        from seqrun.errors import UserInputError
+
+        entry = self.power_off_poses.get(name) or self.power_off_poses.get(name.lower())
+        if entry is None:
+            known = ", ".join(self.power_off_poses) or "none"
+            raise UserInputError(f"'{name}' is not a power-off pose of arm '{self.name}' "
+                                 f"(its power-off poses: {known})")
+        return entry
+
+    def power_off_joints_deg(self, name: str) -> dict[str, float]:
+        """Where the arm stands (user degrees) when it is in power-off pose ``name``: every
+        module reads zero there, so user = -offset."""
+        return {n: -v + 0.0 for n, v in self.power_off_pose(name).offsets_deg.items()}
+
+    def with_zero_reference(self, name: str | None) -> "ArmDescription":
+        """This arm with the offsets of power-off pose ``name`` (None: unchanged). Every
+        user<->module conversion (Joint.to_module_rad, the executor, the setpoint laws)
+        then uses them."""
+        if name is None:
+            return self
+        offsets = self.power_off_pose(name).offsets_deg
+        joints = [j.model_copy(update={"offset_deg": float(offsets[j.name])})
+                  for j in self.joints]
+        key = name if name in self.power_off_poses else name.lower()
+        return self.model_copy(update={"joints": joints, "default_power_off": key})
+
     # Convenience views used everywhere.
     @property
     def dof(self) -> int:
@@ -323,6 +406,9 @@ DEFAULT_ARM = Path("arms/lwa3.yaml")
 def load_arm(path: str | Path) -> ArmDescription:
     """Load and validate an arm file; raises :class:`seqrun.errors.SequenceInvalid`
     with ``file:line:col`` errors."""
-    from seqrun.yamlsource import load_model  # local import: yamlsource is a sibling layer
+    from seqrun.yamlsource import load_document  # local import: a sibling layer
 
-    return load_model(Path(path), ArmDescription)
+    document = load_document(Path(path))
+    arm = document.validate(ArmDescription)
+    arm._sha256, arm._file = document.sha256, document.file
+    return arm

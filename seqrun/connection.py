@@ -41,6 +41,8 @@ class Connection:
     is_simulator: bool
     description: str
     faults: list[Fault] = field(default_factory=list)
+    #: The built-in simulator's power-on pose (its zero reference); None on other buses.
+    power_on_pose: str | None = None
 
     def close(self) -> None:
         try:
@@ -141,7 +143,8 @@ def open_connection(*, interface: str | None = None, channel: str | None = None,
                     force_sim: bool = False, faults: Sequence[Fault] = (),
                     clock: Clock | None = None,
                     sim_positions: Mapping[int, float] | Sequence[float] | None = None,
-                    default_bitrate: int = 1_000_000) -> Connection:
+                    default_bitrate: int = 1_000_000,
+                    power_on_pose: str | None = None) -> Connection:
     """Open the bus the operator asked for (see the module docstring)."""
     response_timeout_s(None)  # a bad $SEQRUN_RESPONSE_TIMEOUT_MS: one line, before the bus
     config = {} if force_sim else resolve_config(interface, channel, bitrate, bus_kwargs)
@@ -163,14 +166,16 @@ def open_connection(*, interface: str | None = None, channel: str | None = None,
         try:
             bus = SimBus(channel=name, clock=clock, faults=list(faults),
                          bitrate=bitrate or config.get("bitrate") or default_bitrate,
-                         positions=sim_positions, options=options, **switches)
+                         positions=sim_positions, options=options,
+                         power_on_pose=power_on_pose, **switches)
         except can.CanInitializationError as exc:
             raise UserInputError(f"--bus-kwargs: {exc}") from None
         kind = "virtual time" if clock.is_virtual else "real time"
         changed = "" if options is None else f", options {os.environ[SIM_OPTIONS_ENV].strip()}"
         return Connection(bus, clock, True,
                           f"SIMULATOR ({kind}): simulated LWA 3 on '{name}', "
-                          f"{bus.bitrate} bit/s{changed} - no hardware is moved", list(faults))
+                          f"{bus.bitrate} bit/s{changed} - no hardware is moved", list(faults),
+                          power_on_pose=bus.arm.power_on_pose)
     if faults:
         raise UserInputError("--sim-fault only applies to the simulator (no -i/-c, or --sim)")
     if config["interface"] == "socketcand":  # python-can's config gives channel=None

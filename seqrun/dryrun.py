@@ -85,11 +85,14 @@ def _prepare_started(connection, arm: ArmDescription) -> None:
 
 def dry_run(loaded: LoadedSequence, arm: ArmDescription, start_deg: Mapping[str, float], *,
             start_pose: str = "park", started: bool = False, speed: float = 1.0,
-            cycle_hz: float | None = None, command_mode: str | None = None) -> DryRun:
+            cycle_hz: float | None = None, command_mode: str | None = None,
+            time_limit_s: float | None = None) -> DryRun:
     """Run ``loaded`` on a simulated arm standing at ``start_deg`` (user degrees).
 
     ``started``: the simulated modules are reset, homed and limited before the run (for
-    sequences written for an arm that is already up).
+    sequences written for an arm that is already up). ``time_limit_s`` (default the arm
+    file's ``control.max_dry_run_s``): simulated time after which the dry run stops with
+    an error, so that no sequence makes validation run for ever.
     """
     clock = VirtualClock()
     positions = {j.module: j.to_module_rad(start_deg[j.name]) for j in arm.joints}
@@ -103,11 +106,18 @@ def dry_run(loaded: LoadedSequence, arm: ArmDescription, start_deg: Mapping[str,
         wall = time.perf_counter()
         outcome = run_sequence(loaded, arm, connection, log_dir=None, speed=speed,
                                cycle_hz=hz, command_mode=command_mode, confirm=None,
-                               listeners=[_keep_summary(events)], dry_run=True)
+                               listeners=[_keep_summary(events)], dry_run=True,
+                               on_executor=_bounded(time_limit_s or arm.control.max_dry_run_s))
         wall = time.perf_counter() - wall
     finally:
         connection.close()
     return DryRun(outcome.result, start_pose, hz, wall, events)
+
+
+def _bounded(seconds: float):
+    def hook(executor) -> None:
+        executor.time_limit_s = seconds
+    return hook
 
 
 def _keep_summary(events: list[dict]):

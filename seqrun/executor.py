@@ -36,6 +36,7 @@ from seqrun.clock import Clock
 from seqrun.errors import (BusError, ModuleFaultError, ModuleTimeoutError, PlanningError,
                            RunAborted, SeqrunError)
 from seqrun.halt import HaltConfirmation, halt_and_confirm
+from seqrun.limits import LimitsInForce
 from seqrun.planner import Limits, MovePlan, plan_move, plan_stop
 from seqrun.setpoints import setpoint_law
 from seqrun.stop_requests import OPERATOR_HALT, StopRequest, StopRequests
@@ -160,6 +161,13 @@ class Executor:
         self.modules = arm.module_ids
         self.movable = [i for i, j in enumerate(arm.joints) if j.locked is None]
         self.limits = Limits.from_arm(arm, speed=speed)
+        # MaxVel/MaxAcc per joint as the modules hold them (preflight readback, set_limits):
+        # every plan stays within these and the arm file's.
+        self.limits_in_force = LimitsInForce(arm)
+        # The poses the sequence was validated with (frozen at load time).
+        self.poses: dict = {}
+        # Bound on a run's (simulated) time; the dry run sets it (control.max_dry_run_s).
+        self.time_limit_s: float | None = None
         self.setpoints = setpoint_law(self.command_mode, arm, self.cycle, self.limits)
         # Stop requests: posted from any thread or signal handler without a lock, acted on
         # by the run loop (see seqrun/stop_requests.py).
@@ -435,6 +443,10 @@ class Executor:
             if halt.cause == OPERATOR_HALT:
                 raise RunAborted(OPERATOR_HALT, f"Halt requested by the operator ({halt.reason})")
             raise RunAborted(halt.cause, f"{halt.reason}: Halt")
+        if self.time_limit_s is not None and self.clock.now() - self._t0 > self.time_limit_s:
+            raise RunAborted("time_limit", f"stopped after {self.time_limit_s:g} s of simulated "
+                             "time (control.max_dry_run_s of the arm file): the sequence takes "
+                             "longer than a dry run may; raise the bound to check it all")
 
     # ------------------------------------------------------------------ motion
     def move(self, target_deg: np.ndarray, active: list[int], limits: Limits, *,
@@ -454,6 +466,9 @@ class Executor:
                   joints=[self.arm.joints[i].name for i in moving])
         if self._current_step is not None:
             self._current_step.planned_duration_s = plan.duration
+        if timeout_s is not None and plan.duration > timeout_s:
+            raise RunAborted("timeout", f"the move is planned to take {plan.duration:.3g} s, "
+                             f"longer than its timeout_s {timeout_s:g} s; nothing was moved")
         peak = np.zeros(len(target_deg))
         t_move = self.clock.now()
         if moving:
@@ -669,7 +684,10 @@ class Executor:
     def _controlled_stop(self, plan: MovePlan, t: float, moving: list[int]) -> None:
         """ruckig to zero velocity from the plan's current state, streamed, then hold."""
         pos, vel, acc = plan.at(t)
-        stop = plan_stop(pos, vel, acc, self.limits, moving)
+        velocity, acceleration = self.limits_in_force.maxima()
+        limits = Limits.from_arm(self.arm, speed=self.speed, max_velocity_deg_s=velocity,
+                                 max_acceleration_deg_s2=acceleration)
+        stop = plan_stop(pos, vel, acc, limits, moving)
         self.emit("controlled_stop", duration_s=_round(stop.duration))
         tol = self.arm.control.position_tolerance_deg
         self._stream(stop, moving, max(tol, 0.5), stop.duration + 2.0, stop_on_abort=False)
@@ -757,18 +775,25 @@ class Executor:
 
         m = self.read_arm()
         states = self.read_state_words()
-        limits = self.transact([GetParam(j.module, p) for j in self.arm.joints
-                                 for p in (ParamId.MIN_POS, ParamId.MAX_POS)], idempotent=True)
+        # MinPos/MaxPos/MaxVel/MaxAcc stay stored in the modules across runs.
+        params = (ParamId.MIN_POS, ParamId.MAX_POS, ParamId.MAX_VEL, ParamId.MAX_ACC)
+        stored = self.transact([GetParam(j.module, p) for j in self.arm.joints for p in params],
+                               idempotent=True)
+        per_joint = [stored[k:k + len(params)] for k in range(0, len(stored), len(params))]
         written = all(
             abs(float(lo.value) - j.to_module_rad(j.limits_deg[0])) < 1e-5
             and abs(float(hi.value) - j.to_module_rad(j.limits_deg[1])) < 1e-5
-            for j, lo, hi in zip(self.arm.joints, limits[0::2], limits[1::2]))
+            for j, (lo, hi, _, _) in zip(self.arm.joints, per_joint))
+        module_limits = {j.name: (math.degrees(float(vel.value)), math.degrees(float(acc.value)))
+                         for j, (_, _, vel, acc) in zip(self.arm.joints, per_joint)}
+        self.limits_in_force.read_back(module_limits)
         ready = all(f & StateFlag.HOME_OK and not f & StateFlag.FAULTS for f in states.values())
         self._record_latched(states)
         started = ready and written
         start_deg = {j.name: float(v) for j, v in zip(self.arm.joints, m.user_deg)}
         result = validate_sequence(replace(loaded, steps=tuple(loaded.steps[first_step - 1:])),
-                                   self.arm, start_deg, started=started, speed=self.speed)
+                                   self.arm, start_deg, started=started, speed=self.speed,
+                                   module_limits=module_limits)
         if first_step > 1:
             before = validate_sequence(replace(loaded, steps=tuple(loaded.steps[:first_step - 1])),
                                        self.arm)
@@ -782,6 +807,7 @@ class Executor:
                         f"(after steps 1-{first_step - 1})"))
         self.validated_targets = dict(getattr(result, "targets_deg", {}))
         self.emit("preflight", start_deg=_r(m.user_deg), homed=ready, limits_written=written,
+                  module_limits={n: _r(v) for n, v in module_limits.items()},
                   states={str(k): v.describe() for k, v in states.items()},
                   errors=[str(e) for e in result.errors], notes=[str(n) for n in result.notes])
         return result
@@ -889,6 +915,7 @@ class Executor:
         from seqrun.steps import HANDLERS
 
         self._t0 = self.clock.now()
+        self.poses = dict(getattr(loaded, "poses", {}))
         steps = list(loaded.steps)
         results = [StepResult(s.number, s.kind, _label(s), _location(s)) for s in steps]
         # clock_s: the run clock's reading at t = 0, so that the run log can put event
@@ -899,10 +926,11 @@ class Executor:
         try:
             check = self.preflight(loaded, first_step)
             if check.errors:
+                summary = "not valid from the arm's measured state"
                 return self._finish(results, "invalid", EXIT_INVALID,
-                                    "not valid from the arm's measured state: "
-                                    + "; ".join(str(e) for e in check.errors), None,
-                                    errors=[e.as_dict() for e in check.errors])
+                                    f"{summary}: " + "; ".join(str(e) for e in check.errors),
+                                    None, errors=[e.as_dict() for e in check.errors],
+                                    summary=summary)
             self._enable_watchdog()
         except Exception as exc:  # noqa: BLE001 - nothing moves yet, but be sure
             self.emergency_halt()
@@ -929,7 +957,9 @@ class Executor:
                     raise OperatorAbort("operator abort")
                 result.started = self.clock.now() - self._t0
                 self.emit("step_started", kind=step.kind, label=result.label,
-                          location=result.location)
+                          location=result.location,
+                          **({"include": list(step.include_labels)}
+                             if getattr(step, "include_labels", ()) else {}))
                 detail = HANDLERS[step.kind](step, self) or {}
                 result.detail.update({k: v for k, v in detail.items()
                                       if k != "planned_duration_s"})

@@ -35,23 +35,32 @@ class Limits:
     def from_arm(cls, arm: ArmDescription, *, velocity_scale: float = 1.0,
                  acceleration_scale: float = 1.0, speed: float = 1.0,
                  velocity_deg_s: Mapping[str, float] | None = None,
-                 reserve: float | None = None) -> "Limits":
+                 reserve: float | None = None,
+                 max_velocity_deg_s: Mapping[str, float] | None = None,
+                 max_acceleration_deg_s2: Mapping[str, float] | None = None) -> "Limits":
         """The arm's maxima × the step's scale factors × the run's speed override.
 
         ``velocity_deg_s`` caps single joints (a step's per-joint velocity); it never
         raises a joint above the arm's maximum. ``reserve`` (default: the arm's
         ``control.tracking_reserve``) is the fraction of each velocity limit kept out of
-        the plan for the executor to catch up a lagging joint.
+        the plan for the executor to catch up a lagging joint. ``max_velocity_deg_s`` and
+        ``max_acceleration_deg_s2`` replace the arm file's maxima of the joints they name
+        by narrower ones (the limits in force, :mod:`seqrun.limits`); never wider.
         """
         if not (0 < speed <= 1 and 0 < velocity_scale <= 1 and 0 < acceleration_scale <= 1):
             raise PlanningError("scale factors and speed must lie in (0, 1]")
         keep = 1.0 - (arm.control.tracking_reserve if reserve is None else reserve)
-        vel = (np.radians([j.max_velocity_deg_s for j in arm.joints])
-               * min(velocity_scale * speed, keep))
+        vmax = {j.name: j.max_velocity_deg_s for j in arm.joints}
+        amax = {j.name: j.max_acceleration_deg_s2 for j in arm.joints}
+        for name, value in (max_velocity_deg_s or {}).items():
+            vmax[name] = min(vmax[name], value)
+        for name, value in (max_acceleration_deg_s2 or {}).items():
+            amax[name] = min(amax[name], value)
+        vel = np.radians([vmax[j.name] for j in arm.joints]) * min(velocity_scale * speed, keep)
         for name, cap in (velocity_deg_s or {}).items():
             i = arm.index(name)
             vel[i] = min(vel[i], math.radians(cap) * speed * keep)
-        acc = np.radians([j.max_acceleration_deg_s2 for j in arm.joints]) * acceleration_scale * speed
+        acc = np.radians([amax[j.name] for j in arm.joints]) * acceleration_scale * speed
         jerk = np.radians([j.max_jerk_deg_s3 for j in arm.joints]) * acceleration_scale * speed
         return cls(vel, acc, jerk)
 

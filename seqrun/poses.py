@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
 from typing import Annotated, Literal
@@ -28,11 +29,15 @@ __all__ = [
     "NOTE_PREFIX",
     "EndEffector",
     "PoseFile",
+    "PoseFinding",
     "available_poses",
+    "check_pose_name",
     "check_pose",
     "find_pose",
+    "pose_overrides",
     "load_pose",
     "pose_document",
+    "pose_findings",
     "pose_yaml",
     "save_pose",
 ]
@@ -96,28 +101,75 @@ def load_pose(path: str | Path) -> PoseFile:
     return load_model(Path(path), PoseFile)
 
 
-def available_poses(poses_dir: str | Path) -> dict[str, Path]:
-    """Pose name -> file for every ``*.yaml`` in ``poses_dir``, sorted by name."""
-    poses_dir = Path(poses_dir)
-    if not poses_dir.is_dir():
+PoseDirs = str | Path | Sequence[str | Path]
+
+
+def _search_path(poses_dir: PoseDirs) -> list[Path]:
+    """One folder, or a search path (first match wins: a campaign's, then the shipped)."""
+    if isinstance(poses_dir, (str, Path)):
+        return [Path(poses_dir)]
+    return [Path(p) for p in poses_dir]
+
+
+def _files(folder: Path) -> dict[str, Path]:
+    if not folder.is_dir():
         return {}
-    return {p.stem: p for p in sorted(poses_dir.glob("*.yaml")) if p.is_file()}
+    return {p.stem: p for p in sorted(folder.glob("*.yaml")) if p.is_file()}
 
 
-def find_pose(name: str, poses_dir: str | Path) -> Path:
-    """The file of pose ``name``; :class:`UserInputError` listing the known poses otherwise."""
+def available_poses(poses_dir: PoseDirs) -> dict[str, Path]:
+    """Pose name -> file for every ``*.yaml`` in ``poses_dir`` (a folder or a search path,
+    where the first folder that has a name wins), sorted by name."""
+    found: dict[str, Path] = {}
+    for folder in _search_path(poses_dir):
+        for name, path in _files(folder).items():
+            found.setdefault(name, path)
+    return dict(sorted(found.items()))
+
+
+def pose_overrides(poses_dir: PoseDirs) -> dict[str, tuple[Path, list[Path]]]:
+    """Poses defined in more than one folder of a search path: name -> (the file used,
+    the files it hides)."""
+    seen: dict[str, list[Path]] = {}
+    for folder in _search_path(poses_dir):
+        for name, path in _files(folder).items():
+            seen.setdefault(name, []).append(path)
+    return {name: (paths[0], paths[1:]) for name, paths in sorted(seen.items())
+            if len(paths) > 1}
+
+
+def find_pose(name: str, poses_dir: PoseDirs) -> Path:
+    """The file of pose ``name``; :class:`UserInputError` listing the known poses and the
+    folders searched otherwise."""
     poses = available_poses(poses_dir)
     if name in poses:
         return poses[name]
-    if not Path(poses_dir).is_dir():
-        raise UserInputError(f"unknown pose '{name}': pose directory {poses_dir} does not exist")
+    folders = _search_path(poses_dir)
+    if len(folders) == 1:
+        if not folders[0].is_dir():
+            raise UserInputError(f"unknown pose '{name}': pose directory {folders[0]} "
+                                 "does not exist")
+        where = f"in {folders[0]}"
+    else:
+        where = "searched " + ", ".join(
+            f"{f}" + ("" if f.is_dir() else " (does not exist)") for f in folders)
     known = ", ".join(poses) if poses else "none"
-    raise UserInputError(f"unknown pose '{name}'; available poses: {known} (in {poses_dir})")
+    raise UserInputError(f"unknown pose '{name}'; available poses: {known} ({where})")
 
 
 def _stored_number(value: float) -> float:
     # round for the reader; + 0.0 turns -0.0 into 0.0 so files never show "-0.0"
     return round(float(value), _DECIMALS) + 0.0
+
+
+def check_pose_name(name: str) -> None:
+    """:class:`UserInputError` (one clear line) for a name a pose file cannot have."""
+    import re
+
+    if not re.match(_POSE_NAME, name):
+        raise UserInputError(f"'{name}' is not a pose name: letters, digits, _ and -, "
+                             "starting with a letter or digit (it names the file "
+                             "poses/<name>.yaml)")
 
 
 def pose_document(name: str, arm: ArmDescription,
@@ -127,8 +179,10 @@ def pose_document(name: str, arm: ArmDescription,
     """A pose file for the arm at ``joints_deg`` (user degrees), end-effector by FK.
 
     Accepts what :func:`seqrun.kinematics.pose_from_user_deg` accepts (a locked joint may be
-    left out of a mapping); raises ``ValueError`` for unknown, missing or wrong joints.
+    left out of a mapping); raises ``ValueError`` for unknown, missing or wrong joints and
+    :class:`UserInputError` for a name that is not a pose name.
     """
+    check_pose_name(name)
     pose = pose_from_user_deg(arm, joints_deg)
     if isinstance(joints_deg, Mapping):
         given = {n: joints_deg.get(n, j.locked) for n, j in zip(arm.joint_names, arm.joints)}
@@ -197,34 +251,51 @@ def save_pose(path: str | Path, pose: PoseFile) -> None:
     os.replace(temporary, path)
 
 
-def check_pose(pose: PoseFile, arm: ArmDescription) -> list[str]:
-    """Problems of a pose for ``arm``, and notes (starting with :data:`NOTE_PREFIX`).
+@dataclass(frozen=True)
+class PoseFinding:
+    """One finding of :func:`pose_findings`: ``where`` is the path of the value in the
+    file (e.g. ``("joints_deg", "j2")``), ``key``: at the key rather than the value."""
+
+    where: tuple[str, ...]
+    message: str
+    note: bool = False
+    key: bool = False
+    joint: str | None = None  # the joint a limit note is about
+
+
+def pose_findings(pose: PoseFile, arm: ArmDescription) -> list[PoseFinding]:
+    """Problems of a pose for ``arm`` (and notes), each with where it is in the file.
 
     Problems: another arm, unknown or missing joints, a locked joint away from its locked
-    value, a stored end-effector that disagrees with FK of the joints. Notes: joints outside
+    value, a stored end-effector that disagrees with FK of the joints (beyond
+    :data:`POSITION_TOLERANCE_MM` / :data:`ORIENTATION_TOLERANCE_DEG`). Notes: joints outside
     their limits (allowed: Park is outside, a sequence starting there moves back inside).
     """
-    findings: list[str] = []
+    findings: list[PoseFinding] = []
     if pose.arm != arm.name:
-        findings.append(f"made for arm '{pose.arm}', not '{arm.name}'")
+        findings.append(PoseFinding(("arm",), f"made for arm '{pose.arm}', not '{arm.name}'"))
     unknown = [name for name in pose.joints_deg if name not in arm.joint_names]
     missing = [name for name in arm.joint_names if name not in pose.joints_deg]
     if unknown:
-        findings.append(f"unknown joint(s) {', '.join(unknown)}; "
-                        f"the arm has {', '.join(arm.joint_names)}")
+        findings.append(PoseFinding(("joints_deg", unknown[0]),
+                                    f"unknown joint(s) {', '.join(unknown)}; "
+                                    f"the arm has {', '.join(arm.joint_names)}", key=True))
     if missing:
-        findings.append(f"missing joint(s) {', '.join(missing)}")
+        findings.append(PoseFinding(("joints_deg",), f"missing joint(s) {', '.join(missing)}",
+                                    key=True))
     for joint in arm.joints:
         value = pose.joints_deg.get(joint.name)
         if value is None:
             continue
         if joint.locked is not None and not math.isclose(value, joint.locked, abs_tol=1e-6):
-            findings.append(f"{joint.name} is locked at {joint.locked:g} deg, "
-                            f"the pose has {value:g}")
+            findings.append(PoseFinding(("joints_deg", joint.name),
+                                        f"{joint.name} is locked at {joint.locked:g} deg, "
+                                        f"the pose has {value:g}"))
         lo, hi = joint.limits_deg
         if not lo <= value <= hi:
-            findings.append(f"{NOTE_PREFIX}{joint.name} {value:g} deg is outside its limits "
-                            f"[{lo:g}, {hi:g}]")
+            findings.append(PoseFinding(("joints_deg", joint.name),
+                                        f"{joint.name} {value:g} deg is outside its limits "
+                                        f"[{lo:g}, {hi:g}]", note=True, joint=joint.name))
     if missing or unknown:
         return findings  # no end-effector to compare with
 
@@ -235,15 +306,23 @@ def check_pose(pose: PoseFile, arm: ArmDescription) -> list[str]:
     stored = pose.end_effector
     distance = float(np.linalg.norm(np.subtract(stored.position_mm, computed.position_mm)))
     if distance > POSITION_TOLERANCE_MM:
-        findings.append(f"end_effector.position_mm {_triple(stored.position_mm)} is "
-                        f"{distance:.3f} mm from forward kinematics "
-                        f"{_triple(computed.position_mm)}")
+        findings.append(PoseFinding(("end_effector", "position_mm"),
+                                    f"end_effector.position_mm {_triple(stored.position_mm)} is "
+                                    f"{distance:.3f} mm from forward kinematics "
+                                    f"{_triple(computed.position_mm)}"))
     angle = math.degrees(float(orientation_error(
         matrix_from_rpy(np.radians(stored.rpy_deg)), computed.rotation)))
     if angle > ORIENTATION_TOLERANCE_DEG:
-        findings.append(f"end_effector.rpy_deg {_triple(stored.rpy_deg)} is {angle:.3f} deg "
-                        f"from forward kinematics {_triple(computed.rpy_deg)}")
+        findings.append(PoseFinding(("end_effector", "rpy_deg"),
+                                    f"end_effector.rpy_deg {_triple(stored.rpy_deg)} is "
+                                    f"{angle:.3f} deg from forward kinematics "
+                                    f"{_triple(computed.rpy_deg)}"))
     return findings
+
+
+def check_pose(pose: PoseFile, arm: ArmDescription) -> list[str]:
+    """:func:`pose_findings` as text; notes start with :data:`NOTE_PREFIX`."""
+    return [(NOTE_PREFIX if f.note else "") + f.message for f in pose_findings(pose, arm)]
 
 
 def _triple(values: Sequence[float]) -> str:

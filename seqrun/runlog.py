@@ -51,10 +51,11 @@ def holds_run(folder: Path) -> bool:
     return any((Path(folder) / name).exists() for name in RUN_FILES)
 
 
-def prepare_run_folder(log_dir: Path | None, sequence_name: str) -> Path:
+def prepare_run_folder(log_dir: Path | None, sequence_name: str,
+                       root: Path = Path("runs")) -> Path:
     """The folder this run writes, created and checked writable (OSError otherwise).
 
-    Without ``log_dir``: ``runs/<time>-<name>/``. A ``log_dir`` that already holds a run
+    Without ``log_dir``: ``<root>/<time>-<name>/``. A ``log_dir`` that already holds a run
     is never overwritten: the run goes to a new ``<time>-<name>/`` folder inside it. Two
     runs in the same second get ``-2``, ``-3`` ... suffixes.
     """
@@ -62,7 +63,7 @@ def prepare_run_folder(log_dir: Path | None, sequence_name: str) -> Path:
         folder = Path(log_dir)
         folder.mkdir(parents=True, exist_ok=True)
     else:
-        base = default_run_dir(sequence_name, Path(log_dir) if log_dir else Path("runs"))
+        base = default_run_dir(sequence_name, Path(log_dir) if log_dir else Path(root))
         base.parent.mkdir(parents=True, exist_ok=True)
         folder = base
         for n in range(2, 1000):

@@ -41,7 +41,8 @@ def build_executor(loaded: LoadedSequence, arm: ArmDescription, connection: Conn
                              # (a dry run keeps the arm file's: deterministic results)
                              response_timeout=(arm.can.response_timeout_s if dry_run
                                                else response_timeout_s(arm)))
-    executor = Executor(client, arm, connection.clock, poses_dir=loaded.poses_dir, speed=speed,
+    executor = Executor(client, arm, connection.clock,
+                        poses_dir=loaded.pose_path or loaded.poses_dir, speed=speed,
                         command_mode=command_mode, cycle_hz=cycle_hz, confirm=confirm,
                         before_step=before_step, listeners=list(listeners), dry_run=dry_run,
                         confirm_clear_latched=confirm_clear_latched, requests=requests)
@@ -58,14 +59,16 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
                  listeners: Iterable[Listener] = (), dry_run: bool = False,
                  on_executor: Callable[[Executor], None] | None = None,
                  confirm_clear_latched: Callable[[str], bool] | None = None,
+                 meta: dict | None = None,
                  requests: StopRequests | None = None,
                  warn: Callable[[str], None] | None = None) -> RunOutcome:
     """Run ``loaded`` on ``connection``; writes the run folder when ``log_dir`` is given.
 
     ``on_executor`` is called with the executor before the run starts (displays and tests
-    hook in there); ``requests`` is the inbox signal handlers post stop requests to;
-    ``warn`` is told once when writing the run folder fails. The connection is not closed.
-    Whichever way the run ends (even by an exception), the run folder is finished.
+    hook in there); ``meta`` goes into report.json (e.g. the zero reference); ``requests``
+    is the inbox signal handlers post stop requests to; ``warn`` is told once when writing
+    the run folder fails. The connection is not closed. Whichever way the run ends (even
+    by an exception), the run folder is finished.
     """
     executor, client = build_executor(loaded, arm, connection, speed=speed,
                                       command_mode=command_mode, cycle_hz=cycle_hz,
@@ -79,7 +82,8 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
                                "arm": arm.name, "bus": connection.description,
                                "simulator": connection.is_simulator,
                                "faults": [f.spec for f in connection.faults], "speed": speed,
-                               "first_step": first_step, "seqrun": __version__},
+                               "first_step": first_step, "seqrun": __version__,
+                               **(meta or {}), "inputs": _inputs(loaded, arm)},
                      clock=connection.clock,
                      channel=getattr(connection.bus, "channel", None) or "can0", warn=warn)
         client.add_frame_listener(log.on_frame)
@@ -101,6 +105,15 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
             log.close()
         client.close()
     return RunOutcome(result, report, log_dir, executor)
+
+
+def _inputs(loaded: LoadedSequence, arm: ArmDescription) -> list[dict[str, str]]:
+    """Every file the run was validated from, with its SHA-256 as it was read: the run
+    uses these contents only (poses are frozen at load time, the arm is loaded once)."""
+    items = loaded.inputs()
+    if arm.sha256:
+        items.append({"kind": "arm", "file": arm.source_file, "sha256": arm.sha256})
+    return items
 
 
 def _unfinished(executor: Executor, loaded: LoadedSequence, exc: BaseException) -> RunResult:

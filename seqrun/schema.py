@@ -36,6 +36,7 @@ from __future__ import annotations
 import inspect
 import os
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any, ClassVar, Literal, Union
@@ -66,6 +67,7 @@ from seqrun.yamlsource import (
 __all__ = [
     "BARE_STEPS",
     "DEFAULT_ARM",
+    "FrozenPose",
     "MAX_INCLUDE_DEPTH",
     "MAX_STEPS",
     "PARAMS_MODELS",
@@ -78,6 +80,7 @@ __all__ = [
     "LoadedSequence",
     "MoveLinearParams",
     "MoveParams",
+    "PowerOffParams",
     "ResetParams",
     "ResolvedStep",
     "Sequence",
@@ -86,6 +89,7 @@ __all__ = [
     "WaitParams",
     "find_project_root",
     "load_sequence",
+    "load_sequence_partial",
     "sequence_json_schema",
 ]
 
@@ -507,6 +511,23 @@ class ConfirmParams(StepParams):
         return value if isinstance(value, cls) else cls(prompt=value)
 
 
+class PowerOffParams(StepParams):
+    """End of a shutdown: check the arm stands in a power-off pose of the arm file, then
+    record that it is powered off there (its modules take their zero there)."""
+
+    kind: ClassVar[str] = "power_off"
+    yaml_name: ClassVar[str] = "power_off"
+    pose: PoseName = Field(description="A power-off pose of the arm file (power_off_poses), "
+                                       "e.g. totem.")
+    tolerance_deg: Positive | None = Field(
+        None, description="How far each joint may be from the pose, degrees (default the arm "
+                          "file's control.position_tolerance_deg).")
+
+    @classmethod
+    def from_shorthand(cls, value: Any) -> StepParams:
+        return value if isinstance(value, cls) else cls(pose=value)
+
+
 class IncludeParams(StepParams):
     """Run the steps of another sequence file here."""
 
@@ -525,7 +546,7 @@ class IncludeParams(StepParams):
 #: Parameter model of each step type, in the order the docs list them.
 PARAMS_MODELS: dict[str, type[StepParams]] = {m.kind: m for m in (
     ResetParams, HomeParams, HaltParams, SetLimitsParams, MoveParams, MoveLinearParams,
-    WaitParams, CheckpointParams, ConfirmParams, IncludeParams)}
+    WaitParams, CheckpointParams, ConfirmParams, PowerOffParams, IncludeParams)}
 STEP_KINDS: tuple[str, ...] = tuple(PARAMS_MODELS)
 #: Step types that may be written as a bare word (``- reset``).
 BARE_STEPS: tuple[str, ...] = ("reset", "home", "halt", "set_limits")
@@ -655,6 +676,16 @@ class ConfirmStep(_Step):
         description=_doc(ConfirmParams) + " Shorthand: 'confirm: Is the desk clear?'.")
 
 
+class PowerOffStep(_Step):
+    """A power_off step."""
+
+    kind: ClassVar[str] = "power_off"
+    power_off: _either(_kind_pick(text="power_off:pose", params="power_off:params"),
+                       **{"power_off:pose": PoseName,
+                          "power_off:params": PowerOffParams}) = Field(
+        description=_doc(PowerOffParams) + " Shorthand: 'power_off: totem'.")
+
+
 class IncludeStep(_Step):
     """An include step."""
 
@@ -667,7 +698,7 @@ class IncludeStep(_Step):
 
 _STEP_MODELS: dict[str, type[_Step]] = {m.kind: m for m in (
     ResetStep, HomeStep, HaltStep, SetLimitsStep, MoveStep, MoveLinearStep, WaitStep,
-    CheckpointStep, ConfirmStep, IncludeStep)}
+    CheckpointStep, ConfirmStep, PowerOffStep, IncludeStep)}
 assert tuple(_STEP_MODELS) == STEP_KINDS, "one step model per parameter model"
 
 BareStep = Annotated[Literal[BARE_STEPS], Field(  # type: ignore[valid-type]
@@ -717,8 +748,10 @@ def _check_step(value: Any) -> Any:
 
 _EXAMPLES = {"move": "move: totem",
              "move_linear": "move_linear: {position_mm: [0, 0, 50], relative: true, "
-                            "frame: tool, speed_mm_s: 10}", "wait": "wait: 2", "checkpoint": "checkpoint: opsafe",
-             "confirm": "confirm: Is the desk clear?", "include": "include: startup.yaml"}
+                            "frame: tool, speed_mm_s: 10}",
+             "wait": "wait: 2", "checkpoint": "checkpoint: opsafe",
+             "confirm": "confirm: Is the desk clear?", "include": "include: startup.yaml",
+             "power_off": "power_off: totem"}
 
 
 def _step_pick(value: Any) -> str | None:
@@ -752,8 +785,10 @@ class Sequence(_Model):
     description: str = Field(description="What the sequence does and when to use it.")
     arm: str | None = Field(
         None, min_length=1,
-        description=f"Arm file, relative to the project root (default {DEFAULT_ARM}). An "
-                    "included sequence must name the same arm or none.")
+        description=f"Arm file, relative to the project root (default: the campaign's arm, "
+                    f"else {DEFAULT_ARM}), or the name of an arm (lwa3: the campaign's "
+                    "arms/lwa3.yaml, else the shipped one). An included sequence must name "
+                    "the same arm or none.")
     steps: list[Step] = Field(min_length=1, description="The steps, in order.")
 
 
@@ -784,6 +819,9 @@ class ResolvedStep:
     include_chain: tuple[Location, ...] = ()
     document: Document | None = field(default=None, repr=False)
     node: Any = field(default=None, repr=False)  # the parameters' YAML node
+    #: What the operator sees of each include in ``include_chain`` (its label, else
+    #: "include FILE"), outermost first.
+    include_labels: tuple[str, ...] = ()
 
     def where(self, *path: Any, key: bool = False) -> Location:
         """Location of a parameter, e.g. ``where("joints", "j4")``; without a path, the step's
@@ -833,6 +871,8 @@ def describe(kind: str, params: StepParams) -> str:
         return "write joint limits"
     if isinstance(params, IncludeParams):
         return f"include {params.file}"
+    if isinstance(params, PowerOffParams):
+        return f"power off in {params.pose}"
     return kind
 
 
@@ -849,10 +889,41 @@ class LoadedSequence:
     arm_path: Path
     steps: tuple[ResolvedStep, ...]
     files: tuple[Path, ...] = ()  # every file read, the top one first
+    #: Where poses are looked up, first match wins (the campaign's, then the shipped).
+    pose_path: tuple[Path, ...] = ()
+    #: The campaign or project the sequence belongs to (seqrun.project.Project).
+    project: Any = None
+    #: Every pose the steps name, read once at load time: the run uses these, never the
+    #: files again (a pose file edited during a run changes nothing).
+    poses: Mapping[str, FrozenPose] = field(default_factory=dict)
+    #: SHA-256 of every sequence file read (same order as ``files``).
+    digests: tuple[str, ...] = ()
 
     @property
     def location(self) -> Location:
         return Location(self.file, 1, 1)
+
+    def inputs(self) -> list[dict[str, str]]:
+        """The files this sequence was validated from: ``{kind, file, sha256}`` each, for the
+        run folder (the arm file is added by whoever loaded the arm)."""
+        items = [{"kind": "sequence", "file": display_path(p), "sha256": d}
+                 for p, d in zip(self.files, self.digests)]
+        items += [{"kind": "pose", "file": pose.document.file, "sha256": pose.document.sha256}
+                  for pose in self.poses.values()]
+        return items
+
+
+@dataclass(frozen=True, eq=False)
+class FrozenPose:
+    """A pose file as it was read and validated (see :attr:`LoadedSequence.poses`)."""
+
+    name: str
+    pose: Any  # seqrun.poses.PoseFile
+    document: Document = field(repr=False)
+
+    @property
+    def joints_deg(self) -> dict[str, float]:
+        return dict(self.pose.joints_deg)
 
 
 def find_project_root(path: str | os.PathLike[str]) -> Path:
@@ -865,16 +936,21 @@ def find_project_root(path: str | os.PathLike[str]) -> Path:
 
 
 class _Loader:
-    def __init__(self, top: Path, root: Path) -> None:
-        self.root = root
-        self.poses_dir = root / "poses"
-        sequences = root / "sequences"
-        self.tree = sequences if top.is_relative_to(sequences) else top.parent
+    def __init__(self, top: Path, project: Any) -> None:
+        self.project = project  # seqrun.project.Project: lookups of poses, arm, includes
+        self.root = project.root
+        self.poses_dir = project.poses_dir
+        self.pose_path = project.pose_path
+        self.tree = project.include_tree(top)
         self.errors: list[SourceError] = []
         self.steps: list[ResolvedStep] = []
         self.files: list[Path] = []
         self.arm_path: Path | None = None
         self.pose_problems: dict[str, str | None] = {}
+        self.poses: dict[str, FrozenPose] = {}
+        self.digests: list[str] = []
+        self.include_titles: dict[Location, str] = {}
+        self.top: Any = None  # the top file's data, when it could be read
 
     def load(self, path: Path, *, chain: tuple[Path, ...] = (),
              include_chain: tuple[Location, ...] = (), include_step: Any = None) -> Any:
@@ -889,6 +965,9 @@ class _Loader:
             self.errors.append(include_step.error(str(exc)))
             return None
         self.files.append(path)
+        self.digests.append(doc.sha256)
+        if not chain:
+            self.top = doc.data
         try:
             seq = doc.validate(Sequence)
         except SequenceInvalid as exc:
@@ -905,7 +984,7 @@ class _Loader:
     def _partial(self, doc: Document, path: Path, chain: tuple[Path, ...],
                  include_chain: tuple[Location, ...]) -> None:
         if not chain:
-            self.arm_path = (self.root / DEFAULT_ARM).resolve()
+            self.arm_path = self._arm(None)
         data = doc.data.get("steps") if isinstance(doc.data, dict) else None
         if not isinstance(data, list):
             return
@@ -932,28 +1011,45 @@ class _Loader:
                 params, params_node = raw.params(), doc.child(node, kind)
             here = doc.location(node)
             if isinstance(params, IncludeParams):
+                self.include_titles[here] = params.label or describe(kind, params)
                 self._include(doc, path, params, params_node, here, chain + (path,),
                               include_chain)
                 continue
             step = ResolvedStep(number=len(self.steps) + 1, kind=kind, params=params,
                                 location=here, label=params.label, include_chain=include_chain,
-                                document=doc, node=params_node)
+                                document=doc, node=params_node,
+                                include_labels=tuple(self.include_titles.get(loc, "include")
+                                                     for loc in include_chain))
             if isinstance(params, (MoveParams, CheckpointParams)) and params.pose is not None:
                 self._check_pose(step, params.pose)
             self.steps.append(step)
 
     def _check_arm(self, doc: Document, seq: Sequence, *, top: bool) -> None:
         if top:
-            self.arm_path = (self.root / (seq.arm or DEFAULT_ARM)).resolve()
-            if seq.arm is not None and not self.arm_path.is_file():
+            if seq.arm is None:  # the campaign's arm: not found is bad input, one line
+                self.arm_path = self.project.arm_path(None)
+                return
+            try:
+                self.arm_path = self.project.arm_path(seq.arm)
+            except UserInputError:
+                self.arm_path = self._arm(None)
+                looked = ", ".join(str(p) for p in self.project.arm_candidates(seq.arm))
                 self.errors.append(doc.error(("arm",), f"arm file '{seq.arm}' not found "
-                                                      f"(looked for {self.arm_path})"))
+                                                      f"(looked for {looked})"))
             return
-        if seq.arm is not None and (self.root / seq.arm).resolve() != self.arm_path:
+        if seq.arm is not None and self._arm(seq.arm) != self.arm_path:
             self.errors.append(doc.error(("arm",), f"this file names arm '{seq.arm}' but the "
                                                   "sequence including it runs on "
                                                   f"{self.arm_path}; remove 'arm' here or "
                                                   "make it the same"))
+
+    def _arm(self, name: str | None) -> Path:
+        """The arm file ``name`` means (the first candidate when none exists: the run
+        then says it is missing)."""
+        try:
+            return self.project.arm_path(name)
+        except UserInputError:
+            return self.project.arm_candidates(name)[0].resolve()
 
     def _include(self, doc: Document, path: Path, params: IncludeParams, node: Any,
                  here: Location, chain: tuple[Path, ...],
@@ -968,7 +1064,8 @@ class _Loader:
             error(f"include '{shown}': cannot resolve the path ({exc})")
             return
         if not target.is_relative_to(self.tree):
-            error(f"include '{params.file}' is outside the sequences folder "
+            what = "campaign folder" if self.project.is_campaign else "sequences folder"
+            error(f"include '{params.file}' is outside the {what} "
                   f"{display_path(self.tree)}; included files must stay inside it")
             return
         if target in chain:
@@ -990,12 +1087,13 @@ class _Loader:
                   include_step=doc.locate(("file",), start=node))
 
     def _check_pose(self, step: ResolvedStep, name: str) -> None:
-        from seqrun.poses import find_pose, load_pose
+        from seqrun.poses import PoseFile, find_pose
 
         if name not in self.pose_problems:
             problem = None
             try:
-                load_pose(find_pose(name, self.poses_dir))
+                document = load_document(find_pose(name, self.pose_path))
+                self.poses[name] = FrozenPose(name, document.validate(PoseFile), document)
             except UserInputError as exc:
                 problem = str(exc)
             except SequenceInvalid as exc:
@@ -1010,27 +1108,54 @@ def load_sequence(path: str | os.PathLike[str], *,
                   project_root: str | os.PathLike[str] | None = None) -> LoadedSequence:
     """Read a sequence file with its includes; every step keeps its own ``file:line:col``.
 
-    Poses come from ``<project root>/poses/`` (root: see :func:`find_project_root`); an
+    Poses come from ``<project root>/poses/``, then the shipped poses; the project is the
+    nearest campaign (``seqrun.toml``) above the file, or ``project_root`` (``--project``),
+    else the nearest folder with ``arms/`` or ``poses/`` (see :mod:`seqrun.project`); an
     unknown pose is a located error listing the available ones. Raises
     :class:`SequenceInvalid` with every error found, :class:`UserInputError` if the file
     cannot be read.
     """
+    loaded, errors = load_sequence_partial(path, project_root=project_root)
+    if errors:
+        raise SequenceInvalid(errors)
+    assert loaded is not None
+    return loaded
+
+
+def load_sequence_partial(path: str | os.PathLike[str], *,
+                          project_root: str | os.PathLike[str] | None = None
+                          ) -> tuple[LoadedSequence | None, list[SourceError]]:
+    """:func:`load_sequence` that keeps going: ``(loaded, errors)``, where ``loaded`` holds
+    the steps that are valid on their own (a step that fails its schema is left out) so
+    that the checks against the arm can still report on them; None if nothing of the top
+    file could be read. Raises :class:`UserInputError` if the file cannot be read."""
+    from seqrun.project import project_for
+
     path = Path(path)
     try:
         top = path.resolve()
-        root = (Path(project_root).resolve() if project_root is not None
-                else find_project_root(top))
+        project = project_for(top, Path(project_root) if project_root is not None else None)
     except (OSError, RuntimeError, ValueError) as exc:  # symlink loop, NUL byte, ...
         raise UserInputError(f"{path}: cannot resolve the path ({exc})") from None
-    loader = _Loader(top, root)
+    root = project.root
+    loader = _Loader(top, project)
     seq = loader.load(top)
-    if loader.errors:
-        raise SequenceInvalid(sort_errors(loader.errors))
-    assert seq is not None and loader.arm_path is not None
-    return LoadedSequence(path=path, file=display_path(path), name=seq.name,
-                          description=seq.description, project_root=root,
+    errors = sort_errors(loader.errors)
+    if seq is not None:
+        name, description = seq.name, seq.description
+    elif isinstance(loader.top, dict):
+        name = loader.top.get("name") if isinstance(loader.top.get("name"), str) else top.stem
+        description = loader.top.get("description")
+        description = description if isinstance(description, str) else ""
+    else:
+        return None, errors
+    assert loader.arm_path is not None
+    return LoadedSequence(path=path, file=display_path(path), name=name or top.stem,
+                          description=description, project_root=root,
                           poses_dir=loader.poses_dir, arm_path=loader.arm_path,
-                          steps=tuple(loader.steps), files=tuple(loader.files))
+                          steps=tuple(loader.steps), files=tuple(loader.files),
+                          pose_path=tuple(loader.pose_path), project=project,
+                          poses=dict(loader.poses), digests=tuple(loader.digests)), errors
 
 
 # --------------------------------------------------------------------------- reference docs
@@ -1085,6 +1210,13 @@ Every step takes an optional `label`, the text the operator sees.
 - Every commanded target lies inside the joint limits in force. A joint that starts outside
   them (Park's j4 at -120.32° against -120…120) may only move back inside (a note).
 - Velocities and limit overrides stay within the arm file's maxima.
+- Every move is planned within the limits in force: the arm file's, those a `set_limits`
+  wrote, and the MaxVel/MaxAcc the modules still hold from before (read back before the
+  first motion; they stay stored in a module until written again or powered off). The
+  dry-run table and the run report say which limit applied and where it came from.
+- A move's `timeout_s` may not be shorter than the move as planned.
+- Waits (`seconds`, `timeout_s`) and move timeouts stay within the arm file's
+  `control.max_wait_s`; a dry run stops after `control.max_dry_run_s` of simulated time.
 - Workspace guards of the arm file hold along each move's planned trajectory (the ruckig plan
   the run streams, sampled at 100 Hz); `seqrun validate` reports the smallest clearance of each move.
 - The arm file's link volumes (capsules) keep `geometry.margin_mm` from its obstacles and
@@ -1098,7 +1230,15 @@ Every step takes an optional `label`, the text the operator sees.
   and away from singular configurations (`cartesian.min_manipulability`); during the run
   the tool further than `max_deviation_mm` from the line is a fault.
 - A checkpoint must agree with the end-effector of the joints tracked so far; a relative
-  one (`moved_mm`) with how far the tool moved during the last move.
+  one (`moved_mm`) with how far the tool moved during the last move. A checkpoint or a
+  wait after a `halt` (and no `reset`) can never pass and is an error.
+- Every pose a step names is checked against the arm at the pose file's own lines: it lists
+  every joint (the locked one at its locked value), its `end_effector` agrees with forward
+  kinematics of its joints, and a pose used as a move target lies inside the joint limits.
+- Every problem is reported in one pass: a step that is wrong on its own is left out and
+  the others are still checked against the arm.
+- A run uses exactly what was validated: the sequence, its includes, the poses and the arm
+  file are read once; their SHA-256 is in the run report (`inputs`).
 - Validation starts from Park (`--start POSE` to choose another pose).
 
 ## Steps
@@ -1175,3 +1315,85 @@ def reference_markdown() -> str:
             parts.append(f"Give exactly one of: {' or '.join(choices)}.\n")
         parts.append("| key | type | |\n|---|---|---|\n" + rows(definition) + "\n")
     return "\n".join(parts)
+
+
+def file_reference_markdown(model: type, title: str, intro: str) -> str:
+    """A reference of a file format given by a pydantic model (pose files, arm files): one
+    row per key, nested mappings as dotted keys, from the model's JSON Schema."""
+    schema = model.model_json_schema()
+    defs = schema.get("$defs", {})
+
+    def resolve(prop: dict) -> dict:
+        if "$ref" in prop:
+            return defs[prop["$ref"].rsplit("/", 1)[-1]]
+        if "allOf" in prop and len(prop["allOf"]) == 1:
+            return {**resolve(prop["allOf"][0]), **{k: v for k, v in prop.items()
+                                                   if k != "allOf"}}
+        return prop
+
+    def kind(prop: dict) -> str:
+        if "anyOf" in prop:
+            return " or ".join(kind(p) for p in prop["anyOf"] if p.get("type") != "null")
+        if "enum" in prop:
+            return " or ".join(f"`{v}`" for v in prop["enum"])
+        if "const" in prop:
+            return f"`{prop['const']}`"
+        if prop.get("type") == "array":
+            items = prop.get("prefixItems") or []
+            if items:
+                return f"[{len(items)} × {kind(items[0])}]"
+            return f"list of {kind(resolve(prop.get('items', {})))}"
+        if prop.get("type") == "object" and isinstance(prop.get("additionalProperties"), dict):
+            return f"{{name: {kind(resolve(prop['additionalProperties']))}}}"
+        if prop.get("format") == "date-time":
+            return "date and time (ISO 8601)"
+        return {"number": "number", "string": "text", "boolean": "true/false",
+                "integer": "whole number", "object": "mapping"}.get(prop.get("type", ""),
+                                                                     "value")
+
+    rows: list[str] = []
+
+    def walk(definition: dict, prefix: str) -> None:
+        required = set(definition.get("required", []))
+        for key, raw in definition.get("properties", {}).items():
+            prop = resolve(raw)
+            name = f"{prefix}{key}"
+            default = ("required" if key in required else
+                       "" if raw.get("default") in (None, "") or isinstance(
+                           raw.get("default"), (dict, list)) and key not in ("rpy_deg",) else
+                       f"default `{raw['default']}`")
+            description = raw.get("description") or prop.get("description") or ""
+            if prop.get("properties"):
+                rows.append(f"| `{name}` | mapping{' — ' + default if default else ''} | "
+                            f"{description} |")
+                walk(prop, name + ".")
+                continue
+            rows.append(f"| `{name}` | {kind(prop)}{' — ' + default if default else ''} | "
+                        f"{description} |")
+
+    walk(schema, "")
+    return (f"# {title}\n\n{intro}\n\n| key | type | |\n|---|---|---|\n" + "\n".join(rows)
+            + "\n")
+
+
+def pose_reference_markdown() -> str:
+    """The pose file reference (``seqrun schema pose --markdown``)."""
+    from seqrun.poses import PoseFile
+
+    return file_reference_markdown(
+        PoseFile, "Pose files",
+        "`poses/<name>.yaml`: a named joint configuration in user degrees (Totem = zeros). "
+        "It lists every joint of the arm, the locked one at its locked value; "
+        "`end_effector` is what forward kinematics gives for those joints and is checked "
+        "against them. `seqrun pose save NAME` writes one from the arm.")
+
+
+def arm_reference_markdown() -> str:
+    """The arm file reference (``seqrun schema arm --markdown``)."""
+    from seqrun.arm import ArmDescription
+
+    return file_reference_markdown(
+        ArmDescription, "Arm files",
+        "`arms/<name>.yaml`: every number about the arm (joints, limits, offsets, "
+        "kinematics, CAN and control-loop settings, workspace guards). Angles in degrees, "
+        "user coordinates.")

@@ -39,6 +39,7 @@ import numpy as np
 
 from seqrun.arm import ArmDescription, Joint
 from seqrun.errors import PlanningError, SequenceInvalid, SourceError, UserInputError
+from seqrun.limits import READBACK, LimitsInForce
 from seqrun.schema import (
     CheckpointParams,
     HaltParams,
@@ -48,6 +49,7 @@ from seqrun.schema import (
     ResetParams,
     ResolvedStep,
     SetLimitsParams,
+    WaitParams,
 )
 
 __all__ = [
@@ -56,6 +58,7 @@ __all__ = [
     "Proximity",
     "ValidationResult",
     "commanded_joints",
+    "format_number",
     "park_deg",
     "pose_joints_deg",
     "resolve_checkpoint",
@@ -137,9 +140,16 @@ class ValidationResult:
 
 
 # --------------------------------------------------------------------------- helpers
-def _f(value: float) -> str:
-    """A number for messages: at most 3 decimals, no trailing zeros, no '-0'."""
-    return f"{round(float(value), 3) + 0.0:g}"
+def format_number(value: float) -> str:
+    """A number for messages: at most 3 decimals, no trailing zeros, no '-0'; a number
+    below 0.001 keeps 3 significant digits (a tolerance of 1e-06 is not "0")."""
+    value = float(value)
+    if value != 0 and abs(value) < 0.001:
+        return f"{value:.3g}"
+    return f"{round(value, 3) + 0.0:g}"
+
+
+_f = format_number
 
 
 def _range(lo: float, hi: float) -> str:
@@ -168,22 +178,37 @@ def park_deg(poses_dir: str | Path) -> dict[str, float]:
     return pose_joints_deg(START_POSE, poses_dir)
 
 
+#: Where poses come from: the poses a sequence froze when it was loaded
+#: (:attr:`LoadedSequence.poses`, name -> FrozenPose or joint mapping), or a folder.
+PoseSource = Mapping | str | Path
+
+
+def _pose_deg(name: str, poses: PoseSource) -> dict[str, float]:
+    if isinstance(poses, Mapping):
+        if name not in poses:
+            raise UserInputError(f"pose '{name}' was not read with the sequence")
+        entry = poses[name]
+        return dict(getattr(entry, "joints_deg", entry))
+    return pose_joints_deg(name, poses)
+
+
 def commanded_joints(params: MoveParams, arm: ArmDescription,
-                     poses_dir: str | Path) -> list[str]:
+                     poses: PoseSource) -> list[str]:
     """The joints a move commands, in arm order: every unlocked joint of the pose, or the
     unlocked joints named in ``joints``. The others are not part of the motion."""
-    names = (pose_joints_deg(params.pose, poses_dir) if params.pose is not None
+    names = (_pose_deg(params.pose, poses) if params.pose is not None
              else params.joints or {})
     return [j.name for j in arm.joints if j.name in names and j.locked is None]
 
 
 def resolve_move_target(params: MoveParams, current_deg: Mapping[str, float],
-                        arm: ArmDescription, poses_dir: str | Path) -> dict[str, float]:
+                        arm: ArmDescription, poses: PoseSource) -> dict[str, float]:
     """Target of a move for every joint of the arm (user degrees, arm order).
 
     Joints the move does not name keep their ``current_deg`` value; ``relative`` values are
-    added to it; locked joints are always at their locked value. Raises
-    :class:`UserInputError` for an unknown pose or joint.
+    added to it; locked joints are always at their locked value. ``poses``: the sequence's
+    frozen poses (a run uses only these) or a pose folder. Raises :class:`UserInputError`
+    for an unknown pose or joint.
     """
     target: dict[str, float] = {}
     for joint in arm.joints:
@@ -194,7 +219,7 @@ def resolve_move_target(params: MoveParams, current_deg: Mapping[str, float],
         else:
             raise UserInputError(f"no current position for joint {joint.name}")
     if params.pose is not None:
-        given = pose_joints_deg(params.pose, poses_dir)
+        given = _pose_deg(params.pose, poses)
         relative = False
     else:
         given, relative = dict(params.joints or {}), params.relative
@@ -208,14 +233,14 @@ def resolve_move_target(params: MoveParams, current_deg: Mapping[str, float],
     return target
 
 
-def resolve_checkpoint(params: CheckpointParams, arm: ArmDescription, poses_dir: str | Path
+def resolve_checkpoint(params: CheckpointParams, arm: ArmDescription, poses: PoseSource
                        ) -> tuple[np.ndarray, np.ndarray, float, float]:
     """Expected end-effector of a checkpoint: ``(position_mm (3,), rotation (3, 3),
     position_tolerance_mm, angle_tolerance_deg)``."""
     from seqrun.kinematics import matrix_from_rpy, pose_from_user_deg
 
     if params.pose is not None:
-        joints = pose_joints_deg(params.pose, poses_dir)
+        joints = _pose_deg(params.pose, poses)
         joints = {j.name: (j.locked if j.locked is not None else joints.get(j.name, 0.0))
                   for j in arm.joints}
         pose = pose_from_user_deg(arm, joints)
@@ -237,8 +262,6 @@ class _JointState:
     homed: bool = False
     halted: bool = False
     limits: tuple[float, float] | None = None  # written MinPos/MaxPos
-    max_velocity: float = 0.0
-    max_velocity_from: str = "the arm file"
     at_start: bool = True  # still at its start position (for the wording of notes)
 
     @property
@@ -248,10 +271,16 @@ class _JointState:
 
 class _Validator:
     def __init__(self, loaded: LoadedSequence, arm: ArmDescription,
-                 start_deg: Mapping[str, float], started: bool) -> None:
+                 start_deg: Mapping[str, float], started: bool,
+                 module_limits: Mapping[str, tuple[float, float]] | None = None,
+                 incomplete: bool = False) -> None:
         self.loaded = loaded
+        # Steps were left out (they failed on their own): what depends on the steps before
+        # (start-up order, where the joints are) is not checked, the rest is.
+        self.incomplete = incomplete
         self.arm = arm
-        self.poses_dir = loaded.poses_dir
+        self.poses_dir = loaded.pose_path or loaded.poses_dir
+        self.poses = loaded.poses
         self.errors: list[SourceError] = []
         self.notes: list[SourceError] = []
         self.joints: dict[str, _JointState] = {}
@@ -261,6 +290,13 @@ class _Validator:
         self.targets_deg: dict[int, np.ndarray] = {}
         self.proximities: dict[int, Proximity] = {}
         self.motion_start_deg: np.ndarray | None = None  # where the last move started
+        # Limits the file itself sets (arm file, its set_limits): exceeding them is an
+        # error. ``limits`` adds what the modules hold: moves are planned within it.
+        self.file_limits = LimitsInForce(arm)
+        self.limits = LimitsInForce(arm)
+        self.pose_checked: dict[str, bool] = {}  # pose name -> usable
+        self.pose_limit_findings: dict[str, dict[str, str]] = {}  # pose -> joint -> message
+        self.reported_pose_limits: set[tuple[str, str]] = set()
         for joint in arm.joints:
             position = joint.locked if joint.locked is not None else start_deg.get(joint.name)
             if position is None or not math.isfinite(position):
@@ -269,8 +305,7 @@ class _Validator:
                     f"start state: {joint.name} {what} (a finite angle is needed for every "
                     "unlocked joint)"))
                 position = 0.0
-            state = _JointState(joint, float(position),
-                                max_velocity=joint.max_velocity_deg_s)
+            state = _JointState(joint, float(position))
             if started:
                 state.reset = state.homed = True
                 state.limits = tuple(joint.limits_deg)  # type: ignore[assignment]
@@ -280,6 +315,57 @@ class _Validator:
             self.errors.append(loaded.location.error(
                 f"start state: unknown joint(s) {', '.join(map(str, unknown))} (the arm has "
                 f"{', '.join(arm.joint_names)})"))
+        if module_limits:
+            self.limits.read_back({n: v for n, v in module_limits.items() if n in self.joints})
+            for name, bound in ((n, self.limits.velocity(n)) for n in module_limits
+                                if n in self.joints):
+                if bound.source == READBACK:
+                    self.notes.append(loaded.location.error(
+                        f"{name}: its module holds MaxVel {_f(bound.value)} deg/s, below the "
+                        f"arm file's {_f(arm.joint(name).max_velocity_deg_s)} deg/s; moves "
+                        "are planned within it until a set_limits writes it"))
+            for name, bound in ((n, self.limits.acceleration(n)) for n in module_limits
+                                if n in self.joints):
+                if bound.source.startswith(READBACK):
+                    self.notes.append(loaded.location.error(
+                        f"{name}: its module holds MaxAcc {_f(module_limits[name][1])} "
+                        f"deg/s^2; moves are planned within {_f(bound.value)} deg/s^2 "
+                        f"({bound.source})"))
+
+    # -- pose files, checked against the arm where they are written
+    def _pose(self, step: ResolvedStep, name: str, *, target: bool) -> dict[str, float] | None:
+        """The frozen joints of pose ``name``; None if it cannot be used (reported)."""
+        frozen = self.poses.get(name)
+        if frozen is None:
+            return None  # unknown or broken pose file: reported when the sequence was loaded
+        if name not in self.pose_checked:
+            from seqrun.poses import pose_findings
+
+            usable = True
+            limits: dict[str, str] = {}
+            for finding in pose_findings(frozen.pose, self.arm):
+                error = frozen.document.error(finding.where, finding.message, key=finding.key)
+                if finding.note:
+                    limits[finding.joint or ""] = error
+                else:
+                    self.errors.append(error)
+                    usable = False
+            self.pose_checked[name] = usable
+            self.pose_limit_findings[name] = limits
+        if target:
+            # A move target outside the arm's limits is the pose file's error, reported at
+            # its line (once per pose; the steps that use it are named).
+            for joint, error in self.pose_limit_findings[name].items():
+                if (name, joint) in self.reported_pose_limits:
+                    continue
+                self.reported_pose_limits.add((name, joint))
+                lo, hi = self.arm.joint(joint).limits_deg
+                value = frozen.pose.joints_deg[joint]
+                self.errors.append(SourceError(
+                    error.file, error.line, error.column,
+                    f"{joint} {_f(value)}° is outside its limits {_range(lo, hi)}: pose "
+                    f"'{name}' cannot be a move target (used at {step.where('pose')})"))
+        return frozen.joints_deg if self.pose_checked[name] else None
 
     # -- common checks
     def _names(self, step: ResolvedStep, names: list[str] | dict, path: tuple,
@@ -316,7 +402,7 @@ class _Validator:
     def home(self, step: ResolvedStep, params: HomeParams) -> None:
         targets = self._modules(step, params.joints)
         not_reset = [s.joint.name for s in targets if not s.reset and not s.locked]
-        if not_reset:
+        if not_reset and not self.incomplete:
             self.errors.append(step.error(
                 f"home before reset{self._which(not_reset)}: reset the modules first (Reset "
                 "clears the error state they power up with)"))
@@ -330,7 +416,7 @@ class _Validator:
     def set_limits(self, step: ResolvedStep, params: SetLimitsParams) -> None:
         unlocked = [s for s in self.joints.values() if not s.locked]
         not_reset = [s.joint.name for s in unlocked if not s.reset]
-        if not_reset:
+        if not_reset and not self.incomplete:
             self.errors.append(step.error(
                 f"set_limits before reset{self._which(not_reset)}: the modules accept "
                 "parameters only after Reset"))
@@ -359,31 +445,24 @@ class _Validator:
             override = params.limits_deg.get(name)
             state.limits = (tuple(override) if override is not None  # type: ignore[assignment]
                             else tuple(state.joint.limits_deg))
-            if name in params.max_velocity_deg_s:
-                state.max_velocity = min(params.max_velocity_deg_s[name],
-                                         state.joint.max_velocity_deg_s)
-                state.max_velocity_from = f"set_limits at {step.location}"
+        written = {key: {n: v for n, v in getattr(params, key).items()
+                         if n in self.joints and not self.joints[n].locked}
+                   for key in ("max_velocity_deg_s", "max_acceleration_deg_s2")}
+        for limits in (self.file_limits, self.limits):
+            limits.written(f"set_limits at {step.location}", written["max_velocity_deg_s"],
+                           written["max_acceleration_deg_s2"])
 
     def move(self, step: ResolvedStep, params: MoveParams) -> None:
         if getattr(params, "position_mm", None) is not None:
             self._move_to_tool_pose(step, params)
             return
         # which joints, and where to
+        pose_limits: dict[str, str] = {}
         if params.pose is not None:
-            try:
-                pose = pose_joints_deg(params.pose, self.poses_dir)
-            except (UserInputError, SequenceInvalid):
-                return  # reported when the sequence was loaded
-            for name, value in pose.items():
-                state = self.joints.get(name)
-                if state is None:
-                    self.errors.append(step.error(
-                        f"pose '{params.pose}' has joint '{name}', which the arm does not have",
-                        "pose"))
-                elif state.locked and abs(value - state.joint.locked) > 1e-6:
-                    self.errors.append(step.error(
-                        f"pose '{params.pose}' sets {name} to {_f(value)}°, but {name} is "
-                        f"locked at {_f(state.joint.locked)}°", "pose"))
+            pose = self._pose(step, params.pose, target=True)
+            if pose is None:
+                return  # its file has errors, reported there
+            pose_limits = self.pose_limit_findings.get(params.pose, {})
             names = [j.name for j in self.arm.joints if j.name in pose and j.locked is None]
             given = {n: float(pose[n]) for n in names}
             where = {n: ("pose",) for n in names}
@@ -395,7 +474,12 @@ class _Validator:
         self._velocities(step, params)
         if not names:
             return
-        self._motion_allowed(step, names)
+        if not self.incomplete:
+            self._motion_allowed(step, names)
+        if getattr(self, "powered_off", None) is not None:
+            self.errors.append(step.error(
+                f"move after power_off (at {self.powered_off.location}): the zero reference "
+                "is recorded for the pose the arm stands in; nothing may move after it"))
 
         # targets inside the limits in force; a joint outside may only come back inside
         target = {n: s.position for n, s in self.joints.items()}
@@ -408,7 +492,11 @@ class _Validator:
             source = "its limits" if state.limits is None or tuple(
                 state.limits) == tuple(state.joint.limits_deg) else "the limits written by " \
                 "set_limits"
-            if not lo <= value <= hi:
+            if name in pose_limits:
+                refused.add(name)  # outside the arm's limits: the pose file's error
+            elif params.relative and self.incomplete:
+                refused.add(name)  # where it starts is not known
+            elif not lo <= value <= hi:
                 refused.add(name)
                 how = (f" ({_f(state.position)}° {'+' if given[name] >= 0 else '-'} "
                        f"{_f(abs(given[name]))}°)" if params.relative else "")
@@ -421,7 +509,9 @@ class _Validator:
                 self.notes.append(step.error(
                     f"{name} {verb} {_f(state.position)}°, {_f(outside)}° outside its limit "
                     f"{_range(lo, hi)}; this move brings it back inside", *where[name]))
-        self._guards_along_plan(step, params, target)
+        if not self.incomplete and not refused:  # a target outside its limits: that error only
+            self._guards_along_plan(step, params, target)
+        self._timeout(step, params, target, [n for n in names if n not in refused])
         for name in names:
             if name in refused:
                 continue
@@ -433,13 +523,81 @@ class _Validator:
     def _velocities(self, step: ResolvedStep, params: MoveParams) -> None:
         for name in self._names(step, params.velocity_deg_s, ("velocity_deg_s",),
                                 as_keys=True, what="a velocity for"):
-            state = self.joints[name]
             value = params.velocity_deg_s[name]
-            if value > state.max_velocity:
+            bound = self.file_limits.velocity(name)
+            held = self.limits.velocity(name)
+            if value > bound.value:
                 self.errors.append(step.error(
                     f"velocity_deg_s of {name} {_f(value)} deg/s is above its maximum "
-                    f"{_f(state.max_velocity)} deg/s (from {state.max_velocity_from})",
+                    f"{_f(bound.value)} deg/s (from the {bound.source})"
+                    if bound.source == "arm file" else
+                    f"velocity_deg_s of {name} {_f(value)} deg/s is above its maximum "
+                    f"{_f(bound.value)} deg/s (from {bound.source})",
                     "velocity_deg_s", name))
+            elif value > held.value:
+                self.notes.append(step.error(
+                    f"velocity_deg_s of {name} {_f(value)} deg/s is above the MaxVel its "
+                    f"module holds, {_f(held.value)} deg/s ({held.source}): planned within "
+                    "that", "velocity_deg_s", name))
+
+    def _timeout(self, step: ResolvedStep, params: MoveParams, target: dict[str, float],
+                 names: list[str]) -> None:
+        """A move's ``timeout_s``: within the arm file's bound, and not shorter than the
+        move planned with the limits in force."""
+        if params.timeout_s is None:
+            return
+        if params.timeout_s > self.arm.control.max_wait_s:
+            self.errors.append(step.error(
+                f"timeout_s {_f(params.timeout_s)} s is longer than the arm file allows "
+                f"(control.max_wait_s = {_f(self.arm.control.max_wait_s)} s)", "timeout_s"))
+            return
+        duration = None if self.incomplete else self._planned_duration(params, target, names)
+        if duration is not None and duration > params.timeout_s:
+            self.errors.append(step.error(
+                f"timeout_s {_f(params.timeout_s)} s is shorter than the move, planned to "
+                f"take {_f(duration)} s with the limits in force; give it more time or let "
+                "it default (the planned duration plus control.settle_timeout_s)",
+                "timeout_s"))
+
+    def _planned_duration(self, params: MoveParams, target: dict[str, float],
+                          names: list[str]) -> float | None:
+        from seqrun.planner import Limits, plan_move
+
+        order = self.arm.joint_names
+        start = [self.joints[n].position for n in order]
+        active = [order.index(n) for n in names
+                  if abs(target[n] - self.joints[n].position) > 1e-9]
+        velocity, acceleration = self.limits.maxima()
+        try:
+            limits = Limits.from_arm(self.arm, velocity_scale=params.velocity_scale,
+                                     acceleration_scale=params.acceleration_scale,
+                                     velocity_deg_s=params.velocity_deg_s,
+                                     max_velocity_deg_s=velocity,
+                                     max_acceleration_deg_s2=acceleration)
+            plan = plan_move(np.radians(start), np.radians([target[n] for n in order]),
+                             limits, active)
+        except (PlanningError, KeyError, ValueError):
+            return None  # what makes it unplannable is reported elsewhere
+        return plan.duration
+
+    def _after_halt(self, step: ResolvedStep, what: str) -> None:
+        """A wait or checkpoint reads the modules, which report HALTED until Reset: after
+        a halt it can only fail."""
+        halted = [s.joint.name for s in self.joints.values() if s.halted and not s.locked]
+        if halted and not self.incomplete:
+            self.errors.append(step.error(
+                f"{what} after halt{self._which(halted)}: the modules report HALTED until "
+                "Reset and this step reads them, so it can never pass; reset first"))
+
+    def wait(self, step: ResolvedStep, params: WaitParams) -> None:
+        self._after_halt(step, f"{step.kind}")
+        bound = self.arm.control.max_wait_s
+        for key in ("seconds", "timeout_s"):
+            value = getattr(params, key)
+            if value is not None and value > bound:
+                self.errors.append(step.error(
+                    f"{key} {_f(value)} s is longer than the arm file allows "
+                    f"(control.max_wait_s = {_f(bound)} s)", key))
 
     def _motion_allowed(self, step: ResolvedStep, names: list[str]) -> None:
         states = [self.joints[n] for n in names]
@@ -485,12 +643,15 @@ class _Validator:
                   if j.locked is None and abs(end[i] - start[i]) > 1e-9]
         if not moving:
             return
+        velocity, acceleration = self.limits.maxima()  # the limits in force, as the run
         try:
             limits = Limits.from_arm(self.arm, velocity_scale=params.velocity_scale,
                                      acceleration_scale=params.acceleration_scale,
                                      speed=self.speed, velocity_deg_s={
                                          n: v for n, v in params.velocity_deg_s.items()
-                                         if n in self.joints})
+                                         if n in self.joints},
+                                     max_velocity_deg_s=velocity,
+                                     max_acceleration_deg_s2=acceleration)
             plan = plan_move(np.radians(start), np.radians(end), limits, moving)
         except PlanningError as exc:
             self.errors.append(step.error(f"this move cannot be planned: {exc}"))
@@ -574,7 +735,7 @@ class _Validator:
         if off > params.position_tolerance_mm:
             self.errors.append(step.error(
                 f"this checkpoint cannot pass: the last move takes the tool by "
-                f"[{', '.join(_f(v) for v in moved)}] mm ({params.frame} frame), {_f(off)} mm "
+                f"[{', '.join(_f(round(float(v), 3) + 0.0) for v in moved)}] mm ({params.frame} frame), {_f(off)} mm "
                 f"from the expected [{', '.join(_f(v) for v in params.moved_mm)}] "
                 f"(tolerance {_f(params.position_tolerance_mm)} mm)", "moved_mm"))
 
@@ -663,7 +824,7 @@ class _Validator:
         if target is None:
             return
         keep = 1 - self.arm.control.tracking_reserve
-        max_velocity = np.array([self.joints[n].max_velocity for n in self.arm.joint_names]) * keep
+        max_velocity = np.array([self.limits.velocity(n).value for n in self.arm.joint_names]) * keep
         try:
             linear = plan_linear(
                 self.arm, params.tool, self._tracked(), target,
@@ -689,14 +850,19 @@ class _Validator:
             return
         from seqrun.kinematics import orientation_error, pose_from_user_deg
 
+        self._after_halt(step, "checkpoint")
+        if params.pose is not None and self._pose(step, params.pose, target=False) is None:
+            return  # unknown pose or its file has errors: reported already
         try:
             position, rotation, pos_tol, ang_tol = resolve_checkpoint(params, self.arm,
-                                                                      self.poses_dir)
+                                                                      self.poses)
         except (UserInputError, SequenceInvalid):
             return  # reported when the sequence was loaded
         except ValueError as exc:
             self.errors.append(step.error(f"checkpoint: {exc}", "pose"))
             return
+        if self.incomplete:
+            return  # where the joints are after the moves before is not known
         pose = pose_from_user_deg(self.arm, {n: s.position for n, s in self.joints.items()})
         distance = float(np.linalg.norm(pose.position_mm - position))
         angle = math.degrees(float(orientation_error(rotation, pose.rotation)))
@@ -708,10 +874,30 @@ class _Validator:
                 f"[{at}] mm, rpy [{rpy}]°, {_f(distance)} mm and {_f(angle)}° from the "
                 f"expected pose (tolerances {_f(pos_tol)} mm, {_f(ang_tol)}°)"))
 
+    def power_off(self, step: ResolvedStep, params) -> None:
+        """The pose must be a power-off pose of the arm, and where the moves before end."""
+        if params.pose not in self.arm.power_off_poses:
+            known = ", ".join(self.arm.power_off_poses) or "none"
+            self.errors.append(step.error(
+                f"'{params.pose}' is not a power-off pose of arm '{self.arm.name}' (its "
+                f"power-off poses: {known}; power_off_poses in the arm file)", "pose"))
+            return
+        target = self.arm.power_off_joints_deg(params.pose)
+        tolerance = params.tolerance_deg or self.arm.control.position_tolerance_deg
+        off = [f"{n} {_f(s.position)}° (pose {_f(target[n])}°)"
+               for n, s in self.joints.items()
+               if not s.locked and abs(s.position - target[n]) > tolerance]
+        if off:
+            self.errors.append(step.error(
+                f"this power_off cannot pass: after the moves before it the arm is not in "
+                f"{params.pose}: {', '.join(off)}"))
+        self.powered_off = step
+
     def run(self) -> ValidationResult:
         handlers = {"reset": self.reset, "home": self.home, "halt": self.halt,
                     "set_limits": self.set_limits, "move": self.move,
-                    "checkpoint": self.checkpoint, "move_linear": self.move_linear}
+                    "wait": self.wait, "checkpoint": self.checkpoint,
+                    "move_linear": self.move_linear, "power_off": self.power_off}
         for step in self.loaded.steps:
             handler = handlers.get(step.kind)
             if handler is not None:
@@ -738,17 +924,23 @@ def _position(item: SourceError) -> tuple[int, int]:
 
 def validate_sequence(loaded: LoadedSequence, arm: ArmDescription,
                       start_deg: Mapping[str, float] | None = None, *,
-                      started: bool = False, speed: float = 1.0) -> ValidationResult:
+                      started: bool = False, speed: float = 1.0,
+                      module_limits: Mapping[str, tuple[float, float]] | None = None,
+                      incomplete: bool = False) -> ValidationResult:
     """Check a loaded sequence against ``arm`` starting at ``start_deg`` (user degrees;
     default the Park pose of the project's poses folder).
 
     ``started=True``: the modules are already reset, homed and have the arm file's limits
     (the executor passes what it measured). ``speed``: the run's speed override, which
-    shapes the plans the guards are checked along. Never raises for a bad sequence:
-    everything is in the result.
+    shapes the plans the guards are checked along. ``module_limits``: MaxVel (deg/s) and
+    MaxAcc (deg/s^2) per joint as read back from the modules (moves are planned within
+    them). ``incomplete``: ``loaded`` lacks steps that failed on their own (see
+    :func:`seqrun.schema.load_sequence_partial`); the checks that depend on the steps before
+    (start-up order, positions: guards, checkpoints, relative targets) are skipped. Never
+    raises for a bad sequence: everything is in the result.
     """
     if start_deg is None:
-        start_deg = park_deg(loaded.poses_dir)
-    validator = _Validator(loaded, arm, start_deg, started)
+        start_deg = park_deg(loaded.pose_path or loaded.poses_dir)
+    validator = _Validator(loaded, arm, start_deg, started, module_limits, incomplete)
     validator.speed = speed
     return validator.run()

@@ -36,12 +36,16 @@ and every local tag (``!foo``) are located errors.
 
 from __future__ import annotations
 
+import contextlib
 import difflib
+import gc
+import hashlib
 import math
 import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
+from collections.abc import Iterator
 from typing import Any, ClassVar, TypeVar
 
 import yaml
@@ -138,15 +142,12 @@ class _Alias:
         self.name = name
 
 
-class _Loader(yaml.SafeLoader):
-    """SafeLoader with the YAML 1.2 core resolver and limits; used for composing only."""
+class _Limits:
+    """The composer's limits (depth, alias uses), shared by both loaders below: the node
+    tree is always built by PyYAML's Python composer with this hook."""
 
-    yaml_implicit_resolvers: ClassVar[dict] = {}
-
-    def __init__(self, stream: str) -> None:
-        super().__init__(stream)
-        self._depth = 0
-        self._alias_uses = 0
+    _depth: int
+    _alias_uses: int
 
     def compose_node(self, parent, index):
         if self.check_event(AliasEvent):
@@ -170,10 +171,96 @@ class _Loader(yaml.SafeLoader):
                 self._depth -= 1
 
 
+class _Loader(_Limits, yaml.SafeLoader):
+    """SafeLoader with the YAML 1.2 core resolver and limits; used for composing only."""
+
+    yaml_implicit_resolvers: ClassVar[dict] = {}
+
+    def __init__(self, stream: str) -> None:
+        super().__init__(stream)
+        self._depth = 0
+        self._alias_uses = 0
+
+
 _Loader.add_implicit_resolver(BOOL, _BOOL_RE, list("tTfF"))
 _Loader.add_implicit_resolver(INT, _INT_RE, list("-+0123456789"))
 _Loader.add_implicit_resolver(FLOAT, _FLOAT_RE, list("-+0123456789."))
 _Loader.add_implicit_resolver(NULL, _NULL_RE, ["~", "n", "N", ""])
+
+try:  # libyaml's scanner and parser, when PyYAML was built with it (its wheels are)
+    from yaml._yaml import CParser as _CParser
+except ImportError:  # pragma: no cover - depends on how PyYAML was installed
+    _CParser = None
+
+#: Compose with libyaml's parser when it is there (6x faster on large files); the
+#: pure-Python one is used without it, and for every file libyaml refuses or that holds
+#: characters YAML forbids, so that messages and positions are the same either way.
+USE_LIBYAML = _CParser is not None
+#: Where libyaml and PyYAML disagree on what is valid YAML (found by comparing the two on
+#: random text, tests/test_yaml_parsers.py): characters PyYAML's reader refuses
+#: (yaml.reader.Reader.NON_PRINTABLE), tabs (libyaml reads "a<TAB>" as the text "a"),
+#: byte-order marks after the start, a block scalar header followed by '#' ("|#"),
+#: directives ("%YAML 1.1#"), and '?' after a '[' or '{' (PyYAML ends a plain scalar at
+#: '?' inside [ ] and { }, libyaml does not), and tags (they scan tag handles apart; seqrun
+#: refuses all but the core ones anyway).
+#: Such files are read by the Python parser only, which names the problem as before.
+_PYTHON_ONLY = re.compile("[^\x09\x0A\x0D\x20-\x7E\x85\xA0-\uD7FF\uE000-\uFFFD"
+                          "\U00010000-\U0010ffff]|[\t\ufeff]|[|>][-+0-9]*#|^%"
+                          "|(?:^|[\\s\\[{,:])![^\\s]",
+                          re.MULTILINE)
+
+if _CParser is not None:
+    class _CLoader(_Limits, yaml.composer.Composer, _CParser, yaml.resolver.BaseResolver):
+        """libyaml's events, PyYAML's Python composer (with the limits), our resolver."""
+
+        yaml_implicit_resolvers: ClassVar[dict] = _Loader.yaml_implicit_resolvers
+
+        def __init__(self, stream: str) -> None:
+            _CParser.__init__(self, stream)
+            yaml.composer.Composer.__init__(self)
+            yaml.resolver.BaseResolver.__init__(self)
+            self._depth = 0
+            self._alias_uses = 0
+            self.empty_scalars = False
+
+        def compose_scalar_node(self, anchor):
+            node = super().compose_scalar_node(anchor)
+            if not node.value and not node.style:
+                # libyaml puts an empty value elsewhere than PyYAML does ("a: {b: }"):
+                # such a file is composed again by the Python parser, for its positions.
+                self.empty_scalars = True
+            return node
+
+
+def _python_only(text: str) -> bool:
+    """Whether ``text`` has one of the constructs of :data:`_PYTHON_ONLY` (linear time)."""
+    if _PYTHON_ONLY.search(text):
+        return True
+    question = text.rfind("?")
+    if question < 0:
+        return False
+    brackets = [i for i in (text.find("["), text.find("{")) if i >= 0]
+    return bool(brackets) and min(brackets) < question
+
+
+def compose(text: str, *, libyaml: bool | None = None) -> Node | None:
+    """The node tree of ``text`` (None for a document without content). Raises
+    :class:`_Problem` for the limits and ``yaml.YAMLError`` for syntax, the same way
+    whichever parser ran (``libyaml``: default :data:`USE_LIBYAML`)."""
+    use_c = USE_LIBYAML if libyaml is None else (libyaml and _CParser is not None)
+    if use_c and not _python_only(text):
+        loader = _CLoader(text)
+        try:
+            node = loader.get_single_node()
+            if not loader.empty_scalars:
+                return node
+        except _Problem:
+            raise
+        except Exception:  # noqa: BLE001 - libyaml refused it: the Python parser says why
+            pass           # in its own words (and refuses or accepts it as it always has)
+        finally:
+            loader.dispose()
+    return yaml.compose(text, Loader=_Loader)
 
 
 def _short_tag(tag: str) -> str:
@@ -272,7 +359,7 @@ class _Converter:
             except _Problem as exc:
                 self.problems.append(exc)
                 continue
-            if key == "<<" and key_node.style is None:
+            if key == "<<" and not key_node.style:
                 self.problems.append(_Problem(key_node.start_mark, "merge keys ('<<') are not "
                                                                    "supported: write the keys "
                                                                    "out"))
@@ -303,6 +390,8 @@ class Document:
     root: Node
     data: Any
     _index: dict[int, dict[Any, tuple[Node, Any]]] = field(repr=False, default_factory=dict)
+    #: SHA-256 (hex) of the bytes read: what a run records of the files it validated.
+    sha256: str = ""
 
     # -- locating
     def location(self, node: Any) -> Location:
@@ -407,6 +496,11 @@ def sort_errors(errors: list[SourceError]) -> list[SourceError]:
 
 def read_text(path: Path, file: str) -> str:
     """The file's text: UTF-8, at most :data:`MAX_FILE_BYTES`, a leading BOM dropped."""
+    return read_source(path, file)[0]
+
+
+def read_source(path: Path, file: str) -> tuple[str, str]:
+    """``(text, sha256 of the bytes)`` of a file, checked as :func:`read_text` says."""
     path = Path(path)
     try:
         if path.is_dir():
@@ -436,7 +530,7 @@ def read_text(path: Path, file: str) -> str:
     text = text.removeprefix("\ufeff")
     if not text.strip():
         raise SequenceInvalid([SourceError(file, 1, 1, "the file is empty")])
-    return text
+    return text, hashlib.sha256(data).hexdigest()
 
 
 #: PyYAML's problem texts that a test engineer would not understand, reworded.
@@ -508,6 +602,20 @@ def _syntax_error(file: str, exc: yaml.YAMLError, text: str) -> SourceError:
     return SourceError(file, 1, 1, f"invalid YAML: {exc}")
 
 
+@contextlib.contextmanager
+def _no_gc_pauses() -> Iterator[None]:
+    """No cyclic garbage collection while a tree is built: every node is new and alive, so
+    the collector would only walk them again and again (half the time of a large file).
+    The size and expansion limits bound what is allocated meanwhile."""
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if enabled:
+            gc.enable()
+
+
 def load_document(path: str | os.PathLike[str], *, file: str | None = None) -> Document:
     """Read, compose and convert one YAML file.
 
@@ -516,24 +624,26 @@ def load_document(path: str | os.PathLike[str], *, file: str | None = None) -> D
     """
     path = Path(path)
     file = file if file is not None else display_path(path)
-    text = read_text(path, file)
-    try:
-        root = yaml.compose(text, Loader=_Loader)  # nodes only: nothing is constructed
-    except _Problem as exc:
-        raise SequenceInvalid([_problem_error(file, exc)]) from None
-    except yaml.YAMLError as exc:
-        raise SequenceInvalid([_syntax_error(file, exc, text)]) from None
-    if root is None:
-        raise SequenceInvalid([SourceError(file, 1, 1, "the file has no content "
-                                                       "(only comments)")])
-    converter = _Converter()
-    try:
-        data = converter.convert(root)
-    except _Problem as exc:
-        raise SequenceInvalid([_problem_error(file, exc)]) from None
+    text, digest = read_source(path, file)
+    with _no_gc_pauses():
+        try:
+            root = compose(text)  # nodes only: nothing is constructed
+        except _Problem as exc:
+            raise SequenceInvalid([_problem_error(file, exc)]) from None
+        except yaml.YAMLError as exc:
+            raise SequenceInvalid([_syntax_error(file, exc, text)]) from None
+        if root is None:
+            raise SequenceInvalid([SourceError(file, 1, 1, "the file has no content "
+                                                           "(only comments)")])
+        converter = _Converter()
+        try:
+            data = converter.convert(root)
+        except _Problem as exc:
+            raise SequenceInvalid([_problem_error(file, exc)]) from None
     if converter.problems:
         raise SequenceInvalid(sort_errors([_problem_error(file, p) for p in converter.problems]))
-    return Document(path=path, file=file, root=root, data=data, _index=converter.index)
+    return Document(path=path, file=file, root=root, data=data, _index=converter.index,
+                    sha256=digest)
 
 
 def _problem_error(file: str, exc: _Problem) -> SourceError:

@@ -176,10 +176,13 @@ def check_file(path: Path, *, sandbox: Path, logs: Path, markers: tuple[Path, ..
         if lines and lines[-1].endswith("nothing was sent"):
             lines.pop()
         assert lines == errors, r.describe()
-        # ... and nothing reached a bus: none opened, no frame, no run folder.
+        # ... and nothing reached a bus: none opened, no frame, no trace; the run folder
+        # holds only the short record of the refusal.
         assert r.spy.buses == 0, r.describe()
         assert r.spy.frames == [], r.describe()
-        assert not folder.exists(), r.describe()
+        assert not (folder / "trace.log").exists(), r.describe()
+        refused = json.loads((folder / "report.json").read_text(encoding="utf-8"))
+        assert refused["status"] == "refused" and refused["exit_code"] == 1, r.describe()
     elif expected == "valid":
         assert v.exit_code in (0, 1), v.describe()
         assert ": valid (" in v.stdout, v.describe()            # the static verdict
@@ -550,7 +553,7 @@ LONG = "a" * 5000
     ([*RUN, "--arm", LONG + ".yaml"], "File name too long"),
     ([*RUN, "--log-dir", "/tmp/" + LONG], "cannot create the run folder"),
     ([*RUN, "--log-dir", TOTEM], "cannot create the run folder"),
-    (["validate", ROOT / "sequences"], "is a directory"),
+    (["validate", ROOT / "docs"], "no sequence files"),
     (["run", ROOT / "sequences", "--virtual-time", "--yes", "--plain"], "not found"),
 ], ids=lambda a: " ".join(str(x)[:30] for x in a) if isinstance(a, list) else None)
 def test_bad_command_line_is_one_error_line(args, words):

@@ -87,7 +87,6 @@ def test_default_files_are_found_from_the_project_root(monkeypatch):
     (["--deg", *PARK, "5"], "--deg needs 7 angles (j1 j2 j3 j4 j5 j6 j7), got 8"),
     (["--deg", "0", "abc", "0", "0", "0", "0", "0"], "--deg: j2 'abc' is not a number"),
     (["--deg", "0", "0", "0", "0", "0", "0", "nan"], "--deg: j7 'nan' is not a finite angle"),
-    (["--deg", "0", "0", "5", "0", "0", "0", "0"], "j3 is locked at 0 deg, got 5"),
     (["--pose", "nowhere"],
      f"unknown pose 'nowhere'; available poses: opsafe, park, totem (in {ROOT / 'poses'})"),
     ([], "give the joint angles with --deg Q1 ... Qn or a pose with --pose NAME"),
@@ -156,3 +155,15 @@ def test_pose_show_unknown():
     result = run("pose", "show", "nowhere", *FILES)
     assert_one_line_error(
         result, f"unknown pose 'nowhere'; available poses: opsafe, park, totem (in {ROOT / 'poses'})")
+
+
+def test_a_locked_joint_off_its_value_is_a_note_not_an_error():
+    """fk is a maths command: it computes the configuration asked for and says that the arm
+    would hold the locked joint elsewhere."""
+    result = run("fk", "--deg", "0", "0", "5", "0", "0", "0", "0", "--json", *FILES)
+    assert result.exit_code == 0, result.output
+    assert result.stderr.strip() == ("note: j3 is locked at 0 deg on the arm; computed with "
+                                     "5 deg as given")
+    at_zero = json.loads(run("fk", "--deg", *["0"] * 7, "--json", *FILES).stdout)
+    turned = json.loads(result.stdout)
+    assert turned["rpy_deg"] != at_zero["rpy_deg"]  # j3's 5 deg is in the result

@@ -116,7 +116,7 @@ def test_invalid_arm_file_is_located(tmp_path):
 
 @pytest.mark.parametrize("args, message", [
     (["nope.yaml"], "error: nope.yaml: no such file"),
-    ([str(ROOT / "sequences")], "is a directory"),
+    ([str(ROOT / "docs")], "no sequence files"),  # a folder: its sequences (campaigns)
     ([str(ROOT / "sequences" / "opsafe.yaml"), "--start", "nowhere"],
      "error: start pose: unknown pose 'nowhere'"),
     ([str(ROOT / "sequences" / "opsafe.yaml"), "--arm", "nope.yaml"],

@@ -122,7 +122,8 @@ def test_invalid_file_sends_nothing(tmp_path, monkeypatch):
                                       "--log-dir", str(tmp_path / "run")])
     assert result.exit_code == EXIT_INVALID
     assert "out_of_limit.yaml:7:33:" in result.output
-    assert sent == [] and not (tmp_path / "run").exists()
+    assert sent == [] and not (tmp_path / "run" / "trace.log").exists()
+    assert json.loads((tmp_path / "run" / "report.json").read_text())["status"] == "refused"
 
 
 def test_sequence_invalid_from_the_measured_state_moves_nothing(project, tmp_path):

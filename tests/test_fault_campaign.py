@@ -17,7 +17,7 @@ Matrix (the default run, no marker):
 * times (virtual seconds from the run start, taken from a clean run of the same code):
 
   ==============  =======  =========================================================
-  ``startup``     ~0.013   after the start-up steps 1-4, before the first motion
+  ``startup``     ~0.015   after the start-up steps 1-4, before the first motion
   ``move1``       3.0      move Park -> Totem (step 5)
   ``after_move1`` ~8.499   1.2 ms after move 1 ended: step 6 reads the arm and plans
   ``move2``       10.0     move Totem -> Op-safe (step 6)
@@ -266,7 +266,7 @@ def test_clean_run_passes_and_follows_the_timeline(clean):
     assert run.halts == []
     assert [e["step"] for e in run.of_type("step_finished")] == list(range(1, 10))
     # The timeline the campaign's phases are defined on (virtual seconds).
-    assert clean.finish[3] <= clean.start[5] < 0.013
+    assert clean.finish[3] <= clean.start[5] < 0.016  # preflight reads MinPos, MaxPos, MaxVel, MaxAcc
     assert clean.start[5] < 3.0 < clean.finish[5] == pytest.approx(8.50, abs=0.05)
     assert clean.start[6] < 10.0 < clean.finish[6] == pytest.approx(13.62, abs=0.05)
     assert clean.start[8] < 14.0 < clean.finish[8] == clean.start[9]

@@ -89,7 +89,8 @@ def make_project(tmp_path: Path, *, watchdog: bool = False, acceleration: float 
 
 
 def seqrun(*args, cwd: Path) -> subprocess.Popen:
-    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    # The zero reference of the "real" (socketcand) arm lives beside the test's files.
+    env = dict(os.environ, PYTHONUNBUFFERED="1", SEQRUN_STATE_DIR=str(cwd / "zero-state"))
     for key in ("CAN_INTERFACE", "CAN_CHANNEL", "CAN_BITRATE", "CAN_CONFIG"):
         env.pop(key, None)
     return subprocess.Popen([sys.executable, "-m", "seqrun", *map(str, args)], cwd=cwd,
@@ -351,6 +352,10 @@ def _kill_mid_move_once(tmp_path: Path, watchdog: bool):
     runner = None
     try:
         port = int(Lines(server).wait_for(r"socketcand 127\.0\.0\.1:([0-9]+)", 20)[1])
+        # The simulated arm powers on at Park: record that, as the operator would.
+        recorded = seqrun("zero", "set", "park", "--yes", "--arm",
+                          sequence.parents[1] / "arms" / "lwa3.yaml", cwd=tmp_path)
+        assert recorded.wait(60) == 0, stop(recorded)
         runner = seqrun("run", sequence, "-i", "socketcand", "--bus-kwargs", f"port={port}",
                         "--yes", "--plain", "--log-dir", folder, cwd=tmp_path)
         cruising = poll_event(folder, runner, lambda e: e["type"] == "setpoint"

@@ -74,8 +74,8 @@ EXPECTED = {
     ],
     "unknown_step.yaml": [("unknown_step.yaml", 5, 5,
                            ["unknown step type 'mvoe'", "did you mean 'move'",
-                            ("expected one of: reset, home, halt, set_limits, move, move_linear, wait, "
-                            "checkpoint, confirm, include")])],
+                            ("expected one of: reset, home, halt, set_limits, move, move_linear, "
+                             "wait, checkpoint, confirm, power_off, include")])],
     "unknown_key.yaml": [("unknown_key.yaml", 9, 7, ["unknown key 'velocty' in move",
                                                      "velocity_deg_s"])],
     "nan.yaml": [("nan.yaml", 7, 25, ["expected a finite number, got .nan"])],
@@ -200,10 +200,14 @@ def test_other_joints_may_move_while_one_is_still_outside(project):
 
 
 def test_moving_a_pose_with_park_j4_is_refused(project):
+    # The pose file's value is what is out of range: the error is at its line, naming the
+    # step that uses the pose as a target.
     result = validate(project, STARTUP + "- move: totem\n- move: park\n")
-    assert [e.message for e in result.errors] == [
-        "j4 target -120.32° is outside its limits -120…120"]
-    assert where(result.errors) == [(8, 9)]
+    [error] = result.errors
+    assert Path(error.file).name == "park.yaml" and (error.line, error.column) == (13, 7)
+    assert error.message.startswith("j4 -120.32° is outside its limits -120…120: pose 'park' "
+                                    "cannot be a move target (used at ")
+    assert error.message.endswith("s.yaml:8:9)")
 
 
 def test_start_state_problems(project):

@@ -16,6 +16,9 @@ COMMAND_MODULES = (
     "seqrun.cli.run",
     "seqrun.cli.arm_commands",
     "seqrun.cli.pose",
+    "seqrun.cli.zero",
+    "seqrun.cli.init",
+    "seqrun.cli.runs",
 )
 
 

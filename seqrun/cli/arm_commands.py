@@ -121,8 +121,13 @@ def status_command(
                                      response_timeout_ms=response_timeout_ms)
     console = Console()
     try:
+        # Positions in user angles need the zeros the modules really have.
+        from seqrun.cli.zero import zero_for_reading
+
+        arm, zero_text = zero_for_reading(connection, arm)
         if not as_json:
             console.print(connection.description, style="bold", highlight=False)
+            console.print(zero_text, highlight=False, markup=False)
         if not watch:
             status = read_status(client, arm)
             if as_json:

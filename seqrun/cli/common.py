@@ -20,6 +20,18 @@ PosesDirOption = Annotated[Path, typer.Option(
 
 
 
+def pose_search_path(poses_dir: Path):
+    """``--poses-dir`` as given, or for the default the poses of the project here (a
+    campaign's poses/, then the shipped ones)."""
+    from seqrun.poses import DEFAULT_POSES_DIR
+
+    if poses_dir != DEFAULT_POSES_DIR:
+        return poses_dir
+    from seqrun.project import project_for
+
+    return project_for(Path.cwd()).pose_path
+
+
 def fail(message: str, code: int = EXIT_USAGE) -> NoReturn:
     """One line on stderr and the exit code; the user never sees a traceback."""
     typer.echo(f"error: {message}", err=True)
@@ -42,6 +54,13 @@ def user_errors() -> Iterator[None]:
 
 
 def load_arm_file(path: Path) -> ArmDescription:
+    from seqrun.arm import DEFAULT_ARM
+
+    if path == DEFAULT_ARM and not path.is_file():
+        # Not in a checkout: the campaign's arm here (seqrun.toml), else the shipped one.
+        from seqrun.project import project_for
+
+        path = project_for(Path.cwd()).arm_path(None)
     if not path.is_file():
         raise UserInputError(f"arm file {path} not found (give one with --arm FILE)")
     return load_arm(path)

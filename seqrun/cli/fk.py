@@ -22,7 +22,7 @@ from seqrun.cli.app import app
 from seqrun.cli.common import ArmOption, PosesDirOption, load_arm_file, user_errors
 from seqrun.cli.pose import format_numbers, load_named_pose
 from seqrun.errors import UserInputError
-from seqrun.kinematics import Pose, pose_from_user_deg
+from seqrun.kinematics import LOCKED_TOLERANCE_DEG, Pose, pose_from_user_deg
 from seqrun.poses import DEFAULT_POSES_DIR
 
 _JSON_DECIMALS = 6  # 1 nm, 1e-6 deg: far below what the arm can do, and readable
@@ -141,8 +141,17 @@ def forward_kinematics(
             joints: list[float] | dict[str, float] = parse_angles(deg, arm.joint_names)
         else:
             joints = load_named_pose(pose_name, poses_dir).joints_deg
+        given = joints if isinstance(joints, dict) else dict(zip(arm.joint_names, joints))
+        off = [j for j in arm.joints if j.locked is not None and j.name in given
+               and abs(given[j.name] - j.locked) > LOCKED_TOLERANCE_DEG]
+        for joint in off:
+            # A maths command: compute what was asked, and say the arm would not do it.
+            typer.echo(f"note: {joint.name} is locked at {joint.locked:g} deg on the arm; "
+                       f"computed with {given[joint.name]:g} deg as given", err=True)
+        maths_arm = arm if not off else arm.model_copy(update={"joints": [
+            j.model_copy(update={"locked": None}) if j in off else j for j in arm.joints]})
         try:
-            pose = pose_from_user_deg(arm, joints)
+            pose = pose_from_user_deg(maths_arm, joints)
         except ValueError as exc:  # locked joint moved, unknown joint in a pose file, ...
             raise UserInputError(str(exc)) from None
     values = joints if isinstance(joints, dict) else dict(zip(arm.joint_names, joints))

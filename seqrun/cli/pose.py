@@ -24,7 +24,9 @@ from seqrun.poses import (
 )
 
 def load_named_pose(name: str, poses_dir: Path) -> PoseFile:
-    return load_pose(find_pose(name, poses_dir))
+    from seqrun.cli.common import pose_search_path
+
+    return load_pose(find_pose(name, pose_search_path(poses_dir)))
 
 
 def format_numbers(values, decimals: int = 3) -> str:
@@ -35,7 +37,9 @@ def format_numbers(values, decimals: int = 3) -> str:
 def list_poses(poses_dir: PosesDirOption = DEFAULT_POSES_DIR) -> None:
     """List the pose files: name, source and description."""
     with user_errors():
-        poses = available_poses(poses_dir)
+        from seqrun.cli.common import pose_search_path
+
+        poses = available_poses(pose_search_path(poses_dir))
         if not poses:
             raise UserInputError(f"no pose files in {poses_dir}")
         width = max(len(name) for name in poses)
@@ -99,9 +103,10 @@ def save_pose_command(
     from datetime import datetime, timezone
 
     from seqrun.errors import BusError
-    from seqrun.poses import pose_document, save_pose
+    from seqrun.poses import check_pose_name, pose_document, save_pose
 
     with user_errors():
+        check_pose_name(name)  # before anything is opened
         arm = load_arm_file(arm_file)
         path = output or (poses_dir / f"{name}.yaml")
         if path.exists() and not force:
@@ -115,6 +120,10 @@ def save_pose_command(
     if connection.is_simulator:
         typer.secho(connection.description, fg="yellow", bold=True, err=True)
     try:
+        from seqrun.cli.zero import zero_for_reading
+
+        arm, zero_text = zero_for_reading(connection, arm)
+        typer.echo(zero_text)
         readings = client.read_arm(arm.module_ids)
     except BusError as exc:
         fail(f"cannot read the arm: {exc}", 3)

@@ -20,11 +20,14 @@ from rich.console import Console
 from seqrun.cli.app import app
 from seqrun.cli.common import (BitrateOption, BusKwargsOption, ChannelOption, InterfaceOption,
                                SimOption, fail, load_arm_file, user_errors)
+from seqrun.cli import campaign_records
 from seqrun.cli.display import LiveDisplay, PlainDisplay
 from seqrun.cli.interrupts import RunSignals
+from seqrun.cli.zero import zero_at_run_start
 from seqrun.connection import open_connection, parse_bus_kwargs, parse_faults
 from seqrun.clock import VirtualClock
-from seqrun.executor import EXIT_INVALID, EXIT_OPERATOR_ABORT
+from seqrun.errors import BusError, SequenceInvalid
+from seqrun.executor import EXIT_FAULT, EXIT_INVALID, EXIT_OPERATOR_ABORT
 from seqrun.runlog import prepare_run_folder
 from seqrun.runner import run_sequence
 from seqrun.schema import load_sequence
@@ -55,7 +58,7 @@ def static_validation(loaded, arm, start: str | None, started: bool, from_step: 
     With ``--from N`` the steps before N are only tracked, to know where step N starts."""
     from seqrun.validation import START_POSE, pose_joints_deg, validate_sequence
 
-    start_deg = pose_joints_deg(start or START_POSE, loaded.poses_dir)
+    start_deg = pose_joints_deg(start or START_POSE, loaded.pose_path or loaded.poses_dir)
     if from_step == 1:
         return validate_sequence(loaded, arm, start_deg, started=started)
     before = validate_sequence(replace(loaded, steps=tuple(loaded.steps[:from_step - 1])),
@@ -120,6 +123,13 @@ def run_command(
     virtual_time: Annotated[bool, typer.Option(
         "--virtual-time", help="Simulator only: run in virtual time, as fast as possible "
                                "(full run folder; used by CI and the tests).")] = False,
+    project_dir: Annotated[Optional[Path], typer.Option(
+        "--project", metavar="DIR", help="Campaign folder (default: the nearest seqrun.toml "
+                                         "above the sequence).")] = None,
+    power_on_at: Annotated[Optional[str], typer.Option(
+        "--power-on-at", metavar="POSE", help="Simulator only: the power-off pose the "
+        "simulated arm was powered on at (default park); it is the run's zero reference.")]
+    = None,
 ) -> None:
     """Run a sequence: validate, read the arm, re-validate from where it stands, move."""
     console = Console(stderr=False)
@@ -132,14 +142,23 @@ def run_command(
             fail(f"sequence file {file} not found")
         faults = parse_faults(sim_fault or [])
         extra = parse_bus_kwargs(bus_kwargs or [])
-        loaded = load_sequence(file)                     # invalid file -> exit 1, no bus
+        try:
+            loaded = load_sequence(file, project_root=project_dir)  # invalid -> exit 1, no bus
+        except SequenceInvalid as exc:
+            campaign_records.refuse_unloadable(file, project_dir, exc.errors, log_dir)
+            raise
         arm = load_arm_file(arm_file or loaded.arm_path)
+        if power_on_at is not None:
+            arm.power_off_pose(power_on_at)  # one of the arm's power-off poses
+        if not (interface or channel or bitrate or extra or sim):  # the campaign's bus
+            interface, channel, bitrate, extra = campaign_records.campaign_bus(loaded, extra)
         if not 1 <= from_step <= len(loaded.steps):
             fail(f"--from {from_step}: the sequence has steps 1-{len(loaded.steps)}")
         # Static validation before the bus is even opened; the executor validates again
         # from the measured state before the first motion.
         static = static_validation(loaded, arm, start, started, from_step)
         if static.errors:
+            campaign_records.refuse(loaded, arm_file or loaded.arm_path, static.errors, log_dir)
             for error in static.errors:
                 typer.echo(str(error), err=True)
             typer.echo(f"{loaded.file}: invalid ({len(static.errors)} error"
@@ -154,10 +173,14 @@ def run_command(
         connection = open_connection(interface=interface, channel=channel, bitrate=bitrate,
                                      bus_kwargs=extra, force_sim=sim, faults=faults,
                                      default_bitrate=arm.can.bitrate,
-                                     clock=VirtualClock() if virtual_time else None)
+                                     clock=VirtualClock() if virtual_time else None,
+                                     power_on_pose=power_on_at.lower() if power_on_at else None)
         if virtual_time and not connection.is_simulator:
             connection.close()
             fail("--virtual-time needs the simulator")
+        if power_on_at is not None and not connection.is_simulator:
+            connection.close()
+            fail("--power-on-at applies to the built-in simulator (seqrun sim serve has its own)")
     style = "bold black on yellow" if connection.is_simulator else "bold white on red"
     console.print(f" {connection.description} ", style=style, highlight=False)
     if not connection.is_simulator and not _ask(
@@ -165,6 +188,22 @@ def run_command(
         console.print("Not started: the operator declined. Nothing was sent.")
         connection.close()
         raise typer.Exit(EXIT_OPERATOR_ABORT)
+    # The modules' zeros are where they were powered off: use (and on real hardware after
+    # a power-on, confirm) the recorded pose's offsets before anything moves.
+    try:
+        with user_errors():
+            try:
+                zero = zero_at_run_start(connection, arm, loaded.project,
+                                         lambda question: _ask(console, question, yes),
+                                         lambda text: console.print(text, style="bold",
+                                                                    highlight=False,
+                                                                    markup=False))
+            except BusError as exc:  # before user_errors: a timeout is no usage error
+                fail(f"cannot read the modules' state: {exc}", EXIT_FAULT)
+            arm = arm.with_zero_reference(zero.pose)
+    except BaseException:
+        connection.close()
+        raise
 
     if rt_priority is not None:
         try:
@@ -175,10 +214,11 @@ def run_command(
             console.print(f"warning: real-time scheduling not available ({exc}); running at "
                           "normal priority", style="yellow", highlight=False)
     try:  # an unusable --log-dir: exit 2, nothing sent; a used one gets a new folder inside
-        folder = prepare_run_folder(log_dir, loaded.name)
+        folder = prepare_run_folder(log_dir, loaded.name, campaign_records.runs_dir(loaded))
     except OSError as exc:
         connection.close()
-        fail(f"cannot create the run folder {log_dir or 'in runs/'}: {exc.strerror or exc}")
+        fail(f"cannot create the run folder {log_dir or campaign_records.runs_dir(loaded)}: "
+             f"{exc.strerror or exc}")
     if log_dir is not None and folder != log_dir:
         console.print(f"{log_dir} holds an earlier run: this run goes to {folder}",
                       highlight=False, markup=False, soft_wrap=True)
@@ -187,6 +227,9 @@ def run_command(
     # loop acts on them, a question is answered "no".
     requests = StopRequests()
     signals = RunSignals(requests)
+
+    campaign_records.record_run(folder, loaded, arm_file or loaded.arm_path,
+                                connection.description, zero)
 
     def confirm(prompt: str) -> bool:
         return _ask(console, prompt, yes, signals.read_answer)
@@ -203,6 +246,10 @@ def run_command(
     displays: list = []
 
     def attach(executor) -> None:
+        executor.emit("zero_reference", **zero.as_dict())  # for the log and any console
+        # The built-in simulator keeps no record: its zero is its power-on pose.
+        executor.record_zero = (None if connection.is_simulator
+                                else campaign_records.zero_recorder(arm, loaded))
         display = (LiveDisplay(console, executor, f"seqrun: {loaded.name}",
                                connection.description, len(loaded.steps))
                    if live else PlainDisplay(console, len(loaded.steps)))
@@ -222,7 +269,8 @@ def run_command(
                                confirm=confirm, before_step=before_step, on_executor=attach,
                                requests=requests, warn=warn,
                                confirm_clear_latched=(None if connection.is_simulator
-                                                      else confirm_clear_latched))
+                                                      else confirm_clear_latched),
+                               meta={"zero": zero.as_dict()})
     finally:
         if live and displays:
             displays[0].__exit__(None, None, None)
@@ -231,8 +279,10 @@ def run_command(
     result = outcome.result
     try:  # a terminal that is gone (SIGHUP) must not change the exit code
         colour = "green" if result.exit_code == 0 else "red"
+        # With a list of errors the message is a summary: each error is printed once, below.
+        message = result.extra.get("summary") or result.message
         console.print(f"[{colour}]{result.status.upper()}[/{colour}] (exit {result.exit_code}): "
-                      f"{result.message}", highlight=False)
+                      f"{message}", highlight=False)
         if result.latched_at_start:
             console.print("note: " + outcome.executor.latched_message()
                           + (" - cleared by the sequence's Reset" if result.exit_code == 0

@@ -18,6 +18,20 @@ from seqrun.cli.app import sim_app
 from seqrun.cli.common import fail
 
 
+def _power_off_pose(name: str) -> str:
+    """``name`` as a power-off pose of the shipped arm (one line and exit 2 otherwise)."""
+    from seqrun.arm import load_arm
+    from seqrun.errors import UserInputError
+    from seqrun.shipped import DEFAULT_ARM_NAME, shipped_arm
+
+    arm = load_arm(shipped_arm(DEFAULT_ARM_NAME))
+    try:
+        arm.power_off_pose(name)
+    except UserInputError as exc:
+        fail(f"--power-on-at: {exc}")
+    return name if name in arm.power_off_poses else name.lower()
+
+
 @sim_app.command("serve")
 def serve(
     port: Annotated[int, typer.Option(help="TCP port to listen on.")] = 29536,
@@ -44,8 +58,12 @@ def serve(
         "--module-option", metavar="NAME=VALUE",
         help="Any other simulator switch (ModuleOptions field), e.g. "
              "watchdog_timeout=0.1. Repeatable.")] = None,
+    power_on_at: Annotated[str, typer.Option(
+        "--power-on-at", metavar="POSE", help="The power-off pose the simulated arm stands in "
+        "at power-on (its modules read zero there): park or totem.")] = "park",
 ) -> None:
-    """Serve a simulated LWA 3 (7 modules at Park, real time) over socketcand."""
+    """Serve a simulated LWA 3 (7 modules, powered on at Park or --power-on-at, real time)
+    over socketcand."""
     from seqrun.clock import RealClock
     from seqrun.sim.arm import SimArm
     from seqrun.sim.faults import parse_faults
@@ -57,6 +75,7 @@ def serve(
         faults = parse_faults(fault or [])
     except ValueError as exc:
         fail(str(exc))
+    power_on_at = _power_off_pose(power_on_at)
     if not 0 <= port <= 65535:
         fail(f"--port {port}: must be 0..65535")
     if bitrate <= 0:
@@ -83,7 +102,7 @@ def serve(
     clock = RealClock()
     # No spinning: TCP adds more latency than a late wake-up, and clients may be many.
     try:
-        arm = SimArm(clock, faults=faults, options=options)
+        arm = SimArm(clock, faults=faults, options=options, power_on_pose=power_on_at)
     except ValueError as exc:  # a fault for a module the arm does not have
         fail(str(exc))
     network = SimNetwork(clock, arm, bitrate, spin_window=0.0)
@@ -93,8 +112,8 @@ def serve(
         fail(str(exc))
     except OSError as exc:
         fail(f"cannot listen on {host}:{port}: {exc.strerror or exc}")
-    typer.echo(f"simulated LWA 3 (modules 1-7, {bitrate} bit/s) on socketcand "
-               f"{server.host}:{server.port}, channel {channel}")
+    typer.echo(f"simulated LWA 3 (modules 1-7, {bitrate} bit/s, powered on at "
+               f"{power_on_at}) on socketcand {server.host}:{server.port}, channel {channel}")
     for item in faults:
         typer.echo(f"  fault {item.spec}")
     for name, value in switches.items():

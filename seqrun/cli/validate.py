@@ -25,9 +25,10 @@ import typer
 
 from seqrun.arm import ArmDescription
 from seqrun.cli.app import app
-from seqrun.cli.common import EXIT_INVALID, EXIT_OK, fail
+from seqrun.cli.common import EXIT_INVALID, EXIT_OK, EXIT_USAGE, fail
 from seqrun.errors import SequenceInvalid, SourceError, UserInputError
-from seqrun.schema import LoadedSequence, load_sequence, sequence_json_schema
+from seqrun.yamlsource import sort_errors
+from seqrun.schema import LoadedSequence, load_sequence_partial, sequence_json_schema
 from seqrun.validation import START_POSE, ValidationResult, pose_joints_deg, validate_sequence
 
 
@@ -53,7 +54,7 @@ class StaticCheck:
 
 def static_check(file: Path, *, start: str | None = None,
                  arm_file: Path | None = None, started: bool = False,
-                 speed: float = 1.0) -> StaticCheck:
+                 speed: float = 1.0, project_dir: Path | None = None) -> StaticCheck:
     """Load ``file`` (with includes), its arm and the start pose, and validate statically.
 
     Invalid files (the sequence, an included one, the arm file, a pose file) end up in
@@ -62,31 +63,36 @@ def static_check(file: Path, *, start: str | None = None,
     from seqrun.arm import load_arm
 
     check = StaticCheck()
-    try:
-        check.loaded = load_sequence(file)
-    except SequenceInvalid as exc:
-        check.errors = list(exc.errors)
+    # Every problem in one pass: the steps that are valid on their own are still checked
+    # against the arm when others are not (the loader leaves the broken ones out).
+    check.loaded, load_errors = load_sequence_partial(file, project_root=project_dir)
+    check.errors = list(load_errors)
+    if check.loaded is None:
         return check
     arm_path = arm_file if arm_file is not None else check.loaded.arm_path
+    if check.errors and arm_file is None and not Path(arm_path).is_file():
+        return check  # the file's own 'arm' is wrong: already among the errors
     if not Path(arm_path).is_file():
         raise UserInputError(f"arm file {arm_path} not found (give one with --arm FILE)")
     try:
         check.arm = load_arm(arm_path)
     except SequenceInvalid as exc:
-        check.errors = list(exc.errors)
+        check.errors = sort_errors(check.errors + list(exc.errors))
         return check
     pose = start or START_POSE
     try:
-        check.start_deg = pose_joints_deg(pose, check.loaded.poses_dir)
+        check.start_deg = pose_joints_deg(pose, check.loaded.pose_path or check.loaded.poses_dir)
     except UserInputError as exc:
         raise UserInputError(f"start pose: {exc}"
                              + ("" if start else " (choose one with --start POSE)")) from None
     except SequenceInvalid as exc:
-        check.errors = list(exc.errors)
+        check.errors = sort_errors(check.errors + list(exc.errors))
         return check
     result: ValidationResult = validate_sequence(check.loaded, check.arm, check.start_deg,
-                                                 started=started, speed=speed)
-    check.errors, check.notes = result.errors, result.notes
+                                                 started=started, speed=speed,
+                                                 incomplete=bool(check.errors))
+    check.errors = sort_errors(check.errors + result.errors)
+    check.notes = result.notes
     check.clearances = [result.clearances[n] for n in sorted(result.clearances)]
     check.proximities = [result.proximities[n] for n in sorted(result.proximities)]
     return check
@@ -135,13 +141,24 @@ def print_dry_run(run, loaded, arm) -> None:
     typer.echo(f"dry run from {run.start_pose} (simulator, virtual time, {run.cycle_hz:g} Hz "
                f"loop): {verdict} - {run.simulated_s:.2f} s simulated in {run.wall_s:.2f} s "
                f"({run.speedup:.0f}x real time)")
-    limits = {j.name: j.max_velocity_deg_s for j in arm.joints}
+    arm_limits = {j.name: j.max_velocity_deg_s for j in arm.joints}
+    includes: tuple[str, ...] = ()
     for s in r.steps:
+        resolved = loaded.steps[s.number - 1] if 0 < s.number <= len(loaded.steps) else None
+        chain = resolved.include_labels if resolved is not None else ()
+        for depth, title in enumerate(chain):
+            if includes[:depth + 1] != chain[:depth + 1]:
+                typer.echo(f"     {'  ' * depth}{_cut(title, 60)}")
+        includes = chain
         planned = "" if s.planned_duration_s is None else f"planned {s.planned_duration_s:6.2f} s, "
         took = "not run" if s.duration_s is None else f"simulated {s.duration_s:6.2f} s"
-        typer.echo(f"  {s.number:2d} {s.status:7s} {s.label[:44]:44s} {planned}{took}")
+        label = ("  " * len(chain) + s.label)
+        typer.echo(f"  {s.number:2d} {s.status:7s} {_cut(label, 44):44s} {planned}{took}")
+        in_force = s.detail.get("limits_in_force") or {}
         peak = s.detail.get("peak_measured_velocity_deg_s")
         if peak:
+            limits = {n: in_force.get(n, {}).get("max_velocity_deg_s", arm_limits[n])
+                      for n in arm_limits}
             moving = [f"{n} {v:.1f}/{limits[n]:g}"
                       for n, v in zip(arm.joint_names, peak) if v > 0.05]
             typer.echo(f"       peak joint velocity (deg/s, of limit): {', '.join(moving)}")
@@ -158,6 +175,10 @@ def print_dry_run(run, loaded, arm) -> None:
         if "max_deviation_mm" in s.detail:
             typer.echo(f"       straight line: {s.detail['length_mm']} mm, largest deviation "
                        f"{s.detail['max_deviation_mm']} mm")
+        for name, bound in in_force.items():
+            typer.echo(f"       limits in force for {name}: {bound['max_velocity_deg_s']:g} deg/s "
+                       f"({bound['velocity_from']}), {bound['max_acceleration_deg_s2']:g} "
+                       f"deg/s^2 ({bound['acceleration_from']})")
         if "position_error_mm" in s.detail:
             d = s.detail
             typer.echo(f"       checkpoint: expected {d['expected_position_mm']} mm, reached "
@@ -177,9 +198,30 @@ def print_dry_run(run, loaded, arm) -> None:
         typer.echo(f"  not verified: {item}")
 
 
+def _is_dir(path: Path) -> bool:
+    try:
+        return path.is_dir()
+    except OSError:  # a name the system refuses: reported when the file is read
+        return False
+def _unusable(message: str, as_json: bool) -> None:
+    """Input that cannot be used at all: exit 2, with --json as a JSON object too."""
+    if as_json:
+        typer.echo(json.dumps({"valid": False, "errors": [{"message": message}], "notes": [],
+                               "dry_run": None}, indent=2, ensure_ascii=False))
+        raise typer.Exit(EXIT_USAGE)
+    fail(message)
+
+
+def _cut(text: str, width: int) -> str:
+    """``text`` in at most ``width`` characters; a cut one ends in "…"."""
+    return text if len(text) <= width else text[:width - 1] + "…"
+
+
 @app.command("validate")
 def validate_command(
-    file: Annotated[Path, typer.Argument(metavar="FILE", help="Sequence file (YAML).")],
+    files: Annotated[list[Path], typer.Argument(
+        metavar="FILE|DIR...", help="Sequence file(s), pose files, or campaign folder(s): "
+                                    "several give one summary table.")],
     as_json: Annotated[bool, typer.Option("--json", help="Print the result as JSON.")] = False,
     start: Annotated[str | None, typer.Option(
         "--start", metavar="POSE",
@@ -198,6 +240,12 @@ def validate_command(
     cycle_hz: Annotated[float | None, typer.Option(
         "--cycle-hz", help="Control-loop rate of the dry run (default: the arm file's "
                            "control.dry_run_cycle_hz).")] = None,
+    junit_file: Annotated[Path | None, typer.Option(
+        "--junit", metavar="FILE", help="Also write a JUnit report (one test per file; "
+                                        "gives the summary table).")] = None,
+    project_dir: Annotated[Path | None, typer.Option(
+        "--project", metavar="DIR", help="Campaign folder (default: the nearest seqrun.toml "
+                                         "above each file).")] = None,
 ) -> None:
     """Check a sequence file and its includes against the arm, then dry-run it on the
     simulator at virtual time. Nothing is sent to a real bus.
@@ -208,14 +256,32 @@ def validate_command(
         fail(f"--speed must lie in (0, 1], got {speed:g}")
     if cycle_hz is not None and not 5 <= cycle_hz <= 500:
         fail(f"--cycle-hz must lie in [5, 500], got {cycle_hz:g}")
+    if len(files) != 1 or _is_dir(files[0]) or junit_file is not None:
+        from seqrun.cli.campaign_validate import report, validate_files
+
+        try:
+            results = validate_files(files, start=start, arm_file=arm_file, started=started,
+                                     static=static, speed=speed, cycle_hz=cycle_hz,
+                                     project_dir=project_dir)
+            valid = report(results, as_json=as_json, junit_file=junit_file)
+        except UserInputError as exc:
+            fail(str(exc))
+        except OSError as exc:
+            fail(f"{exc.filename}: {exc.strerror or exc}")
+        raise typer.Exit(EXIT_OK if valid else EXIT_INVALID)
+    file = files[0]
     try:
         check = static_check(file, start=start, arm_file=arm_file, started=started,
-                             speed=speed)
+                             speed=speed, project_dir=project_dir)
+        if check.loaded is not None:
+            from seqrun.cli.campaign_validate import override_notes
+
+            check.notes = list(check.notes) + override_notes(check.loaded)
     except UserInputError as exc:
-        fail(str(exc))
+        _unusable(str(exc), as_json)
         return
     except OSError as exc:  # a path the system refuses (name too long, permission, ...)
-        fail(f"{exc.filename}: {exc.strerror or exc}")
+        _unusable(f"{exc.filename}: {exc.strerror or exc}", as_json)
         return
     run = None
     if check.valid and not static:
@@ -250,14 +316,17 @@ def schema_command(
     kind: Annotated[SchemaKind, typer.Argument(
         help="Which file format: sequence (default), arm or pose.")] = SchemaKind.sequence,
     markdown: Annotated[bool, typer.Option(
-        "--markdown", help="Print the sequence format reference (docs/sequence-format.md) "
-                           "instead.")] = False,
+        "--markdown", help="Print the format's reference in Markdown instead (for sequences: "
+                           "docs/sequence-format.md).")] = False,
 ) -> None:
     """Print the JSON Schema of a file format (sequence files by default)."""
     if markdown:
-        from seqrun.schema import reference_markdown
+        from seqrun.schema import (arm_reference_markdown, pose_reference_markdown,
+                                   reference_markdown)
 
-        typer.echo(reference_markdown(), nl=False)
+        text = {SchemaKind.sequence: reference_markdown, SchemaKind.pose: pose_reference_markdown,
+                SchemaKind.arm: arm_reference_markdown}[kind]()
+        typer.echo(text, nl=False)
         return
     if kind is SchemaKind.sequence:
         schema = sequence_json_schema()

@@ -60,19 +60,25 @@ class SimArm:
         module's losses do not depend on the traffic of another).
     :param options: behaviours no source confirms, see :class:`~seqrun.sim.module.ModuleOptions`.
     :param positions: start positions (rad, module coordinates) instead of all zeros.
+    :param power_on_pose: the pose the arm physically stands in at power-on (the modules'
+        zeros: they read 0 wherever they were powered off). The encoders read the same
+        either way; this names where that is, for the zero reference (``--power-on-at``).
     """
 
     def __init__(self, clock: Clock, modules: Iterable[int] = range(1, 8),
                  faults: Iterable[Fault | str] | str = (), *,
                  module_latency: float = DEFAULT_MODULE_LATENCY, seed: int = 0,
                  options: ModuleOptions | None = None,
-                 positions: Mapping[int, float] | Sequence[float] | None = None) -> None:
+                 positions: Mapping[int, float] | Sequence[float] | None = None,
+                 power_on_pose: str = "park") -> None:
         if module_latency < 0:
             raise ValueError(f"module_latency must be >= 0, got {module_latency}")
         self.clock = clock
         self.start_time = clock.now()
         self.module_latency = module_latency
         self.seed = seed
+        #: Where the simulated arm physically stood when it was powered on (its zeros).
+        self.power_on_pose = power_on_pose
         self.options = options or ModuleOptions()
         self._lock = threading.RLock()
         self._modules = {m: SimModule(m, clock, options=self.options) for m in modules}

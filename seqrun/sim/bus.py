@@ -143,6 +143,7 @@ class SimBus(BusABC):
         (``home_ok_at_power_on=True``, strings like "true" too, see :mod:`seqrun.sim.options`).
     :param positions: start positions in rad, module coordinates (first bus only).
     :param modules: module ids of the arm, default 1..7 (first bus only).
+    :param power_on_pose: where the arm stood at power-on (first bus only; see SimArm).
     :param tx_queue_size: frames that may wait for the wire before ``send`` waits.
     """
 
@@ -154,6 +155,7 @@ class SimBus(BusABC):
                  options: ModuleOptions | None = None,
                  positions: Mapping[int, float] | Sequence[float] | None = None,
                  modules: Iterable[int] | None = None,
+                 power_on_pose: str | None = None,
                  tx_queue_size: int = DEFAULT_TX_QUEUE_SIZE,
                  fd: bool = False, timing: Any = None, **kwargs: Any) -> None:
         if fd:
@@ -168,7 +170,8 @@ class SimBus(BusABC):
             raise CanInitializationError(str(exc)) from None
         arm_kwargs = {"module_latency": module_latency, "seed": seed, "options": options,
                       "positions": positions,
-                      "modules": None if modules is None else list(modules)}
+                      "modules": None if modules is None else list(modules),
+                      "power_on_pose": power_on_pose}
         self._channel_name = channel
         self.network = _join_channel(channel, clock, _bitrate_from(bitrate, timing),
                                      fault_list, arm_kwargs)

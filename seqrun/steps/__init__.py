@@ -9,8 +9,8 @@ from __future__ import annotations
 
 from typing import Any, Callable
 
-from seqrun.steps import (checkpoint, confirm, halt, home, move, move_tool, reset, set_limits,
-                          wait)
+from seqrun.steps import (checkpoint, confirm, halt, home, move, move_tool, power_off, reset,
+                          set_limits, wait)
 
 Handler = Callable[[Any, Any], "dict | None"]
 
@@ -24,4 +24,5 @@ HANDLERS: dict[str, Handler] = {
     "wait": wait.run,
     "checkpoint": checkpoint.run,
     "confirm": confirm.run,
+    "power_off": power_off.run,
 }

@@ -8,13 +8,13 @@ import numpy as np
 
 from seqrun import kinematics
 from seqrun.errors import RunAborted
-from seqrun.validation import resolve_checkpoint
+from seqrun.validation import format_number, resolve_checkpoint
 
 
 def run(step, ex) -> dict:
     if getattr(step.params, "moved_mm", None) is not None:
         return _relative(step, ex)
-    position, rotation, pos_tol, ang_tol = resolve_checkpoint(step.params, ex.arm, ex.poses_dir)
+    position, rotation, pos_tol, ang_tol = resolve_checkpoint(step.params, ex.arm, ex.poses)
     measured = ex.monitor()
     T = kinematics.fk(ex.chain, np.radians(measured.user_deg))
     reached = T[:3, 3]
@@ -31,8 +31,10 @@ def run(step, ex) -> dict:
     ex.emit("checkpoint", **detail)
     if pos_err > pos_tol or ang_err > ang_tol:
         raise RunAborted("checkpoint",
-                         f"checkpoint failed: end-effector {pos_err:.2f} mm (tolerance {pos_tol} mm) "
-                         f"and {ang_err:.3f}° (tolerance {ang_tol}°) from the expected pose",
+                         f"checkpoint failed: end-effector {format_number(pos_err)} mm "
+                         f"(tolerance {format_number(pos_tol)} mm) and "
+                         f"{format_number(ang_err)}° (tolerance {format_number(ang_tol)}°) "
+                         "from the expected pose",
                          detail=detail)
     return detail
 

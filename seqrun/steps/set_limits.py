@@ -32,4 +32,10 @@ def run(step, ex) -> dict:
             raise RunAborted("limits_not_written",
                              f"module {module}: {param.name} reads back {ack.value:.6f} rad, "
                              f"wrote {value:.6f} rad", module=module)
+    # From now on the modules hold these: later moves are planned within them.
+    ex.limits_in_force.written(f"set_limits at {step.location}",
+                               {n: v for n, v in params.max_velocity_deg_s.items()
+                                if ex.arm.joint(n).locked is None},
+                               {n: v for n, v in params.max_acceleration_deg_s2.items()
+                                if ex.arm.joint(n).locked is None})
     return {"written": len(writes)}

@@ -1,0 +1,71 @@
+"""What ``seqrun run`` takes from the campaign and leaves in it: the bus settings of
+``seqrun.toml``, the run folder location, the run record and the zero-reference record."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Callable
+
+from seqrun.records import write_record, write_refusal
+from seqrun.runlog import default_run_dir
+
+
+def runs_dir(loaded: Any) -> Path:
+    project = getattr(loaded, "project", None)
+    return project.runs_dir if project is not None else Path("runs")
+
+
+def campaign_bus(loaded: Any, extra: dict) -> tuple:
+    """``(interface, channel, bitrate, bus kwargs)`` of the campaign's ``[bus]`` table (all
+    None when it names none: then python-can's configuration, else the simulator)."""
+    config = getattr(getattr(loaded, "project", None), "config", None)
+    if config is None or config.bus.interface is None:
+        return None, None, None, extra
+    bus = config.bus
+    return bus.interface, bus.channel, bus.bitrate, {**bus.kwargs, **extra}
+
+
+def _errors(errors: list) -> list[dict]:
+    return [e.as_dict() if hasattr(e, "as_dict") else {"message": str(e)} for e in errors]
+
+
+def refuse(loaded: Any, arm_path: Path, errors: list, log_dir: Path | None) -> None:
+    """A run refused by validation leaves a short record (best effort: the refusal itself
+    is what the operator must see, a full disk must not hide it)."""
+    folder = log_dir or default_run_dir(loaded.name, runs_dir(loaded))
+    try:
+        write_refusal(folder, sequence=loaded.name, file=str(loaded.file),
+                      errors=_errors(errors), loaded=loaded, arm_path=Path(arm_path))
+    except OSError:
+        pass
+
+
+def refuse_unloadable(file: Path, project_dir: Path | None, errors: list,
+                      log_dir: Path | None) -> None:
+    """The record of a sequence that could not even be loaded (its own errors)."""
+    from seqrun.project import project_for
+
+    try:
+        project = project_for(Path(file).resolve(), project_dir)
+        folder = log_dir or default_run_dir(Path(file).stem, project.runs_dir)
+        write_refusal(folder, sequence=Path(file).stem, file=str(file),
+                      errors=_errors(errors))
+    except Exception:  # the refusal is reported on the terminal either way
+        pass
+
+
+def record_run(folder: Path, loaded: Any, arm_path: Path, bus: str, zero: Any) -> dict:
+    return write_record(folder, loaded=loaded, arm_path=Path(arm_path), bus=bus,
+                        zero=zero.as_dict() if zero is not None else None)
+
+
+def zero_recorder(arm: Any, loaded: Any) -> Callable[[str], str]:
+    """What the ``power_off`` step calls: record the pose for the next power-on."""
+    from seqrun.zero import ZeroStore, pose_title
+
+    store = ZeroStore.for_arm(arm.name, getattr(loaded, "project", None))
+
+    def record(pose: str) -> str:
+        entry = store.set_record(pose, by=Path(str(loaded.file)).name)
+        return f"{entry.describe(pose_title(pose))} ({store.path})"
+    return record

@@ -1,0 +1,58 @@
+"""``seqrun runs [--json]``: the past runs of a campaign (or of ``runs/`` here)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from seqrun.cli.app import app
+from seqrun.cli.common import user_errors
+from seqrun.records import list_runs
+
+
+def _local(when: str | None) -> str:
+    """An ISO time as local 'YYYY-MM-DD HH:MM:SS'."""
+    from datetime import datetime
+
+    try:
+        return datetime.fromisoformat(str(when)).astimezone().strftime("%Y-%m-%d %H:%M:%S")
+    except ValueError:
+        return str(when or "-")[:19]
+
+
+@app.command("runs")
+def runs_command(
+    as_json: Annotated[bool, typer.Option("--json", help="Machine-readable output.")] = False,
+    project_dir: Annotated[Optional[Path], typer.Option(
+        "--project", metavar="DIR", help="Campaign folder (default: the one holding the "
+                                         "current directory).")] = None,
+    runs_dir: Annotated[Optional[Path], typer.Option(
+        "--dir", metavar="DIR", help="Run folders to list (default: the campaign's, else "
+                                     "runs/).")] = None,
+) -> None:
+    """List past runs: when, sequence, result, duration, exit code (oldest first)."""
+    from seqrun.project import find_campaign, open_project
+
+    with user_errors():
+        if runs_dir is None:
+            if project_dir is None:
+                project_dir = find_campaign(Path.cwd())
+            runs_dir = open_project(project_dir).runs_dir if project_dir else Path("runs")
+        runs = list_runs(runs_dir)
+    if as_json:
+        typer.echo(json.dumps(runs, indent=2))
+        return
+    if not runs:
+        typer.echo(f"no runs in {runs_dir}")
+        return
+    typer.echo(f"{'when':19s} {'sequence':24s} {'result':10s} {'duration':>9s} {'exit':>4s}")
+    for run in runs:
+        duration = run["duration_s"]
+        typer.echo(f"{_local(run['when']):19s} {str(run['sequence'] or '-')[:24]:24s} "
+                   f"{str(run['result'] or '-')[:10]:10s} "
+                   f"{'-' if duration is None else f'{duration:.2f} s':>9s} "
+                   f"{'-' if run['exit_code'] is None else run['exit_code']:>4}")
+    typer.echo(f"{len(runs)} run{'s' * (len(runs) != 1)} in {runs_dir}")

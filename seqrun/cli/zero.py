@@ -1,0 +1,154 @@
+"""``seqrun zero set POSE`` / ``seqrun zero show``, and the zero check at the start of a run.
+
+    seqrun zero show                      # the record and the zero in use
+    seqrun zero set totem                 # after a sudden power loss with the arm in Totem
+
+The record says where the arm was powered off (see :mod:`seqrun.zero`); the ``power_off``
+step of ``sequences/shutdown.yaml`` writes it at a normal shutdown.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Callable, Optional
+
+import typer
+
+from seqrun.cli.app import app
+from seqrun.cli.common import fail, user_errors
+from seqrun.errors import BusError, UserInputError
+from seqrun.zero import ZeroInForce, ZeroStore, pose_title, zero_for_run
+
+zero_app = typer.Typer(help="The zero reference: where the arm was powered off.",
+                       no_args_is_help=True)
+app.add_typer(zero_app, name="zero")
+
+ProjectOption = Annotated[Optional[Path], typer.Option(
+    "--project", metavar="DIR", help="Campaign folder (default: the one holding the current "
+                                     "directory, else the per-arm state file).")]
+
+
+def _arm_and_store(arm_file: Optional[Path], project_dir: Optional[Path]):
+    from seqrun.cli.common import load_arm_file
+    from seqrun.project import find_campaign, open_project, project_for
+
+    if project_dir is not None:
+        project = open_project(project_dir)
+    else:
+        campaign = find_campaign(Path.cwd())
+        project = open_project(campaign) if campaign is not None else project_for(Path.cwd())
+    arm_path = arm_file if arm_file is not None else project.arm_path(None)
+    arm = load_arm_file(Path(arm_path))
+    return arm, ZeroStore.for_arm(arm.name, project)
+
+
+@zero_app.command("show")
+def show_command(
+    project_dir: ProjectOption = None,
+    arm_file: Annotated[Optional[Path], typer.Option("--arm", metavar="FILE",
+                                                     help="Arm file.")] = None,
+) -> None:
+    """Where the arm was last powered off, and the zero in use since the last power-on."""
+    with user_errors():
+        arm, store = _arm_and_store(arm_file, project_dir)
+        record, in_use = store.record, store.in_use
+    typer.echo(f"arm      {arm.name}")
+    typer.echo(f"file     {store.path}")
+    typer.echo("record   " + (record.describe(pose_title(record.pose)) if record else
+                              "none (set one with 'seqrun zero set POSE')"))
+    typer.echo("in use   " + (in_use.describe(pose_title(in_use.pose)) if in_use else
+                              "none confirmed since a power-on"))
+    typer.echo("poses    " + ", ".join(arm.power_off_poses or ["(the arm names none)"]))
+
+
+@zero_app.command("set")
+def set_command(
+    pose: Annotated[str, typer.Argument(help="The power-off pose the arm stands in "
+                                             "(power_off_poses of the arm file).")],
+    yes: Annotated[bool, typer.Option("--yes", "-y", help="Do not ask.")] = False,
+    project_dir: ProjectOption = None,
+    arm_file: Annotated[Optional[Path], typer.Option("--arm", metavar="FILE",
+                                                     help="Arm file.")] = None,
+) -> None:
+    """Record where the arm was powered off (after a sudden power loss); asks first."""
+    with user_errors():
+        arm, store = _arm_and_store(arm_file, project_dir)
+        arm.power_off_pose(pose)
+    name = pose if pose in arm.power_off_poses else pose.lower()
+    joints = ", ".join(f"{n} {v:g}°" for n, v in arm.power_off_joints_deg(name).items())
+    question = (f"Record that '{arm.name}' was powered off in {pose_title(name)} ({joints})? "
+                "The next power-on takes its zero there.")
+    if yes:
+        typer.echo(f"{question} yes (--yes)")
+    elif not typer.confirm(question, default=False):
+        fail("nothing recorded", 130)
+    record = store.set_record(name, by="seqrun zero set")
+    typer.echo(f"zero reference recorded: {record.describe(pose_title(name))} ({store.path})")
+
+
+def modules_homed(connection, arm) -> bool:
+    """True when every module reports HOME_OK (no power-on since the last start-up)."""
+    from seqrun.powercube.client import PowerCubeClient
+    from seqrun.powercube.codec import GetParam
+    from seqrun.powercube.protocol import ParamId, StateFlag
+
+    from seqrun.errors import ModuleTimeoutError
+
+    client = PowerCubeClient(connection.bus, connection.clock,
+                             response_timeout=arm.can.response_timeout_s)
+    try:
+        for attempt in range(3):  # a read is idempotent: a lost answer is asked again
+            try:
+                acks = client.transact([GetParam(m, ParamId.CUBE_STATE)
+                                        for m in arm.module_ids])
+                break
+            except ModuleTimeoutError:
+                if attempt == 2:
+                    raise
+    finally:
+        client.close()
+    return all(StateFlag(a.value) & StateFlag.HOME_OK for a in acks)
+
+
+def zero_at_run_start(connection, arm, project, ask: Callable[[str], bool],
+                      show: Callable[[str], None]) -> ZeroInForce:
+    """Decide the zero reference of a run, show it, and on real hardware after a power-on
+    ask the operator to confirm the pose before anything moves.
+
+    Raises :class:`UserInputError` (no record: nothing moves), :class:`BusError`, or
+    ``typer.Exit(130)`` when the operator says the arm is not in that pose.
+    """
+    store = ZeroStore.for_arm(arm.name, project)
+    homed = False if connection.is_simulator else modules_homed(connection, arm)
+    zero = zero_for_run(arm, store, homed=homed,
+                        simulator_pose=connection.power_on_pose if connection.is_simulator
+                        else None)
+    show(zero.text)
+    if zero.question is not None:
+        if not ask(zero.question):
+            show("Not started: the operator says the arm is not in the recorded power-off "
+                 "pose. Nothing was sent. Record the pose it was really powered off in with "
+                 "'seqrun zero set POSE' and run again.")
+            raise typer.Exit(130)
+        store.set_in_use(zero.record)
+    return zero
+
+
+__all__ = ["zero_at_run_start", "modules_homed", "BusError", "UserInputError"]
+
+
+def zero_for_reading(connection, arm, project=None):
+    """The arm with the zero reference in force for reading positions (status, pose save):
+    ``(arm, text)``. Never asks and never refuses (nothing moves); without a usable record
+    the text says the positions use the arm file's offsets."""
+    store = ZeroStore.for_arm(arm.name, project)
+    try:
+        homed = False if connection.is_simulator else modules_homed(connection, arm)
+        zero = zero_for_run(arm, store, homed=homed,
+                            simulator_pose=connection.power_on_pose if connection.is_simulator
+                            else None)
+    except (UserInputError, BusError) as exc:
+        return arm, (f"zero: unknown ({exc}); positions use the arm file's offsets "
+                     f"({arm.default_power_off or 'as written'})")
+    text = zero.text + (" (not yet confirmed at this power-on)" if zero.question else "")
+    return arm.with_zero_reference(zero.pose), text

@@ -1,0 +1,352 @@
+"""The zero reference: the modules' zeros are where they were powered off.
+
+Power-off poses and their offsets in the arm file, the power_off step, the record, and the
+run-start decision: shown, confirmed on real hardware after a power-on, refused without a
+record. The simulator powers on at any supported pose; "real hardware" here is a
+connection that is not the built-in simulator (as a socketcand bus to `seqrun sim serve`).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import typer
+from typer.testing import CliRunner
+
+import seqrun.cli  # noqa: F401  (registers the commands)
+from seqrun.arm import load_arm
+from seqrun.cli.app import app
+from seqrun.cli.zero import zero_at_run_start
+from seqrun.clock import VirtualClock
+from seqrun.connection import Connection, open_connection
+from seqrun.errors import UserInputError
+from seqrun.executor import EXIT_FAULT, EXIT_OK
+from seqrun.poses import find_pose, load_pose
+from seqrun.runner import run_sequence
+from seqrun.schema import load_sequence
+from seqrun.sim.bus import SimBus
+from seqrun.validation import validate_sequence
+from seqrun.zero import ZeroStore, zero_for_run
+
+ROOT = Path(__file__).resolve().parents[1]
+ARM = load_arm(ROOT / "arms" / "lwa3.yaml")
+PARK_OFFSETS = {"j1": 0, "j2": 90, "j3": 0, "j4": 120.32, "j5": 0, "j6": -115.74, "j7": 0}
+OPSAFE = [70, 30, 0, 70, 20, 50, 0]
+
+
+@pytest.fixture(autouse=True)
+def state_dir(tmp_path, monkeypatch):
+    folder = tmp_path / "state"
+    monkeypatch.setenv("SEQRUN_STATE_DIR", str(folder))
+    return folder
+
+
+def hardware(clock=None, channel="hw") -> Connection:
+    """A simulated arm behind a connection seqrun treats as real hardware."""
+    clock = clock or VirtualClock()
+    bus = SimBus(channel=f"{channel}-{id(clock)}", clock=clock)
+    return Connection(bus, clock, False, "test bus (treated as real hardware)")
+
+
+def motion_frames(frames):
+    return [f for f in frames if not f.is_rx and 0x0E1 <= f.arbitration_id <= 0x0FF
+            and f.data[:1] == b"\x0b"]
+
+
+# --------------------------------------------------------------------------- arm file
+def test_park_offsets_are_the_thesis_table_and_totem_offsets_are_zero():
+    assert ARM.default_power_off == "park"
+    assert ARM.power_off_pose("park").offsets_deg == pytest.approx(PARK_OFFSETS)
+    assert [j.offset_deg for j in ARM.joints] == pytest.approx(list(PARK_OFFSETS.values()))
+    assert set(ARM.power_off_pose("totem").offsets_deg.values()) == {0.0}
+
+
+@pytest.mark.parametrize("pose", ["park", "totem"])
+def test_a_power_off_pose_is_where_every_module_reads_zero(pose):
+    """user = -offset at the power-off pose: the shipped pose files agree."""
+    stored = load_pose(find_pose(pose, ROOT / "poses")).joints_deg
+    assert ARM.power_off_joints_deg(pose) == pytest.approx(stored)
+    zeroed = ARM.with_zero_reference(pose)
+    assert [j.to_module_rad(stored[j.name]) for j in zeroed.joints] == pytest.approx([0.0] * 7)
+
+
+def test_an_unknown_power_off_pose_names_the_known_ones():
+    with pytest.raises(UserInputError, match="power-off poses: park, totem"):
+        ARM.with_zero_reference("opsafe")
+
+
+def test_the_joints_offsets_must_be_those_of_the_default_power_off(tmp_path):
+    from seqrun.errors import SequenceInvalid
+
+    text = (ROOT / "arms" / "lwa3.yaml").read_text().replace("default_power_off: park",
+                                                              "default_power_off: totem")
+    (tmp_path / "arm.yaml").write_text(text)
+    with pytest.raises(SequenceInvalid, match="offset_deg must be those of default_power_off"):
+        load_arm(tmp_path / "arm.yaml")
+
+
+# --------------------------------------------------------------------------- executor offsets
+@pytest.mark.parametrize("zero", ["park", "totem"])
+def test_the_run_converts_with_the_offsets_of_the_zero_in_force(zero):
+    """The same sequence sends the module positions of the zero reference in force."""
+    loaded = load_sequence(ROOT / "sequences" / "opsafe.yaml")
+    arm = ARM.with_zero_reference(zero)
+    connection = open_connection(force_sim=True, clock=VirtualClock(), power_on_pose=zero)
+    try:
+        outcome = run_sequence(loaded, arm, connection, log_dir=None, confirm=lambda q: True)
+        positions = connection.bus.arm.positions()
+    finally:
+        connection.close()
+    assert outcome.result.exit_code == EXIT_OK
+    offsets = ARM.power_off_pose(zero).offsets_deg
+    expected = [math.radians(q + offsets[j.name]) for q, j in zip(OPSAFE, ARM.joints)]
+    assert list(positions.values()) == pytest.approx(expected, abs=math.radians(0.25))
+
+
+# --------------------------------------------------------------------------- power_off step
+def test_shutdown_records_totem_through_the_power_off_step(state_dir):
+    loaded = load_sequence(ROOT / "sequences" / "shutdown.yaml")
+    store = ZeroStore.for_arm(ARM.name)
+    connection = hardware()
+
+    def attach(executor):
+        executor.record_zero = lambda pose: str(store.set_record(pose, by="shutdown.yaml"))
+    try:
+        outcome = run_sequence(loaded, ARM, connection, log_dir=None, confirm=lambda q: True,
+                               on_executor=attach)
+    finally:
+        connection.close()
+    assert outcome.result.exit_code == EXIT_OK
+    assert store.record.pose == "totem" and store.record.by == "shutdown.yaml"
+    assert store.path.parent == state_dir
+    assert "recorded 20" in store.record.describe("Totem")
+
+
+def test_power_off_away_from_the_pose_aborts_and_records_nothing(tmp_path):
+    """The step measures: an arm that is not there (validation assumed it would be) ends
+    the run as a fault, nothing recorded."""
+    from seqrun.errors import RunAborted
+    from seqrun.runner import build_executor
+    from seqrun.steps import power_off
+
+    loaded = load_sequence(ROOT / "sequences" / "shutdown.yaml")
+    step = next(s for s in loaded.steps if s.kind == "power_off")
+    connection = open_connection(force_sim=True, clock=VirtualClock())  # at Park, not Totem
+    recorded = []
+    try:
+        executor, client = build_executor(loaded, ARM, connection)
+        executor.record_zero = recorded.append
+        with pytest.raises(RunAborted) as info:
+            power_off.run(step, executor)
+        client.close()
+    finally:
+        connection.close()
+    assert info.value.cause == "power_off"
+    assert "the arm is not in totem (j2 -90.00°, j4 -120.32°, j6 +115.74° away" in str(info.value)
+    assert recorded == []
+
+
+def test_validation_checks_power_off_pose_position_and_no_motion_after(tmp_path):
+    seq = tmp_path / "sequences" / "bad.yaml"
+    seq.parent.mkdir()
+    (tmp_path / "sequences" / "startup.yaml").write_text(
+        (ROOT / "sequences" / "startup.yaml").read_text())
+    seq.write_text("name: Bad\ndescription: three power_off mistakes\nsteps:\n"
+                   "  - include: startup.yaml\n  - power_off: opsafe\n"
+                   "  - power_off: totem\n  - move: totem\n")
+    loaded = load_sequence(seq, project_root=ROOT)
+    errors = [str(e) for e in validate_sequence(loaded, ARM).errors]
+    assert any(e.endswith(":5:16: 'opsafe' is not a power-off pose of arm "
+                          "'Schunk LWA 3 (RV&D facility)' (its power-off poses: park, totem; "
+                          "power_off_poses in the arm file)") for e in errors), errors
+    assert any(":6:5: this power_off cannot pass" in e and "j2 -90° (pose 0°)" in e
+               for e in errors), errors
+    assert any(":7:5: move after power_off" in e for e in errors), errors
+
+
+# --------------------------------------------------------------------------- run start
+def test_the_built_in_simulator_needs_no_record_its_power_on_pose_is_the_zero():
+    for pose in ("park", "totem"):
+        connection = open_connection(force_sim=True, clock=VirtualClock(), power_on_pose=pose)
+        shown = []
+        try:
+            zero = zero_at_run_start(connection, ARM, None, lambda q: False, shown.append)
+        finally:
+            connection.close()
+        assert zero.pose == pose and zero.question is None
+        assert shown == [f"zero: {pose.capitalize()} (the simulator's power-on pose)"]
+
+
+def test_real_hardware_without_a_record_refuses_with_the_command_that_sets_one(state_dir):
+    connection = hardware()
+    try:
+        with pytest.raises(UserInputError) as info:
+            zero_at_run_start(connection, ARM, None, lambda q: True, print)
+    finally:
+        connection.close()
+    assert "no zero reference recorded" in str(info.value)
+    assert "'seqrun zero set POSE' (POSE: park, totem)" in str(info.value)
+    assert str(state_dir) in str(info.value)
+
+
+def test_after_a_power_on_the_record_is_shown_and_confirmed_then_in_use(state_dir):
+    store = ZeroStore.for_arm(ARM.name)
+    store.set_record("totem", by="shutdown.yaml")
+    connection = hardware()
+    questions, shown = [], []
+    try:
+        zero = zero_at_run_start(connection, ARM, None,
+                                 lambda q: questions.append(q) or True, shown.append)
+    finally:
+        connection.close()
+    assert zero.pose == "totem"
+    assert shown[0].startswith("zero: Totem, recorded ") and "by shutdown.yaml" in shown[0]
+    assert questions and "stand in Totem now (j1 0°, j2 0°" in questions[0]
+    assert store.in_use == store.record
+
+
+def test_homed_modules_keep_the_zero_in_use_even_after_a_new_record():
+    """power_off records Totem while the modules stay on: their zeros do not move."""
+    store = ZeroStore.for_arm(ARM.name)
+    store.set_in_use(store.set_record("park", by="test"))
+    store.set_record("totem", by="shutdown.yaml")
+    zero = zero_for_run(ARM, store, simulator_pose=None, homed=True)
+    assert zero.pose == "park" and zero.question is None
+    assert zero_for_run(ARM, store, simulator_pose=None, homed=False).pose == "totem"
+
+
+def _run_after_power_on_at_totem(record: str, answer: bool):
+    """The arm was powered off (and on) in Totem; the record says ``record``."""
+    ZeroStore.for_arm(ARM.name).set_record(record, by="test")
+    clock = VirtualClock()
+    connection = hardware(clock)
+    sent = []
+    try:
+        zero = zero_at_run_start(connection, ARM, None, lambda q: answer, print)
+        loaded = load_sequence(ROOT / "sequences" / "opsafe.yaml")
+        outcome = run_sequence(loaded, ARM.with_zero_reference(zero.pose), connection,
+                               log_dir=None, confirm=lambda q: True,
+                               on_executor=lambda ex: ex.client.add_frame_listener(sent.append))
+        physical = np.degrees(list(connection.bus.arm.positions().values()))  # totem: user
+    finally:
+        connection.close()
+    return outcome, physical, sent
+
+
+def test_a_start_up_after_a_shutdown_at_totem_reaches_opsafe():
+    outcome, physical, _ = _run_after_power_on_at_totem("totem", answer=True)
+    assert outcome.result.exit_code == EXIT_OK
+    assert physical == pytest.approx(OPSAFE, abs=0.25)
+
+
+def test_a_wrong_record_is_stopped_by_the_confirm_before_anything_moves():
+    ZeroStore.for_arm(ARM.name).set_record("park", by="test")
+    connection = hardware()
+    sent = []
+    connection.bus.arm  # the arm stands in Totem, its modules read zero there
+    try:
+        with pytest.raises(typer.Exit) as info:
+            zero_at_run_start(connection, ARM, None, lambda q: False, sent.append)
+        positions = connection.bus.arm.positions()
+    finally:
+        connection.close()
+    assert info.value.exit_code == 130
+    assert "Not started" in sent[-1]
+    assert list(positions.values()) == [0.0] * 7
+
+
+def test_without_the_confirm_a_wrong_record_would_drive_the_arm_into_itself():
+    """Why the confirm exists: nothing else sees the wrong zero. The run 'passes' (the
+    checkpoint uses the same wrong offsets) while the real arm ends with j4 at 190°, far
+    beyond the ±120° where the links collide; no guard or check stops it."""
+    outcome, physical, sent = _run_after_power_on_at_totem("park", answer=True)
+    assert outcome.result.exit_code == EXIT_OK
+    assert physical[3] == pytest.approx(70 + 120.32, abs=0.25)
+    assert motion_frames(sent)
+
+
+# --------------------------------------------------------------------------- CLI
+def test_zero_set_asks_and_show_prints_the_record(state_dir):
+    runner = CliRunner()
+    declined = runner.invoke(app, ["zero", "set", "totem", "--arm",
+                                   str(ROOT / "arms" / "lwa3.yaml")], input="n\n")
+    assert declined.exit_code == 130 and not any(state_dir.glob("*"))
+    accepted = runner.invoke(app, ["zero", "set", "totem", "--arm",
+                                   str(ROOT / "arms" / "lwa3.yaml")], input="y\n")
+    assert accepted.exit_code == 0, accepted.output
+    assert "was powered off in Totem (j1 0°" in accepted.output
+    shown = runner.invoke(app, ["zero", "show", "--arm", str(ROOT / "arms" / "lwa3.yaml")])
+    assert "record   Totem, recorded " in shown.output and "by seqrun zero set" in shown.output
+    data = json.loads(next(state_dir.glob("zero-*.json")).read_text())
+    entry = data["arms"][ARM.name]["record"]
+    assert entry["pose"] == "totem" and entry["user"]
+
+
+def test_zero_set_of_an_unknown_pose_is_one_line():
+    result = CliRunner().invoke(app, ["zero", "set", "upside-down", "--yes", "--arm",
+                                      str(ROOT / "arms" / "lwa3.yaml")])
+    assert result.exit_code == 2
+    assert result.output.strip().splitlines() == [
+        "error: 'upside-down' is not a power-off pose of arm 'Schunk LWA 3 (RV&D facility)' "
+        "(its power-off poses: park, totem)"]
+
+
+def test_run_on_the_simulator_powered_on_at_totem_shows_and_uses_that_zero(tmp_path):
+    result = CliRunner().invoke(app, ["run", str(ROOT / "sequences" / "opsafe.yaml"), "--yes",
+                                      "--virtual-time", "--plain", "--power-on-at", "totem",
+                                      "--log-dir", str(tmp_path / "run")])
+    assert result.exit_code == 0, result.output
+    assert "zero: Totem (the simulator's power-on pose)" in result.output
+    report = json.loads((tmp_path / "run" / "report.json").read_text())
+    assert report["zero"]["pose"] == "totem" and report["zero"]["source"] == "simulator"
+
+
+def test_power_on_at_an_unknown_pose_is_one_line(tmp_path):
+    result = CliRunner().invoke(app, ["run", str(ROOT / "sequences" / "opsafe.yaml"), "--yes",
+                                      "--virtual-time", "--power-on-at", "opsafe",
+                                      "--log-dir", str(tmp_path / "run")])
+    assert result.exit_code == 2
+    assert "is not a power-off pose" in result.output
+
+
+def test_status_and_pose_save_read_positions_with_the_recorded_zero():
+    """After a power-off in Totem the modules read 0 there: with the record the arm reads
+    as Totem (all zeros), not as Park."""
+    from seqrun.cli.zero import zero_for_reading
+
+    connection = hardware()
+    try:
+        arm, text = zero_for_reading(connection, ARM)
+        assert "zero: unknown (no zero reference recorded" in text
+        assert [j.offset_deg for j in arm.joints] == [j.offset_deg for j in ARM.joints]
+        ZeroStore.for_arm(ARM.name).set_record("totem", by="shutdown.yaml")
+        arm, text = zero_for_reading(connection, ARM)
+    finally:
+        connection.close()
+    assert text.startswith("zero: Totem, recorded ") and "not yet confirmed" in text
+    assert [j.to_user_deg(0.0) for j in arm.joints] == [0.0] * 7
+
+
+def test_a_campaign_keeps_its_own_record_and_says_how_to_set_it(tmp_path):
+    from seqrun.project import open_project
+
+    assert CliRunner().invoke(app, ["init", str(tmp_path / "camp")]).exit_code == 0
+    project = open_project(tmp_path / "camp")
+    connection = hardware()
+    try:
+        with pytest.raises(UserInputError) as info:
+            zero_at_run_start(connection, ARM, project, lambda q: True, print)
+        result = CliRunner().invoke(app, ["zero", "set", "totem", "--yes", "--project",
+                                          str(tmp_path / "camp")])
+        assert result.exit_code == 0, result.output
+        zero = zero_at_run_start(connection, ARM, project, lambda q: True, print)
+    finally:
+        connection.close()
+    assert f"'seqrun zero set POSE --project {project.root}'" in str(info.value)
+    assert zero.pose == "totem"
+    assert (project.root / ".seqrun" / "zero.json").is_file()
+    assert ".seqrun/" in (project.root / ".gitignore").read_text()
