@@ -130,8 +130,12 @@ def test_a_full_disk_is_recorded_in_the_report_when_the_report_fits(tmp_path, mo
 
 # ----------------------------------------------------------------------------- --log-dir
 def digest(folder: Path) -> dict[str, str]:
-    return {p.name: hashlib.sha256(p.read_bytes()).hexdigest()
-            for p in folder.iterdir() if p.is_file()}
+    """The first run's files (top level and its inputs/), not the later runs' folders."""
+    files = [p for p in folder.iterdir() if p.is_file()]
+    if (folder / "inputs").is_dir():
+        files += [p for p in (folder / "inputs").rglob("*") if p.is_file()]
+    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in files}
 
 
 def test_a_reused_log_dir_keeps_the_earlier_run(tmp_path):
@@ -143,12 +147,12 @@ def test_a_reused_log_dir_keeps_the_earlier_run(tmp_path):
     second = run_cli(folder)
     assert second.exit_code == 0, second.output
     assert digest(folder) == before                  # the first run untouched
-    (inner,) = [p for p in folder.iterdir() if p.is_dir()]
+    (inner,) = [p for p in folder.iterdir() if (p / "report.json").exists()]
     assert json.loads((inner / "report.json").read_text())["status"] == "passed"
     assert f"this run goes to {inner}" in second.output
     third = run_cli(folder)                          # the same second: its own folder
     assert third.exit_code == 0
-    assert len([p for p in folder.iterdir() if p.is_dir()]) == 2
+    assert len([p for p in folder.iterdir() if (p / "report.json").exists()]) == 2
     assert digest(folder) == before
 
 
@@ -194,7 +198,7 @@ def test_the_trace_is_on_wall_clock_time_with_one_channel_and_converts(tmp_path)
     # One time base: event t + start_epoch_s is the frame's time. Step 1 (Reset) starts
     # with the Reset broadcast; a step's first frame comes within a cycle of its event.
     events = [json.loads(line) for line in (folder / "events.jsonl").read_text().splitlines()]
-    started = events[0]
+    started = next(e for e in events if e["type"] == "run_started")
     report = json.loads((folder / "report.json").read_text())
     assert started["type"] == "run_started"
     assert report["start_epoch_s"] == started["start_epoch_s"]
