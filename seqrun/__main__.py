@@ -1,3 +1,3 @@
-from seqrun.cli import main
+from seqrun.entry import main
 
 main()

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 import threading
+import time
 import traceback
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -39,6 +40,7 @@ from seqrun.planner import Limits, MovePlan, plan_move, plan_stop
 from seqrun.setpoints import setpoint_law
 from seqrun.usermessages import user_message
 from seqrun.tracking import MoveTracking, velocity_window
+from seqrun.stop_requests import OPERATOR_HALT, StopRequest, StopRequests
 from seqrun.powercube.codec import (BroadcastRequest, GetParam, GetParamAck, MotionExtAck,
                                     SetMotion, SetParam)
 from seqrun.powercube.protocol import ConfigFlag, ParamId, ShortState, StateFlag
@@ -131,7 +133,8 @@ class Executor:
                  confirm: Callable[[str], bool] | None = None,
                  before_step: Callable[[Any], bool] | None = None,
                  listeners: Iterable[Listener] = (), dry_run: bool = False,
-                 confirm_clear_latched: Callable[[str], bool] | None = None) -> None:
+                 confirm_clear_latched: Callable[[str], bool] | None = None,
+                 requests: StopRequests | None = None) -> None:
         if not 0 < speed <= 1:
             raise ValueError("speed must lie in (0, 1]")
         self.client = client
@@ -167,12 +170,19 @@ class Executor:
         # Bound on a run's (simulated) time; the dry run sets it (control.max_dry_run_s).
         self.time_limit_s: float | None = None
         self.setpoints = setpoint_law(self.command_mode, arm, self.cycle, self.limits)
-        # Thread-safe control flags.
-        self._lock = threading.Lock()
-        self._abort_requests = 0
-        self._halt_requested = False
+        # Stop requests: posted from any thread or signal handler without a lock, acted on
+        # by the run loop (see seqrun/stop_requests.py).
+        self.requests = requests if requests is not None else StopRequests()
+        self._aborts = 0
+        self._halt: StopRequest | None = None
+        self._taking = False
         self._paused = threading.Event()
         self.waiting_for_operator = False
+        # Last sign of life of the run loop (time.monotonic): the watchdog keeper refreshes
+        # only while the loop makes progress.
+        self._heartbeat = time.monotonic()
+        #: The result of a run that a BaseException (KeyboardInterrupt, SystemExit) ended.
+        self.interrupted_result: RunResult | None = None
         # Run bookkeeping.
         self._t0 = clock.now()
         self.last: Measurement | None = None
@@ -199,20 +209,44 @@ class Executor:
 
     # ------------------------------------------------------------------ control (any thread)
     def abort(self, reason: str = "operator abort") -> None:
-        """First call: controlled stop. Second call: Halt."""
-        with self._lock:
-            self._abort_requests += 1
-            if self._abort_requests >= 2:
-                self._halt_requested = True
-        self._paused.clear()
-        self.emit("abort_requested", reason=reason, count=self._abort_requests)
+        """First call: controlled stop. Second call: Halt. Takes no lock and calls no
+        listener (safe in a signal handler); the run loop acts within a cycle."""
+        self.requests.abort(reason)
 
-    def halt(self, reason: str = "halt requested") -> None:
-        """Immediate Halt (second Ctrl-C, SIGTERM, STOP button)."""
-        with self._lock:
-            self._halt_requested = True
-        self._paused.clear()
-        self.emit("halt_requested", reason=reason)
+    def halt(self, reason: str = "STOP", cause: str = OPERATOR_HALT) -> None:
+        """Immediate Halt (second Ctrl-C, SIGTERM, STOP button); like :meth:`abort` safe
+        in a signal handler. A ``cause`` other than operator_halt ends the run as a fault."""
+        self.requests.halt(reason, cause)
+
+    def _take_requests(self) -> None:
+        """Run loop only: act on the stop requests posted since the last cycle."""
+        self._heartbeat = time.monotonic()
+        if self._taking or not self.requests:
+            return
+        self._taking = True   # a listener reading the flags must not re-enter
+        try:
+            for request in self.requests.take():
+                self._paused.clear()
+                if request.kind == "abort":
+                    self._aborts += 1
+                    self.emit("abort_requested", reason=request.reason, count=self._aborts)
+                    if self._aborts >= 2 and self._halt is None:
+                        self._halt = request
+                elif self._halt is None:
+                    self._halt = request
+                    self.emit("halt_requested", reason=request.reason, cause=request.cause)
+        finally:
+            self._taking = False
+
+    @property
+    def _abort_requests(self) -> int:
+        self._take_requests()
+        return self._aborts
+
+    @property
+    def _halt_requested(self) -> bool:
+        self._take_requests()
+        return self._halt is not None
 
     def pause(self) -> None:
         self._paused.set()
@@ -224,7 +258,7 @@ class Executor:
 
     @property
     def abort_requested(self) -> bool:
-        return self._abort_requests > 0
+        return self._aborts > 0
 
     def ask_operator(self, question: Callable[[Any], bool], arg: Any) -> bool:
         """Ask the operator; while asking, Ctrl-C may interrupt the question."""
@@ -305,6 +339,7 @@ class Executor:
     def transact(self, requests: list, *, idempotent: bool = False) -> list:
         """``client.transact``; ``idempotent`` requests (reads) get one retry."""
         attempts = 1 + (self.READ_RETRIES if idempotent else 0)
+        self._heartbeat = time.monotonic()
         for attempt in range(attempts):
             try:
                 return self.client.transact(requests)
@@ -450,7 +485,10 @@ class Executor:
 
     def _check_halt_request(self) -> None:
         if self._halt_requested:
-            raise RunAborted("operator_halt", "Halt requested by the operator")
+            halt = self._halt
+            if halt.cause == OPERATOR_HALT:
+                raise RunAborted(OPERATOR_HALT, f"Halt requested by the operator ({halt.reason})")
+            raise RunAborted(halt.cause, f"{halt.reason}: Halt")
         if self.time_limit_s is not None and self.clock.now() - self._t0 > self.time_limit_s:
             raise RunAborted("time_limit", f"stopped after {self.time_limit_s:g} s of simulated "
                              "time (control.max_dry_run_s of the arm file): the sequence takes "
@@ -557,6 +595,7 @@ class Executor:
         first one that says NOT_OK halts the arm at once, before the rest of the batch is
         collected; then the module's state word names the cause.
         """
+        self._heartbeat = time.monotonic()
         moving_modules = {self.modules[i] for i in moving}
         reads = [r for m in self.modules if m not in moving_modules for r in self._reads(m)]
         batch = requests + reads
@@ -898,13 +937,23 @@ class Executor:
         self.emit("watchdog_enabled", refresh_period_s=wd.refresh_period_s)
 
     def _keep_watchdog(self) -> None:
-        # Covers the times the run loop is not on the bus (operator prompts).
-        period = self.arm.can.watchdog.refresh_period_s / 4
-        while not self._keeper_stop.wait(period):
+        # Covers the times the run loop is not on the bus (between cycles, operator
+        # prompts), but only while the loop shows signs of life: a loop that is stuck
+        # (a deadlock, a hung call) must let the modules' watchdogs stop the arm.
+        refresh = self.arm.can.watchdog.refresh_period_s
+        while not self._keeper_stop.wait(refresh / 4):
+            if not self.loop_alive(refresh):
+                continue
             try:
                 self.client.service()
             except BusError:
                 return
+
+    def loop_alive(self, within_s: float) -> bool:
+        """True while the run loop made progress within ``within_s`` (real seconds) or
+        waits for the operator's answer (a question comes only between steps)."""
+        return (self.waiting_for_operator
+                or time.monotonic() - self._heartbeat < within_s)
 
     def _disable_watchdog(self) -> None:
         """After a clean end the arm keeps holding: clear WATCHDOG_ENABLE again."""
@@ -931,8 +980,10 @@ class Executor:
         self.poses = dict(getattr(loaded, "poses", {}))
         steps = list(loaded.steps)
         results = [StepResult(s.number, s.kind, _label(s), _location(s)) for s in steps]
+        # clock_s: the run clock's reading at t = 0, so that the run log can put event
+        # times and frame times on one (wall-clock) time base.
         self.emit("run_started", steps=len(steps), first_step=first_step, speed=self.speed,
-                  command_mode=self.command_mode, dry_run=self.dry_run,
+                  command_mode=self.command_mode, dry_run=self.dry_run, clock_s=self._t0,
                   virtual_time=self.clock.is_virtual, cycle_s=self.cycle,
                   velocity_window_s=velocity_window(self.cycle),
                   arm=self.arm.model_dump(mode="json"))
@@ -961,6 +1012,10 @@ class Executor:
                 continue
             self._current_step = result
             try:
+                # A request that came before the question is acted on without asking.
+                self._check_halt_request()
+                if self._abort_requests:
+                    raise OperatorAbort("operator abort")
                 if self.before_step is not None and not self.ask_operator(self.before_step, step):
                     raise OperatorAbort("operator declined the step")
                 self._check_halt_request()
@@ -986,9 +1041,19 @@ class Executor:
             except OperatorAbort as exc:
                 status, code, message = "aborted", EXIT_OPERATOR_ABORT, str(exc)
                 if self._halt_requested:
-                    self.emergency_halt()
+                    # A Halt asked for while nothing moved (a question, between steps): it
+                    # is sent and reported like any Halt.
+                    halted = self.emergency_halt()
                     self._show_state_after_halt()
-                    message += "; Halt sent" + self._halt_note()
+                    message += (f"; {self._halt.reason}: Halt "
+                                + ("sent" if halted else "could not be sent")
+                                + self._halt_note())
+                    cause = self._halt.cause
+                    if cause != OPERATOR_HALT:
+                        status, code = "failed", EXIT_FAULT
+                    fault = {"cause": cause, "module": None, "message": message,
+                             "step": step.number, **self._halt_fields()}
+                    self.emit("fault", **fault)
                 result.status = "aborted"
                 result.finished = self.clock.now() - self._t0
                 result.detail.update(self.tracking_figures())
@@ -1001,7 +1066,7 @@ class Executor:
                     self.emit("internal_error", traceback=traceback.format_exc())
                     exc = RunAborted(cause, f"internal error ({type(exc).__name__}: {exc}); "
                                             "the arm was halted; the traceback is in the event log")
-                if cause == "operator_halt":
+                if cause == OPERATOR_HALT:
                     status, code = "aborted", EXIT_OPERATOR_ABORT
                 else:
                     status, code = "failed", EXIT_FAULT
@@ -1020,10 +1085,29 @@ class Executor:
                 # Anything else leaving a step (KeyboardInterrupt, SystemExit) still halts
                 # the arm before it propagates.
                 self.emergency_halt()
-                self.emit("fault", cause="interrupted", module=None, message=repr(exc),
-                          step=step.number, **self._halt_fields())
+                fault = {"cause": "interrupted", "module": None, "message": repr(exc),
+                         "step": step.number, **self._halt_fields()}
+                self.emit("fault", **fault)
+                result.status = "failed"
+                result.finished = self.clock.now() - self._t0
+                self._current_step = None
+                self._keeper_stop.set()
+                # The run folder is finished with this result before the exception goes on.
+                self.interrupted_result = self._finish(
+                    results, "failed", EXIT_FAULT, f"interrupted ({exc!r}); the arm was halted",
+                    fault)
                 raise
         self._current_step = None
+        if code == EXIT_OK and self._halt_requested:
+            # A Halt asked for after the last step: nothing moves, but it is sent as asked.
+            self.emergency_halt()
+            cause = self._halt.cause
+            status, code = (("aborted", EXIT_OPERATOR_ABORT) if cause == OPERATOR_HALT
+                            else ("failed", EXIT_FAULT))
+            message = f"{self._halt.reason} after the last step; Halt sent" + self._halt_note()
+            fault = {"cause": cause, "module": None, "message": message, "step": None,
+                     **self._halt_fields()}
+            self.emit("fault", **fault)
         if code in (EXIT_OK, EXIT_OPERATOR_ABORT) and not self._halt_requested:
             self._disable_watchdog()
         else:

@@ -1,29 +1,46 @@
 """The run folder: everything a run leaves behind, written as the run goes.
 
 ``runs/<time>-<name>/``
-  trace.log     every CAN frame sent and received, candump format (``can.LogReader`` reads it)
-  events.jsonl  one executor event per line
-  report.json   status, exit code, timing, per-step results, fault; rewritten after each
-                step so that a killed run still leaves a readable report ("running")
+  trace.log     every CAN frame sent and received, candump format (``can.LogReader`` reads
+                it), wall-clock (epoch) time stamps, the bus channel's name in both directions
+  events.jsonl  one executor event per line; ``run_started`` carries ``start_epoch_s``, the
+                wall-clock time of the run's t = 0 (an event at ``t`` happened at
+                ``start_epoch_s + t``, the trace's time base)
+  steps.jsonl   one line per finished step (appended: constant cost per step)
+  report.json   status, exit code, timing, per-step results, fault. While the run goes it
+                says ``running`` and is rewritten at most once a second (it points to
+                steps.jsonl); at the end it is written whole. :func:`read_report` assembles
+                the report of a run that was killed from what is on disk.
   junit.xml     one test case per step and one per checkpoint, measured values as
                 properties, for CI dashboards
   report.html   drawn after the run from the files above (seqrun/report/)
 
-Every file is flushed as it is written: a run killed with SIGKILL leaves a readable log.
+Every line goes to disk as it is written (one write per line): a run killed with SIGKILL
+leaves a readable folder. A failing disk never disturbs the run: the first error stops
+that file, is reported once (``warn``, an event, the report) and leaves whole lines only.
 """
 
 from __future__ import annotations
 
+import copy
 import datetime as _dt
 import json
 import os
+import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 from xml.sax.saxutils import escape, quoteattr
 
 import can
 
 from seqrun.executor import RunResult, StepResult
+from seqrun.logfile import LineFile, write_whole
+
+#: The running report.json is rewritten at most this often (seconds of real time).
+REPORT_INTERVAL_S = 1.0
+
+#: Files whose presence says a folder holds a run.
+RUN_FILES = ("report.json", "events.jsonl", "trace.log")
 
 
 def default_run_dir(sequence_name: str, root: Path = Path("runs")) -> Path:
@@ -32,52 +49,157 @@ def default_run_dir(sequence_name: str, root: Path = Path("runs")) -> Path:
     return root / f"{stamp}-{safe}"
 
 
+def holds_run(folder: Path) -> bool:
+    return any((Path(folder) / name).exists() for name in RUN_FILES)
+
+
+def prepare_run_folder(log_dir: Path | None, sequence_name: str,
+                       root: Path = Path("runs")) -> Path:
+    """The folder this run writes, created and checked writable (OSError otherwise).
+
+    Without ``log_dir``: ``<root>/<time>-<name>/``. A ``log_dir`` that already holds a run
+    is never overwritten: the run goes to a new ``<time>-<name>/`` folder inside it. Two
+    runs in the same second get ``-2``, ``-3`` ... suffixes.
+    """
+    if log_dir is not None and not holds_run(log_dir):
+        folder = Path(log_dir)
+        folder.mkdir(parents=True, exist_ok=True)
+    else:
+        base = default_run_dir(sequence_name, Path(log_dir) if log_dir else Path(root))
+        base.parent.mkdir(parents=True, exist_ok=True)
+        folder = base
+        for n in range(2, 1000):
+            try:
+                folder.mkdir()
+                break
+            except FileExistsError:
+                folder = base.with_name(f"{base.name}-{n}")
+    probe = folder / ".seqrun-write-test"
+    probe.write_bytes(b"")
+    probe.unlink()
+    return folder
+
+
 def _now_iso() -> str:
     return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="milliseconds")
 
 
-def _atomic_write(path: Path, text: str) -> None:
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
+def _iso(epoch: float) -> str:
+    return _dt.datetime.fromtimestamp(epoch, _dt.timezone.utc).isoformat(timespec="milliseconds")
+
+
+class _TraceSink:
+    """File object for python-can's candump writer: one line per write, to a LineFile."""
+
+    def __init__(self, file: LineFile) -> None:
+        self._file = file
+
+    def write(self, text: str) -> int:
+        self._file.write(text)
+        return len(text)
+
+    def flush(self) -> None:
+        pass
+
+    def close(self) -> None:
+        self._file.close()
 
 
 class RunLog:
-    """Event listener and frame listener writing one run folder."""
+    """Event listener and frame listener writing one run folder.
 
-    def __init__(self, folder: Path, meta: dict[str, Any]) -> None:
+    :param clock: the run's clock; frame stamps (its readings) become wall-clock time.
+    :param channel: the bus channel's name, written on every trace line.
+    :param warn: told once, in one line, when writing the run folder fails.
+    """
+
+    def __init__(self, folder: Path, meta: dict[str, Any], *, clock=None,
+                 channel: str | None = None, warn: Callable[[str], None] | None = None) -> None:
         self.folder = Path(folder)
         self.folder.mkdir(parents=True, exist_ok=True)
         self.meta = dict(meta)
+        self.warn = warn
+        self.errors: list[str] = []
+        self._failed_files: set[str] = set()
         self.started_iso = _now_iso()
-        self._events = open(self.folder / "events.jsonl", "w", encoding="utf-8")
-        self._trace = can.Logger(str(self.folder / "trace.log"))
+        # One time base: a reading c of the run's clock happened at epoch0 + (c - clock0).
+        # At virtual time epoch0 is a whole second: the trace keeps microseconds, and with
+        # a whole-second origin every stamp rounds the same way in every run (the virtual
+        # times of two frames compare as exactly as the trace allows, run after run).
+        self._epoch0 = time.time()
+        if clock is not None and getattr(clock, "is_virtual", False):
+            self._epoch0 = float(int(self._epoch0))
+        self._clock0 = clock.now() if clock is not None else None
+        self.time_base: dict[str, Any] = {}
+        self.channel = str(channel) if channel is not None else "can0"
+        self._events = LineFile(self.folder / "events.jsonl", self._failed)
+        self._steps_file = LineFile(self.folder / "steps.jsonl", self._failed)
+        self._trace_file = LineFile(self.folder / "trace.log", self._failed)
+        self._trace = can.CanutilsLogWriter(_TraceSink(self._trace_file), channel=self.channel)
         self._closed = False
-        self._steps: dict[int, dict] = {}
+        self._started: dict[int, dict] = {}
+        self._steps_done = 0
+        self._last_step: int | None = None
+        self._report_written = -1e9
         self._joint_names: list[str] = []
-        self._write_report({"status": "running", "exit_code": None})
+        self._write_running()
+
+    # Failures ----------------------------------------------------------------------
+    def _failed(self, path: Path, exc: OSError) -> None:
+        if path.name in self._failed_files:   # said once per file
+            return
+        self._failed_files.add(path.name)
+        text = f"writing {path} failed ({exc.strerror or exc}); that file stops here"
+        self.errors.append(text)
+        if len(self.errors) == 1 and self.warn is not None:
+            try:
+                self.warn(f"run log: {text}; the run goes on")
+            except Exception:  # noqa: BLE001 - a broken terminal must not stop the run
+                pass
+        if path != self._events.path:
+            self._events.write(json.dumps({"t": None, "type": "log_failed", "file": path.name,
+                                           "error": str(exc)}) + "\n")
 
     # Listeners -------------------------------------------------------------------
     def on_event(self, event: dict) -> None:
         if self._closed:
             return
-        self._events.write(json.dumps(event, separators=(",", ":")) + "\n")
-        self._events.flush()
-        if event["type"] == "run_started":   # names for the per-joint JUnit properties
+        kind = event["type"]
+        if kind == "run_started" and self._clock0 is not None and "clock_s" in event:
+            start = self._epoch0 + (event["clock_s"] - self._clock0)
+            self.time_base = {"start_epoch_s": round(start, 6), "start_utc": _iso(start),
+                              "clock_s": event["clock_s"]}
+            event = {**event, **self.time_base}
+        if kind == "run_started":   # names for the per-joint JUnit properties
             self._joint_names = [j.get("name", "") for j in
                                  (event.get("arm") or {}).get("joints", [])]
-        if event["type"] == "step_finished":
-            self._steps[event.get("step", 0)] = event
-            self._write_report({"status": "running", "exit_code": None})
+        self._events.write(json.dumps(event, separators=(",", ":"), default=str) + "\n")
+        if kind == "step_started":
+            self._started[event.get("step", 0)] = event
+        elif kind == "step_finished":
+            number = event.get("step", 0)
+            begun = self._started.pop(number, {})
+            line = {"number": number, "kind": begun.get("kind"), "label": begun.get("label"),
+                    "location": begun.get("location"),
+                    **{k: v for k, v in event.items() if k not in ("type", "step")}}
+            self._steps_file.write(json.dumps(line, separators=(",", ":"), default=str) + "\n")
+            self._steps_done += 1
+            self._last_step = number
+            if time.monotonic() - self._report_written >= REPORT_INTERVAL_S:
+                self._write_running()
 
     def on_frame(self, msg: can.Message) -> None:
-        if self._closed:
+        if self._closed or not self._trace_file.ok:
             return
-        self._trace.on_message_received(msg)
-        self._trace.file.flush()
+        line = copy.copy(msg)
+        line.channel = self.channel
+        if self._clock0 is not None:
+            line.timestamp = self._epoch0 + (msg.timestamp - self._clock0)
+        self._trace.on_message_received(line)
 
     # Final report -----------------------------------------------------------------
     def finish(self, result: RunResult) -> dict:
+        """Write the final report.json and junit.xml; never raises (errors are recorded)."""
         report = {
             "status": result.status,
             "exit_code": result.exit_code,
@@ -92,19 +214,30 @@ class RunLog:
             "not_verified": result.not_verified,
             "min_heights_mm": result.min_heights_mm,
         }
-        full = self._write_report(report, ended=True)
-        _atomic_write(self.folder / "junit.xml", junit_xml(self.meta.get("sequence", "sequence"),
-                                                          result, self._joint_names))
-        return full
+        junit = junit_xml(self.meta.get("sequence", "sequence"), result, self._joint_names)
+        error = write_whole(self.folder / "junit.xml", junit)
+        if error is not None:
+            self._failed(self.folder / "junit.xml", error)
+        return self._write_report(report, ended=True)
+
+    def _write_running(self) -> None:
+        self._report_written = time.monotonic()
+        self._write_report({"status": "running", "exit_code": None,
+                            "steps_file": "steps.jsonl", "steps_finished": self._steps_done,
+                            "last_step_finished": self._last_step})
 
     def _write_report(self, body: dict, ended: bool = False) -> dict:
         report = {"sequence": self.meta.get("sequence"), "file": self.meta.get("file"),
                   "start": self.started_iso, "end": _now_iso() if ended else None,
+                  **self.time_base,
                   **{k: v for k, v in self.meta.items() if k not in ("sequence", "file")},
                   **body}
-        if not ended and self._steps:
-            report["steps_finished"] = sorted(self._steps)
-        _atomic_write(self.folder / "report.json", json.dumps(report, indent=2, default=str))
+        if ended and self.errors:
+            report["log_errors"] = list(self.errors)
+        error = write_whole(self.folder / "report.json",
+                            json.dumps(report, indent=2, default=str))
+        if error is not None:
+            self._failed(self.folder / "report.json", error)
         return report
 
     def close(self) -> None:
@@ -112,7 +245,53 @@ class RunLog:
             return
         self._closed = True
         self._events.close()
-        self._trace.stop()
+        self._steps_file.close()
+        self._trace_file.close()
+
+
+def read_report(folder: Path) -> dict:
+    """The run's report as far as the folder tells it: report.json of a finished run, or,
+    for a run that was killed (``running``), that report with the steps of steps.jsonl
+    and the last fault and event of events.jsonl. Partial last lines are ignored."""
+    folder = Path(folder)
+    report = json.loads((folder / "report.json").read_text(encoding="utf-8"))
+    if report.get("status") != "running":
+        return report
+    report["steps"] = _json_lines(folder / report.get("steps_file", "steps.jsonl"))
+    events = _json_lines(folder / "events.jsonl")
+    faults = [e for e in events if e.get("type") == "fault"]
+    if faults:
+        report["fault"] = {k: v for k, v in faults[-1].items() if k not in ("t", "type")}
+    if events:
+        report["last_event"] = events[-1]
+    return report
+
+
+def read_trace(folder: Path, *, run_clock: bool = False) -> list[can.Message]:
+    """The frames of trace.log. With ``run_clock`` their stamps are readings of the run's
+    clock (as the executor and the simulator saw them) instead of wall-clock time, to the
+    microsecond the trace keeps: ``stamp - start_epoch_s + clock_s`` (from events.jsonl)."""
+    folder = Path(folder)
+    frames = list(can.LogReader(str(folder / "trace.log")))
+    if run_clock:
+        started = next(e for e in _json_lines(folder / "events.jsonl")
+                       if e.get("type") == "run_started")
+        shift = started["clock_s"] - started["start_epoch_s"]
+        for msg in frames:
+            msg.timestamp = round(msg.timestamp + shift, 6)
+    return frames
+
+
+def _json_lines(path: Path) -> list[dict]:
+    if not path.exists():
+        return []
+    out = []
+    for line in path.read_text(encoding="utf-8").splitlines():
+        try:
+            out.append(json.loads(line))
+        except json.JSONDecodeError:
+            break
+    return out
 
 
 def _checkpoint(step: StepResult) -> dict:

@@ -13,10 +13,11 @@ from typing import Callable, Iterable
 from seqrun import __version__
 from seqrun.arm import ArmDescription
 from seqrun.connection import Connection, response_timeout_s
-from seqrun.executor import Executor, Listener, RunResult
+from seqrun.executor import EXIT_FAULT, Executor, Listener, RunResult, StepResult
 from seqrun.powercube.client import PowerCubeClient
 from seqrun.runlog import RunLog
 from seqrun.schema import LoadedSequence
+from seqrun.stop_requests import StopRequests
 
 
 @dataclass
@@ -35,7 +36,8 @@ def build_executor(loaded: LoadedSequence, arm: ArmDescription, connection: Conn
                    confirm: Callable[[str], bool] | None = None,
                    before_step: Callable | None = None,
                    listeners: Iterable[Listener] = (), dry_run: bool = False,
-                   confirm_clear_latched: Callable[[str], bool] | None = None
+                   confirm_clear_latched: Callable[[str], bool] | None = None,
+                   requests: StopRequests | None = None
                    ) -> tuple[Executor, PowerCubeClient]:
     client = PowerCubeClient(connection.bus, connection.clock,
                              # (a dry run keeps the arm file's: deterministic results)
@@ -45,7 +47,7 @@ def build_executor(loaded: LoadedSequence, arm: ArmDescription, connection: Conn
                         poses_dir=loaded.pose_path or loaded.poses_dir, speed=speed,
                         command_mode=command_mode, cycle_hz=cycle_hz, confirm=confirm,
                         before_step=before_step, listeners=list(listeners), dry_run=dry_run,
-                        confirm_clear_latched=confirm_clear_latched)
+                        confirm_clear_latched=confirm_clear_latched, requests=requests)
     client.on_discard = executor.on_discard
     return executor, client
 
@@ -60,19 +62,24 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
                  on_executor: Callable[[Executor], None] | None = None,
                  confirm_clear_latched: Callable[[str], bool] | None = None,
                  meta: dict | None = None,
-                 html_report: bool = True) -> RunOutcome:
+                 html_report: bool = True,
+                 requests: StopRequests | None = None,
+                 warn: Callable[[str], None] | None = None) -> RunOutcome:
     """Run ``loaded`` on ``connection``; writes the run folder when ``log_dir`` is given,
     with report.html drawn after the run (``html_report``).
 
-    ``on_executor`` is called with the executor before the run starts (signal handlers,
-    displays and tests hook in there); ``meta`` goes into report.json (e.g. the zero
-    reference). The connection is not closed.
+    ``on_executor`` is called with the executor before the run starts (displays and tests
+    hook in there); ``meta`` goes into report.json (e.g. the zero reference); ``requests``
+    is the inbox signal handlers post stop requests to; ``warn`` is told once when writing
+    the run folder fails. The connection is not closed. Whichever way the run ends (even
+    by an exception), the run folder is finished.
     """
     executor, client = build_executor(loaded, arm, connection, speed=speed,
                                       command_mode=command_mode, cycle_hz=cycle_hz,
                                       confirm=confirm, before_step=before_step,
                                       listeners=listeners, dry_run=dry_run,
-                                      confirm_clear_latched=confirm_clear_latched)
+                                      confirm_clear_latched=confirm_clear_latched,
+                                      requests=requests)
     log = None
     if log_dir is not None:
         log = RunLog(log_dir, {"sequence": loaded.name, "file": file or loaded.file,
@@ -80,7 +87,9 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
                                "simulator": connection.is_simulator,
                                "faults": [f.spec for f in connection.faults], "speed": speed,
                                "first_step": first_step, "seqrun": __version__,
-                               **(meta or {}), "inputs": _inputs(loaded, arm)})
+                               **(meta or {}), "inputs": _inputs(loaded, arm)},
+                     clock=connection.clock,
+                     channel=getattr(connection.bus, "channel", None) or "can0", warn=warn)
         client.add_frame_listener(log.on_frame)
         executor.listeners.insert(0, log.on_event)
     if on_executor is not None:
@@ -89,6 +98,10 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
     report = None
     try:
         result = executor.run(loaded, first_step=first_step)
+    except BaseException as exc:
+        if log is not None:
+            log.finish(executor.interrupted_result or _unfinished(executor, loaded, exc))
+        raise
     finally:
         if log is not None:
             if result is not None:
@@ -120,3 +133,15 @@ def _inputs(loaded: LoadedSequence, arm: ArmDescription) -> list[dict[str, str]]
     if arm.sha256:
         items.append({"kind": "arm", "file": arm.source_file, "sha256": arm.sha256})
     return items
+
+
+def _unfinished(executor: Executor, loaded: LoadedSequence, exc: BaseException) -> RunResult:
+    """The result of a run an exception ended outside any step (the executor did not get
+    to say): failed, exit 3, whatever it was."""
+    steps = [StepResult(s.number, s.kind, getattr(s, "title", None) or s.kind,
+                        str(s.location)) for s in loaded.steps]
+    message = f"interrupted ({exc!r}) before the run could finish"
+    return RunResult("failed", EXIT_FAULT, message, steps, 0.0,
+                     executor.clock.now() - executor._t0,
+                     {"cause": "interrupted", "module": None, "message": message,
+                      "step": None, "halt_sent": False, "halt_confirmed": False})

@@ -24,6 +24,7 @@ from seqrun.clock import VirtualClock
 from seqrun.connection import open_connection
 from seqrun.dryrun import _prepare_started
 from seqrun.executor import EXIT_FAULT, EXIT_INVALID, EXIT_OK, EXIT_OPERATOR_ABORT
+from seqrun.runlog import read_trace
 from seqrun.runner import run_sequence
 from seqrun.schema import load_sequence
 from seqrun.sim.faults import parse_fault_spec
@@ -33,7 +34,7 @@ HALT = (0x100, 0x02)
 
 
 def frames(folder: Path) -> list[can.Message]:
-    return list(can.LogReader(str(folder / "trace.log")))
+    return read_trace(folder, run_clock=True)
 
 
 def is_halt(msg: can.Message) -> bool:

@@ -5,6 +5,10 @@ SPEC --log-dir DIR`` in-process through the real CLI (typer app -> runner -> exe
 client -> simulated wire and arm) and then reads what an operator would have: the exit
 code, the output, and the run folder (report.json, events.jsonl, trace.log).
 
+Also (slow tier): every stop signal (SIGINT, SIGTERM, SIGHUP, SIGQUIT) at each of the six
+times below, and a tow error while the run folder's disk is full (see ``test_signal``,
+``test_disk_full_with_a_fault`` at the end).
+
 Matrix (the default run, no marker):
 
 * kinds: ``tow_error``, ``halt``, ``no_ack``, ``drop_acks=0.5``, ``stuck``, ``missing``;
@@ -91,6 +95,7 @@ from seqrun.cli.app import app
 from seqrun.errors import CodecError
 from seqrun.powercube.codec import GetParam, ack_key, decode_ack, decode_request, expected_ack_key
 from seqrun.powercube.protocol import ACK_BASE, BROADCAST_ID, GET_BASE, SET_BASE
+from seqrun.runlog import read_trace
 from seqrun.sim.faults import parse_fault_spec
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -144,7 +149,7 @@ class Run:
 
     @cached_property
     def trace(self) -> list[can.Message]:
-        return list(can.LogReader(str(self.folder / "trace.log")))
+        return read_trace(self.folder, run_clock=True)
 
     @cached_property
     def sent(self) -> list[can.Message]:
@@ -499,3 +504,142 @@ def assert_no_stall(run: Run) -> None:
         gap, at = max((b - a, a) for a, b in itertools.pairwise(cycles))
         assert gap <= CYCLE + RESPONSE_TIMEOUT + EXCHANGE, (
             f"step {step}: no motion command for {gap * 1000:.0f} ms from t = {at:.4f} s")
+
+
+# ----------------------------------------------------------------------------------------
+# Signals at every phase (the handler called at the phase's virtual time, as a signal
+# arriving then would run it) and a disk that fills up during a faulty run
+
+
+SIGNAL_EXPECTED = {"SIGINT": (130, "aborted"), "SIGTERM": (130, "aborted"),
+                   "SIGHUP": (3, "failed"), "SIGQUIT": (3, "failed")}
+#: A stop request is acted on at the loop's next check: within a cycle plus an exchange
+#: (a bus exchange can add a response timeout when an answer is overdue; none is here).
+REQUEST_WITHIN = CYCLE + EXCHANGE
+
+
+def run_cli_with_signal(folder: Path, monkeypatch, signum: int, t_signal: float) -> Run:
+    """The CLI run of :func:`run_cli`; its own signal handler is called once the virtual
+    clock reaches ``t_signal`` (from the clock's sleep, between two bytecodes of the loop)."""
+    import seqrun.cli.run as run_module
+    from seqrun.clock import VirtualClock
+
+    handlers: list = []
+
+    class Recorded(run_module.RunSignals):
+        def __init__(self, requests):
+            super().__init__(requests)
+            handlers.append(self)
+
+    class SignalClock(VirtualClock):
+        fired = False
+
+        def _maybe_fire(self) -> None:
+            if not self.fired and handlers and self.now() >= t_signal:
+                self.fired = True
+                handlers[0].handle(signum, None)
+
+        def sleep(self, seconds: float) -> None:
+            super().sleep(seconds)
+            self._maybe_fire()
+
+        def sleep_until(self, t: float) -> None:
+            super().sleep_until(t)
+            self._maybe_fire()
+
+    monkeypatch.setattr(run_module, "RunSignals", Recorded)
+    monkeypatch.setattr(run_module, "VirtualClock", SignalClock)
+    return run_cli(folder)
+
+
+SIGNAL_CASES = [pytest.param(name, phase, id=f"{name}-{phase}")
+                for name in SIGNAL_EXPECTED for phase in PHASES]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name, phase", SIGNAL_CASES)
+def test_signal(name, phase, clean, tmp_path, monkeypatch):
+    import signal as _signal
+
+    t_signal = clean.times()[phase]
+    run = run_cli_with_signal(tmp_path, monkeypatch, getattr(_signal, name), t_signal)
+    code, status = SIGNAL_EXPECTED[name]
+    assert_no_crash(run)
+    assert run.exit_code == code, run.output
+    assert run.report["status"] == status and run.report["exit_code"] == code
+    assert_complete_logs(run, code)
+    kinds = [e["type"] for e in run.events]
+    if name == "SIGINT":
+        # A controlled stop, never a Halt; braking only if a joint was moving.
+        assert run.halts == [] and run.report["fault"] is None
+        (request,) = run.of_type("abort_requested")
+        assert t_signal <= request["t"] <= t_signal + REQUEST_WITHIN, (request, t_signal)
+        if phase in ("startup", "move1", "move2"):   # "startup": move 1 has just begun
+            assert "controlled_stop" in kinds and "holding" in kinds
+        elif phase in ("dwell", "checkpoint"):
+            assert "controlled_stop" not in kinds
+        return
+    # SIGTERM, SIGHUP, SIGQUIT: the Halt within a cycle, then only Halts and reads.
+    fault = run.report["fault"]
+    assert fault["cause"] == ("operator_halt" if code == 130 else "signal"), fault
+    assert fault["halt_sent"] is True
+    assert run.halts, "no Halt on the bus"
+    assert t_signal <= run.halts[0] <= t_signal + REQUEST_WITHIN, (run.halts[0], t_signal)
+    after = [m for m in run.sent if m.timestamp >= run.halts[0]]
+    assert all(_is_halt(m) or GET_BASE < m.arbitration_id < SET_BASE for m in after), after
+
+
+class _FullDisk:
+    """``os.write`` of the run folder with ``budget`` bytes left, then ENOSPC."""
+
+    def __init__(self, budget: int) -> None:
+        self.left = budget
+
+    def __call__(self, fd, data):
+        import errno
+        import os
+
+        if self.left <= 0:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        n = os.write(fd, bytes(data[:self.left]))
+        self.left -= n
+        return n
+
+
+DISK_CASES = [pytest.param(budget, phase, id=f"{budget // 1000}kB-{phase}")
+              for budget in (0, 60_000, 200_000) for phase in ("move1", "move2", "dwell")]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("budget, phase", DISK_CASES)
+def test_disk_full_with_a_fault(budget, phase, clean, tmp_path, monkeypatch):
+    """A tow error of j4 while the disk is full (from the start, or filled up during the
+    run before the fault): the Halt is sent all the same (the executor's own Halt, recorded as
+    it returns), exit 3, one line about the log, whole lines on disk, no *.tmp."""
+    from seqrun import logfile
+    from seqrun.executor import Executor
+
+    monkeypatch.setattr(logfile, "_write", _FullDisk(budget))
+    halts: list[bool] = []
+    real_halt = Executor.emergency_halt
+
+    def recorded_halt(self):
+        sent = real_halt(self)
+        halts.append(sent)
+        return sent
+
+    monkeypatch.setattr(Executor, "emergency_halt", recorded_halt)
+    t_inject = clean.times()[phase]
+    run = run_cli(tmp_path, f"4:tow_error@{t_inject:.6f}")
+    assert_no_crash(run)
+    assert run.exit_code == 3, run.output
+    assert halts and all(halts), halts     # (a second call returns the first Halt's result)
+    assert "FAILED (exit 3)" in run.output
+    warnings = [line for line in run.output.splitlines() if "run log:" in line]
+    assert len(warnings) == 1, run.output
+    text = (tmp_path / "trace.log").read_text()
+    assert text == "" or text.endswith("\n")
+    assert len(list(can.LogReader(str(tmp_path / "trace.log")))) == len(text.splitlines())
+    for line in (tmp_path / "events.jsonl").read_text().splitlines():
+        json.loads(line)
+    assert not list(tmp_path.glob("*.tmp"))

@@ -3,7 +3,9 @@
 - SIGINT during a move -> controlled stop (ruckig to zero velocity), hold, exit 130; no
   Halt on the bus.
 - A second SIGINT during that controlled stop -> Halt broadcast, exit 130.
-- SIGTERM during a move -> Halt broadcast, exit 130.
+- SIGTERM during a move -> Halt broadcast, exit 130; SIGHUP or SIGQUIT -> Halt, exit 3.
+- A signal at any moment of a run (live view on, in a pseudo-terminal) ends it as asked,
+  with a finished run folder; Ctrl-C while the commands load is one line, exit 130.
 - SIGKILL of the runner mid-move (nothing in seqrun runs any more): with the modules'
   watchdog armed (``can.watchdog.enabled``), the simulated modules stop by themselves; without
   it, they keep going to their last target. The arm is served by ``seqrun sim serve`` in its
@@ -410,3 +412,178 @@ def test_sigkill_without_the_watchdog_the_arm_keeps_moving(tmp_path):
     # Still going: j1 goes on towards the ramp target it was last given, far ahead.
     assert j1[-1] - j1[0] > 5.0, j1
     assert j1[-1] - j1_last_deg > 8.0, (j1_last_deg, j1)
+
+
+# ----------------------------------------------------------------------------- SIGHUP, SIGQUIT
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["SIGHUP", "SIGQUIT"])
+def test_sighup_and_sigquit_during_a_move_halt_and_end_as_a_fault(tmp_path, name):
+    """Issue: the terminal closed (SIGHUP) or Ctrl-\\ (SIGQUIT) killed the runner mid-move
+    without a Halt, the report stayed 'running'."""
+    proc, folder = start_long_move(tmp_path)
+    try:
+        wait_for_event(folder, proc, at_speed, "j1 at speed")
+        proc.send_signal(getattr(signal, name))
+        code, out = wait_exit(proc, 20)
+    finally:
+        stop(proc)
+    assert code == 3, out
+    assert "Traceback" not in out
+    kinds = [e["type"] for e in events(folder)]
+    assert "halt_requested" in kinds and kinds[-1] == "run_finished", kinds[-10:]
+    sent_halts = halts(trace(folder))
+    assert sent_halts and all(f.can_id == BROADCAST for f in sent_halts), sent_halts
+    report = run_folder_report(folder)
+    assert report["status"] == "failed" and report["exit_code"] == 3
+    assert report["fault"]["cause"] == "signal" and report["fault"]["halt_sent"]
+    assert name in report["fault"]["message"]
+    assert (folder / "junit.xml").read_text().rstrip().endswith("</testsuites>")
+
+
+# ----------------------------------------------------------------------------- signal timing
+def seqrun_in_a_terminal(*args, cwd: Path) -> tuple[subprocess.Popen, list[bytes]]:
+    """seqrun with a pseudo-terminal as stdin/stdout/stderr: the live view is on (its
+    lock is where a signal used to deadlock the run). Output is drained by a thread."""
+    import pty
+    master, slave = pty.openpty()
+    env = dict(os.environ, PYTHONUNBUFFERED="1", COLUMNS="120", LINES="40", TERM="xterm")
+    for key in ("CAN_INTERFACE", "CAN_CHANNEL", "CAN_BITRATE", "CAN_CONFIG"):
+        env.pop(key, None)
+    proc = subprocess.Popen([sys.executable, "-m", "seqrun", *map(str, args)], cwd=cwd,
+                            env=env, stdin=slave, stdout=slave, stderr=slave,
+                            start_new_session=True)
+    os.close(slave)
+    chunks: list[bytes] = []
+
+    def drain() -> None:
+        while True:
+            try:
+                data = os.read(master, 4096)
+            except OSError:
+                break
+            if not data:
+                break
+            chunks.append(data)
+        os.close(master)
+
+    threading.Thread(target=drain, daemon=True).start()
+    return proc, chunks
+
+
+EXPECTED = {"SIGINT": 130, "SIGTERM": 130, "SIGHUP": 3}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("delay", [0.0, 0.05, 0.3, 1.0, 2.5])
+@pytest.mark.parametrize("name", sorted(EXPECTED))
+def test_a_signal_at_any_moment_ends_the_run_with_a_finished_folder(tmp_path, name, delay):
+    """The live view on (a pseudo-terminal), the signal ``delay`` s after the run started
+    (preflight, start-up steps, the move): never a hang, the exit code the signal asks for,
+    a finished report and junit.xml, no traceback."""
+    sequence = make_project(tmp_path)
+    folder = tmp_path / "run"
+    proc, chunks = seqrun_in_a_terminal("run", sequence, "--sim", "--yes", "--log-dir", folder,
+                                        cwd=tmp_path)
+    try:
+        wait_for_event(folder, proc, lambda e: e["type"] == "run_started", "the run start")
+        time.sleep(delay)
+        proc.send_signal(getattr(signal, name))
+        try:
+            code = proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            pytest.fail(f"{name} {delay} s into the run: no end within 30 s (a hang)")
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=10)
+    out = b"".join(chunks).decode(errors="replace")
+    assert code == EXPECTED[name], out[-2000:]
+    assert "Traceback" not in out
+    report = run_folder_report(folder)
+    assert report["exit_code"] == code and report["status"] in ("aborted", "failed")
+    assert (folder / "junit.xml").read_text().rstrip().endswith("</testsuites>")
+    assert events(folder)[-1]["type"] == "run_finished"
+    if name != "SIGINT":
+        assert halts(trace(folder)), "no Halt sent"
+        assert report["fault"]["halt_sent"]
+    # One time base in real time too: wall-clock stamps, one channel, events line up.
+    frames = list(can.LogReader(str(folder / "trace.log")))
+    started = next(e for e in events(folder) if e["type"] == "run_started")
+    assert abs(frames[0].timestamp - started["start_epoch_s"]) < 1.0
+    assert abs(started["start_epoch_s"] - time.time()) < 120
+    assert {m.channel for m in frames} == {frames[0].channel}
+
+
+# ----------------------------------------------------------------------------- start-up
+SLOW_IMPORT = """\
+import sys, time
+class Slow:
+    def find_spec(self, name, path=None, target=None):
+        if name == "seqrun.cli":
+            print("importing", flush=True)
+            time.sleep(5)
+        return None
+sys.meta_path.insert(0, Slow())
+sys.argv = ["seqrun", "--help"]
+from seqrun.entry import main
+main()
+"""
+
+
+@pytest.mark.slow
+def test_ctrl_c_while_the_commands_load_is_one_line_and_exit_130(tmp_path):
+    """Issue: Ctrl-C in the second the imports take printed a KeyboardInterrupt
+    traceback. The import of the command line is slowed down so the signal lands in it."""
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    proc = subprocess.Popen([sys.executable, "-c", SLOW_IMPORT], cwd=tmp_path, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline().strip() == "importing"
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=20)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=10)
+    assert proc.returncode == 130, (out, err)
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err
+    assert err.strip().splitlines() == ["seqrun: interrupted during start-up; nothing was sent"]
+
+
+SLOW_VALIDATION = """\
+import sys, time
+import seqrun.cli.run as run_module
+real = run_module.static_validation
+def slow(*args, **kwargs):
+    print("validating", flush=True)
+    time.sleep(5)
+    return real(*args, **kwargs)
+run_module.static_validation = slow
+from seqrun.entry import main
+main(sys.argv[1:])
+"""
+
+
+@pytest.mark.slow
+def test_ctrl_c_while_run_validates_is_one_line_and_exit_130(tmp_path):
+    """Before the run's handlers are in place click said "Aborted!", exit 1 (the code of
+    an invalid sequence)."""
+    sequence = make_project(tmp_path)
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    proc = subprocess.Popen([sys.executable, "-c", SLOW_VALIDATION, "run", str(sequence),
+                             "--sim", "--yes", "--plain", "--log-dir", str(tmp_path / "run")],
+                            cwd=tmp_path, env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline().strip() == "validating"
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=20)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=10)
+    assert proc.returncode == 130, (out, err)
+    assert "Traceback" not in err and "Aborted" not in err
+    assert err.strip().splitlines() == [
+        "seqrun run: interrupted (Ctrl-C) while the arm was not moving; nothing was sent"]
+    assert not (tmp_path / "run").exists()

@@ -27,6 +27,7 @@ from seqrun.powercube.client import DiscardReason, PowerCubeClient
 from seqrun.powercube.codec import GetParamAck, MotionExtAck, PosStateDio, encode
 from seqrun.powercube.protocol import MotionMode, ParamId, ShortState
 from seqrun.runner import run_sequence
+from seqrun.runlog import read_trace
 from seqrun.schema import load_sequence
 from seqrun.sim.bus import SimBus
 
@@ -82,7 +83,7 @@ class Run:
             sim_bus.shutdown()
         self.events = [json.loads(line)
                        for line in (self.folder / "events.jsonl").read_text().splitlines()]
-        self.trace = list(can.LogReader(str(self.folder / "trace.log")))
+        self.trace = read_trace(self.folder, run_clock=True)
 
     def inject(self, *frames: can.Message) -> None:
         for frame in frames:

@@ -1,18 +1,18 @@
 """``seqrun run FILE``: run a sequence on the arm (or the built-in simulator).
 
 Exit codes: 0 success, 1 invalid sequence (no motion), 2 usage error, 3 aborted by a fault,
-timeout or failed checkpoint (arm halted), 130 operator abort (controlled stop; a second
-Ctrl-C or SIGTERM halts instead).
+timeout or failed checkpoint (arm halted), or by SIGHUP / SIGQUIT (Halt), 130 operator abort
+(controlled stop; a second Ctrl-C or SIGTERM halts instead). Signals: cli/interrupts.py.
 """
 
 from __future__ import annotations
 
+import functools
 import os
-import signal
 import sys
 from dataclasses import replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Optional
+from typing import TYPE_CHECKING, Annotated, Callable, Optional
 
 import typer
 
@@ -27,27 +27,33 @@ if TYPE_CHECKING:
 
 
 
-def _ask(console: Console, question: str, assume_yes: bool) -> bool:
-    """Ask the operator; EOF on stdin (no operator) is a no."""
+def _ask(console: Console, question: str, assume_yes: bool,
+         read: Callable[[], str | None] | None = None) -> bool:
+    """Ask the operator; EOF on stdin (no operator) is a no. ``read`` returns None when
+    a signal interrupted the question (a no as well)."""
     if assume_yes:
         console.print(f"{question} yes (--yes)", highlight=False, markup=False, soft_wrap=True)
         return True
     console.print(f"{question} [y/N] ", end="", highlight=False, markup=False, soft_wrap=True)
-    try:
-        answer = sys.stdin.readline()
-    except KeyboardInterrupt:
-        return False
-    return answer.strip().lower() in ("y", "yes")
+    if read is None:
+        try:
+            answer = sys.stdin.readline()
+        except KeyboardInterrupt:
+            return False
+    else:
+        answer = read()
+    return answer is not None and answer.strip().lower() in ("y", "yes")
 
 
 def _ask_shown(console: Console, displays: list, question: str, assume_yes: bool, *,
+               read: Callable[[], str | None] | None = None,
                context: str | None = None) -> bool:
     """:func:`_ask` where the operator looks: the live view (if any) is off meanwhile, so
     its redraw cannot erase the question."""
     if not displays or not hasattr(displays[0], "asking"):
-        return _ask(console, question, assume_yes)
+        return _ask(console, question, assume_yes, read)
     with displays[0].asking(context):
-        return _ask(console, question, assume_yes)
+        return _ask(console, question, assume_yes, read)
 
 
 def static_validation(loaded, arm, start: str | None, started: bool, from_step: int):
@@ -64,7 +70,23 @@ def static_validation(loaded, arm, start: str | None, started: bool, from_step: 
                              before.final_deg, started=True)
 
 
+def _ctrl_c_outside_the_run_is_an_operator_abort(command):
+    """Before the run's own signal handlers are in place (validation, opening the bus, the
+    REAL-arm question) and after they are gone, Ctrl-C is a KeyboardInterrupt: one line,
+    exit 130 (click would say "Aborted!", exit 1: the code of an invalid sequence)."""
+    @functools.wraps(command)
+    def wrapper(*args, **kwargs):
+        try:
+            return command(*args, **kwargs)
+        except KeyboardInterrupt:
+            typer.echo("seqrun run: interrupted (Ctrl-C) while the arm was not moving; "
+                       "nothing was sent", err=True)
+            raise typer.Exit(EXIT_OPERATOR_ABORT) from None
+    return wrapper
+
+
 @app.command("run")
+@_ctrl_c_outside_the_run_is_an_operator_abort
 def run_command(
     file: Annotated[Path, typer.Argument(help="Sequence file (YAML).")],
     interface: InterfaceOption = None,
@@ -125,9 +147,11 @@ def run_command(
     from seqrun.cli.zero import zero_at_run_start
     from seqrun.clock import VirtualClock
     from seqrun.connection import open_connection, parse_bus_kwargs, parse_faults
-    from seqrun.runlog import default_run_dir
+    from seqrun.cli.interrupts import RunSignals
+    from seqrun.runlog import prepare_run_folder
     from seqrun.runner import run_sequence
     from seqrun.schema import load_sequence
+    from seqrun.stop_requests import StopRequests
 
     keep_running_on_broken_pipe()  # a closed stdout never ends a run
     console = make_console(stderr=False)
@@ -203,7 +227,6 @@ def run_command(
         connection.close()
         raise
 
-    folder = log_dir or default_run_dir(loaded.name, campaign_records.runs_dir(loaded))
     if rt_priority is not None:
         try:
             os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(rt_priority))
@@ -212,56 +235,43 @@ def run_command(
         except (OSError, AttributeError) as exc:
             console.print(f"warning: real-time scheduling not available ({exc}); running at "
                           "normal priority", style="yellow", highlight=False, markup=False)
-    try:
-        folder.mkdir(parents=True, exist_ok=True)  # an unusable --log-dir: exit 2, nothing sent
+    try:  # an unusable --log-dir: exit 2, nothing sent; a used one gets a new folder inside
+        folder = prepare_run_folder(log_dir, loaded.name, campaign_records.runs_dir(loaded))
     except OSError as exc:
         connection.close()
-        fail(f"cannot create the run folder {folder}: {exc.strerror or exc}")
+        fail(f"cannot create the run folder {log_dir or campaign_records.runs_dir(loaded)}: "
+             f"{exc.strerror or exc}")
+    if log_dir is not None and folder != log_dir:
+        console.print(f"{log_dir} holds an earlier run: this run goes to {folder}",
+                      highlight=False, markup=False, soft_wrap=True)
+
+    # From here on signals only post stop requests (seqrun/cli/interrupts.py); the control
+    # loop acts on them, a question is answered "no".
+    requests = StopRequests()
+    signals = RunSignals(requests)
 
     campaign_records.record_run(folder, loaded, arm_file or loaded.arm_path,
                                 connection.description, zero)
     displays: list = []
 
     def confirm(prompt: str) -> bool:
-        return _ask_shown(console, displays, prompt, yes)
+        return _ask_shown(console, displays, prompt, yes, read=signals.read_answer)
 
     def confirm_clear_latched(question: str) -> bool:
         # Asked even with --yes: someone may have pressed the emergency stop for a reason.
-        return _ask_shown(console, displays, question, False)
+        return _ask_shown(console, displays, question, False, read=signals.read_answer)
 
     def before_step(s) -> bool:
         if not step:
             return True
         mark = "" if s.title.endswith("?") else "?"
         return _ask_shown(console, displays, f"Run step {s.number}/{len(loaded.steps)}: "
-                          f"{s.title}{mark}", False,
+                          f"{s.title}{mark}", False, read=signals.read_answer,
                           context=f"step {s.number}/{len(loaded.steps)}: {s.title} (asking)")
-
-    interrupts = 0
-    holder: dict = {}
-
-    def on_sigint(signum, frame) -> None:
-        nonlocal interrupts
-        interrupts += 1
-        executor = holder.get("executor")
-        if executor is None:
-            raise KeyboardInterrupt
-        if interrupts == 1:
-            executor.abort("Ctrl-C: controlled stop")
-            if executor.waiting_for_operator:
-                raise KeyboardInterrupt
-        else:
-            executor.halt("second Ctrl-C: Halt")
-
-    def on_sigterm(signum, frame) -> None:
-        executor = holder.get("executor")
-        if executor is not None:
-            executor.halt("SIGTERM: Halt")
 
     live = console.is_terminal and not plain
 
     def attach(executor) -> None:
-        holder["executor"] = executor
         executor.emit("zero_reference", **zero.as_dict())  # for the log and any console
         # The built-in simulator keeps no record: its zero is its power-on pose.
         executor.record_zero = (None if connection.is_simulator
@@ -274,12 +284,16 @@ def run_command(
         if live:
             display.__enter__()
 
-    old_int = signal.signal(signal.SIGINT, on_sigint)
-    old_term = signal.signal(signal.SIGTERM, on_sigterm)
+    def warn(text: str) -> None:
+        console.print(f"  !!  {text}", style="yellow", highlight=False, markup=False,
+                      soft_wrap=True)
+
+    signals.install()
     try:
         outcome = run_sequence(loaded, arm, connection, log_dir=folder, file=str(file),
                                speed=speed, first_step=from_step, command_mode=command_mode,
                                confirm=confirm, before_step=before_step, on_executor=attach,
+                               requests=requests, warn=warn,
                                confirm_clear_latched=(None if connection.is_simulator
                                                       else confirm_clear_latched),
                                meta={"zero": zero.as_dict()},
@@ -287,28 +301,34 @@ def run_command(
     finally:
         if live and displays:
             displays[0].__exit__(None, None, None)
-        signal.signal(signal.SIGINT, old_int)
-        signal.signal(signal.SIGTERM, old_term)
+        signals.restore()
         connection.close()
     result = outcome.result
-    colour = "green" if result.exit_code == 0 else "red"
-    # With a list of errors the message is a summary: each error is printed once, below.
-    message = result.extra.get("summary") or result.message
-    console.print(Text.assemble((result.status.upper(), colour),
-                                f" (exit {result.exit_code}): {message}"), highlight=False)
-    if result.latched_at_start:
-        console.print("note: " + outcome.executor.latched_message()
-                      + (" - cleared by the sequence's Reset" if result.exit_code == 0 else ""),
-                      style="yellow", highlight=False, markup=False)
-    if result.extra.get("errors"):
-        for error in result.extra["errors"]:
-            console.print(f"  {error['file']}:{error['line']}:{error['column']}: "
-                          f"{error['message']}", highlight=False, markup=False)
-    console.print(f"duration {result.duration_s:.2f} s, planned motion "
-                  f"{result.planned_duration_s:.2f} s; log: {folder}", highlight=False,
-                  markup=False)
-    if outcome.report_error:
-        console.print(f"warning: report.html not written ({outcome.report_error}); "
-                      f"try: seqrun report {folder}", style="yellow", highlight=False,
+    try:  # a terminal that is gone (SIGHUP) must not change the exit code
+        colour = "green" if result.exit_code == 0 else "red"
+        # With a list of errors the message is a summary: each error is printed once, below.
+        message = result.extra.get("summary") or result.message
+        console.print(Text.assemble((result.status.upper(), colour),
+                                    f" (exit {result.exit_code}): {message}"), highlight=False)
+        if result.latched_at_start:
+            console.print("note: " + outcome.executor.latched_message()
+                          + (" - cleared by the sequence's Reset" if result.exit_code == 0
+                             else ""),
+                          style="yellow", highlight=False, markup=False)
+        if result.extra.get("errors"):
+            for error in result.extra["errors"]:
+                console.print(f"  {error['file']}:{error['line']}:{error['column']}: "
+                              f"{error['message']}", highlight=False, markup=False)
+        console.print(f"duration {result.duration_s:.2f} s, planned motion "
+                      f"{result.planned_duration_s:.2f} s; log: {folder}", highlight=False,
                       markup=False)
+        if outcome.report_error:
+            console.print(f"warning: report.html not written ({outcome.report_error}); "
+                          f"try: seqrun report {folder}", style="yellow", highlight=False,
+                          markup=False)
+        if outcome.report and outcome.report.get("log_errors"):
+            console.print(f"the run log is incomplete: {outcome.report['log_errors'][0]}",
+                          style="yellow", highlight=False, markup=False, soft_wrap=True)
+    except (OSError, ValueError):
+        pass
     raise typer.Exit(result.exit_code)

@@ -1,0 +1,34 @@
+"""The ``seqrun`` program's entry point: Ctrl-C during start-up is one line, exit 130.
+
+Importing the command line (typer, rich, numpy, python-can, ruckig) takes about a second.
+A Ctrl-C in that second used to print a KeyboardInterrupt traceback. Nothing can have been
+sent to any bus yet, so until the commands are loaded SIGINT ends the process at once with
+one line and the operator-abort exit code; after that each command handles it.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+
+EXIT_OPERATOR_ABORT = 130   # seqrun.executor's, without importing it (the point is speed)
+_MESSAGE = b"seqrun: interrupted during start-up; nothing was sent\n"
+
+
+def _interrupted_during_start_up(signum, frame) -> None:
+    os.write(2, _MESSAGE)
+    os._exit(EXIT_OPERATOR_ABORT)
+
+
+def main(argv: list[str] | None = None) -> None:
+    previous = signal.signal(signal.SIGINT, _interrupted_during_start_up)
+    try:
+        from seqrun.cli import main as cli_main
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    cli_main(argv)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

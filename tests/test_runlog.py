@@ -1,0 +1,274 @@
+"""The run folder: a full disk, a reused or unusable --log-dir, one time base, the report's
+cost per step and the report of a killed run. In process, at virtual time."""
+
+from __future__ import annotations
+
+import errno
+import hashlib
+import json
+import os
+import time
+from pathlib import Path
+
+import can
+import pytest
+from typer.testing import CliRunner
+
+import seqrun.cli  # noqa: F401  (registers the commands on the app)
+from seqrun import logfile
+from seqrun.arm import load_arm
+from seqrun.cli.app import app
+from seqrun.clock import VirtualClock
+from seqrun.connection import open_connection
+from seqrun.executor import RunResult, StepResult
+from seqrun.runlog import RunLog, read_report, read_trace
+from seqrun.runner import run_sequence
+from seqrun.schema import load_sequence
+
+ROOT = Path(__file__).resolve().parents[1]
+TOTEM = ROOT / "sequences" / "totem.yaml"
+
+
+class FullDisk:
+    """``os.write`` for the run folder with ``budget`` bytes of space: a write that does
+    not fit is short (what fits), the next one fails with ENOSPC, like a filling disk."""
+
+    def __init__(self, budget: int) -> None:
+        self.left = budget
+        self.failures = 0
+
+    def __call__(self, fd: int, data) -> int:
+        if self.left <= 0:
+            self.failures += 1
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        n = os.write(fd, bytes(data[:self.left]))
+        self.left -= n
+        return n
+
+
+def run_cli(folder: Path, *extra: str):
+    return CliRunner().invoke(app, ["run", str(TOTEM), "--virtual-time", "--yes", "--plain",
+                                    "--log-dir", str(folder), *extra])
+
+
+def assert_readable(folder: Path) -> None:
+    """Whatever is on disk reads back: whole trace lines only, events that parse, no
+    temporary file left."""
+    text = (folder / "trace.log").read_text()
+    assert text == "" or text.endswith("\n")
+    assert len(list(can.LogReader(str(folder / "trace.log")))) == len(text.splitlines())
+    for line in (folder / "events.jsonl").read_text().splitlines():
+        json.loads(line)
+    assert not list(folder.glob("*.tmp")), list(folder.iterdir())
+
+
+# ----------------------------------------------------------------------------- disk full
+@pytest.mark.parametrize("budget", [0, 3_000, 40_000, 150_000])
+@pytest.mark.parametrize("fault, code", [((), 0), (("--sim-fault", "4:tow_error@3"), 3)])
+def test_a_full_disk_never_disturbs_the_run(tmp_path, monkeypatch, budget, fault, code):
+    """Issue: one traceback per CAN frame, exit 1 instead of 3, report.json.tmp left, a
+    partial last line in trace.log. Now: one line, the run's own exit code, whole lines."""
+    disk = FullDisk(budget)
+    monkeypatch.setattr(logfile, "_write", disk)
+    folder = tmp_path / "run"
+    result = run_cli(folder, *fault)
+    assert result.exit_code == code, result.output
+    assert result.exception is None or isinstance(result.exception, SystemExit)
+    assert "Traceback" not in result.output
+    assert disk.failures >= 1, "the disk never filled up"
+    warnings = [line for line in result.output.splitlines() if "run log:" in line]
+    assert len(warnings) == 1, result.output      # said once, not once per frame
+    assert "No space left on device" in warnings[0]
+    assert ("PASSED" if code == 0 else "FAILED") in result.output
+    assert_readable(folder)
+
+
+def test_a_full_disk_leaves_the_arm_behaviour_unchanged(tmp_path, monkeypatch):
+    """Every frame on the bus, at the same (virtual) time, with and without a full disk."""
+    def frames(folder: Path) -> list[tuple]:
+        loaded = load_sequence(TOTEM)
+        arm = load_arm(loaded.arm_path)
+        connection = open_connection(force_sim=True, clock=VirtualClock())
+        seen: list[tuple] = []
+
+        def attach(executor) -> None:
+            executor.client.add_frame_listener(
+                lambda m: seen.append((m.timestamp, m.arbitration_id, bytes(m.data), m.is_rx)))
+        try:
+            outcome = run_sequence(loaded, arm, connection, log_dir=folder,
+                                   confirm=lambda p: True, on_executor=attach)
+        finally:
+            connection.close()
+        assert outcome.result.exit_code == 0
+        return seen
+
+    clean = frames(tmp_path / "clean")
+    monkeypatch.setattr(logfile, "_write", FullDisk(10_000))
+    assert frames(tmp_path / "full") == clean
+
+
+def test_a_full_disk_is_recorded_in_the_report_when_the_report_fits(tmp_path, monkeypatch):
+    """The trace fills the disk; space comes back for the end (another process freed
+    it): the report says which file stopped."""
+    class TraceOnly(FullDisk):
+        def __call__(self, fd, data):
+            if os.readlink(f"/proc/self/fd/{fd}").endswith("trace.log"):
+                return super().__call__(fd, data)
+            return os.write(fd, data)
+
+    monkeypatch.setattr(logfile, "_write", TraceOnly(5_000))
+    result = run_cli(tmp_path / "run")
+    assert result.exit_code == 0
+    report = json.loads((tmp_path / "run" / "report.json").read_text())
+    assert report["status"] == "passed"
+    assert any("trace.log" in e for e in report["log_errors"]), report.get("log_errors")
+    kinds = [json.loads(line)["type"] for line in
+             (tmp_path / "run" / "events.jsonl").read_text().splitlines()]
+    assert "log_failed" in kinds and kinds[-1] == "run_finished"
+    assert "the run log is incomplete" in result.output
+
+
+# ----------------------------------------------------------------------------- --log-dir
+def digest(folder: Path) -> dict[str, str]:
+    """The first run's files (top level and its inputs/), not the later runs' folders."""
+    files = [p for p in folder.iterdir() if p.is_file()]
+    if (folder / "inputs").is_dir():
+        files += [p for p in (folder / "inputs").rglob("*") if p.is_file()]
+    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in files}
+
+
+def test_a_reused_log_dir_keeps_the_earlier_run(tmp_path):
+    """Issue: a second run with the same --log-dir overwrote the first one's evidence."""
+    folder = tmp_path / "logs"
+    first = run_cli(folder)
+    assert first.exit_code == 0
+    before = digest(folder)
+    second = run_cli(folder)
+    assert second.exit_code == 0, second.output
+    assert digest(folder) == before                  # the first run untouched
+    (inner,) = [p for p in folder.iterdir() if (p / "report.json").exists()]
+    assert json.loads((inner / "report.json").read_text())["status"] == "passed"
+    assert f"this run goes to {inner}" in second.output
+    third = run_cli(folder)                          # the same second: its own folder
+    assert third.exit_code == 0
+    assert len([p for p in folder.iterdir() if (p / "report.json").exists()]) == 2
+    assert digest(folder) == before
+
+
+def test_an_empty_log_dir_is_used_as_it_is(tmp_path):
+    folder = tmp_path / "empty"
+    folder.mkdir()
+    assert run_cli(folder).exit_code == 0
+    assert (folder / "report.json").exists()
+
+
+def test_an_unwritable_existing_log_dir_is_one_line_exit_2(tmp_path):
+    """Issue: an existing read-only --log-dir gave a traceback, exit 1. /proc exists and
+    takes no new files (even for root, where a chmod would not stop anything)."""
+    result = CliRunner().invoke(app, ["run", str(TOTEM), "--virtual-time", "--yes",
+                                      "--plain", "--log-dir", "/proc"])
+    assert result.exit_code == 2, result.output
+    assert "Traceback" not in result.output
+    assert "cannot create the run folder /proc" in result.output
+
+
+# ----------------------------------------------------------------------------- time base
+def test_the_trace_is_on_wall_clock_time_with_one_channel_and_converts(tmp_path):
+    """Issue: sent frames said vcan0, received ones seqrun-1; stamps counted from boot,
+    so a conversion to .asc said 1970. Events + the start time = trace time."""
+    before = time.time()
+    result = run_cli(tmp_path / "run")
+    after = time.time()
+    assert result.exit_code == 0
+    folder = tmp_path / "run"
+    frames = list(can.LogReader(str(folder / "trace.log")))
+    assert {m.channel for m in frames} == {frames[0].channel}           # one name
+    assert {m.is_rx for m in frames} == {True, False}                   # both directions
+    duration = json.loads((folder / "report.json").read_text())["duration_s"]
+    assert before - 1 <= frames[0].timestamp and frames[-1].timestamp <= after + duration + 1
+    # python-can's converter writes a Vector .asc whose start is today, not 1970.
+    with can.Logger(str(folder / "trace.asc")) as asc:
+        for m in frames:
+            asc.on_message_received(m)
+    text = (folder / "trace.asc").read_text()
+    triggerblock = text.split("Begin Triggerblock")[1].splitlines()[0]
+    assert time.strftime("%Y") in triggerblock, triggerblock
+    assert len(list(can.LogReader(str(folder / "trace.asc")))) == len(frames)
+    # One time base: event t + start_epoch_s is the frame's time. Step 1 (Reset) starts
+    # with the Reset broadcast; a step's first frame comes within a cycle of its event.
+    events = [json.loads(line) for line in (folder / "events.jsonl").read_text().splitlines()]
+    started = next(e for e in events if e["type"] == "run_started")
+    report = json.loads((folder / "report.json").read_text())
+    assert started["type"] == "run_started"
+    assert report["start_epoch_s"] == started["start_epoch_s"]
+    step1 = next(e for e in events if e["type"] == "step_started")
+    reset = next(m for m in frames if m.arbitration_id == 0x100 and m.data[0] == 0x00)
+    assert reset.timestamp == pytest.approx(started["start_epoch_s"] + step1["t"], abs=0.01)
+    # On the run's own clock (what the executor and the simulator saw) the Reset is at
+    # the event's t to the microsecond the trace keeps.
+    on_run_clock = read_trace(folder, run_clock=True)
+    reset_run = next(m for m in on_run_clock if m.arbitration_id == 0x100 and m.data[0] == 0)
+    assert reset_run.timestamp == pytest.approx(step1["t"] + started["clock_s"], abs=2e-6)
+
+
+# ----------------------------------------------------------------------------- report cost
+def fake_run(folder: Path, steps: int, *, finish: bool = True) -> RunLog:
+    """A run log fed with ``steps`` finished steps (events as the executor emits them)."""
+    clock = VirtualClock()
+    log = RunLog(folder, {"sequence": "fake"}, clock=clock, channel="can0")
+    log.on_event({"t": 0.0, "type": "run_started", "steps": steps, "clock_s": 0.0})
+    results = []
+    for n in range(1, steps + 1):
+        log.on_event({"t": n, "type": "step_started", "step": n, "kind": "wait",
+                      "label": f"wait {n}", "location": f"f.yaml:{n}:3"})
+        log.on_frame(can.Message(arbitration_id=0x0C1, data=b"\x0a\x3c",
+                                 is_extended_id=False, timestamp=clock.now()))
+        clock.sleep(0.01)
+        log.on_event({"t": n + 0.01, "type": "step_finished", "step": n, "status": "passed",
+                      "duration_s": 0.01, "planned_duration_s": None})
+        results.append(StepResult(n, "wait", f"wait {n}", f"f.yaml:{n}:3", "passed", n, n + 0.01))
+    if finish:
+        log.finish(RunResult("passed", 0, "sequence completed", results, 0.0, steps + 0.01))
+        log.close()
+    return log
+
+
+def test_the_per_step_cost_of_the_report_is_constant(tmp_path, monkeypatch):
+    """Issue: report.json rewritten whole after every step, O(n²). Bytes written while
+    running grow linearly with the steps (the final report aside)."""
+    written: dict[int, int] = {}
+    for steps in (100, 1000):
+        count = [0]
+
+        def write(fd, data, count=count):
+            count[0] += len(data)
+            return os.write(fd, data)
+
+        monkeypatch.setattr(logfile, "_write", write)
+        fake_run(tmp_path / str(steps), steps, finish=False).close()
+        written[steps] = count[0]
+    assert written[1000] / written[100] < 11, written
+
+
+def test_a_killed_run_reads_back_with_its_steps(tmp_path):
+    """A run killed after 30 steps: report.json says running; read_report adds the steps
+    from steps.jsonl (a partly written last line is ignored)."""
+    folder = tmp_path / "run"
+    log = fake_run(folder, 30, finish=False)
+    log.close()
+    with open(folder / "steps.jsonl", "a") as f:
+        f.write('{"number": 31, "sta')                   # the line being written
+    raw = json.loads((folder / "report.json").read_text())
+    assert raw["status"] == "running" and raw["steps_file"] == "steps.jsonl"
+    report = read_report(folder)
+    assert [s["number"] for s in report["steps"]] == list(range(1, 31))
+    assert report["steps"][0]["label"] == "wait 1" and report["steps"][0]["status"] == "passed"
+    assert report["last_event"]["type"] == "step_finished"
+
+
+def test_a_finished_run_reads_back_whole(tmp_path):
+    fake_run(tmp_path / "run", 5)
+    report = read_report(tmp_path / "run")
+    assert report["status"] == "passed" and len(report["steps"]) == 5
+    assert report == json.loads((tmp_path / "run" / "report.json").read_text())
