@@ -112,8 +112,17 @@ def run_injected(tmp_path: Path, where: str, plan: list[tuple[int, str]], nth: i
         injector.executor = executor
         executor.listeners.insert(0, injector.events.append)
         live = LiveDisplay(console, executor, "test", "sim", len(loaded.steps))
-        executor.listeners += [live, PlainDisplay(console, len(loaded.steps))]
-        targets = {"live_view": (live, "_lock"), "client": (executor.client, "_lock"),
+        executor.idle_hooks.append(live.on_idle)
+
+        def live_view(event: dict) -> None:
+            # The live view holds no lock (it draws on the loop's thread): a signal that
+            # arrives while it handles an event stands for "inside the live view".
+            if where == "live_view":
+                injector()
+            live(event)
+
+        executor.listeners += [live_view, PlainDisplay(console, len(loaded.steps))]
+        targets = {"client": (executor.client, "_lock"),
                    "clock": (clock, "_lock"), "sim_bus": (connection.bus.arm, "_lock")}
         if where in targets:
             owner, attr = targets[where]

@@ -70,6 +70,18 @@ def static_validation(loaded, arm, start: str | None, started: bool, from_step: 
                              before.final_deg, started=True)
 
 
+def _all_errors(file: Path, load_errors: list, **check) -> list:
+    """The errors `seqrun validate --static` reports for ``file`` (load errors and the
+    checks of the steps that loaded), else ``load_errors``."""
+    from seqrun.cli.validate import static_check
+    from seqrun.errors import UserInputError
+
+    try:
+        return static_check(file, **check).errors or load_errors
+    except UserInputError:
+        return load_errors
+
+
 def _ctrl_c_outside_the_run_is_an_operator_abort(command):
     """Before the run's own signal handlers are in place (validation, opening the bus, the
     REAL-arm question) and after they are gone, Ctrl-C is a KeyboardInterrupt: one line,
@@ -167,8 +179,12 @@ def run_command(
         try:
             loaded = load_sequence(file, project_root=project_dir)  # invalid -> exit 1, no bus
         except SequenceInvalid as exc:
-            campaign_records.refuse_unloadable(file, project_dir, exc.errors, log_dir)
-            raise
+            # Every problem in one pass, exactly as `seqrun validate` reports them: the
+            # steps that are valid on their own are still checked against the arm.
+            errors = _all_errors(file, exc.errors, start=start, arm_file=arm_file,
+                                 started=started, speed=speed, project_dir=project_dir)
+            campaign_records.refuse_unloadable(file, project_dir, errors, log_dir)
+            raise SequenceInvalid(errors) from None
         arm = load_arm_file(arm_file or loaded.arm_path)
         if power_on_at is not None:
             arm.power_off_pose(power_on_at)  # one of the arm's power-off poses
