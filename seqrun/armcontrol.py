@@ -67,8 +67,11 @@ def command_and_confirm(client: PowerCubeClient, command: CommandId, modules: It
     waiting = sorted(set(modules))
     for attempt in range(1, max(attempts, 1) + 1):
         result.attempts = attempt
-        if attempt == 1:
-            requests: list[Request] = [BroadcastRequest(command, 0)]
+        if attempt == 1 and command == CommandId.HALT:
+            client.halt_now()  # before anything queued is read: a stop must not wait
+            requests: list[Request] = []
+        elif attempt == 1:
+            requests = [BroadcastRequest(command, 0)]
         else:
             client.idle(_RETRY_PAUSE)
             requests = [CommandRequest(m, command) for m in waiting]

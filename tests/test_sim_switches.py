@@ -126,6 +126,7 @@ def test_addressed_refresh_arms_the_watchdog_when_switched_on(clock):
 
 # -- the same switches from `seqrun sim serve` ----------------------------------------------
 
+@pytest.mark.slow  # a real-time subprocess: 50 ms watchdog timing
 def test_sim_serve_switches():
     process = subprocess.Popen(
         [sys.executable, "-m", "seqrun", "sim", "serve", "--port", "0",
