@@ -521,12 +521,15 @@ REQUEST_WITHIN = CYCLE + EXCHANGE
 def run_cli_with_signal(folder: Path, monkeypatch, signum: int, t_signal: float) -> Run:
     """The CLI run of :func:`run_cli`; its own signal handler is called once the virtual
     clock reaches ``t_signal`` (from the clock's sleep, between two bytecodes of the loop)."""
-    import seqrun.cli.run as run_module
+    # seqrun run imports these inside the command (short commands stay light): patch them
+    # where they are looked up then.
+    import seqrun.cli.interrupts as interrupts_module
+    import seqrun.clock as clock_module
     from seqrun.clock import VirtualClock
 
     handlers: list = []
 
-    class Recorded(run_module.RunSignals):
+    class Recorded(interrupts_module.RunSignals):
         def __init__(self, requests):
             super().__init__(requests)
             handlers.append(self)
@@ -547,8 +550,8 @@ def run_cli_with_signal(folder: Path, monkeypatch, signum: int, t_signal: float)
             super().sleep_until(t)
             self._maybe_fire()
 
-    monkeypatch.setattr(run_module, "RunSignals", Recorded)
-    monkeypatch.setattr(run_module, "VirtualClock", SignalClock)
+    monkeypatch.setattr(interrupts_module, "RunSignals", Recorded)
+    monkeypatch.setattr(clock_module, "VirtualClock", SignalClock)
     return run_cli(folder)
 
 

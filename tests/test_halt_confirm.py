@@ -24,7 +24,7 @@ from seqrun.powercube.protocol import ShortState
 from seqrun.runner import run_sequence
 from seqrun.schema import load_sequence
 from seqrun.sim.bus import SimBus
-from tests.wrapbus import WrapBus
+from wrapbus import WrapBus
 
 ROOT = Path(__file__).resolve().parents[1]
 ARM = load_arm(ROOT / "arms" / "lwa3.yaml")

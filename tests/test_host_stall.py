@@ -17,7 +17,7 @@ from seqrun.powercube.client import PowerCubeClient
 from seqrun.runner import run_sequence
 from seqrun.schema import load_sequence
 from seqrun.sim.bus import SimBus
-from tests.wrapbus import WrapBus
+from wrapbus import WrapBus
 
 ROOT = Path(__file__).resolve().parents[1]
 STALL_S = 0.060

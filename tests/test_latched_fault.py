@@ -15,7 +15,8 @@ from typer.testing import CliRunner
 
 import seqrun.cli  # noqa: F401  (registers the commands)
 from seqrun.cli.app import app
-from tests.test_executor_e2e import events, frames, run
+from zerostate import with_park_recorded
+from test_executor_e2e import events, frames, run
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -110,7 +111,7 @@ def test_on_a_real_interface_even_yes_does_not_clear_a_latched_fault_unasked(tmp
     import time
 
     port = _free_port()
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    env = with_park_recorded(dict(os.environ, PYTHONPATH=str(ROOT)), tmp_path)
     server = subprocess.Popen([sys.executable, "-m", "seqrun", "sim", "serve", "--port",
                                str(port), "--fault", "all:halt@0"], cwd=ROOT, env=env,
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)

@@ -30,7 +30,8 @@ from seqrun.powercube.client import PowerCubeClient
 from seqrun.runner import run_sequence
 from seqrun.schema import load_sequence
 from seqrun.sim.bus import SimBus
-from tests.wrapbus import WrapBus
+from wrapbus import WrapBus
+from zerostate import with_park_recorded
 
 ROOT = Path(__file__).resolve().parents[1]
 _channels = itertools.count()
@@ -119,7 +120,7 @@ def _free_port() -> int:
 @pytest.mark.slow
 def test_a_killed_socketcand_server_mid_move_ends_the_run_with_exit_3(tmp_path):
     port = _free_port()
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    env = with_park_recorded(dict(os.environ, PYTHONPATH=str(ROOT)), tmp_path)
     server = subprocess.Popen([sys.executable, "-m", "seqrun", "sim", "serve", "--port",
                                str(port)], cwd=ROOT, env=env, stdout=subprocess.PIPE,
                               stderr=subprocess.STDOUT, text=True)

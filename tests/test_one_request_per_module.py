@@ -25,7 +25,7 @@ from seqrun.powercube.protocol import MotionMode, ParamId
 from seqrun.sim.bus import SimBus
 from seqrun.sim.module import ModuleOptions
 from seqrun.sim.options import parse_module_options
-from tests.test_executor_e2e import run
+from test_executor_e2e import run
 
 ROOT = Path(__file__).resolve().parents[1]
 BUSY = ModuleOptions(drop_request_while_busy=True)

@@ -12,12 +12,14 @@ import subprocess
 import sys
 
 import pytest
+from zerostate import with_park_recorded
 
 ENV = {**os.environ, "PYTHONUNBUFFERED": "1"}
 
 
 @pytest.mark.slow
 def test_run_with_a_watcher_beside_it(tmp_path):
+    env = with_park_recorded(ENV, tmp_path)  # the served arm powers on at Park
     server = subprocess.Popen([sys.executable, "-m", "seqrun", "sim", "serve", "--port", "0"],
                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                               env=ENV)
@@ -33,7 +35,7 @@ def test_run_with_a_watcher_beside_it(tmp_path):
         run = subprocess.run(
             [sys.executable, "-m", "seqrun", "run", "sequences/opsafe.yaml", "--yes",
              "--plain", "--log-dir", str(tmp_path / "run"), *bus],
-            capture_output=True, text=True, env={**ENV, "SEQRUN_RESPONSE_TIMEOUT_MS": "200"},
+            capture_output=True, text=True, env={**env, "SEQRUN_RESPONSE_TIMEOUT_MS": "200"},
             timeout=180)
         assert watcher.poll() is None, "the watch ended during the run"
         watcher.send_signal(signal.SIGINT)
