@@ -221,7 +221,10 @@ def _steps(data: RunData) -> str:
         rows.append(
             f'<tr class="s-{escape(s.status)}" id="step-{s.number}">'
             f'<td class="num">{s.number}</td>'
-            f"<td><strong>{escape(s.kind)}</strong>: {escape(s.label)}<br>"
+            # a label without its own text starts with the kind ("confirm: …"): once
+            f"<td><strong>{escape(s.kind)}</strong>"
+            f"{escape(s.label[len(s.kind):] if s.label.startswith(s.kind) else ': ' + s.label)}"
+            "<br>"
             f'<span class="note mono">{escape(s.location)}</span></td>'
             f"<td>{escape(s.status)}</td><td class=\"num\">{_num(planned, 3)}</td>"
             f'<td class="num">{_num(executed, 3)}</td>'
@@ -355,8 +358,9 @@ def _value(v: Any) -> str:
         return ""
     if isinstance(v, bool):
         return "yes" if v else "no"
-    if isinstance(v, float):
-        return escape(f"{v:g}")
+    if isinstance(v, float):  # up to 6 decimals, never an exponent (epoch seconds, clocks)
+        return escape(f"{v:.6f}".rstrip("0").rstrip(".") if abs(v) >= 1e-3 or v == 0
+                      else f"{v:g}")
     if isinstance(v, dict) and len(v) > 1 and len({json.dumps(x) for x in v.values()}) == 1:
         return f"all {len(v)}: {_value(next(iter(v.values())))}"   # e.g. every module's state
     if isinstance(v, (dict, list)):
