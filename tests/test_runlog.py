@@ -156,6 +156,29 @@ def test_a_reused_log_dir_keeps_the_earlier_run(tmp_path):
     assert digest(folder) == before
 
 
+def test_a_refused_run_never_overwrites_an_earlier_run_in_its_log_dir(tmp_path):
+    """A run refused by validation leaves its short record in a new folder too, beside the
+    earlier run's evidence, for a file that loads and for one that does not."""
+    folder = tmp_path / "logs"
+    assert run_cli(folder).exit_code == 0
+    before = digest(folder)
+    sequences = tmp_path / "sequences"
+    sequences.mkdir()
+    invalid = sequences / "invalid.yaml"   # loads, then fails validation
+    invalid.write_text("name: Bad\ndescription: x\nsteps:\n  - include: "
+                       f"{TOTEM.parent / 'startup.yaml'}\n  - move: {{joints: {{j2: 150}}}}\n")
+    unloadable = sequences / "unloadable.yaml"
+    unloadable.write_text("name: Bad\nsteps: 3\n")
+    for bad in (invalid, unloadable):
+        result = CliRunner().invoke(app, ["run", str(bad), "--virtual-time", "--yes",
+                                          "--plain", "--log-dir", str(folder)])
+        assert result.exit_code == 1, result.output
+    assert digest(folder) == before
+    refused = [json.loads((p / "report.json").read_text()) for p in folder.iterdir()
+               if (p / "report.json").exists()]
+    assert [r["status"] for r in refused] == ["refused", "refused"]
+
+
 def test_an_empty_log_dir_is_used_as_it_is(tmp_path):
     folder = tmp_path / "empty"
     folder.mkdir()

@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from seqrun.records import write_record, write_refusal
-from seqrun.runlog import default_run_dir
+from seqrun.runlog import prepare_run_folder
 
 
 def runs_dir(loaded: Any) -> Path:
@@ -32,8 +32,8 @@ def _errors(errors: list) -> list[dict]:
 def refuse(loaded: Any, arm_path: Path, errors: list, log_dir: Path | None) -> None:
     """A run refused by validation leaves a short record (best effort: the refusal itself
     is what the operator must see, a full disk must not hide it)."""
-    folder = log_dir or default_run_dir(loaded.name, runs_dir(loaded))
-    try:
+    try:  # a --log-dir that holds a run gets a new folder inside: evidence is never overwritten
+        folder = prepare_run_folder(log_dir, loaded.name, runs_dir(loaded))
         write_refusal(folder, sequence=loaded.name, file=str(loaded.file),
                       errors=_errors(errors), loaded=loaded, arm_path=Path(arm_path))
     except OSError:
@@ -47,7 +47,7 @@ def refuse_unloadable(file: Path, project_dir: Path | None, errors: list,
 
     try:
         project = project_for(Path(file).resolve(), project_dir)
-        folder = log_dir or default_run_dir(Path(file).stem, project.runs_dir)
+        folder = prepare_run_folder(log_dir, Path(file).stem, project.runs_dir)
         write_refusal(folder, sequence=Path(file).stem, file=str(file),
                       errors=_errors(errors))
     except Exception:  # the refusal is reported on the terminal either way
