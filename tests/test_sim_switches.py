@@ -134,7 +134,9 @@ def test_sim_serve_switches():
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
         env={**os.environ, "PYTHONUNBUFFERED": "1"})
     try:
-        banner = process.stdout.readline()
+        # The whole banner, read here: communicate(timeout=...) below reads the pipe's file
+        # descriptor and would miss lines already buffered by readline().
+        banner = "".join(iter(process.stdout.readline, "Ctrl-C to stop.\n"))
         port = int(re.search(r"127\.0\.0\.1:(\d+)", banner).group(1))
         with can.Bus(interface="socketcand", host="127.0.0.1", port=port, channel="can0",
                      ignore_config=True) as bus:
