@@ -15,7 +15,7 @@ from typer.testing import CliRunner
 
 import seqrun.cli  # noqa: F401  (registers the commands)
 from seqrun.cli.app import app
-from zerostate import with_park_recorded
+from zerostate import serve_arm
 from test_executor_e2e import events, frames, run
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -92,37 +92,15 @@ def test_the_operator_is_not_asked_without_a_latched_fault(tmp_path):
     assert outcome.result.exit_code == 0 and asked == []
 
 
-def _free_port() -> int:
-    import socket
-
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @pytest.mark.slow
 def test_on_a_real_interface_even_yes_does_not_clear_a_latched_fault_unasked(tmp_path):
     """Through socketcand the CLI cannot tell the simulator from an arm: it must ask, also
     with --yes; without an operator (stdin at end of input) nothing is reset."""
-    import os
-    import socket
     import subprocess
     import sys
-    import time
 
-    port = _free_port()
-    env = with_park_recorded(dict(os.environ, PYTHONPATH=str(ROOT)), tmp_path)
-    server = subprocess.Popen([sys.executable, "-m", "seqrun", "sim", "serve", "--port",
-                               str(port), "--fault", "all:halt@0"], cwd=ROOT, env=env,
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    server, port, env = serve_arm(tmp_path, "--fault", "all:halt@0", cwd=ROOT)
     try:
-        deadline = time.monotonic() + 20
-        while time.monotonic() < deadline:
-            try:
-                socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
-                break
-            except OSError:
-                time.sleep(0.1)
         folder = tmp_path / "run"
         proc = subprocess.run(
             [sys.executable, "-m", "seqrun", "run", "sequences/opsafe.yaml", "-i", "socketcand",

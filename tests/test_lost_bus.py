@@ -10,9 +10,7 @@ from __future__ import annotations
 
 import itertools
 import json
-import os
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -31,7 +29,7 @@ from seqrun.runner import run_sequence
 from seqrun.schema import load_sequence
 from seqrun.sim.bus import SimBus
 from wrapbus import WrapBus
-from zerostate import with_park_recorded
+from zerostate import serve_arm
 
 ROOT = Path(__file__).resolve().parents[1]
 _channels = itertools.count()
@@ -111,27 +109,11 @@ def test_the_client_turns_any_bus_exception_into_a_bus_error():
     inner.shutdown()
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @pytest.mark.slow
 def test_a_killed_socketcand_server_mid_move_ends_the_run_with_exit_3(tmp_path):
-    port = _free_port()
-    env = with_park_recorded(dict(os.environ, PYTHONPATH=str(ROOT)), tmp_path)
-    server = subprocess.Popen([sys.executable, "-m", "seqrun", "sim", "serve", "--port",
-                               str(port)], cwd=ROOT, env=env, stdout=subprocess.PIPE,
-                              stderr=subprocess.STDOUT, text=True)
+    server, port, env = serve_arm(tmp_path, cwd=ROOT, stdout=subprocess.PIPE,
+                                  stderr=subprocess.STDOUT, text=True)
     try:
-        deadline = time.monotonic() + 20
-        while time.monotonic() < deadline:
-            try:
-                socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
-                break
-            except OSError:
-                time.sleep(0.1)
         folder = tmp_path / "run"
         runner = subprocess.Popen(
             [sys.executable, "-m", "seqrun", "run", "sequences/opsafe.yaml", "-i", "socketcand",

@@ -15,3 +15,30 @@ def with_park_recorded(env: dict, folder: Path) -> dict:
                           capture_output=True, text=True, env=env, timeout=60)
     assert done.returncode == 0, done.stdout + done.stderr
     return env
+
+
+def serve_arm(folder: Path, *serve_args: str, cwd: Path,
+              **popen) -> tuple[subprocess.Popen, int, dict]:
+    """``seqrun sim serve`` on a free loopback port, treated as a real arm (a Park zero
+    record in its own state folder under ``folder``), accepting connections:
+    ``(server, port, env)``; the caller kills the server."""
+    import os
+    import socket
+    import time
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    env = with_park_recorded(dict(os.environ, PYTHONPATH=str(cwd)), folder)
+    popen.setdefault("stdout", subprocess.DEVNULL)
+    popen.setdefault("stderr", subprocess.DEVNULL)
+    server = subprocess.Popen([sys.executable, "-m", "seqrun", "sim", "serve", "--port",
+                               str(port), *serve_args], cwd=cwd, env=env, **popen)
+    deadline = time.monotonic() + 20
+    while time.monotonic() < deadline:
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
+            break
+        except OSError:
+            time.sleep(0.1)
+    return server, port, env
