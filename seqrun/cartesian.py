@@ -18,11 +18,12 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 from ruckig import InputParameter, Result, Ruckig, Trajectory
 
 from seqrun.arm import ArmDescription
 from seqrun.errors import SeqrunError
-from seqrun.ik import ORIENTATION_WEIGHT_MM, IkSolver, Unreachable, _rotation_vector, target_frame
+from seqrun.ik import ORIENTATION_WEIGHT_MM, IkSolver, Unreachable, rotation_vector, target_frame
 from seqrun.kinematics import jacobian
 from seqrun.planner import SampledPlan
 
@@ -52,7 +53,7 @@ def solver_for(arm: ArmDescription, tool: str | None, *, tracking: bool = False)
     return solver
 
 
-def tool_pose(solver: IkSolver, joints_deg: Sequence[float]) -> np.ndarray:
+def tool_pose(solver: IkSolver, joints_deg: npt.ArrayLike) -> np.ndarray:
     """The tool frame (4x4, mm) at every-joint user degrees."""
     q = np.radians(np.asarray(joints_deg, dtype=float))[solver.active]
     return solver.forward(q)[0]
@@ -99,7 +100,7 @@ class LinearPath:
     @property
     def turn(self) -> np.ndarray:
         """Rotation vector (rad) from the start orientation to the end, in the start frame."""
-        return _rotation_vector(self.start[:3, :3].T @ self.end[:3, :3])
+        return rotation_vector(self.start[:3, :3].T @ self.end[:3, :3])
 
     def frame_at(self, s: float) -> np.ndarray:
         frame = np.eye(4)
@@ -163,7 +164,7 @@ def _profile(path: LinearPath, speed_mm_s: float, rotation_speed_deg_s: float,
     return trajectory
 
 
-def plan_linear(arm: ArmDescription, tool: str | None, start_deg: Sequence[float],
+def plan_linear(arm: ArmDescription, tool: str | None, start_deg: npt.ArrayLike,
                 target: np.ndarray, *, speed_mm_s: float, rotation_speed_deg_s: float,
                 acceleration_mm_s2: float, jerk_mm_s3: float,
                 max_velocity_deg_s: np.ndarray | None = None,
@@ -175,8 +176,8 @@ def plan_linear(arm: ArmDescription, tool: str | None, start_deg: Sequence[float
     the arm's maxima less the tracking reserve).
     """
     solver = solver_for(arm, tool, tracking=True)
-    start_deg = np.asarray(start_deg, dtype=float)
-    path = LinearPath(tool_pose(solver, start_deg), np.asarray(target, dtype=float))
+    start = np.asarray(start_deg, dtype=float)
+    path = LinearPath(tool_pose(solver, start), np.asarray(target, dtype=float))
     if path.length_mm < 1e-6 and float(np.linalg.norm(path.turn)) < 1e-9:
         raise PathError("the tool is already at the end of the line: nothing to move")
     profile = _profile(path, speed_mm_s, rotation_speed_deg_s, acceleration_mm_s2, jerk_mm_s3)
@@ -187,7 +188,7 @@ def plan_linear(arm: ArmDescription, tool: str | None, start_deg: Sequence[float
     fractions = np.array([profile.at_time(float(t))[0][0] for t in times])
     fractions[0], fractions[-1] = 0.0, 1.0
     joints = np.empty((count, arm.dof))
-    joints[0] = start_deg
+    joints[0] = start
     for k in range(1, count):
         try:
             joints[k] = solver.solve(path.frame_at(float(fractions[k])), joints[k - 1]).joints_deg

@@ -73,7 +73,7 @@ class DryRun:
         }
 
 
-def _prepare_started(connection, arm: ArmDescription) -> None:
+def prepare_started(connection, arm: ArmDescription) -> None:
     """Bring the simulated modules to 'started' (reset, homed, limits written)."""
     client = PowerCubeClient(connection.bus, connection.clock)
     try:
@@ -130,7 +130,7 @@ def _dry_run(loaded: LoadedSequence, arm: ArmDescription, start_deg: Mapping[str
     events: list[dict] = []
     try:
         if started:
-            _prepare_started(connection, arm)
+            prepare_started(connection, arm)
         wall = time.perf_counter()
         outcome = run_sequence(loaded, arm, connection, log_dir=log_dir, speed=speed,
                                cycle_hz=hz, command_mode=command_mode, confirm=None,

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from seqrun.arm import ArmDescription
+from seqrun.arm import ArmDescription, Obstacle
 from seqrun.kinematics import Chain, frame_transforms, matrix_from_rpy
 
 __all__ = ["EXACT_WITHIN_MM", "Clearance", "Geometry"]
@@ -44,16 +44,17 @@ class Clearance:
     index: int         # sample index where it occurs (for a batch)
 
 
-def _point_box(points: np.ndarray, center: np.ndarray, rotation: np.ndarray,
-               half: np.ndarray) -> np.ndarray:
+def point_box(points: np.ndarray, center: np.ndarray, rotation: np.ndarray,
+              half: np.ndarray) -> np.ndarray:
+    """Distance of points ``(..., 3)`` to a box of half sizes ``half`` (negative inside)."""
     local = (points - center) @ rotation  # into the box frame
     outside = np.maximum(np.abs(local) - half, 0.0)
     inside = np.minimum(np.max(np.abs(local) - half, axis=-1), 0.0)
     return np.linalg.norm(outside, axis=-1) + inside
 
 
-def _segment_box(a: np.ndarray, b: np.ndarray, center: np.ndarray, rotation: np.ndarray,
-                 half: np.ndarray) -> np.ndarray:
+def segment_box(a: np.ndarray, b: np.ndarray, center: np.ndarray, rotation: np.ndarray,
+                half: np.ndarray) -> np.ndarray:
     """Exact distance of segments ab ``(..., 3)`` to a box (negative inside), without
     iterating: along the segment the squared outside distance is a piecewise quadratic
     whose pieces end where a coordinate crosses a face plane; its minimum is at a piece's
@@ -83,8 +84,10 @@ def _segment_box(a: np.ndarray, b: np.ndarray, center: np.ndarray, rotation: np.
     return np.min(outside + inside, axis=-1)
 
 
-def _point_cylinder(points: np.ndarray, base: np.ndarray, axis: np.ndarray, radius: float,
-                    height: float) -> np.ndarray:
+def point_cylinder(points: np.ndarray, base: np.ndarray, axis: np.ndarray, radius: float,
+                   height: float) -> np.ndarray:
+    """Distance of points ``(..., 3)`` to a solid cylinder standing on ``base`` along the
+    unit ``axis`` (negative inside)."""
     rel = points - base
     along = rel @ axis
     radial = np.linalg.norm(rel - along[..., None] * axis, axis=-1)
@@ -94,7 +97,7 @@ def _point_cylinder(points: np.ndarray, base: np.ndarray, axis: np.ndarray, radi
     return outside + np.minimum(np.maximum(d_r, d_a), 0.0)
 
 
-def _segment_min(a: np.ndarray, b: np.ndarray, distance) -> np.ndarray:
+def segment_min(a: np.ndarray, b: np.ndarray, distance) -> np.ndarray:
     """A lower bound, within a few µm, of min over t in [0, 1] of distance(a + t (b - a))
     for a convex, 1-Lipschitz ``distance`` (to a convex set): golden-section search, then
     the bracket's width times the segment length is subtracted, so the result never
@@ -128,7 +131,7 @@ def _segment_point(a: np.ndarray, b: np.ndarray, point: np.ndarray) -> np.ndarra
 
 
 def _segment_distance(p1, q1, p2, q2) -> float:
-    """:func:`_segment_segment` for one pair of segments given as float triples."""
+    """:func:`segment_segment` for one pair of segments given as float triples."""
     d1 = (q1[0] - p1[0], q1[1] - p1[1], q1[2] - p1[2])
     d2 = (q2[0] - p2[0], q2[1] - p2[1], q2[2] - p2[2])
     r = (p1[0] - p2[0], p1[1] - p2[1], p1[2] - p2[2])
@@ -159,8 +162,8 @@ def _segment_distance(p1, q1, p2, q2) -> float:
     return math.sqrt(x * x + y * y + z * z)
 
 
-def _segment_segment(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndarray
-                     ) -> np.ndarray:
+def segment_segment(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndarray
+                    ) -> np.ndarray:
     """Closest distance between segments p1q1 and p2q2 (batched; Ericson 5.1.9)."""
     d1, d2, r = q1 - p1, q2 - p2, p1 - p2
     a = np.einsum("...i,...i", d1, d1)
@@ -213,7 +216,7 @@ class Geometry:
                       and (self.capsules[j].name, self.capsules[i].name) not in spec.allowed_pairs]
         self.obstacles = list(spec.obstacles)
         # what is evaluated, in column order: obstacles (their capsules), then link pairs
-        self._checked: list[tuple[object, np.ndarray]] = []
+        self._checked: list[tuple[Obstacle, np.ndarray]] = []
         self._names: list[str] = []
         for obstacle in self.obstacles:
             links = [k for k, c in enumerate(self.capsules) if c.name not in obstacle.ignore_links]
@@ -231,7 +234,7 @@ class Geometry:
         self._planes_only = all(o.kind == "plane" for o in self.obstacles)
         self._planes = {}
         for o in self.obstacles:
-            if o.kind == "plane":
+            if o.kind == "plane" and o.plane is not None:  # (a plane obstacle has one)
                 n = np.asarray(o.plane.normal, dtype=float)
                 n = n / np.linalg.norm(n)
                 self._planes[o.name] = (*n.tolist(), float(n @ np.asarray(o.plane.point_mm)))
@@ -260,7 +263,7 @@ class Geometry:
             columns.append(self._obstacle_distance(obstacle, a, b) - self._radii[links])
         if self.pairs:
             i, j = self._pair_index
-            d = _segment_segment(seg[..., i, 0, :], seg[..., i, 1, :],
+            d = segment_segment(seg[..., i, 0, :], seg[..., i, 1, :],
                                  seg[..., j, 0, :], seg[..., j, 1, :])
             columns.append(d - self._radii[i] - self._radii[j])
         return np.concatenate(columns, axis=-1), self._names
@@ -283,7 +286,7 @@ class Geometry:
             rotation = matrix_from_rpy(np.radians(shape.rpy_deg))
             half = np.asarray(shape.size_mm, dtype=float) / 2.0
             sphere = (center, float(np.linalg.norm(half)))
-            exact = lambda a, b: _segment_box(a, b, center, rotation, half)  # noqa: E731
+            exact = lambda a, b: segment_box(a, b, center, rotation, half)  # noqa: E731
         else:
             base = np.asarray(shape.base_mm, dtype=float)
             axis = np.asarray(shape.axis, dtype=float)
@@ -292,7 +295,7 @@ class Geometry:
                       math.hypot(shape.radius_mm, shape.height_mm / 2))
 
             def exact(a, b):
-                return _segment_min(a, b, lambda p: _point_cylinder(
+                return segment_min(a, b, lambda p: point_cylinder(
                     p, base, axis, shape.radius_mm, shape.height_mm))
         bound = _segment_point(a, b, sphere[0]) - sphere[1]
         near = bound < self.margin_mm + self._max_radius + EXACT_WITHIN_MM

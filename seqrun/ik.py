@@ -27,6 +27,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from seqrun.arm import ArmDescription
 from seqrun.errors import SeqrunError
@@ -97,7 +98,7 @@ def target_frame(position_mm: Sequence[float], rpy_deg: Sequence[float]) -> np.n
     return frame
 
 
-def _rotation_vector(rotation: np.ndarray) -> np.ndarray:
+def rotation_vector(rotation: np.ndarray) -> np.ndarray:
     """Axis × angle of a rotation matrix (the log map), exact near 0 and near π."""
     v = np.array([rotation[2, 1] - rotation[1, 2], rotation[0, 2] - rotation[2, 0],
                   rotation[1, 0] - rotation[0, 1]])
@@ -210,7 +211,7 @@ class IkSolver:
     def _error(self, frame: np.ndarray, target: np.ndarray) -> np.ndarray:
         e = np.empty(6)
         e[:3] = target[:3, 3] - frame[:3, 3]
-        e[3:] = _rotation_vector(target[:3, :3] @ frame[:3, :3].T)
+        e[3:] = rotation_vector(target[:3, :3] @ frame[:3, :3].T)
         return e
 
     def _inside(self, q: np.ndarray) -> np.ndarray:
@@ -287,7 +288,7 @@ class IkSolver:
             else:
                 yield rng.uniform(self.lower, self.upper)
 
-    def solve(self, target: np.ndarray, seed_deg: Sequence[float]) -> IkSolution:
+    def solve(self, target: np.ndarray, seed_deg: npt.ArrayLike) -> IkSolution:
         """Joints that put the tool at ``target`` (4x4, mm), starting from ``seed_deg``
         (every joint of the arm, user degrees). Raises :class:`Unreachable`."""
         target = np.asarray(target, dtype=float)
@@ -302,6 +303,7 @@ class IkSolver:
         starts = [seed]
         generator = self._seeds(seed)
         tried = 0
+        start: np.ndarray | None
         while True:
             if tried < len(starts):
                 start = starts[tried]

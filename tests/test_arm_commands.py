@@ -10,7 +10,7 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
-from seqrun.arm import DEFAULT_ARM, load_arm
+from projecttree import shipped_arm
 from seqrun.armcontrol import command_and_confirm
 from seqrun.cli import app
 from seqrun.clock import RealClock, VirtualClock
@@ -23,7 +23,7 @@ from seqrun.sim.bus import SimBus
 from seqrun.sim.network import SimNetwork
 from seqrun.sim.socketcand import SocketcandServer
 
-ARM = load_arm(DEFAULT_ARM)
+ARM = shipped_arm()
 
 
 def serve(faults=()):

@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import contextlib
 import itertools
-import json
 import os
 import re
 from dataclasses import dataclass, field
@@ -38,6 +37,8 @@ from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 import seqrun.cli  # noqa: F401  (runs seqrun.cli._load_commands: every command registered)
+from projecttree import ROOT
+from runfolder import RunFolder
 from seqrun.arm import load_arm
 from seqrun.cli.app import app
 from seqrun.errors import SequenceInvalid, UserInputError
@@ -46,7 +47,6 @@ from seqrun.schema import load_sequence
 from seqrun.sim.bus import SimBus
 from seqrun.validation import validate_sequence
 
-ROOT = Path(__file__).resolve().parents[1]
 BAD = ROOT / "tests" / "data" / "bad"
 HOSTILE = ROOT / "tests" / "data" / "hostile"
 LOCATED = re.compile(r"^(?P<file>[^:\n]+):(?P<line>[1-9][0-9]*):(?P<col>[1-9][0-9]*): "
@@ -181,13 +181,13 @@ def check_file(path: Path, *, sandbox: Path, logs: Path, markers: tuple[Path, ..
         assert r.spy.buses == 0, r.describe()
         assert r.spy.frames == [], r.describe()
         assert not (folder / "trace.log").exists(), r.describe()
-        refused = json.loads((folder / "report.json").read_text(encoding="utf-8"))
+        refused = RunFolder(folder).report()
         assert refused["status"] == "refused" and refused["exit_code"] == 1, r.describe()
     elif expected == "valid":
         assert v.exit_code in (0, 1), v.describe()
         assert ": valid (" in v.stdout, v.describe()            # the static verdict
         assert r.exit_code in (0, 3), r.describe()              # passed, or a clean fault
-        report = json.loads((folder / "report.json").read_text(encoding="utf-8"))
+        report = RunFolder(folder).report()
         assert report["exit_code"] == r.exit_code
         assert report["status"] == ("passed" if r.exit_code == 0 else "failed")
         if r.exit_code == 3:

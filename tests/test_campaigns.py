@@ -4,7 +4,6 @@ campaign-wide validation (summary table, --json, --junit, exit codes)."""
 from __future__ import annotations
 
 import json
-import shutil
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -12,13 +11,12 @@ import pytest
 from typer.testing import CliRunner
 
 import seqrun.cli  # noqa: F401  (registers the commands)
+from projecttree import ROOT
 from seqrun.cli.app import app
 from seqrun.errors import SequenceInvalid, UserInputError
 from seqrun.project import ConfigInvalid, load_config, project_for
 from seqrun.schema import load_sequence
 from seqrun.shipped import shipped_dir
-
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def invoke(*args: str, **kwargs):

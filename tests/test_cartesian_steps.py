@@ -8,13 +8,12 @@ simulator at virtual time.
 from __future__ import annotations
 
 import re
-import textwrap
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from seqrun.arm import load_arm
+from projecttree import shipped_arm, write_sequence
 from seqrun.cartesian import LinearPath, resolve_target, solver_for, tool_pose
 from seqrun.dryrun import dry_run
 from seqrun.errors import SequenceInvalid
@@ -22,27 +21,15 @@ from seqrun.kinematics import Chain, fk
 from seqrun.schema import load_sequence
 from seqrun.validation import validate_sequence
 
-ROOT = Path(__file__).resolve().parents[1]
-ARM = load_arm(ROOT / "arms" / "lwa3.yaml")
+ARM = shipped_arm()
 CHAIN = Chain.from_arm(ARM)
 PARK = {"j1": 0, "j2": -90, "j3": 0, "j4": -120.32, "j5": 0, "j6": 115.74, "j7": 0}
 OPSAFE = np.array([70, 30, 0, 70, 20, 50, 0], float)
 UP = "- reset\n- home\n- set_limits\n- move: totem\n- move: opsafe\n"  # lines 4-8
 
 
-@pytest.fixture
-def project(tmp_path):
-    (tmp_path / "poses").mkdir()
-    for pose in (ROOT / "poses").glob("*.yaml"):
-        (tmp_path / "poses" / pose.name).write_text(pose.read_text())
-    (tmp_path / "sequences").mkdir()
-    return tmp_path
-
-
 def load(project: Path, steps: str, name: str = "s.yaml"):
-    path = project / "sequences" / name
-    path.write_text("name: T\ndescription: test\nsteps:\n" + textwrap.dedent(steps))
-    return load_sequence(path)
+    return load_sequence(write_sequence(project, steps, name))
 
 
 def messages(items) -> list[str]:

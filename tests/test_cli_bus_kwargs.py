@@ -6,6 +6,7 @@ from __future__ import annotations
 import pytest
 from typer.testing import CliRunner
 
+from projecttree import ROOT
 from seqrun.cli import app
 from seqrun.cli.argv import expand_bus_kwargs
 from seqrun.clock import RealClock
@@ -58,7 +59,8 @@ def test_bad_bus_kwargs_are_one_line_exit_2(command, args, message):
 
 
 def test_bad_bus_kwargs_in_run(tmp_path):
-    result = CliRunner().invoke(app, ["run", "sequences/opsafe.yaml", "--yes", "--log-dir",
+    result = CliRunner().invoke(app, ["run", str(ROOT / "sequences" / "opsafe.yaml"), "--yes",
+                                      "--log-dir",
                                       str(tmp_path / "log"), "-i", "socketcand",
                                       "--bus-kwargs", "port=abc"])
     assert result.exit_code == 2, result.output

@@ -3,17 +3,16 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import pytest
 from typer.testing import CliRunner
 
 import seqrun.cli.fk  # noqa: F401  (registers `fk`)
 import seqrun.cli.pose  # noqa: F401  (registers `pose list/show`)
+from projecttree import ROOT
 from seqrun.cli.app import app
 from seqrun.cli.fk import FkCommand
 
-ROOT = Path(__file__).resolve().parents[1]
 FILES = ["--arm", str(ROOT / "arms" / "lwa3.yaml"), "--poses-dir", str(ROOT / "poses")]
 PARK = ["0", "-90", "0", "-120.32", "0", "115.74", "0"]
 

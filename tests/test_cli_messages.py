@@ -4,31 +4,20 @@ JSON when asked for, include labels shown, cut labels marked, the right referenc
 from __future__ import annotations
 
 import json
-import shutil
 from pathlib import Path
 
-import pytest
 from typer.testing import CliRunner
 
 import seqrun.cli  # noqa: F401  (registers every command)
+from projecttree import ROOT
+from runfolder import RunFolder
 from seqrun.cli.app import app
 
-ROOT = Path(__file__).resolve().parents[1]
 runner = CliRunner()
 
 
 def run(*args, cwd: Path | None = None):
     return runner.invoke(app, [str(a) for a in args])
-
-
-@pytest.fixture
-def project(tmp_path: Path) -> Path:
-    root = tmp_path / "project"
-    (root / "sequences").mkdir(parents=True)
-    shutil.copytree(ROOT / "arms", root / "arms")
-    shutil.copytree(ROOT / "poses", root / "poses")
-    shutil.copy(ROOT / "sequences" / "startup.yaml", root / "sequences")
-    return root
 
 
 def test_a_bad_pose_name_is_one_clear_line(tmp_path):
@@ -51,7 +40,8 @@ def test_an_invalid_from_prints_each_error_once(tmp_path):
     assert text.count("move before home") == 1, text
 
 
-def test_validate_json_of_a_missing_file_is_json(tmp_path):
+def test_validate_json_of_a_missing_file_is_json(tmp_path, monkeypatch):
+    monkeypatch.chdir(ROOT)  # a file outside the current directory is named in full
     result = run("validate", "--json", tmp_path / "missing.yaml")
     assert result.exit_code == 2
     body = json.loads(result.stdout)
@@ -81,8 +71,7 @@ def test_step_started_events_name_their_include(project, tmp_path):
                     "  - wait: 0.1\n")
     result = run("run", path, "--virtual-time", "--yes", "--plain", "--log-dir", tmp_path / "r")
     assert result.exit_code == 0, result.output
-    events = [json.loads(line) for line in (tmp_path / "r" / "events.jsonl").read_text()
-              .splitlines()]
+    events = RunFolder(tmp_path / "r").events()
     started = [e for e in events if e["type"] == "step_started"]
     assert [e.get("include") for e in started] == [["Power-on start-up"]] * 3 + [None]
 

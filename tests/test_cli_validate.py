@@ -12,11 +12,11 @@ import pytest
 from typer.testing import CliRunner
 
 import seqrun.cli.validate  # noqa: F401  (registers `validate` and `schema`)
+from projecttree import ROOT
 from seqrun.cli.app import app
 from seqrun.schema import sequence_json_schema
 from seqrun.yamlsource import display_path
 
-ROOT = Path(__file__).resolve().parents[1]
 BAD = ROOT / "tests" / "data" / "bad"
 SHIPPED = ["startup", "totem", "opsafe", "park", "shutdown"]
 

@@ -14,6 +14,8 @@ from pathlib import Path
 import pytest
 from rich.console import Console
 
+from projecttree import ROOT
+from runfolder import RunFolder
 from seqrun.arm import load_arm
 from seqrun.cli.display import LiveDisplay, PlainDisplay, fixed
 from seqrun.clock import VirtualClock
@@ -22,8 +24,6 @@ from seqrun.executor import EXIT_FAULT, EXIT_OK
 from seqrun.runner import run_sequence
 from seqrun.schema import load_sequence
 from seqrun.sim.faults import parse_fault_spec
-
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def console() -> Console:
@@ -126,16 +126,10 @@ def test_labels_and_messages_are_printed_literally(tmp_path):
     assert "[4/5] [/bold] up (" in plain
     fault_lines = [line for line in plain.splitlines() if "!!  fault:" in line]
     assert len(fault_lines) == 1 and "[state " in fault_lines[0]
-    assert not any(e["type"] == "listener_failed" for e in _events(tmp_path))
+    assert not RunFolder(tmp_path / "run").events("listener_failed")
     live_console.print(view)
     screen = live_console.export_text()
     assert "[state " in screen
-
-
-def _events(tmp_path: Path) -> list[dict]:
-    import json
-    return [json.loads(line) for line in
-            (tmp_path / "run" / "events.jsonl").read_text().splitlines()]
 
 
 def test_a_fault_message_is_printed_literally():
@@ -160,8 +154,8 @@ def test_a_fault_message_names_limits_in_user_degrees_not_module_radians(tmp_pat
                                        "  - set_limits: {limits_deg: {j4: [-100, 100]}}\n")
     first, *_ = run_with_displays(path, tmp_path / "a")
     assert first.result.exit_code == EXIT_OK
-    started = next(e["t"] for e in _events(tmp_path / "a") if e["type"] == "step_started"
-                   and e["step"] == 3)
+    started = next(e["t"] for e in RunFolder(tmp_path / "a" / "run").events("step_started")
+                   if e["step"] == 3)
     outcome, *_ = run_with_displays(path, tmp_path / "b",
                                     faults=[f"4:missing@{started + 1e-6:.6f}"])
     message = outcome.result.fault["message"]
@@ -200,7 +194,7 @@ def test_junit_names_each_step_once(tmp_path):
 
 
 def test_no_minus_zero_in_pose_numbers_or_the_status_table():
-    from seqrun.cli.arm_commands import _table
+    from seqrun.cli.arm_commands import status_table
     from seqrun.cli.pose import format_numbers
 
     assert format_numbers([-0.0001, -0.0004, 1.5]) == "[0.000, 0.000, 1.500]"
@@ -208,7 +202,7 @@ def test_no_minus_zero_in_pose_numbers_or_the_status_table():
                           "velocity_deg_s": -0.0001, "state": "HOME_OK", "fault": False}],
               "end_effector": {"position_mm": [0.0, 0.0, 1000.0], "rpy_deg": [0.0, 0.0, 0.0]}}
     c = console()
-    c.print(_table(status, "arm"))
+    c.print(status_table(status, "arm"))
     text = c.export_text()
     assert "-0.000" not in text and "0.000" in text
 

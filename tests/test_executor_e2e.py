@@ -6,35 +6,28 @@ and checks what the bus, the run folder and the arm show afterwards.
 
 from __future__ import annotations
 
-import json
 import math
 import shutil
 import threading
 import xml.etree.ElementTree as ET
-from pathlib import Path
 
 import can
 import pytest
 from typer.testing import CliRunner
 
 import seqrun.cli  # noqa: F401  (registers the commands)
+from projecttree import ROOT
+from runfolder import RunFolder
 from seqrun.arm import load_arm
 from seqrun.cli.app import app
 from seqrun.clock import VirtualClock
 from seqrun.connection import open_connection
-from seqrun.dryrun import _prepare_started
 from seqrun.executor import EXIT_FAULT, EXIT_INVALID, EXIT_OK, EXIT_OPERATOR_ABORT
-from seqrun.runlog import read_trace
 from seqrun.runner import run_sequence
 from seqrun.schema import load_sequence
-from seqrun.sim.faults import parse_fault_spec
+from simrun import run_on_sim
 
-ROOT = Path(__file__).resolve().parents[1]
 HALT = (0x100, 0x02)
-
-
-def frames(folder: Path) -> list[can.Message]:
-    return read_trace(folder, run_clock=True)
 
 
 def is_halt(msg: can.Message) -> bool:
@@ -46,45 +39,12 @@ def is_motion(msg: can.Message) -> bool:
             and msg.data[:1] == b"\x0b")
 
 
-def events(folder: Path) -> list[dict]:
-    return [json.loads(line) for line in (folder / "events.jsonl").read_text().splitlines()]
-
-
-def run(name: str, tmp_path: Path, *, faults=(), positions=None, started=False, root=ROOT,
-        **kwargs):
-    loaded = load_sequence(root / "sequences" / f"{name}.yaml")
-    arm = load_arm(loaded.arm_path)
-    connection = open_connection(force_sim=True, clock=VirtualClock(),
-                                 faults=[parse_fault_spec(f) for f in faults],
-                                 sim_positions=positions)
-    try:
-        if started:
-            _prepare_started(connection, arm)
-        outcome = run_sequence(loaded, arm, connection, log_dir=tmp_path / "run",
-                               confirm=kwargs.pop("confirm", lambda prompt: True), **kwargs)
-        sim = connection.bus.arm
-        return outcome, sim, connection
-    finally:
-        connection.close()
-
-
-@pytest.fixture
-def project(tmp_path: Path) -> Path:
-    """A project tree of its own (arms/, poses/, sequences/) for sequences made in a test."""
-    root = tmp_path / "project"
-    (root / "sequences").mkdir(parents=True)
-    shutil.copytree(ROOT / "arms", root / "arms")
-    shutil.copytree(ROOT / "poses", root / "poses")
-    shutil.copy(ROOT / "sequences" / "startup.yaml", root / "sequences")
-    return root
-
-
 def test_opsafe_from_power_on_to_a_passed_checkpoint(tmp_path):
-    outcome, sim, _ = run("opsafe", tmp_path)
+    outcome, sim, _ = run_on_sim("opsafe", tmp_path)
     result = outcome.result
     assert result.exit_code == EXIT_OK, result.message
     folder = outcome.log_dir
-    report = json.loads((folder / "report.json").read_text())
+    report = RunFolder(folder).report()
     assert report["status"] == "passed" and report["exit_code"] == 0
     assert report["start"] and report["end"]
     [checkpoint] = report["checkpoints"]
@@ -105,10 +65,10 @@ def test_opsafe_from_power_on_to_a_passed_checkpoint(tmp_path):
         assert math.degrees(sim.module(joint.module).position()) - joint.offset_deg == \
             pytest.approx(want, abs=0.2)
     # Run folder: readable trace with no Halt, events ending in run_finished, junit.
-    trace = frames(folder)
+    trace = RunFolder(folder).trace()
     assert len(trace) > 1000 and not any(is_halt(m) for m in trace)
     assert any(m.is_rx for m in trace) and any(not m.is_rx for m in trace)
-    assert events(folder)[-1]["type"] == "run_finished"
+    assert RunFolder(folder).events()[-1]["type"] == "run_finished"
     suite = ET.parse(folder / "junit.xml").getroot().find("testsuite")
     assert suite.get("tests") == str(len(report["steps"])) and suite.get("failures") == "0"
 
@@ -123,17 +83,17 @@ def test_invalid_file_sends_nothing(tmp_path, monkeypatch):
     assert result.exit_code == EXIT_INVALID
     assert "out_of_limit.yaml:7:33:" in result.output
     assert sent == [] and not (tmp_path / "run" / "trace.log").exists()
-    assert json.loads((tmp_path / "run" / "report.json").read_text())["status"] == "refused"
+    assert RunFolder(tmp_path / "run").report()["status"] == "refused"
 
 
 def test_sequence_invalid_from_the_measured_state_moves_nothing(project, tmp_path):
     # Valid YAML, but on a freshly powered-on arm the modules refuse motion before Home.
     (project / "sequences" / "nohome.yaml").write_text(
         "name: no home\ndescription: moves without start-up\nsteps:\n  - move: totem\n")
-    outcome, sim, _ = run("nohome", tmp_path, root=project)
+    outcome, sim, _ = run_on_sim("nohome", tmp_path, root=project)
     assert outcome.result.exit_code == EXIT_INVALID
     assert "home" in outcome.result.message.lower()
-    trace = frames(outcome.log_dir)
+    trace = RunFolder(outcome.log_dir).trace()
     assert trace and not any(is_motion(m) for m in trace)   # reads only
 
 
@@ -144,11 +104,11 @@ def test_operator_abort_mid_move_is_a_controlled_stop_and_the_arm_holds(tmp_path
                 executor.abort("test: operator abort")
         executor.listeners.append(listener)
 
-    outcome, sim, connection = run("opsafe", tmp_path, on_executor=abort_at_two_seconds)
+    outcome, sim, connection = run_on_sim("opsafe", tmp_path, on_executor=abort_at_two_seconds)
     assert outcome.result.exit_code == EXIT_OPERATOR_ABORT
-    kinds = [e["type"] for e in events(outcome.log_dir)]
+    kinds = [e["type"] for e in RunFolder(outcome.log_dir).events()]
     assert "controlled_stop" in kinds and "holding" in kinds
-    trace = frames(outcome.log_dir)
+    trace = RunFolder(outcome.log_dir).trace()
     assert not any(is_halt(m) for m in trace)        # a controlled stop, not a Halt
     # Stopped and holding: no velocity, and nothing moves when time goes on.
     clock = connection.clock
@@ -156,7 +116,7 @@ def test_operator_abort_mid_move_is_a_controlled_stop_and_the_arm_holds(tmp_path
     assert all(abs(sim.module(m).velocity()) < 1e-9 for m in before)
     clock.advance(5.0)
     assert sim.positions() == pytest.approx(before, abs=1e-12)
-    report = json.loads((outcome.log_dir / "report.json").read_text())
+    report = RunFolder(outcome.log_dir).report()
     assert report["status"] == "aborted" and report["exit_code"] == 130
 
 
@@ -169,9 +129,9 @@ def test_second_abort_halts(tmp_path):
                 executor.abort("second")
         executor.listeners.append(listener)
 
-    outcome, sim, _ = run("opsafe", tmp_path, on_executor=abort_twice)
+    outcome, sim, _ = run_on_sim("opsafe", tmp_path, on_executor=abort_twice)
     assert outcome.result.exit_code == EXIT_OPERATOR_ABORT
-    trace = frames(outcome.log_dir)
+    trace = RunFolder(outcome.log_dir).trace()
     halts = [i for i, m in enumerate(trace) if is_halt(m)]
     assert halts, "a second abort must broadcast Halt"
     assert not any(is_motion(m) for m in trace[halts[0]:])
@@ -199,34 +159,34 @@ def test_pause_and_resume_from_another_thread(tmp_path):
                     done.set()
         executor.listeners.append(listener)
 
-    outcome, sim, _ = run("opsafe", tmp_path, on_executor=pause_then_resume)
+    outcome, sim, _ = run_on_sim("opsafe", tmp_path, on_executor=pause_then_resume)
     assert done.is_set()
     assert outcome.result.exit_code == EXIT_OK, outcome.result.message
-    kinds = [e["type"] for e in events(outcome.log_dir)]
+    kinds = [e["type"] for e in RunFolder(outcome.log_dir).events()]
     assert kinds.index("controlled_stop") < kinds.index("paused") < kinds.index("resumed")
 
 
 def test_speed_override_slows_every_move(tmp_path):
-    fast, _, _ = run("totem", tmp_path / "fast")
-    slow, _, _ = run("totem", tmp_path / "slow", speed=0.5)
+    fast, _, _ = run_on_sim("totem", tmp_path / "fast")
+    slow, _, _ = run_on_sim("totem", tmp_path / "slow", speed=0.5)
     assert fast.result.exit_code == slow.result.exit_code == EXIT_OK
     assert slow.result.planned_duration_s > 1.8 * fast.result.planned_duration_s
-    report = json.loads((slow.log_dir / "report.json").read_text())
+    report = RunFolder(slow.log_dir).report()
     assert report["speed"] == 0.5
 
 
 def test_from_step_refuses_an_arm_that_is_not_where_the_step_expects_it(tmp_path):
     # Step 6 of opsafe moves Totem -> Op-safe; a freshly powered-on arm is in Park.
-    outcome, sim, _ = run("opsafe", tmp_path, first_step=6)
+    outcome, sim, _ = run_on_sim("opsafe", tmp_path, first_step=6)
     assert outcome.result.exit_code == EXIT_INVALID
     assert "--from 6: the arm is not where this step expects it" in outcome.result.message
-    assert not any(is_motion(m) for m in frames(outcome.log_dir))
+    assert not any(is_motion(m) for m in RunFolder(outcome.log_dir).trace())
 
 
 def test_from_step_runs_the_rest_when_the_arm_is_there(tmp_path):
     arm = load_arm(ROOT / "arms" / "lwa3.yaml")
     at_totem = {j.module: j.to_module_rad(0.0) for j in arm.joints}
-    outcome, sim, _ = run("opsafe", tmp_path, first_step=6, positions=at_totem, started=True)
+    outcome, sim, _ = run_on_sim("opsafe", tmp_path, first_step=6, positions=at_totem, started=True)
     assert outcome.result.exit_code == EXIT_OK, outcome.result.message
     statuses = [s.status for s in outcome.result.steps]
     assert statuses[:5] == ["skipped"] * 5 and set(statuses[5:]) == {"passed"}
@@ -256,18 +216,18 @@ def test_a_checkpoint_that_is_not_met_halts_with_exit_3(tmp_path):
         connection.close()
     assert outcome.result.exit_code == EXIT_FAULT
     assert outcome.result.fault["cause"] == "checkpoint"
-    report = json.loads((tmp_path / "run" / "report.json").read_text())
+    report = RunFolder(tmp_path / "run").report()
     [checkpoint] = report["checkpoints"]
     assert checkpoint["status"] == "failed" and checkpoint["position_error_mm"] > 7.0
-    assert any(is_halt(m) for m in frames(tmp_path / "run"))
+    assert any(is_halt(m) for m in RunFolder(tmp_path / "run").trace())
 
 
 def test_injected_tow_error_halts_and_names_the_module(tmp_path):
-    outcome, sim, _ = run("opsafe", tmp_path, faults=["4:tow_error@3"])
+    outcome, sim, _ = run_on_sim("opsafe", tmp_path, faults=["4:tow_error@3"])
     result = outcome.result
     assert result.exit_code == EXIT_FAULT
     assert result.fault["module"] == 4 and result.fault["cause"] == "tow_error"
-    trace = frames(outcome.log_dir)
+    trace = RunFolder(outcome.log_dir).trace()
     first_halt = next(m for m in trace if is_halt(m))
     assert 3.0 <= first_halt.timestamp - trace[0].timestamp <= 3.0 + 0.1 + 0.02
     assert not any(is_motion(m) for m in trace[trace.index(first_halt):])
@@ -277,11 +237,11 @@ def test_watchdog_is_fed_during_the_run_and_disarmed_after_it(project, tmp_path)
     arm_file = project / "arms" / "lwa3.yaml"
     arm_file.write_text(arm_file.read_text().replace("    enabled: false", "    enabled: true"))
     shutil.copy(ROOT / "sequences" / "totem.yaml", project / "sequences")
-    outcome, sim, connection = run("totem", tmp_path, root=project)
+    outcome, sim, connection = run_on_sim("totem", tmp_path, root=project)
     assert outcome.result.exit_code == EXIT_OK, outcome.result.message
-    kinds = [e["type"] for e in events(outcome.log_dir)]
+    kinds = [e["type"] for e in RunFolder(outcome.log_dir).events()]
     assert "watchdog_enabled" in kinds and "watchdog_disabled" in kinds
-    refreshes = [m for m in frames(outcome.log_dir)
+    refreshes = [m for m in RunFolder(outcome.log_dir).trace()
                  if m.arbitration_id == 0x100 and m.data[:1] == b"\x07"]
     gaps = [b.timestamp - a.timestamp for a, b in zip(refreshes, refreshes[1:])]
     assert refreshes and max(gaps) < 0.05        # never a gap the 50 ms watchdog would see
@@ -296,7 +256,7 @@ def test_cli_run_virtual_time_end_to_end(tmp_path):
                                       "--log-dir", str(tmp_path / "run")])
     assert result.exit_code == 0, result.output
     assert "PASSED (exit 0)" in result.output and "Traceback" not in result.output
-    assert json.loads((tmp_path / "run" / "report.json").read_text())["status"] == "passed"
+    assert RunFolder(tmp_path / "run").report()["status"] == "passed"
 
 
 def test_an_unexpected_error_in_a_step_halts_and_is_reported_without_traceback(tmp_path,
@@ -312,8 +272,8 @@ def test_an_unexpected_error_in_a_step_halts_and_is_reported_without_traceback(t
     assert result.exit_code == EXIT_FAULT
     assert "internal error (ZeroDivisionError: simulated bug)" in result.output
     assert "Traceback" not in result.output
-    assert any(is_halt(m) for m in frames(tmp_path / "run"))
-    [internal] = [e for e in events(tmp_path / "run") if e["type"] == "internal_error"]
+    assert any(is_halt(m) for m in RunFolder(tmp_path / "run").trace())
+    [internal] = [e for e in RunFolder(tmp_path / "run").events() if e["type"] == "internal_error"]
     assert "ZeroDivisionError" in internal["traceback"]
 
 
@@ -339,7 +299,7 @@ def test_frames_that_answer_nothing_are_logged_as_discarded(tmp_path):
         intruder.shutdown()
         connection.close()
     assert outcome.result.exit_code == EXIT_OK
-    [discarded] = [e for e in events(tmp_path / "run") if e["type"] == "frame_discarded"]
+    [discarded] = [e for e in RunFolder(tmp_path / "run").events() if e["type"] == "frame_discarded"]
     assert discarded["can_id"] == "0x0A5" and discarded["data"].startswith("0a 27")
 
 
@@ -351,9 +311,9 @@ def test_a_display_that_raises_systemexit_cannot_end_the_run(tmp_path):
                 raise SystemExit(1)
         executor.listeners.append(listener)
 
-    outcome, sim, _ = run("totem", tmp_path, on_executor=broken_display)
+    outcome, sim, _ = run_on_sim("totem", tmp_path, on_executor=broken_display)
     assert outcome.result.exit_code == EXIT_OK
-    assert any(e["type"] == "listener_failed" for e in events(outcome.log_dir))
+    assert any(e["type"] == "listener_failed" for e in RunFolder(outcome.log_dir).events())
 
 
 def test_keyboardinterrupt_escaping_a_step_still_halts(tmp_path, monkeypatch):
@@ -363,10 +323,10 @@ def test_keyboardinterrupt_escaping_a_step_still_halts(tmp_path, monkeypatch):
         raise KeyboardInterrupt
     monkeypatch.setitem(steps.HANDLERS, "wait", interrupted)
     with pytest.raises(KeyboardInterrupt):
-        run("opsafe", tmp_path)
-    trace = frames(tmp_path / "run")
+        run_on_sim("opsafe", tmp_path)
+    trace = RunFolder(tmp_path / "run").trace()
     assert any(is_halt(m) for m in trace)
-    assert [e for e in events(tmp_path / "run") if e["type"] == "fault"][0]["cause"] == "interrupted"
+    assert [e for e in RunFolder(tmp_path / "run").events() if e["type"] == "fault"][0]["cause"] == "interrupted"
 
 
 def test_step_mode_asks_before_each_step_and_a_no_ends_the_run(tmp_path):
@@ -377,7 +337,7 @@ def test_step_mode_asks_before_each_step_and_a_no_ends_the_run(tmp_path):
                                   input="y\ny\ny\ny\nn\n")
     assert declined.exit_code == EXIT_OPERATOR_ABORT, declined.output
     assert "Run step 5/6: Up to Totem" in declined.output
-    assert not any(is_motion(m) for m in frames(tmp_path / "no"))
+    assert not any(is_motion(m) for m in RunFolder(tmp_path / "no").trace())
     accepted = CliRunner().invoke(app, args + ["--log-dir", str(tmp_path / "yes")],
                                   input="y\n" * 6)
     assert accepted.exit_code == EXIT_OK, accepted.output

@@ -90,17 +90,16 @@ import pytest
 from typer.testing import CliRunner
 
 import seqrun.cli  # noqa: F401  (registers the commands on the app)
-from seqrun.arm import load_arm
+from projecttree import ROOT, shipped_arm
+from runfolder import RunFolder
 from seqrun.cli.app import app
 from seqrun.errors import CodecError
 from seqrun.powercube.codec import GetParam, ack_key, decode_ack, decode_request, expected_ack_key
 from seqrun.powercube.protocol import ACK_BASE, BROADCAST_ID, GET_BASE, SET_BASE
-from seqrun.runlog import read_trace
 from seqrun.sim.faults import parse_fault_spec
 
-ROOT = Path(__file__).resolve().parents[1]
 SEQUENCE = ROOT / "sequences" / "opsafe.yaml"
-ARM = load_arm(ROOT / "arms" / "lwa3.yaml")
+ARM = shipped_arm()
 CYCLE = 1.0 / ARM.control.cycle_hz
 RESPONSE_TIMEOUT = ARM.can.response_timeout_s
 FOLLOWING_BOUND = ARM.control.max_following_error_deg
@@ -136,20 +135,19 @@ class Run:
 
     @cached_property
     def report(self) -> dict:
-        return json.loads((self.folder / "report.json").read_text())
+        return RunFolder(self.folder).report()
 
     @cached_property
     def events(self) -> list[dict]:
-        lines = (self.folder / "events.jsonl").read_text().splitlines()
-        return [json.loads(line) for line in lines]
+        return RunFolder(self.folder).events()
 
     @cached_property
     def trace_lines(self) -> list[str]:
-        return [line for line in (self.folder / "trace.log").read_text().splitlines() if line]
+        return RunFolder(self.folder).trace_lines()
 
     @cached_property
     def trace(self) -> list[can.Message]:
-        return read_trace(self.folder, run_clock=True)
+        return RunFolder(self.folder).trace()
 
     @cached_property
     def sent(self) -> list[can.Message]:

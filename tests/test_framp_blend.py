@@ -7,16 +7,15 @@ the likely cause, never in a silent wrong pose.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import can
 from typer.testing import CliRunner
 
 import seqrun.cli  # noqa: F401  (registers the commands)
+from projecttree import ROOT
+from runfolder import RunFolder
 from seqrun.cli.app import app
-
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def cli_run(tmp_path: Path, monkeypatch, *extra: str):
@@ -25,7 +24,7 @@ def cli_run(tmp_path: Path, monkeypatch, *extra: str):
     result = CliRunner().invoke(app, ["run", str(ROOT / "sequences" / "opsafe.yaml"),
                                       "--virtual-time", "--yes", "--plain", "--log-dir",
                                       str(folder), *extra])
-    report = json.loads((folder / "report.json").read_text())
+    report = RunFolder(folder).report()
     return result, report, folder
 
 
@@ -59,6 +58,6 @@ def test_a_stuck_joint_is_not_taken_for_non_blending_firmware(tmp_path):
                                       "--virtual-time", "--yes", "--plain", "--log-dir",
                                       str(tmp_path / "run"), "--sim-fault", "4:stuck@3"])
     assert result.exit_code == 3
-    report = json.loads((tmp_path / "run" / "report.json").read_text())
+    report = RunFolder(tmp_path / "run").report()
     assert report["fault"]["cause"] == "following_error"
     assert "blend" not in report["fault"]["message"]

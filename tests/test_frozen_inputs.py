@@ -4,12 +4,12 @@ read once, when the sequence is loaded, and the run folder records every input's
 from __future__ import annotations
 
 import hashlib
-import json
-import shutil
 from pathlib import Path
 
 import pytest
 
+from projecttree import make_project
+from runfolder import RunFolder
 from seqrun.arm import load_arm
 from seqrun.clock import VirtualClock
 from seqrun.connection import open_connection
@@ -17,7 +17,6 @@ from seqrun.executor import EXIT_OK
 from seqrun.runner import run_sequence
 from seqrun.schema import load_sequence
 
-ROOT = Path(__file__).resolve().parents[1]
 
 #: Op-safe rewritten to a pose below the desk (what the red team wrote mid-run).
 BELOW_THE_DESK = {"j1": 70.0, "j2": 100.0, "j3": 0.0, "j4": 100.0, "j5": 20.0, "j6": 50.0,
@@ -26,11 +25,7 @@ BELOW_THE_DESK = {"j1": 70.0, "j2": 100.0, "j3": 0.0, "j4": 100.0, "j5": 20.0, "
 
 @pytest.fixture
 def project(tmp_path: Path) -> Path:
-    root = tmp_path / "project"
-    shutil.copytree(ROOT / "arms", root / "arms")
-    shutil.copytree(ROOT / "poses", root / "poses")
-    shutil.copytree(ROOT / "sequences", root / "sequences")
-    return root
+    return make_project(tmp_path / "project", sequences="*")
 
 
 def _sha(path: Path) -> str:
@@ -67,7 +62,7 @@ def test_a_pose_file_rewritten_mid_run_changes_nothing(project, tmp_path):
     reached = {j.name: j.to_user_deg(at[j.module]) for j in arm.joints}
     validated = loaded.poses["opsafe"].joints_deg
     assert all(abs(reached[n] - validated[n]) < 0.2 for n in validated), reached
-    report = json.loads((tmp_path / "run" / "report.json").read_text())
+    report = RunFolder(tmp_path / "run").report()
     recorded = {Path(i["file"]).name: i for i in report["inputs"]}
     assert recorded["opsafe.yaml"]["sha256"] == validated_sha
     assert recorded["opsafe.yaml"]["kind"] == "pose"

@@ -3,8 +3,6 @@ validation (along the planned trajectory) and at run time (measured joints)."""
 
 from __future__ import annotations
 
-import textwrap
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,16 +10,16 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from seqrun.arm import ArmDescription, load_arm
+from projecttree import shipped_arm, write_sequence
+from seqrun.arm import ArmDescription
 from seqrun.dryrun import dry_run
-from seqrun.geometry import (Geometry, _point_box, _point_cylinder, _segment_box, _segment_min,
-                             _segment_segment)
+from seqrun.geometry import (Geometry, point_box, point_cylinder, segment_box, segment_min,
+                             segment_segment)
 from seqrun.kinematics import matrix_from_rpy
 from seqrun.schema import load_sequence
 from seqrun.validation import validate_sequence
 
-ROOT = Path(__file__).resolve().parents[1]
-ARM = load_arm(ROOT / "arms" / "lwa3.yaml")
+ARM = shipped_arm()
 GEOMETRY = Geometry(ARM)
 PARK = {"j1": 0, "j2": -90, "j3": 0, "j4": -120.32, "j5": 0, "j6": 115.74, "j7": 0}
 
@@ -37,7 +35,7 @@ def _dense(a, b, n=4001):
 @settings(max_examples=200, deadline=None)
 @given(p1=point, q1=point, p2=point, q2=point)
 def test_segment_distance_matches_dense_sampling(p1, q1, p2, q2):
-    exact = float(_segment_segment(p1, q1, p2, q2))
+    exact = float(segment_segment(p1, q1, p2, q2))
     a, b = _dense(p1, q1, 801), _dense(p2, q2, 801)
     brute = np.min(np.linalg.norm(a[:, None] - b[None], axis=-1))
     spacing = (np.linalg.norm(q1 - p1) + np.linalg.norm(q2 - p2)) / 800
@@ -50,16 +48,16 @@ def test_segment_distance_matches_dense_sampling(p1, q1, p2, q2):
        rpy=arrays(np.float64, 3, elements=st.floats(-3, 3)))
 def test_segment_to_box_matches_dense_sampling(a, b, center, size, rpy):
     rotation = matrix_from_rpy(rpy)
-    distance = lambda p: _point_box(p, center, rotation, size / 2)  # noqa: E731
+    distance = lambda p: point_box(p, center, rotation, size / 2)  # noqa: E731
     brute = float(distance(_dense(a, b)).min())
     tolerance = 1e-6 + np.linalg.norm(b - a) / 4000  # the samples' spacing
-    closed_form = float(_segment_box(a, b, center, rotation, size / 2))
+    closed_form = float(segment_box(a, b, center, rotation, size / 2))
     if brute >= 0:  # outside: exact, never more than the true distance
         assert closed_form <= brute + 1e-6
         assert closed_form == pytest.approx(brute, abs=tolerance)
     else:  # crossing the box: reported as a contact
         assert closed_form <= 0
-    searched = float(_segment_min(a, b, distance))  # the generic search, a lower bound
+    searched = float(segment_min(a, b, distance))  # the generic search, a lower bound
     assert brute - 0.2 <= searched <= brute + 1e-6
 
 
@@ -68,16 +66,16 @@ def test_segment_to_box_matches_dense_sampling(a, b, center, size, rpy):
        radius=st.floats(1, 100), height=st.floats(1, 300))
 def test_segment_to_cylinder_matches_dense_sampling(a, b, base, axis, radius, height):
     unit = axis / np.linalg.norm(axis)
-    distance = lambda p: _point_cylinder(p, base, unit, radius, height)  # noqa: E731
-    exact = float(_segment_min(a, b, distance))
+    distance = lambda p: point_cylinder(p, base, unit, radius, height)  # noqa: E731
+    exact = float(segment_min(a, b, distance))
     brute = float(distance(_dense(a, b)).min())
     assert exact <= brute + 1e-6  # a lower bound: never overstates the clearance
     assert exact == pytest.approx(brute, abs=0.2)
 
 
 def test_point_distances_inside_are_negative():
-    assert float(_point_box(np.zeros(3), np.zeros(3), np.eye(3), np.array([10, 20, 30.]))) == -10
-    assert float(_point_cylinder(np.array([0, 0, 5.]), np.zeros(3), np.array([0, 0, 1.]),
+    assert float(point_box(np.zeros(3), np.zeros(3), np.eye(3), np.array([10, 20, 30.]))) == -10
+    assert float(point_cylinder(np.array([0, 0, 5.]), np.zeros(3), np.array([0, 0, 1.]),
                                  4.0, 100.0)) == -4
 
 
@@ -116,19 +114,9 @@ def test_arm_file_rejects_an_unknown_frame_in_a_capsule():
 
 
 # --------------------------------------------------------------------------- in use
-@pytest.fixture
-def project(tmp_path):
-    (tmp_path / "poses").mkdir()
-    for pose in (ROOT / "poses").glob("*.yaml"):
-        (tmp_path / "poses" / pose.name).write_text(pose.read_text())
-    (tmp_path / "sequences").mkdir()
-    return tmp_path
-
 
 def _load(project, steps):
-    path = project / "sequences" / "s.yaml"
-    path.write_text("name: T\ndescription: t\nsteps:\n" + textwrap.dedent(steps))
-    return load_sequence(path)
+    return load_sequence(write_sequence(project, steps))
 
 
 def _with_mock(arm: ArmDescription) -> ArmDescription:

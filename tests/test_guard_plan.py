@@ -3,19 +3,17 @@
 
 from __future__ import annotations
 
-import textwrap
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from projecttree import ROOT
 from seqrun.arm import GeometrySpec, load_arm
 from seqrun.dryrun import dry_run
 from seqrun.kinematics import Chain, point_positions
 from seqrun.schema import load_sequence
 from seqrun.validation import validate_sequence
 
-ROOT = Path(__file__).resolve().parents[1]
 # The guard planes alone: the arm file's link volumes would also refuse this move (the
 # hand's capsule touches the desk), which would hide what is tested here.
 ARM = load_arm(ROOT / "arms" / "lwa3.yaml").model_copy(update={"geometry": GeometrySpec()})

@@ -9,12 +9,11 @@
 from __future__ import annotations
 
 import itertools
-from pathlib import Path
 
 import can
 import pytest
 
-from seqrun.arm import load_arm
+from projecttree import ROOT, shipped_arm
 from seqrun.clock import VirtualClock
 from seqrun.connection import Connection
 from seqrun.executor import EXIT_FAULT, Executor
@@ -26,8 +25,7 @@ from seqrun.schema import load_sequence
 from seqrun.sim.bus import SimBus
 from wrapbus import WrapBus
 
-ROOT = Path(__file__).resolve().parents[1]
-ARM = load_arm(ROOT / "arms" / "lwa3.yaml")
+ARM = shipped_arm()
 _channels = itertools.count()
 
 

@@ -7,8 +7,8 @@ advances the clock by 60 ms (the host was descheduled while the modules answered
 from __future__ import annotations
 
 import itertools
-from pathlib import Path
 
+from projecttree import ROOT
 from seqrun.arm import load_arm
 from seqrun.clock import VirtualClock
 from seqrun.connection import Connection
@@ -19,7 +19,6 @@ from seqrun.schema import load_sequence
 from seqrun.sim.bus import SimBus
 from wrapbus import WrapBus
 
-ROOT = Path(__file__).resolve().parents[1]
 STALL_S = 0.060
 _channels = itertools.count()
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,13 +12,13 @@ from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 import seqrun.cli.ik  # noqa: F401  (registers `ik`)
-from seqrun.arm import Tool, load_arm
+from projecttree import ROOT, shipped_arm
+from seqrun.arm import Tool
 from seqrun.cli.app import app
 from seqrun.ik import IkSolver, Unreachable, target_frame, tool_chain
 from seqrun.kinematics import Chain, fk, orientation_error
 
-ROOT = Path(__file__).resolve().parents[1]
-ARM = load_arm(ROOT / "arms" / "lwa3.yaml")
+ARM = shipped_arm()
 CHAIN = Chain.from_arm(ARM)
 LIMITS = np.array([j.limits_deg for j in ARM.joints])
 FILES = ["--arm", str(ROOT / "arms" / "lwa3.yaml"), "--poses-dir", str(ROOT / "poses")]
@@ -191,14 +190,14 @@ def test_cli_bad_input_is_one_line_and_exit_2(args, message):
 
 
 def test_rotation_vector_near_a_half_turn():
-    from seqrun.ik import _rotation_vector
+    from seqrun.ik import rotation_vector
     from seqrun.kinematics import matrix_from_rpy
 
     for angle in (math.pi, math.pi - 1e-7, 1e-8, 0.0, 2.0):
         axis = np.array([1.0, -2.0, 0.5]) / np.linalg.norm([1.0, -2.0, 0.5])
         k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
         rotation = np.eye(3) + math.sin(angle) * k + (1 - math.cos(angle)) * k @ k
-        vector = _rotation_vector(rotation)
+        vector = rotation_vector(rotation)
         assert np.linalg.norm(vector) == pytest.approx(angle, abs=1e-9)
         if angle > 1e-3:
             assert abs(abs(vector @ axis) - angle) < 1e-6

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import get_args
 
 import numpy as np
@@ -11,7 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from seqrun.arm import GuardPoint, load_arm
+from projecttree import shipped_arm
+from seqrun.arm import GuardPoint
 from seqrun.kinematics import (
     Chain,
     fk,
@@ -24,8 +24,7 @@ from seqrun.kinematics import (
     rpy_from_matrix,
 )
 
-ROOT = Path(__file__).resolve().parents[1]
-ARM = load_arm(ROOT / "arms" / "lwa3.yaml")
+ARM = shipped_arm()
 CHAIN = Chain.from_arm(ARM)
 
 TOTEM = [0, 0, 0, 0, 0, 0, 0]

@@ -7,18 +7,17 @@ ends the run before anything is reset or moved.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import pytest
 from typer.testing import CliRunner
 
 import seqrun.cli  # noqa: F401  (registers the commands)
+from projecttree import ROOT
+from runfolder import RunFolder
 from seqrun.cli.app import app
+from simrun import run_on_sim
 from zerostate import serve_arm
-from test_executor_e2e import events, frames, run
-
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def cli_run(tmp_path: Path, *faults: str):
@@ -27,7 +26,7 @@ def cli_run(tmp_path: Path, *faults: str):
     for fault in faults:
         args += ["--sim-fault", fault]
     result = CliRunner().invoke(app, args)
-    report = json.loads((tmp_path / "run" / "report.json").read_text())
+    report = RunFolder(tmp_path / "run").report()
     return result, report, " ".join(result.output.split())
 
 
@@ -39,7 +38,7 @@ def test_a_tow_error_latched_before_the_run_is_told_and_reported(tmp_path):
     assert "cleared by the sequence's Reset" in output
     (latched,) = report["latched_at_start"]
     assert latched["module"] == 4 and "TOW_ERROR" in latched["flags"]
-    kinds = [e["type"] for e in events(tmp_path / "run")]
+    kinds = [e["type"] for e in RunFolder(tmp_path / "run").events()]
     assert kinds.index("latched_fault") < kinds.index("latched_fault_cleared")
 
 
@@ -64,13 +63,13 @@ def test_where_the_operator_is_asked_a_no_resets_and_moves_nothing(tmp_path):
         asked.append(question)
         return False
 
-    outcome, sim, _ = run("opsafe", tmp_path, faults=["4:tow_error@0"],
+    outcome, sim, _ = run_on_sim("opsafe", tmp_path, faults=["4:tow_error@0"],
                           confirm_clear_latched=decline)
     assert outcome.result.exit_code == 130
     assert "did not clear the fault latched before the run" in outcome.result.message
     (question,) = asked
     assert "module 4 (j4)" in question and "TOW_ERROR" in question
-    sent = [m for m in frames(outcome.log_dir) if not m.is_rx]
+    sent = [m for m in RunFolder(outcome.log_dir).trace() if not m.is_rx]
     resets = [m for m in sent if m.data[:1] == b"\x00" and 0x0E0 <= m.arbitration_id <= 0x100]
     motion = [m for m in sent if m.data[:1] in (b"\x0b", b"\x08")]
     assert resets == [] and motion == []
@@ -80,7 +79,7 @@ def test_where_the_operator_is_asked_a_no_resets_and_moves_nothing(tmp_path):
 
 def test_where_the_operator_is_asked_a_yes_clears_and_runs(tmp_path):
     asked: list[str] = []
-    outcome, sim, _ = run("opsafe", tmp_path, faults=["all:halt@0"],
+    outcome, sim, _ = run_on_sim("opsafe", tmp_path, faults=["all:halt@0"],
                           confirm_clear_latched=lambda q: asked.append(q) or True)
     assert outcome.result.exit_code == 0, outcome.result.message
     assert len(asked) == 1  # once, not per Reset step or module
@@ -88,7 +87,7 @@ def test_where_the_operator_is_asked_a_yes_clears_and_runs(tmp_path):
 
 def test_the_operator_is_not_asked_without_a_latched_fault(tmp_path):
     asked: list[str] = []
-    outcome, _, _ = run("opsafe", tmp_path, confirm_clear_latched=asked.append)
+    outcome, _, _ = run_on_sim("opsafe", tmp_path, confirm_clear_latched=asked.append)
     assert outcome.result.exit_code == 0 and asked == []
 
 
@@ -113,8 +112,8 @@ def test_on_a_real_interface_even_yes_does_not_clear_a_latched_fault_unasked(tmp
     output = " ".join(proc.stdout.split())
     assert proc.returncode == 130, proc.stdout + proc.stderr
     assert "This Reset clears it" in output and "[y/N]" in output
-    report = json.loads((folder / "report.json").read_text())
+    report = RunFolder(folder).report()
     assert report["status"] == "aborted"
     assert len(report["latched_at_start"]) == 7
-    sent = [m for m in frames(folder) if not m.is_rx]
+    sent = [m for m in RunFolder(folder).trace() if not m.is_rx]
     assert not any(m.data[:1] == b"\x00" for m in sent if 0x0E0 <= m.arbitration_id <= 0x100)

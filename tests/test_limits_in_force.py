@@ -3,14 +3,14 @@ set_limits, and the MaxVel/MaxAcc the modules still hold from before (issue 9, i
 
 from __future__ import annotations
 
-import json
 import math
-import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from projecttree import make_project, shipped_arm
+from runfolder import RunFolder
 from seqrun.arm import load_arm
 from seqrun.cli.validate import static_check
 from seqrun.clock import VirtualClock
@@ -25,8 +25,7 @@ from seqrun.runner import run_sequence
 from seqrun.schema import load_sequence
 from seqrun.validation import park_deg
 
-ROOT = Path(__file__).resolve().parents[1]
-ARM = load_arm(ROOT / "arms" / "lwa3.yaml")
+ARM = shipped_arm()
 
 #: The repro of the issue: narrow three joints, then the shipped move to Totem.
 NARROWED = """\
@@ -41,12 +40,7 @@ steps:
 
 @pytest.fixture
 def project(tmp_path: Path) -> Path:
-    root = tmp_path / "project"
-    (root / "sequences").mkdir(parents=True)
-    shutil.copytree(ROOT / "arms", root / "arms")
-    shutil.copytree(ROOT / "poses", root / "poses")
-    for name in ("startup.yaml", "totem.yaml"):
-        shutil.copy(ROOT / "sequences" / name, root / "sequences")
+    root = make_project(tmp_path / "project", sequences=("startup.yaml", "totem.yaml"))
     (root / "sequences" / "narrowed.yaml").write_text(NARROWED)
     return root
 
@@ -82,7 +76,7 @@ def test_the_repro_passes_validation_and_its_dry_run(project):
 def test_the_repro_runs_and_the_report_says_which_limit_applied(project, tmp_path):
     outcome = _run(project / "sequences" / "narrowed.yaml", tmp_path / "run")
     assert outcome.result.exit_code == EXIT_OK, outcome.result.message
-    report = json.loads((tmp_path / "run" / "report.json").read_text())
+    report = RunFolder(tmp_path / "run").report()
     move = report["steps"][-1]
     assert move["limits_in_force"]["j2"] == {
         "max_velocity_deg_s": 5.0, "velocity_from": move["limits_in_force"]["j2"]["velocity_from"],
@@ -104,13 +98,11 @@ def test_a_max_vel_stored_before_the_run_bounds_the_shipped_totem(project, tmp_p
     outcome = _run(project / "sequences" / "totem.yaml", tmp_path / "run",
                    before=_narrow_stored_max_vel)
     assert outcome.result.exit_code == EXIT_OK, outcome.result.message
-    report = json.loads((tmp_path / "run" / "report.json").read_text())
+    report = RunFolder(tmp_path / "run").report()
     move = next(s for s in report["steps"] if s["kind"] == "move")
     assert move["limits_in_force"]["j4"]["velocity_from"] == READBACK
     assert move["limits_in_force"]["j4"]["max_velocity_deg_s"] == pytest.approx(5.0, abs=1e-4)
-    preflight = next(json.loads(line) for line in
-                     (tmp_path / "run" / "events.jsonl").read_text().splitlines()
-                     if json.loads(line)["type"] == "preflight")
+    [preflight] = RunFolder(tmp_path / "run").events("preflight")
     assert preflight["module_limits"]["j4"][0] == pytest.approx(5.0, abs=1e-3)
     assert any("holds MaxVel 5 deg/s" in note for note in preflight["notes"])
 

@@ -9,16 +9,16 @@ break the bus in process; the slow one kills a real ``seqrun sim serve`` mid-mov
 from __future__ import annotations
 
 import itertools
-import json
 import signal
 import subprocess
 import sys
 import time
 import xml.etree.ElementTree as ET
-from pathlib import Path
 
 import pytest
 
+from projecttree import ROOT
+from runfolder import RunFolder
 from seqrun.arm import load_arm
 from seqrun.clock import VirtualClock
 from seqrun.connection import Connection
@@ -31,7 +31,6 @@ from seqrun.sim.bus import SimBus
 from wrapbus import WrapBus
 from zerostate import serve_arm
 
-ROOT = Path(__file__).resolve().parents[1]
 _channels = itertools.count()
 #: Frames sent before the connection breaks: inside the first move of opsafe.yaml.
 BREAK_AFTER = 1500
@@ -86,7 +85,7 @@ def test_a_bus_that_breaks_mid_move_is_a_fault_with_exit_3_and_finished_logs(
         assert fault["halt_sent"] is True
         assert "Halt sent but NOT confirmed" in result.message
         assert any(e["type"] == "halt_unconfirmed" for e in events)
-    report = json.loads((tmp_path / "run" / "report.json").read_text())
+    report = RunFolder(tmp_path / "run").report()
     assert report["status"] == "failed" and report["exit_code"] == 3
     assert report["fault"]["cause"] == "bus_error"
     suite = ET.parse(tmp_path / "run" / "junit.xml").getroot()
@@ -135,7 +134,7 @@ def test_a_killed_socketcand_server_mid_move_ends_the_run_with_exit_3(tmp_path):
     assert runner.returncode == 3, out + err
     assert "Traceback" not in out + err
     assert "FAILED (exit 3)" in out
-    report = json.loads((folder / "report.json").read_text())
+    report = RunFolder(folder).report()
     assert report["status"] == "failed" and report["exit_code"] == 3
     assert report["fault"]["cause"] in ("bus_error", "no_acknowledge")
     assert report["fault"]["halt_confirmed"] is False

@@ -8,26 +8,25 @@ request in flight per module, so ``opsafe.yaml`` completes under it and nothing 
 from __future__ import annotations
 
 import itertools
-import json
 import os
 import subprocess
 import sys
-from pathlib import Path
 
 import can
 import pytest
 
+from projecttree import ROOT
+from runfolder import RunFolder
 from seqrun.clock import VirtualClock
-from seqrun.connection import open_connection, sim_options_from_env
+from seqrun.connection import sim_options_from_env
 from seqrun.errors import UserInputError
-from seqrun.powercube.codec import GetParam, SetMotion, SetParam, encode
-from seqrun.powercube.protocol import MotionMode, ParamId
+from seqrun.powercube.codec import GetParam, SetParam, encode
+from seqrun.powercube.protocol import ParamId
 from seqrun.sim.bus import SimBus
 from seqrun.sim.module import ModuleOptions
 from seqrun.sim.options import parse_module_options
-from test_executor_e2e import run
+from simrun import run_on_sim
 
-ROOT = Path(__file__).resolve().parents[1]
 BUSY = ModuleOptions(drop_request_while_busy=True)
 _channels = itertools.count()
 
@@ -58,7 +57,7 @@ def test_a_module_drops_a_request_that_arrives_before_its_previous_answer_was_se
 def test_the_ramp_cycle_keeps_one_request_in_flight_per_module(tmp_path, monkeypatch):
     # The simulator option comes from the environment, as on the command line.
     monkeypatch.setenv("SEQRUN_SIM_OPTIONS", "drop_request_while_busy")
-    outcome, sim, _ = run("opsafe", tmp_path)
+    outcome, sim, _ = run_on_sim("opsafe", tmp_path)
     assert sim.options.drop_request_while_busy
     assert outcome.result.exit_code == 0, outcome.result.message
     assert sim.dropped_while_busy == []
@@ -68,7 +67,7 @@ def test_the_ramp_cycle_keeps_one_request_in_flight_per_module(tmp_path, monkeyp
 
 def test_step_mode_under_the_switch_completes_too(tmp_path, monkeypatch):
     monkeypatch.setenv("SEQRUN_SIM_OPTIONS", "drop_request_while_busy")
-    outcome, sim, _ = run("opsafe", tmp_path, command_mode="step")
+    outcome, sim, _ = run_on_sim("opsafe", tmp_path, command_mode="step")
     assert outcome.result.exit_code == 0, outcome.result.message
     assert sim.dropped_while_busy == []
 
@@ -94,7 +93,7 @@ def test_cli_takes_simulator_options_from_the_environment(tmp_path):
                           text=True, timeout=300)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "options drop_request_while_busy" in " ".join(proc.stdout.split())
-    report = json.loads((tmp_path / "run" / "report.json").read_text())
+    report = RunFolder(tmp_path / "run").report()
     assert report["status"] == "passed"
     bad = subprocess.run([sys.executable, "-m", "seqrun", "run", "sequences/opsafe.yaml",
                           "--virtual-time", "--yes", "--plain", "--log-dir",
@@ -113,7 +112,7 @@ def test_the_switch_catches_a_client_that_pipelines_two_requests_to_one_module(
 
     monkeypatch.setenv("SEQRUN_SIM_OPTIONS", "drop_request_while_busy")
     monkeypatch.setattr(PowerCubeClient, "ONE_REQUEST_PER_MODULE", False)
-    outcome, sim, _ = run("opsafe", tmp_path)
+    outcome, sim, _ = run_on_sim("opsafe", tmp_path)
     assert outcome.result.exit_code == 3
     assert outcome.result.fault["cause"] == "no_acknowledge"
     assert sim.dropped_while_busy

@@ -7,11 +7,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from seqrun.arm import load_arm
+from projecttree import shipped_arm
 from seqrun.errors import PlanningError
 from seqrun.planner import Limits, plan_move, plan_stop
 
-ARM = load_arm("arms/lwa3.yaml")
+ARM = shipped_arm()
 LIMITS = Limits.from_arm(ARM)
 ACTIVE = [0, 1, 3, 4, 5, 6]  # joint 3 (index 2) is locked
 

@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 from datetime import datetime, timedelta, timezone
-from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from seqrun.arm import load_arm
+from projecttree import ROOT, shipped_arm
 from seqrun.errors import SequenceInvalid, UserInputError
 from seqrun.poses import (
     NOTE_PREFIX,
@@ -24,9 +23,8 @@ from seqrun.poses import (
     save_pose,
 )
 
-ROOT = Path(__file__).resolve().parents[1]
 POSES = ROOT / "poses"
-ARM = load_arm(ROOT / "arms" / "lwa3.yaml")
+ARM = shipped_arm()
 
 REFERENCE_JOINTS = {  # shared/reference/lwa3-arm.md, user degrees
     "totem": [0, 0, 0, 0, 0, 0, 0],

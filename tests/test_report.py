@@ -21,14 +21,14 @@ import pytest
 from typer.testing import CliRunner
 
 import seqrun.cli  # noqa: F401  (registers the commands)
-from seqrun.arm import load_arm
+from projecttree import ROOT, shipped_arm
+from runfolder import RunFolder
 from seqrun.cli.app import app
 from seqrun.report import load_run, write_html
 from seqrun.report.figures import decimate
 
-ROOT = Path(__file__).resolve().parents[1]
 OPSAFE = ROOT / "sequences" / "opsafe.yaml"
-ARM = load_arm(ROOT / "arms" / "lwa3.yaml")
+ARM = shipped_arm()
 JOINTS = ARM.joint_names
 #: 7 joints + the guard points (virtual time: no loop-period histogram).
 TIME_PLOTS = [f"plot-{n}" for n in JOINTS] + ["plot-guards"]
@@ -53,10 +53,6 @@ def fault_run(tmp_path_factory) -> Path:
     folder = tmp_path_factory.mktemp("fault") / "run"
     assert cli_run(folder, "--sim-fault", "4:tow_error@5").exit_code == 3
     return folder
-
-
-def events(folder: Path) -> list[dict]:
-    return [json.loads(line) for line in (folder / "events.jsonl").read_text().splitlines()]
 
 
 class Page(HTMLParser):
@@ -108,7 +104,7 @@ def page(folder: Path) -> tuple[str, Page]:
 # ---------------------------------------------------------------------------------------
 # Independent recomputation from events.jsonl (numpy only)
 def recompute(folder: Path) -> dict[int, dict[str, np.ndarray]]:
-    log = events(folder)
+    log = RunFolder(folder).events()
     window = next(e for e in log if e["type"] == "run_started")["velocity_window_s"]
     out: dict[int, dict[str, np.ndarray]] = {}
     for planned_event in (e for e in log if e["type"] == "move_planned"):
@@ -137,7 +133,7 @@ def test_report_numbers_equal_a_recomputation_from_the_events(which, request):
     folder = request.getfixturevalue(which)
     expected = recompute(folder)
     assert expected, "no move in the log"
-    report = json.loads((folder / "report.json").read_text())
+    report = RunFolder(folder).report()
     steps = {s["number"]: s for s in report["steps"]}
     _, html = page(folder)
     for step, figures in expected.items():
@@ -181,7 +177,7 @@ def test_an_aborted_move_has_its_figures_up_to_the_stop(tmp_path):
         connection.close()
     assert outcome.result.exit_code == 130 and outcome.report_error is None
     folder = outcome.log_dir
-    step = json.loads((folder / "report.json").read_text())["steps"][4]
+    step = RunFolder(folder).report()["steps"][4]
     assert step["status"] == "aborted"
     expected = recompute(folder)[5]
     for key, values in expected.items():
@@ -200,7 +196,7 @@ def test_report_html_of_a_clean_run_is_self_contained_with_every_plot(clean_run)
     assert {"identity", "steps", "checkpoints"} <= html.ids
     assert "sequences/opsafe.yaml" in text and "exit code 0" in text
     # The checkpoint table shows expected, measured, error and tolerance.
-    report = json.loads((clean_run / "report.json").read_text())
+    report = RunFolder(clean_run).report()
     [checkpoint] = report["checkpoints"]
     table = text[text.index('id="checkpoints"'):]
     for key in ("position_tolerance_mm", "angle_tolerance_deg"):
@@ -217,11 +213,11 @@ def test_report_html_of_a_clean_run_is_self_contained_with_every_plot(clean_run)
 def test_report_of_a_faulted_run_shows_the_fault_on_every_plot(fault_run):
     text, html = page(fault_run)
     assert "FAILED" in text and "fault" in html.ids
-    fault = json.loads((fault_run / "report.json").read_text())["fault"]
+    fault = RunFolder(fault_run).report()["fault"]
     assert fault["cause"] == "tow_error" and fault["module"] == 4
     box = text[text.index('id="fault"'):text.index("</div>", text.index('id="fault"'))]
     assert "tow_error" in box and "module 4" in box.replace("<th>module</th><td>", "module ")
-    fault_t = next(e["t"] for e in events(fault_run) if e["type"] == "fault")
+    fault_t = next(e["t"] for e in RunFolder(fault_run).events() if e["type"] == "fault")
     assert f"{fault_t:.3f} s" in box
     for plot in TIME_PLOTS:
         svg = text[text.index(f'id="{plot}"'):]
@@ -291,7 +287,7 @@ def test_csv_export(clean_run, tmp_path):
     assert result.exit_code == 0, result.output
     with open(out / "timeseries.csv", newline="") as f:
         rows = list(csv.DictReader(f))
-    log = events(clean_run)
+    log = RunFolder(clean_run).events()
     readings = [e for e in log if e["type"] in ("setpoint", "measurement")]
     assert len(rows) == len(readings)
     for name in JOINTS:
@@ -303,7 +299,7 @@ def test_csv_export(clean_run, tmp_path):
     assert [float(row[f"{n}_planned_deg"]) for n in JOINTS] == first_cycle["planned_deg"]
     assert row["j1_state"] and row["streamed"] == "1"
     # The end-effector pose of the last reading is the checkpoint's.
-    report = json.loads((clean_run / "report.json").read_text())
+    report = RunFolder(clean_run).report()
     reached = report["checkpoints"][0]["reached_position_mm"]
     last = rows[-1]
     assert [float(last[k]) for k in ("ee_x_mm", "ee_y_mm", "ee_z_mm")] == pytest.approx(
@@ -322,7 +318,7 @@ def test_junit_has_a_case_per_step_and_per_checkpoint_with_measured_values(clean
     assert len(steps.findall("testcase")) == 9 and steps.get("failures") == "0"
     move = steps.findall("testcase")[4]
     props = {p.get("name"): p.get("value") for p in move.iter("property")}
-    report = json.loads((clean_run / "report.json").read_text())
+    report = RunFolder(clean_run).report()
     figures = report["steps"][4]
     assert float(props["max_following_error_deg.j4"]) == figures["max_following_error_deg"][3]
     assert float(props["peak_measured_velocity_deg_s.j2"]) == \
@@ -393,7 +389,7 @@ def test_loader_reads_the_series_in_time_order(clean_run):
     data = load_run(clean_run)
     s = data.series
     assert np.all(np.diff(s.t) >= 0) and len(s) == len(
-        [e for e in events(clean_run) if e["type"] in ("setpoint", "measurement")])
+        [e for e in RunFolder(clean_run).events() if e["type"] in ("setpoint", "measurement")])
     assert data.arm is not None and data.arm.joint_names == JOINTS
     assert np.all(np.isnan(s.planned[~s.streamed])) and not np.any(np.isnan(s.planned[s.streamed]))
     assert np.all(s.state >= 0)

@@ -16,11 +16,10 @@ import pytest
 from typer.testing import CliRunner
 
 import seqrun.cli  # noqa: F401  (registers the commands)
-from seqrun.arm import load_arm
+from projecttree import ROOT, shipped_arm
 from seqrun.cli.app import app
 
-ROOT = Path(__file__).resolve().parents[1]
-ARM = load_arm(ROOT / "arms" / "lwa3.yaml")
+ARM = shipped_arm()
 PLOTS = [f"plot-{n}" for n in ARM.joint_names] + ["plot-guards"]
 CHROMIUM = os.environ.get("SEQRUN_CHROMIUM") or shutil.which("chromium") or "/usr/bin/chromium"
 

@@ -12,11 +12,10 @@ import pytest
 from typer.testing import CliRunner
 
 import seqrun.cli  # noqa: F401  (registers the commands)
+from runfolder import RunFolder
 from seqrun import __version__
 from seqrun.cli.app import app
 from seqrun.records import freeze_inputs, git_state, list_runs
-
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def invoke(*args):
@@ -85,7 +84,7 @@ def test_a_run_refused_by_validation_leaves_a_short_record(campaign):
     result = invoke("run", bad, "--yes", "--virtual-time")
     assert result.exit_code == 1
     (folder,) = (campaign / "runs").iterdir()
-    report = json.loads((folder / "report.json").read_text())
+    report = RunFolder(folder).report()
     assert report["status"] == "refused" and report["exit_code"] == 1
     assert "j2 target 150° is outside its limits" in report["errors"][0]["message"]
     assert not (folder / "trace.log").exists()  # nothing was sent
@@ -97,7 +96,7 @@ def test_an_unloadable_sequence_is_recorded_as_refused_too(campaign):
     broken.write_text("name: [\n")
     assert invoke("run", broken, "--yes").exit_code == 1
     (folder,) = (campaign / "runs").iterdir()
-    report = json.loads((folder / "report.json").read_text())
+    report = RunFolder(folder).report()
     assert report["status"] == "refused" and report["errors"]
 
 

@@ -15,6 +15,8 @@ import pytest
 from typer.testing import CliRunner
 
 import seqrun.cli  # noqa: F401  (registers the commands on the app)
+from projecttree import ROOT
+from runfolder import RunFolder
 from seqrun import logfile
 from seqrun.arm import load_arm
 from seqrun.cli.app import app
@@ -25,7 +27,6 @@ from seqrun.runlog import RunLog, read_report, read_trace
 from seqrun.runner import run_sequence
 from seqrun.schema import load_sequence
 
-ROOT = Path(__file__).resolve().parents[1]
 TOTEM = ROOT / "sequences" / "totem.yaml"
 
 
@@ -119,11 +120,10 @@ def test_a_full_disk_is_recorded_in_the_report_when_the_report_fits(tmp_path, mo
     monkeypatch.setattr(logfile, "_write", TraceOnly(5_000))
     result = run_cli(tmp_path / "run")
     assert result.exit_code == 0
-    report = json.loads((tmp_path / "run" / "report.json").read_text())
+    report = RunFolder(tmp_path / "run").report()
     assert report["status"] == "passed"
     assert any("trace.log" in e for e in report["log_errors"]), report.get("log_errors")
-    kinds = [json.loads(line)["type"] for line in
-             (tmp_path / "run" / "events.jsonl").read_text().splitlines()]
+    kinds = [e["type"] for e in RunFolder(tmp_path / "run").events()]
     assert "log_failed" in kinds and kinds[-1] == "run_finished"
     assert "the run log is incomplete" in result.output
 
@@ -148,7 +148,7 @@ def test_a_reused_log_dir_keeps_the_earlier_run(tmp_path):
     assert second.exit_code == 0, second.output
     assert digest(folder) == before                  # the first run untouched
     (inner,) = [p for p in folder.iterdir() if (p / "report.json").exists()]
-    assert json.loads((inner / "report.json").read_text())["status"] == "passed"
+    assert RunFolder(inner).report()["status"] == "passed"
     assert f"this run goes to {inner}" in second.output
     third = run_cli(folder)                          # the same second: its own folder
     assert third.exit_code == 0
@@ -174,7 +174,7 @@ def test_a_refused_run_never_overwrites_an_earlier_run_in_its_log_dir(tmp_path):
                                           "--plain", "--log-dir", str(folder)])
         assert result.exit_code == 1, result.output
     assert digest(folder) == before
-    refused = [json.loads((p / "report.json").read_text()) for p in folder.iterdir()
+    refused = [RunFolder(p).report() for p in folder.iterdir()
                if (p / "report.json").exists()]
     assert [r["status"] for r in refused] == ["refused", "refused"]
 
@@ -208,7 +208,7 @@ def test_the_trace_is_on_wall_clock_time_with_one_channel_and_converts(tmp_path)
     frames = list(can.LogReader(str(folder / "trace.log")))
     assert {m.channel for m in frames} == {frames[0].channel}           # one name
     assert {m.is_rx for m in frames} == {True, False}                   # both directions
-    duration = json.loads((folder / "report.json").read_text())["duration_s"]
+    duration = RunFolder(folder).report()["duration_s"]
     assert before - 1 <= frames[0].timestamp and frames[-1].timestamp <= after + duration + 1
     # python-can's converter writes a Vector .asc whose start is today, not 1970.
     with can.Logger(str(folder / "trace.asc")) as asc:
@@ -220,9 +220,9 @@ def test_the_trace_is_on_wall_clock_time_with_one_channel_and_converts(tmp_path)
     assert len(list(can.LogReader(str(folder / "trace.asc")))) == len(frames)
     # One time base: event t + start_epoch_s is the frame's time. Step 1 (Reset) starts
     # with the Reset broadcast; a step's first frame comes within a cycle of its event.
-    events = [json.loads(line) for line in (folder / "events.jsonl").read_text().splitlines()]
+    events = RunFolder(folder).events()
     started = next(e for e in events if e["type"] == "run_started")
-    report = json.loads((folder / "report.json").read_text())
+    report = RunFolder(folder).report()
     assert started["type"] == "run_started"
     assert report["start_epoch_s"] == started["start_epoch_s"]
     step1 = next(e for e in events if e["type"] == "step_started")
@@ -282,7 +282,7 @@ def test_a_killed_run_reads_back_with_its_steps(tmp_path):
     log.close()
     with open(folder / "steps.jsonl", "a") as f:
         f.write('{"number": 31, "sta')                   # the line being written
-    raw = json.loads((folder / "report.json").read_text())
+    raw = RunFolder(folder).report()
     assert raw["status"] == "running" and raw["steps_file"] == "steps.jsonl"
     report = read_report(folder)
     assert [s["number"] for s in report["steps"]] == list(range(1, 31))
@@ -294,4 +294,4 @@ def test_a_finished_run_reads_back_whole(tmp_path):
     fake_run(tmp_path / "run", 5)
     report = read_report(tmp_path / "run")
     assert report["status"] == "passed" and len(report["steps"]) == 5
-    assert report == json.loads((tmp_path / "run" / "report.json").read_text())
+    assert report == RunFolder(tmp_path / "run").report()

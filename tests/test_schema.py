@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 
+from projecttree import ROOT
 from seqrun.errors import SequenceInvalid, UserInputError
 from seqrun.schema import (
     PARAMS_MODELS,
@@ -27,7 +28,6 @@ from seqrun.schema import (
 )
 from seqrun.yamlsource import display_path
 
-ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = [ROOT / "sequences" / f"{name}.yaml"
            for name in ("startup", "totem", "opsafe", "park", "shutdown")]
 

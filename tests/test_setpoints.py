@@ -5,13 +5,13 @@ import math
 import numpy as np
 import pytest
 
-from seqrun.arm import load_arm
+from projecttree import shipped_arm
 from seqrun.planner import Limits, plan_move
 from seqrun.powercube.codec import SetMotion, SetParam
 from seqrun.powercube.protocol import MotionMode, ParamId
 from seqrun.setpoints import RampSetpoints, StepSetpoints, setpoint_law
 
-ARM = load_arm("arms/lwa3.yaml")
+ARM = shipped_arm()
 RUN = Limits.from_arm(ARM)
 PARK = np.radians([0, -90, 0, -120.32, 0, 115.74, 0])
 TOTEM = np.zeros(7)

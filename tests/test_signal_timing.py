@@ -23,6 +23,8 @@ from pathlib import Path
 import pytest
 from rich.console import Console
 
+from projecttree import ROOT
+from runfolder import RunFolder
 from seqrun import logfile
 from seqrun.arm import load_arm
 from seqrun.cli.display import LiveDisplay, PlainDisplay
@@ -35,7 +37,6 @@ from seqrun.runner import run_sequence
 from seqrun.schema import load_sequence
 from seqrun.stop_requests import StopRequests
 
-ROOT = Path(__file__).resolve().parents[1]
 SIGNALS = {"SIGINT": signal.SIGINT, "SIGTERM": signal.SIGTERM, "SIGHUP": signal.SIGHUP,
            "SIGQUIT": signal.SIGQUIT}
 #: A run that does not end within this many real seconds is taken for a deadlock.
@@ -166,7 +167,7 @@ def _is_halt(msg) -> bool:
 
 
 def assert_finished_folder(folder: Path, code: int) -> dict:
-    report = json.loads((folder / "report.json").read_text())
+    report = RunFolder(folder).report()
     assert report["exit_code"] == code and report["status"] != "running"
     junit = (folder / "junit.xml").read_text()
     assert junit.rstrip().endswith("</testsuites>")

@@ -38,11 +38,12 @@ from pathlib import Path
 import can
 import pytest
 
+from projecttree import ROOT
+from runfolder import RunFolder
 from seqrun.clock import RealClock
 from seqrun.powercube.client import PowerCubeClient
 from seqrun.powercube.protocol import StateFlag
 
-ROOT = Path(__file__).resolve().parents[1]
 HALT, BROADCAST = 0x02, 0x100
 TRACE_LINE = re.compile(r"^\((?P<t>[0-9.]+)\) \S+ (?P<id>[0-9A-F]+)#(?P<data>[0-9A-F]*)"
                         r"(?: (?P<dir>[TR]))?$")
@@ -183,7 +184,7 @@ def halts(frames: list[Frame]) -> list[Frame]:
 
 
 def run_folder_report(folder: Path) -> dict:
-    return json.loads((folder / "report.json").read_text(encoding="utf-8"))
+    return RunFolder(folder).report()
 
 
 # ----------------------------------------------------------------------------- SIGINT, SIGTERM

@@ -21,10 +21,10 @@ from __future__ import annotations
 
 import hashlib
 import os
-from pathlib import Path
 
 import pytest
 
+from projecttree import ROOT
 from seqrun.arm import load_arm
 from seqrun.clock import VirtualClock
 from seqrun.executor import Executor
@@ -34,7 +34,6 @@ from seqrun.powercube.protocol import ParamId
 from seqrun.schema import load_sequence
 from seqrun.sim.bus import SimBus
 
-ROOT = Path(__file__).resolve().parents[1]
 GOLDEN = ROOT / "tests" / "data" / "golden"
 SEED = 1234
 

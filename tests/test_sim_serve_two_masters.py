@@ -12,6 +12,7 @@ import subprocess
 import sys
 
 import pytest
+from projecttree import ROOT
 from zerostate import with_park_recorded
 
 ENV = {**os.environ, "PYTHONUNBUFFERED": "1"}
@@ -36,7 +37,7 @@ def test_run_with_a_watcher_beside_it(tmp_path):
             [sys.executable, "-m", "seqrun", "run", "sequences/opsafe.yaml", "--yes",
              "--plain", "--log-dir", str(tmp_path / "run"), *bus],
             capture_output=True, text=True, env={**env, "SEQRUN_RESPONSE_TIMEOUT_MS": "200"},
-            timeout=180)
+            cwd=ROOT, timeout=180)
         assert watcher.poll() is None, "the watch ended during the run"
         watcher.send_signal(signal.SIGINT)
         out, err = watcher.communicate(timeout=10)

@@ -13,26 +13,24 @@ counted in ``client.stats`` and logged in the run's trace.
 from __future__ import annotations
 
 import itertools
-import json
 from pathlib import Path
 
 import can
 import numpy as np
 import pytest
 
-from seqrun.arm import load_arm
+from projecttree import ROOT, shipped_arm
+from runfolder import RunFolder
 from seqrun.clock import VirtualClock
 from seqrun.connection import Connection, open_connection
 from seqrun.powercube.client import DiscardReason, PowerCubeClient
 from seqrun.powercube.codec import GetParamAck, MotionExtAck, PosStateDio, encode
 from seqrun.powercube.protocol import MotionMode, ParamId, ShortState
 from seqrun.runner import run_sequence
-from seqrun.runlog import read_trace
 from seqrun.schema import load_sequence
 from seqrun.sim.bus import SimBus
 
-ROOT = Path(__file__).resolve().parents[1]
-ARM = load_arm(ROOT / "arms" / "lwa3.yaml")
+ARM = shipped_arm()
 CYCLE = 1.0 / ARM.control.cycle_hz
 TIMEOUT = ARM.can.response_timeout_s
 #: 1.0 rad in module coordinates: far from anywhere j4 or j7 is during opsafe.
@@ -81,9 +79,8 @@ class Run:
             if bus is not sim_bus:
                 bus.shutdown()
             sim_bus.shutdown()
-        self.events = [json.loads(line)
-                       for line in (self.folder / "events.jsonl").read_text().splitlines()]
-        self.trace = read_trace(self.folder, run_clock=True)
+        self.events = RunFolder(self.folder).events()
+        self.trace = RunFolder(self.folder).trace()
 
     def inject(self, *frames: can.Message) -> None:
         for frame in frames:

@@ -6,7 +6,6 @@ not how long it takes: timings belong to bench/bench_startup.py.
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import subprocess
@@ -15,7 +14,9 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from projecttree import ROOT
+from runfolder import RunFolder
+
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 
 
@@ -84,7 +85,7 @@ def test_a_closed_pipe_never_ends_a_run(tmp_path):
                                   "sequences/opsafe.yaml", "--yes"])
     assert first.strip()
     assert "Traceback" not in err
-    report = json.loads((folder / "report.json").read_text())
+    report = RunFolder(folder).report()
     assert report["status"] == "passed", report.get("message")
     assert code == 0
     assert all(s["status"] == "passed" for s in report["steps"])
@@ -96,7 +97,7 @@ def test_a_closed_pipe_during_a_fault_still_halts_and_exits_3(tmp_path):
     code, _, err = _head_one(["run", "--virtual-time", "--plain", "--log-dir", str(folder),
                               "--sim-fault", "4:tow_error@3", "sequences/opsafe.yaml", "--yes"])
     assert "Traceback" not in err
-    report = json.loads((folder / "report.json").read_text())
+    report = RunFolder(folder).report()
     assert report["status"] == "failed" and report["fault"]["halt_sent"] is True
     assert code == 3
 

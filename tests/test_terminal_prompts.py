@@ -9,8 +9,6 @@ with send-keys and checks the run ends as answered.
 
 from __future__ import annotations
 
-import json
-import os
 import shlex
 import subprocess
 import sys
@@ -20,7 +18,8 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from projecttree import ROOT
+from runfolder import RunFolder
 
 
 class Pane:
@@ -78,7 +77,7 @@ def test_a_confirm_question_stays_on_the_screen_and_the_answer_counts(tmp_path):
         assert "Op-safe? [y/N] y" in screen   # the question and its answer stay above
     finally:
         pane.close()
-    report = json.loads((tmp_path / "run" / "report.json").read_text())
+    report = RunFolder(tmp_path / "run").report()
     assert report["status"] == "passed"
 
 
@@ -103,7 +102,7 @@ def test_step_mode_shows_every_question_in_turn(tmp_path):
         assert "SEQRUN-EXIT=0" in screen, screen
     finally:
         pane.close()
-    report = json.loads((tmp_path / "run" / "report.json").read_text())
+    report = RunFolder(tmp_path / "run").report()
     assert report["status"] == "passed"
     assert [s["status"] for s in report["steps"]] == ["passed"] * 9
 

@@ -4,13 +4,13 @@ under a jittery clock (the real-time case of a loaded host, reproduced at virtua
 from __future__ import annotations
 
 import random
-from pathlib import Path
 
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from projecttree import ROOT
 from seqrun.arm import load_arm
 from seqrun.clock import VirtualClock
 from seqrun.connection import open_connection
@@ -18,8 +18,6 @@ from seqrun.executor import EXIT_OK, Executor
 from seqrun.powercube.client import PowerCubeClient
 from seqrun.schema import load_sequence
 from seqrun.tracking import MoveTracking, peak_abs, velocity_window, windowed_velocity
-
-ROOT = Path(__file__).resolve().parents[1]
 
 
 class JitteryClock:

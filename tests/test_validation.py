@@ -13,7 +13,7 @@ import yaml
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
-from seqrun.arm import load_arm
+from projecttree import ROOT, shipped_arm, write_sequence
 from seqrun.cli.validate import static_check
 from seqrun.errors import SequenceInvalid, SourceError, UserInputError
 from seqrun.kinematics import Chain, matrix_from_rpy, point_positions, pose_from_user_deg
@@ -27,10 +27,9 @@ from seqrun.validation import (
 )
 from seqrun.yamlsource import display_path
 
-ROOT = Path(__file__).resolve().parents[1]
 BAD = ROOT / "tests" / "data" / "bad"
 POSES = ROOT / "poses"
-ARM = load_arm(ROOT / "arms" / "lwa3.yaml")
+ARM = shipped_arm()
 NO_GEOMETRY = ARM.model_copy(update={"geometry": ARM.geometry.model_copy(
     update={"capsules": [], "obstacles": []})})
 PARK = park_deg(POSES)
@@ -39,19 +38,8 @@ SHIPPED = ["startup", "totem", "opsafe", "park", "shutdown"]
 STARTUP = "- reset\n- home\n- set_limits\n"
 
 
-@pytest.fixture
-def project(tmp_path):
-    (tmp_path / "poses").mkdir()
-    for pose in POSES.glob("*.yaml"):
-        (tmp_path / "poses" / pose.name).write_text(pose.read_text())
-    (tmp_path / "sequences").mkdir()
-    return tmp_path
-
-
 def validate(project: Path, steps: str, start=None, started=False, arm=None):
-    path = project / "sequences" / "s.yaml"
-    path.write_text("name: T\ndescription: test\nsteps:\n" + textwrap.dedent(steps))
-    loaded = load_sequence(path)
+    loaded = load_sequence(write_sequence(project, steps))
     return validate_sequence(loaded, arm or ARM, PARK if start is None else start,
                              started=started)
 

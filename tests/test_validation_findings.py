@@ -4,14 +4,13 @@ steps that can never pass, move timeouts shorter than their plan."""
 
 from __future__ import annotations
 
-import shutil
 import textwrap
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from seqrun.arm import load_arm
+from projecttree import shipped_arm
 from seqrun.cli.validate import static_check
 from seqrun.clock import VirtualClock
 from seqrun.connection import open_connection
@@ -22,19 +21,8 @@ from seqrun.runner import build_executor
 from seqrun.schema import load_sequence
 from seqrun.validation import format_number
 
-ROOT = Path(__file__).resolve().parents[1]
-ARM = load_arm(ROOT / "arms" / "lwa3.yaml")
+ARM = shipped_arm()
 HEAD = "name: T\ndescription: test\nsteps:\n  - include: startup.yaml\n"
-
-
-@pytest.fixture
-def project(tmp_path: Path) -> Path:
-    root = tmp_path / "project"
-    (root / "sequences").mkdir(parents=True)
-    shutil.copytree(ROOT / "arms", root / "arms")
-    shutil.copytree(ROOT / "poses", root / "poses")
-    shutil.copy(ROOT / "sequences" / "startup.yaml", root / "sequences")
-    return root
 
 
 def write(project: Path, steps: str, name: str = "s.yaml") -> Path:

@@ -14,16 +14,16 @@ from pathlib import Path
 
 import pytest
 
+from projecttree import ROOT
 from seqrun.arm import load_arm
 from seqrun.connection import open_connection
-from seqrun.dryrun import _prepare_started
+from seqrun.dryrun import prepare_started
 from seqrun.executor import EXIT_FAULT, EXIT_OK
 from seqrun.powercube.protocol import StateFlag
 from seqrun.runlog import read_trace
 from seqrun.runner import run_sequence
 from seqrun.schema import load_sequence
 
-ROOT = Path(__file__).resolve().parents[1]
 SEQUENCE = """\
 name: Keeper
 description: A question, then one slow move of j1 (modules already started).
@@ -71,7 +71,7 @@ def run(tmp_path: Path, *, confirm, stall_loop: bool):
         executor.check_guards = stuck
 
     try:
-        _prepare_started(connection, arm)
+        prepare_started(connection, arm)
         outcome = run_sequence(loaded, arm, connection, log_dir=tmp_path / "run",
                                confirm=confirm, on_executor=attach)
         states = [connection.bus.arm.module(m).state() for m in arm.module_ids]

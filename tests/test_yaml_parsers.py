@@ -9,11 +9,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from projecttree import ROOT
 from seqrun import yamlsource
 from seqrun.errors import SequenceInvalid, UserInputError
 from seqrun.yamlsource import load_document
 
-ROOT = Path(__file__).resolve().parents[1]
 CORPUS = sorted(p for folder in ("tests/data/hostile", "tests/data/bad", "sequences", "poses",
                                  "arms") for p in (ROOT / folder).glob("*.yaml"))
 

@@ -8,6 +8,7 @@ from typing import Annotated
 import pytest
 from pydantic import BaseModel, ConfigDict, Field
 
+from projecttree import ARM_FILE
 from seqrun import yamlsource
 from seqrun.errors import SequenceInvalid, UserInputError
 from seqrun.yamlsource import FriendlyModel, load_document, load_model
@@ -273,16 +274,14 @@ def test_load_model_returns_the_model(tmp_path):
 def test_arm_file_goes_through_yamlsource():
     from seqrun.arm import load_arm
 
-    arm = load_arm("arms/lwa3.yaml")
+    arm = load_arm(ARM_FILE)
     assert arm.joint("j3").locked == 0.0
 
 
 def test_arm_file_errors_are_located(tmp_path):
-    from pathlib import Path
-
     from seqrun.arm import load_arm
 
-    text = Path("arms/lwa3.yaml").read_text(encoding="utf-8")
+    text = ARM_FILE.read_text(encoding="utf-8")
     text = text.replace("cycle_hz: 100", "cycle_hz: fast")
     path = write(tmp_path, text, "arm.yaml")
     with pytest.raises(SequenceInvalid) as info:

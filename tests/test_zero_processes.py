@@ -13,7 +13,8 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from projecttree import ROOT
+
 pytestmark = pytest.mark.slow
 
 

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,13 +17,15 @@ import typer
 from typer.testing import CliRunner
 
 import seqrun.cli  # noqa: F401  (registers the commands)
+from projecttree import ROOT, shipped_arm
+from runfolder import RunFolder
 from seqrun.arm import load_arm
 from seqrun.cli.app import app
 from seqrun.cli.zero import zero_at_run_start
 from seqrun.clock import VirtualClock
 from seqrun.connection import Connection, open_connection
 from seqrun.errors import UserInputError
-from seqrun.executor import EXIT_FAULT, EXIT_OK
+from seqrun.executor import EXIT_OK
 from seqrun.poses import find_pose, load_pose
 from seqrun.runner import run_sequence
 from seqrun.schema import load_sequence
@@ -32,8 +33,7 @@ from seqrun.sim.bus import SimBus
 from seqrun.validation import validate_sequence
 from seqrun.zero import ZeroStore, zero_for_run
 
-ROOT = Path(__file__).resolve().parents[1]
-ARM = load_arm(ROOT / "arms" / "lwa3.yaml")
+ARM = shipped_arm()
 PARK_OFFSETS = {"j1": 0, "j2": 90, "j3": 0, "j4": 120.32, "j5": 0, "j6": -115.74, "j7": 0}
 OPSAFE = [70, 30, 0, 70, 20, 50, 0]
 
@@ -301,7 +301,7 @@ def test_run_on_the_simulator_powered_on_at_totem_shows_and_uses_that_zero(tmp_p
                                       "--log-dir", str(tmp_path / "run")])
     assert result.exit_code == 0, result.output
     assert "zero: Totem (the simulator's power-on pose)" in result.output
-    report = json.loads((tmp_path / "run" / "report.json").read_text())
+    report = RunFolder(tmp_path / "run").report()
     assert report["zero"]["pose"] == "totem" and report["zero"]["source"] == "simulator"
 
 

@@ -81,7 +81,7 @@ def _number(value: float | None) -> str:
     return "-" if value is None else fixed(value, 3)  # never -0.000
 
 
-def _table(status: dict, title: str) -> Table:
+def status_table(status: dict, title: str) -> Table:
     from rich.table import Table
 
     table = Table(title=title)
@@ -129,6 +129,7 @@ def status_command(
         connection, client = connect(arm, interface, channel, bitrate, bus_kwargs, sim,
                                      response_timeout_ms=response_timeout_ms)
     console = make_console()
+    status: dict | None
     try:
         # Positions in user angles need the zeros the modules really have.
         from seqrun.cli.zero import zero_for_reading
@@ -142,7 +143,7 @@ def status_command(
             if as_json:
                 typer.echo(json.dumps(status))
             else:
-                console.print(_table(status, arm.name))
+                console.print(status_table(status, arm.name))
             return
         if as_json:
             _watch_json(client, arm, period, count)
@@ -153,7 +154,7 @@ def status_command(
         with Live(console=console, auto_refresh=False) as live:
             for _ in _refreshes(period, count):
                 status = read_status(client, arm, status, tolerate_loss=True)
-                live.update(_table(status, arm.name), refresh=True)
+                live.update(status_table(status, arm.name), refresh=True)
     except KeyboardInterrupt:
         pass
     except BusError as exc:

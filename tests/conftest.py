@@ -1,0 +1,25 @@
+"""Fixtures every test file may use. The helper modules beside this file (projecttree,
+runfolder, fakebus, wrapbus, …) are imported by name: pytest puts this folder on sys.path.
+
+Tiers: ``pytest -m "not slow"`` is the fast loop; ``pytest -n 2`` (CI) runs everything."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from projecttree import make_project, shipped_arm
+from seqrun.arm import ArmDescription
+
+
+@pytest.fixture(scope="session")
+def arm() -> ArmDescription:
+    """The shipped arm (arms/lwa3.yaml), loaded once."""
+    return shipped_arm()
+
+
+@pytest.fixture
+def project(tmp_path: Path) -> Path:
+    """A campaign of the test's own: seqrun.toml, arms/, poses/, sequences/startup.yaml."""
+    return make_project(tmp_path / "project")

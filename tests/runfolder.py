@@ -1,0 +1,42 @@
+"""What a run left in its folder, read as written: report.json, steps.jsonl, events.jsonl,
+trace.log (the tests' one reader of a run folder)."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import can
+
+from seqrun.runlog import read_trace
+
+
+@dataclass(frozen=True)
+class RunFolder:
+    """Each read goes to the files again, so a test may read, change a file and read anew."""
+
+    path: Path
+
+    def report(self) -> dict:
+        """report.json as written (``seqrun.runlog.read_report`` also fills in a killed run)."""
+        return json.loads((self.path / "report.json").read_text(encoding="utf-8"))
+
+    def steps(self) -> list[dict]:
+        return _json_lines(self.path / "steps.jsonl")
+
+    def events(self, type: str | None = None) -> list[dict]:
+        """The events in order; with ``type``, only those of that type."""
+        events = _json_lines(self.path / "events.jsonl")
+        return events if type is None else [e for e in events if e["type"] == type]
+
+    def trace(self) -> list[can.Message]:
+        """The frames of trace.log, stamped on the run's clock."""
+        return read_trace(self.path, run_clock=True)
+
+    def trace_lines(self) -> list[str]:
+        return [line for line in (self.path / "trace.log").read_text().splitlines() if line]
+
+
+def _json_lines(path: Path) -> list[dict]:
+    return [json.loads(line) for line in path.read_text(encoding="utf-8").splitlines()]
