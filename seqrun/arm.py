@@ -336,12 +336,13 @@ class ArmDescription(_Strict):
                                                           if missing else "")
                                  + (f"; unknown {', '.join(unknown)}" if unknown else ""))
         if self.default_power_off is not None:
-            entry = self.power_off_poses.get(self.default_power_off)
-            if entry is None:
+            default = self.power_off_poses.get(self.default_power_off)
+            if default is None:
                 raise ValueError(f"default_power_off '{self.default_power_off}' is not one of "
                                  f"power_off_poses ({', '.join(self.power_off_poses) or 'none'})")
             differ = [j.name for j in self.joints
-                      if not math.isclose(j.offset_deg, entry.offsets_deg[j.name], abs_tol=1e-9)]
+                      if not math.isclose(j.offset_deg, default.offsets_deg[j.name],
+                                          abs_tol=1e-9)]
             if differ:
                 raise ValueError(f"the joints' offset_deg must be those of default_power_off "
                                  f"'{self.default_power_off}'; {', '.join(differ)} differ")

@@ -76,7 +76,7 @@ def command_and_confirm(client: PowerCubeClient, command: CommandId, modules: It
             client.idle(_RETRY_PAUSE)
             requests = [CommandRequest(m, command) for m in waiting]
         reads = [GetParam(m, ParamId.CUBE_STATE) for m in waiting]
-        acks = client.transact_partial(requests + reads, timeout)[len(requests):]
+        acks = client.transact_partial([*requests, *reads], timeout)[len(requests):]
         still = []
         for module, ack in zip(waiting, acks, strict=True):
             if ack is None:

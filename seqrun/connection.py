@@ -209,14 +209,14 @@ def open_connection(*, interface: str | None = None, channel: str | None = None,
     config.setdefault("bitrate", default_bitrate)
     _one_line_library_logs()
     try:
-        bus = can.Bus(**config)
+        real_bus = can.Bus(**config)
     # TypeError: --bus-kwargs the interface does not take
     except (can.CanError, OSError, ValueError, TypeError, ImportError) as exc:
         raise UserInputError(f"cannot open CAN interface '{config['interface']}' "
                              f"channel '{config.get('channel')}': {exc}") from None
     desc = (f"CAN interface '{config['interface']}' channel '{config.get('channel')}' "
             f"at {config.get('bitrate')} bit/s")
-    return Connection(bus, clock or RealClock(), False, desc)
+    return Connection(real_bus, clock or RealClock(), False, desc)
 
 
 #: Environment variable that overrides the arm file's response timeout, in milliseconds.
@@ -233,6 +233,7 @@ def response_timeout_s(arm: Any, override_ms: float | None = None) -> float:
     """
     import os
 
+    value: float | str | None
     source, value = "--response-timeout-ms", override_ms
     if value is None and os.environ.get(RESPONSE_TIMEOUT_ENV, "").strip():
         source, value = RESPONSE_TIMEOUT_ENV, os.environ[RESPONSE_TIMEOUT_ENV]

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import os
 import signal
-import sys
 
 EXIT_OPERATOR_ABORT = 130   # seqrun.executor's, without importing it (the point is speed)
 _MESSAGE = b"seqrun: interrupted during start-up; nothing was sent\n"
@@ -31,4 +30,4 @@ def main(argv: list[str] | None = None) -> None:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    main()

@@ -128,7 +128,7 @@ class Executor:
     READ_RETRIES = 1
 
     def __init__(self, client, arm: ArmDescription, clock: Clock, *,
-                 poses_dir: Path | None = None, speed: float = 1.0,
+                 poses_dir: Path | tuple[Path, ...] | None = None, speed: float = 1.0,
                  command_mode: str | None = None, cycle_hz: float | None = None,
                  confirm: Callable[[str], bool] | None = None,
                  before_step: Callable[[Any], bool] | None = None,

@@ -22,14 +22,14 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
 from seqrun.arm import GuardPoint
 
 if TYPE_CHECKING:
-    from seqrun.arm import ArmDescription, Frame
+    from seqrun.arm import ArmDescription, Frame, Tool
 
 __all__ = [
     "GUARD_POINT_FRAMES",
@@ -80,7 +80,7 @@ def _cos_sin_deg(angle_deg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return cos, sin
 
 
-def _frame_matrix(frame: Frame) -> np.ndarray:
+def _frame_matrix(frame: Frame | Tool) -> np.ndarray:
     cos, sin = _cos_sin_deg(np.asarray(frame.rpy_deg, dtype=float))
     return _homogeneous(_rpy_matrix(cos, sin), np.asarray(frame.xyz_mm, dtype=float))
 
@@ -290,7 +290,8 @@ def user_joint_values(arm: ArmDescription,
         missing = [j.name for j in arm.joints if j.locked is None and j.name not in joints_deg]
         if missing:
             raise ValueError(f"missing joint(s) {', '.join(missing)}")
-        values = [float(joints_deg[j.name]) if j.name in joints_deg else float(j.locked)
+        values = [float(joints_deg[j.name]) if j.name in joints_deg
+                  else float(cast(float, j.locked))  # (not missing: locked)
                   for j in arm.joints]
     else:
         values = [float(v) for v in joints_deg]

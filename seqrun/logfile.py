@@ -56,7 +56,8 @@ class LineFile:
     def _fail(self, exc: OSError) -> None:
         self.error = exc
         try:   # cut off what went out of a partly written line: readers see whole lines
-            os.ftruncate(self._fd, self._size)
+            if self._fd is not None:
+                os.ftruncate(self._fd, self._size)
         except OSError:
             pass
         self.on_error(self.path, exc)

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from typing import Mapping, Sequence
 
 import numpy as np
+import numpy.typing as npt
 from ruckig import (ControlInterface, InputParameter, Result, Ruckig, RuckigError,
                     Synchronization, Trajectory)
 
@@ -136,9 +137,9 @@ def _calculate(inp: InputParameter, dofs: int) -> Trajectory:
     return trajectory
 
 
-def plan_move(start: Sequence[float], target: Sequence[float], limits: Limits,
-              active: Sequence[int], *, start_velocity: Sequence[float] | None = None,
-              start_acceleration: Sequence[float] | None = None) -> MovePlan:
+def plan_move(start: npt.ArrayLike, target: npt.ArrayLike, limits: Limits,
+              active: Sequence[int], *, start_velocity: npt.ArrayLike | None = None,
+              start_acceleration: npt.ArrayLike | None = None) -> MovePlan:
     """Plan from ``start`` (with optional non-zero velocity/acceleration) to rest at
     ``target``. Only ``active`` joints move; the others keep their start value."""
     start_arr = np.asarray(start, dtype=float)
@@ -165,8 +166,8 @@ def plan_move(start: Sequence[float], target: Sequence[float], limits: Limits,
     return MovePlan(active, start_arr, target_arr, float(trajectory.duration), trajectory)
 
 
-def plan_stop(position: Sequence[float], velocity: Sequence[float],
-              acceleration: Sequence[float], limits: Limits,
+def plan_stop(position: npt.ArrayLike, velocity: npt.ArrayLike,
+              acceleration: npt.ArrayLike, limits: Limits,
               active: Sequence[int]) -> MovePlan:
     """A controlled stop: from the current state to zero velocity as fast as the limits
     allow, each joint on its own (no synchronization needed to stop)."""

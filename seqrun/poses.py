@@ -10,11 +10,11 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 import numpy as np
 import yaml
@@ -185,7 +185,8 @@ def pose_document(name: str, arm: ArmDescription,
     check_pose_name(name)
     pose = pose_from_user_deg(arm, joints_deg)
     if isinstance(joints_deg, Mapping):
-        given = {n: joints_deg.get(n, j.locked) for n, j in zip(arm.joint_names, arm.joints)}
+        given: dict[str, Any] = {n: joints_deg.get(n, j.locked)  # (a left-out joint: locked)
+                                 for n, j in zip(arm.joint_names, arm.joints)}
     else:
         given = dict(zip(arm.joint_names, joints_deg))
     return PoseFile(
@@ -325,5 +326,5 @@ def check_pose(pose: PoseFile, arm: ArmDescription) -> list[str]:
     return [(NOTE_PREFIX if f.note else "") + f.message for f in pose_findings(pose, arm)]
 
 
-def _triple(values: Sequence[float]) -> str:
+def _triple(values: Iterable[float]) -> str:
     return "[" + ", ".join(f"{v:.3f}" for v in values) + "]"

@@ -41,7 +41,7 @@ def _copy_name(path: Path, root: Path | None) -> str:
     if root is not None and path.is_relative_to(root.resolve()):
         return path.relative_to(root.resolve()).as_posix()
     for kind in ("arms", "poses", "sequences"):
-        folder = shipped_dir(kind).resolve()  # type: ignore[arg-type]
+        folder = shipped_dir(kind).resolve()
         if path.is_relative_to(folder):
             return f"_shipped/{kind}/{path.relative_to(folder).as_posix()}"
     return f"_other/{path.parent.name or 'root'}/{path.name}"
@@ -156,7 +156,7 @@ def write_refusal(folder: Path, *, sequence: str, file: str, errors: list[dict],
 def list_runs(runs_dir: Path) -> list[dict]:
     """One entry per run folder under ``runs_dir`` (oldest first): when, sequence, result,
     duration, exit code, folder."""
-    runs = []
+    runs: list[dict] = []
     if not Path(runs_dir).is_dir():
         return runs
     for folder in sorted(Path(runs_dir).iterdir()):

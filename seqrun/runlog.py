@@ -28,7 +28,7 @@ import json
 import os
 import time
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, TextIO, cast
 from xml.sax.saxutils import escape, quoteattr
 
 import can
@@ -135,7 +135,8 @@ class RunLog:
         self._events = LineFile(self.folder / "events.jsonl", self._failed)
         self._steps_file = LineFile(self.folder / "steps.jsonl", self._failed)
         self._trace_file = LineFile(self.folder / "trace.log", self._failed)
-        self._trace = can.CanutilsLogWriter(_TraceSink(self._trace_file), channel=self.channel)
+        self._trace = can.CanutilsLogWriter(cast(TextIO, _TraceSink(self._trace_file)),
+                                            channel=self.channel)
         self._closed = False
         self._started: dict[int, dict] = {}
         self._steps_done = 0

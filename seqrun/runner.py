@@ -109,7 +109,7 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
             log.close()
         client.close()
     report_error = None
-    if log is not None and html_report:
+    if log is not None and log_dir is not None and html_report:
         report_error = write_html_report(log_dir)
     return RunOutcome(result, report, log_dir, executor, report_error)
 

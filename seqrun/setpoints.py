@@ -119,7 +119,8 @@ class RampSetpoints(_Law):
         return requests
 
 
-LAWS = {"ramp": RampSetpoints, "step": StepSetpoints}
+LAWS: dict[str, type[RampSetpoints] | type[StepSetpoints]] = {
+    "ramp": RampSetpoints, "step": StepSetpoints}
 
 
 def setpoint_law(mode: str, arm: ArmDescription, cycle_s: float,

@@ -34,6 +34,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -51,6 +52,9 @@ from seqrun.schema import (
     SetLimitsParams,
     WaitParams,
 )
+
+if TYPE_CHECKING:
+    from seqrun.poses import PoseDirs
 
 __all__ = [
     "PLAN_SAMPLE_S",
@@ -156,7 +160,7 @@ def _range(lo: float, hi: float) -> str:
     return f"{_f(lo)}…{_f(hi)}"
 
 
-def pose_joints_deg(name: str, poses_dir: str | Path) -> dict[str, float]:
+def pose_joints_deg(name: str, poses_dir: PoseDirs) -> dict[str, float]:
     """Joint angles of pose ``name`` (user degrees). Raises :class:`UserInputError` for an
     unknown pose, :class:`SequenceInvalid` for a broken pose file."""
     from seqrun.poses import find_pose
@@ -173,7 +177,7 @@ def _pose_joints(path: Path, mtime_ns: int) -> tuple[tuple[str, float], ...]:
     return tuple(load_pose(path).joints_deg.items())
 
 
-def park_deg(poses_dir: str | Path) -> dict[str, float]:
+def park_deg(poses_dir: PoseDirs) -> dict[str, float]:
     """The default start state: the Park pose (where a freshly powered-on arm is)."""
     return pose_joints_deg(START_POSE, poses_dir)
 

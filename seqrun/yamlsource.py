@@ -45,8 +45,8 @@ import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from collections.abc import Iterator
-from typing import Any, ClassVar, TypeVar
+from collections.abc import Iterator, Mapping
+from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
 
 import yaml
 from pydantic import BaseModel, TypeAdapter, ValidationError, model_validator
@@ -136,13 +136,19 @@ class _Alias:
 
     __slots__ = ("name", "start_mark", "target")
 
-    def __init__(self, target: Node, start_mark: yaml.Mark, name: str) -> None:
+    def __init__(self, target: Node | None, start_mark: yaml.Mark, name: str) -> None:
         self.target = target
         self.start_mark = start_mark
         self.name = name
 
 
-class _Limits:
+if TYPE_CHECKING:  # what _Limits is mixed into: a parser and PyYAML's composer
+    _Composing = yaml.SafeLoader
+else:
+    _Composing = object
+
+
+class _Limits(_Composing):
     """The composer's limits (depth, alias uses), shared by both loaders below: the node
     tree is always built by PyYAML's Python composer with this hook."""
 
@@ -174,7 +180,7 @@ class _Limits:
 class _Loader(_Limits, yaml.SafeLoader):
     """SafeLoader with the YAML 1.2 core resolver and limits; used for composing only."""
 
-    yaml_implicit_resolvers: ClassVar[dict] = {}
+    yaml_implicit_resolvers: dict = {}
 
     def __init__(self, stream: str) -> None:
         super().__init__(stream)
@@ -190,7 +196,7 @@ _Loader.add_implicit_resolver(NULL, _NULL_RE, ["~", "n", "N", ""])
 try:  # libyaml's scanner and parser, when PyYAML was built with it (its wheels are)
     from yaml._yaml import CParser as _CParser
 except ImportError:  # pragma: no cover - depends on how PyYAML was installed
-    _CParser = None
+    _CParser = None  # type: ignore[assignment,misc]
 
 #: Compose with libyaml's parser when it is there (6x faster on large files); the
 #: pure-Python one is used without it, and for every file libyaml refuses or that holds
@@ -213,7 +219,7 @@ if _CParser is not None:
     class _CLoader(_Limits, yaml.composer.Composer, _CParser, yaml.resolver.BaseResolver):
         """libyaml's events, PyYAML's Python composer (with the limits), our resolver."""
 
-        yaml_implicit_resolvers: ClassVar[dict] = _Loader.yaml_implicit_resolvers
+        yaml_implicit_resolvers: dict = _Loader.yaml_implicit_resolvers
 
         def __init__(self, stream: str) -> None:
             _CParser.__init__(self, stream)
@@ -696,7 +702,7 @@ def _number_hint(value: Any) -> str:
     return ""
 
 
-def friendly_message(err: dict, parent: str = "") -> str:
+def friendly_message(err: Mapping[str, Any], parent: str = "") -> str:
     """A pydantic error dict reworded for a test engineer."""
     kind, value, ctx = err["type"], err.get("input"), err.get("ctx") or {}
     where = f" in {parent}" if parent else ""

@@ -193,6 +193,7 @@ def zero_for_run(arm, store: ZeroStore, *, simulator_pose: str | None,
                            "simulator", not homed)
     how = (f"say where the arm was powered off with '{store.set_command}' "
            f"(POSE: {', '.join(arm.power_off_poses)})")
+    record: ZeroRecord | None
     if homed and store.in_use is not None:
         record = store.in_use
         arm.power_off_pose(record.pose)

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from projecttree import ROOT
 
 
 def test_every_seqrun_package_is_listed_for_the_wheel():
@@ -58,6 +58,8 @@ def test_a_non_editable_install_works_from_an_empty_directory(tmp_path):
                                    "print(shipped_dir('sequences'))")
     shipped = Path(where.stdout.strip())
     assert shipped.is_relative_to(venv), shipped  # the installed copy, not the checkout
+    # PEP 561: the installed package says it is typed
+    assert (shipped.parent.parent / "py.typed").is_file(), sorted(shipped.parent.parent.iterdir())
     valid = run(seqrun, "validate", str(shipped / "opsafe.yaml"))
     assert valid.returncode == 0, valid.stdout + valid.stderr
     assert "valid" in valid.stdout and "dry run from park" in valid.stdout

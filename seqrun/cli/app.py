@@ -11,7 +11,7 @@ from seqrun.cli.argv import expand_bus_kwargs
 class _SeqrunGroup(TyperGroup):
     """Accepts python-can's ``--bus-kwargs K=V K=V`` (see :mod:`seqrun.cli.argv`)."""
 
-    def parse_args(self, ctx, args):  # type: ignore[no-untyped-def]
+    def parse_args(self, ctx, args):
         return super().parse_args(ctx, expand_bus_kwargs(args))
 
 

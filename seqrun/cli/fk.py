@@ -146,6 +146,7 @@ def forward_kinematics(
         if deg is not None:
             joints: list[float] | dict[str, float] = parse_angles(deg, arm.joint_names)
         else:
+            assert pose_name is not None  # (one of the two, checked above)
             joints = load_named_pose(pose_name, poses_dir).joints_deg
         given = joints if isinstance(joints, dict) else dict(zip(arm.joint_names, joints))
         off = [j for j in arm.joints if j.locked is not None and j.name in given

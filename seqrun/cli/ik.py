@@ -107,7 +107,7 @@ def inverse_kinematics(
             "position_error_mm": float(f"{solution.position_error_mm:.3g}"),
             "angle_error_deg": float(f"{math.degrees(solution.angle_error_rad):.3g}"),
             "iterations": solution.iterations, "seeds_tried": solution.seeds_tried,
-            "tool": arm.tool(tool).name if arm.tool(tool) is not None else None}))
+            "tool": found.name if (found := arm.tool(tool)) is not None else None}))
         return
     typer.echo(f"joints_deg    {format_numbers(np.round(joints, 6) + 0.0)}  ({' '.join(arm.joint_names)})")
     moved = np.abs(joints - np.asarray(seed))

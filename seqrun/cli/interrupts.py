@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import signal
 import sys
-from typing import Callable, TextIO
+from typing import Any, Callable, TextIO
 
 from seqrun.stop_requests import StopRequests
 
@@ -41,7 +41,7 @@ class RunSignals:
         self.interrupts = 0          # SIGINTs so far
         self.received = 0            # signals of any kind so far
         self._reading = False        # the main thread is blocked reading an answer
-        self._saved: dict[int, object] = {}
+        self._saved: dict[int, Any] = {}  # what signal.signal returned: restored as is
 
     # ------------------------------------------------------------------ the handler
     def handle(self, signum: int, frame=None) -> None:

@@ -24,7 +24,9 @@ def _power_off_pose(name: str) -> str:
     from seqrun.errors import UserInputError
     from seqrun.shipped import DEFAULT_ARM_NAME, shipped_arm
 
-    arm = load_arm(shipped_arm(DEFAULT_ARM_NAME))
+    path = shipped_arm(DEFAULT_ARM_NAME)
+    assert path is not None  # (shipped with seqrun)
+    arm = load_arm(path)
     try:
         arm.power_off_pose(name)
     except UserInputError as exc:
@@ -114,10 +116,10 @@ def serve(
         fail(f"cannot listen on {host}:{port}: {exc.strerror or exc}")
     typer.echo(f"simulated LWA 3 (modules 1-7, {bitrate} bit/s, powered on at "
                f"{power_on_at}) on socketcand {server.host}:{server.port}, channel {channel}")
-    for item in faults:
-        typer.echo(f"  fault {item.spec}")
-    for name, value in switches.items():
-        typer.echo(f"  switch {name}={getattr(options, name)}")
+    for injected in faults:
+        typer.echo(f"  fault {injected.spec}")
+    for switch in switches:
+        typer.echo(f"  switch {switch}={getattr(options, switch)}")
     typer.echo(f'  python-can: can.Bus(interface="socketcand", host="{server.host}", '
                f'port={server.port}, channel="{channel}")')
     typer.echo("Ctrl-C to stop.")

@@ -89,7 +89,9 @@ def set_command(
 def modules_homed(connection, arm) -> bool:
     """True when every module reports HOME_OK (no power-on since the last start-up)."""
     from seqrun.powercube.client import PowerCubeClient
-    from seqrun.powercube.codec import GetParam
+    from typing import cast
+
+    from seqrun.powercube.codec import GetParam, GetParamAck
     from seqrun.powercube.protocol import ParamId, StateFlag
 
     from seqrun.errors import ModuleTimeoutError
@@ -107,7 +109,7 @@ def modules_homed(connection, arm) -> bool:
                     raise
     finally:
         client.close()
-    return all(StateFlag(a.value) & StateFlag.HOME_OK for a in acks)
+    return all(StateFlag(cast(GetParamAck, a).value) & StateFlag.HOME_OK for a in acks)
 
 
 def zero_at_run_start(connection, arm, project, ask: Callable[[str], bool],
@@ -130,6 +132,7 @@ def zero_at_run_start(connection, arm, project, ask: Callable[[str], bool],
                  "pose. Nothing was sent. Record the pose it was really powered off in with "
                  "'seqrun zero set POSE' and run again.")
             raise typer.Exit(130)
+        assert zero.record is not None  # a question is asked about a record
         store.set_in_use(zero.record)
     return zero
 

@@ -344,7 +344,7 @@ class PowerCubeClient:
         everything after it waits for the broadcast."""
         if not self.ONE_REQUEST_PER_MODULE:
             busy = {}
-        blocked = set(busy)
+        blocked: set[int | None] = set(busy)
         barrier = False
         still: deque[int] = deque()
         in_flight = len(deadlines)
@@ -600,7 +600,7 @@ class PowerCubeClient:
             self._discard(msg, DiscardReason.NOT_AN_ACK)
             return None
         try:
-            return decode_ack(can_id, msg.data)
+            return decode_ack(can_id, bytes(msg.data))
         except CodecError as exc:
             self._discard(msg, f"{DiscardReason.MALFORMED}: {exc}")
             return None
@@ -680,7 +680,7 @@ class PowerCubeClient:
     def set_param(self, module: int, param: ParamId, value: float | int) -> None:
         """Write a parameter, converting ``value`` to its wire type (float32 or an integer,
         range-checked)."""
-        wire = PARAM_TYPES.get(param)  # type: ignore[call-overload]
+        wire = PARAM_TYPES.get(param)
         if wire is not None and wire.is_float and isinstance(value, int):
             value = float(value)
         self.transact([SetParam(module, param, value)])
@@ -708,7 +708,7 @@ class PowerCubeClient:
         acks = self.transact([GetParam(m, ParamId.FPOS_STATE_DIO) for m in modules])
         readings = []
         for module, ack in zip(modules, acks):
-            value: PosStateDio = ack.value  # type: ignore[union-attr, assignment]
+            value: PosStateDio = ack.value  # type: ignore[union-attr]
             readings.append(ModuleReading(module, value.position, value.state, value.dio))
         return readings
 
@@ -768,7 +768,7 @@ class PowerCubeClient:
         ids = list(ids)
         acks = self._exchange([GetParam(m, ParamId.DEF_CUBE_VERSION) for m in ids], timeout,
                               raise_on_timeout=False)
-        return {m: ack.value for m, ack in zip(ids, acks)  # type: ignore[union-attr, misc]
+        return {m: ack.value for m, ack in zip(ids, acks)  # type: ignore[union-attr]
                 if ack is not None}
 
 

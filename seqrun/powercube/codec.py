@@ -41,8 +41,9 @@ from __future__ import annotations
 
 import math
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import NamedTuple, Union
+from typing import Any, NamedTuple, Union
 
 from seqrun.errors import CodecError
 from seqrun.powercube.protocol import (
@@ -145,7 +146,9 @@ class SetParamAck:
 class GetParamAck:
     module: int
     param: ParamId
-    value: float | int | PosStateDio
+    #: Its type follows ``param``'s wire type (PARAM_TYPES): a float, an integer, or a
+    #: PosStateDio for FPOS_STATE_DIO; typed Any so readers need not re-check it.
+    value: Any
 
 
 @dataclass(frozen=True, slots=True)
@@ -429,7 +432,7 @@ def _encode_motion_ext_ack(msg: MotionExtAck) -> tuple[int, bytes]:
     return ACK_BASE + _check_module(msg.module), data
 
 
-_ENCODERS = {
+_ENCODERS: dict[type, Callable[[Any], tuple[int, bytes]]] = {
     CommandRequest: _encode_command,
     BroadcastRequest: _encode_broadcast,
     GetParam: _encode_get,

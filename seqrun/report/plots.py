@@ -155,6 +155,7 @@ def _label_steps(ax, spans, end: float) -> None:
 # ---------------------------------------------------------------------------- plots
 def _joint_plot(data: RunData, i: int) -> Plot:
     arm, s = data.arm, data.series
+    assert arm is not None  # (plots() draws none without the arm)
     joint = arm.joints[i]
     fig, (pos, vel, err) = _figure(6.4, rows=3)
     _line(pos, s.t, s.planned[:, i], PLANNED)
@@ -207,6 +208,7 @@ def _joint_plot(data: RunData, i: int) -> Plot:
 
 def _guard_plot(data: RunData) -> Plot:
     arm, s = data.arm, data.series
+    assert arm is not None  # (plots() draws none without the arm)
     fig, (ax,) = _figure(3.6)
     heights = guard_heights(arm, s.measured)
     guard_colours = ["#d62728", "#8c564b", "#e377c2", "#7f7f7f"]

@@ -199,8 +199,8 @@ class SimArm:
             except CodecError:
                 return []  # not for us, or not PowerCube: a real module ignores it
             if isinstance(request, BroadcastRequest):
-                for module in self._modules.values():
-                    module.handle(request, t)  # never acknowledged
+                for each in self._modules.values():
+                    each.handle(request, t)  # never acknowledged
                 return []
             module = self._modules.get(request.module)
             if module is None:

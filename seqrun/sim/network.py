@@ -339,6 +339,7 @@ class SimNetwork:
                 head = n.queue[0]
                 if head.ready_at <= start and (pending is None or head.rank < pending.rank):
                     node, pending = n, head
+        assert pending is not None  # start >= the earliest ready_at: a head qualifies
         if start > horizon or (start == horizon and not start_at_horizon):
             return None
         queue = node.queue
@@ -501,6 +502,7 @@ class SimNetwork:
                     return None
                 last = self._run_until_received(inbox, horizon)
                 if inbox:
+                    assert last is not None  # a frame was delivered: an event was processed
                     clock.sleep_until(last)
                     return inbox.popleft()
                 if deadline is not None:

@@ -224,7 +224,7 @@ class _Session:
                                                name=f"socketcand-write-{self.peer}")
             self._write("< ok >")  # (unpadded: python-can compares it exactly)
             self._aligned = True
-            if not self.writer.is_alive():
+            if self.writer is not None and not self.writer.is_alive():
                 self.writer.start()
         elif verb == "send":
             if self.endpoint is None:

@@ -26,7 +26,7 @@ def _target(step, ex, measured_deg: np.ndarray) -> np.ndarray:
 def _agree(step, ex, joints_deg: np.ndarray) -> dict:
     """Fault if the run's solution is not the validated one."""
     validated = ex.validated_targets.get(step.number)
-    detail = {"ik_solution_deg": [round(float(v), 3) for v in joints_deg]}
+    detail: dict[str, object] = {"ik_solution_deg": [round(float(v), 3) for v in joints_deg]}
     if validated is None:
         return detail
     difference = np.abs(np.asarray(joints_deg) - validated)
