@@ -30,9 +30,11 @@ def shipped_arm() -> ArmDescription:
 
 
 def make_project(root: Path, *, sequences: Iterable[str] | str = ("startup.yaml",),
-                 arm_changes: Mapping[str, str] | None = None) -> Path:
+                 arm_changes: Mapping[str, str] | None = None, campaign: bool = True) -> Path:
     """``root`` as a campaign: seqrun.toml, arms/lwa3.yaml, copies of the shipped poses and
     of the shipped ``sequences`` named (``"*"``: all of them); returns ``root``.
+    ``campaign=False``: no seqrun.toml (the layout from before campaigns: includes stay
+    inside sequences/).
 
     ``arm_changes`` maps a text of the shipped arm file to its replacement; each must stand
     there exactly once (so a test notices when the arm file changes under it)."""
@@ -48,7 +50,8 @@ def make_project(root: Path, *, sequences: Iterable[str] | str = ("startup.yaml"
              else sequences)
     for name in names:
         shutil.copy(ROOT / "sequences" / name, root / "sequences" / name)
-    (root / "seqrun.toml").write_text(CONFIG, encoding="utf-8")
+    if campaign:
+        (root / "seqrun.toml").write_text(CONFIG, encoding="utf-8")
     return root
 
 

@@ -37,7 +37,7 @@ from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 import seqrun.cli  # noqa: F401  (runs seqrun.cli._load_commands: every command registered)
-from projecttree import ROOT
+from projecttree import ROOT, make_project
 from runfolder import RunFolder
 from seqrun.arm import load_arm
 from seqrun.cli.app import app
@@ -207,15 +207,9 @@ def places(tmp_path):
     return sandbox, logs
 
 
-def make_project(root: Path) -> Path:
-    """A project tree (arms/, poses/, sequences/startup.yaml) for generated files."""
-    root.mkdir(parents=True, exist_ok=True)
-    (root / "arms").symlink_to(ROOT / "arms", target_is_directory=True)
-    (root / "poses").symlink_to(ROOT / "poses", target_is_directory=True)
-    (root / "sequences").mkdir()
-    (root / "sequences" / "startup.yaml").write_bytes(
-        (ROOT / "sequences" / "startup.yaml").read_bytes())
-    return root / "sequences"
+def make_sequences(root: Path) -> Path:
+    """The sequences/ folder of a project tree at ``root``, for generated files."""
+    return make_project(root) / "sequences"
 
 
 # ----------------------------------------------------------------------------- controls
@@ -383,7 +377,7 @@ def _generated(seqs: Path, tmp: Path) -> dict[str, tuple[Path, str, str]]:
 def test_generated_hostile_files(tmp_path, places):
     """Big, deep, numeric and path-based hostile files, generated into tmp_path."""
     sandbox, logs = places
-    seqs = make_project(tmp_path / "project")
+    seqs = make_sequences(tmp_path / "project")
     for name, (path, want, words) in _generated(seqs, tmp_path).items():
         expected, v, r = check_file(path, sandbox=sandbox, logs=logs,
                                     markers=(tmp_path / "pwned-absolute",))
@@ -492,7 +486,7 @@ def sequence_texts(draw) -> str:
 @pytest.fixture(scope="module")
 def fuzz_places(tmp_path_factory):
     root = tmp_path_factory.mktemp("fuzz")
-    seqs = make_project(root / "project")
+    seqs = make_sequences(root / "project")
     (root / "cwd").mkdir()
     (root / "logs").mkdir()
     return seqs, root / "cwd", root / "logs"

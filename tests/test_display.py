@@ -8,13 +8,12 @@ from __future__ import annotations
 
 import io
 import re
-import shutil
 from pathlib import Path
 
 import pytest
 from rich.console import Console
 
-from projecttree import ROOT
+from projecttree import make_project, shipped_arm
 from runfolder import RunFolder
 from seqrun.arm import load_arm
 from seqrun.cli.display import LiveDisplay, PlainDisplay, fixed
@@ -32,11 +31,8 @@ def console() -> Console:
 
 def project(tmp_path: Path, name: str, steps: str) -> Path:
     root = tmp_path / "project"
-    (root / "sequences").mkdir(parents=True, exist_ok=True)
-    for folder in ("arms", "poses"):
-        if not (root / folder).exists():
-            shutil.copytree(ROOT / folder, root / folder)
-    shutil.copy(ROOT / "sequences" / "startup.yaml", root / "sequences")
+    if not root.exists():
+        make_project(root)
     path = root / "sequences" / f"{name}.yaml"
     path.write_text(f"name: {name}\ndescription: a test\nsteps:\n{steps}", encoding="utf-8")
     return path
@@ -170,7 +166,7 @@ def test_request_descriptions_in_user_coordinates():
     from seqrun.powercube.protocol import MotionMode, ParamId
     from seqrun.usermessages import user_message
 
-    arm = load_arm(ROOT / "arms" / "lwa3.yaml")
+    arm = shipped_arm()
     j2 = arm.joint("j2")
     exc = ModuleTimeoutError(j2.module, "whatever", 0.05,
                              request=SetParam(j2.module, ParamId.MAX_POS, j2.to_module_rad(-1e-9)))

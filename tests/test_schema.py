@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from projecttree import ROOT
+from projecttree import ROOT, make_project
 from seqrun.errors import SequenceInvalid, UserInputError
 from seqrun.schema import (
     PARAMS_MODELS,
@@ -34,14 +34,8 @@ SHIPPED = [ROOT / "sequences" / f"{name}.yaml"
 
 @pytest.fixture
 def project(tmp_path):
-    """A project folder: arms/, poses/ (copies of the real ones) and sequences/."""
-    (tmp_path / "arms").mkdir()
-    (tmp_path / "arms" / "lwa3.yaml").write_text((ROOT / "arms" / "lwa3.yaml").read_text())
-    (tmp_path / "poses").mkdir()
-    for pose in (ROOT / "poses").glob("*.yaml"):
-        (tmp_path / "poses" / pose.name).write_text(pose.read_text())
-    (tmp_path / "sequences").mkdir()
-    return tmp_path
+    """A project folder without a campaign (arms/, poses/, an empty sequences/)."""
+    return make_project(tmp_path / "project", sequences=(), campaign=False)
 
 
 def write(folder: Path, name: str, body: str) -> Path:

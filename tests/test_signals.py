@@ -38,7 +38,7 @@ from pathlib import Path
 import can
 import pytest
 
-from projecttree import ROOT
+from projecttree import make_project
 from runfolder import RunFolder
 from seqrun.clock import RealClock
 from seqrun.powercube.client import PowerCubeClient
@@ -60,30 +60,17 @@ AT_SPEED_DEG = 17.0   # j1 measured beyond this: cruising (~9 deg/s, reached aft
 
 
 # ----------------------------------------------------------------------------- helpers
-def make_project(tmp_path: Path, *, watchdog: bool = False, acceleration: float = 4,
-                 jerk: float = 8) -> Path:
+def long_move_project(tmp_path: Path, *, watchdog: bool = False, acceleration: float = 4,
+                      jerk: float = 8) -> Path:
     """tmp project whose arm file is arms/lwa3.yaml with j1 braking at ``acceleration``
     (deg/s²) and ``jerk`` (deg/s³) and the watchdog on or off; returns the sequence path.
     Everything else (timeouts, the watchdog's refresh period) is the shipped arm file's."""
-    root = tmp_path / "project"
-    (root / "arms").mkdir(parents=True)
-    (root / "poses").symlink_to(ROOT / "poses", target_is_directory=True)
-    (root / "sequences").mkdir()
-    text = (ROOT / "arms" / "lwa3.yaml").read_text(encoding="utf-8")
-
-    def change(old: str, new: str) -> None:
-        nonlocal text
-        assert text.count(old) == 1, f"arms/lwa3.yaml changed: update {old!r} here"
-        text = text.replace(old, new)
-
     j1 = ("- {name: j1, module: 1, limits_deg: [-180, 180], offset_deg: 0.0,\n"
           "     max_velocity_deg_s: 30, max_acceleration_deg_s2: 60, max_jerk_deg_s3: 300}")
-    change(j1, j1.replace("max_acceleration_deg_s2: 60, max_jerk_deg_s3: 300",
-                          f"max_acceleration_deg_s2: {acceleration}, max_jerk_deg_s3: {jerk}"))
-    change("    enabled: false", f"    enabled: {'true' if watchdog else 'false'}")
-    (root / "arms" / "lwa3.yaml").write_text(text, encoding="utf-8")
-    (root / "sequences" / "startup.yaml").write_bytes(
-        (ROOT / "sequences" / "startup.yaml").read_bytes())
+    root = make_project(tmp_path / "project", arm_changes={
+        j1: j1.replace("max_acceleration_deg_s2: 60, max_jerk_deg_s3: 300",
+                       f"max_acceleration_deg_s2: {acceleration}, max_jerk_deg_s3: {jerk}"),
+        "    enabled: false": f"    enabled: {'true' if watchdog else 'false'}"})
     sequence = root / "sequences" / "long.yaml"
     sequence.write_text(LONG_MOVE, encoding="utf-8")
     return sequence
@@ -189,7 +176,7 @@ def run_folder_report(folder: Path) -> dict:
 
 # ----------------------------------------------------------------------------- SIGINT, SIGTERM
 def start_long_move(tmp_path: Path) -> tuple[subprocess.Popen, Path]:
-    sequence = make_project(tmp_path)
+    sequence = long_move_project(tmp_path)
     folder = tmp_path / "run"
     proc = seqrun("run", sequence, "--sim", "--yes", "--plain", "--log-dir", folder,
                   cwd=tmp_path)
@@ -347,7 +334,7 @@ def kill_mid_move(tmp_path: Path, *, watchdog: bool, attempts: int = 3):
 def _kill_mid_move_once(tmp_path: Path, watchdog: bool):
     # j1 brakes at 10 deg/s², 40 deg/s³: at speed after ~1.3 s (~6°), and the ramp target
     # the executor streams lies v_max/2a = 1.5 s ahead: a module left alone goes on ~13°.
-    sequence = make_project(tmp_path, watchdog=watchdog, acceleration=10, jerk=40)
+    sequence = long_move_project(tmp_path, watchdog=watchdog, acceleration=10, jerk=40)
     folder = tmp_path / "run"
     server = seqrun("sim", "serve", "--port", "0", cwd=tmp_path)
     runner = None
@@ -481,7 +468,7 @@ def test_a_signal_at_any_moment_ends_the_run_with_a_finished_folder(tmp_path, na
     """The live view on (a pseudo-terminal), the signal ``delay`` s after the run started
     (preflight, start-up steps, the move): never a hang, the exit code the signal asks for,
     a finished report and junit.xml, no traceback."""
-    sequence = make_project(tmp_path)
+    sequence = long_move_project(tmp_path)
     folder = tmp_path / "run"
     proc, chunks = seqrun_in_a_terminal("run", sequence, "--sim", "--yes", "--log-dir", folder,
                                         cwd=tmp_path)
@@ -569,7 +556,7 @@ main(sys.argv[1:])
 def test_ctrl_c_while_run_validates_is_one_line_and_exit_130(tmp_path):
     """Before the run's handlers are in place click said "Aborted!", exit 1 (the code of
     an invalid sequence)."""
-    sequence = make_project(tmp_path)
+    sequence = long_move_project(tmp_path)
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     proc = subprocess.Popen([sys.executable, "-c", SLOW_VALIDATION, "run", str(sequence),
                              "--sim", "--yes", "--plain", "--log-dir", str(tmp_path / "run")],

@@ -7,14 +7,13 @@ not how long it takes: timings belong to bench/bench_startup.py.
 from __future__ import annotations
 
 import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
 
-from projecttree import ROOT
+from projecttree import ROOT, make_project
 from runfolder import RunFolder
 
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
@@ -64,9 +63,7 @@ def _head_one(args: list[str], cwd: Path = ROOT) -> tuple[int, str, str]:
 def test_a_closed_pipe_ends_a_command_quietly(tmp_path):
     """`seqrun validate … | head -1`: exit 141 like other tools, nothing on stderr (it was
     a silent exit 1, "invalid sequence")."""
-    (tmp_path / "sequences").mkdir()
-    shutil.copytree(ROOT / "arms", tmp_path / "arms")
-    shutil.copytree(ROOT / "poses", tmp_path / "poses")
+    make_project(tmp_path, sequences=())
     steps = "".join("  - move: {joints: {j1: 500}}\n" for _ in range(1000))
     (tmp_path / "sequences" / "big.yaml").write_text(
         f"name: big\ndescription: two error lines per step\nsteps:\n{steps}")
@@ -104,9 +101,7 @@ def test_a_closed_pipe_during_a_fault_still_halts_and_exits_3(tmp_path):
 
 def test_piped_run_output_is_not_wrapped(tmp_path):
     """Into a pipe, a long line stays one line (rich wrapped at 80 columns mid-sentence)."""
-    (tmp_path / "sequences").mkdir()
-    shutil.copytree(ROOT / "arms", tmp_path / "arms")
-    shutil.copytree(ROOT / "poses", tmp_path / "poses")
+    make_project(tmp_path, sequences=())
     label = "A label long enough to need more than eighty columns on a terminal " * 2
     (tmp_path / "sequences" / "long.yaml").write_text(
         f"name: long\ndescription: a long label\nsteps:\n  - reset: {{label: {label.strip()}}}\n")

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from projecttree import ROOT
+from projecttree import make_project, shipped_arm
 from seqrun.arm import load_arm
 from seqrun.connection import open_connection
 from seqrun.dryrun import prepare_started
@@ -35,14 +35,8 @@ STALL_S = 0.4
 
 
 def project(tmp_path: Path) -> Path:
-    root = tmp_path / "project"
-    (root / "arms").mkdir(parents=True)
-    (root / "poses").symlink_to(ROOT / "poses", target_is_directory=True)
-    (root / "sequences").mkdir()
-    text = (ROOT / "arms" / "lwa3.yaml").read_text(encoding="utf-8")
-    assert text.count("    enabled: false") == 1
-    (root / "arms" / "lwa3.yaml").write_text(text.replace("    enabled: false",
-                                                          "    enabled: true"))
+    root = make_project(tmp_path / "project", sequences=(),
+                        arm_changes={"    enabled: false": "    enabled: true"})
     path = root / "sequences" / "keeper.yaml"
     path.write_text(SEQUENCE, encoding="utf-8")
     return path
@@ -113,4 +107,4 @@ def test_a_question_keeps_the_modules_alive(tmp_path):
 
 
 def arm_refresh_period() -> float:
-    return load_arm(ROOT / "arms" / "lwa3.yaml").can.watchdog.refresh_period_s
+    return shipped_arm().can.watchdog.refresh_period_s
