@@ -492,6 +492,7 @@ def fuzz_places(tmp_path_factory):
     return seqs, root / "cwd", root / "logs"
 
 
+@pytest.mark.slow  # 80 generated files, each validated and run
 @settings(max_examples=int(os.environ.get("SEQRUN_FUZZ_EXAMPLES", "80")), deadline=None,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 @given(text=sequence_texts(), as_bytes=st.booleans())

@@ -183,6 +183,7 @@ def start_long_move(tmp_path: Path) -> tuple[subprocess.Popen, Path]:
     return proc, folder
 
 
+@pytest.mark.slow  # seqrun as a process, real time
 def test_sigint_during_a_move_is_a_controlled_stop(tmp_path):
     proc, folder = start_long_move(tmp_path)
     try:
@@ -222,6 +223,7 @@ def test_sigint_during_a_move_is_a_controlled_stop(tmp_path):
     assert [s["status"] for s in report["steps"]][-1] == "aborted"
 
 
+@pytest.mark.slow  # seqrun as a process, real time
 def test_second_sigint_during_the_controlled_stop_halts(tmp_path):
     proc, folder = start_long_move(tmp_path)
     try:
@@ -247,6 +249,7 @@ def test_second_sigint_during_the_controlled_stop_halts(tmp_path):
     assert report["fault"]["cause"] == "operator_halt" and report["fault"]["halt_sent"]
 
 
+@pytest.mark.slow  # seqrun as a process, real time
 def test_sigterm_during_a_move_halts(tmp_path):
     proc, folder = start_long_move(tmp_path)
     try:
@@ -371,6 +374,7 @@ def _kill_mid_move_once(tmp_path: Path, watchdog: bool):
                 server.wait(timeout=10)
 
 
+@pytest.mark.slow  # seqrun as a process, real time
 def test_sigkill_with_the_watchdog_armed_the_modules_halt_themselves(tmp_path):
     j1_last_deg, samples = kill_mid_move(tmp_path, watchdog=True)
     # Every module stopped itself: the watchdog's HALTED | ERROR | COMM_ERROR, at once.
@@ -390,6 +394,7 @@ def test_sigkill_with_the_watchdog_armed_the_modules_halt_themselves(tmp_path):
     assert all(positions == settled[0] for positions in settled), (j1_last_deg, j1)
 
 
+@pytest.mark.slow  # seqrun as a process, real time
 def test_sigkill_without_the_watchdog_the_arm_keeps_moving(tmp_path):
     """The control case: nothing stops a module whose host died."""
     j1_last_deg, samples = kill_mid_move(tmp_path, watchdog=False)
