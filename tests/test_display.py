@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 from rich.console import Console
 
-from projecttree import make_project, shipped_arm
+from projecttree import make_project
 from runfolder import RunFolder
 from seqrun.arm import load_arm
 from seqrun.cli.display import LiveDisplay, PlainDisplay, fixed
@@ -160,13 +160,12 @@ def test_a_fault_message_names_limits_in_user_degrees_not_module_radians(tmp_pat
     assert "3.14" not in message and "rad" not in message
 
 
-def test_request_descriptions_in_user_coordinates():
+def test_request_descriptions_in_user_coordinates(arm):
     from seqrun.errors import ModuleTimeoutError
     from seqrun.powercube.codec import SetMotion, SetParam
     from seqrun.powercube.protocol import MotionMode, ParamId
     from seqrun.usermessages import user_message
 
-    arm = shipped_arm()
     j2 = arm.joint("j2")
     exc = ModuleTimeoutError(j2.module, "whatever", 0.05,
                              request=SetParam(j2.module, ParamId.MAX_POS, j2.to_module_rad(-1e-9)))

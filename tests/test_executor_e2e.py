@@ -39,7 +39,7 @@ def is_motion(msg: can.Message) -> bool:
             and msg.data[:1] == b"\x0b")
 
 
-def test_opsafe_from_power_on_to_a_passed_checkpoint(tmp_path):
+def test_opsafe_from_power_on_to_a_passed_checkpoint(tmp_path, arm):
     outcome, sim, _ = run_on_sim("opsafe", tmp_path)
     result = outcome.result
     assert result.exit_code == EXIT_OK, result.message
@@ -59,7 +59,6 @@ def test_opsafe_from_power_on_to_a_passed_checkpoint(tmp_path):
     assert report["planned_duration_s"] == pytest.approx(
         sum(m["planned_duration_s"] for m in moves), abs=1e-3)
     # The simulated arm is at Op-safe (module = user + offset).
-    arm = load_arm(ROOT / "arms" / "lwa3.yaml")
     opsafe = [70, 30, 0, 70, 20, 50, 0]
     for joint, want in zip(arm.joints, opsafe):
         assert math.degrees(sim.module(joint.module).position()) - joint.offset_deg == \
@@ -183,8 +182,7 @@ def test_from_step_refuses_an_arm_that_is_not_where_the_step_expects_it(tmp_path
     assert not any(is_motion(m) for m in RunFolder(outcome.log_dir).trace())
 
 
-def test_from_step_runs_the_rest_when_the_arm_is_there(tmp_path):
-    arm = load_arm(ROOT / "arms" / "lwa3.yaml")
+def test_from_step_runs_the_rest_when_the_arm_is_there(tmp_path, arm):
     at_totem = {j.module: j.to_module_rad(0.0) for j in arm.joints}
     outcome, sim, _ = run_on_sim("opsafe", tmp_path, first_step=6, positions=at_totem, started=True)
     assert outcome.result.exit_code == EXIT_OK, outcome.result.message
