@@ -25,9 +25,13 @@ class RunFolder:
     def steps(self) -> list[dict]:
         return _json_lines(self.path / "steps.jsonl")
 
-    def events(self, type: str | None = None) -> list[dict]:
-        """The events in order; with ``type``, only those of that type."""
-        events = _json_lines(self.path / "events.jsonl")
+    def events(self, type: str | None = None, *, live: bool = False) -> list[dict]:
+        """The events in order; with ``type``, only those of that type. ``live``: the run
+        may still be writing (no file yet: none; a line being written ends the list)."""
+        path = self.path / "events.jsonl"
+        if live and not path.exists():
+            return []
+        events = _json_lines(path, live=live)
         return events if type is None else [e for e in events if e["type"] == type]
 
     def trace(self) -> list[can.Message]:
@@ -38,5 +42,13 @@ class RunFolder:
         return [line for line in (self.path / "trace.log").read_text().splitlines() if line]
 
 
-def _json_lines(path: Path) -> list[dict]:
-    return [json.loads(line) for line in path.read_text(encoding="utf-8").splitlines()]
+def _json_lines(path: Path, *, live: bool = False) -> list[dict]:
+    out = []
+    for line in path.read_text(encoding="utf-8").splitlines():
+        try:
+            out.append(json.loads(line))
+        except json.JSONDecodeError:
+            if not live:
+                raise
+            break  # the line being written
+    return out

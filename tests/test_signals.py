@@ -22,7 +22,6 @@ killed in ``finally``; only loopback addresses are used.
 from __future__ import annotations
 
 import itertools
-import json
 import math
 import os
 import queue
@@ -107,25 +106,12 @@ def wait_exit(proc: subprocess.Popen, timeout: float) -> tuple[int, str]:
     return proc.returncode, out
 
 
-def events(folder: Path) -> list[dict]:
-    path = folder / "events.jsonl"
-    if not path.exists():
-        return []
-    out = []
-    for line in path.read_text(encoding="utf-8").splitlines():
-        try:
-            out.append(json.loads(line))
-        except json.JSONDecodeError:  # the line being written
-            break
-    return out
-
-
 def poll_event(folder: Path, proc: subprocess.Popen, test, timeout: float = 20.0
                ) -> dict | None:
     """Poll events.jsonl until ``test(event)`` holds for one; None if the run ends first."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
-        found = next((e for e in events(folder) if test(e)), None)
+        found = next((e for e in RunFolder(folder).events(live=True) if test(e)), None)
         if found is not None:
             return found
         if proc.poll() is not None:
@@ -194,7 +180,7 @@ def test_sigint_during_a_move_is_a_controlled_stop(tmp_path):
         stop(proc)
     assert code == 130, out
     assert "Traceback" not in out
-    log = events(folder)
+    log = RunFolder(folder).events(live=True)
     kinds = [e["type"] for e in log]
     for kind in ("abort_requested", "controlled_stop", "holding", "operator_abort"):
         assert kind in kinds, (kind, kinds[-10:])
@@ -238,7 +224,7 @@ def test_second_sigint_during_the_controlled_stop_halts(tmp_path):
         stop(proc)
     assert code == 130, out
     assert "Traceback" not in out
-    kinds = [e["type"] for e in events(folder)]
+    kinds = [e["type"] for e in RunFolder(folder).events(live=True)]
     assert "controlled_stop" in kinds and "halt_requested" in kinds
     assert "holding" not in kinds, "the stop ran to its end: the second signal came too late"
     frames = trace(folder)
@@ -260,7 +246,7 @@ def test_sigterm_during_a_move_halts(tmp_path):
         stop(proc)
     assert code == 130, out
     assert "Traceback" not in out
-    kinds = [e["type"] for e in events(folder)]
+    kinds = [e["type"] for e in RunFolder(folder).events(live=True)]
     assert "halt_requested" in kinds and "controlled_stop" not in kinds, kinds[-10:]
     sent_halts = halts(trace(folder))
     assert sent_halts and all(f.can_id == BROADCAST for f in sent_halts), sent_halts
@@ -354,10 +340,10 @@ def _kill_mid_move_once(tmp_path: Path, watchdog: bool):
         if cruising is None:
             return f"exit {runner.returncode}:\n{stop(runner)}"
         if watchdog:
-            assert any(e["type"] == "watchdog_enabled" for e in events(folder))
+            assert any(e["type"] == "watchdog_enabled" for e in RunFolder(folder).events(live=True))
         runner.send_signal(signal.SIGKILL)
         runner.wait(timeout=10)
-        last = [e for e in events(folder) if e["type"] == "setpoint"][-1]
+        last = [e for e in RunFolder(folder).events(live=True) if e["type"] == "setpoint"][-1]
         assert server.poll() is None, "the simulator died with the runner"
         # Observe once the modules' watchdog timeout (50 ms) has certainly passed.
         time.sleep(0.2)
@@ -422,7 +408,7 @@ def test_sighup_and_sigquit_during_a_move_halt_and_end_as_a_fault(tmp_path, name
         stop(proc)
     assert code == 3, out
     assert "Traceback" not in out
-    kinds = [e["type"] for e in events(folder)]
+    kinds = [e["type"] for e in RunFolder(folder).events(live=True)]
     assert "halt_requested" in kinds and kinds[-1] == "run_finished", kinds[-10:]
     sent_halts = halts(trace(folder))
     assert sent_halts and all(f.can_id == BROADCAST for f in sent_halts), sent_halts
@@ -495,13 +481,13 @@ def test_a_signal_at_any_moment_ends_the_run_with_a_finished_folder(tmp_path, na
     report = run_folder_report(folder)
     assert report["exit_code"] == code and report["status"] in ("aborted", "failed")
     assert (folder / "junit.xml").read_text().rstrip().endswith("</testsuites>")
-    assert events(folder)[-1]["type"] == "run_finished"
+    assert RunFolder(folder).events(live=True)[-1]["type"] == "run_finished"
     if name != "SIGINT":
         assert halts(trace(folder)), "no Halt sent"
         assert report["fault"]["halt_sent"]
     # One time base in real time too: wall-clock stamps, one channel, events line up.
     frames = list(can.LogReader(str(folder / "trace.log")))
-    started = next(e for e in events(folder) if e["type"] == "run_started")
+    started = next(e for e in RunFolder(folder).events(live=True) if e["type"] == "run_started")
     assert abs(frames[0].timestamp - started["start_epoch_s"]) < 1.0
     assert abs(started["start_epoch_s"] - time.time()) < 120
     assert {m.channel for m in frames} == {frames[0].channel}
