@@ -11,7 +11,6 @@ import pytest
 
 from projecttree import make_project, shipped_arm
 from runfolder import RunFolder
-from seqrun.arm import load_arm
 from seqrun.cli.validate import static_check
 from seqrun.clock import VirtualClock
 from seqrun.connection import open_connection
@@ -24,6 +23,7 @@ from seqrun.powercube.protocol import ParamId
 from seqrun.runner import run_sequence
 from seqrun.schema import load_sequence
 from seqrun.validation import park_deg
+from simrun import run_on_sim
 
 ARM = shipped_arm()
 
@@ -45,19 +45,6 @@ def project(tmp_path: Path) -> Path:
     return root
 
 
-def _run(path: Path, log_dir: Path, *, before=None):
-    loaded = load_sequence(path)
-    arm = load_arm(loaded.arm_path)
-    connection = open_connection(force_sim=True, clock=VirtualClock())
-    try:
-        if before is not None:
-            before(connection)
-        return run_sequence(loaded, arm, connection, log_dir=log_dir,
-                            confirm=lambda prompt: True)
-    finally:
-        connection.close()
-
-
 def test_the_repro_passes_validation_and_its_dry_run(project):
     check = static_check(project / "sequences" / "narrowed.yaml")
     assert check.valid, check.errors
@@ -74,7 +61,7 @@ def test_the_repro_passes_validation_and_its_dry_run(project):
 
 
 def test_the_repro_runs_and_the_report_says_which_limit_applied(project, tmp_path):
-    outcome = _run(project / "sequences" / "narrowed.yaml", tmp_path / "run")
+    outcome = run_on_sim("narrowed", tmp_path, root=project).outcome
     assert outcome.result.exit_code == EXIT_OK, outcome.result.message
     report = RunFolder(tmp_path / "run").report()
     move = report["steps"][-1]
@@ -95,8 +82,7 @@ def _narrow_stored_max_vel(connection) -> None:
 
 
 def test_a_max_vel_stored_before_the_run_bounds_the_shipped_totem(project, tmp_path):
-    outcome = _run(project / "sequences" / "totem.yaml", tmp_path / "run",
-                   before=_narrow_stored_max_vel)
+    outcome = run_on_sim("totem", tmp_path, root=project, before=_narrow_stored_max_vel).outcome
     assert outcome.result.exit_code == EXIT_OK, outcome.result.message
     report = RunFolder(tmp_path / "run").report()
     move = next(s for s in report["steps"] if s["kind"] == "move")
