@@ -239,3 +239,25 @@ def test_a_fault_the_driver_reports_mid_move_halts_through_it():
     assert result.fault["halt_confirmed"] is True
     assert "module 3 (j3): HOT" in result.message
     assert [e["type"] for e in events].count("halt_confirmed") == 1
+
+
+def test_the_powercube_driver_is_an_arm_driver():
+    from seqrun.drivers import as_driver
+    from seqrun.drivers.powercube import PowerCubeDriver
+    from seqrun.powercube.client import PowerCubeClient
+    from seqrun.sim.bus import SimBus
+
+    clock = VirtualClock()
+    with SimBus("driver-seam", clock=clock) as bus:
+        client = PowerCubeClient(bus, clock)
+        driver = as_driver(client, ARM)
+        assert isinstance(driver, PowerCubeDriver) and isinstance(driver, ArmDriver)
+        assert as_driver(driver, ARM) is driver
+        reading = driver.read()
+        assert reading.positions_rad.shape == (ARM.dof,)
+        # Freshly powered on: every joint refuses motion, its full state says not homed.
+        assert all(state.refuses_motion for state in reading.states.values())
+        states = driver.read_states()
+        assert all(not s.homed and not s.faulted and s.cause == "not_homed"
+                   for s in states.values())
+        client.close()
