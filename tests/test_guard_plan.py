@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from projecttree import ROOT
-from seqrun.arm import GeometrySpec, load_arm
+from projecttree import ROOT, shipped_arm
+from seqrun.arm import GeometrySpec
 from seqrun.dryrun import dry_run
 from seqrun.kinematics import Chain, point_positions
 from seqrun.schema import load_sequence
@@ -16,7 +16,7 @@ from seqrun.validation import validate_sequence
 
 # The guard planes alone: the arm file's link volumes would also refuse this move (the
 # hand's capsule touches the desk), which would hide what is tested here.
-ARM = load_arm(ROOT / "arms" / "lwa3.yaml").model_copy(update={"geometry": GeometrySpec()})
+ARM = shipped_arm().model_copy(update={"geometry": GeometrySpec()})
 PARK = {"j1": 0, "j2": -90, "j3": 0, "j4": -120.32, "j5": 0, "j6": 115.74, "j7": 0}
 # From Park, low over the desk: on the straight line in joint space the lowest watched point
 # stays 13.0 mm above the desk (guard: 10 mm); ruckig's time-synchronized path takes the

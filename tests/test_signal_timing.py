@@ -15,7 +15,6 @@ folder.
 from __future__ import annotations
 
 import io
-import json
 import signal
 import threading
 from pathlib import Path
@@ -171,7 +170,7 @@ def assert_finished_folder(folder: Path, code: int) -> dict:
     assert report["exit_code"] == code and report["status"] != "running"
     junit = (folder / "junit.xml").read_text()
     assert junit.rstrip().endswith("</testsuites>")
-    last = json.loads((folder / "events.jsonl").read_text().splitlines()[-1])
+    last = RunFolder(folder).events()[-1]
     assert last["type"] == "run_finished" and last["exit_code"] == code
     assert not list(folder.glob("*.tmp"))
     return report
