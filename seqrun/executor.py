@@ -126,6 +126,9 @@ class Executor:
 
     #: Idempotent reads are retried this often when an acknowledge is lost (drop_acks).
     READ_RETRIES = 1
+    #: Records the zero reference at a power_off step (set by whoever runs the sequence;
+    #: None: a dry run or the built-in simulator, nothing is recorded).
+    record_zero: Callable[[str], Any] | None = None
 
     def __init__(self, client, arm: ArmDescription, clock: Clock, *,
                  poses_dir: Path | None = None, speed: float = 1.0,

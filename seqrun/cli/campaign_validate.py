@@ -98,7 +98,7 @@ def override_notes(loaded) -> list[SourceError]:
 
 
 def _sequence(path: Path, options: dict) -> FileResult:
-    from seqrun.cli.validate import static_check
+    from seqrun.checks import static_check
     from seqrun.dryrun import dry_run
     from seqrun.validation import START_POSE
 
