@@ -12,7 +12,7 @@ import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Generic, TypeVar
 
 from pydantic import ValidationError
 
@@ -40,8 +40,12 @@ __all__ = [
 ]
 
 
+#: The parameter model of a step (``ResolvedStep[MoveParams]``).
+P = TypeVar("P", bound=StepParams, covariant=True)
+
+
 @dataclass(frozen=True, eq=False)
-class ResolvedStep:
+class ResolvedStep(Generic[P]):
     """One step of the flattened sequence (includes expanded).
 
     ``number`` is 1-based in the flat list; ``location`` is where the step is written;
@@ -50,7 +54,7 @@ class ResolvedStep:
 
     number: int
     kind: str
-    params: StepParams
+    params: P
     location: Location
     label: str | None = None
     include_chain: tuple[Location, ...] = ()

@@ -283,7 +283,7 @@ class Checker:
 
     # -- common checks
     def names(self, step: ResolvedStep, names: list[str] | dict, path: tuple,
-               *, as_keys: bool, what: str) -> list[str]:
+              *, as_keys: bool, what: str) -> list[str]:
         """Known, unlocked joint names among ``names``; errors for the others."""
         good = []
         for i, name in enumerate(names):
@@ -302,10 +302,12 @@ class Checker:
         return good
 
     def modules(self, step: ResolvedStep, joints: str | list[str]) -> list[JointState]:
+        """The joints a module command (reset, home, halt) addresses: every one for
+        'all', else the known ones named (errors for the others)."""
         if joints == "all":
             return list(self.joints.values())
         names = self.names(step, list(joints), ("joints",), as_keys=False,
-                            what=f"a {step.kind} of")
+                           what=f"a {step.kind} of")
         return [self.joints[n] for n in names]
 
     # -- shared by the step kinds' checks
@@ -319,6 +321,7 @@ class Checker:
                 "Reset and this step reads them, so it can never pass; reset first"))
 
     def motion_allowed(self, step: ResolvedStep, names: list[str]) -> None:
+        """The start-up order before moving ``names``: reset, home, limits, no halt."""
         states = [self.joints[n] for n in names]
         not_homed = [s.joint.name for s in states if not s.homed]
         not_reset = [s.joint.name for s in states if not s.reset]
@@ -343,12 +346,14 @@ class Checker:
                 "limits first (the modules' stored limits are narrower than the arm file's)"))
 
     def which(self, names: list[str], of: list[str] | None = None) -> str:
+        """" (j1, j2)" naming ``names`` in a message, or "" when they are all of ``of``
+        (default: every unlocked joint)."""
         everything = of if of is not None else [s.joint.name for s in self.joints.values()
                                                  if not s.locked]
         return "" if sorted(names) == sorted(everything) else f" ({', '.join(names)})"
 
     def guards_along_plan(self, step: ResolvedStep, params: MoveParams,
-                           target: dict[str, float]) -> None:
+                          target: dict[str, float]) -> None:
         """Workspace guards along the trajectory the executor will stream: the ruckig plan
         of this move (its limits and scales, the run's speed), sampled every
         :data:`PLAN_SAMPLE_S` seconds. The plan's time-synchronized path is not the straight
@@ -378,7 +383,7 @@ class Checker:
         self.check_path_guards(step, *plan_samples(plan), what="planned trajectory")
 
     def check_path_guards(self, step: ResolvedStep, times: np.ndarray, path_rad: np.ndarray,
-                           *, what: str) -> None:
+                          *, what: str) -> None:
         """Guards along sampled joint configurations (rad) at ``times`` (s): one error per
         guard, at the watched point that goes lowest; the smallest clearance is kept. Then
         the link volumes against the obstacles and each other (:meth:`_check_path_geometry`)."""
@@ -449,6 +454,7 @@ class Checker:
                               relative=params.relative, frame=params.frame)
 
     def tracked(self) -> np.ndarray:
+        """Where the steps so far leave every joint (user degrees, arm order)."""
         return np.array([self.joints[n].position for n in self.arm.joint_names])
 
     def unlocked_names(self) -> list[str]:
@@ -470,6 +476,8 @@ class Checker:
         return bad
 
     def arrive(self, step: ResolvedStep, joints_deg: np.ndarray) -> None:
+        """An end-effector target's solution (every joint): tracked from here on, and kept
+        for the run to compare its own solution with."""
         self.targets_deg[step.number] = np.asarray(joints_deg, dtype=float).copy()
         for name in self.unlocked_names():
             state = self.joints[name]
@@ -479,6 +487,7 @@ class Checker:
             state.position = value
 
     def solution_note(self, step: ResolvedStep, joints_deg: np.ndarray, extra: str = "") -> None:
+        """A note at ``position_mm``: the joints an end-effector target was solved to."""
         values = ", ".join(f"{n} {_f(joints_deg[self.arm.index(n)])}°"
                            for n in self.unlocked_names())
         self.notes.append(step.error(f"end-effector target solved: {values}{extra}",

@@ -97,7 +97,7 @@ def poses(params: CheckpointParams) -> tuple[str, ...]:
 
 
 # --------------------------------------------------------------------------- static checks
-def check(checker: Checker, step: ResolvedStep, params: CheckpointParams) -> None:
+def check(checker: Checker, step: ResolvedStep[CheckpointParams], params: CheckpointParams) -> None:
     if params.moved_mm is not None:
         _relative_checkpoint(checker, step, params)
         return
@@ -133,7 +133,8 @@ def check(checker: Checker, step: ResolvedStep, params: CheckpointParams) -> Non
             f"expected pose (tolerances {f(pos_tol)} mm, {f(ang_tol)}°)"))
 
 
-def _relative_checkpoint(checker: Checker, step: ResolvedStep, params: CheckpointParams) -> None:
+def _relative_checkpoint(checker: Checker, step: ResolvedStep[CheckpointParams],
+                         params: CheckpointParams) -> None:
     """'The tool moved 50 mm along z': the tracked tool pose now against where the last
     move started."""
     import numpy as np
@@ -143,14 +144,14 @@ def _relative_checkpoint(checker: Checker, step: ResolvedStep, params: Checkpoin
 
     if checker.motion_start_deg is None:
         checker.errors.append(step.error("a relative checkpoint (moved_mm) needs a move before "
-                                      "it", "moved_mm"))
+                                         "it", "moved_mm"))
         return
     try:
         solver = solver_for(checker.arm, params.tool)
     except KeyError:
         names = ", ".join(t.name for t in checker.arm.tools) or "none defined"
         checker.errors.append(step.error(f"unknown tool '{params.tool}' (the arm file's tools: "
-                                      f"{names})", "tool"))
+                                         f"{names})", "tool"))
         return
     moved = displacement(tool_pose(solver, checker.motion_start_deg),
                          tool_pose(solver, checker.tracked()), params.frame)
@@ -158,13 +159,14 @@ def _relative_checkpoint(checker: Checker, step: ResolvedStep, params: Checkpoin
     if off > params.position_tolerance_mm:
         checker.errors.append(step.error(
             f"this checkpoint cannot pass: the last move takes the tool by "
-            f"[{', '.join(f(round(float(v), 3) + 0.0) for v in moved)}] mm ({params.frame} frame), {f(off)} mm "
+            f"[{', '.join(f(round(float(v), 3) + 0.0) for v in moved)}] mm "
+            f"({params.frame} frame), {f(off)} mm "
             f"from the expected [{', '.join(f(v) for v in params.moved_mm)}] "
             f"(tolerance {f(params.position_tolerance_mm)} mm)", "moved_mm"))
 
 
 # --------------------------------------------------------------------------- run
-def run(step: ResolvedStep, ex: StepContext) -> dict:
+def run(step: ResolvedStep[CheckpointParams], ex: StepContext) -> dict:
     import numpy as np
 
     from seqrun import kinematics
@@ -198,7 +200,7 @@ def run(step: ResolvedStep, ex: StepContext) -> dict:
     return detail
 
 
-def _relative(step: ResolvedStep, ex: StepContext) -> dict:
+def _relative(step: ResolvedStep[CheckpointParams], ex: StepContext) -> dict:
     """'The tool moved [x, y, z] mm' since the last move started (measured joints)."""
     import numpy as np
 

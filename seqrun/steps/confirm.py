@@ -32,16 +32,17 @@ def describe(params: ConfirmParams) -> str:
     return f"confirm: {params.prompt}"
 
 
-def check(checker: Checker, step: ResolvedStep, params: ConfirmParams) -> None:
+def check(checker: Checker, step: ResolvedStep[ConfirmParams], params: ConfirmParams) -> None:
     """Nothing to check against the arm: the question is asked at run time."""
 
 
-def run(step: ResolvedStep, ex: StepContext) -> dict:
+def run(step: ResolvedStep[ConfirmParams], ex: StepContext) -> dict:
     from seqrun.executor import OperatorAbort  # imported here: the executor imports the steps
 
     prompt = step.params.prompt
     if ex.confirm is None:  # dry run: nobody to ask
-        ex.not_verified.append(f"step {step.number}: operator confirmation '{prompt}' (assumed yes)")
+        ex.not_verified.append(f"step {step.number}: operator confirmation '{prompt}' "
+                               "(assumed yes)")
         return {"confirmed": "assumed (dry run)"}
     if not ex.ask_operator(ex.confirm, prompt):
         raise OperatorAbort(f"operator declined: {prompt}")

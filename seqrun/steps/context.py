@@ -62,6 +62,9 @@ class StepContext(Protocol):
     commanded_deg: np.ndarray | None    # what the joints were last told (None after a halt)
     not_verified: list[str]             # what a dry run could not check, for the report
     client: ModuleCommands
+    #: Records the zero reference at a power_off step (None: a dry run or the built-in
+    #: simulator, nothing is recorded).
+    record_zero: Callable[[str], Any] | None
 
     # -- bus work and monitoring, every fault checked
     def transact(self, requests: list, *, idempotent: bool = False) -> list: ...

@@ -25,12 +25,12 @@ def describe(params: HaltParams) -> str:
     return f"halt {addressed_text(params)}"
 
 
-def check(checker: Checker, step: ResolvedStep, params: HaltParams) -> None:
+def check(checker: Checker, step: ResolvedStep[HaltParams], params: HaltParams) -> None:
     for state in checker.modules(step, params.joints):
         state.halted = True
 
 
-def run(step: ResolvedStep, ex: StepContext) -> dict:
+def run(step: ResolvedStep[HaltParams], ex: StepContext) -> dict:
     modules = addressed_modules(step.params, ex.arm)
     if modules is None:
         ex.client.halt(None)

@@ -29,7 +29,7 @@ def describe(params: HomeParams) -> str:
     return f"home {addressed_text(params)}"
 
 
-def check(checker: Checker, step: ResolvedStep, params: HomeParams) -> None:
+def check(checker: Checker, step: ResolvedStep[HomeParams], params: HomeParams) -> None:
     targets = checker.modules(step, params.joints)
     not_reset = [s.joint.name for s in targets if not s.reset and not s.locked]
     if not_reset and not checker.incomplete:
@@ -40,7 +40,7 @@ def check(checker: Checker, step: ResolvedStep, params: HomeParams) -> None:
         state.homed = True
 
 
-def run(step: ResolvedStep, ex: StepContext) -> dict:
+def run(step: ResolvedStep[HomeParams], ex: StepContext) -> dict:
     from seqrun.powercube.protocol import StateFlag
 
     modules = addressed_modules(step.params, ex.arm)

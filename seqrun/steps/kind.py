@@ -9,7 +9,8 @@ Each module ``seqrun/steps/<kind>.py`` ends with ``KIND = StepKind(...)`` and
 - ``describe``: the step's title for the operator when it has no label;
 - ``check``: :mod:`seqrun.validation` (the static checks against the arm and the steps
   before, with :class:`seqrun.validation.Checker` tracking the modules and the joints);
-- ``run``: the executor (``seqrun.steps.HANDLERS``), through :class:`~seqrun.steps.context.StepContext`.
+- ``run``: the executor (``seqrun.steps.HANDLERS``), through
+  :class:`~seqrun.steps.context.StepContext`.
 """
 
 from __future__ import annotations

@@ -113,7 +113,7 @@ def poses(params: MoveParams) -> tuple[str, ...]:
 
 
 # --------------------------------------------------------------------------- static checks
-def check(checker: Checker, step: ResolvedStep, params: MoveParams) -> None:
+def check(checker: Checker, step: ResolvedStep[MoveParams], params: MoveParams) -> None:
     from seqrun.validation import format_number as f, format_range
 
     if params.position_mm is not None:
@@ -121,6 +121,7 @@ def check(checker: Checker, step: ResolvedStep, params: MoveParams) -> None:
         return
     # which joints, and where to
     pose_limits: dict[str, str] = {}
+    where: dict[str, tuple[str, ...]]
     if params.pose is not None:
         pose = checker.pose(step, params.pose, target=True)
         if pose is None:
@@ -184,11 +185,11 @@ def check(checker: Checker, step: ResolvedStep, params: MoveParams) -> None:
         state.position = target[name]
 
 
-def _velocities(checker: Checker, step: ResolvedStep, params: MoveParams) -> None:
+def _velocities(checker: Checker, step: ResolvedStep[MoveParams], params: MoveParams) -> None:
     from seqrun.validation import format_number as f
 
     for name in checker.names(step, params.velocity_deg_s, ("velocity_deg_s",),
-                            as_keys=True, what="a velocity for"):
+                              as_keys=True, what="a velocity for"):
         value = params.velocity_deg_s[name]
         bound = checker.file_limits.velocity(name)
         held = checker.limits.velocity(name)
@@ -207,7 +208,8 @@ def _velocities(checker: Checker, step: ResolvedStep, params: MoveParams) -> Non
                 "that", "velocity_deg_s", name))
 
 
-def _timeout(checker: Checker, step: ResolvedStep, params: MoveParams, target: dict[str, float],
+def _timeout(checker: Checker, step: ResolvedStep[MoveParams], params: MoveParams,
+             target: dict[str, float],
              names: list[str]) -> None:
     """A move's ``timeout_s``: within the arm file's bound, and not shorter than the
     move planned with the limits in force."""
@@ -254,7 +256,8 @@ def _planned_duration(checker: Checker, params: MoveParams, target: dict[str, fl
     return plan.duration
 
 
-def _move_to_tool_pose(checker: Checker, step: ResolvedStep, params: MoveParams) -> None:
+def _move_to_tool_pose(checker: Checker, step: ResolvedStep[MoveParams],
+                       params: MoveParams) -> None:
     """A move to an end-effector pose: IK from the tracked joints (the solution nearest
     them), then the same checks as a move to those joints."""
     from seqrun.cartesian import solver_for
@@ -279,7 +282,7 @@ def _move_to_tool_pose(checker: Checker, step: ResolvedStep, params: MoveParams)
 
 
 # --------------------------------------------------------------------------- run
-def run(step: ResolvedStep, ex: StepContext) -> dict:
+def run(step: ResolvedStep[MoveParams], ex: StepContext) -> dict:
     import numpy as np
 
     from seqrun.planner import Limits

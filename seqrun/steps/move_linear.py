@@ -74,7 +74,7 @@ def describe(params: MoveLinearParams) -> str:
     return f"move in a line to [{xyz}] mm"
 
 
-def check(checker: Checker, step: ResolvedStep, params: MoveLinearParams) -> None:
+def check(checker: Checker, step: ResolvedStep[MoveLinearParams], params: MoveLinearParams) -> None:
     """A straight line of the tool: every sample solved and checked now (reachable,
     limits, joint speeds, manipulability, guards along the samples)."""
     import numpy as np
@@ -101,14 +101,14 @@ def check(checker: Checker, step: ResolvedStep, params: MoveLinearParams) -> Non
     if checker.outside_limits(step, linear.joints_deg[1:], "the straight line"):
         return
     checker.check_path_guards(step, linear.plan.times, linear.plan.positions,
-                            what="straight line of the tool")
+                              what="straight line of the tool")
     checker.solution_note(step, linear.joints_deg[-1],
-                        f" ({linear.path.length_mm:.1f} mm in {linear.plan.duration:.2f} s, "
-                        f"smallest manipulability {linear.min_manipulability:.3f})")
+                          f" ({linear.path.length_mm:.1f} mm in {linear.plan.duration:.2f} s, "
+                          f"smallest manipulability {linear.min_manipulability:.3f})")
     checker.arrive(step, linear.joints_deg[-1])
 
 
-def run(step: ResolvedStep, ex: StepContext) -> dict:
+def run(step: ResolvedStep[MoveLinearParams], ex: StepContext) -> dict:
     import numpy as np
 
     from seqrun.cartesian import PathError, plan_linear, solver_for, tool_pose

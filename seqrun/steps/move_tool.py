@@ -8,7 +8,7 @@ motion.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -20,9 +20,12 @@ from seqrun.planner import Limits
 if TYPE_CHECKING:
     from seqrun.loader import ResolvedStep
     from seqrun.steps.context import StepContext
+    from seqrun.steps.move import MoveParams
+    from seqrun.steps.move_linear import MoveLinearParams
 
 
-def tool_target(step: ResolvedStep, ex: StepContext, measured_deg: np.ndarray) -> np.ndarray:
+def tool_target(step: ResolvedStep[MoveParams | MoveLinearParams], ex: StepContext,
+                measured_deg: np.ndarray) -> np.ndarray:
     """The step's tool target (4x4) from the measured joints."""
     params = step.params
     current = tool_pose(solver_for(ex.arm, params.tool), measured_deg)
@@ -30,10 +33,11 @@ def tool_target(step: ResolvedStep, ex: StepContext, measured_deg: np.ndarray) -
                           relative=params.relative, frame=params.frame)
 
 
-def agree(step: ResolvedStep, ex: StepContext, joints_deg: np.ndarray) -> dict:
+def agree(step: ResolvedStep[MoveParams | MoveLinearParams], ex: StepContext,
+          joints_deg: np.ndarray) -> dict:
     """Fault if the run's solution is not the validated one."""
     validated = ex.validated_targets.get(step.number)
-    detail = {"ik_solution_deg": [round(float(v), 3) for v in joints_deg]}
+    detail: dict[str, Any] = {"ik_solution_deg": [round(float(v), 3) for v in joints_deg]}
     if validated is None:
         return detail
     difference = np.abs(np.asarray(joints_deg) - validated)
@@ -50,7 +54,7 @@ def agree(step: ResolvedStep, ex: StepContext, joints_deg: np.ndarray) -> dict:
     return detail
 
 
-def run_pose(step: ResolvedStep, ex: StepContext) -> dict:
+def run_pose(step: ResolvedStep[MoveParams], ex: StepContext) -> dict:
     """``move`` with position_mm: IK from the measured joints, then an ordinary move."""
     params = step.params
     measured = ex.read_arm().user_deg

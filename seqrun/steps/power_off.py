@@ -43,7 +43,7 @@ def describe(params: PowerOffParams) -> str:
     return f"power off in {params.pose}"
 
 
-def check(checker: Checker, step: ResolvedStep, params: PowerOffParams) -> None:
+def check(checker: Checker, step: ResolvedStep[PowerOffParams], params: PowerOffParams) -> None:
     """The pose must be a power-off pose of the arm, and where the moves before end."""
     from seqrun.validation import format_number as f
 
@@ -65,7 +65,7 @@ def check(checker: Checker, step: ResolvedStep, params: PowerOffParams) -> None:
     checker.powered_off = step
 
 
-def run(step: ResolvedStep, ex: StepContext) -> dict:
+def run(step: ResolvedStep[PowerOffParams], ex: StepContext) -> dict:
     pose = step.params.pose
     target = ex.arm.power_off_joints_deg(pose)  # user degrees: every module reads 0 there
     tolerance = step.params.tolerance_deg or ex.arm.control.position_tolerance_deg

@@ -29,12 +29,12 @@ def describe(params: ResetParams) -> str:
     return f"reset {addressed_text(params)}"
 
 
-def check(checker: Checker, step: ResolvedStep, params: ResetParams) -> None:
+def check(checker: Checker, step: ResolvedStep[ResetParams], params: ResetParams) -> None:
     for state in checker.modules(step, params.joints):
         state.reset, state.halted = True, False
 
 
-def run(step: ResolvedStep, ex: StepContext) -> dict:
+def run(step: ResolvedStep[ResetParams], ex: StepContext) -> dict:
     from seqrun.powercube.protocol import StateFlag
 
     modules = addressed_modules(step.params, ex.arm)

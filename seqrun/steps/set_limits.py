@@ -57,7 +57,7 @@ def describe(params: SetLimitsParams) -> str:
     return "write joint limits"
 
 
-def check(checker: Checker, step: ResolvedStep, params: SetLimitsParams) -> None:
+def check(checker: Checker, step: ResolvedStep[SetLimitsParams], params: SetLimitsParams) -> None:
     from seqrun.validation import format_number as f, format_range
 
     joints = checker.joints
@@ -100,7 +100,7 @@ def check(checker: Checker, step: ResolvedStep, params: SetLimitsParams) -> None
                        written["max_acceleration_deg_s2"])
 
 
-def run(step: ResolvedStep, ex: StepContext) -> dict:
+def run(step: ResolvedStep[SetLimitsParams], ex: StepContext) -> dict:
     from seqrun.powercube.codec import GetParam, SetParam
     from seqrun.powercube.protocol import ParamId
 

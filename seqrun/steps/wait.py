@@ -56,7 +56,7 @@ def describe(params: WaitParams) -> str:
             else "wait until in position")
 
 
-def check(checker: Checker, step: ResolvedStep, params: WaitParams) -> None:
+def check(checker: Checker, step: ResolvedStep[WaitParams], params: WaitParams) -> None:
     from seqrun.validation import format_number as f
 
     checker.after_halt(step, f"{step.kind}")
@@ -69,7 +69,7 @@ def check(checker: Checker, step: ResolvedStep, params: WaitParams) -> None:
                 f"(control.max_wait_s = {f(bound)} s)", key))
 
 
-def run(step: ResolvedStep, ex: StepContext) -> dict:
+def run(step: ResolvedStep[WaitParams], ex: StepContext) -> dict:
     params = step.params
     if params.seconds is not None:
         ex.wait(params.seconds)
