@@ -124,7 +124,6 @@ MAX_INCLUDE_DEPTH = 16
 MAX_STEPS = 10_000
 
 _Model = StrictModel
-_doc = doc
 
 # --------------------------------------------------------------------------- include
 _YAML_FILE_RE = re.compile(r"\.ya?ml$")
@@ -188,7 +187,7 @@ def _step_model(kind: StepKind) -> type[_Step]:
         "kind": kind.name,
         kind.name: Field(description=doc(kind.params) + kind.shorthand),
     }
-    return type(_Step)(name, (_Step,), namespace)
+    return type(_Step)(name, (_Step,), namespace)  # type: ignore[misc]  # a pydantic model class
 
 
 class IncludeStep(_Step):

@@ -43,6 +43,7 @@ from seqrun.arm import ArmDescription, Joint
 from seqrun.defaults import START_POSE  # noqa: F401  (re-exported)
 from seqrun.errors import PlanningError, SourceError
 from seqrun.limits import READBACK, LimitsInForce
+from seqrun.steps.registry import step_kind
 from seqrun.targets import (  # noqa: F401  (re-exported: they lived here)
     PoseSource,
     commanded_joints,
@@ -494,8 +495,6 @@ class Checker:
                                      "position_mm"))
 
     def run(self) -> ValidationResult:
-        from seqrun.steps.registry import step_kind
-
         for step in self.loaded.steps:
             kind = step_kind(step.kind)
             errors, notes = len(self.errors), len(self.notes)

@@ -265,8 +265,8 @@ def schema_command(
 ) -> None:
     """Print the JSON Schema of a file format (sequence files by default)."""
     if markdown:
-        from seqrun.schema import (arm_reference_markdown, pose_reference_markdown,
-                                   reference_markdown)
+        from seqrun.reference import (arm_reference_markdown, pose_reference_markdown,
+                                      reference_markdown)
 
         text = {SchemaKind.sequence: reference_markdown, SchemaKind.pose: pose_reference_markdown,
                 SchemaKind.arm: arm_reference_markdown}[kind]()
