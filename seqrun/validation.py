@@ -61,6 +61,7 @@ __all__ = [
     "PLAN_SAMPLE_S",
     "Checker",
     "Clearance",
+    "JointState",
     "Proximity",
     "ValidationResult",
     "commanded_joints",
