@@ -50,6 +50,12 @@ def test_commands_without_a_bus_do_not_import_python_can():
         assert not imported(*args) & {"can", "asyncio", "sqlite3"}, args
 
 
+def test_validate_and_its_dry_run_do_not_import_python_can():
+    """The dry run talks to the simulator without python-can (seqrun.sim.port): its import
+    (can.io: asyncio, ssl, sqlite3) cost more than a whole dry run of a short sequence."""
+    assert not imported("validate", "sequences/opsafe.yaml") & {"can", "asyncio", "sqlite3"}
+
+
 def _head_one(args: list[str], cwd: Path = ROOT) -> tuple[int, str, str]:
     """Run ``seqrun ARGS | head -1``: read one line, close the pipe, wait for the end."""
     proc = subprocess.Popen([sys.executable, "-m", "seqrun", *args], cwd=cwd, env=ENV,
