@@ -18,8 +18,11 @@ the compiler.
 measured in the same run, alternating command by command with this one, for before/after
 figures under the same load. ``--imports N``: also the import time of ``validate opsafe``
 by package (``python -X importtime``, the smallest of N runs per module).
+``--instructions``: also the instructions each seqrun command executes (valgrind's
+callgrind, ~50x slower): a count that a loaded host does not change, for before/after.
 
-Run: ``.venv/bin/python bench/bench_startup.py [--repeat 7] [--compare DIR] [--imports 5]``
+Run: ``.venv/bin/python bench/bench_startup.py [--repeat 7] [--compare DIR] [--imports 5]
+[--instructions]``
 """
 
 from __future__ import annotations
@@ -29,6 +32,7 @@ import collections
 import os
 import re
 import resource
+import shutil
 import statistics
 import subprocess
 import sys
@@ -95,6 +99,15 @@ def import_breakdown(tree: Path, runs: int) -> dict[str, float]:
     return {name: round(us / 1000, 1) for name, us in groups.most_common()}
 
 
+def instructions(tree: Path, args: list[str]) -> int | None:
+    """Instructions executed by ``python ARGS`` in ``tree`` (callgrind's total)."""
+    proc = subprocess.run(["valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null",
+                           sys.executable, *args], cwd=tree, env=environment(tree),
+                          capture_output=True, text=True)
+    match = re.search(r"Collected : (\d+)", proc.stderr)
+    return int(match.group(1)) if match else None
+
+
 def summary(times: list[float], cpu: list[float]) -> dict:
     return {"min_s": round(min(times), 3), "median_s": round(statistics.median(times), 3),
             "cpu_median_s": round(statistics.median(cpu), 3),
@@ -108,6 +121,8 @@ def main() -> None:
                         help="another seqrun checkout, measured alternately with this one")
     parser.add_argument("--imports", type=int, default=0, metavar="N",
                         help="import-time breakdown of validate opsafe (smallest of N runs)")
+    parser.add_argument("--instructions", action="store_true",
+                        help="instructions per seqrun command (needs valgrind)")
     parser.add_argument("--out", type=Path, default=RESULTS / "startup.json")
     opts = parser.parse_args()
     info = machine()
@@ -166,6 +181,16 @@ def main() -> None:
                   f"total {sum(groups.values()):.0f}")
             for name, ms in list(groups.items())[:25]:
                 print(f"  {name:32s} {ms:7.1f}")
+    if opts.instructions:
+        if shutil.which("valgrind") is None:
+            raise SystemExit("--instructions needs valgrind")
+        print(f"\n{'instructions (millions)':34s}" + "".join(f" {label:>13s}" for label in trees))
+        for name, args in COMMANDS.items():
+            if not name.startswith("seqrun"):
+                continue
+            counts = {label: instructions(tree, args) for label, tree in trees.items()}
+            result.setdefault("instructions", {})[name] = counts
+            print(f"{name:34s}" + "".join(f" {(c or 0) / 1e6:13.0f}" for c in counts.values()))
     result["loadavg_at_end"] = [round(x, 2) for x in os.getloadavg()]
     write_json(opts.out, result)
     print(f"written {opts.out}")
