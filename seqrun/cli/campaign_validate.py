@@ -15,7 +15,6 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
-from xml.sax.saxutils import escape, quoteattr
 
 import typer
 
@@ -211,6 +210,10 @@ def table(results: list[FileResult]) -> str:
 
 
 def junit(results: list[FileResult]) -> str:
+    # (imported here: xml.sax.saxutils pulls in urllib, http and email, which a single
+    # file's validation does not need)
+    from xml.sax.saxutils import escape, quoteattr
+
     failures = sum(not r.valid for r in results)
     total = sum(r.simulated_s or 0.0 for r in results)
     lines = ['<?xml version="1.0" encoding="UTF-8"?>',
