@@ -153,11 +153,13 @@ def open_connection(*, interface: str | None = None, channel: str | None = None,
                     clock: Clock | None = None,
                     sim_positions: Mapping[int, float] | Sequence[float] | None = None,
                     default_bitrate: int = 1_000_000,
-                    power_on_pose: str | None = None) -> Connection:
-    """Open the bus the operator asked for (see the module docstring)."""
-    import can
+                    power_on_pose: str | None = None,
+                    python_can: bool = True) -> Connection:
+    """Open the bus the operator asked for (see the module docstring).
 
-    from seqrun.sim.bus import SimBus
+    ``python_can=False`` (with ``force_sim``): the simulator as a
+    :class:`~seqrun.sim.port.SimPort`, without importing python-can (the dry run: nobody
+    outside this process talks to that bus)."""
     from seqrun.sim.module import SIM_OPTIONS_ENV
 
     response_timeout_s(None)  # a bad $SEQRUN_RESPONSE_TIMEOUT_MS: one line, before the bus
@@ -177,12 +179,21 @@ def open_connection(*, interface: str | None = None, channel: str | None = None,
         clock = clock or RealClock()
         name = str(config.get("channel") or f"seqrun-{next(_sim_channels)}")
         options = sim_options_from_env()  # SEQRUN_SIM_OPTIONS, then --bus-kwargs switches
+        if python_can or not force_sim:
+            import can
+
+            from seqrun.sim.bus import SimBus as bus_class
+            refused: tuple[type[Exception], ...] = (can.CanInitializationError,)
+        else:
+            from seqrun.sim.port import SimPort as bus_class  # type: ignore[assignment]
+            from seqrun.sim.port import SimSetupError
+            refused = (SimSetupError,)
         try:
-            bus = SimBus(channel=name, clock=clock, faults=list(faults),
-                         bitrate=bitrate or config.get("bitrate") or default_bitrate,
-                         positions=sim_positions, options=options,
-                         power_on_pose=power_on_pose, **switches)
-        except can.CanInitializationError as exc:
+            bus = bus_class(channel=name, clock=clock, faults=list(faults),
+                            bitrate=bitrate or config.get("bitrate") or default_bitrate,
+                            positions=sim_positions, options=options,
+                            power_on_pose=power_on_pose, **switches)
+        except refused as exc:
             raise UserInputError(f"--bus-kwargs: {exc}") from None
         kind = "virtual time" if clock.is_virtual else "real time"
         changed = "" if options is None else f", options {os.environ[SIM_OPTIONS_ENV].strip()}"
@@ -192,6 +203,8 @@ def open_connection(*, interface: str | None = None, channel: str | None = None,
                           power_on_pose=bus.arm.power_on_pose)
     if faults:
         raise UserInputError("--sim-fault only applies to the simulator (no -i/-c, or --sim)")
+    import can
+
     if config["interface"] == "socketcand":  # python-can's config gives channel=None
         # tcp_tune: TCP_NODELAY + TCP_QUICKACK. Without it Nagle holds a frame back until
         # the previous one is acknowledged, and a delayed ACK takes 40 ms: enough for a

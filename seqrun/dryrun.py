@@ -125,7 +125,7 @@ def _dry_run(loaded: LoadedSequence, arm: ArmDescription, start_deg: Mapping[str
     clock = VirtualClock()
     positions = {j.module: j.to_module_rad(start_deg[j.name]) for j in arm.joints}
     connection = open_connection(force_sim=True, clock=clock, sim_positions=positions,
-                                 default_bitrate=arm.can.bitrate)
+                                 default_bitrate=arm.can.bitrate, python_can=False)
     hz = cycle_hz or arm.control.dry_run_cycle_hz
     events: list[dict] = []
     try:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 import signal
+import sys
 
 EXIT_OPERATOR_ABORT = 130   # seqrun.executor's, without importing it (the point is speed)
 _MESSAGE = b"seqrun: interrupted during start-up; nothing was sent\n"
@@ -20,13 +21,20 @@ def _interrupted_during_start_up(signum, frame) -> None:
     os._exit(EXIT_OPERATOR_ABORT)
 
 
+#: The command line being started; read by :mod:`seqrun.cli` when it is first imported, to
+#: load only the module of the command given (see seqrun.cli.COMMAND_WORDS).
+command_line: list[str] | None = None
+
+
 def main(argv: list[str] | None = None) -> None:
+    global command_line
+    command_line = list(argv if argv is not None else sys.argv[1:])
     previous = signal.signal(signal.SIGINT, _interrupted_during_start_up)
     try:
         from seqrun.cli import main as cli_main
     finally:
         signal.signal(signal.SIGINT, previous)
-    cli_main(argv)
+    cli_main(command_line)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -75,6 +75,9 @@ class Executor:
 
     ``driver``: the arm's :class:`~seqrun.drivers.base.ArmDriver`; a PowerCube client is
     accepted too (wrapped in the PowerCube driver)."""
+    #: Records the zero reference at a power_off step (set by whoever runs the sequence;
+    #: None: a dry run or the built-in simulator, nothing is recorded).
+    record_zero: Callable[[str], Any] | None = None
 
     def __init__(self, driver: ArmDriver | Any, arm: ArmDescription, clock: Clock, *,
                  poses_dir: Path | tuple[Path, ...] | None = None, speed: float = 1.0,
@@ -758,11 +761,12 @@ class Executor:
         self._record_latched(states)
         started = ready and written
         start_deg = {j.name: float(v) for j, v in zip(self.arm.joints, m.user_deg)}
-        result = validate_sequence(replace(loaded, steps=tuple(loaded.steps[first_step - 1:])),
+        steps_before, steps_from = loaded.split_at(first_step)  # as `seqrun run --from`
+        result = validate_sequence(steps_from,
                                    self.arm, start_deg, started=started, speed=self.speed,
                                    module_limits=module_limits)
         if first_step > 1:
-            before = validate_sequence(replace(loaded, steps=tuple(loaded.steps[:first_step - 1])),
+            before = validate_sequence(steps_before,
                                        self.arm)
             tol = max(1.0, 5 * self.arm.control.position_tolerance_deg)
             for j in self.arm.joints:

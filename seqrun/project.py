@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import os
 import re
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -104,6 +103,8 @@ def load_config(path: Path) -> CampaignConfig:
             from None
     except OSError as exc:
         raise UserInputError(f"{shown}: {exc.strerror or exc}") from None
+    import tomllib  # only where a seqrun.toml is read (its regexes cost ~1 ms to compile)
+
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

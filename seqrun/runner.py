@@ -16,7 +16,6 @@ from seqrun.connection import Connection, response_timeout_s
 from seqrun.drivers.powercube import PowerCubeDriver
 from seqrun.executor import EXIT_FAULT, Executor, Listener, RunResult, StepResult
 from seqrun.powercube.client import PowerCubeClient
-from seqrun.runlog import RunLog
 from seqrun.schema import LoadedSequence
 from seqrun.stop_requests import StopRequests
 
@@ -84,6 +83,8 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
                                       requests=requests)
     log = None
     if log_dir is not None:
+        from seqrun.runlog import RunLog  # python-can's log writer: only for a run folder
+
         log = RunLog(log_dir, {"sequence": loaded.name, "file": file or loaded.file,
                                "arm": arm.name, "bus": connection.description,
                                "simulator": connection.is_simulator,

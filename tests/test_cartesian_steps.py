@@ -183,13 +183,13 @@ def test_leaving_the_line_is_a_fault_with_a_halt(project):
 def test_a_run_time_solution_away_from_the_validated_one_is_a_fault(project, monkeypatch):
     from seqrun import validation
 
-    arrive = validation._Validator._arrive
+    arrive = validation.Checker.arrive
 
     def validated_elsewhere(self, step, joints_deg):
         arrive(self, step, joints_deg)
         self.targets_deg[step.number] = np.asarray(joints_deg) + 5.0
 
-    monkeypatch.setattr(validation._Validator, "_arrive", validated_elsewhere)
+    monkeypatch.setattr(validation.Checker, "arrive", validated_elsewhere)
     steps = UP + "- move: {position_mm: [0, 0, -50], relative: true, frame: tool}\n"
     run = dry_run(load(project, steps), ARM, PARK)
     assert run.result.exit_code == 3

@@ -154,7 +154,7 @@ def test_the_run_halts_before_the_obstacle(project, monkeypatch):
     off the executor streams the move and halts it at the margin."""
     from seqrun import validation
 
-    monkeypatch.setattr(validation._Validator, "_check_path_geometry", lambda *a, **k: None)
+    monkeypatch.setattr(validation.Checker, "_check_path_geometry", lambda *a, **k: None)
     run = dry_run(_load(project, STEPS), _with_mock(ARM), PARK)
     assert run.result.exit_code == 3
     assert run.result.fault["cause"] == "collision"

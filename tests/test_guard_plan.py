@@ -74,7 +74,7 @@ def test_without_the_check_the_run_halts_at_the_guard_where_the_plan_said(sequen
     plan switched off, the executor streams the move and its runtime guard halts it."""
     from seqrun import validation
 
-    monkeypatch.setattr(validation._Validator, "_guards_along_plan", lambda *a: None)
+    monkeypatch.setattr(validation.Checker, "guards_along_plan", lambda *a: None)
     run = dry_run(sequence, ARM, PARK)
     assert run.result.exit_code == 3
     assert run.result.fault["cause"] == "workspace_guard"

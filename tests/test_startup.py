@@ -6,6 +6,7 @@ not how long it takes: timings belong to bench/bench_startup.py.
 
 from __future__ import annotations
 
+import ast
 import os
 import subprocess
 import sys
@@ -48,6 +49,12 @@ def test_commands_without_a_bus_do_not_import_python_can():
     for args in (("fk", "--pose", "totem"), ("validate", "--static", "sequences/opsafe.yaml"),
                  ("pose", "list")):
         assert not imported(*args) & {"can", "asyncio", "sqlite3"}, args
+
+
+def test_validate_and_its_dry_run_do_not_import_python_can():
+    """The dry run talks to the simulator without python-can (seqrun.sim.port): its import
+    (can.io: asyncio, ssl, sqlite3) cost more than a whole dry run of a short sequence."""
+    assert not imported("validate", "sequences/opsafe.yaml") & {"can", "asyncio", "sqlite3"}
 
 
 def _head_one(args: list[str], cwd: Path = ROOT) -> tuple[int, str, str]:
@@ -111,3 +118,34 @@ def test_piped_run_output_is_not_wrapped(tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert f"[1/1] {label.strip()} (" in proc.stdout
     assert any(len(line) > 120 for line in proc.stdout.splitlines())
+
+
+def test_each_command_word_loads_the_module_that_defines_it():
+    """`seqrun WORD …` imports only COMMAND_WORDS[WORD]: a wrong entry would make that
+    command unknown to the program (while every test, importing all modules, passed)."""
+    import seqrun.cli
+    from seqrun.cli.app import app
+
+    defined = {c.name: c.callback.__module__ for c in app.registered_commands}
+    for group in app.registered_groups:
+        modules = {c.callback.__module__ for c in group.typer_instance.registered_commands}
+        assert len(modules) == 1, (group.name, modules)
+        defined[group.name] = modules.pop()
+    assert seqrun.cli.COMMAND_WORDS == defined
+
+
+MODULES_AT_EXIT = """\
+import atexit, sys
+atexit.register(lambda: print(sorted(sys.modules), file=sys.stderr))
+from seqrun.entry import main
+main()
+"""
+
+
+def test_a_command_runs_with_only_its_own_module_loaded():
+    proc = subprocess.run([sys.executable, "-c", MODULES_AT_EXIT, "pose", "list"],
+                          cwd=ROOT, env=ENV, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0 and "totem" in proc.stdout
+    loaded = set(ast.literal_eval(proc.stderr.strip().splitlines()[-1]))
+    assert "seqrun.cli.pose" in loaded
+    assert not loaded & {"seqrun.cli.run", "seqrun.cli.validate", "seqrun.cli.sim"}

@@ -2,13 +2,16 @@
 
 The command modules only define the commands (options, help); each command imports what it
 needs when it runs, so ``seqrun --help`` and the short commands do not pay for pydantic,
-numpy, ruckig or python-can (tests/test_startup.py holds this).
+numpy, ruckig or python-can (tests/test_startup.py holds this). The ``seqrun`` program loads
+only the module of the command it runs (:data:`COMMAND_WORDS`); importing this package
+anywhere else registers every command.
 """
 
 from __future__ import annotations
 
 import importlib
 import sys
+from collections.abc import Sequence
 
 from seqrun.cli.app import app
 from seqrun.cli.output import guard_stdout
@@ -29,8 +32,33 @@ COMMAND_MODULES = (
 )
 
 
-def _load_commands() -> None:
-    for name in COMMAND_MODULES:
+#: The first word of a command line -> the module that defines that command (or group).
+#: ``seqrun WORD ...`` loads only that module: typer builds the parameters of every
+#: registered command at each start, ~10 ms for all of them.
+COMMAND_WORDS = {
+    "fk": "seqrun.cli.fk",
+    "ik": "seqrun.cli.ik",
+    "validate": "seqrun.cli.validate",
+    "schema": "seqrun.cli.validate",
+    "sim": "seqrun.cli.sim",
+    "run": "seqrun.cli.run",
+    "status": "seqrun.cli.arm_commands",
+    "halt": "seqrun.cli.arm_commands",
+    "reset": "seqrun.cli.arm_commands",
+    "pose": "seqrun.cli.pose",
+    "zero": "seqrun.cli.zero",
+    "init": "seqrun.cli.init",
+    "runs": "seqrun.cli.runs",
+    "report": "seqrun.cli.report",
+}
+
+
+def _load_commands(argv: Sequence[str] | None = None) -> None:
+    """Register commands on :data:`app`: for a command line whose first word names a
+    command, that command's module; otherwise (no words, ``--help``, a mistyped command,
+    an import by anything but the ``seqrun`` program) every module."""
+    word = argv[0] if argv else None
+    for name in (COMMAND_WORDS[word],) if word in COMMAND_WORDS else COMMAND_MODULES:
         try:
             importlib.import_module(name)
         except ModuleNotFoundError as exc:  # a command group not built yet
@@ -40,8 +68,16 @@ def _load_commands() -> None:
 
 def main(argv: list[str] | None = None) -> None:
     guard_stdout()  # `seqrun … | head`: quiet exit 141, never a run ended by it
-    _load_commands()
-    app(args=argv if argv is not None else sys.argv[1:], prog_name="seqrun")
+    args = argv if argv is not None else sys.argv[1:]
+    _load_commands(args)
+    app(args=args, prog_name="seqrun")
 
 
-_load_commands()
+def _starting_command_line() -> Sequence[str] | None:
+    """The command line the ``seqrun`` program (:mod:`seqrun.entry`) is starting with; None
+    when anything else imports this package (tests, tools: they get every command)."""
+    entry = sys.modules.get("seqrun.entry")
+    return getattr(entry, "command_line", None)
+
+
+_load_commands(_starting_command_line())

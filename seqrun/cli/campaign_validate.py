@@ -15,7 +15,6 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
-from xml.sax.saxutils import escape, quoteattr
 
 import typer
 
@@ -84,21 +83,23 @@ def collect(paths: list[Path]) -> list[Path]:
 def override_notes(loaded) -> list[SourceError]:
     """A note for every pose the sequence uses that the campaign's poses/ overrides."""
     from seqrun.poses import pose_overrides
+    from seqrun.steps.registry import step_kind
 
     overrides = pose_overrides(loaded.pose_path or loaded.poses_dir)
     notes, seen = [], set()
     for step in loaded.steps:
-        name = getattr(step.params, "pose", None)
-        if step.kind in ("move", "checkpoint") and name in overrides and name not in seen:
-            seen.add(name)
-            used, hidden = overrides[name]
-            notes.append(step.error(f"pose '{name}' is the campaign's {used}, which "
-                                    f"overrides {', '.join(str(h) for h in hidden)}", "pose"))
+        for name in step_kind(step.kind).poses(step.params):  # the pose files it names
+            if name in overrides and name not in seen:
+                seen.add(name)
+                used, hidden = overrides[name]
+                notes.append(step.error(f"pose '{name}' is the campaign's {used}, which "
+                                        f"overrides {', '.join(str(h) for h in hidden)}",
+                                        "pose"))
     return notes
 
 
 def _sequence(path: Path, options: dict) -> FileResult:
-    from seqrun.cli.validate import static_check
+    from seqrun.checks import static_check
     from seqrun.dryrun import dry_run
     from seqrun.validation import START_POSE
 
@@ -209,6 +210,10 @@ def table(results: list[FileResult]) -> str:
 
 
 def junit(results: list[FileResult]) -> str:
+    # (imported here: xml.sax.saxutils pulls in urllib, http and email, which a single
+    # file's validation does not need)
+    from xml.sax.saxutils import escape, quoteattr
+
     failures = sum(not r.valid for r in results)
     total = sum(r.simulated_s or 0.0 for r in results)
     lines = ['<?xml version="1.0" encoding="UTF-8"?>',

@@ -10,12 +10,12 @@ from __future__ import annotations
 import functools
 import os
 import sys
-from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Callable, Optional
 
 import typer
 
+from seqrun.checks import static_validation
 from seqrun.cli.app import app
 from seqrun.cli.common import (BitrateOption, BusKwargsOption, ChannelOption, InterfaceOption,
                                SimOption, fail, load_arm_file, user_errors)
@@ -56,24 +56,10 @@ def _ask_shown(console: Console, displays: list, question: str, assume_yes: bool
         return _ask(console, question, assume_yes, read)
 
 
-def static_validation(loaded, arm, start: str | None, started: bool, from_step: int):
-    """Validation from the assumed start (Park, freshly powered on, unless told otherwise).
-    With ``--from N`` the steps before N are only tracked, to know where step N starts."""
-    from seqrun.validation import START_POSE, pose_joints_deg, validate_sequence
-
-    start_deg = pose_joints_deg(start or START_POSE, loaded.pose_path or loaded.poses_dir)
-    if from_step == 1:
-        return validate_sequence(loaded, arm, start_deg, started=started)
-    before = validate_sequence(replace(loaded, steps=tuple(loaded.steps[:from_step - 1])),
-                               arm, start_deg, started=started)
-    return validate_sequence(replace(loaded, steps=tuple(loaded.steps[from_step - 1:])), arm,
-                             before.final_deg, started=True)
-
-
 def _all_errors(file: Path, load_errors: list, **check) -> list:
     """The errors `seqrun validate --static` reports for ``file`` (load errors and the
     checks of the steps that loaded), else ``load_errors``."""
-    from seqrun.cli.validate import static_check
+    from seqrun.checks import static_check
     from seqrun.errors import UserInputError
 
     try:

@@ -1,4 +1,5 @@
-"""PowerCube bus client: request / acknowledge exchanges over any :class:`can.BusABC`.
+"""PowerCube bus client: request / acknowledge exchanges over any :class:`can.BusABC` (or the
+simulator's python-can-free :class:`~seqrun.sim.port.SimPort`).
 
 The client is the only reader of its bus (no :class:`can.Notifier`): every exchange sends
 its requests, then calls ``bus.recv(timeout)`` itself until each request is matched with
@@ -47,8 +48,7 @@ import threading
 from collections import Counter, deque
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
-
-import can
+from typing import TYPE_CHECKING, Any
 
 from seqrun.clock import Clock
 from seqrun.errors import BusError, CodecError, ModuleFaultError, ModuleTimeoutError
@@ -83,12 +83,15 @@ from seqrun.powercube.protocol import (
     StateFlag,
 )
 
+if TYPE_CHECKING:  # python-can only for a bus of python-can's (see _message_class)
+    import can
+
 __all__ = ["ClientStats", "DiscardReason", "ModuleReading", "PowerCubeClient"]
 
 logger = logging.getLogger(__name__)
 
-FrameListener = Callable[[can.Message], None]
-DiscardCallback = Callable[[can.Message, str], None]
+FrameListener = Callable[["can.Message"], None]
+DiscardCallback = Callable[["can.Message", str], None]
 #: ``on_ack(request, ack)`` of :meth:`PowerCubeClient.transact`; raising ends the exchange.
 AckInspector = Callable[[Request, Ack], None]
 
@@ -179,6 +182,7 @@ class PowerCubeClient:
         if response_timeout <= 0:
             raise ValueError(f"response_timeout must be positive, got {response_timeout!r}")
         self.bus = bus
+        self._message = _message_class(bus)
         self.clock = clock
         self.response_timeout = float(response_timeout)
         #: Called with ``(msg, reason)`` for every received frame that is not used.
@@ -513,8 +517,8 @@ class PowerCubeClient:
             raise BusError("PowerCube client is closed")
 
     def _send(self, can_id: int, data: bytes) -> None:
-        msg = can.Message(arbitration_id=can_id, data=data, is_extended_id=False,
-                          is_rx=False, timestamp=self.clock.now())
+        msg = self._message(arbitration_id=can_id, data=data, is_extended_id=False,
+                            is_rx=False, timestamp=self.clock.now())
         try:
             self.bus.send(msg, timeout=self.SEND_TIMEOUT)
         except Exception as exc:
@@ -775,6 +779,18 @@ class PowerCubeClient:
 
 _WATCHDOG_FRAME = encode(BroadcastRequest(CommandId.WATCHDOG_REFRESH, 0))
 _HALT_FRAME = encode(BroadcastRequest(CommandId.HALT, 0))
+
+
+def _message_class(bus: Any) -> Any:
+    """The message type ``bus`` takes: its ``message_class`` (the simulator's python-can-free
+    :class:`~seqrun.sim.port.SimPort`), else python-can's :class:`can.Message` (imported
+    only then: it costs more than a dry run)."""
+    message_class = getattr(bus, "message_class", None)
+    if message_class is None:
+        import can
+
+        message_class = can.Message
+    return message_class
 
 
 def _what(exc: BaseException) -> str:

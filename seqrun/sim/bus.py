@@ -12,6 +12,8 @@ share one wire — here one :class:`~seqrun.sim.network.SimNetwork` with one
 creates the arm (with its clock, faults, bitrate, ...); later ones join it (their faults are
 added); when the last one shuts down the arm is gone and the next bus gets a fresh one
 (power cycle). :func:`get_network` reaches a channel's wire and arm from tests.
+A SimBus is a :class:`~seqrun.sim.port.SimPort` (the same connection to the wire, without
+python-can) with python-can's messages, errors and filters; the dry run uses a SimPort.
 
 Clock: with a :class:`~seqrun.clock.VirtualClock`, :meth:`SimBus.recv` returns the next
 frame due within the timeout and advances the clock to its delivery time, or advances
@@ -30,101 +32,30 @@ CAN FD, error frames, bus state changes, hardware filters (filters are applied i
 from __future__ import annotations
 
 import logging
-import threading
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 import can
 from can import BusABC, CanInitializationError, CanOperationError, Message
 
-from seqrun.clock import Clock, RealClock
-from seqrun.sim.arm import SimArm
-from seqrun.sim.faults import Fault, parse_faults
+from seqrun.clock import Clock
+from seqrun.sim.faults import Fault
 from seqrun.sim.module import ModuleOptions
-from seqrun.sim.options import module_options, pop_switches
-from seqrun.sim.network import (
-    DEFAULT_TX_QUEUE_SIZE,
-    Endpoint,
-    NetworkClosedError,
-    SimNetwork,
-    TransmitTimeoutError,
-    WireFrame,
-)
+from seqrun.sim.network import DEFAULT_TX_QUEUE_SIZE, NetworkClosedError, TransmitTimeoutError
+from seqrun.sim.options import pop_switches
+from seqrun.sim.port import SimPort, SimSetupError, get_network, open_channels
+
+__all__ = ["SimBus", "get_network"]
 
 logger = logging.getLogger(__name__)
 
-#: channel name -> (network, number of open buses on it)
-_channels: dict[str, list[Any]] = {}
-_channels_lock = threading.RLock()
 
-
-def get_network(channel: str = "arm0") -> SimNetwork:
-    """The wire (and, as ``.arm``, the simulated arm) of a channel with an open bus.
-
-    :raises LookupError: no bus is open on ``channel``.
-    """
-    with _channels_lock:
-        try:
-            return _channels[str(channel)][0]
-        except KeyError:
-            raise LookupError(f"no seqrun-sim bus is open on channel {channel!r}") from None
-
-
-def _join_channel(channel: str, clock: Clock | None, bitrate: int | None,
-                  faults: list[Fault], arm_kwargs: dict[str, Any]) -> SimNetwork:
-    with _channels_lock:
-        entry = _channels.get(channel)
-        if entry is None:
-            clock = clock or RealClock()
-            arm = SimArm(clock, faults=faults, **{k: v for k, v in arm_kwargs.items()
-                                                  if v is not None})
-            network = SimNetwork(clock, arm, bitrate or 1_000_000)
-            _channels[channel] = [network, 1]
-            return network
-        network = entry[0]
-        if clock is not None and clock is not network.clock:
-            raise CanInitializationError(
-                f"seqrun-sim channel {channel!r} already runs on another clock; "
-                "pass the same clock object (or none) to every bus on a channel")
-        if bitrate is not None and bitrate != network.bitrate:
-            raise CanInitializationError(
-                f"seqrun-sim channel {channel!r} runs at {network.bitrate} bit/s, "
-                f"not {bitrate}: nodes with different bitrates cannot talk")
-        given = sorted(k for k, v in arm_kwargs.items() if v is not None)
-        if given:
-            raise CanInitializationError(
-                f"seqrun-sim channel {channel!r} already has an arm; {', '.join(given)} "
-                "can only be given to the first bus on a channel")
-        for fault in faults:
-            network.arm.inject(fault)
-        entry[1] += 1
-        return network
-
-
-def _leave_channel(channel: str, network: SimNetwork) -> None:
-    with _channels_lock:
-        entry = _channels.get(channel)
-        if entry is None or entry[0] is not network:
-            return
-        entry[1] -= 1
-        if entry[1] <= 0:
-            del _channels[channel]
-
-
-def _bitrate_from(bitrate: Any, timing: Any) -> int | None:
+def _bitrate_from(bitrate: Any, timing: Any) -> Any:
     if timing is not None:
         if isinstance(timing, can.BitTimingFd):
             raise CanInitializationError("seqrun-sim is classic CAN; CAN FD timing given")
         return int(timing.bitrate)
-    if bitrate is None:
-        return None
-    try:
-        value = int(bitrate)
-    except (TypeError, ValueError):
-        raise CanInitializationError(f"bitrate must be an integer, got {bitrate!r}") from None
-    if value <= 0:
-        raise CanInitializationError(f"bitrate must be positive, got {value}")
-    return value
+    return bitrate
 
 
 class SimBus(BusABC):
@@ -160,36 +91,29 @@ class SimBus(BusABC):
                  fd: bool = False, timing: Any = None, **kwargs: Any) -> None:
         if fd:
             raise CanInitializationError("seqrun-sim simulates a classic CAN bus; fd=True given")
-        channel = "arm0" if channel is None else str(channel)
         try:
-            fault_list = parse_faults(faults)
-            switches = pop_switches(kwargs)
-            if switches:
-                options = module_options(switches, options)
-        except (TypeError, ValueError) as exc:
+            self._port = SimPort(channel, clock=clock, faults=faults,
+                                 bitrate=_bitrate_from(bitrate, timing),
+                                 receive_own_messages=receive_own_messages,
+                                 module_latency=module_latency, seed=seed, options=options,
+                                 positions=positions, modules=modules,
+                                 power_on_pose=power_on_pose, tx_queue_size=tx_queue_size,
+                                 **pop_switches(kwargs))
+        except SimSetupError as exc:
             raise CanInitializationError(str(exc)) from None
-        arm_kwargs = {"module_latency": module_latency, "seed": seed, "options": options,
-                      "positions": positions,
-                      "modules": None if modules is None else list(modules),
-                      "power_on_pose": power_on_pose}
-        self._channel_name = channel
-        self.network = _join_channel(channel, clock, _bitrate_from(bitrate, timing),
-                                     fault_list, arm_kwargs)
+        self.network = self._port.network
         #: The simulated arm behind this bus (shared by every bus on the channel).
-        self.arm = self.network.arm
-        self.clock = self.network.clock
-        self.bitrate = self.network.bitrate
+        self.arm = self._port.arm
+        self.clock = self._port.clock
+        self.bitrate = self._port.bitrate
         self.receive_own_messages = receive_own_messages
-        self._endpoint: Endpoint = self.network.attach(
-            receive_own=receive_own_messages, tx_queue_size=tx_queue_size)
-        self.channel = channel
+        self.channel = channel = self._port.channel
         self.channel_info = (f"seqrun-sim channel {channel!r}: simulated LWA 3, "
                              f"{self.bitrate} bit/s")
         try:
             super().__init__(channel=channel, can_filters=can_filters, **kwargs)
         except Exception:
-            self._endpoint.close()
-            _leave_channel(channel, self.network)
+            self._port.shutdown()
             raise
 
     # -- receive --------------------------------------------------------------------------
@@ -214,7 +138,7 @@ class SimBus(BusABC):
 
     def _receive(self, deadline: float | None) -> Message | None:
         try:
-            frame = self._endpoint.receive(deadline)
+            frame = self._port.receive_frame(deadline)
         except NetworkClosedError:
             raise CanOperationError("Cannot operate on a closed bus") from None
         if frame is None:
@@ -222,7 +146,7 @@ class SimBus(BusABC):
         return Message(timestamp=frame.timestamp, arbitration_id=frame.can_id,
                        is_extended_id=frame.is_extended, is_remote_frame=frame.is_remote,
                        dlc=frame.length, data=frame.data, channel=self.channel,
-                       is_rx=frame.sender != self._endpoint.name)
+                       is_rx=not self._port.is_own(frame))
 
     # -- send ---------------------------------------------------------------------------------
 
@@ -234,25 +158,10 @@ class SimBus(BusABC):
             for longer than ``timeout``.
         """
         self._check_open()
-        if msg.is_fd:
-            raise CanOperationError("seqrun-sim is classic CAN: cannot send a CAN FD frame")
-        if msg.is_error_frame:
-            raise CanOperationError("seqrun-sim: error frames cannot be sent")
-        data = bytes(msg.data or b"")
-        # Stamped with this endpoint as the sender, as the wire would, so it is not copied.
-        sender = self._endpoint.name
-        if msg.is_remote_frame:
-            frame = WireFrame(msg.arbitration_id, b"", msg.is_extended_id, True, msg.dlc,
-                              0.0, sender)
-        else:
-            if msg.dlc != len(data):
-                raise CanOperationError(f"dlc {msg.dlc} does not match {len(data)} data bytes")
-            frame = WireFrame(msg.arbitration_id, data, msg.is_extended_id, False, None, 0.0,
-                              sender)
         try:
-            self._endpoint.send(frame, timeout)
-        except ValueError as exc:
-            raise CanOperationError(f"seqrun-sim: {exc}") from None
+            self._port.send(msg, timeout)
+        except ValueError as exc:  # a frame classic CAN cannot carry
+            raise CanOperationError(str(exc)) from None
         except TransmitTimeoutError as exc:
             raise CanOperationError(str(exc)) from None
         except NetworkClosedError:
@@ -269,11 +178,9 @@ class SimBus(BusABC):
         if self._is_shutdown:
             return
         super().shutdown()
-        self._endpoint.close()
-        _leave_channel(self._channel_name, self.network)
+        self._port.shutdown()
 
     @staticmethod
     def _detect_available_configs() -> list[can.typechecking.AutoDetectedConfig]:
         """The channels that have open buses (and so a running arm)."""
-        with _channels_lock:
-            return [{"interface": "seqrun-sim", "channel": name} for name in _channels]
+        return [{"interface": "seqrun-sim", "channel": name} for name in open_channels()]

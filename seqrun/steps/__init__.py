@@ -1,28 +1,20 @@
-"""One handler per step type.
+"""The step kinds: one module each (parameters, shorthand, description, static check and
+handler), listed in :mod:`seqrun.steps.registry`.
 
-A handler is ``run(step, executor) -> dict | None``: it receives the resolved step (its
-validated parameters and source location) and the executor, whose methods do the bus
-work and the safety checks; the returned dict goes into the step's report entry.
+A handler is ``run(step, ex) -> dict | None``: it receives the resolved step (its
+validated parameters and source location) and the executor as a
+:class:`~seqrun.steps.context.StepContext`, whose methods do the bus work and the safety
+checks; the returned dict goes into the step's report entry.
 """
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
-from seqrun.steps import (checkpoint, confirm, halt, home, move, move_tool, power_off, reset,
-                          set_limits, wait)
+from seqrun.steps.registry import KINDS
 
 Handler = Callable[[Any, Any], "dict | None"]
 
-HANDLERS: dict[str, Handler] = {
-    "reset": reset.run,
-    "home": home.run,
-    "halt": halt.run,
-    "set_limits": set_limits.run,
-    "move": move.run,
-    "move_linear": move_tool.run_linear,
-    "wait": wait.run,
-    "checkpoint": checkpoint.run,
-    "confirm": confirm.run,
-    "power_off": power_off.run,
-}
+#: The handler of each step kind, by name (what the executor calls).
+HANDLERS: dict[str, Handler] = {kind.name: kind.run for kind in KINDS}

@@ -8,3 +8,8 @@ def addressed_modules(params, arm) -> list[int] | None:
     if params.joints == "all":
         return None
     return [arm.joint(name).module for name in params.joints]
+
+
+def addressed_text(params) -> str:
+    """The modules a step addresses, for people: "all modules" or "j1, j2"."""
+    return "all modules" if params.joints == "all" else ", ".join(params.joints)

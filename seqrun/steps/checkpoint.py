@@ -1,18 +1,179 @@
-"""checkpoint: forward kinematics of the measured joints against an expected pose."""
+"""checkpoint: forward kinematics of the measured joints against an expected pose, or how
+far the tool moved during the last move (``moved_mm``)."""
 
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING, Any, ClassVar, Literal
 
-import numpy as np
+from pydantic import ConfigDict, Field, model_validator
+from pydantic_core import PydanticCustomError
 
-from seqrun import kinematics
 from seqrun.errors import RunAborted
-from seqrun.validation import format_number, resolve_checkpoint
+from seqrun.steps.kind import StepKind
+from seqrun.steps.params import PoseName, Positive, StepParams, Vector3, one_key_value
+
+if TYPE_CHECKING:
+    from seqrun.loader import ResolvedStep
+    from seqrun.steps.context import StepContext
+    from seqrun.validation import Checker
 
 
-def run(step, ex) -> dict:
-    if getattr(step.params, "moved_mm", None) is not None:
+class CheckpointParams(StepParams):
+    """Check the measured end-effector pose (forward kinematics of the joints) against an
+    expected one; the run stops if it is off by more than the tolerances."""
+
+    kind: ClassVar[str] = "checkpoint"
+    yaml_name: ClassVar[str] = "checkpoint"
+    model_config = ConfigDict(json_schema_extra={"oneOf": [
+        {"required": ["pose"]}, {"required": ["position_mm", "rpy_deg"]},
+        {"required": ["moved_mm"]}]})
+
+    pose: PoseName | None = Field(  # type: ignore[valid-type]
+        None, description="Expect the end-effector pose of this pose file.")
+    moved_mm: Vector3 | None = Field(
+        None, description="Relative checkpoint: the tool moved by this [x, y, z] in mm during "
+                          "the last move before it (from where that move started), in the "
+                          "base or the tool frame (frame; tool: the tool's frame where the "
+                          "move started), e.g. [0, 0, -300] with frame: tool.")
+    frame: Literal["base", "tool"] = Field(
+        "base", description="With moved_mm: the frame the displacement is given in.")
+    tool: str | None = Field(None, min_length=1, description="With moved_mm: the arm file's "
+                                                             "tool (default: the arm's "
+                                                             "default_tool, else the "
+                                                             "end-effector frame).")
+    position_mm: Vector3 | None = Field(
+        None, description="Expected end-effector position [x, y, z] in mm (base frame).")
+    rpy_deg: Vector3 | None = Field(
+        None, description="Expected orientation [roll, pitch, yaw] in degrees, "
+                          "R = Rz(yaw) Ry(pitch) Rx(roll).")
+    position_tolerance_mm: Positive = Field(
+        7.0, description="Largest allowed distance from the expected position, mm. The "
+                         "default covers the worst case of a 0.2° in-position error on every "
+                         "joint of the LWA 3 at Op-safe (6.2 mm).")
+    angle_tolerance_deg: Positive = Field(
+        1.5, description="Largest allowed rotation angle between expected and measured "
+                         "orientation, degrees (default: covers 0.2° per joint, 1.2°).")
+
+    @model_validator(mode="after")
+    def _one(self) -> CheckpointParams:
+        if self.moved_mm is not None:
+            others = [k for k in ("pose", "position_mm", "rpy_deg") if getattr(self, k) is not None]
+            if others:
+                raise PydanticCustomError("checkpoint_what", "a relative checkpoint (moved_mm) "
+                                          "takes no {others}", {"others": ", ".join(others)})
+            return self
+        if self.frame != "base" or self.tool is not None:
+            raise PydanticCustomError("checkpoint_what", "frame and tool belong to a relative "
+                                                         "checkpoint (moved_mm)")
+        explicit = self.position_mm is not None or self.rpy_deg is not None
+        if self.pose is not None and explicit:
+            raise PydanticCustomError("checkpoint_what", "a checkpoint takes either 'pose' or "
+                                                         "'position_mm' with 'rpy_deg', not both")
+        if self.pose is None and (self.position_mm is None or self.rpy_deg is None):
+            missing = "rpy_deg" if self.position_mm is not None else (
+                "position_mm" if self.rpy_deg is not None else "")
+            raise PydanticCustomError(
+                "checkpoint_what", "a checkpoint with position_mm needs rpy_deg too"
+                if missing == "rpy_deg" else "a checkpoint with rpy_deg needs position_mm too"
+                if missing else "a checkpoint needs either 'pose' or 'position_mm' and 'rpy_deg'")
+        return self
+
+    @classmethod
+    def from_shorthand(cls, value: Any) -> StepParams:
+        return value if isinstance(value, cls) else cls(pose=value)
+
+
+def describe(params: CheckpointParams) -> str:
+    if params.moved_mm is not None:
+        xyz = ", ".join(f"{v:g}" for v in params.moved_mm)
+        return f"checkpoint: the tool moved [{xyz}] mm ({params.frame} frame)"
+    return (f"checkpoint: pose {params.pose}" if params.pose is not None
+            else "checkpoint: end-effector pose")
+
+
+def poses(params: CheckpointParams) -> tuple[str, ...]:
+    return (params.pose,) if params.pose is not None else ()
+
+
+# --------------------------------------------------------------------------- static checks
+def check(checker: Checker, step: ResolvedStep[CheckpointParams], params: CheckpointParams) -> None:
+    if params.moved_mm is not None:
+        _relative_checkpoint(checker, step, params)
+        return
+    import numpy as np
+
+    from seqrun.errors import SequenceInvalid, UserInputError
+    from seqrun.kinematics import orientation_error, pose_from_user_deg
+    from seqrun.targets import resolve_checkpoint
+    from seqrun.validation import format_number as f
+
+    checker.after_halt(step, "checkpoint")
+    if params.pose is not None and checker.pose(step, params.pose, target=False) is None:
+        return  # unknown pose or its file has errors: reported already
+    try:
+        position, rotation, pos_tol, ang_tol = resolve_checkpoint(params, checker.arm,
+                                                                  checker.poses)
+    except (UserInputError, SequenceInvalid):
+        return  # reported when the sequence was loaded
+    except ValueError as exc:
+        checker.errors.append(step.error(f"checkpoint: {exc}", "pose"))
+        return
+    if checker.incomplete:
+        return  # where the joints are after the moves before is not known
+    pose = pose_from_user_deg(checker.arm, {n: s.position for n, s in checker.joints.items()})
+    distance = float(np.linalg.norm(pose.position_mm - position))
+    angle = math.degrees(float(orientation_error(rotation, pose.rotation)))
+    if distance > pos_tol or angle > ang_tol:
+        at = ", ".join(f(v) for v in pose.position_mm)
+        rpy = ", ".join(f(v) for v in pose.rpy_deg)
+        checker.errors.append(step.error(
+            f"this checkpoint cannot pass: after the moves before it the end-effector is at "
+            f"[{at}] mm, rpy [{rpy}]°, {f(distance)} mm and {f(angle)}° from the "
+            f"expected pose (tolerances {f(pos_tol)} mm, {f(ang_tol)}°)"))
+
+
+def _relative_checkpoint(checker: Checker, step: ResolvedStep[CheckpointParams],
+                         params: CheckpointParams) -> None:
+    """'The tool moved 50 mm along z': the tracked tool pose now against where the last
+    move started."""
+    import numpy as np
+
+    from seqrun.cartesian import displacement, solver_for, tool_pose
+    from seqrun.validation import format_number as f
+
+    if checker.motion_start_deg is None:
+        checker.errors.append(step.error("a relative checkpoint (moved_mm) needs a move before "
+                                         "it", "moved_mm"))
+        return
+    try:
+        solver = solver_for(checker.arm, params.tool)
+    except KeyError:
+        names = ", ".join(t.name for t in checker.arm.tools) or "none defined"
+        checker.errors.append(step.error(f"unknown tool '{params.tool}' (the arm file's tools: "
+                                         f"{names})", "tool"))
+        return
+    moved = displacement(tool_pose(solver, checker.motion_start_deg),
+                         tool_pose(solver, checker.tracked()), params.frame)
+    off = float(np.linalg.norm(moved - np.asarray(params.moved_mm)))
+    if off > params.position_tolerance_mm:
+        checker.errors.append(step.error(
+            f"this checkpoint cannot pass: the last move takes the tool by "
+            f"[{', '.join(f(round(float(v), 3) + 0.0) for v in moved)}] mm "
+            f"({params.frame} frame), {f(off)} mm "
+            f"from the expected [{', '.join(f(v) for v in params.moved_mm)}] "
+            f"(tolerance {f(params.position_tolerance_mm)} mm)", "moved_mm"))
+
+
+# --------------------------------------------------------------------------- run
+def run(step: ResolvedStep[CheckpointParams], ex: StepContext) -> dict:
+    import numpy as np
+
+    from seqrun import kinematics
+    from seqrun.targets import resolve_checkpoint
+    from seqrun.validation import format_number
+
+    if step.params.moved_mm is not None:
         return _relative(step, ex)
     position, rotation, pos_tol, ang_tol = resolve_checkpoint(step.params, ex.arm, ex.poses)
     measured = ex.monitor()
@@ -39,8 +200,10 @@ def run(step, ex) -> dict:
     return detail
 
 
-def _relative(step, ex) -> dict:
+def _relative(step: ResolvedStep[CheckpointParams], ex: StepContext) -> dict:
     """'The tool moved [x, y, z] mm' since the last move started (measured joints)."""
+    import numpy as np
+
     from seqrun.cartesian import displacement, solver_for, tool_pose
 
     params = step.params
@@ -63,3 +226,9 @@ def _relative(step, ex) -> dict:
                          f"{detail['expected_moved_mm']} (tolerance "
                          f"{params.position_tolerance_mm} mm)", detail=detail)
     return detail
+
+
+KIND = StepKind(
+    name="checkpoint", params=CheckpointParams, describe=describe, check=check, run=run,
+    poses=poses, value=one_key_value("checkpoint", CheckpointParams, text=("pose", PoseName)),
+    shorthand=" Shorthand: 'checkpoint: opsafe' (a pose).", example="checkpoint: opsafe")

@@ -1,0 +1,93 @@
+"""What a step handler may use of the executor: :class:`StepContext`.
+
+A handler (``run(step, ex)`` of a step kind) does its bus work and safety checks through
+these members only, so the executor's internals (stream, cycle, watchdog, driver) can
+change behind them; ``tests/test_step_registry.py`` checks that the handlers use nothing
+else and that the executor provides all of it. The executor is one implementation; a
+second one (a console's single moves, a test double) implements the same members.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from typing import TYPE_CHECKING, Any, Protocol
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from seqrun.arm import ArmDescription
+    from seqrun.kinematics import Chain
+    from seqrun.limits import LimitsInForce
+    from seqrun.planner import Limits
+    from seqrun.drivers.base import JointState, LimitValues
+
+__all__ = ["JointReading", "StepContext"]
+
+
+class JointReading(Protocol):
+    """One reading of the whole arm, as a handler sees it."""
+
+    t: float
+    user_deg: np.ndarray  # every joint, user degrees, arm order
+
+
+class StepContext(Protocol):
+    """The executor as a step handler sees it."""
+
+    # -- what the run is about (read only for handlers)
+    arm: ArmDescription
+    chain: Chain                        # the arm's kinematic chain (forward kinematics)
+    poses: Mapping[str, Any]            # the poses frozen with the sequence (name -> FrozenPose)
+    speed: float                        # the run's speed override, (0, 1]
+    movable: list[int]                  # indices of the joints that are not locked
+    dry_run: bool
+    #: Asked at a confirm step (None: nobody to ask, a dry run assumes yes).
+    confirm: Callable[[str], bool] | None
+    #: Joint solutions validated from the measured start (step number -> user degrees).
+    validated_targets: Mapping[int, np.ndarray]
+    # -- state a handler reads or updates
+    limits_in_force: LimitsInForce      # MaxVel/MaxAcc the modules hold (set_limits writes)
+    motion_start_deg: np.ndarray | None  # measured joints where the last move started
+    commanded_deg: np.ndarray | None    # what the joints were last told (None after a halt)
+    not_verified: list[str]             # what a dry run could not check, for the report
+    #: Records the zero reference at a power_off step (None: a dry run or the built-in
+    #: simulator, nothing is recorded).
+    record_zero: Callable[[str], Any] | None
+
+    # -- bus work and monitoring, every fault checked
+    def reset_modules(self, modules: list[int] | None) -> None: ...
+
+    def home_modules(self, modules: list[int] | None) -> None: ...
+
+    def halt_modules(self, modules: list[int] | None) -> None: ...
+
+    def write_limits(self, values: dict[str, LimitValues]) -> int: ...
+
+    def read_arm(self) -> JointReading: ...
+
+    def monitor(self) -> JointReading: ...
+
+    def wait_for_states(self, modules: list[int] | None, ok: Callable[[JointState], bool],
+                        timeout_s: float, failure: str) -> dict[int, JointState]: ...
+
+    def refresh_measurement(self, after: str,
+                            words: dict[int, JointState] | None = None) -> None: ...
+
+    def confirm_clearing_latched(self, modules: list[int] | None) -> None: ...
+
+    # -- motion
+    def move(self, target_deg: np.ndarray, active: list[int], limits: Limits, *,
+             tolerance_deg: float, timeout_s: float | None) -> dict[str, Any]: ...
+
+    def follow(self, plan: Any, *, tolerance_deg: float, timeout_s: float | None,
+               path_check: Callable[[Any], None] | None = None,
+               command_mode: str | None = None) -> dict[str, Any]: ...
+
+    def wait(self, seconds: float) -> None: ...
+
+    def wait_in_position(self, tolerance_deg: float, timeout_s: float) -> float: ...
+
+    # -- the operator and the record
+    def ask_operator(self, question: Callable[[Any], bool], arg: Any) -> bool: ...
+
+    def emit(self, type_: str, **data: Any) -> None: ...

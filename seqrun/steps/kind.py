@@ -1,0 +1,63 @@
+"""The record of one step kind: everything seqrun knows about it, found together.
+
+Each module ``seqrun/steps/<kind>.py`` ends with ``KIND = StepKind(...)`` and
+:mod:`seqrun.steps.registry` lists it. Who uses which part:
+
+- ``params``, ``value``, ``shorthand``, ``bare``, ``example``: :mod:`seqrun.schema` (the
+  sequence file's union, the JSON Schema, the format reference, the error for a bare word);
+- ``poses``: :mod:`seqrun.loader` (the pose files read and frozen with the sequence);
+- ``describe``: the step's title for the operator when it has no label;
+- ``check``: :mod:`seqrun.validation` (the static checks against the arm and the steps
+  before, with :class:`seqrun.validation.Checker` tracking the modules and the joints);
+- ``run``: the executor (``seqrun.steps.HANDLERS``), through
+  :class:`~seqrun.steps.context.StepContext`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from seqrun.loader import ResolvedStep
+    from seqrun.steps.context import StepContext
+    from seqrun.steps.params import StepParams
+    from seqrun.validation import Checker
+
+__all__ = ["StepKind", "no_poses"]
+
+
+def no_poses(params: Any) -> tuple[str, ...]:
+    """A step that names no pose file."""
+    return ()
+
+
+@dataclass(frozen=True)
+class StepKind:
+    """One step kind. ``name`` is its key in a sequence file (``move``)."""
+
+    name: str
+    #: The parameter model (a :class:`~seqrun.steps.params.StepParams`).
+    params: type[StepParams]
+    #: The type of the value under the step's key: the parameters or a shorthand
+    #: (:func:`seqrun.steps.params.one_key_value`).
+    value: Any
+    #: One line for people when the step has no label, e.g. "move to pose totem".
+    describe: Callable[[Any], str]
+    #: Static checks: ``check(checker, step, params)`` appends errors/notes to the checker
+    #: and tracks what the step does to the modules and joints.
+    check: Callable[[Checker, ResolvedStep, Any], None]
+    #: The handler: ``run(step, context) -> detail`` (into the step's report entry).
+    run: Callable[[ResolvedStep, StepContext], dict | None]
+    #: The shorthand forms for the docs, e.g. " Shorthand: 'move: totem' (a pose name)."
+    shorthand: str = ""
+    #: May be written as a bare word (``- reset``) with its default parameters.
+    bare: bool = False
+    #: A short example, for the error of a bare word that needs parameters.
+    example: str = ""
+    #: The pose files the step names (read and frozen when the sequence is loaded).
+    poses: Callable[[Any], tuple[str, ...]] = no_poses
+    #: The step moves the arm: the checks know where its motion starts (relative
+    #: checkpoints measure from there).
+    motion: bool = False

@@ -1,0 +1,213 @@
+"""What every step kind's parameters are built from: value types, the base model, shorthand.
+
+A step kind's module (``seqrun/steps/<kind>.py``) defines its parameter model on
+:class:`StepParams` with these value types, and the value its one key takes in a file
+(:func:`one_key_value`: the full parameters, or a shorthand such as ``move: totem``).
+:mod:`seqrun.schema` assembles the kinds of :mod:`seqrun.steps.registry` into the sequence
+file's union and JSON Schema. Only pydantic here: the schema and the loader import it.
+"""
+
+from __future__ import annotations
+
+import inspect
+import re
+from typing import Annotated, Any, ClassVar, Union
+
+from pydantic import AfterValidator, ConfigDict, Discriminator, Field, Tag
+from pydantic_core import PydanticCustomError
+
+from seqrun.yamlsource import FriendlyModel
+
+__all__ = [
+    "AllOrJoints",
+    "AllWord",
+    "Finite",
+    "JointName",
+    "JointsList",
+    "LimitPair",
+    "ModulesParams",
+    "PoseName",
+    "Positive",
+    "Scale",
+    "StepParams",
+    "StrictModel",
+    "Vector3",
+    "check_pose_target",
+    "doc",
+    "either",
+    "exactly_one",
+    "modules_value",
+    "one_key_value",
+]
+
+# --------------------------------------------------------------------------- value types
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+# At least 1 %: below that a move takes hours and the planner's numbers degenerate.
+Scale = Annotated[float, Field(ge=0.01, le=1, allow_inf_nan=False)]
+
+POSE_NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]*$")
+
+
+def _pose_name(value: str) -> str:
+    if not POSE_NAME_RE.match(value):
+        raise PydanticCustomError(
+            "pose_name", "'{value}' is not a pose name (the name of a file in poses/ without "
+                         ".yaml: letters, digits, _ and -)", {"value": value})
+    return value
+
+
+JointName = Annotated[str, Field(min_length=1, description="A joint name of the arm file, "
+                                                           "e.g. j1.")]
+JointsList = Annotated[list[JointName], Field(min_length=1)]
+PoseName = Annotated[str, AfterValidator(_pose_name), Field(
+    json_schema_extra={"pattern": POSE_NAME_RE.pattern},
+    description="Name of a pose file in the project's poses/ folder, without .yaml "
+                "(e.g. totem, park, opsafe).")]
+Vector3 = Annotated[list[Finite], Field(min_length=3, max_length=3)]
+LimitPair = Annotated[list[Finite], Field(min_length=2, max_length=2,
+                                          description="[min, max] in degrees.")]
+
+
+def doc(model: type) -> str:
+    """A model's docstring as one line (for field descriptions)."""
+    return " ".join(inspect.cleandoc(model.__doc__ or "").split())
+
+
+def either(pick, **choices: Any) -> Any:
+    """A union whose branch is chosen by ``pick(value)`` (a tag in ``choices``), so that a
+    wrong value gets the errors of one branch only. Tags contain ':' so they never look
+    like YAML keys when errors are located."""
+    members = tuple(Annotated[tp, Tag(tag)] for tag, tp in choices.items())
+    return Annotated[Union[members], Discriminator(pick)]  # type: ignore[valid-type]  # noqa: UP007
+
+
+def _joints_pick(value: Any) -> str:
+    return "joints:all" if isinstance(value, str) else "joints:list"
+
+
+def _all_only(value: str) -> str:
+    if value != "all":
+        raise PydanticCustomError("all_or_joints", "expected 'all' or a list of joint names, "
+                                                   "got '{value}'", {"value": value})
+    return value
+
+
+AllWord = Annotated[str, AfterValidator(_all_only), Field(json_schema_extra={"const": "all"})]
+AllOrJoints = either(_joints_pick, **{"joints:all": AllWord, "joints:list": JointsList})
+
+
+# --------------------------------------------------------------------------- models
+class StrictModel(FriendlyModel):
+    """Unknown keys, wrong types and changes after loading are errors."""
+
+    model_config = ConfigDict(extra="forbid", strict=True, frozen=True)
+
+
+class StepParams(StrictModel):
+    """Parameters every step has."""
+
+    kind: ClassVar[str] = ""
+    label: str | None = Field(
+        None, min_length=1,
+        description="Text shown to the operator for this step (default: a description "
+                    "generated from the step).")
+
+    @classmethod
+    def from_shorthand(cls, value: Any) -> StepParams:
+        """The full parameters of a shorthand value (overridden where there is one)."""
+        return value if isinstance(value, cls) else cls()
+
+
+class ModulesParams(StepParams):
+    """Parameters of a command to the modules (reset, home, halt): which ones."""
+
+    joints: AllOrJoints = Field(  # type: ignore[valid-type]
+        "all", description="'all' (one broadcast to every module) or a list of joint names "
+                           "(one command per module).")
+
+    @classmethod
+    def from_shorthand(cls, value: Any) -> StepParams:
+        if isinstance(value, cls):
+            return value
+        return cls() if value is None else cls(joints=value)
+
+
+def exactly_one(*alternatives: str) -> dict:
+    """JSON Schema: exactly one of these keys is given."""
+    return {"oneOf": [{"required": [name]} for name in alternatives]}
+
+
+def check_pose_target(params: Any, what: str) -> None:
+    """End-effector targets: position_mm alone with the pose keys (rpy_deg, frame, tool)."""
+    cartesian = [k for k in ("rpy_deg", "tool") if getattr(params, k) is not None]
+    if params.frame != "base":
+        cartesian.append("frame")
+    if params.position_mm is None:
+        if cartesian:
+            raise PydanticCustomError("move_target", "{keys} belong to an end-effector target: "
+                                      "give position_mm too", {"keys": ", ".join(cartesian)})
+        return
+    others = [k for k in ("pose", "joints") if getattr(params, k, None) is not None]
+    if others:
+        raise PydanticCustomError("move_target", "{what} takes either position_mm or {others}, "
+                                  "not both", {"what": what, "others": " or ".join(others)})
+    if not params.relative and params.rpy_deg is None:
+        raise PydanticCustomError("move_target", "an absolute end-effector target needs rpy_deg "
+                                                 "with position_mm")
+    if not params.relative and params.frame != "base":
+        raise PydanticCustomError("move_target", "frame: tool is for relative targets "
+                                                 "(relative: true)")
+
+
+# --------------------------------------------------------------------------- one-key values
+def _kind_pick(*, none: str | None = None, text: str | None = None, number: str | None = None,
+               items: str | None = None, params: str) -> Any:
+    """Choose the branch of a step's value: a mapping is the full parameters; anything else
+    goes to the shorthand that fits it, else to the first shorthand there is (so that
+    ``confirm: 42`` says "expected text", not "expected a mapping")."""
+    shorthand = text or number or items
+
+    def pick(value: Any) -> str:
+        if isinstance(value, (dict, StepParams)):
+            return params
+        if value is None and none:
+            return none
+        if isinstance(value, str) and text:
+            return text
+        if isinstance(value, (int, float)) and not isinstance(value, bool) and number:
+            return number
+        if isinstance(value, list) and items:
+            return items
+        return shorthand or none or params
+    return pick
+
+
+def one_key_value(kind: str, model: type[StepParams], *, none: str | None = None,
+                  text: tuple[str, Any] | None = None, number: tuple[str, Any] | None = None,
+                  items: tuple[str, Any] | None = None) -> Any:
+    """The type of the value under a step's key: the parameters ``model`` (a mapping), or a
+    shorthand: ``none`` names the bare step (``- reset``), ``text``/``number``/``items`` are
+    ``(name, type)`` of a string/number/list shorthand (``move: totem``). A step without
+    shorthand takes its parameters only."""
+    if none is None and text is None and number is None and items is None:
+        return model
+    choices: dict[str, Any] = {}
+    tags: dict[str, str] = {}
+    if none is not None:
+        tags["none"] = f"{kind}:{none}"
+        choices[tags["none"]] = None
+    for role, given in (("text", text), ("number", number), ("items", items)):
+        if given is not None:
+            tags[role] = f"{kind}:{given[0]}"
+            choices[tags[role]] = given[1]
+    tags["params"] = f"{kind}:params"
+    choices[tags["params"]] = model
+    return either(_kind_pick(**tags), **choices)
+
+
+def modules_value(kind: str, model: type[ModulesParams]) -> Any:
+    """The value of a reset/home/halt step: bare (``- halt``), ``all``, a list of joint
+    names (``halt: [j1, j2]``) or the parameters."""
+    return one_key_value(kind, model, none="default", text=("all", AllWord),
+                         items=("list", JointsList))

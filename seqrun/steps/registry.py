@@ -1,0 +1,37 @@
+"""Every step kind seqrun knows, in the order the docs list them.
+
+A step kind is one module, ``seqrun/steps/<kind>.py``, ending with ``KIND = StepKind(...)``
+(:class:`~seqrun.steps.kind.StepKind`: parameters, shorthand, description, static check,
+handler); adding one is that module and one line in :data:`KINDS`. The sequence file's
+union (:mod:`seqrun.schema`), the static checks (:mod:`seqrun.validation`) and the executor
+(:data:`seqrun.steps.HANDLERS`) all take the kinds from here; ``include`` is no step kind
+but the loader's (its steps run in its place).
+"""
+
+from __future__ import annotations
+
+from seqrun.steps import (checkpoint, confirm, halt, home, move, move_linear, power_off, reset,
+                          set_limits, wait)
+from seqrun.steps.kind import StepKind
+
+__all__ = ["KINDS", "StepKind", "step_kind"]
+
+KINDS: tuple[StepKind, ...] = (
+    reset.KIND,
+    home.KIND,
+    halt.KIND,
+    set_limits.KIND,
+    move.KIND,
+    move_linear.KIND,
+    wait.KIND,
+    checkpoint.KIND,
+    confirm.KIND,
+    power_off.KIND,
+)
+
+_BY_NAME: dict[str, StepKind] = {kind.name: kind for kind in KINDS}
+
+
+def step_kind(name: str) -> StepKind:
+    """The step kind called ``name``; KeyError for a name that is none."""
+    return _BY_NAME[name]
