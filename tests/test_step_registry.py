@@ -17,7 +17,7 @@ import pytest
 import seqrun.steps
 from seqrun import schema
 from seqrun.steps import HANDLERS
-from seqrun.steps.context import ModuleCommands, StepContext
+from seqrun.steps.context import StepContext
 from seqrun.steps.kind import StepKind
 from seqrun.steps.params import StepParams
 from seqrun.steps.registry import KINDS, step_kind
@@ -159,10 +159,10 @@ def test_handlers_use_only_the_step_context():
 def test_the_checker_catches_a_handler_reaching_past_the_context():
     source = textwrap.dedent("""
         def run(step, ex: StepContext):
-            ex.client.halt(None)
+            ex.driver.halt(None)
             return {"t": ex._t0, "x": getattr(ex, "last", None)}
     """)
-    assert _context_uses(ast.parse(source)) == {"run": {"client", "_t0", "<getattr>"}}
+    assert _context_uses(ast.parse(source)) == {"run": {"driver", "_t0", "<getattr>"}}
 
 
 def test_the_executor_provides_the_step_context():
@@ -180,7 +180,6 @@ def test_the_executor_provides_the_step_context():
         executor = Executor(client, arm, clock, dry_run=True)
         missing = sorted(m for m in CONTEXT_MEMBERS if not hasattr(executor, m))
         assert missing == []
-        assert protocol_members(ModuleCommands) <= {m for m in dir(executor.client)}
     finally:
         connection.close()
 

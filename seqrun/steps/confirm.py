@@ -6,6 +6,7 @@ from typing import TYPE_CHECKING, Annotated, Any, ClassVar
 
 from pydantic import Field
 
+from seqrun.results import OperatorAbort
 from seqrun.steps.kind import StepKind
 from seqrun.steps.params import StepParams, one_key_value
 
@@ -37,8 +38,6 @@ def check(checker: Checker, step: ResolvedStep[ConfirmParams], params: ConfirmPa
 
 
 def run(step: ResolvedStep[ConfirmParams], ex: StepContext) -> dict:
-    from seqrun.executor import OperatorAbort  # imported here: the executor imports the steps
-
     prompt = step.params.prompt
     if ex.confirm is None:  # dry run: nobody to ask
         ex.not_verified.append(f"step {step.number}: operator confirmation '{prompt}' "

@@ -16,12 +16,12 @@ if TYPE_CHECKING:
     import numpy as np
 
     from seqrun.arm import ArmDescription
+    from seqrun.drivers.base import JointState, LimitValues
     from seqrun.kinematics import Chain
     from seqrun.limits import LimitsInForce
     from seqrun.planner import Limits
-    from seqrun.powercube.protocol import StateFlag
 
-__all__ = ["JointReading", "ModuleCommands", "StepContext"]
+__all__ = ["JointReading", "StepContext"]
 
 
 class JointReading(Protocol):
@@ -29,17 +29,6 @@ class JointReading(Protocol):
 
     t: float
     user_deg: np.ndarray  # every joint, user degrees, arm order
-
-
-class ModuleCommands(Protocol):
-    """The module commands a step sends itself (reset, home, halt steps): ``module=None``
-    is one broadcast to every module."""
-
-    def reset(self, module: int | None = None) -> None: ...
-
-    def home(self, module: int | None = None) -> None: ...
-
-    def halt(self, module: int | None = None) -> None: ...
 
 
 class StepContext(Protocol):
@@ -61,23 +50,28 @@ class StepContext(Protocol):
     motion_start_deg: np.ndarray | None  # measured joints where the last move started
     commanded_deg: np.ndarray | None    # what the joints were last told (None after a halt)
     not_verified: list[str]             # what a dry run could not check, for the report
-    client: ModuleCommands
     #: Records the zero reference at a power_off step (None: a dry run or the built-in
     #: simulator, nothing is recorded).
     record_zero: Callable[[str], Any] | None
 
-    # -- bus work and monitoring, every fault checked
-    def transact(self, requests: list, *, idempotent: bool = False) -> list: ...
+    # -- the drives, in joint terms (``modules=None``: all of them at once), faults checked
+    def reset_modules(self, modules: list[int] | None) -> None: ...
+
+    def home_modules(self, modules: list[int] | None) -> None: ...
+
+    def halt_modules(self, modules: list[int] | None) -> None: ...
+
+    def write_limits(self, values: dict[str, LimitValues]) -> int: ...
 
     def read_arm(self) -> JointReading: ...
 
     def monitor(self) -> JointReading: ...
 
-    def wait_for_states(self, modules: list[int] | None, ok: Callable[[StateFlag], bool],
-                        timeout_s: float, failure: str) -> dict[int, StateFlag]: ...
+    def wait_for_states(self, modules: list[int] | None, ok: Callable[[JointState], bool],
+                        timeout_s: float, failure: str) -> dict[int, JointState]: ...
 
     def refresh_measurement(self, after: str,
-                            words: dict[int, StateFlag] | None = None) -> None: ...
+                            words: dict[int, JointState] | None = None) -> None: ...
 
     def confirm_clearing_latched(self, modules: list[int] | None) -> None: ...
 

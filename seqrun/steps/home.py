@@ -41,17 +41,10 @@ def check(checker: Checker, step: ResolvedStep[HomeParams], params: HomeParams) 
 
 
 def run(step: ResolvedStep[HomeParams], ex: StepContext) -> dict:
-    from seqrun.powercube.protocol import StateFlag
-
     modules = addressed_modules(step.params, ex.arm)
-    if modules is None:
-        ex.client.home(None)
-    else:
-        for module in modules:
-            ex.client.home(module)
-    states = ex.wait_for_states(
-        modules, lambda f: bool(f & StateFlag.HOME_OK) and not f & StateFlag.FAULTS,
-        HOME_TIMEOUT_S, "did not report HOME_OK after Home")
+    ex.home_modules(modules)
+    states = ex.wait_for_states(modules, lambda state: state.ready,
+                                HOME_TIMEOUT_S, "did not report HOME_OK after Home")
     ex.refresh_measurement("home", states)
     return {"states": {str(m): f.describe() for m, f in states.items()}}
 

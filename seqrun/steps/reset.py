@@ -35,16 +35,10 @@ def check(checker: Checker, step: ResolvedStep[ResetParams], params: ResetParams
 
 
 def run(step: ResolvedStep[ResetParams], ex: StepContext) -> dict:
-    from seqrun.powercube.protocol import StateFlag
-
     modules = addressed_modules(step.params, ex.arm)
     ex.confirm_clearing_latched(modules)  # a fault from before the run: ask first
-    if modules is None:
-        ex.client.reset(None)
-    else:
-        for module in modules:
-            ex.client.reset(module)
-    states = ex.wait_for_states(modules, lambda f: not f & StateFlag.FAULTS,
+    ex.reset_modules(modules)
+    states = ex.wait_for_states(modules, lambda state: not state.faulted,
                                 SETTLE_TIMEOUT_S, "still reports a fault after Reset")
     ex.refresh_measurement("reset", states)
     return {"states": {str(m): f.describe() for m, f in states.items()}}
