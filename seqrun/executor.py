@@ -75,12 +75,13 @@ class Executor:
 
     ``driver``: the arm's :class:`~seqrun.drivers.base.ArmDriver`; a PowerCube client is
     accepted too (wrapped in the PowerCube driver)."""
+
     #: Records the zero reference at a power_off step (set by whoever runs the sequence;
     #: None: a dry run or the built-in simulator, nothing is recorded).
     record_zero: Callable[[str], Any] | None = None
 
     def __init__(self, driver: ArmDriver | Any, arm: ArmDescription, clock: Clock, *,
-                 poses_dir: Path | tuple[Path, ...] | None = None, speed: float = 1.0,
+                 poses_dir: Path | None = None, speed: float = 1.0,
                  command_mode: str | None = None, cycle_hz: float | None = None,
                  confirm: Callable[[str], bool] | None = None,
                  before_step: Callable[[Any], bool] | None = None,

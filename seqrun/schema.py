@@ -205,7 +205,8 @@ STEP_MODELS: dict[str, type[_Step]] = {
 assert tuple(STEP_MODELS) == STEP_KINDS, "one step model per parameter model"
 
 BareStep = Annotated[Literal[BARE_STEPS], Field(  # type: ignore[valid-type]
-    description="A step with its default parameters: reset, home, halt or set_limits.")]
+    description="A step with its default parameters: "
+                f"{', '.join(BARE_STEPS[:-1])} or {BARE_STEPS[-1]}.")]
 
 
 def _closest(word: str, options: tuple[str, ...]) -> str:

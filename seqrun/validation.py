@@ -61,8 +61,8 @@ __all__ = [
     "PLAN_SAMPLE_S",
     "Checker",
     "Clearance",
-    "JointState",
     "Proximity",
+    "TrackedJoint",
     "ValidationResult",
     "commanded_joints",
     "format_number",
@@ -164,7 +164,7 @@ def format_range(lo: float, hi: float) -> str:
 
 # --------------------------------------------------------------------------- tracking
 @dataclass
-class JointState:
+class TrackedJoint:
     """What the checks know of one joint after the steps so far."""
 
     joint: Joint
@@ -182,7 +182,7 @@ class JointState:
 
 class Checker:
     """The state the step kinds' checks share while walking the steps: the joints and
-    modules as the steps before left them (:class:`JointState`), the limits in force, the
+    modules as the steps before left them (:class:`TrackedJoint`), the limits in force, the
     findings (``errors``, ``notes``), and the checks more than one kind needs."""
 
     def __init__(self, loaded: LoadedSequence, arm: ArmDescription,
@@ -198,7 +198,7 @@ class Checker:
         self.poses = loaded.poses
         self.errors: list[SourceError] = []
         self.notes: list[SourceError] = []
-        self.joints: dict[str, JointState] = {}
+        self.joints: dict[str, TrackedJoint] = {}
         self._chain = None
         self.speed = 1.0  # the run's speed override: the plans guards are checked along
         self.clearances: dict[int, Clearance] = {}
@@ -221,7 +221,7 @@ class Checker:
                     f"start state: {joint.name} {what} (a finite angle is needed for every "
                     "unlocked joint)"))
                 position = 0.0
-            state = JointState(joint, float(position))
+            state = TrackedJoint(joint, float(position))
             if started:
                 state.reset = state.homed = True
                 state.limits = tuple(joint.limits_deg)  # type: ignore[assignment]
@@ -303,7 +303,7 @@ class Checker:
                 good.append(name)
         return good
 
-    def modules(self, step: ResolvedStep, joints: str | list[str]) -> list[JointState]:
+    def modules(self, step: ResolvedStep, joints: str | list[str]) -> list[TrackedJoint]:
         """The joints a module command (reset, home, halt) addresses: every one for
         'all', else the known ones named (errors for the others)."""
         if joints == "all":

@@ -159,10 +159,10 @@ def test_handlers_use_only_the_step_context():
 def test_the_checker_catches_a_handler_reaching_past_the_context():
     source = textwrap.dedent("""
         def run(step, ex: StepContext):
-            ex.client.halt(None)
+            ex.driver.halt(None)
             return {"t": ex._t0, "x": getattr(ex, "last", None)}
     """)
-    assert _context_uses(ast.parse(source)) == {"run": {"client", "_t0", "<getattr>"}}
+    assert _context_uses(ast.parse(source)) == {"run": {"driver", "_t0", "<getattr>"}}
 
 
 def test_the_executor_provides_the_step_context():

@@ -16,10 +16,10 @@ if TYPE_CHECKING:
     import numpy as np
 
     from seqrun.arm import ArmDescription
+    from seqrun.drivers.base import JointState, LimitValues
     from seqrun.kinematics import Chain
     from seqrun.limits import LimitsInForce
     from seqrun.planner import Limits
-    from seqrun.drivers.base import JointState, LimitValues
 
 __all__ = ["JointReading", "StepContext"]
 
@@ -54,7 +54,7 @@ class StepContext(Protocol):
     #: simulator, nothing is recorded).
     record_zero: Callable[[str], Any] | None
 
-    # -- bus work and monitoring, every fault checked
+    # -- the drives, in joint terms (``modules=None``: all of them at once), faults checked
     def reset_modules(self, modules: list[int] | None) -> None: ...
 
     def home_modules(self, modules: list[int] | None) -> None: ...

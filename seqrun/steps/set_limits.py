@@ -15,6 +15,7 @@ if TYPE_CHECKING:
     from seqrun.validation import Checker
 
 
+
 class SetLimitsParams(StepParams):
     """Write the position limits (MinPos/MaxPos) into every joint's module, and the velocity
     and acceleration limits (MaxVel/MaxAcc) of the joints named here. Values default to the
