@@ -515,6 +515,26 @@ class SessionHalt(Event):
 
 
 @dataclass(frozen=True, kw_only=True)
+class JogStarted(Event):
+    type: ClassVar[str] = "jog_started"
+    when: ClassVar[str] = "a jog starts streaming (joint, direction, velocity, where it would end)"
+    joint: str
+    direction: int
+    velocity_deg_s: float
+    end_deg: float
+    end_reason: str
+
+
+@dataclass(frozen=True, kw_only=True)
+class JogStopped(Event):
+    type: ClassVar[str] = "jog_stopped"
+    when: ClassVar[str] = "a jog ended without a fault (released, stopped, end of its range)"
+    joint: str
+    reason: str
+    joints_deg: Sequence[float] | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
 class StatusPollFailed(Event):
     type: ClassVar[str] = "status_poll_failed"
     when: ClassVar[str] = "the session's idle status poll got no answer (shown as stale)"
