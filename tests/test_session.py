@@ -375,3 +375,29 @@ def test_save_pose_writes_the_measured_joints(session, tmp_path):
             session.save_pose("here")
     finally:
         path.unlink()
+
+
+def test_a_run_on_the_callers_thread_is_the_sessions_activity(session, tmp_path):
+    """``seqrun run`` runs through ``run_loaded``: while it runs, status says so and a
+    second activity is refused; a STOP from another thread (the control socket) halts it."""
+    from seqrun.schema import load_sequence
+
+    loaded = load_sequence(ROOT / "sequences" / "totem.yaml")
+    seen = {}
+
+    def confirm(prompt: str) -> bool:
+        seen["activity"] = session.status().activity
+        with pytest.raises(Refused, match="under way"):
+            session.move_to_joints({"j1": 1})
+        seen["thread"] = threading.Thread(
+            target=lambda: seen.setdefault("halt", session.halt("remote STOP")), daemon=True)
+        seen["thread"].start()
+        time.sleep(0.2)
+        return True
+
+    outcome = session.run_loaded(loaded, log_dir=tmp_path / "run", confirm=confirm,
+                                 html_report=False)
+    assert seen["activity"] == "running"
+    assert outcome.result.exit_code == 130
+    seen["thread"].join(10)
+    assert seen["halt"].confirmed and session.activity is None

@@ -943,11 +943,13 @@ class ArmSession:
                    on_executor: Callable | None = None, requests=None,
                    warn: Callable[[str], None] | None = None, meta: dict | None = None,
                    html_report: bool = True, file: str | None = None,
-                   bus_held: bool = False, cycle_hz: float | None = None):
+                   bus_held: bool = False, cycle_hz: float | None = None,
+                   record_zero: Callable[[str], Any] | None = None):
         """Run an already loaded and checked sequence on the caller's thread with the
         session's client and event hub; returns the runner's outcome (result, report, run
         folder). This is how ``seqrun run`` runs (its prompts are the terminal's own); faces
-        that answer questions through events use :meth:`run_sequence`."""
+        that answer questions through events use :meth:`run_sequence`. ``record_zero``:
+        what a power_off step calls to record the pose the arm is switched off in."""
         from seqrun.runner import run_sequence as run_with_log
         from seqrun.stop_requests import StopRequests
 
@@ -956,6 +958,9 @@ class ArmSession:
         def hook(executor) -> None:
             with self._state:
                 self._executor = executor
+            if self.zero is not None:  # for the log and any face
+                executor.emit("zero_reference", **self.zero.as_dict())
+            executor.record_zero = record_zero
             if on_executor is not None:
                 on_executor(executor)
 
@@ -968,14 +973,20 @@ class ArmSession:
                                 meta=meta, html_report=html_report, requests=requests,
                                 warn=warn, client=self.client, events=self._hub)
 
-        if bus_held:
+        if bus_held:  # run_sequence's worker: the activity is registered already
             return go()
-        with self._bus:
-            try:
-                return go()
-            finally:
-                with self._state:
-                    self._executor = None
+        activity = self._begin("run", {"file": file or loaded.file, "run_dir": str(log_dir)})
+        with self._state:
+            self._run_info = RunInfo(file or loaded.file, None, None, len(loaded.steps),
+                                     str(log_dir) if log_dir is not None else None)
+        result = ActivityResult("run", "failed", EXIT_FAULT_CODE, "interrupted")
+        try:
+            with self._bus:
+                outcome = go()
+            result = _result("run", outcome.result, run_dir=log_dir)
+            return outcome
+        finally:
+            self._end(activity, result)
 
     def pause(self) -> None:
         """Pause the run (controlled stop, hold); :meth:`resume` goes on."""
