@@ -252,12 +252,12 @@ class ArmSession:
         self._closed = False
         self._activity: Activity | None = None
         self._activity_ids = 0
-        self._executor = None
+        self._executor: Any = None  # the activity's Executor (it publishes to _hub)
         self._run_info: RunInfo | None = None
         self._paused = False
         self._halted: str | None = None
-        self._deadman = None
-        self._jog_plan = None
+        self._deadman: Any = None  # the jog's Deadman
+        self._jog_plan: Any = None  # the jog's JogPlan
         self._questions: dict[str, _Question] = {}
         self._question_ids = 0
         self._move_velocities = {j.name: round(j.max_velocity_deg_s * DEFAULT_MOVE_SHARE, 3)
@@ -335,21 +335,23 @@ class ArmSession:
 
     def _on_event(self, event: Event) -> None:
         """Status from the events (its own listener thread)."""
+        from seqrun.events import Fault, Measurement, MovePlanned, StepStarted
+
         kind = event.type
         with self._state:
-            if kind == "measurement":
+            if isinstance(event, Measurement):
                 self._take_measurement(event)
-            elif kind == "move_planned":
+            elif isinstance(event, MovePlanned):
                 for i, value in enumerate(event.target_deg):
                     self._targets[i] = float(value)
-            elif kind == "step_started" and self._run_info is not None:
+            elif isinstance(event, StepStarted) and self._run_info is not None:
                 self._run_info = RunInfo(self._run_info.file, event.step, event.label,
                                          self._run_info.steps, self._run_info.run_dir)
             elif kind == "paused":
                 self._paused = True
             elif kind in ("resumed", "run_finished"):
                 self._paused = False
-            elif kind == "fault" and (event.clock_s or 0) >= self._cleared_at:
+            elif isinstance(event, Fault) and (event.clock_s or 0) >= self._cleared_at:
                 self._message = event.message
                 if event.halt_sent:
                     self._halted = event.cause
@@ -392,10 +394,11 @@ class ArmSession:
         if all(x is not None for x in joints):
             import numpy as np
 
-            T = kinematics.fk(self._chain, np.radians(joints))
-            xyz = tuple(round(float(v), 3) for v in T[:3, 3])
-            rpy = tuple(round(float(v), 3)
-                        for v in np.degrees(kinematics.rpy_from_matrix(T[:3, :3])))
+            T = kinematics.fk(self._chain, np.radians(np.array(joints, dtype=float)))
+            x, y, z = (round(float(v), 3) for v in T[:3, 3])
+            roll, pitch, yaw = (round(float(v), 3)
+                                for v in np.degrees(kinematics.rpy_from_matrix(T[:3, :3])))
+            xyz, rpy = (x, y, z), (roll, pitch, yaw)
         return ArmStatus(rows, fault, xyz, rpy,
                          getattr(self.zero, "pose", None) if self.zero is not None
                          else getattr(self.arm, "zero_reference", None),
@@ -458,12 +461,14 @@ class ArmSession:
             missing = sorted({r.module for r, a in zip(requests, acks) if a is None})
             self._poll_failed(f"no answer from module(s) {', '.join(map(str, missing))}")
             return
-        joints, velocities, words = [], [], {}
+        joints: list[float | None] = []
+        velocities: list[float | None] = []
+        words: dict[int, StateFlag] = {}
         for k, joint in enumerate(arm.joints):
-            pos, vel, state = (a.value for a in acks[3 * k:3 * k + 3])
-            joints.append(round(joint.to_user_deg(float(pos)), 4) + 0.0)
-            velocities.append(round(math.degrees(float(vel)), 4) + 0.0)
-            words[joint.module] = StateFlag(int(state))
+            pos, vel, state = (a.value for a in acks[3 * k:3 * k + 3])  # type: ignore[union-attr]
+            joints.append(round(joint.to_user_deg(float(pos)), 4) + 0.0)  # type: ignore[arg-type]
+            velocities.append(round(math.degrees(float(vel)), 4) + 0.0)  # type: ignore[arg-type]
+            words[joint.module] = StateFlag(int(state))  # type: ignore[arg-type]
         flags, fault = joint_flags(arm.joint_names, arm.module_ids, [0] * len(joints), words)
         now = self.clock.now()
         self._hub.publish(make_event(
@@ -743,7 +748,8 @@ class ArmSession:
         self._check_movable(what)
         loaded = self._one_off(kind, [step])
         with self._state:
-            start = {j.name: float(x) for j, x in zip(self.arm.joints, self._joints)}
+            start = {j.name: float(x) for j, x in zip(self.arm.joints, self._joints)
+                     if x is not None}
         check = validate_sequence(loaded, self.arm, start, started=True)
         if check.errors:
             raise Refused(f"{what}: {check.errors[0].message}")
@@ -892,8 +898,8 @@ class ArmSession:
                           f"1-{len(loaded.steps)}")
         with self._state:
             measured = all(x is not None for x in self._joints)
-            start = ({j.name: float(x) for j, x in zip(self.arm.joints, self._joints)}
-                     if measured else None)
+            start = ({j.name: float(x) for j, x in zip(self.arm.joints, self._joints)
+                      if x is not None} if measured else None)
         if first_step == 1:  # the executor checks again from the arm's measured state
             check = validate_sequence(loaded, self.arm, start, speed=speed,
                                       started=bool(self._homed))
@@ -1099,7 +1105,7 @@ class ArmSession:
         if path.exists() and not overwrite:
             raise Refused(f"save pose: {path} exists (overwrite it explicitly)")
         values = {j.name: round(float(x), 3) for j, x in zip(self.arm.joints, joints)
-                  if j.locked is None}
+                  if j.locked is None and x is not None}
         try:
             pose = pose_document(name, self.arm, values, description=description,
                                  source="simulator" if self.connection.is_simulator else "arm",
