@@ -816,10 +816,10 @@ class ArmSession:
     # ------------------------------------------------------------------ jog
     def jog(self, joint: str, speed_scale: float) -> Activity:
         """Jog one joint at ``speed_scale`` (-1..1) of its move velocity. Call again at
-        least every :data:`JOG_DEADMAN_S` (same joint and scale: renews) or the jog ends
-        with a controlled stop. Refused near a limit (moving towards it) or outside the
-        workspace guards, like a move; a different joint or scale while jogging is refused
-        (stop first)."""
+        least every :data:`JOG_DEADMAN_S` (same joint and direction: renews; the speed
+        stays the first call's) or the jog ends with a controlled stop. Refused near a
+        limit (moving towards it) or outside the workspace guards, like a move; another
+        joint or the other direction while jogging is refused (release first)."""
         import numpy as np
 
         from seqrun.service.jog import Deadman, plan_jog, run_jog
@@ -830,9 +830,8 @@ class ArmSession:
                 plan = self._jog_plan
                 if (plan is not None and plan.joint == joint
                         and isinstance(speed_scale, (int, float))
-                        and abs(plan.velocity_deg_s * plan.direction
-                                - self._move_velocities.get(joint, 0) * speed_scale) < 1e-9):
-                    self._deadman.renew()
+                        and speed_scale * plan.direction > 0 and not self._deadman.expired):
+                    self._deadman.renew()  # the speed stays the jog's first
                     return current
                 raise Refused("jog: another jog is under way (release it first)")
         self._check_movable("jog")
@@ -857,11 +856,11 @@ class ArmSession:
 
     def jog_stop(self) -> ActivityResult | None:
         """End the jog with a controlled stop (waits for it); None if no jog ran."""
-        activity, executor = self._activity, self._executor
+        activity, deadman = self._activity, self._deadman
         if activity is None or activity.kind != "jog":
             return None
-        if executor is not None:
-            executor.abort("jog stopped")
+        if deadman is not None:
+            deadman.release("jog stopped")
         return activity.wait(timeout=30.0)
 
     # ------------------------------------------------------------------ sequences
@@ -1027,9 +1026,13 @@ class ArmSession:
             self.answer(q.id, True)
 
     def abort(self, reason: str = "operator abort") -> None:
-        """Controlled stop of whatever moves (run, move, jog); the activity ends (130)."""
-        executor = self._executor
-        if executor is not None:
+        """Controlled stop of whatever moves (run, move, jog); the activity ends (130 for a
+        run or move; a jog ends normally). As with Ctrl-C, a second abort of a run or move
+        is a Halt."""
+        executor, deadman = self._executor, self._deadman
+        if deadman is not None:
+            deadman.release(reason)  # at most one abort per jog
+        elif executor is not None:
             executor.abort(reason)
         self._withdraw_questions()
 
