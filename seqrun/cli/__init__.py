@@ -26,6 +26,7 @@ COMMAND_MODULES = (
     "seqrun.cli.init",
     "seqrun.cli.runs",
     "seqrun.cli.report",
+    "seqrun.cli.console",
 )
 
 
