@@ -11,7 +11,9 @@
      │    ├── ModuleTimeoutError (TimeoutError)  no matching acknowledge in time
      │    └── ModuleFaultError                a module reports ERROR/HALTED/TOW_ERROR/...
      ├── PlanningError             ruckig refused the input
-     └── RunAborted                the executor stopped a run (fault, timeout, checkpoint)
+     ├── RunAborted                the executor stopped a run (fault, timeout, checkpoint)
+     └── Refused                   the arm session refused a command (bad input, wrong
+                                   state); nothing was sent
 
 Messages are written for a test engineer at the arm: they name the module and its
 decoded state flags, the file and line, never a Python object.
@@ -106,3 +108,9 @@ class RunAborted(SeqrunError):
         #: Measured values for the step's report entry (e.g. a checkpoint's errors).
         self.detail = detail or {}
         super().__init__(message)
+
+
+class Refused(SeqrunError):
+    """The arm session refused a command: bad input (unknown joint or pose, a target
+    outside the limits, NaN) or the wrong state (a move while halted, a second activity
+    while one runs). One line for the operator; nothing was sent to the arm."""
