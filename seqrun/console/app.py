@@ -49,6 +49,9 @@ def _validation_line(exc: RequestValidationError) -> str:
     if not errors:
         return "malformed request"
     first = errors[0]
+    if tuple(first.get("loc", ())) == ("body",):
+        return one_line(f"the request body must be a JSON object (Content-Type: "
+                        f"application/json): {first.get('msg', 'invalid')}")
     where = ".".join(str(p) for p in first.get("loc", ()) if p != "body")
     more = f" (and {len(errors) - 1} more)" if len(errors) > 1 else ""
     return one_line(f"{where + ': ' if where else ''}{first.get('msg', 'invalid')}{more}")
@@ -72,8 +75,9 @@ class Console:
     def status_dict(self) -> dict[str, Any]:
         return jsonable(self.session.status())
 
-    def halt(self, reason: str) -> Any:
-        return jsonable(self.session.halt(reason))
+    def halt(self, reason: str) -> dict[str, Any]:
+        result = self.session.halt(reason)
+        return {**jsonable(result), "message": result.describe()}
 
     def halt_after_crash(self, where: str, exc: BaseException) -> str:
         """A handler crashed: Halt, as ``seqrun run`` does on an internal error."""

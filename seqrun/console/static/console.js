@@ -15,7 +15,7 @@ const state = {
   arm: null, view: null, ws: null, client: null, msgId: 0, status: null,
   latched: {}, poses: [], hoverPose: null, slidersTouched: false,
   jog: null, question: null, selected: null, checked: null,
-  statusCount: 0, eventCount: 0, lastReplies: [],
+  statusCount: 0, eventCount: 0, lastReplies: [], stopTimes: [],
 };
 window.seqrunConsole = state;  // for the browser tests and the bench
 state.frames = frames;
@@ -60,7 +60,9 @@ async function command(label, method, path, body) {
 }
 
 // ---------------------------------------------------------------- STOP
-function stop() {
+// event: the click or key (its timeStamp is when the operator pressed; the bench reads it).
+function stop(event) {
+  state.stopTimes.push(performance.timeOrigin + (event ? event.timeStamp : performance.now()));
   $("#stop").classList.add("pressed");
   setTimeout(() => $("#stop").classList.remove("pressed"), 200);
   releaseJog(false);
@@ -80,7 +82,7 @@ window.addEventListener("keydown", (e) => {
   if (e.key === "Escape" || (e.code === "Space" && !isTyping(e.target))) {
     e.preventDefault();
     e.stopPropagation();
-    if (!e.repeat) stop();
+    if (!e.repeat) stop(e);
   }
 }, true);
 // Space would also click a focused button on release: never let it.
@@ -217,7 +219,9 @@ $("#confirm-yes").addEventListener("click", () => answer(true));
 $("#confirm-no").addEventListener("click", () => answer(false));
 
 // ---------------------------------------------------------------- commands
-$("#stop").addEventListener("click", stop);
+// pointerdown, not click: STOP acts when pressed, not when released.
+$("#stop").addEventListener("pointerdown", (e) => { if (e.button === 0) stop(e); });
+$("#stop").addEventListener("keydown", (e) => { if (e.key === "Enter") { e.preventDefault(); stop(e); } });
 $("#cmd-arm").addEventListener("click", () => command("Arm", "POST", "/arm-up"));
 $("#cmd-home").addEventListener("click", () => command("Home", "POST", "/home"));
 $("#cmd-reset").addEventListener("click", () => command("Reset", "POST", "/reset"));

@@ -51,10 +51,13 @@ class ArmFigure {
   constructor(scene, arm, material, jointMaterial) {
     this.arm = arm;
     this.group = new THREE.Group();
+    // A link volume (capsule) as a unit cylinder stretched between its two points, with a
+    // sphere at each end (a stretched CapsuleGeometry would stretch its caps too).
     this.links = segmentsOf(arm).map((s) => {
-      const mesh = new THREE.Mesh(new THREE.CapsuleGeometry(s.r, 1, 6, 16), material);
-      this.group.add(mesh);
-      return { ...s, mesh };
+      const mesh = new THREE.Mesh(new THREE.CylinderGeometry(s.r, s.r, 1, 20), material);
+      const ends = [0, 1].map(() => new THREE.Mesh(new THREE.SphereGeometry(s.r, 20, 12), material));
+      this.group.add(mesh, ...ends);
+      return { ...s, mesh, ends };
     });
     this.joints = arm.joints.map((j) => {
       const mesh = new THREE.Mesh(new THREE.CylinderGeometry(34, 34, 70, 20), jointMaterial);
@@ -75,7 +78,9 @@ class ArmFigure {
       const len = Math.max(d.length(), 1e-3);
       link.mesh.position.copy(a).addScaledVector(d, 0.5);
       link.mesh.quaternion.setFromUnitVectors(up, d.clone().divideScalar(len));
-      link.mesh.scale.set(1, len, 1);  // capsule of height 1 (+ caps), stretched along y
+      link.mesh.scale.set(1, len, 1);
+      link.ends[0].position.copy(a);
+      link.ends[1].position.copy(b);
     }
     this.joints.forEach((mesh, i) => {
       const m = new THREE.Matrix4().set(...f[i].flat());

@@ -1,0 +1,70 @@
+"""``seqrun console`` as a command: light to load, prints its URL, serves, ends on Ctrl-C."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import urllib.error
+import urllib.request
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
+
+
+def test_console_help_imports_no_web_stack_and_no_bus():
+    proc = subprocess.run([sys.executable, "-X", "importtime", "-m", "seqrun", "console",
+                           "--help"], cwd=ROOT, env=ENV, capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    names = {line.rsplit("|", 1)[1].strip().split(".")[0]
+             for line in proc.stderr.splitlines() if line.startswith("import time:")}
+    assert "seqrun" in names
+    assert not names & {"fastapi", "starlette", "uvicorn", "websockets", "can", "numpy"}
+
+
+def test_the_listen_address_decides_the_token():
+    from seqrun.console.server import is_loopback
+
+    assert is_loopback("127.0.0.1") and is_loopback("localhost") and is_loopback("::1")
+    assert not is_loopback("0.0.0.0") and not is_loopback("192.0.2.7")
+
+
+@pytest.mark.slow
+def test_seqrun_console_prints_its_url_serves_and_ends_on_ctrl_c(tmp_path):
+    proc = subprocess.Popen([sys.executable, "-m", "seqrun", "console", "--sim", "--port", "0",
+                             "--log-dir", str(tmp_path)], cwd=ROOT, env=ENV,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        lines = []
+        url = None
+        while url is None:
+            line = proc.stdout.readline()
+            assert line, "".join(lines)
+            lines.append(line)
+            found = re.search(r"(http://127\.0\.0\.1:\d+/)", line)
+            url = found.group(1) if found else None
+        assert "SIMULATOR" in "".join(lines)
+        with urllib.request.urlopen(url + "api/v1/status", timeout=10) as r:
+            status = json.load(r)
+        assert status["simulator"] is True and len(status["joints"]) == 7
+        with pytest.raises(urllib.error.HTTPError) as refused:
+            urllib.request.urlopen(urllib.request.Request(
+                url + "api/v1/move/joints", data=b'{"joints": {"j1": NaN}}', method="POST",
+                headers={"Content-Type": "application/json"}), timeout=10)
+        assert refused.value.code == 422
+        assert "finite" in json.load(refused.value)["error"]
+        proc.send_signal(signal.SIGINT)
+        out, _ = proc.communicate(timeout=30)
+        assert proc.returncode == 0, out
+        assert "Traceback" not in out
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
