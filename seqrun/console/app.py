@@ -153,11 +153,14 @@ def build_router(console: Console) -> APIRouter:
              summary="Validation findings and the dry-run report from the arm's position now")
     def check(name: str) -> dict[str, Any]:
         now = session.status()
-        start = dict(zip(console.arm.joint_names, now.joints_deg)) \
-            if not isinstance(now.joints_deg, dict) else dict(now.joints_deg)
+        start: dict[str, float] | None = dict(now.joints_deg)
         if any(v is None for v in start.values()):
-            start = None
-        return catalog.check(name, start, started=False)
+            start = None  # nothing measured yet: from Park, as seqrun validate
+        # An arm that is up (every module homed, none halted or in error) is dry-run as
+        # such, so that a sequence without the start-up steps is checked as it would run.
+        up = all("HOME_OK" in j.flags and not {"HALTED", "ERROR"} & set(j.flags)
+                 for j in now.joints) and now.activity not in ("halted", "faulted")
+        return catalog.check(name, start, started=up)
 
     @api.get("/runs", summary="Past runs, newest first")
     def runs() -> list[dict[str, Any]]:
@@ -304,6 +307,9 @@ async def live(console: Console, ws: WebSocket) -> None:
                 await reply(msg_id, False, error=one_line(str(exc)))
             except ValueError as exc:  # pydantic: a malformed jog
                 await reply(msg_id, False, error=one_line(_first_error(exc)))
+            except Exception as exc:  # noqa: BLE001 - a crashed handler halts the arm
+                outcome = await asyncio.to_thread(console.halt_after_crash, f"live {op}", exc)
+                await reply(msg_id, False, error=one_line(f"{op} failed ({exc}); {outcome}"))
 
     def halt_now(msg_id: Any, reason: str) -> None:
         def run() -> None:

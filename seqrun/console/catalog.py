@@ -87,7 +87,7 @@ class Catalog:
         if loaded is None:
             out["errors"] = [e.as_dict() | {"text": str(e)} for e in errors]
             return out
-        out["steps"] = [{"number": s.number, "kind": s.kind, "label": s.label}
+        out["steps"] = [{"number": s.number, "kind": s.kind, "label": s.label or s.kind}
                         for s in loaded.steps]
         try:
             arm = load_arm(loaded.arm_path)
@@ -110,6 +110,9 @@ class Catalog:
             run = dry_run(loaded, arm, start, start_pose="the arm's position now",
                           started=started)
             out["dry_run"] = run.as_dict()
+            labels = {s["number"]: s["label"] for s in out["dry_run"]["steps"]}
+            for step in out["steps"]:  # the executor's labels (a confirm's is its text)
+                step["label"] = labels.get(step["number"]) or step["label"]
         return out
 
     # -- runs --------------------------------------------------------------------------

@@ -194,6 +194,7 @@ function showEvent(e) {
   else if (e.type === "confirm_answered" && state.question && state.question.question_id === e.question_id) closeQuestion();
   else if (e.type === "run_finished" || e.type === "activity_finished") { if (e.type === "run_finished") loadRuns(); closeQuestionIfRunEnded(e); }
   else if (e.type === "step_started") markStep(e.step);
+  else if (e.type === "run_started") markStep(0);
 }
 
 // ---------------------------------------------------------------- confirm dialog
@@ -416,8 +417,9 @@ function markStep(step) {
   });
 }
 
+// The step under way stays marked after the run ends (where it ended); a new run clears it.
 function highlightStep(run) {
-  if (!run || !state.checked || !run.file) { if (!run) document.querySelectorAll("#seq-steps li.current").forEach((li) => li.classList.remove("current")); return; }
+  if (!run || !state.checked || !run.file) return;
   if (!run.file.endsWith(state.checked.sequence)) return;
   if (run.step) markStep(run.step);
 }
