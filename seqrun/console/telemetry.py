@@ -25,13 +25,15 @@ from typing import Any
 
 log = logging.getLogger(__name__)
 
-#: Most status snapshots per second sent to a page (the control loop measures at 100 Hz).
-MAX_STATUS_HZ = 100.0
+#: Most status snapshots per second sent to a page. The control loop measures at 100 Hz;
+#: the cap is above it so that a cycle's jitter never halves the rate.
+MAX_STATUS_HZ = 150.0
 #: A status is pushed at least this often, measurement or not (the page shows it is alive).
 HEARTBEAT_S = 0.5
 HISTORY = 300
-#: Events that carry a new measurement of the arm: each becomes a status snapshot (the
-#: session's status() is fed by them), never a line of the event log.
+#: Events that carry a new measurement of the arm, never a line of the event log. A
+#: ``measurement`` becomes a status snapshot (subscribers get one per cycle of a move and
+#: one per idle poll); a ``setpoint`` comes with the same cycle's measurement.
 MEASURING_EVENTS = frozenset({"measurement", "setpoint"})
 
 
@@ -156,8 +158,9 @@ class Telemetry:
                     self.publish_status()  # heartbeat: nothing measured for a while
                     last_status = now
                     continue
-                if getattr(event, "type", None) in MEASURING_EVENTS:
-                    if now - last_status >= min_gap:
+                kind = getattr(event, "type", None)
+                if kind in MEASURING_EVENTS:
+                    if kind == "measurement" and now - last_status >= min_gap:
                         self.publish_status()
                         last_status = now
                     continue
