@@ -126,6 +126,18 @@ def _activity(activity: Any) -> dict[str, Any]:
     return {"accepted": True, "kind": getattr(activity, "kind", None)}
 
 
+def _confirmed(result: Any) -> Any:
+    """A blocking command's result; one that did not succeed (not valid from the measured
+    state, not confirmed) is a 409 with its one line, not an "ok"."""
+    body = jsonable(result)
+    if getattr(result, "ok", True) is False:
+        message = one_line(f"{getattr(result, 'kind', 'command')} "
+                           f"{getattr(result, 'status', 'failed')}: "
+                           f"{getattr(result, 'message', '')}")
+        return JSONResponse({"error": message, "result": body}, status_code=409)
+    return body
+
+
 def build_router(console: Console) -> APIRouter:
     api = APIRouter(prefix=API)
     session = console.session
@@ -181,15 +193,15 @@ def build_router(console: Console) -> APIRouter:
 
     @api.post("/reset", summary="Reset every module (clears a Halt), confirmed")
     def reset() -> Any:
-        return jsonable(session.reset())
+        return _confirmed(session.reset())
 
     @api.post("/home", summary="Home every module (enables the motors), confirmed")
     def home() -> Any:
-        return jsonable(session.home())
+        return _confirmed(session.home())
 
     @api.post("/arm-up", summary="Arm: reset, then write the arm file's limits")
     def arm_up() -> Any:
-        return jsonable(session.arm_up())
+        return _confirmed(session.arm_up())
 
     @api.post("/move/pose", summary="Move to a named pose (validated, planned, streamed)")
     def move_pose(body: models.PoseMove, client: ClientHeader = None) -> dict[str, Any]:
@@ -217,7 +229,7 @@ def build_router(console: Console) -> APIRouter:
     def jog_stop(client: ClientHeader = None) -> Any:
         result = session.jog_stop()
         motions.jog_ended(client)
-        return jsonable(result)
+        return _confirmed(result)
 
     @api.post("/run", summary="Run a sequence (validated first; a run folder as seqrun run)")
     def run(body: models.RunBody, client: ClientHeader = None) -> dict[str, Any]:

@@ -190,6 +190,7 @@ function showEvent(e) {
   log.append(item);
   while (log.children.length > 400) log.firstChild.remove();
   log.scrollTop = log.scrollHeight;
+  if (e.type === "activity_finished" && e.exit_code !== 0) say(`${e.kind} ${e.status}: ${e.message}`, true);
   if (e.type === "confirm_requested") askOperator(e);
   else if (e.type === "confirm_answered" && state.question && state.question.question_id === e.question_id) closeQuestion();
   else if (e.type === "run_finished" || e.type === "activity_finished") { if (e.type === "run_finished") loadRuns(); closeQuestionIfRunEnded(e); }
@@ -345,6 +346,7 @@ function holdToJog(button, joint, direction) {
     sendJog();
   });
   for (const ev of ["pointerup", "pointercancel", "lostpointercapture"]) button.addEventListener(ev, () => releaseJog(true));
+  button.addEventListener("contextmenu", (e) => e.preventDefault());  // a tablet's long press
 }
 
 function releaseJog(sendStop) {
