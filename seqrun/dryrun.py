@@ -151,7 +151,7 @@ def _bounded(seconds: float):
 
 def _keep_summary(events: list[dict]):
     """Keep the events a report needs (not the per-cycle ones)."""
-    def listener(event: dict) -> None:
-        if event["type"] not in ("setpoint", "measurement"):
-            events.append(event)
+    def listener(event) -> None:
+        if event.type not in ("setpoint", "measurement"):
+            events.append(event.as_dict())
     return listener

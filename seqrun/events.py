@@ -515,6 +515,26 @@ class SessionHalt(Event):
 
 
 @dataclass(frozen=True, kw_only=True)
+class JogStarted(Event):
+    type: ClassVar[str] = "jog_started"
+    when: ClassVar[str] = "a jog starts streaming (joint, direction, velocity, where it would end)"
+    joint: str
+    direction: int
+    velocity_deg_s: float
+    end_deg: float
+    end_reason: str
+
+
+@dataclass(frozen=True, kw_only=True)
+class JogStopped(Event):
+    type: ClassVar[str] = "jog_stopped"
+    when: ClassVar[str] = "a jog ended without a fault (released, stopped, end of its range)"
+    joint: str
+    reason: str
+    joints_deg: Sequence[float] | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
 class StatusPollFailed(Event):
     type: ClassVar[str] = "status_poll_failed"
     when: ClassVar[str] = "the session's idle status poll got no answer (shown as stale)"
@@ -558,11 +578,10 @@ def make_event(type_: str, t: float, data: Mapping[str, Any], *,
     if cls is None:
         return Unregistered(t=t, name=type_, extra=dict(data), clock_s=clock_s)
     names = _plain_fields(cls)
-    known = {k: v for k, v in data.items() if k in names}
+    known = {k: v for k, v in data.items() if k in names and k != "t"}
     extra = {k: v for k, v in data.items() if k not in names}
     if "t" in data:  # a setpoint carries its own t (the cycle's)
         t = data["t"]
-        extra.pop("t", None)
     if cls is RunStarted:
         # run_started's clock_s is its own field (written); the derived reading is the same.
         return cls(t=t, extra=extra, **known)
@@ -609,7 +628,19 @@ class Subscription:
                 self._cond.wait(timeout)
             if not self._queue:
                 return None
+            self._busy = 1
             return self._queue.popleft()
+
+    def task_done(self) -> None:
+        """The event last taken by get() is handled (see Listener.flush)."""
+        with self._cond:
+            self._busy = 0
+
+    @property
+    def idle(self) -> bool:
+        """Nothing queued and nothing taken but not yet handled."""
+        with self._cond:
+            return not self._queue and not self._busy
 
     def get_nowait(self) -> Event | None:
         with self._cond:
@@ -674,6 +705,7 @@ class Listener:
                 sub.close()
                 break
             finally:
+                sub.task_done()
                 with self._idle:
                     self._idle.notify_all()
         with self._idle:
@@ -686,15 +718,15 @@ class Listener:
 
         deadline = time.monotonic() + timeout
         with self._idle:
-            while len(self.subscription) and self._thread.is_alive():
+            while not self.subscription.idle and self._thread.is_alive():
                 left = deadline - time.monotonic()
                 if left <= 0:
                     return False
                 self._idle.wait(min(left, 0.05))
-        # The last event taken may still be in the callback: give it a moment.
         return True
 
     def close(self, timeout: float = 1.0) -> None:
+        """Handle what is queued (up to ``timeout`` s), then stop the thread."""
         self.flush(timeout)
         self.subscription.close()
         self._thread.join(timeout)

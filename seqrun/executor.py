@@ -14,7 +14,8 @@ Safety rules it implements (docs/safety.md tells the operator's side):
 
 Control methods (:meth:`abort`, :meth:`halt`, :meth:`pause`, :meth:`resume`) may be called
 from any thread (signal handler, web console); the run loop acts on them within a cycle.
-Listeners receive structured events (plain dicts) for the log writer and displays.
+Events are typed records (seqrun/events.py): the run log records them synchronously
+(``listeners``); faces subscribe to ``events`` on queues of their own.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ import numpy as np
 from seqrun import kinematics
 from seqrun.arm import ArmDescription
 from seqrun.clock import Clock
+from seqrun.events import EventHub, make_event
 from seqrun.errors import (BusError, ModuleFaultError, ModuleTimeoutError, PlanningError,
                            RunAborted, SeqrunError)
 from seqrun.halt import HaltConfirmation, halt_and_confirm
@@ -39,6 +41,7 @@ from seqrun.limits import LimitsInForce
 from seqrun.planner import Limits, MovePlan, plan_move, plan_stop
 from seqrun.setpoints import setpoint_law
 from seqrun.usermessages import user_message
+from seqrun.telemetry import VelocityWindow, joint_flags
 from seqrun.tracking import MoveTracking, velocity_window
 from seqrun.stop_requests import OPERATOR_HALT, StopRequest, StopRequests
 from seqrun.powercube.codec import (BroadcastRequest, GetParam, GetParamAck, MotionExtAck,
@@ -49,7 +52,8 @@ from seqrun.powercube.protocol import ConfigFlag, ParamId, ShortState, StateFlag
 from seqrun.defaults import (EXIT_FAULT, EXIT_INVALID, EXIT_OK,  # noqa: E402,F401
                              EXIT_OPERATOR_ABORT, EXIT_USAGE)
 
-Listener = Callable[[dict], None]
+#: A synchronous recorder: gets every typed event (it reads like the events.jsonl dict).
+Listener = Callable[[Any], None]
 
 
 class OperatorAbort(SeqrunError):
@@ -134,7 +138,8 @@ class Executor:
                  before_step: Callable[[Any], bool] | None = None,
                  listeners: Iterable[Listener] = (), dry_run: bool = False,
                  confirm_clear_latched: Callable[[str], bool] | None = None,
-                 requests: StopRequests | None = None) -> None:
+                 requests: StopRequests | None = None,
+                 events: EventHub | None = None) -> None:
         if not 0 < speed <= 1:
             raise ValueError("speed must lie in (0, 1]")
         self.client = client
@@ -152,7 +157,12 @@ class Executor:
         self.confirm_clear_latched = confirm_clear_latched
         self.latched_at_start: list[dict[str, Any]] = []
         self._latched_cleared_ok = False
+        #: Synchronous recorders (the run log): called with every typed event on the
+        #: loop's thread; they must be fast and never block. Faces subscribe to ``events``.
         self.listeners: list[Listener] = list(listeners)
+        #: Typed events for subscribers, each on its own queue (seqrun/events.py).
+        self.events = events if events is not None else EventHub()
+        self._velocity = VelocityWindow(velocity_window(self.cycle))
         #: Called with the slack (seconds) before the loop sleeps until its next cycle: the
         #: live view renders there, on the loop's own thread, only when it has time.
         self.idle_hooks: list[Callable[[float], None]] = []
@@ -276,9 +286,15 @@ class Executor:
 
     # ------------------------------------------------------------------ events
     def emit(self, type_: str, **data: Any) -> None:
-        event = {"t": round(self.clock.now() - self._t0, 6), "type": type_, **data}
+        """Make the typed record (seqrun/events.py) and hand it to the synchronous
+        recorders (``listeners``: the run log, which must be on disk before the next
+        instant) and to the hub's subscribers (each on its own queue: never waits)."""
+        now = self.clock.now()
         if self._current_step is not None and "step" not in data:
-            event["step"] = self._current_step.number
+            data["step"] = self._current_step.number
+        derived = self._derived(type_, data) if self.events.subscribers else {}
+        event = make_event(type_, round(now - self._t0, 6), data, clock_s=now,
+                           **derived.get(type_, {}))
         for listener in list(self.listeners):
             try:
                 listener(event)
@@ -287,6 +303,35 @@ class Executor:
             except (Exception, SystemExit) as exc:
                 self.listeners.remove(listener)
                 self.emit("listener_failed", error=repr(exc))
+        self.events.publish(event)
+        if "cycle" in derived:
+            # Faces get every streamed cycle as a measurement too (not logged: the
+            # setpoint holds it).
+            self.events.publish(make_event("measurement", event.t, derived["cycle"],
+                                           clock_s=now, **derived["cycle_derived"]))
+
+    def _derived(self, type_: str, data: dict) -> dict[str, dict]:
+        """Velocities and flag names of a measurement or a setpoint, for subscribers."""
+        if type_ == "measurement":
+            joints, words = data.get("joints_deg"), data.get("states")
+        elif type_ == "setpoint":
+            joints, words = data.get("measured_deg"), None
+        else:
+            return {}
+        short = data.get("state") or []
+        if joints is None:
+            return {}
+        self._velocity.add(self.clock.now(), joints)
+        flags, fault = joint_flags(self.arm.joint_names, self.modules, short, words)
+        extra = {"velocities_deg_s": self._velocity.velocity(), "flags": flags,
+                 "fault": fault}
+        if type_ == "measurement":
+            return {"measurement": {**extra, "source": "step" if "after" in data
+                                    else "monitor"}}
+        cycle = {"joints_deg": joints, "state": short}
+        if "step" in data:
+            cycle["step"] = data["step"]
+        return {"cycle": cycle, "cycle_derived": {**extra, "source": "cycle"}}
 
     def _idle_until(self, t: float) -> None:
         """Sleep until ``t``; the idle hooks may use the slack first."""

@@ -33,6 +33,7 @@ from xml.sax.saxutils import escape, quoteattr
 
 import can
 
+from seqrun.events import Event
 from seqrun.executor import RunResult, StepResult
 from seqrun.logfile import LineFile, write_whole
 
@@ -161,9 +162,13 @@ class RunLog:
                                            "error": str(exc)}) + "\n")
 
     # Listeners -------------------------------------------------------------------
-    def on_event(self, event: dict) -> None:
+    def on_event(self, event: Event | dict) -> None:
+        """Synchronous recorder of a typed event (or its dict): one line on disk before the
+        control loop goes on, so a run killed the next instant leaves a complete log."""
         if self._closed:
             return
+        if isinstance(event, Event):
+            event = event.as_dict()
         kind = event["type"]
         if kind == "run_started" and self._clock0 is not None and "clock_s" in event:
             start = self._epoch0 + (event["clock_s"] - self._clock0)

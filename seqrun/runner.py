@@ -13,6 +13,7 @@ from typing import Callable, Iterable
 from seqrun import __version__
 from seqrun.arm import ArmDescription
 from seqrun.connection import Connection, response_timeout_s
+from seqrun.events import EventHub
 from seqrun.executor import EXIT_FAULT, Executor, Listener, RunResult, StepResult
 from seqrun.powercube.client import PowerCubeClient
 from seqrun.runlog import RunLog
@@ -37,17 +38,22 @@ def build_executor(loaded: LoadedSequence, arm: ArmDescription, connection: Conn
                    before_step: Callable | None = None,
                    listeners: Iterable[Listener] = (), dry_run: bool = False,
                    confirm_clear_latched: Callable[[str], bool] | None = None,
-                   requests: StopRequests | None = None
+                   requests: StopRequests | None = None,
+                   client: PowerCubeClient | None = None, events: EventHub | None = None
                    ) -> tuple[Executor, PowerCubeClient]:
-    client = PowerCubeClient(connection.bus, connection.clock,
-                             # (a dry run keeps the arm file's: deterministic results)
-                             response_timeout=(arm.can.response_timeout_s if dry_run
-                                               else response_timeout_s(arm)))
+    """The executor of one run; ``client``: the arm session's own (else a new one on the
+    connection); ``events``: the hub its events go to (the session's)."""
+    if client is None:
+        client = PowerCubeClient(connection.bus, connection.clock,
+                                 # (a dry run keeps the arm file's: deterministic results)
+                                 response_timeout=(arm.can.response_timeout_s if dry_run
+                                                   else response_timeout_s(arm)))
     executor = Executor(client, arm, connection.clock,
                         poses_dir=loaded.pose_path or loaded.poses_dir, speed=speed,
                         command_mode=command_mode, cycle_hz=cycle_hz, confirm=confirm,
                         before_step=before_step, listeners=list(listeners), dry_run=dry_run,
-                        confirm_clear_latched=confirm_clear_latched, requests=requests)
+                        confirm_clear_latched=confirm_clear_latched, requests=requests,
+                        events=events)
     client.on_discard = executor.on_discard
     return executor, client
 
@@ -64,7 +70,9 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
                  meta: dict | None = None,
                  html_report: bool = True,
                  requests: StopRequests | None = None,
-                 warn: Callable[[str], None] | None = None) -> RunOutcome:
+                 warn: Callable[[str], None] | None = None,
+                 client: PowerCubeClient | None = None,
+                 events: EventHub | None = None) -> RunOutcome:
     """Run ``loaded`` on ``connection``; writes the run folder when ``log_dir`` is given,
     with report.html drawn after the run (``html_report``).
 
@@ -72,14 +80,16 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
     hook in there); ``meta`` goes into report.json (e.g. the zero reference); ``requests``
     is the inbox signal handlers post stop requests to; ``warn`` is told once when writing
     the run folder fails. The connection is not closed. Whichever way the run ends (even
-    by an exception), the run folder is finished.
+    by an exception), the run folder is finished. ``client`` (the arm session's) is used
+    and left open; otherwise the run's own client is closed at the end.
     """
+    own_client = client is None
     executor, client = build_executor(loaded, arm, connection, speed=speed,
                                       command_mode=command_mode, cycle_hz=cycle_hz,
                                       confirm=confirm, before_step=before_step,
                                       listeners=listeners, dry_run=dry_run,
                                       confirm_clear_latched=confirm_clear_latched,
-                                      requests=requests)
+                                      requests=requests, client=client, events=events)
     log = None
     if log_dir is not None:
         log = RunLog(log_dir, {"sequence": loaded.name, "file": file or loaded.file,
@@ -107,7 +117,10 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
             if result is not None:
                 report = log.finish(result)
             log.close()
-        client.close()
+            if not own_client:
+                client.remove_frame_listener(log.on_frame)
+        if own_client:
+            client.close()
     report_error = None
     if log is not None and html_report:
         report_error = write_html_report(log_dir)

@@ -1,11 +1,15 @@
 """What the operator sees during a run: a rich live view on a terminal, plain lines otherwise.
 
-Both are executor listeners: a listener only records the event. The live view renders from
-the control loop's own idle time (:attr:`Executor.idle_hooks`: called with the slack before
-the loop sleeps until its next cycle), at most 10 times a second and only when the slack is
-longer than a render takes, so the display can neither delay a cycle nor compete with the
-loop from a thread of its own. While the operator is asked something the live view is off
-and the question is an ordinary line where the cursor is (:meth:`LiveDisplay.asking`).
+Both consume typed events (:mod:`seqrun.events`) and nothing else of the executor: the live
+view has a subscription of its own (a bounded queue: publishing never waits for it), which it
+drains and renders from the control loop's own idle time (:attr:`Executor.idle_hooks`:
+called with the slack before the loop sleeps until its next cycle), at most 10 times a
+second and only when the slack is longer than a render takes, so the display can neither
+delay a cycle nor compete with the loop from a thread of its own. Joints, velocities and
+state flags come from ``measurement`` events. While the operator is asked something the
+live view is off and the question is an ordinary line where the cursor is
+(:meth:`LiveDisplay.asking`). The plain display is called with each event (by a listener
+thread of the session, or as a recorder).
 
 Everything the user wrote (labels, prompts) and every message is printed literally: rich
 markup is never interpreted in it.
@@ -26,7 +30,6 @@ from rich.text import Text
 
 from seqrun import kinematics
 from seqrun.cli.output import fixed
-from seqrun.powercube.protocol import ShortState, StateFlag
 
 
 def halt_line(event: dict) -> str | None:
@@ -86,8 +89,15 @@ class LiveDisplay:
     MARGIN = 0.001
 
     def __init__(self, console: Console, executor, title: str, bus: str, total: int) -> None:
+        """``executor``: what the view hangs on: its ``arm``, ``events`` (the hub the view
+        subscribes to) and ``idle_hooks`` (where it renders)."""
         self.console = console
         self.ex = executor
+        self.arm = executor.arm
+        self.chain = kinematics.Chain.from_arm(self.arm)
+        self.subscription = executor.events.subscribe(maxsize=2000, name="live view")
+        #: The latest measurement event (joints, velocities, flags).
+        self.measured = None
         self.title = title
         self.bus = bus
         self.total = total
@@ -98,8 +108,6 @@ class LiveDisplay:
         self.message_style = "yellow"
         self.halt_text = ""
         self.target: np.ndarray | None = None
-        self._prev: tuple[float, np.ndarray] | None = None
-        self._velocity = np.zeros(executor.arm.dof)
         self._last_render = -1e9
         self._render_cost = 0.002  # seconds; learnt from the renders
         self.live: Live | None = None
@@ -127,6 +135,7 @@ class LiveDisplay:
             self.ex.idle_hooks.remove(self.on_idle)
         self._stop()
         self.console.print(self)  # the final state stays on the screen
+        self.subscription.close()
 
     @contextmanager
     def asking(self, context: str | None = None) -> Iterator[None]:
@@ -157,10 +166,17 @@ class LiveDisplay:
         self._last_render = time.monotonic()
 
     # -------------------------------------------------------------- events
-    def __call__(self, event: dict) -> None:
-        # No lock: events, idle hooks and renders all run on the control loop's thread
+    def _drain(self) -> None:
+        for event in self.subscription.drain():
+            self(event)
+
+    def __call__(self, event) -> None:
+        # No lock: draining, idle hooks and renders all run on the control loop's thread
         # (a signal handler that emits only sets fields).
         kind = event["type"]
+        if kind == "measurement":
+            self.measured = event
+            return
         if kind == "step_started":
             self.step_text = f"step {event.get('step')}/{self.total}: {event['label']}"
             self.move_duration = None
@@ -184,41 +200,32 @@ class LiveDisplay:
             style = "bold green" if event["exit_code"] == 0 else "bold red"
             self.message, self.message_style = f"{event['status']}: {event['message']}", style
 
-    def _update_velocity(self) -> None:
-        m = self.ex.last
-        if m is None:
-            return
-        if self._prev is not None and m.t > self._prev[0]:
-            self._velocity = (m.user_deg - self._prev[1]) / (m.t - self._prev[0])
-        self._prev = (m.t, m.user_deg.copy())
-
     @staticmethod
-    def _state(m, module: int) -> tuple[str, bool]:
-        """The module's state text and whether it is moving, from the freshest reading."""
-        if m.state_words is not None and module in m.state_words:
-            word = m.state_words[module]
-            return word.describe(), bool(word & StateFlag.MOTION)
-        if module in m.short_state:
-            short = m.short_state[module]
-            return short.describe(), bool(short & ShortState.MOTION)
-        return "-", False
+    def _state(m, joint: str) -> tuple[str, bool]:
+        """The module's state text and whether it is moving, from the freshest reading
+        (its state word where one was read, else the short state)."""
+        flags = (m.flags or {}).get(joint)
+        if flags is None:
+            return "-", False
+        return "|".join(flags) or "OK", "MOTION" in flags
 
     def __rich__(self) -> Panel:
         # Fixed-width text lines, not a rich Table: a Table's layout costs ~30x more
         # (several ms per render), and the render has to fit into the loop's slack.
-        self._update_velocity()
-        m = self.ex.last
-        width = max(len(self._joint_label(j)) for j in self.ex.arm.joints) + 2
+        self._drain()
+        m = self.measured
+        width = max(len(self._joint_label(j)) for j in self.arm.joints) + 2
         lines = [Text(f"  {'joint':<{width}}{'position °':>12}{'velocity °/s':>15}"
                       f"{'target °':>11}    state", style="bold")]
-        for i, joint in enumerate(self.ex.arm.joints):
+        for i, joint in enumerate(self.arm.joints):
             pos = vel = state = "-"
             if m is not None:
-                state, moving = self._state(m, joint.module)
-                pos = fixed(m.user_deg[i], 2)
+                state, moving = self._state(m, joint.name)
+                pos = fixed(m.joints_deg[i], 2)
                 # A module that does not report motion stands still (Halt, end of ramp);
-                # a difference quotient across the last render would say otherwise.
-                vel = fixed(self._velocity[i] if moving else 0.0, 2)
+                # an estimate over the last samples would say otherwise.
+                velocity = m.velocities_deg_s[i] if m.velocities_deg_s else 0.0
+                vel = fixed(velocity if moving else 0.0, 2)
             tgt = fixed(self.target[i], 2) if self.target is not None else "-"
             lines.append(Text(f"  {self._joint_label(joint):<{width}}{pos:>12}{vel:>15}"
                               f"{tgt:>11}    {state}"))
@@ -230,7 +237,7 @@ class LiveDisplay:
                                        f" {done:.1f} / {self.move_duration:.1f} s"))
         parts.extend(lines)
         if m is not None:
-            pose = kinematics.fk(self.ex.chain, np.radians(m.user_deg))
+            pose = kinematics.fk(self.chain, np.radians(m.joints_deg))
             rpy = np.degrees(kinematics.rpy_from_matrix(pose[:3, :3]))
             x, y, z = pose[:3, 3]
             parts.append(Text(f"end-effector  x {fixed(x, 1, 8)}  y {fixed(y, 1, 8)}  "

@@ -51,6 +51,8 @@ def _ask_shown(console: Console, displays: list, question: str, assume_yes: bool
     """:func:`_ask` where the operator looks: the live view (if any) is off meanwhile, so
     its redraw cannot erase the question."""
     if not displays or not hasattr(displays[0], "asking"):
+        for display in displays:  # the plain lines so far come before the question
+            getattr(display, "flush", lambda: None)()
         return _ask(console, question, assume_yes, read)
     with displays[0].asking(context):
         return _ask(console, question, assume_yes, read)
@@ -292,13 +294,14 @@ def run_command(
         # The built-in simulator keeps no record: its zero is its power-on pose.
         executor.record_zero = (None if connection.is_simulator
                                 else campaign_records.zero_recorder(arm, loaded))
-        display = (LiveDisplay(console, executor, f"seqrun: {loaded.name}",
-                               connection.description, len(loaded.steps))
-                   if live else PlainDisplay(console, len(loaded.steps)))
-        executor.listeners.append(display)
-        displays.append(display)
-        if live:
+        if live:  # subscribes to the executor's events, renders in the loop's slack
+            display = LiveDisplay(console, executor, f"seqrun: {loaded.name}",
+                                  connection.description, len(loaded.steps))
             display.__enter__()
+        else:  # its own queue and thread: a blocked stdout never delays the loop
+            display = executor.events.add_listener(PlainDisplay(console, len(loaded.steps)),
+                                                   "plain display", maxsize=100_000)
+        displays.append(display)
 
     def warn(text: str) -> None:
         console.print(f"  !!  {text}", style="yellow", highlight=False, markup=False,
@@ -317,6 +320,8 @@ def run_command(
     finally:
         if live and displays:
             displays[0].__exit__(None, None, None)
+        elif displays:
+            displays[0].close(timeout=5.0)  # every line printed before the summary
         signals.restore()
         connection.close()
     result = outcome.result

@@ -642,16 +642,24 @@ class PowerCubeClient:
         """Emergency-stop one module, or all (broadcast, not acknowledged)."""
         self._command(CommandId.HALT, module)
 
-    def halt_now(self) -> None:
+    def halt_now(self, *, wait: bool = True) -> None:
         """Broadcast Halt ``[0x02, 0x00]`` at once: unlike :meth:`halt`, nothing queued on
         the bus is read first (a flooded receive queue must not delay an emergency stop),
         and no quarantine is waited for. Confirm it with :func:`seqrun.halt.halt_and_confirm`.
 
+        ``wait=False`` (an operator's STOP from another thread): when another thread's
+        exchange holds the client, the frame is sent without waiting for it (python-can
+        buses accept sends from two threads); the exchange goes on, the modules halt.
+
         :raises ~seqrun.errors.BusError: the frame could not be sent.
         """
-        with self._lock:
+        locked = self._lock.acquire(blocking=wait)
+        try:
             self._check_open()
             self._send(*_HALT_FRAME)
+        finally:
+            if locked:
+                self._lock.release()
 
     def refresh_watchdog(self) -> None:
         """Broadcast a watchdog refresh ``[0x07, 0x00]`` now."""

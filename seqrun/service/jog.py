@@ -1,0 +1,177 @@
+"""Jog: one joint at a commanded speed for as long as the operator keeps renewing it (deadman).
+
+A jog is an ordinary executor move (``Executor.move``: planned with ruckig, streamed with the
+same per-cycle checks of state flags, following error and workspace guards, Halt on any fault)
+towards the farthest point of the joint's range that keeps a margin to its limit and to every
+workspace guard. The deadman is checked on the control loop's own thread, once per cycle
+(an executor idle hook): when no renewal came within ``deadman_s`` it posts an abort, and the
+executor brings the joint to rest with its controlled stop (ruckig to zero velocity) and
+holds. Nothing restarts the motion: a new jog is a new command.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from seqrun import kinematics
+from seqrun.errors import Refused
+
+#: Margin (deg) a jog keeps to the joint's limits: it is refused closer than this.
+LIMIT_MARGIN_DEG = 1.0
+#: Margin (mm) a jog keeps above every workspace guard's plane.
+GUARD_MARGIN_MM = 10.0
+#: Step (deg) of the search along the joint for the guard-limited end of the jog.
+SEARCH_STEP_DEG = 0.5
+
+
+@dataclass(frozen=True)
+class JogPlan:
+    joint: str
+    index: int
+    direction: int
+    start_deg: float
+    end_deg: float
+    velocity_deg_s: float
+    why_end: str
+
+
+def plan_jog(arm, joint: str, speed_scale: float, joints_deg: np.ndarray,
+             jog_velocity_deg_s: float) -> JogPlan:
+    """Where a jog of ``joint`` from ``joints_deg`` (user degrees) may go; raises
+    :class:`Refused` (one line) for an unknown or locked joint, a scale outside [-1, 1] or 0,
+    a joint at its limit (within :data:`LIMIT_MARGIN_DEG`, moving towards it) or an arm
+    outside its workspace guards, or one that would leave them at once."""
+    if joint not in arm.joint_names:
+        raise Refused(f"jog: unknown joint '{joint}' (joints: {', '.join(arm.joint_names)})")
+    index = arm.joint_names.index(joint)
+    spec = arm.joints[index]
+    if spec.locked is not None:
+        raise Refused(f"jog: {joint} is locked at {spec.locked:g}° in the arm file")
+    if not isinstance(speed_scale, (int, float)) or not math.isfinite(speed_scale):
+        raise Refused(f"jog: speed scale {speed_scale!r} is not a finite number")
+    if not -1.0 <= speed_scale <= 1.0 or speed_scale == 0:
+        raise Refused(f"jog: speed scale {speed_scale:g} must lie in [-1, 1] and not be 0")
+    direction = 1 if speed_scale > 0 else -1
+    lo, hi = spec.limits_deg
+    start = float(joints_deg[index])
+    limit = (hi - LIMIT_MARGIN_DEG) if direction > 0 else (lo + LIMIT_MARGIN_DEG)
+    if (limit - start) * direction <= 0:
+        raise Refused(f"jog: {joint} at {start:.2f}° is at its "
+                      f"{'upper' if direction > 0 else 'lower'} limit "
+                      f"({hi if direction > 0 else lo:g}°, margin {LIMIT_MARGIN_DEG:g}°)")
+    chain = kinematics.Chain.from_arm(arm)
+    q = np.radians(np.asarray(joints_deg, dtype=float))
+    low = _lowest_guard(arm, chain, q)
+    if low is not None and low[1] < low[2]:
+        raise Refused(f"jog: the arm is outside its workspace guard '{low[0]}' "
+                      f"({low[3]} at z = {low[1]:.1f} mm, below {low[2]:.1f} mm); move it "
+                      "back with a validated move")
+    end, why = limit, "joint limit"
+    n = int(abs(limit - start) / SEARCH_STEP_DEG) + 1
+    for k in range(1, n + 1):
+        x = start + direction * min(k * SEARCH_STEP_DEG, abs(limit - start))
+        q_k = q.copy()
+        q_k[index] = math.radians(x)
+        low = _lowest_guard(arm, chain, q_k)
+        if low is not None and low[1] < low[2] + GUARD_MARGIN_MM:
+            end = start + direction * (k - 1) * SEARCH_STEP_DEG
+            why = f"workspace guard '{low[0]}'"
+            break
+    if abs(end - start) < SEARCH_STEP_DEG / 2:
+        raise Refused(f"jog: {joint} {'+' if direction > 0 else '-'} would bring the arm "
+                      f"within {GUARD_MARGIN_MM:g} mm of its {why}")
+    return JogPlan(joint, index, direction, start, end,
+                   jog_velocity_deg_s * abs(speed_scale), why)
+
+
+def _lowest_guard(arm, chain, q_rad) -> tuple[str, float, float, str] | None:
+    """(guard, z of its lowest point, min_z, point) for the guard closest to being broken."""
+    points = kinematics.point_positions(chain, q_rad)
+    worst = None
+    for guard in arm.workspace.guards:
+        for name in guard.points:
+            z = float(points[name][2])
+            if worst is None or z - guard.min_z_mm < worst[1] - worst[2]:
+                worst = (guard.name, z, guard.min_z_mm, name)
+    return worst
+
+
+class Deadman:
+    """Renewed by the operator's face (any thread); checked by the loop every cycle."""
+
+    def __init__(self, clock, deadman_s: float) -> None:
+        self.clock = clock
+        self.deadman_s = deadman_s
+        self._lock = threading.Lock()
+        self._renewed = clock.now()
+        self.expired = False
+
+    def renew(self) -> None:
+        with self._lock:
+            self._renewed = self.clock.now()
+
+    def overdue(self) -> bool:
+        with self._lock:
+            return self.clock.now() - self._renewed > self.deadman_s
+
+    def idle_hook(self, abort: Callable[[str], None]) -> Callable[[float], None]:
+        """An executor idle hook: the first cycle after expiry posts an abort (controlled
+        stop). Never restarts anything."""
+        def hook(slack: float) -> None:
+            if not self.expired and self.overdue():
+                self.expired = True
+                abort(f"jog released: not renewed within {self.deadman_s * 1000:.0f} ms")
+        return hook
+
+
+def run_jog(executor, plan: JogPlan, deadman: Deadman) -> tuple[str, int, str]:
+    """Stream the jog with ``executor`` (owned by the caller); returns (status, exit code,
+    message). Any fault -> Halt (the executor's emergency Halt), exit 3."""
+    from seqrun.defaults import EXIT_FAULT, EXIT_OK
+    from seqrun.executor import OperatorAbort, _cause
+    from seqrun.planner import Limits
+    from seqrun.usermessages import user_message
+
+    arm = executor.arm
+    hook = deadman.idle_hook(executor.abort)
+    executor.idle_hooks.append(hook)
+    try:
+        m = executor.read_arm()
+        executor.check_states(m)
+        target = m.user_deg.copy()
+        target[plan.index] = plan.end_deg
+        velocity, acceleration = executor.limits_in_force.maxima()
+        limits = Limits.from_arm(arm, velocity_deg_s={plan.joint: plan.velocity_deg_s},
+                                 max_velocity_deg_s=velocity,
+                                 max_acceleration_deg_s2=acceleration)
+        executor.emit("jog_started", joint=plan.joint, direction=plan.direction,
+                      velocity_deg_s=round(plan.velocity_deg_s, 3),
+                      end_deg=round(plan.end_deg, 3), end_reason=plan.why_end)
+        try:
+            executor.move(target, [plan.index], limits,
+                          tolerance_deg=arm.control.position_tolerance_deg, timeout_s=None)
+            message = f"jog {plan.joint}: stopped at the end of its range ({plan.why_end})"
+        except OperatorAbort:  # the deadman or jog_stop: the arm holds after the stop
+            message = (f"jog {plan.joint}: released, controlled stop"
+                       if deadman.expired else f"jog {plan.joint}: stopped (controlled)")
+        executor.emit("jog_stopped", joint=plan.joint, reason=message,
+                      joints_deg=[round(float(x), 3) for x in executor.last.user_deg]
+                      if executor.last is not None else None)
+        return "passed", EXIT_OK, message
+    except Exception as exc:  # noqa: BLE001 - every failure, even a bug, halts
+        executor.emergency_halt()
+        cause, module = _cause(exc)
+        message = user_message(exc, arm)
+        if cause == "operator_halt":
+            return "aborted", 130, f"jog {plan.joint}: {message}"
+        executor.emit("fault", cause=cause, module=module, message=message, step=None,
+                      **executor._halt_fields())
+        return "failed", EXIT_FAULT, message
+    finally:
+        if hook in executor.idle_hooks:
+            executor.idle_hooks.remove(hook)
