@@ -217,6 +217,7 @@ def test_jog_over_http_moves_then_stops(client, setup):
 
 
 def test_save_pose_writes_a_pose_file(client, setup):
+    wait_for(lambda: client.get("/api/v1/status").json()["updated_at"] is not None)
     r = client.post("/api/v1/poses", json={"name": "bench_spot"})
     assert r.status_code == 200, r.text
     assert (setup.folder / "poses" / "bench_spot.yaml").is_file()

@@ -62,7 +62,41 @@ def test_seqrun_console_prints_its_url_serves_and_ends_on_ctrl_c(tmp_path):
         assert "finite" in json.load(refused.value)["error"]
         proc.send_signal(signal.SIGINT)
         out, _ = proc.communicate(timeout=30)
-        assert proc.returncode == 0, out
+        assert proc.returncode == 130, out  # Ctrl-C, as for every seqrun command
+        assert "ended by Ctrl-C" in out and "Traceback" not in out
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+def _post(url: str, path: str, body: dict | None = None) -> dict:
+    request = urllib.request.Request(url + "api/v1/" + path, method="POST",
+                                     data=json.dumps(body or {}).encode(),
+                                     headers={"Content-Type": "application/json"})
+    with urllib.request.urlopen(request, timeout=30) as r:
+        return json.load(r)
+
+
+@pytest.mark.slow
+def test_sigterm_during_a_move_halts_the_arm(tmp_path):
+    proc = subprocess.Popen([sys.executable, "-m", "seqrun", "console", "--sim", "--port", "0",
+                             "--log-dir", str(tmp_path)], cwd=ROOT, env=ENV,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        url = None
+        while url is None:
+            line = proc.stdout.readline()
+            assert line
+            found = re.search(r"(http://127\.0\.0\.1:\d+/)", line)
+            url = found.group(1) if found else None
+        _post(url, "arm-up")
+        _post(url, "home")
+        assert _post(url, "move/joints", {"joints": {"j1": 90}})["accepted"]
+        proc.send_signal(signal.SIGTERM)
+        out, _ = proc.communicate(timeout=30)
+        assert proc.returncode == 130, out
+        assert "ended by SIGTERM; Halt confirmed" in out, out
         assert "Traceback" not in out
     finally:
         if proc.poll() is None:

@@ -9,6 +9,7 @@ The web stack (FastAPI, uvicorn) is imported only when the command runs.
 
 from __future__ import annotations
 
+import signal
 from pathlib import Path
 from typing import Annotated, Optional
 
@@ -18,7 +19,7 @@ from seqrun.cli.app import app
 from seqrun.cli.common import (EXIT_FAULT, ArmOption, BitrateOption, BusKwargsOption,
                                ChannelOption, InterfaceOption, ResponseTimeoutOption,
                                SimOption, fail, load_arm_file, user_errors)
-from seqrun.defaults import DEFAULT_ARM
+from seqrun.defaults import DEFAULT_ARM, EXIT_OPERATOR_ABORT
 
 
 @app.command("console")
@@ -116,6 +117,28 @@ def console_command(
 
         from seqrun.console.server import serve
 
-        serve(application, sock, on_started=started)
+        # uvicorn shuts down gracefully on SIGINT/SIGTERM (the pages are disconnected, their
+        # motions stopped), then raises the signal again: Ctrl-C arrives here as
+        # KeyboardInterrupt, SIGTERM through this handler. SIGTERM halts, as for a run.
+        previous = signal.signal(signal.SIGTERM, _terminated)
+        try:
+            serve(application, sock, on_started=started)
+        except KeyboardInterrupt:
+            typer.echo("seqrun console: ended by Ctrl-C; anything still moving is stopped")
+            raise typer.Exit(EXIT_OPERATOR_ABORT) from None
+        except _Terminated:
+            result = session.halt("SIGTERM (seqrun console)")
+            typer.echo(f"seqrun console: ended by SIGTERM; {result.describe()}")
+            raise typer.Exit(EXIT_OPERATOR_ABORT) from None
+        finally:
+            signal.signal(signal.SIGTERM, previous)
     finally:
         session.close()  # controlled stop of anything still moving, then the bus
+
+
+class _Terminated(Exception):
+    """SIGTERM, raised again by uvicorn after its graceful shutdown."""
+
+
+def _terminated(signum, frame) -> None:  # noqa: ANN001 - a signal handler
+    raise _Terminated()

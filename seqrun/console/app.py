@@ -227,9 +227,9 @@ def build_router(console: Console) -> APIRouter:
 
     @api.post("/jog/stop", summary="End the jog (controlled stop)")
     def jog_stop(client: ClientHeader = None) -> Any:
-        result = session.jog_stop()
+        result = session.jog_stop()  # a controlled stop (the jog ends "aborted", 130)
         motions.jog_ended(client)
-        return _confirmed(result)
+        return jsonable(result)
 
     @api.post("/run", summary="Run a sequence (validated first; a run folder as seqrun run)")
     def run(body: models.RunBody, client: ClientHeader = None) -> dict[str, Any]:

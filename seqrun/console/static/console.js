@@ -320,7 +320,23 @@ $("#move-from-arm").addEventListener("click", () => {
   if (state.status) setSliders(state.status.joints.map((j) => j.position_deg));
   updateGhost();
 });
-$("#cmd-move").addEventListener("click", () => command("MOVE", "POST", "/move/joints", { joints: sliderTargets() }));
+// MOVE sends the joints whose target differs from where they are: the others stay (and a
+// joint that stands just outside its limits, as j4 at Park, is not asked to go there).
+function changedTargets() {
+  const targets = sliderTargets();
+  const now = state.status ? state.status.joints : [];
+  const changed = {};
+  for (const [name, value] of Object.entries(targets)) {
+    const joint = now.find((j) => j.name === name);
+    if (!joint || joint.position_deg === null || Math.abs(value - joint.position_deg) > 0.05) changed[name] = value;
+  }
+  return changed;
+}
+$("#cmd-move").addEventListener("click", () => {
+  const joints = changedTargets();
+  if (Object.keys(joints).length === 0) { say("MOVE: every target is where the arm is already"); return; }
+  command("MOVE", "POST", "/move/joints", { joints });
+});
 $("#cmd-allvel").addEventListener("click", () => {
   const joints = {};
   document.querySelectorAll(".vel-box").forEach((b) => { if (b.value !== "") joints[b.dataset.joint] = Number(b.value); });
