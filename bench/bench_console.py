@@ -94,14 +94,8 @@ def run_opsafe(setup) -> tuple[list[float], Path | None]:
     return (event_periods(folder) if folder else []), folder
 
 
-def back_to_park(setup) -> None:
-    setup.session.reset()
-    setup.session.move_to_pose("park").wait(120)
-
-
 def telemetry(browser, setup, server) -> dict:
-    baseline, _ = run_opsafe(setup)
-    back_to_park(setup)
+    baseline, _ = run_opsafe(setup)  # (the second run starts at Op-safe: via Totem again)
     pages = [open_page(browser, server.url) for _ in range(3)]
     rates: list[list[float]] = [[] for _ in pages]
     moving = threading.Event()

@@ -185,6 +185,7 @@ def test_halt_sends_the_broadcast_and_confirms(client, setup):
     assert client.post("/api/v1/reset").status_code == 200
 
 
+@pytest.mark.slow  # real-time motion for several seconds
 def test_move_to_joints_and_pose_with_velocities(client, setup):
     armed(client)
     r = client.post("/api/v1/velocities", json={"joints": {"j1": 20}})
@@ -234,6 +235,7 @@ def test_sequence_check_shows_findings_and_the_dry_run(client):
     assert bad["errors"][0]["text"].startswith(bad["errors"][0]["file"] + ":4:")
 
 
+@pytest.mark.slow  # real-time motion for several seconds
 def test_a_sequence_with_a_confirm_runs_to_the_end_and_is_listed(client, setup):
     with client.websocket_connect(LIVE) as ws:
         hello = ws.receive_json()
@@ -269,6 +271,7 @@ def test_a_sequence_with_a_confirm_runs_to_the_end_and_is_listed(client, setup):
             catalog.run_file(run_id, name)
 
 
+@pytest.mark.slow  # real-time motion for several seconds
 def test_pause_resume_and_abort_a_run(client, setup):
     r = client.post("/api/v1/run", json={"sequence": "opsafe.yaml"})
     assert r.status_code == 200, r.text

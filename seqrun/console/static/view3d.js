@@ -108,8 +108,8 @@ export class ArmView {
     THREE.Object3D.DEFAULT_UP.set(0, 0, 1);
     this.camera = new THREE.PerspectiveCamera(40, 1, 10, 20000);
     this.camera.up.set(0, 0, 1);
-    this.target = new THREE.Vector3(0, 0, 450);
-    this.orbit = { azimuth: -0.9, elevation: 0.35, distance: 2600 };
+    this.target = new THREE.Vector3(0, 0, 420);
+    this.orbit = { azimuth: -0.9, elevation: 0.35, distance: 2000 };
     this.scene.add(new THREE.HemisphereLight(0xffffff, 0x334455, 2.2));
     const sun = new THREE.DirectionalLight(0xffffff, 1.6);
     sun.position.set(1000, -1500, 2500);
