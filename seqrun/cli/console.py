@@ -103,6 +103,7 @@ def console_command(
 
     session = ArmSession(arm, connection, project=project, log_root=runs, zero=zero,
                          response_timeout_s=timeout)
+    _serve_control_socket(connection, session)
     try:
         application = create_app(session, Catalog(project, runs), arm, token=token,
                                  local_only=is_loopback(listen))
@@ -142,3 +143,17 @@ class _Terminated(Exception):
 
 def _terminated(signum, frame) -> None:  # noqa: ANN001 - a signal handler
     raise _Terminated()
+
+
+def _serve_control_socket(connection, session) -> None:
+    """While the console owns a shared bus, ``seqrun status`` and ``seqrun halt`` in another
+    terminal ask this session over the bus claim's control socket (one controller per bus:
+    the connection holds the claim when the bus is shared; nothing to serve otherwise)."""
+    claim = getattr(connection, "claim", None)
+    if claim is None:
+        return
+    try:
+        from seqrun.service.control_socket import serve_control
+    except ImportError:  # pragma: no cover - a tree without the control socket
+        return
+    serve_control(claim, session.control_handler())
