@@ -152,8 +152,10 @@ def _serve_control_socket(connection, session) -> None:
     claim = getattr(connection, "claim", None)
     if claim is None:
         return
+    import importlib
+
     try:
-        from seqrun.service.control_socket import serve_control
+        control_socket = importlib.import_module("seqrun.service.control_socket")
     except ImportError:  # pragma: no cover - a tree without the control socket
         return
-    serve_control(claim, session.control_handler())
+    control_socket.serve_control(claim, session.control_handler())

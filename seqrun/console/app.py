@@ -165,9 +165,9 @@ def build_router(console: Console) -> APIRouter:
              summary="Validation findings and the dry-run report from the arm's position now")
     def check(name: str) -> dict[str, Any]:
         now = session.status()
-        start: dict[str, float] | None = dict(now.joints_deg)
-        if any(v is None for v in start.values()):
-            start = None  # nothing measured yet: from Park, as seqrun validate
+        measured = dict(now.joints_deg)
+        # nothing measured yet: from Park, as seqrun validate
+        start = None if any(v is None for v in measured.values()) else measured
         # An arm that is up (every module homed, none halted or in error) is dry-run as
         # such, so that a sequence without the start-up steps is checked as it would run.
         up = all("HOME_OK" in j.flags and not {"HALTED", "ERROR"} & set(j.flags)
@@ -307,8 +307,8 @@ async def live(console: Console, ws: WebSocket) -> None:
             op, msg_id = message["op"], message.get("id")
             try:
                 if op == "jog":
-                    body = models.JogBody(joint=message.get("joint"),
-                                          speed_scale=message.get("speed_scale"))
+                    body = models.JogBody.model_validate(
+                        {k: message.get(k) for k in ("joint", "speed_scale")})
                     await asyncio.to_thread(console.session.jog, body.joint, body.speed_scale)
                     console.motions.started(client, "jog")
                 else:
@@ -326,10 +326,10 @@ async def live(console: Console, ws: WebSocket) -> None:
     def halt_now(msg_id: Any, reason: str) -> None:
         def run() -> None:
             try:
-                result = {"ok": True, "result": console.halt(reason)}
+                answer = reply(msg_id, True, result=console.halt(reason))
             except Exception as exc:  # noqa: BLE001 - the page must hear that STOP failed
-                result = {"ok": False, "error": one_line(f"Halt failed: {exc}")}
-            asyncio.run_coroutine_threadsafe(reply(msg_id, **result), loop)
+                answer = reply(msg_id, False, error=one_line(f"Halt failed: {exc}"))
+            asyncio.run_coroutine_threadsafe(answer, loop)
         threading.Thread(target=run, name="console-halt", daemon=True).start()
 
     await send(dumps({"type": "hello", "client": client, "api_version": 1,

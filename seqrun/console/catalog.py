@@ -33,7 +33,7 @@ class Catalog:
         """Every pose file on the project's pose path (campaign first, then the shipped)."""
         from seqrun.poses import available_poses, load_pose
 
-        found = []
+        found: list[dict[str, Any]] = []
         for name, path in available_poses(self.project.pose_path).items():
             try:
                 pose = load_pose(path)
@@ -92,7 +92,8 @@ class Catalog:
         try:
             arm = load_arm(loaded.arm_path)
             start = (dict(start_deg) if start_deg is not None
-                     else pose_joints_deg(START_POSE, loaded.pose_path or loaded.poses_dir))
+                     else pose_joints_deg(START_POSE,  # as seqrun validate: Park
+                                          loaded.pose_path or loaded.poses_dir))  # type: ignore[arg-type]
         except SequenceInvalid as exc:
             errors = list(errors) + list(exc.errors)
             out["errors"] = [e.as_dict() | {"text": str(e)} for e in sort_errors(errors)]
