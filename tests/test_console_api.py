@@ -359,6 +359,23 @@ def test_a_page_that_goes_away_stops_its_move(client, setup):
     assert not setup.wire.halts()  # a controlled stop, not a Halt
 
 
+def test_a_page_gone_silent_during_its_move_is_taken_as_gone(client, setup):
+    """No TCP close (a tablet off the Wi-Fi): 2 s without a message during its move."""
+    from seqrun.console.app import PAGE_SILENCE_S
+
+    armed(client)
+    with client.websocket_connect(LIVE) as ws:
+        page = ws.receive_json()["client"]
+        r = client.post("/api/v1/move/joints", json={"joints": {"j1": 120}},
+                        headers={"X-Seqrun-Client": page})
+        assert r.status_code == 200, r.text
+        started = time.monotonic()
+        status = wait_for(lambda: (s := client.get("/api/v1/status").json())["activity"]
+                          == "idle" and s, timeout=PAGE_SILENCE_S + 5)
+        assert time.monotonic() - started < PAGE_SILENCE_S + 3
+    assert 1.0 < status["joints"][0]["position_deg"] < 100  # stopped, far from 120
+
+
 def test_a_move_from_a_script_without_a_page_is_not_tied_to_a_connection(client, setup):
     armed(client)
     with client.websocket_connect(LIVE) as ws:

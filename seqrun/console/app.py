@@ -36,6 +36,9 @@ from seqrun.errors import Refused, SeqrunError, UserInputError
 log = logging.getLogger(__name__)
 
 API = "/api/v1"
+#: A page sends something (a ping at least) every 0.5 s; one silent for this long while a
+#: motion it started is under way is taken as gone (its motion is stopped).
+PAGE_SILENCE_S = 2.0
 STATIC = Path(__file__).resolve().parent / "static"
 ClientHeader = Annotated[str | None, Header(alias="X-Seqrun-Client")]
 
@@ -339,7 +342,16 @@ async def live(console: Console, ws: WebSocket) -> None:
     tasks = [asyncio.create_task(pump()), asyncio.create_task(worker())]
     try:
         while True:
-            raw = await ws.receive_text()
+            try:
+                raw = await asyncio.wait_for(ws.receive_text(), PAGE_SILENCE_S)
+            except asyncio.TimeoutError:
+                # A page that went silent (a tablet off the Wi-Fi: no TCP close for a long
+                # time) while its motion is under way is taken as gone.
+                if await asyncio.to_thread(console.motions.owns_motion, client):
+                    log.warning("console page %s silent for %.1f s during its motion",
+                                client, PAGE_SILENCE_S)
+                    break
+                continue
             try:
                 message = json.loads(raw)
                 if not isinstance(message, dict) or not isinstance(message.get("op"), str):
@@ -355,7 +367,8 @@ async def live(console: Console, ws: WebSocket) -> None:
             elif op in ("jog", "jog_stop"):
                 ops.put_nowait(message)
             elif op == "ping":
-                await reply(message.get("id"), True)
+                if "id" in message:
+                    await reply(message["id"], True)
             else:
                 await reply(message.get("id"), False, error=f"unknown op '{op}'")
     except WebSocketDisconnect:
@@ -367,6 +380,8 @@ async def live(console: Console, ws: WebSocket) -> None:
             task.cancel()
         console.telemetry.detach(feed)
         await asyncio.to_thread(console.motions.page_gone, client)
+        with contextlib.suppress(Exception):  # already closed by the page, or not
+            await ws.close()
 
 
 def _first_error(exc: Exception) -> str:

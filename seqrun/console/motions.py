@@ -44,6 +44,12 @@ class Motions:
                     and self._owned.client == client:
                 self._owned = None
 
+    def owns_motion(self, client: str) -> bool:
+        """``client`` started the motion under way."""
+        with self._lock:
+            owned = self._owned
+        return owned is not None and owned.client == client and self.under_way(owned)
+
     def under_way(self, owned: _Owned) -> bool:
         if owned.kind == "jog":
             return self.session.status().activity == "jogging"

@@ -94,8 +94,14 @@ window.addEventListener("keyup", (e) => {
 function connect() {
   const ws = new WebSocket(`${location.protocol === "https:" ? "wss" : "ws"}://${location.host}${API}/live`);
   state.ws = ws;
-  ws.onopen = () => { $("#conn").textContent = "live"; $("#conn").className = "badge on"; };
+  // A ping every 0.5 s: the server takes a page silent for 2 s during its motion as gone.
+  let ping = null;
+  ws.onopen = () => {
+    $("#conn").textContent = "live"; $("#conn").className = "badge on";
+    ping = setInterval(() => { if (ws.readyState === WebSocket.OPEN) ws.send('{"op":"ping"}'); }, 500);
+  };
   ws.onclose = () => {
+    clearInterval(ping);
     $("#conn").textContent = "offline"; $("#conn").className = "badge off";
     state.client = null;
     releaseJog(false);
