@@ -528,6 +528,16 @@ class Executor:
         """The short state of every joint's module, for the event log (compact ints)."""
         return [int(m.short_state.get(module, 0)) for module in self.modules]
 
+    def _operator_halt_seen(self, exc: Exception) -> Exception:
+        """A module reporting HALTED while an operator's Halt is posted is that Halt (an
+        arm session sends the broadcast from the operator's thread at once and posts the
+        request; the loop may read HALTED before it takes the request): exit 130."""
+        if (isinstance(exc, RunAborted) and exc.cause == "halted" and self._halt_requested
+                and self._halt.cause == OPERATOR_HALT):
+            return RunAborted(OPERATOR_HALT, f"Halt requested by the operator "
+                                             f"({self._halt.reason})")
+        return exc
+
     def _check_halt_request(self) -> None:
         if self._halt_requested:
             halt = self._halt
@@ -1106,6 +1116,7 @@ class Executor:
                 break
             except Exception as exc:  # noqa: BLE001 - every failure, even a bug, halts
                 self.emergency_halt()
+                exc = self._operator_halt_seen(exc)
                 cause, module = _cause(exc)
                 if cause == "internal_error":
                     self.emit("internal_error", traceback=traceback.format_exc())

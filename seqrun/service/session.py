@@ -402,6 +402,10 @@ class ArmSession:
                          self.connection.description, bool(self.connection.is_simulator),
                          activity, run, updated, stale, message)
 
+    def status_dict(self) -> dict[str, Any]:
+        """:meth:`status` as a JSON-ready dict (the control socket's ``status`` op)."""
+        return self.status().as_dict()
+
     @property
     def _chain(self):
         chain = self.__dict__.get("_chain_cache")
@@ -501,17 +505,19 @@ class ArmSession:
         from seqrun.errors import BusError
         from seqrun.halt import halt_and_confirm
 
+        # The running activity's inbox first (a deque append: no lock, no wait), so that
+        # the loop takes the modules' HALTED state for the operator's Halt (exit 130),
+        # then the broadcast from this thread, whatever holds the client.
+        executor, activity = self._executor, self._activity
+        if executor is not None:
+            executor.halt(reason)
         sent_error = None
         try:
             self.client.halt_now(wait=False)
         except BusError as exc:
             sent_error = str(exc)
-        # No lock before the broadcast; from here on the session's own bookkeeping.
-        executor, activity = self._executor, self._activity
         with self._state:
             self._halted = reason
-        if executor is not None:
-            executor.halt(reason)  # the loop halts and confirms it (exit 130)
         self._withdraw_questions()
         result: HaltConfirmation | None = None
         if activity is not None:
@@ -749,6 +755,7 @@ class ArmSession:
         def work() -> ActivityResult:
             executor = self._new_executor(loaded)
             result = executor.run(loaded)
+            self._poll_once()
             return _result(kind, result)
 
         return self._launch(activity, work, background=True)
@@ -837,6 +844,7 @@ class ArmSession:
         def work() -> ActivityResult:
             executor = self._new_executor()
             status, code, message = run_jog(executor, plan, deadman)
+            self._poll_once()  # at rest: the modules' own velocities, not the estimate
             return ActivityResult("jog", status, code, message)
 
         return self._launch(activity, work, background=True)
@@ -886,8 +894,9 @@ class ArmSession:
             measured = all(x is not None for x in self._joints)
             start = ({j.name: float(x) for j, x in zip(self.arm.joints, self._joints)}
                      if measured else None)
-        if first_step == 1:
-            check = validate_sequence(loaded, self.arm, start, speed=speed)
+        if first_step == 1:  # the executor checks again from the arm's measured state
+            check = validate_sequence(loaded, self.arm, start, speed=speed,
+                                      started=bool(self._homed))
             if check.errors:
                 more = len(check.errors) - 1
                 raise Refused(str(check.errors[0]) + (f" (and {more} more)" if more else ""))

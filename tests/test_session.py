@@ -1,0 +1,377 @@
+"""The arm session (seqrun/service/session.py) on the simulator, at virtual time where the
+outcome must be exact: refusals that send nothing, the jog's deadman, halt during a run and
+never behind a busy lock or a slow subscriber, questions answered from another thread."""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from seqrun.arm import load_arm
+from seqrun.clock import RealClock, VirtualClock
+from seqrun.connection import open_connection
+from seqrun.errors import Refused
+from seqrun.powercube.protocol import BROADCAST_ID
+from seqrun.service import ArmSession
+
+ROOT = Path(__file__).resolve().parents[1]
+ARM = ROOT / "arms" / "lwa3.yaml"
+MOTION_COMMANDS = {0x0B}  # SetMotion (FRAMP, FSTEP, TargetVel ...): anything that moves
+
+
+def open_session(tmp_path: Path, clock=None, **kw) -> ArmSession:
+    connection = open_connection(force_sim=True, clock=clock or VirtualClock())
+    return ArmSession(load_arm(ARM), connection, status_hz=kw.pop("status_hz", 0),
+                      log_root=tmp_path / "runs", poses_dir=ROOT / "poses", **kw)
+
+
+class Frames:
+    """Every frame the session's client sends (its frame listener), by kind."""
+
+    def __init__(self, session: ArmSession) -> None:
+        self.sent: list = []
+        session.client.add_frame_listener(self.on_frame)
+
+    def on_frame(self, msg) -> None:
+        if not msg.is_rx:
+            self.sent.append((time.monotonic(), msg.arbitration_id, bytes(msg.data)))
+
+    def motion(self) -> list:
+        return [f for f in self.sent if f[1] != BROADCAST_ID and f[2][:1] == b"\x0b"]
+
+    def halts(self) -> list:
+        return [f for f in self.sent if f[1] == BROADCAST_ID and f[2][:1] == b"\x02"]
+
+
+@pytest.fixture
+def session(tmp_path):
+    s = open_session(tmp_path)
+    s.poll_status()
+    assert s.arm_up().ok and s.home().ok
+    s.poll_status()
+    yield s
+    s.close()
+
+
+def events_of(sub) -> list:
+    return sub.drain()
+
+
+# ---------------------------------------------------------------------- status
+def test_status_comes_from_the_latest_measurement_and_never_reads_the_bus(tmp_path):
+    s = open_session(tmp_path)
+    try:
+        frames = Frames(s)
+        before = s.status()
+        assert before.updated_at is None and before.activity == "idle"
+        assert frames.sent == []  # status() alone sends nothing
+        polled = s.poll_status()
+        assert polled.joints_deg["j2"] == pytest.approx(-90.0)  # Park
+        assert polled.end_effector_mm == pytest.approx((365.903, -0.1, 47.921), abs=0.01)
+        assert polled.flags["j1"] and not polled.fault
+        assert polled.simulator and "SIMULATOR" in polled.bus
+        sent = len(frames.sent)
+        assert s.status().joints_deg == polled.joints_deg and len(frames.sent) == sent
+        assert s.status_dict()["v"] == 1
+    finally:
+        s.close()
+
+
+def test_the_idle_poll_runs_by_itself(tmp_path):
+    s = open_session(tmp_path, status_hz=20)
+    try:
+        deadline = time.monotonic() + 5
+        while s.status().updated_at is None and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert s.status().joints_deg["j4"] == pytest.approx(-120.32)
+    finally:
+        s.close()
+
+
+# ---------------------------------------------------------------------- refusals
+BAD_MOVES = [
+    ({"j9": 10}, "unknown joint"),
+    ({"j1": float("nan")}, "not a finite number"),
+    ({"j1": "ten"}, "not a number"),
+    ({"j1": 200}, "outside its limits"),
+    ({"j3": 10}, "locked"),
+    ({}, "at least one joint"),
+]
+
+
+@pytest.mark.parametrize("targets,why", BAD_MOVES)
+def test_a_bad_joint_target_is_refused_and_nothing_moves(session, targets, why):
+    frames = Frames(session)
+    with pytest.raises(Refused, match=why):
+        session.move_to_joints(targets)
+    assert frames.motion() == [] and session.activity is None
+
+
+def test_refusals_for_poses_velocities_jogs_and_answers(session):
+    frames = Frames(session)
+    cases = [
+        (lambda: session.move_to_pose("nowhere"), "nowhere"),
+        (lambda: session.move_to_pose("totem", velocity_scale=2), r"\(0, 1\]"),
+        (lambda: session.set_move_velocities({"j1": -1}), "positive"),
+        (lambda: session.set_move_velocities({"j1": 1e6}), "above its limit"),
+        (lambda: session.set_move_velocities({"j1": math.inf}), "finite"),
+        (lambda: session.set_move_velocities({"jx": 1}), "unknown joint"),
+        (lambda: session.jog("j1", 0), "not be 0"),
+        (lambda: session.jog("j1", 1.5), r"\[-1, 1\]"),
+        (lambda: session.jog("j1", float("nan")), "finite"),
+        (lambda: session.jog("j3", 0.5), "locked"),
+        (lambda: session.jog("j9", 0.5), "unknown joint"),
+        # Park: j4 stands beyond its lower limit, the tool 48 mm above the desk.
+        (lambda: session.jog("j4", -0.5), "lower limit"),
+        (lambda: session.answer("q99", True), "no open question"),
+        (lambda: session.pause(), "no sequence is running"),
+        (lambda: session.step(), "no step is waiting"),
+        (lambda: session.save_pose("bad name!"), "not a pose name"),
+        (lambda: session.run_sequence(ROOT / "sequences" / "nothere.yaml"), "nothere"),
+        (lambda: session.run_sequence(ROOT / "sequences" / "opsafe.yaml", speed=0), r"\(0, 1\]"),
+    ]
+    for call, why in cases:
+        with pytest.raises(Refused, match=why):
+            call()
+    assert frames.motion() == [] and session.activity is None
+
+
+def test_an_invalid_sequence_is_refused_with_its_location(session, tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("name: bad\ndescription: x\nsteps:\n  - move: {joints: {j1: 400}}\n")
+    with pytest.raises(Refused, match=r"bad.yaml:4:\d+: .*j1"):
+        session.run_sequence(bad)
+
+
+def test_a_second_activity_is_refused_while_one_runs(session):
+    frames = Frames(session)
+    sub = session.subscribe(maxsize=100_000)
+    move = session.move_to_joints({"j1": 60})
+    with pytest.raises(Refused, match="under way"):
+        session.move_to_joints({"j1": -60})
+    with pytest.raises(Refused, match="under way"):
+        session.reset()
+    assert move.wait(60).ok
+    planned = [e for e in events_of(sub) if e.type == "move_planned"]
+    assert len(planned) == 1 and planned[0].target_deg[0] == pytest.approx(60)
+    assert frames.motion()
+
+
+def test_a_move_while_halted_is_refused_until_an_explicit_reset(session):
+    assert session.halt("test").confirmed
+    assert session.status().activity == "halted"
+    frames = Frames(session)
+    for call in (lambda: session.move_to_joints({"j1": 10}), lambda: session.jog("j1", 0.5),
+                 lambda: session.move_to_pose("totem"), lambda: session.home()):
+        with pytest.raises(Refused, match="halted"):
+            call()
+    assert frames.motion() == []
+    assert session.reset().confirmed
+    session.poll_status()
+    assert session.status().activity == "idle"
+    assert session.move_to_joints({"j1": 5}).wait(60).ok
+
+
+def test_moves_use_the_console_velocities(session):
+    session.set_move_velocities({"j1": 4.0})
+    sub = session.subscribe()
+    assert session.move_to_joints({"j1": 8}).wait(60).ok
+    planned = next(e for e in events_of(sub) if e.type == "move_planned")
+    keep = 1 - session.arm.control.tracking_reserve
+    assert planned.velocity_limit_deg_s[0] == pytest.approx(4.0 * keep, abs=1e-3)
+    # 8 degrees at 4 deg/s (less the tracking reserve) take at least two seconds.
+    assert planned.duration_s >= 2.0
+    assert session.status().joints_deg["j1"] == pytest.approx(8, abs=0.1)
+
+
+def test_a_move_to_a_pose_goes_through_the_validator_and_executor(session):
+    sub = session.subscribe(maxsize=100_000)
+    result = session.move_to_pose("totem").wait(120)
+    assert result.ok and result.run_result.steps[0].kind == "move"
+    kinds = [e.type for e in events_of(sub)]
+    assert kinds.index("preflight") < kinds.index("move_planned") < kinds.index("run_finished")
+    assert "setpoint" in kinds and "measurement" in kinds
+    assert all(abs(v) < 0.1 for v in session.status().joints_deg.values())
+
+
+# ---------------------------------------------------------------------- jog
+PARK = [0.0, -90.0, 0.0, -120.32, 0.0, 115.74, 0.0]
+
+
+def test_a_jog_ends_short_of_the_workspace_guard_and_is_refused_at_it():
+    import numpy as np
+
+    from seqrun.service.jog import GUARD_MARGIN_MM, plan_jog
+
+    arm = load_arm(ARM)
+    down = plan_jog(arm, "j2", -0.5, np.array(PARK), 10.0)
+    assert "desk" in down.why_end and -100 < down.end_deg < -90
+    assert down.velocity_deg_s == pytest.approx(5.0)
+    up = plan_jog(arm, "j2", 0.5, np.array(PARK), 10.0)
+    assert up.why_end == "joint limit" and up.end_deg == pytest.approx(119.0)
+    at_guard = np.array(PARK)
+    at_guard[1] = down.end_deg - 0.25  # within the guard's margin
+    with pytest.raises(Refused, match=f"within {GUARD_MARGIN_MM:g} mm of its workspace guard"):
+        plan_jog(arm, "j2", -0.5, at_guard, 10.0)
+    below = np.array(PARK)
+    below[1] = -100.0  # the tool below the desk's plane
+    with pytest.raises(Refused, match="outside its workspace guard 'desk'"):
+        plan_jog(arm, "j1", 0.5, below, 10.0)
+
+
+def test_a_jog_not_renewed_stops_after_the_deadman_time(session):
+    sub = session.subscribe(maxsize=100_000)
+    start = session.status().joints_deg["j1"]
+    result = session.jog("j1", 0.5).wait(60)
+    assert result.ok and "released" in result.message
+    events = events_of(sub)
+    begun = next(e for e in events if e.type == "jog_started")
+    stop = next(e for e in events if e.type == "controlled_stop")
+    # The deadman (200 ms) is checked every control cycle (10 ms).
+    assert 0.2 <= stop.clock_s - begun.clock_s <= 0.2 + 2 * 0.01 + 1e-9
+    assert [e.type for e in events].count("abort_requested") == 1
+    moved = session.status().joints_deg["j1"] - start
+    assert 0 < moved < 5  # a little, in the commanded direction, then held
+    assert all(v == 0.0 for v in session.status().velocities_deg_s.values())
+    # Nothing restarts by itself: no motion command after the stop ended.
+    assert next(i for i, e in enumerate(events) if e.type == "holding") > \
+        max(i for i, e in enumerate(events) if e.type == "setpoint")
+
+
+def test_a_renewed_jog_keeps_moving_and_stops_when_released(tmp_path):
+    s = open_session(tmp_path, clock=RealClock())
+    try:
+        s.poll_status()
+        assert s.arm_up().ok and s.home().ok
+        s.poll_status()
+        t0 = time.monotonic()
+        activity = s.jog("j1", 0.5)
+        while time.monotonic() - t0 < 0.8:
+            assert s.jog("j1", 0.5) is activity  # renews
+            time.sleep(0.05)
+        released = time.monotonic()
+        result = activity.wait(10)
+        assert result.ok and "released" in result.message
+        assert time.monotonic() - released < 2.0
+        assert s.status().joints_deg["j1"] > 1.0
+        with pytest.raises(Refused, match="another jog"):
+            s.jog("j1", 0.5) if s.activity is not None else (_ for _ in ()).throw(
+                Refused("another jog (already ended)"))
+    finally:
+        s.close()
+
+
+# ---------------------------------------------------------------------- halt
+def test_halt_during_a_run_stops_it_and_is_confirmed(session):
+    sub = session.subscribe(maxsize=100_000)
+    run = session.run_sequence(ROOT / "sequences" / "totem.yaml", assume_yes=True)
+    while True:  # wait for the long move to stream
+        event = sub.get(timeout=30)
+        assert event is not None
+        if event.type == "setpoint":
+            break
+    assert session.status().activity == "running"
+    confirmation = session.halt("STOP from a test")
+    assert confirmation.sent and confirmation.confirmed
+    result = run.wait(30)
+    assert result.exit_code == 130 and result.run_dir is not None
+    assert (result.run_dir / "events.jsonl").exists()
+    assert session.status().activity == "halted"
+    with pytest.raises(Refused, match="halted"):
+        session.move_to_joints({"j1": 1})
+
+
+def test_halt_is_not_held_up_by_a_busy_client_or_a_slow_subscriber(session):
+    frames = Frames(session)
+    session.events.add_listener(lambda event: time.sleep(1.0), "sleeps 1 s per event")
+    release = threading.Event()
+    held = threading.Event()
+
+    def hold_the_client() -> None:  # another thread in the middle of a long exchange
+        with session.client._lock:
+            held.set()
+            release.wait(5)
+
+    threading.Thread(target=hold_the_client, daemon=True).start()
+    assert held.wait(5)
+    done = {}
+    t0 = time.monotonic()
+    caller = threading.Thread(target=lambda: done.setdefault("r", session.halt("STOP")))
+    caller.start()
+    deadline = time.monotonic() + 2
+    while not frames.halts() and time.monotonic() < deadline:
+        time.sleep(0.001)
+    assert frames.halts(), "no Halt frame while the client was busy"
+    assert frames.halts()[0][0] - t0 < 0.1
+    release.set()  # the confirmation reads wait for the exchange, the broadcast did not
+    caller.join(10)
+    assert done["r"].confirmed
+
+
+# ---------------------------------------------------------------------- questions
+def answer_every_question(session, yes: bool) -> threading.Thread:
+    sub = session.subscribe()
+
+    def answer() -> None:
+        for event in sub:
+            if event.type == "confirm_requested":
+                session.answer(event.question_id, yes)
+            if event.type == "activity_finished":
+                return
+
+    thread = threading.Thread(target=answer, daemon=True)
+    thread.start()
+    return thread
+
+
+def test_a_confirm_step_is_answered_from_another_thread(session):
+    answering = answer_every_question(session, True)
+    result = session.run_sequence(ROOT / "sequences" / "totem.yaml").wait(120)
+    answering.join(5)
+    assert result.ok, result.message
+    assert result.run_result.steps[-1].status == "passed"
+
+
+def test_a_declined_question_is_an_operator_abort(session):
+    answering = answer_every_question(session, False)
+    result = session.run_sequence(ROOT / "sequences" / "totem.yaml").wait(120)
+    answering.join(5)
+    assert result.exit_code == 130 and "declined" in result.message
+
+
+def test_step_mode_waits_for_step_and_abort_withdraws_the_question(session):
+    sub = session.subscribe(maxsize=100_000)
+    run = session.run_sequence(ROOT / "sequences" / "totem.yaml", step_mode=True,
+                               assume_yes=True)
+    asked = []
+    while len(asked) < 2:
+        event = sub.get(timeout=30)
+        assert event is not None
+        if event.type == "confirm_requested":
+            asked.append(event)
+            if len(asked) == 1:
+                session.step()
+    assert "step 2/" in asked[1].text
+    session.abort("test")
+    result = run.wait(30)
+    assert result.exit_code == 130 and session.pending_questions() == {}
+
+
+# ---------------------------------------------------------------------- poses
+def test_save_pose_writes_the_measured_joints(session, tmp_path):
+    from seqrun.poses import load_pose
+
+    assert session.move_to_joints({"j1": 12.5}).wait(60).ok
+    session.poll_status()
+    session.project = None
+    path = session.save_pose("here", description="test")
+    try:
+        assert load_pose(path).joints_deg["j1"] == pytest.approx(12.5, abs=0.05)
+        with pytest.raises(Refused, match="exists"):
+            session.save_pose("here")
+    finally:
+        path.unlink()
