@@ -215,6 +215,7 @@ def test_jog_over_http_moves_then_stops(client, setup):
     time.sleep(0.3)
     assert joint(client, "j1") == pytest.approx(start + moved, abs=0.2)  # it stays stopped
     assert stopped["activity"] == "idle"
+    assert not setup.wire.halts()  # a controlled stop, never a Halt (and a Reset)
 
 
 def test_save_pose_writes_a_pose_file(client, setup):
@@ -338,8 +339,9 @@ def test_websocket_jog_hold_and_release(client, setup):
             if m["type"] == "reply":
                 replies[m["id"]] = m
         assert all(r["ok"] for r in replies.values()), replies
-    idle(client)
+    assert idle(client)["activity"] == "idle"
     assert joint(client, "j2") - start > 1.0
+    assert not setup.wire.halts()
 
 
 def test_a_page_that_goes_away_stops_its_move(client, setup):
