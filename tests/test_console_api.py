@@ -62,7 +62,8 @@ def refused(response, status: int, *words: str) -> str:
 
 # ------------------------------------------------------------------------- reading
 def test_status_arm_poses_sequences_and_openapi(client, setup):
-    status = client.get("/api/v1/status").json()
+    status = wait_for(lambda: (s := client.get("/api/v1/status").json())["updated_at"]
+                      is not None and s)  # the session's first reading
     assert status["simulator"] is True
     assert [j["name"] for j in status["joints"]] == setup.arm.joint_names
     assert status["joints"][1]["position_deg"] == pytest.approx(-90.0, abs=0.05)  # Park

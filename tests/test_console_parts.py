@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import threading
 import time
 
 import pytest
@@ -111,7 +112,11 @@ def test_a_slow_page_gets_the_newest_status_and_every_event_in_order():
         finally:
             telemetry.stop()
 
-    batch = asyncio.run(scenario())
+    out: list = []  # its own thread: Playwright's sync API may own this thread's loop
+    worker = threading.Thread(target=lambda: out.append(asyncio.run(scenario())))
+    worker.start()
+    worker.join(30)
+    batch = out[0]
     messages = [json.loads(m) for m in batch]
     events = [m["event"]["label"] for m in messages if m["type"] == "event"]
     statuses = [m for m in messages if m["type"] == "status"]
