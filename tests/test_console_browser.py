@@ -121,6 +121,17 @@ def test_stop_click_esc_and_space_send_the_halt(page, live):
         wait_for(lambda: setup.wire.halts(before), timeout=5)
     page.wait_for_function("window.seqrunConsole.status.activity === 'halted'")
     assert page.text_content("#activity").startswith("halted")
+    # The modules' HALTED shows in red and stays latched after the Reset until acknowledged.
+    page.wait_for_function("window.seqrunConsole.status.joints.every(j => j.fault)")
+    assert "HALTED" in page.text_content("#tlm-j1 .flags")
+    assert "fault" in page.get_attribute("#tlm-j1", "class")
+    page.click("#cmd-reset")
+    page.wait_for_function("window.seqrunConsole.status.joints.every(j => !j.fault)",
+                           timeout=10000)
+    assert "latched" in page.get_attribute("#tlm-j1", "class")
+    assert "was" in page.text_content("#tlm-j1 .flags")
+    page.click("#ack-faults")
+    assert page.get_attribute("#tlm-j1", "class") in ("", None)
 
 
 def test_jog_hold_moves_and_release_stops(page, live):
