@@ -407,7 +407,9 @@ def create_app(session: Any, catalog: Catalog, arm: Any, *, token: str | None = 
             console.telemetry.stop()
 
     app = FastAPI(title="seqrun console", version="1", lifespan=lifespan,
-                  openapi_url=f"{API}/openapi.json", docs_url=f"{API}/docs", redoc_url=None,
+                  # No Swagger UI: it loads its scripts from a CDN (the facility has no
+                  # internet); the OpenAPI document itself is served.
+                  openapi_url=f"{API}/openapi.json", docs_url=None, redoc_url=None,
                   description="The operator console's API: what the page uses, for a "
                               "facility coordinator or a second tool too.")
     app.state.console = console
