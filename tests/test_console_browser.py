@@ -51,6 +51,9 @@ def page(browser, live, tmp_path):
     page = context.new_page()
     errors: list[str] = []
     page.on("pageerror", lambda e: errors.append(str(e)))
+    requests: list[str] = []
+    page.on("request", lambda r: requests.append(r.url))
+    page.requests = requests  # type: ignore[attr-defined]
     page.goto(server.url)
     page.wait_for_function("window.seqrunConsole && window.seqrunConsole.ready "
                            "&& window.seqrunConsole.statusCount > 1", timeout=20000)
@@ -94,6 +97,9 @@ def test_page_loads_with_live_telemetry_and_the_3d_view(page, live):
     wait_for(lambda: page.evaluate("window.seqrunConsole.statusCount") > first + 3)
     assert page.text_content("#tlm-j2 .pos") == "-90.00"  # Park
     assert page.text_content("#conn") == "live"
+    # Offline: the page asks for nothing but the console itself (three.js included).
+    assert all(url.startswith(live[1].url) for url in page.requests), page.requests
+    assert any(url.endswith("three.module.min.js") for url in page.requests)
     # The 3D view is drawn (WebGL), not blank.
     assert distinct_colours(page.locator("#view3d canvas").screenshot()) > 40
     # Its kinematics are the validator's: the page's frames at a pose equal seqrun's.
