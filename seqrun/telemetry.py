@@ -10,28 +10,30 @@
 from __future__ import annotations
 
 from collections import deque
+from functools import lru_cache
 from collections.abc import Mapping, Sequence
-
-import numpy as np
 
 from seqrun.powercube.protocol import ShortState, StateFlag
 from seqrun.tracking import MIN_SPAN_FRACTION, VELOCITY_WINDOW_S
 
 
 class VelocityWindow:
-    """Feed ``(t, joints)`` samples; :meth:`velocity` is the slope over the last window."""
+    """Feed ``(t, joints)`` samples; :meth:`velocity` is the slope over the last window.
+
+    Plain Python over a dozen samples: cheaper than building arrays every control cycle."""
 
     def __init__(self, window_s: float = VELOCITY_WINDOW_S) -> None:
         self.window_s = window_s
-        self._samples: deque[tuple[float, np.ndarray]] = deque()
+        self._samples: deque[tuple[float, tuple[float, ...]]] = deque()
 
     def add(self, t: float, joints_deg: Sequence[float]) -> None:
+        t = float(t)
         if self._samples and t <= self._samples[-1][0]:
             if t < self._samples[-1][0]:  # a new time base (a new run): start over
                 self._samples.clear()
             else:
                 return
-        self._samples.append((t, np.asarray(joints_deg, dtype=float)))
+        self._samples.append((t, tuple(float(x) for x in joints_deg)))
         while self._samples and t - self._samples[0][0] > self.window_s + 1e-9:
             self._samples.popleft()
 
@@ -40,15 +42,41 @@ class VelocityWindow:
 
     def velocity(self) -> list[float] | None:
         """deg/s per joint, or None while the samples span too little of the window."""
-        if len(self._samples) < 2:
+        samples = self._samples
+        if len(samples) < 2:
             return None
-        t = np.array([s[0] for s in self._samples])
-        if t[-1] - t[0] < MIN_SPAN_FRACTION * self.window_s - 1e-9:
+        t0, t1 = samples[0][0], samples[-1][0]
+        if t1 - t0 < MIN_SPAN_FRACTION * self.window_s - 1e-9:
             return None
-        q = np.stack([s[1] for s in self._samples])
-        dt = t - t.mean()
-        slope = (dt[:, None] * (q - q.mean(axis=0))).sum(axis=0) / float((dt * dt).sum())
-        return [round(float(v), 3) for v in slope]
+        n = len(samples)
+        t_mean = sum(s[0] for s in samples) / n
+        dts = [s[0] - t_mean for s in samples]
+        denominator = sum(d * d for d in dts)
+        out = []
+        for j in range(len(samples[-1][1])):
+            q_mean = sum(s[1][j] for s in samples) / n
+            slope = sum(d * (s[1][j] - q_mean) for d, s in zip(dts, samples)) / denominator
+            out.append(round(slope, 3))
+        return out
+
+
+@lru_cache(maxsize=4096)
+def _short_names(state: int) -> tuple[tuple[str, ...], bool]:
+    s = ShortState(state)
+    return (() if not s else tuple(s.describe().split("|"))), bool(s & ShortState.NOT_OK)
+
+
+@lru_cache(maxsize=4096)
+def _word_names(word: int) -> tuple[tuple[str, ...], bool]:
+    w = StateFlag(word)
+    return (tuple(w.describe().split("|")) if w else ()), bool(w & StateFlag.FAULTS)
+
+
+@lru_cache(maxsize=4096)
+def _described_names(text: str) -> tuple[tuple[str, ...], bool]:
+    names = tuple(n for n in text.split("|") if n and n != "none")
+    return names, any(n in StateFlag.__members__ and StateFlag[n] & StateFlag.FAULTS
+                      for n in names)
 
 
 def joint_flags(joint_names: Sequence[str], modules: Sequence[int], short: Sequence[int],
@@ -61,16 +89,13 @@ def joint_flags(joint_names: Sequence[str], modules: Sequence[int], short: Seque
     fault = False
     words = words or {}
     for name, module, state in zip(joint_names, modules, short):
-        word = words.get(str(module), words.get(module))  # type: ignore[call-overload]
+        word = words.get(str(module), words.get(module)) if words else None  # type: ignore[call-overload]
         if isinstance(word, StateFlag):
-            flags[name] = tuple(word.describe().split("|")) if word else ()
-            fault = fault or bool(word & StateFlag.FAULTS)
+            names, bad = _word_names(int(word))
         elif isinstance(word, str):
-            flags[name] = tuple(n for n in word.split("|") if n and n != "none")
-            fault = fault or any(n in StateFlag.__members__ and StateFlag[n] & StateFlag.FAULTS
-                                 for n in flags[name])
+            names, bad = _described_names(word)
         else:
-            s = ShortState(int(state))
-            flags[name] = () if not s else tuple(s.describe().split("|"))
-            fault = fault or bool(s & ShortState.NOT_OK)
+            names, bad = _short_names(int(state))
+        flags[name] = names
+        fault = fault or bad
     return flags, fault

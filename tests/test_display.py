@@ -259,3 +259,14 @@ def test_the_live_view_renders_on_the_control_loop_thread_only(tmp_path):
     new_threads = {t for t in threads_during - threads_before
                    if not t.name.startswith("seqrun")}  # the simulator's and watchdog's own
     assert not new_threads, new_threads
+
+
+def test_a_run_refused_in_preflight_still_shows_where_the_arm_stands(tmp_path):
+    """The live view reads only events: the preflight's reading gives the joint table
+    (a run that ends there has no other measurement)."""
+    path = project(tmp_path, "early", "  - move: {joints: {j1: 10}}\n")  # no start-up
+    outcome, view, live_console, _ = run_with_displays(path, tmp_path)
+    assert outcome.result.status == "invalid"
+    live_console.print(view)
+    table = rows(live_console.export_text())
+    assert table["j2"].split()[0] == "-90.00", table["j2"]

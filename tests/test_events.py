@@ -137,3 +137,34 @@ def test_get_times_out_and_close_ends_iteration():
 def test_a_queue_holds_at_least_one_event(bad):
     with pytest.raises(ValueError):
         EventHub().subscribe(maxsize=bad)
+
+
+@pytest.mark.parametrize("faults", [[], ["2:tow_error@3"]])
+def test_a_run_emits_only_registered_events(tmp_path, faults):
+    """At run time too (the ** call sites the scan cannot see): a whole sequence, with and
+    without a fault, through the runner, gives typed records only."""
+    from seqrun.arm import load_arm
+    from seqrun.clock import VirtualClock
+    from seqrun.connection import open_connection
+    from seqrun.runner import run_sequence
+    from seqrun.schema import load_sequence
+    from seqrun.sim.faults import parse_fault_spec
+
+    loaded = load_sequence(ROOT / "sequences" / "opsafe.yaml")
+    connection = open_connection(force_sim=True, clock=VirtualClock(),
+                                 faults=[parse_fault_spec(f) for f in faults])
+    seen = []
+    try:
+        outcome = run_sequence(loaded, load_arm(loaded.arm_path), connection,
+                               log_dir=tmp_path / "run", confirm=lambda prompt: True,
+                               listeners=[seen.append], html_report=False)
+    finally:
+        connection.close()
+    assert outcome.result.exit_code == (3 if faults else 0)
+    assert seen and not [e for e in seen if isinstance(e, Unregistered)]
+    types = {e.type for e in seen}
+    assert {"run_started", "preflight", "setpoint", "step_finished", "run_finished"} <= types
+    if faults:
+        assert {"fault", "halt_confirmed"} <= types
+    lines = (tmp_path / "run" / "events.jsonl").read_text().splitlines()
+    assert len(lines) == len(seen)

@@ -227,7 +227,7 @@ def test_a_jog_not_renewed_stops_after_the_deadman_time(session):
     sub = session.subscribe(maxsize=100_000)
     start = session.status().joints_deg["j1"]
     result = session.jog("j1", 0.5).wait(60)
-    assert result.ok and "released" in result.message
+    assert result.ok and "not renewed within 200 ms" in result.message
     events = events_of(sub)
     begun = next(e for e in events if e.type == "jog_started")
     stop = next(e for e in events if e.type == "controlled_stop")
@@ -251,16 +251,47 @@ def test_a_renewed_jog_keeps_moving_and_stops_when_released(tmp_path):
         t0 = time.monotonic()
         activity = s.jog("j1", 0.5)
         while time.monotonic() - t0 < 0.8:
-            assert s.jog("j1", 0.5) is activity  # renews
+            assert s.jog("j1", 0.4) is activity  # renews (same joint, same direction)
+            with pytest.raises(Refused, match="another jog"):
+                s.jog("j1", -0.5)
             time.sleep(0.05)
         released = time.monotonic()
         result = activity.wait(10)
         assert result.ok and "released" in result.message
         assert time.monotonic() - released < 2.0
         assert s.status().joints_deg["j1"] > 1.0
-        with pytest.raises(Refused, match="another jog"):
-            s.jog("j1", 0.5) if s.activity is not None else (_ for _ in ()).throw(
-                Refused("another jog (already ended)"))
+    finally:
+        s.close()
+
+
+def test_jog_stop_after_the_deadman_is_no_second_abort(session):
+    """A release that comes after the deadman fired must not be taken for a second abort
+    (the executor halts on a second one): one abort, a controlled stop, no Halt."""
+    sub = session.subscribe(maxsize=100_000)
+    activity = session.jog("j1", 0.5)
+    activity.wait(60)
+    assert session.jog_stop() is None  # over already
+    session.abort("late release")  # nothing runs: no effect
+    types = [e.type for e in events_of(sub)]
+    assert types.count("abort_requested") == 1 and "halt_requested" not in types
+    assert "fault" not in types and session.status().activity == "idle"
+
+
+def test_a_jog_stopped_at_once_is_a_controlled_stop(tmp_path):
+    s = open_session(tmp_path, clock=RealClock())
+    try:
+        s.poll_status()
+        assert s.arm_up().ok and s.home().ok
+        s.poll_status()
+        sub = s.subscribe(maxsize=100_000)
+        s.jog("j1", 0.5)
+        time.sleep(0.1)
+        s.jog("j1", 0.5)
+        result = s.jog_stop()
+        assert result is not None and result.ok and "jog stopped" in result.message
+        types = [e.type for e in sub.drain()]
+        assert types.count("abort_requested") == 1 and "controlled_stop" in types
+        assert "halt_requested" not in types
     finally:
         s.close()
 
@@ -375,3 +406,46 @@ def test_save_pose_writes_the_measured_joints(session, tmp_path):
             session.save_pose("here")
     finally:
         path.unlink()
+
+
+def test_a_run_on_the_callers_thread_is_the_sessions_activity(session, tmp_path):
+    """``seqrun run`` runs through ``run_loaded``: while it runs, status says so and a
+    second activity is refused; a STOP from another thread (the control socket) halts it."""
+    from seqrun.schema import load_sequence
+
+    loaded = load_sequence(ROOT / "sequences" / "totem.yaml")
+    seen = {}
+
+    def confirm(prompt: str) -> bool:
+        seen["activity"] = session.status().activity
+        with pytest.raises(Refused, match="under way"):
+            session.move_to_joints({"j1": 1})
+        seen["thread"] = threading.Thread(
+            target=lambda: seen.setdefault("halt", session.halt("remote STOP")), daemon=True)
+        seen["thread"].start()
+        time.sleep(0.2)
+        return True
+
+    outcome = session.run_loaded(loaded, log_dir=tmp_path / "run", confirm=confirm,
+                                 html_report=False)
+    assert seen["activity"] == "running"
+    assert outcome.result.exit_code == 130
+    seen["thread"].join(10)
+    assert seen["halt"].confirmed and session.activity is None
+
+
+def test_the_deadman_fires_in_real_time_even_when_the_loop_has_no_idle_time():
+    """A loop that is always late never calls its idle hooks; the deadman's own
+    supervisor thread still posts the abort, once."""
+    from seqrun.service.jog import Deadman
+
+    posted = []
+    deadman = Deadman(RealClock(), 0.2)
+    deadman.arm(posted.append)  # the idle hook it returns is never called here
+    try:
+        time.sleep(0.6)
+        assert len(posted) == 1 and "200 ms" in posted[0]
+        deadman.release("late release")
+        assert len(posted) == 1
+    finally:
+        deadman.disarm()

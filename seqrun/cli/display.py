@@ -47,6 +47,18 @@ def halt_line(event: dict) -> str | None:
     return f"HALT sent at {when}{check}: {cause}: {event.get('message', '')}"
 
 
+def _preflight_reading(arm, event):
+    """The preflight's reading (start joints, state words) as a measurement event."""
+    from seqrun.events import make_event
+    from seqrun.telemetry import joint_flags
+
+    short = [0] * arm.dof
+    flags, fault = joint_flags(arm.joint_names, arm.module_ids, short, event["states"])
+    return make_event("measurement", event.t, {"joints_deg": list(event["start_deg"]),
+                                               "state": short},
+                      flags=flags, fault=fault, source="preflight")
+
+
 class PlainDisplay:
     """One line per step and per fault: for logs, pipes and CI."""
 
@@ -177,6 +189,8 @@ class LiveDisplay:
         if kind == "measurement":
             self.measured = event
             return
+        if kind == "preflight":  # the first reading of the arm: joints and state words
+            self.measured = _preflight_reading(self.arm, event)
         if kind == "step_started":
             self.step_text = f"step {event.get('step')}/{self.total}: {event['label']}"
             self.move_duration = None

@@ -163,8 +163,8 @@ def run_command(
     from seqrun.connection import open_connection, parse_bus_kwargs, parse_faults
     from seqrun.cli.interrupts import RunSignals
     from seqrun.runlog import prepare_run_folder
-    from seqrun.runner import run_sequence
     from seqrun.schema import load_sequence
+    from seqrun.service import ArmSession
     from seqrun.stop_requests import StopRequests
 
     keep_running_on_broken_pipe()  # a closed stdout never ends a run
@@ -290,10 +290,6 @@ def run_command(
     live = console.is_terminal and not plain
 
     def attach(executor) -> None:
-        executor.emit("zero_reference", **zero.as_dict())  # for the log and any console
-        # The built-in simulator keeps no record: its zero is its power-on pose.
-        executor.record_zero = (None if connection.is_simulator
-                                else campaign_records.zero_recorder(arm, loaded))
         if live:  # subscribes to the executor's events, renders in the loop's slack
             display = LiveDisplay(console, executor, f"seqrun: {loaded.name}",
                                   connection.description, len(loaded.steps))
@@ -307,22 +303,28 @@ def run_command(
         console.print(f"  !!  {text}", style="yellow", highlight=False, markup=False,
                       soft_wrap=True)
 
+    # The arm session owns the bus for the run (the same object the console and the other
+    # faces use); the terminal's questions stay the terminal's own.
+    session = ArmSession(arm, connection, project=loaded.project, zero=zero, status_hz=0,
+                         own_connection=False)
     signals.install()
     try:
-        outcome = run_sequence(loaded, arm, connection, log_dir=folder, file=str(file),
-                               speed=speed, first_step=from_step, command_mode=command_mode,
-                               confirm=confirm, before_step=before_step, on_executor=attach,
-                               requests=requests, warn=warn,
-                               confirm_clear_latched=(None if connection.is_simulator
-                                                      else confirm_clear_latched),
-                               meta={"zero": zero.as_dict()},
-                               html_report=not no_report)
+        outcome = session.run_loaded(
+            loaded, log_dir=folder, file=str(file), speed=speed, first_step=from_step,
+            command_mode=command_mode, confirm=confirm, before_step=before_step,
+            on_executor=attach, requests=requests, warn=warn,
+            confirm_clear_latched=(None if connection.is_simulator else confirm_clear_latched),
+            meta={"zero": zero.as_dict()}, html_report=not no_report,
+            # The built-in simulator keeps no record: its zero is its power-on pose.
+            record_zero=(None if connection.is_simulator
+                         else campaign_records.zero_recorder(arm, loaded)))
     finally:
         if live and displays:
             displays[0].__exit__(None, None, None)
         elif displays:
             displays[0].close(timeout=5.0)  # every line printed before the summary
         signals.restore()
+        session.close()
         connection.close()
     result = outcome.result
     try:  # a terminal that is gone (SIGHUP) must not change the exit code

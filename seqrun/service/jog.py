@@ -102,14 +102,24 @@ def _lowest_guard(arm, chain, q_rad) -> tuple[str, float, float, str] | None:
 
 
 class Deadman:
-    """Renewed by the operator's face (any thread); checked by the loop every cycle."""
+    """Renewed by the operator's face (any thread); checked by the loop every cycle and, in
+    real time, by a supervisor thread of its own (a loop that is late has no idle time to
+    run hooks in). Posts at most one abort, so a release after expiry is never a second
+    abort (which the executor would take for a Halt)."""
+
+    #: How often the supervisor thread looks (real seconds).
+    SUPERVISE_S = 0.02
 
     def __init__(self, clock, deadman_s: float) -> None:
         self.clock = clock
         self.deadman_s = deadman_s
         self._lock = threading.Lock()
         self._renewed = clock.now()
+        self._released: str | None = None
+        self._abort: Callable[[str], None] | None = None
         self.expired = False
+        self.reason = ""
+        self._done = threading.Event()
 
     def renew(self) -> None:
         with self._lock:
@@ -119,14 +129,42 @@ class Deadman:
         with self._lock:
             return self.clock.now() - self._renewed > self.deadman_s
 
-    def idle_hook(self, abort: Callable[[str], None]) -> Callable[[float], None]:
-        """An executor idle hook: the first cycle after expiry posts an abort (controlled
-        stop). Never restarts anything."""
-        def hook(slack: float) -> None:
-            if not self.expired and self.overdue():
-                self.expired = True
-                abort(f"jog released: not renewed within {self.deadman_s * 1000:.0f} ms")
-        return hook
+    def release(self, reason: str = "jog stopped") -> None:
+        """End the jog now (controlled stop), from any thread."""
+        with self._lock:
+            self._released = self._released or reason
+        self.check()
+
+    def check(self) -> None:
+        """Post the one abort when released or overdue (any thread, idempotent)."""
+        with self._lock:
+            if self.expired or self._abort is None:
+                return
+            if self._released is not None:
+                reason = self._released
+            elif self.clock.now() - self._renewed > self.deadman_s:
+                reason = f"jog released: not renewed within {self.deadman_s * 1000:.0f} ms"
+            else:
+                return
+            self.expired, self.reason, abort = True, reason, self._abort
+        abort(reason)
+
+    def arm(self, abort: Callable[[str], None]) -> Callable[[float], None]:
+        """Start watching for ``abort`` (the executor's): returns the idle hook; in real
+        time also starts the supervisor thread. :meth:`disarm` when the jog has ended."""
+        with self._lock:
+            self._abort = abort
+        if not getattr(self.clock, "is_virtual", False):
+            threading.Thread(target=self._supervise, daemon=True,
+                             name="seqrun-jog-deadman").start()
+        return lambda slack: self.check()
+
+    def disarm(self) -> None:
+        self._done.set()
+
+    def _supervise(self) -> None:
+        while not self._done.wait(self.SUPERVISE_S):
+            self.check()
 
 
 def run_jog(executor, plan: JogPlan, deadman: Deadman) -> tuple[str, int, str]:
@@ -138,7 +176,7 @@ def run_jog(executor, plan: JogPlan, deadman: Deadman) -> tuple[str, int, str]:
     from seqrun.usermessages import user_message
 
     arm = executor.arm
-    hook = deadman.idle_hook(executor.abort)
+    hook = deadman.arm(executor.abort)
     executor.idle_hooks.append(hook)
     try:
         m = executor.read_arm()
@@ -157,8 +195,7 @@ def run_jog(executor, plan: JogPlan, deadman: Deadman) -> tuple[str, int, str]:
                           tolerance_deg=arm.control.position_tolerance_deg, timeout_s=None)
             message = f"jog {plan.joint}: stopped at the end of its range ({plan.why_end})"
         except OperatorAbort:  # the deadman or jog_stop: the arm holds after the stop
-            message = (f"jog {plan.joint}: released, controlled stop"
-                       if deadman.expired else f"jog {plan.joint}: stopped (controlled)")
+            message = f"jog {plan.joint}: {deadman.reason or 'stopped'}; controlled stop"
         executor.emit("jog_stopped", joint=plan.joint, reason=message,
                       joints_deg=[round(float(x), 3) for x in executor.last.user_deg]
                       if executor.last is not None else None)
@@ -173,5 +210,6 @@ def run_jog(executor, plan: JogPlan, deadman: Deadman) -> tuple[str, int, str]:
                       **executor._halt_fields())
         return "failed", EXIT_FAULT, message
     finally:
+        deadman.disarm()
         if hook in executor.idle_hooks:
             executor.idle_hooks.remove(hook)

@@ -252,12 +252,12 @@ class ArmSession:
         self._closed = False
         self._activity: Activity | None = None
         self._activity_ids = 0
-        self._executor = None
+        self._executor: Any = None  # the activity's Executor (it publishes to _hub)
         self._run_info: RunInfo | None = None
         self._paused = False
         self._halted: str | None = None
-        self._deadman = None
-        self._jog_plan = None
+        self._deadman: Any = None  # the jog's Deadman
+        self._jog_plan: Any = None  # the jog's JogPlan
         self._questions: dict[str, _Question] = {}
         self._question_ids = 0
         self._move_velocities = {j.name: round(j.max_velocity_deg_s * DEFAULT_MOVE_SHARE, 3)
@@ -335,21 +335,23 @@ class ArmSession:
 
     def _on_event(self, event: Event) -> None:
         """Status from the events (its own listener thread)."""
+        from seqrun.events import Fault, Measurement, MovePlanned, StepStarted
+
         kind = event.type
         with self._state:
-            if kind == "measurement":
+            if isinstance(event, Measurement):
                 self._take_measurement(event)
-            elif kind == "move_planned":
+            elif isinstance(event, MovePlanned):
                 for i, value in enumerate(event.target_deg):
                     self._targets[i] = float(value)
-            elif kind == "step_started" and self._run_info is not None:
+            elif isinstance(event, StepStarted) and self._run_info is not None:
                 self._run_info = RunInfo(self._run_info.file, event.step, event.label,
                                          self._run_info.steps, self._run_info.run_dir)
             elif kind == "paused":
                 self._paused = True
             elif kind in ("resumed", "run_finished"):
                 self._paused = False
-            elif kind == "fault" and (event.clock_s or 0) >= self._cleared_at:
+            elif isinstance(event, Fault) and (event.clock_s or 0) >= self._cleared_at:
                 self._message = event.message
                 if event.halt_sent:
                     self._halted = event.cause
@@ -392,10 +394,11 @@ class ArmSession:
         if all(x is not None for x in joints):
             import numpy as np
 
-            T = kinematics.fk(self._chain, np.radians(joints))
-            xyz = tuple(round(float(v), 3) for v in T[:3, 3])
-            rpy = tuple(round(float(v), 3)
-                        for v in np.degrees(kinematics.rpy_from_matrix(T[:3, :3])))
+            T = kinematics.fk(self._chain, np.radians(np.array(joints, dtype=float)))
+            x, y, z = (round(float(v), 3) for v in T[:3, 3])
+            roll, pitch, yaw = (round(float(v), 3)
+                                for v in np.degrees(kinematics.rpy_from_matrix(T[:3, :3])))
+            xyz, rpy = (x, y, z), (roll, pitch, yaw)
         return ArmStatus(rows, fault, xyz, rpy,
                          getattr(self.zero, "pose", None) if self.zero is not None
                          else getattr(self.arm, "zero_reference", None),
@@ -458,12 +461,14 @@ class ArmSession:
             missing = sorted({r.module for r, a in zip(requests, acks) if a is None})
             self._poll_failed(f"no answer from module(s) {', '.join(map(str, missing))}")
             return
-        joints, velocities, words = [], [], {}
+        joints: list[float | None] = []
+        velocities: list[float | None] = []
+        words: dict[int, StateFlag] = {}
         for k, joint in enumerate(arm.joints):
-            pos, vel, state = (a.value for a in acks[3 * k:3 * k + 3])
-            joints.append(round(joint.to_user_deg(float(pos)), 4) + 0.0)
-            velocities.append(round(math.degrees(float(vel)), 4) + 0.0)
-            words[joint.module] = StateFlag(int(state))
+            pos, vel, state = (a.value for a in acks[3 * k:3 * k + 3])  # type: ignore[union-attr]
+            joints.append(round(joint.to_user_deg(float(pos)), 4) + 0.0)  # type: ignore[arg-type]
+            velocities.append(round(math.degrees(float(vel)), 4) + 0.0)  # type: ignore[arg-type]
+            words[joint.module] = StateFlag(int(state))  # type: ignore[arg-type]
         flags, fault = joint_flags(arm.joint_names, arm.module_ids, [0] * len(joints), words)
         now = self.clock.now()
         self._hub.publish(make_event(
@@ -743,7 +748,8 @@ class ArmSession:
         self._check_movable(what)
         loaded = self._one_off(kind, [step])
         with self._state:
-            start = {j.name: float(x) for j, x in zip(self.arm.joints, self._joints)}
+            start = {j.name: float(x) for j, x in zip(self.arm.joints, self._joints)
+                     if x is not None}
         check = validate_sequence(loaded, self.arm, start, started=True)
         if check.errors:
             raise Refused(f"{what}: {check.errors[0].message}")
@@ -810,10 +816,10 @@ class ArmSession:
     # ------------------------------------------------------------------ jog
     def jog(self, joint: str, speed_scale: float) -> Activity:
         """Jog one joint at ``speed_scale`` (-1..1) of its move velocity. Call again at
-        least every :data:`JOG_DEADMAN_S` (same joint and scale: renews) or the jog ends
-        with a controlled stop. Refused near a limit (moving towards it) or outside the
-        workspace guards, like a move; a different joint or scale while jogging is refused
-        (stop first)."""
+        least every :data:`JOG_DEADMAN_S` (same joint and direction: renews; the speed
+        stays the first call's) or the jog ends with a controlled stop. Refused near a
+        limit (moving towards it) or outside the workspace guards, like a move; another
+        joint or the other direction while jogging is refused (release first)."""
         import numpy as np
 
         from seqrun.service.jog import Deadman, plan_jog, run_jog
@@ -824,9 +830,8 @@ class ArmSession:
                 plan = self._jog_plan
                 if (plan is not None and plan.joint == joint
                         and isinstance(speed_scale, (int, float))
-                        and abs(plan.velocity_deg_s * plan.direction
-                                - self._move_velocities.get(joint, 0) * speed_scale) < 1e-9):
-                    self._deadman.renew()
+                        and speed_scale * plan.direction > 0 and not self._deadman.expired):
+                    self._deadman.renew()  # the speed stays the jog's first
                     return current
                 raise Refused("jog: another jog is under way (release it first)")
         self._check_movable("jog")
@@ -851,11 +856,11 @@ class ArmSession:
 
     def jog_stop(self) -> ActivityResult | None:
         """End the jog with a controlled stop (waits for it); None if no jog ran."""
-        activity, executor = self._activity, self._executor
+        activity, deadman = self._activity, self._deadman
         if activity is None or activity.kind != "jog":
             return None
-        if executor is not None:
-            executor.abort("jog stopped")
+        if deadman is not None:
+            deadman.release("jog stopped")
         return activity.wait(timeout=30.0)
 
     # ------------------------------------------------------------------ sequences
@@ -892,8 +897,8 @@ class ArmSession:
                           f"1-{len(loaded.steps)}")
         with self._state:
             measured = all(x is not None for x in self._joints)
-            start = ({j.name: float(x) for j, x in zip(self.arm.joints, self._joints)}
-                     if measured else None)
+            start = ({j.name: float(x) for j, x in zip(self.arm.joints, self._joints)
+                      if x is not None} if measured else None)
         if first_step == 1:  # the executor checks again from the arm's measured state
             check = validate_sequence(loaded, self.arm, start, speed=speed,
                                       started=bool(self._homed))
@@ -943,11 +948,13 @@ class ArmSession:
                    on_executor: Callable | None = None, requests=None,
                    warn: Callable[[str], None] | None = None, meta: dict | None = None,
                    html_report: bool = True, file: str | None = None,
-                   bus_held: bool = False, cycle_hz: float | None = None):
+                   bus_held: bool = False, cycle_hz: float | None = None,
+                   record_zero: Callable[[str], Any] | None = None):
         """Run an already loaded and checked sequence on the caller's thread with the
         session's client and event hub; returns the runner's outcome (result, report, run
         folder). This is how ``seqrun run`` runs (its prompts are the terminal's own); faces
-        that answer questions through events use :meth:`run_sequence`."""
+        that answer questions through events use :meth:`run_sequence`. ``record_zero``:
+        what a power_off step calls to record the pose the arm is switched off in."""
         from seqrun.runner import run_sequence as run_with_log
         from seqrun.stop_requests import StopRequests
 
@@ -956,6 +963,9 @@ class ArmSession:
         def hook(executor) -> None:
             with self._state:
                 self._executor = executor
+            if self.zero is not None:  # for the log and any face
+                executor.emit("zero_reference", **self.zero.as_dict())
+            executor.record_zero = record_zero
             if on_executor is not None:
                 on_executor(executor)
 
@@ -968,14 +978,20 @@ class ArmSession:
                                 meta=meta, html_report=html_report, requests=requests,
                                 warn=warn, client=self.client, events=self._hub)
 
-        if bus_held:
+        if bus_held:  # run_sequence's worker: the activity is registered already
             return go()
-        with self._bus:
-            try:
-                return go()
-            finally:
-                with self._state:
-                    self._executor = None
+        activity = self._begin("run", {"file": file or loaded.file, "run_dir": str(log_dir)})
+        with self._state:
+            self._run_info = RunInfo(file or loaded.file, None, None, len(loaded.steps),
+                                     str(log_dir) if log_dir is not None else None)
+        result = ActivityResult("run", "failed", EXIT_FAULT_CODE, "interrupted")
+        try:
+            with self._bus:
+                outcome = go()
+            result = _result("run", outcome.result, run_dir=log_dir)
+            return outcome
+        finally:
+            self._end(activity, result)
 
     def pause(self) -> None:
         """Pause the run (controlled stop, hold); :meth:`resume` goes on."""
@@ -1010,9 +1026,13 @@ class ArmSession:
             self.answer(q.id, True)
 
     def abort(self, reason: str = "operator abort") -> None:
-        """Controlled stop of whatever moves (run, move, jog); the activity ends (130)."""
-        executor = self._executor
-        if executor is not None:
+        """Controlled stop of whatever moves (run, move, jog); the activity ends (130 for a
+        run or move; a jog ends normally). As with Ctrl-C, a second abort of a run or move
+        is a Halt."""
+        executor, deadman = self._executor, self._deadman
+        if deadman is not None:
+            deadman.release(reason)  # at most one abort per jog
+        elif executor is not None:
             executor.abort(reason)
         self._withdraw_questions()
 
@@ -1088,7 +1108,7 @@ class ArmSession:
         if path.exists() and not overwrite:
             raise Refused(f"save pose: {path} exists (overwrite it explicitly)")
         values = {j.name: round(float(x), 3) for j, x in zip(self.arm.joints, joints)
-                  if j.locked is None}
+                  if j.locked is None and x is not None}
         try:
             pose = pose_document(name, self.arm, values, description=description,
                                  source="simulator" if self.connection.is_simulator else "arm",
