@@ -28,7 +28,7 @@ from fastapi.staticfiles import StaticFiles
 from seqrun.console import models
 from seqrun.console.catalog import Catalog
 from seqrun.console.guard import COOKIE, AccessGuard
-from seqrun.console.motions import Motions, end_jog
+from seqrun.console.motions import Motions
 from seqrun.console.scene import arm_scene
 from seqrun.console.telemetry import PageFeed, Telemetry, dumps, jsonable
 from seqrun.errors import Refused, SeqrunError, UserInputError
@@ -230,7 +230,7 @@ def build_router(console: Console) -> APIRouter:
 
     @api.post("/jog/stop", summary="End the jog (controlled stop)")
     def jog_stop(client: ClientHeader = None) -> Any:
-        result = end_jog(session)  # a controlled stop
+        result = session.jog_stop()  # a controlled stop
         motions.jog_ended(client)
         return jsonable(result)
 
@@ -315,7 +315,7 @@ async def live(console: Console, ws: WebSocket) -> None:
                     await asyncio.to_thread(console.session.jog, body.joint, body.speed_scale)
                     console.motions.started(client, "jog")
                 else:
-                    await asyncio.to_thread(end_jog, console.session)
+                    await asyncio.to_thread(console.session.jog_stop)
                     console.motions.jog_ended(client)
                 await reply(msg_id, True)
             except (Refused, UserInputError) as exc:

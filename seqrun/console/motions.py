@@ -24,25 +24,6 @@ class _Owned:
     activity: Any = None
 
 
-def end_jog(session: Any) -> Any:
-    """End the jog under way with a controlled stop; its result (None: no jog ran).
-
-    Workaround for the session as merged: ``ArmSession.jog_stop()`` posts an abort while the
-    jog's deadman goes on counting, the deadman posts its own abort during the controlled
-    stop, and the executor takes a second abort as a Halt: every release ended in a Halt
-    (and a Reset). Letting the deadman end the jog (the page no longer renews it: at most
-    ``JOG_DEADMAN_S`` later) leaves one abort, a controlled stop. ``jog_stop()`` only if
-    the deadman did not end it. Back to ``jog_stop()`` once it disarms the deadman.
-    """
-    activity = session.activity
-    if activity is None or activity.kind != "jog":
-        return None
-    try:
-        return activity.wait(timeout=2.0)
-    except TimeoutError:
-        return session.jog_stop()
-
-
 class Motions:
     def __init__(self, session: Any) -> None:
         self.session = session
@@ -84,7 +65,7 @@ class Motions:
         if not self.under_way(owned):
             return None
         if owned.kind == "jog":
-            end_jog(self.session)
+            self.session.jog_stop()
             done = "jog stopped"
         else:
             self.session.abort()
