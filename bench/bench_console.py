@@ -42,6 +42,8 @@ from bench_liveview import event_periods, summary  # noqa: E402
 from consolekit import LiveServer, console_setup, wait_for  # noqa: E402
 from seqrun_runs import RESULTS, ROOT, machine, write_json  # noqa: E402
 
+from seqrun.service.session import ArmSession  # noqa: E402
+
 CHROMIUM = os.environ.get("SEQRUN_CHROMIUM") or shutil.which("chromium") or "/usr/bin/chromium"
 ARGS = ["--no-sandbox", "--use-gl=angle", "--use-angle=swiftshader",
         "--enable-unsafe-swiftshader", "--disable-background-networking",
@@ -66,36 +68,53 @@ def open_page(browser, url: str):
     return page
 
 
+class TimedSession(ArmSession):
+    """The arm session, noting when each halt() call began (wall clock): the STOP latency
+    splits into the page-to-server part and the session's own."""
+
+    halt_calls: list[float]
+
+    def halt(self, reason: str = "STOP"):
+        self.halt_calls.append(time.time())
+        return super().halt(reason)
+
+
 def stop_latency(browser, setup, server, clicks: int) -> dict:
     page = open_page(browser, server.url)
     setup.session.arm_up()
     setup.session.home()
-    latencies = []
+    latencies, to_server, in_session = [], [], []
     for _ in range(clicks):
         setup.session.reset()
         pressed_before = page.evaluate("window.seqrunConsole.stopTimes.length")
         start = time.time()
         page.click("#stop")
         halt = wait_for(lambda: setup.wire.halts_epoch(start), timeout=5)[0]
+        called = [t for t in setup.session.halt_calls if t >= start][0]
         pressed = page.evaluate(f"window.seqrunConsole.stopTimes[{pressed_before}]") / 1000
         latencies.append((halt - pressed) * 1000)
+        to_server.append((called - pressed) * 1000)
+        in_session.append((halt - called) * 1000)
         wait_for(lambda: setup.session.status().activity == "halted", timeout=5)
     page.context.close()
     setup.session.reset()
-    return pct(latencies)
+    return {**pct(latencies), "press_to_halt_call": pct(to_server),
+            "halt_call_to_frame": pct(in_session)}
 
 
-def run_opsafe(setup) -> tuple[list[float], Path | None]:
+def run_opsafe(setup) -> tuple[list[float], str]:
+    """The 100 Hz loop's periods of one run of opsafe, and how the run ended."""
     setup.session.reset()
     activity = setup.session.run_sequence(setup.folder / "sequences" / "opsafe.yaml",
                                           assume_yes=True)
     result = activity.wait(300)
     folder = Path(result.run_dir) if result.run_dir else None
-    return (event_periods(folder) if folder else []), folder
+    return (event_periods(folder) if folder else []), f"{result.status}: {result.message}"
 
 
 def telemetry(browser, setup, server) -> dict:
-    baseline, _ = run_opsafe(setup)  # (the second run starts at Op-safe: via Totem again)
+    baseline, ended = run_opsafe(setup)  # (the second run starts at Op-safe: via Totem again)
+    print(f"   run without pages: {ended}")
     pages = [open_page(browser, server.url) for _ in range(3)]
     rates: list[list[float]] = [[] for _ in pages]
     moving = threading.Event()
@@ -104,7 +123,8 @@ def telemetry(browser, setup, server) -> dict:
     def run() -> None:
         nonlocal with_tabs
         moving.set()
-        with_tabs, _ = run_opsafe(setup)
+        with_tabs, ended = run_opsafe(setup)
+        print(f"   run with three tabs: {ended}")
         done.set()
 
     with_tabs: list[float] = []
@@ -177,7 +197,8 @@ def main() -> None:
     results: dict = {"machine": machine()}
     with sync_playwright() as pw, tempfile.TemporaryDirectory() as tmp:
         browser = pw.chromium.launch(executable_path=CHROMIUM, headless=True, args=ARGS)
-        setup = console_setup(Path(tmp))
+        TimedSession.halt_calls = []
+        setup = console_setup(Path(tmp), session_class=TimedSession)
         try:
             with LiveServer(setup.app()) as server:
                 if "stop" not in opts.skip:
@@ -187,6 +208,11 @@ def main() -> None:
                     print(f"1. STOP press -> Halt frame on the wire, {r['n']} presses: p50 "
                           f"{r['p50_ms']} ms, p99 {r['p99_ms']} ms, max {r['max_ms']} ms "
                           f"(goal p99 < 20 ms)")
+                    for key, label in (("press_to_halt_call", "press -> session.halt()"),
+                                       ("halt_call_to_frame", "session.halt() -> frame")):
+                        part = r[key]
+                        print(f"   {label}: p50 {part['p50_ms']} ms, p99 {part['p99_ms']} ms, "
+                              f"max {part['max_ms']} ms")
                 if "telemetry" not in opts.skip:
                     results["telemetry"] = t = telemetry(browser, setup, server)
                     print("2. telemetry in the browser, three tabs, during opsafe: "

@@ -128,9 +128,18 @@ function onReply(reply) {
 }
 
 // ---------------------------------------------------------------- telemetry
+// Every status is kept (and counted) as it arrives; the page is redrawn once per animation
+// frame with the newest one (up to 100 statuses a second arrive during a move).
 function showStatus(s) {
   state.status = s;
   state.statusCount += 1;
+  if (!state.drawPending) {
+    state.drawPending = true;
+    requestAnimationFrame(() => { state.drawPending = false; drawStatus(state.status); });
+  }
+}
+
+function drawStatus(s) {
   const title = s.simulator ? "seqrun console - SIMULATOR" : `seqrun console - ${s.bus}`;
   if (document.title !== title) {
     document.title = title;
@@ -176,7 +185,7 @@ $("#ack-faults").addEventListener("click", () => {
     const joint = s && s.joints.find((j) => j.name === name);
     if (!joint || !joint.fault) delete state.latched[name];  // a fault still present stays
   }
-  if (s) showStatus(s);
+  if (s) drawStatus(s);
 });
 
 // ---------------------------------------------------------------- events

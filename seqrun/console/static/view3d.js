@@ -130,7 +130,13 @@ export class ArmView {
     this.attachControls();
     new ResizeObserver(() => this.resize()).observe(container);
     this.resize();
-    const loop = () => { if (this.dirty) this.render(); requestAnimationFrame(loop); };
+    // At most 30 frames a second, and only when something changed: the view must not take
+    // the CPU from the control loop on the same PC (WebGL may be software-rendered).
+    let last = 0;
+    const loop = (now) => {
+      if (this.dirty && now - last >= 33) { last = now; this.render(); }
+      requestAnimationFrame(loop);
+    };
     requestAnimationFrame(loop);
   }
 
