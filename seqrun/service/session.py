@@ -541,13 +541,16 @@ class ArmSession:
                 finally:
                     self._bus.release()
             else:
-                result = HaltConfirmation(sent=sent_error is None, confirmed=False,
-                                          modules_unconfirmed=tuple(self.arm.module_ids),
+                modules = tuple(self.arm.module_ids)
+                result = HaltConfirmation("halt", modules, sent=sent_error is None,
+                                          unconfirmed={m: "not read back" for m in modules},
                                           error="the activity did not hand the bus back "
                                                 "in time to read the modules")
         if sent_error is not None and not result.sent:
-            result = HaltConfirmation(False, False, (), tuple(self.arm.module_ids),
-                                      result.attempts, 0.0, sent_error)
+            modules = tuple(self.arm.module_ids)
+            result = HaltConfirmation("halt", modules, sent=False,
+                                      unconfirmed={m: "no Halt sent" for m in modules},
+                                      attempts=result.attempts, error=sent_error)
         names = dict(zip(self.arm.module_ids, self.arm.joint_names))
         self._publish("session_halt", reason=reason, halt_sent=result.sent,
                       halt_confirmed=result.confirmed,
@@ -1139,9 +1142,9 @@ def _flags_fault(flags: tuple[str, ...]) -> bool:
 
 
 def _short(word) -> int:
-    from seqrun.executor import _short_state
+    from seqrun.drivers.powercube import short_state
 
-    return int(_short_state(word))
+    return int(short_state(word))
 
 
 def _result(kind: str, run, run_dir: Path | None = None) -> ActivityResult:
