@@ -29,6 +29,7 @@ COMMAND_MODULES = (
     "seqrun.cli.init",
     "seqrun.cli.runs",
     "seqrun.cli.report",
+    "seqrun.cli.console",
 )
 
 

@@ -1,0 +1,161 @@
+"""``seqrun console``: the operator console in the browser, on one arm session.
+
+    seqrun console                      # simulator (no bus configured), http://127.0.0.1:8765/
+    seqrun console -i socketcan -c can0 # the real arm
+    seqrun console --host 0.0.0.0       # reachable from a tablet: a token is printed and required
+
+The web stack (FastAPI, uvicorn) is imported only when the command runs.
+"""
+
+from __future__ import annotations
+
+import signal
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from seqrun.cli.app import app
+from seqrun.cli.common import (EXIT_FAULT, ArmOption, BitrateOption, BusKwargsOption,
+                               ChannelOption, InterfaceOption, ResponseTimeoutOption,
+                               SimOption, fail, load_arm_file, user_errors)
+from seqrun.defaults import DEFAULT_ARM, EXIT_OPERATOR_ABORT
+
+
+@app.command("console")
+def console_command(
+    interface: InterfaceOption = None,
+    channel: ChannelOption = None,
+    bitrate: BitrateOption = None,
+    bus_kwargs: BusKwargsOption = None,
+    sim: SimOption = False,
+    port: Annotated[int, typer.Option("--port", help="TCP port (0: any free port).")] = 8765,
+    host: Annotated[Optional[str], typer.Option(
+        "--host", metavar="ADDR",
+        help="Listen on ADDR instead of 127.0.0.1; then every request needs the token "
+             "printed at start.")] = None,
+    arm_file: ArmOption = DEFAULT_ARM,
+    project_dir: Annotated[Optional[Path], typer.Option(
+        "--project", metavar="DIR", help="Campaign folder (default: the one here).")] = None,
+    log_dir: Annotated[Optional[Path], typer.Option(
+        "--log-dir", metavar="DIR", help="Where run folders go (default: the project's runs/).")]
+    = None,
+    response_timeout_ms: ResponseTimeoutOption = None,
+    yes: Annotated[bool, typer.Option(
+        "--yes", "-y", help="Do not ask to confirm the zero reference after a power-on.")]
+    = False,
+) -> None:
+    """Serve the operator console (STOP, telemetry, 3D view, commands, sequences)."""
+    import types
+
+    from seqrun.cli import campaign_records
+    from seqrun.cli.zero import zero_at_run_start
+    from seqrun.connection import open_connection, parse_bus_kwargs, response_timeout_s
+    from seqrun.errors import BusError
+    from seqrun.project import open_project, project_for
+
+    with user_errors():
+        if not 0 <= port <= 65535:
+            fail(f"--port must lie in 0-65535, got {port}")
+        project = open_project(project_dir) if project_dir else project_for(Path.cwd())
+        if arm_file == DEFAULT_ARM and not arm_file.is_file():
+            arm_file = project.arm_path(None)
+        arm = load_arm_file(arm_file)
+        timeout = response_timeout_s(arm, response_timeout_ms)
+        extra = parse_bus_kwargs(bus_kwargs or [])
+        if not (interface or channel or bitrate or extra or sim):  # the campaign's bus
+            interface, channel, bitrate, extra = campaign_records.campaign_bus(
+                types.SimpleNamespace(project=project), extra)
+        from seqrun.console.server import LOCALHOST, bind, is_loopback, url_of
+
+        listen = host or LOCALHOST
+        token = None
+        if not is_loopback(listen):
+            from seqrun.console.guard import new_token
+
+            token = new_token()
+        try:
+            sock = bind(listen, port)  # before the bus: a port in use costs nothing
+        except OSError as exc:
+            fail(f"cannot listen on {listen}:{port}: {exc.strerror or exc}")
+        connection = open_connection(interface=interface, channel=channel, bitrate=bitrate,
+                                     bus_kwargs=extra, force_sim=sim,
+                                     default_bitrate=arm.can.bitrate)
+    try:
+        with user_errors():
+            try:
+                zero = zero_at_run_start(connection, arm, project,
+                                         lambda q: yes or typer.confirm(q, default=False),
+                                         typer.echo)
+            except BusError as exc:
+                fail(f"cannot read the modules' state: {exc}", EXIT_FAULT)
+            arm = arm.with_zero_reference(zero.pose)
+    except BaseException:
+        sock.close()
+        connection.close()
+        raise
+    runs = (log_dir or project.runs_dir)
+    runs = runs if runs.is_absolute() else Path.cwd() / runs
+
+    from seqrun.console.app import create_app
+    from seqrun.console.catalog import Catalog
+    from seqrun.service.session import ArmSession
+
+    session = ArmSession(arm, connection, project=project, log_root=runs, zero=zero,
+                         response_timeout_s=timeout)
+    _serve_control_socket(connection, session)
+    try:
+        application = create_app(session, Catalog(project, runs), arm, token=token,
+                                 local_only=is_loopback(listen))
+        url = url_of(sock, listen, token)
+        banner = "SIMULATOR" if connection.is_simulator else connection.description
+
+        def started() -> None:
+            typer.echo(f"seqrun console on {banner}: {url}", )
+            if token:
+                typer.echo(f"token (required on every request): {token}")
+            typer.echo("Ctrl-C ends the console (any motion is stopped first).")
+
+        from seqrun.console.server import serve
+
+        # uvicorn shuts down gracefully on SIGINT/SIGTERM (the pages are disconnected, their
+        # motions stopped), then raises the signal again: Ctrl-C arrives here as
+        # KeyboardInterrupt, SIGTERM through this handler. SIGTERM halts, as for a run.
+        previous = signal.signal(signal.SIGTERM, _terminated)
+        try:
+            serve(application, sock, on_started=started)
+        except KeyboardInterrupt:
+            typer.echo("seqrun console: ended by Ctrl-C; anything still moving is stopped")
+            raise typer.Exit(EXIT_OPERATOR_ABORT) from None
+        except _Terminated:
+            result = session.halt("SIGTERM (seqrun console)")
+            typer.echo(f"seqrun console: ended by SIGTERM; {result.describe()}")
+            raise typer.Exit(EXIT_OPERATOR_ABORT) from None
+        finally:
+            signal.signal(signal.SIGTERM, previous)
+    finally:
+        session.close()  # controlled stop of anything still moving, then the bus
+
+
+class _Terminated(Exception):
+    """SIGTERM, raised again by uvicorn after its graceful shutdown."""
+
+
+def _terminated(signum, frame) -> None:  # noqa: ANN001 - a signal handler
+    raise _Terminated()
+
+
+def _serve_control_socket(connection, session) -> None:
+    """While the console owns a shared bus, ``seqrun status`` and ``seqrun halt`` in another
+    terminal ask this session over the bus claim's control socket (one controller per bus:
+    the connection holds the claim when the bus is shared; nothing to serve otherwise)."""
+    claim = getattr(connection, "claim", None)
+    if claim is None:
+        return
+    import importlib
+
+    try:
+        control_socket = importlib.import_module("seqrun.service.control_socket")
+    except ImportError:  # pragma: no cover - a tree without the control socket
+        return
+    control_socket.serve_control(claim, session.control_handler())

@@ -1,0 +1,445 @@
+"""The console's web application: the page, the ``/api/v1`` HTTP API and the live WebSocket.
+
+Everything goes through the arm session (:mod:`seqrun.service.session`); the console holds
+no bus and no executor. Refusals are one line, ``{"error": "..."}``: 409 when the session
+refuses (wrong state, unknown joint or pose, out of limits), 422 for a malformed request
+(NaN, unknown keys, wrong types), 400 for bad input, 401/403 from the access guard. Any
+other exception in a handler halts the arm (as a crash does in ``seqrun run``) and answers
+500 saying so.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import itertools
+import json
+import logging
+import threading
+from collections.abc import AsyncIterator
+from pathlib import Path
+from typing import Annotated, Any
+
+from fastapi import APIRouter, FastAPI, Header, Request, WebSocket, WebSocketDisconnect
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import FileResponse, HTMLResponse, JSONResponse
+from fastapi.staticfiles import StaticFiles
+
+from seqrun.console import models
+from seqrun.console.catalog import Catalog
+from seqrun.console.guard import COOKIE, AccessGuard
+from seqrun.console.motions import Motions
+from seqrun.console.scene import arm_scene
+from seqrun.console.telemetry import PageFeed, Telemetry, dumps, jsonable
+from seqrun.errors import Refused, SeqrunError, UserInputError
+
+log = logging.getLogger(__name__)
+
+API = "/api/v1"
+#: A page sends something (a ping at least) every 0.5 s; one silent for this long while a
+#: motion it started is under way is taken as gone (its motion is stopped).
+PAGE_SILENCE_S = 2.0
+STATIC = Path(__file__).resolve().parent / "static"
+ClientHeader = Annotated[str | None, Header(alias="X-Seqrun-Client")]
+
+
+def one_line(text: str) -> str:
+    return " ".join(str(text).split())
+
+
+def _validation_line(exc: RequestValidationError) -> str:
+    errors = exc.errors()
+    if not errors:
+        return "malformed request"
+    first = errors[0]
+    if tuple(first.get("loc", ())) == ("body",):
+        return one_line(f"the request body must be a JSON object (Content-Type: "
+                        f"application/json): {first.get('msg', 'invalid')}")
+    where = ".".join(str(p) for p in first.get("loc", ()) if p != "body")
+    more = f" (and {len(errors) - 1} more)" if len(errors) > 1 else ""
+    return one_line(f"{where + ': ' if where else ''}{first.get('msg', 'invalid')}{more}")
+
+
+class Console:
+    """What the handlers share: the session, the project catalog, the page feeds."""
+
+    def __init__(self, session: Any, catalog: Catalog, arm: Any) -> None:
+        self.session = session
+        self.catalog = catalog
+        self.arm = arm
+        self.scene = arm_scene(arm)
+        self.motions = Motions(session)
+        self.telemetry = Telemetry(session, status_dict=self.status_dict)
+        self._ids = itertools.count(1)
+
+    def new_client_id(self) -> str:
+        return f"page-{next(self._ids)}"
+
+    def status_dict(self) -> dict[str, Any]:
+        return jsonable(self.session.status())
+
+    def halt(self, reason: str) -> dict[str, Any]:
+        result = self.session.halt(reason)
+        return {**jsonable(result), "message": result.describe()}
+
+    def halt_after_crash(self, where: str, exc: BaseException) -> str:
+        """A handler crashed: Halt, as ``seqrun run`` does on an internal error."""
+        log.error("console: internal error in %s: %r", where, exc)
+        try:
+            self.session.halt(f"console internal error in {where}")
+            return "the arm was halted"
+        except Exception as halt_exc:  # noqa: BLE001 - report, never mask the first error
+            log.error("console: the Halt after an internal error failed: %r", halt_exc)
+            return "the Halt FAILED: use the emergency stop"
+
+
+class CrashGuard:
+    """ASGI middleware: an exception no handler expected halts the arm, then answers 500."""
+
+    def __init__(self, app: Any, console: Console) -> None:
+        self.app = app
+        self.console = console
+
+    async def __call__(self, scope: Any, receive: Any, send: Any) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        started = False
+
+        async def tracking_send(message: Any) -> None:
+            nonlocal started
+            if message["type"] == "http.response.start":
+                started = True
+            await send(message)
+
+        try:
+            await self.app(scope, receive, tracking_send)
+        except Exception as exc:  # noqa: BLE001 - the point: nothing crashes silently
+            outcome = await asyncio.to_thread(self.console.halt_after_crash,
+                                              scope.get("path", "?"), exc)
+            if not started:
+                body = json.dumps({"error": one_line(
+                    f"internal error ({type(exc).__name__}: {exc}); {outcome}")}).encode()
+                await send({"type": "http.response.start", "status": 500,
+                            "headers": [(b"content-type", b"application/json")]})
+                await send({"type": "http.response.body", "body": body})
+
+
+def _activity(activity: Any) -> dict[str, Any]:
+    return {"accepted": True, "kind": getattr(activity, "kind", None)}
+
+
+def _confirmed(result: Any) -> Any:
+    """A blocking command's result; one that did not succeed (not valid from the measured
+    state, not confirmed) is a 409 with its one line, not an "ok"."""
+    body = jsonable(result)
+    if getattr(result, "ok", True) is False:
+        message = one_line(f"{getattr(result, 'kind', 'command')} "
+                           f"{getattr(result, 'status', 'failed')}: "
+                           f"{getattr(result, 'message', '')}")
+        return JSONResponse({"error": message, "result": body}, status_code=409)
+    return body
+
+
+def build_router(console: Console) -> APIRouter:
+    api = APIRouter(prefix=API)
+    session = console.session
+    catalog = console.catalog
+    motions = console.motions
+
+    # -- reading ----------------------------------------------------------------------
+    @api.get("/status", summary="The arm now: joints, velocities, targets, states, pose")
+    def status() -> dict[str, Any]:
+        return console.status_dict()
+
+    @api.get("/arm", summary="The arm description's chain, limits, guards and link volumes")
+    def arm() -> dict[str, Any]:
+        return console.scene
+
+    @api.get("/poses", summary="Every named pose (campaign poses first, then the shipped)")
+    def poses() -> list[dict[str, Any]]:
+        return catalog.poses()
+
+    @api.get("/sequences", summary="The project's sequences")
+    def sequences() -> list[dict[str, str]]:
+        return catalog.sequences()
+
+    @api.get("/sequences/{name:path}/check",
+             summary="Validation findings and the dry-run report from the arm's position now")
+    def check(name: str) -> dict[str, Any]:
+        now = session.status()
+        measured = dict(now.joints_deg)
+        # nothing measured yet: from Park, as seqrun validate
+        start = None if any(v is None for v in measured.values()) else measured
+        # An arm that is up (every module homed, none halted or in error) is dry-run as
+        # such, so that a sequence without the start-up steps is checked as it would run.
+        up = all("HOME_OK" in j.flags and not {"HALTED", "ERROR"} & set(j.flags)
+                 for j in now.joints) and now.activity not in ("halted", "faulted")
+        return catalog.check(name, start, started=up)
+
+    @api.get("/runs", summary="Past runs, newest first")
+    def runs() -> list[dict[str, Any]]:
+        return catalog.runs()
+
+    @api.get("/runs/{run_id}/{name}", summary="A file of a run folder (report.html, ...)")
+    def run_file(run_id: str, name: str) -> FileResponse:
+        return FileResponse(catalog.run_file(run_id, name))
+
+    @api.get("/events", summary="Recent events (the event log), oldest first")
+    def events() -> list[Any]:
+        return [json.loads(text)["event"] for text in list(console.telemetry.history)]
+
+    # -- commands -----------------------------------------------------------------------
+    @api.post("/halt", summary="STOP: the Halt broadcast at once, then confirmed")
+    def halt(body: models.HaltBody | None = None) -> Any:
+        return console.halt(body.reason if body else "STOP (console)")
+
+    @api.post("/reset", summary="Reset every module (clears a Halt), confirmed")
+    def reset() -> Any:
+        return _confirmed(session.reset())
+
+    @api.post("/home", summary="Home every module (enables the motors), confirmed")
+    def home() -> Any:
+        return _confirmed(session.home())
+
+    @api.post("/arm-up", summary="Arm: reset, then write the arm file's limits")
+    def arm_up() -> Any:
+        return _confirmed(session.arm_up())
+
+    @api.post("/move/pose", summary="Move to a named pose (validated, planned, streamed)")
+    def move_pose(body: models.PoseMove, client: ClientHeader = None) -> dict[str, Any]:
+        activity = session.move_to_pose(body.name, velocity_scale=body.velocity_scale)
+        motions.started(client, "move", activity)
+        return _activity(activity)
+
+    @api.post("/move/joints", summary="Move to joint targets in user degrees (MOVE)")
+    def move_joints(body: models.JointMap, client: ClientHeader = None) -> dict[str, Any]:
+        activity = session.move_to_joints(dict(body.joints))
+        motions.started(client, "move", activity)
+        return _activity(activity)
+
+    @api.post("/velocities", summary="Per-joint velocity of the console's moves, deg/s (ALLVEL)")
+    def velocities(body: models.JointMap) -> Any:
+        return jsonable(session.set_move_velocities(dict(body.joints)))
+
+    @api.post("/jog", summary="Jog one joint; renew within 200 ms or it stops (deadman)")
+    def jog(body: models.JogBody, client: ClientHeader = None) -> dict[str, Any]:
+        session.jog(body.joint, body.speed_scale)
+        motions.started(client, "jog")
+        return {"accepted": True}
+
+    @api.post("/jog/stop", summary="End the jog (controlled stop)")
+    def jog_stop(client: ClientHeader = None) -> Any:
+        result = session.jog_stop()  # a controlled stop
+        motions.jog_ended(client)
+        return jsonable(result)
+
+    @api.post("/run", summary="Run a sequence (validated first; a run folder as seqrun run)")
+    def run(body: models.RunBody, client: ClientHeader = None) -> dict[str, Any]:
+        path = catalog.sequence_path(body.sequence)
+        activity = session.run_sequence(path, speed=body.speed, step_mode=body.step_mode,
+                                        first_step=body.first_step)
+        motions.started(client, "run", activity)
+        return _activity(activity)
+
+    @api.post("/shutdown", summary="Run the shutdown sequence (to Totem, then power-off)")
+    def shutdown(client: ClientHeader = None) -> dict[str, Any]:
+        activity = session.run_sequence(catalog.shutdown_sequence())
+        motions.started(client, "run", activity)
+        return _activity(activity)
+
+    for verb in ("pause", "resume", "step", "abort"):
+        def control(verb: str = verb) -> Any:
+            return jsonable(getattr(session, verb)())
+        api.add_api_route(f"/run/{verb}", control, methods=["POST"],
+                          summary=f"{verb.capitalize()} the run under way")
+
+    @api.post("/answer", summary="Answer a confirm step (confirm_requested event)")
+    def answer(body: models.AnswerBody) -> Any:
+        return jsonable(session.answer(body.question_id, body.yes))
+
+    @api.post("/poses", summary="Save the arm's measured joints as a pose file")
+    def save_pose(body: models.SavePoseBody) -> dict[str, Any]:
+        path = session.save_pose(body.name, overwrite=body.overwrite)
+        return {"saved": str(path)}
+
+    return api
+
+
+def index_page(request: Request) -> HTMLResponse:
+    html = (STATIC / "index.html").read_text(encoding="utf-8")
+    response = HTMLResponse(html, headers={"Cache-Control": "no-store"})
+    token = request.query_params.get("token")
+    if token:  # the URL printed at start: the page's own requests carry it as a cookie
+        response.set_cookie(COOKIE, token, httponly=True, samesite="strict")
+    return response
+
+
+async def live(console: Console, ws: WebSocket) -> None:
+    """One page's live connection: telemetry and events out; STOP and jog in.
+
+    In: ``{"op": "halt"}``, ``{"op": "jog", "joint": "j2", "speed_scale": 0.5}`` (renewed
+    by the page every ~100 ms while the button is held), ``{"op": "jog_stop"}``; an ``id``
+    is echoed in the reply ``{"type": "reply", "id": ..., "ok": bool, "error"?: str}``.
+    A Halt never waits behind another message: it is sent from its own thread at once.
+    """
+    await ws.accept()
+    loop = asyncio.get_running_loop()
+    client = console.new_client_id()
+    feed = PageFeed(loop)
+    history = console.telemetry.attach(feed)
+    send_lock = asyncio.Lock()
+
+    async def send(text: str) -> None:
+        async with send_lock:
+            await ws.send_text(text)
+
+    async def reply(msg_id: Any, ok: bool, **extra: Any) -> None:
+        await send(dumps({"type": "reply", "id": msg_id, "ok": ok, **extra}))
+
+    async def pump() -> None:
+        while True:
+            for text in await feed.next_batch():
+                await send(text)
+
+    ops: asyncio.Queue[dict[str, Any]] = asyncio.Queue()
+
+    async def worker() -> None:  # jog/jog_stop in order: a renewal never follows its stop
+        while True:
+            message = await ops.get()
+            op, msg_id = message["op"], message.get("id")
+            try:
+                if op == "jog":
+                    body = models.JogBody.model_validate(
+                        {k: message.get(k) for k in ("joint", "speed_scale")})
+                    await asyncio.to_thread(console.session.jog, body.joint, body.speed_scale)
+                    console.motions.started(client, "jog")
+                else:
+                    await asyncio.to_thread(console.session.jog_stop)
+                    console.motions.jog_ended(client)
+                await reply(msg_id, True)
+            except (Refused, UserInputError) as exc:
+                await reply(msg_id, False, error=one_line(str(exc)))
+            except ValueError as exc:  # pydantic: a malformed jog
+                await reply(msg_id, False, error=one_line(_first_error(exc)))
+            except Exception as exc:  # noqa: BLE001 - a crashed handler halts the arm
+                outcome = await asyncio.to_thread(console.halt_after_crash, f"live {op}", exc)
+                await reply(msg_id, False, error=one_line(f"{op} failed ({exc}); {outcome}"))
+
+    def halt_now(msg_id: Any, reason: str) -> None:
+        def run() -> None:
+            try:
+                answer = reply(msg_id, True, result=console.halt(reason))
+            except Exception as exc:  # noqa: BLE001 - the page must hear that STOP failed
+                answer = reply(msg_id, False, error=one_line(f"Halt failed: {exc}"))
+            asyncio.run_coroutine_threadsafe(answer, loop)
+        threading.Thread(target=run, name="console-halt", daemon=True).start()
+
+    await send(dumps({"type": "hello", "client": client, "api_version": 1,
+                      "status": console.status_dict()}))
+    for text in history:
+        await send(text)
+    tasks = [asyncio.create_task(pump()), asyncio.create_task(worker())]
+    try:
+        while True:
+            try:
+                raw = await asyncio.wait_for(ws.receive_text(), PAGE_SILENCE_S)
+            except asyncio.TimeoutError:
+                # A page that went silent (a tablet off the Wi-Fi: no TCP close for a long
+                # time) while its motion is under way is taken as gone.
+                if await asyncio.to_thread(console.motions.owns_motion, client):
+                    log.warning("console page %s silent for %.1f s during its motion",
+                                client, PAGE_SILENCE_S)
+                    break
+                continue
+            try:
+                message = json.loads(raw)
+                if not isinstance(message, dict) or not isinstance(message.get("op"), str):
+                    raise ValueError("expected an object with an 'op'")
+            except ValueError as exc:
+                await reply(None, False, error=one_line(f"malformed message: {exc}"))
+                continue
+            op = message["op"]
+            if op == "halt":
+                while not ops.empty():  # queued jog renewals die with the STOP
+                    ops.get_nowait()
+                halt_now(message.get("id"), str(message.get("reason") or "STOP (console)"))
+            elif op in ("jog", "jog_stop"):
+                ops.put_nowait(message)
+            elif op == "ping":
+                if "id" in message:
+                    await reply(message["id"], True)
+            else:
+                await reply(message.get("id"), False, error=f"unknown op '{op}'")
+    except WebSocketDisconnect:
+        pass
+    except Exception as exc:  # noqa: BLE001 - a crashed handler halts the arm
+        await asyncio.to_thread(console.halt_after_crash, "the live connection", exc)
+    finally:
+        for task in tasks:
+            task.cancel()
+        console.telemetry.detach(feed)
+        await asyncio.to_thread(console.motions.page_gone, client)
+        with contextlib.suppress(Exception):  # already closed by the page, or not
+            await ws.close()
+
+
+def _first_error(exc: Exception) -> str:
+    errors = getattr(exc, "errors", None)
+    if callable(errors):
+        first = errors()[0]
+        return f"{'.'.join(map(str, first['loc']))}: {first['msg']}"
+    return str(exc)
+
+
+def create_app(session: Any, catalog: Catalog, arm: Any, *, token: str | None = None,
+               local_only: bool = True) -> FastAPI:
+    """The ASGI application for one arm session. ``token``: required on every request
+    (``--host``); ``local_only``: the Host header must name this machine."""
+    console = Console(session, catalog, arm)
+
+    @contextlib.asynccontextmanager
+    async def lifespan(_: FastAPI) -> AsyncIterator[None]:
+        console.telemetry.start()
+        try:
+            yield
+        finally:
+            console.telemetry.stop()
+
+    app = FastAPI(title="seqrun console", version="1", lifespan=lifespan,
+                  # No Swagger UI: it loads its scripts from a CDN (the facility has no
+                  # internet); the OpenAPI document itself is served.
+                  openapi_url=f"{API}/openapi.json", docs_url=None, redoc_url=None,
+                  description="The operator console's API: what the page uses, for a "
+                              "facility coordinator or a second tool too.")
+    app.state.console = console
+
+    @app.exception_handler(Refused)
+    async def refused(_: Request, exc: Refused) -> JSONResponse:
+        return JSONResponse({"error": one_line(str(exc))}, status_code=409)
+
+    @app.exception_handler(UserInputError)
+    async def bad_input(_: Request, exc: UserInputError) -> JSONResponse:
+        return JSONResponse({"error": one_line(str(exc))}, status_code=400)
+
+    @app.exception_handler(RequestValidationError)
+    async def malformed(_: Request, exc: RequestValidationError) -> JSONResponse:
+        return JSONResponse({"error": _validation_line(exc)}, status_code=422)
+
+    @app.exception_handler(SeqrunError)
+    async def failed(request: Request, exc: SeqrunError) -> JSONResponse:
+        # A command that could not do or confirm what it says (a bus or module fault).
+        outcome = await asyncio.to_thread(console.halt_after_crash, request.url.path, exc)
+        return JSONResponse({"error": one_line(f"{exc}; {outcome}")}, status_code=503)
+
+    app.include_router(build_router(console))
+
+    @app.websocket(f"{API}/live")
+    async def live_socket(ws: WebSocket) -> None:
+        await live(console, ws)
+
+    app.add_api_route("/", index_page, methods=["GET"], include_in_schema=False)
+    app.mount("/static", StaticFiles(directory=str(STATIC)), name="static")
+    app.add_middleware(CrashGuard, console=console)
+    app.add_middleware(AccessGuard, token=token, local_only=local_only)
+    return app

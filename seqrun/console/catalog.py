@@ -1,0 +1,141 @@
+"""What the console lists from the project: poses, sequences, past runs, and a sequence's
+validation findings with its dry-run report.
+
+Nothing here touches the bus: a check validates and dry-runs on the simulator at virtual
+time, exactly as ``seqrun validate`` does, starting from where the arm stands now.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from seqrun.errors import Refused, SequenceInvalid, UserInputError
+from seqrun.project import Project
+
+
+@dataclass(frozen=True)
+class Catalog:
+    """The project the console serves: where its poses, sequences and runs are."""
+
+    project: Project
+    #: Where run folders are (the session's log root; default the project's runs dir).
+    runs_dir: Path
+
+    @property
+    def sequences_dir(self) -> Path:
+        return self.project.root / "sequences"
+
+    # -- poses -------------------------------------------------------------------------
+    def poses(self) -> list[dict[str, Any]]:
+        """Every pose file on the project's pose path (campaign first, then the shipped)."""
+        from seqrun.poses import available_poses, load_pose
+
+        found: list[dict[str, Any]] = []
+        for name, path in available_poses(self.project.pose_path).items():
+            try:
+                pose = load_pose(path)
+            except SequenceInvalid as exc:
+                found.append({"name": name, "file": str(path), "error": str(exc.errors[0])})
+                continue
+            found.append({"name": name, "file": str(path), "description": pose.description,
+                          "joints_deg": dict(pose.joints_deg)})
+        return found
+
+    # -- sequences ---------------------------------------------------------------------
+    def sequences(self) -> list[dict[str, str]]:
+        folder = self.sequences_dir
+        if not folder.is_dir():
+            return []
+        return [{"name": p.relative_to(folder).as_posix(), "file": str(p)}
+                for p in sorted(folder.rglob("*.yaml")) if p.is_file()]
+
+    def sequence_path(self, name: str) -> Path:
+        """The file of a listed sequence; a name outside the sequences folder is refused."""
+        folder = self.sequences_dir.resolve()
+        path = (folder / name).resolve()
+        if not path.is_relative_to(folder) or path.suffix != ".yaml" or not path.is_file():
+            raise Refused(f"unknown sequence '{name}' (see GET /api/v1/sequences)")
+        return path
+
+    def shutdown_sequence(self) -> Path:
+        """The project's shutdown.yaml, else the shipped one (to Totem, then power-off)."""
+        from seqrun.shipped import shipped_dir
+
+        for folder in (self.sequences_dir, shipped_dir("sequences")):
+            if (folder / "shutdown.yaml").is_file():
+                return folder / "shutdown.yaml"
+        raise Refused("no shutdown.yaml among the project's or the shipped sequences")
+
+    def check(self, name: str, start_deg: Mapping[str, float] | None, *,
+              started: bool) -> dict[str, Any]:
+        """Validation findings (``file:line:col``) and, when valid, the dry run's report
+        (simulator, virtual time) from ``start_deg`` (default: the Park pose)."""
+        from seqrun.arm import load_arm
+        from seqrun.defaults import START_POSE
+        from seqrun.dryrun import dry_run
+        from seqrun.schema import load_sequence_partial
+        from seqrun.validation import pose_joints_deg, validate_sequence
+        from seqrun.yamlsource import sort_errors
+
+        path = self.sequence_path(name)
+        loaded, errors = load_sequence_partial(path, project_root=self.project.root)
+        out: dict[str, Any] = {"sequence": name, "file": str(path), "valid": False,
+                               "errors": [], "notes": [], "steps": [], "dry_run": None}
+        if loaded is None:
+            out["errors"] = [e.as_dict() | {"text": str(e)} for e in errors]
+            return out
+        out["steps"] = [{"number": s.number, "kind": s.kind, "label": s.label or s.kind}
+                        for s in loaded.steps]
+        try:
+            arm = load_arm(loaded.arm_path)
+            start = (dict(start_deg) if start_deg is not None
+                     else pose_joints_deg(START_POSE,  # as seqrun validate: Park
+                                          loaded.pose_path or loaded.poses_dir))  # type: ignore[arg-type]
+        except SequenceInvalid as exc:
+            errors = list(errors) + list(exc.errors)
+            out["errors"] = [e.as_dict() | {"text": str(e)} for e in sort_errors(errors)]
+            return out
+        except (UserInputError, OSError) as exc:
+            raise Refused(f"{name}: {exc}") from None
+        result = validate_sequence(loaded, arm, start, started=started,
+                                   incomplete=bool(errors))
+        errors = sort_errors(list(errors) + result.errors)
+        out["errors"] = [e.as_dict() | {"text": str(e)} for e in errors]
+        out["notes"] = [n.as_dict() | {"text": f"{n.file}:{n.line}:{n.column}: note: "
+                                                f"{n.message}"} for n in result.notes]
+        out["valid"] = not errors
+        if out["valid"]:
+            run = dry_run(loaded, arm, start, start_pose="the arm's position now",
+                          started=started)
+            out["dry_run"] = run.as_dict()
+            labels = {s["number"]: s["label"] for s in out["dry_run"]["steps"]}
+            for step in out["steps"]:  # the executor's labels (a confirm's is its text)
+                step["label"] = labels.get(step["number"]) or step["label"]
+        return out
+
+    # -- runs --------------------------------------------------------------------------
+    def runs(self) -> list[dict[str, Any]]:
+        """Past runs, newest first, each with the id its files are served under."""
+        from seqrun.records import list_runs
+
+        root = self.runs_dir.resolve()
+        found = []
+        for run in reversed(list_runs(root)):
+            folder = Path(run["folder"]).resolve()
+            run_id = folder.relative_to(root).as_posix()
+            found.append(run | {"id": run_id,
+                                "report": (folder / "report.html").is_file()})
+        return found
+
+    def run_file(self, run_id: str, name: str) -> Path:
+        """A file of a run folder (report.html, report.json, ...), never outside it."""
+        root = self.runs_dir.resolve()
+        folder = (root / run_id).resolve()
+        path = (folder / name).resolve()
+        if (not folder.is_relative_to(root) or folder == root
+                or not path.is_relative_to(folder) or not path.is_file()):
+            raise Refused(f"no file '{name}' in run '{run_id}'")
+        return path

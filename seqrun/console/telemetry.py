@@ -1,0 +1,176 @@
+"""Live telemetry for every open page: one subscription to the session, fanned out.
+
+One daemon thread reads the session's events (its own bounded queue: the control loop never
+waits for the console). Each measurement becomes one status snapshot (``session.status()``),
+serialised once and handed to every page; every other event is queued per page and kept in
+a short history for pages opened later. A page that cannot keep up gets the newest status
+only (older snapshots are replaced, never queued), so one slow tablet delays nobody.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import collections
+import dataclasses
+import enum
+import json
+import logging
+import math
+import threading
+import time
+from collections.abc import Callable
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+log = logging.getLogger(__name__)
+
+#: Most status snapshots per second sent to a page. The control loop measures at 100 Hz;
+#: the cap is above it so that a cycle's jitter never halves the rate.
+MAX_STATUS_HZ = 150.0
+#: A status is pushed at least this often, measurement or not (the page shows it is alive).
+HEARTBEAT_S = 0.5
+HISTORY = 300
+#: Events that carry a new measurement of the arm, never a line of the event log. A
+#: ``measurement`` becomes a status snapshot (subscribers get one per cycle of a move and
+#: one per idle poll); a ``setpoint`` comes with the same cycle's measurement.
+MEASURING_EVENTS = frozenset({"measurement", "setpoint"})
+
+
+def jsonable(value: Any) -> Any:
+    """Dataclasses, enums, paths, tuples, numpy numbers -> JSON values; NaN/inf -> None."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        if hasattr(value, "as_dict"):
+            return jsonable(value.as_dict())
+        return {f.name: jsonable(getattr(value, f.name)) for f in dataclasses.fields(value)}
+    if isinstance(value, dict):
+        return {str(k): jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple, set, frozenset)):
+        return [jsonable(v) for v in value]
+    if isinstance(value, bool) or value is None or isinstance(value, str):
+        return value
+    if isinstance(value, enum.Enum):
+        return value.name if isinstance(value, enum.Flag) else jsonable(value.value)
+    if isinstance(value, int):
+        return value
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, (Path, datetime)):
+        return str(value)
+    if hasattr(value, "tolist"):  # numpy arrays and scalars
+        return jsonable(value.tolist())
+    return str(value)
+
+
+def dumps(message: dict[str, Any]) -> str:
+    return json.dumps(jsonable(message), separators=(",", ":"), allow_nan=False)
+
+
+class PageFeed:
+    """What one page has not been sent yet: events in order, and the newest status."""
+
+    def __init__(self, loop: asyncio.AbstractEventLoop, max_events: int = 1000) -> None:
+        self.loop = loop
+        self.events: collections.deque[str] = collections.deque(maxlen=max_events)
+        self.status: str | None = None
+        self.ready = asyncio.Event()
+
+    def push_event(self, text: str) -> None:
+        self.events.append(text)
+        self.ready.set()
+
+    def push_status(self, text: str) -> None:
+        self.status = text
+        self.ready.set()
+
+    async def next_batch(self) -> list[str]:
+        await self.ready.wait()
+        self.ready.clear()
+        batch = list(self.events)
+        self.events.clear()
+        if self.status is not None:
+            batch.append(self.status)
+            self.status = None
+        return batch
+
+
+class Telemetry:
+    """The fan-out: ``attach()`` a page's feed, ``detach()`` it when the page goes."""
+
+    def __init__(self, session: Any, *, status_dict: Callable[[], dict[str, Any]]) -> None:
+        self.session = session
+        self.status_dict = status_dict
+        self.history: collections.deque[str] = collections.deque(maxlen=HISTORY)
+        self._feeds: set[PageFeed] = set()
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._subscription: Any = None
+        #: Snapshots built (status messages), for the bench and the tests.
+        self.snapshots = 0
+
+    # -- pages (event loop thread) ------------------------------------------------------
+    def attach(self, feed: PageFeed) -> list[str]:
+        with self._lock:
+            self._feeds.add(feed)
+            return list(self.history)
+
+    def detach(self, feed: PageFeed) -> None:
+        with self._lock:
+            self._feeds.discard(feed)
+
+    # -- the reader thread ----------------------------------------------------------------
+    def start(self) -> None:
+        self._subscription = self.session.subscribe(maxsize=2000, name="console")
+        self._thread = threading.Thread(target=self._run, name="console-telemetry",
+                                        daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._subscription is not None:
+            self._subscription.close()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+
+    def _broadcast(self, text: str, *, status: bool) -> None:
+        with self._lock:
+            feeds = list(self._feeds)
+        for feed in feeds:
+            method = feed.push_status if status else feed.push_event
+            try:
+                feed.loop.call_soon_threadsafe(method, text)
+            except RuntimeError:  # its loop has closed: the page is gone
+                self.detach(feed)
+
+    def publish_status(self) -> None:
+        self.snapshots += 1
+        self._broadcast(dumps({"type": "status", "status": self.status_dict()}), status=True)
+
+    def _run(self) -> None:
+        min_gap = 1.0 / MAX_STATUS_HZ
+        last_status = 0.0
+        while not self._stop.is_set():
+            try:
+                event = self._subscription.get(timeout=HEARTBEAT_S)
+                now = time.monotonic()
+                if event is None:
+                    self.publish_status()  # heartbeat: nothing measured for a while
+                    last_status = now
+                    continue
+                kind = getattr(event, "type", None)
+                if kind in MEASURING_EVENTS:
+                    if kind == "measurement" and now - last_status >= min_gap:
+                        self.publish_status()
+                        last_status = now
+                    continue
+                text = dumps({"type": "event", "event": event.as_dict()})
+                self.history.append(text)
+                self._broadcast(text, status=False)
+                self.publish_status()  # the activity may have changed with this event
+                last_status = now
+            except Exception:  # noqa: BLE001 - the feed must outlive one bad event
+                if self._stop.is_set():
+                    return
+                log.exception("console telemetry: an event could not be sent")
+                time.sleep(0.05)

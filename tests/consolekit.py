@@ -1,0 +1,171 @@
+"""The console on a real arm session over the simulated arm, for the API, browser and bench.
+
+``console_setup(folder)`` builds a project tree (arms, poses, sequences + a sequence with a
+confirm step), opens the built-in simulator in real time with every frame the session sends
+recorded (``Wire``), and an :class:`ArmSession` on it. ``LiveServer`` serves the app with
+uvicorn on a free port of 127.0.0.1 in a thread (browser tests, bench).
+"""
+
+from __future__ import annotations
+
+import shutil
+import socket
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+
+HALT_ID, HALT_DATA = 0x100, bytes([0x02])
+
+CONFIRM_SEQUENCE = """\
+name: Confirm then nudge
+description: start-up, a question to the operator, then j1 turns by 3 degrees
+steps:
+  - include: startup.yaml
+  - confirm: Is the space around the arm clear for the nudge?
+  - move: {joints: {j1: 3}, label: Nudge j1}
+"""
+
+INVALID_SEQUENCE = """\
+name: Too far
+description: a target outside the limits
+steps:
+  - move: {joints: {j2: 150}}
+"""
+
+
+def project_tree(folder: Path) -> Path:
+    for kind in ("arms", "poses", "sequences"):
+        shutil.copytree(ROOT / kind, folder / kind)
+    (folder / "sequences" / "confirm_nudge.yaml").write_text(CONFIRM_SEQUENCE)
+    (folder / "sequences" / "too_far.yaml").write_text(INVALID_SEQUENCE)
+    return folder
+
+
+@dataclass
+class Wire:
+    """Every frame the session sent, with ``time.perf_counter()`` and ``time.time()`` (epoch
+    seconds, comparable with a browser's ``performance.timeOrigin + timeStamp``) at the send."""
+
+    frames: list[tuple[float, int, bytes, float]] = field(default_factory=list)
+
+    def record(self, msg: Any) -> None:
+        self.frames.append((time.perf_counter(), msg.arbitration_id, bytes(msg.data),
+                            time.time()))
+
+    def halts(self, since: float = 0.0) -> list[float]:
+        return [t for t, can_id, data, _ in list(self.frames)
+                if can_id == HALT_ID and data[:1] == HALT_DATA and t >= since]
+
+    def halts_epoch(self, since_epoch: float = 0.0) -> list[float]:
+        return [e for _, can_id, data, e in list(self.frames)
+                if can_id == HALT_ID and data[:1] == HALT_DATA and e >= since_epoch]
+
+    def motions(self, since: float = 0.0) -> int:
+        """Motion commands (SetMotion 0x0B on a module's set id) sent since ``since``."""
+        return sum(1 for t, can_id, data, _ in list(self.frames)
+                   if t >= since and 0x0E1 <= can_id <= 0x0FF and data[:1] == b"\x0b")
+
+
+@dataclass
+class Setup:
+    folder: Path
+    arm: Any
+    project: Any
+    connection: Any
+    session: Any
+    wire: Wire
+    runs: Path
+
+    def catalog(self):
+        from seqrun.console.catalog import Catalog
+
+        return Catalog(self.project, self.runs)
+
+    def app(self, **kw: Any):
+        from seqrun.console.app import create_app
+
+        return create_app(self.session, self.catalog(), self.arm, **kw)
+
+    def close(self) -> None:
+        self.session.close()
+
+
+def console_setup(folder: Path, *, session_class: Any = None, **session_kw: Any) -> Setup:
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from wrapbus import WrapBus
+
+    from seqrun.arm import load_arm
+    from seqrun.connection import open_connection
+    from seqrun.project import open_project
+    from seqrun.service.session import ArmSession
+
+    project_tree(folder)
+    project = open_project(folder)
+    arm = load_arm(folder / "arms" / "lwa3.yaml").with_zero_reference("park")
+    connection = open_connection(force_sim=True, default_bitrate=arm.can.bitrate)
+    wire = Wire()
+    connection.bus = WrapBus(connection.bus, before_send=wire.record)
+    runs = folder / "runs"
+    session = (session_class or ArmSession)(arm, connection, project=project, log_root=runs,
+                                            **session_kw)
+    return Setup(folder, arm, project, connection, session, wire, runs)
+
+
+class LiveServer:
+    """The console app served by uvicorn on 127.0.0.1:<free port> in a daemon thread."""
+
+    def __init__(self, app: Any) -> None:
+        import uvicorn
+
+        from seqrun.console.server import bind
+
+        self.sock = bind("127.0.0.1", 0)
+        self.port = self.sock.getsockname()[1]
+        self.url = f"http://127.0.0.1:{self.port}/"
+        config = uvicorn.Config(app, log_level="warning", ws="websockets-sansio",
+                                lifespan="on", timeout_graceful_shutdown=2)
+        self.server = uvicorn.Server(config)
+        self.server.install_signal_handlers = lambda: None  # type: ignore[method-assign]
+        self.thread = threading.Thread(target=self.server.run,
+                                       kwargs={"sockets": [self.sock]}, daemon=True)
+
+    def __enter__(self) -> "LiveServer":
+        self.thread.start()
+        deadline = time.monotonic() + 20
+        while not self.server.started:
+            if time.monotonic() > deadline or not self.thread.is_alive():
+                raise RuntimeError("the console server did not start")
+            time.sleep(0.02)
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.server.should_exit = True
+        self.thread.join(timeout=10)
+        try:
+            self.sock.close()
+        except OSError:
+            pass
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def wait_for(predicate, timeout: float = 10.0, period: float = 0.02) -> Any:
+    """Poll ``predicate`` until it returns something true; that value, or TimeoutError."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"condition not met within {timeout} s")
+        time.sleep(period)

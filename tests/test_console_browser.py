@@ -1,0 +1,207 @@
+"""The console in a real browser: Chromium (Debian's, driven by Playwright) on the page served
+by uvicorn, on a real arm session over the simulated arm, in real time.
+
+Needs Chromium at /usr/bin/chromium (``apt-get install chromium``; CI installs it) or at
+$SEQRUN_CHROMIUM; Playwright's own browser download is not used. Screenshots of every test
+are left in its tmp folder (``pytest --basetemp DIR`` keeps them where you want).
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import shutil
+import time
+from pathlib import Path
+
+import pytest
+from consolekit import LiveServer, console_setup, wait_for
+
+CHROMIUM = os.environ.get("SEQRUN_CHROMIUM") or shutil.which("chromium") or "/usr/bin/chromium"
+
+pytestmark = pytest.mark.slow  # a browser, a server and real-time motion
+
+
+@pytest.fixture(scope="module")
+def browser(playwright):
+    assert Path(CHROMIUM).is_file(), (
+        f"Chromium not found at {CHROMIUM}: apt-get install chromium (or set SEQRUN_CHROMIUM)")
+    # WebGL through SwiftShader (software): the 3D view draws without a GPU.
+    browser = playwright.chromium.launch(
+        executable_path=CHROMIUM, headless=True,
+        args=["--no-sandbox", "--use-gl=angle", "--use-angle=swiftshader",
+              "--enable-unsafe-swiftshader", "--disable-background-networking",
+              "--disable-component-update", "--no-first-run"])
+    yield browser
+    browser.close()
+
+
+@pytest.fixture
+def live(tmp_path):
+    setup = console_setup(tmp_path)
+    with LiveServer(setup.app()) as server:
+        yield setup, server
+    setup.close()
+
+
+@pytest.fixture
+def page(browser, live, tmp_path):
+    setup, server = live
+    context = browser.new_context(viewport={"width": 1500, "height": 1000})
+    page = context.new_page()
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    requests: list[str] = []
+    page.on("request", lambda r: requests.append(r.url))
+    page.requests = requests  # type: ignore[attr-defined]
+    page.goto(server.url)
+    page.wait_for_function("window.seqrunConsole && window.seqrunConsole.ready "
+                           "&& window.seqrunConsole.statusCount > 1", timeout=20000)
+    yield page
+    try:
+        page.screenshot(path=str(tmp_path / "console.png"), full_page=True)
+    except Exception:  # noqa: BLE001 - a test that closed its page
+        pass
+    assert not errors, errors
+    context.close()
+
+
+def status_of(page) -> dict:
+    return page.evaluate("window.seqrunConsole.status")
+
+
+def joint(page, name: str) -> float:
+    return next(j["position_deg"] for j in status_of(page)["joints"] if j["name"] == name)
+
+
+def arm_up(page) -> None:
+    for button in ("#cmd-arm", "#cmd-home"):
+        page.click(button)
+        page.wait_for_function("document.querySelector('#message').textContent.includes(': ')",
+                               timeout=20000)
+        assert "error" not in (page.get_attribute("#message", "class") or "")
+        page.evaluate("document.querySelector('#message').textContent = ''")
+
+
+def distinct_colours(png: bytes) -> int:
+    from PIL import Image
+
+    image = Image.open(io.BytesIO(png)).convert("RGB")
+    return len(image.getcolors(maxcolors=1 << 20) or [])
+
+
+def test_page_loads_with_live_telemetry_and_the_3d_view(page, live):
+    setup, _ = live
+    assert "SIMULATOR" in page.title()
+    first = page.evaluate("window.seqrunConsole.statusCount")
+    wait_for(lambda: page.evaluate("window.seqrunConsole.statusCount") > first + 3)
+    assert page.text_content("#tlm-j2 .pos") == "-90.00"  # Park
+    assert page.text_content("#conn") == "live"
+    # Offline: the page asks for nothing but the console itself (three.js included).
+    assert all(url.startswith(live[1].url) for url in page.requests), page.requests
+    assert any(url.endswith("three.module.min.js") for url in page.requests)
+    # The 3D view is drawn (WebGL), not blank.
+    assert distinct_colours(page.locator("#view3d canvas").screenshot()) > 40
+    # Its kinematics are the validator's: the page's frames at a pose equal seqrun's.
+    import numpy as np
+
+    from seqrun.kinematics import Chain, frame_transforms
+
+    q = [20, -30, 0, 45, -10, 60, 15]
+    ours = np.array(page.evaluate(f"window.seqrunConsole.frames(window.seqrunConsole.arm.chain, {q})"))
+    assert np.allclose(ours, frame_transforms(Chain.from_arm(setup.arm), np.radians(q)),
+                       atol=1e-6)
+    # Hovering a pose shows its ghost before anything is sent.
+    page.hover("[data-pose=opsafe]")
+    assert page.evaluate("window.seqrunConsole.view.ghost.group.visible") is True
+    assert setup.wire.motions() == 0
+
+
+def test_stop_click_esc_and_space_send_the_halt(page, live):
+    setup, _ = live
+    arm_up(page)
+    for press in (lambda: page.click("#stop"), lambda: page.keyboard.press("Escape"),
+                  lambda: page.keyboard.press("Space"), lambda: page.click("#stop")):
+        before = time.perf_counter()
+        press()
+        wait_for(lambda: setup.wire.halts(before), timeout=5)
+    page.wait_for_function("window.seqrunConsole.status.activity === 'halted'")
+    assert page.text_content("#activity").startswith("halted")
+    # The modules' HALTED shows in red and stays latched after the Reset until acknowledged.
+    page.wait_for_function("window.seqrunConsole.status.joints.every(j => j.fault)")
+    assert "HALTED" in page.text_content("#tlm-j1 .flags")
+    assert "fault" in page.get_attribute("#tlm-j1", "class")
+    page.click("#cmd-reset")
+    page.wait_for_function("window.seqrunConsole.status.joints.every(j => !j.fault)",
+                           timeout=10000)
+    assert "latched" in page.get_attribute("#tlm-j1", "class")
+    assert "was" in page.text_content("#tlm-j1 .flags")
+    page.click("#ack-faults")
+    assert page.get_attribute("#tlm-j1", "class") in ("", None)
+
+
+def test_jog_hold_moves_and_release_stops(page, live):
+    setup, _ = live
+    arm_up(page)
+    start = joint(page, "j1")
+    box = page.locator(".jog-plus[data-joint=j1]").bounding_box()
+    page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    page.mouse.down()
+    moving = wait_for(lambda: (q := joint(page, "j1")) > start + 0.5 and q, timeout=5)
+    page.wait_for_timeout(600)
+    assert joint(page, "j1") > moving + 0.5  # still going while held
+    page.mouse.up()
+    page.wait_for_function("window.seqrunConsole.status.activity === 'idle'", timeout=5000)
+    stopped = joint(page, "j1")
+    page.wait_for_timeout(500)
+    assert joint(page, "j1") == pytest.approx(stopped, abs=0.1)
+    assert stopped > start + 1.0
+    assert not setup.wire.halts()
+
+
+def test_a_sequence_with_a_confirm_runs_from_the_page(page, live, tmp_path):
+    setup, _ = live
+    page.click("[data-sequence='confirm_nudge.yaml'] button")
+    page.wait_for_selector("#seq-verdict.passed", timeout=60000)
+    assert "dry run passed" in page.text_content("#seq-dryrun")
+    page.click("#run")
+    page.wait_for_selector("#confirm-dialog:not([hidden])", timeout=20000)
+    assert "clear for the nudge" in page.text_content("#confirm-text")
+    page.screenshot(path=str(tmp_path / "confirm.png"))
+    # STOP stays visible and clickable above the dialog.
+    box = page.locator("#stop").bounding_box()
+    on_top = page.evaluate(f"document.elementFromPoint({box['x'] + 20}, {box['y'] + 20}).id")
+    assert on_top == "stop"
+    page.click("#confirm-yes")
+    page.wait_for_function("[...document.querySelectorAll('#events li')]"
+                           ".some(li => li.textContent.includes('run_finished'))", timeout=30000)
+    assert page.get_attribute("#seq-steps li[data-step='5']", "class") == "current"
+    assert joint(page, "j1") == pytest.approx(3, abs=0.3)
+    page.wait_for_selector("#runs li a", timeout=10000)
+    assert "Confirm then nudge" in page.text_content("#runs li a")
+
+
+def test_a_refused_move_shows_why(page, live):
+    setup, _ = live
+    arm_up(page)
+    page.click("#stop")
+    page.wait_for_function("window.seqrunConsole.status.activity === 'halted'")
+    before = time.perf_counter()
+    page.fill(".move-number[data-joint=j1]", "10")
+    page.click("#cmd-move")
+    page.wait_for_selector("#message.error", timeout=5000)
+    message = page.text_content("#message")
+    assert message and "\n" not in message and "Traceback" not in message
+    assert setup.wire.motions(before) == 0
+
+
+def test_closing_the_tab_mid_move_is_a_controlled_stop(page, live):
+    setup, _ = live
+    arm_up(page)
+    page.fill(".move-number[data-joint=j1]", "60")
+    page.click("#cmd-move")
+    wait_for(lambda: setup.session.status().joints[0].position_deg > 2, timeout=10)
+    page.close()
+    wait_for(lambda: setup.session.status().activity == "idle", timeout=10)
+    assert 2 < setup.session.status().joints[0].position_deg < 50
+    assert not setup.wire.halts()  # a controlled stop, not a Halt

@@ -1,0 +1,104 @@
+"""``seqrun console`` as a command: light to load, prints its URL, serves, ends on Ctrl-C."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import urllib.error
+import urllib.request
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
+
+
+def test_console_help_imports_no_web_stack_and_no_bus():
+    proc = subprocess.run([sys.executable, "-X", "importtime", "-m", "seqrun", "console",
+                           "--help"], cwd=ROOT, env=ENV, capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    names = {line.rsplit("|", 1)[1].strip().split(".")[0]
+             for line in proc.stderr.splitlines() if line.startswith("import time:")}
+    assert "seqrun" in names
+    assert not names & {"fastapi", "starlette", "uvicorn", "websockets", "can", "numpy"}
+
+
+def test_the_listen_address_decides_the_token():
+    from seqrun.console.server import is_loopback
+
+    assert is_loopback("127.0.0.1") and is_loopback("localhost") and is_loopback("::1")
+    assert not is_loopback("0.0.0.0") and not is_loopback("192.0.2.7")
+
+
+@pytest.mark.slow
+def test_seqrun_console_prints_its_url_serves_and_ends_on_ctrl_c(tmp_path):
+    proc = subprocess.Popen([sys.executable, "-m", "seqrun", "console", "--sim", "--port", "0",
+                             "--log-dir", str(tmp_path)], cwd=ROOT, env=ENV,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        lines = []
+        url = None
+        while url is None:
+            line = proc.stdout.readline()
+            assert line, "".join(lines)
+            lines.append(line)
+            found = re.search(r"(http://127\.0\.0\.1:\d+/)", line)
+            url = found.group(1) if found else None
+        assert "SIMULATOR" in "".join(lines)
+        with urllib.request.urlopen(url + "api/v1/status", timeout=10) as r:
+            status = json.load(r)
+        assert status["simulator"] is True and len(status["joints"]) == 7
+        with pytest.raises(urllib.error.HTTPError) as refused:
+            urllib.request.urlopen(urllib.request.Request(
+                url + "api/v1/move/joints", data=b'{"joints": {"j1": NaN}}', method="POST",
+                headers={"Content-Type": "application/json"}), timeout=10)
+        assert refused.value.code == 422
+        assert "finite" in json.load(refused.value)["error"]
+        proc.send_signal(signal.SIGINT)
+        out, _ = proc.communicate(timeout=30)
+        assert proc.returncode == 130, out  # Ctrl-C, as for every seqrun command
+        assert "ended by Ctrl-C" in out and "Traceback" not in out
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+def _post(url: str, path: str, body: dict | None = None) -> dict:
+    request = urllib.request.Request(url + "api/v1/" + path, method="POST",
+                                     data=json.dumps(body or {}).encode(),
+                                     headers={"Content-Type": "application/json"})
+    with urllib.request.urlopen(request, timeout=30) as r:
+        return json.load(r)
+
+
+@pytest.mark.slow
+def test_sigterm_during_a_move_halts_the_arm(tmp_path):
+    proc = subprocess.Popen([sys.executable, "-m", "seqrun", "console", "--sim", "--port", "0",
+                             "--log-dir", str(tmp_path)], cwd=ROOT, env=ENV,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        url = None
+        while url is None:
+            line = proc.stdout.readline()
+            assert line
+            found = re.search(r"(http://127\.0\.0\.1:\d+/)", line)
+            url = found.group(1) if found else None
+        _post(url, "arm-up")
+        _post(url, "home")
+        assert _post(url, "move/joints", {"joints": {"j1": 90}})["accepted"]
+        proc.send_signal(signal.SIGTERM)
+        out, _ = proc.communicate(timeout=30)
+        assert proc.returncode == 130, out
+        assert "ended by SIGTERM; Halt confirmed" in out, out
+        assert "Traceback" not in out
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()

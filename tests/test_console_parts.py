@@ -1,0 +1,144 @@
+"""The console's parts on their own: the access guard (token, Host, Origin) on a bare
+Starlette app, and the telemetry fan-out on the real event hub (a slow page gets the newest
+status only, events in order, history bounded, the publisher never waits)."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import threading
+import time
+
+import pytest
+from starlette.applications import Starlette
+from starlette.responses import PlainTextResponse
+from starlette.routing import Route, WebSocketRoute
+from starlette.testclient import TestClient, WebSocketDenialResponse
+
+from seqrun.console.guard import COOKIE, AccessGuard
+from seqrun.console.telemetry import HISTORY, PageFeed, Telemetry, dumps, jsonable
+from seqrun.events import EventHub, make_event
+
+
+def _app(**guard) -> AccessGuard:
+    async def hello(request):
+        return PlainTextResponse("hello")
+
+    async def socket(ws):
+        await ws.accept()
+        await ws.send_text("hello")
+        await ws.close()
+
+    return AccessGuard(Starlette(routes=[Route("/", hello, methods=["GET", "POST"]),
+                                         WebSocketRoute("/ws", socket)]), **guard)
+
+
+def test_token_by_header_query_or_cookie_else_401():
+    client = TestClient(_app(token="t0k", local_only=False))
+    for headers in ({}, {"Authorization": "Bearer nope"}, {"Authorization": "t0k"},
+                    {"Cookie": f"{COOKIE}=nope"}, {"Cookie": "garbage;;=="}):
+        r = client.get("/", headers=headers)
+        assert r.status_code == 401 and "token" in r.json()["error"], headers
+    assert client.get("/", headers={"Authorization": "Bearer t0k"}).text == "hello"
+    assert client.get("/?token=t0k").text == "hello"
+    assert client.get("/", headers={"Cookie": f"{COOKIE}=t0k"}).text == "hello"
+    with pytest.raises(WebSocketDenialResponse) as denied:
+        with client.websocket_connect("/ws"):
+            pass
+    assert denied.value.status_code == 401
+    with client.websocket_connect("/ws?token=t0k") as ws:
+        assert ws.receive_text() == "hello"
+
+
+def test_local_only_refuses_other_host_names_and_foreign_origins():
+    client = TestClient(_app(token=None, local_only=True), base_url="http://127.0.0.1:8765")
+    assert client.get("/").text == "hello"
+    assert client.get("/", headers={"Host": "localhost:8765"}).text == "hello"
+    assert client.get("/", headers={"Host": "[::1]:8765"}).text == "hello"
+    for host in ("evil.example", "evil.example:8765", "127.0.0.1.evil.example:8765"):
+        r = client.get("/", headers={"Host": host})
+        assert r.status_code == 403 and "host" in r.json()["error"], host
+    for origin in ("http://evil.example", "null", "http://127.0.0.1:9999", "file://"):
+        r = client.post("/", headers={"Origin": origin})
+        assert r.status_code == 403 and "origin" in r.json()["error"], origin
+    assert client.post("/", headers={"Origin": "http://127.0.0.1:8765"}).text == "hello"
+
+
+def test_jsonable_never_emits_nan():
+    from dataclasses import dataclass
+    from pathlib import Path
+
+    @dataclass
+    class Thing:
+        a: float
+        b: tuple
+        c: Path
+
+    assert jsonable(Thing(float("nan"), (1, float("inf")), Path("/x"))) == \
+        {"a": None, "b": [1, None], "c": "/x"}
+    json.loads(dumps({"v": float("nan")}))  # valid JSON
+
+
+class _Source:
+    """What Telemetry needs of a session: subscribe() (the real hub) and status()."""
+
+    def __init__(self) -> None:
+        self.hub = EventHub()
+        self.polls = 0
+
+    def subscribe(self, **kw):
+        return self.hub.subscribe(**kw)
+
+
+def test_a_slow_page_gets_the_newest_status_and_every_event_in_order():
+    source = _Source()
+    counter = iter(range(10**6))
+    telemetry = Telemetry(source, status_dict=lambda: {"n": next(counter)})
+
+    async def scenario() -> list[str]:
+        feed = PageFeed(asyncio.get_running_loop())
+        telemetry.attach(feed)
+        telemetry.start()
+        try:
+            for k in range(300):  # a burst: the page reads nothing meanwhile
+                source.hub.publish(make_event("measurement", k * 0.01,
+                                              {"joints_deg": [0.0] * 7, "state": [0] * 7}))
+                if k % 100 == 0:
+                    source.hub.publish(make_event("step_started", k * 0.01, {
+                        "step": k // 100 + 1, "kind": "wait", "label": f"s{k}",
+                        "location": "x:1:1"}))
+            await asyncio.sleep(0.5)
+            return await feed.next_batch()
+        finally:
+            telemetry.stop()
+
+    out: list = []  # its own thread: Playwright's sync API may own this thread's loop
+    worker = threading.Thread(target=lambda: out.append(asyncio.run(scenario())))
+    worker.start()
+    worker.join(30)
+    batch = out[0]
+    messages = [json.loads(m) for m in batch]
+    events = [m["event"]["label"] for m in messages if m["type"] == "event"]
+    statuses = [m for m in messages if m["type"] == "status"]
+    assert events == ["s0", "s100", "s200"]
+    assert len(statuses) == 1  # only the newest snapshot waits for a slow page
+    assert telemetry.snapshots > 1 and statuses[0]["status"]["n"] > 0  # not the first
+
+
+def test_the_history_for_new_pages_is_bounded_and_skips_measurements():
+    source = _Source()
+    telemetry = Telemetry(source, status_dict=lambda: {})
+    telemetry.start()
+    try:
+        for k in range(HISTORY + 50):
+            source.hub.publish(make_event("measurement", k, {"joints_deg": [0.0] * 7,
+                                                             "state": [0] * 7}))
+            source.hub.publish(make_event("retry", k, {"what": f"r{k}"}))
+        deadline = time.monotonic() + 5
+        while (not telemetry.history or json.loads(telemetry.history[-1])["event"]["what"]
+               != f"r{HISTORY + 49}") and time.monotonic() < deadline:
+            time.sleep(0.01)
+    finally:
+        telemetry.stop()
+    whats = [json.loads(h)["event"]["what"] for h in telemetry.history]
+    assert len(whats) == HISTORY and whats[-1] == f"r{HISTORY + 49}" and whats[0] == "r50"
