@@ -51,6 +51,7 @@ COMMAND_WORDS = {
     "init": "seqrun.cli.init",
     "runs": "seqrun.cli.runs",
     "report": "seqrun.cli.report",
+    "console": "seqrun.cli.console",
 }
 
 
