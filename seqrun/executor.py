@@ -29,8 +29,7 @@ import threading
 import time
 import traceback
 from dataclasses import dataclass, replace
-from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import TYPE_CHECKING, Any, Callable, Iterable
 
 import numpy as np
 
@@ -54,6 +53,9 @@ from seqrun.stop_requests import OPERATOR_HALT, StopRequest, StopRequests
 from seqrun.results import (EXIT_FAULT, EXIT_INVALID, EXIT_OK,  # noqa: F401
                             EXIT_OPERATOR_ABORT, EXIT_USAGE, OperatorAbort, RunResult,
                             StepResult)
+
+if TYPE_CHECKING:
+    from seqrun.poses import PoseDirs
 
 #: A synchronous recorder: gets every typed event (it reads like the events.jsonl dict).
 Listener = Callable[[Any], None]
@@ -85,7 +87,7 @@ class Executor:
     record_zero: Callable[[str], Any] | None = None
 
     def __init__(self, driver: ArmDriver | Any, arm: ArmDescription, clock: Clock, *,
-                 poses_dir: Path | None = None, speed: float = 1.0,
+                 poses_dir: PoseDirs | None = None, speed: float = 1.0,
                  command_mode: str | None = None, cycle_hz: float | None = None,
                  confirm: Callable[[str], bool] | None = None,
                  before_step: Callable[[Any], bool] | None = None,

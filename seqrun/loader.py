@@ -311,8 +311,9 @@ class _Loader:
                 self.errors.extend(exc.errors)
                 problem = f"pose '{name}' cannot be used: its file has errors"
             self.pose_problems[name] = problem
-        if self.pose_problems[name] is not None:
-            self.errors.append(step.error(self.pose_problems[name], "pose"))
+        known = self.pose_problems[name]
+        if known is not None:
+            self.errors.append(step.error(known, "pose"))
 
 
 def load_sequence(path: str | os.PathLike[str], *,

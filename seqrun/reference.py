@@ -7,8 +7,12 @@ accepts: ``docs/sequence-format.md`` (tests/test_schema.py checks it is up to da
 from __future__ import annotations
 
 from json import dumps as json_dumps
+from typing import TYPE_CHECKING
 
 from seqrun.schema import PARAMS_MODELS, STEP_MODELS, doc, sequence_json_schema
+
+if TYPE_CHECKING:
+    from pydantic import BaseModel
 
 __all__ = [
     "arm_reference_markdown",
@@ -129,8 +133,9 @@ def _type_text(prop: dict, defs: dict) -> str:
         bounds.append(f"> {prop['exclusiveMinimum']}")
     if "maximum" in prop:
         bounds.append(f"≤ {prop['maximum']}")
-    text = {"number": "number", "string": "text", "boolean": "true/false",
-            "integer": "whole number"}.get(kind, "value")
+    names: dict[str | None, str] = {"number": "number", "string": "text",
+                                    "boolean": "true/false", "integer": "whole number"}
+    text = names.get(kind, "value")  # (kind is None when the schema gives no type)
     return text + (" " + ", ".join(bounds) if bounds else "")
 
 
@@ -173,7 +178,7 @@ def reference_markdown() -> str:
     return "\n".join(parts)
 
 
-def file_reference_markdown(model: type, title: str, intro: str) -> str:
+def file_reference_markdown(model: type[BaseModel], title: str, intro: str) -> str:
     """A reference of a file format given by a pydantic model (pose files, arm files): one
     row per key, nested mappings as dotted keys, from the model's JSON Schema."""
     schema = model.model_json_schema()

@@ -21,6 +21,7 @@ from seqrun.errors import UserInputError
 
 if TYPE_CHECKING:
     from seqrun.arm import ArmDescription
+    from seqrun.poses import PoseDirs
     from seqrun.steps.checkpoint import CheckpointParams
     from seqrun.steps.move import MoveParams
 
@@ -34,9 +35,11 @@ __all__ = [
 ]
 
 
-def pose_joints_deg(name: str, poses_dir: str | Path) -> dict[str, float]:
-    """Joint angles of pose ``name`` (user degrees). Raises :class:`UserInputError` for an
-    unknown pose, :class:`SequenceInvalid` for a broken pose file."""
+def pose_joints_deg(name: str, poses_dir: PoseDirs) -> dict[str, float]:
+    """Joint angles of pose ``name`` (user degrees), from a pose folder or a search path of
+    folders (first match wins, as :func:`seqrun.poses.find_pose`). Raises
+    :class:`UserInputError` for an unknown pose, :class:`SequenceInvalid` for a broken pose
+    file."""
     from seqrun.poses import find_pose
 
     path = find_pose(name, poses_dir)
@@ -51,7 +54,7 @@ def _pose_joints(path: Path, mtime_ns: int) -> tuple[tuple[str, float], ...]:
     return tuple(load_pose(path).joints_deg.items())
 
 
-def park_deg(poses_dir: str | Path) -> dict[str, float]:
+def park_deg(poses_dir: PoseDirs) -> dict[str, float]:
     """The default start state: the Park pose (where a freshly powered-on arm is)."""
     return pose_joints_deg(START_POSE, poses_dir)
 

@@ -29,7 +29,7 @@ class CheckpointParams(StepParams):
         {"required": ["pose"]}, {"required": ["position_mm", "rpy_deg"]},
         {"required": ["moved_mm"]}]})
 
-    pose: PoseName | None = Field(  # type: ignore[valid-type]
+    pose: PoseName | None = Field(
         None, description="Expect the end-effector pose of this pose file.")
     moved_mm: Vector3 | None = Field(
         None, description="Relative checkpoint: the tool moved by this [x, y, z] in mm during "
@@ -142,6 +142,7 @@ def _relative_checkpoint(checker: Checker, step: ResolvedStep[CheckpointParams],
     from seqrun.cartesian import displacement, solver_for, tool_pose
     from seqrun.validation import format_number as f
 
+    assert params.moved_mm is not None  # (check() comes here only for a moved_mm checkpoint)
     if checker.motion_start_deg is None:
         checker.errors.append(step.error("a relative checkpoint (moved_mm) needs a move before "
                                          "it", "moved_mm"))
@@ -207,6 +208,7 @@ def _relative(step: ResolvedStep[CheckpointParams], ex: StepContext) -> dict:
     from seqrun.cartesian import displacement, solver_for, tool_pose
 
     params = step.params
+    assert params.moved_mm is not None  # (run() comes here only for a moved_mm checkpoint)
     measured = ex.monitor()
     if ex.motion_start_deg is None:
         raise RunAborted("checkpoint", "relative checkpoint: no move before it in this run")

@@ -39,7 +39,7 @@ class MoveParams(StepParams):
     yaml_name: ClassVar[str] = "move"
     model_config = ConfigDict(json_schema_extra=exactly_one("pose", "joints", "position_mm"))
 
-    pose: PoseName | None = Field(  # type: ignore[valid-type]
+    pose: PoseName | None = Field(
         None, description="Move every joint to this pose (a file in poses/), e.g. totem.")
     joints: dict[JointName, Finite] | None = Field(
         None, min_length=1,

@@ -28,6 +28,8 @@ def tool_target(step: ResolvedStep[MoveParams | MoveLinearParams], ex: StepConte
                 measured_deg: np.ndarray) -> np.ndarray:
     """The step's tool target (4x4) from the measured joints."""
     params = step.params
+    # (move_linear always has position_mm; a move comes here only when it has one)
+    assert params.position_mm is not None
     current = tool_pose(solver_for(ex.arm, params.tool), measured_deg)
     return resolve_target(current, params.position_mm, params.rpy_deg,
                           relative=params.relative, frame=params.frame)
