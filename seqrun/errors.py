@@ -106,3 +106,8 @@ class RunAborted(SeqrunError):
         #: Measured values for the step's report entry (e.g. a checkpoint's errors).
         self.detail = detail or {}
         super().__init__(message)
+
+
+class Refused(SeqrunError):
+    """A command refused for the state things are in (the bus is held by another
+    controller, a second activity while one runs); nothing was sent. One line."""
