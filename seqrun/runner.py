@@ -17,6 +17,7 @@ from seqrun.executor import EXIT_FAULT, Executor, Listener, RunResult, StepResul
 from seqrun.powercube.client import PowerCubeClient
 from seqrun.runlog import RunLog
 from seqrun.schema import LoadedSequence
+from seqrun.service.run_control import halt_on_foreign_frames
 from seqrun.stop_requests import StopRequests
 
 
@@ -80,6 +81,8 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
                                       listeners=listeners, dry_run=dry_run,
                                       confirm_clear_latched=confirm_clear_latched,
                                       requests=requests)
+    # Another master's request frame on the bus halts the run (one controller per bus).
+    halt_on_foreign_frames(executor, echoes_own=connection.echoes_own)
     log = None
     if log_dir is not None:
         log = RunLog(log_dir, {"sequence": loaded.name, "file": file or loaded.file,

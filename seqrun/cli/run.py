@@ -163,6 +163,7 @@ def run_command(
     from seqrun.runlog import prepare_run_folder
     from seqrun.runner import run_sequence
     from seqrun.schema import load_sequence
+    from seqrun.service.run_control import RunControl
     from seqrun.stop_requests import StopRequests
 
     keep_running_on_broken_pipe()  # a closed stdout never ends a run
@@ -219,6 +220,9 @@ def run_command(
         if power_on_at is not None and not connection.is_simulator:
             connection.close()
             fail("--power-on-at applies to the built-in simulator (seqrun sim serve has its own)")
+    # From here `seqrun status` / `seqrun halt` in another terminal ask this run.
+    requests = StopRequests()
+    control = RunControl.serve(connection, arm, requests)
     style = "bold black on yellow" if connection.is_simulator else "bold white on red"
     console.print(f" {connection.description} ", style=style, highlight=False, markup=False)
     if not connection.is_simulator and not _ask(
@@ -263,7 +267,6 @@ def run_command(
 
     # From here on signals only post stop requests (seqrun/cli/interrupts.py); the control
     # loop acts on them, a question is answered "no".
-    requests = StopRequests()
     signals = RunSignals(requests)
 
     campaign_records.record_run(folder, loaded, arm_file or loaded.arm_path,
@@ -288,6 +291,8 @@ def run_command(
     live = console.is_terminal and not plain
 
     def attach(executor) -> None:
+        if control is not None:
+            control.attach(executor)
         executor.emit("zero_reference", **zero.as_dict())  # for the log and any console
         # The built-in simulator keeps no record: its zero is its power-on pose.
         executor.record_zero = (None if connection.is_simulator
