@@ -295,7 +295,8 @@ def _halt_shared_bus(arm, key: tuple[str, str], open_bus) -> None:
             client.halt_now()
         except BusError as exc:
             fail(f"halt not sent: {exc}", EXIT_FAULT)
-        reply = ask_owner(*key, "halt", reason=f"seqrun halt (pid {os.getpid()})")
+        reply = ask_owner(*key, "halt",
+                          reason=f"seqrun halt from another process (pid {os.getpid()})")
         if reply is not None:
             who = owner_text(reply["holder"])
             halt = reply.get("halt") or {}
