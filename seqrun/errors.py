@@ -11,7 +11,9 @@
      │    ├── ModuleTimeoutError (TimeoutError)  no matching acknowledge in time
      │    └── ModuleFaultError                a module reports ERROR/HALTED/TOW_ERROR/...
      ├── PlanningError             ruckig refused the input
-     └── RunAborted                the executor stopped a run (fault, timeout, checkpoint)
+     ├── RunAborted                the executor stopped a run (fault, timeout, checkpoint)
+     └── Refused                   refused for the state things are in (the bus is held by
+                                   another controller); nothing sent (exit 2)
 
 Messages are written for a test engineer at the arm: they name the module and its
 decoded state flags, the file and line, never a Python object.

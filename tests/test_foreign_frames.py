@@ -177,3 +177,37 @@ def test_a_halt_broadcast_from_another_process_is_named(tmp_path):
     assert [e["reason"] for e in events if e["type"] == "halt_requested"] == [
         "Halt broadcast from another process (frame 0x100 [02 00])"]
     assert halts and halts[0] - t_sent < 0.03
+
+
+def test_status_warns_when_another_master_asks_while_it_reads():
+    from seqrun.cli.bus_owner import StatusSource
+    from seqrun.powercube.client import PowerCubeClient
+
+    clock = RealClock()
+    connection = open_connection(force_sim=True, clock=clock)
+    intruder = SimBus(channel=connection.bus.channel, clock=clock)
+
+    def open_bus():
+        return connection, PowerCubeClient(connection.bus, clock, response_timeout=0.2)
+
+    warnings: list[str] = []
+    source = StatusSource(ARM, None, open_bus, warnings.append)
+    try:
+        first = source.read(tolerate_loss=True)
+        assert warnings == [] and len(first["joints"]) == 7
+        intruder.send(can.Message(arbitration_id=0x0C2, data=b"\x0a\x62",
+                                  is_extended_id=False))
+        intruder.send(can.Message(arbitration_id=0x0C4, data=b"\x0a\x62",
+                                  is_extended_id=False))
+        second = source.read(first, tolerate_loss=True)
+        assert not any(j["stale"] for j in second["joints"])
+        assert warnings == ["another controller is on the bus (frame 0x0C2 [0A 62]: "
+                            "GetExtended FPOS_STATE_DIO to module 2) (+1 more frames): its "
+                            "questions and ours cannot be told apart"]
+        intruder.send(can.Message(arbitration_id=0x100, data=b"\x02\x00",
+                                  is_extended_id=False))
+        source.read(second, tolerate_loss=True)
+        assert warnings[-1].startswith("Halt broadcast from another process (frame 0x100")
+    finally:
+        intruder.shutdown()
+        source.close()
