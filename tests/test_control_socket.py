@@ -14,13 +14,15 @@ from seqrun.service.control_socket import (ask_owner, handle_request, send_reque
 
 
 @pytest.fixture
-def rundir(tmp_path_factory, monkeypatch):
+def rundir(monkeypatch):
     # Short: a unix socket path has about 100 bytes.
+    import shutil
     import tempfile
 
     folder = tempfile.mkdtemp(prefix="sq", dir="/tmp")
     monkeypatch.setenv("SEQRUN_RUNTIME_DIR", folder)
-    return folder
+    yield folder
+    shutil.rmtree(folder, ignore_errors=True)
 
 
 class Owner:
@@ -97,6 +99,6 @@ def test_an_owner_that_does_not_answer_in_time_is_an_error_not_a_hang(rundir, tm
         t0 = time.monotonic()
         reply = ask_owner("socketcan", "can0", "halt", timeout=0.3)
         assert time.monotonic() - t0 < 1.0
-        assert not reply["ok"] and reply["error"].startswith(f"no answer from pid")
+        assert not reply["ok"] and reply["error"].startswith("no answer from pid")
     with pytest.raises(OSError):
         send_request(tmp_path / "nobody.sock", {"op": "status"})

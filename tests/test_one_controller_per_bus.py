@@ -64,8 +64,11 @@ class Bus:
         raise AssertionError("the run did not start moving")
 
     def close(self) -> None:
+        import shutil
+
         self.server.kill()
         self.server.wait(timeout=10)
+        shutil.rmtree(self.runtime, ignore_errors=True)
 
 
 @pytest.fixture

@@ -10,7 +10,7 @@ confirm. When nobody holds the bus they read it themselves, claiming it for each
 
 from __future__ import annotations
 
-from typing import Callable
+from typing import Any, Callable
 
 from seqrun.errors import SeqrunError
 
@@ -40,8 +40,8 @@ class StatusSource:
         self.key = key
         self.open_bus = open_bus
         self.warn = warn
-        self.connection = None
-        self.client = None
+        self.connection: Any = None
+        self.client: Any = None
         self.zero_text: str | None = None
         self._arm_read = arm
         self._foreign: list = []

@@ -211,7 +211,7 @@ def ask_owner(interface: str, channel: str, op: str, *, reason: str | None = Non
         added. A holder that did not answer gives ``{"ok": False, "error": ...}``.
     """
     holder = owner(interface, channel, directory=directory)
-    if holder is None:
+    if holder is None or holder.socket is None:
         return None
     request: dict[str, Any] = {"op": op}
     if reason is not None:
