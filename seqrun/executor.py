@@ -1,4 +1,4 @@
-"""The executor: runs a validated sequence step by step against a PowerCube client.
+"""The executor: runs a validated sequence step by step against an arm driver.
 
 Safety rules it implements (docs/safety.md tells the operator's side):
 
@@ -15,6 +15,10 @@ Safety rules it implements (docs/safety.md tells the operator's side):
 Control methods (:meth:`abort`, :meth:`halt`, :meth:`pause`, :meth:`resume`) may be called
 from any thread (signal handler, web console); the run loop acts on them within a cycle.
 Listeners receive structured events (plain dicts) for the log writer and displays.
+
+The executor speaks joints: user degrees (planning, checks, events) and the drive's radians
+(what the driver reports); everything about the arm's wire protocol (frames, retries, state
+words, watchdog, Halt) is behind :class:`seqrun.drivers.base.ArmDriver`.
 """
 
 from __future__ import annotations
@@ -23,7 +27,7 @@ import math
 import threading
 import time
 import traceback
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
@@ -32,28 +36,23 @@ import numpy as np
 from seqrun import kinematics
 from seqrun.arm import ArmDescription
 from seqrun.clock import Clock
+from seqrun.drivers import (ArmDriver, CycleState, HaltConfirmation, JointState, LimitValues,
+                            MotionRefused, as_driver)
 from seqrun.errors import (BusError, ModuleFaultError, ModuleTimeoutError, PlanningError,
-                           RunAborted, SeqrunError)
-from seqrun.halt import HaltConfirmation, halt_and_confirm
+                           RunAborted)
 from seqrun.limits import LimitsInForce
 from seqrun.planner import Limits, MovePlan, plan_move, plan_stop
-from seqrun.setpoints import setpoint_law
 from seqrun.usermessages import user_message
 from seqrun.tracking import MoveTracking, velocity_window
 from seqrun.stop_requests import FROM_OUTSIDE, OPERATOR_HALT, StopRequest, StopRequests
-from seqrun.powercube.codec import (BroadcastRequest, GetParam, GetParamAck, MotionExtAck,
-                                    SetMotion, SetParam)
-from seqrun.powercube.protocol import ConfigFlag, ParamId, ShortState, StateFlag
 
-# Exit codes (shared with the CLI; defined where the CLI can read them without the executor).
-from seqrun.defaults import (EXIT_FAULT, EXIT_INVALID, EXIT_OK,  # noqa: E402,F401
-                             EXIT_OPERATOR_ABORT, EXIT_USAGE)
+# Result types, the operator's abort and exit codes live in seqrun/results.py; imported
+# from here too.
+from seqrun.results import (EXIT_FAULT, EXIT_INVALID, EXIT_OK,  # noqa: F401
+                            EXIT_OPERATOR_ABORT, EXIT_USAGE, OperatorAbort, RunResult,
+                            StepResult)
 
 Listener = Callable[[dict], None]
-
-
-class OperatorAbort(SeqrunError):
-    """The operator asked to stop (controlled stop already done when raised)."""
 
 
 @dataclass
@@ -62,59 +61,9 @@ class Measurement:
 
     t: float
     user_deg: np.ndarray                 # every joint, user coordinates
-    short_state: dict[int, ShortState]   # per module id
-    #: Full state words, where this reading includes them (after home/reset/halt, a fault).
-    state_words: dict[int, StateFlag] | None = None
-
-
-@dataclass
-class StepResult:
-    number: int
-    kind: str
-    label: str
-    location: str
-    status: str = "pending"              # passed | failed | aborted | skipped
-    started: float | None = None
-    finished: float | None = None
-    planned_duration_s: float | None = None
-    detail: dict[str, Any] = field(default_factory=dict)
-
-    @property
-    def duration_s(self) -> float | None:
-        if self.started is None or self.finished is None:
-            return None
-        return self.finished - self.started
-
-    def as_dict(self) -> dict:
-        return {"number": self.number, "kind": self.kind, "label": self.label,
-                "location": self.location, "status": self.status,
-                "duration_s": _round(self.duration_s),
-                "planned_duration_s": _round(self.planned_duration_s), **self.detail}
-
-
-@dataclass
-class RunResult:
-    status: str                          # passed | failed | aborted | invalid
-    exit_code: int
-    message: str
-    steps: list[StepResult]
-    started: float
-    finished: float
-    fault: dict[str, Any] | None = None
-    not_verified: list[str] = field(default_factory=list)
-    min_heights_mm: dict[str, float] = field(default_factory=dict)
-    extra: dict[str, Any] = field(default_factory=dict)
-    #: Modules that reported a fault (ERROR, HALTED, ...) when the run started, before
-    #: seqrun sent anything but reads: ``[{"module", "joint", "flags"}]``.
-    latched_at_start: list[dict[str, Any]] = field(default_factory=list)
-
-    @property
-    def duration_s(self) -> float:
-        return self.finished - self.started
-
-    @property
-    def planned_duration_s(self) -> float:
-        return sum(s.planned_duration_s or 0.0 for s in self.steps)
+    short_state: dict[int, CycleState]   # per module id: the state sent with the reading
+    #: Full states, where this reading includes them (after home/reset/halt, a fault).
+    state_words: dict[int, JointState] | None = None
 
 
 def _round(x: float | None, nd: int = 4) -> float | None:
@@ -122,12 +71,12 @@ def _round(x: float | None, nd: int = 4) -> float | None:
 
 
 class Executor:
-    """Runs resolved steps; see the module docstring for the safety rules."""
+    """Runs resolved steps; see the module docstring for the safety rules.
 
-    #: Idempotent reads are retried this often when an acknowledge is lost (drop_acks).
-    READ_RETRIES = 1
+    ``driver``: the arm's :class:`~seqrun.drivers.base.ArmDriver`; a PowerCube client is
+    accepted too (wrapped in the PowerCube driver)."""
 
-    def __init__(self, client, arm: ArmDescription, clock: Clock, *,
+    def __init__(self, driver: ArmDriver | Any, arm: ArmDescription, clock: Clock, *,
                  poses_dir: Path | None = None, speed: float = 1.0,
                  command_mode: str | None = None, cycle_hz: float | None = None,
                  confirm: Callable[[str], bool] | None = None,
@@ -137,7 +86,7 @@ class Executor:
                  requests: StopRequests | None = None) -> None:
         if not 0 < speed <= 1:
             raise ValueError("speed must lie in (0, 1]")
-        self.client = client
+        self.driver: ArmDriver = as_driver(driver, arm)
         self.arm = arm
         self.clock = clock
         self.poses_dir = poses_dir
@@ -169,7 +118,8 @@ class Executor:
         self.poses: dict = {}
         # Bound on a run's (simulated) time; the dry run sets it (control.max_dry_run_s).
         self.time_limit_s: float | None = None
-        self.setpoints = setpoint_law(self.command_mode, arm, self.cycle, self.limits)
+        self.driver.configure(cycle_s=self.cycle, run_limits=self.limits,
+                              command_mode=self.command_mode, emit=self.emit)
         # Stop requests: posted from any thread or signal handler without a lock, acted on
         # by the run loop (see seqrun/stop_requests.py).
         self.requests = requests if requests is not None else StopRequests()
@@ -195,8 +145,6 @@ class Executor:
         self._current_step: StepResult | None = None
         self._move_limits = self.limits
         self._tracking: MoveTracking | None = None
-        self._keeper: threading.Thread | None = None
-        self._keeper_stop = threading.Event()
         #: Joint solutions of end-effector targets as validated from the measured start
         #: (step number -> user degrees); the steps solve again and must land close.
         self.validated_targets: dict[int, np.ndarray] = {}
@@ -268,11 +216,18 @@ class Executor:
         finally:
             self.waiting_for_operator = False
 
-    def on_discard(self, msg, reason) -> None:
-        """Client callback: a received frame was not used as an answer (stale, foreign,
-        malformed); it goes into the event log."""
-        self.emit("frame_discarded", can_id=f"0x{msg.arbitration_id:03X}",
-                  data=bytes(msg.data).hex(" "), reason=str(getattr(reason, "value", reason)))
+    @property
+    def client(self) -> Any:
+        """The PowerCube driver's client (tests and benches look at its frames and
+        counters); None for another driver."""
+        return getattr(self.driver, "client", None)
+
+    def on_discard(self, msg: Any, reason: Any) -> None:
+        """Kept for callers that wire ``client.on_discard`` to the executor: the driver
+        logs the discarded frame."""
+        handler = getattr(self.driver, "on_discard", None)
+        if handler is not None:
+            handler(msg, reason)
 
     # ------------------------------------------------------------------ events
     def emit(self, type_: str, **data: Any) -> None:
@@ -305,12 +260,12 @@ class Executor:
         self._idle_until(self.clock.now() + seconds)
 
     def refresh_measurement(self, after: str,
-                            words: dict[int, StateFlag] | None = None) -> None:
+                            words: dict[int, JointState] | None = None) -> None:
         """Emit the arm's state after a step that changes the modules without moving them
         (home, reset, halt) and after a fault's Halt, so the display and the event log show
-        the modules' state, not the last motion cycle's. ``words``: state words the step has
+        the modules' state, not the last motion cycle's. ``words``: full states the step has
         just read (home, reset: nothing moved, positions stand); otherwise the whole arm is
-        read, state words included."""
+        read, full states included."""
         try:
             if words is None or self.last is None:
                 m = self.read_arm()
@@ -323,7 +278,7 @@ class Executor:
             self.emit("measurement_failed", after=after, error=str(exc))
             return
         self.last = replace(m, state_words=words)
-        short = [int(_short_state(words[module])) if module in words
+        short = [words[module].cycle_code if module in words
                  else int(m.short_state.get(module, 0)) for module in self.modules]
         self.emit("measurement", after=after, joints_deg=_r(m.user_deg), state=short,
                   states={str(k): v.describe() for k, v in words.items()})
@@ -335,50 +290,53 @@ class Executor:
     def to_user_deg(self, module_rad: np.ndarray) -> np.ndarray:
         return np.degrees(np.asarray(module_rad)) - self.offsets_deg
 
-    # ------------------------------------------------------------------ bus helpers
-    def transact(self, requests: list, *, idempotent: bool = False) -> list:
-        """``client.transact``; ``idempotent`` requests (reads) get one retry."""
-        attempts = 1 + (self.READ_RETRIES if idempotent else 0)
-        self._heartbeat = time.monotonic()
-        for attempt in range(attempts):
-            try:
-                return self.client.transact(requests)
-            except ModuleTimeoutError as exc:
-                if attempt + 1 >= attempts:
-                    raise
-                self.emit("retry", module=exc.module, what=exc.what)
-        raise AssertionError("unreachable")
-
+    # ------------------------------------------------------------------ the driver
+    # Every call below reaches the bus: each one counts as a sign of life of the run loop
+    # (the watchdog keeper feeds the modules only while the loop makes progress).
     def read_arm(self) -> Measurement:
-        """Read position and short state of every module (pipelined, lost reads retried)."""
-        return self._cycle([], [])
+        """Read position and state of every joint (lost reads retried by the driver)."""
+        self._heartbeat = time.monotonic()
+        return self._measured(self.driver.read())
 
-    def _reads(self, module: int) -> list[GetParam]:
-        """How to read a module this cycle: FPosStateDio, or — while that request is in
-        quarantine after a lost acknowledge — ActPos and CubeState, which tell the same and
-        need not wait for the quarantine."""
-        primary = GetParam(module, ParamId.FPOS_STATE_DIO)
-        if not self.client.is_tainted(primary):
-            return [primary]
-        return [GetParam(module, ParamId.ACT_POS), GetParam(module, ParamId.CUBE_STATE)]
-
-    def _measured(self, module_rad: np.ndarray, states: dict[int, ShortState]) -> Measurement:
-        m = Measurement(self.clock.now(), self.to_user_deg(module_rad), states)
+    def _measured(self, reading) -> Measurement:
+        m = Measurement(self.clock.now(), self.to_user_deg(reading.positions_rad),
+                        reading.states)
         self.last = m
         return m
 
-    def read_state_word(self, module: int) -> StateFlag:
-        return self.client.read_state(module)
+    def read_state_word(self, module: int) -> JointState:
+        """The full state of one module."""
+        return self.driver.read_state(module)
 
-    def read_state_words(self, modules: list[int] | None = None) -> dict[int, StateFlag]:
-        """CubeState of several modules, pipelined."""
-        modules = self.modules if modules is None else modules
-        acks = self.transact([GetParam(m, ParamId.CUBE_STATE) for m in modules], idempotent=True)
-        return {m: StateFlag(a.value) for m, a in zip(modules, acks)}
+    def read_state_words(self, modules: list[int] | None = None) -> dict[int, JointState]:
+        """The full state of several modules (all: None)."""
+        self._heartbeat = time.monotonic()
+        return self.driver.read_states(modules)
 
-    def wait_for_states(self, modules: list[int] | None, ok: Callable[[StateFlag], bool],
-                        timeout_s: float, failure: str) -> dict[int, StateFlag]:
-        """Poll CubeState every cycle until ``ok`` holds for every module."""
+    def reset_modules(self, modules: list[int] | None) -> None:
+        """Reset (clear errors) of ``modules``; None: all of them at once."""
+        self._heartbeat = time.monotonic()
+        self.driver.reset(modules)
+
+    def home_modules(self, modules: list[int] | None) -> None:
+        """Home ``modules``; None: all of them at once."""
+        self._heartbeat = time.monotonic()
+        self.driver.home(modules)
+
+    def halt_modules(self, modules: list[int] | None) -> None:
+        """A deliberate Halt of ``modules`` (a ``halt`` step); None: all at once."""
+        self._heartbeat = time.monotonic()
+        self.driver.halt(modules)
+
+    def write_limits(self, values: dict[str, LimitValues]) -> int:
+        """Write MinPos/MaxPos (and MaxVel/MaxAcc where given) per joint and read them
+        back; a value that reads back different is a fault. Returns the values written."""
+        self._heartbeat = time.monotonic()
+        return self.driver.write_limits(values)
+
+    def wait_for_states(self, modules: list[int] | None, ok: Callable[[JointState], bool],
+                        timeout_s: float, failure: str) -> dict[int, JointState]:
+        """Poll the full state every cycle until ``ok`` holds for every module."""
         deadline = self.clock.now() + timeout_s
         while True:
             self._check_halt_request()
@@ -393,16 +351,16 @@ class Executor:
 
     # ------------------------------------------------------------------ checks
     def check_states(self, m: Measurement, *, require_homed: bool = True) -> None:
-        """Raise a RunAborted naming module and flags for a module whose short state says
-        NOT_OK and whose state word shows a fault (or, with ``require_homed``, no HOME_OK)."""
+        """Raise a RunAborted naming module and flags for a module whose reading says it
+        refuses motion and whose full state shows a fault (or, with ``require_homed``, it
+        is not homed)."""
         for module, state in m.short_state.items():
-            if state & ShortState.NOT_OK:
+            if state.refuses_motion:
                 flags = self.read_state_word(module)
-                bad = flags & StateFlag.FAULTS
-                if bad or (require_homed and not flags & StateFlag.HOME_OK):
+                if flags.faulted or (require_homed and not flags.homed):
                     raise self.module_fault(module, flags)
 
-    def _fault_after_halt(self, module: int, short: ShortState) -> RunAborted:
+    def _fault_after_halt(self, module: int, short: CycleState) -> RunAborted:
         """The fault of a module whose acknowledge said NOT_OK during a move, named from
         its state word (read after the Halt)."""
         try:
@@ -411,28 +369,21 @@ class Executor:
             return RunAborted("module_fault", f"module {module}: NOT_OK in its acknowledge "
                               f"[short state {short.describe()}]; its state word could not be "
                               f"read: {exc}", module=module)
-        if flags & StateFlag.FAULTS or not flags & StateFlag.HOME_OK:
+        if not flags.ready:
             return self.module_fault(module, flags)
         joint = self.arm.joint_names[self.modules.index(module)]
         return RunAborted("motion_refused", f"module {module} ({joint}): refused a motion "
                           f"command during the move (NOT_OK in its acknowledge) "
-                          f"[state {StateFlag(flags).describe()}]", module=module)
+                          f"[state {flags.describe()}]", module=module)
 
-    #: Most specific first: the cause named in the report.
-    _FAULT_CAUSES = ("TOW_ERROR", "BEYOND_HARD", "BEYOND_SOFT", "POWERFAULT", "COMM_ERROR",
-                     "CPU_OVERLOAD", "HALTED", "ERROR")
-
-    def module_fault(self, module: int, flags: StateFlag, context: str = "") -> RunAborted:
+    def module_fault(self, module: int, flags: JointState, context: str = "") -> RunAborted:
         """A RunAborted naming the module, its joint and the decoded fault flags."""
-        faults = StateFlag(flags & StateFlag.FAULTS)
-        cause = next((name.lower() for name in self._FAULT_CAUSES
-                      if faults & StateFlag[name]), "not_homed")
         joint = self.arm.joint_names[self.modules.index(module)] if module in self.modules else "?"
-        what = faults.describe() if faults else "not homed (HOME_OK clear)"
+        what = flags.fault_text if flags.faulted else "not homed (HOME_OK clear)"
         text = f"module {module} ({joint}): {what}"
         if context:
             text += f" {context}"
-        return RunAborted(cause, f"{text} [state {StateFlag(flags).describe()}]", module=module)
+        return RunAborted(flags.cause, f"{text} [state {flags.describe()}]", module=module)
 
     def check_guards(self, m: Measurement) -> None:
         q = np.radians(m.user_deg)
@@ -520,14 +471,16 @@ class Executor:
         self._tracking = MoveTracking(velocity_window(self.cycle))
         t_move = self.clock.now()
         if moving:
-            start = self.setpoints.start(moving, limits)
-            if start:
-                self.transact(start)
+            self._heartbeat = time.monotonic()
+            self.driver.start_motion(moving, limits)
             # A step's timeout covers the whole move; the default allows the plan plus
             # the arm's settle time.
             deadline = (timeout_s if timeout_s is not None
                         else plan.duration + self.arm.control.settle_timeout_s)
-            self._stream(plan, moving, tolerance_deg, deadline, stop_on_abort=True)
+            try:
+                self._stream(plan, moving, tolerance_deg, deadline, stop_on_abort=True)
+            finally:
+                self.driver.end_motion()
         elapsed = self.clock.now() - t_move
         return {"planned_duration_s": plan.duration, "executed_duration_s": elapsed,
                 "duration_ratio": _round(elapsed / plan.duration) if plan.duration > 0 else None,
@@ -562,20 +515,16 @@ class Executor:
         self._tracking = MoveTracking(velocity_window(self.cycle))
         t_move = self.clock.now()
         if moving:
-            law = self.setpoints
-            if command_mode is not None and command_mode != self.command_mode:
-                self.setpoints = setpoint_law(command_mode, self.arm, self.cycle, self.limits)
             deadline = (timeout_s if timeout_s is not None
                         else plan.duration + self.arm.control.settle_timeout_s)
             self.path_check = path_check
             try:
-                start = self.setpoints.start(moving, self.limits)
-                if start:
-                    self.transact(start)
+                self._heartbeat = time.monotonic()
+                self.driver.start_motion(moving, self.limits, command_mode=command_mode)
                 self._stream(plan, moving, tolerance_deg, deadline, stop_on_abort=True)
             finally:
                 self.path_check = None
-                self.setpoints = law
+                self.driver.end_motion()
         elapsed = self.clock.now() - t_move
         return {"planned_duration_s": plan.duration, "executed_duration_s": elapsed,
                 "duration_ratio": _round(elapsed / plan.duration) if plan.duration > 0 else None,
@@ -583,64 +532,22 @@ class Executor:
                 "peak_measured_velocity_deg_s": [0.0] * self.arm.dof,
                 **self.tracking_figures(np.degrees(plan.target))}
 
-    def _cycle(self, requests: list, moving: list[int], *, halt_early: bool = False
-                ) -> Measurement:
-        """Send this cycle's motion requests plus reads of the other modules, pipelined.
+    def _cycle(self, plan: MovePlan, t: float, moving: list[int],
+               measured_deg: np.ndarray) -> Measurement:
+        """One control cycle through the driver: ``plan``'s setpoints at plan time ``t``
+        for ``moving``, and a reading of every joint.
 
-        A lost answer to a motion command is a fault (we cannot know what the module
-        does); a lost read is retried once by the other read path (a read changes nothing
-        on the module), so a rare lost acknowledge does not stop the arm.
-
-        With ``halt_early`` (a move), every acknowledge is looked at as it arrives: the
-        first one that says NOT_OK halts the arm at once, before the rest of the batch is
-        collected; then the module's state word names the cause.
+        The driver looks at every answer as it arrives: the first that refuses motion
+        ends the cycle at once, and the arm is halted before anything else; then the
+        module's full state names the cause.
         """
         self._heartbeat = time.monotonic()
-        moving_modules = {self.modules[i] for i in moving}
-        reads = [r for m in self.modules if m not in moving_modules for r in self._reads(m)]
-        batch = requests + reads
         try:
-            acks = self.client.transact_partial(
-                batch, on_ack=_raise_on_not_ok if halt_early else None)
-        except _NotOkAcknowledge as bad:
+            reading = self.driver.cycle(plan, t, moving, measured_deg)
+        except MotionRefused as refused:
             self.emergency_halt()
-            raise self._fault_after_halt(bad.module, bad.state) from None
-        lost = [i for i, (r, a) in enumerate(zip(batch, acks)) if a is None and _acked(r)]
-        if any(not isinstance(batch[i], GetParam) for i in lost):
-            bad = next(batch[i] for i in lost if not isinstance(batch[i], GetParam))
-            raise ModuleTimeoutError(bad.module, _describe_request(bad),
-                                     self.client.response_timeout)
-        if lost:
-            modules = list(dict.fromkeys(batch[i].module for i in lost))
-            retry = [r for m in modules for r in self._reads(m)]
-            # The retry must go out at once: a request still in quarantine would first
-            # wait it out (up to 4 response timeouts) while the joints move unwatched. Both
-            # read paths of a module lost within one quarantine is a fault.
-            blocked = next((r for r in retry if self.client.is_tainted(r)), None)
-            if blocked is not None:
-                bad = next(batch[i] for i in lost if batch[i].module == blocked.module)
-                lost_ack = ModuleTimeoutError(bad.module, _describe_request(bad),
-                                              self.client.response_timeout)
-                raise RunAborted("no_acknowledge", f"{lost_ack}; not retried: its other read "
-                                 "path is still in quarantine after an earlier lost "
-                                 "acknowledge", module=bad.module)
-            self.emit("retry", modules=modules, what="read")
-            batch, acks = batch + retry, acks + self.transact(retry)
-        positions: dict[int, float] = {}
-        states: dict[int, ShortState] = {}
-        for ack in acks:
-            if isinstance(ack, MotionExtAck):
-                positions[ack.module], states[ack.module] = ack.position, ack.state
-            elif isinstance(ack, GetParamAck):
-                if ack.param == ParamId.FPOS_STATE_DIO:
-                    positions[ack.module] = ack.value.position
-                    states[ack.module] = ack.value.state
-                elif ack.param == ParamId.ACT_POS:
-                    positions[ack.module] = float(ack.value)
-                elif ack.param == ParamId.CUBE_STATE:
-                    states[ack.module] = _short_state(StateFlag(ack.value))
-        module_rad = np.array([positions[m] for m in self.modules])
-        return self._measured(module_rad, states)
+            raise self._fault_after_halt(refused.module, refused.state) from None
+        return self._measured(reading)
 
     def _stream(self, plan: MovePlan, moving: list[int], tolerance_deg: float,
                 deadline: float, *, stop_on_abort: bool) -> None:
@@ -665,8 +572,7 @@ class Executor:
                 t_start, k = self.clock.now(), 0
                 deadline = plan.duration + self.arm.control.settle_timeout_s
                 continue
-            m = self._cycle(self.setpoints.cycle(plan, t, moving, measured), moving,
-                            halt_early=True)
+            m = self._cycle(plan, t, moving, measured)
             measured = m.user_deg
             self.check_states(m)
             self.check_guards(m)
@@ -788,13 +694,13 @@ class Executor:
 
     # ------------------------------------------------------------------ halt
     def emergency_halt(self) -> bool:
-        """Broadcast Halt before reading anything, then confirm it by reading every
-        module's state back (:func:`seqrun.halt.halt_and_confirm`). Done once per run: a
-        later call returns the first result. Returns whether the Halt was sent; the
-        confirmation is in :attr:`halt_result`."""
+        """Halt every module before reading anything, then confirm it by reading every
+        module's state back (the driver's :meth:`~seqrun.drivers.base.ArmDriver.halt_and_confirm`).
+        Done once per run: a later call returns the first result. Returns whether the Halt
+        was sent; the confirmation is in :attr:`halt_result`."""
         if self.halt_result is not None:
             return self.halt_result.sent
-        result = self.halt_result = halt_and_confirm(self.client, self.modules)
+        result = self.halt_result = self.driver.halt_and_confirm()
         names = dict(zip(self.modules, self.arm.joint_names))
         if not result.sent:
             self.emit("halt_failed", error=result.error, message=result.describe(names))
@@ -804,7 +710,7 @@ class Executor:
         else:
             self.emit("halt_unconfirmed", modules=list(result.modules_unconfirmed),
                       attempts=result.attempts, duration_s=_round(result.duration_s),
-                      states={str(k): v for k, v in
+                      states={str(k): v.describe() for k, v in
                                                         result.states.items()},
                       message=result.describe(names))
         return result.sent
@@ -838,18 +744,17 @@ class Executor:
         m = self.read_arm()
         states = self.read_state_words()
         # MinPos/MaxPos/MaxVel/MaxAcc stay stored in the modules across runs.
-        params = (ParamId.MIN_POS, ParamId.MAX_POS, ParamId.MAX_VEL, ParamId.MAX_ACC)
-        stored = self.transact([GetParam(j.module, p) for j in self.arm.joints for p in params],
-                               idempotent=True)
-        per_joint = [stored[k:k + len(params)] for k in range(0, len(stored), len(params))]
+        self._heartbeat = time.monotonic()
+        stored = self.driver.read_limits()
         written = all(
-            abs(float(lo.value) - j.to_module_rad(j.limits_deg[0])) < 1e-5
-            and abs(float(hi.value) - j.to_module_rad(j.limits_deg[1])) < 1e-5
-            for j, (lo, hi, _, _) in zip(self.arm.joints, per_joint))
-        module_limits = {j.name: (math.degrees(float(vel.value)), math.degrees(float(acc.value)))
-                         for j, (_, _, vel, acc) in zip(self.arm.joints, per_joint)}
+            abs(held.min_position - j.to_module_rad(j.limits_deg[0])) < 1e-5
+            and abs(held.max_position - j.to_module_rad(j.limits_deg[1])) < 1e-5
+            for j, held in zip(self.arm.joints, stored))
+        module_limits = {j.name: (math.degrees(held.max_velocity),
+                                  math.degrees(held.max_acceleration))
+                         for j, held in zip(self.arm.joints, stored)}
         self.limits_in_force.read_back(module_limits)
-        ready = all(f & StateFlag.HOME_OK and not f & StateFlag.FAULTS for f in states.values())
+        ready = all(f.ready for f in states.values())
         self._record_latched(states)
         started = ready and written
         start_deg = {j.name: float(v) for j, v in zip(self.arm.joints, m.user_deg)}
@@ -874,15 +779,14 @@ class Executor:
                   errors=[str(e) for e in result.errors], notes=[str(n) for n in result.notes])
         return result
 
-    def _record_latched(self, states: dict[int, StateFlag]) -> None:
+    def _record_latched(self, states: dict[int, JointState]) -> None:
         """Faults the modules report before the run sent anything but reads: told on the
         terminal (event ``latched_fault``) and in the report, never cleared silently."""
         names = dict(zip(self.modules, self.arm.joint_names))
         self.latched_at_start = [
             {"module": m, "joint": names.get(m, "?"),
-             "flags": StateFlag(f & StateFlag.FAULTS).describe(),
-             "state": StateFlag(f).describe()}
-            for m, f in sorted(states.items()) if f & StateFlag.FAULTS]
+             "flags": f.fault_text, "state": f.describe()}
+            for m, f in sorted(states.items()) if f.faulted]
         if self.latched_at_start:
             self.emit("latched_fault", modules=self.latched_at_start,
                       message=self.latched_message())
@@ -917,37 +821,10 @@ class Executor:
         self._latched_cleared_ok = True
 
     def _enable_watchdog(self) -> None:
-        """Arm the modules' watchdogs (read-modify-write of Config) and keep them fed."""
-        wd = self.arm.can.watchdog
-        if not wd.enabled:
-            return
-        # Due at half the period: a refresh sent late (a loaded host, the GIL) still comes
-        # within refresh_period_s of the last one, well inside the modules' timeout.
-        self.client.watchdog_period = wd.refresh_period_s / 2
-        configs = self.transact([GetParam(m, ParamId.CONFIG) for m in self.modules],
-                                 idempotent=True)
-        self.transact([SetParam(m, ParamId.CONFIG, int(a.value) | ConfigFlag.WATCHDOG_ENABLE)
-                        for m, a in zip(self.modules, configs)])
-        self.client.refresh_watchdog()
-        if not self.clock.is_virtual:
-            self._keeper_stop.clear()
-            self._keeper = threading.Thread(target=self._keep_watchdog, daemon=True,
-                                             name="seqrun-watchdog")
-            self._keeper.start()
-        self.emit("watchdog_enabled", refresh_period_s=wd.refresh_period_s)
-
-    def _keep_watchdog(self) -> None:
-        # Covers the times the run loop is not on the bus (between cycles, operator
-        # prompts), but only while the loop shows signs of life: a loop that is stuck
-        # (a deadlock, a hung call) must let the modules' watchdogs stop the arm.
-        refresh = self.arm.can.watchdog.refresh_period_s
-        while not self._keeper_stop.wait(refresh / 4):
-            if not self.loop_alive(refresh):
-                continue
-            try:
-                self.client.service()
-            except BusError:
-                return
+        """Arm the modules' watchdogs (if the arm file asks): the driver keeps them fed
+        while the run loop shows signs of life (:meth:`loop_alive`)."""
+        self._heartbeat = time.monotonic()
+        self.driver.enable_watchdog(self.loop_alive)
 
     def loop_alive(self, within_s: float) -> bool:
         """True while the run loop made progress within ``within_s`` (real seconds) or
@@ -956,20 +833,9 @@ class Executor:
                 or time.monotonic() - self._heartbeat < within_s)
 
     def _disable_watchdog(self) -> None:
-        """After a clean end the arm keeps holding: clear WATCHDOG_ENABLE again."""
-        if not self.arm.can.watchdog.enabled:
-            return
-        self._keeper_stop.set()
-        try:
-            configs = self.transact([GetParam(m, ParamId.CONFIG) for m in self.modules],
-                                     idempotent=True)
-            self.transact([SetParam(m, ParamId.CONFIG,
-                                     int(a.value) & ~int(ConfigFlag.WATCHDOG_ENABLE))
-                            for m, a in zip(self.modules, configs)])
-            self.client.watchdog_period = None
-            self.emit("watchdog_disabled")
-        except BusError as exc:
-            self.emit("watchdog_disable_failed", error=str(exc))
+        """After a clean end the arm keeps holding: the watchdogs are disarmed again."""
+        self._heartbeat = time.monotonic()
+        self.driver.disable_watchdog()
 
     # ------------------------------------------------------------------ run
     def run(self, loaded, *, first_step: int = 1) -> RunResult:
@@ -1095,7 +961,7 @@ class Executor:
                 result.status = "failed"
                 result.finished = self.clock.now() - self._t0
                 self._current_step = None
-                self._keeper_stop.set()
+                self.driver.stop_watchdog_keeper()
                 # The run folder is finished with this result before the exception goes on.
                 self.interrupted_result = self._finish(
                     results, "failed", EXIT_FAULT, f"interrupted ({exc!r}); the arm was halted",
@@ -1115,7 +981,7 @@ class Executor:
         if code in (EXIT_OK, EXIT_OPERATOR_ABORT) and not self._halt_requested:
             self._disable_watchdog()
         else:
-            self._keeper_stop.set()
+            self.driver.stop_watchdog_keeper()
         return self._finish(results, status, code, message, fault)
 
     def _finish(self, results: list[StepResult], status: str, code: int, message: str,
@@ -1130,53 +996,6 @@ class Executor:
                   duration_s=_round(run.duration_s),
                   planned_duration_s=_round(run.planned_duration_s), **extra)
         return run
-
-
-class _NotOkAcknowledge(Exception):
-    """An acknowledge said NOT_OK (raised from inside the exchange to end it at once)."""
-
-    def __init__(self, module: int, state: ShortState) -> None:
-        super().__init__(f"module {module}: NOT_OK")
-        self.module = module
-        self.state = state
-
-
-def _raise_on_not_ok(request, ack) -> None:
-    """``on_ack`` inspector of a move cycle: the first NOT_OK ends the exchange."""
-    if isinstance(ack, MotionExtAck):
-        state = ack.state
-    elif isinstance(ack, GetParamAck) and ack.param == ParamId.FPOS_STATE_DIO:
-        state = ack.value.state
-    elif isinstance(ack, GetParamAck) and ack.param == ParamId.CUBE_STATE:
-        state = _short_state(StateFlag(ack.value))
-    else:
-        return
-    if state & ShortState.NOT_OK:
-        raise _NotOkAcknowledge(ack.module, ShortState(state))
-
-
-def _short_state(flags: StateFlag) -> ShortState:
-    """The short state a module would report for this state word (table B.3)."""
-    short = ShortState(0)
-    if flags & (StateFlag.ERROR | StateFlag.HALTED) or not flags & StateFlag.HOME_OK:
-        short |= ShortState.NOT_OK
-    if flags & StateFlag.MOTION:
-        short |= ShortState.MOTION
-    if flags & StateFlag.RAMP_END:
-        short |= ShortState.RAMP_END
-    return short
-
-
-def _describe_request(request) -> str:
-    if isinstance(request, SetMotion):
-        return f"SetMotion {request.mode.name}"
-    if isinstance(request, (SetParam, GetParam)):
-        return f"{type(request).__name__} {request.param.name}"
-    return type(request).__name__
-
-
-def _acked(request) -> bool:
-    return not isinstance(request, BroadcastRequest)
 
 
 def _cause(exc: Exception) -> tuple[str, int | None]:

@@ -1,4 +1,4 @@
-"""One run, assembled: bus connection -> PowerCube client -> run folder -> executor.
+"""One run, assembled: bus connection -> PowerCube client and driver -> run folder -> executor.
 
 The CLI (``seqrun run``), the dry run (``seqrun validate``) and the end-to-end tests all go
 through :func:`run_sequence`, so what the tests prove is what the operator runs.
@@ -13,6 +13,7 @@ from typing import Callable, Iterable
 from seqrun import __version__
 from seqrun.arm import ArmDescription
 from seqrun.connection import Connection, response_timeout_s
+from seqrun.drivers.powercube import PowerCubeDriver
 from seqrun.executor import EXIT_FAULT, Executor, Listener, RunResult, StepResult
 from seqrun.powercube.client import PowerCubeClient
 from seqrun.runlog import RunLog
@@ -44,12 +45,13 @@ def build_executor(loaded: LoadedSequence, arm: ArmDescription, connection: Conn
                              # (a dry run keeps the arm file's: deterministic results)
                              response_timeout=(arm.can.response_timeout_s if dry_run
                                                else response_timeout_s(arm)))
-    executor = Executor(client, arm, connection.clock,
+    driver = PowerCubeDriver(client, arm)
+    executor = Executor(driver, arm, connection.clock,
                         poses_dir=loaded.pose_path or loaded.poses_dir, speed=speed,
                         command_mode=command_mode, cycle_hz=cycle_hz, confirm=confirm,
                         before_step=before_step, listeners=list(listeners), dry_run=dry_run,
                         confirm_clear_latched=confirm_clear_latched, requests=requests)
-    client.on_discard = executor.on_discard
+    client.on_discard = driver.on_discard
     return executor, client
 
 
@@ -82,7 +84,7 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
                                       confirm_clear_latched=confirm_clear_latched,
                                       requests=requests)
     # Another master's request frame on the bus halts the run (one controller per bus).
-    halt_on_foreign_frames(executor, echoes_own=connection.echoes_own)
+    halt_on_foreign_frames(executor, client, echoes_own=connection.echoes_own)
     log = None
     if log_dir is not None:
         log = RunLog(log_dir, {"sequence": loaded.name, "file": file or loaded.file,

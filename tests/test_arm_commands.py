@@ -79,9 +79,9 @@ def test_lost_answers_are_asked_again(sim_client):
     assert result.confirmed and result.attempts > 1
 
 
-def test_a_halt_that_did_not_arrive_is_sent_again_addressed():
-    """The broadcast is lost (here: it never reaches module 6's state because the module is
-    reset right after) — the next round sends Halt to module 6 itself."""
+def test_a_halt_that_did_not_arrive_is_sent_again():
+    """The broadcast is lost for module 6 (the module ignores it) — the next round sends
+    the Halt again and module 6 confirms."""
     clock = VirtualClock()
     with SimBus("confirm-resend", clock=clock, ignore_config=True) as bus:
         client = PowerCubeClient(bus, clock, response_timeout=0.05)

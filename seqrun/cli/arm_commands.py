@@ -242,14 +242,15 @@ def _broadcast(what: str, arm_file, interface, channel, bitrate, bus_kwargs, sim
     modules = [j.module for j in arm.joints]
     try:
         result = command_and_confirm(client, CommandId[what.upper()], modules)
-    except BusError as exc:
-        fail(f"{what} not sent: {exc}", EXIT_FAULT)
     finally:
         client.close()
         connection.close()
+    if not result.sent:
+        fail(f"{what} not sent: {result.error}", EXIT_FAULT)
     if not result.confirmed:
+        error = f"; {result.error}" if result.error else ""
         fail(f"{what} broadcast sent, but not confirmed by {result.describe_unconfirmed()} "
-             f"after {result.attempts} attempts ({connection.description})", EXIT_FAULT)
+             f"after {result.attempts} attempts ({connection.description}{error})", EXIT_FAULT)
     typer.echo(f"{what.capitalize()} confirmed by modules "
                f"{', '.join(map(str, sorted(result.states)))} ({connection.description})")
 

@@ -26,7 +26,6 @@ from rich.text import Text
 
 from seqrun import kinematics
 from seqrun.cli.output import fixed
-from seqrun.powercube.protocol import ShortState, StateFlag
 
 
 def halt_line(event: dict) -> str | None:
@@ -197,10 +196,10 @@ class LiveDisplay:
         """The module's state text and whether it is moving, from the freshest reading."""
         if m.state_words is not None and module in m.state_words:
             word = m.state_words[module]
-            return word.describe(), bool(word & StateFlag.MOTION)
+            return word.describe(), word.moving
         if module in m.short_state:
             short = m.short_state[module]
-            return short.describe(), bool(short & ShortState.MOTION)
+            return short.describe(), short.moving
         return "-", False
 
     def __rich__(self) -> Panel:

@@ -645,7 +645,8 @@ class PowerCubeClient:
     def halt_now(self) -> None:
         """Broadcast Halt ``[0x02, 0x00]`` at once: unlike :meth:`halt`, nothing queued on
         the bus is read first (a flooded receive queue must not delay an emergency stop),
-        and no quarantine is waited for. Confirm it with :func:`seqrun.halt.halt_and_confirm`.
+        and no quarantine is waited for. Confirm it with
+        :func:`seqrun.drivers.powercube.confirm_command`.
 
         :raises ~seqrun.errors.BusError: the frame could not be sent.
         """

@@ -438,6 +438,16 @@ class ShortState(_Describe, IntFlag):
     def describe(self) -> str:
         return "OK" if self == 0 else super().describe()
 
+    # The joint-level view a driver reports every cycle (seqrun.drivers.base.CycleState);
+    # plain int tests: they run for every module in every control cycle.
+    @property
+    def refuses_motion(self) -> bool:
+        return bool(int(self) & 0x01)   # NOT_OK
+
+    @property
+    def moving(self) -> bool:
+        return bool(int(self) & 0x10)   # MOTION
+
     def to_state_flags(self) -> StateFlag:
         """Expand to the state word like m5api (``NOT_OK`` becomes ``ERROR``)."""
         result = StateFlag(0)

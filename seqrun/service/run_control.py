@@ -113,7 +113,7 @@ class RunControl:
         """Halt the run and confirm it: the run's control loop sends the Halt at its next
         cycle and confirms it (the run then ends with exit 3); when it has not within
         :data:`HALT_WAIT_S` (it waits for an operator's answer, or has ended), this thread
-        confirms through the run's client (its lock makes that safe)."""
+        confirms through the run's driver (its Halt may come from any thread)."""
         self.requests.halt(reason, cause=REMOTE_HALT)
         deadline = time.monotonic() + HALT_WAIT_S
         while time.monotonic() < deadline and not self.finished.is_set():
@@ -129,10 +129,8 @@ class RunControl:
                     "error": ("the run has ended" if self.finished.is_set()
                               else "the run has not started yet")
                     + "; the Halt request stays posted"}
-        from seqrun.halt import halt_and_confirm
-
-        return self._confirmation(halt_and_confirm(executor.client, executor.modules),
-                                  "the run's process")
+        # The driver's emergency stop may be called from any thread.
+        return self._confirmation(executor.driver.halt_and_confirm(), "the run's process")
 
     def _confirmation(self, result, by: str) -> dict:
         names = {j.module: j.name for j in self.arm.joints}
@@ -140,7 +138,8 @@ class RunControl:
                 "modules_confirmed": list(result.modules_confirmed),
                 "modules_unconfirmed": list(result.modules_unconfirmed),
                 "attempts": result.attempts, "error": result.error,
-                "states": {str(k): v for k, v in result.states.items()},
+                "states": {str(k): getattr(v, "text", str(v))
+                           for k, v in result.states.items()},
                 "message": result.describe(names), "confirmed_by": by}
 
 
@@ -169,14 +168,16 @@ def _end_effector(arm, joints_deg: list[float]) -> dict:
             "rpy_deg": [round(float(x), 3) for x in np.degrees(rpy_from_matrix(T[:3, :3]))]}
 
 
-def halt_on_foreign_frames(executor, *, echoes_own: bool = False) -> ForeignFrameWatch:
-    """A request frame this process did not send ends the run: Halt, exit 3 ("another
-    controller is on the bus (frame ...)"; a Halt broadcast is named as one). The request
-    is posted like a signal's (lock-free); the loop acts on it within a cycle."""
+def halt_on_foreign_frames(executor, client, *, echoes_own: bool = False
+                           ) -> ForeignFrameWatch:
+    """A request frame ``client`` (the run's PowerCube client) received that this process
+    did not send ends the run: Halt, exit 3 ("another controller is on the bus (frame
+    ...)"; a Halt broadcast is named as one). The request is posted like a signal's
+    (lock-free); the loop acts on it within a cycle."""
     def on_foreign(frame: ForeignFrame) -> None:
         executor.halt(frame.message(), cause=REMOTE_HALT if frame.is_halt else FOREIGN_MASTER)
 
     watch = ForeignFrameWatch(on_foreign, echoes_own=echoes_own)
-    executor.client.add_frame_listener(watch)
+    client.add_frame_listener(watch)
     return watch
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from seqrun.executor import OperatorAbort
+from seqrun.results import OperatorAbort
 
 
 def run(step, ex) -> dict:

@@ -7,11 +7,7 @@ from seqrun.steps._modules import addressed_modules
 
 def run(step, ex) -> dict:
     modules = addressed_modules(step.params, ex.arm)
-    if modules is None:
-        ex.client.halt(None)
-    else:
-        for module in modules:
-            ex.client.halt(module)
+    ex.halt_modules(modules)
     ex.commanded_deg = None  # nothing is commanded any more
     ex.refresh_measurement("halt")
     return {"modules": "all" if modules is None else modules}

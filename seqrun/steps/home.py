@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from seqrun.powercube.protocol import StateFlag
 from seqrun.steps._modules import addressed_modules
 
 #: PRL modules home without moving; this bounds the wait for HOME_OK.
@@ -11,13 +10,8 @@ HOME_TIMEOUT_S = 5.0
 
 def run(step, ex) -> dict:
     modules = addressed_modules(step.params, ex.arm)
-    if modules is None:
-        ex.client.home(None)
-    else:
-        for module in modules:
-            ex.client.home(module)
-    states = ex.wait_for_states(
-        modules, lambda f: bool(f & StateFlag.HOME_OK) and not f & StateFlag.FAULTS,
-        HOME_TIMEOUT_S, "did not report HOME_OK after Home")
+    ex.home_modules(modules)
+    states = ex.wait_for_states(modules, lambda state: state.ready,
+                                HOME_TIMEOUT_S, "did not report HOME_OK after Home")
     ex.refresh_measurement("home", states)
     return {"states": {str(m): f.describe() for m, f in states.items()}}

@@ -1,0 +1,28 @@
+"""Arm drivers: one module per arm protocol behind one interface (:mod:`.base`).
+
+:mod:`seqrun.drivers.powercube` drives the Schunk PowerCube modules (the LWA 3); the
+executor sees only :class:`~seqrun.drivers.base.ArmDriver`.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from seqrun.arm import ArmDescription
+from seqrun.drivers.base import (ArmDriver, CommandConfirmation, CycleState, EventSink,
+                                 HaltConfirmation, JointLimits, JointReading, JointState,
+                                 LimitValues, MotionRefused)
+
+__all__ = ["ArmDriver", "CommandConfirmation", "CycleState", "EventSink", "HaltConfirmation",
+           "JointLimits", "JointReading", "JointState", "LimitValues", "MotionRefused",
+           "as_driver"]
+
+
+def as_driver(driver_or_client: Any, arm: ArmDescription) -> ArmDriver:
+    """``driver_or_client`` itself if it is an arm driver; a PowerCube client (what the
+    executor was given before drivers existed) is wrapped in a PowerCube driver."""
+    if isinstance(driver_or_client, ArmDriver):
+        return driver_or_client
+    from seqrun.drivers.powercube import PowerCubeDriver
+
+    return PowerCubeDriver(driver_or_client, arm)

@@ -1,0 +1,254 @@
+"""The arm-driver interface: what the executor asks of an arm, in joint terms.
+
+The executor plans in user coordinates and checks in joint terms; a driver turns that into
+one arm's wire protocol and back. Everything a driver reports is joint-level and typed:
+positions in the drive's coordinates (radians, joint order; the executor applies the arm
+file's offsets), a compact per-cycle state (:class:`CycleState`) and, when asked, the full
+decoded state of a joint (:class:`JointState`).
+
+:class:`ArmDriver` lists the calls; :mod:`seqrun.drivers.powercube` implements them over
+the PowerCube protocol. Another arm (or a ROS 2 bridge) is one more module implementing
+the same calls. No I/O here.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, NamedTuple, Protocol, runtime_checkable
+
+import numpy as np
+
+from seqrun.planner import Limits, MovePlan
+
+#: Where a driver sends its events (the executor's ``emit``: type, then fields).
+EventSink = Callable[..., None]
+
+
+class CycleState(Protocol):
+    """What a joint reports with every reading (PowerCube: the short state byte)."""
+
+    @property
+    def refuses_motion(self) -> bool:
+        """The joint has faulted, halted or is not homed: its full state says which."""
+
+    @property
+    def moving(self) -> bool:
+        """The drive reports motion."""
+
+    def describe(self) -> str:
+        """The drive's own flag names, for the operator."""
+
+    def __int__(self) -> int:
+        """A compact code for the event log (the driver documents its bits)."""
+
+
+@dataclass(frozen=True)
+class JointState:
+    """The full state of one joint's drive, decoded by its driver."""
+
+    homed: bool
+    halted: bool
+    moving: bool
+    #: Any fault that stops the joint or makes it refuse motion (halted included).
+    faulted: bool
+    #: The most specific fault, for the report (``tow_error``, ``beyond_soft``, ...);
+    #: ``not_homed`` when none is named.
+    cause: str
+    #: Every flag by the drive's own names (``HOME_OK|RAMP_END``), for the operator.
+    text: str
+    #: Only the fault flags by the drive's names ('' when there is none).
+    fault_text: str = ""
+    #: The :class:`CycleState` code this state shows in a reading (event log).
+    cycle_code: int = 0
+
+    @property
+    def ready(self) -> bool:
+        """Homed and free of faults: the joint accepts motion."""
+        return self.homed and not self.faulted
+
+    def describe(self) -> str:
+        return self.text
+
+
+class JointReading(NamedTuple):
+    """One reading of every joint."""
+
+    #: Drive coordinates (radians), joint order.
+    positions_rad: np.ndarray
+    #: Per module id: the state the joint reported with this reading.
+    states: dict[int, CycleState]
+
+
+@dataclass(frozen=True)
+class JointLimits:
+    """The limits a joint's drive holds, in drive units (rad, rad/s, rad/s^2)."""
+
+    min_position: float
+    max_position: float
+    max_velocity: float
+    max_acceleration: float
+
+
+@dataclass(frozen=True)
+class LimitValues:
+    """Limits to write to one joint, user units (deg, deg/s, deg/s^2); None: left as is."""
+
+    min_deg: float
+    max_deg: float
+    max_velocity_deg_s: float | None = None
+    max_acceleration_deg_s2: float | None = None
+
+
+class MotionRefused(Exception):
+    """A joint refused a motion command mid-cycle (its answer said it refuses motion).
+
+    Raised by :meth:`ArmDriver.cycle` as soon as that answer arrives, before the rest of
+    the cycle is collected: the caller halts the arm at once, then asks why.
+    """
+
+    def __init__(self, module: int, state: CycleState) -> None:
+        super().__init__(f"module {module}: refuses motion")
+        self.module = module
+        self.state = state
+
+
+@dataclass
+class CommandConfirmation:
+    """What a confirmed stop (Halt) or Reset reached, module by module.
+
+    ``sent``: the command left the driver at least once; ``confirmed``: every module read
+    back that it took effect (Halt: HALTED; Reset: no fault left).
+    """
+
+    command: str                         # "halt" | "reset"
+    modules: tuple[int, ...] = ()
+    sent: bool = False
+    #: Last state read from each module that answered.
+    states: dict[int, JointState] = field(default_factory=dict)
+    #: Modules that did not confirm -> why ("no answer", or "state ...").
+    unconfirmed: dict[int, str] = field(default_factory=dict)
+    attempts: int = 0
+    #: Seconds from the first command on the wire to the last confirmation read.
+    duration_s: float = 0.0
+    error: str | None = None
+
+    @property
+    def confirmed(self) -> bool:
+        return self.sent and not self.unconfirmed
+
+    @property
+    def modules_confirmed(self) -> tuple[int, ...]:
+        return tuple(m for m in self.modules if m not in self.unconfirmed)
+
+    @property
+    def modules_unconfirmed(self) -> tuple[int, ...]:
+        return tuple(m for m in self.modules if m in self.unconfirmed)
+
+    def as_dict(self) -> dict[str, Any]:
+        """``halt_sent``, ``halt_confirmed``, ... for a fault record."""
+        return {"halt_sent": self.sent, "halt_confirmed": self.confirmed,
+                "modules_not_halted": list(self.modules_unconfirmed),
+                "halt_attempts": self.attempts,
+                **({"halt_error": self.error} if self.error else {})}
+
+    def describe_unconfirmed(self) -> str:
+        return ", ".join(f"module {m} ({why})" for m, why in sorted(self.unconfirmed.items()))
+
+    def describe(self, joint_names: Mapping[int, str] | None = None) -> str:
+        """One line for the operator."""
+        what = self.command.capitalize()
+        if self.confirmed:
+            return (f"{what} confirmed by every module ({len(self.modules_confirmed)}) "
+                    f"after {self.attempts} attempt{'s' * (self.attempts != 1)}")
+        names = joint_names or {}
+        missing = ", ".join(f"{m} ({names[m]})" if m in names else str(m)
+                            for m in self.modules_unconfirmed)
+        if not self.sent:
+            return (f"{what} could NOT be sent ({self.error}): the modules may still be "
+                    "moving; use the emergency stop")
+        text = f"{what} sent but NOT confirmed by module(s) {missing}"
+        return text + (f" ({self.error})" if self.error else "")
+
+
+#: The confirmation of an emergency Halt (the name the executor and the session use).
+HaltConfirmation = CommandConfirmation
+
+
+@runtime_checkable
+class ArmDriver(Protocol):
+    """One arm behind its protocol. Modules are named by their ids (``modules``, joint
+    order); ``None`` for a set of modules means every module (one broadcast where the
+    protocol has one). Calls come from the executor's thread, except
+    :meth:`halt_and_confirm`, which may come from any thread."""
+
+    #: Module ids in joint order.
+    modules: list[int]
+
+    def configure(self, *, cycle_s: float, run_limits: Limits, command_mode: str,
+                  emit: EventSink) -> None:
+        """Set the run's control period, its (speed-scaled) limits, its setpoint law and
+        where driver events go; raises ValueError for an unknown ``command_mode``."""
+
+    # -- reading
+    def read(self) -> JointReading:
+        """Position and cycle state of every joint (a lost read retried)."""
+
+    def read_states(self, modules: Sequence[int] | None = None) -> dict[int, JointState]:
+        """The full state of ``modules`` (None: all)."""
+
+    def read_state(self, module: int) -> JointState:
+        """The full state of one module."""
+
+    # -- motion
+    def start_motion(self, moving: list[int], limits: Limits, *,
+                     command_mode: str | None = None) -> None:
+        """A motion of the joints ``moving`` (indices) starts, planned within ``limits``:
+        choose its setpoint law (``command_mode``, or the run's) and send what it needs
+        once. Ends with :meth:`end_motion`."""
+
+    def cycle(self, plan: MovePlan, t: float, moving: list[int],
+              measured_deg: np.ndarray) -> JointReading:
+        """One control cycle: setpoints of ``plan`` at plan time ``t`` for ``moving``,
+        and a reading of every joint. Raises :class:`MotionRefused` at the first answer
+        that refuses motion; a lost answer to a motion command is a fault."""
+
+    def end_motion(self) -> None:
+        """The motion is over (or failed): back to the run's setpoint law."""
+
+    # -- commands
+    def reset(self, modules: Sequence[int] | None) -> None:
+        """Clear the modules' error state."""
+
+    def home(self, modules: Sequence[int] | None) -> None:
+        """Home the modules (enable the motors)."""
+
+    def halt(self, modules: Sequence[int] | None) -> None:
+        """A deliberate stop (the sequence's ``halt`` step): modules refuse motion after."""
+
+    def halt_and_confirm(self) -> CommandConfirmation:
+        """The emergency stop: Halt every module before anything else, then read back
+        that each one halted. Never raises; a failure is in the result."""
+
+    # -- limits held by the drives
+    def read_limits(self) -> list[JointLimits]:
+        """What every joint's drive holds (joint order)."""
+
+    def write_limits(self, values: Mapping[str, LimitValues]) -> int:
+        """Write limits per joint name and read them back; raises RunAborted
+        (``limits_not_written``) for a value that reads back different. Returns the
+        number of values written."""
+
+    # -- watchdog (a drive that stops by itself when its master goes silent)
+    def enable_watchdog(self, alive: Callable[[float], bool]) -> None:
+        """Arm the drives' watchdogs (if the arm file asks) and keep them fed while
+        ``alive(within_s)`` says the control loop made progress within ``within_s``."""
+
+    def stop_watchdog_keeper(self) -> None:
+        """Stop feeding the watchdogs (after a fault: they stay armed)."""
+
+    def disable_watchdog(self) -> None:
+        """After a clean end: disarm the watchdogs; the arm keeps holding."""
+
+    def close(self) -> None:
+        """Release the bus."""

@@ -1,0 +1,76 @@
+"""What a run returns: per-step and whole-run results, the operator's abort, exit codes.
+
+Pure data, no I/O: the executor fills them, the run log, the reports and every face read
+them (``from seqrun.executor import ...`` keeps working: it re-exports these).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+# Exit codes (shared with the CLI; defined where the CLI can read them without the executor).
+from seqrun.defaults import (EXIT_FAULT, EXIT_INVALID, EXIT_OK,  # noqa: F401
+                             EXIT_OPERATOR_ABORT, EXIT_USAGE)
+from seqrun.errors import SeqrunError
+
+__all__ = ["EXIT_FAULT", "EXIT_INVALID", "EXIT_OK", "EXIT_OPERATOR_ABORT", "EXIT_USAGE",
+           "OperatorAbort", "RunResult", "StepResult"]
+
+
+class OperatorAbort(SeqrunError):
+    """The operator asked to stop (controlled stop already done when raised)."""
+
+
+@dataclass
+class StepResult:
+    number: int
+    kind: str
+    label: str
+    location: str
+    status: str = "pending"              # passed | failed | aborted | skipped
+    started: float | None = None
+    finished: float | None = None
+    planned_duration_s: float | None = None
+    detail: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def duration_s(self) -> float | None:
+        if self.started is None or self.finished is None:
+            return None
+        return self.finished - self.started
+
+    def as_dict(self) -> dict:
+        return {"number": self.number, "kind": self.kind, "label": self.label,
+                "location": self.location, "status": self.status,
+                "duration_s": _round(self.duration_s),
+                "planned_duration_s": _round(self.planned_duration_s), **self.detail}
+
+
+@dataclass
+class RunResult:
+    status: str                          # passed | failed | aborted | invalid
+    exit_code: int
+    message: str
+    steps: list[StepResult]
+    started: float
+    finished: float
+    fault: dict[str, Any] | None = None
+    not_verified: list[str] = field(default_factory=list)
+    min_heights_mm: dict[str, float] = field(default_factory=dict)
+    extra: dict[str, Any] = field(default_factory=dict)
+    #: Modules that reported a fault (ERROR, HALTED, ...) when the run started, before
+    #: seqrun sent anything but reads: ``[{"module", "joint", "flags"}]``.
+    latched_at_start: list[dict[str, Any]] = field(default_factory=list)
+
+    @property
+    def duration_s(self) -> float:
+        return self.finished - self.started
+
+    @property
+    def planned_duration_s(self) -> float:
+        return sum(s.planned_duration_s or 0.0 for s in self.steps)
+
+
+def _round(x: float | None, nd: int = 4) -> float | None:
+    return None if x is None else round(float(x), nd)

@@ -1,0 +1,263 @@
+"""The driver seam (issue 10.3): the executor speaks joints, never PowerCube.
+
+- ``seqrun/executor.py`` imports nothing from ``seqrun.powercube`` (nor the old
+  PowerCube-only modules it used), and the step modules neither build codec requests nor
+  import the executor (the import cycle executor -> steps -> confirm -> executor is gone);
+- a driver that is not PowerCube at all (an ideal arm, in this file) runs a whole shipped
+  sequence through the executor: reset, home, set_limits, moves, waits, a checkpoint;
+- a fault that driver reports mid-move ends like any fault: Halt through the driver,
+  confirmed, exit 3 with the cause the driver decoded.
+"""
+
+from __future__ import annotations
+
+import ast
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from seqrun.arm import load_arm
+from seqrun.clock import VirtualClock
+from seqrun.drivers.base import (ArmDriver, CommandConfirmation, JointLimits, JointReading,
+                                 JointState, LimitValues, MotionRefused)
+from seqrun.executor import EXIT_FAULT, EXIT_OK, Executor
+from seqrun.planner import Limits, MovePlan
+from seqrun.schema import load_sequence
+from seqrun.validation import pose_joints_deg
+
+ROOT = Path(__file__).resolve().parents[1]
+ARM = load_arm(ROOT / "arms" / "lwa3.yaml")
+#: Modules that only PowerCube code may import.
+POWERCUBE_ONLY = ("seqrun.powercube", "seqrun.setpoints", "seqrun.halt", "seqrun.armcontrol",
+                  "seqrun.drivers.powercube", "seqrun.drivers.setpoints")
+
+
+def imported_modules(path: Path) -> set[str]:
+    """Every module ``path`` imports, at any level (function bodies included)."""
+    names: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            names.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            names.add(node.module)
+            names.update(f"{node.module}.{alias.name}" for alias in node.names)
+    return names
+
+
+def powercube_imports(path: Path) -> list[str]:
+    return sorted(name for name in imported_modules(path)
+                  if any(name == p or name.startswith(p + ".") for p in POWERCUBE_ONLY))
+
+
+def test_the_executor_imports_nothing_from_powercube():
+    assert powercube_imports(ROOT / "seqrun" / "executor.py") == []
+    import seqrun.executor as executor
+
+    leaked = {name: value.__module__ for name, value in vars(executor).items()
+              if getattr(value, "__module__", "").startswith(POWERCUBE_ONLY)}
+    assert leaked == {}
+
+
+def test_steps_build_no_requests_and_do_not_import_the_executor():
+    for path in sorted((ROOT / "seqrun" / "steps").glob("*.py")):
+        assert powercube_imports(path) == [], path.name
+        assert "seqrun.executor" not in imported_modules(path), path.name
+
+
+# -- a driver that is not PowerCube ---------------------------------------------------------
+
+@dataclass(frozen=True)
+class IdealCycleState:
+    """This driver's per-cycle state: bit 0 refuses motion, bit 1 moving."""
+
+    code: int
+
+    @property
+    def refuses_motion(self) -> bool:
+        return bool(self.code & 1)
+
+    @property
+    def moving(self) -> bool:
+        return bool(self.code & 2)
+
+    def describe(self) -> str:
+        return "refuses" if self.refuses_motion else "ok"
+
+    def __int__(self) -> int:
+        return self.code
+
+
+class IdealArm:
+    """An arm whose joints are exactly where the plan says, in drive radians; it starts
+    powered on (not homed) and can be told to overheat one joint at a plan time."""
+
+    def __init__(self, start_deg: Mapping[str, float], *,
+                 overheat: tuple[int, float] | None = None) -> None:
+        self.modules = list(ARM.module_ids)
+        self.offsets = np.radians([j.offset_deg for j in ARM.joints])
+        self.positions = np.radians([start_deg[j.name] for j in ARM.joints]) + self.offsets
+        self.homed = dict.fromkeys(self.modules, False)
+        self.halted = dict.fromkeys(self.modules, False)
+        self.overheated: set[int] = set()
+        self.overheat = overheat
+        self.limits = [JointLimits(-3.0, 3.0, 1.0, 1.0) for _ in self.modules]
+        self.calls: list[str] = []
+        self.cycles = 0
+
+    # -- state
+    def _state(self, module: int) -> JointState:
+        hot, halted, homed = module in self.overheated, self.halted[module], self.homed[module]
+        faulted = hot or halted
+        return JointState(homed=homed, halted=halted, moving=False, faulted=faulted,
+                          cause="overheated" if hot else "halted" if halted else "not_homed",
+                          text=("HOT " if hot else "") + ("HALTED " if halted else "")
+                          + ("HOMED" if homed else "NOT_HOMED"),
+                          fault_text="HOT" if hot else "HALTED" if halted else "",
+                          cycle_code=int(faulted or not homed))
+
+    def _reading(self) -> JointReading:
+        return JointReading(self.positions.copy(),
+                            {m: IdealCycleState(self._state(m).cycle_code)
+                             for m in self.modules})
+
+    # -- the ArmDriver calls
+    def configure(self, *, cycle_s: float, run_limits: Limits, command_mode: str,
+                  emit: Callable[..., None]) -> None:
+        self.calls.append("configure")
+
+    def read(self) -> JointReading:
+        return self._reading()
+
+    def read_states(self, modules: Sequence[int] | None = None) -> dict[int, JointState]:
+        return {m: self._state(m) for m in (self.modules if modules is None else modules)}
+
+    def read_state(self, module: int) -> JointState:
+        return self._state(module)
+
+    def start_motion(self, moving: list[int], limits: Limits, *,
+                     command_mode: str | None = None) -> None:
+        self.calls.append("start_motion")
+
+    def cycle(self, plan: MovePlan, t: float, moving: list[int],
+              measured_deg: np.ndarray) -> JointReading:
+        self.cycles += 1
+        if self.overheat is not None and t >= self.overheat[1]:
+            self.overheated.add(self.overheat[0])
+        for i in moving:
+            module = self.modules[i]
+            if not self._state(module).ready:
+                raise MotionRefused(module, IdealCycleState(1))
+            self.positions[i] = plan.at(t)[0][i] + self.offsets[i]
+        return self._reading()
+
+    def end_motion(self) -> None:
+        self.calls.append("end_motion")
+
+    def reset(self, modules: Sequence[int] | None) -> None:
+        for m in self.modules if modules is None else modules:
+            self.halted[m] = False
+            self.overheated.discard(m)
+
+    def home(self, modules: Sequence[int] | None) -> None:
+        for m in self.modules if modules is None else modules:
+            self.homed[m] = True
+
+    def halt(self, modules: Sequence[int] | None) -> None:
+        for m in self.modules if modules is None else modules:
+            self.halted[m] = True
+
+    def halt_and_confirm(self) -> CommandConfirmation:
+        self.calls.append("halt_and_confirm")
+        self.halt(None)
+        return CommandConfirmation("halt", tuple(self.modules), sent=True,
+                                   states=self.read_states(), attempts=1)
+
+    def read_limits(self) -> list[JointLimits]:
+        return list(self.limits)
+
+    def write_limits(self, values: Mapping[str, LimitValues]) -> int:
+        for i, joint in enumerate(ARM.joints):
+            if joint.name in values:
+                v = values[joint.name]
+                self.limits[i] = JointLimits(joint.to_module_rad(v.min_deg),
+                                             joint.to_module_rad(v.max_deg),
+                                             self.limits[i].max_velocity,
+                                             self.limits[i].max_acceleration)
+        self.calls.append("write_limits")
+        return 2 * len(values)
+
+    def enable_watchdog(self, alive: Callable[[float], bool]) -> None:
+        self.calls.append("enable_watchdog")
+
+    def stop_watchdog_keeper(self) -> None:
+        self.calls.append("stop_watchdog_keeper")
+
+    def disable_watchdog(self) -> None:
+        self.calls.append("disable_watchdog")
+
+    def close(self) -> None:
+        self.calls.append("close")
+
+
+def run_opsafe(driver: IdealArm):
+    loaded = load_sequence(ROOT / "sequences" / "opsafe.yaml")
+    events: list[dict] = []
+    executor = Executor(driver, ARM, VirtualClock(), poses_dir=loaded.poses_dir,
+                        confirm=lambda prompt: True, listeners=[events.append])
+    return executor, executor.run(loaded), events
+
+
+def park() -> dict[str, float]:
+    return pose_joints_deg("park", ROOT / "poses")
+
+
+def test_a_driver_that_is_not_powercube_runs_a_whole_sequence():
+    driver = IdealArm(park())
+    assert isinstance(driver, ArmDriver)
+    executor, result, events = run_opsafe(driver)
+    assert result.exit_code == EXIT_OK, result.message
+    assert executor.driver is driver and executor.client is None
+    # Every step ran through the driver: homed, limits written, the moves streamed.
+    assert all(driver.homed.values()) and "write_limits" in driver.calls
+    assert driver.calls.count("start_motion") == 2 and driver.cycles > 100
+    assert "halt_and_confirm" not in driver.calls and "disable_watchdog" in driver.calls
+    opsafe = pose_joints_deg("opsafe", ROOT / "poses")
+    reached = np.degrees(driver.positions - driver.offsets)
+    assert np.allclose(reached, [opsafe[j.name] for j in ARM.joints], atol=1e-6)
+    assert [s.status for s in result.steps] == ["passed"] * len(result.steps)
+    assert any(e["type"] == "setpoint" for e in events)
+
+
+def test_a_fault_the_driver_reports_mid_move_halts_through_it():
+    driver = IdealArm(park(), overheat=(3, 1.0))     # module 3 overheats 1 s into a move
+    _, result, events = run_opsafe(driver)
+    assert result.exit_code == EXIT_FAULT
+    assert driver.calls.count("halt_and_confirm") == 1
+    assert result.fault["cause"] == "overheated" and result.fault["module"] == 3
+    assert result.fault["halt_confirmed"] is True
+    assert "module 3 (j3): HOT" in result.message
+    assert [e["type"] for e in events].count("halt_confirmed") == 1
+
+
+def test_the_powercube_driver_is_an_arm_driver():
+    from seqrun.drivers import as_driver
+    from seqrun.drivers.powercube import PowerCubeDriver
+    from seqrun.powercube.client import PowerCubeClient
+    from seqrun.sim.bus import SimBus
+
+    clock = VirtualClock()
+    with SimBus("driver-seam", clock=clock) as bus:
+        client = PowerCubeClient(bus, clock)
+        driver = as_driver(client, ARM)
+        assert isinstance(driver, PowerCubeDriver) and isinstance(driver, ArmDriver)
+        assert as_driver(driver, ARM) is driver
+        reading = driver.read()
+        assert reading.positions_rad.shape == (ARM.dof,)
+        # Freshly powered on: every joint refuses motion, its full state says not homed.
+        assert all(state.refuses_motion for state in reading.states.values())
+        states = driver.read_states()
+        assert all(not s.homed and not s.faulted and s.cause == "not_homed"
+                   for s in states.values())
+        client.close()
