@@ -45,8 +45,10 @@ class Bus:
 
     def start_run(self, folder: Path) -> subprocess.Popen:
         return subprocess.Popen(
+            # (a quarter of the speed: the run lasts about a minute, long enough for the
+            # other terminal's commands on a loaded machine)
             [sys.executable, "-m", "seqrun", "run", "sequences/opsafe.yaml", "--yes",
-             "--plain", "--log-dir", str(folder), *self.args],
+             "--plain", "--speed", "0.25", "--no-report", "--log-dir", str(folder), *self.args],
             cwd=ROOT, env=self.env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
 
     def wait_until_moving(self, run: subprocess.Popen, timeout: float = 60) -> dict:
@@ -58,7 +60,7 @@ class Bus:
             if reply and reply.get("ok"):
                 status = reply["status"]
                 if (status["step"] or {}).get("step", 0) >= 5 and any(
-                        abs(j["velocity_deg_s"] or 0) > 1 for j in status["joints"]):
+                        abs(j["velocity_deg_s"] or 0) > 0.5 for j in status["joints"]):
                     return reply
             time.sleep(0.1)
         raise AssertionError("the run did not start moving")
@@ -93,7 +95,7 @@ def test_second_controller_refused_status_and_halt_through_the_run(bus, tmp_path
         bus.wait_until_moving(run)
         holder = read_holder(*bus.key, directory=bus.runtime)
         assert holder.pid == run.pid and holder.command.startswith(
-            "seqrun run sequences/opsafe.yaml --yes --plain")
+            "seqrun run sequences/opsafe.yaml --yes --plain --speed 0.25")
         # A second run and a Reset are refused: one line naming the holder, exit 2.
         for args in (("run", "sequences/opsafe.yaml", "--yes", "--plain",
                       "--log-dir", str(tmp_path / "second")), ("reset",)):
@@ -121,15 +123,15 @@ def test_second_controller_refused_status_and_halt_through_the_run(bus, tmp_path
         assert table.returncode == 0 and f"from the running seqrun (pid {run.pid}" in \
             table.stdout
         # halt: broadcast straight to the bus, confirmed by the run; the run ends halted.
-        t0 = time.monotonic()
         halt = bus.seqrun("halt")
+        t0 = time.monotonic()
         assert halt.returncode == 0, halt.stdout + halt.stderr
         assert re.match(rf"Halt confirmed by modules 1, 2, 3, 4, 5, 6, 7, read back by the "
                         rf"running seqrun \(pid {run.pid}", halt.stdout), halt.stdout
-        out = _finish(run, timeout=30)
+        out = _finish(run, timeout=60)
         took = time.monotonic() - t0
         assert run.returncode == 3, out
-        assert took < 15, took
+        assert took < 10, took   # the run had halted already: it only reports and exits
         # Named by whichever reached the run first: the broadcast it read on the bus, or
         # the request on its socket.
         assert re.search(r"FAILED \(exit 3\): (Halt broadcast from another process \(frame "
