@@ -23,6 +23,8 @@ from seqrun.errors import UserInputError
 if TYPE_CHECKING:  # python-can (and its can.io: asyncio, ssl, sqlite3) only when a bus opens
     import can
 
+    from seqrun.service.bus_claim import BusClaim
+
     from seqrun.sim.faults import Fault
     from seqrun.sim.module import ModuleOptions
 
@@ -43,12 +45,22 @@ class Connection:
     faults: list[Fault] = field(default_factory=list)
     #: The built-in simulator's power-on pose (its zero reference); None on other buses.
     power_on_pose: str | None = None
+    #: (interface, channel) of a bus other processes can reach (one controller per bus:
+    #: seqrun/service/bus_claim.py); None for a bus of this process only (the simulator).
+    bus_key: tuple[str, str] | None = None
+    #: This process's claim of the bus, released by :meth:`close`.
+    claim: BusClaim | None = None
+    #: The bus hands this process its own frames back (``receive_own_messages``).
+    echoes_own: bool = False
 
     def close(self) -> None:
         try:
             self.bus.shutdown()
         except Exception as exc:  # noqa: BLE001 - a dead connection cannot be closed cleanly
             logging.getLogger(__name__).debug("closing the bus failed: %r", exc)
+        finally:
+            if self.claim is not None:
+                self.claim.release()
 
 
 def parse_bus_kwargs(items: Sequence[str]) -> dict[str, Any]:
@@ -110,6 +122,34 @@ def resolve_config(interface: str | None, channel: str | None, bitrate: int | No
         raise UserInputError(f"bad CAN configuration: {exc}") from None
 
 
+#: Interfaces whose bus lives in this process only: nobody else can be on it, no claim.
+PROCESS_LOCAL_INTERFACES = (SIM_INTERFACE, "virtual")
+
+
+def bus_key(config: Mapping[str, Any]) -> tuple[str, str] | None:
+    """(interface, channel) naming a bus for the one-controller claim, from a resolved
+    configuration; None for a bus of this process only. socketcand's channel includes the
+    server's address: two servers are two buses."""
+    interface = config.get("interface")
+    if not interface or interface in PROCESS_LOCAL_INTERFACES:
+        return None
+    if interface == "socketcand":
+        return interface, (f"{config.get('host') or '127.0.0.1'}:"
+                           f"{config.get('port') or DEFAULT_SOCKETCAND_PORT}/"
+                           f"{config.get('channel') or 'can0'}")
+    return str(interface), str(config.get("channel"))
+
+
+def shared_bus(*, interface: str | None = None, channel: str | None = None,
+               bitrate: int | None = None, bus_kwargs: Mapping[str, Any] | None = None,
+               force_sim: bool = False) -> tuple[str, str] | None:
+    """The claim key of the bus :func:`open_connection` would open with these arguments
+    (None: the simulator, nobody else's); opens nothing."""
+    if force_sim:
+        return None
+    return bus_key(resolve_config(interface, channel, bitrate, bus_kwargs))
+
+
 class _OneLineHandler(logging.Handler):
     """python-can logs some failures with a whole traceback (its socketcand client on a
     lost connection); the operator gets the first line, once, and the run's own fault
@@ -154,8 +194,13 @@ def open_connection(*, interface: str | None = None, channel: str | None = None,
                     sim_positions: Mapping[int, float] | Sequence[float] | None = None,
                     default_bitrate: int = 1_000_000,
                     power_on_pose: str | None = None,
-                    python_can: bool = True) -> Connection:
+                    python_can: bool = True, claim: bool = True,
+                    transient: bool = False) -> Connection:
     """Open the bus the operator asked for (see the module docstring).
+
+    A bus other processes can reach is claimed first (``claim``; ``transient`` for a
+    command that holds it for a moment): when another seqrun holds it this raises
+    :class:`~seqrun.errors.Refused` naming the holder, before anything is opened or sent.
 
     ``python_can=False`` (with ``force_sim``): the simulator as a
     :class:`~seqrun.sim.port.SimPort`, without importing python-can (the dry run: nobody
@@ -221,15 +266,28 @@ def open_connection(*, interface: str | None = None, channel: str | None = None,
         _probe_tcp(str(config["host"]), port)
     config.setdefault("bitrate", default_bitrate)
     _one_line_library_logs()
+    key = bus_key(config)
+    held = None
+    if claim and key is not None:
+        from seqrun.service.bus_claim import claim_bus
+
+        held = claim_bus(*key, transient=transient)
     try:
         real_bus = can.Bus(**config)
     # TypeError: --bus-kwargs the interface does not take
     except (can.CanError, OSError, ValueError, TypeError, ImportError) as exc:
+        if held is not None:
+            held.release()
         raise UserInputError(f"cannot open CAN interface '{config['interface']}' "
                              f"channel '{config.get('channel')}': {exc}") from None
+    except BaseException:
+        if held is not None:
+            held.release()
+        raise
     desc = (f"CAN interface '{config['interface']}' channel '{config.get('channel')}' "
             f"at {config.get('bitrate')} bit/s")
-    return Connection(real_bus, clock or RealClock(), False, desc)
+    return Connection(real_bus, clock or RealClock(), False, desc, bus_key=key, claim=held,
+                      echoes_own=bool(config.get("receive_own_messages")))
 
 
 #: Environment variable that overrides the arm file's response timeout, in milliseconds.

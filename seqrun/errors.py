@@ -13,7 +13,8 @@
      ├── PlanningError             ruckig refused the input
      ├── RunAborted                the executor stopped a run (fault, timeout, checkpoint)
      └── Refused                   the arm session refused a command (bad input, wrong
-                                   state); nothing was sent
+                                   state, the bus held by
+                                   another controller); nothing was sent (exit 2)
 
 Messages are written for a test engineer at the arm: they name the module and its
 decoded state flags, the file and line, never a Python object.
@@ -113,4 +114,4 @@ class RunAborted(SeqrunError):
 class Refused(SeqrunError):
     """The arm session refused a command: bad input (unknown joint or pose, a target
     outside the limits, NaN) or the wrong state (a move while halted, a second activity
-    while one runs). One line for the operator; nothing was sent to the arm."""
+    while one runs, the bus held by another controller). One line for the operator; nothing was sent to the arm."""

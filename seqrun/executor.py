@@ -46,7 +46,7 @@ from seqrun.planner import Limits, MovePlan, plan_move, plan_stop
 from seqrun.usermessages import user_message
 from seqrun.telemetry import VelocityWindow, joint_flags
 from seqrun.tracking import MoveTracking, velocity_window
-from seqrun.stop_requests import OPERATOR_HALT, StopRequest, StopRequests
+from seqrun.stop_requests import FROM_OUTSIDE, OPERATOR_HALT, StopRequest, StopRequests
 
 # Result types, the operator's abort and exit codes live in seqrun/results.py; imported
 # from here too.
@@ -1000,6 +1000,10 @@ class Executor:
                 else:
                     status, code = "failed", EXIT_FAULT
                 message = user_message(exc, self.arm) + self._halt_note()
+                if self._halt_requested and self._halt.cause in FROM_OUTSIDE \
+                        and cause != self._halt.cause:
+                    # What the modules showed (HALTED) came from outside: name the source.
+                    cause, message = self._halt.cause, f"{self._halt.reason}: {message}"
                 fault = {"cause": cause, "module": module, "message": message,
                          "step": step.number, **self._halt_fields()}
                 result.status = "failed" if code == EXIT_FAULT else "aborted"

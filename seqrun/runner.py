@@ -18,6 +18,7 @@ from seqrun.events import EventHub
 from seqrun.executor import EXIT_FAULT, Executor, Listener, RunResult, StepResult
 from seqrun.powercube.client import PowerCubeClient
 from seqrun.schema import LoadedSequence
+from seqrun.service.run_control import halt_on_foreign_frames
 from seqrun.stop_requests import StopRequests
 
 
@@ -91,6 +92,8 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
                                       listeners=listeners, dry_run=dry_run,
                                       confirm_clear_latched=confirm_clear_latched,
                                       requests=requests, client=client, events=events)
+    # Another master's request frame on the bus halts the run (one controller per bus).
+    halt_on_foreign_frames(executor, client, echoes_own=connection.echoes_own)
     log = None
     if log_dir is not None:
         from seqrun.runlog import RunLog  # python-can's log writer: only for a run folder

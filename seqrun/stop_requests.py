@@ -14,6 +14,12 @@ from dataclasses import dataclass
 
 #: Cause of a Halt the operator asked for (second Ctrl-C, SIGTERM, a STOP button): exit 130.
 OPERATOR_HALT = "operator_halt"
+#: Halts from outside the run (exit 3): a Halt from another process (``seqrun halt`` in
+#: another terminal: its broadcast seen on the bus, or its request on the control socket),
+#: and a request frame of another master on the bus.
+REMOTE_HALT = "remote_halt"
+FOREIGN_MASTER = "foreign_master"
+FROM_OUTSIDE = (REMOTE_HALT, FOREIGN_MASTER)
 
 
 @dataclass(frozen=True)

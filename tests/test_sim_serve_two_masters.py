@@ -1,6 +1,8 @@
 """A run through `seqrun sim serve` with `seqrun status --watch --json` beside it: the run
 passes, the watch keeps going (one JSON object per refresh) and python-can's socketcand
-client never warns about half elements."""
+client never warns about half elements. One controller per bus: while the run holds the
+bus the watch asks the run (its readings say so), never the modules, and neither process
+sees a frame of another master."""
 
 from __future__ import annotations
 
@@ -45,9 +47,13 @@ def test_run_with_a_watcher_beside_it(tmp_path):
         refreshes = [json.loads(line) for line in out.splitlines()]
         assert len(refreshes) > 20
         assert all(len(r["joints"]) == 7 for r in refreshes)
+        from_run = [r for r in refreshes if "from" in r]
+        assert len(from_run) > 10
+        assert {r["from"]["command"].split()[1] for r in from_run} == {"run"}
         for text in (run.stdout, run.stderr, err):
             assert "incomplete message" not in text
             assert "Traceback" not in text
+            assert "another controller" not in text and "from another process" not in text
     finally:
         for process in (watcher, server):
             if process is not None and process.poll() is None:

@@ -122,47 +122,94 @@ def status_command(
     """
     from rich.live import Live
 
+    from seqrun.cli.bus_owner import (OwnerDidNotAnswer, StatusSource, owner_text,
+                                      warn_once_in)
     from seqrun.cli.output import make_console
 
     with user_errors():
         arm = load_arm_file(arm_file)
-        connection, client = connect(arm, interface, channel, bitrate, bus_kwargs, sim,
-                                     response_timeout_ms=response_timeout_ms)
+        key = _bus_key(arm, interface, channel, bitrate, bus_kwargs, sim, response_timeout_ms)
     console = make_console()
-    status: dict | None
+    warn = warn_once_in(5.0, lambda text: typer.echo(f"warning: {text}", err=True))
+    # Reads only: a run holding the bus is asked over its socket, else the bus is read
+    # (seqrun/cli/bus_owner.py).
+    source = StatusSource(arm, key, lambda: connect(
+        arm, interface, channel, bitrate, bus_kwargs, sim,
+        response_timeout_ms=response_timeout_ms, claim=False), warn)
     try:
-        # Positions in user angles need the zeros the modules really have.
-        from seqrun.cli.zero import zero_for_reading
-
-        arm, zero_text = zero_for_reading(connection, arm)
+        with user_errors():
+            status = source.read(tolerate_loss=watch)
         if not as_json:
-            console.print(connection.description, style="bold", highlight=False, markup=False)
-            console.print(zero_text, highlight=False, markup=False)
-        if not watch:
-            status = read_status(client, arm)
-            if as_json:
-                typer.echo(json.dumps(status))
+            if source.holder is not None:
+                console.print(f"from {owner_text(source.holder)}: "
+                              f"{status.get('bus') or ''}", style="bold", highlight=False,
+                              markup=False)
             else:
-                console.print(status_table(status, arm.name))
+                console.print(source.description, style="bold", highlight=False,
+                              markup=False)
+                console.print(source.zero_text, highlight=False, markup=False)
+        if not watch:
+            if as_json:
+                typer.echo(json.dumps(_with_origin(status, source)))
+            else:
+                console.print(status_table(status, _title(arm, source, status)))
             return
         if as_json:
-            _watch_json(client, arm, period, count)
+            _watch_json(source, status, period, count, warn)
             return
-        status = None
         # No auto-refresh thread: drawing the table between reads, never during one, keeps
         # it from holding the interpreter while acknowledges wait to be read.
         with Live(console=console, auto_refresh=False) as live:
-            for _ in _refreshes(period, count):
-                status = read_status(client, arm, status, tolerate_loss=True)
-                live.update(status_table(status, arm.name), refresh=True)
+            for index in _refreshes(period, count):
+                if index:
+                    status = _next_reading(source, status, warn)
+                live.update(status_table(status, _title(arm, source, status)), refresh=True)
     except KeyboardInterrupt:
         pass
-    except BusError as exc:
+    except (BusError, OwnerDidNotAnswer) as exc:
         console.print(f"error: {exc}", style="red", highlight=False, markup=False)
         raise typer.Exit(EXIT_FAULT) from None
     finally:
-        client.close()
-        connection.close()
+        source.close()
+
+
+def _bus_key(arm, interface, channel, bitrate, bus_kwargs, sim, response_timeout_ms):
+    """The claim key of the bus these options name (None: the simulator); checks the
+    options first, as connecting would."""
+    from seqrun.connection import parse_bus_kwargs, response_timeout_s, shared_bus
+
+    response_timeout_s(arm, response_timeout_ms)
+    return shared_bus(interface=interface, channel=channel, bitrate=bitrate,
+                      bus_kwargs=parse_bus_kwargs(bus_kwargs or []), force_sim=sim)
+
+
+def _title(arm, source, status: dict) -> str:
+    if source.holder is None:
+        return arm.name
+    step = status.get("step") or {}
+    where = f", step {step['step']}: {step['label']}" if step.get("step") else ""
+    return f"{arm.name} (from seqrun pid {source.holder['pid']}{where})"
+
+
+def _with_origin(status: dict, source) -> dict:
+    """A reading from the bus owner says so (``"from": {"pid", "command"}``)."""
+    if source.holder is None:
+        return status
+    return {**status, "from": {"pid": source.holder["pid"],
+                               "command": source.holder["command"]}}
+
+
+def _next_reading(source, previous: dict, warn) -> dict:
+    """A watch's next reading; an owner that does not answer, or a bus held by one that
+    serves no socket, is a warning: the previous values stay, marked stale."""
+    from seqrun.cli.bus_owner import OwnerDidNotAnswer
+    from seqrun.errors import Refused
+
+    try:
+        return source.read(previous, tolerate_loss=True)
+    except (OwnerDidNotAnswer, Refused) as exc:
+        warn(str(exc))
+        return {**previous, "joints": [{**j, "stale": True} for j in previous["joints"]]}
 
 
 def _refreshes(period: float, count: int | None) -> Iterator[int]:
@@ -173,12 +220,12 @@ def _refreshes(period: float, count: int | None) -> Iterator[int]:
         yield index
 
 
-def _watch_json(client, arm, period: float, count: int | None) -> None:
+def _watch_json(source, status: dict, period: float, count: int | None, warn) -> None:
     """JSON lines: one object per refresh, flushed at once (for a pipe), with its time."""
-    status = None
-    for _ in _refreshes(period, count):
-        status = read_status(client, arm, status, tolerate_loss=True)
-        typer.echo(json.dumps({"time": round(time.time(), 3), **status}))
+    for index in _refreshes(period, count):
+        if index:
+            status = _next_reading(source, status, warn)
+        typer.echo(json.dumps({"time": round(time.time(), 3), **_with_origin(status, source)}))
         sys.stdout.flush()
 
 
@@ -215,9 +262,69 @@ def halt_command(arm_file: ArmOption = DEFAULT_ARM, interface: InterfaceOption =
                  response_timeout_ms: ResponseTimeoutOption = None) -> None:
     """Broadcast Halt: every module stops at once and refuses motion until Reset.
     Confirmed by reading every module's state back (HALTED); exit 3 naming the modules
-    that did not confirm."""
-    _broadcast("halt", arm_file, interface, channel, bitrate, bus_kwargs, sim,
-               response_timeout_ms)
+    that did not confirm. While another seqrun holds the bus (a run), the Halt goes
+    straight to the bus all the same, and that seqrun confirms it."""
+    with user_errors():
+        arm = load_arm_file(arm_file)
+        key = _bus_key(arm, interface, channel, bitrate, bus_kwargs, sim, response_timeout_ms)
+    if key is None:   # the simulator of this process: nobody else's bus
+        _broadcast("halt", arm_file, interface, channel, bitrate, bus_kwargs, sim,
+                   response_timeout_ms)
+        return
+    _halt_shared_bus(arm, key, lambda: connect(
+        arm, interface, channel, bitrate, bus_kwargs, sim,
+        response_timeout_ms=response_timeout_ms, claim=False))
+
+
+def _halt_shared_bus(arm, key: tuple[str, str], open_bus) -> None:
+    """Halt broadcast first, unclaimed (it needs no answer: always safe, even beside a
+    run); then the bus owner confirms, or, with no owner, this process claims the bus and
+    confirms by reading the modules back."""
+    import os
+
+    from seqrun.armcontrol import command_and_confirm
+    from seqrun.cli.bus_owner import owner_text
+    from seqrun.errors import Refused
+    from seqrun.powercube.protocol import CommandId
+    from seqrun.service.bus_claim import claim_bus
+    from seqrun.service.control_socket import ask_owner
+
+    with user_errors():
+        connection, client = open_bus()
+    try:
+        try:
+            client.halt_now()
+        except BusError as exc:
+            fail(f"halt not sent: {exc}", EXIT_FAULT)
+        reply = ask_owner(*key, "halt",
+                          reason=f"seqrun halt from another process (pid {os.getpid()})")
+        if reply is not None:
+            who = owner_text(reply["holder"])
+            halt = reply.get("halt") or {}
+            if reply.get("ok") and halt.get("confirmed"):
+                typer.echo(f"Halt confirmed by modules "
+                           f"{', '.join(map(str, halt['modules_confirmed']))}, read back by "
+                           f"{who} ({connection.description})")
+                return
+            fail(f"Halt broadcast sent, but {who} did not confirm it: "
+                 f"{halt.get('message') or halt.get('error') or reply.get('error')}",
+                 EXIT_FAULT)
+        try:
+            claim = claim_bus(*key, transient=True)
+        except Refused as exc:
+            fail(f"Halt broadcast sent, but not confirmed: {exc}", EXIT_FAULT)
+        with claim:
+            result = command_and_confirm(client, CommandId.HALT, [j.module for j in arm.joints])
+    except BusError as exc:
+        fail(f"halt broadcast sent, not confirmed: {exc}", EXIT_FAULT)
+    finally:
+        client.close()
+        connection.close()
+    if not result.confirmed:
+        fail(f"halt broadcast sent, but not confirmed by {result.describe_unconfirmed()} "
+             f"after {result.attempts} attempts ({connection.description})", EXIT_FAULT)
+    typer.echo(f"Halt confirmed by modules {', '.join(map(str, sorted(result.states)))} "
+               f"({connection.description})")
 
 
 @app.command("reset")

@@ -11,7 +11,7 @@ import typer
 
 # Exit codes have one definition (re-exported for the commands).
 from seqrun.defaults import EXIT_FAULT, EXIT_INVALID, EXIT_OK, EXIT_USAGE  # noqa: F401
-from seqrun.errors import SequenceInvalid, UserInputError
+from seqrun.errors import Refused, SequenceInvalid, UserInputError
 
 if TYPE_CHECKING:
     from seqrun.arm import ArmDescription
@@ -45,7 +45,7 @@ def user_errors() -> Iterator[None]:
     """Turn the user's mistakes (bad input, invalid files) into messages and exit codes."""
     try:
         yield
-    except UserInputError as exc:
+    except (UserInputError, Refused) as exc:  # Refused: the bus is another seqrun's
         fail(str(exc))
     except OSError as exc:  # a path the system refuses (name too long, permission, ...)
         fail(f"{exc.filename}: {exc.strerror or exc}" if exc.filename else str(exc))
@@ -91,8 +91,10 @@ ResponseTimeoutOption = Annotated[Optional[float], typer.Option(
 def connect(arm: ArmDescription, interface: Optional[str], channel: Optional[str],
             bitrate: Optional[int], bus_kwargs: Optional[list[str]], sim: bool,
             faults: Optional[list[str]] = None, *,
-            response_timeout_ms: Optional[float] = None):
-    """Open the bus and a PowerCubeClient on it: ``(connection, client)``."""
+            response_timeout_ms: Optional[float] = None, claim: bool = True):
+    """Open the bus and a PowerCubeClient on it: ``(connection, client)``. The bus is
+    claimed for a moment (these commands are done in a second or two): a run's claim
+    refuses them, naming it (exit 2)."""
     from seqrun.connection import (open_connection, parse_bus_kwargs, parse_faults,
                                    response_timeout_s)
     from seqrun.powercube.client import PowerCubeClient
@@ -101,6 +103,7 @@ def connect(arm: ArmDescription, interface: Optional[str], channel: Optional[str
     connection = open_connection(interface=interface, channel=channel, bitrate=bitrate,
                                  bus_kwargs=parse_bus_kwargs(bus_kwargs or []), force_sim=sim,
                                  faults=parse_faults(faults or []),
-                                 default_bitrate=arm.can.bitrate)
+                                 default_bitrate=arm.can.bitrate, claim=claim,
+                                 transient=True)
     client = PowerCubeClient(connection.bus, connection.clock, response_timeout=timeout)
     return connection, client

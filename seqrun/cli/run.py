@@ -151,6 +151,7 @@ def run_command(
     from seqrun.runlog import prepare_run_folder
     from seqrun.schema import load_sequence
     from seqrun.service import ArmSession
+    from seqrun.service.run_control import RunControl
     from seqrun.stop_requests import StopRequests
 
     keep_running_on_broken_pipe()  # a closed stdout never ends a run
@@ -207,6 +208,9 @@ def run_command(
         if power_on_at is not None and not connection.is_simulator:
             connection.close()
             fail("--power-on-at applies to the built-in simulator (seqrun sim serve has its own)")
+    # From here `seqrun status` / `seqrun halt` in another terminal ask this run.
+    requests = StopRequests()
+    control = RunControl.serve(connection, arm, requests)
     style = "bold black on yellow" if connection.is_simulator else "bold white on red"
     console.print(f" {connection.description} ", style=style, highlight=False, markup=False)
     if not connection.is_simulator and not _ask(
@@ -251,7 +255,6 @@ def run_command(
 
     # From here on signals only post stop requests (seqrun/cli/interrupts.py); the control
     # loop acts on them, a question is answered "no".
-    requests = StopRequests()
     signals = RunSignals(requests)
 
     campaign_records.record_run(folder, loaded, arm_file or loaded.arm_path,
@@ -276,6 +279,8 @@ def run_command(
     live = console.is_terminal and not plain
 
     def attach(executor) -> None:
+        if control is not None:
+            control.attach(executor)
         if live:  # subscribes to the executor's events, renders in the loop's slack
             display = LiveDisplay(console, executor, f"seqrun: {loaded.name}",
                                   connection.description, len(loaded.steps))
