@@ -266,12 +266,12 @@ def open_connection(*, interface: str | None = None, channel: str | None = None,
         _probe_tcp(str(config["host"]), port)
     config.setdefault("bitrate", default_bitrate)
     _one_line_library_logs()
-    key = bus_key(config)
+    claim_key = bus_key(config)
     held = None
-    if claim and key is not None:
+    if claim and claim_key is not None:
         from seqrun.service.bus_claim import claim_bus
 
-        held = claim_bus(*key, transient=transient)
+        held = claim_bus(*claim_key, transient=transient)
     try:
         real_bus = can.Bus(**config)
     # TypeError: --bus-kwargs the interface does not take
@@ -286,7 +286,7 @@ def open_connection(*, interface: str | None = None, channel: str | None = None,
         raise
     desc = (f"CAN interface '{config['interface']}' channel '{config.get('channel')}' "
             f"at {config.get('bitrate')} bit/s")
-    return Connection(real_bus, clock or RealClock(), False, desc, bus_key=key, claim=held,
+    return Connection(real_bus, clock or RealClock(), False, desc, bus_key=claim_key, claim=held,
                       echoes_own=bool(config.get("receive_own_messages")))
 
 

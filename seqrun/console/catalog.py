@@ -93,7 +93,7 @@ class Catalog:
             arm = load_arm(loaded.arm_path)
             start = (dict(start_deg) if start_deg is not None
                      else pose_joints_deg(START_POSE,  # as seqrun validate: Park
-                                          loaded.pose_path or loaded.poses_dir))  # type: ignore[arg-type]
+                                          loaded.pose_path or loaded.poses_dir))
         except SequenceInvalid as exc:
             errors = list(errors) + list(exc.errors)
             out["errors"] = [e.as_dict() | {"text": str(e)} for e in sort_errors(errors)]

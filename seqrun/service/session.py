@@ -466,9 +466,9 @@ class ArmSession:
         words: dict[int, StateFlag] = {}
         for k, joint in enumerate(arm.joints):
             pos, vel, state = (a.value for a in acks[3 * k:3 * k + 3])  # type: ignore[union-attr]
-            joints.append(round(joint.to_user_deg(float(pos)), 4) + 0.0)  # type: ignore[arg-type]
-            velocities.append(round(math.degrees(float(vel)), 4) + 0.0)  # type: ignore[arg-type]
-            words[joint.module] = StateFlag(int(state))  # type: ignore[arg-type]
+            joints.append(round(joint.to_user_deg(float(pos)), 4) + 0.0)
+            velocities.append(round(math.degrees(float(vel)), 4) + 0.0)
+            words[joint.module] = StateFlag(int(state))
         flags, fault = joint_flags(arm.joint_names, arm.module_ids, [0] * len(joints), words)
         now = self.clock.now()
         self._hub.publish(make_event(
