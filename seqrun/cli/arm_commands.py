@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import itertools
 import json
-import math
 import sys
 import time
 from collections.abc import Iterator
@@ -28,51 +27,6 @@ from seqrun.errors import BusError
 if TYPE_CHECKING:  # imported where used: `seqrun --help` stays light
     from rich.table import Table
 
-
-
-def read_status(client, arm, previous: dict | None = None, *,
-                tolerate_loss: bool = False) -> dict:
-    """Joints (user degrees), velocities, state words and the end-effector pose.
-
-    ``tolerate_loss`` (``--watch``): a request without an answer does not raise; its
-    joint keeps the values of ``previous`` (the last refresh) marked ``"stale": true``,
-    or None when there is no previous value.
-    """
-    import numpy as np
-
-    from seqrun.kinematics import Chain, fk, rpy_from_matrix
-    from seqrun.powercube.codec import GetParam
-    from seqrun.powercube.protocol import ParamId, StateFlag
-
-    requests = [GetParam(j.module, p) for j in arm.joints
-                for p in (ParamId.ACT_POS, ParamId.ACT_VEL, ParamId.CUBE_STATE)]
-    acks = (client.transact_partial(requests) if tolerate_loss
-            else client.transact(requests))
-    before = {j["joint"]: j for j in (previous or {}).get("joints", [])}
-    joints = []
-    for k, joint in enumerate(arm.joints):
-        answers = acks[3 * k:3 * k + 3]
-        if any(a is None for a in answers):
-            old = before.get(joint.name)
-            joints.append({**(old or {"joint": joint.name, "module": joint.module,
-                                      "position_deg": None, "velocity_deg_s": None,
-                                      "state": None, "fault": False}), "stale": True})
-            continue
-        pos, vel, state = (a.value for a in answers)
-        joints.append({"joint": joint.name, "module": joint.module,
-                       "position_deg": round(joint.to_user_deg(float(pos)), 4),
-                       "velocity_deg_s": round(math.degrees(float(vel)), 4),
-                       "state": StateFlag(state).describe(),
-                       "fault": bool(StateFlag(state) & StateFlag.FAULTS),
-                       "stale": False})
-    if any(j["position_deg"] is None for j in joints):
-        return {"joints": joints, "end_effector": None}
-    q = np.radians([j["position_deg"] for j in joints])
-    T = fk(Chain.from_arm(arm), q)
-    return {"joints": joints,
-            "end_effector": {"position_mm": [round(float(x), 3) for x in T[:3, 3]],
-                             "rpy_deg": [round(float(x), 3)
-                                         for x in np.degrees(rpy_from_matrix(T[:3, :3]))]}}
 
 
 def _number(value: float | None) -> str:
@@ -232,8 +186,7 @@ def _watch_json(source, status: dict, period: float, count: int | None, warn) ->
 def _broadcast(what: str, arm_file, interface, channel, bitrate, bus_kwargs, sim,
                response_timeout_ms) -> None:
     """Broadcast Halt or Reset, then confirm it module by module (exit 3 if not all do)."""
-    from seqrun.armcontrol import command_and_confirm
-    from seqrun.powercube.protocol import CommandId
+    from seqrun.service.arm_access import broadcast_and_confirm
 
     with user_errors():
         arm = load_arm_file(arm_file)
@@ -241,7 +194,7 @@ def _broadcast(what: str, arm_file, interface, channel, bitrate, bus_kwargs, sim
                                      response_timeout_ms=response_timeout_ms)
     modules = [j.module for j in arm.joints]
     try:
-        result = command_and_confirm(client, CommandId[what.upper()], modules)
+        result = broadcast_and_confirm(client, what, modules)
     finally:
         client.close()
         connection.close()
@@ -282,10 +235,9 @@ def _halt_shared_bus(arm, key: tuple[str, str], open_bus) -> None:
     confirms by reading the modules back."""
     import os
 
-    from seqrun.armcontrol import command_and_confirm
+    from seqrun.service.arm_access import broadcast_and_confirm
     from seqrun.cli.bus_owner import owner_text
     from seqrun.errors import Refused
-    from seqrun.powercube.protocol import CommandId
     from seqrun.service.bus_claim import claim_bus
     from seqrun.service.control_socket import ask_owner
 
@@ -314,7 +266,7 @@ def _halt_shared_bus(arm, key: tuple[str, str], open_bus) -> None:
         except Refused as exc:
             fail(f"Halt broadcast sent, but not confirmed: {exc}", EXIT_FAULT)
         with claim:
-            result = command_and_confirm(client, CommandId.HALT, [j.module for j in arm.joints])
+            result = broadcast_and_confirm(client, "halt", [j.module for j in arm.joints])
     except BusError as exc:
         fail(f"halt broadcast sent, not confirmed: {exc}", EXIT_FAULT)
     finally:

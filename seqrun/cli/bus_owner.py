@@ -49,7 +49,7 @@ class StatusSource:
         self.holder: dict | None = None
 
     def read(self, previous: dict | None = None, *, tolerate_loss: bool = False) -> dict:
-        """One reading (the shape of :func:`seqrun.cli.arm_commands.read_status`).
+        """One reading (the shape of :func:`seqrun.service.arm_access.read_status`).
 
         :raises ~seqrun.errors.BusError: a bus reading failed (without ``tolerate_loss``).
         :raises OwnerDidNotAnswer: the bus owner's socket gave no status.
@@ -71,7 +71,7 @@ class StatusSource:
         return self._read_bus(previous, tolerate_loss)
 
     def _read_bus(self, previous: dict | None, tolerate_loss: bool) -> dict:
-        from seqrun.cli.arm_commands import read_status
+        from seqrun.service.arm_access import read_status
 
         claim = None
         if self.key is not None:

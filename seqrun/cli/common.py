@@ -95,15 +95,8 @@ def connect(arm: ArmDescription, interface: Optional[str], channel: Optional[str
     """Open the bus and a PowerCubeClient on it: ``(connection, client)``. The bus is
     claimed for a moment (these commands are done in a second or two): a run's claim
     refuses them, naming it (exit 2)."""
-    from seqrun.connection import (open_connection, parse_bus_kwargs, parse_faults,
-                                   response_timeout_s)
-    from seqrun.powercube.client import PowerCubeClient
+    from seqrun.service.arm_access import open_arm
 
-    timeout = response_timeout_s(arm, response_timeout_ms)  # (checked before connecting)
-    connection = open_connection(interface=interface, channel=channel, bitrate=bitrate,
-                                 bus_kwargs=parse_bus_kwargs(bus_kwargs or []), force_sim=sim,
-                                 faults=parse_faults(faults or []),
-                                 default_bitrate=arm.can.bitrate, claim=claim,
-                                 transient=True)
-    client = PowerCubeClient(connection.bus, connection.clock, response_timeout=timeout)
-    return connection, client
+    return open_arm(arm, interface=interface, channel=channel, bitrate=bitrate,
+                    bus_kwargs=bus_kwargs or [], sim=sim, faults=faults or [],
+                    response_timeout_ms=response_timeout_ms, claim=claim)

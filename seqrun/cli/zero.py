@@ -86,32 +86,6 @@ def set_command(
     typer.echo(f"zero reference recorded: {record.describe(pose_title(name))} ({store.path})")
 
 
-def modules_homed(connection, arm) -> bool:
-    """True when every module reports HOME_OK (no power-on since the last start-up)."""
-    from seqrun.powercube.client import PowerCubeClient
-    from typing import cast
-
-    from seqrun.powercube.codec import GetParam, GetParamAck
-    from seqrun.powercube.protocol import ParamId, StateFlag
-
-    from seqrun.errors import ModuleTimeoutError
-
-    client = PowerCubeClient(connection.bus, connection.clock,
-                             response_timeout=arm.can.response_timeout_s)
-    try:
-        for attempt in range(3):  # a read is idempotent: a lost answer is asked again
-            try:
-                acks = client.transact([GetParam(m, ParamId.CUBE_STATE)
-                                        for m in arm.module_ids])
-                break
-            except ModuleTimeoutError:
-                if attempt == 2:
-                    raise
-    finally:
-        client.close()
-    return all(StateFlag(cast(GetParamAck, a).value) & StateFlag.HOME_OK for a in acks)
-
-
 def zero_at_run_start(connection, arm, project, ask: Callable[[str], bool],
                       show: Callable[[str], None]) -> ZeroInForce:
     """Decide the zero reference of a run, show it, and on real hardware after a power-on
@@ -120,6 +94,8 @@ def zero_at_run_start(connection, arm, project, ask: Callable[[str], bool],
     Raises :class:`UserInputError` (no record: nothing moves), :class:`BusError`, or
     ``typer.Exit(130)`` when the operator says the arm is not in that pose.
     """
+    from seqrun.service.arm_access import modules_homed
+
     store = ZeroStore.for_arm(arm.name, project)
     homed = False if connection.is_simulator else modules_homed(connection, arm)
     zero = zero_for_run(arm, store, homed=homed,
@@ -137,7 +113,7 @@ def zero_at_run_start(connection, arm, project, ask: Callable[[str], bool],
     return zero
 
 
-__all__ = ["zero_at_run_start", "modules_homed", "BusError", "UserInputError"]
+__all__ = ["zero_at_run_start", "BusError", "UserInputError"]
 
 
 def zero_for_reading(connection, arm, project=None):
@@ -146,6 +122,8 @@ def zero_for_reading(connection, arm, project=None):
     the text says the positions use the arm file's offsets."""
     store = ZeroStore.for_arm(arm.name, project)
     try:
+        from seqrun.service.arm_access import modules_homed
+
         homed = False if connection.is_simulator else modules_homed(connection, arm)
         zero = zero_for_run(arm, store, homed=homed,
                             simulator_pose=connection.power_on_pose if connection.is_simulator

@@ -1,0 +1,134 @@
+"""The layer order of docs/architecture.md holds for the code as built.
+
+The table there is the source: every module of seqrun/ is in exactly one layer, imports
+(at the top of a module or inside a function; not those only for type checking) go to the
+same layer or an earlier one, and the faces reach the arm only through the service layer.
+"""
+
+from __future__ import annotations
+
+import ast
+import fnmatch
+import re
+from pathlib import Path
+
+import pytest
+from projecttree import ROOT
+
+DOC = ROOT / "docs" / "architecture.md"
+PACKAGE = ROOT / "seqrun"
+#: What a face must not import: it goes through seqrun.service and seqrun.events.
+FORBIDDEN_FOR_FACES = ("executor", "drivers", "drivers.*", "setpoints", "halt", "armcontrol",
+                       "powercube", "powercube.*")
+FACES = ("cli", "cli.*", "console", "console.*")
+
+
+def documented_layers(text: str) -> list[tuple[str, list[str]]]:
+    """The (layer, module patterns) rows of the "Layers" table, in order."""
+    section = text.split("## Layers", 1)[1].split("\n## ", 1)[0]
+    rows = []
+    for line in section.splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) == 2 and cells[1].startswith("`"):
+            rows.append((cells[0], re.findall(r"`([^`]+)`", cells[1])))
+    return rows
+
+
+def module_name(path: Path) -> str:
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts = parts[:-1]
+    return ".".join(parts)
+
+
+def imported_modules(path: Path, name: str) -> set[str]:
+    """Every module ``path`` imports anywhere in its code, outside ``if TYPE_CHECKING``."""
+    is_package = path.name == "__init__.py"
+    found: set[str] = set()
+
+    class Imports(ast.NodeVisitor):
+        def visit_If(self, node: ast.If) -> None:
+            if "TYPE_CHECKING" in ast.unparse(node.test):
+                for child in node.orelse:
+                    self.visit(child)
+            else:
+                self.generic_visit(node)
+
+        def visit_Import(self, node: ast.Import) -> None:
+            found.update(alias.name for alias in node.names)
+
+        def visit_ImportFrom(self, node: ast.ImportFrom) -> None:
+            if node.level:
+                base = name.split(".") if is_package else name.split(".")[:-1]
+                base = base[:len(base) - (node.level - 1)]
+                module = ".".join(base + ([node.module] if node.module else []))
+            else:
+                module = node.module or ""
+            found.add(module)
+            found.update(f"{module}.{alias.name}" for alias in node.names)
+
+    Imports().visit(ast.parse(path.read_text(encoding="utf-8")))
+    return found
+
+
+def short(module: str) -> str:
+    return "seqrun" if module == "seqrun" else module.removeprefix("seqrun.")
+
+
+def matches(module: str, patterns) -> bool:
+    return any(fnmatch.fnmatchcase(short(module), p) for p in patterns)
+
+
+LAYERS = documented_layers(DOC.read_text(encoding="utf-8"))
+MODULES = {module_name(p): p for p in sorted(PACKAGE.rglob("*.py"))}
+
+
+def layer_of(module: str) -> list[int]:
+    return [i for i, (_, patterns) in enumerate(LAYERS) if matches(module, patterns)]
+
+
+def seqrun_imports(module: str) -> set[str]:
+    return {m for m in imported_modules(MODULES[module], module) if m in MODULES} - {module}
+
+
+def test_the_table_is_found_and_names_the_faces_last():
+    names = [name for name, _ in LAYERS]
+    assert len(names) >= 5 and names[-1] == "faces" and "service" in names
+
+
+@pytest.mark.parametrize("module", sorted(MODULES))
+def test_every_module_is_in_exactly_one_layer(module):
+    assert len(layer_of(module)) == 1, (
+        f"{module} is in {len(layer_of(module))} layers of docs/architecture.md's table")
+
+
+def test_imports_go_to_the_same_layer_or_an_earlier_one():
+    upward = []
+    for module in sorted(MODULES):
+        (own,) = layer_of(module) or (None,)
+        if own is None:
+            continue
+        for target in sorted(seqrun_imports(module)):
+            (theirs,) = layer_of(target) or (None,)
+            if theirs is not None and theirs > own:
+                upward.append(f"{short(module)} ({LAYERS[own][0]}) imports {short(target)} "
+                              f"({LAYERS[theirs][0]})")
+    assert upward == []
+
+
+def test_faces_reach_the_arm_only_through_the_service_layer():
+    reaching_in = sorted(f"{short(m)} imports {short(t)}" for m in MODULES if matches(m, FACES)
+                         for t in seqrun_imports(m) if matches(t, FORBIDDEN_FOR_FACES))
+    assert reaching_in == []
+
+
+def test_the_checker_sees_an_upward_import(tmp_path):
+    """The import reader finds imports inside functions and skips type-checking ones."""
+    source = tmp_path / "probe.py"
+    source.write_text("from typing import TYPE_CHECKING\n"
+                      "if TYPE_CHECKING:\n    from seqrun.executor import Executor\n"
+                      "def f():\n    from seqrun.powercube import codec\n"
+                      "    from . import sibling\n", encoding="utf-8")
+    found = imported_modules(source, "seqrun.cli.probe")
+    assert "seqrun.powercube.codec" in found and "seqrun.cli.sibling" in found
+    assert "seqrun.executor" not in found
