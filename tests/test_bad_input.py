@@ -209,7 +209,7 @@ def places(tmp_path):
 
 def make_sequences(root: Path) -> Path:
     """The sequences/ folder of a project tree at ``root``, for generated files."""
-    return make_project(root) / "sequences"
+    return make_project(root, campaign=False) / "sequences"
 
 
 # ----------------------------------------------------------------------------- controls
