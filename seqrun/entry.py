@@ -4,6 +4,10 @@ Importing the command line (typer, rich, numpy, python-can, ruckig) takes about 
 A Ctrl-C in that second used to print a KeyboardInterrupt traceback. Nothing can have been
 sent to any bus yet, so until the commands are loaded SIGINT ends the process at once with
 one line and the operator-abort exit code; after that each command handles it.
+
+numpy's BLAS (OpenBLAS) starts a thread pool per core at import unless told otherwise: about
+half of numpy's import time, for matrices (4x4, 6x7) far too small to gain from threads.
+The program asks for one thread unless the environment already says how many.
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ command_line: list[str] | None = None
 def main(argv: list[str] | None = None) -> None:
     global command_line
     command_line = list(argv if argv is not None else sys.argv[1:])
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     previous = signal.signal(signal.SIGINT, _interrupted_during_start_up)
     try:
         from seqrun.cli import main as cli_main

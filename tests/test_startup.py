@@ -149,3 +149,21 @@ def test_a_command_runs_with_only_its_own_module_loaded():
     loaded = set(ast.literal_eval(proc.stderr.strip().splitlines()[-1]))
     assert "seqrun.cli.pose" in loaded
     assert not loaded & {"seqrun.cli.run", "seqrun.cli.validate", "seqrun.cli.sim"}
+
+
+THREADS_AT_EXIT = """\
+import atexit, os
+atexit.register(lambda: print(len(os.listdir("/proc/self/task")), file=os.sys.stderr))
+from seqrun.entry import main
+main()
+"""
+
+
+def test_a_command_starts_no_blas_thread_pool():
+    """OpenBLAS starts one thread per core when numpy is imported (about half of numpy's
+    import time); seqrun's 4x4 and 6x7 matrices gain nothing from them."""
+    env = {k: v for k, v in ENV.items() if k != "OPENBLAS_NUM_THREADS"}
+    proc = subprocess.run([sys.executable, "-c", THREADS_AT_EXIT, "fk", "--pose", "totem"],
+                          cwd=ROOT, env=env, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0 and "position_mm" in proc.stdout
+    assert proc.stderr.strip().splitlines()[-1] == "1"  # the main thread only
