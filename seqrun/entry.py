@@ -8,6 +8,9 @@ one line and the operator-abort exit code; after that each command handles it.
 numpy's BLAS (OpenBLAS) starts a thread pool per core at import unless told otherwise: about
 half of numpy's import time, for matrices (4x4, 6x7) far too small to gain from threads.
 The program asks for one thread unless the environment already says how many.
+
+The source text that dataclasses and typing compile at every start is compiled once and
+kept like bytecode (:mod:`seqrun.source_cache`).
 """
 
 from __future__ import annotations
@@ -34,6 +37,9 @@ def main(argv: list[str] | None = None) -> None:
     global command_line
     command_line = list(argv if argv is not None else sys.argv[1:])
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    from seqrun import source_cache
+
+    source_cache.install()
     previous = signal.signal(signal.SIGINT, _interrupted_during_start_up)
     try:
         from seqrun.cli import main as cli_main

@@ -1,0 +1,121 @@
+"""Compiled code of the source text that dataclasses and typing generate, kept between runs.
+
+Every ``@dataclass`` writes its ``__init__``, ``__repr__``, ``__eq__`` (and, frozen,
+``__setattr__``, ``__delattr__``, ``__hash__``) as Python source and compiles it when the
+class is created; every string annotation that pydantic or typer resolves is compiled by
+``typing.ForwardRef``. A ``seqrun validate`` process creates ~160 dataclasses (seqrun's
+events and codec records, pydantic's, typer's) and ~1,000 forward references: compiling
+that text was ~10 % of the instructions of the whole command, the same work in every
+process, like compiling the modules themselves would be without ``__pycache__``.
+
+:func:`install` makes ``dataclasses`` and ``typing`` compile through a table of code
+objects loaded from ``seqrun/__pycache__`` (as ``.pyc`` files are), keyed by the exact
+source text; text not in the table is compiled as before and the table is written back
+at exit (not when bytecode writing is off: ``PYTHONDONTWRITEBYTECODE``). A code object
+depends only on its text, its file name (``<string>``) and the compiler flags (none:
+neither module uses ``__future__`` imports), so the functions and classes made are the
+same as without the table. Nothing else is kept: no results, no validated data.
+"""
+
+from __future__ import annotations
+
+import builtins
+import marshal
+import os
+import sys
+from pathlib import Path
+
+#: Table file format; a different Python (bytecode magic) makes the table start empty.
+_FORMAT = 1
+#: Most entries kept: beyond, the table is rewritten with what the last process used.
+MAX_ENTRIES = 20_000
+
+_codes: dict[tuple[str, str], object] = {}
+_used: set[tuple[str, str]] = set()
+_compiled = 0
+_installed = False
+
+
+def _magic() -> bytes:
+    from importlib.util import MAGIC_NUMBER
+
+    return MAGIC_NUMBER
+
+
+def table_path() -> Path:
+    return (Path(__file__).parent / "__pycache__"
+            / f"generated-code.{sys.implementation.cache_tag}.marshal")
+
+
+def _code(source: str, mode: str):
+    key = (mode, source)
+    code = _codes.get(key)
+    if code is None:
+        global _compiled
+        code = _codes[key] = builtins.compile(source, "<string>", mode, dont_inherit=True)
+        _compiled += 1
+    _used.add(key)
+    return code
+
+
+def _exec(source, globals=None, locals=None, /):  # noqa: A002 (exec's own parameters)
+    """``exec`` for the dataclasses module: its source text compiled through the table."""
+    if type(source) is str:
+        source = _code(source, "exec")
+    return builtins.exec(source, globals, locals)
+
+
+def _compile(source, filename, mode, flags=0, dont_inherit=False, optimize=-1, **kwargs):
+    """``compile`` for the typing module (``ForwardRef``): through the table."""
+    if (type(source) is str and filename == "<string>" and mode == "eval" and not flags
+            and optimize == -1 and not kwargs):
+        return _code(source, mode)
+    return builtins.compile(source, filename, mode, flags, dont_inherit, optimize, **kwargs)
+
+
+def _load(path: Path) -> None:
+    try:
+        data = path.read_bytes()
+    except OSError:
+        return
+    try:
+        header, table = marshal.loads(data)
+        if header != (_FORMAT, _magic()) or type(table) is not dict:
+            return
+    except (EOFError, ValueError, TypeError):
+        return  # damaged or from another Python: start empty
+    _codes.update(table)
+
+
+def save() -> None:
+    """Write the table back if this process compiled text it did not have."""
+    if not _compiled or sys.dont_write_bytecode:
+        return
+    table = _codes if len(_codes) <= MAX_ENTRIES else {k: _codes[k] for k in _used}
+    path = table_path()
+    temporary = path.with_name(f"{path.name}.{os.getpid()}.tmp")
+    try:
+        path.parent.mkdir(exist_ok=True)
+        temporary.write_bytes(marshal.dumps(((_FORMAT, _magic()), table)))
+        os.replace(temporary, path)  # readers see the old table or the new one, whole
+    except OSError:  # a read-only installation: compile every time, as before
+        try:
+            temporary.unlink()
+        except OSError:
+            pass
+
+
+def install() -> None:
+    """Route dataclasses' and typing's compiling through the table (once per process)."""
+    global _installed
+    if _installed:
+        return
+    _installed = True
+    import atexit
+    import dataclasses
+    import typing
+
+    _load(table_path())
+    dataclasses.exec = _exec  # type: ignore[attr-defined]  # its module global, not builtins
+    typing.compile = _compile  # type: ignore[attr-defined]
+    atexit.register(save)

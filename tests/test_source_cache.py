@@ -1,0 +1,97 @@
+"""seqrun.source_cache: the text dataclasses and typing compile, compiled once and kept.
+
+Each case runs in its own interpreter (install() changes dataclasses and typing for the
+whole process) with the table in a temporary folder.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+from projecttree import ROOT
+
+SCRIPT = """\
+import json, sys
+from pathlib import Path
+from seqrun import source_cache
+table = Path(sys.argv[1])
+if sys.argv[2] == "install":
+    source_cache.table_path = lambda: table
+    source_cache.install()
+import dataclasses, typing
+import seqrun.events as events
+from seqrun.powercube.codec import SetMotion
+from seqrun.powercube.protocol import MotionMode
+step = events.StepStarted(t=1.5, step=2, label="Up", kind="move", location="a.yaml:3:5")
+motion = SetMotion(3, MotionMode.FRAMP_ACK, 0.25, None)
+try:
+    step.t = 2.0
+    frozen = False
+except dataclasses.FrozenInstanceError:
+    frozen = True
+init = events.StepStarted.__init__.__code__
+hints = typing.get_type_hints(events.StepStarted)
+source_cache.save()
+print(json.dumps({
+    "compiled": source_cache._compiled,
+    "repr": repr(step) + repr(motion),
+    "eq": step == events.StepStarted(t=1.5, step=2, label="Up", kind="move", location="a.yaml:3:5"),
+    "hash": hash(motion) == hash(SetMotion(3, MotionMode.FRAMP_ACK, 0.25, None)),
+    "frozen": frozen,
+    "init": [init.co_code.hex(), repr(init.co_consts), init.co_names, init.co_varnames],
+    "hints": {k: repr(v) for k, v in hints.items()},
+}))
+"""
+
+
+def run(table: Path, mode: str, *, write: bool = True) -> dict:
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    if not write:
+        env["PYTHONDONTWRITEBYTECODE"] = "1"
+    env["PYTHONPATH"] = str(ROOT)
+    proc = subprocess.run([sys.executable, "-c", SCRIPT, str(table), mode], cwd=ROOT,
+                          env=env, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return json.loads(proc.stdout)
+
+
+def test_a_second_process_compiles_nothing_and_makes_the_same_classes(tmp_path):
+    table = tmp_path / "generated-code.marshal"
+    plain = run(table, "plain")
+    first = run(table, "install")
+    assert first["compiled"] > 100 and table.is_file()  # events' methods, forward refs
+    second = run(table, "install")
+    assert second["compiled"] == 0
+    for result in (first, second):
+        assert {k: v for k, v in result.items() if k != "compiled"} == \
+               {k: v for k, v in plain.items() if k != "compiled"}
+    assert plain["frozen"] and plain["eq"] and plain["hash"]
+
+
+def test_no_table_is_written_when_bytecode_writing_is_off(tmp_path):
+    table = tmp_path / "generated-code.marshal"
+    assert run(table, "install", write=False)["compiled"] > 100
+    assert not table.exists()
+
+
+def test_a_damaged_table_is_ignored_and_replaced(tmp_path):
+    table = tmp_path / "generated-code.marshal"
+    table.write_bytes(b"\x00not a table")
+    assert run(table, "install")["compiled"] > 100
+    assert run(table, "install")["compiled"] == 0
+
+
+def test_the_seqrun_program_installs_it():
+    code = ("import atexit, sys, dataclasses, typing\n"
+            "atexit.register(lambda: print(dataclasses.exec.__module__, "
+            "typing.compile.__module__, file=sys.stderr))\n"
+            "from seqrun.entry import main\nmain()\n")
+    proc = subprocess.run([sys.executable, "-c", code, "pose", "list"], cwd=ROOT,
+                          env={**os.environ, "PYTHONPATH": str(ROOT)}, capture_output=True,
+                          text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stderr.split()[-2:] == ["seqrun.source_cache", "seqrun.source_cache"]
