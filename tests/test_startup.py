@@ -167,3 +167,15 @@ def test_a_command_starts_no_blas_thread_pool():
                           cwd=ROOT, env=env, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0 and "position_mm" in proc.stdout
     assert proc.stderr.strip().splitlines()[-1] == "1"  # the main thread only
+
+
+def test_a_dry_run_does_not_load_the_arm_session():
+    """seqrun.runner needs seqrun.service.run_control; the package used to import the whole
+    arm session (seqrun.service.session) with it."""
+    proc = subprocess.run([sys.executable, "-c", MODULES_AT_EXIT, "validate",
+                           "sequences/opsafe.yaml"],
+                          cwd=ROOT, env=ENV, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0 and "dry run from park" in proc.stdout
+    loaded = set(ast.literal_eval(proc.stderr.strip().splitlines()[-1]))
+    assert "seqrun.service.run_control" in loaded
+    assert "seqrun.service.session" not in loaded

@@ -5,8 +5,23 @@ A face imports :mod:`seqrun.service` and :mod:`seqrun.events`, never the executo
 the PowerCube client. See :class:`seqrun.service.session.ArmSession`.
 """
 
-from seqrun.service.session import (API_VERSION, Activity, ActivityResult, ArmSession,
-                                    ArmStatus, JointStatus, RunInfo)
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from seqrun.service.session import (API_VERSION, Activity, ActivityResult, ArmSession,
+                                        ArmStatus, JointStatus, RunInfo)
 
 __all__ = ["API_VERSION", "Activity", "ActivityResult", "ArmSession", "ArmStatus",
            "JointStatus", "RunInfo"]
+
+
+def __getattr__(name: str) -> Any:
+    # Loaded on first use: a run (seqrun.runner) imports seqrun.service.run_control, and
+    # with it this package, without needing the session.
+    if name in __all__:
+        from seqrun.service import session
+
+        return getattr(session, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
