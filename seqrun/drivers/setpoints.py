@@ -98,10 +98,14 @@ class RampSetpoints(_Law):
         gain = min(self.CATCH_UP_GAIN, 0.5 / self.cycle_s)
         quantum = self.TARGET_VEL_QUANTUM_DEG_S
         requests: list[Request] = []
+        # Joints with the same limits look equally far ahead: one plan sample serves them.
+        aheads: dict[float, np.ndarray] = {}
         for i in moving:
             lead = (self.run_limits.velocity[i] / (2 * self.run_limits.acceleration[i])
                     + 2 * self.cycle_s)
-            ahead = self.module_rad(plan.at(t + lead)[0])
+            ahead = aheads.get(lead)
+            if ahead is None:
+                ahead = aheads[lead] = self.module_rad(plan.at(t + lead)[0])
             direction = math.copysign(1.0, plan.target[i] - plan.start[i])
             lag = (math.degrees(pos_now[i]) - measured_deg[i]) * direction
             cap = abs(math.degrees(vel_next[i])) + gain * lag
