@@ -103,7 +103,19 @@ class MovePlan:
 
     def sample(self, times: Sequence[float]) -> np.ndarray:
         """Positions at many times: shape (len(times), dof)."""
-        return np.array([self.at(t)[0] for t in times])
+        # The positions of at(t), without its velocity and acceleration arrays.
+        if not len(times):
+            return np.array([])
+        out = np.empty((len(times), self.start.shape[0]), self.start.dtype)
+        out[:] = self.start
+        active, trajectory, duration = self.active, self._trajectory, self.duration
+        idx = self._index() if active else None
+        for row, t in zip(out, times):
+            if t >= duration:
+                row[:] = self.target
+            elif active:
+                row[idx] = trajectory.at_time(max(t, 0.0))[0]
+        return out
 
     def peak_velocity(self, samples: int = 200) -> np.ndarray:
         """Largest |velocity| of each joint over the plan (sampled)."""

@@ -95,3 +95,18 @@ def test_plans_respect_limits_and_reach_the_target(start, target):
     assert np.all(np.abs(velocities) <= LIMITS.velocity * 1.001 + 1e-9)
     np.testing.assert_allclose(plan.at(plan.duration)[0][ACTIVE], np.asarray(target)[ACTIVE], atol=1e-7)
     assert np.all(positions[:, 2] == start[2])
+
+
+@settings(max_examples=60, deadline=None)
+@given(start=st.lists(st.floats(-2.5, 2.5), min_size=7, max_size=7),
+       target=st.lists(st.floats(-2.5, 2.5), min_size=7, max_size=7),
+       active=st.sets(st.integers(0, 6)))
+def test_sample_gives_the_positions_of_at(start, target, active):
+    """sample() skips at()'s velocity and acceleration arrays; its positions are at()'s,
+    bit for bit, before the start, past the end and for a plan that moves no joint."""
+    plan = plan_move(start, target, Limits.from_arm(ARM), sorted(active))
+    times = [-0.5, 0.0, *np.linspace(0, plan.duration, 23), plan.duration, plan.duration + 1]
+    expected = np.array([plan.at(t)[0] for t in times])
+    sampled = plan.sample(times)
+    assert sampled.dtype == expected.dtype and np.array_equal(sampled, expected)
+    assert plan.sample([]).shape == np.array([]).shape
