@@ -210,10 +210,10 @@ USE_LIBYAML = _CParser is not None
 #: '?' inside [ ] and { }, libyaml does not), and tags (they scan tag handles apart; seqrun
 #: refuses all but the core ones anyway).
 #: Such files are read by the Python parser only, which names the problem as before.
-_PYTHON_ONLY = re.compile("[^\x09\x0A\x0D\x20-\x7E\x85\xA0-\uD7FF\uE000-\uFFFD"
-                          "\U00010000-\U0010ffff]|[\t\ufeff]|[|>][-+0-9]*#|^%"
-                          "|(?:^|[\\s\\[{,:])![^\\s]",
-                          re.MULTILINE)
+#: (The pattern of all of them; :func:`_python_only` searches its parts one by one.)
+_PYTHON_ONLY = ("[^\x09\x0A\x0D\x20-\x7E\x85\xA0-\uD7FF\uE000-\uFFFD"
+                "\U00010000-\U0010ffff]|[\t\ufeff]|[|>][-+0-9]*#|^%"
+                "|(?:^|[\\s\\[{,:])![^\\s]")
 
 if _CParser is not None:
     class _CLoader(_Limits, yaml.composer.Composer, _CParser, yaml.resolver.BaseResolver):
@@ -238,12 +238,11 @@ if _CParser is not None:
             return node
 
 
-#: :data:`_PYTHON_ONLY` in parts the regular-expression engine searches fast (a character
-#: set it scans for, or after the check that the one character each needs is there): the
-#: alternation as one pattern tries every branch at every character, ~5x slower on the
-#: files every command reads. Same answer (tests/test_yamlsource.py compares them).
-_NOT_FOR_LIBYAML = re.compile("[^\x0A\x0D\x20-\x7E\x85\xA0-\uD7FF\uE000-\uFEFE"
-                              "\uFF00-\uFFFD\U00010000-\U0010ffff]")
+#: :data:`_PYTHON_ONLY` in parts, each searched fast: PyYAML's own pattern of the characters
+#: its reader refuses (compiled once already: a set of ranges up to U+10FFFF costs ~50 M
+#: instructions to compile), the other parts after the check that the character each
+#: needs is there. As one alternation the engine tried every branch at every character of
+#: every file read. Same answer (tests/test_yamlsource.py compares them).
 _BLOCK_HEADER_COMMENT = re.compile("[|>][-+0-9]*#")
 _DIRECTIVE = re.compile("^%", re.MULTILINE)
 _TAG = re.compile("(?:^|[\\s\\[{,:])![^\\s]", re.MULTILINE)
@@ -251,7 +250,8 @@ _TAG = re.compile("(?:^|[\\s\\[{,:])![^\\s]", re.MULTILINE)
 
 def _python_only(text: str) -> bool:
     """Whether ``text`` has one of the constructs of :data:`_PYTHON_ONLY` (linear time)."""
-    if (_NOT_FOR_LIBYAML.search(text) or ("#" in text and _BLOCK_HEADER_COMMENT.search(text))
+    if ("\t" in text or "\ufeff" in text or yaml.reader.Reader.NON_PRINTABLE.search(text)
+            or ("#" in text and _BLOCK_HEADER_COMMENT.search(text))
             or ("%" in text and _DIRECTIVE.search(text))
             or ("!" in text and _TAG.search(text))):
         return True

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 from typing import Annotated
 
 import pytest
@@ -306,6 +307,6 @@ def test_python_only_check_is_the_one_pattern(text):
     """_python_only searches the parts of _PYTHON_ONLY one by one (faster); same answer."""
     question = text.rfind("?")
     brackets = [i for i in (text.find("["), text.find("{")) if i >= 0]
-    expected = bool(yamlsource._PYTHON_ONLY.search(text)) or (
+    expected = bool(re.search(yamlsource._PYTHON_ONLY, text, re.MULTILINE)) or (
         question >= 0 and bool(brackets) and min(brackets) < question)
     assert yamlsource._python_only(text) == expected
