@@ -25,6 +25,12 @@ class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 
+def _no_items() -> list:
+    """An empty list, as ``default_factory``: pydantic reads a factory's signature, and the
+    builtin ``list``'s costs a tokenizer and a parse of its text signature, per field."""
+    return []
+
+
 class Joint(_Strict):
     name: str = Field(description="Joint name used in sequences, e.g. j1.")
     module: int = Field(ge=1, le=31, description="PowerCube module id on the CAN bus.")
@@ -162,7 +168,7 @@ class Obstacle(_Strict):
     box: Box | None = None
     cylinder: Cylinder | None = None
     ignore_links: list[str] = Field(
-        default_factory=list, description="Capsules that touch it by design (the column "
+        default_factory=_no_items, description="Capsules that touch it by design (the column "
                                           "standing on the desk).")
 
     @model_validator(mode="after")
@@ -192,12 +198,12 @@ class GeometrySpec(_Strict):
     margin_mm: Annotated[float, Field(ge=0, allow_inf_nan=False)] = Field(
         10.0, description="Smallest clearance allowed between any two checked surfaces, mm.")
     capsules: list[Capsule] = Field(
-        default_factory=list, description="Link volumes in chain order; links that are not "
+        default_factory=_no_items, description="Link volumes in chain order; links that are not "
                                           "neighbours in this list are checked against each "
                                           "other (self-collision).")
-    obstacles: list[Obstacle] = Field(default_factory=list)
+    obstacles: list[Obstacle] = Field(default_factory=_no_items)
     allowed_pairs: list[tuple[str, str]] = Field(
-        default_factory=list, description="Capsule pairs never checked against each other.")
+        default_factory=_no_items, description="Capsule pairs never checked against each other.")
 
 
 class Cartesian(_Strict):
@@ -238,7 +244,7 @@ class ArmDescription(_Strict):
     kinematics: Kinematics
     workspace: Workspace = Workspace()
     tools: list[Tool] = Field(
-        default_factory=list,
+        default_factory=_no_items,
         description="Named tool centre points. Cartesian targets (seqrun ik, move to a pose in "
                     "mm) mean the tool; without a tool they mean the end-effector frame.")
     cartesian: Cartesian = Cartesian()
