@@ -208,3 +208,55 @@ def test_closing_the_tab_mid_move_is_a_controlled_stop(page, live):
     wait_for(lambda: setup.session.status().activity == "idle", timeout=10)
     assert 2 < setup.session.status().joints[0].position_deg < 50
     assert not setup.wire.halts()  # a controlled stop, not a Halt
+
+
+# Frames the 3D view draws (three.js clears once per frame) and redraws of the telemetry
+# table (one mutation batch per redraw), counted in the browser without the page's help.
+COUNT_DRAWING = """
+window.__frames = 0;
+for (const C of [WebGLRenderingContext, WebGL2RenderingContext]) {
+  const clear = C.prototype.clear;
+  C.prototype.clear = function (...args) { window.__frames += 1; return clear.apply(this, args); };
+}
+window.__redraws = 0;
+document.addEventListener("DOMContentLoaded", () => {
+  new MutationObserver(() => { window.__redraws += 1; }).observe(
+    document.querySelector("#telemetry tbody"), { subtree: true, childList: true, characterData: true });
+});
+"""
+
+
+def drawing(page) -> tuple[int, int, int]:
+    return page.evaluate("[window.seqrunConsole.statusCount, window.__frames, window.__redraws]")
+
+
+def test_the_page_receives_every_status_but_draws_only_changes_at_a_human_rate(page, live):
+    # The page shares the PC (and maybe software WebGL) with the 100 Hz loop: it counts
+    # every status, draws the 3D view only when the arm moved (at most 30 frames a second)
+    # and the numbers at most 10 times a second.
+    setup, _ = live
+    page.add_init_script(COUNT_DRAWING)
+    page.reload()
+    page.wait_for_function("window.seqrunConsole && window.seqrunConsole.ready "
+                           "&& window.seqrunConsole.statusCount > 1 && window.__frames > 0",
+                           timeout=20000)
+    page.wait_for_timeout(1000)
+    still = drawing(page)
+    page.wait_for_timeout(2000)
+    after = drawing(page)
+    assert after[0] > still[0]  # statuses (the idle poll, heartbeats) keep arriving ...
+    assert after[1] == still[1]  # ... the arm did not move: not one frame drawn
+    arm_up(page)
+    page.click("[data-pose=totem]")  # from Park: ~8 s of motion
+    page.wait_for_function("window.seqrunConsole.status.activity === 'moving'", timeout=10000)
+    page.wait_for_timeout(500)
+    t0, before = time.monotonic(), drawing(page)
+    page.wait_for_timeout(3000)
+    t1, moving = time.monotonic(), drawing(page)
+    assert setup.session.status().activity == "moving"  # still under way: a fair window
+    seconds = t1 - t0
+    statuses, frames, redraws = (b - a for a, b in zip(before, moving))
+    assert frames > 0 and redraws > 0  # the moving arm is drawn ...
+    assert frames <= 31 * seconds + 1, (frames, seconds)  # ... at most 30 frames a second
+    assert redraws <= 10 * seconds + 2, (redraws, seconds)  # ... numbers at most 10 a second
+    assert statuses > redraws  # every status received, far fewer drawn
