@@ -165,24 +165,35 @@ def test_one_snapshot_encoded_once_for_all_pages_and_none_without_pages():
                                           {"joints_deg": [0.0] * 7, "state": [0] * 7}))
             time.sleep(0.01)
 
+    def scenario() -> tuple[list, int]:
+        loop = _CountingLoop()
+        try:
+            measure(20)  # no page open: nothing to build
+            time.sleep(0.1)
+            assert built == [] and telemetry.snapshots == 0
+            feeds = [PageFeed(loop) for _ in range(3)]
+            for feed in feeds:
+                telemetry.attach(feed)
+            measure(20)
+            time.sleep(0.2)
+            loop.run_until_complete(asyncio.sleep(0))  # deliver what the reader handed over
+            batches = [loop.run_until_complete(feed.next_batch()) for feed in feeds]
+            telemetry.stop()  # (its reader thread ends: the counts stand still)
+            return batches, loop.wakes
+        finally:
+            loop.close()
+
     telemetry.start()
-    loop = _CountingLoop()
+    out: list = []  # its own thread: Playwright's sync API may own this thread's loop
     try:
-        measure(20)  # no page open: nothing to build
-        time.sleep(0.1)
-        assert built == [] and telemetry.snapshots == 0
-        feeds = [PageFeed(loop) for _ in range(3)]
-        for feed in feeds:
-            telemetry.attach(feed)
-        measure(20)
-        time.sleep(0.2)
-        loop.run_until_complete(asyncio.sleep(0))  # deliver what the reader handed over
-        batches = [loop.run_until_complete(feed.next_batch()) for feed in feeds]
+        worker = threading.Thread(target=lambda: out.append(scenario()))
+        worker.start()
+        worker.join(30)
     finally:
         telemetry.stop()
-        loop.close()
+    batches, wakes = out[0]
     assert telemetry.snapshots > 0 and len(built) == telemetry.snapshots
     # every page gets the same encoded text, and the loop is woken once per snapshot,
     # not once per page
     assert batches[0][-1] is batches[1][-1] is batches[2][-1]
-    assert loop.wakes == telemetry.snapshots
+    assert wakes == telemetry.snapshots

@@ -131,34 +131,52 @@ function onReply(reply) {
 
 // ---------------------------------------------------------------- telemetry
 // Every status is received, counted and kept as it arrives (up to 100 a second during a
-// move); faults are latched from every one. The 3D view takes each measurement and draws at
-// its own capped rate (view3d.js); the numbers and badges are redrawn at a human rate
-// (DRAW_HZ), on an animation frame, only while the page is shown. The page must not take
-// the CPU from the control loop on the same PC.
-const DRAW_HZ = 10;
-state.drawCount = 0;  // DOM redraws (tests, bench)
+// move); faults are latched from every one. Painting is what costs: every frame the browser
+// paints (new numbers or a new 3D picture) is rasterised and composited, in software on a PC
+// without a GPU, on the cores the 100 Hz control loop needs. So the page paints in frames of
+// its own, only when something changed, numbers and 3D view in the same frame, at most
+// frameHz() frames a second (the numbers at most NUMBERS_HZ): none while hidden.
+const NUMBERS_HZ = 10;
+const FRAME_HZ = 20;         // the focused page on a GPU
+const FRAME_HZ_SLOW = 4;     // without the focus, or with software-rendered WebGL
+state.drawCount = 0;  // redraws of the numbers (tests, bench)
+
+function frameHz() {
+  if (document.hidden) return 0;
+  if (!document.hasFocus() || (state.view && state.view.software)) return FRAME_HZ_SLOW;
+  return FRAME_HZ;
+}
 
 function showStatus(s) {
   state.status = s;
   state.statusCount += 1;
   if (!DRAW) return;
   for (const j of s.joints) if (j.fault) state.latched[j.name] = j.flags.join("|");
+  state.statusDirty = true;
   if (state.view) state.view.setMeasured(s.joints.map((j) => j.position_deg));
-  scheduleDraw();
+  scheduleFrame();
 }
 
-function scheduleDraw() {
-  if (state.drawPending || document.hidden) return;
-  state.drawPending = true;
-  const wait = Math.max(0, (state.drawnAt || -Infinity) + 1000 / DRAW_HZ - performance.now());
+function scheduleFrame() {
+  const hz = frameHz();
+  if (state.framePending || hz === 0 || !state.status) return;
+  state.framePending = true;
+  const wait = Math.max(0, (state.frameAt ?? -Infinity) + 1000 / hz - performance.now());
   setTimeout(() => requestAnimationFrame((now) => {
-    state.drawPending = false;
-    if (document.hidden) return;
-    state.drawnAt = now;
-    drawStatus(state.status);
+    state.framePending = false;
+    if (document.hidden) return;  // painted when shown again (visibilitychange)
+    state.frameAt = now;
+    if (state.statusDirty && now - (state.drawnAt ?? -Infinity) >= 1000 / NUMBERS_HZ - 2) {
+      state.statusDirty = false;
+      state.drawnAt = now;
+      drawStatus(state.status);
+    }
+    if (state.view) state.view.renderIfDirty();
+    if (state.statusDirty || (state.view && state.view.dirty)) scheduleFrame();
   }), wait);
 }
-document.addEventListener("visibilitychange", () => { if (state.status) scheduleDraw(); });
+document.addEventListener("visibilitychange", scheduleFrame);
+window.addEventListener("focus", scheduleFrame);
 
 // textContent only when it changed: an unchanged field costs no layout.
 function setText(node, text) {

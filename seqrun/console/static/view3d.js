@@ -47,6 +47,18 @@ function segmentsOf(arm) {
   return names.slice(1).map((n, i) => ({ start: names[i], end: n, r: 30 }));
 }
 
+// WebGL drawn by the CPU (no GPU, or none the browser may use): every frame then costs
+// the CPU the control loop needs.
+function softwareRendered(gl) {
+  try {
+    const info = gl.getExtension("WEBGL_debug_renderer_info");
+    const name = String(gl.getParameter(info ? info.UNMASKED_RENDERER_WEBGL : gl.RENDERER));
+    return /swiftshader|llvmpipe|softpipe|software/i.test(name);
+  } catch (err) {
+    return false;
+  }
+}
+
 class ArmFigure {
   constructor(scene, arm, material, jointMaterial) {
     this.arm = arm;
@@ -100,7 +112,9 @@ export class ArmView {
   constructor(container, arm) {
     this.arm = arm;
     this.container = container;
-    this.renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
+    // Software WebGL: no multisampling, plain shading (each costs the CPU on every frame).
+    this.software = softwareRendered(document.createElement("canvas").getContext("webgl2"));
+    this.renderer = new THREE.WebGLRenderer({ antialias: !this.software, preserveDrawingBuffer: true });
     this.renderer.setPixelRatio(window.devicePixelRatio || 1);
     container.appendChild(this.renderer.domElement);
     this.scene = new THREE.Scene();
@@ -120,9 +134,9 @@ export class ArmView {
     this.scene.add(new THREE.AxesHelper(200));
     for (const g of arm.guards || []) this.addGuard(g);
     this.solid = new ArmFigure(this.scene, arm,
-      new THREE.MeshStandardMaterial({ color: 0x9aa7b4, metalness: 0.3, roughness: 0.5 }),
-      new THREE.MeshStandardMaterial({ color: 0x2f6fd6, metalness: 0.3, roughness: 0.4 }));
-    const ghostMaterial = new THREE.MeshStandardMaterial({ color: 0x5eead4, transparent: true, opacity: 0.28, depthWrite: false });
+      this.material({ color: 0x9aa7b4, metalness: 0.3, roughness: 0.5 }),
+      this.material({ color: 0x2f6fd6, metalness: 0.3, roughness: 0.4 }));
+    const ghostMaterial = this.material({ color: 0x5eead4, transparent: true, opacity: 0.28, depthWrite: false });
     this.ghost = new ArmFigure(this.scene, arm, ghostMaterial, ghostMaterial);
     this.ghost.visible = false;
     this.measured = null;  // the newest measured joints (degrees), drawn at the next frame
@@ -135,16 +149,22 @@ export class ArmView {
     this.attachControls();
     new ResizeObserver(() => this.resize()).observe(container);
     document.addEventListener("visibilitychange", () => this.requestRender());
-    window.addEventListener("focus", () => this.requestRender());
     this.resize();
   }
 
-  // Frames a second the view may draw. WebGL may be software-rendered on the same PC as the
-  // control loop: nothing is drawn while the page is hidden or nothing changed, at most
-  // MAX_FPS while the page has the focus, BACKGROUND_FPS while it is only visible.
+  // The page paints the measured arm in its own frames (renderIfDirty); an operator's
+  // orbit, zoom or ghost is drawn at once, at most MAX_FPS, never while the page is hidden.
   fps() {
-    if (document.hidden) return 0;
-    return document.hasFocus() ? ArmView.MAX_FPS : ArmView.BACKGROUND_FPS;
+    return document.hidden ? 0 : ArmView.MAX_FPS;
+  }
+
+  material({ metalness, roughness, ...common }) {
+    return this.software ? new THREE.MeshLambertMaterial(common)
+      : new THREE.MeshStandardMaterial({ metalness, roughness, ...common });
+  }
+
+  renderIfDirty() {
+    if (this.dirty) this.render();
   }
 
   // A frame is drawn on the next animation frame once the cap allows, with what is newest
@@ -220,14 +240,13 @@ export class ArmView {
     this.dirty = false;
   }
 
-  // The measured arm (degrees): drawn at the next frame if it moved visibly since the last.
+  // The measured arm (degrees): drawn at the page's next frame if it moved visibly.
   setMeasured(qDeg) {
     if (qDeg.some((v) => v === null || v === undefined)) return;
     const base = this.drawn;
     if (base && qDeg.every((v, i) => Math.abs(v - base[i]) < ArmView.STILL_DEG)) return;
     this.measured = qDeg;
     this.dirty = true;
-    this.requestRender();
   }
 
   // A target to show before it is sent (null hides the ghost); redrawn only if it changed.
@@ -248,6 +267,5 @@ export class ArmView {
 }
 
 ArmView.MAX_FPS = 30;
-ArmView.BACKGROUND_FPS = 10;
 // Joint motion (degrees) below which the drawn arm would not visibly change.
 ArmView.STILL_DEG = 0.01;
