@@ -102,3 +102,39 @@ def test_sigterm_during_a_move_halts_the_arm(tmp_path):
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+
+
+@pytest.mark.slow
+def test_rt_priority_puts_only_the_loop_thread_at_sched_fifo(tmp_path):
+    proc = subprocess.Popen([sys.executable, "-m", "seqrun", "console", "--sim", "--port", "0",
+                             "--rt-priority", "5", "--log-dir", str(tmp_path)], cwd=ROOT,
+                            env=ENV, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        lines, url = [], None
+        while url is None:
+            line = proc.stdout.readline()
+            assert line, "".join(lines)
+            lines.append(line)
+            found = re.search(r"(http://127\.0\.0\.1:\d+/)", line)
+            url = found.group(1) if found else None
+        assert "the control loop at SCHED_FIFO priority 5" in "".join(lines)
+        _post(url, "arm-up")
+        _post(url, "home")
+        assert _post(url, "move/joints", {"joints": {"j1": 60}})["accepted"]
+        policies = {}
+        for task in Path(f"/proc/{proc.pid}/task").iterdir():
+            try:
+                policies[int(task.name)] = os.sched_getscheduler(int(task.name)) & 0xFF
+            except ProcessLookupError:  # a thread that ended meanwhile
+                pass
+        fifo = [tid for tid, policy in policies.items() if policy == os.SCHED_FIFO]
+        assert len(fifo) == 1 and len(policies) > 3, policies  # the move's thread, only
+        assert os.sched_getparam(fifo[0]).sched_priority == 5
+        _post(url, "halt")
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
