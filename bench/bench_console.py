@@ -120,7 +120,8 @@ class ConsoleProcess:
     browsers and this script's Playwright client share nothing with its interpreter)."""
 
     def __init__(self, log_dir: Path, *, rt_priority: int | None = None,
-                 switch_interval: float | None = None, nice: int | None = None) -> None:
+                 switch_interval: float | None = None, nice: int | None = None,
+                 prefix: str | None = None) -> None:
         env = {**os.environ, "PYTHONPATH": str(ROOT)}
         args = ["console", "--sim", "--port", "0", "--yes", "--log-dir", str(log_dir)]
         if rt_priority is not None:
@@ -134,6 +135,8 @@ class ConsoleProcess:
                        "from seqrun.entry import main; main()"]
         if nice is not None:  # an experiment: the whole process (every thread) at nice N
             command = ["nice", "-n", str(nice), *command]
+        if prefix:  # an experiment: e.g. "chrt -r 1" (every thread of the process)
+            command = [*prefix.split(), *command]
         self.log_dir = log_dir
         self.proc = subprocess.Popen(command, cwd=ROOT, env=env, stdout=subprocess.PIPE,
                                      stderr=subprocess.STDOUT, text=True)
@@ -267,7 +270,8 @@ def one_run(console: ConsoleProcess, browser, tabs: int, page_url: str) -> dict:
 
 
 def loop_ab(browser, repeats: int, modes: list[str], *, rt_priority: int | None = None,
-            switch_interval: float | None = None, nice: int | None = None) -> dict:
+            switch_interval: float | None = None, nice: int | None = None,
+            prefix: str | None = None) -> dict:
     """The loop's period during opsafe, the modes alternating run by run (the order turns
     round every repetition): ``none`` no page, ``tabs`` three tabs of the page,
     ``tabs-nodraw`` three tabs of the page with ``?draw=0`` (messages counted, nothing
@@ -275,7 +279,7 @@ def loop_ab(browser, repeats: int, modes: list[str], *, rt_priority: int | None 
     runs: dict[str, list[dict]] = {m: [] for m in modes}
     with tempfile.TemporaryDirectory() as tmp:
         console = ConsoleProcess(Path(tmp), rt_priority=rt_priority,
-                                 switch_interval=switch_interval, nice=nice)
+                                 switch_interval=switch_interval, nice=nice, prefix=prefix)
         try:
             for rep in range(repeats):
                 for mode in (modes if rep % 2 == 0 else modes[::-1]):
@@ -367,6 +371,8 @@ def main() -> None:
                         help="experiment: the console interpreter's sys.setswitchinterval")
     parser.add_argument("--console-nice", type=int, metavar="N",
                         help="experiment: run the console process under nice -n N")
+    parser.add_argument("--console-prefix", metavar="COMMAND",
+                        help='experiment: run the console under COMMAND, e.g. "chrt -r 1"')
     parser.add_argument("--browser-cpus", metavar="LIST",
                         help="experiment: run Chromium under taskset -c LIST")
     parser.add_argument("--skip", action="append", default=[],
@@ -401,13 +407,19 @@ def main() -> None:
             modes = [m.strip() for m in opts.modes.split(",") if m.strip()]
             rt = (f", the loop at SCHED_FIFO {opts.rt_priority} (--rt-priority)"
                   if opts.rt_priority else ", normal scheduling")
+            rt += "".join(f", {label} {value}" for label, value in (
+                ("switch interval", opts.switch_interval), ("console nice", opts.console_nice),
+                ("console under", opts.console_prefix),
+                ("Chromium on CPUs", opts.browser_cpus)) if value is not None)
             print(f"2. the 100 Hz loop during opsafe, {' / '.join(modes)} alternating, "
                   f"{opts.repeats} runs each{rt}:")
             t = loop_ab(browser, opts.repeats, modes, rt_priority=opts.rt_priority,
-                        switch_interval=opts.switch_interval, nice=opts.console_nice)
+                        switch_interval=opts.switch_interval, nice=opts.console_nice,
+                        prefix=opts.console_prefix)
             results["telemetry"] = {"rt_priority": opts.rt_priority,
                                     "switch_interval": opts.switch_interval,
                                     "console_nice": opts.console_nice,
+                                    "console_prefix": opts.console_prefix,
                                     "browser_cpus": opts.browser_cpus, "modes": t}
             print(f"   {'mode':12s} {'cycles':>6s} {'p50 ms':>7s} {'p99 ms':>7s} "
                   f"{'max ms':>7s} {'p99 per run':>22s} {'tab Hz':>7s} {'min Hz':>7s}")

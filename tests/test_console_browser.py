@@ -228,7 +228,8 @@ for (const C of [WebGLRenderingContext, WebGL2RenderingContext]) {
 window.__redraws = 0;
 document.addEventListener("DOMContentLoaded", () => {
   new MutationObserver(() => { window.__redraws += 1; }).observe(
-    document.querySelector("#telemetry tbody"), { subtree: true, childList: true, characterData: true });
+    document.querySelector("#telemetry tbody"),
+    { subtree: true, childList: true, characterData: true });
 });
 """
 

@@ -218,7 +218,8 @@ class ArmSession:
     :param status_hz: idle status poll rate; 0 disables polling (tests poll by hand with
         :meth:`poll_status`).
     :param loop_priority: run each activity's thread (the 100 Hz loop) at ``SCHED_FIFO``
-        with this priority (1-99; only that thread: :mod:`seqrun.service.realtime`).
+        with this priority (1-99; that thread and the threads it starts:
+        :mod:`seqrun.service.realtime`).
     """
 
     def __init__(self, arm, connection, *, project=None, log_root: Path | None = None,
