@@ -52,6 +52,7 @@ from seqrun.targets import (  # noqa: F401  (re-exported: they lived here)
     resolve_checkpoint,
     resolve_move_target,
 )
+from seqrun.yamlsource import sort_errors
 
 if TYPE_CHECKING:
     from seqrun.loader import LoadedSequence, ResolvedStep
@@ -502,12 +503,17 @@ class Checker:
             if kind.motion:
                 self.motion_start_deg = self.tracked()
             kind.check(self, step, step.params)
-            # a step's findings in the order they appear in its text
-            self.errors[errors:] = sorted(self.errors[errors:], key=_position)
-            self.notes[notes:] = sorted(self.notes[notes:], key=_position)
+            # a step's findings in the order they appear in its text, then those in other
+            # files (the pose file it names)
+            here = step.location.file
+            self.errors[errors:] = sorted(self.errors[errors:], key=lambda e: _position(e, here))
+            self.notes[notes:] = sorted(self.notes[notes:], key=lambda n: _position(n, here))
         final = {n: s.position for n, s in self.joints.items()}
-        # In step order (a step of an included file comes where it runs), duplicates dropped.
-        result = ValidationResult(list(dict.fromkeys(self.errors)),
+        # Errors in the order `seqrun validate` prints a file's load errors: by position
+        # within a file, the files in the order the steps reach them (a pose file after the
+        # step naming it), duplicates dropped; every command reports this one order.
+        # Notes stay in step order (a step of an included file comes where it runs).
+        result = ValidationResult(sort_errors(self.errors),
                                   list(dict.fromkeys(self.notes)), final)
         result.clearances = dict(self.clearances)
         result.targets_deg = dict(self.targets_deg)
@@ -515,8 +521,8 @@ class Checker:
         return result
 
 
-def _position(item: SourceError) -> tuple[int, int]:
-    return item.line, item.column
+def _position(item: SourceError, file: str) -> tuple[bool, int, int]:
+    return item.file != file, item.line, item.column
 
 
 def validate_sequence(loaded: LoadedSequence, arm: ArmDescription,

@@ -32,7 +32,7 @@ from unittest import mock
 
 import pytest
 import yaml
-from hypothesis import HealthCheck, event, given, settings
+from hypothesis import HealthCheck, event, example, given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
@@ -496,6 +496,8 @@ def fuzz_places(tmp_path_factory):
 @settings(max_examples=int(os.environ.get("SEQRUN_FUZZ_EXAMPLES", "80")), deadline=None,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 @given(text=sequence_texts(), as_bytes=st.booleans())
+# validate and run listed these errors in two orders (the pose file's error in between)
+@example(text="name: Fuzz\ndescription: random\nsteps: [move: park, home]\n", as_bytes=False)
 def test_random_sequence_files(fuzz_places, text, as_bytes):
     """Random documents from fragments: valid steps, wrong types, unknown keys, deep
     nesting, huge/NaN/inf numbers, odd unicode, anchors and aliases, tags."""
@@ -511,6 +513,33 @@ def test_random_sequence_files(fuzz_places, text, as_bytes):
     if expected == "valid":
         # The dry run of `validate` predicts the run (both: the executor on the simulator).
         assert (v.exit_code == 0) == (r.exit_code == 0), v.describe() + "\n" + r.describe()
+
+
+@pytest.mark.parametrize("text", [
+    # Loads, so `run` reports the static validation's findings itself: the step order put
+    # the pose file's error (the first step's target) between the two steps' own errors.
+    "name: Fuzz\ndescription: random\nsteps: [move: park, home]\n",
+    "name: Fuzz\ndescription: random\nsteps:\n  - move: park\n  - home\n  - move: {joints: {j9: 1}}\n",
+    # The move below line 13 of park.yaml: still the sequence's errors first.
+    "name: Fuzz\ndescription: random\n" + "# padding\n" * 20 + "steps: [move: park, home]\n",
+    # Does not load: both commands merge the load errors with the findings the same way.
+    "steps: [move: park, home]\n",
+], ids=["flow", "block", "far_down", "unloadable"])
+def test_validate_and_run_list_errors_in_one_order(tmp_path, places, text):
+    """Found by test_random_sequence_files: both commands list the errors in one order, by
+    position within a file, the files in the order the steps reach them (the sequence
+    before the pose file its move names)."""
+    sandbox, logs = places
+    path = make_sequences(tmp_path / "project") / "s.yaml"
+    path.write_text(text, encoding="utf-8")
+    _, v, _ = check_file(path, sandbox=sandbox, logs=logs)   # asserts run lists them alike
+    errors = [LOCATED.match(line) for line in v.stdout.splitlines()[:-1]
+              if ": note: " not in line]
+    files = [m["file"] for m in errors]
+    assert files == sorted(files, key=lambda f: not f.endswith("s.yaml")), v.describe()
+    assert files[-1].endswith("park.yaml"), v.describe()
+    own = [(int(m["line"]), int(m["col"])) for m in errors if m["file"].endswith("s.yaml")]
+    assert own == sorted(own) and len(own) >= 2, v.describe()
 
 
 # ----------------------------------------------------------------------------- (b) options
