@@ -37,7 +37,10 @@ def _dense(a, b, n=4001):
 def test_segment_distance_matches_dense_sampling(p1, q1, p2, q2):
     exact = float(segment_segment(p1, q1, p2, q2))
     a, b = _dense(p1, q1, 801), _dense(p2, q2, 801)
-    brute = np.min(np.linalg.norm(a[:, None] - b[None], axis=-1))
+    # Every pair's squared distance, one coordinate at a time (a tenth of the time of the
+    # 801 x 801 x 3 difference array and its norm; the same minimum).
+    squared = sum((a[:, k, None] - b[None, :, k]) ** 2 for k in range(3))
+    brute = float(np.sqrt(squared.min()))
     spacing = (np.linalg.norm(q1 - p1) + np.linalg.norm(q2 - p2)) / 800
     assert exact <= brute + 1e-6
     assert brute - exact <= spacing + 1e-6
