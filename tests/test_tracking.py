@@ -18,6 +18,7 @@ from seqrun.executor import EXIT_OK, Executor
 from seqrun.powercube.client import PowerCubeClient
 from seqrun.schema import load_sequence
 from seqrun.tracking import MoveTracking, peak_abs, velocity_window, windowed_velocity
+from tiers import examples
 
 
 class JitteryClock:
@@ -103,7 +104,7 @@ def test_windowed_velocity_of_a_line_is_its_slope():
     assert np.allclose(v[4:], [3.0, -7.5])
 
 
-@settings(max_examples=50, deadline=None)
+@settings(max_examples=examples(50), deadline=None)
 @given(speed=st.floats(1.0, 40.0), jitter=st.floats(0.0, 0.006), seed=st.integers(0, 1000))
 def test_windowed_velocity_bounds_timestamp_jitter(speed, jitter, seed):
     # Positions sampled every 10 ms exactly, timestamps late by up to `jitter`: the
