@@ -52,8 +52,9 @@ def run_tier(tree: Path, workers: int, extra: list[str]) -> dict:
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     tail = proc.stdout.strip().splitlines()[-1] if proc.stdout.strip() else ""
     counts = {kind.rstrip("s"): int(n) for n, kind in SUMMARY.findall(tail)}
+    failed = [line for line in proc.stdout.splitlines() if line.startswith(("FAILED", "ERROR"))]
     return {"wall_s": round(wall, 1), "cpu_s": round(cpu, 1), "load_before": round(load, 2),
-            "exit_code": proc.returncode, "counts": counts, "summary": tail}
+            "exit_code": proc.returncode, "counts": counts, "summary": tail, "failed": failed}
 
 
 def main() -> None:
@@ -74,6 +75,8 @@ def main() -> None:
             print(f"[{i + 1}/{args.repeat}] {name:8s} wall {run['wall_s']:6.1f} s  "
                   f"cpu {run['cpu_s']:6.1f} s  load before {run['load_before']:.2f}  "
                   f"{run['summary']}", flush=True)
+            for line in run["failed"]:
+                print(f"    {line}", flush=True)
     summary = {}
     for name, rs in runs.items():
         summary[name] = {"tree": str(trees[name]),
