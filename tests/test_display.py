@@ -55,7 +55,8 @@ def run_with_displays(path: Path, tmp_path: Path, faults=()):
 
     try:
         outcome = run_sequence(loaded, arm, connection, log_dir=tmp_path / "run",
-                               confirm=lambda prompt: True, on_executor=attach)
+                               confirm=lambda prompt: True, on_executor=attach,
+                               html_report=False)
     finally:
         connection.close()
     return outcome, views["live"], live_console, plain_console

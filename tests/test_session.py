@@ -299,7 +299,8 @@ def test_a_jog_stopped_at_once_is_a_controlled_stop(tmp_path):
 # ---------------------------------------------------------------------- halt
 def test_halt_during_a_run_stops_it_and_is_confirmed(session):
     sub = session.subscribe(maxsize=100_000)
-    run = session.run_sequence(ROOT / "sequences" / "totem.yaml", assume_yes=True)
+    run = session.run_sequence(ROOT / "sequences" / "totem.yaml", assume_yes=True,
+                               html_report=False)
     while True:  # wait for the long move to stream
         event = sub.get(timeout=30)
         assert event is not None
@@ -361,7 +362,7 @@ def answer_every_question(session, yes: bool) -> threading.Thread:
 
 def test_a_confirm_step_is_answered_from_another_thread(session):
     answering = answer_every_question(session, True)
-    result = session.run_sequence(ROOT / "sequences" / "totem.yaml").wait(120)
+    result = session.run_sequence(ROOT / "sequences" / "totem.yaml", html_report=False).wait(120)
     answering.join(5)
     assert result.ok, result.message
     assert result.run_result.steps[-1].status == "passed"
@@ -369,7 +370,7 @@ def test_a_confirm_step_is_answered_from_another_thread(session):
 
 def test_a_declined_question_is_an_operator_abort(session):
     answering = answer_every_question(session, False)
-    result = session.run_sequence(ROOT / "sequences" / "totem.yaml").wait(120)
+    result = session.run_sequence(ROOT / "sequences" / "totem.yaml", html_report=False).wait(120)
     answering.join(5)
     assert result.exit_code == 130 and "declined" in result.message
 
@@ -377,7 +378,7 @@ def test_a_declined_question_is_an_operator_abort(session):
 def test_step_mode_waits_for_step_and_abort_withdraws_the_question(session):
     sub = session.subscribe(maxsize=100_000)
     run = session.run_sequence(ROOT / "sequences" / "totem.yaml", step_mode=True,
-                               assume_yes=True)
+                               assume_yes=True, html_report=False)
     asked = []
     while len(asked) < 2:
         event = sub.get(timeout=30)
