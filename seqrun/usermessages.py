@@ -13,15 +13,15 @@ from seqrun.errors import ModuleTimeoutError
 from seqrun.powercube.codec import SetMotion, SetParam
 from seqrun.powercube.protocol import MotionMode, ParamId
 
-#: Parameters holding a joint position (module radians; user = module - offset).
-_POSITIONS = {ParamId.MIN_POS, ParamId.MAX_POS, ParamId.ACT_POS, ParamId.DEF_MIN_POS,
-              ParamId.DEF_MAX_POS}
-#: Parameters holding a rate (rad/s, rad/s²): no offset.
-_RATES = {ParamId.MAX_VEL: "°/s", ParamId.MAX_ACC: "°/s²", ParamId.ACT_VEL: "°/s",
-          ParamId.DEF_MAX_VEL: "°/s", ParamId.DEF_MAX_ACC: "°/s²"}
-_POSITION_MODES = {MotionMode.FRAMP, MotionMode.FRAMP_ACK, MotionMode.FSTEP,
-                   MotionMode.FSTEP_ACK}
-_VELOCITY_MODES = {MotionMode.FVEL, MotionMode.FVEL_ACK}
+#: The unit each angle-valued parameter is written in: a position ("°": module radians,
+#: user = module - offset) or a rate (rad/s, rad/s²: no offset).
+_PARAM_UNITS = {ParamId.MIN_POS: "°", ParamId.MAX_POS: "°", ParamId.ACT_POS: "°",
+                ParamId.DEF_MIN_POS: "°", ParamId.DEF_MAX_POS: "°",
+                ParamId.MAX_VEL: "°/s", ParamId.MAX_ACC: "°/s²", ParamId.ACT_VEL: "°/s",
+                ParamId.DEF_MAX_VEL: "°/s", ParamId.DEF_MAX_ACC: "°/s²"}
+#: Likewise for the motion modes: a target position or a velocity.
+_MODE_UNITS = {MotionMode.FRAMP: "°", MotionMode.FRAMP_ACK: "°", MotionMode.FSTEP: "°",
+               MotionMode.FSTEP_ACK: "°", MotionMode.FVEL: "°/s", MotionMode.FVEL_ACK: "°/s"}
 
 
 def describe_request(request, arm) -> str | None:
@@ -32,24 +32,28 @@ def describe_request(request, arm) -> str | None:
         return None
     if isinstance(request, SetParam):
         param = ParamId(request.param)
-        if param in _POSITIONS:
-            value = f"{_deg(joint.to_user_deg(float(request.value)))}°"
-        elif param in _RATES:
-            value = f"{_deg(math.degrees(float(request.value)))} {_RATES[param]}"
-        else:
+        unit = _PARAM_UNITS.get(param)
+        if unit is None:
             return None
-        return f"SetExtended {param.name} ({joint.name}) = {value}"
+        return (f"SetExtended {param.name} ({joint.name}) = "
+                f"{_user_value(joint, request.value, unit)}")
     if isinstance(request, SetMotion):
         mode = MotionMode(request.mode)
-        if mode in _POSITION_MODES:
-            value = f"{_deg(joint.to_user_deg(float(request.value)))}°"
-        elif mode in _VELOCITY_MODES:
-            value = f"{_deg(math.degrees(float(request.value)))} °/s"
-        else:
+        unit = _MODE_UNITS.get(mode)
+        if unit is None:
             return None
         timing = f" in {request.time_ms} ms" if request.time_ms is not None else ""
-        return f"SetMotion {mode.name} ({joint.name}) {value}{timing}"
+        return (f"SetMotion {mode.name} ({joint.name}) "
+                f"{_user_value(joint, request.value, unit)}{timing}")
     return None
+
+
+def _user_value(joint, value, unit: str) -> str:
+    """A module value in the operator's units: a position ("°") in user degrees of
+    ``joint``, a rate converted from radians alone."""
+    if unit == "°":
+        return f"{_deg(joint.to_user_deg(float(value)))}°"
+    return f"{_deg(math.degrees(float(value)))} {unit}"
 
 
 def user_message(exc: BaseException, arm) -> str:
