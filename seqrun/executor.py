@@ -39,8 +39,7 @@ from seqrun.clock import Clock
 from seqrun.drivers import (ArmDriver, CycleState, HaltConfirmation, JointState, LimitValues,
                             MotionRefused, as_driver)
 from seqrun.events import EventHub, make_event
-from seqrun.errors import (BusError, ModuleFaultError, ModuleTimeoutError, PlanningError,
-                           RunAborted)
+from seqrun.errors import BusError, RunAborted
 from seqrun.limits import LimitsInForce
 from seqrun.planner import Limits, MovePlan, plan_move, plan_stop
 from seqrun.usermessages import user_message
@@ -52,7 +51,7 @@ from seqrun.stop_requests import FROM_OUTSIDE, OPERATOR_HALT, StopRequest, StopR
 # from here too.
 from seqrun.results import (EXIT_FAULT, EXIT_INVALID, EXIT_OK,  # noqa: F401
                             EXIT_OPERATOR_ABORT, EXIT_USAGE, OperatorAbort, RunResult,
-                            StepResult)
+                            StepResult, fault_cause, halt_fields)
 
 if TYPE_CHECKING:
     from seqrun.poses import PoseDirs
@@ -784,9 +783,11 @@ class Executor:
 
     def _halt_fields(self) -> dict[str, Any]:
         """``halt_sent``, ``halt_confirmed``, ``modules_not_halted`` for a fault record."""
-        if self.halt_result is None:
-            return {"halt_sent": False, "halt_confirmed": False}
-        return self.halt_result.as_dict()
+        return halt_fields(self.halt_result)
+
+    def elapsed_s(self) -> float:
+        """Seconds since the run started (the events' time base)."""
+        return self.clock.now() - self._t0
 
     def _halt_note(self) -> str:
         """What the operator must know about the Halt beyond "sent", or ''."""
@@ -927,7 +928,7 @@ class Executor:
             self._enable_watchdog()
         except Exception as exc:  # noqa: BLE001 - nothing moves yet, but be sure
             self.emergency_halt()
-            cause, module = _cause(exc)
+            cause, module = fault_cause(exc)
             message = user_message(exc, self.arm) + self._halt_note()
             fault = {"cause": cause, "module": module, "message": message, "step": None,
                      **self._halt_fields()}
@@ -990,7 +991,7 @@ class Executor:
             except Exception as exc:  # noqa: BLE001 - every failure, even a bug, halts
                 self.emergency_halt()
                 exc = self._operator_halt_seen(exc)
-                cause, module = _cause(exc)
+                cause, module = fault_cause(exc)
                 if cause == "internal_error":
                     self.emit("internal_error", traceback=traceback.format_exc())
                     exc = RunAborted(cause, f"internal error ({type(exc).__name__}: {exc}); "
@@ -1059,20 +1060,6 @@ class Executor:
                   duration_s=_round(run.duration_s),
                   planned_duration_s=_round(run.planned_duration_s), **extra)
         return run
-
-
-def _cause(exc: Exception) -> tuple[str, int | None]:
-    if isinstance(exc, RunAborted):
-        return exc.cause, exc.module
-    if isinstance(exc, ModuleTimeoutError):
-        return "no_acknowledge", exc.module
-    if isinstance(exc, ModuleFaultError):
-        return "module_fault", exc.module
-    if isinstance(exc, PlanningError):
-        return "planning", None
-    if isinstance(exc, BusError):
-        return "bus_error", getattr(exc, "module", None)
-    return "internal_error", None
 
 
 def _label(step) -> str:

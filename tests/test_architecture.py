@@ -132,3 +132,31 @@ def test_the_checker_sees_an_upward_import(tmp_path):
     found = imported_modules(source, "seqrun.cli.probe")
     assert "seqrun.powercube.codec" in found and "seqrun.cli.sibling" in found
     assert "seqrun.executor" not in found
+
+
+#: Names under which a module holds an executor (or a step's view of it).
+EXECUTOR_NAMES = {"executor", "ex"}
+
+
+def private_uses(path: Path) -> list[str]:
+    """Private names (one leading underscore) ``path`` takes from another seqrun module, and
+    private attributes it reads of an executor held under a name of :data:`EXECUTOR_NAMES`."""
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.ImportFrom) and (node.level or
+                                                 (node.module or "").startswith("seqrun")):
+            found += [f"imports {node.module}.{a.name}" for a in node.names
+                      if a.name.startswith("_") and not a.name.startswith("__")]
+        elif (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)
+              and node.value.id in EXECUTOR_NAMES and node.attr.startswith("_")
+              and not node.attr.startswith("__")):
+            found.append(f"reads {node.value.id}.{node.attr} (line {node.lineno})")
+    return found
+
+
+def test_no_module_uses_another_modules_private_names():
+    """What two modules share is public (the jog once took the executor's ``_cause`` and
+    ``_halt_fields``; they are ``seqrun.results.fault_cause`` / ``halt_fields`` now)."""
+    uses = [f"{short(m)} {use}" for m, path in sorted(MODULES.items())
+            for use in private_uses(path)]
+    assert uses == []
