@@ -51,7 +51,7 @@ from seqrun.stop_requests import FROM_OUTSIDE, OPERATOR_HALT, StopRequest, StopR
 # from here too.
 from seqrun.results import (EXIT_FAULT, EXIT_INVALID, EXIT_OK,  # noqa: F401
                             EXIT_OPERATOR_ABORT, EXIT_USAGE, OperatorAbort, RunResult,
-                            StepResult, fault_cause, halt_fields)
+                            StepResult, fault_cause, halt_fields, latched_message)
 
 if TYPE_CHECKING:
     from seqrun.poses import PoseDirs
@@ -273,16 +273,21 @@ class Executor:
     def _derived(self, type_: str, data: dict) -> dict[str, dict]:
         """Velocities and flag names of a measurement or a setpoint, for subscribers."""
         if type_ == "measurement":
-            joints, words = data.get("joints_deg"), data.get("states")
+            joints = data.get("joints_deg")
         elif type_ == "setpoint":
-            joints, words = data.get("measured_deg"), None
+            joints = data.get("measured_deg")
         else:
             return {}
         short = data.get("state") or []
         if joints is None:
             return {}
         self._velocity.add(self.clock.now(), joints)
-        flags, fault = joint_flags(self.arm.joint_names, self.modules, short, words)
+        # The reading this event reports (read_arm and refresh_measurement set it first),
+        # decoded by the driver; its full states only for a measurement that shows them.
+        m = self.last
+        flags, fault = joint_flags(
+            self.arm.joint_names, self.modules, m.short_state if m is not None else {},
+            m.state_words if m is not None and type_ == "measurement" else None)
         extra = {"velocities_deg_s": self._velocity.velocity(), "flags": flags,
                  "fault": fault}
         if type_ == "measurement":
@@ -840,6 +845,18 @@ class Executor:
                   module_limits={n: _r(v) for n, v in module_limits.items()},
                   states={str(k): v.describe() for k, v in states.items()},
                   errors=[str(e) for e in result.errors], notes=[str(n) for n in result.notes])
+        if self.events.subscribers:
+            # Faces get the first reading as a measurement too (not logged: the preflight
+            # event holds it), its flags decoded by the driver like every other one.
+            flags, fault = joint_flags(self.arm.joint_names, self.modules, m.short_state,
+                                       states)
+            now = self.clock.now()
+            self.events.publish(make_event(
+                "measurement", round(now - self._t0, 6),
+                {"joints_deg": _r(m.user_deg),
+                 "state": [states[k].cycle_code if k in states else int(m.short_state[k])
+                           for k in self.modules]},
+                clock_s=now, flags=flags, fault=fault, source="preflight"))
         return result
 
     def _record_latched(self, states: dict[int, JointState]) -> None:
@@ -855,10 +872,7 @@ class Executor:
                       message=self.latched_message())
 
     def latched_message(self) -> str:
-        which = "; ".join(f"module {e['module']} ({e['joint']}): {e['flags']}"
-                          for e in self.latched_at_start)
-        return (f"fault latched before this run (emergency stop pressed, or a previous "
-                f"run halted?): {which}")
+        return latched_message(self.latched_at_start)
 
     def confirm_clearing_latched(self, modules: list[int] | None) -> None:
         """Called by a Reset step before it clears faults: on real hardware a fault that

@@ -16,7 +16,8 @@ from seqrun.errors import (BusError, ModuleFaultError, ModuleTimeoutError, Plann
                            RunAborted, SeqrunError)
 
 __all__ = ["EXIT_FAULT", "EXIT_INVALID", "EXIT_OK", "EXIT_OPERATOR_ABORT", "EXIT_USAGE",
-           "OperatorAbort", "RunResult", "StepResult", "fault_cause", "halt_fields"]
+           "OperatorAbort", "RunResult", "StepResult", "fault_cause", "halt_fields",
+           "latched_message"]
 
 
 class OperatorAbort(SeqrunError):
@@ -103,3 +104,11 @@ def halt_fields(confirmation: _Confirmation | None) -> dict[str, Any]:
     if confirmation is None:
         return {"halt_sent": False, "halt_confirmed": False}
     return confirmation.as_dict()
+
+
+def latched_message(latched: list[dict[str, Any]]) -> str:
+    """What the operator is told of faults the modules reported before a run sent anything
+    but reads (``RunResult.latched_at_start``)."""
+    which = "; ".join(f"module {e['module']} ({e['joint']}): {e['flags']}" for e in latched)
+    return (f"fault latched before this run (emergency stop pressed, or a previous "
+            f"run halted?): {which}")

@@ -49,8 +49,8 @@ def run_with_displays(path: Path, tmp_path: Path, faults=()):
     views = {}
 
     def attach(executor):
-        views["live"] = LiveDisplay(live_console, executor, f"seqrun: {loaded.name}", "sim",
-                                    len(loaded.steps))
+        views["live"] = LiveDisplay(live_console, executor.arm, executor.events.subscribe(
+            maxsize=2000, name="live view"), f"seqrun: {loaded.name}", "sim", len(loaded.steps))
         executor.listeners += [views["live"], PlainDisplay(plain_console, len(loaded.steps))]
 
     try:
@@ -230,8 +230,10 @@ def test_the_live_view_renders_on_the_control_loop_thread_only(tmp_path):
             return super().__rich__()
 
     def attach(executor):
-        view = Recording(screen, executor, "live", "sim", len(loaded.steps))
+        view = Recording(screen, executor.arm, executor.events.subscribe(maxsize=2000),
+                         "live", "sim", len(loaded.steps))
         executor.listeners.append(view)
+        executor.idle_hooks.append(view.on_idle)  # as ArmSession.add_idle_hook does
         view.__enter__()
         views.append(view)
 

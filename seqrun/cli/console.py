@@ -17,8 +17,9 @@ import typer
 
 from seqrun.cli.app import app
 from seqrun.cli.common import (EXIT_FAULT, ArmOption, BitrateOption, BusKwargsOption,
-                               CampaignOption, ChannelOption, InterfaceOption, ResponseTimeoutOption,
-                               SimOption, fail, load_arm_file, user_errors)
+                               CampaignOption, ChannelOption, InterfaceOption,
+                               ResponseTimeoutOption, SimOption, fail, load_arm_file,
+                               user_errors)
 from seqrun.defaults import DEFAULT_ARM, EXIT_OPERATOR_ABORT
 
 
