@@ -123,11 +123,8 @@ class SetParam:
         """``SetExtended MIN_POS (j4) = -120.00°`` for the module's ``joint``; None for a
         parameter that is not a position or a rate."""
         param = ParamId(self.param)
-        unit = PARAM_UNITS.get(param)
-        if unit is None:
-            return None
-        return (f"SetExtended {param.name} ({joint.name}) = "
-                f"{_user_value(joint, self.value, unit)}")
+        return _in_user_units(f"SetExtended {param.name} ({joint.name}) = ", joint, self.value,
+                              PARAM_UNITS.get(param))
 
 
 @dataclass(frozen=True, slots=True)
@@ -143,12 +140,9 @@ class SetMotion:
         """``SetMotion FRAMP_ACK (j2) 45.00°`` for the module's ``joint``; None for a mode
         whose value is not a position or a velocity."""
         mode = MotionMode(self.mode)
-        unit = MODE_UNITS.get(mode)
-        if unit is None:
-            return None
         timing = f" in {self.time_ms} ms" if self.time_ms is not None else ""
-        return (f"SetMotion {mode.name} ({joint.name}) "
-                f"{_user_value(joint, self.value, unit)}{timing}")
+        return _in_user_units(f"SetMotion {mode.name} ({joint.name}) ", joint, self.value,
+                              MODE_UNITS.get(mode), timing)
 
 
 # ---------------------------------------------------------------------- the operator's units
@@ -171,12 +165,16 @@ MODE_UNITS = {MotionMode.FRAMP: "°", MotionMode.FRAMP_ACK: "°", MotionMode.FST
               MotionMode.FSTEP_ACK: "°", MotionMode.FVEL: "°/s", MotionMode.FVEL_ACK: "°/s"}
 
 
-def _user_value(joint: UserJoint, value: float | int, unit: str) -> str:
-    """A module value in the operator's units: a position ("°") in user degrees of
-    ``joint``, a rate converted from radians alone; two decimals, never -0.00."""
+def _in_user_units(prefix: str, joint: UserJoint, value: float | int, unit: str | None,
+                   suffix: str = "") -> str | None:
+    """``prefix`` + a module value in the operator's units + ``suffix``: a position ("°")
+    in user degrees of ``joint``, a rate converted from radians alone; two decimals, never
+    -0.00. None when the value has no such unit."""
+    if unit is None:
+        return None
     user = joint.to_user_deg(float(value)) if unit == "°" else math.degrees(float(value))
     text = f"{round(user, 2) + 0.0:.2f}"
-    return f"{text}°" if unit == "°" else f"{text} {unit}"
+    return f"{prefix}{text}{'°' if unit == '°' else ' ' + unit}{suffix}"
 
 
 @dataclass(frozen=True, slots=True)
