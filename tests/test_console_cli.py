@@ -102,3 +102,42 @@ def test_sigterm_during_a_move_halts_the_arm(tmp_path):
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+
+
+@pytest.mark.slow
+def test_rt_priority_puts_only_the_loop_thread_at_sched_fifo(tmp_path):
+    proc = subprocess.Popen([sys.executable, "-m", "seqrun", "console", "--sim", "--port", "0",
+                             "--rt-priority", "5", "--log-dir", str(tmp_path)], cwd=ROOT,
+                            env=ENV, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        lines, url = [], None
+        while url is None:
+            line = proc.stdout.readline()
+            assert line, "".join(lines)
+            lines.append(line)
+            found = re.search(r"(http://127\.0\.0\.1:\d+/)", line)
+            url = found.group(1) if found else None
+        assert ("the control loop at SCHED_FIFO priority 5, the console's other threads at "
+                "SCHED_RR 1") in "".join(lines)
+        _post(url, "arm-up")
+        _post(url, "home")
+        assert _post(url, "move/joints", {"joints": {"j1": 60}})["accepted"]
+        policies = {}
+        for task in Path(f"/proc/{proc.pid}/task").iterdir():
+            try:
+                tid = int(task.name)
+                policies[tid] = (os.sched_getscheduler(tid), os.sched_getparam(tid).sched_priority)
+            except ProcessLookupError:  # a thread that ended meanwhile
+                pass
+        # the move's thread (and any it started) at FIFO 5, every other thread at RR 1
+        fifo = [tid for tid, policy in policies.items() if policy == (os.SCHED_FIFO, 5)]
+        rr = [tid for tid, policy in policies.items() if policy == (os.SCHED_RR, 1)]
+        assert fifo and len(rr) > 2 and len(fifo) + len(rr) == len(policies), policies
+        _post(url, "halt")
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()

@@ -142,3 +142,58 @@ def test_the_history_for_new_pages_is_bounded_and_skips_measurements():
         telemetry.stop()
     whats = [json.loads(h)["event"]["what"] for h in telemetry.history]
     assert len(whats) == HISTORY and whats[-1] == f"r{HISTORY + 49}" and whats[0] == "r50"
+
+
+class _CountingLoop(asyncio.SelectorEventLoop):
+    """An event loop that counts the wake-ups other threads ask of it."""
+
+    wakes = 0
+
+    def call_soon_threadsafe(self, *args, **kw):
+        self.wakes += 1
+        return super().call_soon_threadsafe(*args, **kw)
+
+
+def test_one_snapshot_encoded_once_for_all_pages_and_none_without_pages():
+    source = _Source()
+    built = []
+    telemetry = Telemetry(source, status_dict=lambda: built.append(1) or {"n": len(built)})
+
+    def measure(n: int) -> None:
+        for k in range(n):
+            source.hub.publish(make_event("measurement", k * 0.01,
+                                          {"joints_deg": [0.0] * 7, "state": [0] * 7}))
+            time.sleep(0.01)
+
+    def scenario() -> tuple[list, int]:
+        loop = _CountingLoop()
+        try:
+            measure(20)  # no page open: nothing to build
+            time.sleep(0.1)
+            assert built == [] and telemetry.snapshots == 0
+            feeds = [PageFeed(loop) for _ in range(3)]
+            for feed in feeds:
+                telemetry.attach(feed)
+            measure(20)
+            time.sleep(0.2)
+            loop.run_until_complete(asyncio.sleep(0))  # deliver what the reader handed over
+            batches = [loop.run_until_complete(feed.next_batch()) for feed in feeds]
+            telemetry.stop()  # (its reader thread ends: the counts stand still)
+            return batches, loop.wakes
+        finally:
+            loop.close()
+
+    telemetry.start()
+    out: list = []  # its own thread: Playwright's sync API may own this thread's loop
+    try:
+        worker = threading.Thread(target=lambda: out.append(scenario()))
+        worker.start()
+        worker.join(30)
+    finally:
+        telemetry.stop()
+    batches, wakes = out[0]
+    assert telemetry.snapshots > 0 and len(built) == telemetry.snapshots
+    # every page gets the same encoded text, and the loop is woken once per snapshot,
+    # not once per page
+    assert batches[0][-1] is batches[1][-1] is batches[2][-1]
+    assert wakes == telemetry.snapshots

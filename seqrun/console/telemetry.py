@@ -94,6 +94,14 @@ class PageFeed:
         return batch
 
 
+def _deliver(feeds: list[PageFeed], text: str, status: bool) -> None:
+    for feed in feeds:
+        if status:
+            feed.push_status(text)
+        else:
+            feed.push_event(text)
+
+
 class Telemetry:
     """The fan-out: ``attach()`` a page's feed, ``detach()`` it when the page goes."""
 
@@ -134,16 +142,23 @@ class Telemetry:
             self._thread.join(timeout=2.0)
 
     def _broadcast(self, text: str, *, status: bool) -> None:
+        """Hand ``text`` (encoded once) to every page: one wake-up of each event loop for all
+        of its pages, nothing per page in this thread."""
         with self._lock:
-            feeds = list(self._feeds)
-        for feed in feeds:
-            method = feed.push_status if status else feed.push_event
+            by_loop: dict[asyncio.AbstractEventLoop, list[PageFeed]] = {}
+            for feed in self._feeds:
+                by_loop.setdefault(feed.loop, []).append(feed)
+        for loop, feeds in by_loop.items():
             try:
-                feed.loop.call_soon_threadsafe(method, text)
-            except RuntimeError:  # its loop has closed: the page is gone
-                self.detach(feed)
+                loop.call_soon_threadsafe(_deliver, feeds, text, status)
+            except RuntimeError:  # its loop has closed: the pages are gone
+                for feed in feeds:
+                    self.detach(feed)
 
     def publish_status(self) -> None:
+        with self._lock:
+            if not self._feeds:
+                return  # no page open: no snapshot to build (GET /status builds its own)
         self.snapshots += 1
         self._broadcast(dumps({"type": "status", "status": self.status_dict()}), status=True)
 

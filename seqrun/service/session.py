@@ -26,6 +26,7 @@ What it guarantees:
 
 from __future__ import annotations
 
+import logging
 import math
 import threading
 from dataclasses import dataclass
@@ -216,12 +217,16 @@ class ArmSession:
         and the run records.
     :param status_hz: idle status poll rate; 0 disables polling (tests poll by hand with
         :meth:`poll_status`).
+    :param loop_priority: run each activity's thread (the 100 Hz loop) at ``SCHED_FIFO``
+        with this priority (1-99; that thread and the threads it starts:
+        :mod:`seqrun.service.realtime`).
     """
 
     def __init__(self, arm, connection, *, project=None, log_root: Path | None = None,
                  poses_dir=None, zero=None, status_hz: float = STATUS_POLL_HZ,
                  response_timeout_s: float | None = None, own_connection: bool = True,
-                 jog_deadman_s: float = JOG_DEADMAN_S) -> None:
+                 jog_deadman_s: float = JOG_DEADMAN_S,
+                 loop_priority: int | None = None) -> None:
         from seqrun.connection import response_timeout_s as default_timeout
         from seqrun.powercube.client import PowerCubeClient
         from seqrun.shipped import shipped_dir
@@ -233,6 +238,7 @@ class ArmSession:
         self.zero = zero
         self.own_connection = own_connection
         self.jog_deadman_s = jog_deadman_s
+        self.loop_priority = loop_priority
         if poses_dir is None:
             poses_dir = (tuple(project.pose_path) if project is not None
                          else (Path("poses"), shipped_dir("poses")))
@@ -615,6 +621,8 @@ class ArmSession:
         """Run ``work`` holding the bus; in a worker thread when ``background``."""
         def target() -> None:
             result = None
+            if background and self.loop_priority is not None:
+                self._use_realtime()
             try:
                 with self._bus:
                     result = work()
@@ -633,6 +641,14 @@ class ArmSession:
         else:
             target()
         return activity
+
+    def _use_realtime(self) -> None:
+        from seqrun.service.realtime import use_fifo
+
+        why = use_fifo(self.loop_priority)
+        if why is not None:
+            logging.getLogger(__name__).warning(
+                "real-time scheduling of the control loop not available (%s)", why)
 
     def _new_executor(self, loaded=None, **kw: Any):
         from seqrun.executor import Executor

@@ -9,6 +9,8 @@ const el = (tag, props = {}, ...children) => {
   for (const c of children) node.append(c);
   return node;
 };
+// ?draw=0 (benchmarks): count the telemetry, draw nothing (what drawing costs, isolated).
+const DRAW = new URLSearchParams(location.search).get("draw") !== "0";
 const fmt = (v, digits = 2) => (v === null || v === undefined ? "-" : Number(v).toFixed(digits));
 
 const state = {
@@ -128,18 +130,61 @@ function onReply(reply) {
 }
 
 // ---------------------------------------------------------------- telemetry
-// Every status is kept (and counted) as it arrives; the page is redrawn once per animation
-// frame with the newest one (up to 100 statuses a second arrive during a move).
+// Every status is received, counted and kept as it arrives (up to 100 a second during a
+// move); faults are latched from every one. Painting is what costs: every frame the browser
+// paints (new numbers or a new 3D picture) is rasterised and composited, in software on a PC
+// without a GPU, on the cores the 100 Hz control loop needs. So the page paints in frames of
+// its own, only when something changed, numbers and 3D view in the same frame, at most
+// frameHz() frames a second (the numbers at most NUMBERS_HZ): none while hidden.
+const NUMBERS_HZ = 10;
+const FRAME_HZ = 20;         // the focused page on a GPU
+const FRAME_HZ_SLOW = 4;     // without the focus, or with software-rendered WebGL
+state.drawCount = 0;  // redraws of the numbers (tests, bench)
+
+function frameHz() {
+  if (document.hidden) return 0;
+  if (!document.hasFocus() || (state.view && state.view.software)) return FRAME_HZ_SLOW;
+  return FRAME_HZ;
+}
+
 function showStatus(s) {
   state.status = s;
   state.statusCount += 1;
-  if (!state.drawPending) {
-    state.drawPending = true;
-    requestAnimationFrame(() => { state.drawPending = false; drawStatus(state.status); });
-  }
+  if (!DRAW) return;
+  for (const j of s.joints) if (j.fault) state.latched[j.name] = j.flags.join("|");
+  state.statusDirty = true;
+  if (state.view) state.view.setMeasured(s.joints.map((j) => j.position_deg));
+  scheduleFrame();
+}
+
+function scheduleFrame() {
+  const hz = frameHz();
+  if (state.framePending || hz === 0 || !state.status) return;
+  state.framePending = true;
+  const wait = Math.max(0, (state.frameAt ?? -Infinity) + 1000 / hz - performance.now());
+  setTimeout(() => requestAnimationFrame((now) => {
+    state.framePending = false;
+    if (document.hidden) return;  // painted when shown again (visibilitychange)
+    state.frameAt = now;
+    if (state.statusDirty && now - (state.drawnAt ?? -Infinity) >= 1000 / NUMBERS_HZ - 2) {
+      state.statusDirty = false;
+      state.drawnAt = now;
+      drawStatus(state.status);
+    }
+    if (state.view) state.view.renderIfDirty();
+    if (state.statusDirty || (state.view && state.view.dirty)) scheduleFrame();
+  }), wait);
+}
+document.addEventListener("visibilitychange", scheduleFrame);
+window.addEventListener("focus", scheduleFrame);
+
+// textContent only when it changed: an unchanged field costs no layout.
+function setText(node, text) {
+  if (node.textContent !== text) node.textContent = text;
 }
 
 function drawStatus(s) {
+  state.drawCount += 1;
   const title = s.simulator ? "seqrun console - SIMULATOR" : `seqrun console - ${s.bus}`;
   if (document.title !== title) {
     document.title = title;
@@ -147,11 +192,11 @@ function drawStatus(s) {
     $("#title").className = s.simulator ? "sim" : "";
   }
   const act = $("#activity");
-  act.textContent = s.stale ? `${s.activity} (stale)` : s.activity;
+  setText(act, s.stale ? `${s.activity} (stale)` : s.activity);
   act.className = `badge ${s.activity}`;
-  $("#zero").textContent = s.zero_reference ? `zero: ${s.zero_reference}` : "";
-  $("#bus").textContent = s.bus;
-  $("#updated").textContent = s.updated_at === null ? "never" : fmt(s.updated_at, 2);
+  setText($("#zero"), s.zero_reference ? `zero: ${s.zero_reference}` : "");
+  setText($("#bus"), s.bus);
+  setText($("#updated"), s.updated_at === null ? "never" : fmt(s.updated_at, 2));
   const rows = $("#telemetry tbody");
   s.joints.forEach((j, i) => {
     let row = rows.children[i];
@@ -160,18 +205,18 @@ function drawStatus(s) {
         el("td", { className: "vel" }), el("td", { className: "target" }), el("td", { className: "flags" }));
       rows.append(row);
     }
-    row.children[1].textContent = fmt(j.position_deg);
-    row.children[2].textContent = fmt(j.velocity_deg_s);
-    row.children[3].textContent = fmt(j.target_deg);
+    setText(row.children[1], fmt(j.position_deg));
+    setText(row.children[2], fmt(j.velocity_deg_s));
+    setText(row.children[3], fmt(j.target_deg));
     if (j.fault) state.latched[j.name] = j.flags.join("|");
     const latched = state.latched[j.name];
-    row.children[4].textContent = j.fault ? j.flags.join("|") : (latched ? `${j.flags.join("|")} (was ${latched})` : j.flags.join("|"));
+    setText(row.children[4], j.fault ? j.flags.join("|") : (latched ? `${j.flags.join("|")} (was ${latched})` : j.flags.join("|")));
     row.className = [j.fault || latched ? "fault" : "", latched ? "latched" : "", j.locked ? "locked" : ""].join(" ").trim();
   });
   $("#ack-faults").disabled = Object.keys(state.latched).length === 0;
   const ee = s.end_effector;
-  $("#ee-xyz").textContent = ee ? ee.position_mm.map((v) => fmt(v, 1)).join("  ") : "-";
-  $("#ee-rpy").textContent = ee ? ee.rpy_deg.map((v) => fmt(v, 2)).join("  ") : "-";
+  setText($("#ee-xyz"), ee ? ee.position_mm.map((v) => fmt(v, 1)).join("  ") : "-");
+  setText($("#ee-rpy"), ee ? ee.rpy_deg.map((v) => fmt(v, 2)).join("  ") : "-");
   const q = s.joints.map((j) => j.position_deg);
   if (state.view) state.view.setMeasured(q);
   if (!state.slidersTouched) setSliders(q);
@@ -299,11 +344,12 @@ function buildJointControls() {
 }
 
 function setSliders(q) {
+  const numbers = document.querySelectorAll(".move-number");
   document.querySelectorAll(".move-slider").forEach((s, i) => {
     const v = q[state.arm.joints.findIndex((j) => j.name === s.dataset.joint)];
     if (v === null || v === undefined) return;
-    s.value = v.toFixed(1);
-    document.querySelectorAll(".move-number")[i].value = v.toFixed(1);
+    const text = v.toFixed(1);
+    if (numbers[i].value !== text) { s.value = text; numbers[i].value = text; }
   });
 }
 
@@ -484,7 +530,7 @@ $("#runs-refresh").addEventListener("click", loadRuns);
 async function start() {
   state.arm = await api("GET", "/arm");
   buildJointControls();
-  try { state.view = new ArmView($("#view3d"), state.arm); } catch (err) { say(`3D view unavailable: ${err.message}`, true); }
+  if (DRAW) try { state.view = new ArmView($("#view3d"), state.arm); } catch (err) { say(`3D view unavailable: ${err.message}`, true); }
   connect();
   await Promise.all([loadPoses(), loadSequences(), loadRuns()]);
   state.ready = true;

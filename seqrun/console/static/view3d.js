@@ -47,6 +47,18 @@ function segmentsOf(arm) {
   return names.slice(1).map((n, i) => ({ start: names[i], end: n, r: 30 }));
 }
 
+// WebGL drawn by the CPU (no GPU, or none the browser may use): every frame then costs
+// the CPU the control loop needs.
+function softwareRendered(gl) {
+  try {
+    const info = gl.getExtension("WEBGL_debug_renderer_info");
+    const name = String(gl.getParameter(info ? info.UNMASKED_RENDERER_WEBGL : gl.RENDERER));
+    return /swiftshader|llvmpipe|softpipe|software/i.test(name);
+  } catch (err) {
+    return false;
+  }
+}
+
 class ArmFigure {
   constructor(scene, arm, material, jointMaterial) {
     this.arm = arm;
@@ -100,7 +112,9 @@ export class ArmView {
   constructor(container, arm) {
     this.arm = arm;
     this.container = container;
-    this.renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
+    // Software WebGL: no multisampling, plain shading (each costs the CPU on every frame).
+    this.software = softwareRendered(document.createElement("canvas").getContext("webgl2"));
+    this.renderer = new THREE.WebGLRenderer({ antialias: !this.software, preserveDrawingBuffer: true });
     this.renderer.setPixelRatio(window.devicePixelRatio || 1);
     container.appendChild(this.renderer.domElement);
     this.scene = new THREE.Scene();
@@ -120,24 +134,53 @@ export class ArmView {
     this.scene.add(new THREE.AxesHelper(200));
     for (const g of arm.guards || []) this.addGuard(g);
     this.solid = new ArmFigure(this.scene, arm,
-      new THREE.MeshStandardMaterial({ color: 0x9aa7b4, metalness: 0.3, roughness: 0.5 }),
-      new THREE.MeshStandardMaterial({ color: 0x2f6fd6, metalness: 0.3, roughness: 0.4 }));
-    const ghostMaterial = new THREE.MeshStandardMaterial({ color: 0x5eead4, transparent: true, opacity: 0.28, depthWrite: false });
+      this.material({ color: 0x9aa7b4, metalness: 0.3, roughness: 0.5 }),
+      this.material({ color: 0x2f6fd6, metalness: 0.3, roughness: 0.4 }));
+    const ghostMaterial = this.material({ color: 0x5eead4, transparent: true, opacity: 0.28, depthWrite: false });
     this.ghost = new ArmFigure(this.scene, arm, ghostMaterial, ghostMaterial);
     this.ghost.visible = false;
-    this.measured = null;
+    this.measured = null;  // the newest measured joints (degrees), drawn at the next frame
+    this.drawn = null;     // the joints the solid arm was last drawn at
+    this.ghostKey = null;  // what the ghost shows (null: hidden)
     this.dirty = true;
+    this.pending = false;
+    this.last = -Infinity;
+    this.renderCount = 0;  // frames drawn (tests, bench)
     this.attachControls();
     new ResizeObserver(() => this.resize()).observe(container);
+    document.addEventListener("visibilitychange", () => this.requestRender());
     this.resize();
-    // At most 30 frames a second, and only when something changed: the view must not take
-    // the CPU from the control loop on the same PC (WebGL may be software-rendered).
-    let last = 0;
-    const loop = (now) => {
-      if (this.dirty && now - last >= 33) { last = now; this.render(); }
-      requestAnimationFrame(loop);
-    };
-    requestAnimationFrame(loop);
+  }
+
+  // The page paints the measured arm in its own frames (renderIfDirty); an operator's
+  // orbit, zoom or ghost is drawn at once, at most MAX_FPS, never while the page is hidden.
+  fps() {
+    return document.hidden ? 0 : ArmView.MAX_FPS;
+  }
+
+  material({ metalness, roughness, ...common }) {
+    return this.software ? new THREE.MeshLambertMaterial(common)
+      : new THREE.MeshStandardMaterial({ metalness, roughness, ...common });
+  }
+
+  renderIfDirty() {
+    if (this.dirty) this.render();
+  }
+
+  // A frame is drawn on the next animation frame once the cap allows, with what is newest
+  // then; any number of changes before it cost one frame.
+  requestRender() {
+    if (this.pending || !this.dirty) return;
+    const fps = this.fps();
+    if (fps === 0) return;  // drawn when the page is shown again (visibilitychange)
+    this.pending = true;
+    const wait = Math.max(0, this.last + 1000 / fps - performance.now());
+    setTimeout(() => requestAnimationFrame((now) => {
+      this.pending = false;
+      if (document.hidden) return;
+      this.last = now;
+      this.render();
+    }), wait);
   }
 
   addGuard(g) {
@@ -162,11 +205,13 @@ export class ArmView {
       this.orbit.elevation = Math.min(1.5, Math.max(-0.2, this.orbit.elevation + (e.clientY - drag.y) * 0.008));
       drag = { x: e.clientX, y: e.clientY };
       this.dirty = true;
+      this.requestRender();
     });
     el.addEventListener("wheel", (e) => {
       e.preventDefault();
       this.orbit.distance = Math.min(8000, Math.max(600, this.orbit.distance * Math.exp(e.deltaY * 0.001)));
       this.dirty = true;
+      this.requestRender();
     }, { passive: false });
   }
 
@@ -176,9 +221,14 @@ export class ArmView {
     this.camera.aspect = w / h;
     this.camera.updateProjectionMatrix();
     this.dirty = true;
+    this.requestRender();
   }
 
   render() {
+    if (this.measured && this.measured !== this.drawn) {
+      this.solid.set(this.measured);
+      this.drawn = this.measured;
+    }
     const o = this.orbit;
     this.camera.position.set(
       this.target.x + o.distance * Math.cos(o.elevation) * Math.cos(o.azimuth),
@@ -186,24 +236,36 @@ export class ArmView {
       this.target.z + o.distance * Math.sin(o.elevation));
     this.camera.lookAt(this.target);
     this.renderer.render(this.scene, this.camera);
+    this.renderCount += 1;
     this.dirty = false;
   }
 
+  // The measured arm (degrees): drawn at the page's next frame if it moved visibly.
   setMeasured(qDeg) {
     if (qDeg.some((v) => v === null || v === undefined)) return;
+    const base = this.drawn;
+    if (base && qDeg.every((v, i) => Math.abs(v - base[i]) < ArmView.STILL_DEG)) return;
     this.measured = qDeg;
-    this.solid.set(qDeg);
     this.dirty = true;
   }
 
-  // A target to show before it is sent (null hides the ghost).
+  // A target to show before it is sent (null hides the ghost); redrawn only if it changed.
   setGhost(qDeg) {
-    if (!qDeg || qDeg.some((v) => v === null || v === undefined || Number.isNaN(v))) {
+    const hide = !qDeg || qDeg.some((v) => v === null || v === undefined || Number.isNaN(v));
+    const key = hide ? null : qDeg.map((v) => v.toFixed(2)).join(",");
+    if (key === this.ghostKey) return;
+    this.ghostKey = key;
+    if (hide) {
       this.ghost.visible = false;
     } else {
       this.ghost.set(qDeg);
       this.ghost.visible = true;
     }
     this.dirty = true;
+    this.requestRender();
   }
 }
+
+ArmView.MAX_FPS = 30;
+// Joint motion (degrees) below which the drawn arm would not visibly change.
+ArmView.STILL_DEG = 0.01;
