@@ -645,6 +645,7 @@ class ArmSession:
     def _use_realtime(self) -> None:
         from seqrun.service.realtime import use_fifo
 
+        assert self.loop_priority is not None  # called only when one is set
         why = use_fifo(self.loop_priority)
         if why is not None:
             logging.getLogger(__name__).warning(
