@@ -435,6 +435,34 @@ def test_a_run_on_the_callers_thread_is_the_sessions_activity(session, tmp_path)
     assert seen["halt"].confirmed and session.activity is None
 
 
+def test_idle_hooks_run_on_the_loop_thread_of_every_activity_until_removed(session, tmp_path):
+    """A face draws between cycles through the session (the live view of ``seqrun run``):
+    its hook gets the slack on the thread that runs the loop (the caller's for
+    ``run_loaded``, the worker's for a move), and nothing after it is removed."""
+    from seqrun.schema import load_sequence
+
+    calls: list[tuple[str, float]] = []
+
+    def hook(slack: float) -> None:
+        calls.append((threading.current_thread().name, slack))
+
+    session.add_idle_hook(hook)
+    loaded = load_sequence(ROOT / "sequences" / "totem.yaml")
+    outcome = session.run_loaded(loaded, log_dir=tmp_path / "run", confirm=lambda p: True,
+                                 html_report=False)
+    assert outcome.result.exit_code == 0, outcome.result.message
+    here = threading.current_thread().name
+    assert len(calls) > 10 and {name for name, _ in calls} == {here}
+    assert all(slack > 0 for _, slack in calls)
+    n = len(calls)
+    assert session.move_to_joints({"j1": 5}).wait(120).ok
+    assert len(calls) > n and calls[-1][0] != here
+    session.remove_idle_hook(hook)
+    n = len(calls)
+    assert session.move_to_joints({"j1": 0}).wait(120).ok
+    assert len(calls) == n
+
+
 def test_the_deadman_fires_in_real_time_even_when_the_loop_has_no_idle_time():
     """A loop that is always late never calls its idle hooks; the deadman's own
     supervisor thread still posts the abort, once."""

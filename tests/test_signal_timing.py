@@ -112,7 +112,8 @@ def run_injected(tmp_path: Path, where: str, plan: list[tuple[int, str]], nth: i
     def attach(executor) -> None:
         injector.executor = executor
         executor.listeners.insert(0, injector.events.append)
-        live = LiveDisplay(console, executor, "test", "sim", len(loaded.steps))
+        live = LiveDisplay(console, executor.arm, executor.events.subscribe(maxsize=2000),
+                           "test", "sim", len(loaded.steps))
         executor.idle_hooks.append(live.on_idle)
 
         def live_view(event: dict) -> None:
