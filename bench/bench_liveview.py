@@ -14,7 +14,11 @@ Reported per mode (all pairs pooled): cycles, p50 / p99 / max period, periods >=
 and skipped slots (a period of k x 10 ms skipped k - 1 slots). The goal: the live view's
 row matches the plain one's.
 
-Run: ``.venv/bin/python bench/bench_liveview.py [--pairs 3] [--sequence opsafe]``
+``--compare DIR``: a second seqrun checkout (e.g. ``git worktree add /tmp/before main``):
+each pair then runs live and plain with this checkout's code and with DIR's, alternating
+(the order of the two checkouts flips every pair too); the rows are per checkout.
+
+Run: ``.venv/bin/python bench/bench_liveview.py [--pairs 3] [--sequence opsafe] [--compare DIR]``
 """
 
 from __future__ import annotations
@@ -43,14 +47,14 @@ CYCLE_S = 0.010
 MOTION_COMMANDS = {0x0B}  # SetMotion (TargetVel, FRAMP, FSTEP all start with it)
 
 
-def run_in_pty(args: list[str], timeout: float = 600.0) -> tuple[int, int]:
-    """Run ``python -m seqrun ARGS`` with a pty as its terminal; returns (exit code, bytes
-    of output drained)."""
+def run_in_pty(args: list[str], timeout: float = 600.0, root: Path = ROOT) -> tuple[int, int]:
+    """Run ``python -m seqrun ARGS`` (the code of the checkout ``root``) with a pty as its
+    terminal; returns (exit code, bytes of output drained)."""
     master, slave = pty.openpty()
     fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 40, 120, 0, 0))
-    env = {**os.environ, "PYTHONPATH": str(ROOT), "TERM": "xterm-256color",
+    env = {**os.environ, "PYTHONPATH": str(root), "TERM": "xterm-256color",
            "COLUMNS": "120", "LINES": "40"}
-    proc = subprocess.Popen([sys.executable, "-m", "seqrun", *args], cwd=ROOT, env=env,
+    proc = subprocess.Popen([sys.executable, "-m", "seqrun", *args], cwd=root, env=env,
                             stdin=slave, stdout=slave, stderr=slave, close_fds=True,
                             start_new_session=True)
     os.close(slave)
@@ -121,41 +125,50 @@ def main() -> None:
     parser.add_argument("--pairs", type=int, default=3)
     parser.add_argument("--sequence", default="opsafe")
     parser.add_argument("--out", type=Path, default=RESULTS / "liveview.json")
+    parser.add_argument("--compare", type=Path, metavar="DIR",
+                        help="another seqrun checkout, run alternately with this one")
     opts = parser.parse_args()
     info = machine()
-    runs: dict[str, list[dict]] = {"live": [], "plain": []}
+    trees = {"": ROOT}
+    if opts.compare is not None:
+        trees = {"this ": ROOT, "compare ": opts.compare.resolve()}
+    runs: dict[str, list[dict]] = {f"{t}{m}": [] for t in trees for m in ("live", "plain")}
     with tempfile.TemporaryDirectory() as tmp:
         for pair in range(opts.pairs):
             order = ("live", "plain") if pair % 2 == 0 else ("plain", "live")
-            for mode in order:
-                folder = Path(tmp) / f"{mode}-{pair}"
-                args = ["run", f"sequences/{opts.sequence}.yaml", "--yes",
-                        "--log-dir", str(folder)] + (["--plain"] if mode == "plain" else [])
-                t0 = time.perf_counter()
-                code, drained = run_in_pty(args)
-                wall = time.perf_counter() - t0
-                ev, fr = event_periods(folder), frame_periods(folder)
-                runs[mode].append({"pair": pair, "exit_code": code, "wall_s": round(wall, 2),
-                                   "terminal_bytes": drained, "events": summary(ev),
-                                   "frames": summary(fr), "_ev": ev, "_fr": fr})
-                print(f"pair {pair} {mode:5s}: exit {code}, {wall:.1f} s, "
-                      f"{drained} bytes to the terminal, "
-                      f"events {summary(ev)}", flush=True)
+            labels = list(trees) if pair % 2 == 0 else list(trees)[::-1]
+            for tree in labels:
+                for mode in order:
+                    folder = Path(tmp) / f"{tree.strip() or 'run'}-{mode}-{pair}"
+                    args = ["run", f"sequences/{opts.sequence}.yaml", "--yes",
+                            "--log-dir", str(folder)] + (["--plain"] if mode == "plain" else [])
+                    t0 = time.perf_counter()
+                    code, drained = run_in_pty(args, root=trees[tree])
+                    wall = time.perf_counter() - t0
+                    ev, fr = event_periods(folder), frame_periods(folder)
+                    runs[f"{tree}{mode}"].append({
+                        "pair": pair, "exit_code": code, "wall_s": round(wall, 2),
+                        "terminal_bytes": drained, "events": summary(ev),
+                        "frames": summary(fr), "_ev": ev, "_fr": fr})
+                    print(f"pair {pair} {tree}{mode:5s}: exit {code}, {wall:.1f} s, "
+                          f"{drained} bytes to the terminal, "
+                          f"events {summary(ev)}", flush=True)
     table = {}
     for mode, items in runs.items():
         table[mode] = {"events": summary([x for r in items for x in r["_ev"]]),
                        "frames": summary([x for r in items for x in r["_fr"]]),
                        "per_run": [{k: v for k, v in r.items() if not k.startswith("_")}
                                    for r in items]}
-    print(f"\n{'':6s} {'source':7s} {'cycles':>7s} {'p50 ms':>7s} {'p99 ms':>7s} "
+    print(f"\n{'':14s} {'source':7s} {'cycles':>7s} {'p50 ms':>7s} {'p99 ms':>7s} "
           f"{'max ms':>7s} {'>=12ms':>7s} {'skipped':>8s}")
-    for mode in ("live", "plain"):
+    for mode in table:
         for source in ("events", "frames"):
             s = table[mode][source]
-            print(f"{mode:6s} {source:7s} {s.get('cycles', 0):7d} {s.get('p50_ms', 0):7.2f} "
+            print(f"{mode:14s} {source:7s} {s.get('cycles', 0):7d} {s.get('p50_ms', 0):7.2f} "
                   f"{s.get('p99_ms', 0):7.2f} {s.get('max_ms', 0):7.2f} "
                   f"{s.get('periods_ge_12ms', 0):7d} {s.get('skipped_slots', 0):8d}")
     write_json(opts.out, {"machine": info, "sequence": opts.sequence, "pairs": opts.pairs,
+                          "compare": str(opts.compare) if opts.compare else None,
                           "loadavg_at_end": [round(x, 2) for x in os.getloadavg()],
                           **table})
     print(f"\nwritten {opts.out}")

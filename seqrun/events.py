@@ -247,8 +247,9 @@ class Setpoint(Event):
 class Measurement(Event):
     """A reading of the whole arm. In events.jsonl: ``joints_deg``, ``state`` and, after
     home/reset/halt, ``after`` and ``states``. Subscribers also get one per streamed cycle
-    of a move (``source="cycle"``, not written to the log: the ``setpoint`` event holds it)
-    and the session's idle polls (``source="poll"``)."""
+    of a move (``source="cycle"``, not written to the log: the ``setpoint`` event holds it),
+    the preflight's reading (``source="preflight"``, likewise) and the session's idle polls
+    (``source="poll"``)."""
 
     type: ClassVar[str] = "measurement"
     when: ClassVar[str] = ("every monitoring cycle (waits, checkpoints, pause), after home/"
@@ -268,7 +269,7 @@ class Measurement(Event):
     flags: Mapping[str, Sequence[str]] | None = _derived()
     #: Any joint's module reports a fault (ERROR, HALTED, TOW_ERROR, ...).
     fault: bool = _derived(False)
-    #: Where the reading came from: "monitor", "cycle", "poll", "step".
+    #: Where the reading came from: "monitor", "cycle", "preflight", "poll", "step".
     source: str = _derived("monitor")
 
 

@@ -39,8 +39,7 @@ from seqrun.clock import Clock
 from seqrun.drivers import (ArmDriver, CycleState, HaltConfirmation, JointState, LimitValues,
                             MotionRefused, as_driver)
 from seqrun.events import EventHub, make_event
-from seqrun.errors import (BusError, ModuleFaultError, ModuleTimeoutError, PlanningError,
-                           RunAborted)
+from seqrun.errors import BusError, RunAborted
 from seqrun.limits import LimitsInForce
 from seqrun.planner import Limits, MovePlan, plan_move, plan_stop
 from seqrun.usermessages import user_message
@@ -52,7 +51,7 @@ from seqrun.stop_requests import FROM_OUTSIDE, OPERATOR_HALT, StopRequest, StopR
 # from here too.
 from seqrun.results import (EXIT_FAULT, EXIT_INVALID, EXIT_OK,  # noqa: F401
                             EXIT_OPERATOR_ABORT, EXIT_USAGE, OperatorAbort, RunResult,
-                            StepResult)
+                            StepResult, fault_cause, halt_fields, latched_message)
 
 if TYPE_CHECKING:
     from seqrun.poses import PoseDirs
@@ -274,16 +273,21 @@ class Executor:
     def _derived(self, type_: str, data: dict) -> dict[str, dict]:
         """Velocities and flag names of a measurement or a setpoint, for subscribers."""
         if type_ == "measurement":
-            joints, words = data.get("joints_deg"), data.get("states")
+            joints = data.get("joints_deg")
         elif type_ == "setpoint":
-            joints, words = data.get("measured_deg"), None
+            joints = data.get("measured_deg")
         else:
             return {}
         short = data.get("state") or []
         if joints is None:
             return {}
         self._velocity.add(self.clock.now(), joints)
-        flags, fault = joint_flags(self.arm.joint_names, self.modules, short, words)
+        # The reading this event reports (read_arm and refresh_measurement set it first),
+        # decoded by the driver; its full states only for a measurement that shows them.
+        m = self.last
+        flags, fault = joint_flags(
+            self.arm.joint_names, self.modules, m.short_state if m is not None else {},
+            m.state_words if m is not None and type_ == "measurement" else None)
         extra = {"velocities_deg_s": self._velocity.velocity(), "flags": flags,
                  "fault": fault}
         if type_ == "measurement":
@@ -784,9 +788,11 @@ class Executor:
 
     def _halt_fields(self) -> dict[str, Any]:
         """``halt_sent``, ``halt_confirmed``, ``modules_not_halted`` for a fault record."""
-        if self.halt_result is None:
-            return {"halt_sent": False, "halt_confirmed": False}
-        return self.halt_result.as_dict()
+        return halt_fields(self.halt_result)
+
+    def elapsed_s(self) -> float:
+        """Seconds since the run started (the events' time base)."""
+        return self.clock.now() - self._t0
 
     def _halt_note(self) -> str:
         """What the operator must know about the Halt beyond "sent", or ''."""
@@ -839,6 +845,18 @@ class Executor:
                   module_limits={n: _r(v) for n, v in module_limits.items()},
                   states={str(k): v.describe() for k, v in states.items()},
                   errors=[str(e) for e in result.errors], notes=[str(n) for n in result.notes])
+        if self.events.subscribers:
+            # Faces get the first reading as a measurement too (not logged: the preflight
+            # event holds it), its flags decoded by the driver like every other one.
+            flags, fault = joint_flags(self.arm.joint_names, self.modules, m.short_state,
+                                       states)
+            now = self.clock.now()
+            self.events.publish(make_event(
+                "measurement", round(now - self._t0, 6),
+                {"joints_deg": _r(m.user_deg),
+                 "state": [states[k].cycle_code if k in states else int(m.short_state[k])
+                           for k in self.modules]},
+                clock_s=now, flags=flags, fault=fault, source="preflight"))
         return result
 
     def _record_latched(self, states: dict[int, JointState]) -> None:
@@ -854,10 +872,7 @@ class Executor:
                       message=self.latched_message())
 
     def latched_message(self) -> str:
-        which = "; ".join(f"module {e['module']} ({e['joint']}): {e['flags']}"
-                          for e in self.latched_at_start)
-        return (f"fault latched before this run (emergency stop pressed, or a previous "
-                f"run halted?): {which}")
+        return latched_message(self.latched_at_start)
 
     def confirm_clearing_latched(self, modules: list[int] | None) -> None:
         """Called by a Reset step before it clears faults: on real hardware a fault that
@@ -927,7 +942,7 @@ class Executor:
             self._enable_watchdog()
         except Exception as exc:  # noqa: BLE001 - nothing moves yet, but be sure
             self.emergency_halt()
-            cause, module = _cause(exc)
+            cause, module = fault_cause(exc)
             message = user_message(exc, self.arm) + self._halt_note()
             fault = {"cause": cause, "module": module, "message": message, "step": None,
                      **self._halt_fields()}
@@ -990,7 +1005,7 @@ class Executor:
             except Exception as exc:  # noqa: BLE001 - every failure, even a bug, halts
                 self.emergency_halt()
                 exc = self._operator_halt_seen(exc)
-                cause, module = _cause(exc)
+                cause, module = fault_cause(exc)
                 if cause == "internal_error":
                     self.emit("internal_error", traceback=traceback.format_exc())
                     exc = RunAborted(cause, f"internal error ({type(exc).__name__}: {exc}); "
@@ -1059,20 +1074,6 @@ class Executor:
                   duration_s=_round(run.duration_s),
                   planned_duration_s=_round(run.planned_duration_s), **extra)
         return run
-
-
-def _cause(exc: Exception) -> tuple[str, int | None]:
-    if isinstance(exc, RunAborted):
-        return exc.cause, exc.module
-    if isinstance(exc, ModuleTimeoutError):
-        return "no_acknowledge", exc.module
-    if isinstance(exc, ModuleFaultError):
-        return "module_fault", exc.module
-    if isinstance(exc, PlanningError):
-        return "planning", None
-    if isinstance(exc, BusError):
-        return "bus_error", getattr(exc, "module", None)
-    return "internal_error", None
 
 
 def _label(step) -> str:

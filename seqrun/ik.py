@@ -31,7 +31,7 @@ import numpy.typing as npt
 
 from seqrun.arm import ArmDescription
 from seqrun.errors import SeqrunError
-from seqrun.kinematics import Chain, _frame_matrix, matrix_from_rpy
+from seqrun.kinematics import Chain, frame_matrix, matrix_from_rpy
 
 __all__ = [
     "ANGLE_TOLERANCE_RAD",
@@ -87,7 +87,7 @@ def tool_chain(arm: ArmDescription, tool: str | None = None) -> Chain:
     frame = arm.tool(tool)
     if frame is None:
         return chain
-    return Chain(base=chain.base, links=chain.links, tool=chain.tool @ _frame_matrix(frame))
+    return Chain(base=chain.base, links=chain.links, tool=chain.tool @ frame_matrix(frame))
 
 
 def target_frame(position_mm: Sequence[float], rpy_deg: Sequence[float]) -> np.ndarray:

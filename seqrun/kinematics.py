@@ -80,7 +80,8 @@ def _cos_sin_deg(angle_deg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return cos, sin
 
 
-def _frame_matrix(frame: Frame | Tool) -> np.ndarray:
+def frame_matrix(frame: Frame | Tool) -> np.ndarray:
+    """The 4x4 transform of a frame or tool (xyz in mm, rpy in degrees)."""
     cos, sin = _cos_sin_deg(np.asarray(frame.rpy_deg, dtype=float))
     return _homogeneous(_rpy_matrix(cos, sin), np.asarray(frame.xyz_mm, dtype=float))
 
@@ -120,9 +121,9 @@ class Chain:
     @classmethod
     def from_arm(cls, arm: ArmDescription) -> Chain:
         kin = arm.kinematics
-        links = (np.stack([_frame_matrix(f) for f in kin.links]) if kin.links
+        links = (np.stack([frame_matrix(f) for f in kin.links]) if kin.links
                  else np.zeros((0, 4, 4)))
-        return cls(base=_frame_matrix(kin.base), links=links, tool=_frame_matrix(kin.tool))
+        return cls(base=frame_matrix(kin.base), links=links, tool=frame_matrix(kin.tool))
 
 
 def _rot_z(q: np.ndarray) -> np.ndarray:

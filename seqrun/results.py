@@ -7,15 +7,17 @@ them (``from seqrun.executor import ...`` keeps working: it re-exports these).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 # Exit codes (shared with the CLI; defined where the CLI can read them without the executor).
 from seqrun.defaults import (EXIT_FAULT, EXIT_INVALID, EXIT_OK,  # noqa: F401
                              EXIT_OPERATOR_ABORT, EXIT_USAGE)
-from seqrun.errors import SeqrunError
+from seqrun.errors import (BusError, ModuleFaultError, ModuleTimeoutError, PlanningError,
+                           RunAborted, SeqrunError)
 
 __all__ = ["EXIT_FAULT", "EXIT_INVALID", "EXIT_OK", "EXIT_OPERATOR_ABORT", "EXIT_USAGE",
-           "OperatorAbort", "RunResult", "StepResult"]
+           "OperatorAbort", "RunResult", "StepResult", "fault_cause", "halt_fields",
+           "latched_message"]
 
 
 class OperatorAbort(SeqrunError):
@@ -74,3 +76,39 @@ class RunResult:
 
 def _round(x: float | None, nd: int = 4) -> float | None:
     return None if x is None else round(float(x), nd)
+
+
+def fault_cause(exc: BaseException) -> tuple[str, int | None]:
+    """``(cause, module)`` of a fault record for what ended a run or a jog: the cause a
+    check named, else the kind of failure (``internal_error`` for a bug)."""
+    if isinstance(exc, RunAborted):
+        return exc.cause, exc.module
+    if isinstance(exc, ModuleTimeoutError):
+        return "no_acknowledge", exc.module
+    if isinstance(exc, ModuleFaultError):
+        return "module_fault", exc.module
+    if isinstance(exc, PlanningError):
+        return "planning", None
+    if isinstance(exc, BusError):
+        return "bus_error", getattr(exc, "module", None)
+    return "internal_error", None
+
+
+class _Confirmation(Protocol):
+    def as_dict(self) -> dict[str, Any]: ...
+
+
+def halt_fields(confirmation: _Confirmation | None) -> dict[str, Any]:
+    """``halt_sent``, ``halt_confirmed``, ``modules_not_halted`` for a fault record, from
+    the emergency Halt's confirmation (None: no Halt was sent)."""
+    if confirmation is None:
+        return {"halt_sent": False, "halt_confirmed": False}
+    return confirmation.as_dict()
+
+
+def latched_message(latched: list[dict[str, Any]]) -> str:
+    """What the operator is told of faults the modules reported before a run sent anything
+    but reads (``RunResult.latched_at_start``)."""
+    which = "; ".join(f"module {e['module']} ({e['joint']}): {e['flags']}" for e in latched)
+    return (f"fault latched before this run (emergency stop pressed, or a previous "
+            f"run halted?): {which}")

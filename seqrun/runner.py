@@ -161,6 +161,6 @@ def _unfinished(executor: Executor, loaded: LoadedSequence, exc: BaseException) 
                         str(s.location)) for s in loaded.steps]
     message = f"interrupted ({exc!r}) before the run could finish"
     return RunResult("failed", EXIT_FAULT, message, steps, 0.0,
-                     executor.clock.now() - executor._t0,
+                     executor.elapsed_s(),
                      {"cause": "interrupted", "module": None, "message": message,
                       "step": None, "halt_sent": False, "halt_confirmed": False})

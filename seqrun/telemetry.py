@@ -3,18 +3,22 @@
 - :class:`VelocityWindow`: joint velocities as the least-squares slope of the measured
   positions over the last window of samples (the same estimate as :mod:`seqrun.tracking`;
   one cycle's difference quotient is useless on a loaded host).
-- :func:`joint_flags`: each joint's state flag names, from its state word where one was read,
-  else from the short state byte of the extended acknowledge.
+- :func:`joint_flags`: each joint's state flag names and whether any joint is at fault, from
+  the driver's decoded states (:mod:`seqrun.drivers.base`): the full state where one was
+  read, else the state of the reading. The codes themselves are the driver's business.
 """
 
 from __future__ import annotations
 
 from collections import deque
-from functools import lru_cache
 from collections.abc import Mapping, Sequence
+from functools import lru_cache
+from typing import TYPE_CHECKING
 
-from seqrun.powercube.protocol import ShortState, StateFlag
 from seqrun.tracking import MIN_SPAN_FRACTION, VELOCITY_WINDOW_S
+
+if TYPE_CHECKING:
+    from seqrun.drivers.base import CycleState, JointState
 
 
 class VelocityWindow:
@@ -60,42 +64,47 @@ class VelocityWindow:
         return out
 
 
-@lru_cache(maxsize=4096)
-def _short_names(state: int) -> tuple[tuple[str, ...], bool]:
-    s = ShortState(state)
-    return (() if not s else tuple(s.describe().split("|"))), bool(s & ShortState.NOT_OK)
+#: What a drive's ``describe()`` says for "no flag" (PowerCube: "OK", "none"): not a flag.
+NO_FLAGS = frozenset({"", "ok", "none"})
 
 
 @lru_cache(maxsize=4096)
-def _word_names(word: int) -> tuple[tuple[str, ...], bool]:
-    w = StateFlag(word)
-    return (tuple(w.describe().split("|")) if w else ()), bool(w & StateFlag.FAULTS)
+def flag_names(text: str) -> tuple[str, ...]:
+    """The flag names in a drive's ``describe()`` text (``"HOME_OK|RAMP_END"``)."""
+    return tuple(n for n in text.split("|") if n.strip().lower() not in NO_FLAGS)
 
 
-@lru_cache(maxsize=4096)
-def _described_names(text: str) -> tuple[tuple[str, ...], bool]:
-    names = tuple(n for n in text.split("|") if n and n != "none")
-    return names, any(n in StateFlag.__members__ and StateFlag[n] & StateFlag.FAULTS
-                      for n in names)
+#: (cycle state type, code) -> (names, refuses motion): the per-cycle states repeat, and
+#: describing one costs more than a control cycle can spare for every joint.
+_CYCLE_NAMES: dict[tuple[type, int], tuple[tuple[str, ...], bool]] = {}
 
 
-def joint_flags(joint_names: Sequence[str], modules: Sequence[int], short: Sequence[int],
-                words: Mapping[str, str] | Mapping[int, StateFlag] | None = None
+def _cycle_names(state: CycleState) -> tuple[tuple[str, ...], bool]:
+    key = (type(state), int(state))
+    found = _CYCLE_NAMES.get(key)
+    if found is None:
+        if len(_CYCLE_NAMES) > 4096:
+            _CYCLE_NAMES.clear()
+        found = _CYCLE_NAMES[key] = (flag_names(state.describe()), bool(state.refuses_motion))
+    return found
+
+
+def joint_flags(joint_names: Sequence[str], modules: Sequence[int],
+                states: Mapping[int, CycleState],
+                full: Mapping[int, JointState] | None = None
                 ) -> tuple[dict[str, tuple[str, ...]], bool]:
-    """``({joint: flag names}, any fault)``. A state word (by module id, as a StateFlag or
-    its description) wins over the short state; from the short state alone a fault is
-    NOT_OK (a fault, a Halt, or not homed yet)."""
+    """``({joint: flag names}, any fault)`` as the driver decoded them: a joint's full
+    state (where one was read) wins over the state of its last reading; from the latter
+    alone a fault is a joint that refuses motion (a fault, a Halt, or not homed yet)."""
     flags: dict[str, tuple[str, ...]] = {}
     fault = False
-    words = words or {}
-    for name, module, state in zip(joint_names, modules, short):
-        word = words.get(str(module), words.get(module)) if words else None  # type: ignore[call-overload]
-        if isinstance(word, StateFlag):
-            names, bad = _word_names(int(word))
-        elif isinstance(word, str):
-            names, bad = _described_names(word)
+    for name, module in zip(joint_names, modules):
+        word = full.get(module) if full else None
+        if word is not None:
+            names, bad = flag_names(word.text), word.faulted
         else:
-            names, bad = _short_names(int(state))
+            state = states.get(module)
+            names, bad = _cycle_names(state) if state is not None else ((), False)
         flags[name] = names
         fault = fault or bad
     return flags, fault

@@ -7,49 +7,19 @@ in user degrees (Totem = zeros). :func:`user_message` rewrites such a request fo
 
 from __future__ import annotations
 
-import math
-
 from seqrun.errors import ModuleTimeoutError
-from seqrun.powercube.codec import SetMotion, SetParam
-from seqrun.powercube.protocol import MotionMode, ParamId
-
-#: Parameters holding a joint position (module radians; user = module - offset).
-_POSITIONS = {ParamId.MIN_POS, ParamId.MAX_POS, ParamId.ACT_POS, ParamId.DEF_MIN_POS,
-              ParamId.DEF_MAX_POS}
-#: Parameters holding a rate (rad/s, rad/s²): no offset.
-_RATES = {ParamId.MAX_VEL: "°/s", ParamId.MAX_ACC: "°/s²", ParamId.ACT_VEL: "°/s",
-          ParamId.DEF_MAX_VEL: "°/s", ParamId.DEF_MAX_ACC: "°/s²"}
-_POSITION_MODES = {MotionMode.FRAMP, MotionMode.FRAMP_ACK, MotionMode.FSTEP,
-                   MotionMode.FSTEP_ACK}
-_VELOCITY_MODES = {MotionMode.FVEL, MotionMode.FVEL_ACK}
 
 
 def describe_request(request, arm) -> str | None:
-    """``SetExtended MIN_POS (j4) = -120.00°`` for angle-valued writes; None otherwise."""
+    """``SetExtended MIN_POS (j4) = -120.00°`` for angle-valued writes; None otherwise. The
+    request says itself in its joint's units (``in_user_units``: the driver's requests do,
+    see :mod:`seqrun.powercube.codec`)."""
     module = getattr(request, "module", None)
     joint = next((j for j in arm.joints if j.module == module), None)
-    if joint is None:
+    describe = getattr(request, "in_user_units", None)
+    if joint is None or describe is None:
         return None
-    if isinstance(request, SetParam):
-        param = ParamId(request.param)
-        if param in _POSITIONS:
-            value = f"{_deg(joint.to_user_deg(float(request.value)))}°"
-        elif param in _RATES:
-            value = f"{_deg(math.degrees(float(request.value)))} {_RATES[param]}"
-        else:
-            return None
-        return f"SetExtended {param.name} ({joint.name}) = {value}"
-    if isinstance(request, SetMotion):
-        mode = MotionMode(request.mode)
-        if mode in _POSITION_MODES:
-            value = f"{_deg(joint.to_user_deg(float(request.value)))}°"
-        elif mode in _VELOCITY_MODES:
-            value = f"{_deg(math.degrees(float(request.value)))} °/s"
-        else:
-            return None
-        timing = f" in {request.time_ms} ms" if request.time_ms is not None else ""
-        return f"SetMotion {mode.name} ({joint.name}) {value}{timing}"
-    return None
+    return describe(joint)
 
 
 def user_message(exc: BaseException, arm) -> str:
@@ -62,8 +32,3 @@ def user_message(exc: BaseException, arm) -> str:
             return (f"module {exc.module}: no acknowledge to {described}{rest} within "
                     f"{exc.timeout * 1000:.0f} ms")
     return str(exc)
-
-
-def _deg(value: float) -> str:
-    value = round(value, 2)
-    return f"{value + 0.0:.2f}"  # never -0.00

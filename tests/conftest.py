@@ -1,7 +1,8 @@
 """Fixtures every test file may use. The helper modules beside this file (projecttree,
 runfolder, fakebus, wrapbus, …) are imported by name: pytest puts this folder on sys.path.
 
-Tiers: ``pytest -m "not slow"`` is the fast loop; ``pytest -n 2`` (CI) runs everything."""
+Tiers: ``pytest -m "not slow"`` is the fast loop; ``pytest -n 2`` (CI) runs everything.
+Property tests draw a quarter of their examples in the fast loop (tiers.py)."""
 
 from __future__ import annotations
 
@@ -9,8 +10,13 @@ from pathlib import Path
 
 import pytest
 
+import tiers
 from projecttree import make_project, shipped_arm
 from seqrun.arm import ArmDescription
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    tiers.configure(config.getoption("markexpr") or "")
 
 
 @pytest.fixture(scope="session")

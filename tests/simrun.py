@@ -26,14 +26,16 @@ class SimRun(NamedTuple):
 
 def run_on_sim(name: str, tmp_path: Path, *, root: Path = ROOT, faults: Iterable[str] = (),
                positions: Mapping[int, float] | Sequence[float] | None = None, started: bool = False,
-               before: Callable[[Connection], None] | None = None,
+               before: Callable[[Connection], None] | None = None, html_report: bool = False,
                **kwargs: Any) -> SimRun:
     """Run ``root/sequences/<name>.yaml`` (the arm its sequence names) into ``tmp_path/run``.
 
     ``faults``: ``--sim-fault`` specs; ``positions``: the modules' power-on positions;
     ``started``: the modules are reset, homed and limited first; ``before(connection)``
-    runs before the sequence; other keywords go to :func:`seqrun.runner.run_sequence`
-    (``confirm`` answers yes unless given)."""
+    runs before the sequence; ``html_report``: draw report.html too (drawn after the run,
+    it costs as much CPU as the run itself, so only tests that read it ask for it); other
+    keywords go to :func:`seqrun.runner.run_sequence` (``confirm`` answers yes unless
+    given)."""
     loaded = load_sequence(root / "sequences" / f"{name}.yaml")
     arm = load_arm(loaded.arm_path)
     connection = open_connection(force_sim=True, clock=VirtualClock(),
@@ -45,7 +47,8 @@ def run_on_sim(name: str, tmp_path: Path, *, root: Path = ROOT, faults: Iterable
         if before is not None:
             before(connection)
         kwargs.setdefault("confirm", lambda prompt: True)
-        outcome = run_sequence(loaded, arm, connection, log_dir=tmp_path / "run", **kwargs)
+        outcome = run_sequence(loaded, arm, connection, log_dir=tmp_path / "run",
+                               html_report=html_report, **kwargs)
         return SimRun(outcome, connection.bus.arm, connection)
     finally:
         connection.close()

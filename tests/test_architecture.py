@@ -122,6 +122,49 @@ def test_faces_reach_the_arm_only_through_the_service_layer():
     assert reaching_in == []
 
 
+POWERCUBE = ("powercube", "powercube.*")
+WIRE = POWERCUBE + ("sim", "sim.*")
+#: The modules besides the wire layer that may speak PowerCube: the driver, the Halt/Reset
+#: helpers and the places that open a PowerCube client or read frames (the service layer's
+#: plumbing, the run and dry-run assembly, the CSV export of logged state bytes). Anything
+#: else asks the driver (issue 10.3): state codes, requests and their units stay behind it.
+POWERCUBE_SPEAKERS = {"drivers.powercube", "drivers.setpoints", "halt", "armcontrol",
+                      "service.arm_access", "service.session", "service.foreign_frames",
+                      "service.run_control", "runner", "dryrun", "report.csvout"}
+
+
+def test_powercube_is_spoken_only_behind_the_driver_seam():
+    speakers = {short(m) for m in MODULES if not matches(m, WIRE)
+                and any(matches(t, POWERCUBE) for t in seqrun_imports(m))}
+    assert sorted(speakers - POWERCUBE_SPEAKERS) == []
+
+
+def powercube_paths(module: str) -> list[str]:
+    """Import chains from ``module`` to seqrun.powercube that pass only through modules of
+    the base and the arm-and-format layers (the drivers and the service may speak it)."""
+    names = [name for name, _ in LAYERS]
+    through = {names.index("base"), names.index("arm and format")}
+    found, seen = [], set()
+    stack = [(module, (short(module),))]
+    while stack:
+        current, path = stack.pop()
+        for target in sorted(seqrun_imports(current)):
+            if matches(target, POWERCUBE):
+                found.append(" -> ".join(path + (short(target),)))
+            elif target not in seen and set(layer_of(target)) & through:
+                seen.add(target)
+                stack.append((target, path + (short(target),)))
+    return found
+
+
+@pytest.mark.parametrize("module", sorted(m for m in MODULES
+                                          if matches(m, ("executor",) + FACES)))
+def test_the_executor_and_the_faces_do_not_reach_powercube(module):
+    """Not even through a helper of the format layer (telemetry decoded state bytes and
+    usermessages described requests there once)."""
+    assert powercube_paths(module) == []
+
+
 def test_the_checker_sees_an_upward_import(tmp_path):
     """The import reader finds imports inside functions and skips type-checking ones."""
     source = tmp_path / "probe.py"
@@ -132,3 +175,55 @@ def test_the_checker_sees_an_upward_import(tmp_path):
     found = imported_modules(source, "seqrun.cli.probe")
     assert "seqrun.powercube.codec" in found and "seqrun.cli.sibling" in found
     assert "seqrun.executor" not in found
+
+
+#: Names under which a module holds an executor (or a step's view of it).
+EXECUTOR_NAMES = {"executor", "ex"}
+
+
+def private_uses(path: Path) -> list[str]:
+    """Private names (one leading underscore) ``path`` takes from another seqrun module, and
+    private attributes it reads of an executor held under a name of :data:`EXECUTOR_NAMES`."""
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.ImportFrom) and (node.level or
+                                                 (node.module or "").startswith("seqrun")):
+            found += [f"imports {node.module}.{a.name}" for a in node.names
+                      if a.name.startswith("_") and not a.name.startswith("__")]
+        elif (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)
+              and node.value.id in EXECUTOR_NAMES and node.attr.startswith("_")
+              and not node.attr.startswith("__")):
+            found.append(f"reads {node.value.id}.{node.attr} (line {node.lineno})")
+    return found
+
+
+def test_no_module_uses_another_modules_private_names():
+    """What two modules share is public (the jog once took the executor's ``_cause`` and
+    ``_halt_fields``; they are ``seqrun.results.fault_cause`` / ``halt_fields`` now)."""
+    uses = [f"{short(m)} {use}" for m, path in sorted(MODULES.items())
+            for use in private_uses(path)]
+    assert uses == []
+
+
+#: What only the service layer may hold of a run: the executor and its hooks.
+EXECUTOR_HANDLES = {"executor", "idle_hooks", "on_executor", "listeners"}
+
+
+def executor_handles(path: Path) -> list[str]:
+    """Names, attributes, parameters and keywords of :data:`EXECUTOR_HANDLES` in ``path``."""
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        name = (node.id if isinstance(node, ast.Name) else
+                node.attr if isinstance(node, ast.Attribute) else
+                node.arg if isinstance(node, (ast.arg, ast.keyword)) else None)
+        if name in EXECUTOR_HANDLES:
+            found.append(f"{name} (line {node.lineno})")
+    return found
+
+
+@pytest.mark.parametrize("module", sorted(m for m in MODULES if matches(m, FACES)))
+def test_faces_go_through_the_session_and_nothing_else(module):
+    """Issue 10.1: no face imports the executor (above) nor holds one handed out by the
+    service layer: the displays subscribe to the session's events and render in its idle
+    hook, `seqrun run` gives the session its run control, the result says what latched."""
+    assert executor_handles(MODULES[module]) == []

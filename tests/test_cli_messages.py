@@ -69,7 +69,8 @@ def test_step_started_events_name_their_include(project, tmp_path):
     path.write_text("name: T\ndescription: test\nsteps:\n"
                     "  - include: {file: startup.yaml, label: Power-on start-up}\n"
                     "  - wait: 0.1\n")
-    result = run("run", path, "--virtual-time", "--yes", "--plain", "--log-dir", tmp_path / "r")
+    result = run("run", path, "--virtual-time", "--yes", "--plain", "--no-report",
+                 "--log-dir", tmp_path / "r")
     assert result.exit_code == 0, result.output
     events = RunFolder(tmp_path / "r").events()
     started = [e for e in events if e["type"] == "step_started"]

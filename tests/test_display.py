@@ -49,13 +49,14 @@ def run_with_displays(path: Path, tmp_path: Path, faults=()):
     views = {}
 
     def attach(executor):
-        views["live"] = LiveDisplay(live_console, executor, f"seqrun: {loaded.name}", "sim",
-                                    len(loaded.steps))
+        views["live"] = LiveDisplay(live_console, executor.arm, executor.events.subscribe(
+            maxsize=2000, name="live view"), f"seqrun: {loaded.name}", "sim", len(loaded.steps))
         executor.listeners += [views["live"], PlainDisplay(plain_console, len(loaded.steps))]
 
     try:
         outcome = run_sequence(loaded, arm, connection, log_dir=tmp_path / "run",
-                               confirm=lambda prompt: True, on_executor=attach)
+                               confirm=lambda prompt: True, on_executor=attach,
+                               html_report=False)
     finally:
         connection.close()
     return outcome, views["live"], live_console, plain_console
@@ -230,8 +231,10 @@ def test_the_live_view_renders_on_the_control_loop_thread_only(tmp_path):
             return super().__rich__()
 
     def attach(executor):
-        view = Recording(screen, executor, "live", "sim", len(loaded.steps))
+        view = Recording(screen, executor.arm, executor.events.subscribe(maxsize=2000),
+                         "live", "sim", len(loaded.steps))
         executor.listeners.append(view)
+        executor.idle_hooks.append(view.on_idle)  # as ArmSession.add_idle_hook does
         view.__enter__()
         views.append(view)
 
@@ -259,3 +262,25 @@ def test_a_run_refused_in_preflight_still_shows_where_the_arm_stands(tmp_path):
     live_console.print(view)
     table = rows(live_console.export_text())
     assert table["j2"].split()[0] == "-90.00", table["j2"]
+
+
+def test_request_descriptions_give_rates_without_the_offset(arm):
+    """Positions get the joint's offset, rates only the unit (one conversion for both
+    SetExtended and SetMotion); values that are not angles are not described."""
+    import math
+
+    from seqrun.powercube.codec import SetMotion, SetParam
+    from seqrun.powercube.protocol import MotionMode, ParamId
+    from seqrun.usermessages import describe_request
+
+    j2 = arm.joint("j2")
+    rate = math.radians(12.5)
+    assert describe_request(SetParam(j2.module, ParamId.MAX_VEL, rate), arm) == (
+        "SetExtended MAX_VEL (j2) = 12.50 °/s")
+    assert describe_request(SetParam(j2.module, ParamId.MAX_ACC, rate), arm) == (
+        "SetExtended MAX_ACC (j2) = 12.50 °/s²")
+    assert describe_request(SetMotion(j2.module, MotionMode.FVEL_ACK, -rate), arm) == (
+        "SetMotion FVEL_ACK (j2) -12.50 °/s")
+    step = SetMotion(j2.module, MotionMode.FSTEP_ACK, j2.to_module_rad(-30.0), time_ms=40)
+    assert describe_request(step, arm) == "SetMotion FSTEP_ACK (j2) -30.00° in 40 ms"
+    assert describe_request(SetParam(j2.module, ParamId.CUBE_STATE, 0), arm) is None

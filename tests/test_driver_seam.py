@@ -260,3 +260,25 @@ def test_the_powercube_driver_is_an_arm_driver():
         assert all(not s.homed and not s.faulted and s.cause == "not_homed"
                    for s in states.values())
         client.close()
+
+
+def test_measurements_carry_the_flags_and_faults_the_driver_decoded():
+    """A face's flags come from the driver's own states, never from PowerCube codes: the
+    ideal arm's overheated joint is a fault with its own names (decoded as PowerCube, its
+    cycle code 1 read "NOT_OK" and its full state "HOT HALTED HOMED" no fault at all)."""
+    driver = IdealArm(park(), overheat=(3, 1.0))
+    loaded = load_sequence(ROOT / "sequences" / "opsafe.yaml")
+    executor = Executor(driver, ARM, VirtualClock(), poses_dir=loaded.poses_dir,
+                        confirm=lambda prompt: True)
+    subscription = executor.events.subscribe(maxsize=100_000, name="test")
+    result = executor.run(loaded)
+    assert result.exit_code == EXIT_FAULT
+    measurements = [e for e in subscription.drain() if e.type == "measurement"]
+    first, after_halt = measurements[0], measurements[-1]
+    # Not homed yet: no fault in the full state the preflight read, the driver's name for it.
+    assert first.source == "preflight" and not first.fault
+    assert first.flags["j1"] == ("NOT_HOMED",)
+    assert after_halt.after == "halt" and after_halt.fault
+    assert "HOT" in after_halt.flags["j3"][0]
+    names = {n for e in measurements for flags in e.flags.values() for n in flags}
+    assert not names & {"NOT_OK", "SWR", "MOTION", "RAMP_END", "HOME_OK"}, names

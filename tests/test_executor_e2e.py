@@ -209,7 +209,8 @@ def test_a_checkpoint_that_is_not_met_halts_with_exit_3(tmp_path):
     connection_holder["sim"] = connection.bus.arm
     try:
         outcome = run_sequence(loaded, arm, connection, log_dir=tmp_path / "run",
-                               confirm=lambda p: True, on_executor=nudge_before_checkpoint)
+                               confirm=lambda p: True, on_executor=nudge_before_checkpoint,
+                               html_report=False)
     finally:
         connection.close()
     assert outcome.result.exit_code == EXIT_FAULT
@@ -265,7 +266,7 @@ def test_an_unexpected_error_in_a_step_halts_and_is_reported_without_traceback(t
         raise ZeroDivisionError("simulated bug")
     monkeypatch.setitem(steps.HANDLERS, "wait", broken)
     result = CliRunner().invoke(app, ["run", str(ROOT / "sequences" / "opsafe.yaml"),
-                                      "--virtual-time", "--yes", "--plain",
+                                      "--virtual-time", "--yes", "--plain", "--no-report",
                                       "--log-dir", str(tmp_path / "run")])
     assert result.exit_code == EXIT_FAULT
     assert "internal error (ZeroDivisionError: simulated bug)" in result.output
@@ -292,7 +293,8 @@ def test_frames_that_answer_nothing_are_logged_as_discarded(tmp_path):
         executor.listeners.append(listener)
     try:
         outcome = run_sequence(loaded, arm, connection, log_dir=tmp_path / "run",
-                               confirm=lambda p: True, on_executor=inject_once)
+                               confirm=lambda p: True, on_executor=inject_once,
+                               html_report=False)
     finally:
         intruder.shutdown()
         connection.close()
@@ -329,7 +331,7 @@ def test_keyboardinterrupt_escaping_a_step_still_halts(tmp_path, monkeypatch):
 
 def test_step_mode_asks_before_each_step_and_a_no_ends_the_run(tmp_path):
     args = ["run", str(ROOT / "sequences" / "totem.yaml"), "--virtual-time", "--yes", "--plain",
-            "--step"]
+            "--step", "--no-report"]
     # Yes to the three start-up steps and the confirm step, no to the move.
     declined = CliRunner().invoke(app, args + ["--log-dir", str(tmp_path / "no")],
                                   input="y\ny\ny\ny\nn\n")

@@ -22,8 +22,8 @@ def cli_run(tmp_path: Path, monkeypatch, *extra: str):
     monkeypatch.setenv("SEQRUN_SIM_OPTIONS", "framp_from_standstill")
     folder = tmp_path / "run"
     result = CliRunner().invoke(app, ["run", str(ROOT / "sequences" / "opsafe.yaml"),
-                                      "--virtual-time", "--yes", "--plain", "--log-dir",
-                                      str(folder), *extra])
+                                      "--virtual-time", "--yes", "--plain", "--no-report",
+                                      "--log-dir", str(folder), *extra])
     report = RunFolder(folder).report()
     return result, report, folder
 
@@ -55,8 +55,9 @@ def test_step_mode_does_not_depend_on_framp_blending(tmp_path, monkeypatch):
 
 def test_a_stuck_joint_is_not_taken_for_non_blending_firmware(tmp_path):
     result = CliRunner().invoke(app, ["run", str(ROOT / "sequences" / "opsafe.yaml"),
-                                      "--virtual-time", "--yes", "--plain", "--log-dir",
-                                      str(tmp_path / "run"), "--sim-fault", "4:stuck@3"])
+                                      "--virtual-time", "--yes", "--plain", "--no-report",
+                                      "--log-dir", str(tmp_path / "run"),
+                                      "--sim-fault", "4:stuck@3"])
     assert result.exit_code == 3
     report = RunFolder(tmp_path / "run").report()
     assert report["fault"]["cause"] == "following_error"

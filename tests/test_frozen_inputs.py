@@ -53,7 +53,8 @@ def test_a_pose_file_rewritten_mid_run_changes_nothing(project, tmp_path):
     try:
         outcome = run_sequence(loaded, arm, connection, log_dir=tmp_path / "run",
                                confirm=lambda prompt: True,
-                               listeners=[rewrite_after_the_move_to_totem])
+                               listeners=[rewrite_after_the_move_to_totem],
+                               html_report=False)
         at = connection.bus.arm.positions()
     finally:
         connection.close()

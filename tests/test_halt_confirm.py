@@ -97,7 +97,8 @@ def test_a_run_reports_an_unconfirmed_halt_and_names_the_module(tmp_path):
     events = []
     try:
         outcome = run_sequence(loaded, ARM, connection, log_dir=tmp_path / "run",
-                               confirm=lambda prompt: True, listeners=[events.append])
+                               confirm=lambda prompt: True, listeners=[events.append],
+                               html_report=False)
     finally:
         connection.close()
     fault = outcome.result.fault

@@ -62,7 +62,7 @@ def test_a_run_with_a_host_stall_mid_move_has_no_fault(tmp_path):
     connection = Connection(bus, clock, True, "simulator with a host stall")
     try:
         outcome = run_sequence(loaded, arm, connection, log_dir=tmp_path / "run",
-                               confirm=lambda prompt: True)
+                               confirm=lambda prompt: True, html_report=False)
     finally:
         connection.close()
     assert bus.stalled["stalled"]

@@ -17,6 +17,7 @@ from seqrun.arm import Tool
 from seqrun.cli.app import app
 from seqrun.ik import IkSolver, Unreachable, target_frame, tool_chain
 from seqrun.kinematics import Chain, fk, orientation_error
+from tiers import examples
 
 ARM = shipped_arm()
 CHAIN = Chain.from_arm(ARM)
@@ -65,7 +66,7 @@ def _well_conditioned(q_deg, columns=(0, 1, 3, 4, 5, 6)) -> bool:
     return float(np.linalg.svd(jac, compute_uv=False).min()) > 0.1
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=examples(60), deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(q=configuration(locked_j3=True), near=st.booleans())
 def test_round_trip_six_active_joints_keeps_j3_locked(q, near):
     seed = np.clip(q + 3.0, LIMITS[:, 0], LIMITS[:, 1]) if near else np.zeros(7)
@@ -76,7 +77,7 @@ def test_round_trip_six_active_joints_keeps_j3_locked(q, near):
         assert np.max(np.abs(solution.joints_deg - q)) < 1e-3
 
 
-@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=examples(40), deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(q=configuration(locked_j3=False))
 def test_round_trip_full_seven_joint_arm_from_a_nearby_seed(q):
     seed = np.clip(q + 2.0, LIMITS[:, 0], LIMITS[:, 1])

@@ -22,7 +22,7 @@ from zerostate import serve_arm
 
 def cli_run(tmp_path: Path, *faults: str):
     args = ["run", str(ROOT / "sequences" / "opsafe.yaml"), "--virtual-time", "--yes",
-            "--plain", "--log-dir", str(tmp_path / "run")]
+            "--plain", "--no-report", "--log-dir", str(tmp_path / "run")]
     for fault in faults:
         args += ["--sim-fault", fault]
     result = CliRunner().invoke(app, args)

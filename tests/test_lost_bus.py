@@ -65,7 +65,8 @@ def test_a_bus_that_breaks_mid_move_is_a_fault_with_exit_3_and_finished_logs(
     events: list[dict] = []
     try:
         outcome = run_sequence(loaded, arm, connection, log_dir=tmp_path / "run",
-                               confirm=lambda prompt: True, listeners=[events.append])
+                               confirm=lambda prompt: True, listeners=[events.append],
+                               html_report=False)
     finally:
         bus.inner.shutdown()
     assert bus.flags["broken"]

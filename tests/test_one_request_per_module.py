@@ -84,11 +84,13 @@ def test_sim_options_spec():
     assert sim_options_from_env({}) is None
 
 
+@pytest.mark.slow   # two real processes (the fast tier reads the variable in process:
+#                     test_the_switch_catches_a_client_that_pipelines_two_requests_to_one_module)
 def test_cli_takes_simulator_options_from_the_environment(tmp_path):
     env = dict(os.environ, SEQRUN_SIM_OPTIONS="drop_request_while_busy",
                PYTHONPATH=str(ROOT))
     proc = subprocess.run([sys.executable, "-m", "seqrun", "run", "sequences/opsafe.yaml",
-                           "--virtual-time", "--yes", "--plain", "--log-dir",
+                           "--virtual-time", "--yes", "--plain", "--no-report", "--log-dir",
                            str(tmp_path / "run")], cwd=ROOT, env=env, capture_output=True,
                           text=True, timeout=300)
     assert proc.returncode == 0, proc.stdout + proc.stderr

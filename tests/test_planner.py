@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 from projecttree import shipped_arm
 from seqrun.errors import PlanningError
 from seqrun.planner import Limits, plan_move, plan_stop
+from tiers import examples
 
 ARM = shipped_arm()
 LIMITS = Limits.from_arm(ARM)
@@ -87,7 +88,7 @@ def test_stop_reaches_zero_velocity_within_limits():
 angles = st.lists(st.floats(-2.0, 2.0), min_size=7, max_size=7)
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=examples(60), deadline=None)
 @given(angles, angles)
 def test_plans_respect_limits_and_reach_the_target(start, target):
     plan = plan_move(start, target, LIMITS, ACTIVE)

@@ -22,6 +22,7 @@ from seqrun.poses import (
     pose_yaml,
     save_pose,
 )
+from tiers import examples
 
 POSES = ROOT / "poses"
 ARM = shipped_arm()
@@ -81,7 +82,7 @@ joint_values = st.floats(-180, 180, allow_nan=False).map(lambda v: round(v, 4))
 descriptions = st.text(st.characters(codec="utf-8", exclude_categories=("Cs",)), max_size=150)
 
 
-@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=examples(40), deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @example(joints=[0.0] * 6, description="next\x85line", seconds=0, source=None)  # YAML line break
 @example(joints=[0.0] * 6, description="yes", seconds=0, source=None)  # YAML 1.1 boolean
 @given(joints=st.lists(joint_values, min_size=6, max_size=6), description=descriptions,

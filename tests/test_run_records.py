@@ -41,7 +41,7 @@ def campaign(tmp_path, monkeypatch) -> Path:
 
 def test_a_run_freezes_every_input_with_its_sha256(campaign):
     result = invoke("run", campaign / "sequences" / "first.yaml", "--yes", "--virtual-time",
-                    "--plain")
+                    "--plain", "--no-report")
     assert result.exit_code == 0, result.output
     (folder,) = (campaign / "runs").iterdir()  # the campaign's run folder location
     record = json.loads((folder / "record.json").read_text())
@@ -101,7 +101,8 @@ def test_an_unloadable_sequence_is_recorded_as_refused_too(campaign):
 
 
 def test_runs_lists_past_runs(campaign, monkeypatch):
-    invoke("run", campaign / "sequences" / "first.yaml", "--yes", "--virtual-time", "--plain")
+    invoke("run", campaign / "sequences" / "first.yaml", "--yes", "--virtual-time", "--plain",
+           "--no-report")
     bad = campaign / "sequences" / "bad.yaml"
     bad.write_text("name: Bad\ndescription: x\nsteps:\n  - move: totem\n")
     invoke("run", bad, "--yes", "--virtual-time")

@@ -49,7 +49,7 @@ class FullDisk:
 
 def run_cli(folder: Path, *extra: str):
     return CliRunner().invoke(app, ["run", str(TOTEM), "--virtual-time", "--yes", "--plain",
-                                    "--log-dir", str(folder), *extra])
+                                    "--no-report", "--log-dir", str(folder), *extra])
 
 
 def assert_readable(folder: Path) -> None:
@@ -97,7 +97,8 @@ def test_a_full_disk_leaves_the_arm_behaviour_unchanged(tmp_path, monkeypatch):
                 lambda m: seen.append((m.timestamp, m.arbitration_id, bytes(m.data), m.is_rx)))
         try:
             outcome = run_sequence(loaded, arm, connection, log_dir=folder,
-                                   confirm=lambda p: True, on_executor=attach)
+                                   confirm=lambda p: True, on_executor=attach,
+                                   html_report=False)
         finally:
             connection.close()
         assert outcome.result.exit_code == 0

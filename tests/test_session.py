@@ -299,7 +299,8 @@ def test_a_jog_stopped_at_once_is_a_controlled_stop(tmp_path):
 # ---------------------------------------------------------------------- halt
 def test_halt_during_a_run_stops_it_and_is_confirmed(session):
     sub = session.subscribe(maxsize=100_000)
-    run = session.run_sequence(ROOT / "sequences" / "totem.yaml", assume_yes=True)
+    run = session.run_sequence(ROOT / "sequences" / "totem.yaml", assume_yes=True,
+                               html_report=False)
     while True:  # wait for the long move to stream
         event = sub.get(timeout=30)
         assert event is not None
@@ -361,7 +362,7 @@ def answer_every_question(session, yes: bool) -> threading.Thread:
 
 def test_a_confirm_step_is_answered_from_another_thread(session):
     answering = answer_every_question(session, True)
-    result = session.run_sequence(ROOT / "sequences" / "totem.yaml").wait(120)
+    result = session.run_sequence(ROOT / "sequences" / "totem.yaml", html_report=False).wait(120)
     answering.join(5)
     assert result.ok, result.message
     assert result.run_result.steps[-1].status == "passed"
@@ -369,7 +370,7 @@ def test_a_confirm_step_is_answered_from_another_thread(session):
 
 def test_a_declined_question_is_an_operator_abort(session):
     answering = answer_every_question(session, False)
-    result = session.run_sequence(ROOT / "sequences" / "totem.yaml").wait(120)
+    result = session.run_sequence(ROOT / "sequences" / "totem.yaml", html_report=False).wait(120)
     answering.join(5)
     assert result.exit_code == 130 and "declined" in result.message
 
@@ -377,7 +378,7 @@ def test_a_declined_question_is_an_operator_abort(session):
 def test_step_mode_waits_for_step_and_abort_withdraws_the_question(session):
     sub = session.subscribe(maxsize=100_000)
     run = session.run_sequence(ROOT / "sequences" / "totem.yaml", step_mode=True,
-                               assume_yes=True)
+                               assume_yes=True, html_report=False)
     asked = []
     while len(asked) < 2:
         event = sub.get(timeout=30)
@@ -432,6 +433,34 @@ def test_a_run_on_the_callers_thread_is_the_sessions_activity(session, tmp_path)
     assert outcome.result.exit_code == 130
     seen["thread"].join(10)
     assert seen["halt"].confirmed and session.activity is None
+
+
+def test_idle_hooks_run_on_the_loop_thread_of_every_activity_until_removed(session, tmp_path):
+    """A face draws between cycles through the session (the live view of ``seqrun run``):
+    its hook gets the slack on the thread that runs the loop (the caller's for
+    ``run_loaded``, the worker's for a move), and nothing after it is removed."""
+    from seqrun.schema import load_sequence
+
+    calls: list[tuple[str, float]] = []
+
+    def hook(slack: float) -> None:
+        calls.append((threading.current_thread().name, slack))
+
+    session.add_idle_hook(hook)
+    loaded = load_sequence(ROOT / "sequences" / "totem.yaml")
+    outcome = session.run_loaded(loaded, log_dir=tmp_path / "run", confirm=lambda p: True,
+                                 html_report=False)
+    assert outcome.result.exit_code == 0, outcome.result.message
+    here = threading.current_thread().name
+    assert len(calls) > 10 and {name for name, _ in calls} == {here}
+    assert all(slack > 0 for _, slack in calls)
+    n = len(calls)
+    assert session.move_to_joints({"j1": 5}).wait(120).ok
+    assert len(calls) > n and calls[-1][0] != here
+    session.remove_idle_hook(hook)
+    n = len(calls)
+    assert session.move_to_joints({"j1": 0}).wait(120).ok
+    assert len(calls) == n
 
 
 def test_the_deadman_fires_in_real_time_even_when_the_loop_has_no_idle_time():

@@ -9,7 +9,8 @@ deadlocked the run (the handler took the executor's lock and called the live vie
 takes its own non-reentrant lock). Each run must end, within a bound, the way the signal
 asks: SIGINT -> controlled stop (130), SIGTERM -> Halt (130), SIGHUP / SIGQUIT -> Halt
 (exit 3), a second SIGINT during the controlled stop -> Halt; and leave a finished run
-folder.
+folder. (The runs draw no report.html: nothing here reads it, and it is drawn after the
+run has ended.)
 """
 
 from __future__ import annotations
@@ -111,7 +112,8 @@ def run_injected(tmp_path: Path, where: str, plan: list[tuple[int, str]], nth: i
     def attach(executor) -> None:
         injector.executor = executor
         executor.listeners.insert(0, injector.events.append)
-        live = LiveDisplay(console, executor, "test", "sim", len(loaded.steps))
+        live = LiveDisplay(console, executor.arm, executor.events.subscribe(maxsize=2000),
+                           "test", "sim", len(loaded.steps))
         executor.idle_hooks.append(live.on_idle)
 
         def live_view(event: dict) -> None:
@@ -143,7 +145,7 @@ def run_injected(tmp_path: Path, where: str, plan: list[tuple[int, str]], nth: i
             logfile._write = write
             outcome["run"] = run_sequence(loaded, arm, connection, log_dir=tmp_path / "run",
                                           confirm=lambda prompt: True, on_executor=attach,
-                                          requests=requests)
+                                          requests=requests, html_report=False)
         except BaseException as exc:  # noqa: BLE001 - reported by the test
             outcome["error"] = exc
         finally:
@@ -238,7 +240,7 @@ def question_run(tmp_path: Path, answer):
 
     try:
         return run_sequence(loaded, arm, connection, log_dir=tmp_path / "run",
-                            confirm=confirm, requests=requests)
+                            confirm=confirm, requests=requests, html_report=False)
     finally:
         connection.close()
 
@@ -322,7 +324,7 @@ def test_ctrl_c_while_the_yes_answer_prints_ends_the_run_before_the_move(tmp_pat
 
     try:
         run = run_sequence(loaded, arm, connection, log_dir=tmp_path / "run",
-                           confirm=confirm_yes, requests=requests)
+                           confirm=confirm_yes, requests=requests, html_report=False)
     finally:
         connection.close()
     assert run.result.exit_code == EXIT_OPERATOR_ABORT and run.result.fault is None

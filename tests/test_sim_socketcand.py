@@ -123,6 +123,7 @@ def test_cli_refuses_a_non_loopback_host():
     assert "not a loopback address" in result.output
 
 
+@pytest.mark.slow  # a real `seqrun sim serve` process, stopped by a real Ctrl-C
 def test_cli_serves_until_ctrl_c():
     process = subprocess.Popen(
         [sys.executable, "-m", "seqrun", "sim", "serve", "--port", "0",

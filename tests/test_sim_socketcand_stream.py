@@ -75,6 +75,7 @@ def test_pad_element_aligns_every_element():
         assert padded.startswith(" ") or len(text) % ELEMENT_ALIGN == 0
 
 
+@pytest.mark.slow  # 2 s of real-time flooding
 def test_a_slow_reader_never_gets_half_an_element(server):
     """A client reading 1024 bytes at a time (as python-can does) while another floods the
     wire: every read ends exactly at the end of an element."""
@@ -95,6 +96,7 @@ def test_a_slow_reader_never_gets_half_an_element(server):
     assert partial == 0
 
 
+@pytest.mark.slow  # 2 s of real-time flooding
 def test_python_can_client_logs_no_incomplete_message(server, caplog):
     caplog.set_level(logging.WARNING, logger="can")
     driver = load(server, 2.0)
@@ -128,6 +130,7 @@ def test_non_ascii_bytes_get_an_error_element_and_the_session_goes_on(server, ca
     assert "Traceback" not in caplog.text and "UnicodeEncodeError" not in caplog.text
 
 
+@pytest.mark.slow  # 3 s of real-time flooding
 def test_a_client_that_sends_and_hangs_up_at_once_still_gets_its_frames_out(server):
     """seqrun halt from a second terminal: send the Halt broadcast, close. The frame was
     accepted, so it reaches the modules — also when the client closes with unread data

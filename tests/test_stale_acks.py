@@ -73,7 +73,8 @@ class Run:
 
         try:
             self.outcome = run_sequence(loaded, ARM, conn, log_dir=self.folder,
-                                        confirm=lambda prompt: True, on_executor=hook)
+                                        confirm=lambda prompt: True, on_executor=hook,
+                                        html_report=False)
         finally:
             self.intruder.shutdown()
             if bus is not sim_bus:

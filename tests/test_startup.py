@@ -38,11 +38,13 @@ def test_help_imports_no_heavy_package():
     assert not imported("--help") & {"can", "numpy", "ruckig", "pydantic", "rich", "yaml"}
 
 
+@pytest.mark.slow  # four processes (the fast tier keeps --help's and validate's)
 def test_sub_command_help_imports_no_bus_and_no_maths():
     for command in ("run", "validate", "status", "fk"):
         assert not imported(command, "--help") & {"can", "numpy", "ruckig"}, command
 
 
+@pytest.mark.slow  # three processes (the fast tier keeps validate's)
 def test_commands_without_a_bus_do_not_import_python_can():
     """python-can's import pulls in asyncio, ssl and sqlite3 (can.io); ssl alone may come
     from the standard library's xml.sax.saxutils (used by campaign validation)."""
@@ -113,7 +115,8 @@ def test_piped_run_output_is_not_wrapped(tmp_path):
     (tmp_path / "sequences" / "long.yaml").write_text(
         f"name: long\ndescription: a long label\nsteps:\n  - reset: {{label: {label.strip()}}}\n")
     proc = subprocess.run([sys.executable, "-m", "seqrun", "run", "--virtual-time",
-                           "--log-dir", str(tmp_path / "run"), "sequences/long.yaml"],
+                           "--no-report", "--log-dir", str(tmp_path / "run"),
+                           "sequences/long.yaml"],
                           cwd=tmp_path, env=ENV, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
     assert f"[1/1] {label.strip()} (" in proc.stdout

@@ -26,6 +26,7 @@ from seqrun.validation import (
     validate_sequence,
 )
 from seqrun.yamlsource import display_path
+from tiers import examples
 
 BAD = ROOT / "tests" / "data" / "bad"
 POSES = ROOT / "poses"
@@ -443,13 +444,13 @@ def _check_document(root: Path, text: str) -> None:
     event("valid" if result.valid else "loads, fails validation")
 
 
-@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=examples(150), deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(document=_documents)
 def test_random_documents_are_valid_or_located_errors(fuzz_project, document):
     _check_document(fuzz_project, yaml.safe_dump(document, allow_unicode=True))
 
 
-@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=examples(150), deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(base=st.sampled_from(SHIPPED), cut=st.integers(0, 2000), junk=st.text(max_size=6))
 def test_mutated_shipped_files_are_valid_or_located_errors(fuzz_project, base, cut, junk):
     text = (ROOT / "sequences" / f"{base}.yaml").read_text(encoding="utf-8")

@@ -67,7 +67,7 @@ def run(tmp_path: Path, *, confirm, stall_loop: bool):
     try:
         prepare_started(connection, arm)
         outcome = run_sequence(loaded, arm, connection, log_dir=tmp_path / "run",
-                               confirm=confirm, on_executor=attach)
+                               confirm=confirm, on_executor=attach, html_report=False)
         states = [connection.bus.arm.module(m).state() for m in arm.module_ids]
         return outcome, states, stalled
     finally:

@@ -13,6 +13,7 @@ from projecttree import ROOT
 from seqrun import yamlsource
 from seqrun.errors import SequenceInvalid, UserInputError
 from seqrun.yamlsource import load_document
+from tiers import examples
 
 CORPUS = sorted(p for folder in ("tests/data/hostile", "tests/data/bad", "sequences", "poses",
                                  "arms") for p in (ROOT / folder).glob("*.yaml"))
@@ -69,7 +70,7 @@ _PIECES = st.sampled_from([
 ])
 
 
-@settings(max_examples=400, deadline=None,
+@settings(max_examples=examples(400), deadline=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 @given(st.lists(_PIECES, min_size=1, max_size=40).map("".join))
 def test_both_parsers_agree_on_random_text(tmp_path, monkeypatch, text):

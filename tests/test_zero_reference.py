@@ -298,7 +298,7 @@ def test_zero_set_of_an_unknown_pose_is_one_line():
 def test_run_on_the_simulator_powered_on_at_totem_shows_and_uses_that_zero(tmp_path):
     result = CliRunner().invoke(app, ["run", str(ROOT / "sequences" / "opsafe.yaml"), "--yes",
                                       "--virtual-time", "--plain", "--power-on-at", "totem",
-                                      "--log-dir", str(tmp_path / "run")])
+                                      "--no-report", "--log-dir", str(tmp_path / "run")])
     assert result.exit_code == 0, result.output
     assert "zero: Totem (the simulator's power-on pose)" in result.output
     report = RunFolder(tmp_path / "run").report()

@@ -17,6 +17,12 @@ if TYPE_CHECKING:
     from seqrun.arm import ArmDescription
 
 ArmOption = Annotated[Path, typer.Option("--arm", metavar="FILE", help="Arm description file.")]
+#: An arm file only where one is given (None: the command finds the campaign's).
+ArmFileOption = Annotated[Optional[Path], typer.Option("--arm", metavar="FILE", help="Arm file.")]
+#: The campaign of the current directory unless one is given.
+CampaignOption = Annotated[Optional[Path], typer.Option(
+    "--project", metavar="DIR", help="Campaign folder (default: the one holding the current "
+                                     "directory).")]
 PosesDirOption = Annotated[Path, typer.Option(
     "--poses-dir", metavar="DIR", help="Directory of pose files (<name>.yaml).")]
 

@@ -17,8 +17,9 @@ import typer
 
 from seqrun.cli.app import app
 from seqrun.cli.common import (EXIT_FAULT, ArmOption, BitrateOption, BusKwargsOption,
-                               ChannelOption, InterfaceOption, ResponseTimeoutOption,
-                               SimOption, fail, load_arm_file, user_errors)
+                               CampaignOption, ChannelOption, InterfaceOption,
+                               ResponseTimeoutOption, SimOption, fail, load_arm_file,
+                               user_errors)
 from seqrun.defaults import DEFAULT_ARM, EXIT_OPERATOR_ABORT
 
 
@@ -35,8 +36,7 @@ def console_command(
         help="Listen on ADDR instead of 127.0.0.1; then every request needs the token "
              "printed at start.")] = None,
     arm_file: ArmOption = DEFAULT_ARM,
-    project_dir: Annotated[Optional[Path], typer.Option(
-        "--project", metavar="DIR", help="Campaign folder (default: the one here).")] = None,
+    project_dir: CampaignOption = None,
     log_dir: Annotated[Optional[Path], typer.Option(
         "--log-dir", metavar="DIR", help="Where run folders go (default: the project's runs/).")]
     = None,

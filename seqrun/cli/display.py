@@ -1,11 +1,12 @@
 """What the operator sees during a run: a rich live view on a terminal, plain lines otherwise.
 
-Both consume typed events (:mod:`seqrun.events`) and nothing else of the executor: the live
-view has a subscription of its own (a bounded queue: publishing never waits for it), which it
-drains and renders from the control loop's own idle time (:attr:`Executor.idle_hooks`:
-called with the slack before the loop sleeps until its next cycle), at most 10 times a
-second and only when the slack is longer than a render takes, so the display can neither
-delay a cycle nor compete with the loop from a thread of its own. Joints, velocities and
+Both consume the arm session's typed events (:mod:`seqrun.events`) and nothing else: the
+live view has a subscription of its own (a bounded queue: publishing never waits for it),
+which it drains and renders from the control loop's own idle time (:meth:`LiveDisplay.on_idle`,
+given to :meth:`ArmSession.add_idle_hook`: called with the slack before the loop sleeps until
+its next cycle), at most 10 times a second and only when the slack is longer than a render
+takes, so the display can neither delay a cycle nor compete with the loop from a thread of
+its own. Joints, velocities and
 state flags come from ``measurement`` events. While the operator is asked something the
 live view is off and the question is an ordinary line where the cursor is
 (:meth:`LiveDisplay.asking`). The plain display is called with each event (by a listener
@@ -20,7 +21,7 @@ from __future__ import annotations
 import time
 from contextlib import contextmanager
 from datetime import datetime
-from typing import Any, Iterator
+from typing import TYPE_CHECKING, Any, Iterator
 
 import numpy as np
 from rich.console import Console, Group
@@ -30,6 +31,9 @@ from rich.text import Text
 
 from seqrun import kinematics
 from seqrun.cli.output import fixed
+
+if TYPE_CHECKING:
+    from seqrun.events import Subscription
 
 
 def halt_line(event: dict) -> str | None:
@@ -45,18 +49,6 @@ def halt_line(event: dict) -> str | None:
              else f" (NOT confirmed by module(s) "
                   f"{', '.join(map(str, event.get('modules_not_halted') or [])) or '?'})")
     return f"HALT sent at {when}{check}: {cause}: {event.get('message', '')}"
-
-
-def _preflight_reading(arm, event):
-    """The preflight's reading (start joints, state words) as a measurement event."""
-    from seqrun.events import make_event
-    from seqrun.telemetry import joint_flags
-
-    short = [0] * arm.dof
-    flags, fault = joint_flags(arm.joint_names, arm.module_ids, short, event["states"])
-    return make_event("measurement", event.t, {"joints_deg": list(event["start_deg"]),
-                                               "state": short},
-                      flags=flags, fault=fault, source="preflight")
 
 
 class PlainDisplay:
@@ -100,14 +92,14 @@ class LiveDisplay:
     #: Margin kept free before the next cycle, on top of the expected render time.
     MARGIN = 0.001
 
-    def __init__(self, console: Console, executor, title: str, bus: str, total: int) -> None:
-        """``executor``: what the view hangs on: its ``arm``, ``events`` (the hub the view
-        subscribes to) and ``idle_hooks`` (where it renders)."""
+    def __init__(self, console: Console, arm, subscription: Subscription, title: str,
+                 bus: str, total: int) -> None:
+        """``subscription``: the view's own queue of the session's events (it closes it on
+        exit); :meth:`on_idle` is what the owner hands the loop to render in its slack."""
         self.console = console
-        self.ex = executor
-        self.arm = executor.arm
+        self.arm = arm
         self.chain = kinematics.Chain.from_arm(self.arm)
-        self.subscription = executor.events.subscribe(maxsize=2000, name="live view")
+        self.subscription = subscription
         #: The latest measurement event (joints, velocities, flags).
         self.measured = None
         self.title = title
@@ -138,13 +130,10 @@ class LiveDisplay:
             self.live = None
 
     def __enter__(self) -> "LiveDisplay":
-        self.ex.idle_hooks.append(self.on_idle)
         self._start()
         return self
 
     def __exit__(self, *exc: Any) -> None:
-        if self.on_idle in self.ex.idle_hooks:
-            self.ex.idle_hooks.remove(self.on_idle)
         self._stop()
         self.console.print(self)  # the final state stays on the screen
         self.subscription.close()
@@ -162,7 +151,7 @@ class LiveDisplay:
 
     # -------------------------------------------------------------- rendering
     def on_idle(self, slack: float) -> None:
-        """Executor idle hook: render when due and when it fits into the slack."""
+        """The loop's idle hook: render when due and when it fits into the slack."""
         now = time.monotonic()
         if self.live is None or now - self._last_render < self.INTERVAL:
             return
@@ -189,8 +178,6 @@ class LiveDisplay:
         if kind == "measurement":
             self.measured = event
             return
-        if kind == "preflight":  # the first reading of the arm: joints and state words
-            self.measured = _preflight_reading(self.arm, event)
         if kind == "step_started":
             self.step_text = f"step {event.get('step')}/{self.total}: {event['label']}"
             self.move_duration = None

@@ -148,6 +148,7 @@ def run_command(
     from seqrun.clock import VirtualClock
     from seqrun.connection import open_connection, parse_bus_kwargs, parse_faults
     from seqrun.cli.interrupts import RunSignals
+    from seqrun.results import latched_message
     from seqrun.runlog import prepare_run_folder
     from seqrun.schema import load_sequence
     from seqrun.service import ArmSession
@@ -278,32 +279,30 @@ def run_command(
 
     live = console.is_terminal and not plain
 
-    def attach(executor) -> None:
-        if control is not None:
-            control.attach(executor)
-        if live:  # subscribes to the executor's events, renders in the loop's slack
-            display = LiveDisplay(console, executor, f"seqrun: {loaded.name}",
-                                  connection.description, len(loaded.steps))
-            display.__enter__()
-        else:  # its own queue and thread: a blocked stdout never delays the loop
-            display = executor.events.add_listener(PlainDisplay(console, len(loaded.steps)),
-                                                   "plain display", maxsize=100_000)
-        displays.append(display)
-
     def warn(text: str) -> None:
         console.print(f"  !!  {text}", style="yellow", highlight=False, markup=False,
                       soft_wrap=True)
 
     # The arm session owns the bus for the run (the same object the console and the other
-    # faces use); the terminal's questions stay the terminal's own.
+    # faces use); the terminal's questions stay the terminal's own. The displays are the
+    # session's subscribers.
     session = ArmSession(arm, connection, project=loaded.project, zero=zero, status_hz=0,
                          own_connection=False)
+    if live:  # its own queue of the session's events, rendered in the loop's slack
+        view = LiveDisplay(console, arm, session.subscribe(maxsize=2000, name="live view"),
+                           f"seqrun: {loaded.name}", connection.description,
+                           len(loaded.steps))
+        session.add_idle_hook(view.on_idle)
+        displays.append(view.__enter__())
+    else:  # its own queue and thread: a blocked stdout never delays the loop
+        displays.append(session.events.add_listener(
+            PlainDisplay(console, len(loaded.steps)), "plain display", maxsize=100_000))
     signals.install()
     try:
         outcome = session.run_loaded(
             loaded, log_dir=folder, file=str(file), speed=speed, first_step=from_step,
             command_mode=command_mode, confirm=confirm, before_step=before_step,
-            on_executor=attach, requests=requests, warn=warn,
+            run_control=control, requests=requests, warn=warn,
             confirm_clear_latched=(None if connection.is_simulator else confirm_clear_latched),
             meta={"zero": zero.as_dict()}, html_report=not no_report,
             # The built-in simulator keeps no record: its zero is its power-on pose.
@@ -311,6 +310,7 @@ def run_command(
                          else campaign_records.zero_recorder(arm, loaded)))
     finally:
         if live and displays:
+            session.remove_idle_hook(displays[0].on_idle)
             displays[0].__exit__(None, None, None)
         elif displays:
             displays[0].close(timeout=5.0)  # every line printed before the summary
@@ -325,7 +325,7 @@ def run_command(
         console.print(Text.assemble((result.status.upper(), colour),
                                     f" (exit {result.exit_code}): {message}"), highlight=False)
         if result.latched_at_start:
-            console.print("note: " + outcome.executor.latched_message()
+            console.print("note: " + latched_message(result.latched_at_start)
                           + (" - cleared by the sequence's Reset" if result.exit_code == 0
                              else ""),
                           style="yellow", highlight=False, markup=False)

@@ -9,7 +9,7 @@ from typing import Annotated, Optional
 import typer
 
 from seqrun.cli.app import app
-from seqrun.cli.common import user_errors
+from seqrun.cli.common import CampaignOption, user_errors
 from seqrun.records import list_runs
 
 
@@ -26,9 +26,7 @@ def _local(when: str | None) -> str:
 @app.command("runs")
 def runs_command(
     as_json: Annotated[bool, typer.Option("--json", help="Machine-readable output.")] = False,
-    project_dir: Annotated[Optional[Path], typer.Option(
-        "--project", metavar="DIR", help="Campaign folder (default: the one holding the "
-                                         "current directory).")] = None,
+    project_dir: CampaignOption = None,
     runs_dir: Annotated[Optional[Path], typer.Option(
         "--dir", metavar="DIR", help="Run folders to list (default: the campaign's, else "
                                      "runs/).")] = None,

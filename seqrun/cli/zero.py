@@ -15,18 +15,13 @@ from typing import Annotated, Callable, Optional
 import typer
 
 from seqrun.cli.app import app
-from seqrun.cli.common import fail, user_errors
+from seqrun.cli.common import ArmFileOption, CampaignOption, fail, user_errors
 from seqrun.errors import BusError, UserInputError
 from seqrun.zero import ZeroInForce, ZeroStore, pose_title, zero_for_run
 
 zero_app = typer.Typer(help="The zero reference: where the arm was powered off.",
                        no_args_is_help=True)
 app.add_typer(zero_app, name="zero")
-
-ProjectOption = Annotated[Optional[Path], typer.Option(
-    "--project", metavar="DIR", help="Campaign folder (default: the one holding the current "
-                                     "directory, else the per-arm state file).")]
-
 
 def _arm_and_store(arm_file: Optional[Path], project_dir: Optional[Path]):
     from seqrun.cli.common import load_arm_file
@@ -44,11 +39,11 @@ def _arm_and_store(arm_file: Optional[Path], project_dir: Optional[Path]):
 
 @zero_app.command("show")
 def show_command(
-    project_dir: ProjectOption = None,
-    arm_file: Annotated[Optional[Path], typer.Option("--arm", metavar="FILE",
-                                                     help="Arm file.")] = None,
+    project_dir: CampaignOption = None,
+    arm_file: ArmFileOption = None,
 ) -> None:
-    """Where the arm was last powered off, and the zero in use since the last power-on."""
+    """Where the arm was last powered off, and the zero in use since the last power-on
+    (outside a campaign: the per-arm state file)."""
     with user_errors():
         arm, store = _arm_and_store(arm_file, project_dir)
         record, in_use = store.record, store.in_use
@@ -66,9 +61,8 @@ def set_command(
     pose: Annotated[str, typer.Argument(help="The power-off pose the arm stands in "
                                              "(power_off_poses of the arm file).")],
     yes: Annotated[bool, typer.Option("--yes", "-y", help="Do not ask.")] = False,
-    project_dir: ProjectOption = None,
-    arm_file: Annotated[Optional[Path], typer.Option("--arm", metavar="FILE",
-                                                     help="Arm file.")] = None,
+    project_dir: CampaignOption = None,
+    arm_file: ArmFileOption = None,
 ) -> None:
     """Record where the arm was powered off (after a sudden power loss); asks first."""
     with user_errors():

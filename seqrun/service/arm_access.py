@@ -16,9 +16,9 @@ from typing import TYPE_CHECKING, Any, cast
 if TYPE_CHECKING:
     from seqrun.arm import ArmDescription
     from seqrun.connection import Connection
-    from seqrun.drivers.base import CommandConfirmation
+    from seqrun.drivers.base import CommandConfirmation, JointState
 
-__all__ = ["broadcast_and_confirm", "modules_homed", "open_arm", "read_status"]
+__all__ = ["broadcast_and_confirm", "modules_homed", "open_arm", "poll_joints", "read_status"]
 
 
 def open_arm(arm: ArmDescription, *, interface: str | None, channel: str | None,
@@ -84,6 +84,30 @@ def read_status(client, arm, previous: dict | None = None, *,
             "end_effector": {"position_mm": [round(float(x), 3) for x in T[:3, 3]],
                              "rpy_deg": [round(float(x), 3)
                                          for x in np.degrees(rpy_from_matrix(T[:3, :3]))]}}
+
+
+def poll_joints(client, arm) -> tuple[list[float], list[float], dict[int, JointState]]:
+    """One pipelined read of ActPos, ActVel and CubeState of every module: positions (user
+    degrees), velocities (deg/s) and each module's decoded state, by module id. Raises
+    :class:`~seqrun.errors.BusError` naming the modules that did not answer."""
+    from seqrun.drivers.powercube import joint_state
+    from seqrun.errors import BusError
+    from seqrun.powercube.codec import GetParam
+    from seqrun.powercube.protocol import ParamId
+
+    requests = [GetParam(j.module, p) for j in arm.joints
+                for p in (ParamId.ACT_POS, ParamId.ACT_VEL, ParamId.CUBE_STATE)]
+    acks = client.transact_partial(requests)
+    if any(a is None for a in acks):
+        missing = sorted({r.module for r, a in zip(requests, acks) if a is None})
+        raise BusError(f"no answer from module(s) {', '.join(map(str, missing))}")
+    joints, velocities, states = [], [], {}
+    for k, joint in enumerate(arm.joints):
+        pos, vel, state = (a.value for a in acks[3 * k:3 * k + 3])
+        joints.append(round(joint.to_user_deg(float(pos)), 4) + 0.0)
+        velocities.append(round(math.degrees(float(vel)), 4) + 0.0)
+        states[joint.module] = joint_state(int(state))
+    return joints, velocities, states
 
 
 def modules_homed(connection, arm) -> bool:

@@ -171,7 +171,7 @@ def run_jog(executor, plan: JogPlan, deadman: Deadman) -> tuple[str, int, str]:
     """Stream the jog with ``executor`` (owned by the caller); returns (status, exit code,
     message). Any fault -> Halt (the executor's emergency Halt), exit 3."""
     from seqrun.defaults import EXIT_FAULT, EXIT_OK
-    from seqrun.executor import OperatorAbort, _cause
+    from seqrun.results import OperatorAbort, fault_cause, halt_fields
     from seqrun.planner import Limits
     from seqrun.usermessages import user_message
 
@@ -202,12 +202,12 @@ def run_jog(executor, plan: JogPlan, deadman: Deadman) -> tuple[str, int, str]:
         return "passed", EXIT_OK, message
     except Exception as exc:  # noqa: BLE001 - every failure, even a bug, halts
         executor.emergency_halt()
-        cause, module = _cause(exc)
+        cause, module = fault_cause(exc)
         message = user_message(exc, arm)
         if cause == "operator_halt":
             return "aborted", 130, f"jog {plan.joint}: {message}"
         executor.emit("fault", cause=cause, module=module, message=message, step=None,
-                      **executor._halt_fields())
+                      **halt_fields(executor.halt_result))
         return "failed", EXIT_FAULT, message
     finally:
         deadman.disarm()

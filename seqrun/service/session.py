@@ -259,6 +259,7 @@ class ArmSession:
         self._activity: Activity | None = None
         self._activity_ids = 0
         self._executor: Any = None  # the activity's Executor (it publishes to _hub)
+        self._idle_hooks: list[Callable[[float], None]] = []
         self._run_info: RunInfo | None = None
         self._paused = False
         self._halted: str | None = None
@@ -334,6 +335,33 @@ class ArmSession:
     def subscribe(self, *, maxsize: int = 1000, name: str = "") -> Subscription:
         """Typed events on a queue of their own (see :class:`seqrun.events.EventHub`)."""
         return self._hub.subscribe(maxsize=maxsize, name=name)
+
+    def add_idle_hook(self, hook: Callable[[float], None]) -> None:
+        """Call ``hook(slack_s)`` on the control loop's own thread before it sleeps until
+        its next cycle, in every run, move and jog of this session; ``slack_s`` is the time
+        left and the hook must return well within it. A terminal view renders there: it
+        can neither delay a cycle nor compete with the loop from a thread of its own. A
+        hook that raises is dropped (``listener_failed`` event)."""
+        with self._state:
+            self._idle_hooks.append(hook)
+            executor = self._executor
+        if executor is not None:
+            executor.idle_hooks.append(hook)
+
+    def remove_idle_hook(self, hook: Callable[[float], None]) -> None:
+        with self._state:
+            if hook in self._idle_hooks:
+                self._idle_hooks.remove(hook)
+            executor = self._executor
+        if executor is not None and hook in executor.idle_hooks:
+            executor.idle_hooks.remove(hook)
+
+    def _adopt(self, executor) -> None:
+        """The current activity's executor: it publishes to this session's hub (given at
+        its construction) and idles through the session's idle hooks."""
+        with self._state:
+            self._executor = executor
+            executor.idle_hooks.extend(self._idle_hooks)
 
     def _publish(self, type_: str, **data: Any) -> None:
         now = self.clock.now()
@@ -451,42 +479,28 @@ class ArmSession:
 
     def _poll_once(self) -> None:
         """One pipelined read of ActPos, ActVel and CubeState of every module (bus held)."""
-        from seqrun.powercube.codec import GetParam
-        from seqrun.powercube.protocol import ParamId, StateFlag
+        from seqrun.service.arm_access import poll_joints
         from seqrun.telemetry import joint_flags
 
         arm = self.arm
-        requests = [GetParam(j.module, p) for j in arm.joints
-                    for p in (ParamId.ACT_POS, ParamId.ACT_VEL, ParamId.CUBE_STATE)]
         try:
-            acks = self.client.transact_partial(requests)
+            joints, velocities, states = poll_joints(self.client, arm)
         except Exception as exc:  # noqa: BLE001 - a poll never raises: status goes stale
             self._poll_failed(str(exc))
             return
-        if any(a is None for a in acks):
-            missing = sorted({r.module for r, a in zip(requests, acks) if a is None})
-            self._poll_failed(f"no answer from module(s) {', '.join(map(str, missing))}")
-            return
-        joints: list[float | None] = []
-        velocities: list[float | None] = []
-        words: dict[int, StateFlag] = {}
-        for k, joint in enumerate(arm.joints):
-            pos, vel, state = (a.value for a in acks[3 * k:3 * k + 3])  # type: ignore[union-attr]
-            joints.append(round(joint.to_user_deg(float(pos)), 4) + 0.0)
-            velocities.append(round(math.degrees(float(vel)), 4) + 0.0)
-            words[joint.module] = StateFlag(int(state))
-        flags, fault = joint_flags(arm.joint_names, arm.module_ids, [0] * len(joints), words)
+        flags, fault = joint_flags(arm.joint_names, arm.module_ids, {}, states)
         now = self.clock.now()
         self._hub.publish(make_event(
             "measurement", round(now - self._t0, 6),
-            {"joints_deg": joints, "state": [int(_short(w)) for w in words.values()],
-             "states": {str(m): w.describe() for m, w in words.items()}},
+            {"joints_deg": joints, "state": [s.cycle_code for s in states.values()],
+             "states": {str(m): s.describe() for m, s in states.items()}},
             clock_s=now, velocities_deg_s=velocities, flags=flags, fault=fault,
             source="poll"))
         with self._state:  # at once, not only when the listener gets to it
-            self._joints, self._velocities = joints, velocities
+            self._joints = list[float | None](joints)
+            self._velocities = list[float | None](velocities)
             self._flags, self._fault = flags, fault
-            self._homed = all(w & StateFlag.HOME_OK for w in words.values())
+            self._homed = all(s.homed for s in states.values())
             self._updated_at, self._stale = now, False
 
     def _poll_failed(self, error: str) -> None:
@@ -631,6 +645,7 @@ class ArmSession:
     def _use_realtime(self) -> None:
         from seqrun.service.realtime import use_fifo
 
+        assert self.loop_priority is not None  # called only when one is set
         why = use_fifo(self.loop_priority)
         if why is not None:
             logging.getLogger(__name__).warning(
@@ -645,8 +660,7 @@ class ArmSession:
                             else self.poses_dir, requests=StopRequests(), events=self._hub,
                             **kw)
         self.client.on_discard = executor.on_discard
-        with self._state:
-            self._executor = executor
+        self._adopt(executor)
         return executor
 
     def _one_off(self, name: str, steps: list[str]):
@@ -964,7 +978,7 @@ class ArmSession:
                    confirm: Callable[[str], bool] | None = None,
                    before_step: Callable | None = None,
                    confirm_clear_latched: Callable[[str], bool] | None = None,
-                   on_executor: Callable | None = None, requests=None,
+                   on_executor: Callable | None = None, run_control=None, requests=None,
                    warn: Callable[[str], None] | None = None, meta: dict | None = None,
                    html_report: bool = True, file: str | None = None,
                    bus_held: bool = False, cycle_hz: float | None = None,
@@ -973,18 +987,21 @@ class ArmSession:
         session's client and event hub; returns the runner's outcome (result, report, run
         folder). This is how ``seqrun run`` runs (its prompts are the terminal's own); faces
         that answer questions through events use :meth:`run_sequence`. ``record_zero``:
-        what a power_off step calls to record the pose the arm is switched off in."""
+        what a power_off step calls to record the pose the arm is switched off in;
+        ``run_control``: the run's :class:`~seqrun.service.run_control.RunControl`
+        (``seqrun status|halt`` from another terminal), attached to the run's executor."""
         from seqrun.runner import run_sequence as run_with_log
         from seqrun.stop_requests import StopRequests
 
         requests = requests if requests is not None else StopRequests()
 
         def hook(executor) -> None:
-            with self._state:
-                self._executor = executor
+            self._adopt(executor)
             if self.zero is not None:  # for the log and any face
                 executor.emit("zero_reference", **self.zero.as_dict())
             executor.record_zero = record_zero
+            if run_control is not None:  # `seqrun status|halt` from another terminal
+                run_control.attach(executor)
             if on_executor is not None:
                 on_executor(executor)
 
@@ -1155,12 +1172,6 @@ def _flags_fault(flags: tuple[str, ...]) -> bool:
 
     return any(n in StateFlag.__members__ and StateFlag[n] & StateFlag.FAULTS for n in flags) \
         or "NOT_OK" in flags
-
-
-def _short(word) -> int:
-    from seqrun.drivers.powercube import short_state
-
-    return int(short_state(word))
 
 
 def _result(kind: str, run, run_dir: Path | None = None) -> ActivityResult:
