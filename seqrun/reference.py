@@ -45,6 +45,9 @@ steps:
 
 `seqrun validate FILE` checks a file and its includes without moving anything:
 `file:line:col: message` for each problem, exit 0 (valid), 1 (invalid) or 2 (unusable input).
+The problems are listed file by file, by position within each file, the files in the order
+the steps reach their first problem (a pose file's after those of the step that names it);
+`seqrun run` refuses an invalid file with the same lines in the same order.
 
 ## The file
 
