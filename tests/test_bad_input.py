@@ -520,7 +520,8 @@ def test_random_sequence_files(fuzz_places, text, as_bytes):
     # Loads, so `run` reports the static validation's findings itself: the step order put
     # the pose file's error (the first step's target) between the two steps' own errors.
     "name: Fuzz\ndescription: random\nsteps: [move: park, home]\n",
-    "name: Fuzz\ndescription: random\nsteps:\n  - move: park\n  - home\n  - move: {joints: {j9: 1}}\n",
+    "name: Fuzz\ndescription: random\nsteps:\n  - move: park\n  - home\n"
+    "  - move: {joints: {j9: 1}}\n",
     # The move below line 13 of park.yaml: still the sequence's errors first.
     "name: Fuzz\ndescription: random\n" + "# padding\n" * 20 + "steps: [move: park, home]\n",
     # Does not load: both commands merge the load errors with the findings the same way.
