@@ -9,13 +9,11 @@ import os
 import subprocess
 import sys
 import threading
-from pathlib import Path
 
 from consolekit import console_setup, wait_for
+from projecttree import ROOT
 
-from seqrun.service.realtime import thread_policy, use_fifo
-
-ROOT = Path(__file__).resolve().parents[1]
+from seqrun.service.realtime import SWITCH_INTERVAL_S, thread_policy, use_fifo
 
 
 def policy_of(thread: threading.Thread) -> int:
@@ -92,3 +90,26 @@ def test_no_right_to_real_time_says_why_and_changes_nothing():
     t.start()
     t.join()
     assert out[0] and out[1] == (os.SCHED_OTHER, 0)
+
+
+def test_a_thread_holding_the_interpreter_lock_hands_it_over_within_a_millisecond():
+    # (in a process of its own: the switch interval is the whole interpreter's)
+    code = ("import sys; from seqrun.service.realtime import hand_over_the_lock_often as h; "
+            "before = sys.getswitchinterval(); h(); print(repr((before, sys.getswitchinterval())))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=60)
+    assert out.returncode == 0, out.stderr
+    before, after = eval(out.stdout)
+    assert before == 0.005 and after == SWITCH_INTERVAL_S == 0.001
+
+
+def test_the_objects_made_before_serving_are_out_of_the_collectors_view():
+    code = ("import gc; from seqrun.service.realtime import "
+            "keep_long_lived_objects_out_of_collections as keep; "
+            "import seqrun.console.app; before = gc.get_freeze_count(); n = keep(); "
+            "print(repr((before, n, gc.get_freeze_count())))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=60)
+    assert out.returncode == 0, out.stderr
+    before, returned, after = eval(out.stdout)
+    assert before == 0 and returned == after > 10_000  # the web stack's objects, at least

@@ -125,6 +125,9 @@ def console_command(
             typer.echo("Ctrl-C ends the console (any motion is stopped first).")
 
         from seqrun.console.server import serve
+        from seqrun.service.realtime import keep_long_lived_objects_out_of_collections
+
+        keep_long_lived_objects_out_of_collections()  # (the session, the app: made by now)
 
         # uvicorn shuts down gracefully on SIGINT/SIGTERM (the pages are disconnected, their
         # motions stopped), then raises the signal again: Ctrl-C arrives here as
@@ -147,11 +150,17 @@ def console_command(
 
 def _use_realtime(priority: int) -> bool:
     """``--rt-priority N``: every thread of the console at SCHED_RR 1 from now on, the loop's
-    thread (the session's activities) at SCHED_FIFO N (seqrun.service.realtime). Says
+    thread (the session's activities) at SCHED_FIFO N, the interpreter lock's switch
+    interval shortened (seqrun.service.realtime). Says
     whether it could; tried in a thread of its own first (this one must not keep FIFO)."""
     import threading
 
-    from seqrun.service.realtime import use_fifo, use_round_robin
+    from seqrun.service.realtime import (
+        SWITCH_INTERVAL_S,
+        hand_over_the_lock_often,
+        use_fifo,
+        use_round_robin,
+    )
 
     outcome: list[str | None] = []
     probe = threading.Thread(target=lambda: outcome.append(use_fifo(priority)))
@@ -161,8 +170,10 @@ def _use_realtime(priority: int) -> bool:
     if why is None:
         why = use_round_robin()
     if why is None:
+        hand_over_the_lock_often()
         typer.echo(f"real-time scheduling: the control loop at SCHED_FIFO priority "
-                   f"{priority}, the console's other threads at SCHED_RR 1")
+                   f"{priority}, the console's other threads at SCHED_RR 1, the interpreter "
+                   f"lock handed over within {SWITCH_INTERVAL_S * 1000:g} ms")
         return True
     typer.echo(f"warning: real-time scheduling not available ({why}); the control loop "
                "runs at normal priority", err=True)

@@ -12,11 +12,18 @@ browser while the loop waits (priority inversion; measured in bench/README.md).
 
 from __future__ import annotations
 
+import gc
 import os
+import sys
 from pathlib import Path
 
 #: The priority of the process's other threads (the lowest real-time one).
 BASE_PRIORITY = 1
+#: How long a thread may keep the interpreter lock while another waits for it, under
+#: real-time scheduling. Python's default, 5 ms, let a web-server thread keep the woken loop
+#: waiting for up to half a cycle: three console tabs added 1.4 ms to the loop's p99 period
+#: at 5 ms and 0.4 ms at 1 ms (idle host, bench/README.md).
+SWITCH_INTERVAL_S = 0.001
 
 
 def use_fifo(priority: int) -> str | None:
@@ -44,6 +51,24 @@ def use_round_robin(priority: int = BASE_PRIORITY) -> str | None:
     except (OSError, AttributeError, OverflowError) as exc:
         return str(exc) or type(exc).__name__
     return None
+
+
+def hand_over_the_lock_often() -> None:
+    """Make a thread holding the interpreter lock hand it over after at most
+    :data:`SWITCH_INTERVAL_S` when another thread (the loop) asks for it."""
+    sys.setswitchinterval(SWITCH_INTERVAL_S)
+
+
+def keep_long_lived_objects_out_of_collections() -> int:
+    """Move every object made so far (the web stack, the models, the arm, the session: they
+    live as long as the process) out of the cyclic garbage collector's view, and return how
+    many. A full collection scans every tracked object while holding the interpreter lock,
+    in whichever thread allocates, the loop's included: in the console with three pages
+    open that stalled the loop for 120-185 ms about once per opsafe run, and not once in
+    the runs after this (idle host, bench/README.md)."""
+    gc.collect()
+    gc.freeze()
+    return gc.get_freeze_count()
 
 
 def thread_policy() -> tuple[int, int]:
