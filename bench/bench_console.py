@@ -54,6 +54,7 @@ from bench_liveview import event_periods, summary  # noqa: E402
 from consolekit import LiveServer, console_setup, wait_for  # noqa: E402
 from seqrun_runs import RESULTS, ROOT, machine, write_json  # noqa: E402
 
+from seqrun.service.realtime import keep_long_lived_objects_out_of_collections  # noqa: E402
 from seqrun.service.session import ArmSession  # noqa: E402
 
 CHROMIUM = os.environ.get("SEQRUN_CHROMIUM") or shutil.which("chromium") or "/usr/bin/chromium"
@@ -391,6 +392,8 @@ def main() -> None:
                 setup = console_setup(Path(tmp), session_class=TimedSession)
                 try:
                     with LiveServer(setup.app()) as server:
+                        # as `seqrun console` does before it serves
+                        keep_long_lived_objects_out_of_collections()
                         results["stop_to_halt_frame"] = r = stop_latency(browser, setup, server,
                                                                          opts.clicks)
                 finally:
