@@ -14,8 +14,29 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from projecttree import ROOT
+
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
+
+
+def start_console(*options: str) -> tuple[subprocess.Popen, str, str]:
+    """``seqrun console --sim --port 0 OPTIONS``: the process, what it printed up to its
+    URL, and the URL."""
+    proc = subprocess.Popen([sys.executable, "-m", "seqrun", "console", "--sim", "--port", "0",
+                             *options], cwd=ROOT, env=ENV,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    lines: list[str] = []
+    while True:
+        line = proc.stdout.readline()
+        if not line:
+            proc.kill()
+            proc.wait()
+            raise AssertionError("seqrun console ended before printing its URL:\n"
+                                 + "".join(lines))
+        lines.append(line)
+        found = re.search(r"(http://127\.0\.0\.1:\d+/)", line)
+        if found:
+            return proc, "".join(lines), found.group(1)
 
 
 def test_console_help_imports_no_web_stack_and_no_bus():
@@ -38,19 +59,9 @@ def test_the_listen_address_decides_the_token():
 
 @pytest.mark.slow
 def test_seqrun_console_prints_its_url_serves_and_ends_on_ctrl_c(tmp_path):
-    proc = subprocess.Popen([sys.executable, "-m", "seqrun", "console", "--sim", "--port", "0",
-                             "--log-dir", str(tmp_path)], cwd=ROOT, env=ENV,
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    proc, printed, url = start_console("--log-dir", str(tmp_path))
     try:
-        lines = []
-        url = None
-        while url is None:
-            line = proc.stdout.readline()
-            assert line, "".join(lines)
-            lines.append(line)
-            found = re.search(r"(http://127\.0\.0\.1:\d+/)", line)
-            url = found.group(1) if found else None
-        assert "SIMULATOR" in "".join(lines)
+        assert "SIMULATOR" in printed
         with urllib.request.urlopen(url + "api/v1/status", timeout=10) as r:
             status = json.load(r)
         assert status["simulator"] is True and len(status["joints"]) == 7
@@ -80,16 +91,8 @@ def _post(url: str, path: str, body: dict | None = None) -> dict:
 
 @pytest.mark.slow
 def test_sigterm_during_a_move_halts_the_arm(tmp_path):
-    proc = subprocess.Popen([sys.executable, "-m", "seqrun", "console", "--sim", "--port", "0",
-                             "--log-dir", str(tmp_path)], cwd=ROOT, env=ENV,
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    proc, _, url = start_console("--log-dir", str(tmp_path))
     try:
-        url = None
-        while url is None:
-            line = proc.stdout.readline()
-            assert line
-            found = re.search(r"(http://127\.0\.0\.1:\d+/)", line)
-            url = found.group(1) if found else None
         _post(url, "arm-up")
         _post(url, "home")
         assert _post(url, "move/joints", {"joints": {"j1": 90}})["accepted"]
@@ -106,19 +109,10 @@ def test_sigterm_during_a_move_halts_the_arm(tmp_path):
 
 @pytest.mark.slow
 def test_rt_priority_puts_only_the_loop_thread_at_sched_fifo(tmp_path):
-    proc = subprocess.Popen([sys.executable, "-m", "seqrun", "console", "--sim", "--port", "0",
-                             "--rt-priority", "5", "--log-dir", str(tmp_path)], cwd=ROOT,
-                            env=ENV, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    proc, printed, url = start_console("--rt-priority", "5", "--log-dir", str(tmp_path))
     try:
-        lines, url = [], None
-        while url is None:
-            line = proc.stdout.readline()
-            assert line, "".join(lines)
-            lines.append(line)
-            found = re.search(r"(http://127\.0\.0\.1:\d+/)", line)
-            url = found.group(1) if found else None
         assert ("the control loop at SCHED_FIFO priority 5, the console's other threads at "
-                "SCHED_RR 1, the interpreter lock handed over within 1 ms") in "".join(lines)
+                "SCHED_RR 1, the interpreter lock handed over within 1 ms") in printed
         _post(url, "arm-up")
         _post(url, "home")
         assert _post(url, "move/joints", {"joints": {"j1": 60}})["accepted"]
