@@ -143,6 +143,14 @@ def test_stop_click_esc_and_space_send_the_halt(page, live):
                            timeout=10000)
     shows(page, "#tlm-j1 .flags", "was")
     assert "latched" in page.get_attribute("#tlm-j1", "class")
+    # the longest state text (flags and the latched ones) wraps inside the telemetry panel
+    # on a lab PC's screen
+    page.set_viewport_size({"width": 1400, "height": 950})
+    page.wait_for_timeout(300)  # (the page paints its numbers a few times a second)
+    right = page.evaluate("[document.querySelector('#telemetry').getBoundingClientRect().right,"
+                          " document.querySelector('#telemetry').parentElement"
+                          ".getBoundingClientRect().right]")
+    assert right[0] <= right[1], right
     page.click("#ack-faults")
     assert page.get_attribute("#tlm-j1", "class") in ("", None)
 

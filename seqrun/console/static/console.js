@@ -136,6 +136,8 @@ function onReply(reply) {
 // without a GPU, on the cores the 100 Hz control loop needs. So the page paints in frames of
 // its own, only when something changed, numbers and 3D view in the same frame, at most
 // frameHz() frames a second (the numbers at most NUMBERS_HZ): none while hidden.
+// Flags shown as A|B|C, with a line break allowed after each bar (a narrow panel wraps there).
+const FLAG_SEP = "|\u200b";
 const NUMBERS_HZ = 10;
 const FRAME_HZ = 20;         // the focused page on a GPU
 const FRAME_HZ_SLOW = 4;     // without the focus, or with software-rendered WebGL
@@ -151,7 +153,7 @@ function showStatus(s) {
   state.status = s;
   state.statusCount += 1;
   if (!DRAW) return;
-  for (const j of s.joints) if (j.fault) state.latched[j.name] = j.flags.join("|");
+  for (const j of s.joints) if (j.fault) state.latched[j.name] = j.flags.join(FLAG_SEP);
   state.statusDirty = true;
   if (state.view) state.view.setMeasured(s.joints.map((j) => j.position_deg));
   scheduleFrame();
@@ -208,9 +210,9 @@ function drawStatus(s) {
     setText(row.children[1], fmt(j.position_deg));
     setText(row.children[2], fmt(j.velocity_deg_s));
     setText(row.children[3], fmt(j.target_deg));
-    if (j.fault) state.latched[j.name] = j.flags.join("|");
+    if (j.fault) state.latched[j.name] = j.flags.join(FLAG_SEP);
     const latched = state.latched[j.name];
-    setText(row.children[4], j.fault ? j.flags.join("|") : (latched ? `${j.flags.join("|")} (was ${latched})` : j.flags.join("|")));
+    setText(row.children[4], j.fault ? j.flags.join(FLAG_SEP) : (latched ? `${j.flags.join(FLAG_SEP)} (was ${latched})` : j.flags.join(FLAG_SEP)));
     row.className = [j.fault || latched ? "fault" : "", latched ? "latched" : "", j.locked ? "locked" : ""].join(" ").trim();
   });
   $("#ack-faults").disabled = Object.keys(state.latched).length === 0;
