@@ -53,6 +53,12 @@ def solver_for(arm: ArmDescription, tool: str | None, *, tracking: bool = False)
     return solver
 
 
+def unknown_tool(arm: ArmDescription, tool: str | None) -> str:
+    """The one line for a tool name the arm file does not define."""
+    names = ", ".join(t.name for t in arm.tools) or "none defined"
+    return f"unknown tool '{tool}' (the arm file's tools: {names})"
+
+
 def tool_pose(solver: IkSolver, joints_deg: npt.ArrayLike) -> np.ndarray:
     """The tool frame (4x4, mm) at every-joint user degrees."""
     q = np.radians(np.asarray(joints_deg, dtype=float))[solver.active]

@@ -55,6 +55,7 @@ from seqrun.targets import (  # noqa: F401  (re-exported: they lived here)
 from seqrun.yamlsource import sort_errors
 
 if TYPE_CHECKING:
+    from seqrun.ik import IkSolver
     from seqrun.loader import LoadedSequence, ResolvedStep
     from seqrun.steps.move import MoveParams
 
@@ -443,18 +444,25 @@ class Checker:
     # -- end-effector targets (seqrun/cartesian.py)
     def tool_target(self, step: ResolvedStep, params) -> np.ndarray | None:
         """The step's tool target (4x4) from the tracked joints; None after an error."""
-        from seqrun.cartesian import resolve_target, solver_for, tool_pose
+        from seqrun.cartesian import resolve_target, tool_pose
 
-        try:
-            solver = solver_for(self.arm, params.tool)
-        except KeyError:
-            names = ", ".join(t.name for t in self.arm.tools) or "none defined"
-            self.errors.append(step.error(f"unknown tool '{params.tool}' (the arm file's tools: "
-                                          f"{names})", "tool"))
+        solver = self.tool_solver(step, params)
+        if solver is None:
             return None
         current = tool_pose(solver, self.tracked())
         return resolve_target(current, params.position_mm, params.rpy_deg,
                               relative=params.relative, frame=params.frame)
+
+    def tool_solver(self, step: ResolvedStep, params) -> IkSolver | None:
+        """The IK solver of the step's tool; None (and an error at ``tool``) for a tool the
+        arm file does not define."""
+        from seqrun.cartesian import solver_for, unknown_tool
+
+        try:
+            return solver_for(self.arm, params.tool)
+        except KeyError:
+            self.errors.append(step.error(unknown_tool(self.arm, params.tool), "tool"))
+            return None
 
     def tracked(self) -> np.ndarray:
         """Where the steps so far leave every joint (user degrees, arm order)."""

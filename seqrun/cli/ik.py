@@ -72,6 +72,7 @@ def inverse_kinematics(
     the joint limits, with the locked joints at their value. Exit 1 if unreachable."""
     import numpy as np
 
+    from seqrun.cartesian import unknown_tool
     from seqrun.ik import IkSolver, Unreachable, target_frame
     from seqrun.kinematics import user_joint_values
 
@@ -94,8 +95,7 @@ def inverse_kinematics(
         try:
             solver = IkSolver(arm, tool)
         except KeyError:
-            names = ", ".join(t.name for t in arm.tools) or "none defined"
-            raise UserInputError(f"unknown tool '{tool}' (the arm file's tools: {names})") from None
+            raise UserInputError(unknown_tool(arm, tool)) from None
     try:
         solution = solver.solve(target_frame(position, rpy), seed)
     except Unreachable as exc:

@@ -139,7 +139,7 @@ def _relative_checkpoint(checker: Checker, step: ResolvedStep[CheckpointParams],
     move started."""
     import numpy as np
 
-    from seqrun.cartesian import displacement, solver_for, tool_pose
+    from seqrun.cartesian import displacement, tool_pose
     from seqrun.validation import format_number as f
 
     assert params.moved_mm is not None  # (check() comes here only for a moved_mm checkpoint)
@@ -147,12 +147,8 @@ def _relative_checkpoint(checker: Checker, step: ResolvedStep[CheckpointParams],
         checker.errors.append(step.error("a relative checkpoint (moved_mm) needs a move before "
                                          "it", "moved_mm"))
         return
-    try:
-        solver = solver_for(checker.arm, params.tool)
-    except KeyError:
-        names = ", ".join(t.name for t in checker.arm.tools) or "none defined"
-        checker.errors.append(step.error(f"unknown tool '{params.tool}' (the arm file's tools: "
-                                         f"{names})", "tool"))
+    solver = checker.tool_solver(step, params)
+    if solver is None:
         return
     moved = displacement(tool_pose(solver, checker.motion_start_deg),
                          tool_pose(solver, checker.tracked()), params.frame)
