@@ -10,7 +10,8 @@ half of numpy's import time, for matrices (4x4, 6x7) far too small to gain from 
 The program asks for one thread unless the environment already says how many.
 
 The source text that dataclasses and typing compile at every start is compiled once and
-kept like bytecode (:mod:`seqrun.source_cache`).
+kept like bytecode (:mod:`seqrun.source_cache`); so are the regular expressions that modules
+compile when imported (:mod:`seqrun.pattern_cache`).
 """
 
 from __future__ import annotations
@@ -37,8 +38,9 @@ def main(argv: list[str] | None = None) -> None:
     global command_line
     command_line = list(argv if argv is not None else sys.argv[1:])
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-    from seqrun import source_cache
+    from seqrun import pattern_cache, source_cache
 
+    pattern_cache.install()
     source_cache.install()
     previous = signal.signal(signal.SIGINT, _interrupted_during_start_up)
     try:
