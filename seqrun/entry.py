@@ -11,7 +11,8 @@ The program asks for one thread unless the environment already says how many.
 
 The source text that dataclasses and typing compile at every start is compiled once and
 kept like bytecode (:mod:`seqrun.source_cache`); so are the regular expressions that modules
-compile when imported (:mod:`seqrun.pattern_cache`).
+compile when imported (:mod:`seqrun.pattern_cache`). Imports run without cyclic garbage
+collection and what they made is frozen out of later collections (:mod:`seqrun.import_gc`).
 """
 
 from __future__ import annotations
@@ -38,6 +39,9 @@ def main(argv: list[str] | None = None) -> None:
     global command_line
     command_line = list(argv if argv is not None else sys.argv[1:])
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    from seqrun import import_gc
+
+    import_gc.install()
     from seqrun import pattern_cache, source_cache
 
     pattern_cache.install()
