@@ -7,7 +7,8 @@ one line and the operator-abort exit code; after that each command handles it.
 
 numpy's BLAS (OpenBLAS) starts a thread pool per core at import unless told otherwise: about
 half of numpy's import time, for matrices (4x4, 6x7) far too small to gain from threads.
-The program asks for one thread unless the environment already says how many.
+The program asks for one thread unless the environment already says how many. Likewise it
+loads no pydantic plugins unless the environment asks for them (:mod:`seqrun.pydantic_plugins`).
 
 The source text that dataclasses and typing compile at every start is compiled once and
 kept like bytecode (:mod:`seqrun.source_cache`); so are the regular expressions that modules
@@ -39,9 +40,10 @@ def main(argv: list[str] | None = None) -> None:
     global command_line
     command_line = list(argv if argv is not None else sys.argv[1:])
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-    from seqrun import import_gc
+    from seqrun import import_gc, pydantic_plugins
 
     import_gc.install()
+    pydantic_plugins.install()
     from seqrun import pattern_cache, source_cache
 
     pattern_cache.install()
