@@ -9,8 +9,8 @@ that text was ~10 % of the instructions of the whole command, the same work in e
 process, like compiling the modules themselves would be without ``__pycache__``.
 
 :func:`install` makes ``dataclasses`` and ``typing`` compile through a table of code
-objects loaded from ``seqrun/__pycache__`` (as ``.pyc`` files are), keyed by the exact
-source text; text not in the table is compiled as before and the table is written back
+objects loaded from ``seqrun/__pycache__`` (as ``.pyc`` files are; each entry unmarshalled
+when first used), keyed by the exact source text; text not in the table is compiled as before and the table is written back
 at exit (not when bytecode writing is off: ``PYTHONDONTWRITEBYTECODE``). A code object
 depends only on its text, its file name (``<string>``) and the compiler flags (none:
 neither module uses ``__future__`` imports), so the functions and classes made are the
@@ -26,10 +26,14 @@ import sys
 from pathlib import Path
 
 #: Table file format; a different Python (bytecode magic) makes the table start empty.
-_FORMAT = 1
+_FORMAT = 2
 #: Most entries kept: beyond, the table is rewritten with what the last process used.
 MAX_ENTRIES = 20_000
 
+#: (mode, text) -> code object, or its marshalled bytes until first used: a process uses
+#: only some of the entries (each command its own), and unmarshalling all of them cost more
+#: than the start-up work the rest of the table saves (``seqrun validate``: ~18 M
+#: instructions for the ~1,000 entries that every command together has made).
 _codes: dict[tuple[str, str], object] = {}
 _used: set[tuple[str, str]] = set()
 _compiled = 0
@@ -50,6 +54,11 @@ def table_path() -> Path:
 def _code(source: str, mode: str):
     key = (mode, source)
     code = _codes.get(key)
+    if type(code) is bytes:
+        try:
+            code = _codes[key] = marshal.loads(code)
+        except (EOFError, ValueError, TypeError):
+            code = None  # a damaged entry: compiled again below
     if code is None:
         global _compiled
         code = _codes[key] = builtins.compile(source, "<string>", mode, dont_inherit=True)
@@ -91,7 +100,8 @@ def save() -> None:
     """Write the table back if this process compiled text it did not have."""
     if not _compiled or sys.dont_write_bytecode:
         return
-    table = _codes if len(_codes) <= MAX_ENTRIES else {k: _codes[k] for k in _used}
+    kept = _codes if len(_codes) <= MAX_ENTRIES else {k: _codes[k] for k in _used}
+    table = {k: v if type(v) is bytes else marshal.dumps(v) for k, v in kept.items()}
     path = table_path()
     temporary = path.with_name(f"{path.name}.{os.getpid()}.tmp")
     try:

@@ -95,3 +95,31 @@ def test_the_seqrun_program_installs_it():
                           text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert proc.stderr.split()[-2:] == ["seqrun.source_cache", "seqrun.source_cache"]
+
+
+def test_entries_are_unmarshalled_only_when_used_and_a_damaged_one_is_compiled_again(tmp_path):
+    import marshal
+
+    from seqrun import source_cache
+
+    table = tmp_path / "generated-code.marshal"
+    run(table, "install")
+    header, entries = marshal.loads(table.read_bytes())
+    assert all(type(v) is bytes for v in entries.values())
+    unused = ("eval", "list[int]  # text no process here compiles")
+    entries[unused] = marshal.dumps(compile(unused[1], "<string>", "eval"))
+    damaged = next(k for k in entries if k[0] == "exec")
+    entries[damaged] = b"\x00damaged"
+    table.write_bytes(marshal.dumps((header, entries)))
+    probe = ("import json, sys\nfrom pathlib import Path\nfrom seqrun import source_cache\n"
+             "source_cache.table_path = lambda: Path(sys.argv[1])\nsource_cache.install()\n"
+             "import seqrun.events, seqrun.powercube.codec\n"
+             "print(json.dumps({'compiled': source_cache._compiled, 'unused': "
+             "type(source_cache._codes[tuple(sys.argv[2:])]).__name__}))\n")
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONDONTWRITEBYTECODE": "1"}
+    proc = subprocess.run([sys.executable, "-c", probe, str(table), *unused], cwd=ROOT, env=env,
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    result = json.loads(proc.stdout)
+    assert result == {"compiled": 1, "unused": "bytes"}  # the damaged entry, compiled again
+    assert source_cache._FORMAT == header[0]
