@@ -10,8 +10,9 @@ process, like compiling the modules themselves would be without ``__pycache__``.
 
 :func:`install` makes ``dataclasses`` and ``typing`` compile through a table of code
 objects loaded from ``seqrun/__pycache__`` (as ``.pyc`` files are; each entry unmarshalled
-when first used), keyed by the exact source text; text not in the table is compiled as before and the table is written back
-at exit (not when bytecode writing is off: ``PYTHONDONTWRITEBYTECODE``). A code object
+when first used), keyed by the exact source text; text not in the table is compiled as
+before and the table is written back at exit (not when bytecode writing is off:
+``PYTHONDONTWRITEBYTECODE``). A code object
 depends only on its text, its file name (``<string>``) and the compiler flags (none:
 neither module uses ``__future__`` imports), so the functions and classes made are the
 same as without the table. Nothing else is kept: no results, no validated data.
