@@ -29,7 +29,7 @@ _lock = threading.Lock()
 _depth = 0
 _collecting_before = False
 _installed = False
-_find_and_load = _bootstrap._find_and_load
+_find_and_load = _bootstrap._find_and_load  # type: ignore[attr-defined]
 
 
 def _find_and_load_without_collections(name, import_):
@@ -61,4 +61,4 @@ def install() -> None:
     if _installed:
         return
     _installed = True
-    _bootstrap._find_and_load = _find_and_load_without_collections
+    _bootstrap._find_and_load = _find_and_load_without_collections  # type: ignore[attr-defined]

@@ -27,9 +27,9 @@ import sys
 import threading
 import types
 from pathlib import Path
-from re import _compiler, _constants
+from re import _compiler, _constants  # type: ignore[attr-defined]
 
-import _sre
+import _sre  # type: ignore[import-not-found]
 
 #: Table file format.
 _FORMAT = 1
@@ -71,7 +71,7 @@ def recording_sre() -> types.ModuleType:
     arguments; every other name is ``_sre``'s own."""
     module = types.ModuleType(_sre.__name__)
     module.__dict__.update(vars(_sre))
-    module.compile = _recording_sre_compile
+    module.compile = _recording_sre_compile  # type: ignore[attr-defined]
     return module
 
 

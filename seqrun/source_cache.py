@@ -102,7 +102,8 @@ def save() -> None:
     if not _compiled or sys.dont_write_bytecode:
         return
     kept = _codes if len(_codes) <= MAX_ENTRIES else {k: _codes[k] for k in _used}
-    table = {k: v if type(v) is bytes else marshal.dumps(v) for k, v in kept.items()}
+    table = {k: v if type(v) is bytes else marshal.dumps(v)  # type: ignore[arg-type]
+             for k, v in kept.items()}
     path = table_path()
     temporary = path.with_name(f"{path.name}.{os.getpid()}.tmp")
     try:
