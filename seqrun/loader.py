@@ -18,7 +18,6 @@ from pydantic import ValidationError
 
 from seqrun.errors import SequenceInvalid, SourceError, UserInputError
 from seqrun.schema import (
-    STEP_ADAPTER,
     MAX_INCLUDE_DEPTH,
     MAX_STEPS,
     PARAMS_MODELS,
@@ -26,6 +25,7 @@ from seqrun.schema import (
     Sequence,
     StepParams,
     describe,
+    step_adapter,
 )
 from seqrun.steps.registry import step_kind
 from seqrun.yamlsource import Document, Location, display_path, load_document, sort_errors
@@ -202,7 +202,7 @@ class _Loader:
         good, nodes = [], []
         for item, node in zip(data, doc.items(doc.child(doc.root, "steps"))):
             try:
-                good.append(STEP_ADAPTER.validate_python(item))
+                good.append(step_adapter().validate_python(item))
                 nodes.append(node)
             except ValidationError:
                 continue  # already reported by the whole-file validation

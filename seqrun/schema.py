@@ -37,6 +37,7 @@ here: ``from seqrun.schema import load_sequence`` keeps working).
 
 from __future__ import annotations
 
+import functools
 import importlib
 import re
 from typing import TYPE_CHECKING, Annotated, Any, ClassVar, Literal, Union
@@ -293,8 +294,12 @@ class Sequence(_Model):
     steps: list[Step] = Field(min_length=1, description="The steps, in order.")
 
 
-#: Validates one step (a list item of ``steps``) on its own.
-STEP_ADAPTER: TypeAdapter[Any] = TypeAdapter(Step)
+@functools.cache
+def step_adapter() -> TypeAdapter[Any]:
+    """Validates one step (a list item of ``steps``) on its own: for the steps of a file
+    that is not valid as a whole. Built on first use: every start paid ~5 M instructions
+    for a second copy of the steps' union that only invalid files need."""
+    return TypeAdapter(Step)
 
 
 def sequence_json_schema() -> dict:
@@ -326,6 +331,8 @@ _MOVED = {name: "seqrun.loader" for name in (
 
 
 def __getattr__(name: str) -> Any:
+    if name == "STEP_ADAPTER":  # now built on first use: step_adapter()
+        return step_adapter()
     # Imported on first use: the loader and the reference import this module.
     if name in _MOVED:
         return getattr(importlib.import_module(_MOVED[name]), name)

@@ -254,3 +254,22 @@ def test_the_format_and_the_loader_import_no_maths_and_no_bus():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True, cwd=ROOT).stdout.split()
     assert not {"numpy", "ruckig", "can", "seqrun.executor", "seqrun.validation"} & set(out)
+
+
+def test_the_one_step_validator_is_built_only_for_a_file_with_an_invalid_step(project):
+    """A valid file is validated by the Sequence model alone; the single-step validator
+    (a second copy of the steps' union) is built when a file's steps must be checked one
+    by one, and gives the same steps as the whole file's validation would."""
+    from seqrun.loader import load_sequence_partial
+
+    schema.step_adapter.cache_clear()
+    loaded, errors = load_sequence_partial(project / "sequences" / "startup.yaml")
+    assert not errors and loaded is not None
+    assert schema.step_adapter.cache_info().currsize == 0
+    text = (project / "sequences" / "startup.yaml").read_text(encoding="utf-8")
+    broken = project / "sequences" / "broken.yaml"
+    broken.write_text(text + "  - wait: {seconds: -1}\n", encoding="utf-8")
+    partial, errors = load_sequence_partial(broken)
+    assert errors and schema.step_adapter.cache_info().currsize == 1
+    assert [s.kind for s in partial.steps] == [s.kind for s in loaded.steps]
+    assert schema.STEP_ADAPTER is schema.step_adapter()
