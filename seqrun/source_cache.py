@@ -12,10 +12,12 @@ process, like compiling the modules themselves would be without ``__pycache__``.
 objects loaded from ``seqrun/__pycache__`` (as ``.pyc`` files are; each entry unmarshalled
 when first used), keyed by the exact source text; text not in the table is compiled as
 before and the table is written back at exit (not when bytecode writing is off:
-``PYTHONDONTWRITEBYTECODE``). A code object
-depends only on its text, its file name (``<string>``) and the compiler flags (none:
-neither module uses ``__future__`` imports), so the functions and classes made are the
-same as without the table. Nothing else is kept: no results, no validated data.
+``PYTHONDONTWRITEBYTECODE``). A code object depends only on its text, its file name
+(``<string>``) and the compiler flags (none: no module routed here uses ``__future__``
+imports), so the functions and classes made are the same as without the table.
+``collections.namedtuple`` (its ``__new__``) and
+``inspect.get_annotations`` (string annotations) evaluate text too: their ``eval`` goes
+through the table the same way. Nothing else is kept: no results, no validated data.
 """
 
 from __future__ import annotations
@@ -75,6 +77,14 @@ def _exec(source, globals=None, locals=None, /):  # noqa: A002 (exec's own param
     return builtins.exec(source, globals, locals)
 
 
+def _eval(source, globals=None, locals=None, /):  # noqa: A002 (eval's own parameters)
+    """``eval`` for collections (namedtuple) and inspect (string annotations): through the
+    table. eval skips leading spaces and tabs of a text before compiling it."""
+    if type(source) is str:
+        source = _code(source.lstrip(" \t"), "eval")
+    return builtins.eval(source, globals, locals)
+
+
 def _compile(source, filename, mode, flags=0, dont_inherit=False, optimize=-1, **kwargs):
     """``compile`` for the typing module (``ForwardRef``): through the table."""
     if (type(source) is str and filename == "<string>" and mode == "eval" and not flags
@@ -118,16 +128,21 @@ def save() -> None:
 
 
 def install() -> None:
-    """Route dataclasses' and typing's compiling through the table (once per process)."""
+    """Route the compiling of dataclasses, typing, collections and inspect through the
+    table (once per process)."""
     global _installed
     if _installed:
         return
     _installed = True
     import atexit
+    import collections
     import dataclasses
+    import inspect
     import typing
 
     _load(table_path())
     dataclasses.exec = _exec  # type: ignore[attr-defined]  # its module global, not builtins
     typing.compile = _compile  # type: ignore[attr-defined]
+    collections.eval = _eval  # type: ignore[attr-defined]
+    inspect.eval = _eval  # type: ignore[attr-defined]
     atexit.register(save)

@@ -35,6 +35,10 @@ except dataclasses.FrozenInstanceError:
     frozen = True
 init = events.StepStarted.__init__.__code__
 hints = typing.get_type_hints(events.StepStarted)
+import collections, inspect
+Point = collections.namedtuple("Point", "x y", defaults=[0])
+def annotated(a: "list[int]", b: "  dict[str, Point]") -> "Point | None": ...
+annotations = inspect.get_annotations(annotated, eval_str=True)
 source_cache.save()
 print(json.dumps({
     "compiled": source_cache._compiled,
@@ -44,6 +48,12 @@ print(json.dumps({
     "frozen": frozen,
     "init": [init.co_code.hex(), repr(init.co_consts), init.co_names, init.co_varnames],
     "hints": {k: repr(v) for k, v in hints.items()},
+    "namedtuple": [repr(Point(1)), Point.__new__.__code__.co_code.hex(),
+                   Point.__new__.__code__.co_filename, Point.__new__.__defaults__],
+    "annotations": {k: repr(v) for k, v in annotations.items()},
+    "from_table": [key in source_cache._used for key in (
+        ("eval", "list[int]"), ("eval", "dict[str, Point]"),
+        ("eval", "lambda _cls, x, y: _tuple_new(_cls, (x, y))"))],
 }))
 """
 
@@ -67,9 +77,12 @@ def test_a_second_process_compiles_nothing_and_makes_the_same_classes(tmp_path):
     second = run(table, "install")
     assert second["compiled"] == 0
     for result in (first, second):
-        assert {k: v for k, v in result.items() if k != "compiled"} == \
-               {k: v for k, v in plain.items() if k != "compiled"}
+        assert {k: v for k, v in result.items() if k not in ("compiled", "from_table")} == \
+               {k: v for k, v in plain.items() if k not in ("compiled", "from_table")}
     assert plain["frozen"] and plain["eq"] and plain["hash"]
+    assert plain["annotations"]["b"] == "dict[str, __main__.Point]"
+    # the namedtuple's __new__ and the string annotations (eval skips leading blanks) too
+    assert first["from_table"] == second["from_table"] == [True, True, True]
 
 
 def test_no_table_is_written_when_bytecode_writing_is_off(tmp_path):
