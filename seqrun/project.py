@@ -20,12 +20,13 @@ import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Any, Literal
-
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from typing import TYPE_CHECKING
 
 from seqrun.errors import SourceError, UserInputError
 from seqrun.shipped import DEFAULT_ARM_NAME, shipped_arm, shipped_dir
+
+if TYPE_CHECKING:
+    from seqrun.campaign_config import CampaignConfig
 
 #: The campaign's config file name.
 CONFIG_NAME = "seqrun.toml"
@@ -37,37 +38,6 @@ class ConfigInvalid(UserInputError):
     def __init__(self, errors: list[SourceError]) -> None:
         self.errors = errors
         super().__init__("\n".join(str(e) for e in errors))
-
-
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
-
-
-class CampaignSection(_Strict):
-    name: str = Field("", description="Name of the campaign, shown in run records.")
-    arm: str = Field(DEFAULT_ARM_NAME,
-                     description="A shipped arm name (lwa3) or an arm file relative to the "
-                                 "campaign folder (arms/my-arm.yaml).")
-
-
-class BusSection(_Strict):
-    interface: str | None = Field(None, description="python-can interface (-i); none: the "
-                                                    "built-in simulator.")
-    channel: str | None = Field(None, description="CAN channel (-c).")
-    bitrate: Literal[125000, 250000, 500000, 1000000] | None = Field(
-        None, description="Bit rate (-b); default the arm file's.")
-    kwargs: dict[str, Any] = Field({}, description="Extra python-can bus arguments.")
-
-
-class RunsSection(_Strict):
-    dir: Annotated[str, Field(min_length=1)] = Field(
-        "runs", description="Run folders, relative to the campaign folder.")
-
-
-class CampaignConfig(_Strict):
-    campaign: CampaignSection = CampaignSection()
-    bus: BusSection = BusSection()
-    runs: RunsSection = RunsSection()
 
 
 def _config_location(text: str, loc: tuple) -> tuple[int, int]:
@@ -114,6 +84,11 @@ def load_config(path: Path) -> CampaignConfig:
         message = re.sub(r"\s*\(at (line \d+, column \d+|end of document)\)", "", message)
         raise ConfigInvalid([SourceError(shown, line, column,
                                            f"invalid TOML: {message}")]) from None
+    # the models only where a seqrun.toml is read (four pydantic models: ~10 M instructions)
+    from pydantic import ValidationError
+
+    from seqrun.campaign_config import CampaignConfig
+
     try:
         return CampaignConfig.model_validate(data)
     except ValidationError as exc:
@@ -128,6 +103,10 @@ def load_config(path: Path) -> CampaignConfig:
 
 
 def _expected(loc: tuple) -> str:
+    from pydantic import BaseModel
+
+    from seqrun.campaign_config import CampaignConfig
+
     model: type[BaseModel] = CampaignConfig
     for key in loc[:-1]:
         field = model.model_fields.get(str(key))

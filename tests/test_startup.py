@@ -59,6 +59,24 @@ def test_validate_and_its_dry_run_do_not_import_python_can():
     assert not imported("validate", "sequences/opsafe.yaml") & {"can", "asyncio", "sqlite3"}
 
 
+def imported_modules(*args: str, cwd: Path = ROOT) -> set[str]:
+    """Every module ``python -m seqrun ARGS`` (run in ``cwd``) imports."""
+    proc = subprocess.run([sys.executable, "-X", "importtime", "-m", "seqrun", *args],
+                          cwd=cwd, env=ENV, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    return {line.rsplit("|", 1)[1].strip() for line in proc.stderr.splitlines()
+            if line.startswith("import time:") and "|" in line}
+
+
+def test_the_campaign_file_models_are_built_only_for_a_campaign(tmp_path):
+    """The models of seqrun.toml are imported where one is read, not by every command."""
+    outside = imported_modules("validate", "--static", "sequences/opsafe.yaml")
+    assert "seqrun.project" in outside and "seqrun.campaign_config" not in outside
+    campaign = make_project(tmp_path)
+    inside = imported_modules("validate", "--static", "sequences/startup.yaml", cwd=campaign)
+    assert "seqrun.campaign_config" in inside
+
+
 def _head_one(args: list[str], cwd: Path = ROOT) -> tuple[int, str, str]:
     """Run ``seqrun ARGS | head -1``: read one line, close the pipe, wait for the end."""
     proc = subprocess.Popen([sys.executable, "-m", "seqrun", *args], cwd=cwd, env=ENV,
