@@ -226,3 +226,12 @@ def project_for(path: Path, project_dir: Path | None = None) -> Project:
     if campaign is not None:
         return open_project(campaign)
     return Project(_legacy_root(path))
+
+
+def __getattr__(name: str):
+    # The seqrun.toml models moved to seqrun.campaign_config (imported on first use).
+    if name in ("CampaignConfig", "CampaignSection", "BusSection", "RunsSection"):
+        import seqrun.campaign_config
+
+        return getattr(seqrun.campaign_config, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
