@@ -21,7 +21,7 @@ from __future__ import annotations
 import random
 import threading
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from typing import NamedTuple
 
 from seqrun.clock import Clock
 from seqrun.errors import CodecError
@@ -35,13 +35,15 @@ from seqrun.powercube.protocol import GET_BASE, SET_BASE, StateFlag
 from seqrun.sim.faults import Fault, parse_faults
 from seqrun.sim.module import ModuleOptions, SimModule
 
+#: Builds a Reply without the named tuple's Python-level ``__new__`` (once per frame).
+_new_tuple = tuple.__new__
 #: Seconds between the end of a request frame and its acknowledge being ready to send [I].
 DEFAULT_MODULE_LATENCY = 100e-6
 _GET_EXTENDED = 0x0A
+_GET_EXTENDED_BYTE = bytes([_GET_EXTENDED])
 
 
-@dataclass(frozen=True)
-class Reply:
+class Reply(NamedTuple):
     """An acknowledge a module wants to put on the bus from ``ready_at`` on."""
 
     module: int
@@ -192,7 +194,7 @@ class SimArm:
         """
         with self._lock:
             t = self._now(t)
-            if SET_BASE <= can_id < SET_BASE + 0x20 and data[:1] == bytes([_GET_EXTENDED]):
+            if SET_BASE <= can_id < SET_BASE + 0x20 and data[:1] == _GET_EXTENDED_BYTE:
                 can_id = GET_BASE + (can_id - SET_BASE)  # a GetExtended on the SET id
             try:
                 request = decode_request(can_id, bytes(data))
@@ -215,7 +217,8 @@ class SimArm:
             ack_id, ack_data = encode(ack)
             if isinstance(ack, CommandAck) and not self.options.command_ack_trailer:
                 ack_data = ack_data[:1]
-            return [Reply(request.module, ack_id, ack_data, t + self.module_latency)]
+            return [_new_tuple(Reply, (request.module, ack_id, ack_data,
+                                       t + self.module_latency))]
 
     def ack_sent(self, module_id: int) -> None:
         """The wire reports that an acknowledge of ``module_id`` has been sent (delivered):
