@@ -244,6 +244,10 @@ _TICK_TWINS: dict[ParamId, ParamId] = {
 #: Event kinds of SimModule._next_event.
 _WATCHDOG, _PROFILE_END, _SOFT_LIMIT = "watchdog", "profile end", "soft limit"
 
+#: mode -> (its plain twin, the twin's is_float, is_extended_ack, is_float): properties
+#: looked up once.
+_MODE_FACTS = {m: (m.without_ext_ack(), m.without_ext_ack().is_float, m.is_extended_ack,
+                   m.is_float) for m in MotionMode}
 _RAMP_MODES = {MotionMode.FRAMP, MotionMode.IRAMP}
 _STEP_MODES = {MotionMode.FSTEP, MotionMode.ISTEP}
 _VELOCITY_MODES = {MotionMode.FVEL, MotionMode.IVEL}
@@ -747,6 +751,9 @@ class SimModule:
         return ratio if ratio > 0 else 1.0
 
     def _read(self, param: ParamId) -> float | int | PosStateDio:
+        if param is _P_FPOS_STATE_DIO:  # first: the reads of every control cycle
+            return PosStateDio(_f32(self._actual_position()), self._short_state_now(),
+                               self._dio())
         wire = PARAM_TYPES[param]
         if param in _TICK_TWINS:
             value = float(self._read(_TICK_TWINS[param]))  # type: ignore[arg-type]
@@ -824,11 +831,11 @@ class SimModule:
 
     def _motion(self, request: SetMotion) -> Ack | None:
         mode = request.mode
-        base = mode.without_ext_ack()
+        base, base_is_float, is_extended_ack, is_float = _MODE_FACTS[mode]
         position_at_receipt = self._actual_position()
         short_at_receipt = self._short_state_now()
         value = float(request.value)
-        if not base.is_float:
+        if not base_is_float:
             value *= self._inc_ratio()  # ticks, ticks/s -> rad, rad/s
         refusal = self._refusal(base, value)
         if refusal is None:
@@ -843,11 +850,11 @@ class SimModule:
                 self._execute(motion)
         elif not self.options.ack_refused_motion:
             return None
-        if not mode.is_extended_ack:
+        if not is_extended_ack:
             return MotionAck(self.module_id, mode)
         state = _SHORT_STATES[int(short_at_receipt) | (_NOT_OK if refusal else 0)]
         position: float | int = _f32(position_at_receipt)
-        if not mode.is_float:
+        if not is_float:
             position = _fit_int(round(position_at_receipt / self._inc_ratio()), WireType.I32)
         return MotionExtAck(self.module_id, mode, position, state, self._dio())
 

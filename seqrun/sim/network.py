@@ -462,7 +462,9 @@ class SimNetwork:
             if endpoint.closed:
                 raise NetworkClosedError(f"{endpoint.name} is closed")
             now = self.clock.now()
-            self._advance(now, start_at_horizon=False)
+            flight = self._in_flight
+            if flight is None or flight.end <= now:  # (else _advance has nothing to do)
+                self._advance(now, start_at_horizon=False)
             deadline = None if timeout is None else now + timeout
             while len(endpoint._node.queue) >= endpoint.tx_queue_size:
                 if deadline is not None and self.clock.now() >= deadline:
@@ -479,7 +481,8 @@ class SimNetwork:
                 frame = WireFrame(frame.can_id, bytes(frame.data), frame.is_extended,
                                   frame.is_remote, frame.dlc, 0.0, endpoint.name)
             self._queue(endpoint._node, frame, self.clock.now(), durations)
-            self._notify_all()
+            if self._cond._waiters:  # type: ignore[attr-defined]  (_notify_all, inline)
+                self._cond.notify_all()
 
     def _receive(self, endpoint: Endpoint, deadline: float | None) -> WireFrame | None:
         clock = self.clock
