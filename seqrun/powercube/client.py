@@ -43,6 +43,7 @@ trace shares the time base of the run's events.
 
 from __future__ import annotations
 
+import itertools
 import logging
 import threading
 from collections import Counter, deque
@@ -352,10 +353,14 @@ class PowerCubeClient:
         barrier = False
         still: deque[int] = deque()
         in_flight = len(deadlines)
-        for index in held:
+        for position, index in enumerate(held):
+            if in_flight >= window:
+                # Nothing more goes out now: the rest stays held, in order.
+                still.extend(itertools.islice(held, position, None))
+                break
             module = getattr(requests[index], "module", None)  # None: a broadcast
             if barrier or (module in blocked and self.ONE_REQUEST_PER_MODULE) or (
-                    module is None and still) or in_flight >= window:
+                    module is None and still):
                 still.append(index)
                 if module is None:
                     barrier = True

@@ -298,8 +298,8 @@ class SimNetwork:
             self._deliver(flight)
             delivered = True
             flight = None
-        if delivered:
-            self._notify_all()
+        if delivered and self._cond._waiters:  # type: ignore[attr-defined]  (_notify_all)
+            self._cond.notify_all()
 
     def _run_until_received(self, inbox: deque[WireFrame], horizon: float) -> float | None:
         """Virtual time: :meth:`_advance` towards ``horizon``, but stop at the delivery that
@@ -328,8 +328,8 @@ class SimNetwork:
             flight = None
             if inbox:
                 break
-        if delivered:
-            self._notify_all()
+        if delivered and self._cond._waiters:  # type: ignore[attr-defined]  (_notify_all)
+            self._cond.notify_all()
         return last
 
     def _start_next(self, horizon: float, start_at_horizon: bool) -> _InFlight | None:
