@@ -26,6 +26,7 @@ from typing import NamedTuple
 from seqrun.clock import Clock
 from seqrun.errors import CodecError
 from seqrun.powercube.codec import (
+    Ack,
     BroadcastRequest,
     CommandAck,
     decode_request,
@@ -93,6 +94,9 @@ class SimArm:
         #: Acknowledges each module produced that have not been sent on the wire yet
         #: (``drop_request_while_busy``).
         self._unsent_acks: dict[int, int] = {m: 0 for m in self._modules}
+        #: module -> (its last acknowledge, its frame): modules hand out the same immutable
+        #: acknowledge object again while nothing changed (a module at rest read every cycle).
+        self._encoded: dict[int, tuple[Ack, int, bytes]] = {}
         #: Requests dropped because their module was busy: (time, module, can_id, data).
         self.dropped_while_busy: list[tuple[float, int, int, bytes]] = []
         #: Every fault applied so far, with the time it was applied.
@@ -219,7 +223,12 @@ class SimArm:
                                and not self._ack_survives(request.module)):
                 return []
             self._unsent_acks[request.module] += 1
-            ack_id, ack_data = encode(ack)
+            encoded = self._encoded.get(request.module)
+            if encoded is not None and encoded[0] is ack:
+                _, ack_id, ack_data = encoded  # the same acknowledge object as last time
+            else:
+                ack_id, ack_data = encode(ack)
+                self._encoded[request.module] = (ack, ack_id, ack_data)
             if isinstance(ack, CommandAck) and not self.options.command_ack_trailer:
                 ack_data = ack_data[:1]
             return [_new_tuple(Reply, (request.module, ack_id, ack_data,

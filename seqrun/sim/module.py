@@ -464,6 +464,9 @@ class SimModule:
         self._dead = False
         self._last_target = float(position)
         self._saved_position = float(position)
+        #: Acknowledges that do not change, made once (see _fpos_ack).
+        self._set_acks: dict[ParamId, SetParamAck] = {}
+        self._last_fpos_ack: tuple[tuple, GetParamAck] | None = None
 
     def __repr__(self) -> str:
         return (f"<SimModule {self.module_id} pos={self.position():.4f} "
@@ -688,10 +691,15 @@ class SimModule:
             self._broadcast(request)
             return None
         if isinstance(request, GetParam):
-            ack: Ack | None = GetParamAck(self.module_id, request.param, self._read(request.param))
+            if request.param is _P_FPOS_STATE_DIO:
+                ack: Ack | None = self._fpos_ack()
+            else:
+                ack = GetParamAck(self.module_id, request.param, self._read(request.param))
         elif isinstance(request, SetParam):
             self._write(request.param, request.value)
-            ack = SetParamAck(self.module_id, request.param)
+            ack = self._set_acks.get(request.param)
+            if ack is None:
+                ack = self._set_acks[request.param] = SetParamAck(self.module_id, request.param)
         elif isinstance(request, SetMotion):
             ack = self._motion(request)
         elif isinstance(request, CommandRequest):
@@ -701,6 +709,21 @@ class SimModule:
         if (self.options.honour_disable_ack
                 and int(self._params[_P_CONFIG]) & _DISABLE_ACK):
             return None
+        return ack
+
+    def _fpos_ack(self) -> GetParamAck:
+        """The acknowledge of a GetExtended FPosStateDio now: the previous one again while
+        the reading is the same (a module at rest is read every cycle; acknowledges are
+        immutable, and the wire encodes the same object only once)."""
+        position = _f32(self._actual_position())
+        reading = (position, self._short_state_now(), self._dio())
+        last = self._last_fpos_ack
+        # (0.0 == -0.0, but they are different frames)
+        if last is not None and last[0] == reading and (
+                position or math.copysign(1.0, position) == math.copysign(1.0, last[0][0])):
+            return last[1]
+        ack = GetParamAck(self.module_id, _P_FPOS_STATE_DIO, PosStateDio(*reading))
+        self._last_fpos_ack = (reading, ack)
         return ack
 
     def _broadcast(self, request: BroadcastRequest) -> None:
