@@ -81,6 +81,9 @@ def environment(tree: Path) -> dict[str, str]:
     env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
     env["PYTHONPATH"] = str(tree)
     env["PYTHONHASHSEED"] = "0"  # set and dict orders, hence counts, the same every run
+    # One BLAS thread, as the seqrun program sets it: the pool's idle threads spin for a
+    # while, and callgrind counts their instructions too, differently every run.
+    env.setdefault("OPENBLAS_NUM_THREADS", "1")
     return env
 
 
