@@ -463,7 +463,8 @@ class SimNetwork:
                 raise NetworkClosedError(f"{endpoint.name} is closed")
             now = self.clock.now()
             flight = self._in_flight
-            if flight is None or flight.end <= now:  # (else _advance has nothing to do)
+            if (flight.end <= now if flight is not None  # (see _receive_virtual)
+                    else self._active and self._bus_free_at <= now):
                 self._advance(now, start_at_horizon=False)
             deadline = None if timeout is None else now + timeout
             while len(endpoint._node.queue) >= endpoint.tx_queue_size:
@@ -520,7 +521,11 @@ class SimNetwork:
                     raise NetworkClosedError(f"{endpoint.name} is closed")
                 now = clock.now()
                 flight = self._in_flight
-                if flight is None or flight.end <= now:  # (else _advance has nothing to do)
+                # _advance has nothing to do while the frame on the wire ends later, or, with
+                # the wire idle, while nothing is queued or the intermission after the last
+                # frame lasts (the usual case when a request was just sent)
+                if (flight.end <= now if flight is not None
+                        else self._active and self._bus_free_at <= now):
                     self._advance(now)
                 if inbox:
                     return inbox.popleft()
