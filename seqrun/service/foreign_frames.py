@@ -104,11 +104,11 @@ class ForeignFrameWatch:
     def __call__(self, msg) -> None:
         if not is_request_frame(msg):
             return
-        key = (msg.arbitration_id, bytes(msg.data))
-        if not msg.is_rx:
+        if not msg.is_rx:  # one of ours, as it leaves (every request: no key made for it)
             if self.echoes_own:
-                self._sent[key] += 1
+                self._sent[msg.arbitration_id, bytes(msg.data)] += 1
             return
+        key = (msg.arbitration_id, bytes(msg.data))
         if self._sent[key] > 0:
             self._sent[key] -= 1
             return
