@@ -16,9 +16,9 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-import numpy.typing as npt
 from ruckig import InputParameter, Result, Ruckig, Trajectory
 
 from seqrun.arm import ArmDescription
@@ -26,6 +26,9 @@ from seqrun.errors import SeqrunError
 from seqrun.ik import ORIENTATION_WEIGHT_MM, IkSolver, Unreachable, rotation_vector, target_frame
 from seqrun.kinematics import jacobian
 from seqrun.planner import SampledPlan
+
+if TYPE_CHECKING:  # annotations only: numpy.typing is an import of its own at run time
+    import numpy.typing as npt
 
 __all__ = ["LinearPath", "LinearPlan", "PathError", "displacement", "manipulability", "plan_linear",
            "resolve_target", "solver_for"]

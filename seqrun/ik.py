@@ -25,13 +25,16 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-import numpy.typing as npt
 
 from seqrun.arm import ArmDescription
 from seqrun.errors import SeqrunError
 from seqrun.kinematics import Chain, frame_matrix, matrix_from_rpy
+
+if TYPE_CHECKING:  # annotations only: numpy.typing is an import of its own at run time
+    import numpy.typing as npt
 
 __all__ = [
     "ANGLE_TOLERANCE_RAD",

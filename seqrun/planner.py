@@ -13,15 +13,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Mapping, Sequence
+from typing import TYPE_CHECKING, Mapping, Sequence
 
 import numpy as np
-import numpy.typing as npt
 from ruckig import (ControlInterface, InputParameter, Result, Ruckig, RuckigError,
                     Synchronization, Trajectory)
 
 from seqrun.arm import ArmDescription
 from seqrun.errors import PlanningError
+
+if TYPE_CHECKING:  # annotations only: numpy.typing is an import of its own at run time
+    import numpy.typing as npt
 
 
 @dataclass(frozen=True)
