@@ -20,6 +20,7 @@ from seqrun.kinematics import (
     jacobian,
     matrix_from_rpy,
     orientation_error,
+    point_heights,
     point_positions,
     pose_from_user_deg,
     rpy_from_matrix,
@@ -311,3 +312,17 @@ def test_chain_of_an_arm_is_built_once():
         "tool": arm.kinematics.tool.model_copy(update={"xyz_mm": [0.0, 0.0, -100.0]})})})
     assert Chain.from_arm(moved) is not Chain.from_arm(arm)
     assert fk(Chain.from_arm(moved), np.zeros(7))[2, 3] == pytest.approx(1046.1 + 100.0)
+
+
+@given(st.one_of(configurations, special_configurations), st.sampled_from([CHAIN, SKEWED]))
+def test_point_heights_are_the_z_of_point_positions(q, chain):
+    heights = point_heights(chain, q)
+    positions = point_positions(chain, q)
+    assert set(heights) == set(positions)
+    for name, position in positions.items():
+        assert same_bits(np.float64(heights[name]), position[2]), name
+
+
+def test_point_heights_take_one_configuration():
+    with pytest.raises(ValueError, match=r"one configuration of shape \(7,\)"):
+        point_heights(CHAIN, np.zeros((2, 7)))
