@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from seqrun.arm import ArmDescription, Obstacle
-from seqrun.kinematics import Chain, frame_transforms, matrix_from_rpy
+from seqrun.kinematics import Chain, frame_origins, matrix_from_rpy
 
 __all__ = ["EXACT_WITHIN_MM", "Clearance", "Geometry"]
 
@@ -258,25 +258,24 @@ class Geometry:
     def empty(self) -> bool:
         return not self.capsules
 
-    def endpoints(self, q_rad: np.ndarray, frames: np.ndarray | None = None) -> np.ndarray:
-        """Capsule segments ``(..., capsules, 2, 3)`` at joint angles (rad); ``frames``:
-        their :func:`~seqrun.kinematics.frame_transforms` when the caller has them."""
-        if frames is None:
-            frames = frame_transforms(self.chain, q_rad)
-        origins = frames[..., :3, 3]  # (..., n+1, 3)
+    def endpoints(self, q_rad: np.ndarray, origins: np.ndarray | None = None) -> np.ndarray:
+        """Capsule segments ``(..., capsules, 2, 3)`` at joint angles (rad); ``origins``:
+        their :func:`~seqrun.kinematics.frame_origins` when the caller has them."""
+        if origins is None:
+            origins = frame_origins(self.chain, q_rad)  # (..., n+1, 3)
         origin = np.zeros(origins.shape[:-2] + (1, 3))
         points = np.concatenate([origin, origins], axis=-2)  # "base" = the mount, index 0
         return points[..., self._ends, :]
 
-    def clearances(self, q_rad: np.ndarray, frames: np.ndarray | None = None
+    def clearances(self, q_rad: np.ndarray, origins: np.ndarray | None = None
                    ) -> tuple[np.ndarray, list[str]]:
         """Every pair's clearance (mm): ``(..., pairs)`` and the pair names (one numpy
         evaluation per obstacle over all its capsules, one for all self-collision pairs).
-        ``frames``: as for :meth:`endpoints`."""
+        ``origins``: as for :meth:`endpoints`."""
         q = np.asarray(q_rad, dtype=float)
         if not self._names:
             return np.full(q.shape[:-1] + (0,), np.inf), []
-        seg = self.endpoints(q, frames)
+        seg = self.endpoints(q, origins)
         columns: list[np.ndarray] = []
         for obstacle, links in self._checked:
             a, b = seg[..., links, 0, :], seg[..., links, 1, :]
@@ -376,17 +375,18 @@ class Geometry:
                 best, best_name = d, name
         return Clearance(best, best_name, 0)
 
-    def smallest(self, q_rad: np.ndarray, frames: np.ndarray | None = None) -> Clearance | None:
+    def smallest(self, q_rad: np.ndarray, origins: np.ndarray | None = None
+                 ) -> Clearance | None:
         """The smallest clearance over a batch ``(k, dof)`` (or one configuration);
-        ``frames`` of a batch: as for :meth:`endpoints`."""
+        ``origins`` of a batch: as for :meth:`endpoints`."""
         q = np.asarray(q_rad, dtype=float)
         if not self._names:
             return None
         if q.ndim == 1 and self._planes_only:
             return self._smallest_one(q.tolist())
         if q.ndim == 1:
-            q, frames = q[None], None if frames is None else frames[None]
-        values, names = self.clearances(q, frames)
+            q, origins = q[None], None if origins is None else origins[None]
+        values, names = self.clearances(q, origins)
         if not names:
             return None
         flat = int(np.argmin(values))

@@ -41,9 +41,10 @@ __all__ = [
     "jacobian",
     "matrix_from_rpy",
     "orientation_error",
+    "frame_origins",
     "point_heights",
     "point_positions",
-    "points_of_frames",
+    "points_of_origins",
     "pose_from_user_deg",
     "rpy_from_matrix",
     "user_joint_values",
@@ -235,6 +236,22 @@ def frame_transforms(chain: Chain, q_rad: np.ndarray | Sequence[float]) -> np.nd
     return frames
 
 
+def frame_origins(chain: Chain, q_rad: np.ndarray | Sequence[float]) -> np.ndarray:
+    """The origins (mm) of :func:`frame_transforms`' frames, ``(..., n+1, 3)``, the same bits
+    without keeping every 4x4 frame (guards and link volumes along a path need the points)."""
+    q = _joint_angles(chain, q_rad)
+    turned = _turned_frames(chain, q)
+    n = chain.dof
+    origins = np.empty(q.shape[:-1] + (n + 1, 3))
+    current = turned[..., 0, :, :]
+    origins[..., 0, :] = current[..., :3, 3]
+    for k in range(1, n):
+        current = current @ turned[..., k, :, :]
+        origins[..., k, :] = current[..., :3, 3]
+    origins[..., n, :] = (current @ chain.tool)[..., :3, 3]
+    return origins
+
+
 def _frames_of_one(chain: Chain, turned: np.ndarray) -> list[np.ndarray]:
     """The frames of one configuration from its :func:`_turned_frames`, each its own 4x4
     array: ``ndarray.dot`` is the same BLAS product as ``@`` with a third of the overhead."""
@@ -264,7 +281,7 @@ def point_positions(chain: Chain, q_rad: np.ndarray | Sequence[float]) -> dict[G
     The end-effector is the tool point (the origin of :func:`fk`).
     """
     _check_guard_frames(chain.dof)
-    return points_of_frames(frame_transforms(chain, q_rad))
+    return points_of_origins(frame_origins(chain, q_rad))
 
 
 def point_heights(chain: Chain, q_rad: np.ndarray | Sequence[float]) -> dict[GuardPoint, float]:
@@ -289,13 +306,13 @@ def _check_guard_frames(dof: int) -> None:
                          f"this chain has {dof}")
 
 
-def points_of_frames(frames: np.ndarray) -> dict[GuardPoint, np.ndarray]:
-    """:func:`point_positions` from :func:`frame_transforms` already computed (one forward
+def points_of_origins(origins: np.ndarray) -> dict[GuardPoint, np.ndarray]:
+    """:func:`point_positions` from :func:`frame_origins` already computed (one forward
     kinematics for the guards and the link volumes along a path)."""
-    _check_guard_frames(frames.shape[-3] - 1)
+    _check_guard_frames(origins.shape[-2] - 1)
     points: dict[GuardPoint, np.ndarray] = {
-        name: frames[..., index, :3, 3] for name, index in GUARD_POINT_FRAMES.items()}
-    points["end_effector"] = frames[..., -1, :3, 3]
+        name: origins[..., index, :] for name, index in GUARD_POINT_FRAMES.items()}
+    points["end_effector"] = origins[..., -1, :]
     return points
 
 

@@ -16,6 +16,7 @@ from seqrun.arm import GuardPoint
 from seqrun.kinematics import (
     Chain,
     fk,
+    frame_origins,
     frame_transforms,
     jacobian,
     matrix_from_rpy,
@@ -293,6 +294,7 @@ def test_frames_have_the_bits_of_the_4x4_products(q, chain):
     expected = blas_chain_frames(chain, q)
     assert same_bits(frame_transforms(chain, q), expected)
     assert same_bits(fk(chain, q), expected[..., -1, :, :])
+    assert same_bits(frame_origins(chain, q), np.ascontiguousarray(expected[..., :3, 3]))
     if q.ndim == 2:
         for k, single in enumerate(q):
             assert same_bits(frame_transforms(chain, single), expected[k])
