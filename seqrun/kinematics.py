@@ -23,7 +23,7 @@ import math
 import weakref
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, cast
+from typing import TYPE_CHECKING, NamedTuple, cast
 
 import numpy as np
 
@@ -107,7 +107,7 @@ class Chain:
     base: np.ndarray  # (4, 4) mount -> joint 1, before Rz(q1)
     links: np.ndarray  # (n-1, 4, 4) F2 .. Fn
     tool: np.ndarray  # (4, 4) joint n (flange) -> end-effector
-    _turns: tuple[np.ndarray, ...] = field(init=False, repr=False)  # see _turn_terms
+    _turns: _Turns = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         base, links, tool = (_readonly(a) for a in (self.base, self.links, self.tool))
@@ -135,23 +135,37 @@ class Chain:
         links = (np.stack([frame_matrix(f) for f in kin.links]) if kin.links
                  else np.zeros((0, 4, 4)))
         chain = cls(base=frame_matrix(kin.base), links=links, tool=frame_matrix(kin.tool))
+        try:
+            kept = (weakref.ref(kin), chain)
+        except TypeError:  # a kinematics object without weak references: not kept
+            return chain
         if len(_chains) >= _CHAINS_KEPT:
             _chains.clear()
-        _chains[id(kin)] = (weakref.ref(kin), chain)
+        _chains[id(kin)] = kept
         return chain
 
 
-def _turn_terms(base: np.ndarray, links: np.ndarray) -> tuple[np.ndarray, ...]:
-    """``(C, S, K)`` with ``F·Rz(q) = C·cos q + S·sin q + K`` for B, F2 .. Fn (each
-    ``(n, 4, 4)``), the indices of the frames that may not be computed so, and the frames
-    themselves (for those).
+class _Turns(NamedTuple):
+    """``F·Rz(q) = cos_term·cos q + sin_term·sin q + constant`` for B, F2 .. Fn (each
+    ``(n, 4, 4)``), except for the frames in ``general``, which take the product itself
+    (``frames``: B, F2 .. Fn as they are)."""
+
+    cos_term: np.ndarray
+    sin_term: np.ndarray
+    constant: np.ndarray
+    general: tuple[int, ...]
+    frames: np.ndarray
+
+
+def _turn_terms(base: np.ndarray, links: np.ndarray) -> _Turns:
+    """The :class:`_Turns` of a chain.
 
     ``F·Rz(q)`` keeps F's columns 2 and 3 and mixes columns 0 and 1 by cos and sin. When a
     row has at most one non-zero in those two columns (quarter-turn frames, as the LWA 3's),
     every entry is one rounded product: exactly what the 4x4 BLAS product computes whatever
-    its order of summation or fused multiply-adds; adding K (+0 where F·Rz has a zero)
-    gives zeros the sign the product gives them (tests/test_kinematics.py compares the
-    two bit for bit)."""
+    its order of summation or fused multiply-adds; adding ``constant`` (+0 where F·Rz has
+    a zero) gives zeros the sign the product gives them (tests/test_kinematics.py compares
+    the two bit for bit)."""
     frames = np.concatenate([base[None], links])
     clean = frames + 0.0
     exact = np.all((clean[..., 0] == 0) | (clean[..., 1] == 0), axis=-1)
@@ -161,7 +175,7 @@ def _turn_terms(base: np.ndarray, links: np.ndarray) -> tuple[np.ndarray, ...]:
     constant[..., 2:] = clean[..., 2:]
     for array in (cos_term, sin_term, constant, frames):
         array.setflags(write=False)
-    return cos_term, sin_term, constant, tuple(np.flatnonzero(~exact).tolist()), frames
+    return _Turns(cos_term, sin_term, constant, tuple(np.flatnonzero(~exact).tolist()), frames)
 
 
 _CHAINS_KEPT = 16
