@@ -12,8 +12,8 @@ as exact float reprs) are hashed: ``--compare DIR`` runs the same in another che
 says whether both computed bit-identical results.
 
 ``--instructions`` counts the instructions of each part with valgrind's callgrind (the
-process with N replays minus the one with none, per replay): a figure a loaded host does
-not change.
+process with 20 replays minus the one with none, per replay; the garbage collector is off
+while replaying): a figure a loaded host does not change.
 
 Run: ``.venv/bin/python bench/bench_guards.py [--sequence FILE] [--repeat 20]
 [--instructions] [--compare DIR]``
@@ -22,6 +22,7 @@ Run: ``.venv/bin/python bench/bench_guards.py [--sequence FILE] [--repeat 20]
 from __future__ import annotations
 
 import argparse
+import gc
 import hashlib
 import json
 import os
@@ -121,6 +122,8 @@ def worker(sequence: Path, parts: list[str], repeat: int) -> dict:
     """In this process: record, then replay each part ``repeat`` times (time per replay)."""
     calls, digest = record(sequence)
     out = {"digest": digest, "calls": {p: len(calls[p]) for p in PARTS}, "us": {}}
+    gc.collect()
+    gc.disable()  # a collection would land in whichever part runs then (noise of millions)
     for part in parts:
         best = float("inf")
         for _ in range(repeat):
@@ -177,7 +180,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{DESCRIPTION[part]:56s}" + "".join(f" {r['us'][part]:10.1f}"
                                                    for r in results.values()))
     if args.instructions:
-        n = 5
+        n = 20
         print(f"\n{'instructions per validate (thousands)':56s}"
               + "".join(f" {label:>10s}" for label in trees))
         for part in parts:
