@@ -4,9 +4,10 @@ Runs the real executor through the real client and codec against the simulated a
 VirtualClock (what ``seqrun validate`` does), ``--runs`` times after one warm-up run, and
 prints the median wall time and speedup = simulated duration / wall time.
 
-``--cold`` empties the simulator's frame-length cache before every run, as a one-shot
-``seqrun validate`` process starts (the warm runs otherwise find every frame's length cached
-by the warm-up run, since the runs are deterministic).
+``--cold`` empties the simulator's frame-length cache, the bit-stuffing tables and the
+codec's decoded frames before every run, as a one-shot ``seqrun validate`` process starts
+(the warm runs otherwise find them filled by the warm-up run, since the runs are
+deterministic).
 
 Run: ``.venv/bin/python bench/perf_dryrun.py [--runs 15] [--cold] [--profile] [--sequence FILE]``
 """
@@ -28,13 +29,20 @@ from seqrun.clock import VirtualClock
 from seqrun.executor import Executor
 from seqrun.powercube.client import PowerCubeClient
 from seqrun.schema import load_sequence
+from seqrun import can_timing
+from seqrun.powercube import codec
 from seqrun.sim import network
 from seqrun.sim.bus import SimBus
 
 
 def one(loaded, arm, i: int, cold: bool = False):
-    if cold:
+    if cold:  # every in-process table a fresh process starts without
         network._bit_length.cache_clear()
+        can_timing._after_header.cache_clear()
+        can_timing._stuff_table[:] = [0] * len(can_timing._stuff_table)
+        can_timing._stuff_partials.clear()
+        codec._decoded_requests.clear()
+        codec._decoded_acks.clear()
     clock = VirtualClock()
     bus = SimBus(channel=f"perf{i}", clock=clock)
     client = PowerCubeClient(bus, clock)

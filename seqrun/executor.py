@@ -649,7 +649,7 @@ class Executor:
             planned_rad, planned_vel, _ = plan.at(t)
             planned_deg = np.degrees(planned_rad)
             error = np.abs(planned_deg - measured)
-            worst = int(np.argmax(error))
+            worst = int(error.argmax())  # (np.argmax's Python-level dispatch, once a cycle)
             if error[worst] > bound and t <= plan.duration + self.arm.control.settle_timeout_s:
                 name = self.arm.joints[worst].name
                 raise RunAborted("following_error",
@@ -1089,7 +1089,9 @@ def _location(step) -> str:
 
 
 def _r(a, nd: int = 3) -> list[float]:
-    return [round(float(x), nd) for x in a]
+    # An array's floats via tolist(): iterating it would make a numpy scalar per element
+    # (several times a cycle).
+    return [round(float(x), nd) for x in (a.tolist() if isinstance(a, np.ndarray) else a)]
 
 
 def _jsonable(d: dict) -> dict:

@@ -6,6 +6,8 @@ import random
 import re
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from seqrun.can_timing import (
     bit_length_bounds,
@@ -112,6 +114,25 @@ def test_extended_and_remote_frames():
     assert len(bits) == 54
     remote = unstuffed_bits(0x123, b"", remote=True, dlc=8)
     assert len(remote) == 34 and remote[12] == 1  # RTR recessive, no data field
+
+
+@given(st.booleans(), st.integers(0, (1 << 29) - 1), st.binary(max_size=8),
+       st.booleans(), st.integers(0, 8))
+def test_bit_length_counts_the_stuff_bits_of_the_bit_list(extended, raw_id, data, remote,
+                                                          remote_dlc):
+    # The table-driven count of frame_bit_length against the bit-by-bit one, for standard,
+    # extended and remote frames alike.
+    can_id = raw_id if extended else raw_id & 0x7FF
+    if remote:
+        data, dlc = b"", remote_dlc
+    else:
+        dlc = None
+    bits = unstuffed_bits(can_id, data, extended=extended, remote=remote, dlc=dlc)
+    expected = len(bits) + stuff_bit_count(bits) + 10
+    assert frame_bit_length(can_id, data, extended=extended, remote=remote, dlc=dlc,
+                            intermission=False) == expected
+    assert frame_bit_length(can_id, data, extended=extended, remote=remote, dlc=dlc) == (
+        expected + 3)
 
 
 @pytest.mark.parametrize(

@@ -514,3 +514,20 @@ def test_current_mode_is_not_simulated_and_refused(clock):
     assert ack == MotionAck(1, MotionMode.ICUR)
     clock.advance(1.0)
     assert module.position() == 0.0
+
+
+def test_a_read_at_rest_repeats_its_acknowledge_and_a_changed_reading_makes_a_new_one():
+    # The module hands out the same immutable acknowledge while its reading is unchanged
+    # (the wire then encodes it once); any change, even 0.0 -> -0.0, makes a new one.
+    clock = VirtualClock()
+    module = SimModule(3, clock)
+    read = GetParam(3, ParamId.FPOS_STATE_DIO)
+    first = module.handle(read, 0.0)
+    assert module.handle(read, 0.1) is first
+    module.set_position(-0.0, 0.2)
+    negative_zero = module.handle(read, 0.3)
+    assert negative_zero is not first and encode(negative_zero) != encode(first)
+    assert encode(negative_zero)[1][2:6] == struct.pack("<f", -0.0)
+    module.set_position(0.5, 0.4)
+    moved = module.handle(read, 0.5)
+    assert moved.value.position == pytest.approx(0.5) and moved is not negative_zero

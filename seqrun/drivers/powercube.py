@@ -153,17 +153,23 @@ class _NotOkAcknowledge(Exception):
         self.state = state
 
 
+_FPOS_STATE_DIO, _CUBE_STATE = ParamId.FPOS_STATE_DIO, ParamId.CUBE_STATE
+_NOT_OK = int(ShortState.NOT_OK)
+
+
 def _raise_on_not_ok(request, ack) -> None:
     """``on_ack`` inspector of a move cycle: the first NOT_OK ends the exchange."""
+    # (Called for every acknowledge of a move: module constants and plain-int flag tests,
+    # since an enum class attribute and IntFlag's ``&`` are Python-level calls.)
     if isinstance(ack, MotionExtAck):
         state = ack.state
-    elif isinstance(ack, GetParamAck) and ack.param == ParamId.FPOS_STATE_DIO:
+    elif isinstance(ack, GetParamAck) and ack.param == _FPOS_STATE_DIO:
         state = ack.value.state
-    elif isinstance(ack, GetParamAck) and ack.param == ParamId.CUBE_STATE:
+    elif isinstance(ack, GetParamAck) and ack.param == _CUBE_STATE:
         state = short_state(StateFlag(ack.value))
     else:
         return
-    if state & ShortState.NOT_OK:
+    if int(state) & _NOT_OK:
         raise _NotOkAcknowledge(ack.module, ShortState(state))
 
 

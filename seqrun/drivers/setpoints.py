@@ -89,25 +89,30 @@ class RampSetpoints(_Law):
 
     def cycle(self, plan: MovePlan, t: float, moving: list[int],
               measured_deg: np.ndarray) -> list[Request]:
-        pos_now, _, _ = plan.at(t)
-        _, vel_next, _ = plan.at(t + self.cycle_s)
+        pos_now = plan.at(t)[0].tolist()
+        vel_next = plan.at(t + self.cycle_s)[1].tolist()
         # Catch-up may use the reserve the plan left, never more than the move allows.
         ceiling = (np.degrees(self._move_limits.velocity)
-                   / (1 - self.arm.control.tracking_reserve))
+                   / (1 - self.arm.control.tracking_reserve)).tolist()
         # A slow loop must correct gently or it overshoots its own correction.
         gain = min(self.CATCH_UP_GAIN, 0.5 / self.cycle_s)
         quantum = self.TARGET_VEL_QUANTUM_DEG_S
         requests: list[Request] = []
         # Joints with the same limits look equally far ahead: one plan sample serves them.
         aheads: dict[float, np.ndarray] = {}
+        # Per joint on Python floats (.tolist()): the same IEEE double arithmetic as on
+        # numpy's scalars, without a numpy call per operation.
+        velocity, acceleration = (self.run_limits.velocity.tolist(),
+                                  self.run_limits.acceleration.tolist())
+        target, start = plan.target.tolist(), plan.start.tolist()
+        measured = np.asarray(measured_deg).tolist()
         for i in moving:
-            lead = (self.run_limits.velocity[i] / (2 * self.run_limits.acceleration[i])
-                    + 2 * self.cycle_s)
+            lead = velocity[i] / (2 * acceleration[i]) + 2 * self.cycle_s
             ahead = aheads.get(lead)
             if ahead is None:
                 ahead = aheads[lead] = self.module_rad(plan.at(t + lead)[0])
-            direction = math.copysign(1.0, plan.target[i] - plan.start[i])
-            lag = (math.degrees(pos_now[i]) - measured_deg[i]) * direction
+            direction = math.copysign(1.0, target[i] - start[i])
+            lag = (math.degrees(pos_now[i]) - measured[i]) * direction
             cap = abs(math.degrees(vel_next[i])) + gain * lag
             # TargetVel only when it changes by more than the quantum: at cruise the
             # velocity is steady and the write would only load the bus.

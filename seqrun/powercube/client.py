@@ -43,6 +43,7 @@ trace shares the time base of the run's events.
 
 from __future__ import annotations
 
+import itertools
 import logging
 import threading
 from collections import Counter, deque
@@ -352,10 +353,14 @@ class PowerCubeClient:
         barrier = False
         still: deque[int] = deque()
         in_flight = len(deadlines)
-        for index in held:
+        for position, index in enumerate(held):
+            if in_flight >= window:
+                # Nothing more goes out now: the rest stays held, in order.
+                still.extend(itertools.islice(held, position, None))
+                break
             module = getattr(requests[index], "module", None)  # None: a broadcast
             if barrier or (module in blocked and self.ONE_REQUEST_PER_MODULE) or (
-                    module is None and still) or in_flight >= window:
+                    module is None and still):
                 still.append(index)
                 if module is None:
                     barrier = True
@@ -559,9 +564,14 @@ class PowerCubeClient:
                 if ack is not None:
                     return msg, ack
                 continue
-            if self._service_watchdog(now):
+            due = self._watchdog_due
+            if due is None:
+                wake = until
+            elif now >= due:
+                self._service_watchdog(now)
                 continue
-            wake = until if self._watchdog_due is None else min(until, self._watchdog_due)
+            else:
+                wake = until if until < due else due  # noqa: PLR1730 (min(), no call)
             msg = self._recv(wake)
             if msg is None:
                 continue
@@ -570,32 +580,31 @@ class PowerCubeClient:
                 return msg, ack
 
     def _bus_recv(self, timeout: float) -> can.Message | None:
+        """The next frame within ``timeout`` (None: none came), stamped with the clock's
+        now, counted and shown to the frame listeners."""
         try:
-            return self.bus.recv(timeout=timeout)
+            msg = self.bus.recv(timeout=timeout)
         except Exception as exc:  # a lost connection is a bus fault, whatever raised it
             raise BusError(f"receiving from the bus failed: {_what(exc)}") from exc
+        if msg is not None:
+            msg.is_rx = True
+            msg.timestamp = self.clock.now()
+            self.stats.frames_received += 1
+            self._notify(msg)
+        return msg
 
     def _recv(self, wake: float) -> can.Message | None:
-        msg = self._bus_recv(max(0.0, wake - self.clock.now()))
+        clock = self.clock
+        timeout = wake - clock.now()
+        msg = self._bus_recv(timeout if timeout > 0.0 else 0.0)
         if msg is None:
             # A bus that does not know our virtual clock returns without advancing it.
-            if self.clock.is_virtual and self.clock.now() < wake:
-                self.clock.sleep_until(wake)
-            return None
-        self._received(msg)
+            if clock.is_virtual and clock.now() < wake:
+                clock.sleep_until(wake)
         return msg
 
     def _recv_now(self) -> can.Message | None:
-        msg = self._bus_recv(0.0)
-        if msg is not None:
-            self._received(msg)
-        return msg
-
-    def _received(self, msg: can.Message) -> None:
-        msg.is_rx = True
-        msg.timestamp = self.clock.now()
-        self.stats.frames_received += 1
-        self._notify(msg)
+        return self._bus_recv(0.0)
 
     def _decode(self, msg: can.Message) -> Ack | None:
         can_id = msg.arbitration_id

@@ -504,12 +504,35 @@ def _unpack_value(wire: WireType, layout: struct.Struct, data: bytes):
     return layout.unpack_from(data)[2]
 
 
+#: Most decoded frames kept per direction (see _remembered).
+_DECODED_KEPT = 4096
+_decoded_requests: dict[tuple[int, bytes], Request] = {}
+_decoded_acks: dict[tuple[int, bytes], Ack] = {}
+
+
+def _remember(memo: dict, key: tuple[int, bytes], message: Message) -> None:
+    """Keep a decoded frame: decoding is a pure function of (id, data), its messages are
+    immutable, and a bus carries the same frames over and over (every read of a module at
+    rest, every request of a cycle's reads); bounded, since positions vary."""
+    if len(memo) >= _DECODED_KEPT:
+        memo.clear()
+    memo[key] = message
+
+
 def decode_request(can_id: int, data: bytes) -> Request:
     """Decode a host -> module frame (the simulator's side of the wire).
 
     :raises ~seqrun.errors.CodecError: the frame is not a valid PowerCube request.
     """
-    data = bytes(data)
+    key = (can_id, data if type(data) is bytes else bytes(data))
+    request = _decoded_requests.get(key)
+    if request is None:
+        request = _decode_request(*key)
+        _remember(_decoded_requests, key, request)
+    return request
+
+
+def _decode_request(can_id: int, data: bytes) -> Request:
     if can_id == BROADCAST_ID:
         return _decode_broadcast(data)
     if GET_BASE <= can_id < GET_BASE + 0x20:
@@ -591,6 +614,15 @@ def decode_ack(can_id: int, data: bytes) -> Ack:
 
     :raises ~seqrun.errors.CodecError: the frame is not a valid PowerCube acknowledge.
     """
+    key = (can_id, data if type(data) is bytes else bytes(data))
+    ack = _decoded_acks.get(key)
+    if ack is None:
+        ack = _decode_ack(*key)
+        _remember(_decoded_acks, key, ack)
+    return ack
+
+
+def _decode_ack(can_id: int, data: bytes) -> Ack:
     module = can_id - ACK_BASE
     if not MIN_MODULE_ID <= module <= MAX_MODULE_ID:
         if ACK_BASE <= can_id < ACK_BASE + 0x20:
@@ -635,17 +667,21 @@ def decode_ack(can_id: int, data: bytes) -> Ack:
 # Matching
 
 
+#: Builds an AckKey without the named tuple's Python-level ``__new__`` (twice per frame pair).
+_new_tuple = tuple.__new__
+
+
 def ack_key(ack: Ack) -> AckKey:
     """The key an acknowledge is matched on."""
     kind = type(ack)
     if kind is GetParamAck:
-        return AckKey(ack.module, _GET_EXTENDED, int(ack.param))  # type: ignore[union-attr]
+        return _new_tuple(AckKey, (ack.module, _GET_EXTENDED, int(ack.param)))  # type: ignore
     if kind is MotionExtAck or kind is MotionAck:
-        return AckKey(ack.module, _SET_MOTION, int(ack.mode))  # type: ignore[union-attr]
+        return _new_tuple(AckKey, (ack.module, _SET_MOTION, int(ack.mode)))  # type: ignore
     if kind is SetParamAck:
-        return AckKey(ack.module, _SET_EXTENDED, int(ack.param))  # type: ignore[union-attr]
+        return _new_tuple(AckKey, (ack.module, _SET_EXTENDED, int(ack.param)))  # type: ignore
     if kind is CommandAck:
-        return AckKey(ack.module, int(ack.command), None)  # type: ignore[union-attr]
+        return _new_tuple(AckKey, (ack.module, int(ack.command), None))  # type: ignore
     raise CodecError(f"not an acknowledge: {ack!r}")
 
 
@@ -653,13 +689,13 @@ def expected_ack_key(request: Request) -> AckKey | None:
     """The key of the acknowledge ``request`` is answered with; None for broadcasts."""
     kind = type(request)
     if kind is GetParam:
-        return AckKey(request.module, _GET_EXTENDED, int(request.param))  # type: ignore
+        return _new_tuple(AckKey, (request.module, _GET_EXTENDED, int(request.param)))  # type: ignore
     if kind is SetMotion:
-        return AckKey(request.module, _SET_MOTION, int(request.mode))  # type: ignore
+        return _new_tuple(AckKey, (request.module, _SET_MOTION, int(request.mode)))  # type: ignore
     if kind is SetParam:
-        return AckKey(request.module, _SET_EXTENDED, int(request.param))  # type: ignore
+        return _new_tuple(AckKey, (request.module, _SET_EXTENDED, int(request.param)))  # type: ignore
     if kind is CommandRequest:
-        return AckKey(request.module, int(request.command), None)  # type: ignore
+        return _new_tuple(AckKey, (request.module, int(request.command), None))  # type: ignore
     if kind is BroadcastRequest:
         return None
     raise CodecError(f"not a request: {request!r}")

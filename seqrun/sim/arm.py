@@ -21,11 +21,12 @@ from __future__ import annotations
 import random
 import threading
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from typing import NamedTuple
 
 from seqrun.clock import Clock
 from seqrun.errors import CodecError
 from seqrun.powercube.codec import (
+    Ack,
     BroadcastRequest,
     CommandAck,
     decode_request,
@@ -35,13 +36,15 @@ from seqrun.powercube.protocol import GET_BASE, SET_BASE, StateFlag
 from seqrun.sim.faults import Fault, parse_faults
 from seqrun.sim.module import ModuleOptions, SimModule
 
+#: Builds a Reply without the named tuple's Python-level ``__new__`` (once per frame).
+_new_tuple = tuple.__new__
 #: Seconds between the end of a request frame and its acknowledge being ready to send [I].
 DEFAULT_MODULE_LATENCY = 100e-6
 _GET_EXTENDED = 0x0A
+_GET_EXTENDED_BYTE = bytes([_GET_EXTENDED])
 
 
-@dataclass(frozen=True)
-class Reply:
+class Reply(NamedTuple):
     """An acknowledge a module wants to put on the bus from ``ready_at`` on."""
 
     module: int
@@ -91,6 +94,9 @@ class SimArm:
         #: Acknowledges each module produced that have not been sent on the wire yet
         #: (``drop_request_while_busy``).
         self._unsent_acks: dict[int, int] = {m: 0 for m in self._modules}
+        #: module -> (its last acknowledge, its frame): modules hand out the same immutable
+        #: acknowledge object again while nothing changed (a module at rest read every cycle).
+        self._encoded: dict[int, tuple[Ack, int, bytes]] = {}
         #: Requests dropped because their module was busy: (time, module, can_id, data).
         self.dropped_while_busy: list[tuple[float, int, int, bytes]] = []
         #: Every fault applied so far, with the time it was applied.
@@ -191,11 +197,15 @@ class SimArm:
         Returns the acknowledges, in the order the modules produce them.
         """
         with self._lock:
-            t = self._now(t)
-            if SET_BASE <= can_id < SET_BASE + 0x20 and data[:1] == bytes([_GET_EXTENDED]):
+            # self._now(t), without its two calls when no fault is pending (every frame)
+            if t is None:
+                t = self.clock.now()
+            if self._pending:
+                self._apply_due_faults(t)
+            if SET_BASE <= can_id < SET_BASE + 0x20 and data[:1] == _GET_EXTENDED_BYTE:
                 can_id = GET_BASE + (can_id - SET_BASE)  # a GetExtended on the SET id
             try:
-                request = decode_request(can_id, bytes(data))
+                request = decode_request(can_id, data)
             except CodecError:
                 return []  # not for us, or not PowerCube: a real module ignores it
             if isinstance(request, BroadcastRequest):
@@ -209,13 +219,20 @@ class SimArm:
                 self.dropped_while_busy.append((t, request.module, can_id, bytes(data)))
                 return []
             ack = module.handle(request, t)
-            if ack is None or not self._ack_survives(request.module):
+            if ack is None or ((self._silent or self._drop_rate)
+                               and not self._ack_survives(request.module)):
                 return []
             self._unsent_acks[request.module] += 1
-            ack_id, ack_data = encode(ack)
+            encoded = self._encoded.get(request.module)
+            if encoded is not None and encoded[0] is ack:
+                _, ack_id, ack_data = encoded  # the same acknowledge object as last time
+            else:
+                ack_id, ack_data = encode(ack)
+                self._encoded[request.module] = (ack, ack_id, ack_data)
             if isinstance(ack, CommandAck) and not self.options.command_ack_trailer:
                 ack_data = ack_data[:1]
-            return [Reply(request.module, ack_id, ack_data, t + self.module_latency)]
+            return [_new_tuple(Reply, (request.module, ack_id, ack_data,
+                                       t + self.module_latency))]
 
     def ack_sent(self, module_id: int) -> None:
         """The wire reports that an acknowledge of ``module_id`` has been sent (delivered):

@@ -244,6 +244,10 @@ _TICK_TWINS: dict[ParamId, ParamId] = {
 #: Event kinds of SimModule._next_event.
 _WATCHDOG, _PROFILE_END, _SOFT_LIMIT = "watchdog", "profile end", "soft limit"
 
+#: mode -> (its plain twin, the twin's is_float, is_extended_ack, is_float): properties
+#: looked up once.
+_MODE_FACTS = {m: (m.without_ext_ack(), m.without_ext_ack().is_float, m.is_extended_ack,
+                   m.is_float) for m in MotionMode}
 _RAMP_MODES = {MotionMode.FRAMP, MotionMode.IRAMP}
 _STEP_MODES = {MotionMode.FSTEP, MotionMode.ISTEP}
 _VELOCITY_MODES = {MotionMode.FVEL, MotionMode.IVEL}
@@ -460,6 +464,9 @@ class SimModule:
         self._dead = False
         self._last_target = float(position)
         self._saved_position = float(position)
+        #: Acknowledges that do not change, made once (see _fpos_ack).
+        self._set_acks: dict[ParamId, SetParamAck] = {}
+        self._last_fpos_ack: tuple[tuple, GetParamAck] | None = None
 
     def __repr__(self) -> str:
         return (f"<SimModule {self.module_id} pos={self.position():.4f} "
@@ -684,10 +691,15 @@ class SimModule:
             self._broadcast(request)
             return None
         if isinstance(request, GetParam):
-            ack: Ack | None = GetParamAck(self.module_id, request.param, self._read(request.param))
+            if request.param is _P_FPOS_STATE_DIO:
+                ack: Ack | None = self._fpos_ack()
+            else:
+                ack = GetParamAck(self.module_id, request.param, self._read(request.param))
         elif isinstance(request, SetParam):
             self._write(request.param, request.value)
-            ack = SetParamAck(self.module_id, request.param)
+            ack = self._set_acks.get(request.param)
+            if ack is None:
+                ack = self._set_acks[request.param] = SetParamAck(self.module_id, request.param)
         elif isinstance(request, SetMotion):
             ack = self._motion(request)
         elif isinstance(request, CommandRequest):
@@ -697,6 +709,21 @@ class SimModule:
         if (self.options.honour_disable_ack
                 and int(self._params[_P_CONFIG]) & _DISABLE_ACK):
             return None
+        return ack
+
+    def _fpos_ack(self) -> GetParamAck:
+        """The acknowledge of a GetExtended FPosStateDio now: the previous one again while
+        the reading is the same (a module at rest is read every cycle; acknowledges are
+        immutable, and the wire encodes the same object only once)."""
+        position = _f32(self._actual_position())
+        reading = (position, self._short_state_now(), self._dio())
+        last = self._last_fpos_ack
+        # (0.0 == -0.0, but they are different frames)
+        if last is not None and last[0] == reading and (
+                position or math.copysign(1.0, position) == math.copysign(1.0, last[0][0])):
+            return last[1]
+        ack = GetParamAck(self.module_id, _P_FPOS_STATE_DIO, PosStateDio(*reading))
+        self._last_fpos_ack = (reading, ack)
         return ack
 
     def _broadcast(self, request: BroadcastRequest) -> None:
@@ -747,6 +774,9 @@ class SimModule:
         return ratio if ratio > 0 else 1.0
 
     def _read(self, param: ParamId) -> float | int | PosStateDio:
+        if param is _P_FPOS_STATE_DIO:  # first: the reads of every control cycle
+            return PosStateDio(_f32(self._actual_position()), self._short_state_now(),
+                               self._dio())
         wire = PARAM_TYPES[param]
         if param in _TICK_TWINS:
             value = float(self._read(_TICK_TWINS[param]))  # type: ignore[arg-type]
@@ -824,11 +854,11 @@ class SimModule:
 
     def _motion(self, request: SetMotion) -> Ack | None:
         mode = request.mode
-        base = mode.without_ext_ack()
+        base, base_is_float, is_extended_ack, is_float = _MODE_FACTS[mode]
         position_at_receipt = self._actual_position()
         short_at_receipt = self._short_state_now()
         value = float(request.value)
-        if not base.is_float:
+        if not base_is_float:
             value *= self._inc_ratio()  # ticks, ticks/s -> rad, rad/s
         refusal = self._refusal(base, value)
         if refusal is None:
@@ -843,11 +873,11 @@ class SimModule:
                 self._execute(motion)
         elif not self.options.ack_refused_motion:
             return None
-        if not mode.is_extended_ack:
+        if not is_extended_ack:
             return MotionAck(self.module_id, mode)
         state = _SHORT_STATES[int(short_at_receipt) | (_NOT_OK if refusal else 0)]
         position: float | int = _f32(position_at_receipt)
-        if not mode.is_float:
+        if not is_float:
             position = _fit_int(round(position_at_receipt / self._inc_ratio()), WireType.I32)
         return MotionExtAck(self.module_id, mode, position, state, self._dio())
 

@@ -30,7 +30,7 @@ import math
 import threading
 import time
 from collections import deque
-from dataclasses import dataclass
+from typing import NamedTuple
 
 from seqrun.can_timing import INTERMISSION_BITS, frame_bit_length
 from seqrun.clock import Clock
@@ -52,9 +52,12 @@ class TransmitTimeoutError(BusError):
     """``send`` found the transmit queue full until its timeout ran out."""
 
 
-@dataclass(frozen=True, slots=True)
-class WireFrame:
-    """A classic CAN frame on the simulated wire; ``timestamp`` is the delivery time."""
+class WireFrame(NamedTuple):
+    """A classic CAN frame on the simulated wire; ``timestamp`` is the delivery time.
+
+    Immutable. A named tuple rather than a frozen dataclass: the wire makes two per frame,
+    and a frozen dataclass' ``__init__`` costs several times a tuple's (the network
+    builds them with ``tuple.__new__``, without even the named tuple's ``__new__``)."""
 
     can_id: int
     data: bytes = b""
@@ -91,22 +94,27 @@ def _arbitration_key(frame: WireFrame) -> int:
     return frame.can_id << 21 | int(frame.is_remote) << 20
 
 
+#: Frame durations a network keeps (see SimNetwork.frame_durations).
+_DURATIONS_KEPT = 4096
+
 #: ``_Pending.rank`` = arbitration key << _SEQ_BITS | sequence number: frames with equal
 #: keys (one node's, or two nodes sending the same identifier) go in queueing order.
 _SEQ_BITS = 64
 
 
-class _Pending:
-    __slots__ = ("frame", "occupancy", "rank", "ready_at", "to_delivery")
+#: ``tuple.__new__``: builds the named tuples below without their Python-level ``__new__``.
+_new_tuple = tuple.__new__
 
-    def __init__(self, frame: WireFrame, ready_at: float, rank: int, to_delivery: float,
-                 occupancy: float) -> None:
-        self.frame = frame
-        self.ready_at = ready_at
-        self.rank = rank
-        #: Bus time until delivery (end of EOF) and until the bus is free again.
-        self.to_delivery = to_delivery
-        self.occupancy = occupancy
+
+class _Pending(NamedTuple):
+    """A frame waiting in its node's transmit queue."""
+
+    frame: WireFrame
+    ready_at: float
+    rank: int
+    #: Bus time until delivery (end of EOF) and until the bus is free again.
+    to_delivery: float
+    occupancy: float
 
 
 class _Node:
@@ -120,14 +128,11 @@ class _Node:
         self.queue: deque[_Pending] = deque()
 
 
-class _InFlight:
-    __slots__ = ("end", "node", "pending", "start")
-
-    def __init__(self, node: _Node, pending: _Pending, start: float, end: float) -> None:
-        self.node = node
-        self.pending = pending
-        self.start = start
-        self.end = end  # delivery time
+class _InFlight(NamedTuple):
+    node: _Node
+    pending: _Pending
+    start: float
+    end: float  # delivery time
 
 
 class Endpoint:
@@ -206,6 +211,9 @@ class SimNetwork:
         self._names = itertools.count(1)
         self._in_flight: _InFlight | None = None
         self._bus_free_at = clock.now()
+        #: (seconds until delivery, seconds of bus occupancy) by the frame's first five
+        #: fields (id, data, extended, remote, dlc): most frames repeat (see _bit_length).
+        self._durations: dict[tuple, tuple[float, float]] = {}
         #: Statistics: frames that went over the wire and the bus time they used (with
         #: intermission).
         self.frames_transmitted = 0
@@ -252,9 +260,16 @@ class SimNetwork:
 
         :raises ValueError: a frame classic CAN cannot carry.
         """
-        bits = _bit_length(frame.can_id, frame.data, frame.is_extended, frame.is_remote,
-                           frame.dlc if frame.is_remote else None)
-        return (bits - INTERMISSION_BITS) / self.bitrate, bits / self.bitrate
+        key = frame[:5]
+        durations = self._durations.get(key)
+        if durations is None:
+            bits = _bit_length(frame.can_id, frame.data, frame.is_extended, frame.is_remote,
+                               frame.dlc if frame.is_remote else None)
+            durations = (bits - INTERMISSION_BITS) / self.bitrate, bits / self.bitrate
+            if len(self._durations) >= _DURATIONS_KEPT:
+                self._durations.clear()  # bounded: positions make the data of a long run vary
+            self._durations[key] = durations
+        return durations
 
     def run_until(self, t: float | None = None) -> None:
         """Simulate the wire up to ``t`` (default now); for tests and tools."""
@@ -283,8 +298,8 @@ class SimNetwork:
             self._deliver(flight)
             delivered = True
             flight = None
-        if delivered:
-            self._notify_all()
+        if delivered and self._cond._waiters:  # type: ignore[attr-defined]  (_notify_all)
+            self._cond.notify_all()
 
     def _run_until_received(self, inbox: deque[WireFrame], horizon: float) -> float | None:
         """Virtual time: :meth:`_advance` towards ``horizon``, but stop at the delivery that
@@ -313,8 +328,8 @@ class SimNetwork:
             flight = None
             if inbox:
                 break
-        if delivered:
-            self._notify_all()
+        if delivered and self._cond._waiters:  # type: ignore[attr-defined]  (_notify_all)
+            self._cond.notify_all()
         return last
 
     def _start_next(self, horizon: float, start_at_horizon: bool) -> _InFlight | None:
@@ -346,7 +361,8 @@ class SimNetwork:
         queue.popleft()
         if not queue:
             active.remove(node)
-        flight = self._in_flight = _InFlight(node, pending, start, start + pending.to_delivery)
+        flight = self._in_flight = _new_tuple(
+            _InFlight, (node, pending, start, start + pending.to_delivery))
         self._bus_free_at = start + pending.occupancy
         self.frames_transmitted += 1
         self.busy_time += pending.occupancy
@@ -362,36 +378,40 @@ class SimNetwork:
         return ready if ready > self._bus_free_at else self._bus_free_at  # noqa: FURB136
 
     def _deliver(self, flight: _InFlight) -> None:
-        sent = flight.pending.frame
-        frame = WireFrame(sent.can_id, sent.data, sent.is_extended, sent.is_remote, sent.dlc,
-                          flight.end, sent.sender)
-        sender = flight.node
+        sender, pending, _, end = flight
+        can_id, data, is_extended, is_remote, dlc, _, name = pending.frame
+        frame = _new_tuple(WireFrame, (can_id, data, is_extended, is_remote, dlc, end, name))
         for endpoint in self._endpoints:
             if endpoint._node is not sender or endpoint.receive_own:
                 endpoint._inbox.append(frame)
         if sender.is_module:
-            self.arm.ack_sent(frame.can_id - ACK_BASE)  # that module is free again
+            self.arm.ack_sent(can_id - ACK_BASE)  # that module is free again
             return  # the modules ignore each other's acks
-        if frame.is_extended or frame.is_remote:
+        if is_extended or is_remote:
             return  # the modules speak 11-bit data frames
-        for reply in self.arm.handle_frame(frame.can_id, frame.data, flight.end):
-            node = self._module_nodes.get(reply.module)
+        for reply in self.arm.handle_frame(can_id, data, end):
+            module, ack_id, ack_data, ready_at = reply
+            node = self._module_nodes.get(module)
             if node is None:
-                node = _Node(f"module{reply.module}", is_module=True)
-                self._module_nodes[reply.module] = node
+                node = _Node(f"module{module}", is_module=True)
+                self._module_nodes[module] = node
                 self._nodes.append(node)
-            self._queue(node, WireFrame(reply.can_id, reply.data, sender=node.name),
-                        reply.ready_at)
+            self._queue(node, _new_tuple(WireFrame, (ack_id, ack_data, False, False, None, 0.0,
+                                                     node.name)), ready_at)
 
     def _queue(self, node: _Node, frame: WireFrame, ready_at: float,
                durations: tuple[float, float] | None = None) -> None:
-        to_delivery, occupancy = durations or self.frame_durations(frame)
+        if durations is None:
+            durations = self._durations.get(frame[:5]) or self.frame_durations(frame)
         queue = node.queue
         if not queue:
             self._active.append(node)
-        queue.append(_Pending(frame, ready_at,
-                              _arbitration_key(frame) << _SEQ_BITS | next(self._seq),
-                              to_delivery, occupancy))
+        if frame.is_extended or frame.is_remote:
+            key = _arbitration_key(frame)
+        else:
+            key = frame.can_id << 21  # _arbitration_key of a standard data frame
+        queue.append(_new_tuple(_Pending, (frame, ready_at, key << _SEQ_BITS | next(self._seq),
+                                           *durations)))
 
     def _notify_all(self) -> None:
         """Wake the threads waiting on the wire; lock held. Skips Condition.notify_all's
@@ -436,12 +456,16 @@ class SimNetwork:
             time.sleep(0)
 
     def _send(self, endpoint: Endpoint, frame: WireFrame, timeout: float | None) -> None:
-        durations = self.frame_durations(frame)  # ValueError for a frame CAN cannot carry
+        # ValueError for a frame CAN cannot carry
+        durations = self._durations.get(frame[:5]) or self.frame_durations(frame)
         with self._lock:
             if endpoint.closed:
                 raise NetworkClosedError(f"{endpoint.name} is closed")
             now = self.clock.now()
-            self._advance(now, start_at_horizon=False)
+            flight = self._in_flight
+            if (flight.end <= now if flight is not None  # (see _receive_virtual)
+                    else self._active and self._bus_free_at <= now):
+                self._advance(now, start_at_horizon=False)
             deadline = None if timeout is None else now + timeout
             while len(endpoint._node.queue) >= endpoint.tx_queue_size:
                 if deadline is not None and self.clock.now() >= deadline:
@@ -458,7 +482,8 @@ class SimNetwork:
                 frame = WireFrame(frame.can_id, bytes(frame.data), frame.is_extended,
                                   frame.is_remote, frame.dlc, 0.0, endpoint.name)
             self._queue(endpoint._node, frame, self.clock.now(), durations)
-            self._notify_all()
+            if self._cond._waiters:  # type: ignore[attr-defined]  (_notify_all, inline)
+                self._cond.notify_all()
 
     def _receive(self, endpoint: Endpoint, deadline: float | None) -> WireFrame | None:
         clock = self.clock
@@ -495,7 +520,13 @@ class SimNetwork:
                 if endpoint.closed:
                     raise NetworkClosedError(f"{endpoint.name} is closed")
                 now = clock.now()
-                self._advance(now)
+                flight = self._in_flight
+                # _advance has nothing to do while the frame on the wire ends later, or, with
+                # the wire idle, while nothing is queued or the intermission after the last
+                # frame lasts (the usual case when a request was just sent)
+                if (flight.end <= now if flight is not None
+                        else self._active and self._bus_free_at <= now):
+                    self._advance(now)
                 if inbox:
                     return inbox.popleft()
                 if deadline is not None and now >= deadline:

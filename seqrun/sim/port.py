@@ -34,6 +34,9 @@ from seqrun.sim.network import (
 
 __all__ = ["SimMessage", "SimPort", "SimSetupError", "get_network"]
 
+#: Builds a WireFrame without the named tuple's Python-level ``__new__`` (once per frame).
+_new_tuple = tuple.__new__
+
 #: channel name -> [network, number of open ports on it]
 _channels: dict[str, list[Any]] = {}
 _channels_lock = threading.RLock()
@@ -190,6 +193,10 @@ class SimPort:
         self.receive_own_messages = receive_own_messages
         self.endpoint: Endpoint = self.network.attach(receive_own=receive_own_messages,
                                                       tx_queue_size=tx_queue_size)
+        # The network's receive for this clock, called without the endpoint's own layer
+        # (recv runs once per frame).
+        self._receive = (self.network._receive_virtual if self.clock.is_virtual
+                         else self.network._receive)
         self._closed = False
 
     # -- the wire's frames ----------------------------------------------------------------
@@ -221,7 +228,8 @@ class SimPort:
                              sender)
         if msg.dlc != len(data):
             raise ValueError(f"dlc {msg.dlc} does not match {len(data)} data bytes")
-        return WireFrame(msg.arbitration_id, data, msg.is_extended_id, False, None, 0.0, sender)
+        return _new_tuple(WireFrame, (msg.arbitration_id, data, msg.is_extended_id, False, None,
+                                      0.0, sender))
 
     def send_frame(self, frame: WireFrame, timeout: float | None = None) -> None:
         """Queue ``frame`` for the wire.
@@ -231,7 +239,7 @@ class SimPort:
         :raises NetworkClosedError: the port is closed.
         """
         try:
-            self.endpoint.send(frame, timeout)
+            self.network._send(self.endpoint, frame, timeout)  # Endpoint.send, one call less
         except NetworkClosedError:
             raise
         except ValueError as exc:
@@ -243,17 +251,24 @@ class SimPort:
         """The next frame delivered within ``timeout`` seconds of the simulation clock
         (see :mod:`seqrun.sim.bus` for virtual time); None when none is."""
         deadline = None if timeout is None else self.clock.now() + max(timeout, 0.0)
-        frame = self.endpoint.receive(deadline)
+        frame = self._receive(self.endpoint, deadline)  # Endpoint.receive, one call less
         if frame is None:
             return None
-        return SimMessage(frame.timestamp, frame.can_id, frame.is_extended, frame.is_remote,
-                          False, self.channel, frame.length, frame.data,
-                          is_rx=frame.sender != self.endpoint.name)
+        can_id, data, is_extended, is_remote, dlc, timestamp, sender = frame
+        return SimMessage(timestamp, can_id, is_extended, is_remote, False, self.channel,
+                          dlc if is_remote and dlc is not None else len(data), data,
+                          False, sender != self.endpoint.name)
 
     def send(self, msg: Any, timeout: float | None = None) -> None:
         """Queue ``msg`` for the simulated wire (errors as :meth:`wire_frame` and
         :meth:`send_frame`)."""
-        self.send_frame(self.wire_frame(msg), timeout)
+        frame = self.wire_frame(msg)
+        try:
+            self.network._send(self.endpoint, frame, timeout)  # send_frame's, inline
+        except NetworkClosedError:
+            raise
+        except ValueError as exc:
+            raise ValueError(f"seqrun-sim: {exc}") from None
 
     def shutdown(self) -> None:
         """Detach from the wire; the last port of a channel takes the arm with it. Safe to
