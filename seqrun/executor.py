@@ -443,10 +443,13 @@ class Executor:
     def check_guards(self, m: Measurement) -> None:
         q = np.radians(m.user_deg)
         self.check_geometry(q)
-        points = kinematics.point_positions(self.chain, q)
-        for guard in self.arm.workspace.guards:
+        guards = self.arm.workspace.guards
+        if not guards:
+            return
+        heights = kinematics.point_heights(self.chain, q)
+        for guard in guards:
             for name in guard.points:
-                z = float(points[name][2])
+                z = heights[name]
                 key = f"{guard.name}:{name}"
                 self.min_heights_mm[key] = min(self.min_heights_mm.get(key, math.inf), z)
                 if z < guard.min_z_mm:

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from seqrun.arm import ArmDescription, Obstacle
-from seqrun.kinematics import Chain, frame_transforms, matrix_from_rpy
+from seqrun.kinematics import Chain, frame_origins, matrix_from_rpy
 
 __all__ = ["EXACT_WITHIN_MM", "Clearance", "Geometry"]
 
@@ -132,34 +132,38 @@ def _segment_point(a: np.ndarray, b: np.ndarray, point: np.ndarray) -> np.ndarra
 
 def _segment_distance(p1, q1, p2, q2) -> float:
     """:func:`segment_segment` for one pair of segments given as float triples."""
-    d1 = (q1[0] - p1[0], q1[1] - p1[1], q1[2] - p1[2])
-    d2 = (q2[0] - p2[0], q2[1] - p2[1], q2[2] - p2[2])
-    r = (p1[0] - p2[0], p1[1] - p2[1], p1[2] - p2[2])
-    a = d1[0] * d1[0] + d1[1] * d1[1] + d1[2] * d1[2]
-    e = d2[0] * d2[0] + d2[1] * d2[1] + d2[2] * d2[2]
-    f = d2[0] * r[0] + d2[1] * r[1] + d2[2] * r[2]
-    eps = 1e-12
-    if a <= eps and e <= eps:
+    p1x, p1y, p1z = p1
+    p2x, p2y, p2z = p2
+    d1x, d1y, d1z = q1[0] - p1x, q1[1] - p1y, q1[2] - p1z
+    d2x, d2y, d2z = q2[0] - p2x, q2[1] - p2y, q2[2] - p2z
+    rx, ry, rz = p1x - p2x, p1y - p2y, p1z - p2z
+    a = d1x * d1x + d1y * d1y + d1z * d1z
+    e = d2x * d2x + d2y * d2y + d2z * d2z
+    f = d2x * rx + d2y * ry + d2z * rz
+    if a <= _EPS and e <= _EPS:
         s = t = 0.0
-    elif a <= eps:
+    elif a <= _EPS:
         s, t = 0.0, min(max(f / e, 0.0), 1.0)
     else:
-        c = d1[0] * r[0] + d1[1] * r[1] + d1[2] * r[2]
-        if e <= eps:
+        c = d1x * rx + d1y * ry + d1z * rz
+        if e <= _EPS:
             s, t = min(max(-c / a, 0.0), 1.0), 0.0
         else:
-            b = d1[0] * d2[0] + d1[1] * d2[1] + d1[2] * d2[2]
+            b = d1x * d2x + d1y * d2y + d1z * d2z
             denom = a * e - b * b
-            s = min(max((b * f - c * e) / denom, 0.0), 1.0) if denom > eps else 0.0
+            s = min(max((b * f - c * e) / denom, 0.0), 1.0) if denom > _EPS else 0.0
             t = (b * s + f) / e
             if t < 0.0:
                 s, t = min(max(-c / a, 0.0), 1.0), 0.0
             elif t > 1.0:
                 s, t = min(max((b - c) / a, 0.0), 1.0), 1.0
-    x = p1[0] + s * d1[0] - p2[0] - t * d2[0]
-    y = p1[1] + s * d1[1] - p2[1] - t * d2[1]
-    z = p1[2] + s * d1[2] - p2[2] - t * d2[2]
+    x = p1x + s * d1x - p2x - t * d2x
+    y = p1y + s * d1y - p2y - t * d2y
+    z = p1z + s * d1z - p2z - t * d2z
     return math.sqrt(x * x + y * y + z * z)
+
+
+_EPS = 1e-12
 
 
 def segment_segment(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndarray
@@ -238,25 +242,40 @@ class Geometry:
                 n = np.asarray(o.plane.normal, dtype=float)
                 n = n / np.linalg.norm(n)
                 self._planes[o.name] = (*n.tolist(), float(n @ np.asarray(o.plane.point_mm)))
+        # the single-configuration path's columns, in column order: (capsule ends, plane,
+        # radius, name) per obstacle column, (both capsules' ends and radii, name) per pair
+        ends = self._ends.tolist()
+        names_iter = iter(self._names)
+        self._plane_columns = [
+            (*ends[k], *self._planes[obstacle.name], self._radii_list[k], next(names_iter))
+            for obstacle, links in self._checked if obstacle.kind == "plane"
+            for k in links.tolist()] if self._planes_only else []
+        self._pair_columns = [
+            (*ends[i], *ends[j], self._radii_list[i], self._radii_list[j], next(names_iter))
+            for i, j in self.pairs] if self._planes_only else []
 
     @property
     def empty(self) -> bool:
         return not self.capsules
 
-    def endpoints(self, q_rad: np.ndarray) -> np.ndarray:
-        """Capsule segments ``(..., capsules, 2, 3)`` at joint angles (rad)."""
-        frames = frame_transforms(self.chain, q_rad)[..., :3, 3]  # (..., n+1, 3)
-        origin = np.zeros(frames.shape[:-2] + (1, 3))
-        points = np.concatenate([origin, frames], axis=-2)  # "base" = the mount, index 0
+    def endpoints(self, q_rad: np.ndarray, origins: np.ndarray | None = None) -> np.ndarray:
+        """Capsule segments ``(..., capsules, 2, 3)`` at joint angles (rad); ``origins``:
+        their :func:`~seqrun.kinematics.frame_origins` when the caller has them."""
+        if origins is None:
+            origins = frame_origins(self.chain, q_rad)  # (..., n+1, 3)
+        origin = np.zeros(origins.shape[:-2] + (1, 3))
+        points = np.concatenate([origin, origins], axis=-2)  # "base" = the mount, index 0
         return points[..., self._ends, :]
 
-    def clearances(self, q_rad: np.ndarray) -> tuple[np.ndarray, list[str]]:
+    def clearances(self, q_rad: np.ndarray, origins: np.ndarray | None = None
+                   ) -> tuple[np.ndarray, list[str]]:
         """Every pair's clearance (mm): ``(..., pairs)`` and the pair names (one numpy
-        evaluation per obstacle over all its capsules, one for all self-collision pairs)."""
+        evaluation per obstacle over all its capsules, one for all self-collision pairs).
+        ``origins``: as for :meth:`endpoints`."""
         q = np.asarray(q_rad, dtype=float)
         if not self._names:
             return np.full(q.shape[:-1] + (0,), np.inf), []
-        seg = self.endpoints(q)
+        seg = self.endpoints(q, origins)
         columns: list[np.ndarray] = []
         for obstacle, links in self._checked:
             a, b = seg[..., links, 0, :], seg[..., links, 1, :]
@@ -309,22 +328,25 @@ class Geometry:
         floats: the run-time check does this every control cycle."""
         rows = self._rows
         (r00, r01, r02, r10, r11, r12, r20, r21, r22, px, py, pz) = rows[0]
-        points = [(0.0, 0.0, 0.0)]
-        for k, angle in enumerate(q):
-            if k:
-                a00, a01, a02, a10, a11, a12, a20, a21, a22, ax, ay, az = rows[k]
-                px, py, pz = (px + r00 * ax + r01 * ay + r02 * az,
-                              py + r10 * ax + r11 * ay + r12 * az,
-                              pz + r20 * ax + r21 * ay + r22 * az)
-                r00, r01, r02 = (r00 * a00 + r01 * a10 + r02 * a20,
-                                 r00 * a01 + r01 * a11 + r02 * a21,
-                                 r00 * a02 + r01 * a12 + r02 * a22)
-                r10, r11, r12 = (r10 * a00 + r11 * a10 + r12 * a20,
-                                 r10 * a01 + r11 * a11 + r12 * a21,
-                                 r10 * a02 + r11 * a12 + r12 * a22)
-                r20, r21, r22 = (r20 * a00 + r21 * a10 + r22 * a20,
-                                 r20 * a01 + r21 * a11 + r22 * a21,
-                                 r20 * a02 + r21 * a12 + r22 * a22)
+        points = [(0.0, 0.0, 0.0), (px, py, pz)]
+        c, s = math.cos(q[0]), math.sin(q[0])
+        r00, r01 = c * r00 + s * r01, c * r01 - s * r00
+        r10, r11 = c * r10 + s * r11, c * r11 - s * r10
+        r20, r21 = c * r20 + s * r21, c * r21 - s * r20
+        for (a00, a01, a02, a10, a11, a12, a20, a21, a22, ax, ay, az), angle in zip(
+                rows[1:], q[1:]):
+            px, py, pz = (px + r00 * ax + r01 * ay + r02 * az,
+                          py + r10 * ax + r11 * ay + r12 * az,
+                          pz + r20 * ax + r21 * ay + r22 * az)
+            r00, r01, r02 = (r00 * a00 + r01 * a10 + r02 * a20,
+                             r00 * a01 + r01 * a11 + r02 * a21,
+                             r00 * a02 + r01 * a12 + r02 * a22)
+            r10, r11, r12 = (r10 * a00 + r11 * a10 + r12 * a20,
+                             r10 * a01 + r11 * a11 + r12 * a21,
+                             r10 * a02 + r11 * a12 + r12 * a22)
+            r20, r21, r22 = (r20 * a00 + r21 * a10 + r22 * a20,
+                             r20 * a01 + r21 * a11 + r22 * a21,
+                             r20 * a02 + r21 * a12 + r22 * a22)
             points.append((px, py, pz))
             c, s = math.cos(angle), math.sin(angle)
             r00, r01 = c * r00 + s * r01, c * r01 - s * r00
@@ -338,33 +360,33 @@ class Geometry:
     def _smallest_one(self, q) -> Clearance:
         """:meth:`smallest` of one configuration when every obstacle is a plane."""
         points = self._origins(q)
-        seg = [(points[i], points[j]) for i, j in self._ends.tolist()]
         best, best_name = math.inf, ""
-        column = 0
-        for obstacle, links in self._checked:
-            nx, ny, nz, offset = self._planes[obstacle.name]
-            for k in links.tolist():
-                (ax, ay, az), (bx, by, bz) = seg[k]
-                d = min(ax * nx + ay * ny + az * nz, bx * nx + by * ny + bz * nz) - offset
-                d -= self._radii_list[k]
-                if d < best:
-                    best, best_name = d, self._names[column]
-                column += 1
-        for i, j in self.pairs:
-            d = _segment_distance(*seg[i], *seg[j]) - self._radii_list[i] - self._radii_list[j]
+        for start, end, nx, ny, nz, offset, radius, name in self._plane_columns:
+            ax, ay, az = points[start]
+            bx, by, bz = points[end]
+            d = min(ax * nx + ay * ny + az * nz, bx * nx + by * ny + bz * nz) - offset
+            d -= radius
             if d < best:
-                best, best_name = d, self._names[column]
-            column += 1
+                best, best_name = d, name
+        for start_i, end_i, start_j, end_j, radius_i, radius_j, name in self._pair_columns:
+            d = (_segment_distance(points[start_i], points[end_i], points[start_j], points[end_j])
+                 - radius_i - radius_j)
+            if d < best:
+                best, best_name = d, name
         return Clearance(best, best_name, 0)
 
-    def smallest(self, q_rad: np.ndarray) -> Clearance | None:
-        """The smallest clearance over a batch ``(k, dof)`` (or one configuration)."""
+    def smallest(self, q_rad: np.ndarray, origins: np.ndarray | None = None
+                 ) -> Clearance | None:
+        """The smallest clearance over a batch ``(k, dof)`` (or one configuration);
+        ``origins`` of a batch: as for :meth:`endpoints`."""
         q = np.asarray(q_rad, dtype=float)
         if not self._names:
             return None
         if q.ndim == 1 and self._planes_only:
             return self._smallest_one(q.tolist())
-        values, names = self.clearances(np.atleast_2d(q_rad))
+        if q.ndim == 1:
+            q, origins = q[None], None if origins is None else origins[None]
+        values, names = self.clearances(q, origins)
         if not names:
             return None
         flat = int(np.argmin(values))

@@ -20,9 +20,10 @@ Rx(roll)``; it is singular at pitch = ±90°, so orientations are compared as ro
 from __future__ import annotations
 
 import math
+import weakref
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, cast
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, NamedTuple, cast
 
 import numpy as np
 
@@ -40,7 +41,10 @@ __all__ = [
     "jacobian",
     "matrix_from_rpy",
     "orientation_error",
+    "frame_origins",
+    "point_heights",
     "point_positions",
+    "points_of_origins",
     "pose_from_user_deg",
     "rpy_from_matrix",
     "user_joint_values",
@@ -103,6 +107,7 @@ class Chain:
     base: np.ndarray  # (4, 4) mount -> joint 1, before Rz(q1)
     links: np.ndarray  # (n-1, 4, 4) F2 .. Fn
     tool: np.ndarray  # (4, 4) joint n (flange) -> end-effector
+    _turns: _Turns = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         base, links, tool = (_readonly(a) for a in (self.base, self.links, self.tool))
@@ -113,6 +118,7 @@ class Chain:
         object.__setattr__(self, "base", base)
         object.__setattr__(self, "links", links)
         object.__setattr__(self, "tool", tool)
+        object.__setattr__(self, "_turns", _turn_terms(base, links))
 
     @property
     def dof(self) -> int:
@@ -120,10 +126,60 @@ class Chain:
 
     @classmethod
     def from_arm(cls, arm: ArmDescription) -> Chain:
+        """The chain of ``arm.kinematics``; one per kinematics object in a process (a
+        validation, its dry run and the executor's checks ask for it a dozen times)."""
         kin = arm.kinematics
+        kept = _chains.get(id(kin))
+        if kept is not None and kept[0]() is kin:
+            return kept[1]
         links = (np.stack([frame_matrix(f) for f in kin.links]) if kin.links
                  else np.zeros((0, 4, 4)))
-        return cls(base=frame_matrix(kin.base), links=links, tool=frame_matrix(kin.tool))
+        chain = cls(base=frame_matrix(kin.base), links=links, tool=frame_matrix(kin.tool))
+        try:
+            kept = (weakref.ref(kin), chain)
+        except TypeError:  # a kinematics object without weak references: not kept
+            return chain
+        if len(_chains) >= _CHAINS_KEPT:
+            _chains.clear()
+        _chains[id(kin)] = kept
+        return chain
+
+
+class _Turns(NamedTuple):
+    """``F·Rz(q) = cos_term·cos q + sin_term·sin q + constant`` for B, F2 .. Fn (each
+    ``(n, 4, 4)``), except for the frames in ``general``, which take the product itself
+    (``frames``: B, F2 .. Fn as they are)."""
+
+    cos_term: np.ndarray
+    sin_term: np.ndarray
+    constant: np.ndarray
+    general: tuple[int, ...]
+    frames: np.ndarray
+
+
+def _turn_terms(base: np.ndarray, links: np.ndarray) -> _Turns:
+    """The :class:`_Turns` of a chain.
+
+    ``F·Rz(q)`` keeps F's columns 2 and 3 and mixes columns 0 and 1 by cos and sin. When a
+    row has at most one non-zero in those two columns (quarter-turn frames, as the LWA 3's),
+    every entry is one rounded product: exactly what the 4x4 BLAS product computes whatever
+    its order of summation or fused multiply-adds; adding ``constant`` (+0 where F·Rz has
+    a zero) gives zeros the sign the product gives them (tests/test_kinematics.py compares
+    the two bit for bit)."""
+    frames = np.concatenate([base[None], links])
+    clean = frames + 0.0
+    exact = np.all((clean[..., 0] == 0) | (clean[..., 1] == 0), axis=-1)
+    cos_term, sin_term, constant = (np.zeros_like(clean) for _ in range(3))
+    cos_term[..., 0], cos_term[..., 1] = clean[..., 0], clean[..., 1]
+    sin_term[..., 0], sin_term[..., 1] = clean[..., 1], -clean[..., 0]
+    constant[..., 2:] = clean[..., 2:]
+    for array in (cos_term, sin_term, constant, frames):
+        array.setflags(write=False)
+    return _Turns(cos_term, sin_term, constant, tuple(np.flatnonzero(~exact).tolist()), frames)
+
+
+_CHAINS_KEPT = 16
+_chains: dict[int, tuple[weakref.ref, Chain]] = {}
 
 
 def _rot_z(q: np.ndarray) -> np.ndarray:
@@ -146,30 +202,90 @@ def _joint_angles(chain: Chain, q_rad: np.ndarray | Sequence[float]) -> np.ndarr
     return q
 
 
+def _turned_frames(chain: Chain, q: np.ndarray) -> np.ndarray:
+    """``B·Rz(q1), F2·Rz(q2), …, Fn·Rz(qn)``: ``(..., n, 4, 4)``, equal bit for bit to the
+    4x4 products (see :func:`_turn_terms`), all joints at once instead of n BLAS calls."""
+    cos_term, sin_term, constant, general, frames = chain._turns
+    if q.ndim == 1:
+        turned = cos_term * np.cos(q)[:, None, None]
+        turned += sin_term * np.sin(q)[:, None, None]
+        turned += constant
+    else:
+        # Joint-major (n, samples): each operation runs over all samples at once; only the
+        # entries that Rz changes (rows 0-2 of columns 0 and 1) are computed.
+        flat = q.reshape(-1, q.shape[-1])
+        cos, sin = np.cos(flat).T.copy(), np.sin(flat).T.copy()
+        turned = np.empty(flat.shape + (4, 4))
+        turned[...] = constant
+        for i, j in _TURNED_ENTRIES:
+            entry = cos_term[:, i, j, None] * cos
+            entry += sin_term[:, i, j, None] * sin
+            entry += constant[:, i, j, None]
+            turned[:, :, i, j] = entry.T
+        turned = turned.reshape(q.shape + (4, 4))
+    for k in general:  # not a quarter-turn frame: the product itself
+        turned[..., k, :, :] = frames[k] @ _rot_z(q[..., k])
+    return turned
+
+
+_TURNED_ENTRIES = [(i, j) for i in range(3) for j in range(2)]
+
+
 def frame_transforms(chain: Chain, q_rad: np.ndarray | Sequence[float]) -> np.ndarray:
     """Frames of joints 1..n (each after its own rotation), then the tool: ``(..., n+1, 4, 4)``.
 
     Frame i is ``B · Rz(q1) · F2·Rz(q2) · … · Fi·Rz(qi)``; the last entry is :func:`fk`.
     """
     q = _joint_angles(chain, q_rad)
-    rotations = _rot_z(q)  # (..., n, 4, 4)
-    frames = np.empty(q.shape[:-1] + (chain.dof + 1, 4, 4))
-    current = chain.base @ rotations[..., 0, :, :]
-    frames[..., 0, :, :] = current
-    for k, link in enumerate(chain.links, start=1):
-        current = current @ (link @ rotations[..., k, :, :])
-        frames[..., k, :, :] = current
-    frames[..., chain.dof, :, :] = current @ chain.tool
+    turned = _turned_frames(chain, q)  # (..., n, 4, 4)
+    n = chain.dof
+    frames = np.empty(q.shape[:-1] + (n + 1, 4, 4))
+    if q.ndim == 1:
+        frames[...] = _frames_of_one(chain, turned)
+        return frames
+    frames[..., 0, :, :] = turned[..., 0, :, :]
+    for k in range(1, n):  # each product straight into its place (the same BLAS call)
+        np.matmul(frames[..., k - 1, :, :], turned[..., k, :, :], out=frames[..., k, :, :])
+    np.matmul(frames[..., n - 1, :, :], chain.tool, out=frames[..., n, :, :])
+    return frames
+
+
+def frame_origins(chain: Chain, q_rad: np.ndarray | Sequence[float]) -> np.ndarray:
+    """The origins (mm) of :func:`frame_transforms`' frames, ``(..., n+1, 3)``, the same bits
+    without keeping every 4x4 frame (guards and link volumes along a path need the points)."""
+    q = _joint_angles(chain, q_rad)
+    turned = _turned_frames(chain, q)
+    n = chain.dof
+    origins = np.empty(q.shape[:-1] + (n + 1, 3))
+    current = turned[..., 0, :, :]
+    origins[..., 0, :] = current[..., :3, 3]
+    for k in range(1, n):
+        current = current @ turned[..., k, :, :]
+        origins[..., k, :] = current[..., :3, 3]
+    origins[..., n, :] = (current @ chain.tool)[..., :3, 3]
+    return origins
+
+
+def _frames_of_one(chain: Chain, turned: np.ndarray) -> list[np.ndarray]:
+    """The frames of one configuration from its :func:`_turned_frames`, each its own 4x4
+    array: ``ndarray.dot`` is the same BLAS product as ``@`` with a third of the overhead."""
+    turns = list(turned)
+    frame = turns[0]
+    frames = [frame]
+    for turn in turns[1:]:
+        frame = frame.dot(turn)
+        frames.append(frame)
+    frames.append(frame.dot(chain.tool))
     return frames
 
 
 def fk(chain: Chain, q_rad: np.ndarray | Sequence[float]) -> np.ndarray:
     """End-effector frame in the base frame, ``(..., 4, 4)``, translation in mm."""
     q = _joint_angles(chain, q_rad)
-    rotations = _rot_z(q)
-    current = chain.base @ rotations[..., 0, :, :]
-    for k, link in enumerate(chain.links, start=1):
-        current = current @ (link @ rotations[..., k, :, :])
+    turned = _turned_frames(chain, q)
+    current = turned[..., 0, :, :]
+    for k in range(1, chain.dof):
+        current = current @ turned[..., k, :, :]
     return current @ chain.tool
 
 
@@ -178,14 +294,39 @@ def point_positions(chain: Chain, q_rad: np.ndarray | Sequence[float]) -> dict[G
 
     The end-effector is the tool point (the origin of :func:`fk`).
     """
+    _check_guard_frames(chain.dof)
+    return points_of_origins(frame_origins(chain, q_rad))
+
+
+def point_heights(chain: Chain, q_rad: np.ndarray | Sequence[float]) -> dict[GuardPoint, float]:
+    """z (mm) of every guard point of one configuration ``(n,)``: the z of
+    :func:`point_positions`, bit for bit, without the frames array and the position views
+    (the run-time guard check asks every control cycle)."""
+    q = _joint_angles(chain, q_rad)
+    if q.ndim != 1:
+        raise ValueError(f"expected one configuration of shape ({chain.dof},), got {q.shape}")
+    _check_guard_frames(chain.dof)
+    frames = _frames_of_one(chain, _turned_frames(chain, q))
+    heights: dict[GuardPoint, float] = {
+        name: float(frames[index][2, 3]) for name, index in GUARD_POINT_FRAMES.items()}
+    heights["end_effector"] = float(frames[-1][2, 3])
+    return heights
+
+
+def _check_guard_frames(dof: int) -> None:
     needed = max(GUARD_POINT_FRAMES.values()) + 1
-    if chain.dof < needed:
+    if dof < needed:
         raise ValueError(f"guard points are defined for arms with at least {needed} joints, "
-                         f"this chain has {chain.dof}")
-    frames = frame_transforms(chain, q_rad)
+                         f"this chain has {dof}")
+
+
+def points_of_origins(origins: np.ndarray) -> dict[GuardPoint, np.ndarray]:
+    """:func:`point_positions` from :func:`frame_origins` already computed (one forward
+    kinematics for the guards and the link volumes along a path)."""
+    _check_guard_frames(origins.shape[-2] - 1)
     points: dict[GuardPoint, np.ndarray] = {
-        name: frames[..., index, :3, 3] for name, index in GUARD_POINT_FRAMES.items()}
-    points["end_effector"] = frames[..., chain.dof, :3, 3]
+        name: origins[..., index, :] for name, index in GUARD_POINT_FRAMES.items()}
+    points["end_effector"] = origins[..., -1, :]
     return points
 
 

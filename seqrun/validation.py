@@ -391,15 +391,19 @@ class Checker:
         """Guards along sampled joint configurations (rad) at ``times`` (s): one error per
         guard, at the watched point that goes lowest; the smallest clearance is kept. Then
         the link volumes against the obstacles and each other (:meth:`_check_path_geometry`)."""
-        self._check_path_geometry(step, times, path_rad, what=what)
-        guards = self.arm.workspace.guards
-        if not guards:
-            return
-        from seqrun.kinematics import Chain, point_positions
+        from seqrun.kinematics import Chain, frame_origins, points_of_origins
 
+        guards = self.arm.workspace.guards
+        if not guards and self.arm.geometry.capsules == []:
+            return
         if self._chain is None:
             self._chain = Chain.from_arm(self.arm)
-        points = point_positions(self._chain, path_rad)
+        # one forward kinematics of the samples for the link volumes and the guards
+        origins = frame_origins(self._chain, path_rad)
+        self._check_path_geometry(step, times, path_rad, what=what, origins=origins)
+        if not guards:
+            return
+        points = points_of_origins(origins)
         duration = float(times[-1]) if len(times) else 0.0
         for guard in guards:
             lowest = min(guard.points, key=lambda p: float(points[p][:, 2].min()))
@@ -417,15 +421,16 @@ class Checker:
                     f"below the '{guard.name}' guard at {_f(guard.min_z_mm)} mm"))
 
     def _check_path_geometry(self, step: ResolvedStep, times: np.ndarray, path_rad: np.ndarray,
-                             *, what: str) -> None:
-        """Link capsules against obstacles and non-neighbouring links along the samples."""
+                             *, what: str, origins: np.ndarray) -> None:
+        """Link capsules against obstacles and non-neighbouring links along the samples
+        (``origins``: their frames' origins, :func:`~seqrun.kinematics.frame_origins`)."""
         if self.arm.geometry.capsules == []:
             return
         from seqrun.geometry import Geometry
 
         if getattr(self, "_geometry", None) is None:
             self._geometry = Geometry(self.arm)
-        smallest = self._geometry.smallest(path_rad)
+        smallest = self._geometry.smallest(path_rad, origins)
         if smallest is None:
             return
         duration = float(times[-1]) if len(times) else 0.0

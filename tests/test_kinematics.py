@@ -11,14 +11,17 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from projecttree import shipped_arm
+from tiers import examples
 from seqrun.arm import GuardPoint
 from seqrun.kinematics import (
     Chain,
     fk,
+    frame_origins,
     frame_transforms,
     jacobian,
     matrix_from_rpy,
     orientation_error,
+    point_heights,
     point_positions,
     pose_from_user_deg,
     rpy_from_matrix,
@@ -250,3 +253,78 @@ def test_pose_from_user_deg_rejects_bad_joints(joints, message):
 def test_wrong_shape_is_refused():
     with pytest.raises(ValueError, match=r"\(\.\.\., 7\)"):
         fk(CHAIN, np.zeros(6))
+
+
+# --- the same bits as the 4x4 products -------------------------------------------------------
+
+def blas_chain_frames(chain: Chain, q: np.ndarray) -> np.ndarray:
+    """The chain as 4x4 products, one joint after the other (what frame_transforms computed
+    before it mixed cos and sin into the quarter-turn frames itself): the bits every
+    guard height, clearance and checkpoint of a run was computed with."""
+    c, s = np.cos(q), np.sin(q)
+    rot = np.zeros(q.shape + (4, 4))
+    rot[..., 0, 0], rot[..., 0, 1], rot[..., 1, 0], rot[..., 1, 1] = c, -s, s, c
+    rot[..., 2, 2] = rot[..., 3, 3] = 1.0
+    frames = np.empty(q.shape[:-1] + (chain.dof + 1, 4, 4))
+    current = frames[..., 0, :, :] = chain.base @ rot[..., 0, :, :]
+    for k, link in enumerate(chain.links, start=1):
+        current = frames[..., k, :, :] = current @ (link @ rot[..., k, :, :])
+    frames[..., chain.dof, :, :] = current @ chain.tool
+    return frames
+
+
+def same_bits(a: np.ndarray, b: np.ndarray) -> bool:
+    """Equal bit for bit, the signs of zeros included."""
+    return a.shape == b.shape and np.array_equal(a.view(np.int64), b.view(np.int64))
+
+
+SPECIAL_ANGLES = [0.0, -0.0, np.pi / 2, -np.pi / 2, np.pi, -np.pi, 2 * np.pi, 1e-300, 1e-17]
+special_configurations = arrays(np.float64, 7, elements=st.sampled_from(SPECIAL_ANGLES))
+# A chain whose base and third frame are not quarter turns: those two take the 4x4 product.
+SKEWED = Chain.from_arm(ARM.model_copy(update={"kinematics": ARM.kinematics.model_copy(update={
+    "base": ARM.kinematics.base.model_copy(update={"rpy_deg": [170.0, 3.0, 0.0]}),
+    "links": [link.model_copy(update={"rpy_deg": [-83.0, 7.0, 1.5]}) if i == 2 else link
+              for i, link in enumerate(ARM.kinematics.links)]})}))
+
+
+@settings(max_examples=examples(200))
+@given(st.one_of(batches, configurations, special_configurations),
+       st.sampled_from([CHAIN, SKEWED]))
+def test_frames_have_the_bits_of_the_4x4_products(q, chain):
+    expected = blas_chain_frames(chain, q)
+    assert same_bits(frame_transforms(chain, q), expected)
+    assert same_bits(fk(chain, q), expected[..., -1, :, :])
+    assert same_bits(frame_origins(chain, q), np.ascontiguousarray(expected[..., :3, 3]))
+    if q.ndim == 2:
+        for k, single in enumerate(q):
+            assert same_bits(frame_transforms(chain, single), expected[k])
+
+
+def test_quarter_turn_frames_skip_the_product():
+    assert CHAIN._turns.general == ()
+    assert SKEWED._turns.general == (0, 3)
+    assert not np.allclose(fk(SKEWED, np.zeros(7)), fk(CHAIN, np.zeros(7)))
+
+
+def test_chain_of_an_arm_is_built_once():
+    arm = shipped_arm()
+    assert Chain.from_arm(arm) is Chain.from_arm(arm)
+    assert Chain.from_arm(arm.model_copy(update={"description": "other"})) is Chain.from_arm(arm)
+    moved = arm.model_copy(update={"kinematics": arm.kinematics.model_copy(update={
+        "tool": arm.kinematics.tool.model_copy(update={"xyz_mm": [0.0, 0.0, -100.0]})})})
+    assert Chain.from_arm(moved) is not Chain.from_arm(arm)
+    assert fk(Chain.from_arm(moved), np.zeros(7))[2, 3] == pytest.approx(1046.1 + 100.0)
+
+
+@given(st.one_of(configurations, special_configurations), st.sampled_from([CHAIN, SKEWED]))
+def test_point_heights_are_the_z_of_point_positions(q, chain):
+    heights = point_heights(chain, q)
+    positions = point_positions(chain, q)
+    assert set(heights) == set(positions)
+    for name, position in positions.items():
+        assert same_bits(np.float64(heights[name]), position[2]), name
+
+
+def test_point_heights_take_one_configuration():
+    with pytest.raises(ValueError, match=r"one configuration of shape \(7,\)"):
+        point_heights(CHAIN, np.zeros((2, 7)))
