@@ -298,7 +298,7 @@ class SimNetwork:
             self._deliver(flight)
             delivered = True
             flight = None
-        if delivered and self._cond._waiters:  # type: ignore[attr-defined]  (_notify_all)
+        if delivered and self._cond._waiters:  # type: ignore[attr-defined]  # as _notify_all
             self._cond.notify_all()
 
     def _run_until_received(self, inbox: deque[WireFrame], horizon: float) -> float | None:
@@ -328,7 +328,7 @@ class SimNetwork:
             flight = None
             if inbox:
                 break
-        if delivered and self._cond._waiters:  # type: ignore[attr-defined]  (_notify_all)
+        if delivered and self._cond._waiters:  # type: ignore[attr-defined]  # as _notify_all
             self._cond.notify_all()
         return last
 
@@ -482,7 +482,7 @@ class SimNetwork:
                 frame = WireFrame(frame.can_id, bytes(frame.data), frame.is_extended,
                                   frame.is_remote, frame.dlc, 0.0, endpoint.name)
             self._queue(endpoint._node, frame, self.clock.now(), durations)
-            if self._cond._waiters:  # type: ignore[attr-defined]  (_notify_all, inline)
+            if self._cond._waiters:  # type: ignore[attr-defined]  # as _notify_all, inline
                 self._cond.notify_all()
 
     def _receive(self, endpoint: Endpoint, deadline: float | None) -> WireFrame | None:
