@@ -21,6 +21,7 @@ from typing import Any, Mapping
 from seqrun.arm import ArmDescription
 from seqrun.clock import VirtualClock
 from seqrun.connection import open_connection
+from seqrun import frozen_objects
 from seqrun.executor import RunResult
 from seqrun.powercube.client import PowerCubeClient
 from seqrun.powercube.codec import SetParam
@@ -127,8 +128,9 @@ def _dry_run(loaded: LoadedSequence, arm: ArmDescription, start_deg: Mapping[str
     # numpy, the sequence's) are not its garbage: out of the collector's sight while it runs,
     # the collections its own objects cause do not traverse them again (one full collection
     # of a `seqrun validate` process cost ~15 ms). Back in sight afterwards; left alone when
-    # the process keeps objects frozen itself (the console).
-    freeze = gc.get_freeze_count() == 0
+    # the process keeps objects frozen itself (the seqrun program, the console:
+    # seqrun.frozen_objects).
+    freeze = not frozen_objects.kept()
     if freeze:
         gc.freeze()
     try:

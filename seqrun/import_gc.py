@@ -25,6 +25,8 @@ import gc
 import importlib._bootstrap as _bootstrap
 import threading
 
+from seqrun import frozen_objects
+
 _lock = threading.Lock()
 _depth = 0
 _collecting_before = False
@@ -51,7 +53,7 @@ def _find_and_load_without_collections(name, import_):
             _depth -= 1
             if _depth == 0 and _collecting_before:
                 if succeeded:
-                    gc.freeze()
+                    frozen_objects.keep()
                 gc.enable()
 
 

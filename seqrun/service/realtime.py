@@ -17,6 +17,8 @@ import os
 import sys
 from pathlib import Path
 
+from seqrun import frozen_objects
+
 #: The priority of the process's other threads (the lowest real-time one).
 BASE_PRIORITY = 1
 #: How long a thread may keep the interpreter lock while another waits for it, under
@@ -67,7 +69,7 @@ def keep_long_lived_objects_out_of_collections() -> int:
     open that stalled the loop for 120-185 ms about once per opsafe run, and not once in
     the runs after this (idle host, bench/README.md)."""
     gc.collect()
-    gc.freeze()
+    frozen_objects.keep()
     return gc.get_freeze_count()
 
 
