@@ -12,7 +12,6 @@ from __future__ import annotations
 import itertools
 import logging
 import os
-import socket
 import sys
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Iterable, Mapping, Sequence
@@ -180,6 +179,8 @@ def _one_line_library_logs() -> None:
 def _probe_tcp(host: str, port: int, timeout: float = 2.0) -> None:
     """python-can's socketcand client retries a refused connection for 10 s, logging a
     warning each time; one probe first turns "nobody there" into one clear line."""
+    import socket  # only for socketcand: not imported by commands that never reach it
+
     try:
         socket.create_connection((host, port), timeout=timeout).close()
     except OSError as exc:

@@ -3,29 +3,32 @@
 They live in the repository's top-level ``arms/``, ``poses/`` and ``sequences/`` folders
 (the README's first command uses ``sequences/opsafe.yaml`` from the checkout). A wheel
 carries them as the package data ``seqrun._shipped.<kind>`` (``pyproject.toml`` maps the
-folders there), so an installed seqrun finds them from any directory through
-:mod:`importlib.resources`; a source checkout on ``PYTHONPATH`` finds them beside the package.
+folders there), so an installed seqrun finds them from any directory, in its package's
+folder; a source checkout on ``PYTHONPATH`` finds them beside the package.
 """
 
 from __future__ import annotations
 
-import importlib.resources
 from pathlib import Path
 from typing import Literal
 
 Kind = Literal["arms", "poses", "sequences"]
 
-#: The checkout the package was imported from (meaningful only in a source tree).
-_CHECKOUT = Path(__file__).resolve().parent.parent
+#: The package's folder (where pip puts the package data) and the checkout it was imported
+#: from (meaningful only in a source tree).
+_PACKAGE = Path(__file__).resolve().parent
+_CHECKOUT = _PACKAGE.parent
 
 
 def shipped_dir(kind: Kind) -> Path:
     """The folder of shipped ``kind`` files (a real directory either way)."""
-    # Through the regular package seqrun: its resources are plain files once installed
-    # (seqrun._shipped.<kind> itself is a namespace package, whose path is a multiplexed one).
-    installed = importlib.resources.files("seqrun").joinpath("_shipped", kind)
+    # In the regular package seqrun's folder, as importlib.resources.files("seqrun") would
+    # give it for an installation on disk (seqrun._shipped.<kind> itself is a namespace
+    # package, whose path is a multiplexed one); without importing importlib.resources
+    # (zipfile, tempfile): ~1.5 ms of every command that reads an arm.
+    installed = _PACKAGE / "_shipped" / kind
     if installed.is_dir():
-        return Path(str(installed))
+        return installed
     return _CHECKOUT / kind  # a source checkout: the folders beside the package
 
 
