@@ -21,8 +21,6 @@ kept: no matches, nothing from the files seqrun reads.
 
 from __future__ import annotations
 
-import marshal
-import os
 import sys
 import threading
 import types
@@ -30,6 +28,8 @@ from pathlib import Path
 from re import _compiler, _constants  # type: ignore[attr-defined]
 
 import _sre  # type: ignore[import-not-found]
+
+from seqrun import pycache_table
 
 #: Table file format.
 _FORMAT = 1
@@ -55,8 +55,7 @@ def header() -> tuple:
 
 
 def table_path() -> Path:
-    return (Path(__file__).parent / "__pycache__"
-            / f"compiled-patterns.{sys.implementation.cache_tag}.marshal")
+    return pycache_table.path("compiled-patterns")
 
 
 def _recording_sre_compile(pattern, flags, code, groups, groupindex, indexgroup):
@@ -128,19 +127,12 @@ def _compile_and_keep(p, flags, kind, key):
 
 
 def _load(path: Path) -> None:
-    try:
-        data = path.read_bytes()
-    except OSError:
+    tables = pycache_table.read(path, header())
+    if type(tables) is not tuple or len(tables) != 2:
         return
-    try:
-        kept_header, tables = marshal.loads(data)
-        if kept_header != header() or type(tables) is not tuple or len(tables) != 2:
-            return
-        kept_str, kept_bytes = tables
-        if type(kept_str) is not dict or type(kept_bytes) is not dict:
-            return
-    except (EOFError, ValueError, TypeError):
-        return  # damaged or from another Python: start empty
+    kept_str, kept_bytes = tables
+    if type(kept_str) is not dict or type(kept_bytes) is not dict:
+        return
     _tables[str].update(kept_str)
     _tables[bytes].update(kept_bytes)
 
@@ -151,17 +143,7 @@ def save() -> None:
         return
     tables = tuple(table if len(table) <= MAX_ENTRIES else {k: table[k] for k in _used[kind]}
                    for kind, table in _tables.items())
-    path = table_path()
-    temporary = path.with_name(f"{path.name}.{os.getpid()}.tmp")
-    try:
-        path.parent.mkdir(exist_ok=True)
-        temporary.write_bytes(marshal.dumps((header(), tables)))
-        os.replace(temporary, path)  # readers see the old table or the new one, whole
-    except (OSError, ValueError):  # read-only installation, or an entry marshal refuses
-        try:
-            temporary.unlink()
-        except OSError:
-            pass
+    pycache_table.write(table_path(), header(), tables)
 
 
 def install() -> None:

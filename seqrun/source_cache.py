@@ -24,9 +24,10 @@ from __future__ import annotations
 
 import builtins
 import marshal
-import os
 import sys
 from pathlib import Path
+
+from seqrun import pycache_table
 
 #: Table file format; a different Python (bytecode magic) makes the table start empty.
 _FORMAT = 2
@@ -50,8 +51,7 @@ def _magic() -> bytes:
 
 
 def table_path() -> Path:
-    return (Path(__file__).parent / "__pycache__"
-            / f"generated-code.{sys.implementation.cache_tag}.marshal")
+    return pycache_table.path("generated-code")
 
 
 def _code(source: str, mode: str):
@@ -94,17 +94,9 @@ def _compile(source, filename, mode, flags=0, dont_inherit=False, optimize=-1, *
 
 
 def _load(path: Path) -> None:
-    try:
-        data = path.read_bytes()
-    except OSError:
-        return
-    try:
-        header, table = marshal.loads(data)
-        if header != (_FORMAT, _magic()) or type(table) is not dict:
-            return
-    except (EOFError, ValueError, TypeError):
-        return  # damaged or from another Python: start empty
-    _codes.update(table)
+    table = pycache_table.read(path, (_FORMAT, _magic()))
+    if type(table) is dict:  # else none, damaged or from another Python: start empty
+        _codes.update(table)
 
 
 def save() -> None:
@@ -114,17 +106,7 @@ def save() -> None:
     kept = _codes if len(_codes) <= MAX_ENTRIES else {k: _codes[k] for k in _used}
     table = {k: v if type(v) is bytes else marshal.dumps(v)  # type: ignore[arg-type]
              for k, v in kept.items()}
-    path = table_path()
-    temporary = path.with_name(f"{path.name}.{os.getpid()}.tmp")
-    try:
-        path.parent.mkdir(exist_ok=True)
-        temporary.write_bytes(marshal.dumps(((_FORMAT, _magic()), table)))
-        os.replace(temporary, path)  # readers see the old table or the new one, whole
-    except OSError:  # a read-only installation: compile every time, as before
-        try:
-            temporary.unlink()
-        except OSError:
-            pass
+    pycache_table.write(table_path(), (_FORMAT, _magic()), table)
 
 
 def install() -> None:

@@ -14,6 +14,7 @@ import textwrap
 from pathlib import Path
 
 from projecttree import ROOT
+from startupproc import seqrun_program_at_exit
 
 SCRIPT = """\
 import gc, json, sys
@@ -106,12 +107,8 @@ def test_the_collector_still_frees_cycles_made_after_the_imports(tmp_path):
 
 
 def test_the_seqrun_program_installs_it():
-    code = ("import atexit, sys, importlib._bootstrap as b, gc\n"
-            "atexit.register(lambda: print(b._find_and_load.__module__, gc.isenabled(), "
-            "gc.get_freeze_count() > 10_000, file=sys.stderr))\n"
-            "from seqrun.entry import main\nmain()\n")
-    proc = subprocess.run([sys.executable, "-c", code, "pose", "list"], cwd=ROOT,
-                          env={**os.environ, "PYTHONPATH": str(ROOT)}, capture_output=True,
-                          text=True, timeout=120)
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    assert proc.stderr.split()[-3:] == ["seqrun.import_gc", "True", "True"]
+    words = seqrun_program_at_exit(
+        "import atexit, sys, importlib._bootstrap as b, gc\n"
+        "atexit.register(lambda: print(b._find_and_load.__module__, gc.isenabled(), "
+        "gc.get_freeze_count() > 10_000, file=sys.stderr))")
+    assert words[-3:] == ["seqrun.import_gc", "True", "True"]

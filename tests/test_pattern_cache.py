@@ -7,11 +7,7 @@ puts back the module's own state); whole-process cases (file written, read back,
 
 from __future__ import annotations
 
-import json
-import os
 import re
-import subprocess
-import sys
 import warnings
 from pathlib import Path
 from re import _compiler
@@ -21,7 +17,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import tiers
-from projecttree import ROOT
+from startupproc import run_with_table, seqrun_program_at_exit
 from seqrun import pattern_cache
 
 NORMAL = pattern_cache._normal_compile
@@ -217,14 +213,7 @@ print(json.dumps({
 
 
 def run(table: Path, mode: str, *, write: bool = True) -> dict:
-    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
-    if not write:
-        env["PYTHONDONTWRITEBYTECODE"] = "1"
-    env["PYTHONPATH"] = str(ROOT)
-    proc = subprocess.run([sys.executable, "-c", SCRIPT, str(table), mode], cwd=ROOT,
-                          env=env, capture_output=True, text=True, timeout=120)
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    return json.loads(proc.stdout)
+    return run_with_table(SCRIPT, table, mode, write=write)
 
 
 def test_a_second_process_compiles_nothing_and_makes_the_same_patterns(tmp_path):
@@ -260,11 +249,7 @@ def test_a_damaged_table_or_one_of_another_python_is_ignored_and_replaced(tmp_pa
 
 
 def test_the_seqrun_program_installs_it():
-    code = ("import atexit, sys, re\n"
-            "atexit.register(lambda: print(re._compiler.compile.__module__, file=sys.stderr))\n"
-            "from seqrun.entry import main\nmain()\n")
-    proc = subprocess.run([sys.executable, "-c", code, "pose", "list"], cwd=ROOT,
-                          env={**os.environ, "PYTHONPATH": str(ROOT)}, capture_output=True,
-                          text=True, timeout=120)
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    assert proc.stderr.split()[-1] == "seqrun.pattern_cache"
+    words = seqrun_program_at_exit(
+        "import atexit, sys, re\n"
+        "atexit.register(lambda: print(re._compiler.compile.__module__, file=sys.stderr))")
+    assert words[-1] == "seqrun.pattern_cache"

@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 
 from projecttree import ROOT
+from startupproc import run_with_table, seqrun_program_at_exit
 
 SCRIPT = """\
 import json, sys
@@ -59,14 +60,7 @@ print(json.dumps({
 
 
 def run(table: Path, mode: str, *, write: bool = True) -> dict:
-    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
-    if not write:
-        env["PYTHONDONTWRITEBYTECODE"] = "1"
-    env["PYTHONPATH"] = str(ROOT)
-    proc = subprocess.run([sys.executable, "-c", SCRIPT, str(table), mode], cwd=ROOT,
-                          env=env, capture_output=True, text=True, timeout=120)
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    return json.loads(proc.stdout)
+    return run_with_table(SCRIPT, table, mode, write=write)
 
 
 def test_a_second_process_compiles_nothing_and_makes_the_same_classes(tmp_path):
@@ -99,15 +93,11 @@ def test_a_damaged_table_is_ignored_and_replaced(tmp_path):
 
 
 def test_the_seqrun_program_installs_it():
-    code = ("import atexit, sys, dataclasses, typing\n"
-            "atexit.register(lambda: print(dataclasses.exec.__module__, "
-            "typing.compile.__module__, file=sys.stderr))\n"
-            "from seqrun.entry import main\nmain()\n")
-    proc = subprocess.run([sys.executable, "-c", code, "pose", "list"], cwd=ROOT,
-                          env={**os.environ, "PYTHONPATH": str(ROOT)}, capture_output=True,
-                          text=True, timeout=120)
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    assert proc.stderr.split()[-2:] == ["seqrun.source_cache", "seqrun.source_cache"]
+    words = seqrun_program_at_exit(
+        "import atexit, sys, dataclasses, typing\n"
+        "atexit.register(lambda: print(dataclasses.exec.__module__, "
+        "typing.compile.__module__, file=sys.stderr))")
+    assert words[-2:] == ["seqrun.source_cache", "seqrun.source_cache"]
 
 
 def test_entries_are_unmarshalled_only_when_used_and_a_damaged_one_is_compiled_again(tmp_path):
