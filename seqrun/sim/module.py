@@ -715,8 +715,8 @@ class SimModule:
         """The acknowledge of a GetExtended FPosStateDio now: the previous one again while
         the reading is the same (a module at rest is read every cycle; acknowledges are
         immutable, and the wire encodes the same object only once)."""
-        position = _f32(self._actual_position())
-        reading = (position, self._short_state_now(), self._dio())
+        reading = self._fpos_reading()
+        position = reading[0]
         last = self._last_fpos_ack
         # (0.0 == -0.0, but they are different frames)
         if last is not None and last[0] == reading and (
@@ -773,17 +773,17 @@ class SimModule:
         ratio = float(self._params[_P_INC_RATIO])
         return ratio if ratio > 0 else 1.0
 
+    def _fpos_reading(self) -> tuple[float, ShortState, int]:
+        """FPosStateDio's fields now: position (float32), short state, digital inputs."""
+        return _f32(self._actual_position()), self._short_state_now(), self._dio()
+
     def _read(self, param: ParamId) -> float | int | PosStateDio:
         if param is _P_FPOS_STATE_DIO:  # first: the reads of every control cycle
-            return PosStateDio(_f32(self._actual_position()), self._short_state_now(),
-                               self._dio())
+            return PosStateDio(*self._fpos_reading())
         wire = PARAM_TYPES[param]
         if param in _TICK_TWINS:
             value = float(self._read(_TICK_TWINS[param]))  # type: ignore[arg-type]
             return _fit_int(round(value / self._inc_ratio()), wire)
-        if param == _P_FPOS_STATE_DIO:
-            return PosStateDio(_f32(self._actual_position()), self._short_state_now(),
-                               self._dio())
         live = self._live_value(param)
         value = live if live is not None else self._params.get(param, 0)
         if wire is WireType.F32:

@@ -254,21 +254,14 @@ class SimPort:
         frame = self._receive(self.endpoint, deadline)  # Endpoint.receive, one call less
         if frame is None:
             return None
-        can_id, data, is_extended, is_remote, dlc, timestamp, sender = frame
-        return SimMessage(timestamp, can_id, is_extended, is_remote, False, self.channel,
-                          dlc if is_remote and dlc is not None else len(data), data,
-                          False, sender != self.endpoint.name)
+        return SimMessage(frame.timestamp, frame.can_id, frame.is_extended, frame.is_remote,
+                          False, self.channel, frame.length, frame.data, False,
+                          frame.sender != self.endpoint.name)
 
     def send(self, msg: Any, timeout: float | None = None) -> None:
         """Queue ``msg`` for the simulated wire (errors as :meth:`wire_frame` and
         :meth:`send_frame`)."""
-        frame = self.wire_frame(msg)
-        try:
-            self.network._send(self.endpoint, frame, timeout)  # send_frame's, inline
-        except NetworkClosedError:
-            raise
-        except ValueError as exc:
-            raise ValueError(f"seqrun-sim: {exc}") from None
+        self.send_frame(self.wire_frame(msg), timeout)
 
     def shutdown(self) -> None:
         """Detach from the wire; the last port of a channel takes the arm with it. Safe to
