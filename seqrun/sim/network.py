@@ -286,6 +286,10 @@ class SimNetwork:
         flight = self._in_flight
         if flight is not None and flight.end > horizon:
             return  # the frame on the wire is the next event, and it lies ahead
+        if flight is None and not (self._active and self._bus_free_at <= horizon):
+            # the wire is idle and nothing can start by then: nothing queued, or the
+            # intermission after the last frame lasts (the usual case right after a send)
+            return
         delivered = False
         while True:
             if flight is None:
@@ -298,8 +302,8 @@ class SimNetwork:
             self._deliver(flight)
             delivered = True
             flight = None
-        if delivered and self._cond._waiters:  # type: ignore[attr-defined]  # as _notify_all
-            self._cond.notify_all()
+        if delivered:
+            self._notify_all()
 
     def _run_until_received(self, inbox: deque[WireFrame], horizon: float) -> float | None:
         """Virtual time: :meth:`_advance` towards ``horizon``, but stop at the delivery that
@@ -328,8 +332,8 @@ class SimNetwork:
             flight = None
             if inbox:
                 break
-        if delivered and self._cond._waiters:  # type: ignore[attr-defined]  # as _notify_all
-            self._cond.notify_all()
+        if delivered:
+            self._notify_all()
         return last
 
     def _start_next(self, horizon: float, start_at_horizon: bool) -> _InFlight | None:
@@ -402,16 +406,12 @@ class SimNetwork:
     def _queue(self, node: _Node, frame: WireFrame, ready_at: float,
                durations: tuple[float, float] | None = None) -> None:
         if durations is None:
-            durations = self._durations.get(frame[:5]) or self.frame_durations(frame)
+            durations = self.frame_durations(frame)
         queue = node.queue
         if not queue:
             self._active.append(node)
-        if frame.is_extended or frame.is_remote:
-            key = _arbitration_key(frame)
-        else:
-            key = frame.can_id << 21  # _arbitration_key of a standard data frame
-        queue.append(_new_tuple(_Pending, (frame, ready_at, key << _SEQ_BITS | next(self._seq),
-                                           *durations)))
+        key = _arbitration_key(frame) << _SEQ_BITS | next(self._seq)
+        queue.append(_new_tuple(_Pending, (frame, ready_at, key, *durations)))
 
     def _notify_all(self) -> None:
         """Wake the threads waiting on the wire; lock held. Skips Condition.notify_all's
@@ -457,15 +457,12 @@ class SimNetwork:
 
     def _send(self, endpoint: Endpoint, frame: WireFrame, timeout: float | None) -> None:
         # ValueError for a frame CAN cannot carry
-        durations = self._durations.get(frame[:5]) or self.frame_durations(frame)
+        durations = self.frame_durations(frame)
         with self._lock:
             if endpoint.closed:
                 raise NetworkClosedError(f"{endpoint.name} is closed")
             now = self.clock.now()
-            flight = self._in_flight
-            if (flight.end <= now if flight is not None  # (see _receive_virtual)
-                    else self._active and self._bus_free_at <= now):
-                self._advance(now, start_at_horizon=False)
+            self._advance(now, start_at_horizon=False)
             deadline = None if timeout is None else now + timeout
             while len(endpoint._node.queue) >= endpoint.tx_queue_size:
                 if deadline is not None and self.clock.now() >= deadline:
@@ -482,8 +479,7 @@ class SimNetwork:
                 frame = WireFrame(frame.can_id, bytes(frame.data), frame.is_extended,
                                   frame.is_remote, frame.dlc, 0.0, endpoint.name)
             self._queue(endpoint._node, frame, self.clock.now(), durations)
-            if self._cond._waiters:  # type: ignore[attr-defined]  # as _notify_all, inline
-                self._cond.notify_all()
+            self._notify_all()
 
     def _receive(self, endpoint: Endpoint, deadline: float | None) -> WireFrame | None:
         clock = self.clock
@@ -520,13 +516,7 @@ class SimNetwork:
                 if endpoint.closed:
                     raise NetworkClosedError(f"{endpoint.name} is closed")
                 now = clock.now()
-                flight = self._in_flight
-                # _advance has nothing to do while the frame on the wire ends later, or, with
-                # the wire idle, while nothing is queued or the intermission after the last
-                # frame lasts (the usual case when a request was just sent)
-                if (flight.end <= now if flight is not None
-                        else self._active and self._bus_free_at <= now):
-                    self._advance(now)
+                self._advance(now)
                 if inbox:
                     return inbox.popleft()
                 if deadline is not None and now >= deadline:
