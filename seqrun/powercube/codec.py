@@ -504,7 +504,7 @@ def _unpack_value(wire: WireType, layout: struct.Struct, data: bytes):
     return layout.unpack_from(data)[2]
 
 
-#: Most decoded frames kept per direction (see _remembered).
+#: Most decoded frames kept per direction (see _remember).
 _DECODED_KEPT = 4096
 _decoded_requests: dict[tuple[int, bytes], Request] = {}
 _decoded_acks: dict[tuple[int, bytes], Ack] = {}
