@@ -99,6 +99,8 @@ def distinct_colours(png: bytes) -> int:
 
 def test_page_loads_with_live_telemetry_and_the_3d_view(page, live):
     setup, _ = live
+    # The title is written when the page paints, a few times a second, not at every status.
+    page.wait_for_function("document.title.includes('SIMULATOR')", timeout=5000)
     assert "SIMULATOR" in page.title()
     first = page.evaluate("window.seqrunConsole.statusCount")
     wait_for(lambda: page.evaluate("window.seqrunConsole.statusCount") > first + 3)
