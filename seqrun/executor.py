@@ -24,6 +24,7 @@ words, watchdog, Halt) is behind :class:`seqrun.drivers.base.ArmDriver`.
 
 from __future__ import annotations
 
+import gc
 import math
 import threading
 import time
@@ -922,6 +923,12 @@ class Executor:
         """Preflight, then run the steps of ``loaded`` from ``first_step`` (1-based)."""
         from seqrun.steps import HANDLERS
 
+        if not self.clock.is_virtual:
+            # The garbage that earlier work left in reference cycles (a report's figures,
+            # a web request) is collected now, while nothing moves: left to the collector,
+            # a full collection in the loop holds the interpreter as long as it scans
+            # (70-100 ms cycles after a report.html, bench/README.md).
+            gc.collect()
         self._t0 = self.clock.now()
         self.poses = dict(getattr(loaded, "poses", {}))
         steps = list(loaded.steps)
