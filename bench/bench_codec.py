@@ -4,7 +4,10 @@ For three realistic exchanges (a pipelined 7-module FPosStateDio read, a pipelin
 moveRamp, a 7-module step-with-ack cycle) it measures, per frame and on one core:
 
 - encode:  ``encode()`` of every request and every acknowledge;
-- decode:  ``decode_request()`` of the requests and ``decode_ack()`` of the acks;
+- decode:  ``decode_request()`` of the requests and ``decode_ack()`` of the acks. The codec
+           keeps the frames it decoded (a bus repeats them: every read of a module at
+           rest), so two figures: "new" frames (its memo emptied before each round: a
+           moving arm's positions) and "seen" frames (the memo's hits);
 - client:  what the client does per frame: encode a request, or decode an ack and match
            it (``ack_key`` + pending-table lookup);
 
@@ -26,6 +29,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from seqrun.powercube import codec  # noqa: E402
 from seqrun.powercube.codec import (  # noqa: E402
     GetParam,
     GetParamAck,
@@ -120,6 +124,12 @@ def measure(requests, acks):
         for can_id, data in ack_frames:
             decode_ack(can_id, data)
 
+    def decode_new():
+        # Frames the codec has not seen: its memo of decoded frames emptied first.
+        codec._decoded_requests.clear()
+        codec._decoded_acks.clear()
+        decode_all()
+
     keys = [expected_ack_key(r) for r in requests]
 
     def client_path():
@@ -137,6 +147,7 @@ def measure(requests, acks):
         "bits": sum(bits) / len(bits),
         "bus": bus_rate,
         "encode": best_rate(encode_all, n),
+        "decode_new": best_rate(decode_new, n),
         "decode": best_rate(decode_all, n),
         "client": best_rate(client_path, n),
     }
@@ -185,18 +196,20 @@ def main() -> int:
     print(f"PowerCube codec throughput, one core, Python {sys.version.split()[0]}")
     print(f"bus: {BITRATE / 1e6:g} Mbit/s, frame length from {TIMING_SOURCE}\n")
     header = (f"{'workload':<28}{'bits/frame':>11}{'bus fr/s':>10}{'encode fr/s':>13}"
-              f"{'decode fr/s':>13}{'client fr/s':>13}{'client/bus':>12}")
+              f"{'decode new':>13}{'decode seen':>13}{'client fr/s':>13}{'client/bus':>12}")
     print(header)
     print("-" * len(header))
     worst = float("inf")
     for name, (requests, acks) in WORKLOADS.items():
         r = measure(requests, acks)
         ratio = r["client"] / r["bus"]
-        worst = min(worst, ratio, r["encode"] / r["bus"], r["decode"] / r["bus"])
+        worst = min(worst, ratio, r["encode"] / r["bus"], r["decode_new"] / r["bus"])
         print(f"{name:<28}{r['bits']:>11.1f}{r['bus']:>10,.0f}{r['encode']:>13,.0f}"
-              f"{r['decode']:>13,.0f}{r['client']:>13,.0f}{ratio:>11.1f}x")
+              f"{r['decode_new']:>13,.0f}{r['decode']:>13,.0f}{r['client']:>13,.0f}"
+              f"{ratio:>11.1f}x")
     rate, bus = full_client_rate()
-    print(f"{'PowerCubeClient.read_arm':<28}{'':>11}{bus:>10,.0f}{'':>13}{'':>13}{rate:>13,.0f}"
+    print(f"{'PowerCubeClient.read_arm':<28}{'':>11}{bus:>10,.0f}{'':>13}{'':>13}{'':>13}"
+          f"{rate:>13,.0f}"
           f"{rate / bus:>11.1f}x   (whole client, loopback bus)")
     worst = min(worst, rate / bus)
     verdict = "OK" if worst >= GOAL else "BELOW GOAL"

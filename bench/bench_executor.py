@@ -45,7 +45,9 @@ from seqrun_runs import (RESULTS, ROOT, load_shipped, machine, median,  # noqa: 
 from seqrun.clock import RealClock, VirtualClock  # noqa: E402
 
 SEQUENCES = ("opsafe", "totem")
-SEQRUN = ROOT / ".venv" / "bin" / "seqrun"
+#: The ``seqrun`` program installed beside the interpreter that runs this benchmark (any
+#: virtual environment, not only the checkout's ``.venv``).
+SEQRUN = Path(sys.executable).with_name("seqrun")
 RATIO_GOAL = 1.05
 SPEED_GOAL = 200.0
 JITTER_GOAL_MS = 2.0

@@ -63,11 +63,12 @@ class SeqrunRun:
 
 def run_shipped(name: str, clock: Clock, *, log_dir: Path | None = None,
                 listeners=(), keep_events: bool = False, cycle_hz: float | None = None,
-                connection_hook=None) -> SeqrunRun:
+                connection_hook=None, html_report: bool = True) -> SeqrunRun:
     """``seqrun run sequences/NAME.yaml --sim --yes`` on ``clock``.
 
     ``connection_hook(connection) -> connection`` may replace the connection handed to the
-    runner (the loop bench wraps its clock)."""
+    runner (the loop bench wraps its clock). ``html_report=False``: no report.html drawn
+    after the run (``--no-report``)."""
     loaded, arm = load_shipped(name)
     connection = open_connection(force_sim=True, clock=clock, default_bitrate=arm.can.bitrate)
     events: list[dict] = []
@@ -76,7 +77,8 @@ def run_shipped(name: str, clock: Clock, *, log_dir: Path | None = None,
         used = connection_hook(connection) if connection_hook else connection
         c0, w0 = clock.now(), time.perf_counter()
         outcome = run_sequence(loaded, arm, used, log_dir=log_dir, cycle_hz=cycle_hz,
-                               confirm=lambda prompt: True, listeners=listeners)
+                               confirm=lambda prompt: True, listeners=listeners,
+                               html_report=html_report)
         clock_s, wall_s = clock.now() - c0, time.perf_counter() - w0
         final = read_user_deg(connection.bus, clock, arm)
     finally:
