@@ -328,8 +328,8 @@ def main() -> int:
           "checkpoint; the goal applies to the moves)")
 
     if speed:
-        print(f"\n2. dry-run speed: simulated s / wall s (goal >= {SPEED_GOAL:g}x), "
-              f"median of {args.repeat}")
+        print(f"\n2. dry-run speed: simulated s / wall s (goal >= {SPEED_GOAL:g}x for the "
+              f"validate dry run in process), median of {args.repeat}")
         header = f"{'run':<44}{'simulated s':>12}{'wall s':>9}{'speedup':>10}"
         print(header)
         print("-" * len(header))
@@ -374,7 +374,10 @@ def main() -> int:
               "cycle), the others the executor's wake-ups.")
         print(f"   load average (1, 5, 15 min) before the real-time runs {loads['before']}, "
               f"after {loads['after']} ({os.cpu_count()} CPUs); {info['scheduling']}")
-    speed_ok = all(r is None or r["speedup"] >= SPEED_GOAL for r in speed.values())
+    # The goal is the dry run's own speed; the other rows (the 100 Hz --virtual-time run,
+    # whole processes: bench_startup.py's goal) are shown beside it.
+    speed_ok = all(r is None or r["speedup"] >= SPEED_GOAL for key, r in speed.items()
+                   if key.startswith("validate dry run"))
     print(f"\ngoals: fidelity/jitter {'met' if ok else 'NOT met'}, dry-run speed "
           f"{('met' if speed_ok else 'NOT met') if speed else 'not measured'}")
 
