@@ -7,13 +7,12 @@ one line and the operator-abort exit code; after that each command handles it.
 
 numpy's BLAS (OpenBLAS) starts a thread pool per core at import unless told otherwise: about
 half of numpy's import time, for matrices (4x4, 6x7) far too small to gain from threads.
-The program asks for one thread unless the environment already says how many. Likewise it
-loads no pydantic plugins unless the environment asks for them (:mod:`seqrun.pydantic_plugins`).
+The program asks for one thread unless the environment already says how many.
 
-The source text that dataclasses and typing compile at every start is compiled once and
-kept like bytecode (:mod:`seqrun.source_cache`); so are the regular expressions that modules
-compile when imported (:mod:`seqrun.pattern_cache`). Imports run without cyclic garbage
-collection and what they made is frozen out of later collections (:mod:`seqrun.import_gc`).
+Likewise it sets pydantic's documented switch ``PYDANTIC_DISABLE_PLUGINS`` unless the
+environment sets it: third-party plugins have no place on the path that validates the arm's
+and the sequences' files, and looking for them costs every process a read of every installed
+package's entry points.
 """
 
 from __future__ import annotations
@@ -40,14 +39,7 @@ def main(argv: list[str] | None = None) -> None:
     global command_line
     command_line = list(argv if argv is not None else sys.argv[1:])
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-    from seqrun import import_gc, pydantic_plugins
-
-    import_gc.install()
-    pydantic_plugins.install()
-    from seqrun import pattern_cache, source_cache
-
-    pattern_cache.install()
-    source_cache.install()
+    os.environ.setdefault("PYDANTIC_DISABLE_PLUGINS", "__all__")
     previous = signal.signal(signal.SIGINT, _interrupted_during_start_up)
     try:
         from seqrun.cli import main as cli_main

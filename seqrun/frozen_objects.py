@@ -1,7 +1,6 @@
 """Whether this process keeps its long-lived objects out of the cyclic collector's view.
 
-Three places call :func:`gc.freeze`: the ``seqrun`` program after each import
-(:mod:`seqrun.import_gc`), the console once it serves
+Two places call :func:`gc.freeze`: the console once it serves
 (:func:`seqrun.service.realtime.keep_long_lived_objects_out_of_collections`), and a dry run
 for its own duration when nobody else did (:mod:`seqrun.dryrun`, which unfreezes after).
 The dry run must know whether the others did, and :func:`gc.get_freeze_count` walks the
