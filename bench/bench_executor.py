@@ -7,7 +7,7 @@
    virtual time and in real time. Goal: <= 1.05 per move and in total.
 2. Dry-run speed: simulated seconds / wall seconds of ``seqrun run --virtual-time`` (run
    folder written, 100 Hz loop) for opsafe and totem, and of the ``seqrun validate`` dry
-   run (``seqrun.dryrun.dry_run``, when present). Goal >= 200x. cProfile of each (top 15
+   run (``seqrun.service.dryrun.dry_run``, when present). Goal >= 200x. cProfile of each (top 15
    by tottime) goes to ``bench/results/dryrun_profile.txt``.
 3. The 100 Hz setpoint loop in real time (during the real-time runs of 1, one process,
    nothing else of this bench running): every cycle's start is taken where the executor
@@ -190,10 +190,11 @@ def _validate_dry_run():
     """The ``seqrun validate`` dry run, if this checkout has one: a function of the loaded
     sequence (loading is not part of what it times)."""
     try:
-        from seqrun.dryrun import dry_run
+        from seqrun.service.dryrun import dry_run
     except ImportError:
         return None
-    from seqrun.validation import START_POSE, pose_joints_deg
+    from seqrun.defaults import START_POSE
+    from seqrun.arm.targets import pose_joints_deg
 
     def run(loaded, arm):
         start = pose_joints_deg(START_POSE, loaded.poses_dir)
@@ -251,7 +252,7 @@ def dry_run_speed(repeat: int, log_root: Path) -> tuple[dict, str]:
         profiled = validate(loaded, arm)
         prof.disable()
         profiles.append(_profile_text(
-            f"seqrun validate dry run of sequences/{name}.yaml (seqrun.dryrun.dry_run, "
+            f"seqrun validate dry run of sequences/{name}.yaml (seqrun.service.dryrun.dry_run, "
             f"{profiled.cycle_hz:g} Hz): {profiled.simulated_s:.2f} simulated s in "
             f"{profiled.wall_s:.2f} wall s under cProfile", prof))
         out[key] = {"simulated_s": round(runs[0].simulated_s, 4),

@@ -24,12 +24,12 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from seqrun.arm import load_arm
+from seqrun.arm.description import load_arm
 from seqrun.clock import VirtualClock
 from seqrun.executor import Executor
 from seqrun.powercube.client import PowerCubeClient
-from seqrun.schema import load_sequence
-from seqrun import can_timing
+from seqrun.sequence.loader import load_sequence
+from seqrun.powercube import can_timing
 from seqrun.powercube import codec
 from seqrun.sim import network
 from seqrun.sim.bus import SimBus

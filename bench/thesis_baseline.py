@@ -47,7 +47,7 @@ from dataclasses import dataclass, field
 
 import can
 
-from seqrun.arm import ArmDescription
+from seqrun.arm.description import ArmDescription
 from seqrun.clock import Clock
 from seqrun.errors import CodecError
 from seqrun.powercube.codec import (BroadcastRequest, GetParam, SetMotion, SetParam,

@@ -34,28 +34,26 @@ from typing import TYPE_CHECKING, Any, Callable, Iterable
 
 import numpy as np
 
-from seqrun import kinematics
-from seqrun.arm import ArmDescription
+from seqrun.arm import kinematics
+from seqrun.arm.description import ArmDescription
 from seqrun.clock import Clock
 from seqrun.drivers import (ArmDriver, CycleState, HaltConfirmation, JointState, LimitValues,
                             MotionRefused, as_driver)
 from seqrun.events import EventHub, make_event
 from seqrun.errors import BusError, RunAborted
-from seqrun.limits import LimitsInForce
-from seqrun.planner import Limits, MovePlan, plan_move, plan_stop
-from seqrun.usermessages import user_message
-from seqrun.telemetry import VelocityWindow, joint_flags
-from seqrun.tracking import MoveTracking, velocity_window
+from seqrun.arm.limits import LimitsInForce
+from seqrun.arm.planner import Limits, MovePlan, plan_move, plan_stop
+from seqrun.drivers.usermessages import user_message
+from seqrun.arm.telemetry import VelocityWindow, joint_flags
+from seqrun.arm.tracking import MoveTracking, velocity_window
 from seqrun.stop_requests import FROM_OUTSIDE, OPERATOR_HALT, StopRequest, StopRequests
 
-# Result types, the operator's abort and exit codes live in seqrun/results.py; imported
-# from here too.
-from seqrun.results import (EXIT_FAULT, EXIT_INVALID, EXIT_OK,  # noqa: F401
-                            EXIT_OPERATOR_ABORT, EXIT_USAGE, OperatorAbort, RunResult,
+from seqrun.results import (EXIT_FAULT, EXIT_INVALID, EXIT_OK,
+                            EXIT_OPERATOR_ABORT, OperatorAbort, RunResult,
                             StepResult, fault_cause, halt_fields, latched_message)
 
 if TYPE_CHECKING:
-    from seqrun.poses import PoseDirs
+    from seqrun.arm.poses import PoseDirs
 
 #: A synchronous recorder: gets every typed event (it reads like the events.jsonl dict).
 Listener = Callable[[Any], None]
@@ -462,7 +460,7 @@ class Executor:
         """Link volumes against the arm file's obstacles and each other (measured joints)."""
         geometry = self.__dict__.get("_geometry")
         if geometry is None:
-            from seqrun.geometry import Geometry
+            from seqrun.arm.geometry import Geometry
 
             geometry = self.__dict__["_geometry"] = Geometry(self.arm)
         if geometry.empty:
@@ -559,7 +557,7 @@ class Executor:
                 **self.tracking_figures(target_deg)}
 
     def tracking_figures(self, target_deg=None) -> dict[str, Any]:
-        """The current move's tracking figures (seqrun/tracking.py) up to now."""
+        """The current move's tracking figures (seqrun/arm/tracking.py) up to now."""
         if self._tracking is None:
             return {}
         target = self.commanded_deg if target_deg is None else target_deg
@@ -568,7 +566,7 @@ class Executor:
     def follow(self, plan, *, tolerance_deg: float, timeout_s: float | None,
                path_check: Callable[[Measurement], None] | None = None,
                command_mode: str | None = None) -> dict[str, Any]:
-        """Stream a precomputed plan (a :class:`~seqrun.planner.SampledPlan`) that starts
+        """Stream a precomputed plan (a :class:`~seqrun.arm.planner.SampledPlan`) that starts
         where the arm stands; ``path_check`` runs on every cycle's measurement;
         ``command_mode`` overrides the run's setpoint law for this plan."""
         m = self.read_arm()
@@ -810,7 +808,7 @@ class Executor:
     def preflight(self, loaded, first_step: int = 1):
         """Read the arm and validate the sequence (from ``first_step``) from the measured
         state. Returns the ValidationResult; only reads reach the bus."""
-        from seqrun.validation import validate_sequence
+        from seqrun.sequence.validation import validate_sequence
 
         m = self.read_arm()
         states = self.read_state_words()
@@ -921,7 +919,7 @@ class Executor:
     # ------------------------------------------------------------------ run
     def run(self, loaded, *, first_step: int = 1) -> RunResult:
         """Preflight, then run the steps of ``loaded`` from ``first_step`` (1-based)."""
-        from seqrun.steps import HANDLERS
+        from seqrun.steps.registry import HANDLERS
 
         if not self.clock.is_virtual:
             # The garbage that earlier work left in reference cycles (a report's figures,

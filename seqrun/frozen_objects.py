@@ -2,7 +2,7 @@
 
 Two places call :func:`gc.freeze`: the console once it serves
 (:func:`seqrun.service.realtime.keep_long_lived_objects_out_of_collections`), and a dry run
-for its own duration when nobody else did (:mod:`seqrun.dryrun`, which unfreezes after).
+for its own duration when nobody else did (:mod:`seqrun.service.dryrun`, which unfreezes after).
 The dry run must know whether the others did, and :func:`gc.get_freeze_count` walks the
 whole frozen list to answer (~6 ms for a validating process's ~80,000 objects): so the
 freezes that stay say so here.

@@ -15,13 +15,13 @@ from rich.console import Console
 
 from projecttree import make_project
 from runfolder import RunFolder
-from seqrun.arm import load_arm
+from seqrun.arm.description import load_arm
 from seqrun.cli.display import LiveDisplay, PlainDisplay, fixed
 from seqrun.clock import VirtualClock
-from seqrun.connection import open_connection
-from seqrun.executor import EXIT_FAULT, EXIT_OK
-from seqrun.runner import run_sequence
-from seqrun.schema import load_sequence
+from seqrun.service.connection import open_connection
+from seqrun.results import EXIT_FAULT, EXIT_OK
+from seqrun.service.runner import run_sequence
+from seqrun.sequence.loader import load_sequence
 from seqrun.sim.faults import parse_fault_spec
 
 
@@ -165,7 +165,7 @@ def test_request_descriptions_in_user_coordinates(arm):
     from seqrun.errors import ModuleTimeoutError
     from seqrun.powercube.codec import SetMotion, SetParam
     from seqrun.powercube.protocol import MotionMode, ParamId
-    from seqrun.usermessages import user_message
+    from seqrun.drivers.usermessages import user_message
 
     j2 = arm.joint("j2")
     exc = ModuleTimeoutError(j2.module, "whatever", 0.05,
@@ -271,7 +271,7 @@ def test_request_descriptions_give_rates_without_the_offset(arm):
 
     from seqrun.powercube.codec import SetMotion, SetParam
     from seqrun.powercube.protocol import MotionMode, ParamId
-    from seqrun.usermessages import describe_request
+    from seqrun.drivers.usermessages import describe_request
 
     j2 = arm.joint("j2")
     rate = math.radians(12.5)

@@ -22,14 +22,15 @@ from projecttree import ROOT, shipped_arm
 from seqrun.clock import VirtualClock
 from seqrun.drivers.base import (ArmDriver, CommandConfirmation, JointLimits, JointReading,
                                  JointState, LimitValues, MotionRefused)
-from seqrun.executor import EXIT_FAULT, EXIT_OK, Executor
-from seqrun.planner import Limits, MovePlan
-from seqrun.schema import load_sequence
-from seqrun.validation import pose_joints_deg
+from seqrun.executor import Executor
+from seqrun.results import EXIT_FAULT, EXIT_OK
+from seqrun.arm.planner import Limits, MovePlan
+from seqrun.sequence.loader import load_sequence
+from seqrun.arm.targets import pose_joints_deg
 
 ARM = shipped_arm()
 #: Modules that only PowerCube code may import.
-POWERCUBE_ONLY = ("seqrun.powercube", "seqrun.setpoints", "seqrun.halt", "seqrun.armcontrol",
+POWERCUBE_ONLY = ("seqrun.powercube",
                   "seqrun.drivers.powercube", "seqrun.drivers.setpoints")
 
 

@@ -18,13 +18,13 @@ from typer.testing import CliRunner
 import seqrun.cli  # noqa: F401  (registers the commands)
 from projecttree import ROOT
 from runfolder import RunFolder
-from seqrun.arm import load_arm
+from seqrun.arm.description import load_arm
 from seqrun.cli.app import app
 from seqrun.clock import VirtualClock
-from seqrun.connection import open_connection
-from seqrun.executor import EXIT_FAULT, EXIT_INVALID, EXIT_OK, EXIT_OPERATOR_ABORT
-from seqrun.runner import run_sequence
-from seqrun.schema import load_sequence
+from seqrun.service.connection import open_connection
+from seqrun.results import EXIT_FAULT, EXIT_INVALID, EXIT_OK, EXIT_OPERATOR_ABORT
+from seqrun.service.runner import run_sequence
+from seqrun.sequence.loader import load_sequence
 from simrun import run_on_sim
 
 HALT = (0x100, 0x02)
@@ -260,7 +260,7 @@ def test_cli_run_virtual_time_end_to_end(tmp_path):
 
 def test_an_unexpected_error_in_a_step_halts_and_is_reported_without_traceback(tmp_path,
                                                                               monkeypatch):
-    from seqrun import steps
+    from seqrun.steps import registry as steps
 
     def broken(step, ex):
         raise ZeroDivisionError("simulated bug")
@@ -317,7 +317,7 @@ def test_a_display_that_raises_systemexit_cannot_end_the_run(tmp_path):
 
 
 def test_keyboardinterrupt_escaping_a_step_still_halts(tmp_path, monkeypatch):
-    from seqrun import steps
+    from seqrun.steps import registry as steps
 
     def interrupted(step, ex):
         raise KeyboardInterrupt

@@ -11,12 +11,12 @@ from pathlib import Path
 import can
 import pytest
 
-from seqrun.arm import load_arm
+from seqrun.arm.description import load_arm
 from seqrun.clock import RealClock, VirtualClock
-from seqrun.connection import Connection, open_connection
-from seqrun.runlog import read_trace
-from seqrun.runner import run_sequence
-from seqrun.schema import load_sequence
+from seqrun.service.connection import Connection, open_connection
+from seqrun.service.runlog import read_trace
+from seqrun.service.runner import run_sequence
+from seqrun.sequence.loader import load_sequence
 from seqrun.service.foreign_frames import ForeignFrame, ForeignFrameWatch, is_request_frame
 from seqrun.sim.arm import SimArm
 from seqrun.sim.bus import SimBus

@@ -10,12 +10,12 @@ import pytest
 
 from projecttree import make_project
 from runfolder import RunFolder
-from seqrun.arm import load_arm
+from seqrun.arm.description import load_arm
 from seqrun.clock import VirtualClock
-from seqrun.connection import open_connection
-from seqrun.executor import EXIT_OK
-from seqrun.runner import run_sequence
-from seqrun.schema import load_sequence
+from seqrun.service.connection import open_connection
+from seqrun.results import EXIT_OK
+from seqrun.service.runner import run_sequence
+from seqrun.sequence.loader import load_sequence
 
 
 #: Op-safe rewritten to a pose below the desk (what the red team wrote mid-run).

@@ -1,4 +1,4 @@
-"""Link volumes, obstacles and self-collision (seqrun/geometry.py), and their use in
+"""Link volumes, obstacles and self-collision (seqrun/arm/geometry.py), and their use in
 validation (along the planned trajectory) and at run time (measured joints)."""
 
 from __future__ import annotations
@@ -11,13 +11,13 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from projecttree import shipped_arm, write_sequence
-from seqrun.arm import ArmDescription
-from seqrun.dryrun import dry_run
-from seqrun.geometry import (Geometry, point_box, point_cylinder, segment_box, segment_min,
+from seqrun.arm.description import ArmDescription
+from seqrun.service.dryrun import dry_run
+from seqrun.arm.geometry import (Geometry, point_box, point_cylinder, segment_box, segment_min,
                              segment_segment)
-from seqrun.kinematics import matrix_from_rpy
-from seqrun.schema import load_sequence
-from seqrun.validation import validate_sequence
+from seqrun.arm.kinematics import matrix_from_rpy
+from seqrun.sequence.loader import load_sequence
+from seqrun.sequence.validation import validate_sequence
 from tiers import examples
 
 ARM = shipped_arm()
@@ -156,7 +156,7 @@ def test_without_obstacles_the_same_move_is_fine(project):
 def test_the_run_halts_before_the_obstacle(project, monkeypatch):
     """Run-time check from the measured joints: with validation's geometry check switched
     off the executor streams the move and halts it at the margin."""
-    from seqrun import validation
+    from seqrun.sequence import validation
 
     monkeypatch.setattr(validation.Checker, "_check_path_geometry", lambda *a, **k: None)
     run = dry_run(_load(project, STEPS), _with_mock(ARM), PARK)

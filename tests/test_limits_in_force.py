@@ -11,18 +11,18 @@ import pytest
 
 from projecttree import make_project, shipped_arm
 from runfolder import RunFolder
-from seqrun.cli.validate import static_check
+from seqrun.sequence.checks import static_check
 from seqrun.clock import VirtualClock
-from seqrun.connection import open_connection
-from seqrun.dryrun import dry_run
-from seqrun.executor import EXIT_OK
-from seqrun.limits import ARM_FILE, READBACK, LimitsInForce
-from seqrun.planner import Limits
+from seqrun.service.connection import open_connection
+from seqrun.service.dryrun import dry_run
+from seqrun.results import EXIT_OK
+from seqrun.arm.limits import ARM_FILE, READBACK, LimitsInForce
+from seqrun.arm.planner import Limits
 from seqrun.powercube.client import PowerCubeClient
 from seqrun.powercube.protocol import ParamId
-from seqrun.runner import run_sequence
-from seqrun.schema import load_sequence
-from seqrun.validation import park_deg
+from seqrun.service.runner import run_sequence
+from seqrun.sequence.loader import load_sequence
+from seqrun.arm.targets import park_deg
 from simrun import run_on_sim
 
 ARM = shipped_arm()

@@ -16,7 +16,7 @@ import pytest
 
 import seqrun.steps
 from seqrun import schema
-from seqrun.steps import HANDLERS
+from seqrun.steps.registry import HANDLERS
 from seqrun.steps.context import StepContext
 from seqrun.steps.kind import StepKind
 from seqrun.steps.params import StepParams
@@ -89,7 +89,7 @@ def test_schema_union_and_registry_agree():
         assert schema.PARAMS_MODELS[kind.name] is kind.params
         assert schema.STEP_MODELS[kind.name].kind == kind.name
     # the union the files are validated with: one tagged member per kind (+ bare, include)
-    union = schema.STEP_ADAPTER.core_schema
+    union = schema.step_adapter().core_schema
     while union.get("type") != "tagged-union":
         union = union["schema"]
     assert set(union["choices"]) == {f"step:{n}" for n in names} | {"step:bare", "step:include"}
@@ -106,7 +106,7 @@ def test_handlers_and_checks_come_from_the_registry():
 
 def test_each_kind_parses_checks_and_describes_its_own_steps(tmp_path):
     """A step of every kind, written in a file, reaches its kind's parameters and title."""
-    from seqrun.loader import load_sequence
+    from seqrun.sequence.loader import load_sequence
 
     (tmp_path / "poses").mkdir()
     for pose in (ROOT / "poses").glob("*.yaml"):
@@ -167,10 +167,10 @@ def test_the_checker_catches_a_handler_reaching_past_the_context():
 
 def test_the_executor_provides_the_step_context():
     from seqrun.clock import VirtualClock
-    from seqrun.connection import open_connection
+    from seqrun.service.connection import open_connection
     from seqrun.executor import Executor
     from seqrun.powercube.client import PowerCubeClient
-    from seqrun.arm import load_arm
+    from seqrun.arm.description import load_arm
 
     arm = load_arm(ROOT / "arms" / "lwa3.yaml")
     clock = VirtualClock()
@@ -204,9 +204,9 @@ class _OnlyTheContext:
 def test_runs_of_every_kind_use_only_the_step_context(tmp_path, monkeypatch):
     """The real executor on the simulator: each handler gets the executor behind a guard
     that lets through only StepContext's members."""
-    from seqrun.arm import load_arm
-    from seqrun.dryrun import dry_run
-    from seqrun.loader import load_sequence
+    from seqrun.arm.description import load_arm
+    from seqrun.service.dryrun import dry_run
+    from seqrun.sequence.loader import load_sequence
 
     for kind in KINDS:
         monkeypatch.setitem(HANDLERS, kind.name,
@@ -249,18 +249,18 @@ def test_runs_of_every_kind_use_only_the_step_context(tmp_path, monkeypatch):
 def test_the_format_and_the_loader_import_no_maths_and_no_bus():
     """`seqrun validate --static` starts fast: the step kinds' modules import their
     heavy helpers where they run, never when the schema assembles them."""
-    code = ("import sys, seqrun.schema, seqrun.loader, seqrun.steps, seqrun.checks; "
+    code = ("import sys, seqrun.schema, seqrun.sequence.loader, seqrun.steps, seqrun.sequence.checks; "
             "print(' '.join(sorted(sys.modules)))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True, cwd=ROOT).stdout.split()
-    assert not {"numpy", "ruckig", "can", "seqrun.executor", "seqrun.validation"} & set(out)
+    assert not {"numpy", "ruckig", "can", "seqrun.executor", "seqrun.sequence.validation"} & set(out)
 
 
 def test_the_one_step_validator_is_built_only_for_a_file_with_an_invalid_step(project):
     """A valid file is validated by the Sequence model alone; the single-step validator
     (a second copy of the steps' union) is built when a file's steps must be checked one
     by one, and gives the same steps as the whole file's validation would."""
-    from seqrun.loader import load_sequence_partial
+    from seqrun.sequence.loader import load_sequence_partial
 
     schema.step_adapter.cache_clear()
     loaded, errors = load_sequence_partial(project / "sequences" / "startup.yaml")
@@ -272,4 +272,3 @@ def test_the_one_step_validator_is_built_only_for_a_file_with_an_invalid_step(pr
     partial, errors = load_sequence_partial(broken)
     assert errors and schema.step_adapter.cache_info().currsize == 1
     assert [s.kind for s in partial.steps] == [s.kind for s in loaded.steps]
-    assert schema.STEP_ADAPTER is schema.step_adapter()

@@ -14,17 +14,13 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from projecttree import ROOT, shipped_arm, write_sequence
-from seqrun.cli.validate import static_check
+from seqrun.sequence.checks import static_check
 from seqrun.errors import SequenceInvalid, SourceError, UserInputError
-from seqrun.kinematics import Chain, matrix_from_rpy, point_positions, pose_from_user_deg
-from seqrun.schema import CheckpointParams, MoveParams, load_sequence
-from seqrun.validation import (
-    commanded_joints,
-    park_deg,
-    resolve_checkpoint,
-    resolve_move_target,
-    validate_sequence,
-)
+from seqrun.arm.kinematics import Chain, matrix_from_rpy, point_positions, pose_from_user_deg
+from seqrun.schema import CheckpointParams, MoveParams
+from seqrun.sequence.loader import load_sequence
+from seqrun.sequence.validation import validate_sequence
+from seqrun.arm.targets import commanded_joints, park_deg, resolve_checkpoint, resolve_move_target
 from seqrun.yamlsource import display_path
 from tiers import examples
 

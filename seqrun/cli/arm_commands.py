@@ -3,7 +3,7 @@
 With no interface configured these talk to a fresh simulator (they say so); point them at
 a shared simulator with ``-i socketcand`` (``seqrun sim serve``) or at the real bus.
 ``halt`` and ``reset`` succeed only when every module confirms (its state read back, see
-:mod:`seqrun.armcontrol`); ``status --watch`` survives lost answers (shown as stale).
+:func:`seqrun.drivers.powercube.command_and_confirm`); ``status --watch`` survives lost answers (shown as stale).
 """
 
 from __future__ import annotations
@@ -130,7 +130,7 @@ def status_command(
 def _bus_key(arm, interface, channel, bitrate, bus_kwargs, sim, response_timeout_ms):
     """The claim key of the bus these options name (None: the simulator); checks the
     options first, as connecting would."""
-    from seqrun.connection import parse_bus_kwargs, response_timeout_s, shared_bus
+    from seqrun.service.connection import parse_bus_kwargs, response_timeout_s, shared_bus
 
     response_timeout_s(arm, response_timeout_ms)
     return shared_bus(interface=interface, channel=channel, bitrate=bitrate,

@@ -6,8 +6,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Callable
 
-from seqrun.records import write_record, write_refusal
-from seqrun.runlog import prepare_run_folder
+from seqrun.service.records import write_record, write_refusal
+from seqrun.service.runlog import prepare_run_folder
 
 
 def runs_dir(loaded: Any) -> Path:
@@ -43,7 +43,7 @@ def refuse(loaded: Any, arm_path: Path, errors: list, log_dir: Path | None) -> N
 def refuse_unloadable(file: Path, project_dir: Path | None, errors: list,
                       log_dir: Path | None) -> None:
     """The record of a sequence that could not even be loaded (its own errors)."""
-    from seqrun.project import project_for
+    from seqrun.sequence.project import project_for
 
     try:
         project = project_for(Path(file).resolve(), project_dir)
@@ -61,7 +61,7 @@ def record_run(folder: Path, loaded: Any, arm_path: Path, bus: str, zero: Any) -
 
 def zero_recorder(arm: Any, loaded: Any) -> Callable[[str], str]:
     """What the ``power_off`` step calls: record the pose for the next power-on."""
-    from seqrun.zero import ZeroStore, pose_title
+    from seqrun.service.zero import ZeroStore, pose_title
 
     store = ZeroStore.for_arm(arm.name, getattr(loaded, "project", None))
 

@@ -82,7 +82,7 @@ def collect(paths: list[Path]) -> list[Path]:
 
 def override_notes(loaded) -> list[SourceError]:
     """A note for every pose the sequence uses that the campaign's poses/ overrides."""
-    from seqrun.poses import pose_overrides
+    from seqrun.arm.poses import pose_overrides
     from seqrun.steps.registry import step_kind
 
     overrides = pose_overrides(loaded.pose_path or loaded.poses_dir)
@@ -99,9 +99,9 @@ def override_notes(loaded) -> list[SourceError]:
 
 
 def _sequence(path: Path, options: dict) -> FileResult:
-    from seqrun.checks import static_check
-    from seqrun.dryrun import dry_run
-    from seqrun.validation import START_POSE
+    from seqrun.sequence.checks import static_check
+    from seqrun.service.dryrun import dry_run
+    from seqrun.defaults import START_POSE
 
     result = FileResult(str(path), "sequence")
     try:
@@ -139,9 +139,9 @@ def _sequence(path: Path, options: dict) -> FileResult:
 
 
 def _pose(path: Path, options: dict) -> FileResult:
-    from seqrun.arm import load_arm
-    from seqrun.poses import NOTE_PREFIX, check_pose, load_pose
-    from seqrun.project import project_for
+    from seqrun.arm.description import load_arm
+    from seqrun.arm.poses import NOTE_PREFIX, check_pose, load_pose
+    from seqrun.sequence.project import project_for
 
     result = FileResult(str(path), "pose")
     try:
@@ -168,7 +168,7 @@ def _pose(path: Path, options: dict) -> FileResult:
 
 
 def _arm(path: Path) -> FileResult:
-    from seqrun.arm import load_arm
+    from seqrun.arm.description import load_arm
 
     result = FileResult(str(path), "arm")
     try:

@@ -14,7 +14,7 @@ from seqrun.defaults import EXIT_FAULT, EXIT_INVALID, EXIT_OK, EXIT_USAGE  # noq
 from seqrun.errors import Refused, SequenceInvalid, UserInputError
 
 if TYPE_CHECKING:
-    from seqrun.arm import ArmDescription
+    from seqrun.arm.description import ArmDescription
 
 ArmOption = Annotated[Path, typer.Option("--arm", metavar="FILE", help="Arm description file.")]
 #: An arm file only where one is given (None: the command finds the campaign's).
@@ -31,11 +31,11 @@ PosesDirOption = Annotated[Path, typer.Option(
 def pose_search_path(poses_dir: Path):
     """``--poses-dir`` as given, or for the default the poses of the project here (a
     campaign's poses/, then the shipped ones)."""
-    from seqrun.poses import DEFAULT_POSES_DIR
+    from seqrun.defaults import DEFAULT_POSES_DIR
 
     if poses_dir != DEFAULT_POSES_DIR:
         return poses_dir
-    from seqrun.project import project_for
+    from seqrun.sequence.project import project_for
 
     return project_for(Path.cwd()).pose_path
 
@@ -62,16 +62,16 @@ def user_errors() -> Iterator[None]:
 
 
 def load_arm_file(path: Path) -> ArmDescription:
-    from seqrun.arm import DEFAULT_ARM
+    from seqrun.defaults import DEFAULT_ARM
 
     if path == DEFAULT_ARM and not path.is_file():
         # Not in a checkout: the campaign's arm here (seqrun.toml), else the shipped one.
-        from seqrun.project import project_for
+        from seqrun.sequence.project import project_for
 
         path = project_for(Path.cwd()).arm_path(None)
     if not path.is_file():
         raise UserInputError(f"arm file {path} not found (give one with --arm FILE)")
-    from seqrun.arm import load_arm  # pydantic: only for commands that read an arm file
+    from seqrun.arm.description import load_arm  # pydantic: only for commands that read an arm file
 
     return load_arm(path)
 

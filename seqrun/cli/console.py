@@ -56,9 +56,9 @@ def console_command(
 
     from seqrun.cli import campaign_records
     from seqrun.cli.zero import zero_at_run_start
-    from seqrun.connection import open_connection, parse_bus_kwargs, response_timeout_s
+    from seqrun.service.connection import open_connection, parse_bus_kwargs, response_timeout_s
     from seqrun.errors import BusError
-    from seqrun.project import open_project, project_for
+    from seqrun.sequence.project import open_project, project_for
 
     with user_errors():
         if not 0 <= port <= 65535:

@@ -29,7 +29,7 @@ from rich.live import Live
 from rich.panel import Panel
 from rich.text import Text
 
-from seqrun import kinematics
+from seqrun.arm import kinematics
 from seqrun.cli.output import fixed
 
 if TYPE_CHECKING:

@@ -25,7 +25,7 @@ from seqrun.errors import UserInputError
 if TYPE_CHECKING:
     import numpy as np
 
-    from seqrun.kinematics import Pose
+    from seqrun.arm.kinematics import Pose
 
 _JSON_DECIMALS = 6  # 1 nm, 1e-6 deg: far below what the arm can do, and readable
 
@@ -134,7 +134,7 @@ def forward_kinematics(
 ) -> None:
     """End-effector pose (position mm, roll/pitch/yaw deg, rotation matrix) by forward
     kinematics, R = Rz(yaw) Ry(pitch) Rx(roll)."""
-    from seqrun.kinematics import LOCKED_TOLERANCE_DEG, pose_from_user_deg
+    from seqrun.arm.kinematics import LOCKED_TOLERANCE_DEG, pose_from_user_deg
 
     with user_errors():
         if deg is None and pose_name is None:

@@ -72,9 +72,9 @@ def inverse_kinematics(
     the joint limits, with the locked joints at their value. Exit 1 if unreachable."""
     import numpy as np
 
-    from seqrun.cartesian import unknown_tool
-    from seqrun.ik import IkSolver, Unreachable, target_frame
-    from seqrun.kinematics import user_joint_values
+    from seqrun.arm.cartesian import unknown_tool
+    from seqrun.arm.ik import IkSolver, Unreachable, target_frame
+    from seqrun.arm.kinematics import user_joint_values
 
     with user_errors():
         position = _three(position_mm, "--position-mm")

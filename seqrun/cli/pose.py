@@ -15,12 +15,12 @@ from seqrun.defaults import DEFAULT_ARM, DEFAULT_POSES_DIR
 from seqrun.errors import SequenceInvalid, UserInputError
 
 if TYPE_CHECKING:
-    from seqrun.poses import PoseFile
+    from seqrun.arm.poses import PoseFile
 
 
 def load_named_pose(name: str, poses_dir: Path) -> PoseFile:
     from seqrun.cli.common import pose_search_path
-    from seqrun.poses import find_pose, load_pose
+    from seqrun.arm.poses import find_pose, load_pose
 
     return load_pose(find_pose(name, pose_search_path(poses_dir)))
 
@@ -34,7 +34,7 @@ def format_numbers(values, decimals: int = 3) -> str:
 @pose_app.command("list")
 def list_poses(poses_dir: PosesDirOption = DEFAULT_POSES_DIR) -> None:
     """List the pose files: name, source and description."""
-    from seqrun.poses import available_poses, load_pose
+    from seqrun.arm.poses import available_poses, load_pose
 
     with user_errors():
         from seqrun.cli.common import pose_search_path
@@ -60,7 +60,7 @@ def show_pose(
     arm_file: ArmOption = DEFAULT_ARM,
 ) -> None:
     """Show a pose and check it against the arm (exit 1 if it has problems)."""
-    from seqrun.poses import NOTE_PREFIX, check_pose
+    from seqrun.arm.poses import NOTE_PREFIX, check_pose
 
     with user_errors():
         pose = load_named_pose(name, poses_dir)
@@ -105,7 +105,7 @@ def save_pose_command(
     from datetime import datetime, timezone
 
     from seqrun.errors import BusError
-    from seqrun.poses import check_pose_name, pose_document, save_pose
+    from seqrun.arm.poses import check_pose_name, pose_document, save_pose
 
     with user_errors():
         check_pose_name(name)  # before anything is opened

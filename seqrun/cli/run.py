@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Annotated, Callable, Optional
 
 import typer
 
-from seqrun.checks import static_validation
+from seqrun.sequence.checks import static_validation
 from seqrun.cli.app import app
 from seqrun.cli.common import (BitrateOption, BusKwargsOption, ChannelOption, InterfaceOption,
                                SimOption, fail, load_arm_file, user_errors)
@@ -61,7 +61,7 @@ def _ask_shown(console: Console, displays: list, question: str, assume_yes: bool
 def _all_errors(file: Path, load_errors: list, **check) -> list:
     """The errors `seqrun validate --static` reports for ``file`` (load errors and the
     checks of the steps that loaded), else ``load_errors``."""
-    from seqrun.checks import static_check
+    from seqrun.sequence.checks import static_check
     from seqrun.errors import UserInputError
 
     try:
@@ -146,11 +146,11 @@ def run_command(
     from seqrun.cli.output import keep_running_on_broken_pipe, make_console
     from seqrun.cli.zero import zero_at_run_start
     from seqrun.clock import VirtualClock
-    from seqrun.connection import open_connection, parse_bus_kwargs, parse_faults
+    from seqrun.service.connection import open_connection, parse_bus_kwargs, parse_faults
     from seqrun.cli.interrupts import RunSignals
     from seqrun.results import latched_message
-    from seqrun.runlog import prepare_run_folder
-    from seqrun.schema import load_sequence
+    from seqrun.service.runlog import prepare_run_folder
+    from seqrun.sequence.loader import load_sequence
     from seqrun.service import ArmSession
     from seqrun.service.run_control import RunControl
     from seqrun.stop_requests import StopRequests

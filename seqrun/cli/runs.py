@@ -10,7 +10,7 @@ import typer
 
 from seqrun.cli.app import app
 from seqrun.cli.common import CampaignOption, user_errors
-from seqrun.records import list_runs
+from seqrun.service.records import list_runs
 
 
 def _local(when: str | None) -> str:
@@ -32,7 +32,7 @@ def runs_command(
                                      "runs/).")] = None,
 ) -> None:
     """List past runs: when, sequence, result, duration, exit code (oldest first)."""
-    from seqrun.project import find_campaign, open_project
+    from seqrun.sequence.project import find_campaign, open_project
 
     with user_errors():
         if runs_dir is None:

@@ -20,7 +20,7 @@ from seqrun.cli.common import fail
 
 def _power_off_pose(name: str) -> str:
     """``name`` as a power-off pose of the shipped arm (one line and exit 2 otherwise)."""
-    from seqrun.arm import load_arm
+    from seqrun.arm.description import load_arm
     from seqrun.errors import UserInputError
     from seqrun.shipped import DEFAULT_ARM_NAME, shipped_arm
 
@@ -92,7 +92,7 @@ def serve(
         switches["home_ok_at_power_on"] = True
     if addressed_refresh_arms_watchdog:
         switches["addressed_refresh_arms_watchdog"] = True
-    from seqrun.connection import sim_options_from_env
+    from seqrun.service.connection import sim_options_from_env
     from seqrun.errors import UserInputError
 
     try:  # SEQRUN_SIM_OPTIONS first, the flags on top

@@ -22,7 +22,7 @@ from typing import Annotated
 
 import typer
 
-from seqrun.checks import StaticCheck, static_check  # noqa: F401  (re-exported: lived here)
+from seqrun.sequence.checks import StaticCheck, static_check
 from seqrun.cli.app import app
 from seqrun.cli.common import EXIT_INVALID, EXIT_OK, EXIT_USAGE, fail
 from seqrun.defaults import START_POSE
@@ -225,7 +225,7 @@ def validate_command(
         return
     run = None
     if check.valid and not static:
-        from seqrun.dryrun import dry_run
+        from seqrun.service.dryrun import dry_run
 
         run = dry_run(check.loaded, check.arm, check.start_deg, start_pose=start or START_POSE,
                       started=started, speed=speed, cycle_hz=cycle_hz, report_html=report_file)
@@ -265,7 +265,7 @@ def schema_command(
 ) -> None:
     """Print the JSON Schema of a file format (sequence files by default)."""
     if markdown:
-        from seqrun.reference import (arm_reference_markdown, pose_reference_markdown,
+        from seqrun.sequence.reference import (arm_reference_markdown, pose_reference_markdown,
                                       reference_markdown)
 
         text = {SchemaKind.sequence: reference_markdown, SchemaKind.pose: pose_reference_markdown,
@@ -277,11 +277,11 @@ def schema_command(
 
         schema = sequence_json_schema()
     elif kind is SchemaKind.arm:
-        from seqrun.arm import ArmDescription as Model
+        from seqrun.arm.description import ArmDescription as Model
 
         schema = Model.model_json_schema()
     else:
-        from seqrun.poses import PoseFile as Model  # type: ignore[assignment]
+        from seqrun.arm.poses import PoseFile as Model  # type: ignore[assignment]
 
         schema = Model.model_json_schema()
     typer.echo(json.dumps(schema, indent=2, ensure_ascii=False))

@@ -3,7 +3,7 @@
     seqrun zero show                      # the record and the zero in use
     seqrun zero set totem                 # after a sudden power loss with the arm in Totem
 
-The record says where the arm was powered off (see :mod:`seqrun.zero`); the ``power_off``
+The record says where the arm was powered off (see :mod:`seqrun.service.zero`); the ``power_off``
 step of ``sequences/shutdown.yaml`` writes it at a normal shutdown.
 """
 
@@ -17,7 +17,7 @@ import typer
 from seqrun.cli.app import app
 from seqrun.cli.common import ArmFileOption, CampaignOption, fail, user_errors
 from seqrun.errors import BusError, UserInputError
-from seqrun.zero import ZeroInForce, ZeroStore, pose_title, zero_for_run
+from seqrun.service.zero import ZeroInForce, ZeroStore, pose_title, zero_for_run
 
 zero_app = typer.Typer(help="The zero reference: where the arm was powered off.",
                        no_args_is_help=True)
@@ -25,7 +25,7 @@ app.add_typer(zero_app, name="zero")
 
 def _arm_and_store(arm_file: Optional[Path], project_dir: Optional[Path]):
     from seqrun.cli.common import load_arm_file
-    from seqrun.project import find_campaign, open_project, project_for
+    from seqrun.sequence.project import find_campaign, open_project, project_for
 
     if project_dir is not None:
         project = open_project(project_dir)

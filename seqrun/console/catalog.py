@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from seqrun.errors import Refused, SequenceInvalid, UserInputError
-from seqrun.project import Project
+from seqrun.sequence.project import Project
 
 
 @dataclass(frozen=True)
@@ -31,7 +31,7 @@ class Catalog:
     # -- poses -------------------------------------------------------------------------
     def poses(self) -> list[dict[str, Any]]:
         """Every pose file on the project's pose path (campaign first, then the shipped)."""
-        from seqrun.poses import available_poses, load_pose
+        from seqrun.arm.poses import available_poses, load_pose
 
         found: list[dict[str, Any]] = []
         for name, path in available_poses(self.project.pose_path).items():
@@ -73,11 +73,12 @@ class Catalog:
               started: bool) -> dict[str, Any]:
         """Validation findings (``file:line:col``) and, when valid, the dry run's report
         (simulator, virtual time) from ``start_deg`` (default: the Park pose)."""
-        from seqrun.arm import load_arm
+        from seqrun.arm.description import load_arm
         from seqrun.defaults import START_POSE
-        from seqrun.dryrun import dry_run
-        from seqrun.schema import load_sequence_partial
-        from seqrun.validation import pose_joints_deg, validate_sequence
+        from seqrun.service.dryrun import dry_run
+        from seqrun.sequence.loader import load_sequence_partial
+        from seqrun.sequence.validation import validate_sequence
+        from seqrun.arm.targets import pose_joints_deg
         from seqrun.yamlsource import sort_errors
 
         path = self.sequence_path(name)
@@ -119,7 +120,7 @@ class Catalog:
     # -- runs --------------------------------------------------------------------------
     def runs(self) -> list[dict[str, Any]]:
         """Past runs, newest first, each with the id its files are served under."""
-        from seqrun.records import list_runs
+        from seqrun.service.records import list_runs
 
         root = self.runs_dir.resolve()
         found = []

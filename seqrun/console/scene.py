@@ -1,7 +1,7 @@
 """What the page's 3D view needs from the arm description: the chain as 4x4 frames.
 
 The page multiplies these frames with Rz(q) per joint (the reference convention, see
-:mod:`seqrun.kinematics`), so it never interprets roll/pitch/yaw itself: the frames are
+:mod:`seqrun.arm.kinematics`), so it never interprets roll/pitch/yaw itself: the frames are
 computed here by the same code the validator uses (``Chain.from_arm``).
 """
 
@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from seqrun.arm import ArmDescription
+from seqrun.arm.description import ArmDescription
 
 
 def _rows(matrix: Any) -> list[list[float]]:
@@ -18,7 +18,7 @@ def _rows(matrix: Any) -> list[list[float]]:
 
 def arm_scene(arm: ArmDescription) -> dict[str, Any]:
     """The joints (limits, locked value), the chain's frames, guards, link volumes, obstacles."""
-    from seqrun.kinematics import Chain
+    from seqrun.arm.kinematics import Chain
 
     chain = Chain.from_arm(arm)
     return {

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from seqrun.arm import ArmDescription
+from seqrun.arm.description import ArmDescription
 from seqrun.drivers.base import (ArmDriver, CommandConfirmation, CycleState, EventSink,
                                  HaltConfirmation, JointLimits, JointReading, JointState,
                                  LimitValues, MotionRefused)

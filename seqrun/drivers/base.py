@@ -19,7 +19,7 @@ from typing import Any, NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
 
-from seqrun.planner import Limits, MovePlan
+from seqrun.arm.planner import Limits, MovePlan
 
 #: Where a driver sends its events (the executor's ``emit``: type, then fields).
 EventSink = Callable[..., None]

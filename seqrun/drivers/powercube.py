@@ -25,12 +25,12 @@ from typing import Any
 
 import numpy as np
 
-from seqrun.arm import ArmDescription
+from seqrun.arm.description import ArmDescription
 from seqrun.drivers.base import (CommandConfirmation, EventSink, JointLimits, JointReading,
                                  JointState, LimitValues, MotionRefused)
 from seqrun.drivers.setpoints import SetpointLaw, setpoint_law
 from seqrun.errors import BusError, CodecError, ModuleTimeoutError, RunAborted
-from seqrun.planner import Limits, MovePlan
+from seqrun.arm.planner import Limits, MovePlan
 from seqrun.powercube.codec import (BroadcastRequest, GetParam, GetParamAck, MotionExtAck,
                                     Request, SetMotion, SetParam)
 from seqrun.powercube.protocol import CommandId, ConfigFlag, ParamId, ShortState, StateFlag
@@ -141,6 +141,26 @@ def confirm_command(client, command: CommandId, modules: Iterable[int], *,
             break
     result.duration_s = 0.0 if t_first is None else clock.now() - t_first
     return result
+
+
+#: Seconds between rounds of ``seqrun halt|reset``: time for a module that was busy to settle.
+RETRY_PAUSE_S = 0.02
+
+
+def halt_and_confirm(client, modules: Iterable[int], *,
+                     attempts: int = DEFAULT_ATTEMPTS) -> CommandConfirmation:
+    """Halt every module of ``modules`` and read back that each one is HALTED."""
+    return confirm_command(client, CommandId.HALT, modules, attempts=attempts)
+
+
+def command_and_confirm(client, command: CommandId, modules: Iterable[int], *,
+                        attempts: int = DEFAULT_ATTEMPTS,
+                        timeout: float | None = None) -> CommandConfirmation:
+    """``seqrun halt|reset``: broadcast ``command`` (HALT or RESET), then confirm it on every
+    module of ``modules``, pausing between rounds. "Sent" is not "done": a broadcast is never
+    acknowledged, and a frame can be lost on a busy or shared bus."""
+    return confirm_command(client, command, sorted(set(modules)), attempts=attempts,
+                           timeout=timeout, retry_pause_s=RETRY_PAUSE_S)
 
 
 # ---------------------------------------------------------------------- the driver

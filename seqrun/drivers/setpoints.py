@@ -22,8 +22,8 @@ from typing import Protocol
 
 import numpy as np
 
-from seqrun.arm import ArmDescription
-from seqrun.planner import Limits, MovePlan
+from seqrun.arm.description import ArmDescription
+from seqrun.arm.planner import Limits, MovePlan
 from seqrun.powercube.codec import Request, SetMotion, SetParam
 from seqrun.powercube.protocol import MotionMode, ParamId
 

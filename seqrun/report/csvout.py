@@ -10,7 +10,7 @@ monitoring cycle of a wait or checkpoint), full resolution:
 ``<j>_planned_deg``         planned position (empty when nothing was streamed)
 ``<j>_measured_deg``        measured position
 ``<j>_planned_vel_deg_s``   planned velocity (empty when nothing was streamed)
-``<j>_measured_vel_deg_s``  windowed estimate (seqrun/tracking.py; empty for the first
+``<j>_measured_vel_deg_s``  windowed estimate (seqrun/arm/tracking.py; empty for the first
                             samples of the run)
 ``<j>_state``               the module's short state (``MOTION|RAMP_END``, ``OK``, ...)
 ``ee_x_mm`` … ``ee_yaw_deg``  end-effector pose by forward kinematics of the measured joints

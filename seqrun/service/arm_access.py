@@ -14,8 +14,8 @@ from collections.abc import Iterable, Sequence
 from typing import TYPE_CHECKING, Any, cast
 
 if TYPE_CHECKING:
-    from seqrun.arm import ArmDescription
-    from seqrun.connection import Connection
+    from seqrun.arm.description import ArmDescription
+    from seqrun.service.connection import Connection
     from seqrun.drivers.base import CommandConfirmation, JointState
 
 __all__ = ["broadcast_and_confirm", "modules_homed", "open_arm", "poll_joints", "read_status"]
@@ -27,7 +27,7 @@ def open_arm(arm: ArmDescription, *, interface: str | None, channel: str | None,
              claim: bool = True, transient: bool = True) -> tuple[Connection, Any]:
     """Open the bus and a PowerCube client on it: ``(connection, client)``. The bus is
     claimed (for a moment with ``transient``): a run's claim refuses it, naming the run."""
-    from seqrun.connection import (open_connection, parse_bus_kwargs, parse_faults,
+    from seqrun.service.connection import (open_connection, parse_bus_kwargs, parse_faults,
                                    response_timeout_s)
     from seqrun.powercube.client import PowerCubeClient
 
@@ -51,7 +51,7 @@ def read_status(client, arm, previous: dict | None = None, *,
     """
     import numpy as np
 
-    from seqrun.kinematics import Chain, fk, rpy_from_matrix
+    from seqrun.arm.kinematics import Chain, fk, rpy_from_matrix
     from seqrun.powercube.codec import GetParam
     from seqrun.powercube.protocol import ParamId, StateFlag
 
@@ -136,8 +136,8 @@ def modules_homed(connection, arm) -> bool:
 def broadcast_and_confirm(client: Any, what: str, modules: Iterable[int]
                           ) -> CommandConfirmation:
     """Broadcast ``what`` ("halt" or "reset") and confirm it on every module of
-    ``modules`` by reading their states back (:func:`seqrun.armcontrol.command_and_confirm`)."""
-    from seqrun.armcontrol import command_and_confirm
+    ``modules`` by reading their states back (:func:`seqrun.drivers.powercube.command_and_confirm`)."""
+    from seqrun.drivers.powercube import command_and_confirm
     from seqrun.powercube.protocol import CommandId
 
     return command_and_confirm(client, CommandId[what.upper()], modules)

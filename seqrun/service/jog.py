@@ -18,7 +18,7 @@ from typing import Callable
 
 import numpy as np
 
-from seqrun import kinematics
+from seqrun.arm import kinematics
 from seqrun.errors import Refused
 
 #: Margin (deg) a jog keeps to the joint's limits: it is refused closer than this.
@@ -172,8 +172,8 @@ def run_jog(executor, plan: JogPlan, deadman: Deadman) -> tuple[str, int, str]:
     message). Any fault -> Halt (the executor's emergency Halt), exit 3."""
     from seqrun.defaults import EXIT_FAULT, EXIT_OK
     from seqrun.results import OperatorAbort, fault_cause, halt_fields
-    from seqrun.planner import Limits
-    from seqrun.usermessages import user_message
+    from seqrun.arm.planner import Limits
+    from seqrun.drivers.usermessages import user_message
 
     arm = executor.arm
     hook = deadman.arm(executor.abort)

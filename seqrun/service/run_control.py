@@ -161,7 +161,7 @@ def _velocities(readings: list[tuple[float, list[float]]]) -> list[float] | None
 def _end_effector(arm, joints_deg: list[float]) -> dict:
     import numpy as np
 
-    from seqrun.kinematics import Chain, fk, rpy_from_matrix
+    from seqrun.arm.kinematics import Chain, fk, rpy_from_matrix
 
     T = fk(Chain.from_arm(arm), np.radians(joints_deg))
     return {"position_mm": [round(float(x), 3) for x in T[:3, 3]],

@@ -35,7 +35,7 @@ from typing import Any, Callable, Mapping
 
 from seqrun.errors import Refused
 from seqrun.events import Event, EventHub, Subscription, make_event
-from seqrun.halt import HaltConfirmation
+from seqrun.drivers.base import HaltConfirmation
 
 #: Version of this API (and of the console's /api/v<N>).
 API_VERSION = 1
@@ -206,14 +206,14 @@ class ArmSession:
     """The one owner of one arm's bus. Thread-safe; see the module docstring.
 
     :param arm: the arm description, with the zero reference in force applied
-        (:meth:`~seqrun.arm.ArmDescription.with_zero_reference`).
-    :param connection: an open :class:`~seqrun.connection.Connection` (the session closes it
+        (:meth:`~seqrun.arm.description.ArmDescription.with_zero_reference`).
+    :param connection: an open :class:`~seqrun.service.connection.Connection` (the session closes it
         in :meth:`close` when ``own_connection``).
-    :param project: the campaign (:class:`~seqrun.project.Project`): poses, run folders.
+    :param project: the campaign (:class:`~seqrun.sequence.project.Project`): poses, run folders.
     :param log_root: where run folders go (default: the project's runs dir, else ``runs/``).
     :param poses_dir: pose search path for named poses (default: the project's, then the
         shipped poses).
-    :param zero: the zero reference in force (:class:`~seqrun.zero.ZeroInForce`), for status
+    :param zero: the zero reference in force (:class:`~seqrun.service.zero.ZeroInForce`), for status
         and the run records.
     :param status_hz: idle status poll rate; 0 disables polling (tests poll by hand with
         :meth:`poll_status`).
@@ -227,7 +227,7 @@ class ArmSession:
                  response_timeout_s: float | None = None, own_connection: bool = True,
                  jog_deadman_s: float = JOG_DEADMAN_S,
                  loop_priority: int | None = None) -> None:
-        from seqrun.connection import response_timeout_s as default_timeout
+        from seqrun.service.connection import response_timeout_s as default_timeout
         from seqrun.powercube.client import PowerCubeClient
         from seqrun.shipped import shipped_dir
 
@@ -411,7 +411,7 @@ class ArmSession:
 
     def status(self) -> ArmStatus:
         """The latest measurement and what the session does; never touches the bus."""
-        from seqrun import kinematics
+        from seqrun.arm import kinematics
 
         with self._state:
             joints = list(self._joints)
@@ -447,7 +447,7 @@ class ArmSession:
     def _chain(self):
         chain = self.__dict__.get("_chain_cache")
         if chain is None:
-            from seqrun import kinematics
+            from seqrun.arm import kinematics
 
             chain = self.__dict__["_chain_cache"] = kinematics.Chain.from_arm(self.arm)
         return chain
@@ -480,7 +480,7 @@ class ArmSession:
     def _poll_once(self) -> None:
         """One pipelined read of ActPos, ActVel and CubeState of every module (bus held)."""
         from seqrun.service.arm_access import poll_joints
-        from seqrun.telemetry import joint_flags
+        from seqrun.arm.telemetry import joint_flags
 
         arm = self.arm
         try:
@@ -528,7 +528,7 @@ class ArmSession:
         """Halt broadcast now from this thread, stop any activity, confirm by reading every
         module back. Never waits behind a lock, a run or a queue before the broadcast."""
         from seqrun.errors import BusError
-        from seqrun.halt import halt_and_confirm
+        from seqrun.drivers.powercube import halt_and_confirm
 
         # The running activity's inbox first (a deque append: no lock, no wait), so that
         # the loop takes the modules' HALTED state for the operator's Halt (exit 130),
@@ -667,7 +667,7 @@ class ArmSession:
         """A sequence built in memory (a file in a private folder, loaded by the same
         loader): the console's moves and commands are sequences like any other."""
         from seqrun.errors import SequenceInvalid, UserInputError
-        from seqrun.schema import load_sequence
+        from seqrun.sequence.loader import load_sequence
 
         folder = self.__dict__.get("_tmp")
         if folder is None:
@@ -776,7 +776,7 @@ class ArmSession:
 
     def _validated_move(self, kind: str, step: str, what: str):
         """Load and validate a one-step move from the measured joints (Refused on errors)."""
-        from seqrun.validation import validate_sequence
+        from seqrun.sequence.validation import validate_sequence
 
         self._check_movable(what)
         loaded = self._one_off(kind, [step])
@@ -906,9 +906,9 @@ class ArmSession:
         ``step_mode``'s before-step question, clearing a latched fault) are published as
         ``confirm_requested`` events; answer them with :meth:`answer`."""
         from seqrun.errors import SequenceInvalid, UserInputError
-        from seqrun.runlog import prepare_run_folder
-        from seqrun.schema import load_sequence
-        from seqrun.validation import validate_sequence
+        from seqrun.service.runlog import prepare_run_folder
+        from seqrun.sequence.loader import load_sequence
+        from seqrun.sequence.validation import validate_sequence
 
         speed = _finite(speed, "speed")
         if not 0 < speed <= 1:
@@ -990,7 +990,7 @@ class ArmSession:
         what a power_off step calls to record the pose the arm is switched off in;
         ``run_control``: the run's :class:`~seqrun.service.run_control.RunControl`
         (``seqrun status|halt`` from another terminal), attached to the run's executor."""
-        from seqrun.runner import run_sequence as run_with_log
+        from seqrun.service.runner import run_sequence as run_with_log
         from seqrun.stop_requests import StopRequests
 
         requests = requests if requests is not None else StopRequests()
@@ -1120,7 +1120,7 @@ class ArmSession:
     # ------------------------------------------------------------------ poses
     def pose_names(self) -> list[str]:
         """Every pose the session can move to (the project's and the shipped ones)."""
-        from seqrun.poses import available_poses
+        from seqrun.arm.poses import available_poses
 
         return list(available_poses(self.poses_dir))
 
@@ -1129,7 +1129,7 @@ class ArmSession:
         from datetime import datetime, timezone
 
         from seqrun.errors import UserInputError
-        from seqrun.poses import check_pose_name, pose_document, save_pose
+        from seqrun.arm.poses import check_pose_name, pose_document, save_pose
 
         try:
             check_pose_name(name)

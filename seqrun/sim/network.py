@@ -1,6 +1,6 @@
 """SimNetwork: the shared CAN wire between host endpoints and the simulated arm.
 
-Every frame occupies the bus for its exact wire time (:mod:`seqrun.can_timing`: stuff
+Every frame occupies the bus for its exact wire time (:mod:`seqrun.powercube.can_timing`: stuff
 bits, CRC, EOF and intermission at the configured bitrate); frames go out one at a time.
 When the bus becomes free, the frames that are ready compete and the lowest identifier
 wins, as in CAN arbitration (standard before extended with the same base id); each node
@@ -32,7 +32,7 @@ import time
 from collections import deque
 from typing import NamedTuple
 
-from seqrun.can_timing import INTERMISSION_BITS, frame_bit_length
+from seqrun.powercube.can_timing import INTERMISSION_BITS, frame_bit_length
 from seqrun.clock import Clock
 from seqrun.errors import BusError
 from seqrun.powercube.protocol import ACK_BASE

@@ -14,9 +14,9 @@ from seqrun.steps.kind import StepKind
 from seqrun.steps.params import PoseName, Positive, StepParams, Vector3, one_key_value
 
 if TYPE_CHECKING:
-    from seqrun.loader import ResolvedStep
+    from seqrun.sequence.loader import ResolvedStep
     from seqrun.steps.context import StepContext
-    from seqrun.validation import Checker
+    from seqrun.sequence.validation import Checker
 
 
 class CheckpointParams(StepParams):
@@ -104,9 +104,9 @@ def check(checker: Checker, step: ResolvedStep[CheckpointParams], params: Checkp
     import numpy as np
 
     from seqrun.errors import SequenceInvalid, UserInputError
-    from seqrun.kinematics import orientation_error, pose_from_user_deg
-    from seqrun.targets import resolve_checkpoint
-    from seqrun.validation import format_number as f
+    from seqrun.arm.kinematics import orientation_error, pose_from_user_deg
+    from seqrun.arm.targets import resolve_checkpoint
+    from seqrun.formatting import format_number as f
 
     checker.after_halt(step, "checkpoint")
     if params.pose is not None and checker.pose(step, params.pose, target=False) is None:
@@ -139,8 +139,8 @@ def _relative_checkpoint(checker: Checker, step: ResolvedStep[CheckpointParams],
     move started."""
     import numpy as np
 
-    from seqrun.cartesian import displacement, tool_pose
-    from seqrun.validation import format_number as f
+    from seqrun.arm.cartesian import displacement, tool_pose
+    from seqrun.formatting import format_number as f
 
     assert params.moved_mm is not None  # (check() comes here only for a moved_mm checkpoint)
     if checker.motion_start_deg is None:
@@ -166,9 +166,9 @@ def _relative_checkpoint(checker: Checker, step: ResolvedStep[CheckpointParams],
 def run(step: ResolvedStep[CheckpointParams], ex: StepContext) -> dict:
     import numpy as np
 
-    from seqrun import kinematics
-    from seqrun.targets import resolve_checkpoint
-    from seqrun.validation import format_number
+    from seqrun.arm import kinematics
+    from seqrun.arm.targets import resolve_checkpoint
+    from seqrun.formatting import format_number
 
     if step.params.moved_mm is not None:
         return _relative(step, ex)
@@ -201,7 +201,7 @@ def _relative(step: ResolvedStep[CheckpointParams], ex: StepContext) -> dict:
     """'The tool moved [x, y, z] mm' since the last move started (measured joints)."""
     import numpy as np
 
-    from seqrun.cartesian import displacement, solver_for, tool_pose
+    from seqrun.arm.cartesian import displacement, solver_for, tool_pose
 
     params = step.params
     assert params.moved_mm is not None  # (run() comes here only for a moved_mm checkpoint)

@@ -11,9 +11,9 @@ from seqrun.steps.kind import StepKind
 from seqrun.steps.params import StepParams, one_key_value
 
 if TYPE_CHECKING:
-    from seqrun.loader import ResolvedStep
+    from seqrun.sequence.loader import ResolvedStep
     from seqrun.steps.context import StepContext
-    from seqrun.validation import Checker
+    from seqrun.sequence.validation import Checker
 
 
 class ConfirmParams(StepParams):

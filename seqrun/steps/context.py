@@ -15,11 +15,11 @@ from typing import TYPE_CHECKING, Any, Protocol
 if TYPE_CHECKING:
     import numpy as np
 
-    from seqrun.arm import ArmDescription
+    from seqrun.arm.description import ArmDescription
     from seqrun.drivers.base import JointState, LimitValues
-    from seqrun.kinematics import Chain
-    from seqrun.limits import LimitsInForce
-    from seqrun.planner import Limits
+    from seqrun.arm.kinematics import Chain
+    from seqrun.arm.limits import LimitsInForce
+    from seqrun.arm.planner import Limits
 
 __all__ = ["JointReading", "StepContext"]
 

@@ -5,11 +5,11 @@ Each module ``seqrun/steps/<kind>.py`` ends with ``KIND = StepKind(...)`` and
 
 - ``params``, ``value``, ``shorthand``, ``bare``, ``example``: :mod:`seqrun.schema` (the
   sequence file's union, the JSON Schema, the format reference, the error for a bare word);
-- ``poses``: :mod:`seqrun.loader` (the pose files read and frozen with the sequence);
+- ``poses``: :mod:`seqrun.sequence.loader` (the pose files read and frozen with the sequence);
 - ``describe``: the step's title for the operator when it has no label;
-- ``check``: :mod:`seqrun.validation` (the static checks against the arm and the steps
-  before, with :class:`seqrun.validation.Checker` tracking the modules and the joints);
-- ``run``: the executor (``seqrun.steps.HANDLERS``), through
+- ``check``: :mod:`seqrun.sequence.validation` (the static checks against the arm and the steps
+  before, with :class:`seqrun.sequence.validation.Checker` tracking the modules and the joints);
+- ``run``: the executor (``seqrun.steps.registry.HANDLERS``), through
   :class:`~seqrun.steps.context.StepContext`.
 """
 
@@ -20,10 +20,10 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from seqrun.loader import ResolvedStep
+    from seqrun.sequence.loader import ResolvedStep
     from seqrun.steps.context import StepContext
     from seqrun.steps.params import StepParams
-    from seqrun.validation import Checker
+    from seqrun.sequence.validation import Checker
 
 __all__ = ["StepKind", "no_poses"]
 

@@ -26,9 +26,9 @@ from seqrun.steps.params import (
 )
 
 if TYPE_CHECKING:
-    from seqrun.loader import ResolvedStep
+    from seqrun.sequence.loader import ResolvedStep
     from seqrun.steps.context import StepContext
-    from seqrun.validation import Checker
+    from seqrun.sequence.validation import Checker
 
 
 class MoveParams(StepParams):
@@ -114,7 +114,7 @@ def poses(params: MoveParams) -> tuple[str, ...]:
 
 # --------------------------------------------------------------------------- static checks
 def check(checker: Checker, step: ResolvedStep[MoveParams], params: MoveParams) -> None:
-    from seqrun.validation import format_number as f, format_range
+    from seqrun.formatting import format_number as f, format_range
 
     if params.position_mm is not None:
         _move_to_tool_pose(checker, step, params)
@@ -186,7 +186,7 @@ def check(checker: Checker, step: ResolvedStep[MoveParams], params: MoveParams) 
 
 
 def _velocities(checker: Checker, step: ResolvedStep[MoveParams], params: MoveParams) -> None:
-    from seqrun.validation import format_number as f
+    from seqrun.formatting import format_number as f
 
     for name in checker.names(step, params.velocity_deg_s, ("velocity_deg_s",),
                               as_keys=True, what="a velocity for"):
@@ -213,7 +213,7 @@ def _timeout(checker: Checker, step: ResolvedStep[MoveParams], params: MoveParam
              names: list[str]) -> None:
     """A move's ``timeout_s``: within the arm file's bound, and not shorter than the
     move planned with the limits in force."""
-    from seqrun.validation import format_number as f
+    from seqrun.formatting import format_number as f
 
     if params.timeout_s is None:
         return
@@ -236,7 +236,7 @@ def _planned_duration(checker: Checker, params: MoveParams, target: dict[str, fl
     import numpy as np
 
     from seqrun.errors import PlanningError
-    from seqrun.planner import Limits, plan_move
+    from seqrun.arm.planner import Limits, plan_move
 
     order = checker.arm.joint_names
     start = [checker.joints[n].position for n in order]
@@ -260,8 +260,8 @@ def _move_to_tool_pose(checker: Checker, step: ResolvedStep[MoveParams],
                        params: MoveParams) -> None:
     """A move to an end-effector pose: IK from the tracked joints (the solution nearest
     them), then the same checks as a move to those joints."""
-    from seqrun.cartesian import solver_for
-    from seqrun.ik import Unreachable
+    from seqrun.arm.cartesian import solver_for
+    from seqrun.arm.ik import Unreachable
 
     _velocities(checker, step, params)
     checker.motion_allowed(step, checker.unlocked_names())
@@ -285,8 +285,8 @@ def _move_to_tool_pose(checker: Checker, step: ResolvedStep[MoveParams],
 def run(step: ResolvedStep[MoveParams], ex: StepContext) -> dict:
     import numpy as np
 
-    from seqrun.planner import Limits
-    from seqrun.targets import resolve_move_target
+    from seqrun.arm.planner import Limits
+    from seqrun.arm.targets import resolve_move_target
 
     params = step.params
     if params.position_mm is not None:  # an end-effector target

@@ -15,9 +15,9 @@ from seqrun.steps.kind import StepKind
 from seqrun.steps.params import Positive, StepParams, Vector3, check_pose_target, one_key_value
 
 if TYPE_CHECKING:
-    from seqrun.loader import ResolvedStep
+    from seqrun.sequence.loader import ResolvedStep
     from seqrun.steps.context import StepContext
-    from seqrun.validation import Checker
+    from seqrun.sequence.validation import Checker
 
 
 class MoveLinearParams(StepParams):
@@ -79,7 +79,7 @@ def check(checker: Checker, step: ResolvedStep[MoveLinearParams], params: MoveLi
     limits, joint speeds, manipulability, guards along the samples)."""
     import numpy as np
 
-    from seqrun.cartesian import PathError, plan_linear
+    from seqrun.arm.cartesian import PathError, plan_linear
 
     checker.motion_allowed(step, checker.unlocked_names())
     target = checker.tool_target(step, params)
@@ -111,7 +111,7 @@ def check(checker: Checker, step: ResolvedStep[MoveLinearParams], params: MoveLi
 def run(step: ResolvedStep[MoveLinearParams], ex: StepContext) -> dict:
     import numpy as np
 
-    from seqrun.cartesian import PathError, plan_linear, solver_for, tool_pose
+    from seqrun.arm.cartesian import PathError, plan_linear, solver_for, tool_pose
     from seqrun.steps.move_tool import agree, tool_target
 
     """``move_linear``: the line solved from the measured joints, streamed sample by

@@ -12,13 +12,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from seqrun.cartesian import resolve_target, solver_for, tool_pose
+from seqrun.arm.cartesian import resolve_target, solver_for, tool_pose
 from seqrun.errors import RunAborted
-from seqrun.ik import Unreachable
-from seqrun.planner import Limits
+from seqrun.arm.ik import Unreachable
+from seqrun.arm.planner import Limits
 
 if TYPE_CHECKING:
-    from seqrun.loader import ResolvedStep
+    from seqrun.sequence.loader import ResolvedStep
     from seqrun.steps.context import StepContext
     from seqrun.steps.move import MoveParams
     from seqrun.steps.move_linear import MoveLinearParams

@@ -9,9 +9,9 @@ from seqrun.steps.kind import StepKind
 from seqrun.steps.params import ModulesParams, modules_value
 
 if TYPE_CHECKING:
-    from seqrun.loader import ResolvedStep
+    from seqrun.sequence.loader import ResolvedStep
     from seqrun.steps.context import StepContext
-    from seqrun.validation import Checker
+    from seqrun.sequence.validation import Checker
 
 #: Errors that Reset cannot clear (power cycle needed) are reported, not waited for.
 SETTLE_TIMEOUT_S = 1.0

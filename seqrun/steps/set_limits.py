@@ -10,9 +10,9 @@ from seqrun.steps.kind import StepKind
 from seqrun.steps.params import JointName, LimitPair, Positive, StepParams, one_key_value
 
 if TYPE_CHECKING:
-    from seqrun.loader import ResolvedStep
+    from seqrun.sequence.loader import ResolvedStep
     from seqrun.steps.context import StepContext
-    from seqrun.validation import Checker
+    from seqrun.sequence.validation import Checker
 
 
 
@@ -54,7 +54,7 @@ def describe(params: SetLimitsParams) -> str:
 
 
 def check(checker: Checker, step: ResolvedStep[SetLimitsParams], params: SetLimitsParams) -> None:
-    from seqrun.validation import format_number as f, format_range
+    from seqrun.formatting import format_number as f, format_range
 
     joints = checker.joints
     unlocked = [s for s in joints.values() if not s.locked]

@@ -21,8 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from seqrun.arm import ArmDescription, Obstacle
-from seqrun.kinematics import Chain, frame_origins, matrix_from_rpy
+from seqrun.arm.description import ArmDescription, Obstacle
+from seqrun.arm.kinematics import Chain, frame_origins, matrix_from_rpy
 
 __all__ = ["EXACT_WITHIN_MM", "Clearance", "Geometry"]
 
@@ -260,7 +260,7 @@ class Geometry:
 
     def endpoints(self, q_rad: np.ndarray, origins: np.ndarray | None = None) -> np.ndarray:
         """Capsule segments ``(..., capsules, 2, 3)`` at joint angles (rad); ``origins``:
-        their :func:`~seqrun.kinematics.frame_origins` when the caller has them."""
+        their :func:`~seqrun.arm.kinematics.frame_origins` when the caller has them."""
         if origins is None:
             origins = frame_origins(self.chain, q_rad)  # (..., n+1, 3)
         origin = np.zeros(origins.shape[:-2] + (1, 3))

@@ -27,10 +27,10 @@ from typing import TYPE_CHECKING, NamedTuple, cast
 
 import numpy as np
 
-from seqrun.arm import GuardPoint
+from seqrun.arm.description import GuardPoint
 
 if TYPE_CHECKING:
-    from seqrun.arm import ArmDescription, Frame, Tool
+    from seqrun.arm.description import ArmDescription, Frame, Tool
 
 __all__ = [
     "GUARD_POINT_FRAMES",

@@ -22,12 +22,11 @@ offending value:
   the expected pose (relative checkpoints: with how far the tool moved in the last move);
 - the arm file's link volumes along each planned trajectory (:attr:`ValidationResult.proximities`);
 - end-effector targets solved by IK (:attr:`ValidationResult.targets_deg`) and straight
-  lines of the tool sampled and checked sample by sample (seqrun/cartesian.py).
+  lines of the tool sampled and checked sample by sample (seqrun/arm/cartesian.py).
 
 The executor runs it again with the measured start state (``start_deg``) and
 ``started=True`` when the modules report that they are reset, homed and limited.
-Where a move or a checkpoint goes is :mod:`seqrun.targets`, shared with the executor
-(re-exported here).
+Where a move or a checkpoint goes is :mod:`seqrun.arm.targets`, shared with the executor.
 """
 
 from __future__ import annotations
@@ -39,24 +38,20 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from seqrun.arm import ArmDescription, Joint
-from seqrun.defaults import START_POSE  # noqa: F401  (re-exported)
+from seqrun.arm.description import ArmDescription, Joint
 from seqrun.errors import PlanningError, SourceError
-from seqrun.limits import READBACK, LimitsInForce
+from seqrun.formatting import format_number as _f
+from seqrun.formatting import format_range
+from seqrun.arm.limits import READBACK, LimitsInForce
 from seqrun.steps.registry import step_kind
-from seqrun.targets import (  # noqa: F401  (re-exported: they lived here)
-    PoseSource,
-    commanded_joints,
+from seqrun.arm.targets import (
     park_deg,
-    pose_joints_deg,
-    resolve_checkpoint,
-    resolve_move_target,
 )
 from seqrun.yamlsource import sort_errors
 
 if TYPE_CHECKING:
-    from seqrun.ik import IkSolver
-    from seqrun.loader import LoadedSequence, ResolvedStep
+    from seqrun.arm.ik import IkSolver
+    from seqrun.sequence.loader import LoadedSequence, ResolvedStep
     from seqrun.steps.move import MoveParams
 
 __all__ = [
@@ -66,13 +61,6 @@ __all__ = [
     "Proximity",
     "TrackedJoint",
     "ValidationResult",
-    "commanded_joints",
-    "format_number",
-    "format_range",
-    "park_deg",
-    "pose_joints_deg",
-    "resolve_checkpoint",
-    "resolve_move_target",
     "validate_sequence",
 ]
 
@@ -147,23 +135,6 @@ class ValidationResult:
 
 
 # --------------------------------------------------------------------------- helpers
-def format_number(value: float) -> str:
-    """A number for messages: at most 3 decimals, no trailing zeros, no '-0'; a number
-    below 0.001 keeps 3 significant digits (a tolerance of 1e-06 is not "0")."""
-    value = float(value)
-    if value != 0 and abs(value) < 0.001:
-        return f"{value:.3g}"
-    return f"{round(value, 3) + 0.0:g}"
-
-
-_f = format_number
-
-
-def format_range(lo: float, hi: float) -> str:
-    """``lo…hi`` for messages (numbers as :func:`format_number`)."""
-    return f"{_f(lo)}…{_f(hi)}"
-
-
 # --------------------------------------------------------------------------- tracking
 @dataclass
 class TrackedJoint:
@@ -257,7 +228,7 @@ class Checker:
         if frozen is None:
             return None  # unknown or broken pose file: reported when the sequence was loaded
         if name not in self.pose_checked:
-            from seqrun.poses import pose_findings
+            from seqrun.arm.poses import pose_findings
 
             usable = True
             limits: dict[str, str] = {}
@@ -362,7 +333,7 @@ class Checker:
         of this move (its limits and scales, the run's speed), sampled every
         :data:`PLAN_SAMPLE_S` seconds. The plan's time-synchronized path is not the straight
         line in joint space and can dip lower. Records the move's smallest clearance."""
-        from seqrun.planner import Limits, plan_move
+        from seqrun.arm.planner import Limits, plan_move
 
         names = self.arm.joint_names
         start = np.array([self.joints[n].position for n in names])
@@ -391,7 +362,7 @@ class Checker:
         """Guards along sampled joint configurations (rad) at ``times`` (s): one error per
         guard, at the watched point that goes lowest; the smallest clearance is kept. Then
         the link volumes against the obstacles and each other (:meth:`_check_path_geometry`)."""
-        from seqrun.kinematics import Chain, frame_origins, points_of_origins
+        from seqrun.arm.kinematics import Chain, frame_origins, points_of_origins
 
         guards = self.arm.workspace.guards
         if not guards and self.arm.geometry.capsules == []:
@@ -423,10 +394,10 @@ class Checker:
     def _check_path_geometry(self, step: ResolvedStep, times: np.ndarray, path_rad: np.ndarray,
                              *, what: str, origins: np.ndarray) -> None:
         """Link capsules against obstacles and non-neighbouring links along the samples
-        (``origins``: their frames' origins, :func:`~seqrun.kinematics.frame_origins`)."""
+        (``origins``: their frames' origins, :func:`~seqrun.arm.kinematics.frame_origins`)."""
         if self.arm.geometry.capsules == []:
             return
-        from seqrun.geometry import Geometry
+        from seqrun.arm.geometry import Geometry
 
         if getattr(self, "_geometry", None) is None:
             self._geometry = Geometry(self.arm)
@@ -446,10 +417,10 @@ class Checker:
                 f"this move takes the {a} {how} the {b} (at {at:.2f} s of {duration:.2f} s, "
                 f"{what}); the arm file's geometry margin is {_f(margin)} mm"))
 
-    # -- end-effector targets (seqrun/cartesian.py)
+    # -- end-effector targets (seqrun/arm/cartesian.py)
     def tool_target(self, step: ResolvedStep, params) -> np.ndarray | None:
         """The step's tool target (4x4) from the tracked joints; None after an error."""
-        from seqrun.cartesian import resolve_target, tool_pose
+        from seqrun.arm.cartesian import resolve_target, tool_pose
 
         solver = self.tool_solver(step, params)
         if solver is None:
@@ -461,7 +432,7 @@ class Checker:
     def tool_solver(self, step: ResolvedStep, params) -> IkSolver | None:
         """The IK solver of the step's tool; None (and an error at ``tool``) for a tool the
         arm file does not define."""
-        from seqrun.cartesian import solver_for, unknown_tool
+        from seqrun.arm.cartesian import solver_for, unknown_tool
 
         try:
             return solver_for(self.arm, params.tool)
@@ -551,7 +522,7 @@ def validate_sequence(loaded: LoadedSequence, arm: ArmDescription,
     shapes the plans the guards are checked along. ``module_limits``: MaxVel (deg/s) and
     MaxAcc (deg/s^2) per joint as read back from the modules (moves are planned within
     them). ``incomplete``: ``loaded`` lacks steps that failed on their own (see
-    :func:`seqrun.loader.load_sequence_partial`); the checks that depend on the steps before
+    :func:`seqrun.sequence.loader.load_sequence_partial`); the checks that depend on the steps before
     (start-up order, positions: guards, checkpoints, relative targets) are skipped. Never
     raises for a bad sequence: everything is in the result.
     """

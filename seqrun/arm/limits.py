@@ -22,7 +22,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
-from seqrun.arm import ArmDescription
+from seqrun.arm.description import ArmDescription
 
 __all__ = ["ARM_FILE", "READBACK", "Bound", "LimitsInForce"]
 

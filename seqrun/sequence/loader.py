@@ -3,7 +3,7 @@
 :func:`load_sequence` reads a file with its includes into a flat list of
 :class:`ResolvedStep`; the poses the steps name are read once and frozen with it
 (:attr:`LoadedSequence.poses`), with the SHA-256 of every file read. What a file may say
-is :mod:`seqrun.schema`; what it means for the arm is :mod:`seqrun.validation`.
+is :mod:`seqrun.schema`; what it means for the arm is :mod:`seqrun.sequence.validation`.
 """
 
 from __future__ import annotations
@@ -96,7 +96,7 @@ class LoadedSequence:
     files: tuple[Path, ...] = ()  # every file read, the top one first
     #: Where poses are looked up, first match wins (the campaign's, then the shipped).
     pose_path: tuple[Path, ...] = ()
-    #: The campaign or project the sequence belongs to (seqrun.project.Project).
+    #: The campaign or project the sequence belongs to (seqrun.sequence.project.Project).
     project: Any = None
     #: Every pose the steps name, read once at load time: the run uses these, never the
     #: files again (a pose file edited during a run changes nothing).
@@ -129,7 +129,7 @@ class FrozenPose:
     """A pose file as it was read and validated (see :attr:`LoadedSequence.poses`)."""
 
     name: str
-    pose: Any  # seqrun.poses.PoseFile
+    pose: Any  # seqrun.arm.poses.PoseFile
     document: Document = field(repr=False)
 
     @property
@@ -148,7 +148,7 @@ def find_project_root(path: str | os.PathLike[str]) -> Path:
 
 class _Loader:
     def __init__(self, top: Path, project: Any) -> None:
-        self.project = project  # seqrun.project.Project: lookups of poses, arm, includes
+        self.project = project  # seqrun.sequence.project.Project: lookups of poses, arm, includes
         self.root = project.root
         self.poses_dir = project.poses_dir
         self.pose_path = project.pose_path
@@ -298,7 +298,7 @@ class _Loader:
                   include_step=doc.locate(("file",), start=node))
 
     def _check_pose(self, step: ResolvedStep, name: str) -> None:
-        from seqrun.poses import PoseFile, find_pose
+        from seqrun.arm.poses import PoseFile, find_pose
 
         if name not in self.pose_problems:
             problem = None
@@ -322,7 +322,7 @@ def load_sequence(path: str | os.PathLike[str], *,
 
     Poses come from ``<project root>/poses/``, then the shipped poses; the project is the
     nearest campaign (``seqrun.toml``) above the file, or ``project_root`` (``--project``),
-    else the nearest folder with ``arms/`` or ``poses/`` (see :mod:`seqrun.project`); an
+    else the nearest folder with ``arms/`` or ``poses/`` (see :mod:`seqrun.sequence.project`); an
     unknown pose is a located error listing the available ones. Raises
     :class:`SequenceInvalid` with every error found, :class:`UserInputError` if the file
     cannot be read.
@@ -341,7 +341,7 @@ def load_sequence_partial(path: str | os.PathLike[str], *,
     the steps that are valid on their own (a step that fails its schema is left out) so
     that the checks against the arm can still report on them; None if nothing of the top
     file could be read. Raises :class:`UserInputError` if the file cannot be read."""
-    from seqrun.project import project_for
+    from seqrun.sequence.project import project_for
 
     path = Path(path)
     try:

@@ -19,7 +19,7 @@ import numpy as np
 from ruckig import (ControlInterface, InputParameter, Result, Ruckig, RuckigError,
                     Synchronization, Trajectory)
 
-from seqrun.arm import ArmDescription
+from seqrun.arm.description import ArmDescription
 from seqrun.errors import PlanningError
 
 if TYPE_CHECKING:  # annotations only: numpy.typing is an import of its own at run time
@@ -48,7 +48,7 @@ class Limits:
         ``control.tracking_reserve``) is the fraction of each velocity limit kept out of
         the plan for the executor to catch up a lagging joint. ``max_velocity_deg_s`` and
         ``max_acceleration_deg_s2`` replace the arm file's maxima of the joints they name
-        by narrower ones (the limits in force, :mod:`seqrun.limits`); never wider.
+        by narrower ones (the limits in force, :mod:`seqrun.arm.limits`); never wider.
         """
         if not (0 < speed <= 1 and 0 < velocity_scale <= 1 and 0 < acceleration_scale <= 1):
             raise PlanningError("scale factors and speed must lie in (0, 1]")

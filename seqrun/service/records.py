@@ -71,7 +71,7 @@ def input_paths(loaded: Any, arm_path: Path | None = None) -> list[Path]:
     """The files a loaded sequence uses: itself and its includes, the pose files its steps
     name, the arm file and the campaign config."""
     from seqrun.errors import SeqrunError
-    from seqrun.poses import find_pose
+    from seqrun.arm.poses import find_pose
 
     paths = [Path(p) for p in loaded.files]
     pose_path = loaded.pose_path or loaded.poses_dir

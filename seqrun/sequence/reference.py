@@ -242,7 +242,7 @@ def file_reference_markdown(model: type[BaseModel], title: str, intro: str) -> s
 
 def pose_reference_markdown() -> str:
     """The pose file reference (``seqrun schema pose --markdown``)."""
-    from seqrun.poses import PoseFile
+    from seqrun.arm.poses import PoseFile
 
     return file_reference_markdown(
         PoseFile, "Pose files",
@@ -254,7 +254,7 @@ def pose_reference_markdown() -> str:
 
 def arm_reference_markdown() -> str:
     """The arm file reference (``seqrun schema arm --markdown``)."""
-    from seqrun.arm import ArmDescription
+    from seqrun.arm.description import ArmDescription
 
     return file_reference_markdown(
         ArmDescription, "Arm files",

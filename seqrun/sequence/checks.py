@@ -18,9 +18,9 @@ from seqrun.defaults import START_POSE
 from seqrun.errors import SequenceInvalid, SourceError, UserInputError
 
 if TYPE_CHECKING:
-    from seqrun.arm import ArmDescription
-    from seqrun.loader import LoadedSequence
-    from seqrun.validation import ValidationResult
+    from seqrun.arm.description import ArmDescription
+    from seqrun.sequence.loader import LoadedSequence
+    from seqrun.sequence.validation import ValidationResult
 
 __all__ = ["StaticCheck", "static_check", "static_validation"]
 
@@ -52,9 +52,10 @@ def static_check(file: Path, *, start: str | None = None,
     Invalid files (the sequence, an included one, the arm file, a pose file) end up in
     ``errors``; input that cannot be used at all raises :class:`UserInputError`.
     """
-    from seqrun.arm import load_arm
-    from seqrun.loader import load_sequence_partial
-    from seqrun.validation import pose_joints_deg, validate_sequence
+    from seqrun.arm.description import load_arm
+    from seqrun.sequence.loader import load_sequence_partial
+    from seqrun.sequence.validation import validate_sequence
+    from seqrun.arm.targets import pose_joints_deg
     from seqrun.yamlsource import sort_errors
 
     check = StaticCheck()
@@ -97,7 +98,8 @@ def static_validation(loaded: LoadedSequence, arm: ArmDescription, start: str | 
                       started: bool, from_step: int) -> ValidationResult:
     """Validation from the assumed start (Park, freshly powered on, unless told otherwise).
     With ``--from N`` the steps before N are only tracked, to know where step N starts."""
-    from seqrun.validation import pose_joints_deg, validate_sequence
+    from seqrun.sequence.validation import validate_sequence
+    from seqrun.arm.targets import pose_joints_deg
 
     start_deg = pose_joints_deg(start or START_POSE, loaded.pose_path or loaded.poses_dir)
     if from_step == 1:

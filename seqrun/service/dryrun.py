@@ -18,16 +18,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
-from seqrun.arm import ArmDescription
+from seqrun.arm.description import ArmDescription
 from seqrun.clock import VirtualClock
-from seqrun.connection import open_connection
+from seqrun.service.connection import open_connection
 from seqrun import frozen_objects
-from seqrun.executor import RunResult
+from seqrun.results import RunResult
 from seqrun.powercube.client import PowerCubeClient
 from seqrun.powercube.codec import SetParam
 from seqrun.powercube.protocol import ParamId
-from seqrun.runner import run_sequence
-from seqrun.schema import LoadedSequence
+from seqrun.service.runner import run_sequence
+from seqrun.sequence.loader import LoadedSequence
 
 #: Checks a simulator cannot make for the operator, listed in every dry-run report.
 ALWAYS_UNVERIFIED = (

@@ -8,7 +8,7 @@ measured joints), so both solve the same problem the same way:
 - :func:`plan_linear`: a straight line of the tool, time-parametrized by a jerk-limited
   1-D ruckig profile on the path parameter, sampled every ``sample_s``, every sample
   solved by IK from the previous one, checked for reachability, joint velocity and
-  manipulability; the result streams as a :class:`~seqrun.planner.SampledPlan`.
+  manipulability; the result streams as a :class:`~seqrun.arm.planner.SampledPlan`.
 """
 
 from __future__ import annotations
@@ -21,11 +21,11 @@ from typing import TYPE_CHECKING
 import numpy as np
 from ruckig import InputParameter, Result, Ruckig, Trajectory
 
-from seqrun.arm import ArmDescription
+from seqrun.arm.description import ArmDescription
 from seqrun.errors import SeqrunError
-from seqrun.ik import ORIENTATION_WEIGHT_MM, IkSolver, Unreachable, rotation_vector, target_frame
-from seqrun.kinematics import jacobian
-from seqrun.planner import SampledPlan
+from seqrun.arm.ik import ORIENTATION_WEIGHT_MM, IkSolver, Unreachable, rotation_vector, target_frame
+from seqrun.arm.kinematics import jacobian
+from seqrun.arm.planner import SampledPlan
 
 if TYPE_CHECKING:  # annotations only: numpy.typing is an import of its own at run time
     import numpy.typing as npt
@@ -129,7 +129,7 @@ class LinearPath:
 
 def manipulability(solver: IkSolver, q_deg: np.ndarray) -> np.ndarray:
     """Yoshikawa's sqrt(det(J Jᵀ)) of the active joints, position rows in units of
-    :data:`~seqrun.ik.ORIENTATION_WEIGHT_MM` (dimensionless), for ``(..., dof)`` degrees."""
+    :data:`~seqrun.arm.ik.ORIENTATION_WEIGHT_MM` (dimensionless), for ``(..., dof)`` degrees."""
     jac = jacobian(solver.chain, np.radians(q_deg))[..., solver.active].copy()
     jac[..., :3, :] /= ORIENTATION_WEIGHT_MM
     det = np.linalg.det(jac @ np.swapaxes(jac, -1, -2))

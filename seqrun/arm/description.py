@@ -17,7 +17,7 @@ from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, field_validator,
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 
-#: Points of the arm a workspace guard can watch (see :func:`seqrun.kinematics.point_positions`).
+#: Points of the arm a workspace guard can watch (see :func:`seqrun.arm.kinematics.point_positions`).
 GuardPoint = Literal["shoulder", "elbow", "wrist", "flange", "end_effector"]
 
 
@@ -193,7 +193,7 @@ class Obstacle(_Strict):
 
 class GeometrySpec(_Strict):
     """Link volumes and facility obstacles, checked along every planned trajectory and
-    every control cycle (seqrun/geometry.py)."""
+    every control cycle (seqrun/arm/geometry.py)."""
 
     margin_mm: Annotated[float, Field(ge=0, allow_inf_nan=False)] = Field(
         10.0, description="Smallest clearance allowed between any two checked surfaces, mm.")
@@ -407,7 +407,6 @@ class ArmDescription(_Strict):
 
 
 #: Arm file used when a sequence names none (relative to the project root / cwd).
-from seqrun.defaults import DEFAULT_ARM  # noqa: E402,F401  (re-exported)
 
 
 def load_arm(path: str | Path) -> ArmDescription:

@@ -1,4 +1,4 @@
-"""The models of a campaign's ``seqrun.toml`` (read by :func:`seqrun.project.load_config`,
+"""The models of a campaign's ``seqrun.toml`` (read by :func:`seqrun.sequence.project.load_config`,
 imported only where such a file is read)."""
 
 from __future__ import annotations

@@ -1,10 +1,10 @@
 """Where a step goes: move targets and checkpoint poses, from the poses frozen with a sequence.
 
-Shared by the static checks (:mod:`seqrun.validation`, from the tracked joints) and the
+Shared by the static checks (:mod:`seqrun.sequence.validation`, from the tracked joints) and the
 step handlers (:mod:`seqrun.steps`, from the measured joints): both resolve a target the
 same way. Pose lookups by name: the poses a sequence froze when it was loaded
-(:attr:`seqrun.loader.LoadedSequence.poses`), or a pose folder (the start pose of a check,
-read once per file version). Cartesian targets are :mod:`seqrun.cartesian`.
+(:attr:`seqrun.sequence.loader.LoadedSequence.poses`), or a pose folder (the start pose of a check,
+read once per file version). Cartesian targets are :mod:`seqrun.arm.cartesian`.
 """
 
 from __future__ import annotations
@@ -20,8 +20,8 @@ from seqrun.defaults import START_POSE
 from seqrun.errors import UserInputError
 
 if TYPE_CHECKING:
-    from seqrun.arm import ArmDescription
-    from seqrun.poses import PoseDirs
+    from seqrun.arm.description import ArmDescription
+    from seqrun.arm.poses import PoseDirs
     from seqrun.steps.checkpoint import CheckpointParams
     from seqrun.steps.move import MoveParams
 
@@ -37,10 +37,10 @@ __all__ = [
 
 def pose_joints_deg(name: str, poses_dir: PoseDirs) -> dict[str, float]:
     """Joint angles of pose ``name`` (user degrees), from a pose folder or a search path of
-    folders (first match wins, as :func:`seqrun.poses.find_pose`). Raises
+    folders (first match wins, as :func:`seqrun.arm.poses.find_pose`). Raises
     :class:`UserInputError` for an unknown pose, :class:`SequenceInvalid` for a broken pose
     file."""
-    from seqrun.poses import find_pose
+    from seqrun.arm.poses import find_pose
 
     path = find_pose(name, poses_dir)
     return dict(_pose_joints(path, path.stat().st_mtime_ns))
@@ -49,7 +49,7 @@ def pose_joints_deg(name: str, poses_dir: PoseDirs) -> dict[str, float]:
 @functools.lru_cache(maxsize=64)
 def _pose_joints(path: Path, mtime_ns: int) -> tuple[tuple[str, float], ...]:
     # Keyed on the file's mtime: a pose file edited between runs is read again.
-    from seqrun.poses import load_pose
+    from seqrun.arm.poses import load_pose
 
     return tuple(load_pose(path).joints_deg.items())
 
@@ -118,7 +118,7 @@ def resolve_checkpoint(params: CheckpointParams, arm: ArmDescription, poses: Pos
                        ) -> tuple[np.ndarray, np.ndarray, float, float]:
     """Expected end-effector of a checkpoint: ``(position_mm (3,), rotation (3, 3),
     position_tolerance_mm, angle_tolerance_deg)``."""
-    from seqrun.kinematics import matrix_from_rpy, pose_from_user_deg
+    from seqrun.arm.kinematics import matrix_from_rpy, pose_from_user_deg
 
     if params.pose is not None:
         joints = _pose_deg(params.pose, poses)

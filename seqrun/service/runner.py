@@ -12,13 +12,14 @@ from pathlib import Path
 from typing import Callable, Iterable
 
 from seqrun import __version__
-from seqrun.arm import ArmDescription
-from seqrun.connection import Connection, response_timeout_s
+from seqrun.arm.description import ArmDescription
+from seqrun.service.connection import Connection, response_timeout_s
 from seqrun.drivers.powercube import PowerCubeDriver
 from seqrun.events import EventHub
-from seqrun.executor import EXIT_FAULT, Executor, Listener, RunResult, StepResult
+from seqrun.executor import Executor, Listener
+from seqrun.results import EXIT_FAULT, RunResult, StepResult
 from seqrun.powercube.client import PowerCubeClient
-from seqrun.schema import LoadedSequence
+from seqrun.sequence.loader import LoadedSequence
 from seqrun.service.run_control import halt_on_foreign_frames
 from seqrun.stop_requests import StopRequests
 
@@ -97,7 +98,7 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
     halt_on_foreign_frames(executor, client, echoes_own=connection.echoes_own)
     log = None
     if log_dir is not None:
-        from seqrun.runlog import RunLog  # python-can's log writer: only for a run folder
+        from seqrun.service.runlog import RunLog  # python-can's log writer: only for a run folder
 
         log = RunLog(log_dir, {"sequence": loaded.name, "file": file or loaded.file,
                                "arm": arm.name, "bus": connection.description,

@@ -1,7 +1,7 @@
 """What a face needs from a reading of the arm, derived without the executor (pure).
 
 - :class:`VelocityWindow`: joint velocities as the least-squares slope of the measured
-  positions over the last window of samples (the same estimate as :mod:`seqrun.tracking`;
+  positions over the last window of samples (the same estimate as :mod:`seqrun.arm.tracking`;
   one cycle's difference quotient is useless on a loaded host).
 - :func:`joint_flags`: each joint's state flag names and whether any joint is at fault, from
   the driver's decoded states (:mod:`seqrun.drivers.base`): the full state where one was
@@ -15,7 +15,7 @@ from collections.abc import Mapping, Sequence
 from functools import lru_cache
 from typing import TYPE_CHECKING
 
-from seqrun.tracking import MIN_SPAN_FRACTION, VELOCITY_WINDOW_S
+from seqrun.arm.tracking import MIN_SPAN_FRACTION, VELOCITY_WINDOW_S
 
 if TYPE_CHECKING:
     from seqrun.drivers.base import CycleState, JointState

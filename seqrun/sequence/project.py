@@ -26,7 +26,7 @@ from seqrun.errors import SourceError, UserInputError
 from seqrun.shipped import DEFAULT_ARM_NAME, shipped_arm, shipped_dir
 
 if TYPE_CHECKING:
-    from seqrun.campaign_config import CampaignConfig
+    from seqrun.sequence.campaign_config import CampaignConfig
 
 #: The campaign's config file name.
 CONFIG_NAME = "seqrun.toml"
@@ -87,7 +87,7 @@ def load_config(path: Path) -> CampaignConfig:
     # the models only where a seqrun.toml is read (four pydantic models: ~10 M instructions)
     from pydantic import ValidationError
 
-    from seqrun.campaign_config import CampaignConfig
+    from seqrun.sequence.campaign_config import CampaignConfig
 
     try:
         return CampaignConfig.model_validate(data)
@@ -105,7 +105,7 @@ def load_config(path: Path) -> CampaignConfig:
 def _expected(loc: tuple) -> str:
     from pydantic import BaseModel
 
-    from seqrun.campaign_config import CampaignConfig
+    from seqrun.sequence.campaign_config import CampaignConfig
 
     model: type[BaseModel] = CampaignConfig
     for key in loc[:-1]:
@@ -227,11 +227,3 @@ def project_for(path: Path, project_dir: Path | None = None) -> Project:
         return open_project(campaign)
     return Project(_legacy_root(path))
 
-
-def __getattr__(name: str):
-    # The seqrun.toml models moved to seqrun.campaign_config (imported on first use).
-    if name in ("CampaignConfig", "CampaignSection", "BusSection", "RunsSection"):
-        import seqrun.campaign_config
-
-        return getattr(seqrun.campaign_config, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

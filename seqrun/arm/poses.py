@@ -20,9 +20,9 @@ import numpy as np
 import yaml
 from pydantic import BaseModel, ConfigDict, Field
 
-from seqrun.arm import ArmDescription
+from seqrun.arm.description import ArmDescription
 from seqrun.errors import UserInputError
-from seqrun.kinematics import matrix_from_rpy, orientation_error, pose_from_user_deg
+from seqrun.arm.kinematics import matrix_from_rpy, orientation_error, pose_from_user_deg
 
 __all__ = [
     "DEFAULT_POSES_DIR",
@@ -43,7 +43,7 @@ __all__ = [
 ]
 
 #: Pose directory used when none is given (relative to the project root / cwd).
-from seqrun.defaults import DEFAULT_POSES_DIR  # noqa: E402  (re-exported)
+from seqrun.defaults import DEFAULT_POSES_DIR  # noqa: E402
 
 #: First line of every pose file: editors with yaml-language-server validate against it.
 SCHEMA_COMMENT = "# yaml-language-server: $schema=../docs/schema/pose.schema.json"
@@ -178,7 +178,7 @@ def pose_document(name: str, arm: ArmDescription,
                   saved_at: datetime | None = None) -> PoseFile:
     """A pose file for the arm at ``joints_deg`` (user degrees), end-effector by FK.
 
-    Accepts what :func:`seqrun.kinematics.pose_from_user_deg` accepts (a locked joint may be
+    Accepts what :func:`seqrun.arm.kinematics.pose_from_user_deg` accepts (a locked joint may be
     left out of a mapping); raises ``ValueError`` for unknown, missing or wrong joints and
     :class:`UserInputError` for a name that is not a pose name.
     """

@@ -25,7 +25,6 @@ from __future__ import annotations
 import copy
 import datetime as _dt
 import json
-import os
 import time
 from pathlib import Path
 from typing import Any, Callable, TextIO, cast
@@ -34,8 +33,8 @@ from xml.sax.saxutils import escape, quoteattr
 import can
 
 from seqrun.events import Event
-from seqrun.executor import RunResult, StepResult
-from seqrun.logfile import LineFile, write_whole
+from seqrun.results import RunResult, StepResult
+from seqrun.service.logfile import LineFile, write_whole
 
 #: The running report.json is rewritten at most this often (seconds of real time).
 REPORT_INTERVAL_S = 1.0

@@ -29,9 +29,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from seqrun.arm import ArmDescription
+from seqrun.arm.description import ArmDescription
 from seqrun.errors import SeqrunError
-from seqrun.kinematics import Chain, frame_matrix, matrix_from_rpy
+from seqrun.arm.kinematics import Chain, frame_matrix, matrix_from_rpy
 
 if TYPE_CHECKING:  # annotations only: numpy.typing is an import of its own at run time
     import numpy.typing as npt
