@@ -194,7 +194,7 @@ def _validate_dry_run():
     except ImportError:
         return None
     from seqrun.defaults import START_POSE
-    from seqrun.arm.targets import pose_joints_deg
+    from seqrun.arm.poses import pose_joints_deg
 
     def run(loaded, arm):
         start = pose_joints_deg(START_POSE, loaded.poses_dir)

@@ -925,7 +925,7 @@ class Executor:
             # The garbage that earlier work left in reference cycles (a report's figures,
             # a web request) is collected now, while nothing moves: left to the collector,
             # a full collection in the loop holds the interpreter as long as it scans
-            # (70-100 ms cycles after a report.html, bench/README.md).
+            # (a report.html's figures made cycles several periods long).
             gc.collect()
         self._t0 = self.clock.now()
         self.poses = dict(getattr(loaded, "poses", {}))

@@ -283,8 +283,8 @@ class Sequence(_Model):
 @functools.cache
 def step_adapter() -> TypeAdapter[Any]:
     """Validates one step (a list item of ``steps``) on its own: for the steps of a file
-    that is not valid as a whole. Built on first use: every start paid ~5 M instructions
-    for a second copy of the steps' union that only invalid files need."""
+    that is not valid as a whole. Built on first use: it is a second copy of the steps'
+    union, which only invalid files need, and every start would pay for it."""
     return TypeAdapter(Step)
 
 

@@ -30,7 +30,7 @@ def test_from_a_step_starts_where_the_steps_before_leave_the_arm():
     assert static_check(OPSAFE).valid
     before, rest = loaded.split_at(6)
     from seqrun.sequence.validation import validate_sequence
-    from seqrun.arm.targets import park_deg
+    from seqrun.arm.poses import park_deg
 
     cold = validate_sequence(rest, ARM, park_deg(loaded.pose_path), started=False)
     assert any("move before home" in e.message for e in cold.errors)

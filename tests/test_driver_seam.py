@@ -26,7 +26,7 @@ from seqrun.executor import Executor
 from seqrun.results import EXIT_FAULT, EXIT_OK
 from seqrun.arm.planner import Limits, MovePlan
 from seqrun.sequence.loader import load_sequence
-from seqrun.arm.targets import pose_joints_deg
+from seqrun.arm.poses import pose_joints_deg
 
 ARM = shipped_arm()
 #: Modules that only PowerCube code may import.

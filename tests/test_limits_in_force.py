@@ -22,7 +22,7 @@ from seqrun.powercube.client import PowerCubeClient
 from seqrun.powercube.protocol import ParamId
 from seqrun.service.runner import run_sequence
 from seqrun.sequence.loader import load_sequence
-from seqrun.arm.targets import park_deg
+from seqrun.arm.poses import park_deg
 from simrun import run_on_sim
 
 ARM = shipped_arm()

@@ -19,7 +19,7 @@ from seqrun.powercube.protocol import ParamId
 from seqrun.sequence.loader import load_sequence
 from seqrun.sim.bus import SimBus
 from seqrun.sim.port import SimMessage, SimPort, SimSetupError, get_network
-from seqrun.arm.targets import pose_joints_deg
+from seqrun.arm.poses import pose_joints_deg
 
 ROOT = Path(__file__).resolve().parents[1]
 _names = itertools.count()

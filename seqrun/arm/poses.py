@@ -8,6 +8,7 @@ file, a changed arm description).
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 from collections.abc import Iterable, Mapping, Sequence
@@ -21,6 +22,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field
 
 from seqrun.arm.description import ArmDescription
+from seqrun.defaults import START_POSE
 from seqrun.errors import UserInputError
 from seqrun.arm.kinematics import matrix_from_rpy, orientation_error, pose_from_user_deg
 
@@ -30,14 +32,17 @@ __all__ = [
     "EndEffector",
     "PoseFile",
     "PoseFinding",
+    "PoseSource",
     "available_poses",
     "check_pose_name",
     "check_pose",
     "find_pose",
     "pose_overrides",
     "load_pose",
+    "park_deg",
     "pose_document",
     "pose_findings",
+    "pose_joints_deg",
     "pose_yaml",
     "save_pose",
 ]
@@ -155,6 +160,37 @@ def find_pose(name: str, poses_dir: PoseDirs) -> Path:
             f"{f}" + ("" if f.is_dir() else " (does not exist)") for f in folders)
     known = ", ".join(poses) if poses else "none"
     raise UserInputError(f"unknown pose '{name}'; available poses: {known} ({where})")
+
+
+#: Where a pose is looked up by name: the poses a sequence froze when it was loaded (name
+#: -> an object with ``joints_deg``, or a joint mapping; a run uses only these), or a pose
+#: folder or search path.
+PoseSource = Mapping[str, Any] | PoseDirs
+
+
+def pose_joints_deg(name: str, poses: PoseSource) -> dict[str, float]:
+    """Joint angles of pose ``name`` (user degrees), from the poses frozen with a sequence
+    or from a pose folder or search path (first match wins, as :func:`find_pose`). Raises
+    :class:`UserInputError` for an unknown pose (or one the sequence did not read),
+    :class:`SequenceInvalid` for a broken pose file."""
+    if isinstance(poses, Mapping):
+        if name not in poses:
+            raise UserInputError(f"pose '{name}' was not read with the sequence")
+        entry: Any = poses[name]
+        return dict(entry.joints_deg if hasattr(entry, "joints_deg") else entry)
+    path = find_pose(name, poses)
+    return dict(_pose_joints(path, path.stat().st_mtime_ns))
+
+
+@functools.lru_cache(maxsize=64)
+def _pose_joints(path: Path, mtime_ns: int) -> tuple[tuple[str, float], ...]:
+    # Keyed on the file's mtime: a pose file edited between runs is read again.
+    return tuple(load_pose(path).joints_deg.items())
+
+
+def park_deg(poses_dir: PoseDirs) -> dict[str, float]:
+    """The default start state: the Park pose (where a freshly powered-on arm is)."""
+    return pose_joints_deg(START_POSE, poses_dir)
 
 
 def _stored_number(value: float) -> float:

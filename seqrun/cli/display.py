@@ -211,8 +211,8 @@ class LiveDisplay:
         return "|".join(flags) or "OK", "MOTION" in flags
 
     def __rich__(self) -> Panel:
-        # Fixed-width text lines, not a rich Table: a Table's layout costs ~30x more
-        # (several ms per render), and the render has to fit into the loop's slack.
+        # Fixed-width text lines, not a rich Table: a Table's layout costs many times more,
+        # and the render has to fit into the loop's slack.
         self._drain()
         m = self.measured
         width = max(len(self._joint_label(j)) for j in self.arm.joints) + 2

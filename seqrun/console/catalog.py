@@ -78,7 +78,7 @@ class Catalog:
         from seqrun.service.dryrun import dry_run
         from seqrun.sequence.loader import load_sequence_partial
         from seqrun.sequence.validation import validate_sequence
-        from seqrun.arm.targets import pose_joints_deg
+        from seqrun.arm.poses import pose_joints_deg
         from seqrun.yamlsource import sort_errors
 
         path = self.sequence_path(name)

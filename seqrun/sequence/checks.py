@@ -55,7 +55,7 @@ def static_check(file: Path, *, start: str | None = None,
     from seqrun.arm.description import load_arm
     from seqrun.sequence.loader import load_sequence_partial
     from seqrun.sequence.validation import validate_sequence
-    from seqrun.arm.targets import pose_joints_deg
+    from seqrun.arm.poses import pose_joints_deg
     from seqrun.yamlsource import sort_errors
 
     check = StaticCheck()
@@ -99,7 +99,7 @@ def static_validation(loaded: LoadedSequence, arm: ArmDescription, start: str | 
     """Validation from the assumed start (Park, freshly powered on, unless told otherwise).
     With ``--from N`` the steps before N are only tracked, to know where step N starts."""
     from seqrun.sequence.validation import validate_sequence
-    from seqrun.arm.targets import pose_joints_deg
+    from seqrun.arm.poses import pose_joints_deg
 
     start_deg = pose_joints_deg(start or START_POSE, loaded.pose_path or loaded.poses_dir)
     if from_step == 1:

@@ -1,9 +1,11 @@
 """Reading a sequence file: includes expanded, every step with its own ``file:line:col``.
 
 :func:`load_sequence` reads a file with its includes into a flat list of
-:class:`ResolvedStep`; the poses the steps name are read once and frozen with it
-(:attr:`LoadedSequence.poses`), with the SHA-256 of every file read. What a file may say
-is :mod:`seqrun.schema`; what it means for the arm is :mod:`seqrun.sequence.validation`.
+:class:`~seqrun.steps.resolved.ResolvedStep`; the poses the steps name are read once and
+frozen with it (:attr:`LoadedSequence.poses`, :class:`~seqrun.steps.resolved.FrozenPose`),
+with the SHA-256 of every file read. Both are the step layer's data: the loader builds them,
+the step kinds read them. What a file may say is :mod:`seqrun.schema`; what it means for
+the arm is :mod:`seqrun.sequence.validation`.
 """
 
 from __future__ import annotations
@@ -12,7 +14,7 @@ import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Generic, TypeVar
+from typing import Any
 
 from pydantic import ValidationError
 
@@ -23,62 +25,19 @@ from seqrun.schema import (
     PARAMS_MODELS,
     IncludeParams,
     Sequence,
-    StepParams,
     describe,
     step_adapter,
 )
 from seqrun.steps.registry import step_kind
+from seqrun.steps.resolved import FrozenPose, ResolvedStep
 from seqrun.yamlsource import Document, Location, display_path, load_document, sort_errors
 
 __all__ = [
-    "FrozenPose",
     "LoadedSequence",
-    "ResolvedStep",
     "find_project_root",
     "load_sequence",
     "load_sequence_partial",
 ]
-
-
-#: The parameter model of a step (``ResolvedStep[MoveParams]``).
-P = TypeVar("P", bound=StepParams, covariant=True)
-
-
-@dataclass(frozen=True, eq=False)
-class ResolvedStep(Generic[P]):
-    """One step of the flattened sequence (includes expanded).
-
-    ``number`` is 1-based in the flat list; ``location`` is where the step is written;
-    ``include_chain`` the include steps that led to it, outermost first.
-    """
-
-    number: int
-    kind: str
-    params: P
-    location: Location
-    label: str | None = None
-    include_chain: tuple[Location, ...] = ()
-    document: Document | None = field(default=None, repr=False)
-    node: Any = field(default=None, repr=False)  # the parameters' YAML node
-    #: What the operator sees of each include in ``include_chain`` (its label, else
-    #: "include FILE"), outermost first.
-    include_labels: tuple[str, ...] = ()
-
-    def where(self, *path: Any, key: bool = False) -> Location:
-        """Location of a parameter, e.g. ``where("joints", "j4")``; without a path, the step's
-        own location. Where the path is not written out (shorthand), the nearest enclosing
-        value."""
-        if not path or self.document is None or self.node is None:
-            return self.location
-        return self.document.locate(path, start=self.node, key=key)
-
-    def error(self, message: str, *path: Any, key: bool = False) -> SourceError:
-        return self.where(*path, key=key).error(message)
-
-    @property
-    def title(self) -> str:
-        """What the operator sees: the label, or a short description of the step."""
-        return self.label or describe(self.kind, self.params)
 
 
 @dataclass(frozen=True, eq=False)
@@ -122,19 +81,6 @@ class LoadedSequence:
         items += [{"kind": "pose", "file": pose.document.file, "sha256": pose.document.sha256}
                   for pose in self.poses.values()]
         return items
-
-
-@dataclass(frozen=True, eq=False)
-class FrozenPose:
-    """A pose file as it was read and validated (see :attr:`LoadedSequence.poses`)."""
-
-    name: str
-    pose: Any  # seqrun.arm.poses.PoseFile
-    document: Document = field(repr=False)
-
-    @property
-    def joints_deg(self) -> dict[str, float]:
-        return dict(self.pose.joints_deg)
 
 
 def find_project_root(path: str | os.PathLike[str]) -> Path:
@@ -226,12 +172,14 @@ class _Loader:
                 self._include(doc, path, params, params_node, here, chain + (path,),
                               include_chain)
                 continue
+            step_type = step_kind(kind)
             step = ResolvedStep(number=len(self.steps) + 1, kind=kind, params=params,
                                 location=here, label=params.label, include_chain=include_chain,
                                 document=doc, node=params_node,
                                 include_labels=tuple(self.include_titles.get(loc, "include")
-                                                     for loc in include_chain))
-            for pose in step_kind(kind).poses(params):
+                                                     for loc in include_chain),
+                                description=step_type.describe(params))
+            for pose in step_type.poses(params):
                 self._check_pose(step, pose)
             self.steps.append(step)
 

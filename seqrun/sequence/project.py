@@ -73,7 +73,7 @@ def load_config(path: Path) -> CampaignConfig:
             from None
     except OSError as exc:
         raise UserInputError(f"{shown}: {exc.strerror or exc}") from None
-    import tomllib  # only where a seqrun.toml is read (its regexes cost ~1 ms to compile)
+    import tomllib  # only where a seqrun.toml is read (it compiles its regexes at import)
 
     try:
         data = tomllib.loads(text)
@@ -84,7 +84,7 @@ def load_config(path: Path) -> CampaignConfig:
         message = re.sub(r"\s*\(at (line \d+, column \d+|end of document)\)", "", message)
         raise ConfigInvalid([SourceError(shown, line, column,
                                            f"invalid TOML: {message}")]) from None
-    # the models only where a seqrun.toml is read (four pydantic models: ~10 M instructions)
+    # the models only where a seqrun.toml is read (four pydantic models, built at import)
     from pydantic import ValidationError
 
     from seqrun.sequence.campaign_config import CampaignConfig

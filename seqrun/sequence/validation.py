@@ -26,7 +26,10 @@ offending value:
 
 The executor runs it again with the measured start state (``start_deg``) and
 ``started=True`` when the modules report that they are reset, homed and limited.
-Where a move or a checkpoint goes is :mod:`seqrun.arm.targets`, shared with the executor.
+A kind's check sees the :class:`Checker` as a
+:class:`~seqrun.steps.check_context.CheckContext` (the step layer's protocol); where a move
+or a checkpoint goes is its kind's own (``seqrun.steps.move.resolve_move_target``,
+``seqrun.steps.checkpoint.resolve_checkpoint``).
 """
 
 from __future__ import annotations
@@ -34,32 +37,33 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from seqrun.arm.description import ArmDescription, Joint
+from seqrun.arm.description import ArmDescription
 from seqrun.errors import PlanningError, SourceError
 from seqrun.formatting import format_number as _f
 from seqrun.formatting import format_range
 from seqrun.arm.limits import READBACK, LimitsInForce
+from seqrun.arm.poses import park_deg
+from seqrun.steps.check_context import TrackedJoint
 from seqrun.steps.registry import step_kind
-from seqrun.arm.targets import (
-    park_deg,
-)
 from seqrun.yamlsource import sort_errors
 
 if TYPE_CHECKING:
     from seqrun.arm.ik import IkSolver
-    from seqrun.sequence.loader import LoadedSequence, ResolvedStep
-    from seqrun.steps.move import MoveParams
+    from seqrun.arm.kinematics import Chain
+    from seqrun.sequence.loader import LoadedSequence
+    from seqrun.steps.check_context import PlannedMoveParams
+    from seqrun.steps.params import ToolParams, ToolTargetParams
+    from seqrun.steps.resolved import ResolvedStep
 
 __all__ = [
     "PLAN_SAMPLE_S",
     "Checker",
     "Clearance",
     "Proximity",
-    "TrackedJoint",
     "ValidationResult",
     "validate_sequence",
 ]
@@ -134,29 +138,12 @@ class ValidationResult:
         return not self.errors
 
 
-# --------------------------------------------------------------------------- helpers
 # --------------------------------------------------------------------------- tracking
-@dataclass
-class TrackedJoint:
-    """What the checks know of one joint after the steps so far."""
-
-    joint: Joint
-    position: float
-    reset: bool = False
-    homed: bool = False
-    halted: bool = False
-    limits: tuple[float, float] | None = None  # written MinPos/MaxPos
-    at_start: bool = True  # still at its start position (for the wording of notes)
-
-    @property
-    def locked(self) -> bool:
-        return self.joint.locked is not None
-
-
 class Checker:
     """The state the step kinds' checks share while walking the steps: the joints and
-    modules as the steps before left them (:class:`TrackedJoint`), the limits in force, the
-    findings (``errors``, ``notes``), and the checks more than one kind needs."""
+    modules as the steps before left them (:class:`~seqrun.steps.check_context.TrackedJoint`),
+    the limits in force, the findings (``errors``, ``notes``), and the checks more than one
+    kind needs. The kinds see it as a :class:`~seqrun.steps.check_context.CheckContext`."""
 
     def __init__(self, loaded: LoadedSequence, arm: ArmDescription,
                  start_deg: Mapping[str, float], started: bool,
@@ -172,7 +159,7 @@ class Checker:
         self.errors: list[SourceError] = []
         self.notes: list[SourceError] = []
         self.joints: dict[str, TrackedJoint] = {}
-        self._chain = None
+        self._chain: Chain | None = None
         self.speed = 1.0  # the run's speed override: the plans guards are checked along
         self.clearances: dict[int, Clearance] = {}
         self.targets_deg: dict[int, np.ndarray] = {}
@@ -183,7 +170,8 @@ class Checker:
         self.file_limits = LimitsInForce(arm)
         self.limits = LimitsInForce(arm)
         self.pose_checked: dict[str, bool] = {}  # pose name -> usable
-        self.pose_limit_findings: dict[str, dict[str, str]] = {}  # pose -> joint -> message
+        # pose -> joint -> its finding at the pose file's line
+        self.pose_limit_findings: dict[str, dict[str, SourceError]] = {}
         self.reported_pose_limits: set[tuple[str, str]] = set()
         self.powered_off: ResolvedStep | None = None  # the power_off step, once there is one
         for joint in arm.joints:
@@ -231,7 +219,7 @@ class Checker:
             from seqrun.arm.poses import pose_findings
 
             usable = True
-            limits: dict[str, str] = {}
+            limits: dict[str, SourceError] = {}
             for finding in pose_findings(frozen.pose, self.arm):
                 error = frozen.document.error(finding.where, finding.message, key=finding.key)
                 if finding.note:
@@ -257,7 +245,7 @@ class Checker:
         return frozen.joints_deg if self.pose_checked[name] else None
 
     # -- common checks
-    def names(self, step: ResolvedStep, names: list[str] | dict, path: tuple,
+    def names(self, step: ResolvedStep, names: list[str] | Mapping[str, Any], path: tuple,
               *, as_keys: bool, what: str) -> list[str]:
         """Known, unlocked joint names among ``names``; errors for the others."""
         good = []
@@ -267,9 +255,9 @@ class Checker:
                 self.errors.append(step.error(
                     f"unknown joint '{name}' (the arm has {', '.join(self.arm.joint_names)})",
                     *where, key=as_keys))
-            elif self.joints[name].locked:
+            elif (locked := self.joints[name].joint.locked) is not None:
                 self.errors.append(step.error(
-                    f"{name} is locked at {_f(self.joints[name].joint.locked)}°: {what} a "
+                    f"{name} is locked at {_f(locked)}°: {what} a "
                     "locked joint is not allowed (seqrun never commands it)", *where,
                     key=as_keys))
             else:
@@ -327,7 +315,7 @@ class Checker:
                                                  if not s.locked]
         return "" if sorted(names) == sorted(everything) else f" ({', '.join(names)})"
 
-    def guards_along_plan(self, step: ResolvedStep, params: MoveParams,
+    def guards_along_plan(self, step: ResolvedStep, params: PlannedMoveParams,
                           target: dict[str, float]) -> None:
         """Workspace guards along the trajectory the executor will stream: the ruckig plan
         of this move (its limits and scales, the run's speed), sampled every
@@ -418,10 +406,11 @@ class Checker:
                 f"{what}); the arm file's geometry margin is {_f(margin)} mm"))
 
     # -- end-effector targets (seqrun/arm/cartesian.py)
-    def tool_target(self, step: ResolvedStep, params) -> np.ndarray | None:
+    def tool_target(self, step: ResolvedStep, params: ToolTargetParams) -> np.ndarray | None:
         """The step's tool target (4x4) from the tracked joints; None after an error."""
         from seqrun.arm.cartesian import resolve_target, tool_pose
 
+        assert params.position_mm is not None  # (only steps with a tool target come here)
         solver = self.tool_solver(step, params)
         if solver is None:
             return None
@@ -429,7 +418,7 @@ class Checker:
         return resolve_target(current, params.position_mm, params.rpy_deg,
                               relative=params.relative, frame=params.frame)
 
-    def tool_solver(self, step: ResolvedStep, params) -> IkSolver | None:
+    def tool_solver(self, step: ResolvedStep, params: ToolParams) -> IkSolver | None:
         """The IK solver of the step's tool; None (and an error at ``tool``) for a tool the
         arm file does not define."""
         from seqrun.arm.cartesian import solver_for, unknown_tool

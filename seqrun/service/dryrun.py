@@ -126,10 +126,9 @@ def _dry_run(loaded: LoadedSequence, arm: ArmDescription, start_deg: Mapping[str
              log_dir: Path | None = None) -> DryRun:
     # The objects that exist before the dry run (a validating process: pydantic's models,
     # numpy, the sequence's) are not its garbage: out of the collector's sight while it runs,
-    # the collections its own objects cause do not traverse them again (one full collection
-    # of a `seqrun validate` process cost ~15 ms). Back in sight afterwards; left alone when
-    # the process keeps objects frozen itself (the seqrun program, the console:
-    # seqrun.frozen_objects).
+    # the collections its own objects cause do not traverse them again. Back in sight
+    # afterwards; left alone when the process keeps objects frozen itself (the seqrun
+    # program, the console: seqrun.frozen_objects).
     freeze = not frozen_objects.kept()
     if freeze:
         gc.freeze()

@@ -139,7 +139,7 @@ def write_html_report(folder: Path) -> str | None:
     """Draw folder/report.html; returns why not instead of raising: the run is over and
     its outcome (and exit code) must not depend on the report.
 
-    matplotlib's figures leave ~70,000 objects in reference cycles; they are collected here,
+    matplotlib's figures leave many objects in reference cycles; they are collected here,
     before the session can start its next motion, not by a full collection in that motion's
     control loop."""
     try:

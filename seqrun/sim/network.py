@@ -77,8 +77,8 @@ class WireFrame(NamedTuple):
 @functools.lru_cache(maxsize=4096)
 def _bit_length(can_id: int, data: bytes, extended: bool, remote: bool,
                 dlc: int | None) -> int:
-    # Cached: computing stuffing and CRC bit by bit costs ~20 µs of Python, and a bus
-    # mostly carries the same requests and acks over and over.
+    # Cached: computing stuffing and CRC bit by bit is slow in Python, and a bus mostly
+    # carries the same requests and acks over and over.
     return frame_bit_length(can_id, data, extended=extended, remote=remote, dlc=dlc)
 
 
@@ -193,8 +193,8 @@ class SimNetwork:
             raise ValueError(f"bitrate must be positive, got {bitrate}")
         self.clock = clock
         #: Real time only: the last ``spin_window`` seconds before a wire event a receiver
-        #: busy-waits (yielding the GIL) instead of sleeping, because a sleeping thread
-        #: wakes 50-100 µs late — as long as a whole request frame. 0 never spins.
+        #: busy-waits (yielding the GIL) instead of sleeping, because a sleeping thread can
+        #: wake as late as a whole request frame lasts. 0 never spins.
         self.spin_window = spin_window
         self.arm = arm
         self.bitrate = int(bitrate)

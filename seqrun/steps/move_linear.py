@@ -15,9 +15,9 @@ from seqrun.steps.kind import StepKind
 from seqrun.steps.params import Positive, StepParams, Vector3, check_pose_target, one_key_value
 
 if TYPE_CHECKING:
-    from seqrun.sequence.loader import ResolvedStep
+    from seqrun.steps.check_context import CheckContext
     from seqrun.steps.context import StepContext
-    from seqrun.sequence.validation import Checker
+    from seqrun.steps.resolved import ResolvedStep
 
 
 class MoveLinearParams(StepParams):
@@ -74,7 +74,8 @@ def describe(params: MoveLinearParams) -> str:
     return f"move in a line to [{xyz}] mm"
 
 
-def check(checker: Checker, step: ResolvedStep[MoveLinearParams], params: MoveLinearParams) -> None:
+def check(checker: CheckContext,
+          step: ResolvedStep[MoveLinearParams], params: MoveLinearParams) -> None:
     """A straight line of the tool: every sample solved and checked now (reachable,
     limits, joint speeds, manipulability, guards along the samples)."""
     import numpy as np
@@ -121,7 +122,7 @@ def run(step: ResolvedStep[MoveLinearParams], ex: StepContext) -> dict:
     keep = 1 - ex.arm.control.tracking_reserve
     max_velocity = np.array([j.max_velocity_deg_s for j in ex.arm.joints]) * keep * ex.speed
     try:
-        linear = plan_linear(ex.arm, params.tool, measured, tool_target(step, ex, measured),
+        linear = plan_linear(ex.arm, params.tool, measured, tool_target(params, ex, measured),
                              speed_mm_s=params.speed_mm_s * ex.speed,
                              rotation_speed_deg_s=params.rotation_speed_deg_s * ex.speed,
                              acceleration_mm_s2=params.acceleration_mm_s2 * ex.speed,

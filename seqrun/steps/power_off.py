@@ -17,9 +17,9 @@ from seqrun.steps.kind import StepKind
 from seqrun.steps.params import PoseName, Positive, StepParams, one_key_value
 
 if TYPE_CHECKING:
-    from seqrun.sequence.loader import ResolvedStep
+    from seqrun.steps.check_context import CheckContext
     from seqrun.steps.context import StepContext
-    from seqrun.sequence.validation import Checker
+    from seqrun.steps.resolved import ResolvedStep
 
 
 class PowerOffParams(StepParams):
@@ -43,7 +43,8 @@ def describe(params: PowerOffParams) -> str:
     return f"power off in {params.pose}"
 
 
-def check(checker: Checker, step: ResolvedStep[PowerOffParams], params: PowerOffParams) -> None:
+def check(checker: CheckContext,
+          step: ResolvedStep[PowerOffParams], params: PowerOffParams) -> None:
     """The pose must be a power-off pose of the arm, and where the moves before end."""
     from seqrun.formatting import format_number as f
 

@@ -10,9 +10,9 @@ from seqrun.steps.kind import StepKind
 from seqrun.steps.params import JointName, LimitPair, Positive, StepParams, one_key_value
 
 if TYPE_CHECKING:
-    from seqrun.sequence.loader import ResolvedStep
+    from seqrun.steps.check_context import CheckContext
     from seqrun.steps.context import StepContext
-    from seqrun.sequence.validation import Checker
+    from seqrun.steps.resolved import ResolvedStep
 
 
 
@@ -53,7 +53,8 @@ def describe(params: SetLimitsParams) -> str:
     return "write joint limits"
 
 
-def check(checker: Checker, step: ResolvedStep[SetLimitsParams], params: SetLimitsParams) -> None:
+def check(checker: CheckContext,
+          step: ResolvedStep[SetLimitsParams], params: SetLimitsParams) -> None:
     from seqrun.formatting import format_number as f, format_range
 
     joints = checker.joints
