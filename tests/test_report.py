@@ -352,7 +352,7 @@ def test_dry_run_report(tmp_path):
     assert f"report: {out}" in result.output
     text = out.read_text()
     html = Page(text)
-    assert "Dry run report" in text and "dry run, virtual time, 10 Hz" in text
+    assert "Dry run report" in text and "dry run, virtual time, 100 Hz" in text
     assert html.plots == TIME_PLOTS and html.external == []
     result = CliRunner().invoke(app, ["validate", str(OPSAFE), "--report",
                                       str(tmp_path / "no" / "dir.html")])

@@ -10,9 +10,12 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import TYPE_CHECKING, Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, field_validator, model_validator
+
+if TYPE_CHECKING:
+    from seqrun.errors import SourceError
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
@@ -83,11 +86,13 @@ class CanSettings(_Strict):
 
 
 class Control(_Strict):
-    cycle_hz: Annotated[float, Field(ge=10, le=500)] = 100
-    dry_run_cycle_hz: Annotated[float, Field(ge=5, le=500)] = Field(
-        10, description="Control-loop rate of dry runs (seqrun validate). The modules' ramps "
-                        "interpolate between setpoints, so a slower stream changes simulated "
-                        "durations by about a cycle and makes dry runs far faster.")
+    cycle_hz: Annotated[float, Field(ge=10, le=500)] = Field(
+        100, description="Setpoint and monitoring loop rate of runs and of dry runs "
+                         "(seqrun validate).")
+    dry_run_cycle_hz: Annotated[float | None, Field(ge=5, le=500)] = Field(
+        None, description="No longer used (ignored, with a note from seqrun validate): the "
+                          "dry run streams at cycle_hz, as a run does, so that its figures "
+                          "are the run's. Kept so that older arm files still load.")
     command_mode: Literal["ramp", "step"] = "ramp"
     tracking_reserve: Annotated[float, Field(ge=0, lt=0.5)] = Field(
         0.05, description="Fraction of each velocity limit kept out of the plans so that a "
@@ -261,6 +266,7 @@ class ArmDescription(_Strict):
     # SHA-256 of the file it was loaded from (recorded in run folders); not a file key.
     _sha256: str = PrivateAttr("")
     _file: str = PrivateAttr("")
+    _notes: list = PrivateAttr(default_factory=_no_items)
 
     @property
     def sha256(self) -> str:
@@ -270,6 +276,12 @@ class ArmDescription(_Strict):
     def source_file(self) -> str:
         """The file it was loaded from, as messages name it ("" if built in code)."""
         return self._file
+
+    @property
+    def notes(self) -> list[SourceError]:
+        """What is worth knowing about the file, not wrong in it (keys no longer used),
+        ``file:line:col``; ``seqrun validate`` lists them with the sequence's notes."""
+        return list(self._notes)
 
     @field_validator("joints")
     @classmethod
@@ -417,4 +429,10 @@ def load_arm(path: str | Path) -> ArmDescription:
     document = load_document(Path(path))
     arm = document.validate(ArmDescription)
     arm._sha256, arm._file = document.sha256, document.file
+    if arm.control.dry_run_cycle_hz is not None:
+        arm._notes.append(document.error(
+            ("control", "dry_run_cycle_hz"), "control.dry_run_cycle_hz is no longer used and "
+            f"is ignored: the dry run streams at control.cycle_hz ({arm.control.cycle_hz:g} "
+            "Hz) like a run, so that its figures are the run's; delete this line",
+            key=True))
     return arm

@@ -140,18 +140,25 @@ def _segment_distance(p1, q1, p2, q2) -> float:
     a = d1x * d1x + d1y * d1y + d1z * d1z
     e = d2x * d2x + d2y * d2y + d2z * d2z
     f = d2x * rx + d2y * ry + d2z * rz
-    if a <= _EPS and e <= _EPS:
+    if a == 0.0 and e == 0.0:
         s = t = 0.0
-    elif a <= _EPS:
+    elif a == 0.0:
         s, t = 0.0, min(max(f / e, 0.0), 1.0)
     else:
         c = d1x * rx + d1y * ry + d1z * rz
-        if e <= _EPS:
+        if e == 0.0:
             s, t = min(max(-c / a, 0.0), 1.0), 0.0
         else:
             b = d1x * d2x + d1y * d2y + d1z * d2z
-            denom = a * e - b * b
-            s = min(max((b * f - c * e) / denom, 0.0), 1.0) if denom > _EPS else 0.0
+            # a e - b b and b f - c e through n = d1 x d2 (see segment_segment)
+            nx, ny, nz = d1y * d2z - d1z * d2y, d1z * d2x - d1x * d2z, d1x * d2y - d1y * d2x
+            denom = nx * nx + ny * ny + nz * nz
+            if denom > _PARALLEL * a * e:
+                s = ((ny * d2z - nz * d2y) * rx + (nz * d2x - nx * d2z) * ry
+                     + (nx * d2y - ny * d2x) * rz) / denom
+                s = min(max(s, 0.0), 1.0)
+            else:
+                s = 0.0
             t = (b * s + f) / e
             if t < 0.0:
                 s, t = min(max(-c / a, 0.0), 1.0), 0.0
@@ -163,7 +170,13 @@ def _segment_distance(p1, q1, p2, q2) -> float:
     return math.sqrt(x * x + y * y + z * z)
 
 
-_EPS = 1e-12
+#: Segments count as parallel when the sine squared of their angle is below this. The
+#: test is relative (an absolute one took a short segment for a parallel one and measured
+#: from its first point only), and the closest point of skew lines comes from n = d1 x d2
+#: (|n|^2 = a e - b^2, (n x d2).r = b f - c e without their cancellation): its error in
+#: the distance stays at rounding level however small the angle, so only truly parallel
+#: segments (where any start works) take s = 0.
+_PARALLEL = 1e-24
 
 
 def segment_segment(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndarray
@@ -175,19 +188,21 @@ def segment_segment(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndarr
     f = np.einsum("...i,...i", d2, r)
     c = np.einsum("...i,...i", d1, r)
     b = np.einsum("...i,...i", d1, d2)
-    denom = a * e - b * b
-    eps = 1e-12
-    safe_a = np.where(a > eps, a, 1.0)
-    safe_e = np.where(e > eps, e, 1.0)
-    # general case: closest points of the lines, s clamped, t from s, then s again
-    s = np.where(denom > eps, np.clip((b * f - c * e) / np.where(denom > eps, denom, 1.0),
-                                      0.0, 1.0), 0.0)
+    n = np.cross(d1, d2)
+    denom = np.einsum("...i,...i", n, n)  # a e - b^2, without its cancellation
+    safe_a = np.where(a > 0.0, a, 1.0)
+    safe_e = np.where(e > 0.0, e, 1.0)
+    # general case: closest points of the lines, s clamped, t from s, then s again;
+    # parallel segments (see _PARALLEL): s = 0, then t and s clamped
+    skew = denom > _PARALLEL * a * e
+    numerator = np.einsum("...i,...i", np.cross(n, d2), r)  # b f - c e
+    s = np.where(skew, np.clip(numerator / np.where(skew, denom, 1.0), 0.0, 1.0), 0.0)
     t = (b * s + f) / safe_e
     s = np.where(t < 0, np.clip(-c / safe_a, 0, 1),
                  np.where(t > 1, np.clip((b - c) / safe_a, 0, 1), s))
     t = np.clip(t, 0.0, 1.0)
     # degenerate segments (points)
-    first_point, second_point = a <= eps, e <= eps
+    first_point, second_point = a == 0.0, e == 0.0
     s = np.where(second_point, np.clip(-c / safe_a, 0, 1), s)
     t = np.where(second_point, 0.0, t)
     t = np.where(first_point, np.clip(f / safe_e, 0, 1), t)

@@ -120,9 +120,17 @@ def _sequence(path: Path, options: dict) -> FileResult:
         return result
     if options["static"]:
         return result
+    faults = options.get("faults") or []
+    unknown = [f.spec for f in faults if f.module is not None
+               and f.module not in check.arm.module_ids]
+    if unknown:
+        result.result = "error"
+        result.errors.append(f"--sim-fault '{unknown[0]}': the arm has no such module "
+                             f"(modules {', '.join(map(str, check.arm.module_ids))})")
+        return result
     run = dry_run(check.loaded, check.arm, check.start_deg,
                   start_pose=options["start"] or START_POSE, started=options["started"],
-                  speed=options["speed"], cycle_hz=options["cycle_hz"])
+                  speed=options["speed"], faults=faults)
     result.simulated_s = round(run.simulated_s, 2)
     guards = {g.name: g.min_z_mm for g in check.arm.workspace.guards}
     best = math.inf
@@ -172,13 +180,15 @@ def _arm(path: Path) -> FileResult:
 
     result = FileResult(str(path), "arm")
     try:
-        load_arm(path)
+        arm = load_arm(path)
     except SequenceInvalid as exc:
         result.result = "invalid"
         result.errors = [str(e) for e in exc.errors]
     except (UserInputError, OSError) as exc:
         result.result = "error"
         result.errors.append(str(exc))
+    else:
+        result.notes = [f"{n.file}:{n.line}:{n.column}: note: {n.message}" for n in arm.notes]
     return result
 
 

@@ -69,9 +69,10 @@ def print_dry_run(run, loaded, arm) -> None:
     """Human report of a dry run: per step planned vs simulated, peaks, heights, checks."""
     r = run.result
     verdict = "passed" if run.passed else f"FAILED ({r.status})"
+    rehearsed = f", rehearsing {', '.join(run.faults)}" if run.faults else ""
     typer.echo(f"dry run from {run.start_pose} (simulator, virtual time, {run.cycle_hz:g} Hz "
-               f"loop): {verdict} - {run.simulated_s:.2f} s simulated in {run.wall_s:.2f} s "
-               f"({run.speedup:.0f}x real time)")
+               f"loop{rehearsed}): {verdict} - {run.simulated_s:.2f} s simulated in "
+               f"{run.wall_s:.2f} s ({run.speedup:.0f}x real time)")
     arm_limits = {j.name: j.max_velocity_deg_s for j in arm.joints}
     includes: tuple[str, ...] = ()
     for s in r.steps:
@@ -143,6 +144,27 @@ def _unusable(message: str, as_json: bool) -> None:
     fail(message)
 
 
+def _faults(specs: list[str]) -> list:
+    """``--sim-fault`` specs as faults (one line, exit 2, for a bad one)."""
+    from seqrun.sim.faults import parse_fault_spec
+
+    faults = []
+    for spec in specs:
+        try:
+            faults.append(parse_fault_spec(spec))
+        except ValueError as exc:
+            fail(f"--sim-fault '{spec}': {exc}")
+    return faults
+
+
+def _check_fault_modules(faults: list, arm) -> None:
+    """The simulated arm has the arm file's modules (as ``seqrun run`` checks)."""
+    for fault in faults:
+        if fault.module is not None and fault.module not in arm.module_ids:
+            fail(f"--sim-fault '{fault.spec}': the arm has no module {fault.module} "
+                 f"(modules {', '.join(map(str, arm.module_ids))})")
+
+
 def _cut(text: str, width: int) -> str:
     """``text`` in at most ``width`` characters; a cut one ends in "…"."""
     return text if len(text) <= width else text[:width - 1] + "…"
@@ -168,9 +190,10 @@ def validate_command(
                           "that do not include the start-up).")] = False,
     speed: Annotated[float, typer.Option("--speed", help="Speed override of the dry run, "
                                                          "0 < F <= 1.")] = 1.0,
-    cycle_hz: Annotated[float | None, typer.Option(
-        "--cycle-hz", help="Control-loop rate of the dry run (default: the arm file's "
-                           "control.dry_run_cycle_hz).")] = None,
+    sim_fault: Annotated[list[str] | None, typer.Option(
+        "--sim-fault", metavar="SPEC", help="Rehearse a simulator fault in the dry run, as "
+        "seqrun run --sim-fault injects it: MODULE:KIND@SECONDS from the start (e.g. "
+        "4:tow_error@2.5, all:halt@3, 3:drop_acks=0.3@0); repeatable.")] = None,
     junit_file: Annotated[Path | None, typer.Option(
         "--junit", metavar="FILE", help="Also write a JUnit report (one test per file; "
                                         "gives the summary table).")] = None,
@@ -188,8 +211,9 @@ def validate_command(
     """
     if not 0 < speed <= 1:
         fail(f"--speed must lie in (0, 1], got {speed:g}")
-    if cycle_hz is not None and not 5 <= cycle_hz <= 500:
-        fail(f"--cycle-hz must lie in [5, 500], got {cycle_hz:g}")
+    faults = _faults(sim_fault or [])
+    if faults and static:
+        fail("--sim-fault rehearses a fault in the dry run: leave out --static")
     if report_file is not None and (static or not report_file.parent.is_dir()
                                     or len(files) != 1 or _is_dir(files[0])):
         fail("--report draws the dry run: leave out --static" if static
@@ -201,7 +225,7 @@ def validate_command(
 
         try:
             results = validate_files(files, start=start, arm_file=arm_file, started=started,
-                                     static=static, speed=speed, cycle_hz=cycle_hz,
+                                     static=static, speed=speed, faults=faults,
                                      project_dir=project_dir)
             valid = report(results, as_json=as_json, junit_file=junit_file)
         except UserInputError as exc:
@@ -227,8 +251,9 @@ def validate_command(
     if check.valid and not static:
         from seqrun.service.dryrun import dry_run
 
+        _check_fault_modules(faults, check.arm)
         run = dry_run(check.loaded, check.arm, check.start_deg, start_pose=start or START_POSE,
-                      started=started, speed=speed, cycle_hz=cycle_hz, report_html=report_file)
+                      started=started, speed=speed, report_html=report_file, faults=faults)
         if run.report_error:
             fail(f"cannot write the report: {run.report_error}")
     valid = check.valid and (run is None or run.passed)

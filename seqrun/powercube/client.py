@@ -302,7 +302,8 @@ class PowerCubeClient:
         results: list[Ack | None] = [None] * len(requests)
         with self._lock:
             self._check_open()
-            self._drain_tainted({k for k in keys if k is not None})
+            if self._taints:  # (nothing in quarantine, the usual case: nothing to wait for)
+                self._drain_tainted({k for k in keys if k is not None})
             self._flush_queued()
             self._service_watchdog(self.clock.now())
             pending: dict[AckKey, deque[int]] = {}

@@ -88,7 +88,7 @@ def static_check(file: Path, *, start: str | None = None,
                                                  started=started, speed=speed,
                                                  incomplete=bool(check.errors))
     check.errors = sort_errors(check.errors + result.errors)
-    check.notes = result.notes
+    check.notes = check.arm.notes + result.notes
     check.clearances = [result.clearances[n] for n in sorted(result.clearances)]
     check.proximities = [result.proximities[n] for n in sorted(result.proximities)]
     return check

@@ -2,10 +2,10 @@
 
 Nothing here opens a real bus: the connection is always the built-in simulator, on a
 :class:`~seqrun.clock.VirtualClock`, started in the given pose. The executor, planner,
-client, codec and simulated wire are the ones a real run uses; the only difference is the
-control-loop rate (``control.dry_run_cycle_hz``): the modules' own ramps interpolate between
-setpoints, so a slower stream changes the simulated durations by about one cycle while
-making the dry run far faster than real time.
+client, codec, simulated wire and control-loop rate (``control.cycle_hz``) are the ones a
+run uses, so every figure of a dry run (durations, velocities, following error, guard
+clearances, the verdict and the failing step, under a rehearsed ``--sim-fault`` too) is
+the one ``seqrun run --virtual-time`` reports (tests/test_dryrun_is_the_run.py).
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 from seqrun.arm.description import ArmDescription
 from seqrun.clock import VirtualClock
@@ -28,6 +28,9 @@ from seqrun.powercube.codec import SetParam
 from seqrun.powercube.protocol import ParamId
 from seqrun.service.runner import run_sequence
 from seqrun.sequence.loader import LoadedSequence
+
+if TYPE_CHECKING:
+    from seqrun.sim.faults import Fault
 
 #: Checks a simulator cannot make for the operator, listed in every dry-run report.
 ALWAYS_UNVERIFIED = (
@@ -46,6 +49,8 @@ class DryRun:
     events: list[dict] = field(default_factory=list, repr=False)
     #: Why the requested report could not be drawn (None: written or not asked for).
     report_error: str | None = None
+    #: The simulator faults rehearsed (spec strings, as ``--sim-fault`` takes them).
+    faults: list[str] = field(default_factory=list)
 
     @property
     def passed(self) -> bool:
@@ -63,7 +68,7 @@ class DryRun:
         r = self.result
         return {
             "passed": self.passed, "status": r.status, "message": r.message,
-            "start_pose": self.start_pose, "cycle_hz": self.cycle_hz,
+            "start_pose": self.start_pose, "cycle_hz": self.cycle_hz, "faults": self.faults,
             "simulated_s": round(self.simulated_s, 4),
             "planned_motion_s": round(r.planned_duration_s, 4),
             "wall_s": round(self.wall_s, 4), "speedup": round(self.speedup, 1),
@@ -93,7 +98,7 @@ def dry_run(loaded: LoadedSequence, arm: ArmDescription, start_deg: Mapping[str,
             start_pose: str = "park", started: bool = False, speed: float = 1.0,
             cycle_hz: float | None = None, command_mode: str | None = None,
             time_limit_s: float | None = None,
-            report_html: Path | None = None) -> DryRun:
+            report_html: Path | None = None, faults: Sequence[Fault] = ()) -> DryRun:
     """Run ``loaded`` on a simulated arm standing at ``start_deg`` (user degrees).
 
     ``started``: the simulated modules are reset, homed and limited before the run (for
@@ -101,13 +106,15 @@ def dry_run(loaded: LoadedSequence, arm: ArmDescription, start_deg: Mapping[str,
     file's ``control.max_dry_run_s``): simulated time after which the dry run stops with
     an error, so that no sequence makes validation run for ever. ``report_html``: draw the
     dry run's report there (the run is logged to a temporary run folder for it, which
-    costs time).
+    costs time). ``cycle_hz``: another loop rate than the arm file's (benchmarks; the
+    figures are then not the run's). ``faults``: simulator faults to rehearse, timed from
+    the start of the dry run as ``seqrun run --virtual-time --sim-fault`` times them.
     """
     if report_html is not None:
         with tempfile.TemporaryDirectory(prefix="seqrun-dry-run-") as folder:
             run = _dry_run(loaded, arm, start_deg, start_pose=start_pose, started=started,
                            speed=speed, cycle_hz=cycle_hz, command_mode=command_mode,
-                           time_limit_s=time_limit_s, log_dir=Path(folder))
+                           time_limit_s=time_limit_s, log_dir=Path(folder), faults=faults)
             try:
                 from seqrun.report import write_html
 
@@ -117,13 +124,13 @@ def dry_run(loaded: LoadedSequence, arm: ArmDescription, start_deg: Mapping[str,
         return run
     return _dry_run(loaded, arm, start_deg, start_pose=start_pose, started=started,
                     speed=speed, cycle_hz=cycle_hz, command_mode=command_mode,
-                    time_limit_s=time_limit_s)
+                    time_limit_s=time_limit_s, faults=faults)
 
 
 def _dry_run(loaded: LoadedSequence, arm: ArmDescription, start_deg: Mapping[str, float], *,
              start_pose: str, started: bool, speed: float, cycle_hz: float | None,
              command_mode: str | None, time_limit_s: float | None = None,
-             log_dir: Path | None = None) -> DryRun:
+             log_dir: Path | None = None, faults: Sequence[Fault] = ()) -> DryRun:
     # The objects that exist before the dry run (a validating process: pydantic's models,
     # numpy, the sequence's) are not its garbage: out of the collector's sight while it runs,
     # the collections its own objects cause do not traverse them again. Back in sight
@@ -136,7 +143,7 @@ def _dry_run(loaded: LoadedSequence, arm: ArmDescription, start_deg: Mapping[str
         return _dry_run_unfrozen(loaded, arm, start_deg, start_pose=start_pose,
                                  started=started, speed=speed, cycle_hz=cycle_hz,
                                  command_mode=command_mode, time_limit_s=time_limit_s,
-                                 log_dir=log_dir)
+                                 log_dir=log_dir, faults=faults)
     finally:
         if freeze:
             gc.unfreeze()
@@ -145,12 +152,14 @@ def _dry_run(loaded: LoadedSequence, arm: ArmDescription, start_deg: Mapping[str
 def _dry_run_unfrozen(loaded: LoadedSequence, arm: ArmDescription,
                       start_deg: Mapping[str, float], *, start_pose: str, started: bool,
                       speed: float, cycle_hz: float | None, command_mode: str | None,
-                      time_limit_s: float | None, log_dir: Path | None) -> DryRun:
+                      time_limit_s: float | None, log_dir: Path | None,
+                      faults: Sequence[Fault]) -> DryRun:
     clock = VirtualClock()
     positions = {j.module: j.to_module_rad(start_deg[j.name]) for j in arm.joints}
     connection = open_connection(force_sim=True, clock=clock, sim_positions=positions,
-                                 default_bitrate=arm.can.bitrate, python_can=False)
-    hz = cycle_hz or arm.control.dry_run_cycle_hz
+                                 faults=list(faults), default_bitrate=arm.can.bitrate,
+                                 python_can=False)
+    hz = cycle_hz or arm.control.cycle_hz
     events: list[dict] = []
     try:
         if started:
@@ -164,7 +173,8 @@ def _dry_run_unfrozen(loaded: LoadedSequence, arm: ArmDescription,
         wall = time.perf_counter() - wall
     finally:
         connection.close()
-    return DryRun(outcome.result, start_pose, hz, wall, events)
+    return DryRun(outcome.result, start_pose, hz, wall, events,
+                  faults=[f.spec for f in faults])
 
 
 def _bounded(seconds: float):

@@ -102,11 +102,11 @@ class ForeignFrameWatch:
         self._sent: Counter[tuple[int, bytes]] = Counter()
 
     def __call__(self, msg) -> None:
-        if not is_request_frame(msg):
-            return
         if not msg.is_rx:  # one of ours, as it leaves (every request: no key made for it)
-            if self.echoes_own:
+            if self.echoes_own and is_request_frame(msg):
                 self._sent[msg.arbitration_id, bytes(msg.data)] += 1
+            return
+        if not is_request_frame(msg):
             return
         key = (msg.arbitration_id, bytes(msg.data))
         if self._sent[key] > 0:

@@ -410,7 +410,10 @@ class SimNetwork:
         queue = node.queue
         if not queue:
             self._active.append(node)
-        key = _arbitration_key(frame) << _SEQ_BITS | next(self._seq)
+        # (_arbitration_key of a standard data frame, every module's and nearly every
+        # host's, without the call)
+        key = ((frame.can_id << 21 if not (frame.is_extended or frame.is_remote)
+                else _arbitration_key(frame)) << _SEQ_BITS | next(self._seq))
         queue.append(_new_tuple(_Pending, (frame, ready_at, key, *durations)))
 
     def _notify_all(self) -> None:
