@@ -43,7 +43,6 @@ from seqrun.events import EventHub, make_event
 from seqrun.errors import BusError, RunAborted
 from seqrun.arm.limits import LimitsInForce
 from seqrun.arm.planner import Limits, MovePlan, plan_move, plan_stop
-from seqrun.drivers.usermessages import user_message
 from seqrun.arm.telemetry import VelocityWindow, joint_flags
 from seqrun.arm.tracking import MoveTracking, velocity_window
 from seqrun.stop_requests import FROM_OUTSIDE, OPERATOR_HALT, StopRequest, StopRequests
@@ -242,6 +241,12 @@ class Executor:
         handler = getattr(self.driver, "on_discard", None)
         if handler is not None:
             handler(msg, reason)
+
+    def describe_error(self, exc: BaseException) -> str:
+        """``exc`` in the operator's words: a driver's error (a lost answer to a request)
+        in user degrees and joint names, as the driver describes it."""
+        describe = getattr(self.driver, "describe_error", None)
+        return describe(exc) if describe is not None else str(exc)
 
     # ------------------------------------------------------------------ events
     def emit(self, type_: str, **data: Any) -> None:
@@ -951,7 +956,7 @@ class Executor:
         except Exception as exc:  # noqa: BLE001 - nothing moves yet, but be sure
             self.emergency_halt()
             cause, module = fault_cause(exc)
-            message = user_message(exc, self.arm) + self._halt_note()
+            message = self.describe_error(exc) + self._halt_note()
             fault = {"cause": cause, "module": module, "message": message, "step": None,
                      **self._halt_fields()}
             self.emit("fault", **fault)
@@ -1022,7 +1027,7 @@ class Executor:
                     status, code = "aborted", EXIT_OPERATOR_ABORT
                 else:
                     status, code = "failed", EXIT_FAULT
-                message = user_message(exc, self.arm) + self._halt_note()
+                message = self.describe_error(exc) + self._halt_note()
                 if self._halt_requested and self._halt.cause in FROM_OUTSIDE \
                         and cause != self._halt.cause:
                     # What the modules showed (HALTED) came from outside: name the source.

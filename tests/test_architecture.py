@@ -127,8 +127,10 @@ WIRE = POWERCUBE + ("sim", "sim.*")
 #: helpers and the places that open a PowerCube client or read frames (the service layer's
 #: plumbing, the run and dry-run assembly, the CSV export of logged state bytes). Anything
 #: else asks the driver (issue 10.3): state codes, requests and their units stay behind it.
-POWERCUBE_SPEAKERS = {"drivers.powercube", "drivers.setpoints",
-                      "service.arm_access", "service.session", "service.foreign_frames",
+POWERCUBE_SPEAKERS = {"drivers.powercube", "drivers.powercube.driver",
+                      "drivers.powercube.setpoints", "drivers.powercube.states",
+                      "drivers.powercube.confirm", "drivers.powercube.foreign",
+                      "service.arm_access", "service.session",
                       "service.run_control", "service.runner", "service.dryrun",
                       "report.csvout"}
 

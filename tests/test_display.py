@@ -165,7 +165,7 @@ def test_request_descriptions_in_user_coordinates(arm):
     from seqrun.errors import ModuleTimeoutError
     from seqrun.powercube.codec import SetMotion, SetParam
     from seqrun.powercube.protocol import MotionMode, ParamId
-    from seqrun.drivers.usermessages import user_message
+    from seqrun.drivers.powercube.messages import user_message
 
     j2 = arm.joint("j2")
     exc = ModuleTimeoutError(j2.module, "whatever", 0.05,
@@ -271,7 +271,7 @@ def test_request_descriptions_give_rates_without_the_offset(arm):
 
     from seqrun.powercube.codec import SetMotion, SetParam
     from seqrun.powercube.protocol import MotionMode, ParamId
-    from seqrun.drivers.usermessages import describe_request
+    from seqrun.drivers.powercube.messages import describe_request
 
     j2 = arm.joint("j2")
     rate = math.radians(12.5)

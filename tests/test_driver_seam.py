@@ -31,7 +31,7 @@ from seqrun.arm.targets import pose_joints_deg
 ARM = shipped_arm()
 #: Modules that only PowerCube code may import.
 POWERCUBE_ONLY = ("seqrun.powercube",
-                  "seqrun.drivers.powercube", "seqrun.drivers.setpoints")
+                  "seqrun.drivers.powercube", "seqrun.drivers.powercube.setpoints")
 
 
 def imported_modules(path: Path) -> set[str]:

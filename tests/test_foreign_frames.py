@@ -17,7 +17,7 @@ from seqrun.service.connection import Connection, open_connection
 from seqrun.service.runlog import read_trace
 from seqrun.service.runner import run_sequence
 from seqrun.sequence.loader import load_sequence
-from seqrun.service.foreign_frames import ForeignFrame, ForeignFrameWatch, is_request_frame
+from seqrun.drivers.powercube.foreign import ForeignFrame, ForeignFrameWatch, is_request_frame
 from seqrun.sim.arm import SimArm
 from seqrun.sim.bus import SimBus
 from seqrun.sim.network import SimNetwork

@@ -97,11 +97,11 @@ class StatusSource:
 
     def _open(self) -> None:
         from seqrun.cli.zero import zero_for_reading
-        from seqrun.service.foreign_frames import ForeignFrameWatch
+        from seqrun.service.arm_access import watch_foreign_frames
 
         self.connection, self.client = self.open_bus()
-        self.client.add_frame_listener(ForeignFrameWatch(
-            self._foreign.append, echoes_own=self.connection.echoes_own))
+        watch_foreign_frames(self.client, self._foreign.append,
+                             echoes_own=self.connection.echoes_own)
         self._arm_read, text = zero_for_reading(self.connection, self.arm)
         if self.zero_text is None:
             self.zero_text = text

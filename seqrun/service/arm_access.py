@@ -133,6 +133,14 @@ def modules_homed(connection, arm) -> bool:
     return all(StateFlag(cast(GetParamAck, a).value) & StateFlag.HOME_OK for a in acks)
 
 
+def watch_foreign_frames(client: Any, on_foreign: Any, *, echoes_own: bool = False) -> None:
+    """Call ``on_foreign(frame)`` for every request frame ``client`` receives that this
+    process did not send (another master on the bus)."""
+    from seqrun.drivers.powercube.foreign import ForeignFrameWatch
+
+    client.add_frame_listener(ForeignFrameWatch(on_foreign, echoes_own=echoes_own))
+
+
 def broadcast_and_confirm(client: Any, what: str, modules: Iterable[int]
                           ) -> CommandConfirmation:
     """Broadcast ``what`` ("halt" or "reset") and confirm it on every module of

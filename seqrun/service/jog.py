@@ -173,7 +173,6 @@ def run_jog(executor, plan: JogPlan, deadman: Deadman) -> tuple[str, int, str]:
     from seqrun.defaults import EXIT_FAULT, EXIT_OK
     from seqrun.results import OperatorAbort, fault_cause, halt_fields
     from seqrun.arm.planner import Limits
-    from seqrun.drivers.usermessages import user_message
 
     arm = executor.arm
     hook = deadman.arm(executor.abort)
@@ -203,7 +202,7 @@ def run_jog(executor, plan: JogPlan, deadman: Deadman) -> tuple[str, int, str]:
     except Exception as exc:  # noqa: BLE001 - every failure, even a bug, halts
         executor.emergency_halt()
         cause, module = fault_cause(exc)
-        message = user_message(exc, arm)
+        message = executor.describe_error(exc)
         if cause == "operator_halt":
             return "aborted", 130, f"jog {plan.joint}: {message}"
         executor.emit("fault", cause=cause, module=module, message=message, step=None,

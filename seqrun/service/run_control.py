@@ -15,7 +15,7 @@ import time
 from collections import deque
 from typing import Any
 
-from seqrun.service.foreign_frames import ForeignFrame, ForeignFrameWatch
+from seqrun.drivers.powercube.foreign import ForeignFrame, ForeignFrameWatch
 from seqrun.stop_requests import FOREIGN_MASTER, REMOTE_HALT, StopRequests
 
 #: How long a ``halt`` request waits for the run's own Halt confirmation before this

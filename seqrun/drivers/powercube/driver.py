@@ -4,7 +4,7 @@ Everything that knows PowerCube frames lives here (or in the client and codec be
 
 - reads: FPosStateDio per module, or ActPos + CubeState while that request is in
   quarantine after a lost acknowledge; a lost read is retried once by the other path;
-- a control cycle: the setpoint law's requests (:mod:`seqrun.drivers.setpoints`) plus
+- a control cycle: the setpoint law's requests (:mod:`seqrun.drivers.powercube.setpoints`) plus
   reads of the other modules, pipelined; every acknowledge is looked at as it arrives and
   the first that says NOT_OK ends the cycle at once (:class:`~seqrun.drivers.base.MotionRefused`)
   so that the executor halts before the rest of the batch is collected;
@@ -26,141 +26,24 @@ from typing import Any
 import numpy as np
 
 from seqrun.arm.description import ArmDescription
+from seqrun.arm.planner import Limits, MovePlan
 from seqrun.drivers.base import (CommandConfirmation, EventSink, JointLimits, JointReading,
                                  JointState, LimitValues, MotionRefused)
-from seqrun.drivers.setpoints import SetpointLaw, setpoint_law
-from seqrun.errors import BusError, CodecError, ModuleTimeoutError, RunAborted
-from seqrun.arm.planner import Limits, MovePlan
+from seqrun.drivers.powercube.confirm import confirm_command
+from seqrun.drivers.powercube.messages import user_message
+from seqrun.drivers.powercube.setpoints import SetpointLaw, setpoint_law
+from seqrun.drivers.powercube.states import joint_state, short_state
+from seqrun.errors import BusError, ModuleTimeoutError, RunAborted
 from seqrun.powercube.codec import (BroadcastRequest, GetParam, GetParamAck, MotionExtAck,
                                     Request, SetMotion, SetParam)
 from seqrun.powercube.protocol import CommandId, ConfigFlag, ParamId, ShortState, StateFlag
 
-#: Rounds of "command, read back" before a module counts as not confirming.
-DEFAULT_ATTEMPTS = 3
-
 #: float32 on the wire: a read-back equal within this is the value written.
 READBACK_TOLERANCE_RAD = 1e-6
-
-#: Most specific first: the cause named in the report.
-FAULT_CAUSES = ("TOW_ERROR", "BEYOND_HARD", "BEYOND_SOFT", "POWERFAULT", "COMM_ERROR",
-                "CPU_OVERLOAD", "HALTED", "ERROR")
 
 
 def _no_events(type_: str, **data: Any) -> None:
     """Event sink until the executor configures the driver."""
-
-
-# ---------------------------------------------------------------------- state decoding
-def short_state(flags: StateFlag) -> ShortState:
-    """The short state a module would report for this state word (table B.3)."""
-    short = ShortState(0)
-    if flags & (StateFlag.ERROR | StateFlag.HALTED) or not flags & StateFlag.HOME_OK:
-        short |= ShortState.NOT_OK
-    if flags & StateFlag.MOTION:
-        short |= ShortState.MOTION
-    if flags & StateFlag.RAMP_END:
-        short |= ShortState.RAMP_END
-    return short
-
-
-def joint_state(flags: StateFlag | int) -> JointState:
-    """A module's state word, decoded."""
-    flags = StateFlag(flags)
-    faults = StateFlag(flags & StateFlag.FAULTS)
-    cause = next((name.lower() for name in FAULT_CAUSES if faults & StateFlag[name]),
-                 "not_homed")
-    return JointState(homed=bool(flags & StateFlag.HOME_OK),
-                      halted=bool(flags & StateFlag.HALTED),
-                      moving=bool(flags & StateFlag.MOTION),
-                      faulted=bool(faults), cause=cause, text=flags.describe(),
-                      fault_text=faults.describe() if faults else "",
-                      cycle_code=int(short_state(flags)))
-
-
-# ---------------------------------------------------------------------- Halt / Reset, confirmed
-def confirm_command(client, command: CommandId, modules: Iterable[int], *,
-                    attempts: int = DEFAULT_ATTEMPTS, timeout: float | None = None,
-                    retry_pause_s: float = 0.0) -> CommandConfirmation:
-    """Broadcast Halt or Reset and confirm it on every module by reading its state back.
-
-    1. Halt goes out **first** (``client.halt_now()``), before anything already queued on
-       the bus is read: a flood of queued frames must not delay a stop. Reset goes out as
-       its broadcast.
-    2. Every module's CubeState is read back (pipelined); Halt is confirmed by HALTED,
-       Reset by no fault bit left (a fault Reset cannot clear, e.g. a power fault, leaves
-       the module unconfirmed, named with its state).
-    3. For modules that did not confirm, the broadcast goes out again (after
-       ``retry_pause_s``: time for a busy module to settle) and they are read again, up to
-       ``attempts`` rounds in all.
-
-    Never raises for the bus: a command that could not be sent gives ``sent=False`` and
-    the error; modules that never answer are unconfirmed with "no answer".
-    """
-    if command not in (CommandId.HALT, CommandId.RESET):
-        raise CodecError(f"confirm_command: {command.name} is not Halt or Reset")
-    name = command.name.lower()
-    wanted = tuple(dict.fromkeys(modules))
-    result = CommandConfirmation(name, wanted, unconfirmed={m: "no answer" for m in wanted})
-    clock = client.clock
-    t_first: float | None = None
-    for attempt in range(1, max(1, attempts) + 1):
-        result.attempts = attempt
-        if attempt > 1 and retry_pause_s > 0:
-            client.idle(retry_pause_s)
-        try:
-            if command == CommandId.HALT:
-                client.halt_now()
-            else:
-                client.transact([BroadcastRequest(command, 0)])
-            result.sent = True
-            if t_first is None:
-                t_first = clock.now()
-        except Exception as exc:  # noqa: BLE001 - any failure of the bus is reported
-            result.error = f"sending the {command.name.capitalize()} failed: {exc}"
-            break
-        waiting = [m for m in wanted if m in result.unconfirmed]
-        try:
-            acks = client.transact_partial([GetParam(m, ParamId.CUBE_STATE) for m in waiting],
-                                           timeout)
-        except Exception as exc:  # noqa: BLE001
-            result.error = f"reading the modules back failed: {exc}"
-            continue
-        for module, ack in zip(waiting, acks):
-            if not isinstance(ack, GetParamAck):
-                result.unconfirmed[module] = "no answer"
-                continue
-            state = joint_state(int(ack.value))  # type: ignore[arg-type]
-            result.states[module] = state
-            took_effect = state.halted if command == CommandId.HALT else not state.faulted
-            if took_effect:
-                result.unconfirmed.pop(module, None)
-            else:
-                result.unconfirmed[module] = f"state {state.text}"
-        if not result.unconfirmed:
-            result.error = None
-            break
-    result.duration_s = 0.0 if t_first is None else clock.now() - t_first
-    return result
-
-
-#: Seconds between rounds of ``seqrun halt|reset``: time for a module that was busy to settle.
-RETRY_PAUSE_S = 0.02
-
-
-def halt_and_confirm(client, modules: Iterable[int], *,
-                     attempts: int = DEFAULT_ATTEMPTS) -> CommandConfirmation:
-    """Halt every module of ``modules`` and read back that each one is HALTED."""
-    return confirm_command(client, CommandId.HALT, modules, attempts=attempts)
-
-
-def command_and_confirm(client, command: CommandId, modules: Iterable[int], *,
-                        attempts: int = DEFAULT_ATTEMPTS,
-                        timeout: float | None = None) -> CommandConfirmation:
-    """``seqrun halt|reset``: broadcast ``command`` (HALT or RESET), then confirm it on every
-    module of ``modules``, pausing between rounds. "Sent" is not "done": a broadcast is never
-    acknowledged, and a frame can be lost on a busy or shared bus."""
-    return confirm_command(client, command, sorted(set(modules)), attempts=attempts,
-                           timeout=timeout, retry_pause_s=RETRY_PAUSE_S)
 
 
 # ---------------------------------------------------------------------- the driver
@@ -237,6 +120,10 @@ class PowerCubeDriver:
         malformed); it goes into the event log."""
         self.emit("frame_discarded", can_id=f"0x{msg.arbitration_id:03X}",
                   data=bytes(msg.data).hex(" "), reason=str(getattr(reason, "value", reason)))
+
+    def describe_error(self, exc: BaseException) -> str:
+        """``str(exc)``, with a request that got no answer described in user degrees."""
+        return user_message(exc, self.arm)
 
     # ------------------------------------------------------------------ bus helpers
     def transact(self, requests: list, *, idempotent: bool = False) -> list:
