@@ -17,9 +17,9 @@ from any thread (signal handler, web console); the run loop acts on them within 
 Events are typed records (seqrun/events.py): the run log records them synchronously
 (``listeners``); faces subscribe to ``events`` on queues of their own.
 
-The executor speaks joints: user degrees (planning, checks, events) and the drive's radians
-(what the driver reports); everything about the arm's wire protocol (frames, retries, state
-words, watchdog, Halt) is behind :class:`seqrun.drivers.base.ArmDriver`.
+The executor speaks joints in user degrees (planning, checks, events, what the driver
+reports); everything about the arm's wire protocol (units and offsets, frames, retries,
+state words, watchdog, Halt) is behind :class:`seqrun.drivers.base.ArmDriver`.
 """
 
 from __future__ import annotations
@@ -56,6 +56,10 @@ if TYPE_CHECKING:
 
 #: A synchronous recorder: gets every typed event (it reads like the events.jsonl dict).
 Listener = Callable[[Any], None]
+
+#: MinPos/MaxPos the drives hold count as the arm file's within this (the float32 a drive
+#: stores, 1e-5 rad).
+LIMITS_MATCH_DEG = math.degrees(1e-5)
 
 
 @dataclass
@@ -120,7 +124,6 @@ class Executor:
         self.idle_hooks: list[Callable[[float], None]] = []
         self.dry_run = dry_run
         self.chain = kinematics.Chain.from_arm(arm)
-        self.offsets_deg = np.array([j.offset_deg for j in arm.joints])
         self.modules = arm.module_ids
         self.movable = [i for i, j in enumerate(arm.joints) if j.locked is None]
         self.limits = Limits.from_arm(arm, speed=speed)
@@ -245,8 +248,7 @@ class Executor:
     def describe_error(self, exc: BaseException) -> str:
         """``exc`` in the operator's words: a driver's error (a lost answer to a request)
         in user degrees and joint names, as the driver describes it."""
-        describe = getattr(self.driver, "describe_error", None)
-        return describe(exc) if describe is not None else str(exc)
+        return self.driver.describe_error(exc)
 
     # ------------------------------------------------------------------ events
     def emit(self, type_: str, **data: Any) -> None:
@@ -342,13 +344,6 @@ class Executor:
         self.emit("measurement", after=after, joints_deg=_r(m.user_deg), state=short,
                   states={str(k): v.describe() for k, v in words.items()})
 
-    # ------------------------------------------------------------------ conversions
-    def to_module_rad(self, user_deg: np.ndarray) -> np.ndarray:
-        return np.radians(np.asarray(user_deg) + self.offsets_deg)
-
-    def to_user_deg(self, module_rad: np.ndarray) -> np.ndarray:
-        return np.degrees(np.asarray(module_rad)) - self.offsets_deg
-
     # ------------------------------------------------------------------ the driver
     # Every call below reaches the bus: each one counts as a sign of life of the run loop
     # (the watchdog keeper feeds the modules only while the loop makes progress).
@@ -358,8 +353,7 @@ class Executor:
         return self._measured(self.driver.read())
 
     def _measured(self, reading) -> Measurement:
-        m = Measurement(self.clock.now(), self.to_user_deg(reading.positions_rad),
-                        reading.states)
+        m = Measurement(self.clock.now(), reading.positions_deg, reading.states)
         self.last = m
         return m
 
@@ -820,12 +814,10 @@ class Executor:
         # MinPos/MaxPos/MaxVel/MaxAcc stay stored in the modules across runs.
         self._heartbeat = time.monotonic()
         stored = self.driver.read_limits()
-        written = all(
-            abs(held.min_position - j.to_module_rad(j.limits_deg[0])) < 1e-5
-            and abs(held.max_position - j.to_module_rad(j.limits_deg[1])) < 1e-5
-            for j, held in zip(self.arm.joints, stored))
-        module_limits = {j.name: (math.degrees(held.max_velocity),
-                                  math.degrees(held.max_acceleration))
+        written = all(abs(held.min_deg - j.limits_deg[0]) < LIMITS_MATCH_DEG
+                      and abs(held.max_deg - j.limits_deg[1]) < LIMITS_MATCH_DEG
+                      for j, held in zip(self.arm.joints, stored))
+        module_limits = {j.name: (held.max_velocity_deg_s, held.max_acceleration_deg_s2)
                          for j, held in zip(self.arm.joints, stored)}
         self.limits_in_force.read_back(module_limits)
         ready = all(f.ready for f in states.values())

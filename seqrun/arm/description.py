@@ -3,7 +3,8 @@
 Joint limits, offsets, velocity/acceleration/jerk maxima, the locked joint, the kinematic
 chain, CAN defaults, control-loop settings and workspace guards all come from this file;
 nothing about the arm is hard-coded elsewhere. Angles are degrees in user coordinates
-(Totem = zeros); ``module_position = user_position + offset``.
+(Totem = zeros); ``module_position = user_position + offset`` (the driver converts:
+:mod:`seqrun.drivers.powercube.units`).
 """
 
 from __future__ import annotations
@@ -51,13 +52,6 @@ class Joint(_Strict):
         if self.locked is not None and not lo <= self.locked <= hi:
             raise ValueError(f"locked value {self.locked} of {self.name} is outside its limits")
         return self
-
-    # Conversions between the user's degrees and the module's radians.
-    def to_module_rad(self, user_deg: float) -> float:
-        return math.radians(user_deg + self.offset_deg)
-
-    def to_user_deg(self, module_rad: float) -> float:
-        return math.degrees(module_rad) - self.offset_deg
 
 
 class Frame(_Strict):
@@ -238,6 +232,9 @@ class PowerOffPose(_Strict):
 class ArmDescription(_Strict):
     name: str
     description: str = ""
+    driver: str = Field(
+        "powercube", description="How seqrun speaks to the arm's modules: the name of an arm "
+                                 "driver (powercube: Schunk PowerCube modules over CAN).")
     can: CanSettings = CanSettings()
     control: Control = Control()
     joints: list[Joint] = Field(min_length=1)

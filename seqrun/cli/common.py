@@ -98,7 +98,7 @@ def connect(arm: ArmDescription, interface: Optional[str], channel: Optional[str
             bitrate: Optional[int], bus_kwargs: Optional[list[str]], sim: bool,
             faults: Optional[list[str]] = None, *,
             response_timeout_ms: Optional[float] = None, claim: bool = True):
-    """Open the bus and a PowerCubeClient on it: ``(connection, client)``. The bus is
+    """Open the bus and the arm's driver on it: ``(connection, driver)``. The bus is
     claimed for a moment (these commands are done in a second or two): a run's claim
     refuses them, naming it (exit 2)."""
     from seqrun.service.arm_access import open_arm

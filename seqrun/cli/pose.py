@@ -113,9 +113,9 @@ def save_pose_command(
         path = output or (poses_dir / f"{name}.yaml")
         if path.exists() and not force:
             fail(f"{path} exists (use --force to overwrite)")
-        connection, client = connect(arm, interface, channel, bitrate, bus_kwargs, sim)
+        connection, driver = connect(arm, interface, channel, bitrate, bus_kwargs, sim)
     if connection.is_simulator and not sim:
-        client.close()
+        driver.close()
         connection.close()
         fail("no CAN interface configured: pose save reads the arm on a bus (-i/-c or "
              "python-can's configuration); give --sim to read the built-in simulator")
@@ -126,14 +126,15 @@ def save_pose_command(
 
         arm, zero_text = zero_for_reading(connection, arm)
         typer.echo(zero_text)
-        readings = client.read_arm(arm.module_ids)
+        driver.use_arm(arm)
+        reading = driver.read()
     except BusError as exc:
         fail(f"cannot read the arm: {exc}", 3)
     finally:
-        client.close()
+        driver.close()
         connection.close()
-    joints = {j.name: round(j.to_user_deg(r.position), 3)
-              for j, r in zip(arm.joints, readings) if j.locked is None}
+    joints = {j.name: round(float(x), 3)
+              for j, x in zip(arm.joints, reading.positions_deg) if j.locked is None}
     with user_errors():
         try:
             pose = pose_document(name, arm, joints, description=description,

@@ -2,7 +2,7 @@
 
 Every face (``seqrun run`` and the arm commands, the web console, a future ROS 2 bridge) goes
 through an :class:`ArmSession` and its typed results and events (:mod:`seqrun.events`), never
-through the executor or the PowerCube client.
+through the executor or the arm's driver.
 
 What it guarantees:
 
@@ -14,7 +14,7 @@ What it guarantees:
   built in memory, validated by the same validator and run by the same executor (the same
   per-cycle checks, the same Halt on any fault).
 - :meth:`ArmSession.halt` **never waits behind anything**: it sends the Halt broadcast from
-  the caller's thread (the client's ``halt_now`` path takes no lock a run holds), posts a Halt
+  the caller's thread (the driver's ``halt_now`` path takes no lock a run holds), posts a Halt
   request to a running activity's stop-request inbox, and then confirms by reading every
   module back.
 - **Status without touching the bus**: :meth:`ArmSession.status` returns the latest
@@ -227,8 +227,8 @@ class ArmSession:
                  response_timeout_s: float | None = None, own_connection: bool = True,
                  jog_deadman_s: float = JOG_DEADMAN_S,
                  loop_priority: int | None = None) -> None:
+        from seqrun.drivers.registry import open_driver
         from seqrun.service.connection import response_timeout_s as default_timeout
-        from seqrun.powercube.client import PowerCubeClient
         from seqrun.shipped import shipped_dir
 
         self.arm = arm
@@ -245,13 +245,12 @@ class ArmSession:
         self.poses_dir = poses_dir
         self.log_root = Path(log_root) if log_root is not None else (
             project.runs_dir if project is not None else Path("runs"))
-        self.client = PowerCubeClient(
-            connection.bus, self.clock,
-            response_timeout=(response_timeout_s if response_timeout_s is not None
-                              else default_timeout(arm)))
+        #: The arm's driver: every word to the modules goes through it.
+        self.driver = open_driver(arm, connection, response_timeout_s=(
+            response_timeout_s if response_timeout_s is not None else default_timeout(arm)))
         self._hub = EventHub()
         # _state guards the session's fields only (microseconds, never across bus I/O or a
-        # wait); _bus is held by whoever talks to the modules through the client (a poll,
+        # wait); _bus is held by whoever talks to the modules through the driver (a poll,
         # an activity). halt() takes neither before its broadcast.
         self._state = threading.RLock()
         self._bus = threading.Lock()
@@ -302,7 +301,7 @@ class ArmSession:
 
     def close(self) -> None:
         """Stop any motion (controlled stop; a Halt if that does not end it), stop the
-        status poll, close the client and (``own_connection``) the bus."""
+        status poll, close the driver and (``own_connection``) the bus."""
         with self._state:
             if self._closed:
                 return
@@ -318,13 +317,18 @@ class ArmSession:
         if self._poller is not None:
             self._poller.join(timeout=5.0)
         self._status_listener.close(timeout=1.0)
-        self.client.close()
+        self.driver.close()
         if self.own_connection:
             self.connection.close()
 
     @property
     def closed(self) -> bool:
         return self._closed
+
+    @property
+    def client(self) -> Any:
+        """The driver's bus client, where it has one (tests look at its frames)."""
+        return getattr(self.driver, "client", None)
 
     # ------------------------------------------------------------------ events and status
     @property
@@ -395,7 +399,8 @@ class ArmSession:
                 and m.clock_s < self._updated_at):
             return  # older than a reading the session took itself meanwhile
         if m.states:
-            self._homed = all("HOME_OK" in str(w).split("|") for w in m.states.values())
+            homed = self.driver.HOMED_FLAG
+            self._homed = all(homed in str(w).split("|") for w in m.states.values())
         self._joints = [float(x) for x in m.joints_deg]
         if m.velocities_deg_s is not None:
             self._velocities = [float(v) for v in m.velocities_deg_s]
@@ -411,7 +416,7 @@ class ArmSession:
 
     def status(self) -> ArmStatus:
         """The latest measurement and what the session does; never touches the bus."""
-        from seqrun.arm import kinematics
+        from seqrun.service.kinematics import end_effector
 
         with self._state:
             joints = list(self._joints)
@@ -421,36 +426,26 @@ class ArmSession:
             fault, updated, stale = self._fault, self._updated_at, self._stale
             activity, run, message = self._activity_state(), self._run_info, self._message
         rows = tuple(JointStatus(j.name, j.module, joints[i], velocities[i], targets[i],
-                                 flags.get(j.name, ()), _flags_fault(flags.get(j.name, ())),
+                                 flags.get(j.name, ()), self._flags_fault(flags.get(j.name, ())),
                                  j.locked is not None)
                      for i, j in enumerate(self.arm.joints))
         xyz = rpy = None
         if all(x is not None for x in joints):
-            import numpy as np
-
-            T = kinematics.fk(self._chain, np.radians(np.array(joints, dtype=float)))
-            x, y, z = (round(float(v), 3) for v in T[:3, 3])
-            roll, pitch, yaw = (round(float(v), 3)
-                                for v in np.degrees(kinematics.rpy_from_matrix(T[:3, :3])))
-            xyz, rpy = (x, y, z), (roll, pitch, yaw)
+            pose = end_effector(self.arm, joints)  # type: ignore[arg-type]
+            xyz, rpy = tuple(pose["position_mm"]), tuple(pose["rpy_deg"])
         return ArmStatus(rows, fault, xyz, rpy,
                          getattr(self.zero, "pose", None) if self.zero is not None
                          else getattr(self.arm, "zero_reference", None),
                          self.connection.description, bool(self.connection.is_simulator),
                          activity, run, updated, stale, message)
 
+    def _flags_fault(self, flags: tuple[str, ...]) -> bool:
+        """A joint's flag names (as its driver named them) say it is at fault."""
+        return any(n in self.driver.FAULT_FLAGS for n in flags)
+
     def status_dict(self) -> dict[str, Any]:
         """:meth:`status` as a JSON-ready dict (the control socket's ``status`` op)."""
         return self.status().as_dict()
-
-    @property
-    def _chain(self):
-        chain = self.__dict__.get("_chain_cache")
-        if chain is None:
-            from seqrun.arm import kinematics
-
-            chain = self.__dict__["_chain_cache"] = kinematics.Chain.from_arm(self.arm)
-        return chain
 
     def _activity_state(self) -> str:
         if self._activity is not None:
@@ -471,7 +466,7 @@ class ArmSession:
         and return the new status. The background poll calls this."""
         if self._bus.acquire(blocking=False):
             try:
-                if self._activity is None and not self.client.closed:
+                if self._activity is None and not self.driver.closed:
                     self._poll_once()
             finally:
                 self._bus.release()
@@ -479,12 +474,12 @@ class ArmSession:
 
     def _poll_once(self) -> None:
         """One pipelined read of ActPos, ActVel and CubeState of every module (bus held)."""
-        from seqrun.service.arm_access import poll_joints
         from seqrun.arm.telemetry import joint_flags
+        from seqrun.service.arm_access import read_joints
 
         arm = self.arm
         try:
-            joints, velocities, states = poll_joints(self.client, arm)
+            joints, velocities, states = read_joints(self.driver)
         except Exception as exc:  # noqa: BLE001 - a poll never raises: status goes stale
             self._poll_failed(str(exc))
             return
@@ -528,17 +523,16 @@ class ArmSession:
         """Halt broadcast now from this thread, stop any activity, confirm by reading every
         module back. Never waits behind a lock, a run or a queue before the broadcast."""
         from seqrun.errors import BusError
-        from seqrun.drivers.powercube import halt_and_confirm
 
         # The running activity's inbox first (a deque append: no lock, no wait), so that
         # the loop takes the modules' HALTED state for the operator's Halt (exit 130),
-        # then the broadcast from this thread, whatever holds the client.
+        # then the broadcast from this thread, whatever holds the bus.
         executor, activity = self._executor, self._activity
         if executor is not None:
             executor.halt(reason)
         sent_error = None
         try:
-            self.client.halt_now(wait=False)
+            self.driver.halt_now(wait=False)
         except BusError as exc:
             sent_error = str(exc)
         with self._state:
@@ -555,7 +549,7 @@ class ArmSession:
         if result is None:
             if self._bus.acquire(timeout=HALT_CONFIRM_WAIT_S):
                 try:
-                    result = halt_and_confirm(self.client, self.arm.module_ids)
+                    result = self.driver.halt_and_confirm()
                     if result.confirmed:
                         self._poll_once()
                 finally:
@@ -655,11 +649,10 @@ class ArmSession:
         from seqrun.executor import Executor
         from seqrun.stop_requests import StopRequests
 
-        executor = Executor(self.client, self.arm, self.clock,
+        executor = Executor(self.driver, self.arm, self.clock,
                             poses_dir=(loaded.pose_path or loaded.poses_dir) if loaded
                             else self.poses_dir, requests=StopRequests(), events=self._hub,
                             **kw)
-        self.client.on_discard = executor.on_discard
         self._adopt(executor)
         return executor
 
@@ -766,7 +759,7 @@ class ArmSession:
             raise Refused(f"{what}: the arm is halted ({halted or 'HALTED'}); reset it first")
         if not homed:
             return
-        bad = [f"{n}: {'|'.join(f)}" for n, f in flags.items() if _flags_fault(f)]
+        bad = [f"{n}: {'|'.join(f)}" for n, f in flags.items() if self._flags_fault(f)]
         if fault or bad:
             raise Refused(f"{what}: module fault ({'; '.join(bad) or 'NOT_OK'}); reset it first")
         if not measured:
@@ -984,7 +977,7 @@ class ArmSession:
                    bus_held: bool = False, cycle_hz: float | None = None,
                    record_zero: Callable[[str], Any] | None = None):
         """Run an already loaded and checked sequence on the caller's thread with the
-        session's client and event hub; returns the runner's outcome (result, report, run
+        session's driver and event hub; returns the runner's outcome (result, report, run
         folder). This is how ``seqrun run`` runs (its prompts are the terminal's own); faces
         that answer questions through events use :meth:`run_sequence`. ``record_zero``:
         what a power_off step calls to record the pose the arm is switched off in;
@@ -1012,7 +1005,7 @@ class ArmSession:
                                 confirm=confirm, before_step=before_step,
                                 on_executor=hook, confirm_clear_latched=confirm_clear_latched,
                                 meta=meta, html_report=html_report, requests=requests,
-                                warn=warn, client=self.client, events=self._hub)
+                                warn=warn, driver=self.driver, events=self._hub)
 
         if bus_held:  # run_sequence's worker: the activity is registered already
             return go()
@@ -1165,13 +1158,6 @@ class _Question:
 
     def __post_init__(self) -> None:
         self.answered = threading.Event()
-
-
-def _flags_fault(flags: tuple[str, ...]) -> bool:
-    from seqrun.powercube.protocol import StateFlag
-
-    return any(n in StateFlag.__members__ and StateFlag[n] & StateFlag.FAULTS for n in flags) \
-        or "NOT_OK" in flags
 
 
 def _result(kind: str, run, run_dir: Path | None = None) -> ActivityResult:

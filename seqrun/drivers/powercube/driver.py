@@ -20,19 +20,23 @@ from __future__ import annotations
 
 import math
 import threading
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
 from seqrun.arm.description import ArmDescription
 from seqrun.arm.planner import Limits, MovePlan
-from seqrun.drivers.base import (CommandConfirmation, EventSink, JointLimits, JointReading,
+from seqrun.drivers.base import (ArmPoll, CommandConfirmation, ConfirmedCommand, CycleState,
+                                 EventSink, ForeignTraffic, JointLimits, JointReading,
                                  JointState, LimitValues, MotionRefused)
-from seqrun.drivers.powercube.confirm import confirm_command
+from seqrun.drivers.powercube.confirm import (DEFAULT_ATTEMPTS, command_and_confirm,
+                                              confirm_command)
 from seqrun.drivers.powercube.messages import user_message
 from seqrun.drivers.powercube.setpoints import SetpointLaw, setpoint_law
-from seqrun.drivers.powercube.states import joint_state, short_state
+from seqrun.drivers.powercube.states import (FAULT_FLAGS, HOMED_FLAG, cycle_state,
+                                             joint_state, short_state)
+from seqrun.drivers.powercube.units import ModuleUnits, module_positions
 from seqrun.errors import BusError, ModuleTimeoutError, RunAborted
 from seqrun.powercube.codec import (BroadcastRequest, GetParam, GetParamAck, MotionExtAck,
                                     Request, SetMotion, SetParam)
@@ -94,12 +98,19 @@ class PowerCubeDriver:
 
     #: Idempotent reads are retried this often when an acknowledge is lost (drop_acks).
     READ_RETRIES = 1
+    #: Attempts of the HOME_OK reading of :meth:`homed` (a read is idempotent).
+    HOMED_ATTEMPTS = 3
+    FAULT_FLAGS = FAULT_FLAGS
+    HOMED_FLAG = HOMED_FLAG
 
-    def __init__(self, client, arm: ArmDescription) -> None:
+    def __init__(self, client, arm: ArmDescription, *, echoes_own: bool = False) -> None:
         self.client = client
         self.arm = arm
         self.clock = client.clock
         self.modules: list[int] = arm.module_ids
+        self.units = ModuleUnits(arm)
+        #: The transport hands this process its own frames back (``receive_own_messages``).
+        self.echoes_own = echoes_own
         self.emit: EventSink = _no_events
         self.cycle_s = 1.0 / arm.control.cycle_hz
         self.run_limits = Limits.from_arm(arm)
@@ -109,6 +120,35 @@ class PowerCubeDriver:
         self._keeper: threading.Thread | None = None
         self._keeper_stop = threading.Event()
 
+    # ------------------------------------------------------------------ the family
+    @classmethod
+    def open(cls, arm: ArmDescription, connection, *,
+             response_timeout_s: float | None = None) -> PowerCubeDriver:
+        """The driver of ``arm`` on ``connection`` with a client of its own; frames it
+        does not use as answers go into the event log."""
+        from seqrun.powercube.client import PowerCubeClient
+
+        client = PowerCubeClient(connection.bus, connection.clock, response_timeout=(
+            response_timeout_s if response_timeout_s is not None
+            else arm.can.response_timeout_s))
+        driver = cls(client, arm, echoes_own=bool(getattr(connection, "echoes_own", False)))
+        client.on_discard = driver.on_discard
+        return driver
+
+    @staticmethod
+    def cycle_state(code: int) -> CycleState:
+        return cycle_state(code)
+
+    @classmethod
+    def simulator_positions(cls, arm: ArmDescription,
+                            joints_deg: Mapping[str, float]) -> dict[int, float]:
+        return module_positions(arm, joints_deg)
+
+    def use_arm(self, arm: ArmDescription) -> None:
+        self.arm = arm
+        self.units = ModuleUnits(arm)
+
+    # ------------------------------------------------------------------ the run
     def configure(self, *, cycle_s: float, run_limits: Limits, command_mode: str,
                   emit: EventSink) -> None:
         self._run_law = self._law = setpoint_law(command_mode, self.arm, cycle_s, run_limits)
@@ -239,7 +279,7 @@ class PowerCubeDriver:
                 elif ack.param == ParamId.CUBE_STATE:
                     states[ack.module] = short_state(StateFlag(ack.value))
         module_rad = np.array([positions[m] for m in self.modules])
-        return JointReading(module_rad, states)  # type: ignore[arg-type]
+        return JointReading(self.units.user_deg(module_rad), states)  # type: ignore[arg-type]
 
     # ------------------------------------------------------------------ commands
     def reset(self, modules: Sequence[int] | None) -> None:
@@ -262,15 +302,79 @@ class PowerCubeDriver:
     def halt_and_confirm(self) -> CommandConfirmation:
         return confirm_command(self.client, CommandId.HALT, self.modules)
 
+    def halt_now(self, *, wait: bool = True) -> None:
+        self.client.halt_now(wait=wait)
+
+    def confirm(self, command: ConfirmedCommand,
+                modules: Sequence[int] | None = None,
+                attempts: int = DEFAULT_ATTEMPTS) -> CommandConfirmation:
+        return command_and_confirm(self.client, CommandId[command.upper()],
+                                   self.modules if modules is None else modules,
+                                   attempts=attempts)
+
+    # ------------------------------------------------------------------ outside a run
+    _STATUS_PARAMS = (ParamId.ACT_POS, ParamId.ACT_VEL, ParamId.CUBE_STATE)
+
+    def poll(self, *, tolerate_loss: bool = False) -> ArmPoll:
+        """ActPos, ActVel and CubeState of every module, pipelined."""
+        params = self._STATUS_PARAMS
+        requests = [GetParam(m, p) for m in self.modules for p in params]
+        acks = (self.client.transact_partial(requests) if tolerate_loss
+                else self.client.transact(requests))
+        positions: list[float | None] = []
+        velocities: list[float | None] = []
+        states: dict[int, JointState | None] = {}
+        for k, module in enumerate(self.modules):
+            answers = acks[len(params) * k:len(params) * (k + 1)]
+            if any(a is None for a in answers):
+                positions.append(None)
+                velocities.append(None)
+                states[module] = None
+                continue
+            pos, vel, state = (a.value for a in answers)
+            positions.append(self.units.joint_user_deg(module, float(pos)))
+            velocities.append(math.degrees(float(vel)))
+            states[module] = joint_state(int(state))
+        return ArmPoll(positions, velocities, states)
+
+    def homed(self) -> bool:
+        for attempt in range(self.HOMED_ATTEMPTS):
+            try:
+                acks = self.client.transact([GetParam(m, ParamId.CUBE_STATE)
+                                             for m in self.modules])
+                break
+            except ModuleTimeoutError:
+                if attempt + 1 == self.HOMED_ATTEMPTS:
+                    raise
+        return all(StateFlag(a.value) & StateFlag.HOME_OK for a in acks)
+
+    def watch_foreign(self, on_foreign: Callable[[ForeignTraffic], None]) -> None:
+        from seqrun.drivers.powercube.foreign import ForeignFrameWatch
+
+        self.client.add_frame_listener(ForeignFrameWatch(on_foreign,
+                                                         echoes_own=self.echoes_own))
+
+    def add_frame_listener(self, listener: Callable[[Any], None]) -> None:
+        self.client.add_frame_listener(listener)
+
+    def remove_frame_listener(self, listener: Callable[[Any], None]) -> None:
+        self.client.remove_frame_listener(listener)
+
     # ------------------------------------------------------------------ limits
     _LIMIT_PARAMS = (ParamId.MIN_POS, ParamId.MAX_POS, ParamId.MAX_VEL, ParamId.MAX_ACC)
 
     def read_limits(self) -> list[JointLimits]:
-        params = self._LIMIT_PARAMS
+        params, units = self._LIMIT_PARAMS, self.units
         stored = self.transact([GetParam(j.module, p) for j in self.arm.joints for p in params],
                                idempotent=True)
-        return [JointLimits(*(float(a.value) for a in stored[k:k + len(params)]))
-                for k in range(0, len(stored), len(params))]
+        limits = []
+        for k, joint in enumerate(self.arm.joints):
+            low, high, velocity, acceleration = (float(a.value) for a in
+                                                 stored[len(params) * k:len(params) * (k + 1)])
+            limits.append(JointLimits(units.joint_user_deg(joint.module, low),
+                                      units.joint_user_deg(joint.module, high),
+                                      math.degrees(velocity), math.degrees(acceleration)))
+        return limits
 
     def write_limits(self, values: Mapping[str, LimitValues]) -> int:
         writes: list[tuple[int, ParamId, float]] = []
@@ -278,8 +382,10 @@ class PowerCubeDriver:
             value = values.get(joint.name)
             if value is None:
                 continue
-            writes.append((joint.module, ParamId.MIN_POS, joint.to_module_rad(value.min_deg)))
-            writes.append((joint.module, ParamId.MAX_POS, joint.to_module_rad(value.max_deg)))
+            writes.append((joint.module, ParamId.MIN_POS,
+                           self.units.joint_module_rad(joint.module, value.min_deg)))
+            writes.append((joint.module, ParamId.MAX_POS,
+                           self.units.joint_module_rad(joint.module, value.max_deg)))
             if value.max_velocity_deg_s is not None:
                 writes.append((joint.module, ParamId.MAX_VEL,
                                math.radians(value.max_velocity_deg_s)))
@@ -292,8 +398,8 @@ class PowerCubeDriver:
             if abs(float(ack.value) - value) > READBACK_TOLERANCE_RAD:
                 joint = next(j for j in self.arm.joints if j.module == module)
                 if param in (ParamId.MIN_POS, ParamId.MAX_POS):  # user coordinates, degrees
-                    read, wrote, unit = (joint.to_user_deg(float(ack.value)),
-                                         joint.to_user_deg(value), "°")
+                    read, wrote, unit = (self.units.joint_user_deg(module, float(ack.value)),
+                                         self.units.joint_user_deg(module, value), "°")
                 else:
                     read, wrote = math.degrees(float(ack.value)), math.degrees(value)
                     unit = "°/s" if param == ParamId.MAX_VEL else "°/s²"
@@ -354,6 +460,10 @@ class PowerCubeDriver:
             self.emit("watchdog_disabled")
         except BusError as exc:
             self.emit("watchdog_disable_failed", error=str(exc))
+
+    @property
+    def closed(self) -> bool:
+        return self.client.closed
 
     def close(self) -> None:
         self._keeper_stop.set()
