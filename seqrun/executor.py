@@ -513,9 +513,12 @@ class Executor:
 
     # ------------------------------------------------------------------ motion
     def move(self, target_deg: np.ndarray, active: list[int], limits: Limits, *,
-             tolerance_deg: float, timeout_s: float | None) -> dict[str, Any]:
-        """Plan from the measured state to ``target_deg`` and stream it; returns metrics."""
-        m = self.read_arm()
+             tolerance_deg: float, timeout_s: float | None,
+             start: Measurement | None = None) -> dict[str, Any]:
+        """Plan from the measured state to ``target_deg`` and stream it; returns metrics.
+        ``start``: the reading the caller has just taken to find the target (the arm is
+        read once at the start of a move); None: read it now."""
+        m = start if start is not None else self.read_arm()
         self.check_states(m)
         self._move_limits = limits
         start_deg = m.user_deg.copy()
@@ -564,11 +567,13 @@ class Executor:
 
     def follow(self, plan, *, tolerance_deg: float, timeout_s: float | None,
                path_check: Callable[[Measurement], None] | None = None,
-               command_mode: str | None = None) -> dict[str, Any]:
+               command_mode: str | None = None,
+               start: Measurement | None = None) -> dict[str, Any]:
         """Stream a precomputed plan (a :class:`~seqrun.arm.planner.SampledPlan`) that starts
-        where the arm stands; ``path_check`` runs on every cycle's measurement;
-        ``command_mode`` overrides the run's setpoint law for this plan."""
-        m = self.read_arm()
+        where the arm stands (``start``: the reading it was planned from; None: read it
+        now); ``path_check`` runs on every cycle's measurement; ``command_mode`` overrides
+        the run's setpoint law for this plan."""
+        m = start if start is not None else self.read_arm()
         self.check_states(m)
         self.motion_start_deg = m.user_deg.copy()  # for relative checkpoints
         moving = list(plan.active)

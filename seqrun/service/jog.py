@@ -191,7 +191,8 @@ def run_jog(executor, plan: JogPlan, deadman: Deadman) -> tuple[str, int, str]:
                       end_deg=round(plan.end_deg, 3), end_reason=plan.why_end)
         try:
             executor.move(target, [plan.index], limits,
-                          tolerance_deg=arm.control.position_tolerance_deg, timeout_s=None)
+                          tolerance_deg=arm.control.position_tolerance_deg, timeout_s=None,
+                          start=m)
             message = f"jog {plan.joint}: stopped at the end of its range ({plan.why_end})"
         except OperatorAbort:  # the deadman or jog_stop: the arm holds after the stop
             message = f"jog {plan.joint}: {deadman.reason or 'stopped'}; controlled stop"

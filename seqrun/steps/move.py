@@ -307,7 +307,7 @@ def run(step: ResolvedStep[MoveParams], ex: StepContext) -> dict:
                              max_velocity_deg_s=velocity, max_acceleration_deg_s2=acceleration)
     tolerance = params.tolerance_deg or ex.arm.control.position_tolerance_deg
     detail = ex.move(target_deg, active, limits, tolerance_deg=tolerance,
-                     timeout_s=params.timeout_s)
+                     timeout_s=params.timeout_s, start=current)
     # Which limits bound the plan, and where they come from (report, dry-run table).
     narrowed = ex.limits_in_force.narrowed([ex.arm.joints[i].name for i in active])
     if narrowed:

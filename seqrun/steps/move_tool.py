@@ -59,7 +59,8 @@ def agree(step: ResolvedStep[MoveParams | MoveLinearParams], ex: StepContext,
 def run_pose(step: ResolvedStep[MoveParams], ex: StepContext) -> dict:
     """``move`` with position_mm: IK from the measured joints, then an ordinary move."""
     params = step.params
-    measured = ex.read_arm().user_deg
+    reading = ex.read_arm()
+    measured = reading.user_deg
     try:
         solution = solver_for(ex.arm, params.tool).solve(tool_target(step, ex, measured), measured)
     except Unreachable as exc:
@@ -71,5 +72,5 @@ def run_pose(step: ResolvedStep[MoveParams], ex: StepContext) -> dict:
     tolerance = params.tolerance_deg or ex.arm.control.position_tolerance_deg
     ex.emit("ik_solved", joints_deg=detail["ik_solution_deg"])
     metrics = ex.move(solution.joints_deg, list(ex.movable), limits, tolerance_deg=tolerance,
-                      timeout_s=params.timeout_s)
+                      timeout_s=params.timeout_s, start=reading)
     return {**detail, **metrics}
