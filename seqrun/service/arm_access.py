@@ -86,8 +86,8 @@ def read_joints(driver: ArmDriver) -> tuple[list[float], list[float], dict[int, 
     poll = driver.poll(tolerate_loss=True)
     if not poll.complete:
         raise BusError(f"no answer from module(s) {', '.join(map(str, poll.missing()))}")
-    joints = [round(float(x), 4) + 0.0 for x in poll.positions_deg]   # (never -0.0)
-    velocities = [round(float(v), 4) + 0.0 for v in poll.velocities_deg_s]
+    joints = [round(x, 4) + 0.0 for x in poll.positions_deg if x is not None]  # (no -0.0)
+    velocities = [round(v, 4) + 0.0 for v in poll.velocities_deg_s if v is not None]
     return joints, velocities, dict(poll.states)
 
 

@@ -80,7 +80,7 @@ def confirm_command(client, command: CommandId, modules: Iterable[int], *,
             if not isinstance(ack, GetParamAck):
                 result.unconfirmed[module] = "no answer"
                 continue
-            state = joint_state(int(ack.value))  # type: ignore[arg-type]
+            state = joint_state(int(ack.value))
             result.states[module] = state
             if took_effect(state):
                 result.unconfirmed.pop(module, None)

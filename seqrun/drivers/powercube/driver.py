@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 import threading
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -100,8 +100,8 @@ class PowerCubeDriver:
     READ_RETRIES = 1
     #: Attempts of the HOME_OK reading of :meth:`homed` (a read is idempotent).
     HOMED_ATTEMPTS = 3
-    FAULT_FLAGS = FAULT_FLAGS
-    HOMED_FLAG = HOMED_FLAG
+    FAULT_FLAGS: ClassVar[frozenset[str]] = FAULT_FLAGS
+    HOMED_FLAG: ClassVar[str] = HOMED_FLAG
 
     def __init__(self, client, arm: ArmDescription, *, echoes_own: bool = False) -> None:
         self.client = client
@@ -114,7 +114,7 @@ class PowerCubeDriver:
         self.emit: EventSink = _no_events
         self.cycle_s = 1.0 / arm.control.cycle_hz
         self.run_limits = Limits.from_arm(arm)
-        self.command_mode = arm.control.command_mode
+        self.command_mode: str = arm.control.command_mode
         self._run_law: SetpointLaw | None = None
         self._law: SetpointLaw | None = None
         self._keeper: threading.Thread | None = None
@@ -238,16 +238,16 @@ class PowerCubeDriver:
         """
         moving_modules = {self.modules[i] for i in moving}
         reads = [r for m in self.modules if m not in moving_modules for r in self._reads(m)]
-        batch = requests + reads
+        batch: list[Any] = requests + reads   # (addressed requests: every one has a module)
         try:
             acks = self.client.transact_partial(
                 batch, on_ack=_raise_on_not_ok if halt_early else None)
-        except _NotOkAcknowledge as bad:
-            raise MotionRefused(bad.module, bad.state) from None
+        except _NotOkAcknowledge as refused:
+            raise MotionRefused(refused.module, refused.state) from None
         lost = [i for i, (r, a) in enumerate(zip(batch, acks)) if a is None and _acked(r)]
         if any(not isinstance(batch[i], GetParam) for i in lost):
-            bad = next(batch[i] for i in lost if not isinstance(batch[i], GetParam))
-            raise ModuleTimeoutError(bad.module, _describe_request(bad),
+            unanswered = next(batch[i] for i in lost if not isinstance(batch[i], GetParam))
+            raise ModuleTimeoutError(unanswered.module, _describe_request(unanswered),
                                      self.client.response_timeout)
         if lost:
             modules = list(dict.fromkeys(batch[i].module for i in lost))
@@ -257,12 +257,12 @@ class PowerCubeDriver:
             # read paths of a module lost within one quarantine is a fault.
             blocked = next((r for r in retry if self.client.is_tainted(r)), None)
             if blocked is not None:
-                bad = next(batch[i] for i in lost if batch[i].module == blocked.module)
-                lost_ack = ModuleTimeoutError(bad.module, _describe_request(bad),
+                unanswered = next(batch[i] for i in lost if batch[i].module == blocked.module)
+                lost_ack = ModuleTimeoutError(unanswered.module, _describe_request(unanswered),
                                               self.client.response_timeout)
                 raise RunAborted("no_acknowledge", f"{lost_ack}; not retried: its other read "
                                  "path is still in quarantine after an earlier lost "
-                                 "acknowledge", module=bad.module)
+                                 "acknowledge", module=unanswered.module)
             self.emit("retry", modules=modules, what="read")
             batch, acks = batch + retry, acks + self.transact(retry)
         positions: dict[int, float] = {}
@@ -394,14 +394,14 @@ class PowerCubeDriver:
                                math.radians(value.max_acceleration_deg_s2)))
         self.transact([SetParam(m, p, v) for m, p, v in writes])
         acks = self.transact([GetParam(m, p) for m, p, _ in writes], idempotent=True)
-        for (module, param, value), ack in zip(writes, acks):
-            if abs(float(ack.value) - value) > READBACK_TOLERANCE_RAD:
+        for (module, param, wrote_rad), ack in zip(writes, acks):
+            if abs(float(ack.value) - wrote_rad) > READBACK_TOLERANCE_RAD:
                 joint = next(j for j in self.arm.joints if j.module == module)
                 if param in (ParamId.MIN_POS, ParamId.MAX_POS):  # user coordinates, degrees
                     read, wrote, unit = (self.units.joint_user_deg(module, float(ack.value)),
-                                         self.units.joint_user_deg(module, value), "°")
+                                         self.units.joint_user_deg(module, wrote_rad), "°")
                 else:
-                    read, wrote = math.degrees(float(ack.value)), math.degrees(value)
+                    read, wrote = math.degrees(float(ack.value)), math.degrees(wrote_rad)
                     unit = "°/s" if param == ParamId.MAX_VEL else "°/s²"
                 raise RunAborted("limits_not_written",
                                  f"module {module} ({joint.name}): {param.name} reads back "
