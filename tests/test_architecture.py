@@ -154,8 +154,8 @@ def powercube_paths(module: str) -> list[str]:
     return found
 
 
-@pytest.mark.parametrize("module", sorted(m for m in MODULES
-                                          if matches(m, ("executor",) + FACES)))
+@pytest.mark.parametrize("module", sorted(m for m in MODULES if matches(
+    m, ("executor", "execution", "execution.*") + FACES)))
 def test_the_executor_and_the_faces_do_not_reach_powercube(module):
     """Not even through a helper of the format layer (telemetry decoded state bytes and
     usermessages described requests there once)."""
@@ -175,7 +175,7 @@ def test_the_checker_sees_an_upward_import(tmp_path):
 
 
 #: Names under which a module holds an executor (or a step's view of it).
-EXECUTOR_NAMES = {"executor", "ex"}
+EXECUTOR_NAMES = {"executor", "ex", "run"}
 
 
 def private_uses(path: Path) -> list[str]:

@@ -60,6 +60,8 @@ def powercube_imports(path: Path) -> list[str]:
 
 def test_the_executor_imports_nothing_from_powercube():
     assert powercube_imports(ROOT / "seqrun" / "executor.py") == []
+    for path in sorted((ROOT / "seqrun" / "execution").glob("*.py")):
+        assert powercube_imports(path) == [], path.name
     import seqrun.executor as executor
 
     leaked = {name: value.__module__ for name, value in vars(executor).items()
