@@ -115,6 +115,22 @@ def test_imports_go_to_the_same_layer_or_an_earlier_one():
     assert upward == []
 
 
+#: The layers a face may import (issue 25.4): the service layer, the events and the other
+#: base modules (errors, exit codes, formatting), and the faces themselves.
+FACE_LAYERS = ("base", "service", "faces")
+
+
+def test_faces_import_the_service_layer_and_events_only():
+    """Validation, kinematics, poses, the campaign and the simulator are service calls for
+    a face (seqrun/service/checking.py, kinematics.py, poses.py, campaigns.py,
+    simulator.py), not modules it reaches into; type-only imports do not count."""
+    allowed = {i for i, (name, _) in enumerate(LAYERS) if name in FACE_LAYERS}
+    reaching = sorted(f"{short(m)} imports {short(t)} ({LAYERS[layer_of(t)[0]][0]})"
+                      for m in MODULES if matches(m, FACES)
+                      for t in seqrun_imports(m) if layer_of(t) and layer_of(t)[0] not in allowed)
+    assert reaching == []
+
+
 def test_faces_reach_the_arm_only_through_the_service_layer():
     reaching_in = sorted(f"{short(m)} imports {short(t)}" for m in MODULES if matches(m, FACES)
                          for t in seqrun_imports(m) if matches(t, FORBIDDEN_FOR_FACES))

@@ -1,8 +1,9 @@
-"""Pose files as the faces use them: the names a session can move to, and a pose saved
-from the arm's measured joints (the console's "save pose", ``seqrun pose save``).
+"""Pose files as the faces use them: the poses on a search path, a pose by name and its
+findings against the arm, the names a session can move to, and a pose saved from the
+arm's measured joints (the console's "save pose", ``seqrun pose save``).
 
-The file format and the checks are :mod:`seqrun.arm.poses`; this is where a reading of
-the arm becomes a pose file.
+The file format and the checks are :mod:`seqrun.arm.poses`; this is where a face finds a
+pose and where a reading of the arm becomes a pose file.
 """
 
 from __future__ import annotations
@@ -17,7 +18,47 @@ from seqrun.errors import Refused
 if TYPE_CHECKING:
     from seqrun.arm.description import ArmDescription
 
-__all__ = ["pose_names", "save_measured_pose"]
+__all__ = ["check_pose_name", "find_named_pose", "list_poses", "pose_findings", "pose_names",
+           "save_measured_pose", "save_session_pose"]
+
+
+def find_named_pose(name: str, poses_dir: Any):
+    """The pose file ``name`` on the search path ``poses_dir`` (--poses-dir, or the
+    campaign's poses then the shipped ones for the default), loaded."""
+    from seqrun.arm.poses import find_pose, load_pose
+    from seqrun.service.campaigns import pose_search_path
+
+    return load_pose(find_pose(name, pose_search_path(poses_dir)))
+
+
+def list_poses(poses_dir: Any) -> list[tuple[str, Path, Any, str | None]]:
+    """``(name, file, pose or None, its first error or None)`` of every pose file on the
+    search path (one broken file does not hide the others)."""
+    from seqrun.arm.poses import available_poses, load_pose
+    from seqrun.errors import SequenceInvalid
+
+    found: list[tuple[str, Path, Any, str | None]] = []
+    for name, path in available_poses(poses_dir).items():
+        try:
+            found.append((name, path, load_pose(path), None))
+        except SequenceInvalid as exc:
+            found.append((name, path, None, str(exc.errors[0])))
+    return found
+
+
+def pose_findings(pose: Any, arm: ArmDescription) -> list[tuple[bool, str]]:
+    """A pose checked against the arm: ``(is a problem, line)`` for each finding, in order
+    (the others are notes, already marked as such)."""
+    from seqrun.arm.poses import NOTE_PREFIX, check_pose
+
+    return [(not f.startswith(NOTE_PREFIX), f) for f in check_pose(pose, arm)]
+
+
+def check_pose_name(name: str) -> None:
+    """A name a pose file may have; :class:`~seqrun.errors.UserInputError` otherwise."""
+    from seqrun.arm.poses import check_pose_name as check
+
+    check(name)
 
 
 def pose_names(poses_dir: Any) -> list[str]:
