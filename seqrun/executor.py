@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import gc
 import time
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any, Callable, Iterable
 
 import numpy as np
@@ -43,14 +43,15 @@ from seqrun.arm.limits import LimitsInForce
 from seqrun.arm.planner import Limits
 from seqrun.arm.tracking import velocity_window
 from seqrun.clock import Clock
-from seqrun.drivers import (ArmDriver, CycleState, HaltConfirmation, JointState, LimitValues,
-                            as_driver)
+from seqrun.drivers import ArmDriver, HaltConfirmation, JointState, LimitValues, as_driver
 from seqrun.events import EventHub, make_event
 from seqrun.execution import ending
 from seqrun.execution.checks import ReadingChecks
-from seqrun.execution.preflight import LatchedFaults, preflight
+from seqrun.execution.latched import LatchedFaults
+from seqrun.execution.preflight import preflight
+from seqrun.execution.run import Measurement, rounded
 from seqrun.execution.stops import StopControl
-from seqrun.execution.streaming import Streaming, rounded
+from seqrun.execution.streaming import Streaming
 from seqrun.execution.telemetry import SubscriberFields
 from seqrun.results import (EXIT_FAULT, EXIT_INVALID, EXIT_OK,  # noqa: F401 (re-exported)
                             EXIT_OPERATOR_ABORT, OperatorAbort, RunResult, StepResult)
@@ -61,17 +62,6 @@ if TYPE_CHECKING:
 
 #: A synchronous recorder: gets every typed event (it reads like the events.jsonl dict).
 Listener = Callable[[Any], None]
-
-
-@dataclass
-class Measurement:
-    """One reading of the whole arm."""
-
-    t: float
-    user_deg: np.ndarray                 # every joint, user coordinates
-    short_state: dict[int, CycleState]   # per module id: the state sent with the reading
-    #: Full states, where this reading includes them (after home/reset/halt, a fault).
-    state_words: dict[int, JointState] | None = None
 
 
 class Executor:
@@ -106,7 +96,7 @@ class Executor:
         self.before_step = before_step
         #: Faults the modules had latched before the run; a Reset clears one only when
         #: ``confirm_clear_latched`` says so (None: not asked, simulator and dry run).
-        self.latched = LatchedFaults(self, confirm_clear_latched)
+        self.latched = LatchedFaults(arm, confirm_clear_latched, self.emit, self.ask_operator)
         #: Synchronous recorders (the run log): called with every typed event on the
         #: loop's thread; they must be fast and never block. Faces subscribe to ``events``.
         self.listeners: list[Listener] = list(listeners)

@@ -18,7 +18,7 @@ from seqrun.results import (EXIT_FAULT, EXIT_OPERATOR_ABORT, RunResult, StepResu
 from seqrun.stop_requests import FROM_OUTSIDE, OPERATOR_HALT
 
 if TYPE_CHECKING:
-    from seqrun.executor import Executor
+    from seqrun.execution.run import Run
 
 #: (status, exit code, message, fault record or None): how a run ends.
 Ending = tuple[str, int, str, "dict[str, Any] | None"]
@@ -29,7 +29,7 @@ def round4(x: float | None, nd: int = 4) -> float | None:
     return None if x is None else round(float(x), nd)
 
 
-def emergency_halt(run: Executor) -> bool:
+def emergency_halt(run: Run) -> bool:
     """Halt every module before reading anything, then confirm it by reading every
     module's state back (the driver's ``halt_and_confirm``). Done once per run: a later
     call returns the first result. Returns whether the Halt was sent; the confirmation is
@@ -51,14 +51,14 @@ def emergency_halt(run: Executor) -> bool:
     return result.sent
 
 
-def show_state_after_halt(run: Executor) -> None:
+def show_state_after_halt(run: Run) -> None:
     """After a confirmed Halt, the modules' state for the display and the event log (an
     unconfirmed Halt has its own event naming the modules that did not answer)."""
     if run.halt_result is not None and run.halt_result.confirmed:
         run.refresh_measurement("halt")
 
 
-def halt_note(run: Executor) -> str:
+def halt_note(run: Run) -> str:
     """What the operator must know about the Halt beyond "sent", or ''."""
     result = run.halt_result
     if result is None or result.confirmed:
@@ -66,13 +66,13 @@ def halt_note(run: Executor) -> str:
     return "; " + result.describe(dict(zip(run.modules, run.arm.joint_names)))
 
 
-def _fault(run: Executor, cause: str, module: int | None, message: str,
+def _fault(run: Run, cause: str, module: int | None, message: str,
            step: int | None) -> dict[str, Any]:
     return {"cause": cause, "module": module, "message": message, "step": step,
             **halt_fields(run.halt_result)}
 
 
-def preflight_failed(run: Executor, exc: Exception) -> Ending:
+def preflight_failed(run: Run, exc: Exception) -> Ending:
     """The preflight raised (a module that does not answer): nothing moved, but Halt."""
     run.emergency_halt()
     cause, module = fault_cause(exc)
@@ -83,7 +83,7 @@ def preflight_failed(run: Executor, exc: Exception) -> Ending:
     return "failed", EXIT_FAULT, message, fault
 
 
-def step_aborted(run: Executor, step, result: StepResult, exc: BaseException) -> Ending:
+def step_aborted(run: Run, step, result: StepResult, exc: BaseException) -> Ending:
     """An operator abort ended the step (controlled stop, or before anything moved); a
     Halt asked for meanwhile is sent and reported like any Halt."""
     status, code, message, fault = "aborted", EXIT_OPERATOR_ABORT, str(exc), None
@@ -106,7 +106,7 @@ def step_aborted(run: Executor, step, result: StepResult, exc: BaseException) ->
     return status, code, message, fault
 
 
-def step_failed(run: Executor, step, result: StepResult, exc: Exception) -> Ending:
+def step_failed(run: Run, step, result: StepResult, exc: Exception) -> Ending:
     """Any exception of a step, even a bug: Halt, the cause named, exit 3 (130 for the
     operator's own Halt)."""
     run.emergency_halt()
@@ -136,7 +136,7 @@ def step_failed(run: Executor, step, result: StepResult, exc: Exception) -> Endi
     return status, code, message, fault
 
 
-def step_interrupted(run: Executor, step, result: StepResult, results: list[StepResult],
+def step_interrupted(run: Run, step, result: StepResult, results: list[StepResult],
                      exc: BaseException) -> None:
     """Anything else leaving a step (KeyboardInterrupt, SystemExit) still halts the arm
     before it propagates; the run folder is finished with this result first
@@ -152,7 +152,7 @@ def step_interrupted(run: Executor, step, result: StepResult, results: list[Step
                                     f"interrupted ({exc!r}); the arm was halted", fault)
 
 
-def halt_after_last_step(run: Executor) -> Ending:
+def halt_after_last_step(run: Run) -> Ending:
     """A Halt asked for after the last step: nothing moves, but it is sent as asked."""
     halt = run.stops.halt_request
     assert halt is not None
@@ -165,7 +165,7 @@ def halt_after_last_step(run: Executor) -> Ending:
     return status, code, message, fault
 
 
-def finish(run: Executor, results: list[StepResult], status: str, code: int, message: str,
+def finish(run: Run, results: list[StepResult], status: str, code: int, message: str,
            fault: dict | None, **extra: Any) -> RunResult:
     """The run's result, announced (``run_finished``)."""
     checks = run.checks
@@ -184,7 +184,7 @@ def jsonable(d: dict) -> dict:
     """A step's details with numpy values as plain ones (the event log is JSON)."""
     import numpy as np
 
-    from seqrun.execution.streaming import rounded
+    from seqrun.execution.run import rounded
 
     out = {}
     for k, v in d.items():

@@ -20,16 +20,11 @@ from seqrun.arm.planner import Limits, MovePlan, plan_move, plan_stop
 from seqrun.arm.tracking import MoveTracking, velocity_window
 from seqrun.drivers.base import MotionRefused
 from seqrun.errors import RunAborted
+from seqrun.execution.run import rounded
 from seqrun.results import OperatorAbort
 
 if TYPE_CHECKING:
-    from seqrun.executor import Executor, Measurement
-
-
-def rounded(a, nd: int = 3) -> list[float]:
-    """Floats of ``a`` rounded for the event log (a numpy array via tolist(): iterating it
-    would make a numpy scalar per element, several times a cycle)."""
-    return [round(float(x), nd) for x in (a.tolist() if isinstance(a, np.ndarray) else a)]
+    from seqrun.execution.run import Measurement, Run
 
 
 def _round(x: float | None, nd: int = 4) -> float | None:
@@ -40,7 +35,7 @@ class Streaming:
     """The moves and waits of one run (the executor it streams for: its driver, clock,
     checks, stop requests and events)."""
 
-    def __init__(self, run: Executor) -> None:
+    def __init__(self, run: Run) -> None:
         self.run = run
         #: The figures of the move under way (seqrun/arm/tracking.py).
         self.tracking: MoveTracking | None = None

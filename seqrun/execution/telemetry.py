@@ -14,13 +14,13 @@ from seqrun.arm.telemetry import VelocityWindow, joint_flags
 from seqrun.arm.tracking import velocity_window
 
 if TYPE_CHECKING:
-    from seqrun.executor import Executor
+    from seqrun.execution.run import Run
 
 
 class SubscriberFields:
     """The derived fields of one run's readings (module docstring)."""
 
-    def __init__(self, run: Executor) -> None:
+    def __init__(self, run: Run) -> None:
         self._run = run
         self._velocity = VelocityWindow(velocity_window(run.cycle))
 
