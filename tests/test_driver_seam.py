@@ -406,3 +406,36 @@ def test_a_dry_run_starts_the_simulated_drives_where_the_arm_stands():
     modules' encoder zero (the shipped arm's zero reference is Park)."""
     assert registry.simulator_positions(ARM, park()) == pytest.approx(
         dict.fromkeys(ARM.module_ids, 0.0), abs=1e-12)
+
+
+def test_the_offsets_are_applied_in_one_place():
+    """The user-degree <-> module-radian offset is the PowerCube family's, in one module
+    (issue 25.1: it was applied in the arm description, the executor, the setpoint laws
+    and the codec); the arm description only holds the offsets."""
+    users = sorted(str(path.relative_to(ROOT)) for path in (ROOT / "seqrun").rglob("*.py")
+                   if "offset_deg" in path.read_text(encoding="utf-8"))
+    assert users == ["seqrun/arm/description.py", "seqrun/drivers/powercube/units.py"]
+    from seqrun.arm.description import Joint
+
+    assert not hasattr(Joint, "to_module_rad") and not hasattr(Joint, "to_user_deg")
+
+
+def test_the_powercube_driver_confirms_home_by_reading_it_back():
+    """Confirmed Halt, Reset and Home are the driver's (seqrun halt / reset, the session)."""
+    from seqrun.service.connection import open_connection
+
+    connection = open_connection(force_sim=True, clock=VirtualClock(), python_can=False)
+    try:
+        driver = registry.open_driver(ARM, connection)
+        assert not driver.homed()           # freshly powered on
+        home = driver.confirm("home")
+        assert home.confirmed and home.command == "home" and driver.homed(), home.describe()
+        halt = driver.confirm("halt")
+        assert halt.confirmed and all(s.halted for s in halt.states.values())
+        home = driver.confirm("home")       # halted: Home does not clear it, not confirmed
+        assert home.sent and not home.confirmed and home.attempts == 3
+        assert "HALTED" in home.describe_unconfirmed()
+        assert driver.confirm("reset").confirmed
+        driver.close()
+    finally:
+        connection.close()

@@ -369,9 +369,8 @@ class ArmDescription(_Strict):
         return {n: -v + 0.0 for n, v in self.power_off_pose(name).offsets_deg.items()}
 
     def with_zero_reference(self, name: str | None) -> "ArmDescription":
-        """This arm with the offsets of power-off pose ``name`` (None: unchanged). Every
-        user<->module conversion (Joint.to_module_rad, the executor, the setpoint laws)
-        then uses them."""
+        """This arm with the offsets of power-off pose ``name`` (None: unchanged). The arm's
+        driver, opened with it (or told with ``use_arm``), converts with them."""
         if name is None:
             return self
         offsets = self.power_off_pose(name).offsets_deg
