@@ -67,9 +67,9 @@ class RecordingClock(RealClock):
     def sleep_until(self, t: float) -> None:
         super().sleep_until(t)
         caller = sys._getframe(1)
-        while caller is not None and caller.f_code.co_name in ("_idle_until", "_idle"):
+        while caller is not None and caller.f_code.co_name in ("idle_until", "idle"):
             caller = caller.f_back  # the executor sleeps through its idle-hook wrapper
-        if caller is not None and caller.f_code.co_name == "_stream":
+        if caller is not None and caller.f_code.co_name == "stream":
             self.wakes.append((caller.f_locals.get("t_start", 0.0), t, time.monotonic()))
 
 

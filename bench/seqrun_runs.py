@@ -29,6 +29,7 @@ from seqrun.service.connection import open_connection  # noqa: E402
 from seqrun.powercube.client import PowerCubeClient  # noqa: E402
 from seqrun.service.runner import RunOutcome, run_sequence  # noqa: E402
 from seqrun.sequence.loader import LoadedSequence, load_sequence
+from seqrun.drivers.powercube.units import to_user_deg  # noqa: E402
 
 RESULTS = ROOT / "bench" / "results"
 
@@ -45,7 +46,7 @@ def read_user_deg(bus, clock: Clock, arm: ArmDescription) -> list[float]:
         readings = client.read_arm([j.module for j in arm.joints])
     finally:
         client.close()
-    return [j.to_user_deg(r.position) for j, r in zip(arm.joints, readings)]
+    return [to_user_deg(j, r.position) for j, r in zip(arm.joints, readings)]
 
 
 @dataclass

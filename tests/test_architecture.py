@@ -135,6 +135,22 @@ def test_imports_for_the_type_checker_go_the_same_way():
     assert sorted(upward_imports(type_only=True)) == sorted(TYPE_ONLY_UPWARD)
 
 
+#: The layers a face may import (issue 25.4): the service layer, the events and the other
+#: base modules (errors, exit codes, formatting), and the faces themselves.
+FACE_LAYERS = ("base", "service", "faces")
+
+
+def test_faces_import_the_service_layer_and_events_only():
+    """Validation, kinematics, poses, the campaign and the simulator are service calls for
+    a face (seqrun/service/checking.py, kinematics.py, poses.py, campaigns.py,
+    simulator.py), not modules it reaches into; type-only imports do not count."""
+    allowed = {i for i, (name, _) in enumerate(LAYERS) if name in FACE_LAYERS}
+    reaching = sorted(f"{short(m)} imports {short(t)} ({LAYERS[layer_of(t)[0]][0]})"
+                      for m in MODULES if matches(m, FACES)
+                      for t in seqrun_imports(m) if layer_of(t) and layer_of(t)[0] not in allowed)
+    assert reaching == []
+
+
 def test_faces_reach_the_arm_only_through_the_service_layer():
     reaching_in = sorted(f"{short(m)} imports {short(t)}" for m in MODULES if matches(m, FACES)
                          for t in seqrun_imports(m) if matches(t, FORBIDDEN_FOR_FACES))
@@ -143,20 +159,17 @@ def test_faces_reach_the_arm_only_through_the_service_layer():
 
 POWERCUBE = ("powercube", "powercube.*")
 WIRE = POWERCUBE + ("sim", "sim.*")
-#: The modules besides the wire layer that may speak PowerCube: the driver, the Halt/Reset
-#: helpers and the places that open a PowerCube client or read frames (the service layer's
-#: plumbing, the run and dry-run assembly, the CSV export of logged state bytes). Anything
-#: else asks the driver (issue 10.3): state codes, requests and their units stay behind it.
-POWERCUBE_SPEAKERS = {"drivers.powercube", "drivers.setpoints",
-                      "service.arm_access", "service.session", "service.foreign_frames",
-                      "service.run_control", "service.runner", "service.dryrun",
-                      "report.csvout"}
+#: The modules besides the wire layer that may speak PowerCube: the PowerCube driver family,
+#: nothing else (issue 25.1). The service layer, the report and every face ask the arm's
+#: driver (seqrun/drivers/registry.py): units, offsets, state codes, requests, the watch for
+#: another master and the confirmed Halt stay behind it.
+POWERCUBE_SPEAKERS = ("drivers.powercube", "drivers.powercube.*")
 
 
 def test_powercube_is_spoken_only_behind_the_driver_seam():
     speakers = {short(m) for m in MODULES if not matches(m, WIRE)
                 and any(matches(t, POWERCUBE) for t in seqrun_imports(m))}
-    assert sorted(speakers - POWERCUBE_SPEAKERS) == []
+    assert sorted(s for s in speakers if not matches("seqrun." + s, POWERCUBE_SPEAKERS)) == []
 
 
 def powercube_paths(module: str) -> list[str]:
@@ -177,8 +190,8 @@ def powercube_paths(module: str) -> list[str]:
     return found
 
 
-@pytest.mark.parametrize("module", sorted(m for m in MODULES
-                                          if matches(m, ("executor",) + FACES)))
+@pytest.mark.parametrize("module", sorted(m for m in MODULES if matches(
+    m, ("executor", "execution", "execution.*") + FACES)))
 def test_the_executor_and_the_faces_do_not_reach_powercube(module):
     """Not even through a helper of the format layer (telemetry decoded state bytes and
     usermessages described requests there once)."""
@@ -199,7 +212,7 @@ def test_the_checker_sees_an_upward_import(tmp_path):
 
 
 #: Names under which a module holds an executor (or a step's view of it).
-EXECUTOR_NAMES = {"executor", "ex"}
+EXECUTOR_NAMES = {"executor", "ex", "run"}
 
 
 def private_uses(path: Path) -> list[str]:

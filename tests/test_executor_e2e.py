@@ -25,6 +25,7 @@ from seqrun.service.connection import open_connection
 from seqrun.results import EXIT_FAULT, EXIT_INVALID, EXIT_OK, EXIT_OPERATOR_ABORT
 from seqrun.service.runner import run_sequence
 from seqrun.sequence.loader import load_sequence
+from seqrun.drivers.powercube.units import to_module_rad
 from simrun import run_on_sim
 
 HALT = (0x100, 0x02)
@@ -183,7 +184,7 @@ def test_from_step_refuses_an_arm_that_is_not_where_the_step_expects_it(tmp_path
 
 
 def test_from_step_runs_the_rest_when_the_arm_is_there(tmp_path, arm):
-    at_totem = {j.module: j.to_module_rad(0.0) for j in arm.joints}
+    at_totem = {j.module: to_module_rad(j, 0.0) for j in arm.joints}
     outcome, sim, _ = run_on_sim("opsafe", tmp_path, first_step=6, positions=at_totem, started=True)
     assert outcome.result.exit_code == EXIT_OK, outcome.result.message
     statuses = [s.status for s in outcome.result.steps]

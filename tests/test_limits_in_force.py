@@ -23,6 +23,8 @@ from seqrun.powercube.protocol import ParamId
 from seqrun.service.runner import run_sequence
 from seqrun.sequence.loader import load_sequence
 from seqrun.arm.poses import park_deg
+from seqrun.arm.poses import park_deg
+from seqrun.drivers.powercube.units import to_module_rad
 from simrun import run_on_sim
 
 ARM = shipped_arm()
@@ -104,7 +106,7 @@ def test_set_limits_persists_in_the_simulated_modules_for_the_next_run(project, 
         assert one.result.exit_code == EXIT_OK, one.result.message
         # back down to Park for the second run to have something to do
         sim = connection.bus.arm
-        sim.set_positions({j.module: j.to_module_rad(v)
+        sim.set_positions({j.module: to_module_rad(j, v)
                            for j, v in zip(ARM.joints, park_deg(project / "poses").values())})
         two = run_sequence(second, ARM, connection, log_dir=None, confirm=lambda p: True)
     finally:

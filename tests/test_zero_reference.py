@@ -32,6 +32,7 @@ from seqrun.sequence.loader import load_sequence
 from seqrun.sim.bus import SimBus
 from seqrun.sequence.validation import validate_sequence
 from seqrun.service.zero import ZeroStore, zero_for_run
+from seqrun.drivers.powercube.units import to_module_rad, to_user_deg
 
 ARM = shipped_arm()
 PARK_OFFSETS = {"j1": 0, "j2": 90, "j3": 0, "j4": 120.32, "j5": 0, "j6": -115.74, "j7": 0}
@@ -71,7 +72,7 @@ def test_a_power_off_pose_is_where_every_module_reads_zero(pose):
     stored = load_pose(find_pose(pose, ROOT / "poses")).joints_deg
     assert ARM.power_off_joints_deg(pose) == pytest.approx(stored)
     zeroed = ARM.with_zero_reference(pose)
-    assert [j.to_module_rad(stored[j.name]) for j in zeroed.joints] == pytest.approx([0.0] * 7)
+    assert [to_module_rad(j, stored[j.name]) for j in zeroed.joints] == pytest.approx([0.0] * 7)
 
 
 def test_an_unknown_power_off_pose_names_the_known_ones():
@@ -328,7 +329,7 @@ def test_status_and_pose_save_read_positions_with_the_recorded_zero():
     finally:
         connection.close()
     assert text.startswith("zero: Totem, recorded ") and "not yet confirmed" in text
-    assert [j.to_user_deg(0.0) for j in arm.joints] == [0.0] * 7
+    assert [to_user_deg(j, 0.0) for j in arm.joints] == [0.0] * 7
 
 
 def test_a_campaign_keeps_its_own_record_and_says_how_to_set_it(tmp_path):

@@ -3,7 +3,8 @@
 Joint limits, offsets, velocity/acceleration/jerk maxima, the locked joint, the kinematic
 chain, CAN defaults, control-loop settings and workspace guards all come from this file;
 nothing about the arm is hard-coded elsewhere. Angles are degrees in user coordinates
-(Totem = zeros); ``module_position = user_position + offset``.
+(Totem = zeros); ``module_position = user_position + offset`` (the driver converts:
+:mod:`seqrun.drivers.powercube.units`).
 """
 
 from __future__ import annotations
@@ -54,13 +55,6 @@ class Joint(_Strict):
         if self.locked is not None and not lo <= self.locked <= hi:
             raise ValueError(f"locked value {self.locked} of {self.name} is outside its limits")
         return self
-
-    # Conversions between the user's degrees and the module's radians.
-    def to_module_rad(self, user_deg: float) -> float:
-        return math.radians(user_deg + self.offset_deg)
-
-    def to_user_deg(self, module_rad: float) -> float:
-        return math.degrees(module_rad) - self.offset_deg
 
 
 class Frame(_Strict):
@@ -243,6 +237,9 @@ class PowerOffPose(_Strict):
 class ArmDescription(_Strict):
     name: str
     description: str = ""
+    driver: str = Field(
+        "powercube", description="How seqrun speaks to the arm's modules: the name of an arm "
+                                 "driver (powercube: Schunk PowerCube modules over CAN).")
     can: CanSettings = CanSettings()
     control: Control = Control()
     joints: list[Joint] = Field(min_length=1)
@@ -384,9 +381,8 @@ class ArmDescription(_Strict):
         return {n: -v + 0.0 for n, v in self.power_off_pose(name).offsets_deg.items()}
 
     def with_zero_reference(self, name: str | None) -> "ArmDescription":
-        """This arm with the offsets of power-off pose ``name`` (None: unchanged). Every
-        user<->module conversion (Joint.to_module_rad, the executor, the setpoint laws)
-        then uses them."""
+        """This arm with the offsets of power-off pose ``name`` (None: unchanged). The arm's
+        driver, opened with it (or told with ``use_arm``), converts with them."""
         if name is None:
             return self
         offsets = self.power_off_pose(name).offsets_deg

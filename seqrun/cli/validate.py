@@ -22,14 +22,13 @@ from typing import Annotated
 
 import typer
 
-from seqrun.sequence.checks import StaticCheck, static_check
 from seqrun.cli.app import app
 from seqrun.cli.common import EXIT_INVALID, EXIT_OK, EXIT_USAGE, fail
 from seqrun.defaults import START_POSE
 from seqrun.errors import UserInputError
 
 
-def print_report(check: StaticCheck, file: Path, *, as_json: bool) -> None:
+def print_report(check, file: Path, *, as_json: bool) -> None:
     if as_json:
         typer.echo(json.dumps({"valid": check.valid,
                                "errors": [e.as_dict() for e in check.errors],
@@ -53,7 +52,7 @@ def print_report(check: StaticCheck, file: Path, *, as_json: bool) -> None:
         typer.echo(f"{name}: invalid ({count} error{'s' * (count != 1)}{notes})")
 
 
-def print_clearances(check: StaticCheck) -> None:
+def print_clearances(check) -> None:
     """Per move: the smallest guard clearance along its planned trajectory, and where."""
     for c in check.clearances:
         typer.echo(f"  step {c.step}: lowest {c.point.replace('_', '-')} z = {c.z_mm:.1f} mm, "
@@ -146,23 +145,12 @@ def _unusable(message: str, as_json: bool) -> None:
 
 def _faults(specs: list[str]) -> list:
     """``--sim-fault`` specs as faults (one line, exit 2, for a bad one)."""
-    from seqrun.sim.faults import parse_fault_spec
+    from seqrun.service.connection import parse_faults
 
-    faults = []
-    for spec in specs:
-        try:
-            faults.append(parse_fault_spec(spec))
-        except ValueError as exc:
-            fail(f"--sim-fault '{spec}': {exc}")
-    return faults
-
-
-def _check_fault_modules(faults: list, arm) -> None:
-    """The simulated arm has the arm file's modules (as ``seqrun run`` checks)."""
-    for fault in faults:
-        if fault.module is not None and fault.module not in arm.module_ids:
-            fail(f"--sim-fault '{fault.spec}': the arm has no module {fault.module} "
-                 f"(modules {', '.join(map(str, arm.module_ids))})")
+    try:
+        return parse_faults(specs)
+    except UserInputError as exc:
+        fail(str(exc))
 
 
 def _cut(text: str, width: int) -> str:
@@ -221,7 +209,8 @@ def validate_command(
              if len(files) != 1 or _is_dir(files[0])
              else f"--report {report_file}: no directory {report_file.parent}")
     if len(files) != 1 or _is_dir(files[0]) or junit_file is not None:
-        from seqrun.cli.campaign_validate import report, validate_files
+        from seqrun.cli.campaign_validate import report
+        from seqrun.service.campaign_checks import validate_files
 
         try:
             results = validate_files(files, start=start, arm_file=arm_file, started=started,
@@ -233,30 +222,23 @@ def validate_command(
         except OSError as exc:
             fail(f"{exc.filename}: {exc.strerror or exc}")
         raise typer.Exit(EXIT_OK if valid else EXIT_INVALID)
+    from seqrun.service.checking import check_sequence
+
     file = files[0]
     try:
-        check = static_check(file, start=start, arm_file=arm_file, started=started,
-                             speed=speed, project_dir=project_dir)
-        if check.loaded is not None:
-            from seqrun.cli.campaign_validate import override_notes
-
-            check.notes = list(check.notes) + override_notes(check.loaded)
+        checked = check_sequence(file, start=start, arm_file=arm_file, started=started,
+                                 speed=speed, project_dir=project_dir, dry_run=not static,
+                                 faults=faults, report_html=report_file)
     except UserInputError as exc:
         _unusable(str(exc), as_json)
         return
     except OSError as exc:  # a path the system refuses (name too long, permission, ...)
         _unusable(f"{exc.filename}: {exc.strerror or exc}", as_json)
         return
-    run = None
-    if check.valid and not static:
-        from seqrun.service.dryrun import dry_run
-
-        _check_fault_modules(faults, check.arm)
-        run = dry_run(check.loaded, check.arm, check.start_deg, start_pose=start or START_POSE,
-                      started=started, speed=speed, report_html=report_file, faults=faults)
-        if run.report_error:
-            fail(f"cannot write the report: {run.report_error}")
-    valid = check.valid and (run is None or run.passed)
+    check, run = checked.static, checked.dry_run
+    if run is not None and run.report_error:
+        fail(f"cannot write the report: {run.report_error}")
+    valid = checked.valid
     if as_json:
         typer.echo(json.dumps({"valid": valid,
                                "errors": [e.as_dict() for e in check.errors],
@@ -289,24 +271,9 @@ def schema_command(
                            "docs/sequence-format.md).")] = False,
 ) -> None:
     """Print the JSON Schema of a file format (sequence files by default)."""
+    from seqrun.service.formats import format_reference, format_schema
+
     if markdown:
-        from seqrun.sequence.reference import (arm_reference_markdown, pose_reference_markdown,
-                                      reference_markdown)
-
-        text = {SchemaKind.sequence: reference_markdown, SchemaKind.pose: pose_reference_markdown,
-                SchemaKind.arm: arm_reference_markdown}[kind]()
-        typer.echo(text, nl=False)
+        typer.echo(format_reference(kind.value), nl=False)
         return
-    if kind is SchemaKind.sequence:
-        from seqrun.schema import sequence_json_schema
-
-        schema = sequence_json_schema()
-    elif kind is SchemaKind.arm:
-        from seqrun.arm.description import ArmDescription as Model
-
-        schema = Model.model_json_schema()
-    else:
-        from seqrun.arm.poses import PoseFile as Model  # type: ignore[assignment]
-
-        schema = Model.model_json_schema()
-    typer.echo(json.dumps(schema, indent=2, ensure_ascii=False))
+    typer.echo(json.dumps(format_schema(kind.value), indent=2, ensure_ascii=False))

@@ -24,14 +24,9 @@ zero_app = typer.Typer(help="The zero reference: where the arm was powered off."
 app.add_typer(zero_app, name="zero")
 
 def _arm_and_store(arm_file: Optional[Path], project_dir: Optional[Path]):
-    from seqrun.cli.common import load_arm_file
-    from seqrun.sequence.project import find_campaign, open_project, project_for
+    from seqrun.service.campaigns import load_arm_file, zero_campaign
 
-    if project_dir is not None:
-        project = open_project(project_dir)
-    else:
-        campaign = find_campaign(Path.cwd())
-        project = open_project(campaign) if campaign is not None else project_for(Path.cwd())
+    project = zero_campaign(project_dir)
     arm_path = arm_file if arm_file is not None else project.arm_path(None)
     arm = load_arm_file(Path(arm_path))
     return arm, ZeroStore.for_arm(arm.name, project)

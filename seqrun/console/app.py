@@ -29,7 +29,7 @@ from seqrun.console import models
 from seqrun.console.catalog import Catalog
 from seqrun.console.guard import COOKIE, AccessGuard
 from seqrun.console.motions import Motions
-from seqrun.console.scene import arm_scene
+from seqrun.service.kinematics import arm_scene
 from seqrun.console.telemetry import PageFeed, Telemetry, dumps, jsonable
 from seqrun.errors import Refused, SeqrunError, UserInputError
 

@@ -10,6 +10,7 @@ Imports stay inside the functions: importing this module is cheap.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -45,9 +46,11 @@ class StaticCheck:
 
 
 def static_check(file: Path, *, start: str | None = None,
+                 start_deg: Mapping[str, float] | None = None,
                  arm_file: Path | None = None, started: bool = False,
                  speed: float = 1.0, project_dir: Path | None = None) -> StaticCheck:
-    """Load ``file`` (with includes), its arm and the start pose, and validate statically.
+    """Load ``file`` (with includes), its arm and the start pose (``start_deg``: joints in
+    user degrees instead, e.g. where the arm stands), and validate statically.
 
     Invalid files (the sequence, an included one, the arm file, a pose file) end up in
     ``errors``; input that cannot be used at all raises :class:`UserInputError`.
@@ -77,7 +80,8 @@ def static_check(file: Path, *, start: str | None = None,
         return check
     pose = start or START_POSE
     try:
-        check.start_deg = pose_joints_deg(pose, check.loaded.pose_path or check.loaded.poses_dir)
+        check.start_deg = (dict(start_deg) if start_deg is not None else
+                           pose_joints_deg(pose, check.loaded.pose_path or check.loaded.poses_dir))
     except UserInputError as exc:
         raise UserInputError(f"start pose: {exc}"
                              + ("" if start else " (choose one with --start POSE)")) from None

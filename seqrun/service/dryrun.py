@@ -18,16 +18,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
+from seqrun import frozen_objects
 from seqrun.arm.description import ArmDescription
 from seqrun.clock import VirtualClock
-from seqrun.service.connection import open_connection
-from seqrun import frozen_objects
+from seqrun.drivers.base import LimitValues
+from seqrun.drivers.registry import open_driver, simulator_positions
 from seqrun.results import RunResult
-from seqrun.powercube.client import PowerCubeClient
-from seqrun.powercube.codec import SetParam
-from seqrun.powercube.protocol import ParamId
-from seqrun.service.runner import run_sequence
 from seqrun.sequence.loader import LoadedSequence
+from seqrun.service.connection import open_connection
+from seqrun.service.runner import run_sequence
 
 if TYPE_CHECKING:
     from seqrun.sim.faults import Fault
@@ -81,17 +80,15 @@ class DryRun:
 
 
 def prepare_started(connection, arm: ArmDescription) -> None:
-    """Bring the simulated modules to 'started' (reset, homed, limits written)."""
-    client = PowerCubeClient(connection.bus, connection.clock)
+    """Bring the simulated modules to 'started' (reset, homed, the arm file's limits
+    written), through the arm's driver as a start-up sequence would."""
+    driver = open_driver(arm, connection)
     try:
-        client.reset(None)
-        client.home(None)
-        client.transact([SetParam(j.module, p, j.to_module_rad(v))
-                         for j in arm.joints
-                         for p, v in ((ParamId.MIN_POS, j.limits_deg[0]),
-                                      (ParamId.MAX_POS, j.limits_deg[1]))])
+        driver.reset(None)
+        driver.home(None)
+        driver.write_limits({j.name: LimitValues(*j.limits_deg) for j in arm.joints})
     finally:
-        client.close()
+        driver.close()
 
 
 def dry_run(loaded: LoadedSequence, arm: ArmDescription, start_deg: Mapping[str, float], *,
@@ -155,7 +152,7 @@ def _dry_run_unfrozen(loaded: LoadedSequence, arm: ArmDescription,
                       time_limit_s: float | None, log_dir: Path | None,
                       faults: Sequence[Fault]) -> DryRun:
     clock = VirtualClock()
-    positions = {j.module: j.to_module_rad(start_deg[j.name]) for j in arm.joints}
+    positions = simulator_positions(arm, start_deg)
     connection = open_connection(force_sim=True, clock=clock, sim_positions=positions,
                                  faults=list(faults), default_bitrate=arm.can.bitrate,
                                  python_can=False)

@@ -1,4 +1,4 @@
-"""One run, assembled: bus connection -> PowerCube client and driver -> run folder -> executor.
+"""One run, assembled: bus connection -> the arm's driver -> run folder -> executor.
 
 The CLI (``seqrun run``), the dry run (``seqrun validate``) and the end-to-end tests all go
 through :func:`run_sequence`, so what the tests prove is what the operator runs.
@@ -13,13 +13,13 @@ from typing import Callable, Iterable
 
 from seqrun import __version__
 from seqrun.arm.description import ArmDescription
-from seqrun.service.connection import Connection, response_timeout_s
-from seqrun.drivers.powercube import PowerCubeDriver
+from seqrun.drivers.base import ArmDriver
+from seqrun.drivers.registry import open_driver
 from seqrun.events import EventHub
 from seqrun.executor import Executor, Listener
 from seqrun.results import EXIT_FAULT, RunResult, StepResult
-from seqrun.powercube.client import PowerCubeClient
 from seqrun.sequence.loader import LoadedSequence
+from seqrun.service.connection import Connection, response_timeout_s
 from seqrun.service.run_control import halt_on_foreign_frames
 from seqrun.stop_requests import StopRequests
 
@@ -42,24 +42,22 @@ def build_executor(loaded: LoadedSequence, arm: ArmDescription, connection: Conn
                    listeners: Iterable[Listener] = (), dry_run: bool = False,
                    confirm_clear_latched: Callable[[str], bool] | None = None,
                    requests: StopRequests | None = None,
-                   client: PowerCubeClient | None = None, events: EventHub | None = None
-                   ) -> tuple[Executor, PowerCubeClient]:
-    """The executor of one run; ``client``: the arm session's own (else a new one on the
-    connection); ``events``: the hub its events go to (the session's)."""
-    if client is None:
-        client = PowerCubeClient(connection.bus, connection.clock,
-                                 # (a dry run keeps the arm file's: deterministic results)
-                                 response_timeout=(arm.can.response_timeout_s if dry_run
-                                                   else response_timeout_s(arm)))
-    driver = PowerCubeDriver(client, arm)
+                   driver: ArmDriver | None = None, events: EventHub | None = None
+                   ) -> tuple[Executor, ArmDriver]:
+    """The executor of one run and its driver; ``driver``: the arm session's own (else a
+    new one on the connection); ``events``: the hub its events go to (the session's)."""
+    if driver is None:
+        driver = open_driver(arm, connection,
+                             # (a dry run keeps the arm file's: deterministic results)
+                             response_timeout_s=(arm.can.response_timeout_s if dry_run
+                                                 else response_timeout_s(arm)))
     executor = Executor(driver, arm, connection.clock,
                         poses_dir=loaded.pose_path or loaded.poses_dir, speed=speed,
                         command_mode=command_mode, cycle_hz=cycle_hz, confirm=confirm,
                         before_step=before_step, listeners=list(listeners), dry_run=dry_run,
                         confirm_clear_latched=confirm_clear_latched, requests=requests,
                         events=events)
-    client.on_discard = driver.on_discard
-    return executor, client
+    return executor, driver
 
 
 def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connection, *,
@@ -75,7 +73,7 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
                  html_report: bool = True,
                  requests: StopRequests | None = None,
                  warn: Callable[[str], None] | None = None,
-                 client: PowerCubeClient | None = None,
+                 driver: ArmDriver | None = None,
                  events: EventHub | None = None) -> RunOutcome:
     """Run ``loaded`` on ``connection``; writes the run folder when ``log_dir`` is given,
     with report.html drawn after the run (``html_report``).
@@ -84,18 +82,18 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
     hook in there); ``meta`` goes into report.json (e.g. the zero reference); ``requests``
     is the inbox signal handlers post stop requests to; ``warn`` is told once when writing
     the run folder fails. The connection is not closed. Whichever way the run ends (even
-    by an exception), the run folder is finished. ``client`` (the arm session's) is used
-    and left open; otherwise the run's own client is closed at the end.
+    by an exception), the run folder is finished. ``driver`` (the arm session's) is used
+    and left open; otherwise the run's own driver is closed at the end.
     """
-    own_client = client is None
-    executor, client = build_executor(loaded, arm, connection, speed=speed,
+    own_driver = driver is None
+    executor, driver = build_executor(loaded, arm, connection, speed=speed,
                                       command_mode=command_mode, cycle_hz=cycle_hz,
                                       confirm=confirm, before_step=before_step,
                                       listeners=listeners, dry_run=dry_run,
                                       confirm_clear_latched=confirm_clear_latched,
-                                      requests=requests, client=client, events=events)
-    # Another master's request frame on the bus halts the run (one controller per bus).
-    halt_on_foreign_frames(executor, client, echoes_own=connection.echoes_own)
+                                      requests=requests, driver=driver, events=events)
+    # Another master's request on the bus halts the run (one controller per bus).
+    halt_on_foreign_frames(executor, driver)
     log = None
     if log_dir is not None:
         from seqrun.service.runlog import RunLog  # python-can's log writer: only for a run folder
@@ -108,7 +106,7 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
                                **(meta or {}), "inputs": _inputs(loaded, arm)},
                      clock=connection.clock,
                      channel=getattr(connection.bus, "channel", None) or "can0", warn=warn)
-        client.add_frame_listener(log.on_frame)
+        driver.add_frame_listener(log.on_frame)
         executor.listeners.insert(0, log.on_event)
     if on_executor is not None:
         on_executor(executor)
@@ -125,10 +123,10 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
             if result is not None:
                 report = log.finish(result)
             log.close()
-            if not own_client:
-                client.remove_frame_listener(log.on_frame)
-        if own_client:
-            client.close()
+            if not own_driver:
+                driver.remove_frame_listener(log.on_frame)
+        if own_driver:
+            driver.close()
     report_error = None
     if log is not None and log_dir is not None and html_report:
         report_error = write_html_report(log_dir)

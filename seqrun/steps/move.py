@@ -343,7 +343,7 @@ def run(step: ResolvedStep[MoveParams], ex: StepContext) -> dict:
                              max_velocity_deg_s=velocity, max_acceleration_deg_s2=acceleration)
     tolerance = params.tolerance_deg or ex.arm.control.position_tolerance_deg
     detail = ex.move(target_deg, active, limits, tolerance_deg=tolerance,
-                     timeout_s=params.timeout_s)
+                     timeout_s=params.timeout_s, start=current)
     # Which limits bound the plan, and where they come from (report, dry-run table).
     narrowed = ex.limits_in_force.narrowed([ex.arm.joints[i].name for i in active])
     if narrowed:
@@ -362,7 +362,8 @@ def _run_to_tool_pose(step: ResolvedStep[MoveParams], ex: StepContext) -> dict:
     from seqrun.steps.move_tool import agree, tool_target
 
     params = step.params
-    measured = ex.read_arm().user_deg
+    reading = ex.read_arm()  # read once: the IK start and the move's start agree
+    measured = reading.user_deg
     try:
         solution = solver_for(ex.arm, params.tool).solve(tool_target(params, ex, measured),
                                                          measured)
@@ -375,7 +376,7 @@ def _run_to_tool_pose(step: ResolvedStep[MoveParams], ex: StepContext) -> dict:
     tolerance = params.tolerance_deg or ex.arm.control.position_tolerance_deg
     ex.emit("ik_solved", joints_deg=detail["ik_solution_deg"])
     metrics = ex.move(solution.joints_deg, list(ex.movable), limits, tolerance_deg=tolerance,
-                      timeout_s=params.timeout_s)
+                      timeout_s=params.timeout_s, start=reading)
     return {**detail, **metrics}
 
 

@@ -118,7 +118,8 @@ def run(step: ResolvedStep[MoveLinearParams], ex: StepContext) -> dict:
     """``move_linear``: the line solved from the measured joints, streamed sample by
     sample; the tool's distance from the line is checked every cycle."""
     params = step.params
-    measured = ex.read_arm().user_deg
+    reading = ex.read_arm()
+    measured = reading.user_deg
     keep = 1 - ex.arm.control.tracking_reserve
     max_velocity = np.array([j.max_velocity_deg_s for j in ex.arm.joints]) * keep * ex.speed
     try:
@@ -147,7 +148,8 @@ def run(step: ResolvedStep[MoveLinearParams], ex: StepContext) -> dict:
     ex.emit("ik_solved", joints_deg=detail["ik_solution_deg"], samples=len(linear.plan.times),
             length_mm=round(path.length_mm, 3))
     metrics = ex.follow(linear.plan, tolerance_deg=tolerance, timeout_s=params.timeout_s,
-                        path_check=deviation, command_mode=ex.arm.cartesian.linear_command_mode)
+                        path_check=deviation, command_mode=ex.arm.cartesian.linear_command_mode,
+                        start=reading)
     return {**detail, **metrics, "length_mm": round(path.length_mm, 3),
             "max_deviation_mm": round(worst["mm"], 4),
             "min_manipulability": round(linear.min_manipulability, 4)}

@@ -1,5 +1,5 @@
-"""What ``seqrun run`` takes from the campaign and leaves in it: the bus settings of
-``seqrun.toml``, the run folder location, the run record and the zero-reference record."""
+"""What a run leaves in its campaign: the run folder's location, the record of a run (and
+of one refused before it started), the zero-reference record of a power_off step."""
 
 from __future__ import annotations
 
@@ -13,16 +13,6 @@ from seqrun.service.runlog import prepare_run_folder
 def runs_dir(loaded: Any) -> Path:
     project = getattr(loaded, "project", None)
     return project.runs_dir if project is not None else Path("runs")
-
-
-def campaign_bus(loaded: Any, extra: dict) -> tuple:
-    """``(interface, channel, bitrate, bus kwargs)`` of the campaign's ``[bus]`` table (all
-    None when it names none: then python-can's configuration, else the simulator)."""
-    config = getattr(getattr(loaded, "project", None), "config", None)
-    if config is None or config.bus.interface is None:
-        return None, None, None, extra
-    bus = config.bus
-    return bus.interface, bus.channel, bus.bitrate, {**bus.kwargs, **extra}
 
 
 def _errors(errors: list) -> list[dict]:
@@ -43,10 +33,10 @@ def refuse(loaded: Any, arm_path: Path, errors: list, log_dir: Path | None) -> N
 def refuse_unloadable(file: Path, project_dir: Path | None, errors: list,
                       log_dir: Path | None) -> None:
     """The record of a sequence that could not even be loaded (its own errors)."""
-    from seqrun.sequence.project import project_for
+    from seqrun.service.campaigns import campaign_of
 
     try:
-        project = project_for(Path(file).resolve(), project_dir)
+        project = campaign_of(Path(file).resolve(), project_dir)
         folder = prepare_run_folder(log_dir, Path(file).stem, project.runs_dir)
         write_refusal(folder, sequence=Path(file).stem, file=str(file),
                       errors=_errors(errors))

@@ -1,7 +1,8 @@
 """Setpoint laws: how a ruckig plan becomes PowerCube motion requests, cycle by cycle.
 
-Pure: a law turns (plan, plan time, measured joints) into request objects; the executor
-sends them. One class per command mode of the arm file (``control.command_mode``):
+Pure: a law turns (plan, plan time, measured joints) into request objects in module units
+(:mod:`.units`); the driver sends them. One class per command mode of the arm file
+(``control.command_mode``):
 
 - :class:`RampSetpoints` ("ramp", the facility's way): TargetVel + FRAMP_ACK. The position
   sent lies far enough ahead on the plan that the module's own braking curve never binds
@@ -24,6 +25,7 @@ import numpy as np
 
 from seqrun.arm.description import ArmDescription
 from seqrun.arm.planner import Limits, MovePlan
+from seqrun.drivers.powercube.units import ModuleUnits
 from seqrun.powercube.codec import Request, SetMotion, SetParam
 from seqrun.powercube.protocol import MotionMode, ParamId
 
@@ -43,10 +45,7 @@ class _Law:
         self.cycle_s = cycle_s
         self.run_limits = run_limits          # arm x speed override: sets the lookahead
         self.modules = arm.module_ids
-        self.offsets_deg = np.array([j.offset_deg for j in arm.joints])
-
-    def module_rad(self, user_rad: np.ndarray) -> np.ndarray:
-        return np.asarray(user_rad) + np.radians(self.offsets_deg)
+        self.module_rad = ModuleUnits(arm).module_rad_of_user_rad
 
 
 class StepSetpoints(_Law):

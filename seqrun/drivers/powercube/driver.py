@@ -4,7 +4,7 @@ Everything that knows PowerCube frames lives here (or in the client and codec be
 
 - reads: FPosStateDio per module, or ActPos + CubeState while that request is in
   quarantine after a lost acknowledge; a lost read is retried once by the other path;
-- a control cycle: the setpoint law's requests (:mod:`seqrun.drivers.setpoints`) plus
+- a control cycle: the setpoint law's requests (:mod:`seqrun.drivers.powercube.setpoints`) plus
   reads of the other modules, pipelined; every acknowledge is looked at as it arrives and
   the first that says NOT_OK ends the cycle at once (:class:`~seqrun.drivers.base.MotionRefused`)
   so that the executor halts before the rest of the batch is collected;
@@ -20,147 +20,34 @@ from __future__ import annotations
 
 import math
 import threading
-from collections.abc import Callable, Iterable, Mapping, Sequence
-from typing import Any
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any, ClassVar
 
 import numpy as np
 
 from seqrun.arm.description import ArmDescription
-from seqrun.drivers.base import (CommandConfirmation, EventSink, JointLimits, JointReading,
-                                 JointState, LimitValues, MotionRefused)
-from seqrun.drivers.setpoints import SetpointLaw, setpoint_law
-from seqrun.errors import BusError, CodecError, ModuleTimeoutError, RunAborted
 from seqrun.arm.planner import Limits, MovePlan
+from seqrun.drivers.base import (ArmPoll, CommandConfirmation, ConfirmedCommand, CycleState,
+                                 EventSink, ForeignTraffic, JointLimits, JointReading,
+                                 JointState, LimitValues, MotionRefused)
+from seqrun.drivers.powercube.confirm import (DEFAULT_ATTEMPTS, command_and_confirm,
+                                              confirm_command)
+from seqrun.drivers.powercube.messages import user_message
+from seqrun.drivers.powercube.setpoints import SetpointLaw, setpoint_law
+from seqrun.drivers.powercube.states import (FAULT_FLAGS, HOMED_FLAG, cycle_state,
+                                             joint_state, short_state)
+from seqrun.drivers.powercube.units import ModuleUnits, module_positions
+from seqrun.errors import BusError, ModuleTimeoutError, RunAborted
 from seqrun.powercube.codec import (BroadcastRequest, GetParam, GetParamAck, MotionExtAck,
                                     Request, SetMotion, SetParam)
 from seqrun.powercube.protocol import CommandId, ConfigFlag, ParamId, ShortState, StateFlag
 
-#: Rounds of "command, read back" before a module counts as not confirming.
-DEFAULT_ATTEMPTS = 3
-
 #: float32 on the wire: a read-back equal within this is the value written.
 READBACK_TOLERANCE_RAD = 1e-6
-
-#: Most specific first: the cause named in the report.
-FAULT_CAUSES = ("TOW_ERROR", "BEYOND_HARD", "BEYOND_SOFT", "POWERFAULT", "COMM_ERROR",
-                "CPU_OVERLOAD", "HALTED", "ERROR")
 
 
 def _no_events(type_: str, **data: Any) -> None:
     """Event sink until the executor configures the driver."""
-
-
-# ---------------------------------------------------------------------- state decoding
-def short_state(flags: StateFlag) -> ShortState:
-    """The short state a module would report for this state word (table B.3)."""
-    short = ShortState(0)
-    if flags & (StateFlag.ERROR | StateFlag.HALTED) or not flags & StateFlag.HOME_OK:
-        short |= ShortState.NOT_OK
-    if flags & StateFlag.MOTION:
-        short |= ShortState.MOTION
-    if flags & StateFlag.RAMP_END:
-        short |= ShortState.RAMP_END
-    return short
-
-
-def joint_state(flags: StateFlag | int) -> JointState:
-    """A module's state word, decoded."""
-    flags = StateFlag(flags)
-    faults = StateFlag(flags & StateFlag.FAULTS)
-    cause = next((name.lower() for name in FAULT_CAUSES if faults & StateFlag[name]),
-                 "not_homed")
-    return JointState(homed=bool(flags & StateFlag.HOME_OK),
-                      halted=bool(flags & StateFlag.HALTED),
-                      moving=bool(flags & StateFlag.MOTION),
-                      faulted=bool(faults), cause=cause, text=flags.describe(),
-                      fault_text=faults.describe() if faults else "",
-                      cycle_code=int(short_state(flags)))
-
-
-# ---------------------------------------------------------------------- Halt / Reset, confirmed
-def confirm_command(client, command: CommandId, modules: Iterable[int], *,
-                    attempts: int = DEFAULT_ATTEMPTS, timeout: float | None = None,
-                    retry_pause_s: float = 0.0) -> CommandConfirmation:
-    """Broadcast Halt or Reset and confirm it on every module by reading its state back.
-
-    1. Halt goes out **first** (``client.halt_now()``), before anything already queued on
-       the bus is read: a flood of queued frames must not delay a stop. Reset goes out as
-       its broadcast.
-    2. Every module's CubeState is read back (pipelined); Halt is confirmed by HALTED,
-       Reset by no fault bit left (a fault Reset cannot clear, e.g. a power fault, leaves
-       the module unconfirmed, named with its state).
-    3. For modules that did not confirm, the broadcast goes out again (after
-       ``retry_pause_s``: time for a busy module to settle) and they are read again, up to
-       ``attempts`` rounds in all.
-
-    Never raises for the bus: a command that could not be sent gives ``sent=False`` and
-    the error; modules that never answer are unconfirmed with "no answer".
-    """
-    if command not in (CommandId.HALT, CommandId.RESET):
-        raise CodecError(f"confirm_command: {command.name} is not Halt or Reset")
-    name = command.name.lower()
-    wanted = tuple(dict.fromkeys(modules))
-    result = CommandConfirmation(name, wanted, unconfirmed={m: "no answer" for m in wanted})
-    clock = client.clock
-    t_first: float | None = None
-    for attempt in range(1, max(1, attempts) + 1):
-        result.attempts = attempt
-        if attempt > 1 and retry_pause_s > 0:
-            client.idle(retry_pause_s)
-        try:
-            if command == CommandId.HALT:
-                client.halt_now()
-            else:
-                client.transact([BroadcastRequest(command, 0)])
-            result.sent = True
-            if t_first is None:
-                t_first = clock.now()
-        except Exception as exc:  # noqa: BLE001 - any failure of the bus is reported
-            result.error = f"sending the {command.name.capitalize()} failed: {exc}"
-            break
-        waiting = [m for m in wanted if m in result.unconfirmed]
-        try:
-            acks = client.transact_partial([GetParam(m, ParamId.CUBE_STATE) for m in waiting],
-                                           timeout)
-        except Exception as exc:  # noqa: BLE001
-            result.error = f"reading the modules back failed: {exc}"
-            continue
-        for module, ack in zip(waiting, acks):
-            if not isinstance(ack, GetParamAck):
-                result.unconfirmed[module] = "no answer"
-                continue
-            state = joint_state(int(ack.value))  # type: ignore[arg-type]
-            result.states[module] = state
-            took_effect = state.halted if command == CommandId.HALT else not state.faulted
-            if took_effect:
-                result.unconfirmed.pop(module, None)
-            else:
-                result.unconfirmed[module] = f"state {state.text}"
-        if not result.unconfirmed:
-            result.error = None
-            break
-    result.duration_s = 0.0 if t_first is None else clock.now() - t_first
-    return result
-
-
-#: Seconds between rounds of ``seqrun halt|reset``: time for a module that was busy to settle.
-RETRY_PAUSE_S = 0.02
-
-
-def halt_and_confirm(client, modules: Iterable[int], *,
-                     attempts: int = DEFAULT_ATTEMPTS) -> CommandConfirmation:
-    """Halt every module of ``modules`` and read back that each one is HALTED."""
-    return confirm_command(client, CommandId.HALT, modules, attempts=attempts)
-
-
-def command_and_confirm(client, command: CommandId, modules: Iterable[int], *,
-                        attempts: int = DEFAULT_ATTEMPTS,
-                        timeout: float | None = None) -> CommandConfirmation:
-    """``seqrun halt|reset``: broadcast ``command`` (HALT or RESET), then confirm it on every
-    module of ``modules``, pausing between rounds. "Sent" is not "done": a broadcast is never
-    acknowledged, and a frame can be lost on a busy or shared bus."""
-    return confirm_command(client, command, sorted(set(modules)), attempts=attempts,
-                           timeout=timeout, retry_pause_s=RETRY_PAUSE_S)
 
 
 # ---------------------------------------------------------------------- the driver
@@ -211,21 +98,57 @@ class PowerCubeDriver:
 
     #: Idempotent reads are retried this often when an acknowledge is lost (drop_acks).
     READ_RETRIES = 1
+    #: Attempts of the HOME_OK reading of :meth:`homed` (a read is idempotent).
+    HOMED_ATTEMPTS = 3
+    FAULT_FLAGS: ClassVar[frozenset[str]] = FAULT_FLAGS
+    HOMED_FLAG: ClassVar[str] = HOMED_FLAG
 
-    def __init__(self, client, arm: ArmDescription) -> None:
+    def __init__(self, client, arm: ArmDescription, *, echoes_own: bool = False) -> None:
         self.client = client
         self.arm = arm
         self.clock = client.clock
         self.modules: list[int] = arm.module_ids
+        self.units = ModuleUnits(arm)
+        #: The transport hands this process its own frames back (``receive_own_messages``).
+        self.echoes_own = echoes_own
         self.emit: EventSink = _no_events
         self.cycle_s = 1.0 / arm.control.cycle_hz
         self.run_limits = Limits.from_arm(arm)
-        self.command_mode = arm.control.command_mode
+        self.command_mode: str = arm.control.command_mode
         self._run_law: SetpointLaw | None = None
         self._law: SetpointLaw | None = None
         self._keeper: threading.Thread | None = None
         self._keeper_stop = threading.Event()
 
+    # ------------------------------------------------------------------ the family
+    @classmethod
+    def open(cls, arm: ArmDescription, connection, *,
+             response_timeout_s: float | None = None) -> PowerCubeDriver:
+        """The driver of ``arm`` on ``connection`` with a client of its own; frames it
+        does not use as answers go into the event log."""
+        from seqrun.powercube.client import PowerCubeClient
+
+        client = PowerCubeClient(connection.bus, connection.clock, response_timeout=(
+            response_timeout_s if response_timeout_s is not None
+            else arm.can.response_timeout_s))
+        driver = cls(client, arm, echoes_own=bool(getattr(connection, "echoes_own", False)))
+        client.on_discard = driver.on_discard
+        return driver
+
+    @staticmethod
+    def cycle_state(code: int) -> CycleState:
+        return cycle_state(code)
+
+    @classmethod
+    def simulator_positions(cls, arm: ArmDescription,
+                            joints_deg: Mapping[str, float]) -> dict[int, float]:
+        return module_positions(arm, joints_deg)
+
+    def use_arm(self, arm: ArmDescription) -> None:
+        self.arm = arm
+        self.units = ModuleUnits(arm)
+
+    # ------------------------------------------------------------------ the run
     def configure(self, *, cycle_s: float, run_limits: Limits, command_mode: str,
                   emit: EventSink) -> None:
         self._run_law = self._law = setpoint_law(command_mode, self.arm, cycle_s, run_limits)
@@ -237,6 +160,10 @@ class PowerCubeDriver:
         malformed); it goes into the event log."""
         self.emit("frame_discarded", can_id=f"0x{msg.arbitration_id:03X}",
                   data=bytes(msg.data).hex(" "), reason=str(getattr(reason, "value", reason)))
+
+    def describe_error(self, exc: BaseException) -> str:
+        """``str(exc)``, with a request that got no answer described in user degrees."""
+        return user_message(exc, self.arm)
 
     # ------------------------------------------------------------------ bus helpers
     def transact(self, requests: list, *, idempotent: bool = False) -> list:
@@ -311,16 +238,16 @@ class PowerCubeDriver:
         """
         moving_modules = {self.modules[i] for i in moving}
         reads = [r for m in self.modules if m not in moving_modules for r in self._reads(m)]
-        batch = requests + reads
+        batch: list[Any] = requests + reads   # (addressed requests: every one has a module)
         try:
             acks = self.client.transact_partial(
                 batch, on_ack=_raise_on_not_ok if halt_early else None)
-        except _NotOkAcknowledge as bad:
-            raise MotionRefused(bad.module, bad.state) from None
+        except _NotOkAcknowledge as refused:
+            raise MotionRefused(refused.module, refused.state) from None
         lost = [i for i, (r, a) in enumerate(zip(batch, acks)) if a is None and _acked(r)]
         if any(not isinstance(batch[i], GetParam) for i in lost):
-            bad = next(batch[i] for i in lost if not isinstance(batch[i], GetParam))
-            raise ModuleTimeoutError(bad.module, _describe_request(bad),
+            unanswered = next(batch[i] for i in lost if not isinstance(batch[i], GetParam))
+            raise ModuleTimeoutError(unanswered.module, _describe_request(unanswered),
                                      self.client.response_timeout)
         if lost:
             modules = list(dict.fromkeys(batch[i].module for i in lost))
@@ -330,12 +257,12 @@ class PowerCubeDriver:
             # read paths of a module lost within one quarantine is a fault.
             blocked = next((r for r in retry if self.client.is_tainted(r)), None)
             if blocked is not None:
-                bad = next(batch[i] for i in lost if batch[i].module == blocked.module)
-                lost_ack = ModuleTimeoutError(bad.module, _describe_request(bad),
+                unanswered = next(batch[i] for i in lost if batch[i].module == blocked.module)
+                lost_ack = ModuleTimeoutError(unanswered.module, _describe_request(unanswered),
                                               self.client.response_timeout)
                 raise RunAborted("no_acknowledge", f"{lost_ack}; not retried: its other read "
                                  "path is still in quarantine after an earlier lost "
-                                 "acknowledge", module=bad.module)
+                                 "acknowledge", module=unanswered.module)
             self.emit("retry", modules=modules, what="read")
             batch, acks = batch + retry, acks + self.transact(retry)
         positions: dict[int, float] = {}
@@ -352,7 +279,7 @@ class PowerCubeDriver:
                 elif ack.param == ParamId.CUBE_STATE:
                     states[ack.module] = short_state(StateFlag(ack.value))
         module_rad = np.array([positions[m] for m in self.modules])
-        return JointReading(module_rad, states)  # type: ignore[arg-type]
+        return JointReading(self.units.user_deg(module_rad), states)  # type: ignore[arg-type]
 
     # ------------------------------------------------------------------ commands
     def reset(self, modules: Sequence[int] | None) -> None:
@@ -375,15 +302,79 @@ class PowerCubeDriver:
     def halt_and_confirm(self) -> CommandConfirmation:
         return confirm_command(self.client, CommandId.HALT, self.modules)
 
+    def halt_now(self, *, wait: bool = True) -> None:
+        self.client.halt_now(wait=wait)
+
+    def confirm(self, command: ConfirmedCommand,
+                modules: Sequence[int] | None = None,
+                attempts: int = DEFAULT_ATTEMPTS) -> CommandConfirmation:
+        return command_and_confirm(self.client, CommandId[command.upper()],
+                                   self.modules if modules is None else modules,
+                                   attempts=attempts)
+
+    # ------------------------------------------------------------------ outside a run
+    _STATUS_PARAMS = (ParamId.ACT_POS, ParamId.ACT_VEL, ParamId.CUBE_STATE)
+
+    def poll(self, *, tolerate_loss: bool = False) -> ArmPoll:
+        """ActPos, ActVel and CubeState of every module, pipelined."""
+        params = self._STATUS_PARAMS
+        requests = [GetParam(m, p) for m in self.modules for p in params]
+        acks = (self.client.transact_partial(requests) if tolerate_loss
+                else self.client.transact(requests))
+        positions: list[float | None] = []
+        velocities: list[float | None] = []
+        states: dict[int, JointState | None] = {}
+        for k, module in enumerate(self.modules):
+            answers = acks[len(params) * k:len(params) * (k + 1)]
+            if any(a is None for a in answers):
+                positions.append(None)
+                velocities.append(None)
+                states[module] = None
+                continue
+            pos, vel, state = (a.value for a in answers)
+            positions.append(self.units.joint_user_deg(module, float(pos)))
+            velocities.append(math.degrees(float(vel)))
+            states[module] = joint_state(int(state))
+        return ArmPoll(positions, velocities, states)
+
+    def homed(self) -> bool:
+        for attempt in range(self.HOMED_ATTEMPTS):
+            try:
+                acks = self.client.transact([GetParam(m, ParamId.CUBE_STATE)
+                                             for m in self.modules])
+                break
+            except ModuleTimeoutError:
+                if attempt + 1 == self.HOMED_ATTEMPTS:
+                    raise
+        return all(StateFlag(a.value) & StateFlag.HOME_OK for a in acks)
+
+    def watch_foreign(self, on_foreign: Callable[[ForeignTraffic], None]) -> None:
+        from seqrun.drivers.powercube.foreign import ForeignFrameWatch
+
+        self.client.add_frame_listener(ForeignFrameWatch(on_foreign,
+                                                         echoes_own=self.echoes_own))
+
+    def add_frame_listener(self, listener: Callable[[Any], None]) -> None:
+        self.client.add_frame_listener(listener)
+
+    def remove_frame_listener(self, listener: Callable[[Any], None]) -> None:
+        self.client.remove_frame_listener(listener)
+
     # ------------------------------------------------------------------ limits
     _LIMIT_PARAMS = (ParamId.MIN_POS, ParamId.MAX_POS, ParamId.MAX_VEL, ParamId.MAX_ACC)
 
     def read_limits(self) -> list[JointLimits]:
-        params = self._LIMIT_PARAMS
+        params, units = self._LIMIT_PARAMS, self.units
         stored = self.transact([GetParam(j.module, p) for j in self.arm.joints for p in params],
                                idempotent=True)
-        return [JointLimits(*(float(a.value) for a in stored[k:k + len(params)]))
-                for k in range(0, len(stored), len(params))]
+        limits = []
+        for k, joint in enumerate(self.arm.joints):
+            low, high, velocity, acceleration = (float(a.value) for a in
+                                                 stored[len(params) * k:len(params) * (k + 1)])
+            limits.append(JointLimits(units.joint_user_deg(joint.module, low),
+                                      units.joint_user_deg(joint.module, high),
+                                      math.degrees(velocity), math.degrees(acceleration)))
+        return limits
 
     def write_limits(self, values: Mapping[str, LimitValues]) -> int:
         writes: list[tuple[int, ParamId, float]] = []
@@ -391,8 +382,10 @@ class PowerCubeDriver:
             value = values.get(joint.name)
             if value is None:
                 continue
-            writes.append((joint.module, ParamId.MIN_POS, joint.to_module_rad(value.min_deg)))
-            writes.append((joint.module, ParamId.MAX_POS, joint.to_module_rad(value.max_deg)))
+            writes.append((joint.module, ParamId.MIN_POS,
+                           self.units.joint_module_rad(joint.module, value.min_deg)))
+            writes.append((joint.module, ParamId.MAX_POS,
+                           self.units.joint_module_rad(joint.module, value.max_deg)))
             if value.max_velocity_deg_s is not None:
                 writes.append((joint.module, ParamId.MAX_VEL,
                                math.radians(value.max_velocity_deg_s)))
@@ -401,14 +394,14 @@ class PowerCubeDriver:
                                math.radians(value.max_acceleration_deg_s2)))
         self.transact([SetParam(m, p, v) for m, p, v in writes])
         acks = self.transact([GetParam(m, p) for m, p, _ in writes], idempotent=True)
-        for (module, param, value), ack in zip(writes, acks):
-            if abs(float(ack.value) - value) > READBACK_TOLERANCE_RAD:
+        for (module, param, wrote_rad), ack in zip(writes, acks):
+            if abs(float(ack.value) - wrote_rad) > READBACK_TOLERANCE_RAD:
                 joint = next(j for j in self.arm.joints if j.module == module)
                 if param in (ParamId.MIN_POS, ParamId.MAX_POS):  # user coordinates, degrees
-                    read, wrote, unit = (joint.to_user_deg(float(ack.value)),
-                                         joint.to_user_deg(value), "°")
+                    read, wrote, unit = (self.units.joint_user_deg(module, float(ack.value)),
+                                         self.units.joint_user_deg(module, wrote_rad), "°")
                 else:
-                    read, wrote = math.degrees(float(ack.value)), math.degrees(value)
+                    read, wrote = math.degrees(float(ack.value)), math.degrees(wrote_rad)
                     unit = "°/s" if param == ParamId.MAX_VEL else "°/s²"
                 raise RunAborted("limits_not_written",
                                  f"module {module} ({joint.name}): {param.name} reads back "
@@ -467,6 +460,10 @@ class PowerCubeDriver:
             self.emit("watchdog_disabled")
         except BusError as exc:
             self.emit("watchdog_disable_failed", error=str(exc))
+
+    @property
+    def closed(self) -> bool:
+        return self.client.closed
 
     def close(self) -> None:
         self._keeper_stop.set()
