@@ -16,9 +16,7 @@ again at full resolution (the CSV export). Nothing here draws or writes;
 
 from __future__ import annotations
 
-import gzip
 import json
-import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Iterator
@@ -70,7 +68,7 @@ class RunData:
     step_summaries: dict[int, StepSummary]
     fault: dict[str, Any] | None       # with "t" when the event log has the fault event
     checkpoints: list[dict]
-    trace: dict[str, int] | None       # frames sent / received, when the trace is there
+    trace: dict[str, Any] | None       # frames sent / received, when the trace is there
     run_started: dict[str, Any]
     torn_lines: int = 0                # unreadable lines in events.jsonl (a killed run)
     #: record.json of the run folder (inputs with sha256, git state, zero), when written.
@@ -153,18 +151,17 @@ def _read_json(path: Path) -> dict:
     return data if isinstance(data, dict) else {}
 
 
-#: The CAN trace of a run folder: compressed (since issue 29), or as older runs wrote it.
-TRACE_NAMES = ("trace.log.gz", "trace.log")
+def _trace_summary(folder: Path) -> dict[str, Any] | None:
+    """Frames sent and received (candump lines end in T or R); no full parse. A trace
+    cut short (a killed run) counts what it holds."""
+    from seqrun.service.logfile import read_lines
+    from seqrun.service.runlog import trace_path
 
-
-def _trace_summary(folder: Path) -> dict[str, int] | None:
-    """Frames sent and received (candump lines end in T or R); no full parse. A
-    compressed trace cut short (a killed run) counts what it holds."""
-    path = next((folder / name for name in TRACE_NAMES if (folder / name).is_file()), None)
+    path = trace_path(folder)
     if path is None:
         return None
     sent = received = 0
-    for line in _trace_lines(path):
+    for line in read_lines(path):
         end = line.rstrip()[-2:]
         if end == b" T":
             sent += 1
@@ -172,15 +169,6 @@ def _trace_summary(folder: Path) -> dict[str, int] | None:
             received += 1
     return {"sent": sent, "received": received, "bytes": path.stat().st_size,
             "file": path.name}
-
-
-def _trace_lines(path: Path) -> Iterator[bytes]:
-    opener = gzip.open if path.suffix == ".gz" else open
-    with opener(path, "rb") as f:
-        try:
-            yield from f
-        except (EOFError, zlib.error, gzip.BadGzipFile):
-            return   # the end of what a killed run got to disk
 
 
 def from_records(report: dict, events: Iterable[dict], *, arm: ArmDescription | None = None,
