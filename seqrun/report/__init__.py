@@ -22,11 +22,11 @@ def write_html(folder: str | Path, out: str | Path | None = None, *,
                arm: ArmDescription | None = None, data: RunData | None = None) -> Path:
     """Draw the report of run folder ``folder`` into ``out`` (default folder/report.html)."""
     from seqrun.report.html import html_parts
-    from seqrun.report.plots import render_plots
+    from seqrun.report.plots import iter_plots
 
     data = data if data is not None else load_run(folder, arm=arm)
     target = Path(out) if out is not None else Path(folder) / HTML_NAME
-    plots = render_plots(data)
+    plots = iter_plots(data)   # drawn one at a time as the page is written
     tmp = target.with_name(target.name + ".tmp")
     try:
         with open(tmp, "w", encoding="utf-8") as f:

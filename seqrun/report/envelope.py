@@ -35,6 +35,7 @@ class Envelope:
         self.count = 0                  # samples added
         self.level: int | None = None   # None: every sample kept (a short line)
         self._t0 = 0.0
+        self._raw: list[tuple[np.ndarray, np.ndarray]] = []   # a short line's samples
         self._b = _as_buckets(0, np.zeros(0), np.zeros((0, self.lines)))
         self._ids = np.zeros(0, np.int64)
 
@@ -44,24 +45,25 @@ class Envelope:
         if len(t) == 0:
             return
         y = np.asarray(y, dtype=float).reshape(len(t), self.lines)
-        new = _as_buckets(self.count, t, y)
         if self.count == 0:
             self._t0 = float(t[0])
         self.count += len(t)
         if self.level is None:
-            self._b = _concat(self._b, new)
+            self._raw.append((t, y))
             if self.count <= self.max_points:
                 return
             # Too long to keep whole: the finest level of time buckets that fits.
+            t = np.concatenate([r[0] for r in self._raw])
+            y = np.concatenate([r[1] for r in self._raw])
+            self._raw = []
             level = 0
-            while len(np.unique(self._ids_of(self._b["first_t"], level))) > self.buckets:
+            while len(np.unique(self._ids_of(t, level))) > self.buckets:
                 level += 1
             self.level = level
-            self._ids = self._ids_of(self._b["first_t"], level)
-            self._b, self._ids = _reduce(self._b, self._ids)
+            self._b, self._ids = _reduce(_as_buckets(0, t, y), self._ids_of(t, level))
             return
         ids = self._ids_of(t, self.level)
-        new, ids = _reduce(new, ids)
+        new, ids = _reduce(_as_buckets(self.count - len(t), t, y), ids)
         self._b, self._ids = _reduce(_concat(self._b, new), np.concatenate([self._ids, ids]))
         while len(self._ids) > self.buckets:
             self.level += 1
@@ -72,6 +74,10 @@ class Envelope:
 
     def finish(self) -> list[tuple[np.ndarray, np.ndarray]]:
         """Every line's (t, y), at most ``max_points`` points each, in time order."""
+        if self.level is None:
+            t = np.concatenate([np.zeros(0)] + [r[0] for r in self._raw])
+            y = np.concatenate([np.zeros((0, self.lines))] + [r[1] for r in self._raw])
+            return [(t, y[:, j]) for j in range(self.lines)]
         return [_points(self._b, j) for j in range(self.lines)]
 
 

@@ -10,6 +10,7 @@ tools (and the tests) can read the numbers back.
 from __future__ import annotations
 
 import datetime as _dt
+import itertools
 import json
 from html import escape
 from typing import Any, Iterable, Iterator
@@ -59,14 +60,15 @@ figcaption{font-size:12px;color:#555}
 """
 
 
-def render_html(data: RunData, plots: list[Plot], *, generated: str | None = None) -> str:
+def render_html(data: RunData, plots: Iterable[Plot], *, generated: str | None = None) -> str:
     return "".join(html_parts(data, plots, generated=generated))
 
 
-def html_parts(data: RunData, plots: list[Plot], *, generated: str | None = None
+def html_parts(data: RunData, plots: Iterable[Plot], *, generated: str | None = None
                ) -> Iterator[str]:
     """The page in pieces, in order, to be written as they come: the steps table of a
-    run of thousands of steps is tens of MB, never held whole."""
+    run of thousands of steps is tens of MB, never held whole; ``plots`` may be drawn
+    as they are asked for (:func:`seqrun.report.plots.iter_plots`)."""
     r = data.report
     status = str(r.get("status") or ("running" if data.event_count else "unknown"))
     name = r.get("sequence") or "sequence"
@@ -320,8 +322,10 @@ def _checkpoints(data: RunData) -> str:
     return "".join(rows)
 
 
-def _plots(plots: list[Plot], data: RunData) -> Iterator[str]:
-    if not plots:
+def _plots(plots: Iterable[Plot], data: RunData) -> Iterator[str]:
+    plots = iter(plots)
+    first = next(plots, None)
+    if first is None:
         why = ("the event log has no arm readings" if data.reading_count == 0
                else "the run folder does not describe the arm")
         yield f"\n<h2>Plots</h2><p>No plots: {why}.</p>"
@@ -329,7 +333,7 @@ def _plots(plots: list[Plot], data: RunData) -> Iterator[str]:
     yield ("\n<h2>Plots</h2>\n"
            '<p class="note">Dashed grey: planned; blue: measured; red dashed: limits; '
            "grey verticals: step starts (numbered above); red vertical: the fault.</p>")
-    for p in plots:
+    for p in itertools.chain([first], plots):
         yield (f'\n<figure class="plot" id="{escape(p.id)}">{p.svg}'
                f"<figcaption>{escape(p.caption)}</figcaption></figure>")
 

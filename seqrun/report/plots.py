@@ -9,16 +9,18 @@ paths: the SVG needs no font.
 
 from __future__ import annotations
 
+import gc
 import io
 import re
 from dataclasses import dataclass
+from typing import Iterator
 
 import numpy as np
 
 from seqrun.report.data import MAX_POINTS, RunData
 from seqrun.report.figures import loop_periods, period_stats, step_spans
 
-__all__ = ["MAX_POINTS", "Plot", "render_plots"]
+__all__ = ["MAX_POINTS", "Plot", "iter_plots", "render_plots"]
 #: matplotlib drops path vertices closer than this (pixels) to the line: quantised noise
 #: (following errors in 0.001° steps) costs no bytes it could show.
 SIMPLIFY_THRESHOLD = 0.3
@@ -41,19 +43,30 @@ class Plot:
 
 def render_plots(data: RunData) -> list[Plot]:
     """Every plot of the report (none without samples or without the arm description)."""
+    return list(iter_plots(data))
+
+
+def iter_plots(data: RunData) -> Iterator[Plot]:
+    """The plots one at a time, each drawn when it is asked for (a page written as it is
+    drawn holds one plot's SVG at a time)."""
     import matplotlib
 
     matplotlib.use("Agg")
     if data.arm is None or data.reading_count == 0 or data.dof != data.arm.dof:
-        return []
-    plots = [_joint_plot(data, i) for i in range(data.arm.dof)]
+        return
+    drawings = [lambda i=i: _joint_plot(data, i) for i in range(data.arm.dof)]
     if data.arm.workspace.guards:
-        plots.append(_guard_plot(data))
+        drawings.append(lambda: _guard_plot(data))
     if not data.virtual_time:
         periods, counts = loop_periods(data)
         if periods.size:
-            plots.append(_period_plot(data, periods, counts))
-    return plots
+            drawings.append(lambda: _period_plot(data, periods, counts))
+    for draw in drawings:
+        plot = draw()
+        # A drawn figure is a web of reference cycles (tens of MB for a long run's steps):
+        # collected before the next one is drawn, not whenever the collector comes by.
+        gc.collect()
+        yield plot
 
 
 # ---------------------------------------------------------------------------- helpers

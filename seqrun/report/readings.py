@@ -22,7 +22,7 @@ from seqrun.arm.tracking import VelocityStream
 #: Event types that carry one reading of the whole arm.
 SAMPLE_EVENTS = ("setpoint", "measurement")
 #: Readings per chunk: large enough for numpy to pay off, small enough to stay flat.
-CHUNK_READINGS = 4096
+CHUNK_READINGS = 1024
 
 
 @dataclass
