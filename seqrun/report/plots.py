@@ -113,6 +113,15 @@ def _round(m: re.Match) -> str:
     return "0" if text == "-0" else text
 
 
+def _segments(ax, x0, y0, x1, y1, *, transform=None, **style) -> None:
+    """Straight segments (x0, y0)-(x1, y1) drawn as one line broken by NaN: one SVG path
+    however many a run of thousands of steps has (a dash pattern restarts per segment)."""
+    gap = np.full(len(x0), np.nan)
+    x = np.column_stack([x0, x1, gap]).ravel()
+    y = np.column_stack([y0, y1, gap]).ravel()
+    ax.plot(x, y, transform=transform if transform is not None else ax.transData, **style)
+
+
 def _line(ax, data: RunData, name: str, style) -> None:
     t, y = data.overview.line(name)
     ax.plot(t, y, **style)
@@ -125,9 +134,10 @@ def _time_axes(data: RunData, axes, name: str, *, label_steps: bool = True) -> N
     fault_t = (data.fault or {}).get("t")
     starts = [start for _, start, _ in spans]
     for k, ax in enumerate(axes):
-        # One collection for all boundaries: a line object per step and axes made long
-        # runs (hundreds of steps) slow to draw.
-        ax.vlines(starts, 0, 1, transform=ax.get_xaxis_transform(), **STEP_LINE)
+        # One line for all boundaries: a line object per step and axes made long runs
+        # (hundreds of steps) slow to draw; a collection writes an SVG element per step.
+        _segments(ax, starts, [0.0] * len(starts), starts, [1.0] * len(starts),
+                  transform=ax.get_xaxis_transform(), **STEP_LINE)
         if fault_t is not None:
             # gid: the SVG group gets an id, so the marker can be found in the page.
             ax.axvline(fault_t, **FAULT_LINE, label="fault", gid=f"{name}-fault-{k}")
@@ -193,7 +203,8 @@ def _joint_plot(data: RunData, i: int) -> Plot:
         begins += [step.started_t] * 2
         ends += [end] * 2
     if limits:
-        vel.hlines(limits, begins, ends, **MOVE_LIMIT, label="planner limit of the move")
+        _segments(vel, begins, limits, ends, limits, **MOVE_LIMIT,
+                  label="planner limit of the move")
     vel.set_ylabel("velocity (°/s)", fontsize=8)
 
     _line(err, data, f"error.{i}", dict(color="#2ca02c", linewidth=0.9,
