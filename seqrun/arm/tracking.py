@@ -70,6 +70,33 @@ def windowed_velocity(t: np.ndarray, q: np.ndarray, window_s: float) -> np.ndarr
     return v[:, 0] if flat else v
 
 
+class VelocityStream:
+    """:func:`windowed_velocity` of a series that arrives a chunk at a time, in bounded
+    memory: each chunk is estimated together with the samples of the one window before
+    it, so the estimates are those of the whole series (times in non-decreasing order)."""
+
+    def __init__(self, window_s: float) -> None:
+        self.window_s = float(window_s)
+        self._t = np.zeros(0)
+        self._q: np.ndarray | None = None
+
+    def feed(self, t: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """The estimates of the samples ``t``, ``q`` (samples × joints), the next chunk."""
+        t = np.asarray(t, dtype=float)
+        q = np.asarray(q, dtype=float)
+        if self._q is None or len(self._t) == 0:
+            tt, qq = t, q
+        else:
+            tt, qq = np.concatenate([self._t, t]), np.concatenate([self._q, q])
+        v = windowed_velocity(tt, qq, self.window_s)[len(tt) - len(t):]
+        if len(tt):
+            # The next chunk's windows reach back at most one window (and the edge) from
+            # its first sample, which is no earlier than this chunk's last.
+            keep = np.searchsorted(tt, tt[-1] - self.window_s - 2 * _EDGE_S, side="left")
+            self._t, self._q = tt[keep:], qq[keep:]
+        return v
+
+
 def peak_abs(v: np.ndarray) -> np.ndarray:
     """Largest |v| per joint, ignoring NaN (0 where there is no estimate at all)."""
     v = np.abs(np.asarray(v, dtype=float))
