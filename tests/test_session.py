@@ -140,6 +140,23 @@ def test_refusals_for_poses_velocities_jogs_and_answers(session):
     assert frames.motion() == [] and session.activity is None
 
 
+def test_booleans_and_texts_are_not_numbers(session):
+    """Every face hands typed values on: True is not 1 and "12" is not 12 (issue 24)."""
+    session.arm_up()
+    session.home()
+    frames = Frames(session)
+    for call in (lambda: session.move_to_joints({"j1": True}),
+                 lambda: session.move_to_joints({"j1": "12"}),
+                 lambda: session.move_to_joints({"j1": " 14 "}),
+                 lambda: session.move_to_pose("totem", velocity_scale=True),
+                 lambda: session.set_move_velocities({"j1": True}),
+                 lambda: session.jog("j1", True),
+                 lambda: session.run_sequence(ROOT / "sequences" / "opsafe.yaml", speed=True)):
+        with pytest.raises(Refused, match="is not a number"):
+            call()
+    assert frames.motion() == [] and session.activity is None
+
+
 def test_an_invalid_sequence_is_refused_with_its_location(session, tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_text("name: bad\ndescription: x\nsteps:\n  - move: {joints: {j1: 400}}\n")

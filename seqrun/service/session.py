@@ -863,13 +863,13 @@ class ArmSession:
                 plan = self._jog_plan
                 if (plan is not None and plan.joint == joint
                         and isinstance(speed_scale, (int, float))
+                        and not isinstance(speed_scale, bool)
                         and speed_scale * plan.direction > 0 and not self._deadman.expired):
                     self._deadman.renew()  # the speed stays the jog's first
                     return current
                 raise Refused("jog: another jog is under way (release it first)")
         self._check_movable("jog")
-        if not isinstance(speed_scale, (int, float)):
-            raise Refused(f"jog: speed scale {speed_scale!r} is not a number")
+        speed_scale = _finite(speed_scale, "jog: speed scale")
         with self._state:
             joints = np.array(self._joints, dtype=float)
             velocity = self._move_velocities.get(joint, 0.0)
@@ -1196,10 +1196,13 @@ class _ControlHandler:
 
 
 def _finite(value: Any, what: str) -> float:
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise Refused(f"{what}: {value!r} is not a number") from None
+    """``value`` as a finite float; a boolean or a text is not a number (``True`` is not 1
+    and ``"12"`` not 12: every face passes typed values on)."""
+    import numbers
+
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise Refused(f"{what}: {value!r} is not a number")
+    x = float(value)
     if not math.isfinite(x):
         raise Refused(f"{what}: {value!r} is not a finite number")
     return x
