@@ -70,6 +70,64 @@ class Wire:
                    if t >= since and 0x0E1 <= can_id <= 0x0FF and data[:1] == b"\x0b")
 
 
+#: Host requests that change nothing on a module: a read (GetExtended) or a Halt.
+READ_OR_HALT = (0x0A, 0x02)
+
+
+class BusListener:
+    """An independent listener on the simulated bus: a second python-can bus on the same
+    channel (not the session's), collecting every frame any host sends to the modules
+    with ``time.perf_counter()`` at its arrival. What the console did, as the wire saw it."""
+
+    def __init__(self, connection: Any) -> None:
+        import can
+
+        inner = connection.bus
+        inner = getattr(inner, "inner", inner)  # (the tests' WrapBus)
+        self.bus = can.Bus(interface="seqrun-sim", channel=inner.channel,
+                           clock=connection.clock)
+        self.frames: list[tuple[float, int, bytes]] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True, name="bus-listener")
+        self._thread.start()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            msg = self.bus.recv(0.05)
+            if msg is not None and 0x0E0 <= msg.arbitration_id <= HALT_ID:
+                self.frames.append((time.perf_counter(), msg.arbitration_id,
+                                    bytes(msg.data)))
+
+    def requests(self, since: float = 0.0) -> list[tuple[float, int, bytes]]:
+        return [f for f in list(self.frames) if f[0] >= since]
+
+    def halts(self, since: float = 0.0) -> list[float]:
+        return [t for t, can_id, data in self.requests(since)
+                if can_id == HALT_ID and data[:1] == HALT_DATA]
+
+    def not_reads(self, since: float = 0.0) -> list[tuple[int, bytes]]:
+        """Requests since ``since`` that are neither a read nor a Halt (a motion, a
+        parameter write, a Reset or Home)."""
+        return [(can_id, data) for _, can_id, data in self.requests(since)
+                if not data or data[0] not in READ_OR_HALT]
+
+    def wait_for_halt(self, since: float, timeout: float = 5.0) -> float:
+        return wait_for(lambda: self.halts(since), timeout)[0]
+
+    def saw_halt(self, since: float, timeout: float = 2.0) -> bool:
+        """A Halt arrived since ``since`` (waiting up to ``timeout`` for it)."""
+        try:
+            self.wait_for_halt(since, timeout)
+        except TimeoutError:
+            return False
+        return True
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=2)
+        self.bus.shutdown()
+
+
 @dataclass
 class Setup:
     folder: Path

@@ -20,31 +20,47 @@ from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Annotated, Any
 
-from fastapi import APIRouter, FastAPI, Header, Request, WebSocket, WebSocketDisconnect
+from fastapi import APIRouter, Depends, FastAPI, Header, Request, WebSocket, WebSocketDisconnect
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, HTMLResponse, JSONResponse
 from fastapi.staticfiles import StaticFiles
 
 from seqrun.console import models
+from seqrun.console.bodies import BODY_CUT, Malformed, check_body, read_model, to_model
+from seqrun.console.limits import RequestLimits
+from seqrun.console.live import PAGE_SILENCE_S, live  # noqa: F401 (the tests' name)
 from seqrun.console.catalog import Catalog
 from seqrun.console.guard import COOKIE, AccessGuard
 from seqrun.console.motions import Motions
 from seqrun.console.scene import arm_scene
-from seqrun.console.telemetry import PageFeed, Telemetry, dumps, jsonable
+from seqrun.console.telemetry import Telemetry, jsonable
 from seqrun.errors import Refused, SeqrunError, UserInputError
 
 log = logging.getLogger(__name__)
 
 API = "/api/v1"
-#: A page sends something (a ping at least) every 0.5 s; one silent for this long while a
-#: motion it started is under way is taken as gone (its motion is stopped).
-PAGE_SILENCE_S = 2.0
 STATIC = Path(__file__).resolve().parent / "static"
 ClientHeader = Annotated[str | None, Header(alias="X-Seqrun-Client")]
 
 
 def one_line(text: str) -> str:
     return " ".join(str(text).split())
+
+
+def json_body(model: type[Any]) -> Any:
+    """A handler's strictly parsed body (:mod:`seqrun.console.bodies`): the dependency and
+    its OpenAPI description."""
+    async def parse(request: Request) -> Any:
+        return await read_model(request, model)
+
+    return Depends(parse)
+
+
+def documented(model: type[Any]) -> dict[str, Any]:
+    """The request body's schema for the OpenAPI document (the body is read by
+    :func:`json_body`, not by the framework)."""
+    return {"requestBody": {"required": True, "content": {"application/json": {
+        "schema": model.model_json_schema()}}}}
 
 
 def _validation_line(exc: RequestValidationError) -> str:
@@ -82,6 +98,22 @@ class Console:
         result = self.session.halt(reason)
         return {**jsonable(result), "message": result.describe()}
 
+    async def halt_now(self, reason: str) -> dict[str, Any]:
+        """:meth:`halt` on a thread of its own, started at once: a STOP never waits for the
+        web server's worker threads (all of them may be busy with blocking commands)."""
+        loop = asyncio.get_running_loop()
+        done: asyncio.Future[dict[str, Any]] = loop.create_future()
+
+        def run() -> None:
+            try:
+                result: Any = self.halt(reason)
+                loop.call_soon_threadsafe(_settle, done, result, None)
+            except BaseException as exc:  # noqa: BLE001 - handed to the awaiting request
+                loop.call_soon_threadsafe(_settle, done, None, exc)
+
+        threading.Thread(target=run, name="console-halt", daemon=True).start()
+        return await done
+
     def halt_after_crash(self, where: str, exc: BaseException) -> str:
         """A handler crashed: Halt, as ``seqrun run`` does on an internal error."""
         log.error("console: internal error in %s: %r", where, exc)
@@ -91,6 +123,15 @@ class Console:
         except Exception as halt_exc:  # noqa: BLE001 - report, never mask the first error
             log.error("console: the Halt after an internal error failed: %r", halt_exc)
             return "the Halt FAILED: use the emergency stop"
+
+
+def _settle(future: asyncio.Future[Any], result: Any, exc: BaseException | None) -> None:
+    if future.done():
+        return
+    if exc is not None:
+        future.set_exception(exc)
+    else:
+        future.set_result(result)
 
 
 class CrashGuard:
@@ -190,9 +231,28 @@ def build_router(console: Console) -> APIRouter:
         return [json.loads(text)["event"] for text in list(console.telemetry.history)]
 
     # -- commands -----------------------------------------------------------------------
-    @api.post("/halt", summary="STOP: the Halt broadcast at once, then confirmed")
-    def halt(body: models.HaltBody | None = None) -> Any:
-        return console.halt(body.reason if body else "STOP (console)")
+    @api.post("/halt", summary="STOP: the Halt broadcast at once, then confirmed; never "
+                               "refused for its body", openapi_extra=documented(models.HaltBody))
+    async def halt(request: Request) -> Any:
+        # Nothing about the request is read before the Halt is on its way: a STOP with a
+        # malformed, oversized or slow body still stops the arm, then says what was wrong.
+        halting = asyncio.ensure_future(console.halt_now("STOP (console)"))
+        note = reason = None
+        try:
+            raw = await request.body()
+            data = check_body(raw, request.headers.get("content-type"),
+                              request.scope.get(BODY_CUT))
+            reason = to_model({} if data is None else data, models.HaltBody).reason
+        except Malformed as exc:
+            note = f"the arm was halted; the request body was refused: {exc}"
+        except Exception as exc:  # noqa: BLE001 - a lost connection: the Halt goes on
+            note = f"the arm was halted; the request body could not be read: {exc!r}"
+        answer = await halting
+        if reason is not None:
+            answer["reason"] = reason
+        if note is not None:
+            answer["note"] = one_line(note)
+        return answer
 
     @api.post("/reset", summary="Reset every module (clears a Halt), confirmed")
     def reset() -> Any:
@@ -206,24 +266,30 @@ def build_router(console: Console) -> APIRouter:
     def arm_up() -> Any:
         return _confirmed(session.arm_up())
 
-    @api.post("/move/pose", summary="Move to a named pose (validated, planned, streamed)")
-    def move_pose(body: models.PoseMove, client: ClientHeader = None) -> dict[str, Any]:
+    @api.post("/move/pose", summary="Move to a named pose (validated, planned, streamed)",
+              openapi_extra=documented(models.PoseMove))
+    def move_pose(body: models.PoseMove = json_body(models.PoseMove),
+                  client: ClientHeader = None) -> dict[str, Any]:
         activity = session.move_to_pose(body.name, velocity_scale=body.velocity_scale)
         motions.started(client, "move", activity)
         return _activity(activity)
 
-    @api.post("/move/joints", summary="Move to joint targets in user degrees (MOVE)")
-    def move_joints(body: models.JointMap, client: ClientHeader = None) -> dict[str, Any]:
+    @api.post("/move/joints", summary="Move to joint targets in user degrees (MOVE)",
+              openapi_extra=documented(models.JointMap))
+    def move_joints(body: models.JointMap = json_body(models.JointMap),
+                    client: ClientHeader = None) -> dict[str, Any]:
         activity = session.move_to_joints(dict(body.joints))
         motions.started(client, "move", activity)
         return _activity(activity)
 
-    @api.post("/velocities", summary="Per-joint velocity of the console's moves, deg/s (ALLVEL)")
-    def velocities(body: models.JointMap) -> Any:
+    @api.post("/velocities", summary="Per-joint velocity of the console's moves, deg/s (ALLVEL)",
+              openapi_extra=documented(models.JointMap))
+    def velocities(body: models.JointMap = json_body(models.JointMap)) -> Any:
         return jsonable(session.set_move_velocities(dict(body.joints)))
 
-    @api.post("/jog", summary="Jog one joint; renew within 200 ms or it stops (deadman)")
-    def jog(body: models.JogBody, client: ClientHeader = None) -> dict[str, Any]:
+    @api.post("/jog", summary="Jog one joint; renew within 200 ms or it stops (deadman)",
+              openapi_extra=documented(models.JogBody))
+    def jog(body: models.JogBody = json_body(models.JogBody), client: ClientHeader = None) -> dict[str, Any]:
         session.jog(body.joint, body.speed_scale)
         motions.started(client, "jog")
         return {"accepted": True}
@@ -234,8 +300,9 @@ def build_router(console: Console) -> APIRouter:
         motions.jog_ended(client)
         return jsonable(result)
 
-    @api.post("/run", summary="Run a sequence (validated first; a run folder as seqrun run)")
-    def run(body: models.RunBody, client: ClientHeader = None) -> dict[str, Any]:
+    @api.post("/run", summary="Run a sequence (validated first; a run folder as seqrun run)",
+              openapi_extra=documented(models.RunBody))
+    def run(body: models.RunBody = json_body(models.RunBody), client: ClientHeader = None) -> dict[str, Any]:
         path = catalog.sequence_path(body.sequence)
         activity = session.run_sequence(path, speed=body.speed, step_mode=body.step_mode,
                                         first_step=body.first_step)
@@ -254,12 +321,14 @@ def build_router(console: Console) -> APIRouter:
         api.add_api_route(f"/run/{verb}", control, methods=["POST"],
                           summary=f"{verb.capitalize()} the run under way")
 
-    @api.post("/answer", summary="Answer a confirm step (confirm_requested event)")
-    def answer(body: models.AnswerBody) -> Any:
+    @api.post("/answer", summary="Answer a confirm step (confirm_requested event)",
+              openapi_extra=documented(models.AnswerBody))
+    def answer(body: models.AnswerBody = json_body(models.AnswerBody)) -> Any:
         return jsonable(session.answer(body.question_id, body.yes))
 
-    @api.post("/poses", summary="Save the arm's measured joints as a pose file")
-    def save_pose(body: models.SavePoseBody) -> dict[str, Any]:
+    @api.post("/poses", summary="Save the arm's measured joints as a pose file",
+              openapi_extra=documented(models.SavePoseBody))
+    def save_pose(body: models.SavePoseBody = json_body(models.SavePoseBody)) -> dict[str, Any]:
         path = session.save_pose(body.name, overwrite=body.overwrite)
         return {"saved": str(path)}
 
@@ -273,123 +342,6 @@ def index_page(request: Request) -> HTMLResponse:
     if token:  # the URL printed at start: the page's own requests carry it as a cookie
         response.set_cookie(COOKIE, token, httponly=True, samesite="strict")
     return response
-
-
-async def live(console: Console, ws: WebSocket) -> None:
-    """One page's live connection: telemetry and events out; STOP and jog in.
-
-    In: ``{"op": "halt"}``, ``{"op": "jog", "joint": "j2", "speed_scale": 0.5}`` (renewed
-    by the page every ~100 ms while the button is held), ``{"op": "jog_stop"}``; an ``id``
-    is echoed in the reply ``{"type": "reply", "id": ..., "ok": bool, "error"?: str}``.
-    A Halt never waits behind another message: it is sent from its own thread at once.
-    """
-    await ws.accept()
-    loop = asyncio.get_running_loop()
-    client = console.new_client_id()
-    feed = PageFeed(loop)
-    history = console.telemetry.attach(feed)
-    send_lock = asyncio.Lock()
-
-    async def send(text: str) -> None:
-        async with send_lock:
-            await ws.send_text(text)
-
-    async def reply(msg_id: Any, ok: bool, **extra: Any) -> None:
-        await send(dumps({"type": "reply", "id": msg_id, "ok": ok, **extra}))
-
-    async def pump() -> None:
-        while True:
-            for text in await feed.next_batch():
-                await send(text)
-
-    ops: asyncio.Queue[dict[str, Any]] = asyncio.Queue()
-
-    async def worker() -> None:  # jog/jog_stop in order: a renewal never follows its stop
-        while True:
-            message = await ops.get()
-            op, msg_id = message["op"], message.get("id")
-            try:
-                if op == "jog":
-                    body = models.JogBody.model_validate(
-                        {k: message.get(k) for k in ("joint", "speed_scale")})
-                    await asyncio.to_thread(console.session.jog, body.joint, body.speed_scale)
-                    console.motions.started(client, "jog")
-                else:
-                    await asyncio.to_thread(console.session.jog_stop)
-                    console.motions.jog_ended(client)
-                await reply(msg_id, True)
-            except (Refused, UserInputError) as exc:
-                await reply(msg_id, False, error=one_line(str(exc)))
-            except ValueError as exc:  # pydantic: a malformed jog
-                await reply(msg_id, False, error=one_line(_first_error(exc)))
-            except Exception as exc:  # noqa: BLE001 - a crashed handler halts the arm
-                outcome = await asyncio.to_thread(console.halt_after_crash, f"live {op}", exc)
-                await reply(msg_id, False, error=one_line(f"{op} failed ({exc}); {outcome}"))
-
-    def halt_now(msg_id: Any, reason: str) -> None:
-        def run() -> None:
-            try:
-                answer = reply(msg_id, True, result=console.halt(reason))
-            except Exception as exc:  # noqa: BLE001 - the page must hear that STOP failed
-                answer = reply(msg_id, False, error=one_line(f"Halt failed: {exc}"))
-            asyncio.run_coroutine_threadsafe(answer, loop)
-        threading.Thread(target=run, name="console-halt", daemon=True).start()
-
-    await send(dumps({"type": "hello", "client": client, "api_version": 1,
-                      "status": console.status_dict()}))
-    for text in history:
-        await send(text)
-    tasks = [asyncio.create_task(pump()), asyncio.create_task(worker())]
-    try:
-        while True:
-            try:
-                raw = await asyncio.wait_for(ws.receive_text(), PAGE_SILENCE_S)
-            except asyncio.TimeoutError:
-                # A page that went silent (a tablet off the Wi-Fi: no TCP close for a long
-                # time) while its motion is under way is taken as gone.
-                if await asyncio.to_thread(console.motions.owns_motion, client):
-                    log.warning("console page %s silent for %.1f s during its motion",
-                                client, PAGE_SILENCE_S)
-                    break
-                continue
-            try:
-                message = json.loads(raw)
-                if not isinstance(message, dict) or not isinstance(message.get("op"), str):
-                    raise ValueError("expected an object with an 'op'")
-            except ValueError as exc:
-                await reply(None, False, error=one_line(f"malformed message: {exc}"))
-                continue
-            op = message["op"]
-            if op == "halt":
-                while not ops.empty():  # queued jog renewals die with the STOP
-                    ops.get_nowait()
-                halt_now(message.get("id"), str(message.get("reason") or "STOP (console)"))
-            elif op in ("jog", "jog_stop"):
-                ops.put_nowait(message)
-            elif op == "ping":
-                if "id" in message:
-                    await reply(message["id"], True)
-            else:
-                await reply(message.get("id"), False, error=f"unknown op '{op}'")
-    except WebSocketDisconnect:
-        pass
-    except Exception as exc:  # noqa: BLE001 - a crashed handler halts the arm
-        await asyncio.to_thread(console.halt_after_crash, "the live connection", exc)
-    finally:
-        for task in tasks:
-            task.cancel()
-        console.telemetry.detach(feed)
-        await asyncio.to_thread(console.motions.page_gone, client)
-        with contextlib.suppress(Exception):  # already closed by the page, or not
-            await ws.close()
-
-
-def _first_error(exc: Exception) -> str:
-    errors = getattr(exc, "errors", None)
-    if callable(errors):
-        first = errors()[0]
-        return f"{'.'.join(map(str, first['loc']))}: {first['msg']}"
-    return str(exc)
 
 
 def create_app(session: Any, catalog: Catalog, arm: Any, *, token: str | None = None,
@@ -422,6 +374,10 @@ def create_app(session: Any, catalog: Catalog, arm: Any, *, token: str | None = 
     async def bad_input(_: Request, exc: UserInputError) -> JSONResponse:
         return JSONResponse({"error": one_line(str(exc))}, status_code=400)
 
+    @app.exception_handler(Malformed)
+    async def malformed_body(_: Request, exc: Malformed) -> JSONResponse:
+        return JSONResponse({"error": one_line(str(exc))}, status_code=exc.status)
+
     @app.exception_handler(RequestValidationError)
     async def malformed(_: Request, exc: RequestValidationError) -> JSONResponse:
         return JSONResponse({"error": _validation_line(exc)}, status_code=422)
@@ -441,5 +397,6 @@ def create_app(session: Any, catalog: Catalog, arm: Any, *, token: str | None = 
     app.add_api_route("/", index_page, methods=["GET"], include_in_schema=False)
     app.mount("/static", StaticFiles(directory=str(STATIC)), name="static")
     app.add_middleware(CrashGuard, console=console)
+    app.add_middleware(RequestLimits, always_read=frozenset({f"{API}/halt"}))
     app.add_middleware(AccessGuard, token=token, local_only=local_only)
     return app

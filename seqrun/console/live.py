@@ -1,0 +1,196 @@
+"""One page's live connection (``/api/v1/live``): telemetry and events out; STOP and jog in.
+
+In: ``{"op": "halt"}``, ``{"op": "jog", "joint": "j2", "speed_scale": 0.5}`` (renewed by the
+page every ~100 ms while the button is held), ``{"op": "jog_stop"}``, ``{"op": "ping"}``; an
+``id`` is echoed in the reply ``{"type": "reply", "id": ..., "ok": bool, "error"?: str}``.
+Messages are strict (:mod:`seqrun.console.models`): a repeated key, an unknown key or a value
+of the wrong type is refused — except that a message that asks to STOP halts whatever else is
+wrong with it (its reply carries a ``note``). A Halt never waits behind another message: it
+is sent from its own thread at once.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from typing import TYPE_CHECKING, Any
+
+from fastapi import WebSocket, WebSocketDisconnect
+
+from seqrun.console import models
+from seqrun.console.bodies import Malformed, one_line, parse_json, to_model
+from seqrun.console.telemetry import PageFeed, dumps
+from seqrun.errors import Refused, UserInputError
+
+if TYPE_CHECKING:
+    from seqrun.console.app import Console
+
+log = logging.getLogger(__name__)
+
+#: A page sends something (a ping at least) every 0.5 s; one silent for this long while a
+#: motion it started is under way is taken as gone (its motion is stopped).
+PAGE_SILENCE_S = 2.0
+
+
+def wants_halt(raw: str, message: Any) -> bool:
+    """The message asks to STOP: its ``op`` is "halt" (even next to other keys, a repeated
+    ``op``, wrong types), or it is not JSON but names the op (a page's STOP with a broken
+    encoder must still stop)."""
+    if isinstance(message, dict):
+        return message.get("op") == "halt"
+    compact = "".join(raw.split())
+    return '"op":"halt"' in compact
+
+
+def _loose(raw: str) -> Any:
+    """The message as JSON with the last of repeated keys (only to find a STOP and an id in
+    a message that the strict parser refused)."""
+    import json
+
+    with contextlib.suppress(ValueError):
+        return json.loads(raw, object_pairs_hook=_halt_wins)
+    return None
+
+
+def _halt_wins(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    out = dict(pairs)
+    if any(key == "op" and value == "halt" for key, value in pairs):
+        out["op"] = "halt"
+    return out
+
+
+def _message_id(message: Any) -> Any:
+    value = message.get("id") if isinstance(message, dict) else None
+    ok = (isinstance(value, str) and len(value) <= 64) or (
+        isinstance(value, int) and not isinstance(value, bool) and 0 <= value <= 2**53)
+    return value if ok else None
+
+
+async def live(console: "Console", ws: WebSocket) -> None:
+    await ws.accept()
+    loop = asyncio.get_running_loop()
+    client = console.new_client_id()
+    feed = PageFeed(loop)
+    history = console.telemetry.attach(feed)
+    send_lock = asyncio.Lock()
+
+    async def send(text: str) -> None:
+        async with send_lock:
+            await ws.send_text(text)
+
+    async def reply(msg_id: Any, ok: bool, **extra: Any) -> None:
+        await send(dumps({"type": "reply", "id": msg_id, "ok": ok, **extra}))
+
+    async def pump() -> None:
+        while True:
+            for text in await feed.next_batch():
+                await send(text)
+
+    ops: asyncio.Queue[models.JogMessage | models.JogStopMessage] = asyncio.Queue()
+
+    async def worker() -> None:  # jog/jog_stop in order: a renewal never follows its stop
+        while True:
+            message = await ops.get()
+            try:
+                if isinstance(message, models.JogMessage):
+                    await asyncio.to_thread(console.session.jog, message.joint,
+                                            message.speed_scale)
+                    console.motions.started(client, "jog")
+                else:
+                    await asyncio.to_thread(console.session.jog_stop)
+                    console.motions.jog_ended(client)
+                await reply(message.id, True)
+            except (Refused, UserInputError) as exc:
+                await reply(message.id, False, error=one_line(str(exc)))
+            except Exception as exc:  # noqa: BLE001 - a bug: this message fails, not the arm
+                log.error("console: live %s failed: %r", message.op, exc)
+                await reply(message.id, False,
+                            error=one_line(f"{message.op} failed: internal error ({exc!r})"))
+
+    async def halt(msg_id: Any, reason: str, note: str | None) -> None:
+        while not ops.empty():  # queued jog renewals die with the STOP
+            ops.get_nowait()
+        try:
+            result = await console.halt_now(reason)
+        except Exception as exc:  # noqa: BLE001 - the page must hear that STOP failed
+            await reply(msg_id, False, error=one_line(f"Halt failed: {exc}"))
+            return
+        extra = {"note": one_line(note)} if note else {}
+        await reply(msg_id, True, result=result, **extra)
+
+    async def handle(raw: str) -> None:
+        try:
+            message: Any = parse_json(raw)
+        except Malformed as exc:
+            loose = _loose(raw)
+            if wants_halt(raw, loose):
+                await halt_task(_message_id(loose), "STOP (console)",
+                                f"the arm was halted; the message was refused: {exc}")
+                return
+            await reply(_message_id(loose), False, error=one_line(f"malformed message: {exc}"))
+            return
+        if not isinstance(message, dict) or not isinstance(message.get("op"), str):
+            await reply(_message_id(message), False,
+                        error="malformed message: expected an object with an 'op'")
+            return
+        op, msg_id = message["op"], _message_id(message)
+        kind = models.LIVE_MESSAGES.get(op)
+        if kind is None:
+            await reply(msg_id, False, error=one_line(f"unknown op '{op[:40]}'"))
+            return
+        try:
+            parsed: Any = to_model(message, kind)
+        except Malformed as exc:
+            if op == "halt":
+                await halt_task(msg_id, "STOP (console)",
+                                f"the arm was halted; the message was refused: {exc}")
+            else:
+                await reply(msg_id, False, error=one_line(f"{op}: {exc}"))
+            return
+        if isinstance(parsed, models.HaltMessage):
+            await halt_task(parsed.id, parsed.reason, None)
+        elif isinstance(parsed, (models.JogMessage, models.JogStopMessage)):
+            ops.put_nowait(parsed)
+        elif parsed.id is not None:  # a ping that wants an answer
+            await reply(parsed.id, True)
+
+    halts: set[asyncio.Task[None]] = set()
+
+    async def halt_task(msg_id: Any, reason: str, note: str | None) -> None:
+        # The Halt's thread starts now; the reply goes out when it is confirmed, while the
+        # next messages are read.
+        task = asyncio.ensure_future(halt(msg_id, reason, note))
+        halts.add(task)
+        task.add_done_callback(halts.discard)
+        await asyncio.sleep(0)  # let it start before anything else is read
+
+    await send(dumps({"type": "hello", "client": client, "api_version": 1,
+                      "status": console.status_dict()}))
+    for text in history:
+        await send(text)
+    tasks = [asyncio.create_task(pump()), asyncio.create_task(worker())]
+    try:
+        while True:
+            try:
+                raw = await asyncio.wait_for(ws.receive_text(), PAGE_SILENCE_S)
+            except asyncio.TimeoutError:
+                # A page that went silent (a tablet off the Wi-Fi: no TCP close for a long
+                # time) while its motion is under way is taken as gone.
+                if await asyncio.to_thread(console.motions.owns_motion, client):
+                    log.warning("console page %s silent for %.1f s during its motion",
+                                client, PAGE_SILENCE_S)
+                    break
+                continue
+            await handle(raw)
+    except WebSocketDisconnect:
+        pass
+    except Exception as exc:  # noqa: BLE001 - a bug ends this connection, not the arm
+        log.error("console: the live connection of %s failed: %r", client, exc)
+    finally:
+        for task in tasks:
+            task.cancel()
+        console.telemetry.detach(feed)
+        await asyncio.to_thread(console.motions.page_gone, client)
+        with contextlib.suppress(Exception):  # already closed by the page, or not
+            await ws.close()

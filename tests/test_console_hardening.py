@@ -1,0 +1,266 @@
+"""The console under attack (issue 24), watched from the wire by an independent listener
+(a second bus on the simulated channel, not the session's): STOP always stops, whatever its
+body; a mistyped command never becomes motion.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+
+import pytest
+from consolekit import BusListener, console_setup
+from fastapi.testclient import TestClient
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+LOCAL = "http://127.0.0.1:8765"
+LIVE = "ws://127.0.0.1:8765/api/v1/live"
+JSON = {"Content-Type": "application/json"}
+
+
+@pytest.fixture
+def setup(tmp_path):
+    s = console_setup(tmp_path)
+    yield s
+    s.close()
+
+
+@pytest.fixture
+def wire(setup):
+    listener = BusListener(setup.connection)
+    yield listener
+    listener.close()
+
+
+@pytest.fixture
+def client(setup):
+    with TestClient(setup.app(), base_url=LOCAL, raise_server_exceptions=False) as c:
+        yield c
+
+
+def armed(client) -> None:
+    for path in ("/api/v1/arm-up", "/api/v1/home"):
+        r = client.post(path)
+        assert r.status_code == 200, r.text
+
+
+def reply_to(ws, msg_id):
+    while True:
+        message = ws.receive_json()
+        if message["type"] == "reply" and message.get("id") == msg_id:
+            return message
+
+
+# ------------------------------------------------------------------ 1. STOP always stops
+BAD_HALT_BODIES = {
+    "invalid JSON": (b'{"reason": ', JSON),
+    "reason null": (b'{"reason": null}', JSON),
+    "reason over 200 characters": (json.dumps({"reason": "x" * 300}).encode(), JSON),
+    "an extra key": (b'{"reason": "r", "force": true}', JSON),
+    "text/plain": (b'{"reason": "r"}', {"Content-Type": "text/plain"}),
+    "a number for the reason": (b'{"reason": 5}', JSON),
+    "not an object": (b'["halt"]', JSON),
+    "duplicate keys": (b'{"reason": "a", "reason": "b"}', JSON),
+    "a huge body": (b'{"reason": "' + b"x" * (8 << 20) + b'"}', JSON),
+}
+
+
+@pytest.mark.parametrize("what", list(BAD_HALT_BODIES))
+def test_http_stop_halts_whatever_its_body_then_says_what_was_wrong(client, wire, what):
+    body, headers = BAD_HALT_BODIES[what]
+    before = time.perf_counter()
+    r = client.post("/api/v1/halt", content=body, headers=headers)
+    assert wire.saw_halt(before), f"{what}: no Halt on the wire ({r.status_code} {r.text[:200]})"
+    assert r.status_code == 200, r.text[:300]
+    answer = r.json()
+    assert answer["halt_sent"] is True and answer["halt_confirmed"] is True, answer
+    assert answer["note"] and "\n" not in answer["note"], answer  # what was wrong with it
+
+
+def test_http_stop_without_a_body_or_with_a_good_one_has_no_note(client, wire):
+    for kwargs in ({}, {"json": {"reason": "test STOP"}}):
+        before = time.perf_counter()
+        answer = client.post("/api/v1/halt", **kwargs).json()
+        assert wire.saw_halt(before) and answer["halt_confirmed"] is True
+        assert "note" not in answer, answer
+
+
+def test_a_moving_arm_is_halted_by_a_malformed_stop(client, setup, wire):
+    armed(client)
+    assert client.post("/api/v1/move/joints", json={"joints": {"j1": 60}}).status_code == 200
+    from consolekit import wait_for
+
+    wait_for(lambda: (setup.session.status().joints[0].position_deg or 0) > 1.0)
+    before = time.perf_counter()
+    r = client.post("/api/v1/halt", content=b'{"reason": null, "extra": 1}', headers=JSON)
+    assert wire.saw_halt(before) and r.status_code == 200, r.text
+    assert wait_for(lambda: setup.session.status().activity == "halted", timeout=10)
+    stopped = setup.session.status().joints[0].position_deg
+    time.sleep(0.3)
+    assert setup.session.status().joints[0].position_deg == pytest.approx(stopped, abs=0.05)
+
+
+BAD_HALT_MESSAGES = [
+    '{"op": "halt", "reason": null, "id": 1}',
+    '{"op": "halt", "reason": 5, "id": 1}',
+    '{"op": "halt", "reason": "r", "force": true, "id": 1}',
+    '{"op": "halt", "reason": "' + "x" * 300 + '", "id": 1}',
+    '{"op": "halt", "op": "halt", "id": 1}',
+    '{"op": "jog", "op": "halt", "id": 1}',
+    '{"op": "halt", "id": 1',  # not even JSON
+]
+
+
+@pytest.mark.parametrize("text", BAD_HALT_MESSAGES)
+def test_a_malformed_live_stop_still_halts(client, wire, text):
+    with client.websocket_connect(LIVE) as ws:
+        ws.receive_json()
+        before = time.perf_counter()
+        ws.send_text(text)
+        wire.wait_for_halt(before)
+        reply = next(m for m in iter(ws.receive_json, None)
+                     if m["type"] == "reply" and "result" in m)
+        assert reply["result"]["halt_confirmed"] is True, reply
+        assert reply.get("note"), reply
+
+
+# ------------------------------------------------------------------ 2. wrong types never move
+MISTYPED = [
+    ("/api/v1/move/joints", b'{"joints": {"j1": true}}'),
+    ("/api/v1/move/joints", b'{"joints": {"j1": false}}'),
+    ("/api/v1/move/joints", b'{"joints": {"j1": "12"}}'),
+    ("/api/v1/move/joints", b'{"joints": {"j1": " 14 "}}'),
+    ("/api/v1/move/joints", b'{"joints": {"j1": 5, "j1": 6}}'),
+    ("/api/v1/move/joints", b'{"joints": {"j1": 5}, "joints": {"j1": 6}}'),
+    ("/api/v1/move/pose", b'{"name": "totem", "velocity_scale": true}'),
+    ("/api/v1/move/pose", b'{"name": "totem", "velocity_scale": "0.5"}'),
+    ("/api/v1/jog", b'{"joint": "j1", "speed_scale": true}'),
+    ("/api/v1/velocities", b'{"joints": {"j1": true}}'),
+    ("/api/v1/run", b'{"sequence": "confirm_nudge.yaml", "step_mode": 0}'),
+    ("/api/v1/run", b'{"sequence": "confirm_nudge.yaml", "first_step": true}'),
+    ("/api/v1/run", b'{"sequence": "confirm_nudge.yaml", "speed": "1"}'),
+]
+
+
+def test_the_reported_mistyped_commands_are_refused_and_nothing_moves(client, wire):
+    armed(client)
+    before = time.perf_counter()
+    for path, body in MISTYPED:
+        r = client.post(path, content=body, headers=JSON)
+        assert r.status_code == 422, (path, body, r.status_code, r.text)
+        assert "\n" not in r.json()["error"]
+    time.sleep(0.3)
+    assert wire.not_reads(before) == [], "a mistyped command reached the modules"
+
+
+def test_a_live_jog_with_a_boolean_speed_is_refused(client, wire):
+    armed(client)
+    before = time.perf_counter()
+    with client.websocket_connect(LIVE) as ws:
+        ws.receive_json()
+        for k, text in enumerate(['{"op": "jog", "joint": "j1", "speed_scale": true, "id": 0}',
+                                  '{"op": "jog", "joint": "j1", "speed_scale": "1", "id": 1}',
+                                  '{"op": "jog", "joint": "j1", "speed_scale": 0.5, "id": 2, '
+                                  '"speed_scale": 1}',
+                                  '{"op": "jog", "joint": "j1", "speed_scale": 0.5, "id": 3, '
+                                  '"x": 1}']):
+            ws.send_text(text)
+            reply = reply_to(ws, k)
+            assert reply["ok"] is False and reply["error"], (text, reply)
+    time.sleep(0.3)
+    assert wire.not_reads(before) == []
+
+
+# Every command's body, valid (each would move the arm, start a run or change something),
+# with the type of each value: hypothesis replaces one value by a value of another type,
+# adds an unknown key or repeats a key, and the command must be refused with nothing sent.
+COMMANDS = {
+    "/api/v1/move/joints": {"joints": {"j1": 5.0, "j2": -80}},
+    "/api/v1/move/pose": {"name": "totem", "velocity_scale": 0.5},
+    "/api/v1/velocities": {"joints": {"j1": 10.0}},
+    "/api/v1/jog": {"joint": "j1", "speed_scale": 0.5},
+    "/api/v1/run": {"sequence": "confirm_nudge.yaml", "speed": 1.0, "step_mode": False,
+                    "first_step": 1},
+    "/api/v1/answer": {"question_id": "q1", "yes": True},
+    "/api/v1/poses": {"name": "spot", "overwrite": False},
+    "live jog": {"op": "jog", "joint": "j1", "speed_scale": 0.5, "id": 1},
+    "live jog_stop": {"op": "jog_stop", "id": 1},
+}
+
+
+#: Values that may be null (the default).
+NULLABLE = {("velocity_scale",)}
+
+
+def _other_type(value, nullable=False):
+    """Values of any type but ``value``'s (an int is a fine float, so neither replaces the
+    other; None only where it is not a value)."""
+    numbers = st.one_of(st.integers(-1000, 1000),
+                        st.floats(-1000, 1000, allow_nan=False, allow_infinity=False))
+    texts = st.one_of(st.just("12"), st.just(" 14 "), st.just("true"), st.text(max_size=8))
+    options = [st.lists(st.integers(), max_size=2),
+               st.dictionaries(st.text(max_size=3), st.integers(), max_size=2)]
+    if not nullable:
+        options.append(st.none())
+    if isinstance(value, bool):
+        options += [numbers, texts]
+    elif isinstance(value, (int, float)):
+        options += [st.booleans(), texts]
+    elif isinstance(value, str):
+        options += [st.booleans(), numbers]
+    return st.one_of(options)
+
+
+def _leaves(body, path=()):
+    for key, value in body.items():
+        if isinstance(value, dict):
+            yield from _leaves(value, path + (key,))
+        else:
+            yield path + (key,)
+
+
+@st.composite
+def mistyped(draw):
+    name = draw(st.sampled_from(sorted(COMMANDS)))
+    body = json.loads(json.dumps(COMMANDS[name]))
+    how = draw(st.sampled_from(["type", "type", "extra key", "repeated key"]))
+    leaves = [p for p in _leaves(body) if p not in (("op",), ("id",))]
+    if how == "type" and leaves:
+        where = draw(st.sampled_from(leaves))
+        parent = body
+        for key in where[:-1]:
+            parent = parent[key]
+        parent[where[-1]] = draw(_other_type(parent[where[-1]], where in NULLABLE))
+        text = json.dumps(body)
+    elif how == "extra key":
+        body[draw(st.sampled_from(["force", "j1", "unsafe", "Joints"]))] = \
+            draw(st.one_of(st.booleans(), st.integers(), st.text(max_size=4)))
+        text = json.dumps(body)
+    else:  # the first key again, with another value after it (the last would win)
+        key = "op" if name.startswith("live") else next(iter(body))
+        text = json.dumps(body)[:-1] + f", {json.dumps(key)}: {json.dumps(body[key])}}}"
+    return name, text
+
+
+@settings(max_examples=150, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(case=mistyped())
+def test_no_mistyped_command_moves_anything(client, wire, armed_once, case):
+    name, text = case
+    before = time.perf_counter()
+    if name.startswith("live"):
+        with client.websocket_connect(LIVE) as ws:
+            ws.receive_json()
+            ws.send_text(text)
+            reply = reply_to(ws, json.loads(text, object_pairs_hook=dict).get("id"))
+        assert reply["ok"] is False, (text, reply)
+    else:
+        r = client.post(name, content=text.encode(), headers=JSON)
+        assert r.status_code == 422, (name, text, r.status_code, r.text)
+    assert wire.not_reads(before) == [], (name, text)
+
+
+@pytest.fixture
+def armed_once(client):
+    armed(client)
