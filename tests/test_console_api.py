@@ -1,8 +1,8 @@
 """The console's HTTP and WebSocket API without a browser (FastAPI's test client), on a real
 arm session over the simulated arm (real time): every command and every refusal.
 
-A refusal is one line (``{"error": ...}``) and sends no motion command to the bus; a
-crashed handler halts the arm; a page that goes away stops the motion it started.
+A refusal is one line (``{"error": ...}``) and sends no motion command to the bus; a page
+that goes away stops the motion it started (tests/test_console_hardening.py: attacks).
 """
 
 from __future__ import annotations
@@ -15,7 +15,6 @@ from consolekit import console_setup, wait_for
 from fastapi.testclient import TestClient
 
 from seqrun.errors import Refused
-from seqrun.service.session import ArmSession
 
 LOCAL = "http://127.0.0.1:8765"  # the Host a local browser sends
 LIVE = "ws://127.0.0.1:8765/api/v1/live"
@@ -149,7 +148,7 @@ def test_unknown_pose_and_sequence_are_refused(client, setup):
     refused(client.post("/api/v1/run", json={"sequence": "missing.yaml"}), 409,
             "unknown sequence")
     refused(client.post("/api/v1/run", json={"sequence": "too_far.yaml"}), 409)
-    refused(client.get("/api/v1/sequences/%2E%2E/%2E%2E/etc/passwd/check"), 409)
+    refused(client.post("/api/v1/sequences/%2E%2E/%2E%2E/etc/passwd/check"), 409)
     assert setup.wire.motions(before) == 0
 
 
@@ -229,10 +228,10 @@ def test_save_pose_writes_a_pose_file(client, setup):
 
 
 def test_sequence_check_shows_findings_and_the_dry_run(client):
-    good = client.get("/api/v1/sequences/opsafe.yaml/check").json()
+    good = client.post("/api/v1/sequences/opsafe.yaml/check").json()
     assert good["valid"] is True and good["dry_run"]["passed"] is True
     assert len(good["steps"]) == len(good["dry_run"]["steps"])
-    bad = client.get("/api/v1/sequences/too_far.yaml/check").json()
+    bad = client.post("/api/v1/sequences/too_far.yaml/check").json()
     assert bad["valid"] is False and bad["dry_run"] is None
     assert bad["errors"][0]["text"].startswith(bad["errors"][0]["file"] + ":4:")
 
@@ -390,26 +389,6 @@ def test_a_move_from_a_script_without_a_page_is_not_tied_to_a_connection(client,
 
 
 # ------------------------------------------------------------------------- crashes, access
-class _CrashingSession(ArmSession):
-    def set_move_velocities(self, velocities_deg_s):
-        raise RuntimeError("a bug in a handler")
-
-
-def test_a_crashed_handler_halts_the_arm(tmp_path):
-    setup = console_setup(tmp_path, session_class=_CrashingSession)
-    try:
-        with TestClient(setup.app(), base_url=LOCAL, raise_server_exceptions=False) as client:
-            armed(client)
-            before = time.perf_counter()
-            r = client.post("/api/v1/velocities", json={"joints": {"j1": 10}})
-            message = refused(r, 500, "internal error", "halted")
-            assert "a bug in a handler" in message
-            assert setup.wire.halts(before)
-            assert client.get("/api/v1/status").json()["activity"] == "halted"
-    finally:
-        setup.close()
-
-
 def test_with_a_token_every_request_and_websocket_needs_it(setup):
     from starlette.testclient import WebSocketDenialResponse
 

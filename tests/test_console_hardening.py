@@ -264,3 +264,105 @@ def test_no_mistyped_command_moves_anything(client, wire, armed_once, case):
 @pytest.fixture
 def armed_once(client):
     armed(client)
+
+
+# ------------------------------------------------------------------ 3. GETs and crashes
+def test_a_nul_in_a_run_file_path_is_refused_without_halting_a_moving_arm(client, setup, wire):
+    from consolekit import wait_for
+
+    armed(client)
+    assert client.post("/api/v1/move/joints", json={"joints": {"j1": 40}}).status_code == 200
+    wait_for(lambda: (setup.session.status().joints[0].position_deg or 0) > 1.0)
+    before = time.perf_counter()
+    for path in ("/api/v1/runs/x/%00", "/api/v1/runs/%00/report.json"):
+        r = client.get(path)
+        assert r.status_code in (404, 409), (path, r.status_code, r.text)
+        assert set(r.json()) == {"error"}, r.text
+    assert setup.session.status().activity == "moving"
+    assert not wire.saw_halt(before, timeout=0.5)
+
+
+class _Crashing:
+    def set_move_velocities(self, velocities_deg_s):
+        raise RuntimeError("a bug in a handler \x1b[31mred\x1b[0m")
+
+
+def test_a_crashed_handler_is_a_500_for_that_request_only(tmp_path, caplog):
+    from seqrun.service.session import ArmSession
+
+    session_class = type("CrashingSession", (_Crashing, ArmSession), {})
+    setup = console_setup(tmp_path, session_class=session_class)
+    listener = BusListener(setup.connection)
+    try:
+        with TestClient(setup.app(), base_url=LOCAL, raise_server_exceptions=False) as client:
+            armed(client)
+            before = time.perf_counter()
+            with caplog.at_level("ERROR"):
+                r = client.post("/api/v1/velocities", json={"joints": {"j1": 10}})
+            assert r.status_code == 500, r.text
+            message = r.json()["error"]
+            assert "internal error" in message and "a bug in a handler" in message
+            assert "halted" not in message and "\n" not in message
+            assert not listener.saw_halt(before, timeout=0.5)
+            assert client.get("/api/v1/status").json()["activity"] == "idle"
+            logged = "\n".join(r.getMessage() for r in caplog.records)
+            assert "a bug in a handler" in logged
+            assert "\x1b" not in logged, logged  # escape codes never reach the terminal raw
+    finally:
+        listener.close()
+        setup.close()
+
+
+def test_a_logged_path_and_message_are_escaped(setup, caplog):
+    from seqrun.console.app import create_app
+    from seqrun.console.catalog import Catalog
+
+    class CrashingCatalog(Catalog):
+        def run_file(self, run_id, name):
+            raise RuntimeError(f"cannot serve {name}")
+
+    app = create_app(setup.session, CrashingCatalog(setup.project, setup.runs), setup.arm)
+    with TestClient(app, base_url=LOCAL, raise_server_exceptions=False) as client:
+        with caplog.at_level("INFO"):
+            for path in ("/api/v1/runs/%1B%5B31m/x", "/api/v1/runs/%1B%5D0;pwned%07/%1B%5B2J"):
+                assert client.get(path).status_code == 500
+    logged = [r.getMessage() for r in caplog.records]
+    assert any("pwned" in m for m in logged), logged
+    assert all("\x1b" not in m and "\x07" not in m for m in logged), logged
+
+
+def test_the_dry_run_check_is_no_get(client):
+    """An <img> of any web page can send a GET (without an Origin): a GET must cost little
+    and change nothing, so the check (seconds of dry run) is a POST."""
+    r = client.get("/api/v1/sequences/opsafe.yaml/check")
+    assert r.status_code == 405, r.text[:200]
+    assert set(r.json()) == {"error"}, r.text
+    foreign = client.post("/api/v1/sequences/opsafe.yaml/check",
+                          headers={"Origin": "http://evil.example"})
+    assert foreign.status_code == 403
+    r = client.post("/api/v1/sequences/opsafe.yaml/check")
+    assert r.status_code == 200 and r.json()["dry_run"]["passed"] is True, r.text[:300]
+
+
+def test_checks_are_rate_limited(client):
+    codes = [client.post("/api/v1/sequences/too_far.yaml/check") for _ in range(8)]
+    limited = [r for r in codes if r.status_code == 429]
+    assert limited, [r.status_code for r in codes]
+    assert "Retry-After" in limited[0].headers and set(limited[0].json()) == {"error"}
+
+
+def test_the_check_runs_in_a_worker_process_below_the_console(setup):
+    import os
+
+    from seqrun.console.checker import CHECK_NICE, CheckWorker
+
+    worker = CheckWorker()
+    try:
+        result = worker.check(setup.catalog(), "opsafe.yaml", None, started=False)
+        assert result["dry_run"]["passed"] is True
+        assert worker.pid is not None and worker.pid != os.getpid()
+        assert os.getpriority(os.PRIO_PROCESS, worker.pid) == \
+            min(19, os.getpriority(os.PRIO_PROCESS, 0) + CHECK_NICE)
+        assert os.sched_getscheduler(worker.pid) == os.SCHED_OTHER
+    finally:
+        worker.close()

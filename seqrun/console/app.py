@@ -24,12 +24,15 @@ from fastapi import APIRouter, Depends, FastAPI, Header, Request, WebSocket, Web
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, HTMLResponse, JSONResponse
 from fastapi.staticfiles import StaticFiles
+from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from seqrun.console import models
-from seqrun.console.bodies import BODY_CUT, Malformed, check_body, read_model, to_model
+from seqrun.console.bodies import (BODY_CUT, Malformed, check_body, printable, read_model,
+                                   to_model)
 from seqrun.console.limits import RequestLimits
 from seqrun.console.live import PAGE_SILENCE_S, live  # noqa: F401 (the tests' name)
 from seqrun.console.catalog import Catalog
+from seqrun.console.checker import CheckWorker, RateLimit, TooMany
 from seqrun.console.guard import COOKIE, AccessGuard
 from seqrun.console.motions import Motions
 from seqrun.console.scene import arm_scene
@@ -85,6 +88,8 @@ class Console:
         self.arm = arm
         self.scene = arm_scene(arm)
         self.motions = Motions(session)
+        self.checker = CheckWorker()
+        self.check_rate = RateLimit(what="check")
         self.telemetry = Telemetry(session, status_dict=self.status_dict)
         self._ids = itertools.count(1)
 
@@ -114,14 +119,16 @@ class Console:
         threading.Thread(target=run, name="console-halt", daemon=True).start()
         return await done
 
-    def halt_after_crash(self, where: str, exc: BaseException) -> str:
-        """A handler crashed: Halt, as ``seqrun run`` does on an internal error."""
-        log.error("console: internal error in %s: %r", where, exc)
+    def halt_after_bus_fault(self, where: str, exc: BaseException) -> str:
+        """A command could not do or confirm what it says on the bus: Halt, as ``seqrun
+        run`` does on a bus fault."""
+        log.error("console: %s failed on the bus: %s", printable(where), printable(repr(exc)))
         try:
-            self.session.halt(f"console internal error in {where}")
+            self.session.halt(f"bus fault in a console command ({printable(where)[:80]})")
             return "the arm was halted"
         except Exception as halt_exc:  # noqa: BLE001 - report, never mask the first error
-            log.error("console: the Halt after an internal error failed: %r", halt_exc)
+            log.error("console: the Halt after a bus fault failed: %s",
+                      printable(repr(halt_exc)))
             return "the Halt FAILED: use the emergency stop"
 
 
@@ -135,7 +142,10 @@ def _settle(future: asyncio.Future[Any], result: Any, exc: BaseException | None)
 
 
 class CrashGuard:
-    """ASGI middleware: an exception no handler expected halts the arm, then answers 500."""
+    """ASGI middleware: an exception no handler expected is a 500 for that request, logged
+    (escaped), and nothing else: the arm's activities run in the session, which halts on
+    their faults itself; a bug in serving one request is no fault of the arm, and a Halt
+    there would stop a run in the operator's name (a GET from any web page could do it)."""
 
     def __init__(self, app: Any, console: Console) -> None:
         self.app = app
@@ -156,14 +166,26 @@ class CrashGuard:
         try:
             await self.app(scope, receive, tracking_send)
         except Exception as exc:  # noqa: BLE001 - the point: nothing crashes silently
-            outcome = await asyncio.to_thread(self.console.halt_after_crash,
-                                              scope.get("path", "?"), exc)
+            log.error("console: internal error in %s %s: %s", scope.get("method", "?"),
+                      printable(scope.get("path", "?")), printable(repr(exc)),
+                      exc_info=log.isEnabledFor(logging.DEBUG))
             if not started:
-                body = json.dumps({"error": one_line(
-                    f"internal error ({type(exc).__name__}: {exc}); {outcome}")}).encode()
+                body = json.dumps({"error": one_line(printable(
+                    f"internal error ({type(exc).__name__}: {exc})"))}).encode()
                 await send({"type": "http.response.start", "status": 500,
                             "headers": [(b"content-type", b"application/json")]})
                 await send({"type": "http.response.body", "body": body})
+
+
+def check_start(now: Any) -> tuple[dict[str, float] | None, bool]:
+    """Where a check's dry run starts: the measured joints (nothing measured yet: Park, as
+    ``seqrun validate``), and whether the arm is up (every module homed, none halted or in
+    error: a sequence without the start-up steps is checked as it would run)."""
+    measured = dict(now.joints_deg)
+    start = None if any(v is None for v in measured.values()) else measured
+    up = all("HOME_OK" in j.flags and not {"HALTED", "ERROR"} & set(j.flags)
+             for j in now.joints) and now.activity not in ("halted", "faulted")
+    return start, up
 
 
 def _activity(activity: Any) -> dict[str, Any]:
@@ -205,18 +227,17 @@ def build_router(console: Console) -> APIRouter:
     def sequences() -> list[dict[str, str]]:
         return catalog.sequences()
 
-    @api.get("/sequences/{name:path}/check",
-             summary="Validation findings and the dry-run report from the arm's position now")
-    def check(name: str) -> dict[str, Any]:
-        now = session.status()
-        measured = dict(now.joints_deg)
-        # nothing measured yet: from Park, as seqrun validate
-        start = None if any(v is None for v in measured.values()) else measured
-        # An arm that is up (every module homed, none halted or in error) is dry-run as
-        # such, so that a sequence without the start-up steps is checked as it would run.
-        up = all("HOME_OK" in j.flags and not {"HALTED", "ERROR"} & set(j.flags)
-                 for j in now.joints) and now.activity not in ("halted", "faulted")
-        return catalog.check(name, start, started=up)
+    @api.post("/sequences/{name:path}/check",
+              summary="Validation findings and the dry-run report from the arm's position "
+                      "now (a worker process; at most a few per second)")
+    async def check(name: str) -> Any:
+        console.check_rate.take()  # TooMany: 429
+        try:
+            start, up = check_start(session.status())
+            return await asyncio.to_thread(console.checker.check, catalog, name, start,
+                                           started=up)
+        finally:
+            console.check_rate.give_back()
 
     @api.get("/runs", summary="Past runs, newest first")
     def runs() -> list[dict[str, Any]]:
@@ -357,6 +378,7 @@ def create_app(session: Any, catalog: Catalog, arm: Any, *, token: str | None = 
             yield
         finally:
             console.telemetry.stop()
+            console.checker.close()
 
     app = FastAPI(title="seqrun console", version="1", lifespan=lifespan,
                   # No Swagger UI: it loads its scripts from a CDN (the facility has no
@@ -374,6 +396,17 @@ def create_app(session: Any, catalog: Catalog, arm: Any, *, token: str | None = 
     async def bad_input(_: Request, exc: UserInputError) -> JSONResponse:
         return JSONResponse({"error": one_line(str(exc))}, status_code=400)
 
+    @app.exception_handler(TooMany)
+    async def too_many(_: Request, exc: TooMany) -> JSONResponse:
+        return JSONResponse({"error": one_line(str(exc))}, status_code=429,
+                            headers={"Retry-After": str(max(1, round(exc.retry_after_s)))})
+
+    @app.exception_handler(StarletteHTTPException)
+    async def http_error(_: Request, exc: StarletteHTTPException) -> JSONResponse:
+        # 404, 405, ...: the documented {"error"} body, as every refusal
+        return JSONResponse({"error": one_line(printable(str(exc.detail)))},
+                            status_code=exc.status_code, headers=exc.headers)
+
     @app.exception_handler(Malformed)
     async def malformed_body(_: Request, exc: Malformed) -> JSONResponse:
         return JSONResponse({"error": one_line(str(exc))}, status_code=exc.status)
@@ -385,7 +418,7 @@ def create_app(session: Any, catalog: Catalog, arm: Any, *, token: str | None = 
     @app.exception_handler(SeqrunError)
     async def failed(request: Request, exc: SeqrunError) -> JSONResponse:
         # A command that could not do or confirm what it says (a bus or module fault).
-        outcome = await asyncio.to_thread(console.halt_after_crash, request.url.path, exc)
+        outcome = await asyncio.to_thread(console.halt_after_bus_fault, request.url.path, exc)
         return JSONResponse({"error": one_line(f"{exc}; {outcome}")}, status_code=503)
 
     app.include_router(build_router(console))

@@ -55,8 +55,12 @@ class Catalog:
     def sequence_path(self, name: str) -> Path:
         """The file of a listed sequence; a name outside the sequences folder is refused."""
         folder = self.sequences_dir.resolve()
-        path = (folder / name).resolve()
-        if not path.is_relative_to(folder) or path.suffix != ".yaml" or not path.is_file():
+        try:
+            path = (folder / name).resolve()
+            ok = path.is_relative_to(folder) and path.suffix == ".yaml" and path.is_file()
+        except (OSError, ValueError):  # a NUL in the name, a name too long, a loop
+            ok = False
+        if not ok:
             raise Refused(f"unknown sequence '{name}' (see GET /api/v1/sequences)")
         return path
 
@@ -133,9 +137,13 @@ class Catalog:
     def run_file(self, run_id: str, name: str) -> Path:
         """A file of a run folder (report.html, report.json, ...), never outside it."""
         root = self.runs_dir.resolve()
-        folder = (root / run_id).resolve()
-        path = (folder / name).resolve()
-        if (not folder.is_relative_to(root) or folder == root
-                or not path.is_relative_to(folder) or not path.is_file()):
+        try:
+            folder = (root / run_id).resolve()
+            path = (folder / name).resolve()
+            ok = (folder.is_relative_to(root) and folder != root
+                  and path.is_relative_to(folder) and path.is_file())
+        except (OSError, ValueError):  # a NUL in the name, a name too long, a loop
+            ok = False
+        if not ok:
             raise Refused(f"no file '{name}' in run '{run_id}'")
         return path

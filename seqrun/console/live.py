@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any
 from fastapi import WebSocket, WebSocketDisconnect
 
 from seqrun.console import models
-from seqrun.console.bodies import Malformed, one_line, parse_json, to_model
+from seqrun.console.bodies import Malformed, one_line, parse_json, printable, to_model
 from seqrun.console.telemetry import PageFeed, dumps
 from seqrun.errors import Refused, UserInputError
 
@@ -104,9 +104,9 @@ async def live(console: "Console", ws: WebSocket) -> None:
             except (Refused, UserInputError) as exc:
                 await reply(message.id, False, error=one_line(str(exc)))
             except Exception as exc:  # noqa: BLE001 - a bug: this message fails, not the arm
-                log.error("console: live %s failed: %r", message.op, exc)
+                log.error("console: live %s failed: %s", message.op, printable(repr(exc)))
                 await reply(message.id, False,
-                            error=one_line(f"{message.op} failed: internal error ({exc!r})"))
+                            error=one_line(printable(f"{message.op} failed: internal error ({exc!r})")))
 
     async def halt(msg_id: Any, reason: str, note: str | None) -> None:
         while not ops.empty():  # queued jog renewals die with the STOP
@@ -186,7 +186,8 @@ async def live(console: "Console", ws: WebSocket) -> None:
     except WebSocketDisconnect:
         pass
     except Exception as exc:  # noqa: BLE001 - a bug ends this connection, not the arm
-        log.error("console: the live connection of %s failed: %r", client, exc)
+        log.error("console: the live connection of %s failed: %s", client,
+                  printable(repr(exc)))
     finally:
         for task in tasks:
             task.cancel()

@@ -465,7 +465,7 @@ async function openSequence(name) {
   $("#seq-dryrun").replaceChildren();
   $("#seq-steps").replaceChildren();
   let check;
-  try { check = await api("GET", `/sequences/${encodeURI(name)}/check`); } catch (err) { $("#seq-findings").replaceChildren(); return; }
+  try { check = await api("POST", `/sequences/${encodeURI(name)}/check`); } catch (err) { $("#seq-findings").replaceChildren(); return; }
   if (state.selected !== name) return;
   state.checked = check;
   const findings = [el("p", { className: check.valid ? "passed" : "failed", id: "seq-verdict", textContent: check.valid ? "valid" : `invalid: ${check.errors.length} error(s)` })];
