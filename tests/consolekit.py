@@ -181,14 +181,12 @@ class LiveServer:
     def __init__(self, app: Any) -> None:
         import uvicorn
 
-        from seqrun.console.server import bind
+        from seqrun.console.server import bind, uvicorn_config
 
         self.sock = bind("127.0.0.1", 0)
         self.port = self.sock.getsockname()[1]
         self.url = f"http://127.0.0.1:{self.port}/"
-        config = uvicorn.Config(app, log_level="warning", ws="websockets-sansio",
-                                lifespan="on", timeout_graceful_shutdown=2)
-        self.server = uvicorn.Server(config)
+        self.server = uvicorn.Server(uvicorn_config(app, graceful_s=2))
         self.server.install_signal_handlers = lambda: None  # type: ignore[method-assign]
         self.thread = threading.Thread(target=self.server.run,
                                        kwargs={"sockets": [self.sock]}, daemon=True)

@@ -366,3 +366,128 @@ def test_the_check_runs_in_a_worker_process_below_the_console(setup):
         assert os.sched_getscheduler(worker.pid) == os.SCHED_OTHER
     finally:
         worker.close()
+
+
+# ------------------------------------------------------------------ 4. clients and the loop
+def test_live_connections_are_capped_with_a_clear_refusal(setup):
+    from starlette.testclient import WebSocketDenialResponse
+
+    with TestClient(setup.app(max_pages=2), base_url=LOCAL) as client:
+        with client.websocket_connect(LIVE) as one, client.websocket_connect(LIVE) as two:
+            assert one.receive_json()["type"] == two.receive_json()["type"] == "hello"
+            with pytest.raises(WebSocketDenialResponse) as refused:
+                with client.websocket_connect(LIVE):
+                    pass
+            assert refused.value.status_code == 503
+            assert "too many live connections" in refused.value.json()["error"]
+        with client.websocket_connect(LIVE) as again:  # room again once they closed
+            assert again.receive_json()["type"] == "hello"
+
+
+def test_a_request_body_is_capped(client, wire):
+    from seqrun.console.bodies import MAX_BODY_BYTES
+
+    big = b'{"joints": {"j1": 5}, "pad": "' + b"x" * (2 * MAX_BODY_BYTES) + b'"}'
+    r = client.post("/api/v1/move/joints", content=big, headers=JSON)
+    assert r.status_code == 413 and "over" in r.json()["error"], r.text[:200]
+
+    def chunks():  # no Content-Length: the cap holds while reading
+        yield b'{"joints": {"j1": 5}, "pad": "'
+        for _ in range(40):
+            yield b"x" * 8192
+        yield b'"}'
+
+    r = client.post("/api/v1/move/joints", content=chunks(), headers=JSON)
+    assert r.status_code == 413, r.text[:200]
+    assert wire.not_reads() == []
+
+
+def _raw(port: int):
+    import socket
+
+    return socket.create_connection(("127.0.0.1", port), timeout=10)
+
+
+def _closed_within(sock, seconds: float) -> bool:
+    """The server closed ``sock`` within ``seconds`` (what it sent first is skipped)."""
+    sock.settimeout(0.2)
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        try:
+            if sock.recv(65536) == b"":
+                return True
+        except TimeoutError:
+            continue
+        except OSError:
+            return True
+    return False
+
+
+def test_a_request_head_must_arrive_in_time(setup, monkeypatch):
+    """Slowloris: a head sent a byte at a time held a connection for good."""
+    from consolekit import LiveServer
+
+    from seqrun.console.server import HeadDeadline
+
+    monkeypatch.setattr(HeadDeadline, "head_timeout_s", 1.0)
+    with LiveServer(setup.app()) as server:
+        slow = _raw(server.port)
+        slow.sendall(b"GET /api/v1/status HTTP/1.1\r\nHost: 127.0.0.1\r\n")  # never ends
+        assert _closed_within(slow, 3.0), "a request head was allowed to trickle for good"
+        silent = _raw(server.port)  # connected, sends nothing
+        assert _closed_within(silent, 3.0)
+        # A whole request is answered; the next head on the kept-alive connection has its
+        # own deadline.
+        kept = _raw(server.port)
+        kept.sendall(b"GET /api/v1/status HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
+        assert b"200 OK" in kept.recv(65536)
+        kept.sendall(b"GET /api/v1/status HTTP/1.1\r\n")
+        assert _closed_within(kept, 3.0)
+        # A live connection is not a request head: it stays open.
+        import websockets.sync.client
+
+        with websockets.sync.client.connect(f"ws://127.0.0.1:{server.port}/api/v1/live") as ws:
+            time.sleep(1.5)
+            ws.send('{"op": "ping", "id": 5}')
+            assert any(json.loads(ws.recv(timeout=5)).get("id") == 5 for _ in range(400))
+        for s in (slow, silent, kept):
+            s.close()
+
+
+def test_a_page_that_does_not_read_is_closed_and_holds_nothing_up(setup, monkeypatch):
+    import base64
+    import os
+    import socket
+
+    from consolekit import LiveServer, wait_for
+
+    from seqrun.console import live
+    from seqrun.events import make_event
+
+    monkeypatch.setattr(live, "SEND_STALL_S", 1.0)
+    app = setup.app()
+    with LiveServer(app) as server:
+        console = app.state.console
+        sock = socket.socket()
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        sock.connect(("127.0.0.1", server.port))
+        key = base64.b64encode(os.urandom(16)).decode()
+        sock.sendall((f"GET /api/v1/live HTTP/1.1\r\nHost: 127.0.0.1:{server.port}\r\n"
+                      "Upgrade: websocket\r\nConnection: Upgrade\r\n"
+                      f"Sec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n\r\n")
+                     .encode())
+        assert b"101" in sock.recv(1024)
+        wait_for(lambda: console.live_connections == 1)
+        hub = setup.session.events
+        slowest, k = 0.0, 0
+        deadline = time.monotonic() + 30
+        while console.live_connections and time.monotonic() < deadline:
+            for _ in range(50):  # 500 kB of events the page never takes
+                k += 1
+                started = time.perf_counter()
+                hub.publish(make_event("status_poll_failed", float(k), {"error": "x" * 10_000}))
+                slowest = max(slowest, time.perf_counter() - started)
+            time.sleep(0.01)
+        assert console.live_connections == 0, f"still open after {10 * k} kB sent to it"
+        assert slowest < 0.05, slowest  # publishing never waited for the page
+        sock.close()

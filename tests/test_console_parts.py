@@ -197,3 +197,38 @@ def test_one_snapshot_encoded_once_for_all_pages_and_none_without_pages():
     # not once per page
     assert batches[0][-1] is batches[1][-1] is batches[2][-1]
     assert wakes == telemetry.snapshots
+
+
+def test_a_page_s_events_are_bounded_oldest_dropped_and_counted():
+    from seqrun.console.telemetry import PAGE_EVENTS
+
+    async def scenario() -> tuple[PageFeed, list[str]]:
+        feed = PageFeed(asyncio.get_running_loop())
+        for k in range(PAGE_EVENTS + 25):
+            feed.push_event(f"e{k}")
+        feed.push_status("s1")
+        feed.push_status("s2")
+        return feed, await feed.next_batch()
+
+    feed, batch = asyncio.run(scenario())
+    assert batch[0] == "e25" and batch[-2] == f"e{PAGE_EVENTS + 24}" and batch[-1] == "s2"
+    assert len(batch) == PAGE_EVENTS + 1
+    assert feed.dropped_events == 25 and feed.replaced_statuses == 1
+
+
+def test_the_pages_share_a_budget_of_statuses():
+    from seqrun.console.telemetry import MAX_STATUS_HZ, STATUS_BUDGET_PER_S
+
+    telemetry = Telemetry(_Source(), status_dict=lambda: {})
+    loop = asyncio.new_event_loop()
+    try:
+        assert telemetry.status_gap_s() == pytest.approx(1 / MAX_STATUS_HZ)
+        for _ in range(3):  # a few tabs: every measurement
+            telemetry.attach(PageFeed(loop))
+        assert telemetry.status_gap_s() == pytest.approx(1 / MAX_STATUS_HZ)
+        for _ in range(97):  # a hundred clients: their share each
+            telemetry.attach(PageFeed(loop))
+        assert telemetry.status_gap_s() == pytest.approx(100 / STATUS_BUDGET_PER_S)
+        assert 100 / telemetry.status_gap_s() <= STATUS_BUDGET_PER_S + 1e-9
+    finally:
+        loop.close()

@@ -30,7 +30,7 @@ from seqrun.console import models
 from seqrun.console.bodies import (BODY_CUT, Malformed, check_body, printable, read_model,
                                    to_model)
 from seqrun.console.limits import RequestLimits
-from seqrun.console.live import PAGE_SILENCE_S, live  # noqa: F401 (the tests' name)
+from seqrun.console.live import MAX_PAGES, PAGE_SILENCE_S, live  # noqa: F401 (tests' name)
 from seqrun.console.catalog import Catalog
 from seqrun.console.checker import CheckWorker, RateLimit, TooMany
 from seqrun.console.guard import COOKIE, AccessGuard
@@ -89,6 +89,8 @@ class Console:
         self.scene = arm_scene(arm)
         self.motions = Motions(session)
         self.checker = CheckWorker()
+        self.max_pages = MAX_PAGES
+        self.live_connections = 0
         self.check_rate = RateLimit(what="check")
         self.telemetry = Telemetry(session, status_dict=self.status_dict)
         self._ids = itertools.count(1)
@@ -366,10 +368,12 @@ def index_page(request: Request) -> HTMLResponse:
 
 
 def create_app(session: Any, catalog: Catalog, arm: Any, *, token: str | None = None,
-               local_only: bool = True) -> FastAPI:
+               local_only: bool = True, max_pages: int = MAX_PAGES) -> FastAPI:
     """The ASGI application for one arm session. ``token``: required on every request
-    (``--host``); ``local_only``: the Host header must name this machine."""
+    (``--host``); ``local_only``: the Host header must name this machine; ``max_pages``:
+    live connections at most."""
     console = Console(session, catalog, arm)
+    console.max_pages = max_pages
 
     @contextlib.asynccontextmanager
     async def lifespan(_: FastAPI) -> AsyncIterator[None]:

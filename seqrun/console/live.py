@@ -31,6 +31,15 @@ log = logging.getLogger(__name__)
 #: A page sends something (a ping at least) every 0.5 s; one silent for this long while a
 #: motion it started is under way is taken as gone (its motion is stopped).
 PAGE_SILENCE_S = 2.0
+#: Live connections at most (pages and tools); one more is refused (503) saying so.
+MAX_PAGES = 100
+#: A page that has not taken a message for this long (its connection's buffers full) is
+#: closed: it is not reading, and whatever it shows is old.
+SEND_STALL_S = 10.0
+
+
+class PageTooSlow(Exception):
+    """The page did not take a message within :data:`SEND_STALL_S`."""
 
 
 def wants_halt(raw: str, message: Any) -> bool:
@@ -67,7 +76,31 @@ def _message_id(message: Any) -> Any:
     return value if ok else None
 
 
+async def refuse(ws: WebSocket, message: str, status: int = 503) -> None:
+    """Refuse a live connection with an HTTP answer where the server can give one (a
+    browser shows a failed connection either way; a tool reads the answer)."""
+    from fastapi.responses import JSONResponse
+
+    try:
+        await ws.send_denial_response(JSONResponse({"error": message}, status_code=status))
+    except RuntimeError:  # no denial responses: a close with the reason
+        await ws.close(code=1013, reason=message[:120])
+
+
 async def live(console: "Console", ws: WebSocket) -> None:
+    if console.live_connections >= console.max_pages:
+        log.warning("console: live connection refused, %d open", console.live_connections)
+        await refuse(ws, f"too many live connections ({console.max_pages} open): close a "
+                         "page or a tool first")
+        return
+    console.live_connections += 1  # (counted before the first await: the cap holds)
+    try:
+        await _live(console, ws)
+    finally:
+        console.live_connections -= 1
+
+
+async def _live(console: "Console", ws: WebSocket) -> None:
     await ws.accept()
     loop = asyncio.get_running_loop()
     client = console.new_client_id()
@@ -77,15 +110,22 @@ async def live(console: "Console", ws: WebSocket) -> None:
 
     async def send(text: str) -> None:
         async with send_lock:
-            await ws.send_text(text)
+            try:
+                await asyncio.wait_for(ws.send_text(text), SEND_STALL_S)
+            except asyncio.TimeoutError:
+                raise PageTooSlow(client) from None
 
     async def reply(msg_id: Any, ok: bool, **extra: Any) -> None:
         await send(dumps({"type": "reply", "id": msg_id, "ok": ok, **extra}))
 
     async def pump() -> None:
+        gap = console.telemetry.status_gap_s
         while True:
-            for text in await feed.next_batch():
+            batch = await feed.next_batch()
+            for text in batch:
                 await send(text)
+            if batch and batch[-1].startswith('{"type":"status"'):
+                await asyncio.sleep(gap())  # this page's share of the status budget
 
     ops: asyncio.Queue[models.JogMessage | models.JogStopMessage] = asyncio.Queue()
 
@@ -169,29 +209,40 @@ async def live(console: "Console", ws: WebSocket) -> None:
                       "status": console.status_dict()}))
     for text in history:
         await send(text)
-    tasks = [asyncio.create_task(pump()), asyncio.create_task(worker())]
+    pumping = asyncio.create_task(pump())
+    tasks = [pumping, asyncio.create_task(worker())]
+    receiving: asyncio.Task[str] | None = None
     try:
         while True:
-            try:
-                raw = await asyncio.wait_for(ws.receive_text(), PAGE_SILENCE_S)
-            except asyncio.TimeoutError:
-                # A page that went silent (a tablet off the Wi-Fi: no TCP close for a long
-                # time) while its motion is under way is taken as gone.
-                if await asyncio.to_thread(console.motions.owns_motion, client):
-                    log.warning("console page %s silent for %.1f s during its motion",
-                                client, PAGE_SILENCE_S)
-                    break
+            if receiving is None:
+                receiving = asyncio.create_task(ws.receive_text())
+            done, _ = await asyncio.wait({receiving, pumping}, timeout=PAGE_SILENCE_S,
+                                         return_when=asyncio.FIRST_COMPLETED)
+            if pumping in done:  # it does not read: nothing it shows is current
+                log.warning("console page %s took no message for %.0f s: closed", client,
+                            SEND_STALL_S)
+                break
+            if receiving in done:
+                raw, receiving = receiving.result(), None
+                await handle(raw)
                 continue
-            await handle(raw)
+            # A page that went silent (a tablet off the Wi-Fi: no TCP close for a long
+            # time) while its motion is under way is taken as gone.
+            if await asyncio.to_thread(console.motions.owns_motion, client):
+                log.warning("console page %s silent for %.1f s during its motion",
+                            client, PAGE_SILENCE_S)
+                break
     except WebSocketDisconnect:
         pass
     except Exception as exc:  # noqa: BLE001 - a bug ends this connection, not the arm
         log.error("console: the live connection of %s failed: %s", client,
                   printable(repr(exc)))
     finally:
-        for task in tasks:
+        for task in tasks + ([receiving] if receiving is not None else []):
             task.cancel()
         console.telemetry.detach(feed)
         await asyncio.to_thread(console.motions.page_gone, client)
-        with contextlib.suppress(Exception):  # already closed by the page, or not
-            await ws.close()
+        # (already closed by the page, or not; a page that does not read never takes the
+        # close frame either: the server drops the connection when this returns)
+        with contextlib.suppress(Exception):
+            await asyncio.wait_for(ws.close(), 1.0)
