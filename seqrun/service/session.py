@@ -35,6 +35,7 @@ from typing import Any, Callable, Mapping
 
 from seqrun.errors import Refused
 from seqrun.events import Event, EventHub, Subscription, make_event
+from seqrun.service.control import ControlDesk
 from seqrun.halt import HaltConfirmation
 
 #: Version of this API (and of the console's /api/v<N>).
@@ -172,9 +173,11 @@ class ActivityResult:
 class Activity:
     """A handle on something the session does in the background (a move, a jog, a run)."""
 
-    def __init__(self, kind: str, activity_id: int) -> None:
+    def __init__(self, kind: str, activity_id: int, started_by: str | None = None) -> None:
         self.kind = kind
         self.id = activity_id
+        #: Who started it (a face's client name), when the face said.
+        self.started_by = started_by
         self._done = threading.Event()
         self._result: ActivityResult | None = None
 
@@ -286,6 +289,8 @@ class ArmSession:
         self._message = ""
         self._status_listener = self._hub.add_listener(self._on_event, "session status",
                                                        maxsize=10_000)
+        #: Who holds control and who watches (every face of this session shares it).
+        self.control = ControlDesk(publish=self._publish, clock=self.clock.now)
         self._poll_stop = threading.Event()
         self._poller: threading.Thread | None = None
         if status_hz > 0:
@@ -589,7 +594,8 @@ class ArmSession:
         return _ControlHandler(self)
 
     # ------------------------------------------------------------------ activities
-    def _begin(self, kind: str, detail: Mapping[str, Any] | None = None) -> Activity:
+    def _begin(self, kind: str, detail: Mapping[str, Any] | None = None,
+               by: str | None = None) -> Activity:
         with self._state:
             if self._closed:
                 raise Refused("the session is closed")
@@ -597,9 +603,12 @@ class ArmSession:
                 raise Refused(f"a {self._activity.kind} is under way: wait for it to end, "
                               "or stop it first")
             self._activity_ids += 1
-            activity = Activity(kind, self._activity_ids)
+            activity = Activity(kind, self._activity_ids, by)
             self._activity = activity
-        self._publish("activity_started", kind=kind, detail=dict(detail or {}))
+        detail = dict(detail or {})
+        if by is not None:
+            detail["by"] = by
+        self._publish("activity_started", kind=kind, detail=detail)
         return activity
 
     def _end(self, activity: Activity, result: ActivityResult) -> None:
@@ -788,8 +797,8 @@ class ArmSession:
             raise Refused(f"{what}: {check.errors[0].message}")
         return loaded
 
-    def _start_move(self, kind: str, loaded, detail: dict) -> Activity:
-        activity = self._begin(kind, detail)
+    def _start_move(self, kind: str, loaded, detail: dict, by: str | None = None) -> Activity:
+        activity = self._begin(kind, detail, by)
 
         def work() -> ActivityResult:
             executor = self._new_executor(loaded)
@@ -799,7 +808,8 @@ class ArmSession:
 
         return self._launch(activity, work, background=True)
 
-    def move_to_pose(self, name: str, *, velocity_scale: float | None = None) -> Activity:
+    def move_to_pose(self, name: str, *, velocity_scale: float | None = None,
+                     by: str | None = None) -> Activity:
         """Move to a named pose (a pose file), as a one-step sequence: validated, executed
         by the executor. Non-blocking."""
         import json
@@ -813,10 +823,10 @@ class ArmSession:
             params["velocity_deg_s"] = self.move_velocities()
         loaded = self._validated_move("move", f"move: {json.dumps(params)}",
                                       f"move to {name}")
-        return self._start_move("move", loaded, {"pose": name})
+        return self._start_move("move", loaded, {"pose": name}, by)
 
     def move_to_joints(self, joints_deg: Mapping[str, float], *,
-                       velocity_scale: float | None = None) -> Activity:
+                       velocity_scale: float | None = None, by: str | None = None) -> Activity:
         """Move the named joints to user-degree targets (others stay). Non-blocking."""
         import json
 
@@ -837,7 +847,7 @@ class ArmSession:
         params["velocity_deg_s"] = {n: v for n, v in self.move_velocities().items()
                                     if n in targets}
         loaded = self._validated_move("move", f"move: {json.dumps(params)}", "move")
-        return self._start_move("move", loaded, {"joints": targets})
+        return self._start_move("move", loaded, {"joints": targets}, by)
 
     @staticmethod
     def _scale(value: Any) -> float:
@@ -847,7 +857,7 @@ class ArmSession:
         return v
 
     # ------------------------------------------------------------------ jog
-    def jog(self, joint: str, speed_scale: float) -> Activity:
+    def jog(self, joint: str, speed_scale: float, *, by: str | None = None) -> Activity:
         """Jog one joint at ``speed_scale`` (-1..1) of its move velocity. Call again at
         least every :data:`JOG_DEADMAN_S` (same joint and direction: renews; the speed
         stays the first call's) or the jog ends with a controlled stop. Refused near a
@@ -875,7 +885,7 @@ class ArmSession:
             velocity = self._move_velocities.get(joint, 0.0)
         plan = plan_jog(self.arm, joint, float(speed_scale), joints, velocity)
         deadman = Deadman(self.clock, self.jog_deadman_s)
-        activity = self._begin("jog", {"joint": joint, "speed_scale": speed_scale})
+        activity = self._begin("jog", {"joint": joint, "speed_scale": speed_scale}, by)
         with self._state:
             self._deadman, self._jog_plan = deadman, plan
 
@@ -900,7 +910,7 @@ class ArmSession:
     def run_sequence(self, file: str | Path, *, speed: float = 1.0, step_mode: bool = False,
                      first_step: int = 1, command_mode: str | None = None,
                      log_dir: Path | None = None, html_report: bool = True,
-                     loaded=None, assume_yes: bool = False) -> Activity:
+                     loaded=None, assume_yes: bool = False, by: str | None = None) -> Activity:
         """Validate ``file`` (refused with its first error line when invalid), then run it in
         a worker thread with a run folder like ``seqrun run``. Questions (confirm steps,
         ``step_mode``'s before-step question, clearing a latched fault) are published as
@@ -942,7 +952,7 @@ class ArmSession:
             folder = prepare_run_folder(log_dir, loaded.name, self.log_root)
         except OSError as exc:
             raise Refused(f"cannot create the run folder: {exc.strerror or exc}") from None
-        activity = self._begin("run", {"file": str(file), "run_dir": str(folder)})
+        activity = self._begin("run", {"file": str(file), "run_dir": str(folder)}, by)
         with self._state:
             self._run_info = RunInfo(str(file), None, None, len(loaded.steps), str(folder))
         total = len(loaded.steps)
@@ -1079,7 +1089,10 @@ class ArmSession:
             self._question_ids += 1
             q = _Question(f"q{self._question_ids}", text, step)
             self._questions[q.id] = q
-        self._publish("confirm_requested", question_id=q.id, text=text)
+        activity = self._activity
+        by = activity.started_by if activity is not None else None
+        self._publish("confirm_requested", question_id=q.id, text=text,
+                      **({"started_by": by} if by is not None else {}))
         executor = self._executor
         while not q.answered.wait(0.05):
             # A stop request posted meanwhile (abort, STOP) answers no at once.
