@@ -95,8 +95,10 @@ class BusListener:
         while not self._stop.is_set():
             msg = self.bus.recv(0.05)
             if msg is not None and 0x0E0 <= msg.arbitration_id <= HALT_ID:
-                self.frames.append((time.perf_counter(), msg.arbitration_id,
-                                    bytes(msg.data)))
+                # when the frame was on the wire (the simulator's own time stamp, the
+                # monotonic clock), on the tests' perf_counter
+                at = time.perf_counter() - (time.monotonic() - msg.timestamp)
+                self.frames.append((at, msg.arbitration_id, bytes(msg.data)))
 
     def requests(self, since: float = 0.0) -> list[tuple[float, int, bytes]]:
         return [f for f in list(self.frames) if f[0] >= since]
@@ -207,6 +209,21 @@ class LiveServer:
             self.sock.close()
         except OSError:
             pass
+
+
+CLIENT = "X-Seqrun-Client"
+
+
+def take_control(client: Any, name: str = "tests", page: str | None = None) -> str:
+    """``client`` (a TestClient or an httpx client) takes control: as an API client named
+    ``name`` (its id then goes with every request it sends), or for the page ``page``."""
+    headers = {CLIENT: page} if page else {}
+    r = client.post("/api/v1/control/take", json={"name": name}, headers=headers)
+    assert r.status_code == 200, r.text
+    ident = r.json()["client"]
+    if page is None:
+        client.headers[CLIENT] = ident
+    return ident
 
 
 def free_port() -> int:

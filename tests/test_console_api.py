@@ -11,7 +11,7 @@ import math
 import time
 
 import pytest
-from consolekit import console_setup, wait_for
+from consolekit import console_setup, take_control, wait_for
 from fastapi.testclient import TestClient
 
 from seqrun.errors import Refused
@@ -30,6 +30,7 @@ def setup(tmp_path):
 @pytest.fixture
 def client(setup):
     with TestClient(setup.app(), base_url=LOCAL, raise_server_exceptions=False) as c:
+        take_control(c)
         yield c
 
 
@@ -241,8 +242,9 @@ def test_a_sequence_with_a_confirm_runs_to_the_end_and_is_listed(client, setup):
     with client.websocket_connect(LIVE) as ws:
         hello = ws.receive_json()
         assert hello["type"] == "hello" and hello["status"]["simulator"] is True
-        r = client.post("/api/v1/run", json={"sequence": "confirm_nudge.yaml"},
-                        headers={"X-Seqrun-Client": hello["client"]})
+        take_control(client, page=hello["client"])
+        client.headers["X-Seqrun-Client"] = hello["client"]  # the page's commands
+        r = client.post("/api/v1/run", json={"sequence": "confirm_nudge.yaml"})
         assert r.status_code == 200, r.text
         question = None
         while question is None:
@@ -310,7 +312,7 @@ def test_websocket_refuses_malformed_messages(client, setup):
     armed(client)
     before = time.perf_counter()
     with client.websocket_connect(LIVE) as ws:
-        ws.receive_json()
+        take_control(client, page=ws.receive_json()["client"])
         for text, words in (("not json", "malformed"), ('["halt"]', "malformed"),
                             ('{"op": "fly", "id": 1}', "unknown op"),
                             ('{"op": "jog", "joint": "j1", "speed_scale": 9, "id": 2}',
@@ -328,7 +330,7 @@ def test_websocket_jog_hold_and_release(client, setup):
     armed(client)
     start = joint(client, "j2")
     with client.websocket_connect(LIVE) as ws:
-        ws.receive_json()
+        take_control(client, page=ws.receive_json()["client"])
         for k in range(8):
             ws.send_json({"op": "jog", "joint": "j2", "speed_scale": 0.8, "id": k})
             time.sleep(0.1)
@@ -348,6 +350,7 @@ def test_a_page_that_goes_away_stops_its_move(client, setup):
     armed(client)
     with client.websocket_connect(LIVE) as ws:
         page = ws.receive_json()["client"]
+        take_control(client, page=page)
         r = client.post("/api/v1/move/joints", json={"joints": {"j1": 60}},
                         headers={"X-Seqrun-Client": page})
         assert r.status_code == 200, r.text
@@ -368,6 +371,7 @@ def test_a_page_gone_silent_during_its_move_is_taken_as_gone(client, setup):
     armed(client)
     with client.websocket_connect(LIVE) as ws:
         page = ws.receive_json()["client"]
+        take_control(client, page=page)
         r = client.post("/api/v1/move/joints", json={"joints": {"j1": 120}},
                         headers={"X-Seqrun-Client": page})
         assert r.status_code == 200, r.text
@@ -394,8 +398,11 @@ def test_with_a_token_every_request_and_websocket_needs_it(setup):
 
     with TestClient(setup.app(token="s3cret", local_only=False)) as client:
         refused(client.get("/api/v1/status"), 401, "token")
-        refused(client.get("/"), 401)
-        refused(client.post("/api/v1/halt"), 401)
+        refused(client.post("/api/v1/control/take"), 401, "token")
+        refused(client.post("/api/v1/run/abort"), 401, "token")
+        opened = client.get("/")  # a person: where the token is, and a STOP without it
+        assert opened.status_code == 401 and "token required" in opened.text
+        assert 'id="stop"' in opened.text
         refused(client.get("/api/v1/status", headers={"Authorization": "Bearer wrong"}), 401)
         assert client.get("/api/v1/status",
                           headers={"Authorization": "Bearer s3cret"}).status_code == 200
@@ -408,6 +415,15 @@ def test_with_a_token_every_request_and_websocket_needs_it(setup):
         assert client.get("/api/v1/status").status_code == 200  # now by cookie
         with client.websocket_connect("/api/v1/live") as ws:
             assert ws.receive_json()["type"] == "hello"
+
+
+def test_stop_needs_no_token(setup):
+    with TestClient(setup.app(token="s3cret"), base_url=LOCAL) as client:
+        before = time.perf_counter()
+        r = client.post("/api/v1/halt")
+        assert r.status_code == 200 and r.json()["halt_confirmed"] is True, r.text
+        assert setup.wire.halts(before)
+        refused(client.post("/api/v1/halt", headers={"Origin": "http://evil.example"}), 403)
 
 
 def test_other_hosts_and_origins_are_refused(client):

@@ -9,7 +9,7 @@ import json
 import time
 
 import pytest
-from consolekit import BusListener, console_setup
+from consolekit import BusListener, console_setup, take_control
 from fastapi.testclient import TestClient
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -36,6 +36,7 @@ def wire(setup):
 @pytest.fixture
 def client(setup):
     with TestClient(setup.app(), base_url=LOCAL, raise_server_exceptions=False) as c:
+        take_control(c)
         yield c
 
 
@@ -295,6 +296,7 @@ def test_a_crashed_handler_is_a_500_for_that_request_only(tmp_path, caplog):
     listener = BusListener(setup.connection)
     try:
         with TestClient(setup.app(), base_url=LOCAL, raise_server_exceptions=False) as client:
+            take_control(client)
             armed(client)
             before = time.perf_counter()
             with caplog.at_level("ERROR"):

@@ -37,7 +37,9 @@ def test_token_by_header_query_or_cookie_else_401():
     client = TestClient(_app(token="t0k", local_only=False))
     for headers in ({}, {"Authorization": "Bearer nope"}, {"Authorization": "t0k"},
                     {"Cookie": f"{COOKIE}=nope"}, {"Cookie": "garbage;;=="}):
-        r = client.get("/", headers=headers)
+        r = client.get("/", headers=headers)  # (a person's browser: a page saying so)
+        assert r.status_code == 401 and "token required" in r.text, headers
+        r = client.post("/", headers=headers)
         assert r.status_code == 401 and "token" in r.json()["error"], headers
     assert client.get("/", headers={"Authorization": "Bearer t0k"}).text == "hello"
     assert client.get("/?token=t0k").text == "hello"

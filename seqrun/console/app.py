@@ -88,6 +88,8 @@ class Console:
         self.arm = arm
         self.scene = arm_scene(arm)
         self.motions = Motions(session)
+        #: Who holds control: the session's (shared with its other faces).
+        self.control = session.control
         self.checker = CheckWorker()
         self.max_pages = MAX_PAGES
         self.live_connections = 0
@@ -97,6 +99,9 @@ class Console:
 
     def new_client_id(self) -> str:
         return f"page-{next(self._ids)}"
+
+    def new_api_id(self) -> str:
+        return f"api-{next(self._ids)}"
 
     def status_dict(self) -> dict[str, Any]:
         return jsonable(self.session.status())
@@ -277,23 +282,33 @@ def build_router(console: Console) -> APIRouter:
             answer["note"] = one_line(note)
         return answer
 
+    def commander(client: str | None, what: str) -> str | None:
+        """The name of the client that commands ``what``: it must hold control (else 409
+        naming the holder). STOP and the stops (abort, pause, end a jog) need no control."""
+        console.control.require(client, what)
+        return console.control.name_of(client)
+
     @api.post("/reset", summary="Reset every module (clears a Halt), confirmed")
-    def reset() -> Any:
+    def reset(client: ClientHeader = None) -> Any:
+        commander(client, "reset")
         return _confirmed(session.reset())
 
     @api.post("/home", summary="Home every module (enables the motors), confirmed")
-    def home() -> Any:
+    def home(client: ClientHeader = None) -> Any:
+        commander(client, "home")
         return _confirmed(session.home())
 
     @api.post("/arm-up", summary="Arm: reset, then write the arm file's limits")
-    def arm_up() -> Any:
+    def arm_up(client: ClientHeader = None) -> Any:
+        commander(client, "arm")
         return _confirmed(session.arm_up())
 
     @api.post("/move/pose", summary="Move to a named pose (validated, planned, streamed)",
               openapi_extra=documented(models.PoseMove))
     def move_pose(body: models.PoseMove = json_body(models.PoseMove),
                   client: ClientHeader = None) -> dict[str, Any]:
-        activity = session.move_to_pose(body.name, velocity_scale=body.velocity_scale)
+        by = commander(client, f"move to {body.name}")
+        activity = session.move_to_pose(body.name, velocity_scale=body.velocity_scale, by=by)
         motions.started(client, "move", activity)
         return _activity(activity)
 
@@ -301,23 +316,28 @@ def build_router(console: Console) -> APIRouter:
               openapi_extra=documented(models.JointMap))
     def move_joints(body: models.JointMap = json_body(models.JointMap),
                     client: ClientHeader = None) -> dict[str, Any]:
-        activity = session.move_to_joints(dict(body.joints))
+        by = commander(client, "move")
+        activity = session.move_to_joints(dict(body.joints), by=by)
         motions.started(client, "move", activity)
         return _activity(activity)
 
     @api.post("/velocities", summary="Per-joint velocity of the console's moves, deg/s (ALLVEL)",
               openapi_extra=documented(models.JointMap))
-    def velocities(body: models.JointMap = json_body(models.JointMap)) -> Any:
+    def velocities(body: models.JointMap = json_body(models.JointMap),
+                   client: ClientHeader = None) -> Any:
+        commander(client, "move velocities")
         return jsonable(session.set_move_velocities(dict(body.joints)))
 
     @api.post("/jog", summary="Jog one joint; renew within 200 ms or it stops (deadman)",
               openapi_extra=documented(models.JogBody))
-    def jog(body: models.JogBody = json_body(models.JogBody), client: ClientHeader = None) -> dict[str, Any]:
-        session.jog(body.joint, body.speed_scale)
+    def jog(body: models.JogBody = json_body(models.JogBody),
+            client: ClientHeader = None) -> dict[str, Any]:
+        by = commander(client, "jog")
+        session.jog(body.joint, body.speed_scale, by=by)
         motions.started(client, "jog")
         return {"accepted": True}
 
-    @api.post("/jog/stop", summary="End the jog (controlled stop)")
+    @api.post("/jog/stop", summary="End the jog (controlled stop; any client)")
     def jog_stop(client: ClientHeader = None) -> Any:
         result = session.jog_stop()  # a controlled stop
         motions.jog_ended(client)
@@ -325,35 +345,79 @@ def build_router(console: Console) -> APIRouter:
 
     @api.post("/run", summary="Run a sequence (validated first; a run folder as seqrun run)",
               openapi_extra=documented(models.RunBody))
-    def run(body: models.RunBody = json_body(models.RunBody), client: ClientHeader = None) -> dict[str, Any]:
+    def run(body: models.RunBody = json_body(models.RunBody),
+            client: ClientHeader = None) -> dict[str, Any]:
+        by = commander(client, f"run {body.sequence}")
         path = catalog.sequence_path(body.sequence)
         activity = session.run_sequence(path, speed=body.speed, step_mode=body.step_mode,
-                                        first_step=body.first_step)
+                                        first_step=body.first_step, by=by)
         motions.started(client, "run", activity)
         return _activity(activity)
 
     @api.post("/shutdown", summary="Run the shutdown sequence (to Totem, then power-off)")
     def shutdown(client: ClientHeader = None) -> dict[str, Any]:
-        activity = session.run_sequence(catalog.shutdown_sequence())
+        by = commander(client, "shut down")
+        activity = session.run_sequence(catalog.shutdown_sequence(), by=by)
         motions.started(client, "run", activity)
         return _activity(activity)
 
-    for verb in ("pause", "resume", "step", "abort"):
-        def control(verb: str = verb) -> Any:
+    for verb, needs_control in (("pause", False), ("resume", True), ("step", True),
+                                ("abort", False)):
+        def run_control(client: ClientHeader = None, verb: str = verb,
+                        needs_control: bool = needs_control) -> Any:
+            if needs_control:
+                commander(client, verb)
             return jsonable(getattr(session, verb)())
-        api.add_api_route(f"/run/{verb}", control, methods=["POST"],
-                          summary=f"{verb.capitalize()} the run under way")
+        api.add_api_route(f"/run/{verb}", run_control, methods=["POST"],
+                          summary=f"{verb.capitalize()} the run under way"
+                                  + ("" if needs_control else " (any client)"))
 
     @api.post("/answer", summary="Answer a confirm step (confirm_requested event)",
               openapi_extra=documented(models.AnswerBody))
-    def answer(body: models.AnswerBody = json_body(models.AnswerBody)) -> Any:
+    def answer(body: models.AnswerBody = json_body(models.AnswerBody),
+               client: ClientHeader = None) -> Any:
+        commander(client, "answer")
         return jsonable(session.answer(body.question_id, body.yes))
 
     @api.post("/poses", summary="Save the arm's measured joints as a pose file",
               openapi_extra=documented(models.SavePoseBody))
-    def save_pose(body: models.SavePoseBody = json_body(models.SavePoseBody)) -> dict[str, Any]:
+    def save_pose(body: models.SavePoseBody = json_body(models.SavePoseBody),
+                  client: ClientHeader = None) -> dict[str, Any]:
+        commander(client, "save pose")
         path = session.save_pose(body.name, overwrite=body.overwrite)
         return {"saved": str(path)}
+
+    # -- control ------------------------------------------------------------------------
+    @api.get("/control", summary="Who holds control and who is connected")
+    def control_state() -> dict[str, Any]:
+        return console.control.state().as_dict()
+
+    @api.post("/control/take", summary="Take control (a page: its id in X-Seqrun-Client; an "
+                                        "API client without one joins with its name)",
+              openapi_extra=documented(models.TakeControlBody))
+    def take_control(body: models.TakeControlBody = json_body(models.TakeControlBody),
+                     client: ClientHeader = None) -> dict[str, Any]:
+        if client is None:  # an API client: joins now, and is known by the id it gets
+            client = console.new_api_id()
+            console.control.join(client, f"{one_line(printable(body.name))} ({client})",
+                                 "api")
+        state = console.control.take(client)
+        return {"client": client, **state.as_dict()}
+
+    @api.post("/control/release", summary="Give control up (the holder)")
+    def release_control(client: ClientHeader = None) -> dict[str, Any]:
+        if client is None:
+            raise Refused("release control: say who you are (X-Seqrun-Client)")
+        return console.control.release(client).as_dict()
+
+    @api.post("/control/leave", summary="An API client leaves (gives control up if it holds "
+                                         "it)")
+    def leave(client: ClientHeader = None) -> dict[str, Any]:
+        known = console.control.client(client)
+        if known is None or known.kind != "api":
+            raise Refused("leave: not an API client of this console (a page leaves by "
+                          "closing)")
+        return console.control.leave(known.id).as_dict()
 
     return api
 
@@ -369,9 +433,10 @@ def index_page(request: Request) -> HTMLResponse:
 
 def create_app(session: Any, catalog: Catalog, arm: Any, *, token: str | None = None,
                local_only: bool = True, max_pages: int = MAX_PAGES) -> FastAPI:
-    """The ASGI application for one arm session. ``token``: required on every request
-    (``--host``); ``local_only``: the Host header must name this machine; ``max_pages``:
-    live connections at most."""
+    """The ASGI application for one arm session. ``token``: required on every request but
+    STOP (``seqrun console`` always makes one; None: no token, for embedding and tests);
+    ``local_only``: the Host header must name this machine; ``max_pages``: live
+    connections at most."""
     console = Console(session, catalog, arm)
     console.max_pages = max_pages
 
@@ -435,5 +500,6 @@ def create_app(session: Any, catalog: Catalog, arm: Any, *, token: str | None = 
     app.mount("/static", StaticFiles(directory=str(STATIC)), name="static")
     app.add_middleware(CrashGuard, console=console)
     app.add_middleware(RequestLimits, always_read=frozenset({f"{API}/halt"}))
-    app.add_middleware(AccessGuard, token=token, local_only=local_only)
+    app.add_middleware(AccessGuard, token=token, local_only=local_only,
+                       open_to_all=frozenset({("POST", f"{API}/halt")}))
     return app

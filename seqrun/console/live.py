@@ -100,12 +100,25 @@ async def live(console: "Console", ws: WebSocket) -> None:
         console.live_connections -= 1
 
 
+def page_name(client: str, ws: WebSocket) -> str:
+    """What the other clients see of a page: its id, its browser and where it is."""
+    agent = ws.headers.get("user-agent", "")
+    browser = next((name for key, name in (("Edg/", "Edge"), ("Firefox/", "Firefox"),
+                                           ("Chrome/", "Chromium"), ("Safari/", "Safari"))
+                    if key in agent), "a browser" if "Mozilla" in agent else "a tool")
+    host = ws.client.host if ws.client else "?"
+    where = "this PC" if host in ("127.0.0.1", "::1", "localhost", "testclient") else host
+    return printable(f"{client} · {browser} on {where}")
+
+
 async def _live(console: "Console", ws: WebSocket) -> None:
     await ws.accept()
     loop = asyncio.get_running_loop()
     client = console.new_client_id()
     feed = PageFeed(loop)
     history = console.telemetry.attach(feed)
+    # The first page of a console without a holder gets control; the others watch.
+    control = console.control.join(client, page_name(client, ws), "page", take_if_free=True)
     send_lock = asyncio.Lock()
 
     async def send(text: str) -> None:
@@ -134,8 +147,10 @@ async def _live(console: "Console", ws: WebSocket) -> None:
             message = await ops.get()
             try:
                 if isinstance(message, models.JogMessage):
+                    console.control.require(client, "jog")
                     await asyncio.to_thread(console.session.jog, message.joint,
-                                            message.speed_scale)
+                                            message.speed_scale,
+                                            by=console.control.name_of(client))
                     console.motions.started(client, "jog")
                 else:
                     await asyncio.to_thread(console.session.jog_stop)
@@ -205,14 +220,15 @@ async def _live(console: "Console", ws: WebSocket) -> None:
         task.add_done_callback(halts.discard)
         await asyncio.sleep(0)  # let it start before anything else is read
 
-    await send(dumps({"type": "hello", "client": client, "api_version": 1,
-                      "status": console.status_dict()}))
-    for text in history:
-        await send(text)
-    pumping = asyncio.create_task(pump())
-    tasks = [pumping, asyncio.create_task(worker())]
+    tasks: list[asyncio.Task[Any]] = []
     receiving: asyncio.Task[str] | None = None
     try:
+        await send(dumps({"type": "hello", "client": client, "api_version": 1,
+                          "status": console.status_dict(), "control": control.as_dict()}))
+        for text in history:
+            await send(text)
+        pumping = asyncio.create_task(pump())
+        tasks += [pumping, asyncio.create_task(worker())]
         while True:
             if receiving is None:
                 receiving = asyncio.create_task(ws.receive_text())
@@ -232,7 +248,7 @@ async def _live(console: "Console", ws: WebSocket) -> None:
                 log.warning("console page %s silent for %.1f s during its motion",
                             client, PAGE_SILENCE_S)
                 break
-    except WebSocketDisconnect:
+    except (WebSocketDisconnect, PageTooSlow):
         pass
     except Exception as exc:  # noqa: BLE001 - a bug ends this connection, not the arm
         log.error("console: the live connection of %s failed: %s", client,
@@ -241,6 +257,7 @@ async def _live(console: "Console", ws: WebSocket) -> None:
         for task in tasks + ([receiving] if receiving is not None else []):
             task.cancel()
         console.telemetry.detach(feed)
+        console.control.leave(client)
         await asyncio.to_thread(console.motions.page_gone, client)
         # (already closed by the page, or not; a page that does not read never takes the
         # close frame either: the server drops the connection when this returns)
