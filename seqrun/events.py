@@ -241,6 +241,10 @@ class Setpoint(Event):
     planned_vel_deg_s: Sequence[float]
     #: Short state byte of every joint's module.
     state: Sequence[int]
+    #: When the joints answered (s since the run start, from the bus's own time stamps):
+    #: the time of ``measured_deg`` (one per joint when they answered over 2 ms apart);
+    #: ``t`` is when the loop logged it, later after a host stall.
+    read_t: float | Sequence[float] | None = _optional()
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -70,6 +70,14 @@ class Measurement:
     short_state: dict[int, CycleState]   # per module id: the state sent with the reading
     #: Full states, where this reading includes them (after home/reset/halt, a fault).
     state_words: dict[int, JointState] | None = None
+    #: When each joint answered (clock times, joint order, from the bus's own stamps;
+    #: None: not known, ``t`` stands for all of them).
+    answered_at: np.ndarray | None = None
+
+    @property
+    def at(self) -> float:
+        """The reading's time: when the joints answered (their mean) where known."""
+        return self.t if self.answered_at is None else float(self.answered_at.mean())
 
 
 def _round(x: float | None, nd: int = 4) -> float | None:
@@ -282,7 +290,9 @@ class Executor:
         short = data.get("state") or []
         if joints is None:
             return {}
-        self._velocity.add(self.clock.now(), joints)
+        # the reading's time: when the joints answered (a stalled host stamps late)
+        self._velocity.add(self.last.at if self.last is not None else self.clock.now(),
+                           joints)
         # The reading this event reports (read_arm and refresh_measurement set it first),
         # decoded by the driver; its full states only for a measurement that shows them.
         m = self.last
@@ -356,7 +366,8 @@ class Executor:
 
     def _measured(self, reading) -> Measurement:
         m = Measurement(self.clock.now(), self.to_user_deg(reading.positions_rad),
-                        reading.states)
+                        reading.states,
+                        answered_at=getattr(reading, "answered_at", None))
         self.last = m
         return m
 
@@ -660,11 +671,14 @@ class Executor:
                                  module=self.modules[worst])
             logged_planned, logged_measured = _r(planned_deg), _r(measured)
             event_t = round(self.clock.now() - self._t0, 6)
+            # When the joints answered (the bus's own stamps): after a host stall the
+            # event's time is late, the reading's is not.
+            read_t = self._read_t(m)
             if self._tracking is not None:
                 # The figures come from the logged values, so events.jsonl reproduces them.
-                self._tracking.add(event_t, logged_planned, logged_measured)
-            self.emit("setpoint", t=event_t, plan_t=round(t, 4), planned_deg=logged_planned,
-                      measured_deg=logged_measured,
+                self._tracking.add(read_t, logged_planned, logged_measured)
+            self.emit("setpoint", t=event_t, read_t=read_t, plan_t=round(t, 4),
+                      planned_deg=logged_planned, measured_deg=logged_measured,
                       planned_vel_deg_s=_r(np.degrees(planned_vel), 2), state=self._states(m))
             if t >= plan.duration:
                 final_error = np.abs(np.degrees(plan.target) - measured)[moving]
@@ -680,6 +694,20 @@ class Executor:
             # Next cycle slot; slots missed while waiting on the bus are skipped, not
             # made up in a burst.
             k = max(k + 1, math.ceil((self.clock.now() - t_start) / self.cycle))
+
+    #: Joints that answered further apart than this (s) in one reading get a time each in
+    #: the log (a host stall split the cycle's exchange); closer, one time stands for all.
+    READ_SPREAD_S = 0.002
+
+    def _read_t(self, m: Measurement) -> float | list[float]:
+        """A reading's time as logged (``read_t``): s since the run start, one for all
+        joints, or one per joint when they answered far apart."""
+        if m.answered_at is None:
+            return round(m.t - self._t0, 6)
+        at = m.answered_at - self._t0
+        if float(at.max() - at.min()) > self.READ_SPREAD_S:
+            return [round(float(x), 6) for x in at]
+        return round(float(at.mean()), 6)
 
     #: Below this share of its planned travel a lagging joint counts as hardly moving.
     SLOW_SHARE = 0.5

@@ -19,7 +19,7 @@ from pydantic import ValidationError
 
 from seqrun.arm import ArmDescription
 from seqrun.errors import UserInputError
-from seqrun.tracking import velocity_window, windowed_velocity
+from seqrun.tracking import sample_time, velocity_window, windowed_velocity
 
 #: Event types that carry one reading of the whole arm.
 SAMPLE_EVENTS = ("setpoint", "measurement")
@@ -42,6 +42,9 @@ class Series:
     planned_vel: np.ndarray
     measured_vel: np.ndarray
     state: np.ndarray
+    #: Each joint's own sample time (samples × joints): ``t`` unless the joints of a
+    #: reading answered apart (``read_t`` per joint).
+    t_joint: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.t)
@@ -272,8 +275,17 @@ def _series(events: list[dict], window_s: float, dof: int | None) -> Series:
     measured = np.full((n, dof), np.nan)
     planned_vel = np.full((n, dof), np.nan)
     state = np.full((n, dof), -1, int)
+    t_joint = np.empty((n, dof))
     for i, e in enumerate(samples):
-        t[i] = e["t"]
+        # a reading's time is when the joints answered (read_t: one, or one per joint),
+        # where the log has it
+        read_t = e.get("read_t")
+        if isinstance(read_t, list) and len(read_t) == dof:
+            t[i] = sample_time(read_t)
+            t_joint[i] = read_t
+        else:
+            t[i] = read_t if isinstance(read_t, (int, float)) else e["t"]
+            t_joint[i] = t[i]
         step[i] = e.get("step") or 0
         measured[i] = _joints(e)
         if e["type"] == "setpoint":
@@ -284,11 +296,13 @@ def _series(events: list[dict], window_s: float, dof: int | None) -> Series:
         if len(e.get("state") or ()) == dof:
             state[i] = e["state"]
     order = np.argsort(t, kind="stable")
-    t, step, streamed = t[order], step[order], streamed[order]
+    t, step, streamed, t_joint = t[order], step[order], streamed[order], t_joint[order]
     planned, measured, planned_vel, state = (planned[order], measured[order],
                                              planned_vel[order], state[order])
-    measured_vel = windowed_velocity(t, measured, window_s) if n else measured.copy()
-    return Series(t, step, streamed, planned, measured, planned_vel, measured_vel, state)
+    measured_vel = (windowed_velocity(t, measured, window_s, t_joint) if n
+                    else measured.copy())
+    return Series(t, step, streamed, planned, measured, planned_vel, measured_vel, state,
+                  t_joint)
 
 
 def _joints(event: dict) -> list:

@@ -34,7 +34,8 @@ def recompute_move_figures(data: RunData, step: StepView) -> dict[str, Any]:
     s = data.series
     target = (np.asarray(step.move["target_deg"], dtype=float)
               if step.move and "target_deg" in step.move else s.planned[idx[-1]])
-    velocity = windowed_velocity(s.t[idx], s.measured[idx], data.velocity_window_s)
+    velocity = windowed_velocity(s.t[idx], s.measured[idx], data.velocity_window_s,
+                                 None if s.t_joint is None else s.t_joint[idx])
     return {
         "max_following_error_deg": _r(np.max(np.abs(s.planned[idx] - s.measured[idx]), axis=0)),
         "final_error_deg": _r(np.abs(target - s.measured[idx[-1]])),
