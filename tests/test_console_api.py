@@ -433,3 +433,28 @@ def test_other_hosts_and_origins_are_refused(client):
     refused(client.post("/api/v1/halt", headers={"Origin": "null"}), 403, "origin")
     ok = client.get("/api/v1/status", headers={"Origin": LOCAL})
     assert ok.status_code == 200
+
+
+def test_a_symlinked_sequence_is_listed_and_runnable_or_not_listed(client, setup, tmp_path):
+    folder = setup.folder / "sequences"
+    (folder / "inside.yaml").symlink_to(folder / "confirm_nudge.yaml")
+    elsewhere = tmp_path / "elsewhere.yaml"
+    elsewhere.write_text((folder / "confirm_nudge.yaml").read_text())
+    (folder / "outside.yaml").symlink_to(elsewhere)
+    listed = {s["name"] for s in client.get("/api/v1/sequences").json()}
+    assert "inside.yaml" in listed and "outside.yaml" not in listed
+    check = client.post("/api/v1/sequences/inside.yaml/check")
+    assert check.status_code == 200 and check.json()["valid"] is True, check.text[:300]
+    refused(client.post("/api/v1/run", json={"sequence": "outside.yaml"}), 409,
+            "unknown sequence")
+
+
+def test_poses_say_whether_a_move_may_go_there(client):
+    poses = {p["name"]: p for p in client.get("/api/v1/poses").json()}
+    assert poses["totem"]["move_target"] is True and "why" not in poses["totem"]
+    park = poses["park"]  # the power-on pose: j4 0.32 deg beyond its limit (the facts)
+    assert park["move_target"] is False
+    assert park["why"].startswith(park["file"] + ": j4 -120.32° is outside its limits")
+    armed(client)
+    message = refused(client.post("/api/v1/move/pose", json={"name": "park"}), 409)
+    assert "park.yaml:13:7: j4 -120.32°" in message and "seqrun-session" not in message

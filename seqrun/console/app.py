@@ -228,7 +228,7 @@ def build_router(console: Console) -> APIRouter:
 
     @api.get("/poses", summary="Every named pose (campaign poses first, then the shipped)")
     def poses() -> list[dict[str, Any]]:
-        return catalog.poses()
+        return catalog.poses(console.arm)
 
     @api.get("/sequences", summary="The project's sequences")
     def sequences() -> list[dict[str, str]]:

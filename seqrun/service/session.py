@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import logging
 import math
+import re
 import threading
 from dataclasses import dataclass
 from pathlib import Path
@@ -266,6 +267,8 @@ class ArmSession:
         self._run_info: RunInfo | None = None
         self._paused = False
         self._halted: str | None = None
+        #: The running activity's Halt was sent and the modules read back.
+        self._halt_read_back = False
         self._deadman: Any = None  # the jog's Deadman
         self._jog_plan: Any = None  # the jog's JogPlan
         self._questions: dict[str, _Question] = {}
@@ -366,7 +369,22 @@ class ArmSession:
         its construction) and idles through the session's idle hooks."""
         with self._state:
             self._executor = executor
+            self._halt_read_back = False
             executor.idle_hooks.extend(self._idle_hooks)
+        # A recorder (called on the loop's thread before any subscriber gets the event):
+        # the status says "halted" the moment the Halt was read back, while the run still
+        # writes its report, and before any face hears of it.
+        executor.listeners.append(self._note_halt_read_back)
+
+    #: The executor's events that say a Halt was sent and the modules read back.
+    HALT_READ_BACK = frozenset({"halt_confirmed", "halt_unconfirmed", "halt_failed"})
+
+    def _note_halt_read_back(self, event: Event) -> None:
+        if event.type in self.HALT_READ_BACK:
+            with self._state:
+                self._halt_read_back = True
+                if self._halted is None:
+                    self._halted = "fault"
 
     def _publish(self, type_: str, **data: Any) -> None:
         now = self.clock.now()
@@ -458,6 +476,8 @@ class ArmSession:
         return chain
 
     def _activity_state(self) -> str:
+        if self._halted is not None and self._halt_read_back:
+            return "halted"  # (the activity may still be ending: its report, its log)
         if self._activity is not None:
             kind = self._activity.kind
             if kind == "run":
@@ -794,8 +814,18 @@ class ArmSession:
                      if x is not None}
         check = validate_sequence(loaded, self.arm, start, started=True)
         if check.errors:
-            raise Refused(f"{what}: {check.errors[0].message}")
+            raise Refused(f"{what}: {self._own_words(check.errors[0])}")
         return loaded
+
+    def _own_words(self, error) -> str:
+        """A finding about a session command in the operator's terms: where it is when that
+        is a file of theirs (a pose file), never the session's private one-step file."""
+        private = str(self.__dict__.get("_tmp", "\0"))
+        message = re.sub(r"\s*\(used at [^()]*" + re.escape(private) + r"[^()]*\)", "",
+                         error.message)
+        if str(error.file).startswith(private):
+            return message
+        return f"{error.file}:{error.line}:{error.column}: {message}"
 
     def _start_move(self, kind: str, loaded, detail: dict, by: str | None = None) -> Activity:
         activity = self._begin(kind, detail, by)
