@@ -242,3 +242,30 @@ def wait_for(predicate, timeout: float = 10.0, period: float = 0.02) -> Any:
         if time.monotonic() > deadline:
             raise TimeoutError(f"condition not met within {timeout} s")
         time.sleep(period)
+
+
+def console_process(log_dir: Path, *options: str) -> tuple[Any, str]:
+    """``seqrun console --sim --port 0 --yes --log-dir LOG_DIR OPTIONS`` in a process of its
+    own: the process and the URL it printed (with its token)."""
+    import os
+    import re
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen([sys.executable, "-m", "seqrun", "console", "--sim", "--port", "0",
+                             "--yes", "--log-dir", str(log_dir), *options], cwd=ROOT,
+                            env={**os.environ, "PYTHONPATH": str(ROOT)},
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    lines = []
+    while True:
+        line = proc.stdout.readline()
+        if not line:
+            proc.kill()
+            proc.wait()
+            raise RuntimeError("seqrun console ended before printing its URL:\n"
+                               + "".join(lines))
+        lines.append(line)
+        found = re.search(r"(http://127\.0\.0\.1:\d+/\?token=\S+)", line)
+        if found:
+            threading.Thread(target=lambda: proc.stdout.read(), daemon=True).start()
+            return proc, found.group(1)
