@@ -360,7 +360,7 @@ def test_the_check_runs_in_a_worker_process_below_the_console(setup):
 
     worker = CheckWorker()
     try:
-        result = worker.check(setup.catalog(), "opsafe.yaml", None, started=False)
+        result = json.loads(worker.check(setup.catalog(), "opsafe.yaml", None, started=False))
         assert result["dry_run"]["passed"] is True
         assert worker.pid is not None and worker.pid != os.getpid()
         assert os.getpriority(os.PRIO_PROCESS, worker.pid) == \

@@ -22,7 +22,7 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, FastAPI, Header, Request, WebSocket, WebSocketDisconnect
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import FileResponse, HTMLResponse, JSONResponse
+from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
@@ -236,13 +236,14 @@ def build_router(console: Console) -> APIRouter:
 
     @api.post("/sequences/{name:path}/check",
               summary="Validation findings and the dry-run report from the arm's position "
-                      "now (a worker process; at most a few per second)")
+                      "now (a worker process; 3 at once, then one per 3 s)")
     async def check(name: str) -> Any:
         console.check_rate.take()  # TooMany: 429
         try:
             start, up = check_start(session.status())
-            return await asyncio.to_thread(console.checker.check, catalog, name, start,
-                                           started=up)
+            answer = await asyncio.to_thread(console.checker.check, catalog, name, start,
+                                             started=up)
+            return Response(answer, media_type="application/json")  # (encoded there)
         finally:
             console.check_rate.give_back()
 
@@ -255,8 +256,16 @@ def build_router(console: Console) -> APIRouter:
         return FileResponse(catalog.run_file(run_id, name))
 
     @api.get("/events", summary="Recent events (the event log), oldest first")
-    def events() -> list[Any]:
-        return [json.loads(text)["event"] for text in list(console.telemetry.history)]
+    def events() -> Response:
+        # The history holds each event's message as sent to the pages: its event part is
+        # passed on as it is (a GET costs little: nothing decoded, nothing encoded again).
+        prefix, parts = '{"type":"event","event":', []
+        for text in list(console.telemetry.history):
+            if text.startswith(prefix) and text.endswith("}"):
+                parts.append(text[len(prefix):-1])
+            else:
+                parts.append(json.dumps(json.loads(text)["event"]))
+        return Response("[" + ",".join(parts) + "]", media_type="application/json")
 
     # -- commands -----------------------------------------------------------------------
     @api.post("/halt", summary="STOP: the Halt broadcast at once, then confirmed; never "

@@ -4,9 +4,10 @@ A dry run is seconds of pure Python. Run in the console's process it holds the i
 lock the 100 Hz loop needs several times a cycle: a page asking for checks in a loop slowed
 the loop during a run from p99 20 ms to 137 ms. So the check runs in one worker process of
 its own (spawned, not forked: the console has threads), at normal scheduling and ``nice``
-10 even when the console has real-time scheduling, one check at a time; a check that takes
-longer than :data:`CHECK_TIMEOUT_S` is stopped (the worker is replaced). :class:`RateLimit`
-refuses requests beyond a few per second (429), so nobody can keep the worker busy for all.
+19 even when the console has real-time scheduling, one check at a time; a check that takes
+longer than :data:`CHECK_TIMEOUT_S` is stopped (the worker is replaced). The worker hands
+back the answer encoded as JSON, so that the console's process only passes bytes on.
+:class:`RateLimit` refuses requests beyond a few (429), so nobody can keep the worker busy.
 """
 
 from __future__ import annotations
@@ -23,8 +24,8 @@ from seqrun.errors import Refused
 
 log = logging.getLogger(__name__)
 
-#: The worker's niceness (0 is the console's; higher yields the CPU to it).
-CHECK_NICE = 10
+#: The worker's niceness (0 is the console's; 19 yields the CPU to it almost entirely).
+CHECK_NICE = 19
 #: Longest a check may take (s) before it is stopped.
 CHECK_TIMEOUT_S = 120.0
 
@@ -41,7 +42,7 @@ class RateLimit:
     """A token bucket: ``burst`` requests at once, then one per ``every_s`` seconds; and at
     most one at a time (:meth:`take` ... :meth:`give_back`)."""
 
-    def __init__(self, *, burst: int = 4, every_s: float = 2.0, what: str = "check") -> None:
+    def __init__(self, *, burst: int = 3, every_s: float = 3.0, what: str = "check") -> None:
         self.burst = burst
         self.every_s = every_s
         self.what = what
@@ -82,8 +83,10 @@ def _lower_priority(nice: int) -> None:
 
 
 def _serve(conn: Any, nice: int) -> None:
-    """The worker's loop: (catalog, name, start, started) in, (kind, value) out."""
+    """The worker's loop: (catalog, name, start, started) in, (kind, value) out; the value
+    of an answer is its JSON text (bytes)."""
     _lower_priority(nice)
+    from seqrun.console.telemetry import dumps
     from seqrun.errors import SeqrunError, UserInputError
 
     while True:
@@ -95,7 +98,8 @@ def _serve(conn: Any, nice: int) -> None:
             return
         catalog, name, start, started = request
         try:
-            reply: tuple[str, Any] = ("ok", catalog.check(name, start, started=started))
+            answer = catalog.check(name, start, started=started)
+            reply: tuple[str, Any] = ("ok", dumps(answer).encode())
         except (Refused, UserInputError) as exc:
             reply = ("refused", str(exc))
         except SeqrunError as exc:
@@ -146,9 +150,9 @@ class CheckWorker:
                 process.join(timeout=2.0)
 
     def check(self, catalog: Any, name: str, start: Mapping[str, float] | None, *,
-              started: bool) -> dict[str, Any]:
-        """The catalog's check of ``name`` in the worker; Refused as the catalog refuses,
-        RuntimeError when the worker failed."""
+              started: bool) -> bytes:
+        """The catalog's check of ``name`` in the worker, as JSON; Refused as the catalog
+        refuses, RuntimeError when the worker failed."""
         with self._lock:
             if self._closed:
                 raise Refused("the console is closing")

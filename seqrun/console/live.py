@@ -36,6 +36,8 @@ MAX_PAGES = 100
 #: A page that has not taken a message for this long (its connection's buffers full) is
 #: closed: it is not reading, and whatever it shows is old.
 SEND_STALL_S = 10.0
+#: How often a connection looks at its page's silence and its sends (s).
+STALL_CHECK_S = 0.5
 
 
 class PageTooSlow(Exception):
@@ -121,12 +123,22 @@ async def _live(console: "Console", ws: WebSocket) -> None:
     control = console.control.join(client, page_name(client, ws), "page", take_if_free=True)
     send_lock = asyncio.Lock()
 
+    # When the send under way started (None: none is): a send that waits for the page for
+    # longer than SEND_STALL_S ends the connection (checked by the receiving loop, below;
+    # a timeout around every send would cost a task per message).
+    sending_since: list[float | None] = [None]
+
     async def send(text: str) -> None:
         async with send_lock:
+            sending_since[0] = loop.time()
             try:
-                await asyncio.wait_for(ws.send_text(text), SEND_STALL_S)
-            except asyncio.TimeoutError:
-                raise PageTooSlow(client) from None
+                await ws.send_text(text)
+            finally:
+                sending_since[0] = None
+
+    def stalled() -> bool:
+        since = sending_since[0]
+        return since is not None and loop.time() - since > SEND_STALL_S
 
     async def reply(msg_id: Any, ok: bool, **extra: Any) -> None:
         await send(dumps({"type": "reply", "id": msg_id, "ok": ok, **extra}))
@@ -229,18 +241,22 @@ async def _live(console: "Console", ws: WebSocket) -> None:
             await send(text)
         pumping = asyncio.create_task(pump())
         tasks += [pumping, asyncio.create_task(worker())]
+        heard = loop.time()
         while True:
             if receiving is None:
                 receiving = asyncio.create_task(ws.receive_text())
-            done, _ = await asyncio.wait({receiving, pumping}, timeout=PAGE_SILENCE_S,
+            done, _ = await asyncio.wait({receiving, pumping}, timeout=STALL_CHECK_S,
                                          return_when=asyncio.FIRST_COMPLETED)
-            if pumping in done:  # it does not read: nothing it shows is current
+            if pumping in done or stalled():  # it does not read: nothing it shows is current
                 log.warning("console page %s took no message for %.0f s: closed", client,
                             SEND_STALL_S)
                 break
             if receiving in done:
                 raw, receiving = receiving.result(), None
+                heard = loop.time()
                 await handle(raw)
+                continue
+            if loop.time() - heard < PAGE_SILENCE_S:
                 continue
             # A page that went silent (a tablet off the Wi-Fi: no TCP close for a long
             # time) while its motion is under way is taken as gone.

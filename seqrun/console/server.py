@@ -91,9 +91,13 @@ def uvicorn_config(app: Any, *, log_level: str = "warning",
     """How the console is served (``seqrun console`` and the tests' server alike)."""
     import uvicorn
 
+    # No per-message compression: each connection compresses every message on its own (the
+    # same status once per page), which cost more of the interpreter than all the rest of
+    # the sending; a status is ~1.7 kB.
     return uvicorn.Config(app, log_level=log_level, ws="websockets-sansio", http=HeadDeadline,
                           lifespan="on", timeout_graceful_shutdown=graceful_s,
-                          ws_max_size=WS_MAX_BYTES, timeout_keep_alive=5)
+                          ws_max_size=WS_MAX_BYTES, ws_per_message_deflate=False,
+                          timeout_keep_alive=5)
 
 
 def is_loopback(host: str) -> bool:
