@@ -265,7 +265,11 @@ def console_process(log_dir: Path, *options: str) -> tuple[Any, str]:
             raise RuntimeError("seqrun console ended before printing its URL:\n"
                                + "".join(lines))
         lines.append(line)
-        found = re.search(r"(http://127\.0\.0\.1:\d+/\?token=\S+)", line)
+        found = re.search(r"(http://127\.0\.0\.1:\d+/\S*)", line)
         if found:
+            if "token=" not in found.group(1):  # a console that prints no token
+                proc.kill()
+                proc.wait()
+                raise RuntimeError(f"no token in the printed URL: {found.group(1)}")
             threading.Thread(target=lambda: proc.stdout.read(), daemon=True).start()
             return proc, found.group(1)

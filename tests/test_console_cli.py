@@ -34,9 +34,9 @@ def start_console(*options: str) -> tuple[subprocess.Popen, str, str]:
             raise AssertionError("seqrun console ended before printing its URL:\n"
                                  + "".join(lines))
         lines.append(line)
-        found = re.search(r"(http://127\.0\.0\.1:\d+/)\?token=(\S+)", line)
+        found = re.search(r"(http://127\.0\.0\.1:\d+/)(\?token=(\S+))?", line)
         if found:
-            Api.tokens[found.group(1)] = found.group(2)
+            Api.tokens[found.group(1)] = found.group(3) or ""
             return proc, "".join(lines), found.group(1)
 
 
