@@ -1,11 +1,15 @@
-"""The console's web application: the page, the ``/api/v1`` HTTP API and the live WebSocket.
+"""The console's web application: the page, the ``/api/v1`` HTTP API and the live WebSocket
+(:mod:`seqrun.console.live`).
 
 Everything goes through the arm session (:mod:`seqrun.service.session`); the console holds
-no bus and no executor. Refusals are one line, ``{"error": "..."}``: 409 when the session
-refuses (wrong state, unknown joint or pose, out of limits), 422 for a malformed request
-(NaN, unknown keys, wrong types), 400 for bad input, 401/403 from the access guard. Any
-other exception in a handler halts the arm (as a crash does in ``seqrun run``) and answers
-500 saying so.
+no bus and no executor. Commands need control (:mod:`seqrun.service.control`); STOP needs
+nothing and is never refused for its body. Bodies are strict (:mod:`seqrun.console.bodies`).
+Refusals are one line, ``{"error": "..."}``: 409 when the session refuses (wrong state,
+unknown joint or pose, out of limits, not in control), 422 for a malformed request (NaN,
+unknown or repeated keys, wrong types), 413/408 a body too large or slow, 429 too many
+checks, 400 for bad input, 401/403 from the access guard, 404/405 as any HTTP error. A
+command that fails on the bus halts the arm (503); any other exception in a handler is a
+500 for that request only (logged, escaped).
 """
 
 from __future__ import annotations
@@ -27,13 +31,13 @@ from fastapi.staticfiles import StaticFiles
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from seqrun.console import models
-from seqrun.console.bodies import (BODY_CUT, Malformed, check_body, printable, read_model,
-                                   to_model)
-from seqrun.console.limits import RequestLimits
-from seqrun.console.live import MAX_PAGES, PAGE_SILENCE_S, live  # noqa: F401 (tests' name)
+from seqrun.console.bodies import (BODY_CUT, Malformed, check_body, one_line, printable,
+                                   read_model, to_model)
 from seqrun.console.catalog import Catalog
 from seqrun.console.checker import CheckWorker, RateLimit, TooMany
 from seqrun.console.guard import COOKIE, AccessGuard
+from seqrun.console.limits import RequestLimits
+from seqrun.console.live import MAX_PAGES, PAGE_SILENCE_S, live  # noqa: F401 (tests' name)
 from seqrun.console.motions import Motions
 from seqrun.console.scene import arm_scene
 from seqrun.console.telemetry import Telemetry, jsonable
@@ -44,10 +48,6 @@ log = logging.getLogger(__name__)
 API = "/api/v1"
 STATIC = Path(__file__).resolve().parent / "static"
 ClientHeader = Annotated[str | None, Header(alias="X-Seqrun-Client")]
-
-
-def one_line(text: str) -> str:
-    return " ".join(str(text).split())
 
 
 def json_body(model: type[Any]) -> Any:

@@ -43,8 +43,9 @@ class Catalog:
                 found.append({"name": name, "file": str(path), "error": str(exc.errors[0]),
                               "move_target": False, "why": str(exc.errors[0])})
                 continue
-            entry = {"name": name, "file": str(path), "description": pose.description,
-                     "joints_deg": dict(pose.joints_deg)}
+            entry: dict[str, Any] = {"name": name, "file": str(path),
+                                     "description": pose.description,
+                                     "joints_deg": dict(pose.joints_deg)}
             if arm is not None:
                 outside = _outside_limits(arm, pose.joints_deg)
                 entry["move_target"] = not outside
