@@ -275,6 +275,8 @@ def one_run(console: ConsoleProcess, browser, tabs: int, page_url: str,
     """One run of opsafe with ``tabs`` pages open (and ``load`` started before it, stopped
     after it: an object with start() and stop() -> dict): the loop's periods, each tab's
     rate, and how much CPU time the console process' threads got and waited for."""
+    if console.call("GET", "/status")["activity"] in ("halted", "faulted"):
+        console.call("POST", "/reset")  # the run before failed (a loaded host): start again
     pages = [open_page(browser, page_url) for _ in range(tabs)]
     if load is not None:
         load.start()
