@@ -114,7 +114,7 @@ def console_command(
     _serve_control_socket(connection, session)
     try:
         application = create_app(session, Catalog(project, runs), arm, token=token,
-                                 local_only=is_loopback(listen))
+                                 local_only=is_loopback(listen), start_checker=True)
         url = url_of(sock, listen, token)
         banner = "SIMULATOR" if connection.is_simulator else connection.description
 

@@ -441,17 +441,21 @@ def index_page(request: Request) -> HTMLResponse:
 
 
 def create_app(session: Any, catalog: Catalog, arm: Any, *, token: str | None = None,
-               local_only: bool = True, max_pages: int = MAX_PAGES) -> FastAPI:
+               local_only: bool = True, max_pages: int = MAX_PAGES,
+               start_checker: bool = False) -> FastAPI:
     """The ASGI application for one arm session. ``token``: required on every request but
     STOP (``seqrun console`` always makes one; None: no token, for embedding and tests);
     ``local_only``: the Host header must name this machine; ``max_pages``: live
-    connections at most."""
+    connections at most; ``start_checker``: start the check's worker process with the app
+    (else at the first check)."""
     console = Console(session, catalog, arm)
     console.max_pages = max_pages
 
     @contextlib.asynccontextmanager
     async def lifespan(_: FastAPI) -> AsyncIterator[None]:
         console.telemetry.start()
+        if start_checker:
+            await asyncio.to_thread(console.checker.start)
         try:
             yield
         finally:

@@ -126,6 +126,13 @@ class CheckWorker:
     def pid(self) -> int | None:
         return self._process.pid if self._process is not None else None
 
+    def start(self) -> None:
+        """Start the worker now (``seqrun console`` does, before it serves: starting a
+        process in the middle of a run would take the interpreter from the loop)."""
+        with self._lock:
+            if not self._closed and (self._process is None or not self._process.is_alive()):
+                self._start()
+
     def _start(self) -> None:
         parent, child = self._context.Pipe()
         process = self._context.Process(target=_serve, args=(child, self.nice), daemon=True,
