@@ -122,7 +122,8 @@ def test_local_clients_need_the_printed_token_but_stop_does_not(tmp_path):
         with urllib.request.urlopen(stop, timeout=30) as r:
             assert json.load(r)["halt_confirmed"] is True
         # the dry-run check's worker runs from the start (no process starts mid-run)
-        children = Path(f"/proc/{proc.pid}/task/{proc.pid}/children").read_text().split()
+        children = [child for task in Path(f"/proc/{proc.pid}/task").iterdir()
+                    for child in (task / "children").read_text().split()]
         commands = [Path(f"/proc/{child}/cmdline").read_bytes() for child in children]
         assert any(b"spawn_main" in command for command in commands), commands
     finally:
