@@ -12,7 +12,7 @@ moveRamp, a 7-module step-with-ack cycle) it measures, per frame and on one core
            it (``ack_key`` + pending-table lookup);
 
 and compares with how many of the same frames a 1 Mbit/s bus can carry (exact bit length
-from ``seqrun.can_timing`` when present: stuff bits and 3-bit intermission included).
+from ``seqrun.powercube.can_timing`` when present: stuff bits and 3-bit intermission included).
 The last row runs the whole ``PowerCubeClient.read_arm`` over a bus that answers
 instantly (python-can message objects included). Goal: every path at least 5x the bus
 frame rate.
@@ -51,9 +51,9 @@ BITRATE = 1_000_000
 GOAL = 5.0
 
 try:
-    from seqrun.can_timing import frame_bit_length
+    from seqrun.powercube.can_timing import frame_bit_length
 
-    TIMING_SOURCE = "seqrun.can_timing (exact, stuffing + intermission)"
+    TIMING_SOURCE = "seqrun.powercube.can_timing (exact, stuffing + intermission)"
 except ImportError:  # pragma: no cover - the simulator engineer's module is missing
     TIMING_SOURCE = "estimate: 47 + 8*dlc bits + ~15% stuffing + 3 intermission"
 

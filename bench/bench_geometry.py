@@ -1,5 +1,5 @@
 """Collision distance per configuration: link capsules against the arm file's obstacles
-and each other (seqrun/geometry.py), single configurations and batched.
+and each other (seqrun/arm/geometry.py), single configurations and batched.
 
 Every pair's clearance is computed (``Geometry.clearances``) for N random configurations
 inside the joint limits (batched: one call for all N); single = ``Geometry.smallest`` of
@@ -27,8 +27,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from seqrun.arm import ArmDescription, load_arm  # noqa: E402
-from seqrun.geometry import Geometry  # noqa: E402
+from seqrun.arm.description import ArmDescription, load_arm  # noqa: E402
+from seqrun.arm.geometry import Geometry  # noqa: E402
 
 
 def with_mock(arm: ArmDescription) -> ArmDescription:

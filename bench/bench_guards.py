@@ -44,10 +44,12 @@ DESCRIPTION = {
 def record(sequence: Path) -> tuple[dict, str]:
     """Run the static check and the dry run of ``sequence`` once, recording the calls of
     each part; returns them and a digest of what the recorded calls computed."""
-    from seqrun import executor, kinematics, validation
-    from seqrun.checks import static_check
-    from seqrun.dryrun import dry_run
-    from seqrun.geometry import Geometry
+    from seqrun import executor
+    from seqrun.arm import kinematics
+    from seqrun.sequence import validation
+    from seqrun.sequence.checks import static_check
+    from seqrun.service.dryrun import dry_run
+    from seqrun.arm.geometry import Geometry
 
     calls: dict[str, list] = {part: [] for part in PARTS}
     path_guards = validation.Checker.check_path_guards
@@ -111,8 +113,8 @@ def replay(part: str, calls: list) -> None:
         for ex, m in calls:
             ex.check_guards(m)
     else:
-        from seqrun.geometry import Geometry
-        from seqrun.kinematics import Chain
+        from seqrun.arm.geometry import Geometry
+        from seqrun.arm.kinematics import Chain
 
         for kind, arm in calls:
             Chain.from_arm(arm) if kind == "chain" else Geometry(arm)

@@ -32,9 +32,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from seqrun.arm import load_arm  # noqa: E402
-from seqrun.ik import IkSolver, Unreachable  # noqa: E402
-from seqrun.kinematics import Chain, fk, orientation_error  # noqa: E402
+from seqrun.arm.description import load_arm  # noqa: E402
+from seqrun.arm.ik import IkSolver, Unreachable  # noqa: E402
+from seqrun.arm.kinematics import Chain, fk, orientation_error  # noqa: E402
 
 POSITION_TOL_MM = 1e-3
 ANGLE_TOL_RAD = 1e-6

@@ -23,9 +23,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from seqrun.arm import load_arm  # noqa: E402
-from seqrun.dryrun import dry_run  # noqa: E402
-from seqrun.schema import load_sequence  # noqa: E402
+from seqrun.arm.description import load_arm  # noqa: E402
+from seqrun.service.dryrun import dry_run  # noqa: E402
+from seqrun.sequence.loader import load_sequence
 
 STEPS = """\
 name: approach

@@ -2,7 +2,7 @@
 
 One refresh = ``client.read_arm(1..7)``: seven pipelined GetExtended FPosStateDio (0x62)
 requests and their seven 8-byte acknowledges, 14 frames. The simulated wire gives every
-frame its exact bit length (stuff bits, CRC, intermission: ``seqrun.can_timing``), so the
+frame its exact bit length (stuff bits, CRC, intermission: ``seqrun.powercube.can_timing``), so the
 bus limit is ``bitrate / sum(bits of the 14 frames)`` refreshes per second. The rest of a
 refresh is the modules' processing latency (100 µs, at least once per refresh: the last
 ack cannot start before its request arrived) and, in real time, Python.
@@ -26,7 +26,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from seqrun.can_timing import frame_bit_length  # noqa: E402
+from seqrun.powercube.can_timing import frame_bit_length  # noqa: E402
 from seqrun.clock import Clock, RealClock, VirtualClock  # noqa: E402
 from seqrun.powercube.client import PowerCubeClient  # noqa: E402
 from seqrun.powercube.codec import GetParam, GetParamAck, PosStateDio, encode  # noqa: E402

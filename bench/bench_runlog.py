@@ -5,7 +5,7 @@ report.json used to be rewritten whole after every step (every step's result in 
 one line appended to steps.jsonl, and the running report.json (constant size) is rewritten
 at most once a second; the whole report is written once, at the end.
 
-This feeds a :class:`seqrun.runlog.RunLog` the events of ``N`` finished steps (as the
+This feeds a :class:`seqrun.service.runlog.RunLog` the events of ``N`` finished steps (as the
 executor emits them, with a few CAN frames and setpoint events per step, no bus, no arm)
 and measures, per step, the CPU time and the bytes written while the run goes, then the
 final report separately. The per-step figures should not grow with N.
@@ -29,8 +29,8 @@ import can  # noqa: E402
 
 from seqrun import logfile  # noqa: E402
 from seqrun.clock import VirtualClock  # noqa: E402
-from seqrun.executor import RunResult, StepResult  # noqa: E402
-from seqrun.runlog import RunLog  # noqa: E402
+from seqrun.results import RunResult, StepResult
+from seqrun.service.runlog import RunLog  # noqa: E402
 
 FRAMES_PER_STEP = 14       # one cycle of a 7-module arm: 7 requests, 7 acknowledges
 SETPOINTS_PER_STEP = 1

@@ -68,7 +68,7 @@ def one_run(sequence: str, slow: bool) -> dict:
             attached["done"] = True
             attach(first.executor)  # type: ignore[attr-defined]
 
-    import seqrun.runner as runner
+    import seqrun.service.runner as runner
 
     original = runner.build_executor
 

@@ -10,7 +10,7 @@ One refresh = the position of every joint the reader uses, on the simulated LWA 
   the previous acknowledge is in (for a fair comparison; also for all 7 modules);
 - seqrun: ``PowerCubeClient.read_arm(1..7)``: seven GetExtended FPosStateDio (0x62: position,
   state and dio) sent back to back, then the seven acknowledges collected (pipelined);
-- bus limit: ``bitrate / sum of the frames' bit lengths`` (``seqrun.can_timing``: stuff
+- bus limit: ``bitrate / sum of the frames' bit lengths`` (``seqrun.powercube.can_timing``: stuff
   bits, CRC, EOF, intermission) of one seqrun refresh; the same bound is given for each
   pattern's own frames. The modules' processing latency is not in it;
 - ceiling: the bus limit with one module answer latency (100 us) added per refresh: a
@@ -35,7 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from seqrun_runs import RESULTS, load_shipped, machine, median, write_json  # noqa: E402
 from thesis_baseline import READ_MODULES, ThesisSession  # noqa: E402
 
-from seqrun.can_timing import frame_bit_length  # noqa: E402
+from seqrun.powercube.can_timing import frame_bit_length  # noqa: E402
 from seqrun.clock import RealClock, VirtualClock  # noqa: E402
 from seqrun.powercube.client import PowerCubeClient  # noqa: E402
 from seqrun.powercube.codec import GetParam, GetParamAck, PosStateDio, encode  # noqa: E402

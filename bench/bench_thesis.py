@@ -38,7 +38,7 @@ from seqrun_runs import (RESULTS, load_shipped, machine, median, read_user_deg, 
 from thesis_baseline import OPSAFE_DEG, ThesisSession  # noqa: E402
 
 from seqrun.clock import RealClock, VirtualClock  # noqa: E402
-from seqrun.runner import write_html_report  # noqa: E402
+from seqrun.service.runner import write_html_report  # noqa: E402
 from seqrun.sim.bus import SimBus  # noqa: E402
 
 

@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 
 from seqrun import yamlsource
-from seqrun.schema import load_sequence
+from seqrun.sequence.loader import load_sequence
 from seqrun.yamlsource import load_document
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -2,7 +2,7 @@
 
 Runs, under valgrind's callgrind, one process that does the static check of the sequence
 (as ``seqrun validate --static`` does) and imports the dry run's modules, then the same
-plus one dry run (:func:`seqrun.dryrun.dry_run`, as ``seqrun validate`` calls it, caches
+plus one dry run (:func:`seqrun.service.dryrun.dry_run`, as ``seqrun validate`` calls it, caches
 cold: a fresh process). The difference is the dry run's own cost; divided by the frames
 it put on the simulated wire it gives the instructions per frame. Instruction counts do
 not depend on the host's load, so before/after figures can be taken on a busy machine.
@@ -38,11 +38,11 @@ ROOT = Path(__file__).resolve().parents[1]
 def inner(sequence: str, dry_runs: int, digest: bool) -> None:
     """The measured process: static check, dry-run imports, ``dry_runs`` dry runs."""
     sys.path.insert(0, os.getcwd())
-    from seqrun.checks import static_check
+    from seqrun.sequence.checks import static_check
 
     check = static_check(Path(sequence))
     assert check.valid, check.errors
-    import seqrun.dryrun as dryrun
+    import seqrun.service.dryrun as dryrun
 
     opened = []
     if dry_runs:

@@ -1,8 +1,8 @@
 """Shared by the benches: one ``seqrun run`` of a shipped sequence on the simulator.
 
 ``run_shipped`` does what ``seqrun run sequences/NAME.yaml --sim --yes [--virtual-time]``
-does, through the same entry point (:func:`seqrun.runner.run_sequence`): a simulator
-connection from :func:`seqrun.connection.open_connection`, confirmations answered yes,
+does, through the same entry point (:func:`seqrun.service.runner.run_sequence`): a simulator
+connection from :func:`seqrun.service.connection.open_connection`, confirmations answered yes,
 optionally the run folder. Afterwards it reads the arm once more (not timed) so that the
 final joint errors are measured the same way for every contender.
 """
@@ -23,12 +23,13 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from seqrun.arm import ArmDescription, load_arm  # noqa: E402
+from seqrun.arm.description import ArmDescription, load_arm  # noqa: E402
 from seqrun.clock import Clock  # noqa: E402
-from seqrun.connection import open_connection  # noqa: E402
+from seqrun.service.connection import open_connection  # noqa: E402
 from seqrun.powercube.client import PowerCubeClient  # noqa: E402
-from seqrun.runner import RunOutcome, run_sequence  # noqa: E402
-from seqrun.schema import LoadedSequence, load_sequence  # noqa: E402
+from seqrun.service.runner import RunOutcome, run_sequence  # noqa: E402
+from seqrun.sequence.loader import LoadedSequence, load_sequence
+from seqrun.drivers.powercube.units import to_user_deg  # noqa: E402
 
 RESULTS = ROOT / "bench" / "results"
 
@@ -45,7 +46,7 @@ def read_user_deg(bus, clock: Clock, arm: ArmDescription) -> list[float]:
         readings = client.read_arm([j.module for j in arm.joints])
     finally:
         client.close()
-    return [j.to_user_deg(r.position) for j, r in zip(arm.joints, readings)]
+    return [to_user_deg(j, r.position) for j, r in zip(arm.joints, readings)]
 
 
 @dataclass

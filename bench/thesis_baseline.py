@@ -47,12 +47,13 @@ from dataclasses import dataclass, field
 
 import can
 
-from seqrun.arm import ArmDescription
+from seqrun.arm.description import ArmDescription
 from seqrun.clock import Clock
 from seqrun.errors import CodecError
 from seqrun.powercube.codec import (BroadcastRequest, GetParam, SetMotion, SetParam,
                                     decode_ack, encode)
 from seqrun.powercube.protocol import CommandId, MotionMode, ParamId
+from seqrun.drivers.powercube.units import to_module_rad
 
 #: ``launch.launcher``: "After a pause of one second ..." (thesis 5.2).
 LAUNCHER_PAUSE_S = 1.0
@@ -136,8 +137,8 @@ class ThesisSession:
         self.launcher(BroadcastRequest(CommandId.RESET))
         for joint in self.arm.joints:
             lo, hi = joint.limits_deg
-            self.launcher(SetParam(joint.module, ParamId.MIN_POS, joint.to_module_rad(lo)))
-            self.launcher(SetParam(joint.module, ParamId.MAX_POS, joint.to_module_rad(hi)))
+            self.launcher(SetParam(joint.module, ParamId.MIN_POS, to_module_rad(joint, lo)))
+            self.launcher(SetParam(joint.module, ParamId.MAX_POS, to_module_rad(joint, hi)))
 
     def home(self) -> None:
         """``home`` -> ``GeneralCommands.Home()`` (broadcast), then the listing's
@@ -153,7 +154,7 @@ class ThesisSession:
             joint = self.arm.joints[number - 1]
             self.launcher(SetParam(joint.module, ParamId.TARGET_VEL, self.velocity_rad_s))
             self.launcher(SetMotion(joint.module, MotionMode.FRAMP,
-                                    joint.to_module_rad(user_deg[number - 1])))
+                                    to_module_rad(joint, user_deg[number - 1])))
 
     def totem(self) -> None:
         """``totem`` -> ``Multiple.Totem()`` (joints 2, 4, 6), then ``self.read()``."""

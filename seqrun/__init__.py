@@ -1,14 +1,16 @@
 """seqrun: a declarative, validated sequence runner for PowerCube robot arms.
 
-Layers (each only imports the ones above it):
+The folders are the layers; each imports only the ones listed before it
+(docs/architecture.md, checked by tests/test_architecture.py):
 
-    powercube.protocol, powercube.codec   pure wire format (no I/O)
-    powercube.client                      request/acknowledge over any can.BusABC
-    sim                                   a faithful simulated LWA 3 behind the python-can API
-    arm, kinematics, planner              arm description -> forward kinematics -> ruckig plans
-    yamlsource, schema, validation        sequence files -> validated steps with file:line:col
-    executor, steps                       runs steps against the client, emits events
-    runlog, cli                           logs and the operator's command line
+    (base)      errors, clock, events, results, yamlsource, ...   shared by every layer
+    powercube/, sim/    the wire format, the bus client, a faithful simulated LWA 3
+    arm/                the arm description, kinematics, IK, geometry, ruckig plans (pure)
+    drivers/            the arm-driver seam: the executor's arm, in joints (PowerCube behind it)
+    steps/, schema.py, sequence/   sequence files -> validated steps with file:line:col
+    executor.py         runs validated steps against a driver, emits typed events
+    service/, report/   the arm session every face uses; runs, dry runs, run folders, reports
+    cli/, console/      the faces: the command line and the operator console
 """
 
 __version__ = "0.1.0"

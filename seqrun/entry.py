@@ -1,12 +1,12 @@
 """The ``seqrun`` program's entry point: Ctrl-C during start-up is one line, exit 130.
 
-Importing the command line (typer, rich, numpy, python-can, ruckig) takes about a second.
-A Ctrl-C in that second used to print a KeyboardInterrupt traceback. Nothing can have been
+Importing the command line (typer, rich, numpy, python-can, ruckig) takes a moment. A
+Ctrl-C in that moment used to print a KeyboardInterrupt traceback. Nothing can have been
 sent to any bus yet, so until the commands are loaded SIGINT ends the process at once with
 one line and the operator-abort exit code; after that each command handles it.
 
-numpy's BLAS (OpenBLAS) starts a thread pool per core at import unless told otherwise: about
-half of numpy's import time, for matrices (4x4, 6x7) far too small to gain from threads.
+numpy's BLAS (OpenBLAS) starts a thread pool per core at import unless told otherwise: a
+large part of numpy's import time, for matrices (4x4, 6x7) far too small to gain from threads.
 The program asks for one thread unless the environment already says how many.
 
 Likewise it sets pydantic's documented switch ``PYDANTIC_DISABLE_PLUGINS`` unless the

@@ -2,10 +2,10 @@
 
 Two places call :func:`gc.freeze`: the console once it serves
 (:func:`seqrun.service.realtime.keep_long_lived_objects_out_of_collections`), and a dry run
-for its own duration when nobody else did (:mod:`seqrun.dryrun`, which unfreezes after).
+for its own duration when nobody else did (:mod:`seqrun.service.dryrun`, which unfreezes after).
 The dry run must know whether the others did, and :func:`gc.get_freeze_count` walks the
-whole frozen list to answer (~6 ms for a validating process's ~80,000 objects): so the
-freezes that stay say so here.
+whole frozen list to answer (every object a process has imported): so the freezes that
+stay say so here.
 """
 
 from __future__ import annotations

@@ -30,17 +30,15 @@ Each step kind's parameter model and shorthand live with the rest of that kind i
 assembles them, with ``include``, into the one-key step mappings, the step union and the
 JSON Schema. The models only check what a file says on its own (types, ranges, which keys
 go together); what depends on the arm (joint names, limits, velocities, the start-up
-order) is :mod:`seqrun.validation`. Reading a file with its includes is
-:mod:`seqrun.loader`, the Markdown reference :mod:`seqrun.reference` (both re-exported
-here: ``from seqrun.schema import load_sequence`` keeps working).
+order) is :mod:`seqrun.sequence.validation`. Reading a file with its includes is
+:mod:`seqrun.sequence.loader`, the Markdown reference :mod:`seqrun.sequence.reference`.
 """
 
 from __future__ import annotations
 
 import functools
-import importlib
 import re
-from typing import TYPE_CHECKING, Annotated, Any, ClassVar, Literal, Union
+from typing import Annotated, Any, ClassVar, Literal, Union
 
 from pydantic import (
     AfterValidator,
@@ -81,16 +79,9 @@ from seqrun.steps.reset import ResetParams
 from seqrun.steps.set_limits import SetLimitsParams
 from seqrun.steps.wait import WaitParams
 
-if TYPE_CHECKING:  # re-exported lazily below: they import this module
-    from seqrun.loader import (FrozenPose, LoadedSequence, ResolvedStep, find_project_root,
-                               load_sequence, load_sequence_partial)
-    from seqrun.reference import (arm_reference_markdown, file_reference_markdown,
-                                  pose_reference_markdown, reference_markdown)
-
 __all__ = [
     "BARE_STEPS",
     "DEFAULT_ARM",
-    "FrozenPose",
     "MAX_INCLUDE_DEPTH",
     "MAX_STEPS",
     "PARAMS_MODELS",
@@ -100,20 +91,15 @@ __all__ = [
     "HaltParams",
     "HomeParams",
     "IncludeParams",
-    "LoadedSequence",
     "MoveLinearParams",
     "MoveParams",
     "PowerOffParams",
     "ResetParams",
-    "ResolvedStep",
     "Sequence",
     "SetLimitsParams",
     "StepParams",
     "WaitParams",
     "describe",
-    "find_project_root",
-    "load_sequence",
-    "load_sequence_partial",
     "sequence_json_schema",
 ]
 
@@ -297,8 +283,8 @@ class Sequence(_Model):
 @functools.cache
 def step_adapter() -> TypeAdapter[Any]:
     """Validates one step (a list item of ``steps``) on its own: for the steps of a file
-    that is not valid as a whole. Built on first use: every start paid ~5 M instructions
-    for a second copy of the steps' union that only invalid files need."""
+    that is not valid as a whole. Built on first use: it is a second copy of the steps'
+    union, which only invalid files need, and every start would pay for it."""
     return TypeAdapter(Step)
 
 
@@ -319,21 +305,3 @@ def describe(kind: str, params: StepParams) -> str:
         return step_kind(kind).describe(params)
     except KeyError:
         return kind
-
-
-# --------------------------------------------------------------------------- moved names
-#: Names that moved to their own modules, still importable from here.
-_MOVED = {name: "seqrun.loader" for name in (
-    "FrozenPose", "LoadedSequence", "ResolvedStep", "find_project_root", "load_sequence",
-    "load_sequence_partial")} | {name: "seqrun.reference" for name in (
-    "arm_reference_markdown", "file_reference_markdown", "pose_reference_markdown",
-    "reference_markdown")}
-
-
-def __getattr__(name: str) -> Any:
-    if name == "STEP_ADAPTER":  # now built on first use: step_adapter()
-        return step_adapter()
-    # Imported on first use: the loader and the reference import this module.
-    if name in _MOVED:
-        return getattr(importlib.import_module(_MOVED[name]), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -25,7 +25,7 @@ def shipped_dir(kind: Kind) -> Path:
     # In the regular package seqrun's folder, as importlib.resources.files("seqrun") would
     # give it for an installation on disk (seqrun._shipped.<kind> itself is a namespace
     # package, whose path is a multiplexed one); without importing importlib.resources
-    # (zipfile, tempfile): ~1.5 ms of every command that reads an arm.
+    # (zipfile, tempfile) in every command that reads an arm.
     installed = _PACKAGE / "_shipped" / kind
     if installed.is_dir():
         return installed

@@ -239,8 +239,8 @@ if _CParser is not None:
 
 
 #: :data:`_PYTHON_ONLY` in parts, each searched fast: PyYAML's own pattern of the characters
-#: its reader refuses (compiled once already: a set of ranges up to U+10FFFF costs ~50 M
-#: instructions to compile), the other parts after the check that the character each
+#: its reader refuses (compiled once already: a set of ranges up to U+10FFFF is slow to
+#: compile), the other parts after the check that the character each
 #: needs is there. As one alternation the engine tried every branch at every character of
 #: every file read. Same answer (tests/test_yamlsource.py compares them).
 _BLOCK_HEADER_COMMENT = re.compile("[|>][-+0-9]*#")

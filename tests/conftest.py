@@ -12,7 +12,7 @@ import pytest
 
 import tiers
 from projecttree import make_project, shipped_arm
-from seqrun.arm import ArmDescription
+from seqrun.arm.description import ArmDescription
 
 
 def pytest_configure(config: pytest.Config) -> None:

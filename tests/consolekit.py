@@ -160,9 +160,9 @@ def console_setup(folder: Path, *, session_class: Any = None, **session_kw: Any)
     sys.path.insert(0, str(Path(__file__).parent))
     from wrapbus import WrapBus
 
-    from seqrun.arm import load_arm
-    from seqrun.connection import open_connection
-    from seqrun.project import open_project
+    from seqrun.arm.description import load_arm
+    from seqrun.service.connection import open_connection
+    from seqrun.sequence.project import open_project
     from seqrun.service.session import ArmSession
 
     project_tree(folder)

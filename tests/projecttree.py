@@ -14,7 +14,7 @@ import textwrap
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 
-from seqrun.arm import ArmDescription, load_arm
+from seqrun.arm.description import ArmDescription, load_arm
 
 ROOT = Path(__file__).resolve().parents[1]
 ARM_FILE = ROOT / "arms" / "lwa3.yaml"

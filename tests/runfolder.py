@@ -9,7 +9,7 @@ from pathlib import Path
 
 import can
 
-from seqrun.runlog import read_trace
+from seqrun.service.runlog import read_trace
 
 
 @dataclass(frozen=True)
@@ -19,7 +19,7 @@ class RunFolder:
     path: Path
 
     def report(self) -> dict:
-        """report.json as written (``seqrun.runlog.read_report`` also fills in a killed run)."""
+        """report.json as written (``seqrun.service.runlog.read_report`` also fills in a killed run)."""
         return json.loads((self.path / "report.json").read_text(encoding="utf-8"))
 
     def steps(self) -> list[dict]:

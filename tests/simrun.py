@@ -8,12 +8,12 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 from projecttree import ROOT
-from seqrun.arm import load_arm
+from seqrun.arm.description import load_arm
 from seqrun.clock import VirtualClock
-from seqrun.connection import Connection, open_connection
-from seqrun.dryrun import prepare_started
-from seqrun.runner import RunOutcome, run_sequence
-from seqrun.schema import load_sequence
+from seqrun.service.connection import Connection, open_connection
+from seqrun.service.dryrun import prepare_started
+from seqrun.service.runner import RunOutcome, run_sequence
+from seqrun.sequence.loader import load_sequence
 from seqrun.sim.arm import SimArm
 from seqrun.sim.faults import parse_fault_spec
 
@@ -34,7 +34,7 @@ def run_on_sim(name: str, tmp_path: Path, *, root: Path = ROOT, faults: Iterable
     ``started``: the modules are reset, homed and limited first; ``before(connection)``
     runs before the sequence; ``html_report``: draw report.html too (drawn after the run,
     it costs as much CPU as the run itself, so only tests that read it ask for it); other
-    keywords go to :func:`seqrun.runner.run_sequence` (``confirm`` answers yes unless
+    keywords go to :func:`seqrun.service.runner.run_sequence` (``confirm`` answers yes unless
     given)."""
     loaded = load_sequence(root / "sequences" / f"{name}.yaml")
     arm = load_arm(loaded.arm_path)

@@ -11,10 +11,10 @@ import yaml
 from typer.testing import CliRunner
 
 from projecttree import shipped_arm
-from seqrun.armcontrol import command_and_confirm
+from seqrun.drivers.powercube import command_and_confirm
 from seqrun.cli import app
 from seqrun.clock import RealClock, VirtualClock
-from seqrun.connection import response_timeout_s
+from seqrun.service.connection import response_timeout_s
 from seqrun.errors import UserInputError
 from seqrun.powercube.client import PowerCubeClient
 from seqrun.powercube.protocol import CommandId, StateFlag

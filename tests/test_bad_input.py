@@ -40,13 +40,13 @@ from typer.testing import CliRunner
 import seqrun.cli  # noqa: F401  (runs seqrun.cli._load_commands: every command registered)
 from projecttree import ROOT, make_project
 from runfolder import RunFolder
-from seqrun.arm import load_arm
+from seqrun.arm.description import load_arm
 from seqrun.cli.app import app
 from seqrun.errors import SequenceInvalid, UserInputError
 from seqrun.powercube.codec import decode_request
-from seqrun.schema import load_sequence
+from seqrun.sequence.loader import load_sequence
 from seqrun.sim.bus import SimBus
-from seqrun.validation import validate_sequence
+from seqrun.sequence.validation import validate_sequence
 
 BAD = ROOT / "tests" / "data" / "bad"
 HOSTILE = ROOT / "tests" / "data" / "hostile"

@@ -13,9 +13,9 @@ from typer.testing import CliRunner
 import seqrun.cli  # noqa: F401  (registers the commands)
 from projecttree import ROOT
 from seqrun.cli.app import app
-from seqrun.errors import SequenceInvalid, UserInputError
-from seqrun.project import ConfigInvalid, load_config, project_for
-from seqrun.schema import load_sequence
+from seqrun.errors import SequenceInvalid
+from seqrun.sequence.project import ConfigInvalid, load_config, project_for
+from seqrun.sequence.loader import load_sequence
 from seqrun.shipped import shipped_dir
 
 

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from seqrun.can_timing import (
+from seqrun.powercube.can_timing import (
     bit_length_bounds,
     crc15,
     frame_bit_length,

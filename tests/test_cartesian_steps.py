@@ -14,12 +14,12 @@ import numpy as np
 import pytest
 
 from projecttree import shipped_arm, write_sequence
-from seqrun.cartesian import LinearPath, resolve_target, solver_for, tool_pose
-from seqrun.dryrun import dry_run
+from seqrun.arm.cartesian import LinearPath, resolve_target, solver_for, tool_pose
+from seqrun.service.dryrun import dry_run
 from seqrun.errors import SequenceInvalid
-from seqrun.kinematics import Chain, fk
-from seqrun.schema import load_sequence
-from seqrun.validation import validate_sequence
+from seqrun.arm.kinematics import Chain, fk
+from seqrun.sequence.loader import load_sequence
+from seqrun.sequence.validation import validate_sequence
 
 ARM = shipped_arm()
 CHAIN = Chain.from_arm(ARM)
@@ -39,7 +39,7 @@ def messages(items) -> list[str]:
 # --------------------------------------------------------------------------- validation
 def test_absolute_tool_pose_is_solved_nearest_the_tracked_joints(project):
     frame = fk(CHAIN, np.radians(OPSAFE + [5, -5, 0, 5, 0, 5, 0]))
-    from seqrun.kinematics import rpy_from_matrix
+    from seqrun.arm.kinematics import rpy_from_matrix
 
     xyz, rpy = frame[:3, 3].tolist(), np.degrees(rpy_from_matrix(frame)).tolist()
     result = validate_sequence(load(project, UP + f"- move: {{position_mm: {xyz}, "
@@ -181,7 +181,7 @@ def test_leaving_the_line_is_a_fault_with_a_halt(project):
 
 
 def test_a_run_time_solution_away_from_the_validated_one_is_a_fault(project, monkeypatch):
-    from seqrun import validation
+    from seqrun.sequence import validation
 
     arrive = validation.Checker.arrive
 

@@ -1,12 +1,12 @@
-"""The checks the commands run before anything moves (seqrun/checks.py), without the CLI."""
+"""The checks the commands run before anything moves (seqrun/sequence/checks.py), without the CLI."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from seqrun.arm import load_arm
-from seqrun.checks import static_check, static_validation
-from seqrun.loader import load_sequence
+from seqrun.arm.description import load_arm
+from seqrun.sequence.checks import static_check, static_validation
+from seqrun.sequence.loader import load_sequence
 
 ROOT = Path(__file__).resolve().parents[1]
 OPSAFE = ROOT / "sequences" / "opsafe.yaml"
@@ -29,7 +29,8 @@ def test_from_a_step_starts_where_the_steps_before_leave_the_arm():
     assert static_validation(loaded, ARM, None, False, 6).errors == []
     assert static_check(OPSAFE).valid
     before, rest = loaded.split_at(6)
-    from seqrun.validation import park_deg, validate_sequence
+    from seqrun.sequence.validation import validate_sequence
+    from seqrun.arm.poses import park_deg
 
     cold = validate_sequence(rest, ARM, park_deg(loaded.pose_path), started=False)
     assert any("move before home" in e.message for e in cold.errors)

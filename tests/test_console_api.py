@@ -90,10 +90,10 @@ def test_the_page_and_the_vendored_three_js_are_served(client):
 
 
 def test_the_scene_frames_are_the_validators_kinematics(client, setup):
-    """The page multiplies the served frames by Rz(q): the same product as seqrun.kinematics."""
+    """The page multiplies the served frames by Rz(q): the same product as seqrun.arm.kinematics."""
     import numpy as np
 
-    from seqrun.kinematics import Chain, frame_transforms
+    from seqrun.arm.kinematics import Chain, frame_transforms
 
     scene = client.get("/api/v1/arm").json()["chain"]
     q = np.radians([10, -20, 0, 35, -40, 50, 60])

@@ -114,7 +114,7 @@ def test_page_loads_with_live_telemetry_and_the_3d_view(page, live):
     # Its kinematics are the validator's: the page's frames at a pose equal seqrun's.
     import numpy as np
 
-    from seqrun.kinematics import Chain, frame_transforms
+    from seqrun.arm.kinematics import Chain, frame_transforms
 
     q = [20, -30, 0, 45, -10, 60, 15]
     ours = np.array(page.evaluate(f"window.seqrunConsole.frames(window.seqrunConsole.arm.chain, {q})"))

@@ -15,14 +15,15 @@ from rich.console import Console
 
 from projecttree import make_project
 from runfolder import RunFolder
-from seqrun.arm import load_arm
+from seqrun.arm.description import load_arm
 from seqrun.cli.display import LiveDisplay, PlainDisplay, fixed
 from seqrun.clock import VirtualClock
-from seqrun.connection import open_connection
-from seqrun.executor import EXIT_FAULT, EXIT_OK
-from seqrun.runner import run_sequence
-from seqrun.schema import load_sequence
+from seqrun.service.connection import open_connection
+from seqrun.results import EXIT_FAULT, EXIT_OK
+from seqrun.service.runner import run_sequence
+from seqrun.sequence.loader import load_sequence
 from seqrun.sim.faults import parse_fault_spec
+from seqrun.drivers.powercube.units import to_module_rad
 
 
 def console() -> Console:
@@ -165,15 +166,15 @@ def test_request_descriptions_in_user_coordinates(arm):
     from seqrun.errors import ModuleTimeoutError
     from seqrun.powercube.codec import SetMotion, SetParam
     from seqrun.powercube.protocol import MotionMode, ParamId
-    from seqrun.usermessages import user_message
+    from seqrun.drivers.powercube.messages import user_message
 
     j2 = arm.joint("j2")
     exc = ModuleTimeoutError(j2.module, "whatever", 0.05,
-                             request=SetParam(j2.module, ParamId.MAX_POS, j2.to_module_rad(-1e-9)))
+                             request=SetParam(j2.module, ParamId.MAX_POS, to_module_rad(j2, -1e-9)))
     assert user_message(exc, arm) == (f"module {j2.module}: no acknowledge to SetExtended "
                                       "MAX_POS (j2) = 0.00° within 50 ms")
     exc = ModuleTimeoutError(j2.module, "x", 0.05, request=SetMotion(
-        j2.module, MotionMode.FRAMP_ACK, j2.to_module_rad(45.0)))
+        j2.module, MotionMode.FRAMP_ACK, to_module_rad(j2, 45.0)))
     assert "SetMotion FRAMP_ACK (j2) 45.00°" in user_message(exc, arm)
 
 
@@ -271,7 +272,7 @@ def test_request_descriptions_give_rates_without_the_offset(arm):
 
     from seqrun.powercube.codec import SetMotion, SetParam
     from seqrun.powercube.protocol import MotionMode, ParamId
-    from seqrun.usermessages import describe_request
+    from seqrun.drivers.powercube.messages import describe_request
 
     j2 = arm.joint("j2")
     rate = math.radians(12.5)
@@ -281,6 +282,6 @@ def test_request_descriptions_give_rates_without_the_offset(arm):
         "SetExtended MAX_ACC (j2) = 12.50 °/s²")
     assert describe_request(SetMotion(j2.module, MotionMode.FVEL_ACK, -rate), arm) == (
         "SetMotion FVEL_ACK (j2) -12.50 °/s")
-    step = SetMotion(j2.module, MotionMode.FSTEP_ACK, j2.to_module_rad(-30.0), time_ms=40)
+    step = SetMotion(j2.module, MotionMode.FSTEP_ACK, to_module_rad(j2, -30.0), time_ms=40)
     assert describe_request(step, arm) == "SetMotion FSTEP_ACK (j2) -30.00° in 40 ms"
     assert describe_request(SetParam(j2.module, ParamId.CUBE_STATE, 0), arm) is None

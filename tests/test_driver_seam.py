@@ -1,10 +1,12 @@
-"""The driver seam (issue 10.3): the executor speaks joints, never PowerCube.
+"""The driver seam (issues 10.3, 25.1): the executor speaks user joints, never PowerCube.
 
-- ``seqrun/executor.py`` imports nothing from ``seqrun.powercube`` (nor the old
-  PowerCube-only modules it used), and the step modules neither build codec requests nor
-  import the executor (the import cycle executor -> steps -> confirm -> executor is gone);
-- a driver that is not PowerCube at all (an ideal arm, in this file) runs a whole shipped
-  sequence through the executor: reset, home, set_limits, moves, waits, a checkpoint;
+- ``seqrun/executor.py`` imports nothing from ``seqrun.powercube`` (nor the PowerCube
+  driver family), and the step modules neither build codec requests nor import the
+  executor (the import cycle executor -> steps -> confirm -> executor is gone);
+- a driver family that is not PowerCube at all (an ideal arm, in this file), registered in
+  ``seqrun.drivers.registry.DRIVERS`` with one line and named by its arm file, runs a whole
+  shipped sequence the way ``seqrun run`` assembles one (``open_driver``, the runner, the
+  executor): reset, home, set_limits, moves, waits, a checkpoint;
 - a fault that driver reports mid-move ends like any fault: Halt through the driver,
   confirmed, exit 3 with the cause the driver decoded.
 """
@@ -12,25 +14,32 @@
 from __future__ import annotations
 
 import ast
+import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+import pytest
 
 from projecttree import ROOT, shipped_arm
+from seqrun.arm.planner import Limits, MovePlan
+from seqrun.arm.poses import pose_joints_deg
 from seqrun.clock import VirtualClock
-from seqrun.drivers.base import (ArmDriver, CommandConfirmation, JointLimits, JointReading,
-                                 JointState, LimitValues, MotionRefused)
-from seqrun.executor import EXIT_FAULT, EXIT_OK, Executor
-from seqrun.planner import Limits, MovePlan
-from seqrun.schema import load_sequence
-from seqrun.validation import pose_joints_deg
+from seqrun.drivers import registry
+from seqrun.drivers.base import (ArmDriver, ArmPoll, CommandConfirmation, JointLimits,
+                                 JointReading, JointState, LimitValues, MotionRefused)
+from seqrun.errors import UserInputError
+from seqrun.executor import Executor
+from seqrun.results import EXIT_FAULT, EXIT_OK
+from seqrun.sequence.loader import load_sequence
+from seqrun.arm.poses import pose_joints_deg
+from seqrun.service.runner import run_sequence
 
 ARM = shipped_arm()
 #: Modules that only PowerCube code may import.
-POWERCUBE_ONLY = ("seqrun.powercube", "seqrun.setpoints", "seqrun.halt", "seqrun.armcontrol",
-                  "seqrun.drivers.powercube", "seqrun.drivers.setpoints")
+POWERCUBE_ONLY = ("seqrun.powercube", "seqrun.drivers.powercube")
 
 
 def imported_modules(path: Path) -> set[str]:
@@ -52,6 +61,8 @@ def powercube_imports(path: Path) -> list[str]:
 
 def test_the_executor_imports_nothing_from_powercube():
     assert powercube_imports(ROOT / "seqrun" / "executor.py") == []
+    for path in sorted((ROOT / "seqrun" / "execution").glob("*.py")):
+        assert powercube_imports(path) == [], path.name
     import seqrun.executor as executor
 
     leaked = {name: value.__module__ for name, value in vars(executor).items()
@@ -88,26 +99,60 @@ class IdealCycleState:
         return self.code
 
 
+class IdealBus:
+    """What the ideal arm's driver is opened on (a connection's ``clock``, ``bus``): the
+    arm stands at ``start_deg``, powered on, and may overheat one joint at a plan time."""
+
+    def __init__(self, start_deg: Mapping[str, float], *,
+                 overheat: tuple[int, float] | None = None) -> None:
+        self.clock = VirtualClock()
+        self.bus = (dict(start_deg), overheat)
+        self.description, self.is_simulator, self.faults = "the ideal arm", True, []
+        self.opened: list[IdealArm] = []
+
+
 class IdealArm:
-    """An arm whose joints are exactly where the plan says, in drive radians; it starts
-    powered on (not homed) and can be told to overheat one joint at a plan time."""
+    """The driver of an arm whose joints are exactly where the plan says (user degrees);
+    it starts powered on (not homed) and can be told to overheat one joint at a plan
+    time. Registered as the driver "ideal" by the tests that use it."""
+
+    FAULT_FLAGS = frozenset({"HOT", "HALTED"})
+    HOMED_FLAG = "HOMED"
 
     def __init__(self, start_deg: Mapping[str, float], *,
                  overheat: tuple[int, float] | None = None) -> None:
         self.modules = list(ARM.module_ids)
-        self.offsets = np.radians([j.offset_deg for j in ARM.joints])
-        self.positions = np.radians([start_deg[j.name] for j in ARM.joints]) + self.offsets
-        self.homed = dict.fromkeys(self.modules, False)
+        self.positions = np.array([start_deg[j.name] for j in ARM.joints], dtype=float)
+        self.homed_ = dict.fromkeys(self.modules, False)
         self.halted = dict.fromkeys(self.modules, False)
         self.overheated: set[int] = set()
         self.overheat = overheat
-        self.limits = [JointLimits(-3.0, 3.0, 1.0, 1.0) for _ in self.modules]
+        self.limits = [JointLimits(math.degrees(-3.0), math.degrees(3.0), math.degrees(1.0),
+                                   math.degrees(1.0)) for _ in self.modules]
         self.calls: list[str] = []
         self.cycles = 0
+        self.closed = False
+
+    # -- the family (what the registry asks of the class)
+    @classmethod
+    def open(cls, arm, connection: IdealBus, *,
+             response_timeout_s: float | None = None) -> IdealArm:
+        start_deg, overheat = connection.bus
+        driver = cls(start_deg, overheat=overheat)
+        connection.opened.append(driver)
+        return driver
+
+    @staticmethod
+    def cycle_state(code: int) -> IdealCycleState:
+        return IdealCycleState(code)
+
+    @classmethod
+    def simulator_positions(cls, arm, joints_deg: Mapping[str, float]) -> dict[int, float]:
+        return {j.module: joints_deg[j.name] for j in arm.joints}
 
     # -- state
     def _state(self, module: int) -> JointState:
-        hot, halted, homed = module in self.overheated, self.halted[module], self.homed[module]
+        hot, halted, homed = module in self.overheated, self.halted[module], self.homed_[module]
         faulted = hot or halted
         return JointState(homed=homed, halted=halted, moving=False, faulted=faulted,
                           cause="overheated" if hot else "halted" if halted else "not_homed",
@@ -122,6 +167,9 @@ class IdealArm:
                              for m in self.modules})
 
     # -- the ArmDriver calls
+    def use_arm(self, arm) -> None:
+        self.calls.append("use_arm")
+
     def configure(self, *, cycle_s: float, run_limits: Limits, command_mode: str,
                   emit: Callable[..., None]) -> None:
         self.calls.append("configure")
@@ -148,7 +196,7 @@ class IdealArm:
             module = self.modules[i]
             if not self._state(module).ready:
                 raise MotionRefused(module, IdealCycleState(1))
-            self.positions[i] = plan.at(t)[0][i] + self.offsets[i]
+            self.positions[i] = math.degrees(plan.at(t)[0][i])
         return self._reading()
 
     def end_motion(self) -> None:
@@ -161,7 +209,7 @@ class IdealArm:
 
     def home(self, modules: Sequence[int] | None) -> None:
         for m in self.modules if modules is None else modules:
-            self.homed[m] = True
+            self.homed_[m] = True
 
     def halt(self, modules: Sequence[int] | None) -> None:
         for m in self.modules if modules is None else modules:
@@ -173,6 +221,31 @@ class IdealArm:
         return CommandConfirmation("halt", tuple(self.modules), sent=True,
                                    states=self.read_states(), attempts=1)
 
+    def halt_now(self, *, wait: bool = True) -> None:
+        self.halt(None)
+
+    def confirm(self, command: str, modules: Sequence[int] | None = None
+                ) -> CommandConfirmation:
+        getattr(self, command)(modules)
+        return CommandConfirmation(command, tuple(self.modules), sent=True,
+                                   states=self.read_states(), attempts=1)
+
+    def poll(self, *, tolerate_loss: bool = False) -> ArmPoll:
+        return ArmPoll(self.positions.tolist(), [0.0] * len(self.modules), self.read_states())
+
+    def homed(self) -> bool:
+        return all(self.homed_.values())
+
+    def watch_foreign(self, on_foreign: Callable[[Any], None]) -> None:
+        self.calls.append("watch_foreign")  # the ideal arm has no other master
+
+    def add_frame_listener(self, listener: Callable[[Any], None]) -> None: ...
+
+    def remove_frame_listener(self, listener: Callable[[Any], None]) -> None: ...
+
+    def describe_error(self, exc: BaseException) -> str:
+        return str(exc)
+
     def read_limits(self) -> list[JointLimits]:
         return list(self.limits)
 
@@ -180,10 +253,9 @@ class IdealArm:
         for i, joint in enumerate(ARM.joints):
             if joint.name in values:
                 v = values[joint.name]
-                self.limits[i] = JointLimits(joint.to_module_rad(v.min_deg),
-                                             joint.to_module_rad(v.max_deg),
-                                             self.limits[i].max_velocity,
-                                             self.limits[i].max_acceleration)
+                self.limits[i] = JointLimits(v.min_deg, v.max_deg,
+                                             self.limits[i].max_velocity_deg_s,
+                                             self.limits[i].max_acceleration_deg_s2)
         self.calls.append("write_limits")
         return 2 * len(values)
 
@@ -198,40 +270,54 @@ class IdealArm:
 
     def close(self) -> None:
         self.calls.append("close")
+        self.closed = True
 
 
-def run_opsafe(driver: IdealArm):
+#: The arm file of an ideal arm: the shipped one, naming the ideal driver.
+IDEAL = ARM.model_copy(update={"driver": "ideal"})
+
+
+@pytest.fixture
+def ideal_driver(monkeypatch):
+    """The ideal arm's driver family, registered the way every family is: one line."""
+    monkeypatch.setitem(registry.DRIVERS, "ideal", f"{__name__}:IdealArm")
+
+
+def run_opsafe(bus: IdealBus):
+    """opsafe.yaml assembled as ``seqrun run`` assembles a run: the registry opens the
+    arm file's driver on the connection, the runner builds the executor around it."""
     loaded = load_sequence(ROOT / "sequences" / "opsafe.yaml")
     events: list[dict] = []
-    executor = Executor(driver, ARM, VirtualClock(), poses_dir=loaded.poses_dir,
-                        confirm=lambda prompt: True, listeners=[events.append])
-    return executor, executor.run(loaded), events
+    outcome = run_sequence(loaded, IDEAL, bus, log_dir=None, confirm=lambda prompt: True,
+                           listeners=[events.append])
+    (driver,) = bus.opened
+    return outcome.executor, outcome.result, events, driver
 
 
 def park() -> dict[str, float]:
     return pose_joints_deg("park", ROOT / "poses")
 
 
-def test_a_driver_that_is_not_powercube_runs_a_whole_sequence():
-    driver = IdealArm(park())
+def test_a_driver_that_is_not_powercube_runs_a_whole_sequence(ideal_driver):
+    executor, result, events, driver = run_opsafe(IdealBus(park()))
     assert isinstance(driver, ArmDriver)
-    executor, result, events = run_opsafe(driver)
     assert result.exit_code == EXIT_OK, result.message
     assert executor.driver is driver and executor.client is None
     # Every step ran through the driver: homed, limits written, the moves streamed.
-    assert all(driver.homed.values()) and "write_limits" in driver.calls
+    assert all(driver.homed_.values()) and "write_limits" in driver.calls
     assert driver.calls.count("start_motion") == 2 and driver.cycles > 100
     assert "halt_and_confirm" not in driver.calls and "disable_watchdog" in driver.calls
+    # The runner watched for another master and closed the driver it opened.
+    assert "watch_foreign" in driver.calls and driver.closed
     opsafe = pose_joints_deg("opsafe", ROOT / "poses")
-    reached = np.degrees(driver.positions - driver.offsets)
-    assert np.allclose(reached, [opsafe[j.name] for j in ARM.joints], atol=1e-6)
+    assert np.allclose(driver.positions, [opsafe[j.name] for j in ARM.joints], atol=1e-6)
     assert [s.status for s in result.steps] == ["passed"] * len(result.steps)
     assert any(e["type"] == "setpoint" for e in events)
 
 
-def test_a_fault_the_driver_reports_mid_move_halts_through_it():
-    driver = IdealArm(park(), overheat=(3, 1.0))     # module 3 overheats 1 s into a move
-    _, result, events = run_opsafe(driver)
+def test_a_fault_the_driver_reports_mid_move_halts_through_it(ideal_driver):
+    # module 3 overheats 1 s into a move
+    _, result, events, driver = run_opsafe(IdealBus(park(), overheat=(3, 1.0)))
     assert result.exit_code == EXIT_FAULT
     assert driver.calls.count("halt_and_confirm") == 1
     assert result.fault["cause"] == "overheated" and result.fault["module"] == 3
@@ -253,7 +339,8 @@ def test_the_powercube_driver_is_an_arm_driver():
         assert isinstance(driver, PowerCubeDriver) and isinstance(driver, ArmDriver)
         assert as_driver(driver, ARM) is driver
         reading = driver.read()
-        assert reading.positions_rad.shape == (ARM.dof,)
+        # Powered on at Park: the driver reports Park in user degrees (offsets applied).
+        assert reading.positions_deg == pytest.approx([park()[j.name] for j in ARM.joints])
         # Freshly powered on: every joint refuses motion, its full state says not homed.
         assert all(state.refuses_motion for state in reading.states.values())
         states = driver.read_states()
@@ -268,7 +355,7 @@ def test_measurements_carry_the_flags_and_faults_the_driver_decoded():
     cycle code 1 read "NOT_OK" and its full state "HOT HALTED HOMED" no fault at all)."""
     driver = IdealArm(park(), overheat=(3, 1.0))
     loaded = load_sequence(ROOT / "sequences" / "opsafe.yaml")
-    executor = Executor(driver, ARM, VirtualClock(), poses_dir=loaded.poses_dir,
+    executor = Executor(driver, IDEAL, VirtualClock(), poses_dir=loaded.poses_dir,
                         confirm=lambda prompt: True)
     subscription = executor.events.subscribe(maxsize=100_000, name="test")
     result = executor.run(loaded)
@@ -282,3 +369,74 @@ def test_measurements_carry_the_flags_and_faults_the_driver_decoded():
     assert "HOT" in after_halt.flags["j3"][0]
     names = {n for e in measurements for flags in e.flags.values() for n in flags}
     assert not names & {"NOT_OK", "SWR", "MOTION", "RAMP_END", "HOME_OK"}, names
+
+
+# -- the registry ----------------------------------------------------------------------------
+
+def test_the_registry_opens_the_driver_an_arm_file_names(ideal_driver):
+    from seqrun.drivers.powercube import PowerCubeDriver
+    from seqrun.service.connection import open_connection
+
+    assert registry.driver_name(ARM) == "powercube" == registry.DEFAULT_DRIVER
+    connection = open_connection(force_sim=True, clock=VirtualClock(), python_can=False)
+    try:
+        driver = registry.open_driver(ARM, connection)
+        assert isinstance(driver, PowerCubeDriver) and isinstance(driver, ArmDriver)
+        driver.close()
+    finally:
+        connection.close()
+    assert isinstance(registry.open_driver(IDEAL, IdealBus(park())), IdealArm)
+
+
+def test_an_unknown_driver_is_one_line_naming_the_known_ones():
+    with pytest.raises(UserInputError, match=r"unknown arm driver 'canopen' \(known: "
+                                             r"powercube\)"):
+        registry.open_driver(ARM.model_copy(update={"driver": "canopen"}), None)
+
+
+def test_a_logged_state_code_is_described_by_its_drivers_family(ideal_driver):
+    """What a run folder's ``state`` columns say comes from the family that logged them
+    (the report's CSV asks the registry, never PowerCube)."""
+    assert registry.cycle_state(ARM, 0x11).describe() == "NOT_OK|MOTION"
+    assert registry.cycle_state(None, 0).describe() == "OK"    # (no arm logged: PowerCube)
+    assert registry.cycle_state(IDEAL, 1).describe() == "refuses"
+
+
+def test_a_dry_run_starts_the_simulated_drives_where_the_arm_stands():
+    """The offsets are applied by the driver family, once: Park in user degrees is the
+    modules' encoder zero (the shipped arm's zero reference is Park)."""
+    assert registry.simulator_positions(ARM, park()) == pytest.approx(
+        dict.fromkeys(ARM.module_ids, 0.0), abs=1e-12)
+
+
+def test_the_offsets_are_applied_in_one_place():
+    """The user-degree <-> module-radian offset is the PowerCube family's, in one module
+    (issue 25.1: it was applied in the arm description, the executor, the setpoint laws
+    and the codec); the arm description only holds the offsets."""
+    users = sorted(str(path.relative_to(ROOT)) for path in (ROOT / "seqrun").rglob("*.py")
+                   if "offset_deg" in path.read_text(encoding="utf-8"))
+    assert users == ["seqrun/arm/description.py", "seqrun/drivers/powercube/units.py"]
+    from seqrun.arm.description import Joint
+
+    assert not hasattr(Joint, "to_module_rad") and not hasattr(Joint, "to_user_deg")
+
+
+def test_the_powercube_driver_confirms_home_by_reading_it_back():
+    """Confirmed Halt, Reset and Home are the driver's (seqrun halt / reset, the session)."""
+    from seqrun.service.connection import open_connection
+
+    connection = open_connection(force_sim=True, clock=VirtualClock(), python_can=False)
+    try:
+        driver = registry.open_driver(ARM, connection)
+        assert not driver.homed()           # freshly powered on
+        home = driver.confirm("home")
+        assert home.confirmed and home.command == "home" and driver.homed(), home.describe()
+        halt = driver.confirm("halt")
+        assert halt.confirmed and all(s.halted for s in halt.states.values())
+        home = driver.confirm("home")       # halted: Home does not clear it, not confirmed
+        assert home.sent and not home.confirmed and home.attempts == 3
+        assert "HALTED" in home.describe_unconfirmed()
+        assert driver.confirm("reset").confirmed
+        driver.close()
+    finally:
+        connection.close()

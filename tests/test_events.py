@@ -143,11 +143,11 @@ def test_a_queue_holds_at_least_one_event(bad):
 def test_a_run_emits_only_registered_events(tmp_path, faults):
     """At run time too (the ** call sites the scan cannot see): a whole sequence, with and
     without a fault, through the runner, gives typed records only."""
-    from seqrun.arm import load_arm
+    from seqrun.arm.description import load_arm
     from seqrun.clock import VirtualClock
-    from seqrun.connection import open_connection
-    from seqrun.runner import run_sequence
-    from seqrun.schema import load_sequence
+    from seqrun.service.connection import open_connection
+    from seqrun.service.runner import run_sequence
+    from seqrun.sequence.loader import load_sequence
     from seqrun.sim.faults import parse_fault_spec
 
     loaded = load_sequence(ROOT / "sequences" / "opsafe.yaml")

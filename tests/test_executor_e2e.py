@@ -18,13 +18,14 @@ from typer.testing import CliRunner
 import seqrun.cli  # noqa: F401  (registers the commands)
 from projecttree import ROOT
 from runfolder import RunFolder
-from seqrun.arm import load_arm
+from seqrun.arm.description import load_arm
 from seqrun.cli.app import app
 from seqrun.clock import VirtualClock
-from seqrun.connection import open_connection
-from seqrun.executor import EXIT_FAULT, EXIT_INVALID, EXIT_OK, EXIT_OPERATOR_ABORT
-from seqrun.runner import run_sequence
-from seqrun.schema import load_sequence
+from seqrun.service.connection import open_connection
+from seqrun.results import EXIT_FAULT, EXIT_INVALID, EXIT_OK, EXIT_OPERATOR_ABORT
+from seqrun.service.runner import run_sequence
+from seqrun.sequence.loader import load_sequence
+from seqrun.drivers.powercube.units import to_module_rad
 from simrun import run_on_sim
 
 HALT = (0x100, 0x02)
@@ -183,7 +184,7 @@ def test_from_step_refuses_an_arm_that_is_not_where_the_step_expects_it(tmp_path
 
 
 def test_from_step_runs_the_rest_when_the_arm_is_there(tmp_path, arm):
-    at_totem = {j.module: j.to_module_rad(0.0) for j in arm.joints}
+    at_totem = {j.module: to_module_rad(j, 0.0) for j in arm.joints}
     outcome, sim, _ = run_on_sim("opsafe", tmp_path, first_step=6, positions=at_totem, started=True)
     assert outcome.result.exit_code == EXIT_OK, outcome.result.message
     statuses = [s.status for s in outcome.result.steps]
@@ -260,7 +261,7 @@ def test_cli_run_virtual_time_end_to_end(tmp_path):
 
 def test_an_unexpected_error_in_a_step_halts_and_is_reported_without_traceback(tmp_path,
                                                                               monkeypatch):
-    from seqrun import steps
+    from seqrun.steps import registry as steps
 
     def broken(step, ex):
         raise ZeroDivisionError("simulated bug")
@@ -317,7 +318,7 @@ def test_a_display_that_raises_systemexit_cannot_end_the_run(tmp_path):
 
 
 def test_keyboardinterrupt_escaping_a_step_still_halts(tmp_path, monkeypatch):
-    from seqrun import steps
+    from seqrun.steps import registry as steps
 
     def interrupted(step, ex):
         raise KeyboardInterrupt

@@ -11,13 +11,13 @@ from pathlib import Path
 import can
 import pytest
 
-from seqrun.arm import load_arm
+from seqrun.arm.description import load_arm
 from seqrun.clock import RealClock, VirtualClock
-from seqrun.connection import Connection, open_connection
-from seqrun.runlog import read_trace
-from seqrun.runner import run_sequence
-from seqrun.schema import load_sequence
-from seqrun.service.foreign_frames import ForeignFrame, ForeignFrameWatch, is_request_frame
+from seqrun.service.connection import Connection, open_connection
+from seqrun.service.runlog import read_trace
+from seqrun.service.runner import run_sequence
+from seqrun.sequence.loader import load_sequence
+from seqrun.drivers.powercube.foreign import ForeignFrame, ForeignFrameWatch, is_request_frame
 from seqrun.sim.arm import SimArm
 from seqrun.sim.bus import SimBus
 from seqrun.sim.network import SimNetwork
@@ -181,14 +181,14 @@ def test_a_halt_broadcast_from_another_process_is_named(tmp_path):
 
 def test_status_warns_when_another_master_asks_while_it_reads():
     from seqrun.cli.bus_owner import StatusSource
-    from seqrun.powercube.client import PowerCubeClient
+    from seqrun.drivers.registry import open_driver
 
     clock = RealClock()
     connection = open_connection(force_sim=True, clock=clock)
     intruder = SimBus(channel=connection.bus.channel, clock=clock)
 
     def open_bus():
-        return connection, PowerCubeClient(connection.bus, clock, response_timeout=0.2)
+        return connection, open_driver(ARM, connection, response_timeout_s=0.2)
 
     warnings: list[str] = []
     source = StatusSource(ARM, None, open_bus, warnings.append)

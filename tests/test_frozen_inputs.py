@@ -10,12 +10,13 @@ import pytest
 
 from projecttree import make_project
 from runfolder import RunFolder
-from seqrun.arm import load_arm
+from seqrun.arm.description import load_arm
 from seqrun.clock import VirtualClock
-from seqrun.connection import open_connection
-from seqrun.executor import EXIT_OK
-from seqrun.runner import run_sequence
-from seqrun.schema import load_sequence
+from seqrun.service.connection import open_connection
+from seqrun.results import EXIT_OK
+from seqrun.service.runner import run_sequence
+from seqrun.sequence.loader import load_sequence
+from seqrun.drivers.powercube.units import to_user_deg
 
 
 #: Op-safe rewritten to a pose below the desk (what the red team wrote mid-run).
@@ -60,7 +61,7 @@ def test_a_pose_file_rewritten_mid_run_changes_nothing(project, tmp_path):
         connection.close()
     assert rewritten and rewritten[0] != validated_sha  # the file did change mid-run
     assert outcome.result.exit_code == EXIT_OK, outcome.result.message
-    reached = {j.name: j.to_user_deg(at[j.module]) for j in arm.joints}
+    reached = {j.name: to_user_deg(j, at[j.module]) for j in arm.joints}
     validated = loaded.poses["opsafe"].joints_deg
     assert all(abs(reached[n] - validated[n]) < 0.2 for n in validated), reached
     report = RunFolder(tmp_path / "run").report()

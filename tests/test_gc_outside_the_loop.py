@@ -17,9 +17,9 @@ import pytest
 
 from projecttree import write_sequence
 from seqrun.clock import RealClock, VirtualClock
-from seqrun.connection import open_connection
-from seqrun.runner import build_executor, write_html_report
-from seqrun.schema import load_sequence
+from seqrun.service.connection import open_connection
+from seqrun.service.runner import build_executor, write_html_report
+from seqrun.sequence.loader import load_sequence
 from simrun import run_on_sim
 
 

@@ -1,4 +1,4 @@
-"""Link volumes, obstacles and self-collision (seqrun/geometry.py), and their use in
+"""Link volumes, obstacles and self-collision (seqrun/arm/geometry.py), and their use in
 validation (along the planned trajectory) and at run time (measured joints)."""
 
 from __future__ import annotations
@@ -11,13 +11,13 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from projecttree import shipped_arm, write_sequence
-from seqrun.arm import ArmDescription
-from seqrun.dryrun import dry_run
-from seqrun.geometry import (Geometry, point_box, point_cylinder, segment_box, segment_min,
-                             segment_segment)
-from seqrun.kinematics import matrix_from_rpy
-from seqrun.schema import load_sequence
-from seqrun.validation import validate_sequence
+from seqrun.arm.description import ArmDescription
+from seqrun.service.dryrun import dry_run
+from seqrun.arm.geometry import (Geometry, _segment_distance, point_box, point_cylinder,
+                             segment_box, segment_min, segment_segment)
+from seqrun.arm.kinematics import matrix_from_rpy
+from seqrun.sequence.loader import load_sequence
+from seqrun.sequence.validation import validate_sequence
 from tiers import examples
 
 ARM = shipped_arm()
@@ -45,6 +45,38 @@ def test_segment_distance_matches_dense_sampling(p1, q1, p2, q2):
     spacing = (np.linalg.norm(q1 - p1) + np.linalg.norm(q2 - p2)) / 800
     assert exact <= brute + 1e-6
     assert brute - exact <= spacing + 1e-6
+
+
+def test_a_short_segment_is_a_segment_not_its_first_point():
+    # hypothesis' counter-example (issue 29): seg 1 is 1e-5 long and ends where seg 2
+    # starts, so they touch; taken for parallel segments, seg 1 was measured from its first
+    # point only (8.2e-6). The run-time check (Geometry) uses the scalar twin.
+    p1, q1 = np.array([1e-5, 0.0, 0.0]), np.zeros(3)
+    p2, q2 = np.zeros(3), np.full(3, 0.0625)
+    assert float(segment_segment(p1, q1, p2, q2)) == 0.0
+    assert _segment_distance(p1, q1, p2, q2) == 0.0
+    # the same pair the other way round, and seg 1 a little away from seg 2's start
+    assert float(segment_segment(p2, q2, p1, q1)) == 0.0
+    assert _segment_distance(p2, q2, p1, q1) == 0.0
+    lifted = np.array([0.0, 0.0, -1e-6])
+    assert float(segment_segment(p1 + lifted, q1 + lifted, p2, q2)) == pytest.approx(
+        1e-6, rel=1e-6)
+    assert _segment_distance(p1 + lifted, q1 + lifted, p2, q2) == pytest.approx(1e-6, rel=1e-6)
+
+
+def test_parallel_and_degenerate_segments():
+    a, b = np.array([0.0, 0.0, 0.0]), np.array([10.0, 0.0, 0.0])
+    for p2, q2, expected in (
+            (np.array([5.0, 3.0, 0.0]), np.array([25.0, 3.0, 0.0]), 3.0),    # overlapping
+            (np.array([14.0, 3.0, 0.0]), np.array([25.0, 3.0, 0.0]), 5.0),   # beyond the end
+            (np.array([-7.0, 4.0, 0.0]), np.array([-3.0, 4.0, 0.0]), 5.0),   # before the start
+            (np.array([4.0, 0.0, 2.0]), np.array([4.0, 0.0, 2.0]), 2.0),     # a point
+    ):
+        for args in ((a, b, p2, q2), (p2, q2, a, b), (b, a, q2, p2)):
+            assert float(segment_segment(*args)) == pytest.approx(expected)
+            assert _segment_distance(*args) == pytest.approx(expected)
+    assert float(segment_segment(a, a, b, b)) == pytest.approx(10.0)
+    assert _segment_distance(a, a, b, b) == pytest.approx(10.0)
 
 
 @settings(max_examples=examples(150), deadline=None)
@@ -156,7 +188,7 @@ def test_without_obstacles_the_same_move_is_fine(project):
 def test_the_run_halts_before_the_obstacle(project, monkeypatch):
     """Run-time check from the measured joints: with validation's geometry check switched
     off the executor streams the move and halts it at the margin."""
-    from seqrun import validation
+    from seqrun.sequence import validation
 
     monkeypatch.setattr(validation.Checker, "_check_path_geometry", lambda *a, **k: None)
     run = dry_run(_load(project, STEPS), _with_mock(ARM), PARK)

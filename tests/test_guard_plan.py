@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from projecttree import ROOT, shipped_arm
-from seqrun.arm import GeometrySpec
-from seqrun.dryrun import dry_run
-from seqrun.kinematics import Chain, point_positions
-from seqrun.schema import load_sequence
-from seqrun.validation import validate_sequence
+from seqrun.arm.description import GeometrySpec
+from seqrun.service.dryrun import dry_run
+from seqrun.arm.kinematics import Chain, point_positions
+from seqrun.sequence.loader import load_sequence
+from seqrun.sequence.validation import validate_sequence
 
 # The guard planes alone: the arm file's link volumes would also refuse this move (the
 # hand's capsule touches the desk), which would hide what is tested here.
@@ -72,7 +72,7 @@ def test_the_executor_refuses_it_too_before_anything_moves(sequence):
 def test_without_the_check_the_run_halts_at_the_guard_where_the_plan_said(sequence, monkeypatch):
     """What the static check predicts is what the run does: with the guard check along the
     plan switched off, the executor streams the move and its runtime guard halts it."""
-    from seqrun import validation
+    from seqrun.sequence import validation
 
     monkeypatch.setattr(validation.Checker, "guards_along_plan", lambda *a: None)
     run = dry_run(sequence, ARM, PARK)

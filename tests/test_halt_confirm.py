@@ -15,13 +15,14 @@ import pytest
 
 from projecttree import ROOT, shipped_arm
 from seqrun.clock import VirtualClock
-from seqrun.connection import Connection
-from seqrun.executor import EXIT_FAULT, Executor
-from seqrun.halt import halt_and_confirm
+from seqrun.service.connection import Connection
+from seqrun.executor import Executor
+from seqrun.results import EXIT_FAULT
+from seqrun.drivers.powercube import halt_and_confirm
 from seqrun.powercube.client import PowerCubeClient
 from seqrun.powercube.protocol import ShortState
-from seqrun.runner import run_sequence
-from seqrun.schema import load_sequence
+from seqrun.service.runner import run_sequence
+from seqrun.sequence.loader import load_sequence
 from seqrun.sim.bus import SimBus
 from wrapbus import WrapBus
 
@@ -74,7 +75,7 @@ def test_modules_that_do_not_answer_after_the_halt_are_named():
     clock = VirtualClock()
     bus, client = sim(clock, faults=["3:no_ack@0", "5:missing@0"])
     try:
-        result = halt_and_confirm(client, ARM.module_ids, retries=3)
+        result = halt_and_confirm(client, ARM.module_ids, attempts=3)
     finally:
         client.close()
     assert result.sent and not result.confirmed

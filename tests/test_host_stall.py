@@ -9,13 +9,13 @@ from __future__ import annotations
 import itertools
 
 from projecttree import ROOT
-from seqrun.arm import load_arm
+from seqrun.arm.description import load_arm
 from seqrun.clock import VirtualClock
-from seqrun.connection import Connection
-from seqrun.executor import EXIT_OK
+from seqrun.service.connection import Connection
+from seqrun.results import EXIT_OK
 from seqrun.powercube.client import PowerCubeClient
-from seqrun.runner import run_sequence
-from seqrun.schema import load_sequence
+from seqrun.service.runner import run_sequence
+from seqrun.sequence.loader import load_sequence
 from seqrun.sim.bus import SimBus
 from wrapbus import WrapBus
 

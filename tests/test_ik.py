@@ -1,4 +1,4 @@
-"""Inverse kinematics (seqrun/ik.py) and ``seqrun ik``: round trips, limits, tools, errors."""
+"""Inverse kinematics (seqrun/arm/ik.py) and ``seqrun ik``: round trips, limits, tools, errors."""
 
 from __future__ import annotations
 
@@ -13,10 +13,10 @@ from typer.testing import CliRunner
 
 import seqrun.cli.ik  # noqa: F401  (registers `ik`)
 from projecttree import ROOT, shipped_arm
-from seqrun.arm import Tool
+from seqrun.arm.description import Tool
 from seqrun.cli.app import app
-from seqrun.ik import IkSolver, Unreachable, target_frame, tool_chain
-from seqrun.kinematics import Chain, fk, orientation_error
+from seqrun.arm.ik import IkSolver, Unreachable, target_frame, tool_chain
+from seqrun.arm.kinematics import Chain, fk, orientation_error
 from tiers import examples
 
 ARM = shipped_arm()
@@ -59,7 +59,7 @@ def _check(solver, chain, q_true, seed):
 def _well_conditioned(q_deg, columns=(0, 1, 3, 4, 5, 6)) -> bool:
     """Away from singularities (where the solution is not unique, e.g. Totem: j1, j5, j7
     on one line)."""
-    from seqrun.kinematics import jacobian
+    from seqrun.arm.kinematics import jacobian
 
     jac = jacobian(CHAIN, np.radians(q_deg))[:, list(columns)]
     jac[:3] /= 200.0  # mm -> comparable with radians
@@ -159,7 +159,7 @@ def test_cli_finds_opsafe_near_opsafe():
 def test_cli_near_deg_takes_negative_angles():
     park = ["0", "-90", "0", "-120", "0", "115.74", "0"]
     pose = fk(CHAIN, np.radians([0, -85, 0, -110, 0, 100, 0]))
-    from seqrun.kinematics import rpy_from_matrix
+    from seqrun.arm.kinematics import rpy_from_matrix
 
     rpy = np.degrees(rpy_from_matrix(pose))
     result = run("ik", "--position-mm", *map(str, pose[:3, 3]), "--rpy-deg", *map(str, rpy),
@@ -191,8 +191,8 @@ def test_cli_bad_input_is_one_line_and_exit_2(args, message):
 
 
 def test_rotation_vector_near_a_half_turn():
-    from seqrun.ik import rotation_vector
-    from seqrun.kinematics import matrix_from_rpy
+    from seqrun.arm.ik import rotation_vector
+    from seqrun.arm.kinematics import matrix_from_rpy
 
     for angle in (math.pi, math.pi - 1e-7, 1e-8, 0.0, 2.0):
         axis = np.array([1.0, -2.0, 0.5]) / np.linalg.norm([1.0, -2.0, 0.5])

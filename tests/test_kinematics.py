@@ -12,8 +12,8 @@ from hypothesis.extra.numpy import arrays
 
 from projecttree import shipped_arm
 from tiers import examples
-from seqrun.arm import GuardPoint
-from seqrun.kinematics import (
+from seqrun.arm.description import GuardPoint
+from seqrun.arm.kinematics import (
     Chain,
     fk,
     frame_origins,

@@ -11,18 +11,20 @@ import pytest
 
 from projecttree import make_project, shipped_arm
 from runfolder import RunFolder
-from seqrun.cli.validate import static_check
+from seqrun.sequence.checks import static_check
 from seqrun.clock import VirtualClock
-from seqrun.connection import open_connection
-from seqrun.dryrun import dry_run
-from seqrun.executor import EXIT_OK
-from seqrun.limits import ARM_FILE, READBACK, LimitsInForce
-from seqrun.planner import Limits
+from seqrun.service.connection import open_connection
+from seqrun.service.dryrun import dry_run
+from seqrun.results import EXIT_OK
+from seqrun.arm.limits import ARM_FILE, READBACK, LimitsInForce
+from seqrun.arm.planner import Limits
 from seqrun.powercube.client import PowerCubeClient
 from seqrun.powercube.protocol import ParamId
-from seqrun.runner import run_sequence
-from seqrun.schema import load_sequence
-from seqrun.validation import park_deg
+from seqrun.service.runner import run_sequence
+from seqrun.sequence.loader import load_sequence
+from seqrun.arm.poses import park_deg
+from seqrun.arm.poses import park_deg
+from seqrun.drivers.powercube.units import to_module_rad
 from simrun import run_on_sim
 
 ARM = shipped_arm()
@@ -104,7 +106,7 @@ def test_set_limits_persists_in_the_simulated_modules_for_the_next_run(project, 
         assert one.result.exit_code == EXIT_OK, one.result.message
         # back down to Park for the second run to have something to do
         sim = connection.bus.arm
-        sim.set_positions({j.module: j.to_module_rad(v)
+        sim.set_positions({j.module: to_module_rad(j, v)
                            for j, v in zip(ARM.joints, park_deg(project / "poses").values())})
         two = run_sequence(second, ARM, connection, log_dir=None, confirm=lambda p: True)
     finally:

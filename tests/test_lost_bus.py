@@ -19,14 +19,14 @@ import pytest
 
 from projecttree import ROOT
 from runfolder import RunFolder
-from seqrun.arm import load_arm
+from seqrun.arm.description import load_arm
 from seqrun.clock import VirtualClock
-from seqrun.connection import Connection
+from seqrun.service.connection import Connection
 from seqrun.errors import BusError
-from seqrun.executor import EXIT_FAULT
+from seqrun.results import EXIT_FAULT
 from seqrun.powercube.client import PowerCubeClient
-from seqrun.runner import run_sequence
-from seqrun.schema import load_sequence
+from seqrun.service.runner import run_sequence
+from seqrun.sequence.loader import load_sequence
 from seqrun.sim.bus import SimBus
 from wrapbus import WrapBus
 from zerostate import serve_arm

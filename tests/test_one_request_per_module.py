@@ -18,7 +18,7 @@ import pytest
 from projecttree import ROOT
 from runfolder import RunFolder
 from seqrun.clock import VirtualClock
-from seqrun.connection import sim_options_from_env
+from seqrun.service.connection import sim_options_from_env
 from seqrun.errors import UserInputError
 from seqrun.powercube.codec import GetParam, SetParam, encode
 from seqrun.powercube.protocol import ParamId

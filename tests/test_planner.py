@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 from projecttree import shipped_arm
 from seqrun.errors import PlanningError
-from seqrun.planner import Limits, plan_move, plan_stop
+from seqrun.arm.planner import Limits, plan_move, plan_stop
 from tiers import examples
 
 ARM = shipped_arm()

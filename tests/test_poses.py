@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 from projecttree import ROOT, shipped_arm
 from seqrun.errors import SequenceInvalid, UserInputError
-from seqrun.poses import (
+from seqrun.arm.poses import (
     NOTE_PREFIX,
     SCHEMA_COMMENT,
     PoseFile,

@@ -3,7 +3,7 @@
 The runs are real ``seqrun run --virtual-time`` runs through the CLI (in process); the
 numbers the report shows are held against a recomputation from the raw events.jsonl
 written here with plain numpy (a least-squares fit per window, no code shared with
-seqrun/tracking.py).
+seqrun/arm/tracking.py).
 """
 
 from __future__ import annotations
@@ -163,9 +163,9 @@ def test_an_aborted_move_has_its_figures_up_to_the_stop(tmp_path):
     # Operator abort 2 s into the first move: controlled stop, exit 130. The move's step
     # result carries the figures of what was streamed (the stop included), the page draws.
     from seqrun.clock import VirtualClock
-    from seqrun.connection import open_connection
-    from seqrun.runner import run_sequence
-    from seqrun.schema import load_sequence
+    from seqrun.service.connection import open_connection
+    from seqrun.service.runner import run_sequence
+    from seqrun.sequence.loader import load_sequence
 
     def abort_at_two_seconds(executor):
         def listener(event):
@@ -357,7 +357,7 @@ def test_dry_run_report(tmp_path):
     assert f"report: {out}" in result.output
     text = out.read_text()
     html = Page(text)
-    assert "Dry run report" in text and "dry run, virtual time, 10 Hz" in text
+    assert "Dry run report" in text and "dry run, virtual time, 100 Hz" in text
     assert html.plots == TIME_PLOTS and html.external == []
     result = CliRunner().invoke(app, ["validate", str(OPSAFE), "--report",
                                       str(tmp_path / "no" / "dir.html")])

@@ -8,12 +8,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from seqrun.arm import load_arm
+from seqrun.arm.description import load_arm
 from seqrun.clock import RealClock
-from seqrun.connection import open_connection
-from seqrun.kinematics import Chain, fk
-from seqrun.runner import build_executor
-from seqrun.schema import load_sequence
+from seqrun.service.connection import open_connection
+from seqrun.arm.kinematics import Chain, fk
+from seqrun.service.runner import build_executor
+from seqrun.sequence.loader import load_sequence
 from seqrun.service import run_control
 from seqrun.service.run_control import RunControl
 from seqrun.stop_requests import REMOTE_HALT, StopRequests

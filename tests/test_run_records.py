@@ -15,7 +15,7 @@ import seqrun.cli  # noqa: F401  (registers the commands)
 from runfolder import RunFolder
 from seqrun import __version__
 from seqrun.cli.app import app
-from seqrun.records import freeze_inputs, git_state, list_runs
+from seqrun.service.records import freeze_inputs, git_state, list_runs
 
 
 def invoke(*args):

@@ -17,15 +17,15 @@ from typer.testing import CliRunner
 import seqrun.cli  # noqa: F401  (registers the commands on the app)
 from projecttree import ROOT
 from runfolder import RunFolder
-from seqrun import logfile
-from seqrun.arm import load_arm
+from seqrun.service import logfile
+from seqrun.arm.description import load_arm
 from seqrun.cli.app import app
 from seqrun.clock import VirtualClock
-from seqrun.connection import open_connection
-from seqrun.executor import RunResult, StepResult
-from seqrun.runlog import RunLog, read_report, read_trace
-from seqrun.runner import run_sequence
-from seqrun.schema import load_sequence
+from seqrun.service.connection import open_connection
+from seqrun.results import RunResult, StepResult
+from seqrun.service.runlog import RunLog, read_report, read_trace
+from seqrun.service.runner import run_sequence
+from seqrun.sequence.loader import load_sequence
 
 TOTEM = ROOT / "sequences" / "totem.yaml"
 

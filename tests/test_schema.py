@@ -10,22 +10,10 @@ import pytest
 
 from projecttree import ROOT, make_project
 from seqrun.errors import SequenceInvalid, UserInputError
-from seqrun.schema import (
-    PARAMS_MODELS,
-    STEP_KINDS,
-    CheckpointParams,
-    ConfirmParams,
-    HaltParams,
-    MoveParams,
-    ResetParams,
-    Sequence,
-    SetLimitsParams,
-    WaitParams,
-    describe,
-    find_project_root,
-    load_sequence,
-    sequence_json_schema,
-)
+from seqrun.schema import (PARAMS_MODELS, STEP_KINDS, CheckpointParams, ConfirmParams, HaltParams,
+                           MoveParams, ResetParams, Sequence, SetLimitsParams, WaitParams,
+                           describe, sequence_json_schema)
+from seqrun.sequence.loader import find_project_root, load_sequence
 from seqrun.yamlsource import display_path
 
 SHIPPED = [ROOT / "sequences" / f"{name}.yaml"
@@ -369,7 +357,7 @@ def test_display_names_are_relative_to_the_cwd():
 
 
 def test_committed_reference_docs_match_the_models():
-    from seqrun.schema import reference_markdown
+    from seqrun.sequence.reference import reference_markdown
 
     committed = (ROOT / "docs" / "sequence-format.md").read_text(encoding="utf-8")
     assert committed == reference_markdown(), (

@@ -11,9 +11,9 @@ from pathlib import Path
 
 import pytest
 
-from seqrun.arm import load_arm
+from seqrun.arm.description import load_arm
 from seqrun.clock import RealClock, VirtualClock
-from seqrun.connection import open_connection
+from seqrun.service.connection import open_connection
 from seqrun.errors import Refused
 from seqrun.powercube.protocol import BROADCAST_ID
 from seqrun.service import ArmSession
@@ -452,7 +452,7 @@ def test_step_mode_waits_for_step_and_abort_withdraws_the_question(session):
 
 # ---------------------------------------------------------------------- poses
 def test_save_pose_writes_the_measured_joints(session, tmp_path):
-    from seqrun.poses import load_pose
+    from seqrun.arm.poses import load_pose
 
     assert session.move_to_joints({"j1": 12.5}).wait(60).ok
     session.poll_status()
@@ -469,7 +469,7 @@ def test_save_pose_writes_the_measured_joints(session, tmp_path):
 def test_a_run_on_the_callers_thread_is_the_sessions_activity(session, tmp_path):
     """``seqrun run`` runs through ``run_loaded``: while it runs, status says so and a
     second activity is refused; a STOP from another thread (the control socket) halts it."""
-    from seqrun.schema import load_sequence
+    from seqrun.sequence.loader import load_sequence
 
     loaded = load_sequence(ROOT / "sequences" / "totem.yaml")
     seen = {}
@@ -496,7 +496,7 @@ def test_idle_hooks_run_on_the_loop_thread_of_every_activity_until_removed(sessi
     """A face draws between cycles through the session (the live view of ``seqrun run``):
     its hook gets the slack on the thread that runs the loop (the caller's for
     ``run_loaded``, the worker's for a move), and nothing after it is removed."""
-    from seqrun.schema import load_sequence
+    from seqrun.sequence.loader import load_sequence
 
     calls: list[tuple[str, float]] = []
 

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from projecttree import shipped_arm
-from seqrun.planner import Limits, plan_move
+from seqrun.arm.planner import Limits, plan_move
 from seqrun.powercube.codec import SetMotion, SetParam
 from seqrun.powercube.protocol import MotionMode, ParamId
-from seqrun.setpoints import RampSetpoints, StepSetpoints, setpoint_law
+from seqrun.drivers.powercube.setpoints import RampSetpoints, StepSetpoints, setpoint_law
 
 ARM = shipped_arm()
 RUN = Limits.from_arm(ARM)

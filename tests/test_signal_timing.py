@@ -25,16 +25,16 @@ from rich.console import Console
 
 from projecttree import ROOT
 from runfolder import RunFolder
-from seqrun import logfile
-from seqrun.arm import load_arm
+from seqrun.service import logfile
+from seqrun.arm.description import load_arm
 from seqrun.cli.display import LiveDisplay, PlainDisplay
 from seqrun.cli.interrupts import RunSignals
 from seqrun.clock import VirtualClock
-from seqrun.connection import open_connection
-from seqrun.executor import EXIT_FAULT, EXIT_OK, EXIT_OPERATOR_ABORT
-from seqrun.runlog import read_trace
-from seqrun.runner import run_sequence
-from seqrun.schema import load_sequence
+from seqrun.service.connection import open_connection
+from seqrun.results import EXIT_FAULT, EXIT_OK, EXIT_OPERATOR_ABORT
+from seqrun.service.runlog import read_trace
+from seqrun.service.runner import run_sequence
+from seqrun.sequence.loader import load_sequence
 from seqrun.stop_requests import StopRequests
 
 SIGNALS = {"SIGINT": signal.SIGINT, "SIGTERM": signal.SIGTERM, "SIGHUP": signal.SIGHUP,
@@ -295,7 +295,7 @@ def test_end_of_input_at_a_question_is_an_operator_abort(tmp_path):
 def test_an_exception_leaving_a_step_still_finishes_the_run_folder(tmp_path, monkeypatch):
     """A BaseException out of a step handler (not a fault the executor knows): the arm is
     halted, the exception goes on, and the run folder is finished (failed, exit 3)."""
-    from seqrun.steps import HANDLERS
+    from seqrun.steps.registry import HANDLERS
 
     def broken(step, ex):
         raise SystemExit("a handler gave up")

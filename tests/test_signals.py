@@ -531,13 +531,13 @@ def test_ctrl_c_while_the_commands_load_is_one_line_and_exit_130(tmp_path):
 
 SLOW_VALIDATION = """\
 import sys, time
-import seqrun.cli.run as run_module
-real = run_module.static_validation
+import seqrun.service.checking as checking
+real = checking.check_for_run
 def slow(*args, **kwargs):
     print("validating", flush=True)
     time.sleep(5)
     return real(*args, **kwargs)
-run_module.static_validation = slow
+checking.check_for_run = slow
 from seqrun.entry import main
 main(sys.argv[1:])
 """

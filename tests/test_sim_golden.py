@@ -25,13 +25,13 @@ import os
 import pytest
 
 from projecttree import ROOT
-from seqrun.arm import load_arm
+from seqrun.arm.description import load_arm
 from seqrun.clock import VirtualClock
 from seqrun.executor import Executor
 from seqrun.powercube.client import PowerCubeClient
 from seqrun.powercube.codec import GetParam
 from seqrun.powercube.protocol import ParamId
-from seqrun.schema import load_sequence
+from seqrun.sequence.loader import load_sequence
 from seqrun.sim.bus import SimBus
 
 GOLDEN = ROOT / "tests" / "data" / "golden"

@@ -6,7 +6,7 @@ import threading
 
 import pytest
 
-from seqrun.can_timing import frame_bit_length
+from seqrun.powercube.can_timing import frame_bit_length
 from seqrun.clock import RealClock, VirtualClock
 from seqrun.sim.arm import SimArm
 from seqrun.sim.network import (

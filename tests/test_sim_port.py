@@ -8,18 +8,18 @@ from pathlib import Path
 import can
 import pytest
 
-import seqrun.dryrun as dryrun_module
-from seqrun.arm import load_arm
+import seqrun.service.dryrun as dryrun_module
+from seqrun.arm.description import load_arm
 from seqrun.clock import VirtualClock
-from seqrun.connection import open_connection
-from seqrun.dryrun import dry_run
+from seqrun.service.connection import open_connection
+from seqrun.service.dryrun import dry_run
 from seqrun.powercube.client import PowerCubeClient
 from seqrun.powercube.codec import GetParam, encode
 from seqrun.powercube.protocol import ParamId
-from seqrun.schema import load_sequence
+from seqrun.sequence.loader import load_sequence
 from seqrun.sim.bus import SimBus
 from seqrun.sim.port import SimMessage, SimPort, SimSetupError, get_network
-from seqrun.validation import pose_joints_deg
+from seqrun.arm.poses import pose_joints_deg
 
 ROOT = Path(__file__).resolve().parents[1]
 _names = itertools.count()

@@ -15,7 +15,7 @@ import can
 import pytest
 
 from seqrun.clock import VirtualClock
-from seqrun.connection import open_connection
+from seqrun.service.connection import open_connection
 from seqrun.errors import UserInputError
 from seqrun.powercube.codec import (
     BroadcastRequest,

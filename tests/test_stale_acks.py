@@ -22,12 +22,12 @@ import pytest
 from projecttree import ROOT, shipped_arm
 from runfolder import RunFolder
 from seqrun.clock import VirtualClock
-from seqrun.connection import Connection, open_connection
+from seqrun.service.connection import Connection, open_connection
 from seqrun.powercube.client import DiscardReason, PowerCubeClient
 from seqrun.powercube.codec import GetParamAck, MotionExtAck, PosStateDio, encode
 from seqrun.powercube.protocol import MotionMode, ParamId, ShortState
-from seqrun.runner import run_sequence
-from seqrun.schema import load_sequence
+from seqrun.service.runner import run_sequence
+from seqrun.sequence.loader import load_sequence
 from seqrun.sim.bus import SimBus
 
 ARM = shipped_arm()

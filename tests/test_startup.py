@@ -71,10 +71,10 @@ def imported_modules(*args: str, cwd: Path = ROOT) -> set[str]:
 def test_the_campaign_file_models_are_built_only_for_a_campaign(tmp_path):
     """The models of seqrun.toml are imported where one is read, not by every command."""
     outside = imported_modules("validate", "--static", "sequences/opsafe.yaml")
-    assert "seqrun.project" in outside and "seqrun.campaign_config" not in outside
+    assert "seqrun.sequence.project" in outside and "seqrun.sequence.campaign_config" not in outside
     campaign = make_project(tmp_path)
     inside = imported_modules("validate", "--static", "sequences/startup.yaml", cwd=campaign)
-    assert "seqrun.campaign_config" in inside
+    assert "seqrun.sequence.campaign_config" in inside
 
 
 def _head_one(args: list[str], cwd: Path = ROOT) -> tuple[int, str, str]:
@@ -191,7 +191,7 @@ def test_a_command_starts_no_blas_thread_pool():
 
 
 def test_a_dry_run_does_not_load_the_arm_session():
-    """seqrun.runner needs seqrun.service.run_control; the package used to import the whole
+    """seqrun.service.runner needs seqrun.service.run_control; the package used to import the whole
     arm session (seqrun.service.session) with it."""
     proc = subprocess.run([sys.executable, "-c", MODULES_AT_EXIT, "validate",
                            "sequences/opsafe.yaml"],

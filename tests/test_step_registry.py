@@ -1,6 +1,7 @@
 """One registry per step kind: every kind has all its parts, the sequence file's union,
-the static checks and the executor's handlers all come from the registry, and a handler
-uses nothing of the executor beyond :class:`seqrun.steps.context.StepContext`."""
+the static checks and the executor's handlers all come from the registry, a handler uses
+nothing of the executor beyond :class:`seqrun.steps.context.StepContext` and a check
+nothing of the validator beyond :class:`seqrun.steps.check_context.CheckContext`."""
 
 from __future__ import annotations
 
@@ -16,8 +17,9 @@ import pytest
 
 import seqrun.steps
 from seqrun import schema
-from seqrun.steps import HANDLERS
+from seqrun.steps.check_context import CheckContext
 from seqrun.steps.context import StepContext
+from seqrun.steps.registry import HANDLERS
 from seqrun.steps.kind import StepKind
 from seqrun.steps.params import StepParams
 from seqrun.steps.registry import KINDS, step_kind
@@ -52,6 +54,7 @@ def protocol_members(protocol: type) -> set[str]:
 
 
 CONTEXT_MEMBERS = protocol_members(StepContext)
+CHECK_MEMBERS = protocol_members(CheckContext)
 
 
 # --------------------------------------------------------------------------- completeness
@@ -89,7 +92,7 @@ def test_schema_union_and_registry_agree():
         assert schema.PARAMS_MODELS[kind.name] is kind.params
         assert schema.STEP_MODELS[kind.name].kind == kind.name
     # the union the files are validated with: one tagged member per kind (+ bare, include)
-    union = schema.STEP_ADAPTER.core_schema
+    union = schema.step_adapter().core_schema
     while union.get("type") != "tagged-union":
         union = union["schema"]
     assert set(union["choices"]) == {f"step:{n}" for n in names} | {"step:bare", "step:include"}
@@ -106,7 +109,7 @@ def test_handlers_and_checks_come_from_the_registry():
 
 def test_each_kind_parses_checks_and_describes_its_own_steps(tmp_path):
     """A step of every kind, written in a file, reaches its kind's parameters and title."""
-    from seqrun.loader import load_sequence
+    from seqrun.sequence.loader import load_sequence
 
     (tmp_path / "poses").mkdir()
     for pose in (ROOT / "poses").glob("*.yaml"):
@@ -124,14 +127,14 @@ def test_each_kind_parses_checks_and_describes_its_own_steps(tmp_path):
 
 
 # --------------------------------------------------------------------------- the context
-def _context_uses(tree: ast.Module) -> dict[str, set[str]]:
-    """Per function: the attributes read or set on its parameter typed StepContext."""
+def _context_uses(tree: ast.Module, protocol: str = "StepContext") -> dict[str, set[str]]:
+    """Per function: the attributes read or set on its parameter typed ``protocol``."""
     uses: dict[str, set[str]] = {}
     for node in ast.walk(tree):
         if not isinstance(node, ast.FunctionDef):
             continue
         typed = {a.arg for a in node.args.args + node.args.kwonlyargs
-                 if isinstance(a.annotation, ast.Name) and a.annotation.id == "StepContext"}
+                 if isinstance(a.annotation, ast.Name) and a.annotation.id == protocol}
         if not typed:
             continue
         found = uses.setdefault(node.name, set())
@@ -167,10 +170,10 @@ def test_the_checker_catches_a_handler_reaching_past_the_context():
 
 def test_the_executor_provides_the_step_context():
     from seqrun.clock import VirtualClock
-    from seqrun.connection import open_connection
+    from seqrun.service.connection import open_connection
     from seqrun.executor import Executor
     from seqrun.powercube.client import PowerCubeClient
-    from seqrun.arm import load_arm
+    from seqrun.arm.description import load_arm
 
     arm = load_arm(ROOT / "arms" / "lwa3.yaml")
     clock = VirtualClock()
@@ -204,9 +207,9 @@ class _OnlyTheContext:
 def test_runs_of_every_kind_use_only_the_step_context(tmp_path, monkeypatch):
     """The real executor on the simulator: each handler gets the executor behind a guard
     that lets through only StepContext's members."""
-    from seqrun.arm import load_arm
-    from seqrun.dryrun import dry_run
-    from seqrun.loader import load_sequence
+    from seqrun.arm.description import load_arm
+    from seqrun.service.dryrun import dry_run
+    from seqrun.sequence.loader import load_sequence
 
     for kind in KINDS:
         monkeypatch.setitem(HANDLERS, kind.name,
@@ -245,22 +248,137 @@ def test_runs_of_every_kind_use_only_the_step_context(tmp_path, monkeypatch):
     assert [s.status for s in run.result.steps] == ["passed"] * 17
 
 
+# --------------------------------------------------------------------------- the checks' context
+def _check_uses() -> dict[str, set[str]]:
+    """Per step module's function: what it uses of its parameter typed CheckContext."""
+    return {f"{path.name}:{function}": used for path in sorted(STEPS_DIR.glob("*.py"))
+            for function, used in _context_uses(ast.parse(path.read_text()),
+                                                "CheckContext").items()}
+
+
+def test_checks_use_only_the_check_context():
+    uses = _check_uses()
+    beyond = {where: sorted(used - CHECK_MEMBERS) for where, used in uses.items()
+              if used - CHECK_MEMBERS}
+    assert beyond == {}
+    checks = {where for where in uses if where.endswith(":check")}
+    assert len(checks) == len(KINDS)  # every kind's check(checker, ...) is typed: looked at
+
+
+def test_the_check_context_lists_exactly_what_the_checks_use():
+    """No member for nobody: the protocol says what the kinds need of the validator."""
+    used = set().union(*_check_uses().values())
+    assert sorted(CHECK_MEMBERS - used) == []
+
+
+def test_the_checker_catches_a_check_reaching_past_its_context():
+    source = textwrap.dedent("""
+        def check(checker: CheckContext, step, params):
+            checker.loaded.steps
+            checker.errors.append(checker._chain)
+    """)
+    assert _context_uses(ast.parse(source), "CheckContext") == {
+        "check": {"loaded", "errors", "_chain"}}
+
+
+def _checker(tmp_path):
+    from seqrun.arm.description import load_arm
+    from seqrun.sequence.loader import load_sequence
+    from seqrun.sequence.validation import Checker
+
+    path = tmp_path / "one.yaml"
+    path.write_text("name: one\ndescription: a step\nsteps:\n  - reset\n")
+    arm = load_arm(ROOT / "arms" / "lwa3.yaml")
+    return Checker(load_sequence(path), arm, {j.name: 0.0 for j in arm.joints}, started=True)
+
+
+def test_the_checker_provides_the_check_context(tmp_path):
+    checker = _checker(tmp_path)
+    assert sorted(m for m in CHECK_MEMBERS if not hasattr(checker, m)) == []
+
+
+class _OnlyTheCheckContext:
+    """The validator as a check may see it: anything beyond CheckContext raises."""
+
+    def __init__(self, checker) -> None:
+        object.__setattr__(self, "_checker", checker)
+
+    def __getattr__(self, name: str):
+        if name not in CHECK_MEMBERS:
+            raise AssertionError(f"a check used checker.{name}, not in CheckContext")
+        return getattr(self._checker, name)
+
+    def __setattr__(self, name: str, value) -> None:
+        if name not in CHECK_MEMBERS:
+            raise AssertionError(f"a check set checker.{name}, not in CheckContext")
+        setattr(self._checker, name, value)
+
+
+def test_checks_of_every_kind_use_only_the_check_context(tmp_path, monkeypatch):
+    """The real validation of a sequence with every kind (and its findings): each check
+    gets the Checker behind a guard that lets through only CheckContext's members."""
+    import dataclasses
+
+    from seqrun.arm.description import load_arm
+    from seqrun.sequence import validation
+    from seqrun.sequence.loader import load_sequence
+
+    guarded = {kind.name: dataclasses.replace(
+        kind, check=lambda checker, step, params, check=kind.check:
+        check(_OnlyTheCheckContext(checker), step, params)) for kind in KINDS}
+    monkeypatch.setattr(validation, "step_kind", guarded.__getitem__)
+    (tmp_path / "poses").mkdir()
+    for pose in (ROOT / "poses").glob("*.yaml"):
+        (tmp_path / "poses" / pose.name).write_text(pose.read_text())
+    (tmp_path / "sequences").mkdir()
+    path = tmp_path / "sequences" / "every.yaml"
+    path.write_text(textwrap.dedent("""\
+        name: every kind
+        description: each step kind once, some of them wrong
+        steps:
+          - reset
+          - home: [j1, j2]
+          - home
+          - set_limits: {max_velocity_deg_s: {j1: 20, j9: 1}}
+          - move: totem
+          - move: {joints: {j1: 500}, velocity_deg_s: {j1: 999}, timeout_s: 0.01}
+          - move: opsafe
+          - wait: {until: in_position}
+          - move: {position_mm: [0, 0, -20], relative: true, frame: tool}
+          - move_linear: {position_mm: [0, 0, 20], relative: true, frame: tool, speed_mm_s: 20}
+          - checkpoint: {moved_mm: [0, 0, 20], frame: tool}
+          - move: totem
+          - checkpoint: opsafe
+          - confirm: Is the desk clear?
+          - power_off: totem
+          - move: {joints: {j1: 1}}
+          - halt: [j1, j3]
+          - wait: 0.1
+    """))
+    arm = load_arm(ROOT / "arms" / "lwa3.yaml")
+    park = {"j1": 0, "j2": -90, "j3": 0, "j4": -120.32, "j5": 0, "j6": 115.74, "j7": 0}
+    result = validation.validate_sequence(load_sequence(path), arm, park)
+    # the wrong steps were checked, through the guard: set_limits (j9), move (target and
+    # velocity), checkpoint, move after power_off, halt (locked j3), wait after halt
+    assert sorted({error.line for error in result.errors}) == [7, 9, 16, 19, 20, 21]
+
+
 # --------------------------------------------------------------------------- import weight
 def test_the_format_and_the_loader_import_no_maths_and_no_bus():
     """`seqrun validate --static` starts fast: the step kinds' modules import their
     heavy helpers where they run, never when the schema assembles them."""
-    code = ("import sys, seqrun.schema, seqrun.loader, seqrun.steps, seqrun.checks; "
+    code = ("import sys, seqrun.schema, seqrun.sequence.loader, seqrun.steps, seqrun.sequence.checks; "
             "print(' '.join(sorted(sys.modules)))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True, cwd=ROOT).stdout.split()
-    assert not {"numpy", "ruckig", "can", "seqrun.executor", "seqrun.validation"} & set(out)
+    assert not {"numpy", "ruckig", "can", "seqrun.executor", "seqrun.sequence.validation"} & set(out)
 
 
 def test_the_one_step_validator_is_built_only_for_a_file_with_an_invalid_step(project):
     """A valid file is validated by the Sequence model alone; the single-step validator
     (a second copy of the steps' union) is built when a file's steps must be checked one
     by one, and gives the same steps as the whole file's validation would."""
-    from seqrun.loader import load_sequence_partial
+    from seqrun.sequence.loader import load_sequence_partial
 
     schema.step_adapter.cache_clear()
     loaded, errors = load_sequence_partial(project / "sequences" / "startup.yaml")
@@ -272,4 +390,3 @@ def test_the_one_step_validator_is_built_only_for_a_file_with_an_invalid_step(pr
     partial, errors = load_sequence_partial(broken)
     assert errors and schema.step_adapter.cache_info().currsize == 1
     assert [s.kind for s in partial.steps] == [s.kind for s in loaded.steps]
-    assert schema.STEP_ADAPTER is schema.step_adapter()

@@ -11,13 +11,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from projecttree import ROOT
-from seqrun.arm import load_arm
+from seqrun.arm.description import load_arm
 from seqrun.clock import VirtualClock
-from seqrun.connection import open_connection
-from seqrun.executor import EXIT_OK, Executor
+from seqrun.service.connection import open_connection
+from seqrun.executor import Executor
+from seqrun.results import EXIT_OK
 from seqrun.powercube.client import PowerCubeClient
-from seqrun.schema import load_sequence
-from seqrun.tracking import MoveTracking, peak_abs, velocity_window, windowed_velocity
+from seqrun.sequence.loader import load_sequence
+from seqrun.arm.tracking import MoveTracking, peak_abs, velocity_window, windowed_velocity
 from tiers import examples
 
 

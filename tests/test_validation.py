@@ -14,17 +14,15 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from projecttree import ROOT, shipped_arm, write_sequence
-from seqrun.cli.validate import static_check
+from seqrun.sequence.checks import static_check
 from seqrun.errors import SequenceInvalid, SourceError, UserInputError
-from seqrun.kinematics import Chain, matrix_from_rpy, point_positions, pose_from_user_deg
-from seqrun.schema import CheckpointParams, MoveParams, load_sequence
-from seqrun.validation import (
-    commanded_joints,
-    park_deg,
-    resolve_checkpoint,
-    resolve_move_target,
-    validate_sequence,
-)
+from seqrun.arm.kinematics import Chain, matrix_from_rpy, point_positions, pose_from_user_deg
+from seqrun.schema import CheckpointParams, MoveParams
+from seqrun.sequence.loader import load_sequence
+from seqrun.sequence.validation import validate_sequence
+from seqrun.arm.poses import park_deg
+from seqrun.steps.checkpoint import resolve_checkpoint
+from seqrun.steps.move import resolve_move_target
 from seqrun.yamlsource import display_path
 from tiers import examples
 
@@ -344,13 +342,6 @@ def test_resolve_move_target():
         resolve_move_target(MoveParams(joints={"j9": 1}), target, ARM, POSES)
     with pytest.raises(UserInputError, match="unknown pose"):
         resolve_move_target(MoveParams(pose="nowhere"), target, ARM, POSES)
-
-
-def test_commanded_joints():
-    assert commanded_joints(MoveParams(pose="totem"), ARM, POSES) == [
-        "j1", "j2", "j4", "j5", "j6", "j7"]
-    assert commanded_joints(MoveParams(joints={"j4": 1, "j1": 2, "j3": 0}), ARM, POSES) == [
-        "j1", "j4"]
 
 
 def test_resolve_checkpoint():

@@ -11,15 +11,15 @@ import numpy as np
 import pytest
 
 from projecttree import shipped_arm
-from seqrun.cli.validate import static_check
+from seqrun.sequence.checks import static_check
 from seqrun.clock import VirtualClock
-from seqrun.connection import open_connection
-from seqrun.dryrun import dry_run
+from seqrun.service.connection import open_connection
+from seqrun.service.dryrun import dry_run
 from seqrun.errors import RunAborted
-from seqrun.planner import Limits
-from seqrun.runner import build_executor
-from seqrun.schema import load_sequence
-from seqrun.validation import format_number
+from seqrun.arm.planner import Limits
+from seqrun.service.runner import build_executor
+from seqrun.sequence.loader import load_sequence
+from seqrun.formatting import format_number
 
 ARM = shipped_arm()
 HEAD = "name: T\ndescription: test\nsteps:\n  - include: startup.yaml\n"

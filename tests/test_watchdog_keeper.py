@@ -15,14 +15,14 @@ from pathlib import Path
 import pytest
 
 from projecttree import make_project, shipped_arm
-from seqrun.arm import load_arm
-from seqrun.connection import open_connection
-from seqrun.dryrun import prepare_started
-from seqrun.executor import EXIT_FAULT, EXIT_OK
+from seqrun.arm.description import load_arm
+from seqrun.service.connection import open_connection
+from seqrun.service.dryrun import prepare_started
+from seqrun.results import EXIT_FAULT, EXIT_OK
 from seqrun.powercube.protocol import StateFlag
-from seqrun.runlog import read_trace
-from seqrun.runner import run_sequence
-from seqrun.schema import load_sequence
+from seqrun.service.runlog import read_trace
+from seqrun.service.runner import run_sequence
+from seqrun.sequence.loader import load_sequence
 
 SEQUENCE = """\
 name: Keeper

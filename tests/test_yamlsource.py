@@ -275,14 +275,14 @@ def test_load_model_returns_the_model(tmp_path):
 
 
 def test_arm_file_goes_through_yamlsource():
-    from seqrun.arm import load_arm
+    from seqrun.arm.description import load_arm
 
     arm = load_arm(ARM_FILE)
     assert arm.joint("j3").locked == 0.0
 
 
 def test_arm_file_errors_are_located(tmp_path):
-    from seqrun.arm import load_arm
+    from seqrun.arm.description import load_arm
 
     text = ARM_FILE.read_text(encoding="utf-8")
     text = text.replace("cycle_hz: 100", "cycle_hz: fast")

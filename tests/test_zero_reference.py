@@ -19,19 +19,20 @@ from typer.testing import CliRunner
 import seqrun.cli  # noqa: F401  (registers the commands)
 from projecttree import ROOT, shipped_arm
 from runfolder import RunFolder
-from seqrun.arm import load_arm
+from seqrun.arm.description import load_arm
 from seqrun.cli.app import app
 from seqrun.cli.zero import zero_at_run_start
 from seqrun.clock import VirtualClock
-from seqrun.connection import Connection, open_connection
+from seqrun.service.connection import Connection, open_connection
 from seqrun.errors import UserInputError
-from seqrun.executor import EXIT_OK
-from seqrun.poses import find_pose, load_pose
-from seqrun.runner import run_sequence
-from seqrun.schema import load_sequence
+from seqrun.results import EXIT_OK
+from seqrun.arm.poses import find_pose, load_pose
+from seqrun.service.runner import run_sequence
+from seqrun.sequence.loader import load_sequence
 from seqrun.sim.bus import SimBus
-from seqrun.validation import validate_sequence
-from seqrun.zero import ZeroStore, zero_for_run
+from seqrun.sequence.validation import validate_sequence
+from seqrun.service.zero import ZeroStore, zero_for_run
+from seqrun.drivers.powercube.units import to_module_rad, to_user_deg
 
 ARM = shipped_arm()
 PARK_OFFSETS = {"j1": 0, "j2": 90, "j3": 0, "j4": 120.32, "j5": 0, "j6": -115.74, "j7": 0}
@@ -71,7 +72,7 @@ def test_a_power_off_pose_is_where_every_module_reads_zero(pose):
     stored = load_pose(find_pose(pose, ROOT / "poses")).joints_deg
     assert ARM.power_off_joints_deg(pose) == pytest.approx(stored)
     zeroed = ARM.with_zero_reference(pose)
-    assert [j.to_module_rad(stored[j.name]) for j in zeroed.joints] == pytest.approx([0.0] * 7)
+    assert [to_module_rad(j, stored[j.name]) for j in zeroed.joints] == pytest.approx([0.0] * 7)
 
 
 def test_an_unknown_power_off_pose_names_the_known_ones():
@@ -130,7 +131,7 @@ def test_power_off_away_from_the_pose_aborts_and_records_nothing(tmp_path):
     """The step measures: an arm that is not there (validation assumed it would be) ends
     the run as a fault, nothing recorded."""
     from seqrun.errors import RunAborted
-    from seqrun.runner import build_executor
+    from seqrun.service.runner import build_executor
     from seqrun.steps import power_off
 
     loaded = load_sequence(ROOT / "sequences" / "shutdown.yaml")
@@ -328,11 +329,11 @@ def test_status_and_pose_save_read_positions_with_the_recorded_zero():
     finally:
         connection.close()
     assert text.startswith("zero: Totem, recorded ") and "not yet confirmed" in text
-    assert [j.to_user_deg(0.0) for j in arm.joints] == [0.0] * 7
+    assert [to_user_deg(j, 0.0) for j in arm.joints] == [0.0] * 7
 
 
 def test_a_campaign_keeps_its_own_record_and_says_how_to_set_it(tmp_path):
-    from seqrun.project import open_project
+    from seqrun.sequence.project import open_project
 
     assert CliRunner().invoke(app, ["init", str(tmp_path / "camp")]).exit_code == 0
     project = open_project(tmp_path / "camp")

@@ -21,13 +21,13 @@ SCHEMA_DIR = ROOT / "docs" / "schema"
 
 
 def _pose_schema() -> dict:
-    from seqrun.poses import PoseFile
+    from seqrun.arm.poses import PoseFile
 
     return PoseFile.model_json_schema()
 
 
 def _arm_schema() -> dict:
-    from seqrun.arm import ArmDescription
+    from seqrun.arm.description import ArmDescription
 
     return ArmDescription.model_json_schema()
 

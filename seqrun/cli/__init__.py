@@ -35,7 +35,7 @@ COMMAND_MODULES = (
 
 #: The first word of a command line -> the module that defines that command (or group).
 #: ``seqrun WORD ...`` loads only that module: typer builds the parameters of every
-#: registered command at each start, ~10 ms for all of them.
+#: registered command at each start.
 COMMAND_WORDS = {
     "fk": "seqrun.cli.fk",
     "ik": "seqrun.cli.ik",

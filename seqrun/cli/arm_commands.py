@@ -2,8 +2,8 @@
 
 With no interface configured these talk to a fresh simulator (they say so); point them at
 a shared simulator with ``-i socketcand`` (``seqrun sim serve``) or at the real bus.
-``halt`` and ``reset`` succeed only when every module confirms (its state read back, see
-:mod:`seqrun.armcontrol`); ``status --watch`` survives lost answers (shown as stale).
+``halt`` and ``reset`` succeed only when every module confirms (its state read back by the
+arm's driver); ``status --watch`` survives lost answers (shown as stale).
 """
 
 from __future__ import annotations
@@ -130,7 +130,7 @@ def status_command(
 def _bus_key(arm, interface, channel, bitrate, bus_kwargs, sim, response_timeout_ms):
     """The claim key of the bus these options name (None: the simulator); checks the
     options first, as connecting would."""
-    from seqrun.connection import parse_bus_kwargs, response_timeout_s, shared_bus
+    from seqrun.service.connection import parse_bus_kwargs, response_timeout_s, shared_bus
 
     response_timeout_s(arm, response_timeout_ms)
     return shared_bus(interface=interface, channel=channel, bitrate=bitrate,
@@ -190,13 +190,12 @@ def _broadcast(what: str, arm_file, interface, channel, bitrate, bus_kwargs, sim
 
     with user_errors():
         arm = load_arm_file(arm_file)
-        connection, client = connect(arm, interface, channel, bitrate, bus_kwargs, sim,
+        connection, driver = connect(arm, interface, channel, bitrate, bus_kwargs, sim,
                                      response_timeout_ms=response_timeout_ms)
-    modules = [j.module for j in arm.joints]
     try:
-        result = broadcast_and_confirm(client, what, modules)
+        result = broadcast_and_confirm(driver, what)
     finally:
-        client.close()
+        driver.close()
         connection.close()
     if not result.sent:
         fail(f"{what} not sent: {result.error}", EXIT_FAULT)
@@ -242,10 +241,10 @@ def _halt_shared_bus(arm, key: tuple[str, str], open_bus) -> None:
     from seqrun.service.control_socket import ask_owner
 
     with user_errors():
-        connection, client = open_bus()
+        connection, driver = open_bus()
     try:
         try:
-            client.halt_now()
+            driver.halt_now()
         except BusError as exc:
             fail(f"halt not sent: {exc}", EXIT_FAULT)
         reply = ask_owner(*key, "halt",
@@ -266,11 +265,11 @@ def _halt_shared_bus(arm, key: tuple[str, str], open_bus) -> None:
         except Refused as exc:
             fail(f"Halt broadcast sent, but not confirmed: {exc}", EXIT_FAULT)
         with claim:
-            result = broadcast_and_confirm(client, "halt", [j.module for j in arm.joints])
+            result = broadcast_and_confirm(driver, "halt")
     except BusError as exc:
         fail(f"halt broadcast sent, not confirmed: {exc}", EXIT_FAULT)
     finally:
-        client.close()
+        driver.close()
         connection.close()
     if not result.confirmed:
         fail(f"halt broadcast sent, but not confirmed by {result.describe_unconfirmed()} "

@@ -29,7 +29,7 @@ def owner_text(holder: dict) -> str:
 class StatusSource:
     """Where ``seqrun status`` gets a reading: the bus owner, else the bus itself.
 
-    :param open_bus: opens ``(connection, client)`` without claiming (the claim is taken
+    :param open_bus: opens ``(connection, driver)`` without claiming (the claim is taken
         per reading here).
     :param key: the bus's claim key (None: the simulator of this process).
     """
@@ -41,7 +41,7 @@ class StatusSource:
         self.open_bus = open_bus
         self.warn = warn
         self.connection: Any = None
-        self.client: Any = None
+        self.driver: Any = None
         self.zero_text: str | None = None
         self._arm_read = arm
         self._foreign: list = []
@@ -83,7 +83,7 @@ class StatusSource:
                 self._open()
             elif claim is not None:
                 self._drain()
-            status = read_status(self.client, self._arm_read, previous,
+            status = read_status(self.driver, self._arm_read, previous,
                                  tolerate_loss=tolerate_loss)
         finally:
             if claim is not None:
@@ -97,12 +97,11 @@ class StatusSource:
 
     def _open(self) -> None:
         from seqrun.cli.zero import zero_for_reading
-        from seqrun.service.foreign_frames import ForeignFrameWatch
 
-        self.connection, self.client = self.open_bus()
-        self.client.add_frame_listener(ForeignFrameWatch(
-            self._foreign.append, echoes_own=self.connection.echoes_own))
+        self.connection, self.driver = self.open_bus()
+        self.driver.watch_foreign(self._foreign.append)
         self._arm_read, text = zero_for_reading(self.connection, self.arm)
+        self.driver.use_arm(self._arm_read)  # positions in the zero reference in force
         if self.zero_text is None:
             self.zero_text = text
 
@@ -119,9 +118,9 @@ class StatusSource:
 
     def _close_bus(self) -> None:
         if self.connection is not None:
-            self.client.close()
+            self.driver.close()
             self.connection.close()
-            self.connection = self.client = None
+            self.connection = self.driver = None
 
     def close(self) -> None:
         self._close_bus()

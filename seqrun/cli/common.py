@@ -12,9 +12,11 @@ import typer
 # Exit codes have one definition (re-exported for the commands).
 from seqrun.defaults import EXIT_FAULT, EXIT_INVALID, EXIT_OK, EXIT_USAGE  # noqa: F401
 from seqrun.errors import Refused, SequenceInvalid, UserInputError
+# The arm file and the poses a command reads (the campaign's, else the shipped ones).
+from seqrun.service.campaigns import load_arm_file, pose_search_path  # noqa: F401
 
 if TYPE_CHECKING:
-    from seqrun.arm import ArmDescription
+    from seqrun.arm.description import ArmDescription
 
 ArmOption = Annotated[Path, typer.Option("--arm", metavar="FILE", help="Arm description file.")]
 #: An arm file only where one is given (None: the command finds the campaign's).
@@ -25,19 +27,6 @@ CampaignOption = Annotated[Optional[Path], typer.Option(
                                      "directory).")]
 PosesDirOption = Annotated[Path, typer.Option(
     "--poses-dir", metavar="DIR", help="Directory of pose files (<name>.yaml).")]
-
-
-
-def pose_search_path(poses_dir: Path):
-    """``--poses-dir`` as given, or for the default the poses of the project here (a
-    campaign's poses/, then the shipped ones)."""
-    from seqrun.poses import DEFAULT_POSES_DIR
-
-    if poses_dir != DEFAULT_POSES_DIR:
-        return poses_dir
-    from seqrun.project import project_for
-
-    return project_for(Path.cwd()).pose_path
 
 
 def fail(message: str, code: int = EXIT_USAGE) -> NoReturn:
@@ -61,23 +50,6 @@ def user_errors() -> Iterator[None]:
         raise typer.Exit(EXIT_INVALID) from None
 
 
-def load_arm_file(path: Path) -> ArmDescription:
-    from seqrun.arm import DEFAULT_ARM
-
-    if path == DEFAULT_ARM and not path.is_file():
-        # Not in a checkout: the campaign's arm here (seqrun.toml), else the shipped one.
-        from seqrun.project import project_for
-
-        path = project_for(Path.cwd()).arm_path(None)
-    if not path.is_file():
-        raise UserInputError(f"arm file {path} not found (give one with --arm FILE)")
-    from seqrun.arm import load_arm  # pydantic: only for commands that read an arm file
-
-    return load_arm(path)
-
-
-
-
 # Bus selection, shared by every command that talks to the arm (python-can's own flags).
 InterfaceOption = Annotated[Optional[str], typer.Option(
     "-i", "--interface", help="python-can interface (socketcan, ixxat, pcan, socketcand, ...). "
@@ -98,7 +70,7 @@ def connect(arm: ArmDescription, interface: Optional[str], channel: Optional[str
             bitrate: Optional[int], bus_kwargs: Optional[list[str]], sim: bool,
             faults: Optional[list[str]] = None, *,
             response_timeout_ms: Optional[float] = None, claim: bool = True):
-    """Open the bus and a PowerCubeClient on it: ``(connection, client)``. The bus is
+    """Open the bus and the arm's driver on it: ``(connection, driver)``. The bus is
     claimed for a moment (these commands are done in a second or two): a run's claim
     refuses them, naming it (exit 2)."""
     from seqrun.service.arm_access import open_arm

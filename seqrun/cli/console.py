@@ -56,25 +56,26 @@ def console_command(
     """Serve the operator console (STOP, telemetry, 3D view, commands, sequences)."""
     import types
 
-    from seqrun.cli import campaign_records
+    from seqrun.service import campaign_records
+    from seqrun.service.campaigns import campaign_bus
     from seqrun.cli.zero import zero_at_run_start
-    from seqrun.connection import open_connection, parse_bus_kwargs, response_timeout_s
+    from seqrun.service.connection import open_connection, parse_bus_kwargs, response_timeout_s
     from seqrun.errors import BusError
-    from seqrun.project import open_project, project_for
+    from seqrun.service.campaigns import campaign_here
 
     with user_errors():
         if not 0 <= port <= 65535:
             fail(f"--port must lie in 0-65535, got {port}")
         if rt_priority is not None and not _use_realtime(rt_priority):
             rt_priority = None  # (before any thread starts: they inherit the policy)
-        project = open_project(project_dir) if project_dir else project_for(Path.cwd())
+        project = campaign_here(project_dir)
         if arm_file == DEFAULT_ARM and not arm_file.is_file():
             arm_file = project.arm_path(None)
         arm = load_arm_file(arm_file)
         timeout = response_timeout_s(arm, response_timeout_ms)
         extra = parse_bus_kwargs(bus_kwargs or [])
         if not (interface or channel or bitrate or extra or sim):  # the campaign's bus
-            interface, channel, bitrate, extra = campaign_records.campaign_bus(
+            interface, channel, bitrate, extra = campaign_bus(
                 types.SimpleNamespace(project=project), extra)
         from seqrun.console.server import LOCALHOST, bind, is_loopback, url_of
 

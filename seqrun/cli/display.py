@@ -29,7 +29,7 @@ from rich.live import Live
 from rich.panel import Panel
 from rich.text import Text
 
-from seqrun import kinematics
+from seqrun.service.kinematics import end_effector_pose
 from seqrun.cli.output import fixed
 
 if TYPE_CHECKING:
@@ -98,7 +98,6 @@ class LiveDisplay:
         exit); :meth:`on_idle` is what the owner hands the loop to render in its slack."""
         self.console = console
         self.arm = arm
-        self.chain = kinematics.Chain.from_arm(self.arm)
         self.subscription = subscription
         #: The latest measurement event (joints, velocities, flags).
         self.measured = None
@@ -211,8 +210,8 @@ class LiveDisplay:
         return "|".join(flags) or "OK", "MOTION" in flags
 
     def __rich__(self) -> Panel:
-        # Fixed-width text lines, not a rich Table: a Table's layout costs ~30x more
-        # (several ms per render), and the render has to fit into the loop's slack.
+        # Fixed-width text lines, not a rich Table: a Table's layout costs many times more,
+        # and the render has to fit into the loop's slack.
         self._drain()
         m = self.measured
         width = max(len(self._joint_label(j)) for j in self.arm.joints) + 2
@@ -238,9 +237,7 @@ class LiveDisplay:
                                        f" {done:.1f} / {self.move_duration:.1f} s"))
         parts.extend(lines)
         if m is not None:
-            pose = kinematics.fk(self.chain, np.radians(m.joints_deg))
-            rpy = np.degrees(kinematics.rpy_from_matrix(pose[:3, :3]))
-            x, y, z = pose[:3, 3]
+            (x, y, z), rpy = end_effector_pose(self.arm, m.joints_deg)
             parts.append(Text(f"end-effector  x {fixed(x, 1, 8)}  y {fixed(y, 1, 8)}  "
                               f"z {fixed(z, 1, 8)} mm   roll {fixed(rpy[0], 2, 7)}  "
                               f"pitch {fixed(rpy[1], 2, 7)}  yaw {fixed(rpy[2], 2, 7)} °"))

@@ -25,7 +25,7 @@ from seqrun.errors import UserInputError
 if TYPE_CHECKING:
     import numpy as np
 
-    from seqrun.kinematics import Pose
+    from seqrun.arm.kinematics import Pose
 
 _JSON_DECIMALS = 6  # 1 nm, 1e-6 deg: far below what the arm can do, and readable
 
@@ -134,7 +134,7 @@ def forward_kinematics(
 ) -> None:
     """End-effector pose (position mm, roll/pitch/yaw deg, rotation matrix) by forward
     kinematics, R = Rz(yaw) Ry(pitch) Rx(roll)."""
-    from seqrun.kinematics import LOCKED_TOLERANCE_DEG, pose_from_user_deg
+    from seqrun.service.kinematics import forward_kinematics as pose_of_joints
 
     with user_errors():
         if deg is None and pose_name is None:
@@ -148,27 +148,10 @@ def forward_kinematics(
         else:
             assert pose_name is not None  # (one of the two, checked above)
             joints = load_named_pose(pose_name, poses_dir).joints_deg
-        given = joints if isinstance(joints, dict) else dict(zip(arm.joint_names, joints))
-        off = [j for j in arm.joints if j.locked is not None and j.name in given
-               and abs(given[j.name] - j.locked) > LOCKED_TOLERANCE_DEG]
-        for joint in off:
-            # A maths command: compute what was asked, and say the arm would not do it.
-            typer.echo(f"note: {joint.name} is locked at {joint.locked:g} deg on the arm; "
-                       f"computed with {given[joint.name]:g} deg as given", err=True)
-        maths_arm = arm if not off else arm.model_copy(update={"joints": [
-            j.model_copy(update={"locked": None}) if j in off else j for j in arm.joints]})
-        try:
-            pose = pose_from_user_deg(maths_arm, joints)
-        except ValueError as exc:  # locked joint moved, unknown joint in a pose file, ...
-            raise UserInputError(str(exc)) from None
-    values = joints if isinstance(joints, dict) else dict(zip(arm.joint_names, joints))
-    for joint in arm.joints:
-        lo, hi = joint.limits_deg
-        value = values.get(joint.name)
-        if value is not None and not lo <= value <= hi:
-            typer.echo(f"note: {joint.name} {value:g} deg is outside its limits [{lo:g}, {hi:g}]",
-                       err=True)
-    typer.echo(pose_json(pose) if as_json else pose_text(pose))
+        fk = pose_of_joints(arm, joints)
+    for note in fk.notes:  # a maths command: what was asked, and what the arm would not do
+        typer.echo(note, err=True)
+    typer.echo(pose_json(fk.pose) if as_json else pose_text(fk.pose))
 
 
 __all__ = ["FkCommand", "ValuesAfterOption", "parse_angles", "pose_json", "pose_text"]

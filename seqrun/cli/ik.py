@@ -72,9 +72,7 @@ def inverse_kinematics(
     the joint limits, with the locked joints at their value. Exit 1 if unreachable."""
     import numpy as np
 
-    from seqrun.cartesian import unknown_tool
-    from seqrun.ik import IkSolver, Unreachable, target_frame
-    from seqrun.kinematics import user_joint_values
+    from seqrun.service.kinematics import inverse_kinematics
 
     with user_errors():
         position = _three(position_mm, "--position-mm")
@@ -88,18 +86,10 @@ def inverse_kinematics(
             seed_values = load_named_pose(near, poses_dir).joints_deg
         else:
             seed_values = {j.name: 0.0 for j in arm.joints if j.locked is None}
-        try:
-            seed = user_joint_values(arm, seed_values)
-        except ValueError as exc:
-            raise UserInputError(f"seed: {exc}") from None
-        try:
-            solver = IkSolver(arm, tool)
-        except KeyError:
-            raise UserInputError(unknown_tool(arm, tool)) from None
-    try:
-        solution = solver.solve(target_frame(position, rpy), seed)
-    except Unreachable as exc:
-        fail(str(exc), EXIT_INVALID)
+        ik = inverse_kinematics(arm, position, rpy, tool=tool, seed=seed_values)
+    if ik.solution is None:
+        fail(str(ik.unreachable), EXIT_INVALID)
+    solution, seed = ik.solution, ik.seed_deg
     joints = solution.joints_deg
     if as_json:
         typer.echo(json.dumps({
@@ -107,7 +97,7 @@ def inverse_kinematics(
             "position_error_mm": float(f"{solution.position_error_mm:.3g}"),
             "angle_error_deg": float(f"{math.degrees(solution.angle_error_rad):.3g}"),
             "iterations": solution.iterations, "seeds_tried": solution.seeds_tried,
-            "tool": found.name if (found := arm.tool(tool)) is not None else None}))
+            "tool": ik.tool}))
         return
     typer.echo(f"joints_deg    {format_numbers(np.round(joints, 6) + 0.0)}  ({' '.join(arm.joint_names)})")
     moved = np.abs(joints - np.asarray(seed))

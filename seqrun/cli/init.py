@@ -61,7 +61,7 @@ def init_command(
                                                    "to the campaign.")] = DEFAULT_ARM_NAME,
 ) -> None:
     """Create a campaign folder: seqrun.toml, sequences/ with a starter, poses/."""
-    from seqrun.project import CONFIG_NAME  # pydantic: not for `seqrun --help`
+    from seqrun.service.campaigns import CONFIG_NAME
 
     if folder.exists() and not folder.is_dir():
         fail(f"{folder} exists and is not a folder")

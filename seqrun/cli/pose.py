@@ -10,19 +10,19 @@ import typer
 from seqrun.cli.app import pose_app
 from seqrun.cli.common import (BitrateOption, BusKwargsOption, ChannelOption, InterfaceOption,
                                SimOption, connect, fail,
-                               EXIT_INVALID, ArmOption, PosesDirOption, load_arm_file, user_errors)
+                               EXIT_INVALID, ArmOption, PosesDirOption, load_arm_file,
+                               pose_search_path, user_errors)
 from seqrun.defaults import DEFAULT_ARM, DEFAULT_POSES_DIR
-from seqrun.errors import SequenceInvalid, UserInputError
+from seqrun.errors import UserInputError
 
 if TYPE_CHECKING:
-    from seqrun.poses import PoseFile
+    from seqrun.arm.poses import PoseFile
 
 
 def load_named_pose(name: str, poses_dir: Path) -> PoseFile:
-    from seqrun.cli.common import pose_search_path
-    from seqrun.poses import find_pose, load_pose
+    from seqrun.service.poses import find_named_pose
 
-    return load_pose(find_pose(name, pose_search_path(poses_dir)))
+    return find_named_pose(name, poses_dir)
 
 
 def format_numbers(values, decimals: int = 3) -> str:
@@ -34,20 +34,16 @@ def format_numbers(values, decimals: int = 3) -> str:
 @pose_app.command("list")
 def list_poses(poses_dir: PosesDirOption = DEFAULT_POSES_DIR) -> None:
     """List the pose files: name, source and description."""
-    from seqrun.poses import available_poses, load_pose
+    from seqrun.service.poses import list_poses
 
     with user_errors():
-        from seqrun.cli.common import pose_search_path
-
-        poses = available_poses(pose_search_path(poses_dir))
+        poses = list_poses(pose_search_path(poses_dir))
         if not poses:
             raise UserInputError(f"no pose files in {poses_dir}")
-        width = max(len(name) for name in poses)
-        for name, path in poses.items():
-            try:
-                pose = load_pose(path)
-            except SequenceInvalid as exc:  # one broken file must not hide the others
-                typer.echo(f"{name:<{width}}  (invalid: {exc.errors[0]})")
+        width = max(len(name) for name, *_ in poses)
+        for name, _path, pose, error in poses:
+            if pose is None:  # one broken file must not hide the others
+                typer.echo(f"{name:<{width}}  (invalid: {error})")
                 continue
             summary = pose.description.split(". ")[0]  # the first sentence; `show` has it all
             typer.echo(f"{name:<{width}}  {pose.source or '-':<9}  {summary}")
@@ -60,7 +56,7 @@ def show_pose(
     arm_file: ArmOption = DEFAULT_ARM,
 ) -> None:
     """Show a pose and check it against the arm (exit 1 if it has problems)."""
-    from seqrun.poses import NOTE_PREFIX, check_pose
+    from seqrun.service.poses import pose_findings
 
     with user_errors():
         pose = load_named_pose(name, poses_dir)
@@ -75,12 +71,10 @@ def show_pose(
     typer.echo(f"joints_deg    {joints}")
     typer.echo(f"position_mm   {format_numbers(pose.end_effector.position_mm)}")
     typer.echo(f"rpy_deg       {format_numbers(pose.end_effector.rpy_deg)}")
-    findings = check_pose(pose, arm)
-    problems = [f for f in findings if not f.startswith(NOTE_PREFIX)]
-    for finding in findings:
-        typer.echo(finding if finding.startswith(NOTE_PREFIX) else f"problem: {finding}",
-                   err=True)
-    if problems:
+    findings = pose_findings(pose, arm)
+    for problem, finding in findings:
+        typer.echo(f"problem: {finding}" if problem else finding, err=True)
+    if any(problem for problem, _ in findings):
         raise typer.Exit(EXIT_INVALID)
 
 
@@ -102,10 +96,8 @@ def save_pose_command(
     Reads the arm on the configured bus; the built-in simulator only with --sim (its arm
     always starts at Park, so a pose saved from it is marked source: simulator).
     """
-    from datetime import datetime, timezone
-
     from seqrun.errors import BusError
-    from seqrun.poses import check_pose_name, pose_document, save_pose
+    from seqrun.service.poses import check_pose_name, save_measured_pose
 
     with user_errors():
         check_pose_name(name)  # before anything is opened
@@ -113,9 +105,9 @@ def save_pose_command(
         path = output or (poses_dir / f"{name}.yaml")
         if path.exists() and not force:
             fail(f"{path} exists (use --force to overwrite)")
-        connection, client = connect(arm, interface, channel, bitrate, bus_kwargs, sim)
+        connection, driver = connect(arm, interface, channel, bitrate, bus_kwargs, sim)
     if connection.is_simulator and not sim:
-        client.close()
+        driver.close()
         connection.close()
         fail("no CAN interface configured: pose save reads the arm on a bus (-i/-c or "
              "python-can's configuration); give --sim to read the built-in simulator")
@@ -126,21 +118,20 @@ def save_pose_command(
 
         arm, zero_text = zero_for_reading(connection, arm)
         typer.echo(zero_text)
-        readings = client.read_arm(arm.module_ids)
+        driver.use_arm(arm)
+        reading = driver.read()
     except BusError as exc:
         fail(f"cannot read the arm: {exc}", 3)
     finally:
-        client.close()
+        driver.close()
         connection.close()
-    joints = {j.name: round(j.to_user_deg(r.position), 3)
-              for j, r in zip(arm.joints, readings) if j.locked is None}
+    joints = {j.name: round(float(x), 3)
+              for j, x in zip(arm.joints, reading.positions_deg) if j.locked is None}
     with user_errors():
         try:
-            pose = pose_document(name, arm, joints, description=description,
-                                 source="simulator" if connection.is_simulator else "arm",
-                                 saved_at=datetime.now(timezone.utc).replace(microsecond=0))
+            pose = save_measured_pose(path, name, arm, joints,
+                                      simulator=connection.is_simulator,
+                                      description=description)
         except ValueError as exc:
             fail(str(exc))
-        path.parent.mkdir(parents=True, exist_ok=True)
-        save_pose(path, pose)
     typer.echo(f"saved {path}: " + ", ".join(f"{k} {v:g}" for k, v in pose.joints_deg.items()))

@@ -15,12 +15,11 @@ from typing import TYPE_CHECKING, Annotated, Callable, Optional
 
 import typer
 
-from seqrun.checks import static_validation
 from seqrun.cli.app import app
 from seqrun.cli.common import (BitrateOption, BusKwargsOption, ChannelOption, InterfaceOption,
-                               SimOption, fail, load_arm_file, user_errors)
+                               SimOption, fail, user_errors)
 from seqrun.defaults import EXIT_FAULT, EXIT_INVALID, EXIT_OPERATOR_ABORT
-from seqrun.errors import BusError, SequenceInvalid
+from seqrun.errors import BusError
 
 if TYPE_CHECKING:
     from rich.console import Console
@@ -56,18 +55,6 @@ def _ask_shown(console: Console, displays: list, question: str, assume_yes: bool
         return _ask(console, question, assume_yes, read)
     with displays[0].asking(context):
         return _ask(console, question, assume_yes, read)
-
-
-def _all_errors(file: Path, load_errors: list, **check) -> list:
-    """The errors `seqrun validate --static` reports for ``file`` (load errors and the
-    checks of the steps that loaded), else ``load_errors``."""
-    from seqrun.checks import static_check
-    from seqrun.errors import UserInputError
-
-    try:
-        return static_check(file, **check).errors or load_errors
-    except UserInputError:
-        return load_errors
 
 
 def _ctrl_c_outside_the_run_is_an_operator_abort(command):
@@ -139,79 +126,44 @@ def run_command(
 ) -> None:
     """Run a sequence: validate, read the arm, re-validate from where it stands, move."""
     # Imported here, not at the top: `seqrun --help` and the other commands stay light.
-    from rich.text import Text
-
-    from seqrun.cli import campaign_records
-    from seqrun.cli.display import LiveDisplay, PlainDisplay
     from seqrun.cli.output import keep_running_on_broken_pipe, make_console
-    from seqrun.cli.zero import zero_at_run_start
-    from seqrun.clock import VirtualClock
-    from seqrun.connection import open_connection, parse_bus_kwargs, parse_faults
-    from seqrun.cli.interrupts import RunSignals
-    from seqrun.results import latched_message
-    from seqrun.runlog import prepare_run_folder
-    from seqrun.schema import load_sequence
-    from seqrun.service import ArmSession
-    from seqrun.service.run_control import RunControl
-    from seqrun.stop_requests import StopRequests
+    from seqrun.service.run_preparation import RunInvalid, RunRequest, prepare_run
 
     keep_running_on_broken_pipe()  # a closed stdout never ends a run
     console = make_console(stderr=False)
+    request = RunRequest(file, interface, channel, bitrate, bus_kwargs or [], sim,
+                         sim_fault or [], speed, from_step, log_dir, arm_file, command_mode,
+                         start, started, virtual_time, project_dir, power_on_at)
     with user_errors():
-        if not 0 < speed <= 1:
-            fail(f"--speed must lie in (0, 1], got {speed:g}")
-        if command_mode not in (None, "ramp", "step"):
-            fail(f"--command-mode must be ramp or step, got '{command_mode}'")
-        if not file.is_file():
-            fail(f"sequence file {file} not found")
-        faults = parse_faults(sim_fault or [])
-        extra = parse_bus_kwargs(bus_kwargs or [])
         try:
-            loaded = load_sequence(file, project_root=project_dir)  # invalid -> exit 1, no bus
-        except SequenceInvalid as exc:
-            # Every problem in one pass, exactly as `seqrun validate` reports them: the
-            # steps that are valid on their own are still checked against the arm.
-            errors = _all_errors(file, exc.errors, start=start, arm_file=arm_file,
-                                 started=started, speed=speed, project_dir=project_dir)
-            campaign_records.refuse_unloadable(file, project_dir, errors, log_dir)
-            raise SequenceInvalid(errors) from None
-        arm = load_arm_file(arm_file or loaded.arm_path)
-        if power_on_at is not None:
-            arm.power_off_pose(power_on_at)  # one of the arm's power-off poses
-        if not (interface or channel or bitrate or extra or sim):  # the campaign's bus
-            interface, channel, bitrate, extra = campaign_records.campaign_bus(loaded, extra)
-        if not 1 <= from_step <= len(loaded.steps):
-            fail(f"--from {from_step}: the sequence has steps 1-{len(loaded.steps)}")
-        # Static validation before the bus is even opened; the executor validates again
-        # from the measured state before the first motion.
-        static = static_validation(loaded, arm, start, started, from_step)
-        if static.errors:
-            campaign_records.refuse(loaded, arm_file or loaded.arm_path, static.errors, log_dir)
-            for error in static.errors:
+            run = prepare_run(request)   # nothing is opened before the checks pass
+        except RunInvalid as exc:
+            for error in exc.errors:
                 typer.echo(str(error), err=True)
-            typer.echo(f"{loaded.file}: invalid ({len(static.errors)} error"
-                       f"{'s' * (len(static.errors) != 1)}); nothing was sent", err=True)
-            raise typer.Exit(EXIT_INVALID)
-        if virtual_time and not (sim or faults or not (interface or channel or extra)):
-            fail("--virtual-time needs the simulator")
-        for fault in faults:  # the simulated arm has the arm file's modules
-            if fault.module is not None and fault.module not in arm.module_ids:
-                fail(f"--sim-fault '{fault.spec}': the arm has no module {fault.module} "
-                     f"(modules {', '.join(map(str, arm.module_ids))})")
-        connection = open_connection(interface=interface, channel=channel, bitrate=bitrate,
-                                     bus_kwargs=extra, force_sim=sim, faults=faults,
-                                     default_bitrate=arm.can.bitrate,
-                                     clock=VirtualClock() if virtual_time else None,
-                                     power_on_pose=power_on_at.lower() if power_on_at else None)
-        if virtual_time and not connection.is_simulator:
-            connection.close()
-            fail("--virtual-time needs the simulator")
-        if power_on_at is not None and not connection.is_simulator:
-            connection.close()
-            fail("--power-on-at applies to the built-in simulator (seqrun sim serve has its own)")
+            typer.echo(str(exc), err=True)
+            raise typer.Exit(EXIT_INVALID) from None
     # From here `seqrun status` / `seqrun halt` in another terminal ask this run.
+    from seqrun.service.run_control import RunControl
+    from seqrun.stop_requests import StopRequests
+
     requests = StopRequests()
-    control = RunControl.serve(connection, arm, requests)
+    control = RunControl.serve(run.connection, run.arm, requests)
+    zero = _confirm_start(console, run, yes)
+    _use_realtime(console, rt_priority)
+    folder = _run_folder(console, run, log_dir)
+    outcome = _run_in_session(console, run, zero, folder, control, requests, step=step,
+                              yes=yes, plain=plain, speed=speed, from_step=from_step,
+                              command_mode=command_mode, no_report=no_report)
+    _print_outcome(console, outcome, folder)
+    raise typer.Exit(outcome.result.exit_code)
+
+
+def _confirm_start(console: Console, run, yes: bool):
+    """The bus banner, on real hardware the operator's yes, and the zero reference in
+    force (on real hardware after a power-on, confirmed); the arm of the run gets it."""
+    from seqrun.cli.zero import zero_at_run_start
+
+    connection, loaded = run.connection, run.loaded
     style = "bold black on yellow" if connection.is_simulator else "bold white on red"
     console.print(f" {connection.description} ", style=style, highlight=False, markup=False)
     if not connection.is_simulator and not _ask(
@@ -224,42 +176,62 @@ def run_command(
     try:
         with user_errors():
             try:
-                zero = zero_at_run_start(connection, arm, loaded.project,
+                zero = zero_at_run_start(connection, run.arm, loaded.project,
                                          lambda question: _ask(console, question, yes),
                                          lambda text: console.print(text, style="bold",
                                                                     highlight=False,
                                                                     markup=False))
             except BusError as exc:  # before user_errors: a timeout is no usage error
                 fail(f"cannot read the modules' state: {exc}", EXIT_FAULT)
-            arm = arm.with_zero_reference(zero.pose)
+            run.arm = run.arm.with_zero_reference(zero.pose)
     except BaseException:
         connection.close()
         raise
+    return zero
 
-    if rt_priority is not None:
-        try:
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(rt_priority))
-            console.print(f"real-time scheduling: SCHED_FIFO priority {rt_priority}",
-                          highlight=False)
-        except (OSError, AttributeError) as exc:
-            console.print(f"warning: real-time scheduling not available ({exc}); running at "
-                          "normal priority", style="yellow", highlight=False, markup=False)
-    try:  # an unusable --log-dir: exit 2, nothing sent; a used one gets a new folder inside
-        folder = prepare_run_folder(log_dir, loaded.name, campaign_records.runs_dir(loaded))
-    except OSError as exc:
-        connection.close()
-        fail(f"cannot create the run folder {log_dir or campaign_records.runs_dir(loaded)}: "
-             f"{exc.strerror or exc}")
+
+def _use_realtime(console: Console, rt_priority: int | None) -> None:
+    if rt_priority is None:
+        return
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(rt_priority))
+        console.print(f"real-time scheduling: SCHED_FIFO priority {rt_priority}",
+                      highlight=False)
+    except (OSError, AttributeError) as exc:
+        console.print(f"warning: real-time scheduling not available ({exc}); running at "
+                      "normal priority", style="yellow", highlight=False, markup=False)
+
+
+def _run_folder(console: Console, run, log_dir: Path | None) -> Path:
+    """An unusable --log-dir: exit 2, nothing sent; a used one gets a new folder inside."""
+    from seqrun.errors import UserInputError
+    from seqrun.service.run_preparation import run_folder
+
+    try:
+        folder = run_folder(run.loaded, log_dir)
+    except UserInputError as exc:
+        run.connection.close()
+        fail(str(exc))
     if log_dir is not None and folder != log_dir:
         console.print(f"{log_dir} holds an earlier run: this run goes to {folder}",
                       highlight=False, markup=False, soft_wrap=True)
+    return folder
 
+
+def _run_in_session(console: Console, run, zero, folder: Path, control, requests, *,
+                    step: bool, yes: bool, plain: bool, speed: float, from_step: int,
+                    command_mode: str | None, no_report: bool):
+    """The run in an arm session (the same object the console and the other faces use),
+    with the terminal's own questions, signals and displays (the session's subscribers)."""
+    from seqrun.cli.display import LiveDisplay, PlainDisplay
+    from seqrun.cli.interrupts import RunSignals
+    from seqrun.service import ArmSession, campaign_records
+
+    loaded, connection, arm = run.loaded, run.connection, run.arm
     # From here on signals only post stop requests (seqrun/cli/interrupts.py); the control
     # loop acts on them, a question is answered "no".
     signals = RunSignals(requests)
-
-    campaign_records.record_run(folder, loaded, arm_file or loaded.arm_path,
-                                connection.description, zero)
+    campaign_records.record_run(folder, loaded, run.arm_path, connection.description, zero)
     displays: list = []
 
     def confirm(prompt: str) -> bool:
@@ -283,9 +255,6 @@ def run_command(
         console.print(f"  !!  {text}", style="yellow", highlight=False, markup=False,
                       soft_wrap=True)
 
-    # The arm session owns the bus for the run (the same object the console and the other
-    # faces use); the terminal's questions stay the terminal's own. The displays are the
-    # session's subscribers.
     session = ArmSession(arm, connection, project=loaded.project, zero=zero, status_hz=0,
                          own_connection=False)
     if live:  # its own queue of the session's events, rendered in the loop's slack
@@ -299,8 +268,8 @@ def run_command(
             PlainDisplay(console, len(loaded.steps)), "plain display", maxsize=100_000))
     signals.install()
     try:
-        outcome = session.run_loaded(
-            loaded, log_dir=folder, file=str(file), speed=speed, first_step=from_step,
+        return session.run_loaded(
+            loaded, log_dir=folder, file=str(run.file), speed=speed, first_step=from_step,
             command_mode=command_mode, confirm=confirm, before_step=before_step,
             run_control=control, requests=requests, warn=warn,
             confirm_clear_latched=(None if connection.is_simulator else confirm_clear_latched),
@@ -317,6 +286,14 @@ def run_command(
         signals.restore()
         session.close()
         connection.close()
+
+
+def _print_outcome(console: Console, outcome, folder: Path) -> None:
+    """The run's verdict, its errors, its duration and where its log is."""
+    from rich.text import Text
+
+    from seqrun.results import latched_message
+
     result = outcome.result
     try:  # a terminal that is gone (SIGHUP) must not change the exit code
         colour = "green" if result.exit_code == 0 else "red"
@@ -345,4 +322,3 @@ def run_command(
                           style="yellow", highlight=False, markup=False, soft_wrap=True)
     except (OSError, ValueError):
         pass
-    raise typer.Exit(result.exit_code)

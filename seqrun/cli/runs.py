@@ -10,7 +10,7 @@ import typer
 
 from seqrun.cli.app import app
 from seqrun.cli.common import CampaignOption, user_errors
-from seqrun.records import list_runs
+from seqrun.service.records import list_runs
 
 
 def _local(when: str | None) -> str:
@@ -32,13 +32,11 @@ def runs_command(
                                      "runs/).")] = None,
 ) -> None:
     """List past runs: when, sequence, result, duration, exit code (oldest first)."""
-    from seqrun.project import find_campaign, open_project
+    from seqrun.service.campaigns import runs_dir_here
 
     with user_errors():
         if runs_dir is None:
-            if project_dir is None:
-                project_dir = find_campaign(Path.cwd())
-            runs_dir = open_project(project_dir).runs_dir if project_dir else Path("runs")
+            runs_dir = runs_dir_here(project_dir)
         runs = list_runs(runs_dir)
     if as_json:
         typer.echo(json.dumps(runs, indent=2))

@@ -18,22 +18,6 @@ from seqrun.cli.app import sim_app
 from seqrun.cli.common import fail
 
 
-def _power_off_pose(name: str) -> str:
-    """``name`` as a power-off pose of the shipped arm (one line and exit 2 otherwise)."""
-    from seqrun.arm import load_arm
-    from seqrun.errors import UserInputError
-    from seqrun.shipped import DEFAULT_ARM_NAME, shipped_arm
-
-    path = shipped_arm(DEFAULT_ARM_NAME)
-    assert path is not None  # (shipped with seqrun)
-    arm = load_arm(path)
-    try:
-        arm.power_off_pose(name)
-    except UserInputError as exc:
-        fail(f"--power-on-at: {exc}")
-    return name if name in arm.power_off_poses else name.lower()
-
-
 @sim_app.command("serve")
 def serve(
     port: Annotated[int, typer.Option(help="TCP port to listen on.")] = 29536,
@@ -66,60 +50,29 @@ def serve(
 ) -> None:
     """Serve a simulated LWA 3 (7 modules, powered on at Park or --power-on-at, real time)
     over socketcand."""
-    from seqrun.clock import RealClock
-    from seqrun.sim.arm import SimArm
-    from seqrun.sim.faults import parse_faults
-    from seqrun.sim.network import SimNetwork
-    from seqrun.sim.options import module_options
-    from seqrun.sim.socketcand import SocketcandServer
+    from seqrun.errors import UserInputError
+    from seqrun.service.simulator import serve_simulated_arm
 
-    try:
-        faults = parse_faults(fault or [])
-    except ValueError as exc:
-        fail(str(exc))
-    power_on_at = _power_off_pose(power_on_at)
-    if not 0 <= port <= 65535:
-        fail(f"--port {port}: must be 0..65535")
-    if bitrate <= 0:
-        fail(f"--bitrate {bitrate}: must be positive")
     switches: dict[str, object] = {}
-    for item in module_option or []:
-        name, sep, value = item.partition("=")
-        if not sep or not name:
-            fail(f"--module-option expects NAME=VALUE, got '{item}'")
-        switches[name.strip()] = value.strip()
     if home_ok_at_power_on:
         switches["home_ok_at_power_on"] = True
     if addressed_refresh_arms_watchdog:
         switches["addressed_refresh_arms_watchdog"] = True
-    from seqrun.connection import sim_options_from_env
-    from seqrun.errors import UserInputError
-
-    try:  # SEQRUN_SIM_OPTIONS first, the flags on top
-        options = module_options(switches, sim_options_from_env())
-    except ValueError as exc:
-        fail(f"--module-option {exc}")
+    try:
+        served = serve_simulated_arm(host=host, port=port, channel=channel,
+                                     faults=fault or [], bitrate=bitrate,
+                                     module_options=module_option or [], switches=switches,
+                                     power_on_at=power_on_at)
     except UserInputError as exc:
         fail(str(exc))
-    clock = RealClock()
-    # No spinning: TCP adds more latency than a late wake-up, and clients may be many.
-    try:
-        arm = SimArm(clock, faults=faults, options=options, power_on_pose=power_on_at)
-    except ValueError as exc:  # a fault for a module the arm does not have
-        fail(str(exc))
-    network = SimNetwork(clock, arm, bitrate, spin_window=0.0)
-    try:
-        server = SocketcandServer(network, host=host, port=port, channel=channel)
-    except ValueError as exc:
-        fail(str(exc))
-    except OSError as exc:
-        fail(f"cannot listen on {host}:{port}: {exc.strerror or exc}")
+    server = served.server
     typer.echo(f"simulated LWA 3 (modules 1-7, {bitrate} bit/s, powered on at "
-               f"{power_on_at}) on socketcand {server.host}:{server.port}, channel {channel}")
-    for injected in faults:
-        typer.echo(f"  fault {injected.spec}")
-    for switch in switches:
-        typer.echo(f"  switch {switch}={getattr(options, switch)}")
+               f"{served.power_on_pose}) on socketcand {server.host}:{server.port}, "
+               f"channel {channel}")
+    for spec in served.faults:
+        typer.echo(f"  fault {spec}")
+    for switch, value in served.switches.items():
+        typer.echo(f"  switch {switch}={value}")
     typer.echo(f'  python-can: can.Bus(interface="socketcand", host="{server.host}", '
                f'port={server.port}, channel="{channel}")')
     typer.echo("Ctrl-C to stop.")

@@ -22,14 +22,13 @@ from typing import Annotated
 
 import typer
 
-from seqrun.checks import StaticCheck, static_check  # noqa: F401  (re-exported: lived here)
 from seqrun.cli.app import app
 from seqrun.cli.common import EXIT_INVALID, EXIT_OK, EXIT_USAGE, fail
 from seqrun.defaults import START_POSE
 from seqrun.errors import UserInputError
 
 
-def print_report(check: StaticCheck, file: Path, *, as_json: bool) -> None:
+def print_report(check, file: Path, *, as_json: bool) -> None:
     if as_json:
         typer.echo(json.dumps({"valid": check.valid,
                                "errors": [e.as_dict() for e in check.errors],
@@ -53,7 +52,7 @@ def print_report(check: StaticCheck, file: Path, *, as_json: bool) -> None:
         typer.echo(f"{name}: invalid ({count} error{'s' * (count != 1)}{notes})")
 
 
-def print_clearances(check: StaticCheck) -> None:
+def print_clearances(check) -> None:
     """Per move: the smallest guard clearance along its planned trajectory, and where."""
     for c in check.clearances:
         typer.echo(f"  step {c.step}: lowest {c.point.replace('_', '-')} z = {c.z_mm:.1f} mm, "
@@ -69,9 +68,10 @@ def print_dry_run(run, loaded, arm) -> None:
     """Human report of a dry run: per step planned vs simulated, peaks, heights, checks."""
     r = run.result
     verdict = "passed" if run.passed else f"FAILED ({r.status})"
+    rehearsed = f", rehearsing {', '.join(run.faults)}" if run.faults else ""
     typer.echo(f"dry run from {run.start_pose} (simulator, virtual time, {run.cycle_hz:g} Hz "
-               f"loop): {verdict} - {run.simulated_s:.2f} s simulated in {run.wall_s:.2f} s "
-               f"({run.speedup:.0f}x real time)")
+               f"loop{rehearsed}): {verdict} - {run.simulated_s:.2f} s simulated in "
+               f"{run.wall_s:.2f} s ({run.speedup:.0f}x real time)")
     arm_limits = {j.name: j.max_velocity_deg_s for j in arm.joints}
     includes: tuple[str, ...] = ()
     for s in r.steps:
@@ -143,6 +143,16 @@ def _unusable(message: str, as_json: bool) -> None:
     fail(message)
 
 
+def _faults(specs: list[str]) -> list:
+    """``--sim-fault`` specs as faults (one line, exit 2, for a bad one)."""
+    from seqrun.service.connection import parse_faults
+
+    try:
+        return parse_faults(specs)
+    except UserInputError as exc:
+        fail(str(exc))
+
+
 def _cut(text: str, width: int) -> str:
     """``text`` in at most ``width`` characters; a cut one ends in "…"."""
     return text if len(text) <= width else text[:width - 1] + "…"
@@ -168,9 +178,10 @@ def validate_command(
                           "that do not include the start-up).")] = False,
     speed: Annotated[float, typer.Option("--speed", help="Speed override of the dry run, "
                                                          "0 < F <= 1.")] = 1.0,
-    cycle_hz: Annotated[float | None, typer.Option(
-        "--cycle-hz", help="Control-loop rate of the dry run (default: the arm file's "
-                           "control.dry_run_cycle_hz).")] = None,
+    sim_fault: Annotated[list[str] | None, typer.Option(
+        "--sim-fault", metavar="SPEC", help="Rehearse a simulator fault in the dry run, as "
+        "seqrun run --sim-fault injects it: MODULE:KIND@SECONDS from the start (e.g. "
+        "4:tow_error@2.5, all:halt@3, 3:drop_acks=0.3@0); repeatable.")] = None,
     junit_file: Annotated[Path | None, typer.Option(
         "--junit", metavar="FILE", help="Also write a JUnit report (one test per file; "
                                         "gives the summary table).")] = None,
@@ -188,8 +199,9 @@ def validate_command(
     """
     if not 0 < speed <= 1:
         fail(f"--speed must lie in (0, 1], got {speed:g}")
-    if cycle_hz is not None and not 5 <= cycle_hz <= 500:
-        fail(f"--cycle-hz must lie in [5, 500], got {cycle_hz:g}")
+    faults = _faults(sim_fault or [])
+    if faults and static:
+        fail("--sim-fault rehearses a fault in the dry run: leave out --static")
     if report_file is not None and (static or not report_file.parent.is_dir()
                                     or len(files) != 1 or _is_dir(files[0])):
         fail("--report draws the dry run: leave out --static" if static
@@ -197,11 +209,12 @@ def validate_command(
              if len(files) != 1 or _is_dir(files[0])
              else f"--report {report_file}: no directory {report_file.parent}")
     if len(files) != 1 or _is_dir(files[0]) or junit_file is not None:
-        from seqrun.cli.campaign_validate import report, validate_files
+        from seqrun.cli.campaign_validate import report
+        from seqrun.service.campaign_checks import validate_files
 
         try:
             results = validate_files(files, start=start, arm_file=arm_file, started=started,
-                                     static=static, speed=speed, cycle_hz=cycle_hz,
+                                     static=static, speed=speed, faults=faults,
                                      project_dir=project_dir)
             valid = report(results, as_json=as_json, junit_file=junit_file)
         except UserInputError as exc:
@@ -209,29 +222,23 @@ def validate_command(
         except OSError as exc:
             fail(f"{exc.filename}: {exc.strerror or exc}")
         raise typer.Exit(EXIT_OK if valid else EXIT_INVALID)
+    from seqrun.service.checking import check_sequence
+
     file = files[0]
     try:
-        check = static_check(file, start=start, arm_file=arm_file, started=started,
-                             speed=speed, project_dir=project_dir)
-        if check.loaded is not None:
-            from seqrun.cli.campaign_validate import override_notes
-
-            check.notes = list(check.notes) + override_notes(check.loaded)
+        checked = check_sequence(file, start=start, arm_file=arm_file, started=started,
+                                 speed=speed, project_dir=project_dir, dry_run=not static,
+                                 faults=faults, report_html=report_file)
     except UserInputError as exc:
         _unusable(str(exc), as_json)
         return
     except OSError as exc:  # a path the system refuses (name too long, permission, ...)
         _unusable(f"{exc.filename}: {exc.strerror or exc}", as_json)
         return
-    run = None
-    if check.valid and not static:
-        from seqrun.dryrun import dry_run
-
-        run = dry_run(check.loaded, check.arm, check.start_deg, start_pose=start or START_POSE,
-                      started=started, speed=speed, cycle_hz=cycle_hz, report_html=report_file)
-        if run.report_error:
-            fail(f"cannot write the report: {run.report_error}")
-    valid = check.valid and (run is None or run.passed)
+    check, run = checked.static, checked.dry_run
+    if run is not None and run.report_error:
+        fail(f"cannot write the report: {run.report_error}")
+    valid = checked.valid
     if as_json:
         typer.echo(json.dumps({"valid": valid,
                                "errors": [e.as_dict() for e in check.errors],
@@ -264,24 +271,9 @@ def schema_command(
                            "docs/sequence-format.md).")] = False,
 ) -> None:
     """Print the JSON Schema of a file format (sequence files by default)."""
+    from seqrun.service.formats import format_reference, format_schema
+
     if markdown:
-        from seqrun.reference import (arm_reference_markdown, pose_reference_markdown,
-                                      reference_markdown)
-
-        text = {SchemaKind.sequence: reference_markdown, SchemaKind.pose: pose_reference_markdown,
-                SchemaKind.arm: arm_reference_markdown}[kind]()
-        typer.echo(text, nl=False)
+        typer.echo(format_reference(kind.value), nl=False)
         return
-    if kind is SchemaKind.sequence:
-        from seqrun.schema import sequence_json_schema
-
-        schema = sequence_json_schema()
-    elif kind is SchemaKind.arm:
-        from seqrun.arm import ArmDescription as Model
-
-        schema = Model.model_json_schema()
-    else:
-        from seqrun.poses import PoseFile as Model  # type: ignore[assignment]
-
-        schema = Model.model_json_schema()
-    typer.echo(json.dumps(schema, indent=2, ensure_ascii=False))
+    typer.echo(json.dumps(format_schema(kind.value), indent=2, ensure_ascii=False))

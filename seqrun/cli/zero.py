@@ -3,7 +3,7 @@
     seqrun zero show                      # the record and the zero in use
     seqrun zero set totem                 # after a sudden power loss with the arm in Totem
 
-The record says where the arm was powered off (see :mod:`seqrun.zero`); the ``power_off``
+The record says where the arm was powered off (see :mod:`seqrun.service.zero`); the ``power_off``
 step of ``sequences/shutdown.yaml`` writes it at a normal shutdown.
 """
 
@@ -17,21 +17,16 @@ import typer
 from seqrun.cli.app import app
 from seqrun.cli.common import ArmFileOption, CampaignOption, fail, user_errors
 from seqrun.errors import BusError, UserInputError
-from seqrun.zero import ZeroInForce, ZeroStore, pose_title, zero_for_run
+from seqrun.service.zero import ZeroInForce, ZeroStore, pose_title, zero_for_run
 
 zero_app = typer.Typer(help="The zero reference: where the arm was powered off.",
                        no_args_is_help=True)
 app.add_typer(zero_app, name="zero")
 
 def _arm_and_store(arm_file: Optional[Path], project_dir: Optional[Path]):
-    from seqrun.cli.common import load_arm_file
-    from seqrun.project import find_campaign, open_project, project_for
+    from seqrun.service.campaigns import load_arm_file, zero_campaign
 
-    if project_dir is not None:
-        project = open_project(project_dir)
-    else:
-        campaign = find_campaign(Path.cwd())
-        project = open_project(campaign) if campaign is not None else project_for(Path.cwd())
+    project = zero_campaign(project_dir)
     arm_path = arm_file if arm_file is not None else project.arm_path(None)
     arm = load_arm_file(Path(arm_path))
     return arm, ZeroStore.for_arm(arm.name, project)

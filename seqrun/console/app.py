@@ -39,7 +39,7 @@ from seqrun.console.guard import COOKIE, AccessGuard
 from seqrun.console.limits import RequestLimits
 from seqrun.console.live import MAX_PAGES, PAGE_SILENCE_S, live  # noqa: F401 (tests' name)
 from seqrun.console.motions import Motions
-from seqrun.console.scene import arm_scene
+from seqrun.service.kinematics import arm_scene
 from seqrun.console.telemetry import Telemetry, jsonable
 from seqrun.errors import Refused, SeqrunError, UserInputError
 

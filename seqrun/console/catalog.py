@@ -1,8 +1,9 @@
 """What the console lists from the project: poses, sequences, past runs, and a sequence's
 validation findings with its dry-run report.
 
-Nothing here touches the bus: a check validates and dry-runs on the simulator at virtual
-time, exactly as ``seqrun validate`` does, starting from where the arm stands now.
+Nothing here touches the bus: a check is ``seqrun validate``'s own service call
+(:func:`seqrun.service.checking.check_sequence`: the static checks, then the dry run on
+the simulator at virtual time), starting from where the arm stands now.
 """
 
 from __future__ import annotations
@@ -10,10 +11,12 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from seqrun.errors import Refused, SequenceInvalid, UserInputError
-from seqrun.project import Project
+from seqrun.errors import Refused, UserInputError
+
+if TYPE_CHECKING:
+    from seqrun.sequence.project import Project
 
 
 @dataclass(frozen=True)
@@ -33,15 +36,13 @@ class Catalog:
         """Every pose file on the project's pose path (campaign first, then the shipped).
         With ``arm``: ``move_target`` says whether a move may go there, and ``why`` not (a
         joint outside its limits: Park's j4, the power-on pose, lies 0.32° beyond -120°)."""
-        from seqrun.poses import available_poses, load_pose
+        from seqrun.service.poses import list_poses
 
         found: list[dict[str, Any]] = []
-        for name, path in available_poses(self.project.pose_path).items():
-            try:
-                pose = load_pose(path)
-            except SequenceInvalid as exc:
-                found.append({"name": name, "file": str(path), "error": str(exc.errors[0]),
-                              "move_target": False, "why": str(exc.errors[0])})
+        for name, path, pose, error in list_poses(self.project.pose_path):
+            if pose is None:
+                found.append({"name": name, "file": str(path), "error": error,
+                              "move_target": False, "why": error})
                 continue
             entry: dict[str, Any] = {"name": name, "file": str(path),
                                      "description": pose.description,
@@ -97,45 +98,31 @@ class Catalog:
     def check(self, name: str, start_deg: Mapping[str, float] | None, *,
               started: bool) -> dict[str, Any]:
         """Validation findings (``file:line:col``) and, when valid, the dry run's report
-        (simulator, virtual time) from ``start_deg`` (default: the Park pose)."""
-        from seqrun.arm import load_arm
-        from seqrun.defaults import START_POSE
-        from seqrun.dryrun import dry_run
-        from seqrun.schema import load_sequence_partial
-        from seqrun.validation import pose_joints_deg, validate_sequence
-        from seqrun.yamlsource import sort_errors
+        (simulator, virtual time) from ``start_deg`` (default: the Park pose), by the same
+        service call as ``seqrun validate``."""
+        from seqrun.service.checking import check_sequence
 
         path = self.sequence_path(name)
-        loaded, errors = load_sequence_partial(path, project_root=self.project.root)
-        out: dict[str, Any] = {"sequence": name, "file": str(path), "valid": False,
-                               "errors": [], "notes": [], "steps": [], "dry_run": None}
-        if loaded is None:
-            out["errors"] = [e.as_dict() | {"text": str(e)} for e in errors]
-            return out
-        out["steps"] = [{"number": s.number, "kind": s.kind, "label": s.label or s.kind}
-                        for s in loaded.steps]
         try:
-            arm = load_arm(loaded.arm_path)
-            start = (dict(start_deg) if start_deg is not None
-                     else pose_joints_deg(START_POSE,  # as seqrun validate: Park
-                                          loaded.pose_path or loaded.poses_dir))
-        except SequenceInvalid as exc:
-            errors = list(errors) + list(exc.errors)
-            out["errors"] = [e.as_dict() | {"text": str(e)} for e in sort_errors(errors)]
-            return out
+            check = check_sequence(path, start_deg=start_deg, started=started,
+                                   start_label="the arm's position now",
+                                   project_dir=self.project.root)
         except (UserInputError, OSError) as exc:
             raise Refused(f"{name}: {exc}") from None
-        result = validate_sequence(loaded, arm, start, started=started,
-                                   incomplete=bool(errors))
-        errors = sort_errors(list(errors) + result.errors)
-        out["errors"] = [e.as_dict() | {"text": str(e)} for e in errors]
-        out["notes"] = [n.as_dict() | {"text": f"{n.file}:{n.line}:{n.column}: note: "
-                                                f"{n.message}"} for n in result.notes]
-        out["valid"] = not errors
-        if out["valid"]:
-            run = dry_run(loaded, arm, start, start_pose="the arm's position now",
-                          started=started)
-            out["dry_run"] = run.as_dict()
+        # (valid: the checks found no error; whether the dry run passed is its own)
+        out: dict[str, Any] = {"sequence": name, "file": str(path),
+                               "valid": check.static.valid,
+                               "errors": [e.as_dict() | {"text": str(e)} for e in check.errors],
+                               "notes": [n.as_dict() | {"text": f"{n.file}:{n.line}:{n.column}: "
+                                                                f"note: {n.message}"}
+                                         for n in check.notes],
+                               "steps": [], "dry_run": None}
+        if check.loaded is None:
+            return out
+        out["steps"] = [{"number": s.number, "kind": s.kind, "label": s.label or s.kind}
+                        for s in check.loaded.steps]
+        if check.dry_run is not None:
+            out["dry_run"] = check.dry_run.as_dict()
             labels = {s["number"]: s["label"] for s in out["dry_run"]["steps"]}
             for step in out["steps"]:  # the executor's labels (a confirm's is its text)
                 step["label"] = labels.get(step["number"]) or step["label"]
@@ -144,7 +131,7 @@ class Catalog:
     # -- runs --------------------------------------------------------------------------
     def runs(self) -> list[dict[str, Any]]:
         """Past runs, newest first, each with the id its files are served under."""
-        from seqrun.records import list_runs
+        from seqrun.service.records import list_runs
 
         root = self.runs_dir.resolve()
         found = []

@@ -14,7 +14,8 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-from typing import TYPE_CHECKING, Any
+from collections.abc import Awaitable
+from typing import Any, Protocol
 
 from fastapi import WebSocket, WebSocketDisconnect
 
@@ -23,10 +24,25 @@ from seqrun.console.bodies import Malformed, one_line, parse_json, printable, to
 from seqrun.console.telemetry import PageFeed, dumps
 from seqrun.errors import Refused, UserInputError
 
-if TYPE_CHECKING:
-    from seqrun.console.app import Console
-
 log = logging.getLogger(__name__)
+
+
+class Console(Protocol):
+    """What a live connection uses of the console (:class:`seqrun.console.app.Console`;
+    named here, not imported: the app imports this module)."""
+
+    live_connections: int
+    max_pages: int
+    session: Any
+    telemetry: Any
+    control: Any
+    motions: Any
+
+    def new_client_id(self) -> str: ...
+
+    def halt_now(self, reason: str) -> Awaitable[Any]: ...
+
+    def status_dict(self) -> dict[str, Any]: ...
 
 #: A page sends something (a ping at least) every 0.5 s; one silent for this long while a
 #: motion it started is under way is taken as gone (its motion is stopped).
@@ -89,7 +105,7 @@ async def refuse(ws: WebSocket, message: str, status: int = 503) -> None:
         await ws.close(code=1013, reason=message[:120])
 
 
-async def live(console: "Console", ws: WebSocket) -> None:
+async def live(console: Console, ws: WebSocket) -> None:
     if console.live_connections >= console.max_pages:
         log.warning("console: live connection refused, %d open", console.live_connections)
         await refuse(ws, f"too many live connections ({console.max_pages} open): close a "
@@ -113,7 +129,7 @@ def page_name(client: str, ws: WebSocket) -> str:
     return printable(f"{client} · {browser} on {where}")
 
 
-async def _live(console: "Console", ws: WebSocket) -> None:
+async def _live(console: Console, ws: WebSocket) -> None:
     await ws.accept()
     loop = asyncio.get_running_loop()
     client = console.new_client_id()

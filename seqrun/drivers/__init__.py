@@ -1,21 +1,24 @@
-"""Arm drivers: one module per arm protocol behind one interface (:mod:`.base`).
+"""Arm drivers: one package per arm protocol behind one interface (:mod:`.base`), found
+by name in :mod:`.registry` (``open_driver``).
 
 :mod:`seqrun.drivers.powercube` drives the Schunk PowerCube modules (the LWA 3); the
-executor sees only :class:`~seqrun.drivers.base.ArmDriver`.
+executor, the session and every command see only :class:`~seqrun.drivers.base.ArmDriver`,
+in user degrees.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-from seqrun.arm import ArmDescription
-from seqrun.drivers.base import (ArmDriver, CommandConfirmation, CycleState, EventSink,
-                                 HaltConfirmation, JointLimits, JointReading, JointState,
-                                 LimitValues, MotionRefused)
+from seqrun.arm.description import ArmDescription
+from seqrun.drivers.base import (ArmDriver, ArmPoll, CommandConfirmation, CycleState,
+                                 DriverFamily, EventSink, ForeignTraffic, HaltConfirmation,
+                                 JointLimits, JointReading, JointState, LimitValues,
+                                 MotionRefused)
 
-__all__ = ["ArmDriver", "CommandConfirmation", "CycleState", "EventSink", "HaltConfirmation",
-           "JointLimits", "JointReading", "JointState", "LimitValues", "MotionRefused",
-           "as_driver"]
+__all__ = ["ArmDriver", "ArmPoll", "CommandConfirmation", "CycleState", "DriverFamily",
+           "EventSink", "ForeignTraffic", "HaltConfirmation", "JointLimits", "JointReading",
+           "JointState", "LimitValues", "MotionRefused", "as_driver"]
 
 
 def as_driver(driver_or_client: Any, arm: ArmDescription) -> ArmDriver:

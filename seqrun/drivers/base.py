@@ -1,25 +1,30 @@
 """The arm-driver interface: what the executor asks of an arm, in joint terms.
 
 The executor plans in user coordinates and checks in joint terms; a driver turns that into
-one arm's wire protocol and back. Everything a driver reports is joint-level and typed:
-positions in the drive's coordinates (radians, joint order; the executor applies the arm
-file's offsets), a compact per-cycle state (:class:`CycleState`) and, when asked, the full
-decoded state of a joint (:class:`JointState`).
+one arm's wire protocol and back. Everything a driver reports is joint-level, typed and in
+the user's units: positions in user degrees (joint order; the driver alone applies the arm
+file's offsets and its drives' units), a compact per-cycle state (:class:`CycleState`) and,
+when asked, the full decoded state of a joint (:class:`JointState`).
 
-:class:`ArmDriver` lists the calls; :mod:`seqrun.drivers.powercube` implements them over
-the PowerCube protocol. Another arm (or a ROS 2 bridge) is one more module implementing
-the same calls. No I/O here.
+:class:`ArmDriver` lists the calls of one open arm (a run's and the session's);
+:class:`DriverFamily` what the registry (:mod:`seqrun.drivers.registry`) asks of a driver
+class before an arm is open. :mod:`seqrun.drivers.powercube` implements both over the
+PowerCube protocol; another arm (or a ROS 2 bridge) is one more package implementing the
+same calls (docs/adding-a-driver.md). No I/O here.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, NamedTuple, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, ClassVar, Literal, NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
 
-from seqrun.planner import Limits, MovePlan
+from seqrun.arm.planner import Limits, MovePlan
+
+if TYPE_CHECKING:
+    from seqrun.arm.description import ArmDescription
 
 #: Where a driver sends its events (the executor's ``emit``: type, then fields).
 EventSink = Callable[..., None]
@@ -74,8 +79,8 @@ class JointState:
 class JointReading(NamedTuple):
     """One reading of every joint."""
 
-    #: Drive coordinates (radians), joint order.
-    positions_rad: np.ndarray
+    #: User degrees (Totem = zeros), joint order.
+    positions_deg: np.ndarray
     #: Per module id: the state the joint reported with this reading.
     states: dict[int, CycleState]
     #: When each joint answered (clock times, joint order, from the bus's own time stamps;
@@ -85,13 +90,32 @@ class JointReading(NamedTuple):
 
 
 @dataclass(frozen=True)
-class JointLimits:
-    """The limits a joint's drive holds, in drive units (rad, rad/s, rad/s^2)."""
+class ArmPoll:
+    """One reading of the arm outside a run (status): per joint (joint order) its
+    position and velocity, per module id its full state. A joint whose answers were lost
+    (``tolerate_loss``) is None in all three."""
 
-    min_position: float
-    max_position: float
-    max_velocity: float
-    max_acceleration: float
+    positions_deg: list[float | None]
+    velocities_deg_s: list[float | None]
+    states: dict[int, JointState | None]
+
+    @property
+    def complete(self) -> bool:
+        return all(s is not None for s in self.states.values())
+
+    def missing(self) -> list[int]:
+        """The modules that did not answer."""
+        return [m for m, s in self.states.items() if s is None]
+
+
+@dataclass(frozen=True)
+class JointLimits:
+    """The limits a joint's drive holds, in user units (deg, deg/s, deg/s^2)."""
+
+    min_deg: float
+    max_deg: float
+    max_velocity_deg_s: float
+    max_acceleration_deg_s2: float
 
 
 @dataclass(frozen=True)
@@ -178,6 +202,20 @@ class CommandConfirmation:
 #: The confirmation of an emergency Halt (the name the executor and the session use).
 HaltConfirmation = CommandConfirmation
 
+#: The commands a driver confirms by reading every module back.
+ConfirmedCommand = Literal["halt", "reset", "home"]
+
+
+class ForeignTraffic(Protocol):
+    """A request on the bus that this process did not send: another master."""
+
+    @property
+    def is_halt(self) -> bool:
+        """An emergency stop (``seqrun halt`` from another terminal), not a controller."""
+
+    def message(self) -> str:
+        """The one line the operator reads."""
+
 
 @runtime_checkable
 class ArmDriver(Protocol):
@@ -188,6 +226,14 @@ class ArmDriver(Protocol):
 
     #: Module ids in joint order.
     modules: list[int]
+    #: Flag names (of :meth:`CycleState.describe` and :attr:`JointState.text`) that mean a
+    #: fault, and the one that means homed: what a face may read in a logged state text.
+    FAULT_FLAGS: ClassVar[frozenset[str]]
+    HOMED_FLAG: ClassVar[str]
+
+    def use_arm(self, arm: ArmDescription) -> None:
+        """From now on convert with ``arm`` (the same arm with the zero reference decided
+        after connecting: the modules are asked first)."""
 
     def configure(self, *, cycle_s: float, run_limits: Limits, command_mode: str,
                   emit: EventSink) -> None:
@@ -196,7 +242,7 @@ class ArmDriver(Protocol):
 
     # -- reading
     def read(self) -> JointReading:
-        """Position and cycle state of every joint (a lost read retried)."""
+        """Position (user degrees) and cycle state of every joint (a lost read retried)."""
 
     def read_states(self, modules: Sequence[int] | None = None) -> dict[int, JointState]:
         """The full state of ``modules`` (None: all)."""
@@ -213,8 +259,8 @@ class ArmDriver(Protocol):
 
     def cycle(self, plan: MovePlan, t: float, moving: list[int],
               measured_deg: np.ndarray) -> JointReading:
-        """One control cycle: setpoints of ``plan`` at plan time ``t`` for ``moving``,
-        and a reading of every joint. Raises :class:`MotionRefused` at the first answer
+        """One control cycle: setpoints of ``plan`` (user radians) at plan time ``t`` for
+        ``moving``, and a reading of every joint. Raises :class:`MotionRefused` at the first answer
         that refuses motion; a lost answer to a motion command is a fault."""
 
     def end_motion(self) -> None:
@@ -232,11 +278,43 @@ class ArmDriver(Protocol):
 
     def halt_and_confirm(self) -> CommandConfirmation:
         """The emergency stop: Halt every module before anything else, then read back
-        that each one halted. Never raises; a failure is in the result."""
+        that each one halted. Never raises; a failure is in the result. Any thread."""
+
+    def halt_now(self, *, wait: bool = True) -> None:
+        """The Halt broadcast at once, before anything queued is read; ``wait=False``: even
+        while another thread's exchange holds the bus (an operator's STOP). Confirm it with
+        :meth:`halt_and_confirm`. Raises :class:`~seqrun.errors.BusError`."""
+
+    def confirm(self, command: ConfirmedCommand,
+                modules: Sequence[int] | None = None) -> CommandConfirmation:
+        """``seqrun halt|reset`` (and Home): broadcast ``command`` and confirm it on every
+        module (None: all) by reading its state back, repeating it for the modules that
+        did not confirm. Never raises for the bus."""
+
+    # -- the arm outside a run (status, the zero decision)
+    def poll(self, *, tolerate_loss: bool = False) -> ArmPoll:
+        """Position, velocity and full state of every joint (reads only). A lost answer
+        raises :class:`~seqrun.errors.BusError`, or with ``tolerate_loss`` leaves its
+        joint None."""
+
+    def homed(self) -> bool:
+        """Every module reports homed (no power-on since the last start-up); reads only,
+        a lost answer asked again."""
+
+    def watch_foreign(self, on_foreign: Callable[[ForeignTraffic], None]) -> None:
+        """Call ``on_foreign`` for every request on the bus this process did not send."""
+
+    def add_frame_listener(self, listener: Callable[[Any], None]) -> None:
+        """``listener(frame)`` for every frame sent and received (the run log's trace)."""
+
+    def remove_frame_listener(self, listener: Callable[[Any], None]) -> None: ...
+
+    def describe_error(self, exc: BaseException) -> str:
+        """``exc`` in the operator's words (a request that got no answer in user units)."""
 
     # -- limits held by the drives
     def read_limits(self) -> list[JointLimits]:
-        """What every joint's drive holds (joint order)."""
+        """What every joint's drive holds (joint order, user units)."""
 
     def write_limits(self, values: Mapping[str, LimitValues]) -> int:
         """Write limits per joint name and read them back; raises RunAborted
@@ -254,5 +332,29 @@ class ArmDriver(Protocol):
     def disable_watchdog(self) -> None:
         """After a clean end: disarm the watchdogs; the arm keeps holding."""
 
+    @property
+    def closed(self) -> bool: ...
+
     def close(self) -> None:
-        """Release the bus."""
+        """Stop using the bus (the connection stays open: its owner closes it)."""
+
+
+class DriverFamily(Protocol):
+    """What :mod:`seqrun.drivers.registry` asks of a driver class (no arm open yet)."""
+
+    @classmethod
+    def open(cls, arm: ArmDescription, connection: Any, *,
+             response_timeout_s: float | None = None) -> ArmDriver:
+        """The driver of ``arm`` on an open connection (:class:`seqrun.service.connection.
+        Connection`: its ``bus``, ``clock``, ``echoes_own``)."""
+
+    @staticmethod
+    def cycle_state(code: int) -> CycleState:
+        """A logged per-cycle state code (``int(CycleState)``) back as its state: what a
+        report says of a run folder's ``state`` columns."""
+
+    @classmethod
+    def simulator_positions(cls, arm: ArmDescription,
+                            joints_deg: Mapping[str, float]) -> dict[int, float]:
+        """What the family's simulated drives read (by module id, in their units) while
+        the arm stands at ``joints_deg``: where a dry run starts them."""

@@ -311,7 +311,8 @@ class PowerCubeClient:
         with self._lock:
             self.last_ack_times = [None] * len(requests)
             self._check_open()
-            self._drain_tainted({k for k in keys if k is not None})
+            if self._taints:  # (nothing in quarantine, the usual case: nothing to wait for)
+                self._drain_tainted({k for k in keys if k is not None})
             self._flush_queued()
             self._service_watchdog(self.clock.now())
             pending: dict[AckKey, deque[int]] = {}

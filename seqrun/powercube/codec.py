@@ -43,7 +43,7 @@ import math
 import struct
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, NamedTuple, Protocol, Union
+from typing import Any, NamedTuple, Union
 
 from seqrun.errors import CodecError
 from seqrun.powercube.protocol import (
@@ -119,13 +119,6 @@ class SetParam:
     param: ParamId
     value: float | int
 
-    def in_user_units(self, joint: UserJoint) -> str | None:
-        """``SetExtended MIN_POS (j4) = -120.00°`` for the module's ``joint``; None for a
-        parameter that is not a position or a rate."""
-        param = ParamId(self.param)
-        return _in_user_units(f"SetExtended {param.name} ({joint.name}) = ", joint, self.value,
-                              PARAM_UNITS.get(param))
-
 
 @dataclass(frozen=True, slots=True)
 class SetMotion:
@@ -135,46 +128,6 @@ class SetMotion:
     mode: MotionMode
     value: float | int
     time_ms: int | None = None
-
-    def in_user_units(self, joint: UserJoint) -> str | None:
-        """``SetMotion FRAMP_ACK (j2) 45.00°`` for the module's ``joint``; None for a mode
-        whose value is not a position or a velocity."""
-        mode = MotionMode(self.mode)
-        timing = f" in {self.time_ms} ms" if self.time_ms is not None else ""
-        return _in_user_units(f"SetMotion {mode.name} ({joint.name}) ", joint, self.value,
-                              MODE_UNITS.get(mode), timing)
-
-
-# ---------------------------------------------------------------------- the operator's units
-class UserJoint(Protocol):
-    """What a request needs of its joint to say itself in the operator's units."""
-
-    name: str
-
-    def to_user_deg(self, module_rad: float) -> float: ...
-
-
-#: The unit each angle-valued parameter is written in: a position ("°": module radians,
-#: user = module - offset) or a rate (rad/s, rad/s²: no offset).
-PARAM_UNITS = {ParamId.MIN_POS: "°", ParamId.MAX_POS: "°", ParamId.ACT_POS: "°",
-               ParamId.DEF_MIN_POS: "°", ParamId.DEF_MAX_POS: "°",
-               ParamId.MAX_VEL: "°/s", ParamId.MAX_ACC: "°/s²", ParamId.ACT_VEL: "°/s",
-               ParamId.DEF_MAX_VEL: "°/s", ParamId.DEF_MAX_ACC: "°/s²"}
-#: Likewise for the motion modes: a target position or a velocity.
-MODE_UNITS = {MotionMode.FRAMP: "°", MotionMode.FRAMP_ACK: "°", MotionMode.FSTEP: "°",
-              MotionMode.FSTEP_ACK: "°", MotionMode.FVEL: "°/s", MotionMode.FVEL_ACK: "°/s"}
-
-
-def _in_user_units(prefix: str, joint: UserJoint, value: float | int, unit: str | None,
-                   suffix: str = "") -> str | None:
-    """``prefix`` + a module value in the operator's units + ``suffix``: a position ("°")
-    in user degrees of ``joint``, a rate converted from radians alone; two decimals, never
-    -0.00. None when the value has no such unit."""
-    if unit is None:
-        return None
-    user = joint.to_user_deg(float(value)) if unit == "°" else math.degrees(float(value))
-    text = f"{round(user, 2) + 0.0:.2f}"
-    return f"{prefix}{text}{'°' if unit == '°' else ' ' + unit}{suffix}"
 
 
 @dataclass(frozen=True, slots=True)

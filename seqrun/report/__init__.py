@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from seqrun.arm import ArmDescription
+from seqrun.arm.description import ArmDescription
 from seqrun.report.data import RunData, load_run
 
 HTML_NAME = "report.html"

@@ -10,9 +10,10 @@ monitoring cycle of a wait or checkpoint), full resolution:
 ``<j>_planned_deg``         planned position (empty when nothing was streamed)
 ``<j>_measured_deg``        measured position
 ``<j>_planned_vel_deg_s``   planned velocity (empty when nothing was streamed)
-``<j>_measured_vel_deg_s``  windowed estimate (seqrun/tracking.py; empty for the first
+``<j>_measured_vel_deg_s``  windowed estimate (seqrun/arm/tracking.py; empty for the first
                             samples of the run)
-``<j>_state``               the module's short state (``MOTION|RAMP_END``, ``OK``, ...)
+``<j>_state``               the module's state in its driver's words (``MOTION|RAMP_END``,
+                            ``OK``, ...)
 ``ee_x_mm`` … ``ee_yaw_deg``  end-effector pose by forward kinematics of the measured joints
 ==========================  ================================================================
 
@@ -26,8 +27,7 @@ import csv
 import math
 from pathlib import Path
 
-
-from seqrun.powercube.protocol import ShortState
+from seqrun.drivers.registry import cycle_state
 from seqrun.report.data import RunData
 from seqrun.report.figures import end_effector_pose, move_figures
 
@@ -64,7 +64,7 @@ def _timeseries(data: RunData, path: Path) -> Path:
             for code in s.state[k]:
                 code = int(code)
                 if code not in states:
-                    states[code] = "" if code < 0 else ShortState(code).describe()
+                    states[code] = "" if code < 0 else cycle_state(data.arm, code).describe()
                 row.append(states[code])
             if pose is not None:
                 row += [_f(x, 3) for x in pose[k]]

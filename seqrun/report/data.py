@@ -1,6 +1,6 @@
 """Reading a run folder: the one loader every part of the report goes through.
 
-A run folder (``seqrun/runlog.py``) holds ``report.json`` (summary and per-step results),
+A run folder (``seqrun/service/runlog.py``) holds ``report.json`` (summary and per-step results),
 ``events.jsonl`` (every executor event, one per line) and ``trace.log`` (CAN frames). The
 loader tolerates what a killed or older run leaves: a missing or ``running`` report.json,
 a torn last line in events.jsonl, events without the per-cycle fields of newer versions.
@@ -17,9 +17,9 @@ from typing import Any
 import numpy as np
 from pydantic import ValidationError
 
-from seqrun.arm import ArmDescription
+from seqrun.arm.description import ArmDescription
 from seqrun.errors import UserInputError
-from seqrun.tracking import sample_time, velocity_window, windowed_velocity
+from seqrun.arm.tracking import sample_time, velocity_window, windowed_velocity
 
 #: Event types that carry one reading of the whole arm.
 SAMPLE_EVENTS = ("setpoint", "measurement")
@@ -31,7 +31,7 @@ class Series:
 
     ``planned`` and ``planned_vel`` are NaN where no plan was streamed (waits, checkpoints);
     ``state`` is the short state byte of each module (-1 where the log has none);
-    ``measured_vel`` is the windowed estimate of :mod:`seqrun.tracking`.
+    ``measured_vel`` is the windowed estimate of :mod:`seqrun.arm.tracking`.
     """
 
     t: np.ndarray

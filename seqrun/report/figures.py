@@ -1,7 +1,7 @@
 """What the report computes from a loaded run (pure: arrays in, arrays and dicts out).
 
 The per-move figures are recomputed here with the same definitions the executor uses
-(:mod:`seqrun.tracking`), from the logged samples of the step: they fill in what
+(:mod:`seqrun.arm.tracking`), from the logged samples of the step: they fill in what
 report.json lacks (a move ended by a fault in an older version, a killed run) and let a
 test hold the two against each other.
 """
@@ -12,10 +12,10 @@ from typing import Any
 
 import numpy as np
 
-from seqrun import kinematics
-from seqrun.arm import ArmDescription
+from seqrun.arm import kinematics
+from seqrun.arm.description import ArmDescription
 from seqrun.report.data import RunData, Series, StepView
-from seqrun.tracking import peak_abs, windowed_velocity
+from seqrun.arm.tracking import peak_abs, windowed_velocity
 
 #: Per-joint figures of a move, in the order the report shows them.
 MOVE_FIGURES = ("max_following_error_deg", "final_error_deg", "peak_measured_velocity_deg_s")

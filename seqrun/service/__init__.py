@@ -18,7 +18,7 @@ __all__ = ["API_VERSION", "Activity", "ActivityResult", "ArmSession", "ArmStatus
 
 
 def __getattr__(name: str) -> Any:
-    # Loaded on first use: a run (seqrun.runner) imports seqrun.service.run_control, and
+    # Loaded on first use: a run (seqrun.service.runner) imports seqrun.service.run_control, and
     # with it this package, without needing the session.
     if name in __all__:
         from seqrun.service import session

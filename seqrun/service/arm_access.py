@@ -1,35 +1,34 @@
 """The arm outside a run, for the short commands (``seqrun status``, ``halt``, ``reset``,
-``pose save``, the zero-reference check at a run's start): open the bus with a PowerCube
-client, read the whole arm's status, check Home, broadcast Halt/Reset and confirm it.
+``pose save``, the zero-reference check at a run's start): open the bus and the arm's
+driver, read the whole arm's status, check Home, broadcast Halt/Reset and confirm it.
 
-The faces (cli/, console/) call these and never build PowerCube requests themselves
-(``tests/test_architecture.py`` holds them to it). Everything heavy is imported inside the
-functions: the CLI's start-up stays light.
+The faces (cli/, console/) call these and hold what they return; they never see a
+protocol (``tests/test_architecture.py`` holds them to it). Everything heavy is imported
+inside the functions: the CLI's start-up stays light.
 """
 
 from __future__ import annotations
 
-import math
-from collections.abc import Iterable, Sequence
-from typing import TYPE_CHECKING, Any, cast
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from seqrun.arm import ArmDescription
-    from seqrun.connection import Connection
-    from seqrun.drivers.base import CommandConfirmation, JointState
+    from seqrun.arm.description import ArmDescription
+    from seqrun.drivers.base import ArmDriver, CommandConfirmation
+    from seqrun.service.connection import Connection
 
-__all__ = ["broadcast_and_confirm", "modules_homed", "open_arm", "poll_joints", "read_status"]
+__all__ = ["modules_homed", "open_arm", "read_joints", "read_status", "status_rows"]
 
 
 def open_arm(arm: ArmDescription, *, interface: str | None, channel: str | None,
              bitrate: int | None, bus_kwargs: Sequence[str] = (), sim: bool = False,
              faults: Sequence[str] = (), response_timeout_ms: float | None = None,
-             claim: bool = True, transient: bool = True) -> tuple[Connection, Any]:
-    """Open the bus and a PowerCube client on it: ``(connection, client)``. The bus is
+             claim: bool = True, transient: bool = True) -> tuple[Connection, ArmDriver]:
+    """Open the bus and the arm's driver on it: ``(connection, driver)``. The bus is
     claimed (for a moment with ``transient``): a run's claim refuses it, naming the run."""
-    from seqrun.connection import (open_connection, parse_bus_kwargs, parse_faults,
-                                   response_timeout_s)
-    from seqrun.powercube.client import PowerCubeClient
+    from seqrun.drivers.registry import open_driver
+    from seqrun.service.connection import (open_connection, parse_bus_kwargs, parse_faults,
+                                           response_timeout_s)
 
     timeout = response_timeout_s(arm, response_timeout_ms)  # (checked before connecting)
     connection = open_connection(interface=interface, channel=channel, bitrate=bitrate,
@@ -37,11 +36,31 @@ def open_arm(arm: ArmDescription, *, interface: str | None, channel: str | None,
                                  faults=parse_faults(list(faults)),
                                  default_bitrate=arm.can.bitrate, claim=claim,
                                  transient=transient)
-    client = PowerCubeClient(connection.bus, connection.clock, response_timeout=timeout)
-    return connection, client
+    return connection, open_driver(arm, connection, response_timeout_s=timeout)
 
 
-def read_status(client, arm, previous: dict | None = None, *,
+def status_rows(arm: ArmDescription, poll, previous: dict | None = None) -> list[dict]:
+    """A driver's poll as the rows ``seqrun status`` prints (user degrees, rounded); a
+    joint without an answer keeps the row of ``previous`` (the last refresh), marked
+    ``"stale": true``, or has None values."""
+    before = {j["joint"]: j for j in (previous or {}).get("joints", [])}
+    rows = []
+    for k, joint in enumerate(arm.joints):
+        state = poll.states[joint.module]
+        if state is None:
+            old = before.get(joint.name)
+            rows.append({**(old or {"joint": joint.name, "module": joint.module,
+                                    "position_deg": None, "velocity_deg_s": None,
+                                    "state": None, "fault": False}), "stale": True})
+            continue
+        rows.append({"joint": joint.name, "module": joint.module,
+                     "position_deg": round(poll.positions_deg[k], 4),
+                     "velocity_deg_s": round(poll.velocities_deg_s[k], 4),
+                     "state": state.text, "fault": state.faulted, "stale": False})
+    return rows
+
+
+def read_status(driver: ArmDriver, arm: ArmDescription, previous: dict | None = None, *,
                 tolerate_loss: bool = False) -> dict:
     """Joints (user degrees), velocities, state words and the end-effector pose.
 
@@ -49,95 +68,41 @@ def read_status(client, arm, previous: dict | None = None, *,
     joint keeps the values of ``previous`` (the last refresh) marked ``"stale": true``,
     or None when there is no previous value.
     """
-    import numpy as np
+    from seqrun.service.kinematics import end_effector
 
-    from seqrun.kinematics import Chain, fk, rpy_from_matrix
-    from seqrun.powercube.codec import GetParam
-    from seqrun.powercube.protocol import ParamId, StateFlag
-
-    requests = [GetParam(j.module, p) for j in arm.joints
-                for p in (ParamId.ACT_POS, ParamId.ACT_VEL, ParamId.CUBE_STATE)]
-    acks = (client.transact_partial(requests) if tolerate_loss
-            else client.transact(requests))
-    before = {j["joint"]: j for j in (previous or {}).get("joints", [])}
-    joints = []
-    for k, joint in enumerate(arm.joints):
-        answers = acks[3 * k:3 * k + 3]
-        if any(a is None for a in answers):
-            old = before.get(joint.name)
-            joints.append({**(old or {"joint": joint.name, "module": joint.module,
-                                      "position_deg": None, "velocity_deg_s": None,
-                                      "state": None, "fault": False}), "stale": True})
-            continue
-        pos, vel, state = (a.value for a in answers)
-        joints.append({"joint": joint.name, "module": joint.module,
-                       "position_deg": round(joint.to_user_deg(float(pos)), 4),
-                       "velocity_deg_s": round(math.degrees(float(vel)), 4),
-                       "state": StateFlag(state).describe(),
-                       "fault": bool(StateFlag(state) & StateFlag.FAULTS),
-                       "stale": False})
+    joints = status_rows(arm, driver.poll(tolerate_loss=tolerate_loss), previous)
     if any(j["position_deg"] is None for j in joints):
         return {"joints": joints, "end_effector": None}
-    q = np.radians([j["position_deg"] for j in joints])
-    T = fk(Chain.from_arm(arm), q)
     return {"joints": joints,
-            "end_effector": {"position_mm": [round(float(x), 3) for x in T[:3, 3]],
-                             "rpy_deg": [round(float(x), 3)
-                                         for x in np.degrees(rpy_from_matrix(T[:3, :3]))]}}
+            "end_effector": end_effector(arm, [j["position_deg"] for j in joints])}
 
 
-def poll_joints(client, arm) -> tuple[list[float], list[float], dict[int, JointState]]:
-    """One pipelined read of ActPos, ActVel and CubeState of every module: positions (user
-    degrees), velocities (deg/s) and each module's decoded state, by module id. Raises
-    :class:`~seqrun.errors.BusError` naming the modules that did not answer."""
-    from seqrun.drivers.powercube import joint_state
+def read_joints(driver: ArmDriver) -> tuple[list[float], list[float], dict[int, Any]]:
+    """One reading of every joint: positions (user degrees), velocities (deg/s) and each
+    module's decoded state, by module id. Raises :class:`~seqrun.errors.BusError` naming
+    the modules that did not answer."""
     from seqrun.errors import BusError
-    from seqrun.powercube.codec import GetParam
-    from seqrun.powercube.protocol import ParamId
 
-    requests = [GetParam(j.module, p) for j in arm.joints
-                for p in (ParamId.ACT_POS, ParamId.ACT_VEL, ParamId.CUBE_STATE)]
-    acks = client.transact_partial(requests)
-    if any(a is None for a in acks):
-        missing = sorted({r.module for r, a in zip(requests, acks) if a is None})
-        raise BusError(f"no answer from module(s) {', '.join(map(str, missing))}")
-    joints, velocities, states = [], [], {}
-    for k, joint in enumerate(arm.joints):
-        pos, vel, state = (a.value for a in acks[3 * k:3 * k + 3])
-        joints.append(round(joint.to_user_deg(float(pos)), 4) + 0.0)
-        velocities.append(round(math.degrees(float(vel)), 4) + 0.0)
-        states[joint.module] = joint_state(int(state))
-    return joints, velocities, states
+    poll = driver.poll(tolerate_loss=True)
+    if not poll.complete:
+        raise BusError(f"no answer from module(s) {', '.join(map(str, poll.missing()))}")
+    joints = [round(x, 4) + 0.0 for x in poll.positions_deg if x is not None]  # (no -0.0)
+    velocities = [round(v, 4) + 0.0 for v in poll.velocities_deg_s if v is not None]
+    return joints, velocities, dict(poll.states)
 
 
-def modules_homed(connection, arm) -> bool:
-    """True when every module reports HOME_OK (no power-on since the last start-up)."""
-    from seqrun.errors import ModuleTimeoutError
-    from seqrun.powercube.client import PowerCubeClient
-    from seqrun.powercube.codec import GetParam, GetParamAck
-    from seqrun.powercube.protocol import ParamId, StateFlag
+def modules_homed(connection: Connection, arm: ArmDescription) -> bool:
+    """True when every module reports homed (no power-on since the last start-up)."""
+    from seqrun.drivers.registry import open_driver
 
-    client = PowerCubeClient(connection.bus, connection.clock,
-                             response_timeout=arm.can.response_timeout_s)
+    driver = open_driver(arm, connection)
     try:
-        for attempt in range(3):  # a read is idempotent: a lost answer is asked again
-            try:
-                acks = client.transact([GetParam(m, ParamId.CUBE_STATE)
-                                        for m in arm.module_ids])
-                break
-            except ModuleTimeoutError:
-                if attempt == 2:
-                    raise
+        return driver.homed()
     finally:
-        client.close()
-    return all(StateFlag(cast(GetParamAck, a).value) & StateFlag.HOME_OK for a in acks)
+        driver.close()
 
 
-def broadcast_and_confirm(client: Any, what: str, modules: Iterable[int]
-                          ) -> CommandConfirmation:
-    """Broadcast ``what`` ("halt" or "reset") and confirm it on every module of
-    ``modules`` by reading their states back (:func:`seqrun.armcontrol.command_and_confirm`)."""
-    from seqrun.armcontrol import command_and_confirm
-    from seqrun.powercube.protocol import CommandId
-
-    return command_and_confirm(client, CommandId[what.upper()], modules)
+def broadcast_and_confirm(driver: ArmDriver, what: str) -> CommandConfirmation:
+    """Broadcast ``what`` ("halt" or "reset") and confirm it on every module by reading
+    their states back."""
+    return driver.confirm(what)  # type: ignore[arg-type]

@@ -18,7 +18,7 @@ from typing import Callable
 
 import numpy as np
 
-from seqrun import kinematics
+from seqrun.arm import kinematics
 from seqrun.errors import Refused
 
 #: Margin (deg) a jog keeps to the joint's limits: it is refused closer than this.
@@ -172,8 +172,7 @@ def run_jog(executor, plan: JogPlan, deadman: Deadman) -> tuple[str, int, str]:
     message). Any fault -> Halt (the executor's emergency Halt), exit 3."""
     from seqrun.defaults import EXIT_FAULT, EXIT_OK
     from seqrun.results import OperatorAbort, fault_cause, halt_fields
-    from seqrun.planner import Limits
-    from seqrun.usermessages import user_message
+    from seqrun.arm.planner import Limits
 
     arm = executor.arm
     hook = deadman.arm(executor.abort)
@@ -192,7 +191,8 @@ def run_jog(executor, plan: JogPlan, deadman: Deadman) -> tuple[str, int, str]:
                       end_deg=round(plan.end_deg, 3), end_reason=plan.why_end)
         try:
             executor.move(target, [plan.index], limits,
-                          tolerance_deg=arm.control.position_tolerance_deg, timeout_s=None)
+                          tolerance_deg=arm.control.position_tolerance_deg, timeout_s=None,
+                          start=m)
             message = f"jog {plan.joint}: stopped at the end of its range ({plan.why_end})"
         except OperatorAbort:  # the deadman or jog_stop: the arm holds after the stop
             message = f"jog {plan.joint}: {deadman.reason or 'stopped'}; controlled stop"
@@ -203,7 +203,7 @@ def run_jog(executor, plan: JogPlan, deadman: Deadman) -> tuple[str, int, str]:
     except Exception as exc:  # noqa: BLE001 - every failure, even a bug, halts
         executor.emergency_halt()
         cause, module = fault_cause(exc)
-        message = user_message(exc, arm)
+        message = executor.describe_error(exc)
         if cause == "operator_halt":
             return "aborted", 130, f"jog {plan.joint}: {message}"
         executor.emit("fault", cause=cause, module=module, message=message, step=None,

@@ -7,7 +7,7 @@ writer, inherit it, as under ``seqrun run --rt-priority``). Every other thread o
 runs at ``SCHED_RR`` priority 1 (:func:`use_round_robin`): below the loop, above every
 normal process. That matters because the loop needs Python's interpreter lock (GIL) several
 times a cycle: a web-server thread holding it must not be kept off the CPU by a busy
-browser while the loop waits (priority inversion; measured in bench/README.md).
+browser while the loop waits (priority inversion; seen with bench/bench_console.py).
 """
 
 from __future__ import annotations
@@ -22,9 +22,9 @@ from seqrun import frozen_objects
 #: The priority of the process's other threads (the lowest real-time one).
 BASE_PRIORITY = 1
 #: How long a thread may keep the interpreter lock while another waits for it, under
-#: real-time scheduling. Python's default, 5 ms, let a web-server thread keep the woken loop
-#: waiting for up to half a cycle: three console tabs added 1.4 ms to the loop's p99 period
-#: at 5 ms and 0.4 ms at 1 ms (idle host, bench/README.md).
+#: real-time scheduling. Python's default, 5 ms, lets a web-server thread keep the woken
+#: loop waiting for up to half a cycle (the console's tabs then showed in the loop's p99
+#: period).
 SWITCH_INTERVAL_S = 0.001
 
 
@@ -66,8 +66,8 @@ def keep_long_lived_objects_out_of_collections() -> int:
     live as long as the process) out of the cyclic garbage collector's view, and return how
     many. A full collection scans every tracked object while holding the interpreter lock,
     in whichever thread allocates, the loop's included: in the console with three pages
-    open that stalled the loop for 120-185 ms about once per opsafe run, and not once in
-    the runs after this (idle host, bench/README.md)."""
+    open that stalled the loop for many cycles now and then, and not once in the runs
+    after this."""
     gc.collect()
     frozen_objects.keep()
     return gc.get_freeze_count()

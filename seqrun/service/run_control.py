@@ -15,7 +15,6 @@ import time
 from collections import deque
 from typing import Any
 
-from seqrun.service.foreign_frames import ForeignFrame, ForeignFrameWatch
 from seqrun.stop_requests import FOREIGN_MASTER, REMOTE_HALT, StopRequests
 
 #: How long a ``halt`` request waits for the run's own Halt confirmation before this
@@ -84,25 +83,26 @@ class RunControl:
     def status_dict(self) -> dict:
         """What ``seqrun status`` prints, from the run's last reading (the same shape as a
         reading of the bus: joints, end effector), plus the run's activity."""
-        from seqrun.powercube.protocol import ShortState
+        from seqrun.drivers.registry import cycle_state
+        from seqrun.service.kinematics import end_effector
 
         readings = list(self._readings)
         joints_out = []
         last = readings[-1][1] if readings else None
         velocity = _velocities(readings)
         for k, joint in enumerate(self.arm.joints):
-            short = ShortState(self._states[k]) if k < len(self._states) else None
+            short = cycle_state(self.arm, self._states[k]) if k < len(self._states) else None
             word = self._words.get(str(joint.module))
             joints_out.append({
                 "joint": joint.name, "module": joint.module,
                 "position_deg": None if last is None else round(float(last[k]), 4),
                 "velocity_deg_s": None if velocity is None else round(velocity[k], 4),
                 "state": word or (short.describe() if short is not None else None),
-                "fault": bool(short is not None and short & ShortState.NOT_OK),
+                "fault": bool(short is not None and short.refuses_motion),
                 "stale": last is None})
         status: dict[str, Any] = {"joints": joints_out, "end_effector": None}
         if last is not None:
-            status["end_effector"] = _end_effector(self.arm, last)
+            status["end_effector"] = end_effector(self.arm, last)
         status["activity"] = ("finished" if self.finished.is_set() else
                               "starting" if self.executor is None else "running")
         status["step"] = self._step
@@ -158,26 +158,13 @@ def _velocities(readings: list[tuple[float, list[float]]]) -> list[float] | None
     return [(b - a) / (t1 - t0) for a, b in zip(q0, q1)]
 
 
-def _end_effector(arm, joints_deg: list[float]) -> dict:
-    import numpy as np
-
-    from seqrun.kinematics import Chain, fk, rpy_from_matrix
-
-    T = fk(Chain.from_arm(arm), np.radians(joints_deg))
-    return {"position_mm": [round(float(x), 3) for x in T[:3, 3]],
-            "rpy_deg": [round(float(x), 3) for x in np.degrees(rpy_from_matrix(T[:3, :3]))]}
-
-
-def halt_on_foreign_frames(executor, client, *, echoes_own: bool = False
-                           ) -> ForeignFrameWatch:
-    """A request frame ``client`` (the run's PowerCube client) received that this process
-    did not send ends the run: Halt, exit 3 ("another controller is on the bus (frame
-    ...)"; a Halt broadcast is named as one). The request is posted like a signal's
-    (lock-free); the loop acts on it within a cycle."""
-    def on_foreign(frame: ForeignFrame) -> None:
+def halt_on_foreign_frames(executor, driver) -> None:
+    """A request the run's driver sees on the bus that this process did not send ends the
+    run: Halt, exit 3 ("another controller is on the bus (frame ...)"; a Halt broadcast is
+    named as one). The request is posted like a signal's (lock-free); the loop acts on it
+    within a cycle."""
+    def on_foreign(frame) -> None:
         executor.halt(frame.message(), cause=REMOTE_HALT if frame.is_halt else FOREIGN_MASTER)
 
-    watch = ForeignFrameWatch(on_foreign, echoes_own=echoes_own)
-    client.add_frame_listener(watch)
-    return watch
+    driver.watch_foreign(on_foreign)
 

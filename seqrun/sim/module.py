@@ -114,6 +114,9 @@ _SYNC_MOTION = int(ConfigFlag.SYNC_MOTION)
 #: Position tolerance (rad) below which a limit counts as reached, not crossed; targets are
 #: clamped exactly onto limits, so rounding must not turn "stopped at MinPos" into a fault.
 _LIMIT_EPS = 1e-9
+#: How far (rad) inside its limits a whole motion profile must stay for the soft-limit
+#: search to be skipped: a million times the rounding of a position of a few radians.
+_CLEAR = 1e-9
 
 
 @dataclass(frozen=True)
@@ -279,6 +282,11 @@ class _Profile:
     segments: list[_Segment]
     target: float | None
     end: float = field(init=False)
+    #: (t, sample(t)) of the last call: a motion command samples the profile at the same
+    #: instant several times (position and state at receipt, refusal check, re-plan).
+    _last_sample: tuple | None = field(default=None, init=False, repr=False, compare=False)
+    #: Lowest and highest position of the whole profile, once asked (see span()).
+    _span: tuple | None = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         last = self.segments[-1]
@@ -286,6 +294,9 @@ class _Profile:
 
     def sample(self, t: float) -> tuple[float, float, _Segment]:
         """Position and velocity at ``t`` (t0 <= t <= end)."""
+        last = self._last_sample
+        if last is not None and last[0] == t:
+            return last[1]
         tau = t - self.t0
         segment = self.segments[0]
         for candidate in self.segments:
@@ -295,9 +306,35 @@ class _Profile:
                 break
         d = min(max(tau - segment.t_start, 0.0), segment.duration)
         if self.target is not None and t >= self.end:
-            return self.target, 0.0, segment
-        position = segment.p + segment.v * d + 0.5 * segment.a * d * d
-        return position, segment.v + segment.a * d, segment
+            result = self.target, 0.0, segment
+        else:
+            position = segment.p + segment.v * d + 0.5 * segment.a * d * d
+            result = position, segment.v + segment.a * d, segment
+        self._last_sample = (t, result)
+        return result
+
+    def span(self) -> tuple[float, float] | None:
+        """(lowest, highest) position anywhere on the profile, from its segments' ends and
+        turning points; None when it has no bound (a velocity-mode cruise)."""
+        span = self._span
+        if span is None:
+            positions = []
+            for segment in self.segments:
+                duration, p, v, a = segment.duration, segment.p, segment.v, segment.a
+                if not math.isfinite(duration):
+                    if v != 0 or a != 0:
+                        self._span = (None,)
+                        return None
+                    duration = 0.0
+                positions.append(p)
+                positions.append(p + v * duration + 0.5 * a * duration * duration)
+                if a != 0 and 0.0 < -v / a < duration:
+                    turn = -v / a
+                    positions.append(p + v * turn + 0.5 * a * turn * turn)
+            if self.target is not None:
+                positions.append(self.target)
+            span = self._span = (min(positions), max(positions))
+        return None if span[0] is None else span
 
 
 def _build_profile(kind: str, t0: float, p0: float, v0: float,
@@ -525,6 +562,14 @@ class SimModule:
 
     def _limit_exit(self, profile: _Profile, until: float) -> tuple[float, float] | None:
         lo, hi = self._params[_P_MIN_POS], self._params[_P_MAX_POS]
+        # A profile that stays clear inside the limits everywhere crosses none (the
+        # common case, looked at on every frame while a module moves): the search below
+        # would find no root and nothing beyond, since its positions are the profile's
+        # ones up to rounding, far less than the clearance asked for here.
+        span = profile.span()
+        if span is not None and lo - _LIMIT_EPS + _CLEAR < span[0] and (
+                span[1] < hi + _LIMIT_EPS - _CLEAR):
+            return None
         tau_now, tau_end = self._t - profile.t0, until - profile.t0
         for segment in profile.segments:
             seg_end = segment.t_start + segment.duration

@@ -1,6 +1,6 @@
 """SimNetwork: the shared CAN wire between host endpoints and the simulated arm.
 
-Every frame occupies the bus for its exact wire time (:mod:`seqrun.can_timing`: stuff
+Every frame occupies the bus for its exact wire time (:mod:`seqrun.powercube.can_timing`: stuff
 bits, CRC, EOF and intermission at the configured bitrate); frames go out one at a time.
 When the bus becomes free, the frames that are ready compete and the lowest identifier
 wins, as in CAN arbitration (standard before extended with the same base id); each node
@@ -32,7 +32,7 @@ import time
 from collections import deque
 from typing import NamedTuple
 
-from seqrun.can_timing import INTERMISSION_BITS, frame_bit_length
+from seqrun.powercube.can_timing import INTERMISSION_BITS, frame_bit_length
 from seqrun.clock import Clock
 from seqrun.errors import BusError
 from seqrun.powercube.protocol import ACK_BASE
@@ -77,8 +77,8 @@ class WireFrame(NamedTuple):
 @functools.lru_cache(maxsize=4096)
 def _bit_length(can_id: int, data: bytes, extended: bool, remote: bool,
                 dlc: int | None) -> int:
-    # Cached: computing stuffing and CRC bit by bit costs ~20 µs of Python, and a bus
-    # mostly carries the same requests and acks over and over.
+    # Cached: computing stuffing and CRC bit by bit is slow in Python, and a bus mostly
+    # carries the same requests and acks over and over.
     return frame_bit_length(can_id, data, extended=extended, remote=remote, dlc=dlc)
 
 
@@ -193,8 +193,8 @@ class SimNetwork:
             raise ValueError(f"bitrate must be positive, got {bitrate}")
         self.clock = clock
         #: Real time only: the last ``spin_window`` seconds before a wire event a receiver
-        #: busy-waits (yielding the GIL) instead of sleeping, because a sleeping thread
-        #: wakes 50-100 µs late — as long as a whole request frame. 0 never spins.
+        #: busy-waits (yielding the GIL) instead of sleeping, because a sleeping thread can
+        #: wake as late as a whole request frame lasts. 0 never spins.
         self.spin_window = spin_window
         self.arm = arm
         self.bitrate = int(bitrate)
@@ -410,7 +410,10 @@ class SimNetwork:
         queue = node.queue
         if not queue:
             self._active.append(node)
-        key = _arbitration_key(frame) << _SEQ_BITS | next(self._seq)
+        # (_arbitration_key of a standard data frame, every module's and nearly every
+        # host's, without the call)
+        key = ((frame.can_id << 21 if not (frame.is_extended or frame.is_remote)
+                else _arbitration_key(frame)) << _SEQ_BITS | next(self._seq))
         queue.append(_new_tuple(_Pending, (frame, ready_at, key, *durations)))
 
     def _notify_all(self) -> None:

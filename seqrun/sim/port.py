@@ -254,9 +254,10 @@ class SimPort:
         frame = self._receive(self.endpoint, deadline)  # Endpoint.receive, one call less
         if frame is None:
             return None
-        return SimMessage(frame.timestamp, frame.can_id, frame.is_extended, frame.is_remote,
-                          False, self.channel, frame.length, frame.data, False,
-                          frame.sender != self.endpoint.name)
+        can_id, data, extended, remote, dlc, timestamp, sender = frame
+        return SimMessage(timestamp, can_id, extended, remote, False, self.channel,
+                          dlc if remote and dlc is not None else len(data), data, False,
+                          sender != self.endpoint.name)
 
     def send(self, msg: Any, timeout: float | None = None) -> None:
         """Queue ``msg`` for the simulated wire (errors as :meth:`wire_frame` and

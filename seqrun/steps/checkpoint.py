@@ -14,9 +14,13 @@ from seqrun.steps.kind import StepKind
 from seqrun.steps.params import PoseName, Positive, StepParams, Vector3, one_key_value
 
 if TYPE_CHECKING:
-    from seqrun.loader import ResolvedStep
+    import numpy as np
+
+    from seqrun.arm.description import ArmDescription
+    from seqrun.arm.poses import PoseSource
+    from seqrun.steps.check_context import CheckContext
     from seqrun.steps.context import StepContext
-    from seqrun.validation import Checker
+    from seqrun.steps.resolved import ResolvedStep
 
 
 class CheckpointParams(StepParams):
@@ -96,17 +100,41 @@ def poses(params: CheckpointParams) -> tuple[str, ...]:
     return (params.pose,) if params.pose is not None else ()
 
 
+def resolve_checkpoint(params: CheckpointParams, arm: ArmDescription, poses: PoseSource
+                       ) -> tuple[np.ndarray, np.ndarray, float, float]:
+    """Expected end-effector of a checkpoint: ``(position_mm (3,), rotation (3, 3),
+    position_tolerance_mm, angle_tolerance_deg)``. ``poses``: the sequence's frozen poses
+    (a run uses only these) or a pose folder."""
+    import numpy as np
+
+    from seqrun.arm.kinematics import matrix_from_rpy, pose_from_user_deg
+    from seqrun.arm.poses import pose_joints_deg
+
+    if params.pose is not None:
+        joints = pose_joints_deg(params.pose, poses)
+        joints = {j.name: (j.locked if j.locked is not None else joints.get(j.name, 0.0))
+                  for j in arm.joints}
+        pose = pose_from_user_deg(arm, joints)
+        position, rotation = pose.position_mm, pose.rotation
+    else:
+        assert params.position_mm is not None and params.rpy_deg is not None
+        position = np.asarray(params.position_mm, dtype=float)
+        rotation = matrix_from_rpy(np.radians(params.rpy_deg))
+    return (np.array(position, dtype=float), np.array(rotation, dtype=float),
+            float(params.position_tolerance_mm), float(params.angle_tolerance_deg))
+
+
 # --------------------------------------------------------------------------- static checks
-def check(checker: Checker, step: ResolvedStep[CheckpointParams], params: CheckpointParams) -> None:
+def check(checker: CheckContext,
+          step: ResolvedStep[CheckpointParams], params: CheckpointParams) -> None:
     if params.moved_mm is not None:
         _relative_checkpoint(checker, step, params)
         return
     import numpy as np
 
     from seqrun.errors import SequenceInvalid, UserInputError
-    from seqrun.kinematics import orientation_error, pose_from_user_deg
-    from seqrun.targets import resolve_checkpoint
-    from seqrun.validation import format_number as f
+    from seqrun.arm.kinematics import orientation_error, pose_from_user_deg
+    from seqrun.formatting import format_number as f
 
     checker.after_halt(step, "checkpoint")
     if params.pose is not None and checker.pose(step, params.pose, target=False) is None:
@@ -133,14 +161,14 @@ def check(checker: Checker, step: ResolvedStep[CheckpointParams], params: Checkp
             f"expected pose (tolerances {f(pos_tol)} mm, {f(ang_tol)}°)"))
 
 
-def _relative_checkpoint(checker: Checker, step: ResolvedStep[CheckpointParams],
+def _relative_checkpoint(checker: CheckContext, step: ResolvedStep[CheckpointParams],
                          params: CheckpointParams) -> None:
     """'The tool moved 50 mm along z': the tracked tool pose now against where the last
     move started."""
     import numpy as np
 
-    from seqrun.cartesian import displacement, tool_pose
-    from seqrun.validation import format_number as f
+    from seqrun.arm.cartesian import displacement, tool_pose
+    from seqrun.formatting import format_number as f
 
     assert params.moved_mm is not None  # (check() comes here only for a moved_mm checkpoint)
     if checker.motion_start_deg is None:
@@ -166,9 +194,8 @@ def _relative_checkpoint(checker: Checker, step: ResolvedStep[CheckpointParams],
 def run(step: ResolvedStep[CheckpointParams], ex: StepContext) -> dict:
     import numpy as np
 
-    from seqrun import kinematics
-    from seqrun.targets import resolve_checkpoint
-    from seqrun.validation import format_number
+    from seqrun.arm import kinematics
+    from seqrun.formatting import format_number
 
     if step.params.moved_mm is not None:
         return _relative(step, ex)
@@ -201,7 +228,7 @@ def _relative(step: ResolvedStep[CheckpointParams], ex: StepContext) -> dict:
     """'The tool moved [x, y, z] mm' since the last move started (measured joints)."""
     import numpy as np
 
-    from seqrun.cartesian import displacement, solver_for, tool_pose
+    from seqrun.arm.cartesian import displacement, solver_for, tool_pose
 
     params = step.params
     assert params.moved_mm is not None  # (run() comes here only for a moved_mm checkpoint)

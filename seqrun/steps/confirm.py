@@ -11,9 +11,9 @@ from seqrun.steps.kind import StepKind
 from seqrun.steps.params import StepParams, one_key_value
 
 if TYPE_CHECKING:
-    from seqrun.loader import ResolvedStep
+    from seqrun.steps.check_context import CheckContext
     from seqrun.steps.context import StepContext
-    from seqrun.validation import Checker
+    from seqrun.steps.resolved import ResolvedStep
 
 
 class ConfirmParams(StepParams):
@@ -33,7 +33,7 @@ def describe(params: ConfirmParams) -> str:
     return f"confirm: {params.prompt}"
 
 
-def check(checker: Checker, step: ResolvedStep[ConfirmParams], params: ConfirmParams) -> None:
+def check(checker: CheckContext, step: ResolvedStep[ConfirmParams], params: ConfirmParams) -> None:
     """Nothing to check against the arm: the question is asked at run time."""
 
 

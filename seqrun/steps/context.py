@@ -15,11 +15,11 @@ from typing import TYPE_CHECKING, Any, Protocol
 if TYPE_CHECKING:
     import numpy as np
 
-    from seqrun.arm import ArmDescription
+    from seqrun.arm.description import ArmDescription
     from seqrun.drivers.base import JointState, LimitValues
-    from seqrun.kinematics import Chain
-    from seqrun.limits import LimitsInForce
-    from seqrun.planner import Limits
+    from seqrun.arm.kinematics import Chain
+    from seqrun.arm.limits import LimitsInForce
+    from seqrun.arm.planner import Limits
 
 __all__ = ["JointReading", "StepContext"]
 
@@ -76,12 +76,16 @@ class StepContext(Protocol):
     def confirm_clearing_latched(self, modules: list[int] | None) -> None: ...
 
     # -- motion
+    # ``start``: the reading the target was found from (read_arm); the move plans from it
+    # instead of reading the arm again.
     def move(self, target_deg: np.ndarray, active: list[int], limits: Limits, *,
-             tolerance_deg: float, timeout_s: float | None) -> dict[str, Any]: ...
+             tolerance_deg: float, timeout_s: float | None,
+             start: JointReading | None = None) -> dict[str, Any]: ...
 
     def follow(self, plan: Any, *, tolerance_deg: float, timeout_s: float | None,
                path_check: Callable[[Any], None] | None = None,
-               command_mode: str | None = None) -> dict[str, Any]: ...
+               command_mode: str | None = None,
+               start: JointReading | None = None) -> dict[str, Any]: ...
 
     def wait(self, seconds: float) -> None: ...
 

@@ -9,9 +9,9 @@ from seqrun.steps.kind import StepKind
 from seqrun.steps.params import ModulesParams, modules_value
 
 if TYPE_CHECKING:
-    from seqrun.loader import ResolvedStep
+    from seqrun.steps.check_context import CheckContext
     from seqrun.steps.context import StepContext
-    from seqrun.validation import Checker
+    from seqrun.steps.resolved import ResolvedStep
 
 
 class HaltParams(ModulesParams):
@@ -25,7 +25,7 @@ def describe(params: HaltParams) -> str:
     return f"halt {addressed_text(params)}"
 
 
-def check(checker: Checker, step: ResolvedStep[HaltParams], params: HaltParams) -> None:
+def check(checker: CheckContext, step: ResolvedStep[HaltParams], params: HaltParams) -> None:
     for state in checker.modules(step, params.joints):
         state.halted = True
 

@@ -9,9 +9,9 @@ from seqrun.steps.kind import StepKind
 from seqrun.steps.params import ModulesParams, modules_value
 
 if TYPE_CHECKING:
-    from seqrun.loader import ResolvedStep
+    from seqrun.steps.check_context import CheckContext
     from seqrun.steps.context import StepContext
-    from seqrun.validation import Checker
+    from seqrun.steps.resolved import ResolvedStep
 
 #: PRL modules home without moving; this bounds the wait for HOME_OK.
 HOME_TIMEOUT_S = 5.0
@@ -29,7 +29,7 @@ def describe(params: HomeParams) -> str:
     return f"home {addressed_text(params)}"
 
 
-def check(checker: Checker, step: ResolvedStep[HomeParams], params: HomeParams) -> None:
+def check(checker: CheckContext, step: ResolvedStep[HomeParams], params: HomeParams) -> None:
     targets = checker.modules(step, params.joints)
     not_reset = [s.joint.name for s in targets if not s.reset and not s.locked]
     if not_reset and not checker.incomplete:

@@ -5,12 +5,16 @@ Each module ``seqrun/steps/<kind>.py`` ends with ``KIND = StepKind(...)`` and
 
 - ``params``, ``value``, ``shorthand``, ``bare``, ``example``: :mod:`seqrun.schema` (the
   sequence file's union, the JSON Schema, the format reference, the error for a bare word);
-- ``poses``: :mod:`seqrun.loader` (the pose files read and frozen with the sequence);
-- ``describe``: the step's title for the operator when it has no label;
-- ``check``: :mod:`seqrun.validation` (the static checks against the arm and the steps
-  before, with :class:`seqrun.validation.Checker` tracking the modules and the joints);
-- ``run``: the executor (``seqrun.steps.HANDLERS``), through
+- ``poses``, ``describe``: the loader (the pose files read and frozen with the sequence; the
+  step's title for the operator when it has no label);
+- ``check``: the static validation (the checks against the arm and the steps before),
+  through :class:`~seqrun.steps.check_context.CheckContext`;
+- ``run``: the executor (``seqrun.steps.registry.HANDLERS``), through
   :class:`~seqrun.steps.context.StepContext`.
+
+Both contexts are protocols of this layer: a kind imports neither the validator nor the
+executor, and what it receives (:class:`~seqrun.steps.resolved.ResolvedStep`) is this
+layer's data too.
 """
 
 from __future__ import annotations
@@ -20,10 +24,10 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from seqrun.loader import ResolvedStep
+    from seqrun.steps.check_context import CheckContext
     from seqrun.steps.context import StepContext
     from seqrun.steps.params import StepParams
-    from seqrun.validation import Checker
+    from seqrun.steps.resolved import ResolvedStep
 
 __all__ = ["StepKind", "no_poses"]
 
@@ -47,7 +51,7 @@ class StepKind:
     describe: Callable[[Any], str]
     #: Static checks: ``check(checker, step, params)`` appends errors/notes to the checker
     #: and tracks what the step does to the modules and joints.
-    check: Callable[[Checker, ResolvedStep, Any], None]
+    check: Callable[[CheckContext, ResolvedStep, Any], None]
     #: The handler: ``run(step, context) -> detail`` (into the step's report entry).
     run: Callable[[ResolvedStep, StepContext], dict | None]
     #: The shorthand forms for the docs, e.g. " Shorthand: 'move: totem' (a pose name)."

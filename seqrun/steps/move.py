@@ -1,11 +1,13 @@
 """move: one synchronized ruckig motion to a pose, to joint angles or to a tool pose.
 
 A tool pose (``position_mm``) is solved by inverse kinematics: at validation from the
-tracked joints, at run time again from the measured ones (:mod:`seqrun.steps.move_tool`).
+tracked joints, at run time again from the measured ones (:mod:`seqrun.steps.move_tool`
+holds what ``move`` and ``move_linear`` share of that).
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any, ClassVar, Literal
 
 from pydantic import ConfigDict, Field, model_validator
@@ -26,9 +28,11 @@ from seqrun.steps.params import (
 )
 
 if TYPE_CHECKING:
-    from seqrun.loader import ResolvedStep
+    from seqrun.arm.description import ArmDescription
+    from seqrun.arm.poses import PoseSource
+    from seqrun.steps.check_context import CheckContext
     from seqrun.steps.context import StepContext
-    from seqrun.validation import Checker
+    from seqrun.steps.resolved import ResolvedStep
 
 
 class MoveParams(StepParams):
@@ -112,15 +116,50 @@ def poses(params: MoveParams) -> tuple[str, ...]:
     return (params.pose,) if params.pose is not None else ()
 
 
+def resolve_move_target(params: MoveParams, current_deg: Mapping[str, float],
+                        arm: ArmDescription, poses: PoseSource) -> dict[str, float]:
+    """Target of a move for every joint of the arm (user degrees, arm order).
+
+    Joints the move does not name keep their ``current_deg`` value; ``relative`` values are
+    added to it; locked joints are always at their locked value. ``poses``: the sequence's
+    frozen poses (a run uses only these) or a pose folder. Raises :class:`UserInputError`
+    for an unknown pose or joint.
+    """
+    from seqrun.arm.poses import pose_joints_deg
+    from seqrun.errors import UserInputError
+
+    target: dict[str, float] = {}
+    for joint in arm.joints:
+        if joint.locked is not None:
+            target[joint.name] = float(joint.locked)
+        elif joint.name in current_deg:
+            target[joint.name] = float(current_deg[joint.name])
+        else:
+            raise UserInputError(f"no current position for joint {joint.name}")
+    if params.pose is not None:
+        given = pose_joints_deg(params.pose, poses)
+        relative = False
+    else:
+        given, relative = dict(params.joints or {}), params.relative
+    for name, value in given.items():
+        if name not in target:
+            raise UserInputError(f"unknown joint '{name}' (the arm has "
+                                 f"{', '.join(arm.joint_names)})")
+        if arm.joint(name).locked is not None:
+            continue
+        target[name] = target[name] + value if relative else float(value)
+    return target
+
+
 # --------------------------------------------------------------------------- static checks
-def check(checker: Checker, step: ResolvedStep[MoveParams], params: MoveParams) -> None:
-    from seqrun.validation import format_number as f, format_range
+def check(checker: CheckContext, step: ResolvedStep[MoveParams], params: MoveParams) -> None:
+    from seqrun.formatting import format_number as f, format_range
 
     if params.position_mm is not None:
         _move_to_tool_pose(checker, step, params)
         return
     # which joints, and where to
-    pose_limits: dict[str, str] = {}
+    pose_limits: Mapping[str, object] = {}  # joints outside the arm's limits: the pose's error
     where: dict[str, tuple[str, ...]]
     if params.pose is not None:
         pose = checker.pose(step, params.pose, target=True)
@@ -185,8 +224,8 @@ def check(checker: Checker, step: ResolvedStep[MoveParams], params: MoveParams) 
         state.position = target[name]
 
 
-def _velocities(checker: Checker, step: ResolvedStep[MoveParams], params: MoveParams) -> None:
-    from seqrun.validation import format_number as f
+def _velocities(checker: CheckContext, step: ResolvedStep[MoveParams], params: MoveParams) -> None:
+    from seqrun.formatting import format_number as f
 
     for name in checker.names(step, params.velocity_deg_s, ("velocity_deg_s",),
                               as_keys=True, what="a velocity for"):
@@ -208,12 +247,12 @@ def _velocities(checker: Checker, step: ResolvedStep[MoveParams], params: MovePa
                 "that", "velocity_deg_s", name))
 
 
-def _timeout(checker: Checker, step: ResolvedStep[MoveParams], params: MoveParams,
+def _timeout(checker: CheckContext, step: ResolvedStep[MoveParams], params: MoveParams,
              target: dict[str, float],
              names: list[str]) -> None:
     """A move's ``timeout_s``: within the arm file's bound, and not shorter than the
     move planned with the limits in force."""
-    from seqrun.validation import format_number as f
+    from seqrun.formatting import format_number as f
 
     if params.timeout_s is None:
         return
@@ -231,12 +270,12 @@ def _timeout(checker: Checker, step: ResolvedStep[MoveParams], params: MoveParam
             "timeout_s"))
 
 
-def _planned_duration(checker: Checker, params: MoveParams, target: dict[str, float],
+def _planned_duration(checker: CheckContext, params: MoveParams, target: dict[str, float],
                       names: list[str]) -> float | None:
     import numpy as np
 
     from seqrun.errors import PlanningError
-    from seqrun.planner import Limits, plan_move
+    from seqrun.arm.planner import Limits, plan_move
 
     order = checker.arm.joint_names
     start = [checker.joints[n].position for n in order]
@@ -256,12 +295,12 @@ def _planned_duration(checker: Checker, params: MoveParams, target: dict[str, fl
     return plan.duration
 
 
-def _move_to_tool_pose(checker: Checker, step: ResolvedStep[MoveParams],
+def _move_to_tool_pose(checker: CheckContext, step: ResolvedStep[MoveParams],
                        params: MoveParams) -> None:
     """A move to an end-effector pose: IK from the tracked joints (the solution nearest
     them), then the same checks as a move to those joints."""
-    from seqrun.cartesian import solver_for
-    from seqrun.ik import Unreachable
+    from seqrun.arm.cartesian import solver_for
+    from seqrun.arm.ik import Unreachable
 
     _velocities(checker, step, params)
     checker.motion_allowed(step, checker.unlocked_names())
@@ -285,14 +324,11 @@ def _move_to_tool_pose(checker: Checker, step: ResolvedStep[MoveParams],
 def run(step: ResolvedStep[MoveParams], ex: StepContext) -> dict:
     import numpy as np
 
-    from seqrun.planner import Limits
-    from seqrun.targets import resolve_move_target
+    from seqrun.arm.planner import Limits
 
     params = step.params
     if params.position_mm is not None:  # an end-effector target
-        from seqrun.steps.move_tool import run_pose
-
-        return run_pose(step, ex)
+        return _run_to_tool_pose(step, ex)
     current = ex.read_arm()
     current_deg = {j.name: float(v) for j, v in zip(ex.arm.joints, current.user_deg)}
     # The pose as it was validated (frozen when the sequence was loaded), never the file now.
@@ -307,7 +343,7 @@ def run(step: ResolvedStep[MoveParams], ex: StepContext) -> dict:
                              max_velocity_deg_s=velocity, max_acceleration_deg_s2=acceleration)
     tolerance = params.tolerance_deg or ex.arm.control.position_tolerance_deg
     detail = ex.move(target_deg, active, limits, tolerance_deg=tolerance,
-                     timeout_s=params.timeout_s)
+                     timeout_s=params.timeout_s, start=current)
     # Which limits bound the plan, and where they come from (report, dry-run table).
     narrowed = ex.limits_in_force.narrowed([ex.arm.joints[i].name for i in active])
     if narrowed:
@@ -315,6 +351,33 @@ def run(step: ResolvedStep[MoveParams], ex: StepContext) -> dict:
     else:
         detail["limits_from"] = "arm file"
     return detail
+
+
+def _run_to_tool_pose(step: ResolvedStep[MoveParams], ex: StepContext) -> dict:
+    """A move to an end-effector pose: IK from the measured joints, then an ordinary move."""
+    from seqrun.arm.cartesian import solver_for
+    from seqrun.arm.ik import Unreachable
+    from seqrun.arm.planner import Limits
+    from seqrun.errors import RunAborted
+    from seqrun.steps.move_tool import agree, tool_target
+
+    params = step.params
+    reading = ex.read_arm()  # read once: the IK start and the move's start agree
+    measured = reading.user_deg
+    try:
+        solution = solver_for(ex.arm, params.tool).solve(tool_target(params, ex, measured),
+                                                         measured)
+    except Unreachable as exc:
+        raise RunAborted("unreachable", f"end-effector target {exc}") from None
+    detail = agree(step, ex, solution.joints_deg)
+    limits = Limits.from_arm(ex.arm, velocity_scale=params.velocity_scale,
+                             acceleration_scale=params.acceleration_scale, speed=ex.speed,
+                             velocity_deg_s=params.velocity_deg_s)
+    tolerance = params.tolerance_deg or ex.arm.control.position_tolerance_deg
+    ex.emit("ik_solved", joints_deg=detail["ik_solution_deg"])
+    metrics = ex.move(solution.joints_deg, list(ex.movable), limits, tolerance_deg=tolerance,
+                      timeout_s=params.timeout_s, start=reading)
+    return {**detail, **metrics}
 
 
 KIND = StepKind(

@@ -15,9 +15,9 @@ from seqrun.steps.kind import StepKind
 from seqrun.steps.params import Positive, StepParams, Vector3, check_pose_target, one_key_value
 
 if TYPE_CHECKING:
-    from seqrun.loader import ResolvedStep
+    from seqrun.steps.check_context import CheckContext
     from seqrun.steps.context import StepContext
-    from seqrun.validation import Checker
+    from seqrun.steps.resolved import ResolvedStep
 
 
 class MoveLinearParams(StepParams):
@@ -74,12 +74,13 @@ def describe(params: MoveLinearParams) -> str:
     return f"move in a line to [{xyz}] mm"
 
 
-def check(checker: Checker, step: ResolvedStep[MoveLinearParams], params: MoveLinearParams) -> None:
+def check(checker: CheckContext,
+          step: ResolvedStep[MoveLinearParams], params: MoveLinearParams) -> None:
     """A straight line of the tool: every sample solved and checked now (reachable,
     limits, joint speeds, manipulability, guards along the samples)."""
     import numpy as np
 
-    from seqrun.cartesian import PathError, plan_linear
+    from seqrun.arm.cartesian import PathError, plan_linear
 
     checker.motion_allowed(step, checker.unlocked_names())
     target = checker.tool_target(step, params)
@@ -111,17 +112,18 @@ def check(checker: Checker, step: ResolvedStep[MoveLinearParams], params: MoveLi
 def run(step: ResolvedStep[MoveLinearParams], ex: StepContext) -> dict:
     import numpy as np
 
-    from seqrun.cartesian import PathError, plan_linear, solver_for, tool_pose
+    from seqrun.arm.cartesian import PathError, plan_linear, solver_for, tool_pose
     from seqrun.steps.move_tool import agree, tool_target
 
     """``move_linear``: the line solved from the measured joints, streamed sample by
     sample; the tool's distance from the line is checked every cycle."""
     params = step.params
-    measured = ex.read_arm().user_deg
+    reading = ex.read_arm()
+    measured = reading.user_deg
     keep = 1 - ex.arm.control.tracking_reserve
     max_velocity = np.array([j.max_velocity_deg_s for j in ex.arm.joints]) * keep * ex.speed
     try:
-        linear = plan_linear(ex.arm, params.tool, measured, tool_target(step, ex, measured),
+        linear = plan_linear(ex.arm, params.tool, measured, tool_target(params, ex, measured),
                              speed_mm_s=params.speed_mm_s * ex.speed,
                              rotation_speed_deg_s=params.rotation_speed_deg_s * ex.speed,
                              acceleration_mm_s2=params.acceleration_mm_s2 * ex.speed,
@@ -146,7 +148,8 @@ def run(step: ResolvedStep[MoveLinearParams], ex: StepContext) -> dict:
     ex.emit("ik_solved", joints_deg=detail["ik_solution_deg"], samples=len(linear.plan.times),
             length_mm=round(path.length_mm, 3))
     metrics = ex.follow(linear.plan, tolerance_deg=tolerance, timeout_s=params.timeout_s,
-                        path_check=deviation, command_mode=ex.arm.cartesian.linear_command_mode)
+                        path_check=deviation, command_mode=ex.arm.cartesian.linear_command_mode,
+                        start=reading)
     return {**detail, **metrics, "length_mm": round(path.length_mm, 3),
             "max_deviation_mm": round(worst["mm"], 4),
             "min_manipulability": round(linear.min_manipulability, 4)}

@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import inspect
 import re
-from typing import TYPE_CHECKING, Annotated, Any, ClassVar, Union
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Annotated, Any, ClassVar, Protocol, Union
 
 from pydantic import AfterValidator, ConfigDict, Discriminator, Field, Tag
 from pydantic_core import PydanticCustomError
@@ -31,6 +32,8 @@ __all__ = [
     "Scale",
     "StepParams",
     "StrictModel",
+    "ToolParams",
+    "ToolTargetParams",
     "Vector3",
     "check_pose_target",
     "doc",
@@ -141,6 +144,30 @@ class ModulesParams(StepParams):
 def exactly_one(*alternatives: str) -> dict:
     """JSON Schema: exactly one of these keys is given."""
     return {"oneOf": [{"required": [name]} for name in alternatives]}
+
+
+class ToolParams(Protocol):
+    """Parameters that name a tool of the arm file (None: the arm's default tool)."""
+
+    @property
+    def tool(self) -> str | None: ...
+
+
+class ToolTargetParams(ToolParams, Protocol):
+    """An end-effector target as ``move`` (with ``position_mm``) and ``move_linear`` write
+    it: what the tool-target helpers read of either kind's parameters."""
+
+    @property
+    def position_mm(self) -> Sequence[float] | None: ...
+
+    @property
+    def rpy_deg(self) -> Sequence[float] | None: ...
+
+    @property
+    def relative(self) -> bool: ...
+
+    @property
+    def frame(self) -> str: ...
 
 
 def check_pose_target(params: Any, what: str) -> None:

@@ -1,7 +1,7 @@
 """power_off: check the arm stands in a power-off pose, then record the zero reference.
 
 The modules take the position they are switched off in as their encoder zero, so the
-next power-on needs to know where that was (:mod:`seqrun.zero`). Nothing is sent to the
+next power-on needs to know where that was (:mod:`seqrun.service.zero`). Nothing is sent to the
 modules: the step measures, compares and records. The record is written through
 ``ex.record_zero(pose)`` (set by whoever runs the sequence); a dry run records nothing.
 """
@@ -17,9 +17,9 @@ from seqrun.steps.kind import StepKind
 from seqrun.steps.params import PoseName, Positive, StepParams, one_key_value
 
 if TYPE_CHECKING:
-    from seqrun.loader import ResolvedStep
+    from seqrun.steps.check_context import CheckContext
     from seqrun.steps.context import StepContext
-    from seqrun.validation import Checker
+    from seqrun.steps.resolved import ResolvedStep
 
 
 class PowerOffParams(StepParams):
@@ -43,9 +43,10 @@ def describe(params: PowerOffParams) -> str:
     return f"power off in {params.pose}"
 
 
-def check(checker: Checker, step: ResolvedStep[PowerOffParams], params: PowerOffParams) -> None:
+def check(checker: CheckContext,
+          step: ResolvedStep[PowerOffParams], params: PowerOffParams) -> None:
     """The pose must be a power-off pose of the arm, and where the moves before end."""
-    from seqrun.validation import format_number as f
+    from seqrun.formatting import format_number as f
 
     if params.pose not in checker.arm.power_off_poses:
         known = ", ".join(checker.arm.power_off_poses) or "none"

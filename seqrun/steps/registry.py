@@ -3,18 +3,21 @@
 A step kind is one module, ``seqrun/steps/<kind>.py``, ending with ``KIND = StepKind(...)``
 (:class:`~seqrun.steps.kind.StepKind`: parameters, shorthand, description, static check,
 handler); adding one is that module and one line in :data:`KINDS`. The sequence file's
-union (:mod:`seqrun.schema`), the static checks (:mod:`seqrun.validation`) and the executor
-(:data:`seqrun.steps.HANDLERS`) all take the kinds from here; ``include`` is no step kind
+union (:mod:`seqrun.schema`), the static checks (:mod:`seqrun.sequence.validation`) and the executor
+(:data:`HANDLERS`) all take the kinds from here; ``include`` is no step kind
 but the loader's (its steps run in its place).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 from seqrun.steps import (checkpoint, confirm, halt, home, move, move_linear, power_off, reset,
                           set_limits, wait)
 from seqrun.steps.kind import StepKind
 
-__all__ = ["KINDS", "StepKind", "step_kind"]
+__all__ = ["HANDLERS", "KINDS", "Handler", "StepKind", "step_kind"]
 
 KINDS: tuple[StepKind, ...] = (
     reset.KIND,
@@ -30,6 +33,11 @@ KINDS: tuple[StepKind, ...] = (
 )
 
 _BY_NAME: dict[str, StepKind] = {kind.name: kind for kind in KINDS}
+
+Handler = Callable[[Any, Any], "dict | None"]
+
+#: The handler of each step kind, by name (what the executor calls).
+HANDLERS: dict[str, Handler] = {kind.name: kind.run for kind in KINDS}
 
 
 def step_kind(name: str) -> StepKind:

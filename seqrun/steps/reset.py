@@ -9,9 +9,9 @@ from seqrun.steps.kind import StepKind
 from seqrun.steps.params import ModulesParams, modules_value
 
 if TYPE_CHECKING:
-    from seqrun.loader import ResolvedStep
+    from seqrun.steps.check_context import CheckContext
     from seqrun.steps.context import StepContext
-    from seqrun.validation import Checker
+    from seqrun.steps.resolved import ResolvedStep
 
 #: Errors that Reset cannot clear (power cycle needed) are reported, not waited for.
 SETTLE_TIMEOUT_S = 1.0
@@ -29,7 +29,7 @@ def describe(params: ResetParams) -> str:
     return f"reset {addressed_text(params)}"
 
 
-def check(checker: Checker, step: ResolvedStep[ResetParams], params: ResetParams) -> None:
+def check(checker: CheckContext, step: ResolvedStep[ResetParams], params: ResetParams) -> None:
     for state in checker.modules(step, params.joints):
         state.reset, state.halted = True, False
 

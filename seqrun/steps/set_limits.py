@@ -10,9 +10,9 @@ from seqrun.steps.kind import StepKind
 from seqrun.steps.params import JointName, LimitPair, Positive, StepParams, one_key_value
 
 if TYPE_CHECKING:
-    from seqrun.loader import ResolvedStep
+    from seqrun.steps.check_context import CheckContext
     from seqrun.steps.context import StepContext
-    from seqrun.validation import Checker
+    from seqrun.steps.resolved import ResolvedStep
 
 
 
@@ -53,8 +53,9 @@ def describe(params: SetLimitsParams) -> str:
     return "write joint limits"
 
 
-def check(checker: Checker, step: ResolvedStep[SetLimitsParams], params: SetLimitsParams) -> None:
-    from seqrun.validation import format_number as f, format_range
+def check(checker: CheckContext,
+          step: ResolvedStep[SetLimitsParams], params: SetLimitsParams) -> None:
+    from seqrun.formatting import format_number as f, format_range
 
     joints = checker.joints
     unlocked = [s for s in joints.values() if not s.locked]

@@ -11,9 +11,9 @@ from seqrun.steps.kind import StepKind
 from seqrun.steps.params import Positive, StepParams, exactly_one, one_key_value
 
 if TYPE_CHECKING:
-    from seqrun.loader import ResolvedStep
+    from seqrun.steps.check_context import CheckContext
     from seqrun.steps.context import StepContext
-    from seqrun.validation import Checker
+    from seqrun.steps.resolved import ResolvedStep
 
 
 class WaitParams(StepParams):
@@ -56,8 +56,8 @@ def describe(params: WaitParams) -> str:
             else "wait until in position")
 
 
-def check(checker: Checker, step: ResolvedStep[WaitParams], params: WaitParams) -> None:
-    from seqrun.validation import format_number as f
+def check(checker: CheckContext, step: ResolvedStep[WaitParams], params: WaitParams) -> None:
+    from seqrun.formatting import format_number as f
 
     checker.after_halt(step, f"{step.kind}")
     bound = checker.arm.control.max_wait_s

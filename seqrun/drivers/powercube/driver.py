@@ -1,0 +1,479 @@
+"""The PowerCube driver: the executor's arm-driver calls over a :class:`PowerCubeClient`.
+
+Everything that knows PowerCube frames lives here (or in the client and codec below it):
+
+- reads: FPosStateDio per module, or ActPos + CubeState while that request is in
+  quarantine after a lost acknowledge; a lost read is retried once by the other path;
+- a control cycle: the setpoint law's requests (:mod:`seqrun.drivers.powercube.setpoints`) plus
+  reads of the other modules, pipelined; every acknowledge is looked at as it arrives and
+  the first that says NOT_OK ends the cycle at once (:class:`~seqrun.drivers.base.MotionRefused`)
+  so that the executor halts before the rest of the batch is collected;
+- state words decoded into :class:`~seqrun.drivers.base.JointState` (fault cause named);
+- the modules' watchdog: Config read-modify-write and a keeper thread that refreshes only
+  while the control loop shows signs of life;
+- Halt or Reset confirmed by reading every module's state back (:func:`confirm_command`,
+  the one implementation: the executor's emergency Halt and ``seqrun halt|reset``);
+- MinPos/MaxPos/MaxVel/MaxAcc read back and written.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any, ClassVar
+
+import numpy as np
+
+from seqrun.arm.description import ArmDescription
+from seqrun.arm.planner import Limits, MovePlan
+from seqrun.drivers.base import (ArmPoll, CommandConfirmation, ConfirmedCommand, CycleState,
+                                 EventSink, ForeignTraffic, JointLimits, JointReading,
+                                 JointState, LimitValues, MotionRefused)
+from seqrun.drivers.powercube.confirm import (DEFAULT_ATTEMPTS, command_and_confirm,
+                                              confirm_command)
+from seqrun.drivers.powercube.messages import user_message
+from seqrun.drivers.powercube.setpoints import SetpointLaw, setpoint_law
+from seqrun.drivers.powercube.states import (FAULT_FLAGS, HOMED_FLAG, cycle_state,
+                                             joint_state, short_state)
+from seqrun.drivers.powercube.units import ModuleUnits, module_positions
+from seqrun.errors import BusError, ModuleTimeoutError, RunAborted
+from seqrun.powercube.codec import (BroadcastRequest, GetParam, GetParamAck, MotionExtAck,
+                                    Request, SetMotion, SetParam)
+from seqrun.powercube.protocol import CommandId, ConfigFlag, ParamId, ShortState, StateFlag
+
+#: float32 on the wire: a read-back equal within this is the value written.
+READBACK_TOLERANCE_RAD = 1e-6
+
+
+def _no_events(type_: str, **data: Any) -> None:
+    """Event sink until the executor configures the driver."""
+
+
+# ---------------------------------------------------------------------- the driver
+class _NotOkAcknowledge(Exception):
+    """An acknowledge said NOT_OK (raised from inside the exchange to end it at once)."""
+
+    def __init__(self, module: int, state: ShortState) -> None:
+        super().__init__(f"module {module}: NOT_OK")
+        self.module = module
+        self.state = state
+
+
+_FPOS_STATE_DIO, _CUBE_STATE = ParamId.FPOS_STATE_DIO, ParamId.CUBE_STATE
+_NOT_OK = int(ShortState.NOT_OK)
+
+
+def _raise_on_not_ok(request, ack) -> None:
+    """``on_ack`` inspector of a move cycle: the first NOT_OK ends the exchange."""
+    # (Called for every acknowledge of a move: module constants and plain-int flag tests,
+    # since an enum class attribute and IntFlag's ``&`` are Python-level calls.)
+    if isinstance(ack, MotionExtAck):
+        state = ack.state
+    elif isinstance(ack, GetParamAck) and ack.param == _FPOS_STATE_DIO:
+        state = ack.value.state
+    elif isinstance(ack, GetParamAck) and ack.param == _CUBE_STATE:
+        state = short_state(StateFlag(ack.value))
+    else:
+        return
+    if int(state) & _NOT_OK:
+        raise _NotOkAcknowledge(ack.module, ShortState(state))
+
+
+def _describe_request(request) -> str:
+    if isinstance(request, SetMotion):
+        return f"SetMotion {request.mode.name}"
+    if isinstance(request, (SetParam, GetParam)):
+        return f"{type(request).__name__} {request.param.name}"
+    return type(request).__name__
+
+
+def _acked(request) -> bool:
+    return not isinstance(request, BroadcastRequest)
+
+
+class PowerCubeDriver:
+    """:class:`~seqrun.drivers.base.ArmDriver` over a
+    :class:`~seqrun.powercube.client.PowerCubeClient` (module docstring)."""
+
+    #: Idempotent reads are retried this often when an acknowledge is lost (drop_acks).
+    READ_RETRIES = 1
+    #: Attempts of the HOME_OK reading of :meth:`homed` (a read is idempotent).
+    HOMED_ATTEMPTS = 3
+    FAULT_FLAGS: ClassVar[frozenset[str]] = FAULT_FLAGS
+    HOMED_FLAG: ClassVar[str] = HOMED_FLAG
+
+    def __init__(self, client, arm: ArmDescription, *, echoes_own: bool = False) -> None:
+        self.client = client
+        self.arm = arm
+        self.clock = client.clock
+        self.modules: list[int] = arm.module_ids
+        self.units = ModuleUnits(arm)
+        #: The transport hands this process its own frames back (``receive_own_messages``).
+        self.echoes_own = echoes_own
+        self.emit: EventSink = _no_events
+        self.cycle_s = 1.0 / arm.control.cycle_hz
+        self.run_limits = Limits.from_arm(arm)
+        self.command_mode: str = arm.control.command_mode
+        self._run_law: SetpointLaw | None = None
+        self._law: SetpointLaw | None = None
+        self._keeper: threading.Thread | None = None
+        self._keeper_stop = threading.Event()
+
+    # ------------------------------------------------------------------ the family
+    @classmethod
+    def open(cls, arm: ArmDescription, connection, *,
+             response_timeout_s: float | None = None) -> PowerCubeDriver:
+        """The driver of ``arm`` on ``connection`` with a client of its own; frames it
+        does not use as answers go into the event log."""
+        from seqrun.powercube.client import PowerCubeClient
+
+        client = PowerCubeClient(connection.bus, connection.clock, response_timeout=(
+            response_timeout_s if response_timeout_s is not None
+            else arm.can.response_timeout_s))
+        driver = cls(client, arm, echoes_own=bool(getattr(connection, "echoes_own", False)))
+        client.on_discard = driver.on_discard
+        return driver
+
+    @staticmethod
+    def cycle_state(code: int) -> CycleState:
+        return cycle_state(code)
+
+    @classmethod
+    def simulator_positions(cls, arm: ArmDescription,
+                            joints_deg: Mapping[str, float]) -> dict[int, float]:
+        return module_positions(arm, joints_deg)
+
+    def use_arm(self, arm: ArmDescription) -> None:
+        self.arm = arm
+        self.units = ModuleUnits(arm)
+
+    # ------------------------------------------------------------------ the run
+    def configure(self, *, cycle_s: float, run_limits: Limits, command_mode: str,
+                  emit: EventSink) -> None:
+        self._run_law = self._law = setpoint_law(command_mode, self.arm, cycle_s, run_limits)
+        self.cycle_s, self.run_limits, self.command_mode = cycle_s, run_limits, command_mode
+        self.emit = emit
+
+    def on_discard(self, msg, reason) -> None:
+        """Client callback: a received frame was not used as an answer (stale, foreign,
+        malformed); it goes into the event log."""
+        self.emit("frame_discarded", can_id=f"0x{msg.arbitration_id:03X}",
+                  data=bytes(msg.data).hex(" "), reason=str(getattr(reason, "value", reason)))
+
+    def describe_error(self, exc: BaseException) -> str:
+        """``str(exc)``, with a request that got no answer described in user degrees."""
+        return user_message(exc, self.arm)
+
+    # ------------------------------------------------------------------ bus helpers
+    def transact(self, requests: list, *, idempotent: bool = False) -> list:
+        """``client.transact``; ``idempotent`` requests (reads) get one retry."""
+        attempts = 1 + (self.READ_RETRIES if idempotent else 0)
+        for attempt in range(attempts):
+            try:
+                return self.client.transact(requests)
+            except ModuleTimeoutError as exc:
+                if attempt + 1 >= attempts:
+                    raise
+                self.emit("retry", module=exc.module, what=exc.what)
+        raise AssertionError("unreachable")
+
+    def _reads(self, module: int) -> list[GetParam]:
+        """How to read a module this cycle: FPosStateDio, or — while that request is in
+        quarantine after a lost acknowledge — ActPos and CubeState, which tell the same and
+        need not wait for the quarantine."""
+        primary = GetParam(module, ParamId.FPOS_STATE_DIO)
+        if not self.client.is_tainted(primary):
+            return [primary]
+        return [GetParam(module, ParamId.ACT_POS), GetParam(module, ParamId.CUBE_STATE)]
+
+    # ------------------------------------------------------------------ reading
+    def read(self) -> JointReading:
+        """Read position and short state of every module (pipelined, lost reads retried)."""
+        return self._cycle([], [])
+
+    def read_state(self, module: int) -> JointState:
+        return joint_state(self.client.read_state(module))
+
+    def read_states(self, modules: Sequence[int] | None = None) -> dict[int, JointState]:
+        """CubeState of several modules, pipelined."""
+        modules = self.modules if modules is None else list(modules)
+        acks = self.transact([GetParam(m, ParamId.CUBE_STATE) for m in modules], idempotent=True)
+        return {m: joint_state(a.value) for m, a in zip(modules, acks)}
+
+    # ------------------------------------------------------------------ motion
+    def start_motion(self, moving: list[int], limits: Limits, *,
+                     command_mode: str | None = None) -> None:
+        law = self._run_law
+        if law is None:
+            raise RuntimeError("PowerCubeDriver.configure() was not called")
+        if command_mode is not None and command_mode != self.command_mode:
+            law = setpoint_law(command_mode, self.arm, self.cycle_s, self.run_limits)
+        self._law = law
+        start = law.start(moving, limits)
+        if start:
+            self.transact(start)
+
+    def cycle(self, plan: MovePlan, t: float, moving: list[int],
+              measured_deg: np.ndarray) -> JointReading:
+        law = self._law
+        if law is None:
+            raise RuntimeError("PowerCubeDriver.start_motion() was not called")
+        return self._cycle(law.cycle(plan, t, moving, measured_deg), moving, halt_early=True)
+
+    def end_motion(self) -> None:
+        self._law = self._run_law
+
+    def _cycle(self, requests: list[Request], moving: list[int], *,
+               halt_early: bool = False) -> JointReading:
+        """Send this cycle's motion requests plus reads of the other modules, pipelined.
+
+        A lost answer to a motion command is a fault (we cannot know what the module
+        does); a lost read is retried once by the other read path (a read changes nothing
+        on the module), so a rare lost acknowledge does not stop the arm.
+
+        With ``halt_early`` (a move), every acknowledge is looked at as it arrives: the
+        first one that says NOT_OK raises :class:`MotionRefused` at once, before the rest
+        of the batch is collected.
+        """
+        moving_modules = {self.modules[i] for i in moving}
+        reads = [r for m in self.modules if m not in moving_modules for r in self._reads(m)]
+        batch: list[Any] = requests + reads   # (addressed requests: every one has a module)
+        try:
+            acks = self.client.transact_partial(
+                batch, on_ack=_raise_on_not_ok if halt_early else None)
+        except _NotOkAcknowledge as refused:
+            raise MotionRefused(refused.module, refused.state) from None
+        times = list(getattr(self.client, "last_ack_times", ()))
+        lost = [i for i, (r, a) in enumerate(zip(batch, acks)) if a is None and _acked(r)]
+        if any(not isinstance(batch[i], GetParam) for i in lost):
+            unanswered = next(batch[i] for i in lost if not isinstance(batch[i], GetParam))
+            raise ModuleTimeoutError(unanswered.module, _describe_request(unanswered),
+                                     self.client.response_timeout)
+        if lost:
+            modules = list(dict.fromkeys(batch[i].module for i in lost))
+            retry = [r for m in modules for r in self._reads(m)]
+            # The retry must go out at once: a request still in quarantine would first
+            # wait it out (up to 4 response timeouts) while the joints move unwatched. Both
+            # read paths of a module lost within one quarantine is a fault.
+            blocked = next((r for r in retry if self.client.is_tainted(r)), None)
+            if blocked is not None:
+                unanswered = next(batch[i] for i in lost if batch[i].module == blocked.module)
+                lost_ack = ModuleTimeoutError(unanswered.module, _describe_request(unanswered),
+                                              self.client.response_timeout)
+                raise RunAborted("no_acknowledge", f"{lost_ack}; not retried: its other read "
+                                 "path is still in quarantine after an earlier lost "
+                                 "acknowledge", module=unanswered.module)
+            self.emit("retry", modules=modules, what="read")
+            batch, acks = batch + retry, acks + self.transact(retry)
+            times += list(getattr(self.client, "last_ack_times", ()))
+        positions: dict[int, float] = {}
+        states: dict[int, ShortState] = {}
+        # when each position was answered (the modules measure as they answer)
+        answered: dict[int, float | None] = {}
+        for ack, at in zip(acks, times + [None] * (len(acks) - len(times))):
+            if isinstance(ack, MotionExtAck):
+                positions[ack.module], states[ack.module] = ack.position, ack.state
+                answered[ack.module] = at
+            elif isinstance(ack, GetParamAck):
+                if ack.param == ParamId.FPOS_STATE_DIO:
+                    positions[ack.module] = ack.value.position
+                    states[ack.module] = ack.value.state
+                    answered[ack.module] = at
+                elif ack.param == ParamId.ACT_POS:
+                    positions[ack.module] = float(ack.value)
+                    answered[ack.module] = at
+                elif ack.param == ParamId.CUBE_STATE:
+                    states[ack.module] = short_state(StateFlag(ack.value))
+        module_rad = np.array([positions[m] for m in self.modules])
+        stamps = [answered.get(m) for m in self.modules]
+        at = None if None in stamps else np.array(stamps, dtype=float)
+        return JointReading(self.units.user_deg(module_rad), states, at)  # type: ignore[arg-type]
+
+    # ------------------------------------------------------------------ commands
+    def reset(self, modules: Sequence[int] | None) -> None:
+        self._command(self.client.reset, modules)
+
+    def home(self, modules: Sequence[int] | None) -> None:
+        self._command(self.client.home, modules)
+
+    def halt(self, modules: Sequence[int] | None) -> None:
+        self._command(self.client.halt, modules)
+
+    @staticmethod
+    def _command(send: Callable[[int | None], None], modules: Sequence[int] | None) -> None:
+        if modules is None:
+            send(None)          # one broadcast
+        else:
+            for module in modules:
+                send(module)
+
+    def halt_and_confirm(self) -> CommandConfirmation:
+        return confirm_command(self.client, CommandId.HALT, self.modules)
+
+    def halt_now(self, *, wait: bool = True) -> None:
+        self.client.halt_now(wait=wait)
+
+    def confirm(self, command: ConfirmedCommand,
+                modules: Sequence[int] | None = None,
+                attempts: int = DEFAULT_ATTEMPTS) -> CommandConfirmation:
+        return command_and_confirm(self.client, CommandId[command.upper()],
+                                   self.modules if modules is None else modules,
+                                   attempts=attempts)
+
+    # ------------------------------------------------------------------ outside a run
+    _STATUS_PARAMS = (ParamId.ACT_POS, ParamId.ACT_VEL, ParamId.CUBE_STATE)
+
+    def poll(self, *, tolerate_loss: bool = False) -> ArmPoll:
+        """ActPos, ActVel and CubeState of every module, pipelined."""
+        params = self._STATUS_PARAMS
+        requests = [GetParam(m, p) for m in self.modules for p in params]
+        acks = (self.client.transact_partial(requests) if tolerate_loss
+                else self.client.transact(requests))
+        positions: list[float | None] = []
+        velocities: list[float | None] = []
+        states: dict[int, JointState | None] = {}
+        for k, module in enumerate(self.modules):
+            answers = acks[len(params) * k:len(params) * (k + 1)]
+            if any(a is None for a in answers):
+                positions.append(None)
+                velocities.append(None)
+                states[module] = None
+                continue
+            pos, vel, state = (a.value for a in answers)
+            positions.append(self.units.joint_user_deg(module, float(pos)))
+            velocities.append(math.degrees(float(vel)))
+            states[module] = joint_state(int(state))
+        return ArmPoll(positions, velocities, states)
+
+    def homed(self) -> bool:
+        for attempt in range(self.HOMED_ATTEMPTS):
+            try:
+                acks = self.client.transact([GetParam(m, ParamId.CUBE_STATE)
+                                             for m in self.modules])
+                break
+            except ModuleTimeoutError:
+                if attempt + 1 == self.HOMED_ATTEMPTS:
+                    raise
+        return all(StateFlag(a.value) & StateFlag.HOME_OK for a in acks)
+
+    def watch_foreign(self, on_foreign: Callable[[ForeignTraffic], None]) -> None:
+        from seqrun.drivers.powercube.foreign import ForeignFrameWatch
+
+        self.client.add_frame_listener(ForeignFrameWatch(on_foreign,
+                                                         echoes_own=self.echoes_own))
+
+    def add_frame_listener(self, listener: Callable[[Any], None]) -> None:
+        self.client.add_frame_listener(listener)
+
+    def remove_frame_listener(self, listener: Callable[[Any], None]) -> None:
+        self.client.remove_frame_listener(listener)
+
+    # ------------------------------------------------------------------ limits
+    _LIMIT_PARAMS = (ParamId.MIN_POS, ParamId.MAX_POS, ParamId.MAX_VEL, ParamId.MAX_ACC)
+
+    def read_limits(self) -> list[JointLimits]:
+        params, units = self._LIMIT_PARAMS, self.units
+        stored = self.transact([GetParam(j.module, p) for j in self.arm.joints for p in params],
+                               idempotent=True)
+        limits = []
+        for k, joint in enumerate(self.arm.joints):
+            low, high, velocity, acceleration = (float(a.value) for a in
+                                                 stored[len(params) * k:len(params) * (k + 1)])
+            limits.append(JointLimits(units.joint_user_deg(joint.module, low),
+                                      units.joint_user_deg(joint.module, high),
+                                      math.degrees(velocity), math.degrees(acceleration)))
+        return limits
+
+    def write_limits(self, values: Mapping[str, LimitValues]) -> int:
+        writes: list[tuple[int, ParamId, float]] = []
+        for joint in self.arm.joints:
+            value = values.get(joint.name)
+            if value is None:
+                continue
+            writes.append((joint.module, ParamId.MIN_POS,
+                           self.units.joint_module_rad(joint.module, value.min_deg)))
+            writes.append((joint.module, ParamId.MAX_POS,
+                           self.units.joint_module_rad(joint.module, value.max_deg)))
+            if value.max_velocity_deg_s is not None:
+                writes.append((joint.module, ParamId.MAX_VEL,
+                               math.radians(value.max_velocity_deg_s)))
+            if value.max_acceleration_deg_s2 is not None:
+                writes.append((joint.module, ParamId.MAX_ACC,
+                               math.radians(value.max_acceleration_deg_s2)))
+        self.transact([SetParam(m, p, v) for m, p, v in writes])
+        acks = self.transact([GetParam(m, p) for m, p, _ in writes], idempotent=True)
+        for (module, param, wrote_rad), ack in zip(writes, acks):
+            if abs(float(ack.value) - wrote_rad) > READBACK_TOLERANCE_RAD:
+                joint = next(j for j in self.arm.joints if j.module == module)
+                if param in (ParamId.MIN_POS, ParamId.MAX_POS):  # user coordinates, degrees
+                    read, wrote, unit = (self.units.joint_user_deg(module, float(ack.value)),
+                                         self.units.joint_user_deg(module, wrote_rad), "°")
+                else:
+                    read, wrote = math.degrees(float(ack.value)), math.degrees(wrote_rad)
+                    unit = "°/s" if param == ParamId.MAX_VEL else "°/s²"
+                raise RunAborted("limits_not_written",
+                                 f"module {module} ({joint.name}): {param.name} reads back "
+                                 f"{read:.3f}{unit}, wrote {wrote:.3f}{unit}", module=module)
+        return len(writes)
+
+    # ------------------------------------------------------------------ watchdog
+    def enable_watchdog(self, alive: Callable[[float], bool]) -> None:
+        """Arm the modules' watchdogs (read-modify-write of Config) and keep them fed."""
+        wd = self.arm.can.watchdog
+        if not wd.enabled:
+            return
+        # Due at half the period: a refresh sent late (a loaded host, the GIL) still comes
+        # within refresh_period_s of the last one, well inside the modules' timeout.
+        self.client.watchdog_period = wd.refresh_period_s / 2
+        configs = self.transact([GetParam(m, ParamId.CONFIG) for m in self.modules],
+                                idempotent=True)
+        self.transact([SetParam(m, ParamId.CONFIG, int(a.value) | ConfigFlag.WATCHDOG_ENABLE)
+                       for m, a in zip(self.modules, configs)])
+        self.client.refresh_watchdog()
+        if not self.clock.is_virtual:
+            self._keeper_stop.clear()
+            self._keeper = threading.Thread(target=self._keep_watchdog, args=(alive,),
+                                            daemon=True, name="seqrun-watchdog")
+            self._keeper.start()
+        self.emit("watchdog_enabled", refresh_period_s=wd.refresh_period_s)
+
+    def _keep_watchdog(self, alive: Callable[[float], bool]) -> None:
+        # Covers the times the run loop is not on the bus (between cycles, operator
+        # prompts), but only while the loop shows signs of life: a loop that is stuck
+        # (a deadlock, a hung call) must let the modules' watchdogs stop the arm.
+        refresh = self.arm.can.watchdog.refresh_period_s
+        while not self._keeper_stop.wait(refresh / 4):
+            if not alive(refresh):
+                continue
+            try:
+                self.client.service()
+            except BusError:
+                return
+
+    def stop_watchdog_keeper(self) -> None:
+        self._keeper_stop.set()
+
+    def disable_watchdog(self) -> None:
+        """After a clean end the arm keeps holding: clear WATCHDOG_ENABLE again."""
+        if not self.arm.can.watchdog.enabled:
+            return
+        self._keeper_stop.set()
+        try:
+            configs = self.transact([GetParam(m, ParamId.CONFIG) for m in self.modules],
+                                    idempotent=True)
+            self.transact([SetParam(m, ParamId.CONFIG,
+                                    int(a.value) & ~int(ConfigFlag.WATCHDOG_ENABLE))
+                           for m, a in zip(self.modules, configs)])
+            self.client.watchdog_period = None
+            self.emit("watchdog_disabled")
+        except BusError as exc:
+            self.emit("watchdog_disable_failed", error=str(exc))
+
+    @property
+    def closed(self) -> bool:
+        return self.client.closed
+
+    def close(self) -> None:
+        self._keeper_stop.set()
+        self.client.close()

@@ -1,0 +1,294 @@
+"""Streaming a plan to the arm, cycle by cycle, and watching it while it waits.
+
+Each control cycle (``control.cycle_hz``) sends the plan's setpoints through the driver and
+gets a reading of every joint back; the reading is checked (state flags, guards, link
+volumes, the step's path check) and held against the plan (following error). An abort or a
+pause ends the stream with a controlled stop (ruckig to zero velocity, streamed), then
+hold; a Halt request, a refused motion or any fault raises, and the executor halts the arm.
+Waits and checkpoints monitor every cycle without commanding anything.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from seqrun.arm.planner import Limits, MovePlan, plan_move, plan_stop
+from seqrun.arm.tracking import MoveTracking, velocity_window
+from seqrun.drivers.base import MotionRefused
+from seqrun.errors import RunAborted
+from seqrun.execution.run import rounded
+from seqrun.results import OperatorAbort
+
+if TYPE_CHECKING:
+    from seqrun.execution.run import Measurement, Run
+
+
+def _round(x: float | None, nd: int = 4) -> float | None:
+    return None if x is None else round(float(x), nd)
+
+
+class Streaming:
+    """The moves and waits of one run (the executor it streams for: its driver, clock,
+    checks, stop requests and events)."""
+
+    def __init__(self, run: Run) -> None:
+        self.run = run
+        #: The figures of the move under way (seqrun/arm/tracking.py).
+        self.tracking: MoveTracking | None = None
+        #: The limits the move under way was planned with (a resumed move plans again).
+        self.move_limits = run.limits
+        #: Extra check of every streamed cycle (a straight-line move's deviation).
+        self.path_check: Callable[[Measurement], None] | None = None
+
+    # ------------------------------------------------------------------ moves
+    def move(self, target_deg: np.ndarray, active: list[int], limits: Limits, *,
+             tolerance_deg: float, timeout_s: float | None,
+             start: Measurement | None = None) -> dict[str, Any]:
+        run = self.run
+        m = start if start is not None else run.read_arm()
+        run.check_states(m)
+        self.move_limits = limits
+        start_deg = m.user_deg.copy()
+        run.motion_start_deg = start_deg.copy()  # for relative checkpoints
+        moving = [i for i in active if abs(target_deg[i] - start_deg[i]) > 1e-9]
+        plan = plan_move(np.radians(start_deg), np.radians(target_deg), limits, moving)
+        run.commanded_deg = np.where(np.isin(np.arange(len(target_deg)), moving),
+                                     target_deg, start_deg)
+        velocity_limit = rounded(np.degrees(limits.velocity))
+        run.emit("move_planned", duration_s=_round(plan.duration),
+                 start_deg=rounded(start_deg), target_deg=rounded(target_deg),
+                 joints=[run.arm.joints[i].name for i in moving],
+                 velocity_limit_deg_s=velocity_limit)
+        if run.current_step is not None:
+            run.current_step.planned_duration_s = plan.duration
+        if timeout_s is not None and plan.duration > timeout_s:
+            raise RunAborted("timeout", f"the move is planned to take {plan.duration:.3g} s, "
+                             f"longer than its timeout_s {timeout_s:g} s; nothing was moved")
+        self.tracking = MoveTracking(velocity_window(run.cycle))
+        t_move = run.clock.now()
+        if moving:
+            run.beat()
+            run.driver.start_motion(moving, limits)
+            # A step's timeout covers the whole move; the default allows the plan plus
+            # the arm's settle time.
+            deadline = (timeout_s if timeout_s is not None
+                        else plan.duration + run.arm.control.settle_timeout_s)
+            try:
+                self.stream(plan, moving, tolerance_deg, deadline, stop_on_abort=True)
+            finally:
+                run.driver.end_motion()
+        elapsed = run.clock.now() - t_move
+        return {"planned_duration_s": plan.duration, "executed_duration_s": elapsed,
+                "duration_ratio": _round(elapsed / plan.duration) if plan.duration > 0 else None,
+                "peak_velocity_deg_s": rounded(np.degrees(plan.peak_velocity())),
+                "peak_measured_velocity_deg_s": [0.0] * len(target_deg),
+                "velocity_limit_deg_s": velocity_limit,
+                **self.tracking_figures(target_deg)}
+
+    def tracking_figures(self, target_deg=None) -> dict[str, Any]:
+        """The current move's tracking figures (seqrun/arm/tracking.py) up to now."""
+        if self.tracking is None:
+            return {}
+        target = self.run.commanded_deg if target_deg is None else target_deg
+        return self.tracking.figures(target)
+
+    def follow(self, plan, *, tolerance_deg: float, timeout_s: float | None,
+               path_check: Callable[[Measurement], None] | None = None,
+               command_mode: str | None = None,
+               start: Measurement | None = None) -> dict[str, Any]:
+        run = self.run
+        m = start if start is not None else run.read_arm()
+        run.check_states(m)
+        run.motion_start_deg = m.user_deg.copy()  # for relative checkpoints
+        moving = list(plan.active)
+        run.commanded_deg = np.degrees(plan.target)
+        run.emit("move_planned", duration_s=_round(plan.duration),
+                 start_deg=rounded(m.user_deg), target_deg=rounded(np.degrees(plan.target)),
+                 joints=[run.arm.joints[i].name for i in moving], sampled=True)
+        if run.current_step is not None:
+            run.current_step.planned_duration_s = plan.duration
+        self.tracking = MoveTracking(velocity_window(run.cycle))
+        t_move = run.clock.now()
+        if moving:
+            deadline = (timeout_s if timeout_s is not None
+                        else plan.duration + run.arm.control.settle_timeout_s)
+            self.path_check = path_check
+            try:
+                run.beat()
+                run.driver.start_motion(moving, run.limits, command_mode=command_mode)
+                self.stream(plan, moving, tolerance_deg, deadline, stop_on_abort=True)
+            finally:
+                self.path_check = None
+                run.driver.end_motion()
+        elapsed = run.clock.now() - t_move
+        return {"planned_duration_s": plan.duration, "executed_duration_s": elapsed,
+                "duration_ratio": _round(elapsed / plan.duration) if plan.duration > 0 else None,
+                "peak_velocity_deg_s": rounded(np.degrees(plan.peak_velocity())),
+                "peak_measured_velocity_deg_s": [0.0] * run.arm.dof,
+                **self.tracking_figures(np.degrees(plan.target))}
+
+    # ------------------------------------------------------------------ the stream
+    def cycle(self, plan: MovePlan, t: float, moving: list[int],
+              measured_deg: np.ndarray) -> Measurement:
+        """One control cycle through the driver: ``plan``'s setpoints at plan time ``t``
+        for ``moving``, and a reading of every joint.
+
+        The driver looks at every answer as it arrives: the first that refuses motion
+        ends the cycle at once, and the arm is halted before anything else; then the
+        module's full state names the cause.
+        """
+        run = self.run
+        run.beat()
+        try:
+            reading = run.driver.cycle(plan, t, moving, measured_deg)
+        except MotionRefused as refused:
+            run.emergency_halt()
+            raise run.checks.fault_after_halt(refused.module, refused.state) from None
+        return run.take_reading(reading)
+
+    def stream(self, plan: MovePlan, moving: list[int], tolerance_deg: float,
+               deadline: float, *, stop_on_abort: bool) -> None:
+        """Stream ``plan`` cycle by cycle until every moving joint is in tolerance."""
+        run = self.run
+        stops = run.stops
+        t_start = run.clock.now()
+        bound = run.arm.control.max_following_error_deg
+        measured = run.last.user_deg if run.last is not None else np.degrees(plan.start)
+        k = 0
+        while True:
+            t_cycle = t_start + k * run.cycle
+            run.idle_until(t_cycle)
+            t = run.clock.now() - t_start
+            run.check_halt_request()
+            if stop_on_abort and (stops.aborts or stops.paused.is_set()):
+                self.controlled_stop(plan, t, moving)
+                if stops.aborts:
+                    raise OperatorAbort("operator abort: controlled stop, arm holding")
+                self.wait_while_paused()
+                # Resumed: re-plan from where the arm stands to the same target.
+                m = run.read_arm()
+                plan = plan_move(np.radians(m.user_deg), plan.target, self.move_limits, moving)
+                t_start, k = run.clock.now(), 0
+                deadline = plan.duration + run.arm.control.settle_timeout_s
+                continue
+            m = self.cycle(plan, t, moving, measured)
+            measured = m.user_deg
+            run.check_states(m)
+            run.check_guards(m)
+            if self.path_check is not None:
+                self.path_check(m)
+            planned_rad, planned_vel, _ = plan.at(t)
+            planned_deg = np.degrees(planned_rad)
+            error = np.abs(planned_deg - measured)
+            worst = int(error.argmax())  # (np.argmax's Python-level dispatch, once a cycle)
+            if error[worst] > bound and t <= plan.duration + run.arm.control.settle_timeout_s:
+                name = run.arm.joints[worst].name
+                raise RunAborted("following_error",
+                                 f"{name} (module {run.modules[worst]}) does not follow its "
+                                 f"plan: {error[worst]:.2f}° from the planned position (limit "
+                                 f"{bound}°)" + run.checks.lag_diagnosis(
+                                     plan, planned_deg, measured, moving, run.command_mode),
+                                 module=run.modules[worst])
+            logged_planned, logged_measured = rounded(planned_deg), rounded(measured)
+            event_t = round(run.elapsed_s(), 6)
+            # When the joints answered (the bus's own stamps): after a host stall the
+            # event's time is late, the reading's is not.
+            read_t = self.read_t(m, event_t)
+            if self.tracking is not None:
+                # The figures come from the logged values, so events.jsonl reproduces them.
+                self.tracking.add(read_t, logged_planned, logged_measured)
+            run.emit("setpoint", t=event_t, read_t=read_t, plan_t=round(t, 4),
+                     planned_deg=logged_planned, measured_deg=logged_measured,
+                     planned_vel_deg_s=rounded(np.degrees(planned_vel), 2),
+                     state=run.states_of(m))
+            if t >= plan.duration:
+                final_error = np.abs(np.degrees(plan.target) - measured)[moving]
+                if np.all(final_error <= tolerance_deg):
+                    return
+                if t > deadline:
+                    i = moving[int(np.argmax(final_error))]
+                    raise RunAborted("timeout",
+                                     f"{run.arm.joints[i].name} (module {run.modules[i]}) not "
+                                     f"in position {deadline:.1f} s after the move started: "
+                                     f"{float(np.max(final_error)):.2f}° off (tolerance "
+                                     f"{tolerance_deg}°)", module=run.modules[i])
+            # Next cycle slot; slots missed while waiting on the bus are skipped, not
+            # made up in a burst.
+            k = max(k + 1, math.ceil((run.clock.now() - t_start) / run.cycle))
+
+    #: Joints that answered further apart than this (s) in one reading get a time each in
+    #: the log (a host stall split the cycle's exchange); closer, one time stands for all.
+    READ_SPREAD_S = 0.002
+
+    def read_t(self, m: Measurement, event_t: float) -> float | list[float]:
+        """A reading's time as logged (``read_t``): s since the run start, one for all
+        joints, or one per joint when they answered far apart (``event_t``: when the loop
+        logs it, the run's time base)."""
+        run = self.run
+        t0 = run.clock.now() - run.elapsed_s()
+        if m.answered_at is None:
+            return round(m.t - t0, 6)
+        at = m.answered_at - t0
+        if float(at.max() - at.min()) > self.READ_SPREAD_S:
+            return [round(float(x), 6) for x in at]
+        return round(float(at.mean()), 6)
+
+    def controlled_stop(self, plan: MovePlan, t: float, moving: list[int]) -> None:
+        """ruckig to zero velocity from the plan's current state, streamed, then hold."""
+        run = self.run
+        pos, vel, acc = plan.at(t)
+        velocity, acceleration = run.limits_in_force.maxima()
+        limits = Limits.from_arm(run.arm, speed=run.speed, max_velocity_deg_s=velocity,
+                                 max_acceleration_deg_s2=acceleration)
+        stop = plan_stop(pos, vel, acc, limits, moving)
+        run.emit("controlled_stop", duration_s=_round(stop.duration))
+        tol = run.arm.control.position_tolerance_deg
+        self.stream(stop, moving, max(tol, 0.5), stop.duration + 2.0, stop_on_abort=False)
+        run.emit("holding", joints_deg=rounded(run.last.user_deg) if run.last else None)
+
+    # ------------------------------------------------------------------ waiting
+    def wait_while_paused(self) -> None:
+        run = self.run
+        stops = run.stops
+        run.emit("paused")
+        while stops.paused.is_set() and not stops.aborts and stops.halt_request is None:
+            run.monitor()
+            run.idle(run.cycle)
+        run.check_halt_request()
+        if stops.aborts:
+            raise OperatorAbort("operator abort while paused")
+
+    def wait(self, seconds: float) -> None:
+        """Wait while monitoring every cycle (keeps faults and watchdog in view)."""
+        run = self.run
+        end = run.clock.now() + seconds
+        while run.clock.now() < end:
+            run.monitor()
+            if run.stops.aborts:
+                raise OperatorAbort("operator abort during a wait")
+            run.idle(min(run.cycle, end - run.clock.now()))
+
+    def wait_in_position(self, tolerance_deg: float, timeout_s: float) -> float:
+        """Wait until every commanded joint is within tolerance; returns the time taken."""
+        run = self.run
+        start = run.clock.now()
+        target = run.commanded_deg
+        while True:
+            m = run.monitor()
+            if target is None:
+                return 0.0
+            err = np.abs(m.user_deg - target)[run.movable]
+            if np.all(err <= tolerance_deg):
+                return run.clock.now() - start
+            if run.stops.aborts:
+                raise OperatorAbort("operator abort during a wait")
+            if run.clock.now() - start > timeout_s:
+                i = run.movable[int(np.argmax(err))]
+                raise RunAborted("timeout", f"{run.arm.joints[i].name} not in position within "
+                                 f"{timeout_s} s: {float(np.max(err)):.2f}° off",
+                                 module=run.modules[i])
+            run.idle(run.cycle)

@@ -1,0 +1,113 @@
+"""The checks before anything moves, as the commands run them (no output, no exit codes).
+
+:func:`static_check` is ``seqrun validate --static`` (and the first part of
+``seqrun validate``): a file with its includes, its arm and the start pose, every problem
+in one pass. :func:`static_validation` is what ``seqrun run`` checks before it opens the
+bus, from the assumed start and, with ``--from N``, from where step N starts. The faces
+(the CLI today) print what these return; the executor checks again from the measured arm.
+Imports stay inside the functions: importing this module is cheap.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from seqrun.defaults import START_POSE
+from seqrun.errors import SequenceInvalid, SourceError, UserInputError
+
+if TYPE_CHECKING:
+    from seqrun.arm.description import ArmDescription
+    from seqrun.sequence.loader import LoadedSequence
+    from seqrun.sequence.validation import ValidationResult
+
+__all__ = ["StaticCheck", "static_check", "static_validation"]
+
+
+@dataclass
+class StaticCheck:
+    """What ``seqrun validate`` found before any dry run."""
+
+    loaded: LoadedSequence | None = None
+    arm: ArmDescription | None = None
+    start_deg: dict[str, float] | None = None
+    errors: list[SourceError] = field(default_factory=list)
+    notes: list[SourceError] = field(default_factory=list)
+    #: Smallest guard clearance of each move along its planned trajectory.
+    clearances: list = field(default_factory=list)
+    #: Smallest link-volume clearance of each move (arm file geometry).
+    proximities: list = field(default_factory=list)
+
+    @property
+    def valid(self) -> bool:
+        return not self.errors
+
+
+def static_check(file: Path, *, start: str | None = None,
+                 start_deg: Mapping[str, float] | None = None,
+                 arm_file: Path | None = None, started: bool = False,
+                 speed: float = 1.0, project_dir: Path | None = None) -> StaticCheck:
+    """Load ``file`` (with includes), its arm and the start pose (``start_deg``: joints in
+    user degrees instead, e.g. where the arm stands), and validate statically.
+
+    Invalid files (the sequence, an included one, the arm file, a pose file) end up in
+    ``errors``; input that cannot be used at all raises :class:`UserInputError`.
+    """
+    from seqrun.arm.description import load_arm
+    from seqrun.sequence.loader import load_sequence_partial
+    from seqrun.sequence.validation import validate_sequence
+    from seqrun.arm.poses import pose_joints_deg
+    from seqrun.yamlsource import sort_errors
+
+    check = StaticCheck()
+    # Every problem in one pass: the steps that are valid on their own are still checked
+    # against the arm when others are not (the loader leaves the broken ones out).
+    check.loaded, load_errors = load_sequence_partial(file, project_root=project_dir)
+    check.errors = list(load_errors)
+    if check.loaded is None:
+        return check
+    arm_path = arm_file if arm_file is not None else check.loaded.arm_path
+    if check.errors and arm_file is None and not Path(arm_path).is_file():
+        return check  # the file's own 'arm' is wrong: already among the errors
+    if not Path(arm_path).is_file():
+        raise UserInputError(f"arm file {arm_path} not found (give one with --arm FILE)")
+    try:
+        check.arm = load_arm(arm_path)
+    except SequenceInvalid as exc:
+        check.errors = sort_errors(check.errors + list(exc.errors))
+        return check
+    pose = start or START_POSE
+    try:
+        check.start_deg = (dict(start_deg) if start_deg is not None else
+                           pose_joints_deg(pose, check.loaded.pose_path or check.loaded.poses_dir))
+    except UserInputError as exc:
+        raise UserInputError(f"start pose: {exc}"
+                             + ("" if start else " (choose one with --start POSE)")) from None
+    except SequenceInvalid as exc:
+        check.errors = sort_errors(check.errors + list(exc.errors))
+        return check
+    result: ValidationResult = validate_sequence(check.loaded, check.arm, check.start_deg,
+                                                 started=started, speed=speed,
+                                                 incomplete=bool(check.errors))
+    check.errors = sort_errors(check.errors + result.errors)
+    check.notes = check.arm.notes + result.notes
+    check.clearances = [result.clearances[n] for n in sorted(result.clearances)]
+    check.proximities = [result.proximities[n] for n in sorted(result.proximities)]
+    return check
+
+
+def static_validation(loaded: LoadedSequence, arm: ArmDescription, start: str | None,
+                      started: bool, from_step: int) -> ValidationResult:
+    """Validation from the assumed start (Park, freshly powered on, unless told otherwise).
+    With ``--from N`` the steps before N are only tracked, to know where step N starts."""
+    from seqrun.sequence.validation import validate_sequence
+    from seqrun.arm.poses import pose_joints_deg
+
+    start_deg = pose_joints_deg(start or START_POSE, loaded.pose_path or loaded.poses_dir)
+    if from_step == 1:
+        return validate_sequence(loaded, arm, start_deg, started=started)
+    before, rest = loaded.split_at(from_step)
+    tracked = validate_sequence(before, arm, start_deg, started=started)
+    return validate_sequence(rest, arm, tracked.final_deg, started=True)

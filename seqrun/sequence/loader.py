@@ -1,0 +1,320 @@
+"""Reading a sequence file: includes expanded, every step with its own ``file:line:col``.
+
+:func:`load_sequence` reads a file with its includes into a flat list of
+:class:`~seqrun.steps.resolved.ResolvedStep`; the poses the steps name are read once and
+frozen with it (:attr:`LoadedSequence.poses`, :class:`~seqrun.steps.resolved.FrozenPose`),
+with the SHA-256 of every file read. Both are the step layer's data: the loader builds them,
+the step kinds read them. What a file may say is :mod:`seqrun.schema`; what it means for
+the arm is :mod:`seqrun.sequence.validation`.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from pydantic import ValidationError
+
+from seqrun.errors import SequenceInvalid, SourceError, UserInputError
+from seqrun.schema import (
+    MAX_INCLUDE_DEPTH,
+    MAX_STEPS,
+    PARAMS_MODELS,
+    IncludeParams,
+    Sequence,
+    describe,
+    step_adapter,
+)
+from seqrun.steps.registry import step_kind
+from seqrun.steps.resolved import FrozenPose, ResolvedStep
+from seqrun.yamlsource import Document, Location, display_path, load_document, sort_errors
+
+__all__ = [
+    "LoadedSequence",
+    "find_project_root",
+    "load_sequence",
+    "load_sequence_partial",
+]
+
+
+@dataclass(frozen=True, eq=False)
+class LoadedSequence:
+    """A sequence file with its includes expanded into :attr:`steps`."""
+
+    path: Path
+    file: str
+    name: str
+    description: str
+    project_root: Path
+    poses_dir: Path
+    arm_path: Path
+    steps: tuple[ResolvedStep, ...]
+    files: tuple[Path, ...] = ()  # every file read, the top one first
+    #: Where poses are looked up, first match wins (the campaign's, then the shipped).
+    pose_path: tuple[Path, ...] = ()
+    #: The campaign or project the sequence belongs to (seqrun.sequence.project.Project).
+    project: Any = None
+    #: Every pose the steps name, read once at load time: the run uses these, never the
+    #: files again (a pose file edited during a run changes nothing).
+    poses: Mapping[str, FrozenPose] = field(default_factory=dict)
+    #: SHA-256 of every sequence file read (same order as ``files``).
+    digests: tuple[str, ...] = ()
+
+    @property
+    def location(self) -> Location:
+        return Location(self.file, 1, 1)
+
+    def split_at(self, first_step: int) -> tuple[LoadedSequence, LoadedSequence]:
+        """The steps before ``first_step`` (1-based) and the steps from it on, as two
+        sequences (``--from N``: the steps before are only tracked, not run)."""
+        return (replace(self, steps=self.steps[:first_step - 1]),
+                replace(self, steps=self.steps[first_step - 1:]))
+
+    def inputs(self) -> list[dict[str, str]]:
+        """The files this sequence was validated from: ``{kind, file, sha256}`` each, for the
+        run folder (the arm file is added by whoever loaded the arm)."""
+        items = [{"kind": "sequence", "file": display_path(p), "sha256": d}
+                 for p, d in zip(self.files, self.digests)]
+        items += [{"kind": "pose", "file": pose.document.file, "sha256": pose.document.sha256}
+                  for pose in self.poses.values()]
+        return items
+
+
+def find_project_root(path: str | os.PathLike[str]) -> Path:
+    """Nearest ancestor of ``path`` holding an ``arms/`` or ``poses/`` folder; else the cwd."""
+    start = Path(path).resolve()
+    for folder in (start if start.is_dir() else start.parent, *start.parents):
+        if (folder / "arms").is_dir() or (folder / "poses").is_dir():
+            return folder
+    return Path.cwd().resolve()
+
+
+class _Loader:
+    def __init__(self, top: Path, project: Any) -> None:
+        self.project = project  # seqrun.sequence.project.Project: lookups of poses, arm, includes
+        self.root = project.root
+        self.poses_dir = project.poses_dir
+        self.pose_path = project.pose_path
+        self.tree = project.include_tree(top)
+        self.errors: list[SourceError] = []
+        self.steps: list[ResolvedStep] = []
+        self.files: list[Path] = []
+        self.arm_path: Path | None = None
+        self.pose_problems: dict[str, str | None] = {}
+        self.poses: dict[str, FrozenPose] = {}
+        self.digests: list[str] = []
+        self.include_titles: dict[Location, str] = {}
+        self.top: Any = None  # the top file's data, when it could be read
+
+    def load(self, path: Path, *, chain: tuple[Path, ...] = (),
+             include_chain: tuple[Location, ...] = (), include_step: Any = None) -> Any:
+        try:
+            doc = load_document(path, file=display_path(path))
+        except SequenceInvalid as exc:
+            self.errors.extend(exc.errors)
+            return None
+        except UserInputError as exc:
+            if include_step is None:
+                raise  # the file named on the command line
+            self.errors.append(include_step.error(str(exc)))
+            return None
+        self.files.append(path)
+        self.digests.append(doc.sha256)
+        if not chain:
+            self.top = doc.data
+        try:
+            seq = doc.validate(Sequence)
+        except SequenceInvalid as exc:
+            # Report every problem at once: go on with the steps that are valid on their own
+            # (their includes and poses are checked too); the file's errors are known.
+            self.errors.extend(exc.errors)
+            self._partial(doc, path, chain, include_chain)
+            return None
+        self._check_arm(doc, seq, top=not chain)
+        self._steps(doc, path, seq.steps, doc.items(doc.child(doc.root, "steps")), chain,
+                    include_chain)
+        return seq
+
+    def _partial(self, doc: Document, path: Path, chain: tuple[Path, ...],
+                 include_chain: tuple[Location, ...]) -> None:
+        if not chain:
+            self.arm_path = self._arm(None)
+        data = doc.data.get("steps") if isinstance(doc.data, dict) else None
+        if not isinstance(data, list):
+            return
+        good, nodes = [], []
+        for item, node in zip(data, doc.items(doc.child(doc.root, "steps"))):
+            try:
+                good.append(step_adapter().validate_python(item))
+                nodes.append(node)
+            except ValidationError:
+                continue  # already reported by the whole-file validation
+        self._steps(doc, path, good, nodes, chain, include_chain)
+
+    def _steps(self, doc: Document, path: Path, steps: list, items: list,
+               chain: tuple[Path, ...], include_chain: tuple[Location, ...]) -> None:
+        for raw, node in zip(steps, items):
+            if len(self.steps) >= MAX_STEPS:
+                self.errors.append(doc.location(node).error(
+                    f"the sequence expands to more than {MAX_STEPS} steps with its includes"))
+                return
+            if isinstance(raw, str):
+                kind, params, params_node = raw, PARAMS_MODELS[raw](), node
+            else:
+                kind = raw.kind
+                params, params_node = raw.params(), doc.child(node, kind)
+            here = doc.location(node)
+            if isinstance(params, IncludeParams):
+                self.include_titles[here] = params.label or describe(kind, params)
+                self._include(doc, path, params, params_node, here, chain + (path,),
+                              include_chain)
+                continue
+            step_type = step_kind(kind)
+            step = ResolvedStep(number=len(self.steps) + 1, kind=kind, params=params,
+                                location=here, label=params.label, include_chain=include_chain,
+                                document=doc, node=params_node,
+                                include_labels=tuple(self.include_titles.get(loc, "include")
+                                                     for loc in include_chain),
+                                description=step_type.describe(params))
+            for pose in step_type.poses(params):
+                self._check_pose(step, pose)
+            self.steps.append(step)
+
+    def _check_arm(self, doc: Document, seq: Sequence, *, top: bool) -> None:
+        if top:
+            if seq.arm is None:  # the campaign's arm: not found is bad input, one line
+                self.arm_path = self.project.arm_path(None)
+                return
+            try:
+                self.arm_path = self.project.arm_path(seq.arm)
+            except UserInputError:
+                self.arm_path = self._arm(None)
+                looked = ", ".join(str(p) for p in self.project.arm_candidates(seq.arm))
+                self.errors.append(doc.error(("arm",), f"arm file '{seq.arm}' not found "
+                                                      f"(looked for {looked})"))
+            return
+        if seq.arm is not None and self._arm(seq.arm) != self.arm_path:
+            self.errors.append(doc.error(("arm",), f"this file names arm '{seq.arm}' but the "
+                                                  "sequence including it runs on "
+                                                  f"{self.arm_path}; remove 'arm' here or "
+                                                  "make it the same"))
+
+    def _arm(self, name: str | None) -> Path:
+        """The arm file ``name`` means (the first candidate when none exists: the run
+        then says it is missing)."""
+        try:
+            return self.project.arm_path(name)
+        except UserInputError:
+            return self.project.arm_candidates(name)[0].resolve()
+
+    def _include(self, doc: Document, path: Path, params: IncludeParams, node: Any,
+                 here: Location, chain: tuple[Path, ...],
+                 include_chain: tuple[Location, ...]) -> None:
+        def error(message: str) -> None:
+            self.errors.append(doc.error(("file",), message, start=node))
+
+        try:
+            target = (path.parent / params.file).resolve()
+        except (OSError, RuntimeError, ValueError) as exc:  # symlink loop, NUL byte, ...
+            shown = params.file if params.file.isprintable() else ascii(params.file)[1:-1]
+            error(f"include '{shown}': cannot resolve the path ({exc})")
+            return
+        if not target.is_relative_to(self.tree):
+            what = "campaign folder" if self.project.is_campaign else "sequences folder"
+            error(f"include '{params.file}' is outside the {what} "
+                  f"{display_path(self.tree)}; included files must stay inside it")
+            return
+        if target in chain:
+            names = " -> ".join(p.name for p in (*chain[chain.index(target):], target))
+            error(f"include loop: {names}")
+            return
+        if len(chain) >= MAX_INCLUDE_DEPTH:
+            error(f"includes nested more than {MAX_INCLUDE_DEPTH} deep")
+            return
+        try:
+            is_file = target.is_file()
+        except OSError as exc:  # name too long, permission denied, ...
+            error(f"include '{params.file}': cannot use the path ({exc.strerror or exc})")
+            return
+        if not is_file:
+            error(f"include '{params.file}': no such file ({target})")
+            return
+        self.load(target, chain=chain, include_chain=include_chain + (here,),
+                  include_step=doc.locate(("file",), start=node))
+
+    def _check_pose(self, step: ResolvedStep, name: str) -> None:
+        from seqrun.arm.poses import PoseFile, find_pose
+
+        if name not in self.pose_problems:
+            problem = None
+            try:
+                document = load_document(find_pose(name, self.pose_path))
+                self.poses[name] = FrozenPose(name, document.validate(PoseFile), document)
+            except UserInputError as exc:
+                problem = str(exc)
+            except SequenceInvalid as exc:
+                self.errors.extend(exc.errors)
+                problem = f"pose '{name}' cannot be used: its file has errors"
+            self.pose_problems[name] = problem
+        known = self.pose_problems[name]
+        if known is not None:
+            self.errors.append(step.error(known, "pose"))
+
+
+def load_sequence(path: str | os.PathLike[str], *,
+                  project_root: str | os.PathLike[str] | None = None) -> LoadedSequence:
+    """Read a sequence file with its includes; every step keeps its own ``file:line:col``.
+
+    Poses come from ``<project root>/poses/``, then the shipped poses; the project is the
+    nearest campaign (``seqrun.toml``) above the file, or ``project_root`` (``--project``),
+    else the nearest folder with ``arms/`` or ``poses/`` (see :mod:`seqrun.sequence.project`); an
+    unknown pose is a located error listing the available ones. Raises
+    :class:`SequenceInvalid` with every error found, :class:`UserInputError` if the file
+    cannot be read.
+    """
+    loaded, errors = load_sequence_partial(path, project_root=project_root)
+    if errors:
+        raise SequenceInvalid(errors)
+    assert loaded is not None
+    return loaded
+
+
+def load_sequence_partial(path: str | os.PathLike[str], *,
+                          project_root: str | os.PathLike[str] | None = None
+                          ) -> tuple[LoadedSequence | None, list[SourceError]]:
+    """:func:`load_sequence` that keeps going: ``(loaded, errors)``, where ``loaded`` holds
+    the steps that are valid on their own (a step that fails its schema is left out) so
+    that the checks against the arm can still report on them; None if nothing of the top
+    file could be read. Raises :class:`UserInputError` if the file cannot be read."""
+    from seqrun.sequence.project import project_for
+
+    path = Path(path)
+    try:
+        top = path.resolve()
+        project = project_for(top, Path(project_root) if project_root is not None else None)
+    except (OSError, RuntimeError, ValueError) as exc:  # symlink loop, NUL byte, ...
+        raise UserInputError(f"{path}: cannot resolve the path ({exc})") from None
+    root = project.root
+    loader = _Loader(top, project)
+    seq = loader.load(top)
+    errors = sort_errors(loader.errors)
+    if seq is not None:
+        name, description = seq.name, seq.description
+    elif isinstance(loader.top, dict):
+        name = loader.top.get("name") if isinstance(loader.top.get("name"), str) else top.stem
+        description = loader.top.get("description")
+        description = description if isinstance(description, str) else ""
+    else:
+        return None, errors
+    assert loader.arm_path is not None
+    return LoadedSequence(path=path, file=display_path(path), name=name or top.stem,
+                          description=description, project_root=root,
+                          poses_dir=loader.poses_dir, arm_path=loader.arm_path,
+                          steps=tuple(loader.steps), files=tuple(loader.files),
+                          pose_path=tuple(loader.pose_path), project=project,
+                          poses=dict(loader.poses), digests=tuple(loader.digests)), errors
+
+

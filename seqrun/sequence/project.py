@@ -1,0 +1,229 @@
+"""Campaign folders: where a sequence's poses, arm file and includes come from.
+
+A campaign is a folder with a ``seqrun.toml`` (``seqrun init DIR`` makes one)::
+
+    seqrun.toml      which arm, bus settings, run folder location
+    sequences/       the campaign's sequences (includes may reach anywhere in the folder)
+    poses/           the campaign's poses: added to the shipped ones, overriding same names
+    arms/            (optional) the campaign's own arm files
+
+A sequence belongs to the nearest ``seqrun.toml`` above it, or to the folder named with
+``--project DIR``. Without a campaign the old layout still works: the nearest folder with
+``arms/`` or ``poses/`` (the seqrun checkout itself), else the current directory. Either
+way the shipped poses and arms (:mod:`seqrun.shipped`) come last in every search, so a
+non-editable install finds them from anywhere. Every failed lookup names the places searched.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from seqrun.errors import SourceError, UserInputError
+from seqrun.shipped import DEFAULT_ARM_NAME, shipped_arm, shipped_dir
+
+if TYPE_CHECKING:
+    from seqrun.sequence.campaign_config import CampaignConfig
+
+#: The campaign's config file name.
+CONFIG_NAME = "seqrun.toml"
+
+
+class ConfigInvalid(UserInputError):
+    """A broken ``seqrun.toml``: bad input (exit 2), said as ``file:line:col: message``."""
+
+    def __init__(self, errors: list[SourceError]) -> None:
+        self.errors = errors
+        super().__init__("\n".join(str(e) for e in errors))
+
+
+def _config_location(text: str, loc: tuple) -> tuple[int, int]:
+    """Line and column of a key path such as ('bus', 'bitrate') in TOML text (best effort:
+    the key's line inside its table, else the table header, else 1:1)."""
+    lines = text.splitlines()
+    table: str | None = None
+    header_line = None
+    keys = [str(k) for k in loc if not isinstance(k, int)]
+    want_table = keys[0] if len(keys) > 1 else None
+    want_key = keys[-1] if keys else None
+    for number, raw in enumerate(lines, start=1):
+        line = raw.strip()
+        match = re.match(r"^\[\s*([^\]]+?)\s*\]", line)
+        if match:
+            table = match.group(1)
+            if table == want_table:
+                header_line = number
+            continue
+        key = re.match(r"^([A-Za-z0-9_\-\"']+)\s*=", line)
+        if key and key.group(1).strip("\"'") == want_key and table == want_table:
+            return number, raw.index(key.group(1)) + 1
+    return (header_line, 1) if header_line else (1, 1)
+
+
+def load_config(path: Path) -> CampaignConfig:
+    """Read ``seqrun.toml``; :class:`ConfigInvalid` with ``file:line:col`` errors."""
+    shown = os.path.relpath(path) if path.is_absolute() else str(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigInvalid([SourceError(shown, 1, 1, f"not UTF-8 text ({exc.reason})")]) \
+            from None
+    except OSError as exc:
+        raise UserInputError(f"{shown}: {exc.strerror or exc}") from None
+    import tomllib  # only where a seqrun.toml is read (it compiles its regexes at import)
+
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        message = str(exc)
+        match = re.search(r"\(at line (\d+), column (\d+)\)", message)
+        line, column = (int(match.group(1)), int(match.group(2))) if match else (1, 1)
+        message = re.sub(r"\s*\(at (line \d+, column \d+|end of document)\)", "", message)
+        raise ConfigInvalid([SourceError(shown, line, column,
+                                           f"invalid TOML: {message}")]) from None
+    # the models only where a seqrun.toml is read (four pydantic models, built at import)
+    from pydantic import ValidationError
+
+    from seqrun.sequence.campaign_config import CampaignConfig
+
+    try:
+        return CampaignConfig.model_validate(data)
+    except ValidationError as exc:
+        errors = []
+        for error in exc.errors():
+            line, column = _config_location(text, tuple(error["loc"]))
+            where = ".".join(str(k) for k in error["loc"])
+            message = ("unknown key (expected: " + _expected(error["loc"]) + ")"
+                       if error["type"] == "extra_forbidden" else error["msg"])
+            errors.append(SourceError(shown, line, column, f"{where}: {message}"))
+        raise ConfigInvalid(errors) from None
+
+
+def _expected(loc: tuple) -> str:
+    from pydantic import BaseModel
+
+    from seqrun.sequence.campaign_config import CampaignConfig
+
+    model: type[BaseModel] = CampaignConfig
+    for key in loc[:-1]:
+        field = model.model_fields.get(str(key))
+        if field is None or not isinstance(field.annotation, type):
+            break
+        model = field.annotation
+    return ", ".join(model.model_fields)
+
+
+def find_campaign(start: Path) -> Path | None:
+    """The nearest folder at or above ``start`` holding a ``seqrun.toml``."""
+    start = start.resolve()
+    for folder in (start if start.is_dir() else start.parent, *start.parents):
+        if (folder / CONFIG_NAME).is_file():
+            return folder
+    return None
+
+
+def _legacy_root(start: Path) -> Path:
+    """Nearest ancestor holding an ``arms/`` or ``poses/`` folder; else the cwd."""
+    start = start.resolve()
+    for folder in (start if start.is_dir() else start.parent, *start.parents):
+        if (folder / "arms").is_dir() or (folder / "poses").is_dir():
+            return folder
+    return Path.cwd().resolve()
+
+
+@dataclass(frozen=True)
+class Project:
+    """The folder a sequence belongs to, and where its files are looked up."""
+
+    root: Path
+    config_path: Path | None = None
+    config: CampaignConfig | None = None
+
+    @property
+    def is_campaign(self) -> bool:
+        return self.config_path is not None
+
+    @property
+    def poses_dir(self) -> Path:
+        return self.root / "poses"
+
+    @property
+    def pose_path(self) -> tuple[Path, ...]:
+        """Where poses are looked up, first match wins: the project's, then the shipped."""
+        own, shipped = self.poses_dir, shipped_dir("poses")
+        if own.resolve() == shipped.resolve():
+            return (own,)
+        return (own, shipped)
+
+    @property
+    def runs_dir(self) -> Path:
+        if self.config is not None:
+            return self.root / self.config.runs.dir
+        return Path("runs")
+
+    def include_tree(self, top: Path) -> Path:
+        """The folder includes of ``top`` must stay inside: the whole campaign; without
+        one, the project's ``sequences/`` (or the folder of the file given)."""
+        if self.is_campaign:
+            return self.root
+        sequences = self.root / "sequences"
+        return sequences if top.is_relative_to(sequences) else top.parent
+
+    def arm_candidates(self, name: str | None) -> list[Path]:
+        """The files an arm reference may mean, in search order. ``name``: what a sequence's
+        ``arm:`` says (a file relative to the project), else the campaign's arm."""
+        if name is None and self.config is not None:
+            name = self.config.campaign.arm
+        if name is None:
+            return [self.root / "arms" / f"{DEFAULT_ARM_NAME}.yaml",
+                    shipped_dir("arms") / f"{DEFAULT_ARM_NAME}.yaml"]
+        if "/" not in name and "\\" not in name and not name.endswith((".yaml", ".yml")):
+            return [self.root / "arms" / f"{name}.yaml", shipped_dir("arms") / f"{name}.yaml"]
+        candidates = [self.root / name]
+        shipped = shipped_arm(Path(name).stem)
+        if name.startswith("arms/") and shipped is not None:
+            candidates.append(shipped)  # 'arms/lwa3.yaml' of a sequence written for the checkout
+        return candidates
+
+    def arm_path(self, name: str | None = None) -> Path:
+        """The arm file, or :class:`UserInputError` naming every place searched."""
+        candidates = self.arm_candidates(name)
+        for path in candidates:
+            if path.is_file():
+                return path.resolve()
+        if name is None and self.config is not None:
+            name = self.config.campaign.arm
+        what = f"arm '{name}'" if name else "the arm"
+        raise UserInputError(f"{what} not found (looked for "
+                             + ", ".join(str(p) for p in candidates) + ")")
+
+    def describe(self) -> str:
+        if self.config_path is not None:
+            return f"campaign {self.root}"
+        return f"project {self.root} (no {CONFIG_NAME})"
+
+
+def open_project(folder: Path) -> Project:
+    """The project in ``folder`` (``--project DIR``)."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise UserInputError(f"project folder {folder} does not exist")
+    config_path = folder / CONFIG_NAME
+    if config_path.is_file():
+        return Project(folder.resolve(), config_path.resolve(), load_config(config_path))
+    return Project(folder.resolve())
+
+
+def project_for(path: Path, project_dir: Path | None = None) -> Project:
+    """The project of a sequence (or folder) ``path``: ``project_dir`` if given, else the
+    nearest campaign above it, else the nearest folder with ``arms/`` or ``poses/``."""
+    if project_dir is not None:
+        return open_project(project_dir)
+    campaign = find_campaign(path)
+    if campaign is not None:
+        return open_project(campaign)
+    return Project(_legacy_root(path))
+

@@ -1,0 +1,263 @@
+"""The file format references in Markdown (``seqrun schema [sequence|arm|pose] --markdown``).
+
+Generated from the models' JSON Schema, so the docs cannot drift from what the loader
+accepts: ``docs/sequence-format.md`` (tests/test_schema.py checks it is up to date).
+"""
+
+from __future__ import annotations
+
+from json import dumps as json_dumps
+from typing import TYPE_CHECKING
+
+from seqrun.schema import PARAMS_MODELS, STEP_MODELS, doc, sequence_json_schema
+
+if TYPE_CHECKING:
+    from pydantic import BaseModel
+
+__all__ = [
+    "arm_reference_markdown",
+    "file_reference_markdown",
+    "pose_reference_markdown",
+    "reference_markdown",
+]
+
+_REFERENCE_INTRO = """\
+# Sequence files
+
+<!-- Generated from the models in seqrun/schema.py by `seqrun schema --markdown`;
+     do not edit by hand (tests/test_schema.py checks it is up to date). -->
+
+A sequence file says what the arm does, step by step. Editors with yaml-language-server
+check it as you type when its first line names the schema:
+
+```yaml
+# yaml-language-server: $schema=../docs/schema/sequence.schema.json
+name: Op-safe
+description: From a freshly powered-on arm in Park to the Op-safe pre-grasp pose.
+steps:
+  - include: startup.yaml                 # reset, home, set_limits
+  - confirm: Is the space around the arm clear?
+  - move: {pose: totem, velocity_scale: 0.5, label: Up to Totem}
+  - move: {pose: opsafe, velocity_scale: 0.5}
+  - wait: {until: in_position}
+  - checkpoint: {pose: opsafe}
+```
+
+`seqrun validate FILE` checks a file and its includes without moving anything:
+`file:line:col: message` for each problem, exit 0 (valid), 1 (invalid) or 2 (unusable input).
+The problems are listed file by file, by position within each file, the files in the order
+the steps reach their first problem (a pose file's after those of the step that names it);
+`seqrun run` refuses an invalid file with the same lines in the same order.
+
+## The file
+
+| key | | |
+|---|---|---|
+{top}
+
+Each step is a mapping with one key, the step type; its value holds the step's parameters.
+Every step takes an optional `label`, the text the operator sees.
+
+## YAML as seqrun reads it
+
+- YAML 1.2 values: only `true`/`false` are booleans (`yes`, `no`, `on`, `off` stay words, and
+  where `true`/`false` is expected they are an error); `010` is ten; `1:30` is text, not 90.
+- `.nan`, `.inf` are refused wherever a number is expected.
+- A key given twice is an error (plain YAML silently keeps the last one).
+- No tags (`!!python/...`, `!custom`, ...), no merge keys (`<<`), one document per file;
+  anchors and aliases are fine within limits.
+
+## Rules checked against the arm
+
+- Start-up order: `reset` before `home` and before `set_limits`; `home` and `set_limits`
+  before the first `move`; `reset` again after a `halt`.
+- Joints must exist; the locked joint (j3) is never commanded.
+- Every commanded target lies inside the joint limits in force. A joint that starts outside
+  them (Park's j4 at -120.32° against -120…120) may only move back inside (a note).
+- Velocities and limit overrides stay within the arm file's maxima.
+- Every move is planned within the limits in force: the arm file's, those a `set_limits`
+  wrote, and the MaxVel/MaxAcc the modules still hold from before (read back before the
+  first motion; they stay stored in a module until written again or powered off). The
+  dry-run table and the run report say which limit applied and where it came from.
+- A move's `timeout_s` may not be shorter than the move as planned.
+- Waits (`seconds`, `timeout_s`) and move timeouts stay within the arm file's
+  `control.max_wait_s`; a dry run stops after `control.max_dry_run_s` of simulated time.
+- Workspace guards of the arm file hold along each move's planned trajectory (the ruckig plan
+  the run streams, sampled at 100 Hz); `seqrun validate` reports the smallest clearance of each move.
+- The arm file's link volumes (capsules) keep `geometry.margin_mm` from its obstacles and
+  from each other along each move, and the closest pair of each move is reported.
+- End-effector targets (`move` with `position_mm`, `move_linear`) are solved by inverse
+  kinematics from the joints tracked so far (the solution nearest them); an unreachable
+  target is an error at its `position_mm`. The run solves again from the measured joints
+  and stops (Halt) if that solution is more than `cartesian.ik_agreement_deg` from the
+  validated one. A straight line is sampled every `cartesian.linear_sample_s` and every
+  sample must be reachable, inside the limits in force, within the joint velocity limits
+  and away from singular configurations (`cartesian.min_manipulability`); during the run
+  the tool further than `max_deviation_mm` from the line is a fault.
+- A checkpoint must agree with the end-effector of the joints tracked so far; a relative
+  one (`moved_mm`) with how far the tool moved during the last move. A checkpoint or a
+  wait after a `halt` (and no `reset`) can never pass and is an error.
+- Every pose a step names is checked against the arm at the pose file's own lines: it lists
+  every joint (the locked one at its locked value), its `end_effector` agrees with forward
+  kinematics of its joints, and a pose used as a move target lies inside the joint limits.
+- Every problem is reported in one pass: a step that is wrong on its own is left out and
+  the others are still checked against the arm.
+- A run uses exactly what was validated: the sequence, its includes, the poses and the arm
+  file are read once; their SHA-256 is in the run report (`inputs`).
+- Validation starts from Park (`--start POSE` to choose another pose).
+
+## Steps
+"""
+
+
+def _type_text(prop: dict, defs: dict) -> str:
+    if "$ref" in prop:
+        return "mapping"
+    if "anyOf" in prop:
+        kinds = [_type_text(p, defs) for p in prop["anyOf"] if p.get("type") != "null"]
+        return " or ".join(kinds)
+    if "oneOf" in prop:
+        return " or ".join(_type_text(p, defs) for p in prop["oneOf"])
+    if "const" in prop:
+        return f"`{prop['const']}`"
+    if "enum" in prop:
+        return " or ".join(f"`{v}`" for v in prop["enum"])
+    kind = prop.get("type")
+    if kind == "array":
+        items = _type_text(prop.get("items", {}), defs)
+        n = prop.get("minItems")
+        if n is not None and n == prop.get("maxItems"):
+            return f"[{n} × {items}]"
+        return f"list of {items}"
+    if kind == "object":
+        return f"{{joint: {_type_text(prop.get('additionalProperties', {}), defs)}}}"
+    bounds = []
+    if "exclusiveMinimum" in prop:
+        bounds.append(f"> {prop['exclusiveMinimum']}")
+    if "maximum" in prop:
+        bounds.append(f"≤ {prop['maximum']}")
+    names: dict[str | None, str] = {"number": "number", "string": "text",
+                                    "boolean": "true/false", "integer": "whole number"}
+    text = names.get(kind, "value")  # (kind is None when the schema gives no type)
+    return text + (" " + ", ".join(bounds) if bounds else "")
+
+
+def reference_markdown() -> str:
+    """The sequence format reference (docs/sequence-format.md), from the models."""
+    schema = sequence_json_schema()
+    defs = schema["$defs"]
+
+    def rows(definition: dict) -> str:
+        required = set(definition.get("required", []))
+        lines = []
+        props = definition["properties"]
+        for key in sorted(props, key=lambda k: k == "label"):  # label last
+            prop = props[key]
+            if key == "steps":
+                lines.append(f"| `steps` | list of steps (below) — required | "
+                             f"{prop.get('description', '')} |")
+                continue
+            default = ("required" if key in required else
+                       "" if prop.get("default") in (None, {}) else
+                       f"default `{json_dumps(prop['default'])}`")
+            lines.append(f"| `{key}` | {_type_text(prop, defs)}"
+                         f"{' — ' + default if default else ''} | "
+                         f"{prop.get('description', '')} |")
+        return "\n".join(lines)
+
+    parts = [_REFERENCE_INTRO.replace("{top}", rows(schema))]
+    for kind, model in PARAMS_MODELS.items():
+        step = defs[STEP_MODELS[kind].__name__]["properties"][kind]
+        parts.append(f"### `{kind}`\n\n{doc(model)}\n")
+        shorthand = step["description"].split(" Shorthand: ", 1)
+        if len(shorthand) == 2:
+            parts.append(f"Shorthand: {shorthand[1]}\n")
+        definition = defs[model.__name__]
+        if "oneOf" in definition:
+            choices = [" + ".join(f"`{k}`" for k in alt["required"])
+                       for alt in definition["oneOf"]]
+            parts.append(f"Give exactly one of: {' or '.join(choices)}.\n")
+        parts.append("| key | type | |\n|---|---|---|\n" + rows(definition) + "\n")
+    return "\n".join(parts)
+
+
+def file_reference_markdown(model: type[BaseModel], title: str, intro: str) -> str:
+    """A reference of a file format given by a pydantic model (pose files, arm files): one
+    row per key, nested mappings as dotted keys, from the model's JSON Schema."""
+    schema = model.model_json_schema()
+    defs = schema.get("$defs", {})
+
+    def resolve(prop: dict) -> dict:
+        if "$ref" in prop:
+            return defs[prop["$ref"].rsplit("/", 1)[-1]]
+        if "allOf" in prop and len(prop["allOf"]) == 1:
+            return {**resolve(prop["allOf"][0]), **{k: v for k, v in prop.items()
+                                                   if k != "allOf"}}
+        return prop
+
+    def kind(prop: dict) -> str:
+        if "anyOf" in prop:
+            return " or ".join(kind(p) for p in prop["anyOf"] if p.get("type") != "null")
+        if "enum" in prop:
+            return " or ".join(f"`{v}`" for v in prop["enum"])
+        if "const" in prop:
+            return f"`{prop['const']}`"
+        if prop.get("type") == "array":
+            items = prop.get("prefixItems") or []
+            if items:
+                return f"[{len(items)} × {kind(items[0])}]"
+            return f"list of {kind(resolve(prop.get('items', {})))}"
+        if prop.get("type") == "object" and isinstance(prop.get("additionalProperties"), dict):
+            return f"{{name: {kind(resolve(prop['additionalProperties']))}}}"
+        if prop.get("format") == "date-time":
+            return "date and time (ISO 8601)"
+        return {"number": "number", "string": "text", "boolean": "true/false",
+                "integer": "whole number", "object": "mapping"}.get(prop.get("type", ""),
+                                                                     "value")
+
+    rows: list[str] = []
+
+    def walk(definition: dict, prefix: str) -> None:
+        required = set(definition.get("required", []))
+        for key, raw in definition.get("properties", {}).items():
+            prop = resolve(raw)
+            name = f"{prefix}{key}"
+            default = ("required" if key in required else
+                       "" if raw.get("default") in (None, "") or isinstance(
+                           raw.get("default"), (dict, list)) and key not in ("rpy_deg",) else
+                       f"default `{raw['default']}`")
+            description = raw.get("description") or prop.get("description") or ""
+            if prop.get("properties"):
+                rows.append(f"| `{name}` | mapping{' — ' + default if default else ''} | "
+                            f"{description} |")
+                walk(prop, name + ".")
+                continue
+            rows.append(f"| `{name}` | {kind(prop)}{' — ' + default if default else ''} | "
+                        f"{description} |")
+
+    walk(schema, "")
+    return (f"# {title}\n\n{intro}\n\n| key | type | |\n|---|---|---|\n" + "\n".join(rows)
+            + "\n")
+
+
+def pose_reference_markdown() -> str:
+    """The pose file reference (``seqrun schema pose --markdown``)."""
+    from seqrun.arm.poses import PoseFile
+
+    return file_reference_markdown(
+        PoseFile, "Pose files",
+        "`poses/<name>.yaml`: a named joint configuration in user degrees (Totem = zeros). "
+        "It lists every joint of the arm, the locked one at its locked value; "
+        "`end_effector` is what forward kinematics gives for those joints and is checked "
+        "against them. `seqrun pose save NAME` writes one from the arm.")
+
+
+def arm_reference_markdown() -> str:
+    """The arm file reference (``seqrun schema arm --markdown``)."""
+    from seqrun.arm.description import ArmDescription
+
+    return file_reference_markdown(
+        ArmDescription, "Arm files",
+        "`arms/<name>.yaml`: every number about the arm (joints, limits, offsets, "
+        "kinematics, CAN and control-loop settings, workspace guards). Angles in degrees, "
+        "user coordinates.")

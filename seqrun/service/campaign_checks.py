@@ -1,0 +1,171 @@
+"""Checking many files at once: every sequence of a campaign (``seqrun validate DIR`` or
+several files), each pose file against the arm, each arm file, one result per file.
+
+A sequence gets :func:`seqrun.service.checking.check_sequence` (the static checks and,
+unless ``static``, the dry run); a pose file the pose checks against the campaign's arm;
+an arm file its own validation. The face prints the results (a table, JSON, JUnit).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from seqrun.errors import SequenceInvalid, UserInputError
+
+__all__ = ["FileResult", "collect", "validate_files"]
+
+#: Folders of a campaign that hold no sequences.
+_NOT_SEQUENCES = {"poses", "arms", "runs", ".seqrun", ".git"}
+
+
+@dataclass
+class FileResult:
+    file: str
+    kind: str  # sequence | pose | arm
+    result: str = "valid"  # valid | invalid | dry run failed | error
+    simulated_s: float | None = None
+    clearance_mm: float | None = None
+    clearance_at: str | None = None
+    errors: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def valid(self) -> bool:
+        return self.result == "valid"
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"file": self.file, "kind": self.kind, "result": self.result,
+                "valid": self.valid, "simulated_s": self.simulated_s,
+                "lowest_guard_clearance_mm": self.clearance_mm,
+                "lowest_guard_clearance_at": self.clearance_at,
+                "errors": self.errors, "notes": self.notes}
+
+
+def _kind(path: Path) -> str:
+    parts = {p.lower() for p in path.parent.parts}
+    if "poses" in parts:
+        return "pose"
+    if "arms" in parts:
+        return "arm"
+    return "sequence"
+
+
+def collect(paths: list[Path]) -> list[Path]:
+    """The files to validate: files as given; a folder's sequences (its ``sequences/``, or
+    every YAML outside poses/arms/runs) and its ``poses/``."""
+    files: list[Path] = []
+    for path in paths:
+        if path.is_file():
+            files.append(path)
+            continue
+        if not path.is_dir():
+            raise UserInputError(f"{path}: no such file or folder")
+        sequences = path / "sequences"
+        if sequences.is_dir():
+            found = sorted(sequences.rglob("*.yaml"))
+        else:
+            found = sorted(p for p in path.rglob("*.yaml")
+                           if not _NOT_SEQUENCES & set(p.relative_to(path).parts[:-1]))
+        found += sorted((path / "poses").glob("*.yaml")) if (path / "poses").is_dir() else []
+        if not found:
+            raise UserInputError(f"{path}: no sequence files (looked in "
+                                 f"{sequences if sequences.is_dir() else path})")
+        files.extend(found)
+    return list(dict.fromkeys(files))
+
+
+def _sequence(path: Path, options: dict) -> FileResult:
+    from seqrun.service.checking import check_sequence
+
+    result = FileResult(str(path), "sequence")
+    try:
+        check = check_sequence(path, start=options["start"], arm_file=options["arm_file"],
+                               started=options["started"], project_dir=options["project_dir"],
+                               dry_run=not options["static"], speed=options["speed"],
+                               faults=options.get("faults") or ())
+    except (UserInputError, OSError) as exc:
+        result.result = "error"
+        result.errors.append(str(exc))
+        return result
+    result.errors = [str(e) for e in check.errors]
+    result.notes = [f"{n.file}:{n.line}:{n.column}: note: {n.message}" for n in check.notes]
+    if not check.static.valid:
+        result.result = "invalid"
+        return result
+    run = check.dry_run
+    if run is None:
+        return result
+    assert check.arm is not None
+    result.simulated_s = round(run.simulated_s, 2)
+    guards = {g.name: g.min_z_mm for g in check.arm.workspace.guards}
+    best = math.inf
+    for key, z in run.result.min_heights_mm.items():
+        guard, point = key.split(":", 1)
+        clearance = z - guards.get(guard, 0.0)
+        if clearance < best:
+            best, result.clearance_mm = clearance, round(clearance, 1)
+            result.clearance_at = f"{point} above '{guard}'"
+    if not run.passed:
+        result.result = "dry run failed"
+        result.errors.append(f"dry run {run.result.status}: {run.result.message}")
+    return result
+
+
+def _pose(path: Path, options: dict) -> FileResult:
+    from seqrun.arm.description import load_arm
+    from seqrun.arm.poses import NOTE_PREFIX, check_pose, load_pose
+    from seqrun.sequence.project import project_for
+
+    result = FileResult(str(path), "pose")
+    try:
+        pose = load_pose(path)
+        project = project_for(path.resolve(), options["project_dir"])
+        arm = load_arm(options["arm_file"] or project.arm_path(None))
+    except SequenceInvalid as exc:
+        result.result = "invalid"
+        result.errors = [str(e) for e in exc.errors]
+        return result
+    except (UserInputError, OSError) as exc:
+        result.result = "error"
+        result.errors.append(str(exc))
+        return result
+    for finding in check_pose(pose, arm):
+        (result.notes if finding.startswith(NOTE_PREFIX) else result.errors).append(
+            f"{path}: {finding}")
+    if pose.name != path.stem:
+        result.errors.append(f"{path}: name '{pose.name}' differs from the file name "
+                             f"'{path.stem}' (sequences find poses by file name)")
+    if result.errors:
+        result.result = "invalid"
+    return result
+
+
+def _arm(path: Path) -> FileResult:
+    from seqrun.arm.description import load_arm
+
+    result = FileResult(str(path), "arm")
+    try:
+        arm = load_arm(path)
+    except SequenceInvalid as exc:
+        result.result = "invalid"
+        result.errors = [str(e) for e in exc.errors]
+    except (UserInputError, OSError) as exc:
+        result.result = "error"
+        result.errors.append(str(exc))
+    else:
+        result.notes = [f"{n.file}:{n.line}:{n.column}: note: {n.message}" for n in arm.notes]
+    return result
+
+
+def validate_files(paths: list[Path], **options: Any) -> list[FileResult]:
+    results = []
+    for path in collect(paths):
+        kind = _kind(path)
+        results.append(_pose(path, options) if kind == "pose" else
+                       _arm(path) if kind == "arm" else _sequence(path, options))
+    return results
+
+

@@ -1,0 +1,90 @@
+"""The campaign a command works in, and what it says: its arm file, its poses, its bus.
+
+Every face finds these here: the campaign of the current directory (or ``--project``),
+of a sequence, the arm file a command reads (``--arm``, else the campaign's, else the
+shipped one), the pose search path, the campaign's ``[bus]``. (Issue 23 makes this the
+one arm context every command resolves once.)
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from seqrun.errors import UserInputError
+from seqrun.sequence.project import CONFIG_NAME
+
+if TYPE_CHECKING:
+    from seqrun.arm.description import ArmDescription
+    from seqrun.sequence.project import Project
+
+__all__ = ["CONFIG_NAME", "campaign_bus", "campaign_here", "campaign_of", "load_arm_file",
+           "pose_search_path", "runs_dir_here", "zero_campaign"]
+
+def campaign_of(path: Path, project_dir: Path | None = None) -> Project:
+    """The campaign of a sequence (or folder) ``path``: ``project_dir`` if given, else the
+    nearest one above it, else the nearest folder with ``arms/`` or ``poses/``."""
+    from seqrun.sequence.project import project_for
+
+    return project_for(path, project_dir)
+
+
+def campaign_here(project_dir: Path | None = None) -> Project:
+    """``--project DIR``, else the campaign of the current directory."""
+    from seqrun.sequence.project import open_project, project_for
+
+    return open_project(project_dir) if project_dir else project_for(Path.cwd())
+
+
+def zero_campaign(project_dir: Path | None = None) -> Project:
+    """The campaign whose zero reference a command reads (``--project DIR``, else the
+    nearest seqrun.toml above the current directory, else the folder itself)."""
+    from seqrun.sequence.project import find_campaign, open_project, project_for
+
+    if project_dir is not None:
+        return open_project(project_dir)
+    campaign = find_campaign(Path.cwd())
+    return open_project(campaign) if campaign is not None else project_for(Path.cwd())
+
+
+def runs_dir_here(project_dir: Path | None = None) -> Path:
+    """Where the run folders of the campaign here are (``runs/`` outside a campaign)."""
+    from seqrun.sequence.project import find_campaign, open_project
+
+    if project_dir is None:
+        project_dir = find_campaign(Path.cwd())
+    return open_project(project_dir).runs_dir if project_dir else Path("runs")
+
+
+def load_arm_file(path: Path) -> ArmDescription:
+    """The arm file ``path``; for the default (``arms/lwa3.yaml``) where there is none, the
+    campaign's arm here (seqrun.toml), else the shipped one."""
+    from seqrun.defaults import DEFAULT_ARM
+
+    if path == DEFAULT_ARM and not path.is_file():
+        path = campaign_of(Path.cwd()).arm_path(None)
+    if not path.is_file():
+        raise UserInputError(f"arm file {path} not found (give one with --arm FILE)")
+    from seqrun.arm.description import load_arm  # pydantic: only for commands that read one
+
+    return load_arm(path)
+
+
+def pose_search_path(poses_dir: Path) -> Any:
+    """``--poses-dir`` as given, or for the default the poses of the campaign here (a
+    campaign's poses/, then the shipped ones)."""
+    from seqrun.defaults import DEFAULT_POSES_DIR
+
+    if poses_dir != DEFAULT_POSES_DIR:
+        return poses_dir
+    return campaign_of(Path.cwd()).pose_path
+
+
+def campaign_bus(loaded: Any, extra: dict) -> tuple:
+    """``(interface, channel, bitrate, bus kwargs)`` of the campaign's ``[bus]`` table (all
+    None when it names none: then python-can's configuration, else the simulator)."""
+    config = getattr(getattr(loaded, "project", None), "config", None)
+    if config is None or config.bus.interface is None:
+        return None, None, None, extra
+    bus = config.bus
+    return bus.interface, bus.channel, bus.bitrate, {**bus.kwargs, **extra}

@@ -1,0 +1,133 @@
+"""Checking a sequence before anything moves, the one way every face asks for it.
+
+:func:`check_sequence` is ``seqrun validate`` of one file: the static checks (every
+problem in one pass, ``file:line:col``), the campaign's pose overrides as notes, then the
+dry run on the simulator at virtual time. The console's check of a listed sequence is the
+same call, from where the arm stands now. :func:`errors_before_bus` and
+:func:`check_for_run` are what ``seqrun run`` checks before it opens the bus. Nothing here
+prints or exits; nothing reaches a real bus.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from seqrun.defaults import START_POSE
+from seqrun.errors import UserInputError
+
+if TYPE_CHECKING:
+    from seqrun.arm.description import ArmDescription
+    from seqrun.sequence.checks import StaticCheck
+    from seqrun.sequence.loader import LoadedSequence
+    from seqrun.sequence.validation import ValidationResult
+    from seqrun.service.dryrun import DryRun
+    from seqrun.sim.faults import Fault
+
+__all__ = ["SequenceCheck", "check_for_run", "check_sequence", "errors_before_bus",
+           "override_notes"]
+
+
+@dataclass
+class SequenceCheck:
+    """What ``seqrun validate`` found for one sequence: the static checks and, when they
+    passed and a dry run was asked for, the dry run."""
+
+    static: StaticCheck
+    dry_run: DryRun | None = None
+
+    @property
+    def valid(self) -> bool:
+        return self.static.valid and (self.dry_run is None or self.dry_run.passed)
+
+    @property
+    def loaded(self) -> LoadedSequence | None:
+        return self.static.loaded
+
+    @property
+    def arm(self) -> ArmDescription | None:
+        return self.static.arm
+
+    @property
+    def errors(self) -> list:
+        return self.static.errors
+
+    @property
+    def notes(self) -> list:
+        return self.static.notes
+
+
+def check_sequence(file: Path, *, start: str | None = None,
+                   start_deg: Mapping[str, float] | None = None,
+                   start_label: str | None = None, arm_file: Path | None = None,
+                   started: bool = False, speed: float = 1.0, project_dir: Path | None = None,
+                   dry_run: bool = True, faults: Sequence[Fault] = (),
+                   report_html: Path | None = None) -> SequenceCheck:
+    """Validate ``file`` (with its includes) against its arm from the start pose ``start``
+    (default Park: freshly powered on) or from ``start_deg`` (user degrees: where the arm
+    stands), then dry-run it when valid and ``dry_run``, rehearsing the simulator ``faults``. ``start_label`` names the start
+    in the dry run's report. Invalid files are findings; input that cannot be used at all
+    raises :class:`~seqrun.errors.UserInputError`."""
+    from seqrun.sequence.checks import static_check
+
+    static = static_check(file, start=start, start_deg=start_deg, arm_file=arm_file,
+                          started=started, speed=speed, project_dir=project_dir)
+    if static.loaded is not None:
+        static.notes = list(static.notes) + override_notes(static.loaded)
+    check = SequenceCheck(static)
+    if static.valid and dry_run:
+        from seqrun.service.dryrun import dry_run as run_dry
+
+        assert static.loaded is not None and static.arm is not None
+        assert static.start_deg is not None
+        for fault in faults:  # the simulated arm has the arm file's modules (as run checks)
+            if fault.module is not None and fault.module not in static.arm.module_ids:
+                raise UserInputError(
+                    f"--sim-fault '{fault.spec}': the arm has no module {fault.module} "
+                    f"(modules {', '.join(map(str, static.arm.module_ids))})")
+        check.dry_run = run_dry(static.loaded, static.arm, static.start_deg,
+                                start_pose=start_label or start or START_POSE,
+                                started=started, speed=speed, faults=faults,
+                                report_html=report_html)
+    return check
+
+
+def override_notes(loaded: LoadedSequence) -> list:
+    """A note for every pose the sequence uses that the campaign's poses/ overrides."""
+    from seqrun.arm.poses import pose_overrides
+    from seqrun.steps.registry import step_kind
+
+    overrides = pose_overrides(loaded.pose_path or loaded.poses_dir)
+    notes, seen = [], set()
+    for step in loaded.steps:
+        for name in step_kind(step.kind).poses(step.params):  # the pose files it names
+            if name in overrides and name not in seen:
+                seen.add(name)
+                used, hidden = overrides[name]
+                notes.append(step.error(f"pose '{name}' is the campaign's {used}, which "
+                                        f"overrides {', '.join(str(h) for h in hidden)}",
+                                        "pose"))
+    return notes
+
+
+def errors_before_bus(file: Path, load_errors: list, **check: Any) -> list:
+    """The errors ``seqrun validate --static`` reports for ``file`` that did not load (its
+    load errors and the checks of the steps that loaded), else ``load_errors``."""
+    from seqrun.sequence.checks import static_check
+
+    try:
+        return static_check(file, **check).errors or load_errors
+    except UserInputError:
+        return load_errors
+
+
+def check_for_run(loaded: LoadedSequence, arm: ArmDescription, start: str | None,
+                  started: bool, from_step: int) -> ValidationResult:
+    """What ``seqrun run`` checks before it opens the bus: validation from the assumed
+    start (with ``--from N`` from where step N starts); the executor checks again from
+    the measured arm."""
+    from seqrun.sequence.checks import static_validation
+
+    return static_validation(loaded, arm, start, started, from_step)

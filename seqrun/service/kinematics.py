@@ -1,0 +1,150 @@
+"""The arm's kinematics as the faces ask for it (the pure maths is
+:mod:`seqrun.arm.kinematics`, :mod:`seqrun.arm.ik`).
+
+- the end effector of a reading: ``seqrun status``, the session's status, a run's status
+  over its control socket, the live view;
+- ``seqrun fk`` and ``seqrun ik``: a pose of joint angles, joint angles of a tool target;
+- the console's 3D view: the chain as frames, guards, link volumes, obstacles.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from seqrun.arm.description import ArmDescription
+    from seqrun.arm.kinematics import Pose
+
+__all__ = ["ForwardKinematics", "InverseKinematics", "arm_scene", "end_effector",
+           "end_effector_pose", "forward_kinematics", "inverse_kinematics"]
+
+
+def end_effector(arm: ArmDescription, joints_deg: Sequence[float]) -> dict[str, list[float]]:
+    """``{"position_mm": [x, y, z], "rpy_deg": [roll, pitch, yaw]}`` (rounded to 1 µm and
+    0.001°) of the end effector with every joint at ``joints_deg`` (user degrees)."""
+    import numpy as np
+
+    from seqrun.arm.kinematics import Chain, fk, rpy_from_matrix
+
+    frame = fk(Chain.from_arm(arm), np.radians(np.asarray(joints_deg, dtype=float)))
+    return {"position_mm": [round(float(x), 3) for x in frame[:3, 3]],
+            "rpy_deg": [round(float(x), 3)
+                        for x in np.degrees(rpy_from_matrix(frame[:3, :3]))]}
+
+
+def end_effector_pose(arm: ArmDescription, joints_deg: Sequence[float]
+                      ) -> tuple[list[float], list[float]]:
+    """``([x, y, z] mm, [roll, pitch, yaw] deg)`` of the end effector, unrounded (a live
+    view formats them itself)."""
+    import numpy as np
+
+    from seqrun.arm.kinematics import Chain, fk, rpy_from_matrix
+
+    frame = fk(Chain.from_arm(arm), np.radians(np.asarray(joints_deg, dtype=float)))
+    return ([float(x) for x in frame[:3, 3]],
+            [float(x) for x in np.degrees(rpy_from_matrix(frame[:3, :3]))])
+
+
+@dataclass
+class ForwardKinematics:
+    """``seqrun fk``: the pose and what the operator should know about the joints given."""
+
+    pose: Pose
+    #: One line each: a locked joint given another value, a joint outside its limits.
+    notes: list[str] = field(default_factory=list)
+
+
+def forward_kinematics(arm: ArmDescription,
+                       joints: Sequence[float] | Mapping[str, float]) -> ForwardKinematics:
+    """The end-effector pose of ``joints`` (user degrees: one per joint, or a pose's by
+    name). A maths question: a locked joint given another value is computed as given, with
+    a note that the arm would not do it. Bad joints: :class:`~seqrun.errors.UserInputError`."""
+    from seqrun.arm.kinematics import LOCKED_TOLERANCE_DEG, pose_from_user_deg
+    from seqrun.errors import UserInputError
+
+    given = joints if isinstance(joints, Mapping) else dict(zip(arm.joint_names, joints))
+    off = [j for j in arm.joints if j.locked is not None and j.name in given
+           and abs(given[j.name] - j.locked) > LOCKED_TOLERANCE_DEG]
+    notes = [f"note: {joint.name} is locked at {joint.locked:g} deg on the arm; computed "
+             f"with {given[joint.name]:g} deg as given" for joint in off]
+    maths_arm = arm if not off else arm.model_copy(update={"joints": [
+        j.model_copy(update={"locked": None}) if j in off else j for j in arm.joints]})
+    try:
+        pose = pose_from_user_deg(maths_arm, joints)
+    except ValueError as exc:  # locked joint moved, unknown joint in a pose file, ...
+        raise UserInputError(str(exc)) from None
+    for joint in arm.joints:
+        lo, hi = joint.limits_deg
+        value = given.get(joint.name)
+        if value is not None and not lo <= value <= hi:
+            notes.append(f"note: {joint.name} {value:g} deg is outside its limits "
+                         f"[{lo:g}, {hi:g}]")
+    return ForwardKinematics(pose, notes)
+
+
+@dataclass
+class InverseKinematics:
+    """``seqrun ik``: the solution (None: unreachable, ``unreachable`` says why), the seed
+    it started from (user degrees, every joint) and the tool it put at the target."""
+
+    solution: Any
+    seed_deg: Any
+    tool: str | None
+    unreachable: str | None = None
+
+
+def inverse_kinematics(arm: ArmDescription, position_mm: Sequence[float],
+                       rpy_deg: Sequence[float], *, tool: str | None,
+                       seed: Sequence[float] | Mapping[str, float]) -> InverseKinematics:
+    """Joint angles that put ``tool`` (None: the arm's default, else the end-effector
+    frame) at the position and orientation, inside the joint limits, from ``seed`` (user
+    degrees). A bad seed or an unknown tool: :class:`~seqrun.errors.UserInputError`."""
+    from seqrun.arm.cartesian import unknown_tool
+    from seqrun.arm.ik import IkSolver, Unreachable, target_frame
+    from seqrun.arm.kinematics import user_joint_values
+    from seqrun.errors import UserInputError
+
+    try:
+        seed_deg = user_joint_values(arm, seed)
+    except ValueError as exc:
+        raise UserInputError(f"seed: {exc}") from None
+    try:
+        solver = IkSolver(arm, tool)
+    except KeyError:
+        raise UserInputError(unknown_tool(arm, tool)) from None
+    found = arm.tool(tool)
+    name = found.name if found is not None else None
+    try:
+        solution = solver.solve(target_frame(position_mm, rpy_deg), seed_deg)
+    except Unreachable as exc:
+        return InverseKinematics(None, seed_deg, name, str(exc))
+    return InverseKinematics(solution, seed_deg, name)
+
+
+def arm_scene(arm: ArmDescription) -> dict[str, Any]:
+    """What a 3D view needs of the arm: the joints (limits, locked value), the chain as 4x4
+    frames (the view multiplies them with Rz(q) per joint, the reference convention of
+    :mod:`seqrun.arm.kinematics`, computed by the code the validator uses), the guards,
+    link volumes and obstacles."""
+    from seqrun.arm.kinematics import Chain
+
+    def rows(matrix: Any) -> list[list[float]]:
+        return [[round(float(v), 9) for v in row] for row in matrix]
+
+    chain = Chain.from_arm(arm)
+    return {
+        "name": arm.name,
+        "joints": [{"name": j.name, "module": j.module, "limits_deg": list(j.limits_deg),
+                    "locked": j.locked, "max_velocity_deg_s": j.max_velocity_deg_s}
+                   for j in arm.joints],
+        "chain": {"base": rows(chain.base), "links": [rows(m) for m in chain.links],
+                  "tool": rows(chain.tool)},
+        "guards": [{"name": g.name, "min_z_mm": g.min_z_mm, "points": list(g.points)}
+                   for g in arm.workspace.guards],
+        "capsules": [{"name": c.name, "start": c.start, "end": c.end,
+                      "radius_mm": c.radius_mm} for c in arm.geometry.capsules],
+        "obstacles": [o.model_dump(mode="json", exclude_none=True)
+                      for o in arm.geometry.obstacles],
+    }

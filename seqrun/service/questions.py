@@ -1,0 +1,102 @@
+"""Questions for the operator as events: a run's ``confirm`` steps, step mode's before-step
+question, clearing a fault latched before the run.
+
+A question is published (``confirm_requested``) and answered by any face from any thread
+(:meth:`Questions.answer`); a stop request or an abort withdraws it (a "no"). Part of the
+arm session (:mod:`seqrun.service.session`).
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from seqrun.errors import Refused
+
+#: How often a waiting question looks for a stop request that answers it "no" (s).
+POLL_S = 0.05
+
+
+@dataclass
+class Question:
+    id: str
+    text: str
+    step: bool = False
+    yes: bool | None = None
+
+    def __post_init__(self) -> None:
+        self.answered = threading.Event()
+
+
+class Questions:
+    """The open questions of one session.
+
+    :param publish: the session's ``publish(type, **fields)``.
+    :param stop_pending: whether a stop request is posted for the activity asking (a
+        pending abort or STOP answers "no" at once).
+    """
+
+    def __init__(self, publish: Callable[..., None], stop_pending: Callable[[], bool],
+                 started_by: Callable[[], str | None] = lambda: None) -> None:
+        self._publish = publish
+        self._stop_pending = stop_pending
+        self._started_by = started_by
+        self._lock = threading.Lock()
+        self._open: dict[str, Question] = {}
+        self._ids = 0
+
+    def ask(self, text: str, *, step: bool = False) -> bool:
+        """Publish ``text`` and wait for the answer (or the withdrawal: no)."""
+        with self._lock:
+            self._ids += 1
+            q = Question(f"q{self._ids}", text, step)
+            self._open[q.id] = q
+        by = self._started_by()  # who started the run the question is about
+        self._publish("confirm_requested", question_id=q.id, text=text,
+                      **({"started_by": by} if by is not None else {}))
+        while not q.answered.wait(POLL_S):
+            # A stop request posted meanwhile (abort, STOP) answers no at once.
+            if self._stop_pending():
+                self._resolve(q, False)
+        return bool(q.yes)
+
+    def answer(self, question_id: str, yes: bool) -> None:
+        """Answer a ``confirm_requested`` question (any thread). Refused: unknown or
+        already answered question."""
+        with self._lock:
+            q = self._open.get(question_id)
+        if q is None:
+            raise Refused(f"answer: no open question {question_id!r}")
+        if not isinstance(yes, bool):
+            raise Refused(f"answer: yes must be true or false, got {yes!r}")
+        self._resolve(q, yes)
+
+    def step(self) -> None:
+        """In step mode: let the next step start (answers its before-step question yes)."""
+        with self._lock:
+            waiting = [q for q in self._open.values() if q.step]
+        if not waiting:
+            raise Refused("step: no step is waiting to start")
+        for q in waiting:
+            self.answer(q.id, True)
+
+    def withdraw(self) -> None:
+        """Every open question answered "no" (the activity was stopped)."""
+        with self._lock:
+            open_ = list(self._open.values())
+        for q in open_:
+            self._resolve(q, False)
+
+    def pending(self) -> dict[str, str]:
+        """Questions waiting for an answer: id -> text."""
+        with self._lock:
+            return {q.id: q.text for q in self._open.values()}
+
+    def _resolve(self, q: Question, yes: bool) -> None:
+        with self._lock:
+            if self._open.pop(q.id, None) is None:
+                return
+            q.yes = yes
+        self._publish("confirm_answered", question_id=q.id, yes=yes)
+        q.answered.set()

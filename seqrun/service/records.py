@@ -1,0 +1,174 @@
+"""Run records: what a run used, frozen in its run folder, and the list of past runs.
+
+Every run folder gets ``inputs/`` (a copy of every file the run read: the sequence and its
+includes, the pose files, the arm file, the campaign's ``seqrun.toml``) and ``record.json``
+(each input with its sha256, the seqrun version, the campaign's git commit and whether the
+work tree was dirty, the bus and the zero reference). A run refused by validation leaves a
+short folder too (``report.json`` with status ``refused`` and the errors), so a campaign's
+run log is complete. ``seqrun runs`` lists the folders.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import hashlib
+import json
+import os
+import shutil
+import subprocess
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+from seqrun.shipped import shipped_dir
+
+#: How long ``git rev-parse`` may take before the record says "unknown".
+GIT_TIMEOUT_S = 5.0
+
+
+def sha256_file(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 16), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def _copy_name(path: Path, root: Path | None) -> str:
+    """Where an input goes under ``inputs/``: its path in the campaign, or ``_shipped/…``
+    for a shipped file, else ``_other/<parent>/<name>``."""
+    path = path.resolve()
+    if root is not None and path.is_relative_to(root.resolve()):
+        return path.relative_to(root.resolve()).as_posix()
+    for kind in ("arms", "poses", "sequences"):
+        folder = shipped_dir(kind).resolve()
+        if path.is_relative_to(folder):
+            return f"_shipped/{kind}/{path.relative_to(folder).as_posix()}"
+    return f"_other/{path.parent.name or 'root'}/{path.name}"
+
+
+def freeze_inputs(folder: Path, paths: Iterable[Path], root: Path | None = None) -> list[dict]:
+    """Copy every file of ``paths`` into ``folder/inputs/`` and return one entry per file:
+    ``{"path", "copy", "sha256", "bytes"}`` (duplicates dropped, order kept). The sha256 is
+    of the copy, so record and copy always agree."""
+    entries: list[dict] = []
+    seen: set[Path] = set()
+    for path in paths:
+        path = Path(path).resolve()
+        if path in seen or not path.is_file():
+            continue
+        seen.add(path)
+        name = _copy_name(path, root)
+        target = Path(folder) / "inputs" / name
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(path, target)
+        entries.append({"path": str(path), "copy": f"inputs/{name}",
+                        "sha256": sha256_file(target), "bytes": target.stat().st_size})
+    return entries
+
+
+def input_paths(loaded: Any, arm_path: Path | None = None) -> list[Path]:
+    """The files a loaded sequence uses: itself and its includes, the pose files its steps
+    name, the arm file and the campaign config."""
+    from seqrun.errors import SeqrunError
+    from seqrun.arm.poses import find_pose
+
+    paths = [Path(p) for p in loaded.files]
+    pose_path = loaded.pose_path or loaded.poses_dir
+    for name in ("park",) + tuple(dict.fromkeys(
+            getattr(s.params, "pose", None) for s in loaded.steps)):
+        if name is None:
+            continue
+        try:
+            paths.append(find_pose(name, pose_path))
+        except SeqrunError:  # a power_off pose is in the arm file, not a pose file
+            pass
+    paths.append(Path(arm_path or loaded.arm_path))
+    config = getattr(loaded.project, "config_path", None)
+    if config is not None:
+        paths.append(Path(config))
+    return paths
+
+
+def git_state(folder: Path) -> dict | None:
+    """``{"commit", "dirty"}`` of the git work tree holding ``folder``; None when it is not
+    in one (or git is missing); ``commit: None`` when git did not answer in time."""
+    def git(*args: str) -> subprocess.CompletedProcess:
+        return subprocess.run(["git", "-C", str(folder), *args], capture_output=True,
+                              text=True, timeout=GIT_TIMEOUT_S,
+                              env={**os.environ, "GIT_OPTIONAL_LOCKS": "0"})
+
+    try:
+        head = git("rev-parse", "HEAD")
+        if head.returncode != 0:
+            return None
+        status = git("status", "--porcelain", "--untracked-files=no")
+    except FileNotFoundError:
+        return None
+    except subprocess.TimeoutExpired:
+        return {"commit": None, "dirty": None, "note": f"git took over {GIT_TIMEOUT_S:g} s"}
+    return {"commit": head.stdout.strip(), "dirty": bool(status.stdout.strip())}
+
+
+def write_record(folder: Path, *, loaded: Any, arm_path: Path, bus: str,
+                 zero: dict | None, inputs: list[dict] | None = None) -> dict:
+    """Freeze the inputs (unless given) and write ``record.json``; returns the record."""
+    from seqrun import __version__
+
+    project = getattr(loaded, "project", None)
+    root = getattr(project, "root", None)
+    if inputs is None:
+        inputs = freeze_inputs(folder, input_paths(loaded, arm_path), root)
+    record = {
+        "seqrun": __version__,
+        "sequence": loaded.name,
+        "file": str(loaded.file),
+        "campaign": str(root) if getattr(project, "is_campaign", False) else None,
+        "git": git_state(root) if root is not None else None,
+        "bus": bus,
+        "zero": zero,
+        "inputs": inputs,
+    }
+    Path(folder).mkdir(parents=True, exist_ok=True)
+    (Path(folder) / "record.json").write_text(json.dumps(record, indent=2) + "\n",
+                                              encoding="utf-8")
+    return record
+
+
+def write_refusal(folder: Path, *, sequence: str, file: str, errors: list[dict],
+                  loaded: Any = None, arm_path: Path | None = None, bus: str | None = None,
+                  exit_code: int = 1) -> None:
+    """The short record of a run that validation refused: nothing was sent."""
+    now = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="milliseconds")
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    report = {"sequence": sequence, "file": file, "start": now, "end": now,
+              "status": "refused", "exit_code": exit_code,
+              "message": f"refused by validation ({len(errors)} error"
+                         f"{'s' * (len(errors) != 1)}); nothing was sent",
+              "duration_s": 0.0, "errors": errors}
+    (folder / "report.json").write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+    if loaded is not None:
+        write_record(folder, loaded=loaded, arm_path=arm_path or loaded.arm_path,
+                     bus=bus or "none (refused before the bus was opened)", zero=None)
+
+
+def list_runs(runs_dir: Path) -> list[dict]:
+    """One entry per run folder under ``runs_dir`` (oldest first): when, sequence, result,
+    duration, exit code, folder."""
+    runs: list[dict] = []
+    if not Path(runs_dir).is_dir():
+        return runs
+    for folder in sorted(Path(runs_dir).iterdir()):
+        report_file = folder / "report.json"
+        if not folder.is_dir() or not report_file.is_file():
+            continue
+        try:
+            report = json.loads(report_file.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            report = {"status": "unreadable report.json"}
+        runs.append({"when": report.get("start"), "sequence": report.get("sequence"),
+                     "result": report.get("status"), "duration_s": report.get("duration_s"),
+                     "exit_code": report.get("exit_code"), "folder": str(folder)})
+    runs.sort(key=lambda r: (r["when"] or "", r["folder"]))
+    return runs

@@ -1,0 +1,156 @@
+"""A run made ready, up to an open bus: what ``seqrun run`` does before it asks anything.
+
+:func:`prepare_run` checks the options, loads the sequence (every problem in one pass,
+as ``seqrun validate`` reports them), loads its arm, checks the sequence statically from
+the assumed start (nothing is opened before that passes; a refusal is recorded in the
+campaign) and opens the bus (the campaign's, python-can's configuration, else the
+simulator). What follows — the operator's questions, the zero reference, the run in the
+arm session — is the face's, through :class:`~seqrun.service.session.ArmSession`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from seqrun.errors import SeqrunError, SequenceInvalid, UserInputError
+
+if TYPE_CHECKING:
+    from seqrun.arm.description import ArmDescription
+    from seqrun.sequence.loader import LoadedSequence
+    from seqrun.service.connection import Connection
+
+__all__ = ["PreparedRun", "RunInvalid", "RunRequest", "prepare_run", "run_folder"]
+
+
+@dataclass
+class RunRequest:
+    """``seqrun run``'s options."""
+
+    file: Path
+    interface: str | None = None
+    channel: str | None = None
+    bitrate: int | None = None
+    bus_kwargs: Sequence[str] = ()
+    sim: bool = False
+    sim_faults: Sequence[str] = ()
+    speed: float = 1.0
+    from_step: int = 1
+    log_dir: Path | None = None
+    arm_file: Path | None = None
+    command_mode: str | None = None
+    start: str | None = None
+    started: bool = False
+    virtual_time: bool = False
+    project_dir: Path | None = None
+    power_on_at: str | None = None
+
+
+@dataclass
+class PreparedRun:
+    """A run ready to go: the sequence, its arm (the arm file's offsets: the zero
+    reference is decided on the bus) and the open connection (the caller closes it)."""
+
+    loaded: LoadedSequence
+    arm: ArmDescription
+    connection: Connection
+    #: The arm file the run names (its record says which).
+    arm_path: Path = field(default_factory=Path)
+    #: The sequence file as the operator named it.
+    file: Path = field(default_factory=Path)
+
+
+class RunInvalid(SeqrunError):
+    """The sequence is not valid from the assumed start: nothing was opened or sent."""
+
+    def __init__(self, file: str, errors: list) -> None:
+        super().__init__(f"{file}: invalid ({len(errors)} error{'s' * (len(errors) != 1)}); "
+                         "nothing was sent")
+        self.file = file
+        self.errors = errors
+
+
+def prepare_run(request: RunRequest) -> PreparedRun:
+    """Check, load and validate the run of ``request``, then open its bus.
+
+    :raises UserInputError: an option or file that cannot be used (one line).
+    :raises SequenceInvalid: the sequence does not load (every error, as ``validate``).
+    :raises RunInvalid: it loads but is not valid from the assumed start.
+    """
+    from seqrun.clock import VirtualClock
+    from seqrun.sequence.loader import load_sequence
+    from seqrun.service import campaign_records
+    from seqrun.service.campaigns import campaign_bus, load_arm_file
+    from seqrun.service.checking import check_for_run, errors_before_bus
+    from seqrun.service.connection import open_connection, parse_bus_kwargs, parse_faults
+
+    r = request
+    if not 0 < r.speed <= 1:
+        raise UserInputError(f"--speed must lie in (0, 1], got {r.speed:g}")
+    if r.command_mode not in (None, "ramp", "step"):
+        raise UserInputError(f"--command-mode must be ramp or step, got '{r.command_mode}'")
+    if not r.file.is_file():
+        raise UserInputError(f"sequence file {r.file} not found")
+    faults = parse_faults(list(r.sim_faults))
+    extra = parse_bus_kwargs(list(r.bus_kwargs))
+    try:
+        loaded = load_sequence(r.file, project_root=r.project_dir)  # invalid -> no bus
+    except SequenceInvalid as exc:
+        # Every problem in one pass, exactly as `seqrun validate` reports them: the steps
+        # that are valid on their own are still checked against the arm.
+        errors = errors_before_bus(r.file, exc.errors, start=r.start, arm_file=r.arm_file,
+                                   started=r.started, speed=r.speed,
+                                   project_dir=r.project_dir)
+        campaign_records.refuse_unloadable(r.file, r.project_dir, errors, r.log_dir)
+        raise SequenceInvalid(errors) from None
+    arm_path = r.arm_file or loaded.arm_path
+    arm = load_arm_file(arm_path)
+    if r.power_on_at is not None:
+        arm.power_off_pose(r.power_on_at)  # one of the arm's power-off poses
+    interface, channel, bitrate = r.interface, r.channel, r.bitrate
+    if not (interface or channel or bitrate or extra or r.sim):  # the campaign's bus
+        interface, channel, bitrate, extra = campaign_bus(loaded, extra)
+    if not 1 <= r.from_step <= len(loaded.steps):
+        raise UserInputError(f"--from {r.from_step}: the sequence has steps "
+                             f"1-{len(loaded.steps)}")
+    # Static validation before the bus is even opened; the executor validates again from
+    # the measured state before the first motion.
+    static = check_for_run(loaded, arm, r.start, r.started, r.from_step)
+    if static.errors:
+        campaign_records.refuse(loaded, arm_path, static.errors, r.log_dir)
+        raise RunInvalid(loaded.file, list(static.errors))
+    if r.virtual_time and not (r.sim or faults or not (interface or channel or extra)):
+        raise UserInputError("--virtual-time needs the simulator")
+    for fault in faults:  # the simulated arm has the arm file's modules
+        if fault.module is not None and fault.module not in arm.module_ids:
+            raise UserInputError(f"--sim-fault '{fault.spec}': the arm has no module "
+                                 f"{fault.module} (modules {', '.join(map(str, arm.module_ids))})")
+    connection = open_connection(interface=interface, channel=channel, bitrate=bitrate,
+                                 bus_kwargs=extra, force_sim=r.sim, faults=faults,
+                                 default_bitrate=arm.can.bitrate,
+                                 clock=VirtualClock() if r.virtual_time else None,
+                                 power_on_pose=r.power_on_at.lower() if r.power_on_at else None)
+    if r.virtual_time and not connection.is_simulator:
+        connection.close()
+        raise UserInputError("--virtual-time needs the simulator")
+    if r.power_on_at is not None and not connection.is_simulator:
+        connection.close()
+        raise UserInputError("--power-on-at applies to the built-in simulator (seqrun sim "
+                             "serve has its own)")
+    return PreparedRun(loaded, arm, connection, Path(arm_path), r.file)
+
+
+def run_folder(loaded: LoadedSequence, log_dir: Path | None) -> Path:
+    """The run's folder (``--log-dir``, else a new one in the campaign's runs/); a used
+    ``--log-dir`` gets a new folder inside. An unusable one: UserInputError."""
+    from seqrun.service import campaign_records
+    from seqrun.service.runlog import prepare_run_folder
+
+    try:
+        return prepare_run_folder(log_dir, loaded.name, campaign_records.runs_dir(loaded))
+    except OSError as exc:
+        raise UserInputError(f"cannot create the run folder "
+                             f"{log_dir or campaign_records.runs_dir(loaded)}: "
+                             f"{exc.strerror or exc}") from None

@@ -1,0 +1,381 @@
+"""The run folder: everything a run leaves behind, written as the run goes.
+
+``runs/<time>-<name>/``
+  trace.log     every CAN frame sent and received, candump format (``can.LogReader`` reads
+                it), wall-clock (epoch) time stamps, the bus channel's name in both directions
+  events.jsonl  one executor event per line; ``run_started`` carries ``start_epoch_s``, the
+                wall-clock time of the run's t = 0 (an event at ``t`` happened at
+                ``start_epoch_s + t``, the trace's time base)
+  steps.jsonl   one line per finished step (appended: constant cost per step)
+  report.json   status, exit code, timing, per-step results, fault. While the run goes it
+                says ``running`` and is rewritten at most once a second (it points to
+                steps.jsonl); at the end it is written whole. :func:`read_report` assembles
+                the report of a run that was killed from what is on disk.
+  junit.xml     one test case per step and one per checkpoint, measured values as
+                properties, for CI dashboards
+  report.html   drawn after the run from the files above (seqrun/report/)
+
+Every line goes to disk as it is written (one write per line): a run killed with SIGKILL
+leaves a readable folder. A failing disk never disturbs the run: the first error stops
+that file, is reported once (``warn``, an event, the report) and leaves whole lines only.
+"""
+
+from __future__ import annotations
+
+import copy
+import datetime as _dt
+import json
+import time
+from pathlib import Path
+from typing import Any, Callable, TextIO, cast
+from xml.sax.saxutils import escape, quoteattr
+
+import can
+
+from seqrun.events import Event
+from seqrun.results import RunResult, StepResult
+from seqrun.service.logfile import LineFile, write_whole
+
+#: The running report.json is rewritten at most this often (seconds of real time).
+REPORT_INTERVAL_S = 1.0
+
+#: Files whose presence says a folder holds a run.
+RUN_FILES = ("report.json", "events.jsonl", "trace.log")
+
+
+def default_run_dir(sequence_name: str, root: Path = Path("runs")) -> Path:
+    stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+    safe = "".join(c if c.isalnum() or c in "-_" else "-" for c in sequence_name)[:60]
+    return root / f"{stamp}-{safe}"
+
+
+def holds_run(folder: Path) -> bool:
+    return any((Path(folder) / name).exists() for name in RUN_FILES)
+
+
+def prepare_run_folder(log_dir: Path | None, sequence_name: str,
+                       root: Path = Path("runs")) -> Path:
+    """The folder this run writes, created and checked writable (OSError otherwise).
+
+    Without ``log_dir``: ``<root>/<time>-<name>/``. A ``log_dir`` that already holds a run
+    is never overwritten: the run goes to a new ``<time>-<name>/`` folder inside it. Two
+    runs in the same second get ``-2``, ``-3`` ... suffixes.
+    """
+    if log_dir is not None and not holds_run(log_dir):
+        folder = Path(log_dir)
+        folder.mkdir(parents=True, exist_ok=True)
+    else:
+        base = default_run_dir(sequence_name, Path(log_dir) if log_dir else Path(root))
+        base.parent.mkdir(parents=True, exist_ok=True)
+        folder = base
+        for n in range(2, 1000):
+            try:
+                folder.mkdir()
+                break
+            except FileExistsError:
+                folder = base.with_name(f"{base.name}-{n}")
+    probe = folder / ".seqrun-write-test"
+    probe.write_bytes(b"")
+    probe.unlink()
+    return folder
+
+
+def _now_iso() -> str:
+    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="milliseconds")
+
+
+def _iso(epoch: float) -> str:
+    return _dt.datetime.fromtimestamp(epoch, _dt.timezone.utc).isoformat(timespec="milliseconds")
+
+
+class _TraceSink:
+    """File object for python-can's candump writer: one line per write, to a LineFile."""
+
+    def __init__(self, file: LineFile) -> None:
+        self._file = file
+
+    def write(self, text: str) -> int:
+        self._file.write(text)
+        return len(text)
+
+    def flush(self) -> None:
+        pass
+
+    def close(self) -> None:
+        self._file.close()
+
+
+class RunLog:
+    """Event listener and frame listener writing one run folder.
+
+    :param clock: the run's clock; frame stamps (its readings) become wall-clock time.
+    :param channel: the bus channel's name, written on every trace line.
+    :param warn: told once, in one line, when writing the run folder fails.
+    """
+
+    def __init__(self, folder: Path, meta: dict[str, Any], *, clock=None,
+                 channel: str | None = None, warn: Callable[[str], None] | None = None) -> None:
+        self.folder = Path(folder)
+        self.folder.mkdir(parents=True, exist_ok=True)
+        self.meta = dict(meta)
+        self.warn = warn
+        self.errors: list[str] = []
+        self._failed_files: set[str] = set()
+        self.started_iso = _now_iso()
+        # One time base: a reading c of the run's clock happened at epoch0 + (c - clock0).
+        # At virtual time epoch0 is a whole second: the trace keeps microseconds, and with
+        # a whole-second origin every stamp rounds the same way in every run (the virtual
+        # times of two frames compare as exactly as the trace allows, run after run).
+        self._epoch0 = time.time()
+        if clock is not None and getattr(clock, "is_virtual", False):
+            self._epoch0 = float(int(self._epoch0))
+        self._clock0 = clock.now() if clock is not None else None
+        self.time_base: dict[str, Any] = {}
+        self.channel = str(channel) if channel is not None else "can0"
+        self._events = LineFile(self.folder / "events.jsonl", self._failed)
+        self._steps_file = LineFile(self.folder / "steps.jsonl", self._failed)
+        self._trace_file = LineFile(self.folder / "trace.log", self._failed)
+        self._trace = can.CanutilsLogWriter(cast(TextIO, _TraceSink(self._trace_file)),
+                                            channel=self.channel)
+        self._closed = False
+        self._started: dict[int, dict] = {}
+        self._steps_done = 0
+        self._last_step: int | None = None
+        self._report_written = -1e9
+        self._joint_names: list[str] = []
+        self._write_running()
+
+    # Failures ----------------------------------------------------------------------
+    def _failed(self, path: Path, exc: OSError) -> None:
+        if path.name in self._failed_files:   # said once per file
+            return
+        self._failed_files.add(path.name)
+        text = f"writing {path} failed ({exc.strerror or exc}); that file stops here"
+        self.errors.append(text)
+        if len(self.errors) == 1 and self.warn is not None:
+            try:
+                self.warn(f"run log: {text}; the run goes on")
+            except Exception:  # noqa: BLE001 - a broken terminal must not stop the run
+                pass
+        if path != self._events.path:
+            self._events.write(json.dumps({"t": None, "type": "log_failed", "file": path.name,
+                                           "error": str(exc)}) + "\n")
+
+    # Listeners -------------------------------------------------------------------
+    def on_event(self, event: Event | dict) -> None:
+        """Synchronous recorder of a typed event (or its dict): one line on disk before the
+        control loop goes on, so a run killed the next instant leaves a complete log."""
+        if self._closed:
+            return
+        if isinstance(event, Event):
+            event = event.as_dict()
+        kind = event["type"]
+        if kind == "run_started" and self._clock0 is not None and "clock_s" in event:
+            start = self._epoch0 + (event["clock_s"] - self._clock0)
+            self.time_base = {"start_epoch_s": round(start, 6), "start_utc": _iso(start),
+                              "clock_s": event["clock_s"]}
+            event = {**event, **self.time_base}
+        if kind == "run_started":   # names for the per-joint JUnit properties
+            self._joint_names = [j.get("name", "") for j in
+                                 (event.get("arm") or {}).get("joints", [])]
+        self._events.write(json.dumps(event, separators=(",", ":"), default=str) + "\n")
+        if kind == "step_started":
+            self._started[event.get("step", 0)] = event
+        elif kind == "step_finished":
+            number = event.get("step", 0)
+            begun = self._started.pop(number, {})
+            line = {"number": number, "kind": begun.get("kind"), "label": begun.get("label"),
+                    "location": begun.get("location"),
+                    **{k: v for k, v in event.items() if k not in ("type", "step")}}
+            self._steps_file.write(json.dumps(line, separators=(",", ":"), default=str) + "\n")
+            self._steps_done += 1
+            self._last_step = number
+            if time.monotonic() - self._report_written >= REPORT_INTERVAL_S:
+                self._write_running()
+
+    def on_frame(self, msg: can.Message) -> None:
+        if self._closed or not self._trace_file.ok:
+            return
+        line = copy.copy(msg)
+        line.channel = self.channel
+        if self._clock0 is not None:
+            line.timestamp = self._epoch0 + (msg.timestamp - self._clock0)
+        self._trace.on_message_received(line)
+
+    # Final report -----------------------------------------------------------------
+    def finish(self, result: RunResult) -> dict:
+        """Write the final report.json and junit.xml; never raises (errors are recorded)."""
+        report = {
+            "status": result.status,
+            "exit_code": result.exit_code,
+            "message": result.message,
+            "duration_s": round(result.duration_s, 4),
+            "planned_duration_s": round(result.planned_duration_s, 4),
+            "fault": result.fault,
+            "latched_at_start": result.latched_at_start,
+            "steps": [s.as_dict() for s in result.steps],
+            "checkpoints": [_checkpoint(s) for s in result.steps if s.kind == "checkpoint"
+                            and s.status != "skipped"],
+            "not_verified": result.not_verified,
+            "min_heights_mm": result.min_heights_mm,
+        }
+        junit = junit_xml(self.meta.get("sequence", "sequence"), result, self._joint_names)
+        error = write_whole(self.folder / "junit.xml", junit)
+        if error is not None:
+            self._failed(self.folder / "junit.xml", error)
+        return self._write_report(report, ended=True)
+
+    def _write_running(self) -> None:
+        self._report_written = time.monotonic()
+        self._write_report({"status": "running", "exit_code": None,
+                            "steps_file": "steps.jsonl", "steps_finished": self._steps_done,
+                            "last_step_finished": self._last_step})
+
+    def _write_report(self, body: dict, ended: bool = False) -> dict:
+        report = {"sequence": self.meta.get("sequence"), "file": self.meta.get("file"),
+                  "start": self.started_iso, "end": _now_iso() if ended else None,
+                  **self.time_base,
+                  **{k: v for k, v in self.meta.items() if k not in ("sequence", "file")},
+                  **body}
+        if ended and self.errors:
+            report["log_errors"] = list(self.errors)
+        error = write_whole(self.folder / "report.json",
+                            json.dumps(report, indent=2, default=str))
+        if error is not None:
+            self._failed(self.folder / "report.json", error)
+        return report
+
+    def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        self._events.close()
+        self._steps_file.close()
+        self._trace_file.close()
+
+
+def read_report(folder: Path) -> dict:
+    """The run's report as far as the folder tells it: report.json of a finished run, or,
+    for a run that was killed (``running``), that report with the steps of steps.jsonl
+    and the last fault and event of events.jsonl. Partial last lines are ignored."""
+    folder = Path(folder)
+    report = json.loads((folder / "report.json").read_text(encoding="utf-8"))
+    if report.get("status") != "running":
+        return report
+    report["steps"] = _json_lines(folder / report.get("steps_file", "steps.jsonl"))
+    events = _json_lines(folder / "events.jsonl")
+    faults = [e for e in events if e.get("type") == "fault"]
+    if faults:
+        report["fault"] = {k: v for k, v in faults[-1].items() if k not in ("t", "type")}
+    if events:
+        report["last_event"] = events[-1]
+    return report
+
+
+def read_trace(folder: Path, *, run_clock: bool = False) -> list[can.Message]:
+    """The frames of trace.log. With ``run_clock`` their stamps are readings of the run's
+    clock (as the executor and the simulator saw them) instead of wall-clock time, to the
+    microsecond the trace keeps: ``stamp - start_epoch_s + clock_s`` (from events.jsonl)."""
+    folder = Path(folder)
+    frames = list(can.LogReader(str(folder / "trace.log")))
+    if run_clock:
+        started = next(e for e in _json_lines(folder / "events.jsonl")
+                       if e.get("type") == "run_started")
+        shift = started["clock_s"] - started["start_epoch_s"]
+        for msg in frames:
+            msg.timestamp = round(msg.timestamp + shift, 6)
+    return frames
+
+
+def _json_lines(path: Path) -> list[dict]:
+    if not path.exists():
+        return []
+    out = []
+    for line in path.read_text(encoding="utf-8").splitlines():
+        try:
+            out.append(json.loads(line))
+        except json.JSONDecodeError:
+            break
+    return out
+
+
+def _checkpoint(step: StepResult) -> dict:
+    keys = ("expected_position_mm", "reached_position_mm", "position_error_mm",
+            "angle_error_deg", "position_tolerance_mm", "angle_tolerance_deg")
+    return {"step": step.number, "status": step.status,
+            **{k: step.detail[k] for k in keys if k in step.detail}}
+
+
+#: Step results that become JUnit properties (lists: one property per joint).
+_JUNIT_PROPERTIES = ("planned_duration_s", "executed_duration_s", "duration_ratio",
+                     "max_following_error_deg", "final_error_deg",
+                     "peak_measured_velocity_deg_s", "peak_velocity_deg_s",
+                     "velocity_limit_deg_s", "waited_s")
+_CHECKPOINT_PROPERTIES = ("expected_position_mm", "reached_position_mm", "reached_rpy_deg",
+                          "position_error_mm", "position_tolerance_mm", "angle_error_deg",
+                          "angle_tolerance_deg")
+
+
+def junit_xml(suite: str, result: RunResult, joint_names: list[str] | None = None) -> str:
+    """Two suites: one test case per step, one per checkpoint; measured values are
+    properties (per joint: ``max_following_error_deg.j2``), so a CI dashboard shows them."""
+    names = joint_names or []
+    checkpoints = [s for s in result.steps if s.kind == "checkpoint"]
+    lines = ['<?xml version="1.0" encoding="UTF-8"?>', "<testsuites>"]
+    lines += _junit_suite(suite, suite, result, result.steps, _JUNIT_PROPERTIES, names)
+    if checkpoints:
+        lines += _junit_suite(f"{suite}: checkpoints", f"{suite}.checkpoints", result,
+                              checkpoints, _CHECKPOINT_PROPERTIES, names, checkpoint=True)
+    lines.append("</testsuites>")
+    return "\n".join(lines) + "\n"
+
+
+def _junit_suite(name: str, classname: str, result: RunResult, steps: list[StepResult],
+                 keys: tuple[str, ...], joint_names: list[str], *,
+                 checkpoint: bool = False) -> list[str]:
+    failures = sum(1 for s in steps if s.status in ("failed", "aborted"))
+    skipped = sum(1 for s in steps if s.status in ("skipped", "pending"))
+    time = sum(s.duration_s or 0.0 for s in steps) if checkpoint else result.duration_s
+    lines = [f'<testsuite name={quoteattr(name)} tests="{len(steps)}" '
+             f'failures="{failures}" skipped="{skipped}" time="{time:.3f}">']
+    for s in steps:
+        # A step without a label is described starting with its kind ("confirm: …",
+        # "move to pose …"): no second kind in front of it.
+        kind = "" if s.label.split(":")[0].split(" ")[0] == s.kind else f"{s.kind}: "
+        title = f"{s.number:02d} {s.label}" if checkpoint else f"{s.number:02d} {kind}{s.label}"
+        duration = f"{s.duration_s:.3f}" if s.duration_s is not None else "0"
+        lines.append(f'  <testcase classname={quoteattr(classname)} name={quoteattr(title)} '
+                     f'file={quoteattr(s.location)} time="{duration}">')
+        properties = _junit_properties(s, keys, joint_names)
+        if properties:
+            lines.append("    <properties>")
+            lines += [f"      <property name={quoteattr(k)} value={quoteattr(v)}/>"
+                      for k, v in properties]
+            lines.append("    </properties>")
+        if s.status in ("failed", "aborted"):
+            msg = s.detail.get("error") or result.message
+            lines.append(f'    <failure message={quoteattr(str(msg))}>{escape(str(msg))}</failure>')
+        elif s.status in ("skipped", "pending"):
+            lines.append('    <skipped message="not run"/>')
+        lines.append("  </testcase>")
+    lines.append("</testsuite>")
+    return lines
+
+
+def _junit_properties(step: StepResult, keys: tuple[str, ...],
+                      joint_names: list[str]) -> list[tuple[str, str]]:
+    values = {**step.detail, "planned_duration_s": step.planned_duration_s}
+    out = []
+    for key in keys:
+        value = values.get(key)
+        if value is None:
+            continue
+        if isinstance(value, (list, tuple)) and key.endswith(("_mm", "rpy_deg")):
+            out.append((key, " ".join(f"{float(x):g}" for x in value)))
+        elif isinstance(value, (list, tuple)):
+            names = joint_names if len(joint_names) == len(value) else \
+                [f"joint{i + 1}" for i in range(len(value))]
+            out += [(f"{key}.{n}", f"{float(x):g}") for n, x in zip(names, value)]
+        else:
+            out.append((key, f"{float(value):g}" if isinstance(value, (int, float)) else str(value)))
+    return out

@@ -1,0 +1,182 @@
+"""Sequence runs in a session: ``seqrun run``'s (on the caller's thread, the terminal's own
+prompts and signals) and the console's (in a worker, questions as events), each with its
+run folder, and pause/resume of the run under way.
+
+Both go through :func:`seqrun.service.runner.run_sequence` with the session's driver and
+event hub, so a run in the console is exactly a run from the terminal. Part of the arm
+session (:mod:`seqrun.service.session`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from seqrun.errors import Refused
+from seqrun.service.activities import (EXIT_FAULT_CODE, Activity, ActivityResult,
+                                       activity_result)
+from seqrun.service.motion import finite
+from seqrun.service.status import RunInfo
+
+
+class Runs:
+    """The sequence runs of one session (its ``arm``, ``project``, ``connection``,
+    ``driver``, ``events``, ``zero``, ``log_root``, ``activities``, ``telemetry``,
+    ``questions``)."""
+
+    def __init__(self, session: Any) -> None:
+        self._session = session
+
+    def run_sequence(self, file: str | Path, *, speed: float = 1.0, step_mode: bool = False,
+                     first_step: int = 1, command_mode: str | None = None,
+                     log_dir: Path | None = None, html_report: bool = True,
+                     loaded=None, assume_yes: bool = False, by: str | None = None) -> Activity:
+        """Validate ``file`` (refused with its first error line when invalid), then run it in
+        a worker thread with a run folder like ``seqrun run``. Questions (confirm steps,
+        ``step_mode``'s before-step question, clearing a latched fault) are published as
+        ``confirm_requested`` events; answer them with the session's ``answer``."""
+        from seqrun.errors import SequenceInvalid, UserInputError
+        from seqrun.sequence.loader import load_sequence
+        from seqrun.sequence.validation import validate_sequence
+        from seqrun.service.runlog import prepare_run_folder
+
+        s = self._session
+        speed = finite(speed, "speed")
+        if not 0 < speed <= 1:
+            raise Refused(f"speed {speed:g} must lie in (0, 1]")
+        if command_mode not in (None, "ramp", "step"):
+            raise Refused(f"command mode must be ramp or step, got {command_mode!r}")
+        if loaded is None:
+            try:
+                loaded = load_sequence(Path(file), project_root=(
+                    s.project.root if s.project is not None else None))
+            except SequenceInvalid as exc:
+                more = len(exc.errors) - 1
+                raise Refused(str(exc.errors[0]) + (f" (and {more} more)" if more else "")) \
+                    from None
+            except UserInputError as exc:
+                raise Refused(str(exc)) from None
+        if not isinstance(first_step, int) or not 1 <= first_step <= len(loaded.steps):
+            raise Refused(f"first step {first_step!r}: the sequence has steps "
+                          f"1-{len(loaded.steps)}")
+        now = s.telemetry.condition()
+        start = s.telemetry.joints_deg() if now.measured else None
+        if first_step == 1:  # the executor checks again from the arm's measured state
+            check = validate_sequence(loaded, s.arm, start, speed=speed,
+                                      started=bool(s.telemetry.homed))
+            if check.errors:
+                more = len(check.errors) - 1
+                raise Refused(str(check.errors[0]) + (f" (and {more} more)" if more else ""))
+        try:
+            folder = prepare_run_folder(log_dir, loaded.name, s.log_root)
+        except OSError as exc:
+            raise Refused(f"cannot create the run folder: {exc.strerror or exc}") from None
+        activity = s.activities.begin("run", {"file": str(file), "run_dir": str(folder)},
+                                       by)
+        s.activities.run_info = RunInfo(str(file), None, None, len(loaded.steps), str(folder))
+        total = len(loaded.steps)
+
+        def before_step(step) -> bool:
+            if not step_mode:
+                return True
+            return s.questions.ask(f"Run step {step.number}/{total}: {step.title}?", step=True)
+
+        def confirm(prompt: str) -> bool:
+            return True if assume_yes else s.questions.ask(prompt)
+
+        def work() -> ActivityResult:
+            outcome = self.run_loaded(loaded, log_dir=folder, speed=speed,
+                                      first_step=first_step, command_mode=command_mode,
+                                      confirm=confirm, before_step=before_step,
+                                      confirm_clear_latched=(
+                                          None if s.connection.is_simulator
+                                          else lambda q: s.questions.ask(q)),
+                                      html_report=html_report, file=str(file),
+                                      bus_held=True)
+            result = activity_result("run", outcome.result, run_dir=folder)
+            try:
+                s.telemetry.poll_once()
+            except Exception:  # noqa: BLE001
+                pass
+            return result
+
+        return s.activities.launch(activity, work, background=True)
+
+    def run_loaded(self, loaded, *, log_dir: Path | None, speed: float = 1.0,
+                   first_step: int = 1, command_mode: str | None = None,
+                   confirm: Callable[[str], bool] | None = None,
+                   before_step: Callable | None = None,
+                   confirm_clear_latched: Callable[[str], bool] | None = None,
+                   on_executor: Callable | None = None, run_control=None, requests=None,
+                   warn: Callable[[str], None] | None = None, meta: dict | None = None,
+                   html_report: bool = True, file: str | None = None,
+                   bus_held: bool = False, cycle_hz: float | None = None,
+                   record_zero: Callable[[str], Any] | None = None):
+        """Run an already loaded and checked sequence on the caller's thread with the
+        session's driver and event hub; returns the runner's outcome (result, report, run
+        folder). This is how ``seqrun run`` runs (its prompts are the terminal's own); faces
+        that answer questions through events use :meth:`run_sequence`. ``record_zero``:
+        what a power_off step calls to record the pose the arm is switched off in;
+        ``run_control``: the run's :class:`~seqrun.service.run_control.RunControl`
+        (``seqrun status|halt`` from another terminal), attached to the run's executor."""
+        from seqrun.service.runner import run_sequence as run_with_log
+        from seqrun.stop_requests import StopRequests
+
+        s = self._session
+        requests = requests if requests is not None else StopRequests()
+
+        def hook(executor) -> None:
+            s.activities.adopt(executor)
+            if s.zero is not None:  # for the log and any face
+                executor.emit("zero_reference", **s.zero.as_dict())
+            executor.record_zero = record_zero
+            if run_control is not None:  # `seqrun status|halt` from another terminal
+                run_control.attach(executor)
+            if on_executor is not None:
+                on_executor(executor)
+
+        def go():
+            return run_with_log(loaded, s.arm, s.connection, log_dir=log_dir, file=file,
+                                speed=speed, first_step=first_step,
+                                command_mode=command_mode, cycle_hz=cycle_hz,
+                                confirm=confirm, before_step=before_step,
+                                on_executor=hook, confirm_clear_latched=confirm_clear_latched,
+                                meta=meta, html_report=html_report, requests=requests,
+                                warn=warn, driver=s.driver, events=s.events)
+
+        if bus_held:  # run_sequence's worker: the activity is registered already
+            return go()
+        activity = s.activities.begin("run", {"file": file or loaded.file,
+                                              "run_dir": str(log_dir)})
+        s.activities.run_info = RunInfo(file or loaded.file, None, None, len(loaded.steps),
+                                        str(log_dir) if log_dir is not None else None)
+        result = ActivityResult("run", "failed", EXIT_FAULT_CODE, "interrupted")
+        try:
+            with s.activities.bus:
+                outcome = go()
+            result = activity_result("run", outcome.result, run_dir=log_dir)
+            return outcome
+        finally:
+            s.activities.end(activity, result)
+
+    # ------------------------------------------------------------------ the run under way
+    def pause(self) -> None:
+        """Pause the run (controlled stop, hold); :meth:`resume` goes on."""
+        executor = self._running_executor("pause")
+        executor.pause()
+        self._session.activities.paused = True
+
+    def resume(self) -> None:
+        executor = self._running_executor("resume")
+        if self._session.telemetry.halted() is not None:
+            raise Refused("resume: the arm was halted; nothing restarts it")
+        executor.resume()
+        self._session.activities.paused = False
+
+    def _running_executor(self, what: str):
+        activities = self._session.activities
+        activity, executor = activities.current, activities.executor
+        if activity is None or activity.kind != "run" or executor is None:
+            raise Refused(f"{what}: no sequence is running")
+        return executor
