@@ -20,11 +20,22 @@
    ``--browser-cpus LIST`` (Chromium under ``taskset -c LIST``).
 3. **Idle CPU** of a ``seqrun console --sim`` process (user + system time over
    ``--idle-seconds``), with no page and with one tab open.
+4. **The dry-run check hammered** (issue 24.3): the loop's period during opsafe, quiet vs
+   four clients asking for opsafe's check back to back (as a web page's ``<img>`` loop
+   did), alternating run by run; with ``--baseline DIR`` (the tree before issue 24, e.g.
+   ``git archive 2bfba80 | tar -x -C DIR``) the same on a console of that tree in the same
+   run, side by side: there the check ran in the console's process (GET, no limit), here in
+   a worker process at nice 10, rate-limited.
+5. **Live clients** (issue 24.4): the loop's period during opsafe with no live client vs
+   ``--clients 50,50`` (50 that read every message, 50 that connect and never read; in a
+   process of their own at nice 10: they stand for tablets elsewhere), alternating run by
+   run in one console process. Goal: p99 within 2 ms of none.
 
 Chromium: /usr/bin/chromium or $SEQRUN_CHROMIUM (Playwright drives it; no browser download).
 
 Run: ``.venv/bin/python bench/bench_console.py [--clicks 100] [--idle-seconds 10]
-[--repeats 3] [--modes none,tabs] [--rt-priority N] [--skip stop|telemetry|idle]``
+[--repeats 3] [--modes none,tabs] [--rt-priority N] [--skip|--only
+stop|telemetry|idle|check|clients] [--baseline DIR] [--clients 50,50] [--out FILE]``
 """
 
 from __future__ import annotations
@@ -134,8 +145,8 @@ class ConsoleProcess:
 
     def __init__(self, log_dir: Path, *, rt_priority: int | None = None,
                  switch_interval: float | None = None, nice: int | None = None,
-                 prefix: str | None = None) -> None:
-        env = {**os.environ, "PYTHONPATH": str(ROOT)}
+                 prefix: str | None = None, root: Path = ROOT) -> None:
+        env = {**os.environ, "PYTHONPATH": str(root)}
         args = ["console", "--sim", "--port", "0", "--yes", "--log-dir", str(log_dir)]
         if rt_priority is not None:
             args += ["--rt-priority", str(rt_priority)]
@@ -151,9 +162,11 @@ class ConsoleProcess:
         if prefix:  # an experiment: e.g. "chrt -r 1" (every thread of the process)
             command = [*prefix.split(), *command]
         self.log_dir = log_dir
-        self.proc = subprocess.Popen(command, cwd=ROOT, env=env, stdout=subprocess.PIPE,
+        self.proc = subprocess.Popen(command, cwd=root, env=env, stdout=subprocess.PIPE,
                                      stderr=subprocess.STDOUT, text=True)
         self.url = ""
+        self.token: str | None = None
+        self.client: str | None = None
         self.lines: list[str] = []
         self.answered: set[str] = set()  # confirm questions answered (ids are per session)
         while not self.url:
@@ -165,18 +178,38 @@ class ConsoleProcess:
             found = re.search(r"(http://\S+)", line)
             self.url = found.group(1) if found else ""
         threading.Thread(target=self._drain, daemon=True).start()
+        # The console prints its token in the URL (every request but STOP needs it) and
+        # commands need control: this script takes it (the tabs it opens watch).
+        found = re.search(r"[?&]token=([^&\s]+)", self.url)
+        self.base = self.url.split("?", 1)[0]
+        if found:
+            self.token = found.group(1)
+            self.client = self.call("POST", "/control/take", {"name": "bench"})["client"]
 
     def _drain(self) -> None:
         for line in self.proc.stdout:
             self.lines.append(line)
 
+    def headers(self) -> dict[str, str]:
+        headers = {"Content-Type": "application/json"}
+        if self.token:
+            headers["Authorization"] = f"Bearer {self.token}"
+        if self.client:
+            headers["X-Seqrun-Client"] = self.client
+        return headers
+
     def call(self, method: str, path: str, body: dict | None = None) -> Any:
         data = None if body is None else json.dumps(body).encode()
-        request = urllib.request.Request(self.url.rstrip("/") + "/api/v1" + path, data=data,
-                                         method=method,
-                                         headers={"Content-Type": "application/json"})
+        request = urllib.request.Request(self.base.rstrip("/") + "/api/v1" + path, data=data,
+                                         method=method, headers=self.headers())
         with urllib.request.urlopen(request, timeout=60) as response:
             return json.loads(response.read())
+
+    @property
+    def live_url(self) -> str:
+        """The live WebSocket's URL (with the token where the console has one)."""
+        url = self.base.replace("http://", "ws://").rstrip("/") + "/api/v1/live"
+        return url + (f"?token={self.token}" if self.token else "")
 
     def close(self) -> None:
         self.proc.terminate()
@@ -237,10 +270,16 @@ def browser_cpu_seconds() -> float:
     return sum(c for pid, c in cpu.items() if "chrom" in names[pid] and ours(pid))
 
 
-def one_run(console: ConsoleProcess, browser, tabs: int, page_url: str) -> dict:
-    """One run of opsafe with ``tabs`` pages open: the loop's periods, each tab's rate, and
-    how much CPU time the console process' threads got and waited for."""
+def one_run(console: ConsoleProcess, browser, tabs: int, page_url: str,
+            load: Any = None) -> dict:
+    """One run of opsafe with ``tabs`` pages open (and ``load`` started before it, stopped
+    after it: an object with start() and stop() -> dict): the loop's periods, each tab's
+    rate, and how much CPU time the console process' threads got and waited for."""
+    if console.call("GET", "/status")["activity"] in ("halted", "faulted"):
+        console.call("POST", "/reset")  # the run before failed (a loaded host): start again
     pages = [open_page(browser, page_url) for _ in range(tabs)]
+    if load is not None:
+        load.start()
     before = task_times(console.proc.pid)
     browser_before = browser_cpu_seconds()
     console.call("POST", "/run", {"sequence": "opsafe.yaml"})
@@ -264,6 +303,7 @@ def one_run(console: ConsoleProcess, browser, tabs: int, page_url: str) -> dict:
             break
     seconds = time.monotonic() - started
     after = task_times(console.proc.pid)
+    load_figures = load.stop() if load is not None else None
     browser_cpu = max(0.0, browser_cpu_seconds() - browser_before)  # (closed tabs: gone)
     for p in pages:
         p.context.close()
@@ -279,7 +319,8 @@ def one_run(console: ConsoleProcess, browser, tabs: int, page_url: str) -> dict:
             "min_rates": [float(np.min(r)) if r else None for r in rates],
             "cpu_percent": round(100 * cpu / seconds, 1),
             "browser_cpu_percent": round(100 * browser_cpu / seconds, 1),
-            "runnable_wait_ms_per_s": round(1000 * waited / seconds, 1)}
+            "runnable_wait_ms_per_s": round(1000 * waited / seconds, 1),
+            "load": load_figures}
 
 
 def loop_ab(browser, repeats: int, modes: list[str], *, rt_priority: int | None = None,
@@ -323,6 +364,207 @@ def loop_ab(browser, repeats: int, modes: list[str], *, rt_priority: int | None 
                                                 for run in items],
                      "results": [run["result"] for run in items]}
     return out
+
+
+# -- section 4: the dry-run check hammered during a run (issue 24.3), before and after
+class CheckHammer:
+    """``threads`` clients asking for the check of opsafe back to back, as a web page's
+    <img> loop did: GET on a console of before issue 24 (no token), POST with the token on
+    one after it (mostly refused 429 by its rate limit: that is the point)."""
+
+    def __init__(self, console: ConsoleProcess, threads: int = 4) -> None:
+        self.console = console
+        self.threads = threads
+        self.codes: dict[int, int] = {}
+        self._stop = threading.Event()
+        self._workers: list[threading.Thread] = []
+
+    def _hammer(self) -> None:
+        console = self.console
+        method = "POST" if console.token else "GET"
+        url = console.base.rstrip("/") + "/api/v1/sequences/opsafe.yaml/check"
+        while not self._stop.is_set():
+            request = urllib.request.Request(url, method=method, data=b"" if method == "POST"
+                                             else None, headers=console.headers())
+            try:
+                with urllib.request.urlopen(request, timeout=120) as response:
+                    response.read()
+                    code = response.status
+            except urllib.error.HTTPError as exc:
+                code = exc.code
+                if code == 429:  # refused at once: ask again as a page would, soon
+                    time.sleep(0.05)
+            except OSError:
+                code = -1
+            self.codes[code] = self.codes.get(code, 0) + 1
+
+    def start(self) -> None:
+        self._stop.clear()
+        self.codes = {}
+        self._workers = [threading.Thread(target=self._hammer, daemon=True)
+                         for _ in range(self.threads)]
+        for worker in self._workers:
+            worker.start()
+
+    def stop(self) -> dict:
+        self._stop.set()
+        for worker in self._workers:
+            worker.join(timeout=150)
+        return {"answers": dict(sorted(self.codes.items()))}
+
+
+def check_ab(browser, repeats: int, baseline: Path | None) -> dict:
+    """The loop's period during opsafe, quiet vs the check hammered, alternating run by
+    run, in a console of this tree and (``baseline``) one of the tree before."""
+    trees = [("after", ROOT)] + ([("before", baseline)] if baseline else [])
+    runs: dict[str, list[dict]] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        consoles = {name: ConsoleProcess(Path(tmp) / name, root=root) for name, root in trees}
+        try:
+            for console in consoles.values():  # warm-up: every measured run from Op-safe
+                one_run(console, browser, 0, console.url)
+            for rep in range(repeats):
+                order = [(name, mode) for name, _ in trees for mode in ("quiet", "hammered")]
+                for name, mode in (order if rep % 2 == 0 else order[::-1]):
+                    console = consoles[name]
+                    load = CheckHammer(console) if mode == "hammered" else None
+                    run = one_run(console, browser, 0, console.url, load)
+                    runs.setdefault(f"{name} {mode}", []).append(run)
+                    s = summary(run["periods"])
+                    print(f"   {name:6s} {mode:9s} rep {rep + 1}: {run['result']}, loop p50 "
+                          f"{s.get('p50_ms')} p99 {s.get('p99_ms')} max {s.get('max_ms')} ms;"
+                          f" console CPU {run['cpu_percent']} %"
+                          + (f"; check answers {run['load']['answers']}" if run["load"] else ""),
+                          flush=True)
+        finally:
+            for console in consoles.values():
+                console.close()
+    return {mode: {"loop": summary([p for run in items for p in run["periods"]]),
+                   "loop_p99_per_run_ms": [summary(run["periods"]).get("p99_ms")
+                                           for run in items],
+                   "results": [run["result"] for run in items],
+                   "check_answers": [run["load"] for run in items]}
+            for mode, items in runs.items()}
+
+
+# -- section 5: 50 reading + 50 non-reading live clients during a run (issue 24.4)
+class LiveClients:
+    """``reading`` live clients that take every message and ``idle`` ones that connect and
+    never read (a small receive buffer: the console's sends to them block). They stand for
+    tablets and tools elsewhere on the network, so they run in a process of their own at
+    ``nice`` 10 (this script with ``--live-clients-child``), not competing with the console
+    for the CPU as if they were part of it."""
+
+    def __init__(self, console: ConsoleProcess, reading: int = 50, idle: int = 50) -> None:
+        self.console = console
+        self.reading = reading
+        self.idle = idle
+        self.proc: Any = None
+
+    def start(self) -> None:
+        self.proc = subprocess.Popen(
+            ["nice", "-n", "10", sys.executable, str(Path(__file__).resolve()),
+             "--live-clients-child", self.console.live_url, str(self.reading), str(self.idle)],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=ROOT,
+            env={**os.environ, "PYTHONPATH": str(ROOT)})
+        line = self.proc.stdout.readline()
+        if line.strip() != "ready":
+            raise RuntimeError(f"the live clients did not connect: {line!r}")
+
+    def stop(self) -> dict:
+        self.proc.stdin.write("stop\n")
+        self.proc.stdin.flush()
+        figures = json.loads(self.proc.stdout.readline())
+        self.proc.wait(60)
+        return figures
+
+
+def live_clients_child(url: str, reading: int, idle: int) -> None:
+    """The live clients (see :class:`LiveClients`): prints "ready" once connected, then the
+    figures as one JSON line when "stop" comes on stdin."""
+    import asyncio
+    import socket
+
+    import websockets.asyncio.client
+
+    async def main() -> None:
+        done = asyncio.Event()
+        received = [0] * reading
+        refused = 0
+
+        async def reader(k: int) -> None:
+            nonlocal refused
+            try:
+                async with websockets.asyncio.client.connect(url, max_size=None) as ws:
+                    while not done.is_set():
+                        try:
+                            await asyncio.wait_for(ws.recv(), 1.0)
+                            received[k] += 1
+                        except asyncio.TimeoutError:
+                            continue
+            except Exception:  # noqa: BLE001 - refused (the cap) or dropped: counted
+                refused += 1
+
+        host, port = re.search(r"ws://([^:/]+):(\d+)", url).groups()
+        path = url.split(f":{port}", 1)[1]
+        sockets = []
+        for _ in range(idle):
+            sock = socket.socket()
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+            sock.connect((host, int(port)))
+            sock.sendall((f"GET {path} HTTP/1.1\r\nHost: {host}:{port}\r\n"
+                          "Upgrade: websocket\r\nConnection: Upgrade\r\n"
+                          "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n"
+                          "Sec-WebSocket-Version: 13\r\n\r\n").encode())
+            sockets.append(sock)
+        tasks = [asyncio.create_task(reader(k)) for k in range(reading)]
+        await asyncio.sleep(2.0)  # connected (and sent the history of events)
+        for k in range(reading):
+            received[k] = 0
+        print("ready", flush=True)
+        started = time.monotonic()
+        await asyncio.get_running_loop().run_in_executor(None, sys.stdin.readline)
+        seconds = time.monotonic() - started
+        done.set()
+        await asyncio.gather(*tasks)
+        for sock in sockets:
+            sock.close()
+        rates = [n / seconds for n in received]
+        print(json.dumps({"reading": reading, "idle": idle, "refused": refused,
+                          "reader_hz_median": round(float(np.median(rates)), 1),
+                          "reader_hz_min": round(float(np.min(rates)), 1)}), flush=True)
+
+    asyncio.run(main())
+
+
+def clients_ab(browser, repeats: int, reading: int, idle: int,
+               switch_interval: float | None = None) -> dict:
+    """The loop's period during opsafe with no client and with ``reading`` + ``idle`` live
+    clients, alternating run by run in one console process."""
+    runs: dict[str, list[dict]] = {"none": [], "clients": []}
+    with tempfile.TemporaryDirectory() as tmp:
+        console = ConsoleProcess(Path(tmp), switch_interval=switch_interval)
+        try:
+            one_run(console, browser, 0, console.url)  # warm-up: every measured run from Op-safe
+            for rep in range(repeats):
+                for mode in (("none", "clients") if rep % 2 == 0 else ("clients", "none")):
+                    load = LiveClients(console, reading, idle) if mode == "clients" else None
+                    run = one_run(console, browser, 0, console.url, load)
+                    runs[mode].append(run)
+                    s = summary(run["periods"])
+                    print(f"   {mode:8s} rep {rep + 1}: {run['result']}, loop p50 "
+                          f"{s.get('p50_ms')} p99 {s.get('p99_ms')} max {s.get('max_ms')} ms;"
+                          f" console CPU {run['cpu_percent']} %"
+                          + (f"; clients {run['load']}" if run["load"] else ""), flush=True)
+        finally:
+            console.close()
+    return {mode: {"loop": summary([p for run in items for p in run["periods"]]),
+                   "loop_p99_per_run_ms": [summary(run["periods"]).get("p99_ms")
+                                           for run in items],
+                   "console_cpu_percent": [run["cpu_percent"] for run in items],
+                   "results": [run["result"] for run in items],
+                   "clients": [run["load"] for run in items]}
+            for mode, items in runs.items()}
 
 
 def cpu_seconds(pid: int) -> float:
@@ -371,6 +613,9 @@ def launch(pw, browser_cpus: str | None):
 
 
 def main() -> None:
+    if sys.argv[1:2] == ["--live-clients-child"]:
+        live_clients_child(sys.argv[2], int(sys.argv[3]), int(sys.argv[4]))
+        return
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--clicks", type=int, default=100)
     parser.add_argument("--idle-seconds", type=float, default=10.0)
@@ -389,9 +634,20 @@ def main() -> None:
     parser.add_argument("--browser-cpus", metavar="LIST",
                         help="experiment: run Chromium under taskset -c LIST")
     parser.add_argument("--skip", action="append", default=[],
-                        choices=["stop", "telemetry", "idle"])
+                        choices=["stop", "telemetry", "idle", "check", "clients"])
+    parser.add_argument("--only", action="append", default=[],
+                        choices=["stop", "telemetry", "idle", "check", "clients"],
+                        help="run only these sections")
+    parser.add_argument("--baseline", type=Path, metavar="DIR",
+                        help="section 4 also on a console of the source tree DIR (before "
+                             "issue 24: git archive 2bfba80 | tar -x -C DIR)")
+    parser.add_argument("--clients", default="50,50", metavar="READING,IDLE",
+                        help="section 5's live clients: reading, not reading")
     parser.add_argument("--out", type=Path, default=RESULTS / "console.json")
     opts = parser.parse_args()
+    if opts.only:
+        opts.skip = [s for s in ("stop", "telemetry", "idle", "check", "clients")
+                     if s not in opts.only]
     from playwright.sync_api import sync_playwright
 
     results: dict = {"machine": machine(),
@@ -449,6 +705,29 @@ def main() -> None:
                       f"{s.get('p99_ms', 0):7.2f} {s.get('max_ms', 0):7.2f} {per_run:>22s} "
                       f"{row['tab_median_hz'] or '-':>7} {row['tab_min_hz'] or '-':>7}")
             print("   goals: >= 50 Hz in every tab; the loop's p99 with three tabs as without")
+        if "check" not in opts.skip:
+            print(f"4. the 100 Hz loop during opsafe, quiet vs the dry-run check hammered (4 "
+                  f"clients back to back), {opts.repeats} runs each, alternating"
+                  + (f"; before: {opts.baseline}" if opts.baseline else "") + ":")
+            results["check"] = c = check_ab(browser, opts.repeats, opts.baseline)
+            for mode, row in c.items():
+                s = row["loop"]
+                print(f"   {mode:16s} p50 {s.get('p50_ms')} p99 {s.get('p99_ms')} max "
+                      f"{s.get('max_ms')} ms; p99 per run {row['loop_p99_per_run_ms']}; "
+                      f"{row['results']}")
+        if "clients" not in opts.skip:
+            reading, idle = (int(x) for x in opts.clients.split(","))
+            print(f"5. the 100 Hz loop during opsafe, no live client vs {reading} reading + "
+                  f"{idle} not reading, {opts.repeats} runs each, alternating:")
+            results["clients"] = c = clients_ab(browser, opts.repeats, reading, idle,
+                                                opts.switch_interval)
+            for mode, row in c.items():
+                s = row["loop"]
+                print(f"   {mode:8s} p50 {s.get('p50_ms')} p99 {s.get('p99_ms')} max "
+                      f"{s.get('max_ms')} ms; p99 per run {row['loop_p99_per_run_ms']}; "
+                      f"{row['results']}")
+            gap = c["clients"]["loop"].get("p99_ms", 0) - c["none"]["loop"].get("p99_ms", 0)
+            print(f"   p99 with the clients - without: {gap:+.2f} ms (goal: within 2 ms)")
         if "idle" not in opts.skip:
             results["idle_cpu"] = idle = idle_cpu(browser, opts.idle_seconds)
             print(f"3. seqrun console --sim at idle: {idle['no_page']['cpu_percent']} % CPU "

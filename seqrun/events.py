@@ -241,6 +241,10 @@ class Setpoint(Event):
     planned_vel_deg_s: Sequence[float]
     #: Short state byte of every joint's module.
     state: Sequence[int]
+    #: When the joints answered (s since the run start, from the bus's own time stamps):
+    #: the time of ``measured_deg`` (one per joint when they answered over 2 ms apart);
+    #: ``t`` is when the loop logged it, later after a host stall.
+    read_t: float | Sequence[float] | None = _optional()
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -400,6 +404,8 @@ class ConfirmRequested(Event):
                            "ArmSession.answer(question_id, yes)")
     question_id: str
     text: str
+    #: Who started the activity that asks (a face's client name; None: not said).
+    started_by: str | None = _optional()
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -533,6 +539,46 @@ class JogStopped(Event):
     joint: str
     reason: str
     joints_deg: Sequence[float] | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class ClientJoined(Event):
+    type: ClassVar[str] = "client_joined"
+    when: ClassVar[str] = ("a client (a console page, an API client) joined the session "
+                           "(seqrun/service/control.py); holder and clients as after it")
+    client: Mapping[str, Any]
+    holder: Mapping[str, Any] | None = None
+    clients: Sequence[Mapping[str, Any]] = ()
+
+
+@dataclass(frozen=True, kw_only=True)
+class ClientLeft(Event):
+    type: ClassVar[str] = "client_left"
+    when: ClassVar[str] = "a client left the session (its connection closed)"
+    client: Mapping[str, Any]
+    holder: Mapping[str, Any] | None = None
+    clients: Sequence[Mapping[str, Any]] = ()
+
+
+@dataclass(frozen=True, kw_only=True)
+class ControlTaken(Event):
+    type: ClassVar[str] = "control_taken"
+    when: ClassVar[str] = ("a client took control of the arm (holder), from nobody or from "
+                           "the previous holder (previous), who sees it")
+    holder: Mapping[str, Any] | None
+    previous: Mapping[str, Any] | None = None
+    clients: Sequence[Mapping[str, Any]] = ()
+
+
+@dataclass(frozen=True, kw_only=True)
+class ControlReleased(Event):
+    type: ClassVar[str] = "control_released"
+    when: ClassVar[str] = ("the holder gave control up, or left (left); nobody holds it "
+                           "until a client takes it")
+    previous: Mapping[str, Any]
+    left: bool = False
+    holder: Mapping[str, Any] | None = None
+    clients: Sequence[Mapping[str, Any]] = ()
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -236,6 +236,10 @@ class Executor:
         """Seconds since the run started (the events' time base)."""
         return self.clock.now() - self._t0
 
+    def since_start(self, t: float) -> float:
+        """Clock time ``t`` as seconds since the run started (the events' time base)."""
+        return t - self._t0
+
     def refresh_measurement(self, after: str,
                             words: dict[int, JointState] | None = None) -> None:
         """Emit the arm's state after a step that changes the modules without moving them
@@ -274,7 +278,8 @@ class Executor:
 
     def take_reading(self, reading) -> Measurement:
         """A driver's reading as the run's latest measurement."""
-        m = Measurement(self.clock.now(), reading.positions_deg, reading.states)
+        m = Measurement(self.clock.now(), reading.positions_deg, reading.states,
+                        answered_at=getattr(reading, "answered_at", None))
         self.last = m
         return m
 

@@ -70,6 +70,66 @@ class Wire:
                    if t >= since and 0x0E1 <= can_id <= 0x0FF and data[:1] == b"\x0b")
 
 
+#: Host requests that change nothing on a module: a read (GetExtended) or a Halt.
+READ_OR_HALT = (0x0A, 0x02)
+
+
+class BusListener:
+    """An independent listener on the simulated bus: a second python-can bus on the same
+    channel (not the session's), collecting every frame any host sends to the modules
+    with ``time.perf_counter()`` at its arrival. What the console did, as the wire saw it."""
+
+    def __init__(self, connection: Any) -> None:
+        import can
+
+        inner = connection.bus
+        inner = getattr(inner, "inner", inner)  # (the tests' WrapBus)
+        self.bus = can.Bus(interface="seqrun-sim", channel=inner.channel,
+                           clock=connection.clock)
+        self.frames: list[tuple[float, int, bytes]] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True, name="bus-listener")
+        self._thread.start()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            msg = self.bus.recv(0.05)
+            if msg is not None and 0x0E0 <= msg.arbitration_id <= HALT_ID:
+                # when the frame was on the wire (the simulator's own time stamp, the
+                # monotonic clock), on the tests' perf_counter
+                at = time.perf_counter() - (time.monotonic() - msg.timestamp)
+                self.frames.append((at, msg.arbitration_id, bytes(msg.data)))
+
+    def requests(self, since: float = 0.0) -> list[tuple[float, int, bytes]]:
+        return [f for f in list(self.frames) if f[0] >= since]
+
+    def halts(self, since: float = 0.0) -> list[float]:
+        return [t for t, can_id, data in self.requests(since)
+                if can_id == HALT_ID and data[:1] == HALT_DATA]
+
+    def not_reads(self, since: float = 0.0) -> list[tuple[int, bytes]]:
+        """Requests since ``since`` that are neither a read nor a Halt (a motion, a
+        parameter write, a Reset or Home)."""
+        return [(can_id, data) for _, can_id, data in self.requests(since)
+                if not data or data[0] not in READ_OR_HALT]
+
+    def wait_for_halt(self, since: float, timeout: float = 5.0) -> float:
+        return wait_for(lambda: self.halts(since), timeout)[0]
+
+    def saw_halt(self, since: float, timeout: float = 2.0) -> bool:
+        """A Halt arrived since ``since`` (waiting up to ``timeout`` for it)."""
+        try:
+            self.wait_for_halt(since, timeout)
+        except TimeoutError:
+            return False
+        return True
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=2)
+        self.bus.shutdown()
+
+
 @dataclass
 class Setup:
     folder: Path
@@ -123,14 +183,12 @@ class LiveServer:
     def __init__(self, app: Any) -> None:
         import uvicorn
 
-        from seqrun.console.server import bind
+        from seqrun.console.server import bind, uvicorn_config
 
         self.sock = bind("127.0.0.1", 0)
         self.port = self.sock.getsockname()[1]
         self.url = f"http://127.0.0.1:{self.port}/"
-        config = uvicorn.Config(app, log_level="warning", ws="websockets-sansio",
-                                lifespan="on", timeout_graceful_shutdown=2)
-        self.server = uvicorn.Server(config)
+        self.server = uvicorn.Server(uvicorn_config(app, graceful_s=2))
         self.server.install_signal_handlers = lambda: None  # type: ignore[method-assign]
         self.thread = threading.Thread(target=self.server.run,
                                        kwargs={"sockets": [self.sock]}, daemon=True)
@@ -153,6 +211,21 @@ class LiveServer:
             pass
 
 
+CLIENT = "X-Seqrun-Client"
+
+
+def take_control(client: Any, name: str = "tests", page: str | None = None) -> str:
+    """``client`` (a TestClient or an httpx client) takes control: as an API client named
+    ``name`` (its id then goes with every request it sends), or for the page ``page``."""
+    headers = {CLIENT: page} if page else {}
+    r = client.post("/api/v1/control/take", json={"name": name}, headers=headers)
+    assert r.status_code == 200, r.text
+    ident = r.json()["client"]
+    if page is None:
+        client.headers[CLIENT] = ident
+    return ident
+
+
 def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -169,3 +242,34 @@ def wait_for(predicate, timeout: float = 10.0, period: float = 0.02) -> Any:
         if time.monotonic() > deadline:
             raise TimeoutError(f"condition not met within {timeout} s")
         time.sleep(period)
+
+
+def console_process(log_dir: Path, *options: str) -> tuple[Any, str]:
+    """``seqrun console --sim --port 0 --yes --log-dir LOG_DIR OPTIONS`` in a process of its
+    own: the process and the URL it printed (with its token)."""
+    import os
+    import re
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen([sys.executable, "-m", "seqrun", "console", "--sim", "--port", "0",
+                             "--yes", "--log-dir", str(log_dir), *options], cwd=ROOT,
+                            env={**os.environ, "PYTHONPATH": str(ROOT)},
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    lines = []
+    while True:
+        line = proc.stdout.readline()
+        if not line:
+            proc.kill()
+            proc.wait()
+            raise RuntimeError("seqrun console ended before printing its URL:\n"
+                               + "".join(lines))
+        lines.append(line)
+        found = re.search(r"(http://127\.0\.0\.1:\d+/\S*)", line)
+        if found:
+            if "token=" not in found.group(1):  # a console that prints no token
+                proc.kill()
+                proc.wait()
+                raise RuntimeError(f"no token in the printed URL: {found.group(1)}")
+            threading.Thread(target=lambda: proc.stdout.read(), daemon=True).start()
+            return proc, found.group(1)

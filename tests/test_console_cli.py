@@ -21,7 +21,7 @@ ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 
 def start_console(*options: str) -> tuple[subprocess.Popen, str, str]:
     """``seqrun console --sim --port 0 OPTIONS``: the process, what it printed up to its
-    URL, and the URL."""
+    URL and its token, and the URL (without the token: see :class:`Api`)."""
     proc = subprocess.Popen([sys.executable, "-m", "seqrun", "console", "--sim", "--port", "0",
                              *options], cwd=ROOT, env=ENV,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
@@ -34,9 +34,30 @@ def start_console(*options: str) -> tuple[subprocess.Popen, str, str]:
             raise AssertionError("seqrun console ended before printing its URL:\n"
                                  + "".join(lines))
         lines.append(line)
-        found = re.search(r"(http://127\.0\.0\.1:\d+/)", line)
+        found = re.search(r"(http://127\.0\.0\.1:\d+/)(\?token=(\S+))?", line)
         if found:
+            Api.tokens[found.group(1)] = found.group(3) or ""
             return proc, "".join(lines), found.group(1)
+
+
+class Api:
+    """Requests to a console started by :func:`start_console`, with its token, as a client
+    that took control."""
+
+    tokens: dict[str, str] = {}
+
+    def __init__(self, url: str) -> None:
+        self.url = url
+        self.headers = {"Content-Type": "application/json",
+                        "Authorization": f"Bearer {self.tokens[url]}"}
+        self.headers["X-Seqrun-Client"] = self.post("control/take", {"name": "tests"})["client"]
+
+    def post(self, path: str, body: dict | None = None) -> dict:
+        request = urllib.request.Request(self.url + "api/v1/" + path, method="POST",
+                                         data=json.dumps(body or {}).encode(),
+                                         headers=self.headers)
+        with urllib.request.urlopen(request, timeout=30) as r:
+            return json.load(r)
 
 
 def test_console_help_imports_no_web_stack_and_no_bus():
@@ -62,13 +83,15 @@ def test_seqrun_console_prints_its_url_serves_and_ends_on_ctrl_c(tmp_path):
     proc, printed, url = start_console("--log-dir", str(tmp_path))
     try:
         assert "SIMULATOR" in printed
-        with urllib.request.urlopen(url + "api/v1/status", timeout=10) as r:
+        api = Api(url)
+        with urllib.request.urlopen(urllib.request.Request(
+                url + "api/v1/status", headers=api.headers), timeout=10) as r:
             status = json.load(r)
         assert status["simulator"] is True and len(status["joints"]) == 7
         with pytest.raises(urllib.error.HTTPError) as refused:
             urllib.request.urlopen(urllib.request.Request(
                 url + "api/v1/move/joints", data=b'{"joints": {"j1": NaN}}', method="POST",
-                headers={"Content-Type": "application/json"}), timeout=10)
+                headers=api.headers), timeout=10)
         assert refused.value.code == 422
         assert "finite" in json.load(refused.value)["error"]
         proc.send_signal(signal.SIGINT)
@@ -81,21 +104,45 @@ def test_seqrun_console_prints_its_url_serves_and_ends_on_ctrl_c(tmp_path):
             proc.wait()
 
 
-def _post(url: str, path: str, body: dict | None = None) -> dict:
-    request = urllib.request.Request(url + "api/v1/" + path, method="POST",
-                                     data=json.dumps(body or {}).encode(),
-                                     headers={"Content-Type": "application/json"})
-    with urllib.request.urlopen(request, timeout=30) as r:
-        return json.load(r)
+@pytest.mark.slow
+def test_local_clients_need_the_printed_token_but_stop_does_not(tmp_path):
+    """On 127.0.0.1 too: any local process could otherwise command the arm."""
+    proc, printed, url = start_console("--log-dir", str(tmp_path))
+    try:
+        printed += proc.stdout.readline()  # the line after the URL
+        assert f"{url}?token=" in printed and "every request but STOP needs it" in printed
+        for path, method in (("api/v1/status", "GET"), ("api/v1/control/take", "POST"),
+                             ("api/v1/arm-up", "POST"), ("", "GET")):
+            with pytest.raises(urllib.error.HTTPError) as refused:
+                urllib.request.urlopen(urllib.request.Request(url + path, method=method,
+                                                              data=b"" if method == "POST"
+                                                              else None), timeout=10)
+            assert refused.value.code == 401, path
+        stop = urllib.request.Request(url + "api/v1/halt", method="POST", data=b"")
+        with urllib.request.urlopen(stop, timeout=30) as r:
+            assert json.load(r)["halt_confirmed"] is True
+        # the dry-run check's worker runs from the start (no process starts mid-run)
+        children = [child for task in Path(f"/proc/{proc.pid}/task").iterdir()
+                    for child in (task / "children").read_text().split()]
+        commands = [Path(f"/proc/{child}/cmdline").read_bytes() for child in children]
+        assert any(b"spawn_main" in command for command in commands), commands
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
 
 
 @pytest.mark.slow
 def test_sigterm_during_a_move_halts_the_arm(tmp_path):
     proc, _, url = start_console("--log-dir", str(tmp_path))
     try:
-        _post(url, "arm-up")
-        _post(url, "home")
-        assert _post(url, "move/joints", {"joints": {"j1": 90}})["accepted"]
+        api = Api(url)
+        api.post("arm-up")
+        api.post("home")
+        assert api.post("move/joints", {"joints": {"j1": 90}})["accepted"]
         proc.send_signal(signal.SIGTERM)
         out, _ = proc.communicate(timeout=30)
         assert proc.returncode == 130, out
@@ -113,9 +160,10 @@ def test_rt_priority_puts_only_the_loop_thread_at_sched_fifo(tmp_path):
     try:
         assert ("the control loop at SCHED_FIFO priority 5, the console's other threads at "
                 "SCHED_RR 1, the interpreter lock handed over within 1 ms") in printed
-        _post(url, "arm-up")
-        _post(url, "home")
-        assert _post(url, "move/joints", {"joints": {"j1": 60}})["accepted"]
+        api = Api(url)
+        api.post("arm-up")
+        api.post("home")
+        assert api.post("move/joints", {"joints": {"j1": 60}})["accepted"]
         policies = {}
         for task in Path(f"/proc/{proc.pid}/task").iterdir():
             try:
@@ -127,7 +175,7 @@ def test_rt_priority_puts_only_the_loop_thread_at_sched_fifo(tmp_path):
         fifo = [tid for tid, policy in policies.items() if policy == (os.SCHED_FIFO, 5)]
         rr = [tid for tid, policy in policies.items() if policy == (os.SCHED_RR, 1)]
         assert fifo and len(rr) > 2 and len(fifo) + len(rr) == len(policies), policies
-        _post(url, "halt")
+        api.post("halt")
     finally:
         proc.send_signal(signal.SIGTERM)
         try:

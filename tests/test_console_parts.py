@@ -37,7 +37,9 @@ def test_token_by_header_query_or_cookie_else_401():
     client = TestClient(_app(token="t0k", local_only=False))
     for headers in ({}, {"Authorization": "Bearer nope"}, {"Authorization": "t0k"},
                     {"Cookie": f"{COOKIE}=nope"}, {"Cookie": "garbage;;=="}):
-        r = client.get("/", headers=headers)
+        r = client.get("/", headers=headers)  # (a person's browser: a page saying so)
+        assert r.status_code == 401 and "token required" in r.text, headers
+        r = client.post("/", headers=headers)
         assert r.status_code == 401 and "token" in r.json()["error"], headers
     assert client.get("/", headers={"Authorization": "Bearer t0k"}).text == "hello"
     assert client.get("/?token=t0k").text == "hello"
@@ -197,3 +199,44 @@ def test_one_snapshot_encoded_once_for_all_pages_and_none_without_pages():
     # not once per page
     assert batches[0][-1] is batches[1][-1] is batches[2][-1]
     assert wakes == telemetry.snapshots
+
+
+def test_a_page_s_events_are_bounded_oldest_dropped_and_counted():
+    from seqrun.console.telemetry import PAGE_EVENTS
+
+    async def scenario() -> tuple[PageFeed, list[str]]:
+        feed = PageFeed(asyncio.get_running_loop())
+        for k in range(PAGE_EVENTS + 25):
+            feed.push_event(f"e{k}")
+        feed.push_status("s1")
+        feed.push_status("s2")
+        return feed, await feed.next_batch()
+
+    # (a loop of its own on a thread of its own: a browser test before this one in the
+    # same process may leave this thread's loop running)
+    out: list[tuple[PageFeed, list[str]]] = []
+    worker = threading.Thread(target=lambda: out.append(asyncio.run(scenario())))
+    worker.start()
+    worker.join(timeout=10)
+    feed, batch = out[0]
+    assert batch[0] == "e25" and batch[-2] == f"e{PAGE_EVENTS + 24}" and batch[-1] == "s2"
+    assert len(batch) == PAGE_EVENTS + 1
+    assert feed.dropped_events == 25 and feed.replaced_statuses == 1
+
+
+def test_the_pages_share_a_budget_of_statuses():
+    from seqrun.console.telemetry import MAX_STATUS_HZ, STATUS_BUDGET_PER_S
+
+    telemetry = Telemetry(_Source(), status_dict=lambda: {})
+    loop = asyncio.new_event_loop()
+    try:
+        assert telemetry.status_gap_s() == pytest.approx(1 / MAX_STATUS_HZ)
+        for _ in range(3):  # a few tabs: every measurement
+            telemetry.attach(PageFeed(loop))
+        assert telemetry.status_gap_s() == pytest.approx(1 / MAX_STATUS_HZ)
+        for _ in range(97):  # a hundred clients: their share each
+            telemetry.attach(PageFeed(loop))
+        assert telemetry.status_gap_s() == pytest.approx(100 / STATUS_BUDGET_PER_S)
+        assert 100 / telemetry.status_gap_s() <= STATUS_BUDGET_PER_S + 1e-9
+    finally:
+        loop.close()

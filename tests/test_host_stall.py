@@ -68,3 +68,51 @@ def test_a_run_with_a_host_stall_mid_move_has_no_fault(tmp_path):
     assert bus.stalled["stalled"]
     assert outcome.result.fault is None, outcome.result.message
     assert outcome.result.exit_code == EXIT_OK
+
+
+def test_a_stalled_loop_does_not_invent_velocity_in_the_report(tmp_path):
+    """Issue 24.8: with the loop stalled while the answers waited, report.json claimed peaks
+    of 26-80 deg/s for moves commanded at 15.8 deg/s at most: the velocity came from
+    positions over the wall-clock gap between the loop's time stamps. It comes from the
+    time the modules answered (the acknowledges' own time stamps) instead."""
+    import json
+
+    import numpy as np
+
+    loaded = load_sequence(ROOT / "sequences" / "opsafe.yaml")
+    arm = load_arm(loaded.arm_path)
+    clock = VirtualClock()
+    inner = SimBus(channel=f"test-stall-{next(_channels)}", clock=clock)
+    stalls = {"n": 0}
+
+    def before_recv(timeout):  # the host descheduled while the modules answer, again and again
+        if bus.sends > 2000 and bus.sends % 211 == 0 and stalls["n"] < 40:
+            stalls["n"] += 1
+            clock.advance(STALL_S)
+
+    bus = WrapBus(inner, before_recv=before_recv)
+    connection = Connection(bus, clock, True, "simulator with host stalls")
+    try:
+        outcome = run_sequence(loaded, arm, connection, log_dir=tmp_path / "run",
+                               confirm=lambda prompt: True, html_report=False)
+    finally:
+        connection.close()
+    assert stalls["n"] > 10 and outcome.result.exit_code == EXIT_OK, outcome.result.message
+    report = json.loads((tmp_path / "run" / "report.json").read_text())
+    # What the modules were told: TargetVel caps each module's speed (the plan's velocity
+    # plus the catch-up of a lag, as after a stall).
+    from seqrun.powercube.codec import SetParam, decode_request
+    from seqrun.powercube.protocol import ParamId
+
+    commanded = np.zeros(7)
+    for kind, msg in bus.calls:
+        if kind == "send" and 0x0E1 <= msg.arbitration_id <= 0x0E7:
+            request = decode_request(msg.arbitration_id, bytes(msg.data))
+            if isinstance(request, SetParam) and request.param == ParamId.TARGET_VEL:
+                i = request.module - 1
+                commanded[i] = max(commanded[i], np.degrees(abs(request.value)))
+    moves = [s for s in report["steps"] if s.get("peak_measured_velocity_deg_s")]
+    assert moves and commanded.max() < 16.0
+    for step in moves:
+        peak = np.array(step["peak_measured_velocity_deg_s"])
+        assert np.all(peak <= commanded * 1.03 + 0.2), (step.get("label"), peak, commanded)

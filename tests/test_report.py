@@ -111,15 +111,19 @@ def recompute(folder: Path) -> dict[int, dict[str, np.ndarray]]:
     for planned_event in (e for e in log if e["type"] == "move_planned"):
         step = planned_event["step"]
         cycles = [e for e in log if e["type"] == "setpoint" and e["step"] == step]
-        t = np.array([e["t"] for e in cycles])
         planned = np.array([e["planned_deg"] for e in cycles])
         measured = np.array([e["measured_deg"] for e in cycles])
+        # when the joints answered (read_t: one time, or one per joint), as the log says
+        per_joint = np.array([np.broadcast_to(e["read_t"], measured.shape[1:])
+                              for e in cycles], dtype=float)
+        t = np.round(per_joint.mean(axis=1), 6)
         peak = np.zeros(measured.shape[1])
         for k in range(len(t)):
             inside = (t >= t[k] - window - 1e-9) & (t <= t[k])
             if t[k] - t[inside].min() < window / 2 - 1e-9:
                 continue
-            slopes = np.polyfit(t[inside], measured[inside], 1)[0]
+            slopes = [np.polyfit(per_joint[inside, j], measured[inside, j], 1)[0]
+                      for j in range(measured.shape[1])]
             peak = np.maximum(peak, np.abs(slopes))
         out[step] = {
             "max_following_error_deg": np.abs(planned - measured).max(axis=0),
@@ -296,7 +300,8 @@ def test_csv_export(clean_run, tmp_path):
                      "state"):
             assert f"{name}_{kind}" in rows[0]
     first_cycle = next(e for e in log if e["type"] == "setpoint")
-    row = next(r for r in rows if float(r["t_s"]) == first_cycle["t"])
+    # a reading's time is when the joints answered (read_t; one here, no stall)
+    row = next(r for r in rows if float(r["t_s"]) == first_cycle["read_t"])
     assert [float(row[f"{n}_planned_deg"]) for n in JOINTS] == first_cycle["planned_deg"]
     assert row["j1_state"] and row["streamed"] == "1"
     # The end-effector pose of the last reading is the checkpoint's.

@@ -140,6 +140,23 @@ def test_refusals_for_poses_velocities_jogs_and_answers(session):
     assert frames.motion() == [] and session.activity is None
 
 
+def test_booleans_and_texts_are_not_numbers(session):
+    """Every face hands typed values on: True is not 1 and "12" is not 12 (issue 24)."""
+    session.arm_up()
+    session.home()
+    frames = Frames(session)
+    for call in (lambda: session.move_to_joints({"j1": True}),
+                 lambda: session.move_to_joints({"j1": "12"}),
+                 lambda: session.move_to_joints({"j1": " 14 "}),
+                 lambda: session.move_to_pose("totem", velocity_scale=True),
+                 lambda: session.set_move_velocities({"j1": True}),
+                 lambda: session.jog("j1", True),
+                 lambda: session.run_sequence(ROOT / "sequences" / "opsafe.yaml", speed=True)):
+        with pytest.raises(Refused, match="is not a number"):
+            call()
+    assert frames.motion() == [] and session.activity is None
+
+
 def test_an_invalid_sequence_is_refused_with_its_location(session, tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_text("name: bad\ndescription: x\nsteps:\n  - move: {joints: {j1: 400}}\n")
@@ -315,6 +332,46 @@ def test_halt_during_a_run_stops_it_and_is_confirmed(session):
     assert session.status().activity == "halted"
     with pytest.raises(Refused, match="halted"):
         session.move_to_joints({"j1": 1})
+
+
+def test_the_status_says_halted_once_the_halt_is_read_back_not_when_the_run_ends(session):
+    """Issue 24.7: the HALTED badge came 1.3-1.8 s after the STOP, when the run had written
+    its report. The status is "halted" from the moment the modules were read back HALTED,
+    before any face hears of it."""
+    sub = session.subscribe(maxsize=100_000)
+    seen: list[str] = []
+
+    def at_read_back(event):  # a face: what does the status say when it hears of it?
+        if event.type == "halt_confirmed":
+            seen.append(session.status().activity)
+
+    session.events.add_listener(at_read_back, "a face")
+    run = session.run_sequence(ROOT / "sequences" / "totem.yaml", assume_yes=True,
+                               html_report=True)  # (a report to write after the Halt)
+    while (event := sub.get(timeout=30)) is not None and event.type != "setpoint":
+        pass
+    threading.Thread(target=session.halt, args=("STOP from a test",)).start()
+    while (event := sub.get(timeout=30)) is not None and event.type != "halt_confirmed":
+        pass
+    assert wait_until(lambda: seen) == ["halted"]
+    assert run.wait(60).exit_code == 130
+
+
+def test_a_refused_pose_names_its_pose_file_not_the_session_s(session):
+    """Park's j4 (-120.32) lies outside the +-120 limit: the refusal says where that is."""
+    with pytest.raises(Refused) as refused:
+        session.move_to_pose("park")
+    message = str(refused.value)
+    assert "park.yaml:13:7: j4 -120.32° is outside its limits" in message
+    assert "seqrun-session" not in message and "used at" not in message
+
+
+def wait_until(predicate, timeout: float = 10.0):
+    deadline = time.monotonic() + timeout
+    while not (value := predicate()):
+        assert time.monotonic() < deadline, "not within the time"
+        time.sleep(0.01)
+    return value
 
 
 def test_halt_is_not_held_up_by_a_busy_client_or_a_slow_subscriber(session):

@@ -2,7 +2,9 @@
 
     seqrun console                      # simulator (no bus configured), http://127.0.0.1:8765/
     seqrun console -i socketcan -c can0 # the real arm
-    seqrun console --host 0.0.0.0       # reachable from a tablet: a token is printed and required
+    seqrun console --host 0.0.0.0       # reachable from a tablet
+
+A token is printed at start (in the URL): every request but STOP needs it.
 
 The web stack (FastAPI, uvicorn) is imported only when the command runs.
 """
@@ -33,8 +35,8 @@ def console_command(
     port: Annotated[int, typer.Option("--port", help="TCP port (0: any free port).")] = 8765,
     host: Annotated[Optional[str], typer.Option(
         "--host", metavar="ADDR",
-        help="Listen on ADDR instead of 127.0.0.1; then every request needs the token "
-             "printed at start.")] = None,
+        help="Listen on ADDR instead of 127.0.0.1 (e.g. 0.0.0.0 for a tablet); every "
+             "request but STOP needs the token printed at start, wherever it listens.")] = None,
     arm_file: ArmOption = DEFAULT_ARM,
     project_dir: CampaignOption = None,
     log_dir: Annotated[Optional[Path], typer.Option(
@@ -77,12 +79,10 @@ def console_command(
                 types.SimpleNamespace(project=project), extra)
         from seqrun.console.server import LOCALHOST, bind, is_loopback, url_of
 
-        listen = host or LOCALHOST
-        token = None
-        if not is_loopback(listen):
-            from seqrun.console.guard import new_token
+        from seqrun.console.guard import new_token
 
-            token = new_token()
+        listen = host or LOCALHOST
+        token = new_token()  # on 127.0.0.1 too: any local process could command the arm
         try:
             sock = bind(listen, port)  # before the bus: a port in use costs nothing
         except OSError as exc:
@@ -115,14 +115,13 @@ def console_command(
     _serve_control_socket(connection, session)
     try:
         application = create_app(session, Catalog(project, runs), arm, token=token,
-                                 local_only=is_loopback(listen))
+                                 local_only=is_loopback(listen), start_checker=True)
         url = url_of(sock, listen, token)
         banner = "SIMULATOR" if connection.is_simulator else connection.description
 
         def started() -> None:
-            typer.echo(f"seqrun console on {banner}: {url}", )
-            if token:
-                typer.echo(f"token (required on every request): {token}")
+            typer.echo(f"seqrun console on {banner}: {url}")
+            typer.echo(f"token (every request but STOP needs it; the URL carries it): {token}")
             typer.echo("Ctrl-C ends the console (any motion is stopped first).")
 
         from seqrun.console.server import serve

@@ -1,11 +1,15 @@
-"""The console's web application: the page, the ``/api/v1`` HTTP API and the live WebSocket.
+"""The console's web application: the page, the ``/api/v1`` HTTP API and the live WebSocket
+(:mod:`seqrun.console.live`).
 
 Everything goes through the arm session (:mod:`seqrun.service.session`); the console holds
-no bus and no executor. Refusals are one line, ``{"error": "..."}``: 409 when the session
-refuses (wrong state, unknown joint or pose, out of limits), 422 for a malformed request
-(NaN, unknown keys, wrong types), 400 for bad input, 401/403 from the access guard. Any
-other exception in a handler halts the arm (as a crash does in ``seqrun run``) and answers
-500 saying so.
+no bus and no executor. Commands need control (:mod:`seqrun.service.control`); STOP needs
+nothing and is never refused for its body. Bodies are strict (:mod:`seqrun.console.bodies`).
+Refusals are one line, ``{"error": "..."}``: 409 when the session refuses (wrong state,
+unknown joint or pose, out of limits, not in control), 422 for a malformed request (NaN,
+unknown or repeated keys, wrong types), 413/408 a body too large or slow, 429 too many
+checks, 400 for bad input, 401/403 from the access guard, 404/405 as any HTTP error. A
+command that fails on the bus halts the arm (503); any other exception in a handler is a
+500 for that request only (logged, escaped).
 """
 
 from __future__ import annotations
@@ -20,31 +24,46 @@ from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Annotated, Any
 
-from fastapi import APIRouter, FastAPI, Header, Request, WebSocket, WebSocketDisconnect
+from fastapi import APIRouter, Depends, FastAPI, Header, Request, WebSocket, WebSocketDisconnect
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import FileResponse, HTMLResponse, JSONResponse
+from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
+from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from seqrun.console import models
+from seqrun.console.bodies import (BODY_CUT, Malformed, check_body, one_line, printable,
+                                   read_model, to_model)
 from seqrun.console.catalog import Catalog
+from seqrun.console.checker import CheckWorker, RateLimit, TooMany
 from seqrun.console.guard import COOKIE, AccessGuard
+from seqrun.console.limits import RequestLimits
+from seqrun.console.live import MAX_PAGES, PAGE_SILENCE_S, live  # noqa: F401 (tests' name)
 from seqrun.console.motions import Motions
 from seqrun.service.kinematics import arm_scene
-from seqrun.console.telemetry import PageFeed, Telemetry, dumps, jsonable
+from seqrun.console.telemetry import Telemetry, jsonable
 from seqrun.errors import Refused, SeqrunError, UserInputError
 
 log = logging.getLogger(__name__)
 
 API = "/api/v1"
-#: A page sends something (a ping at least) every 0.5 s; one silent for this long while a
-#: motion it started is under way is taken as gone (its motion is stopped).
-PAGE_SILENCE_S = 2.0
 STATIC = Path(__file__).resolve().parent / "static"
 ClientHeader = Annotated[str | None, Header(alias="X-Seqrun-Client")]
 
 
-def one_line(text: str) -> str:
-    return " ".join(str(text).split())
+def json_body(model: type[Any]) -> Any:
+    """A handler's strictly parsed body (:mod:`seqrun.console.bodies`): the dependency and
+    its OpenAPI description."""
+    async def parse(request: Request) -> Any:
+        return await read_model(request, model)
+
+    return Depends(parse)
+
+
+def documented(model: type[Any]) -> dict[str, Any]:
+    """The request body's schema for the OpenAPI document (the body is read by
+    :func:`json_body`, not by the framework)."""
+    return {"requestBody": {"required": True, "content": {"application/json": {
+        "schema": model.model_json_schema()}}}}
 
 
 def _validation_line(exc: RequestValidationError) -> str:
@@ -69,11 +88,20 @@ class Console:
         self.arm = arm
         self.scene = arm_scene(arm)
         self.motions = Motions(session)
+        #: Who holds control: the session's (shared with its other faces).
+        self.control = session.control
+        self.checker = CheckWorker()
+        self.max_pages = MAX_PAGES
+        self.live_connections = 0
+        self.check_rate = RateLimit(what="check")
         self.telemetry = Telemetry(session, status_dict=self.status_dict)
         self._ids = itertools.count(1)
 
     def new_client_id(self) -> str:
         return f"page-{next(self._ids)}"
+
+    def new_api_id(self) -> str:
+        return f"api-{next(self._ids)}"
 
     def status_dict(self) -> dict[str, Any]:
         return jsonable(self.session.status())
@@ -82,19 +110,49 @@ class Console:
         result = self.session.halt(reason)
         return {**jsonable(result), "message": result.describe()}
 
-    def halt_after_crash(self, where: str, exc: BaseException) -> str:
-        """A handler crashed: Halt, as ``seqrun run`` does on an internal error."""
-        log.error("console: internal error in %s: %r", where, exc)
+    async def halt_now(self, reason: str) -> dict[str, Any]:
+        """:meth:`halt` on a thread of its own, started at once: a STOP never waits for the
+        web server's worker threads (all of them may be busy with blocking commands)."""
+        loop = asyncio.get_running_loop()
+        done: asyncio.Future[dict[str, Any]] = loop.create_future()
+
+        def run() -> None:
+            try:
+                result: Any = self.halt(reason)
+                loop.call_soon_threadsafe(_settle, done, result, None)
+            except BaseException as exc:  # noqa: BLE001 - handed to the awaiting request
+                loop.call_soon_threadsafe(_settle, done, None, exc)
+
+        threading.Thread(target=run, name="console-halt", daemon=True).start()
+        return await done
+
+    def halt_after_bus_fault(self, where: str, exc: BaseException) -> str:
+        """A command could not do or confirm what it says on the bus: Halt, as ``seqrun
+        run`` does on a bus fault."""
+        log.error("console: %s failed on the bus: %s", printable(where), printable(repr(exc)))
         try:
-            self.session.halt(f"console internal error in {where}")
+            self.session.halt(f"bus fault in a console command ({printable(where)[:80]})")
             return "the arm was halted"
         except Exception as halt_exc:  # noqa: BLE001 - report, never mask the first error
-            log.error("console: the Halt after an internal error failed: %r", halt_exc)
+            log.error("console: the Halt after a bus fault failed: %s",
+                      printable(repr(halt_exc)))
             return "the Halt FAILED: use the emergency stop"
 
 
+def _settle(future: asyncio.Future[Any], result: Any, exc: BaseException | None) -> None:
+    if future.done():
+        return
+    if exc is not None:
+        future.set_exception(exc)
+    else:
+        future.set_result(result)
+
+
 class CrashGuard:
-    """ASGI middleware: an exception no handler expected halts the arm, then answers 500."""
+    """ASGI middleware: an exception no handler expected is a 500 for that request, logged
+    (escaped), and nothing else: the arm's activities run in the session, which halts on
+    their faults itself; a bug in serving one request is no fault of the arm, and a Halt
+    there would stop a run in the operator's name (a GET from any web page could do it)."""
 
     def __init__(self, app: Any, console: Console) -> None:
         self.app = app
@@ -115,14 +173,26 @@ class CrashGuard:
         try:
             await self.app(scope, receive, tracking_send)
         except Exception as exc:  # noqa: BLE001 - the point: nothing crashes silently
-            outcome = await asyncio.to_thread(self.console.halt_after_crash,
-                                              scope.get("path", "?"), exc)
+            log.error("console: internal error in %s %s: %s", scope.get("method", "?"),
+                      printable(scope.get("path", "?")), printable(repr(exc)),
+                      exc_info=log.isEnabledFor(logging.DEBUG))
             if not started:
-                body = json.dumps({"error": one_line(
-                    f"internal error ({type(exc).__name__}: {exc}); {outcome}")}).encode()
+                body = json.dumps({"error": one_line(printable(
+                    f"internal error ({type(exc).__name__}: {exc})"))}).encode()
                 await send({"type": "http.response.start", "status": 500,
                             "headers": [(b"content-type", b"application/json")]})
                 await send({"type": "http.response.body", "body": body})
+
+
+def check_start(now: Any) -> tuple[dict[str, float] | None, bool]:
+    """Where a check's dry run starts: the measured joints (nothing measured yet: Park, as
+    ``seqrun validate``), and whether the arm is up (every module homed, none halted or in
+    error: a sequence without the start-up steps is checked as it would run)."""
+    measured = dict(now.joints_deg)
+    start = None if any(v is None for v in measured.values()) else measured
+    up = all("HOME_OK" in j.flags and not {"HALTED", "ERROR"} & set(j.flags)
+             for j in now.joints) and now.activity not in ("halted", "faulted")
+    return start, up
 
 
 def _activity(activity: Any) -> dict[str, Any]:
@@ -158,24 +228,24 @@ def build_router(console: Console) -> APIRouter:
 
     @api.get("/poses", summary="Every named pose (campaign poses first, then the shipped)")
     def poses() -> list[dict[str, Any]]:
-        return catalog.poses()
+        return catalog.poses(console.arm)
 
     @api.get("/sequences", summary="The project's sequences")
     def sequences() -> list[dict[str, str]]:
         return catalog.sequences()
 
-    @api.get("/sequences/{name:path}/check",
-             summary="Validation findings and the dry-run report from the arm's position now")
-    def check(name: str) -> dict[str, Any]:
-        now = session.status()
-        measured = dict(now.joints_deg)
-        # nothing measured yet: from Park, as seqrun validate
-        start = None if any(v is None for v in measured.values()) else measured
-        # An arm that is up (every module homed, none halted or in error) is dry-run as
-        # such, so that a sequence without the start-up steps is checked as it would run.
-        up = all("HOME_OK" in j.flags and not {"HALTED", "ERROR"} & set(j.flags)
-                 for j in now.joints) and now.activity not in ("halted", "faulted")
-        return catalog.check(name, start, started=up)
+    @api.post("/sequences/{name:path}/check",
+              summary="Validation findings and the dry-run report from the arm's position "
+                      "now (a worker process; 3 at once, then one per 3 s)")
+    async def check(name: str) -> Any:
+        console.check_rate.take()  # TooMany: 429
+        try:
+            start, up = check_start(session.status())
+            answer = await asyncio.to_thread(console.checker.check, catalog, name, start,
+                                             started=up)
+            return Response(answer, media_type="application/json")  # (encoded there)
+        finally:
+            console.check_rate.give_back()
 
     @api.get("/runs", summary="Past runs, newest first")
     def runs() -> list[dict[str, Any]]:
@@ -186,82 +256,177 @@ def build_router(console: Console) -> APIRouter:
         return FileResponse(catalog.run_file(run_id, name))
 
     @api.get("/events", summary="Recent events (the event log), oldest first")
-    def events() -> list[Any]:
-        return [json.loads(text)["event"] for text in list(console.telemetry.history)]
+    def events() -> Response:
+        # The history holds each event's message as sent to the pages: its event part is
+        # passed on as it is (a GET costs little: nothing decoded, nothing encoded again).
+        prefix, parts = '{"type":"event","event":', []
+        for text in list(console.telemetry.history):
+            if text.startswith(prefix) and text.endswith("}"):
+                parts.append(text[len(prefix):-1])
+            else:
+                parts.append(json.dumps(json.loads(text)["event"]))
+        return Response("[" + ",".join(parts) + "]", media_type="application/json")
 
     # -- commands -----------------------------------------------------------------------
-    @api.post("/halt", summary="STOP: the Halt broadcast at once, then confirmed")
-    def halt(body: models.HaltBody | None = None) -> Any:
-        return console.halt(body.reason if body else "STOP (console)")
+    @api.post("/halt", summary="STOP: the Halt broadcast at once, then confirmed; never "
+                               "refused for its body", openapi_extra=documented(models.HaltBody))
+    async def halt(request: Request) -> Any:
+        # Nothing about the request is read before the Halt is on its way: a STOP with a
+        # malformed, oversized or slow body still stops the arm, then says what was wrong.
+        halting = asyncio.ensure_future(console.halt_now("STOP (console)"))
+        note = reason = None
+        try:
+            raw = await request.body()
+            data = check_body(raw, request.headers.get("content-type"),
+                              request.scope.get(BODY_CUT))
+            reason = to_model({} if data is None else data, models.HaltBody).reason
+        except Malformed as exc:
+            note = f"the arm was halted; the request body was refused: {exc}"
+        except Exception as exc:  # noqa: BLE001 - a lost connection: the Halt goes on
+            note = f"the arm was halted; the request body could not be read: {exc!r}"
+        answer = await halting
+        if reason is not None:
+            answer["reason"] = reason
+        if note is not None:
+            answer["note"] = one_line(note)
+        return answer
+
+    def commander(client: str | None, what: str) -> str | None:
+        """The name of the client that commands ``what``: it must hold control (else 409
+        naming the holder). STOP and the stops (abort, pause, end a jog) need no control."""
+        console.control.require(client, what)
+        return console.control.name_of(client)
 
     @api.post("/reset", summary="Reset every module (clears a Halt), confirmed")
-    def reset() -> Any:
+    def reset(client: ClientHeader = None) -> Any:
+        commander(client, "reset")
         return _confirmed(session.reset())
 
     @api.post("/home", summary="Home every module (enables the motors), confirmed")
-    def home() -> Any:
+    def home(client: ClientHeader = None) -> Any:
+        commander(client, "home")
         return _confirmed(session.home())
 
     @api.post("/arm-up", summary="Arm: reset, then write the arm file's limits")
-    def arm_up() -> Any:
+    def arm_up(client: ClientHeader = None) -> Any:
+        commander(client, "arm")
         return _confirmed(session.arm_up())
 
-    @api.post("/move/pose", summary="Move to a named pose (validated, planned, streamed)")
-    def move_pose(body: models.PoseMove, client: ClientHeader = None) -> dict[str, Any]:
-        activity = session.move_to_pose(body.name, velocity_scale=body.velocity_scale)
+    @api.post("/move/pose", summary="Move to a named pose (validated, planned, streamed)",
+              openapi_extra=documented(models.PoseMove))
+    def move_pose(body: models.PoseMove = json_body(models.PoseMove),
+                  client: ClientHeader = None) -> dict[str, Any]:
+        by = commander(client, f"move to {body.name}")
+        activity = session.move_to_pose(body.name, velocity_scale=body.velocity_scale, by=by)
         motions.started(client, "move", activity)
         return _activity(activity)
 
-    @api.post("/move/joints", summary="Move to joint targets in user degrees (MOVE)")
-    def move_joints(body: models.JointMap, client: ClientHeader = None) -> dict[str, Any]:
-        activity = session.move_to_joints(dict(body.joints))
+    @api.post("/move/joints", summary="Move to joint targets in user degrees (MOVE)",
+              openapi_extra=documented(models.JointMap))
+    def move_joints(body: models.JointMap = json_body(models.JointMap),
+                    client: ClientHeader = None) -> dict[str, Any]:
+        by = commander(client, "move")
+        activity = session.move_to_joints(dict(body.joints), by=by)
         motions.started(client, "move", activity)
         return _activity(activity)
 
-    @api.post("/velocities", summary="Per-joint velocity of the console's moves, deg/s (ALLVEL)")
-    def velocities(body: models.JointMap) -> Any:
+    @api.post("/velocities", summary="Per-joint velocity of the console's moves, deg/s (ALLVEL)",
+              openapi_extra=documented(models.JointMap))
+    def velocities(body: models.JointMap = json_body(models.JointMap),
+                   client: ClientHeader = None) -> Any:
+        commander(client, "move velocities")
         return jsonable(session.set_move_velocities(dict(body.joints)))
 
-    @api.post("/jog", summary="Jog one joint; renew within 200 ms or it stops (deadman)")
-    def jog(body: models.JogBody, client: ClientHeader = None) -> dict[str, Any]:
-        session.jog(body.joint, body.speed_scale)
+    @api.post("/jog", summary="Jog one joint; renew within 200 ms or it stops (deadman)",
+              openapi_extra=documented(models.JogBody))
+    def jog(body: models.JogBody = json_body(models.JogBody),
+            client: ClientHeader = None) -> dict[str, Any]:
+        by = commander(client, "jog")
+        session.jog(body.joint, body.speed_scale, by=by)
         motions.started(client, "jog")
         return {"accepted": True}
 
-    @api.post("/jog/stop", summary="End the jog (controlled stop)")
+    @api.post("/jog/stop", summary="End the jog (controlled stop; any client)")
     def jog_stop(client: ClientHeader = None) -> Any:
         result = session.jog_stop()  # a controlled stop
         motions.jog_ended(client)
         return jsonable(result)
 
-    @api.post("/run", summary="Run a sequence (validated first; a run folder as seqrun run)")
-    def run(body: models.RunBody, client: ClientHeader = None) -> dict[str, Any]:
+    @api.post("/run", summary="Run a sequence (validated first; a run folder as seqrun run)",
+              openapi_extra=documented(models.RunBody))
+    def run(body: models.RunBody = json_body(models.RunBody),
+            client: ClientHeader = None) -> dict[str, Any]:
+        by = commander(client, f"run {body.sequence}")
         path = catalog.sequence_path(body.sequence)
         activity = session.run_sequence(path, speed=body.speed, step_mode=body.step_mode,
-                                        first_step=body.first_step)
+                                        first_step=body.first_step, by=by)
         motions.started(client, "run", activity)
         return _activity(activity)
 
     @api.post("/shutdown", summary="Run the shutdown sequence (to Totem, then power-off)")
     def shutdown(client: ClientHeader = None) -> dict[str, Any]:
-        activity = session.run_sequence(catalog.shutdown_sequence())
+        by = commander(client, "shut down")
+        activity = session.run_sequence(catalog.shutdown_sequence(), by=by)
         motions.started(client, "run", activity)
         return _activity(activity)
 
-    for verb in ("pause", "resume", "step", "abort"):
-        def control(verb: str = verb) -> Any:
+    for verb, needs_control in (("pause", False), ("resume", True), ("step", True),
+                                ("abort", False)):
+        def run_control(client: ClientHeader = None, verb: str = verb,
+                        needs_control: bool = needs_control) -> Any:
+            if needs_control:
+                commander(client, verb)
             return jsonable(getattr(session, verb)())
-        api.add_api_route(f"/run/{verb}", control, methods=["POST"],
-                          summary=f"{verb.capitalize()} the run under way")
+        api.add_api_route(f"/run/{verb}", run_control, methods=["POST"],
+                          summary=f"{verb.capitalize()} the run under way"
+                                  + ("" if needs_control else " (any client)"))
 
-    @api.post("/answer", summary="Answer a confirm step (confirm_requested event)")
-    def answer(body: models.AnswerBody) -> Any:
+    @api.post("/answer", summary="Answer a confirm step (confirm_requested event)",
+              openapi_extra=documented(models.AnswerBody))
+    def answer(body: models.AnswerBody = json_body(models.AnswerBody),
+               client: ClientHeader = None) -> Any:
+        commander(client, "answer")
         return jsonable(session.answer(body.question_id, body.yes))
 
-    @api.post("/poses", summary="Save the arm's measured joints as a pose file")
-    def save_pose(body: models.SavePoseBody) -> dict[str, Any]:
+    @api.post("/poses", summary="Save the arm's measured joints as a pose file",
+              openapi_extra=documented(models.SavePoseBody))
+    def save_pose(body: models.SavePoseBody = json_body(models.SavePoseBody),
+                  client: ClientHeader = None) -> dict[str, Any]:
+        commander(client, "save pose")
         path = session.save_pose(body.name, overwrite=body.overwrite)
         return {"saved": str(path)}
+
+    # -- control ------------------------------------------------------------------------
+    @api.get("/control", summary="Who holds control and who is connected")
+    def control_state() -> dict[str, Any]:
+        return console.control.state().as_dict()
+
+    @api.post("/control/take", summary="Take control (a page: its id in X-Seqrun-Client; an "
+                                        "API client without one joins with its name)",
+              openapi_extra=documented(models.TakeControlBody))
+    def take_control(body: models.TakeControlBody = json_body(models.TakeControlBody),
+                     client: ClientHeader = None) -> dict[str, Any]:
+        if client is None:  # an API client: joins now, and is known by the id it gets
+            client = console.new_api_id()
+            console.control.join(client, f"{one_line(printable(body.name))} ({client})",
+                                 "api")
+        state = console.control.take(client)
+        return {"client": client, **state.as_dict()}
+
+    @api.post("/control/release", summary="Give control up (the holder)")
+    def release_control(client: ClientHeader = None) -> dict[str, Any]:
+        if client is None:
+            raise Refused("release control: say who you are (X-Seqrun-Client)")
+        return console.control.release(client).as_dict()
+
+    @api.post("/control/leave", summary="An API client leaves (gives control up if it holds "
+                                         "it)")
+    def leave(client: ClientHeader = None) -> dict[str, Any]:
+        known = console.control.client(client)
+        if known is None or known.kind != "api":
+            raise Refused("leave: not an API client of this console (a page leaves by "
+                          "closing)")
+        return console.control.leave(known.id).as_dict()
 
     return api
 
@@ -275,136 +440,27 @@ def index_page(request: Request) -> HTMLResponse:
     return response
 
 
-async def live(console: Console, ws: WebSocket) -> None:
-    """One page's live connection: telemetry and events out; STOP and jog in.
-
-    In: ``{"op": "halt"}``, ``{"op": "jog", "joint": "j2", "speed_scale": 0.5}`` (renewed
-    by the page every ~100 ms while the button is held), ``{"op": "jog_stop"}``; an ``id``
-    is echoed in the reply ``{"type": "reply", "id": ..., "ok": bool, "error"?: str}``.
-    A Halt never waits behind another message: it is sent from its own thread at once.
-    """
-    await ws.accept()
-    loop = asyncio.get_running_loop()
-    client = console.new_client_id()
-    feed = PageFeed(loop)
-    history = console.telemetry.attach(feed)
-    send_lock = asyncio.Lock()
-
-    async def send(text: str) -> None:
-        async with send_lock:
-            await ws.send_text(text)
-
-    async def reply(msg_id: Any, ok: bool, **extra: Any) -> None:
-        await send(dumps({"type": "reply", "id": msg_id, "ok": ok, **extra}))
-
-    async def pump() -> None:
-        while True:
-            for text in await feed.next_batch():
-                await send(text)
-
-    ops: asyncio.Queue[dict[str, Any]] = asyncio.Queue()
-
-    async def worker() -> None:  # jog/jog_stop in order: a renewal never follows its stop
-        while True:
-            message = await ops.get()
-            op, msg_id = message["op"], message.get("id")
-            try:
-                if op == "jog":
-                    body = models.JogBody.model_validate(
-                        {k: message.get(k) for k in ("joint", "speed_scale")})
-                    await asyncio.to_thread(console.session.jog, body.joint, body.speed_scale)
-                    console.motions.started(client, "jog")
-                else:
-                    await asyncio.to_thread(console.session.jog_stop)
-                    console.motions.jog_ended(client)
-                await reply(msg_id, True)
-            except (Refused, UserInputError) as exc:
-                await reply(msg_id, False, error=one_line(str(exc)))
-            except ValueError as exc:  # pydantic: a malformed jog
-                await reply(msg_id, False, error=one_line(_first_error(exc)))
-            except Exception as exc:  # noqa: BLE001 - a crashed handler halts the arm
-                outcome = await asyncio.to_thread(console.halt_after_crash, f"live {op}", exc)
-                await reply(msg_id, False, error=one_line(f"{op} failed ({exc}); {outcome}"))
-
-    def halt_now(msg_id: Any, reason: str) -> None:
-        def run() -> None:
-            try:
-                answer = reply(msg_id, True, result=console.halt(reason))
-            except Exception as exc:  # noqa: BLE001 - the page must hear that STOP failed
-                answer = reply(msg_id, False, error=one_line(f"Halt failed: {exc}"))
-            asyncio.run_coroutine_threadsafe(answer, loop)
-        threading.Thread(target=run, name="console-halt", daemon=True).start()
-
-    await send(dumps({"type": "hello", "client": client, "api_version": 1,
-                      "status": console.status_dict()}))
-    for text in history:
-        await send(text)
-    tasks = [asyncio.create_task(pump()), asyncio.create_task(worker())]
-    try:
-        while True:
-            try:
-                raw = await asyncio.wait_for(ws.receive_text(), PAGE_SILENCE_S)
-            except asyncio.TimeoutError:
-                # A page that went silent (a tablet off the Wi-Fi: no TCP close for a long
-                # time) while its motion is under way is taken as gone.
-                if await asyncio.to_thread(console.motions.owns_motion, client):
-                    log.warning("console page %s silent for %.1f s during its motion",
-                                client, PAGE_SILENCE_S)
-                    break
-                continue
-            try:
-                message = json.loads(raw)
-                if not isinstance(message, dict) or not isinstance(message.get("op"), str):
-                    raise ValueError("expected an object with an 'op'")
-            except ValueError as exc:
-                await reply(None, False, error=one_line(f"malformed message: {exc}"))
-                continue
-            op = message["op"]
-            if op == "halt":
-                while not ops.empty():  # queued jog renewals die with the STOP
-                    ops.get_nowait()
-                halt_now(message.get("id"), str(message.get("reason") or "STOP (console)"))
-            elif op in ("jog", "jog_stop"):
-                ops.put_nowait(message)
-            elif op == "ping":
-                if "id" in message:
-                    await reply(message["id"], True)
-            else:
-                await reply(message.get("id"), False, error=f"unknown op '{op}'")
-    except WebSocketDisconnect:
-        pass
-    except Exception as exc:  # noqa: BLE001 - a crashed handler halts the arm
-        await asyncio.to_thread(console.halt_after_crash, "the live connection", exc)
-    finally:
-        for task in tasks:
-            task.cancel()
-        console.telemetry.detach(feed)
-        await asyncio.to_thread(console.motions.page_gone, client)
-        with contextlib.suppress(Exception):  # already closed by the page, or not
-            await ws.close()
-
-
-def _first_error(exc: Exception) -> str:
-    errors = getattr(exc, "errors", None)
-    if callable(errors):
-        first = errors()[0]
-        return f"{'.'.join(map(str, first['loc']))}: {first['msg']}"
-    return str(exc)
-
-
 def create_app(session: Any, catalog: Catalog, arm: Any, *, token: str | None = None,
-               local_only: bool = True) -> FastAPI:
-    """The ASGI application for one arm session. ``token``: required on every request
-    (``--host``); ``local_only``: the Host header must name this machine."""
+               local_only: bool = True, max_pages: int = MAX_PAGES,
+               start_checker: bool = False) -> FastAPI:
+    """The ASGI application for one arm session. ``token``: required on every request but
+    STOP (``seqrun console`` always makes one; None: no token, for embedding and tests);
+    ``local_only``: the Host header must name this machine; ``max_pages``: live
+    connections at most; ``start_checker``: start the check's worker process with the app
+    (else at the first check)."""
     console = Console(session, catalog, arm)
+    console.max_pages = max_pages
 
     @contextlib.asynccontextmanager
     async def lifespan(_: FastAPI) -> AsyncIterator[None]:
         console.telemetry.start()
+        if start_checker:
+            await asyncio.to_thread(console.checker.start)
         try:
             yield
         finally:
             console.telemetry.stop()
+            console.checker.close()
 
     app = FastAPI(title="seqrun console", version="1", lifespan=lifespan,
                   # No Swagger UI: it loads its scripts from a CDN (the facility has no
@@ -422,6 +478,21 @@ def create_app(session: Any, catalog: Catalog, arm: Any, *, token: str | None = 
     async def bad_input(_: Request, exc: UserInputError) -> JSONResponse:
         return JSONResponse({"error": one_line(str(exc))}, status_code=400)
 
+    @app.exception_handler(TooMany)
+    async def too_many(_: Request, exc: TooMany) -> JSONResponse:
+        return JSONResponse({"error": one_line(str(exc))}, status_code=429,
+                            headers={"Retry-After": str(max(1, round(exc.retry_after_s)))})
+
+    @app.exception_handler(StarletteHTTPException)
+    async def http_error(_: Request, exc: StarletteHTTPException) -> JSONResponse:
+        # 404, 405, ...: the documented {"error"} body, as every refusal
+        return JSONResponse({"error": one_line(printable(str(exc.detail)))},
+                            status_code=exc.status_code, headers=exc.headers)
+
+    @app.exception_handler(Malformed)
+    async def malformed_body(_: Request, exc: Malformed) -> JSONResponse:
+        return JSONResponse({"error": one_line(str(exc))}, status_code=exc.status)
+
     @app.exception_handler(RequestValidationError)
     async def malformed(_: Request, exc: RequestValidationError) -> JSONResponse:
         return JSONResponse({"error": _validation_line(exc)}, status_code=422)
@@ -429,7 +500,7 @@ def create_app(session: Any, catalog: Catalog, arm: Any, *, token: str | None = 
     @app.exception_handler(SeqrunError)
     async def failed(request: Request, exc: SeqrunError) -> JSONResponse:
         # A command that could not do or confirm what it says (a bus or module fault).
-        outcome = await asyncio.to_thread(console.halt_after_crash, request.url.path, exc)
+        outcome = await asyncio.to_thread(console.halt_after_bus_fault, request.url.path, exc)
         return JSONResponse({"error": one_line(f"{exc}; {outcome}")}, status_code=503)
 
     app.include_router(build_router(console))
@@ -441,5 +512,7 @@ def create_app(session: Any, catalog: Catalog, arm: Any, *, token: str | None = 
     app.add_api_route("/", index_page, methods=["GET"], include_in_schema=False)
     app.mount("/static", StaticFiles(directory=str(STATIC)), name="static")
     app.add_middleware(CrashGuard, console=console)
-    app.add_middleware(AccessGuard, token=token, local_only=local_only)
+    app.add_middleware(RequestLimits, always_read=frozenset({f"{API}/halt"}))
+    app.add_middleware(AccessGuard, token=token, local_only=local_only,
+                       open_to_all=frozenset({("POST", f"{API}/halt")}))
     return app

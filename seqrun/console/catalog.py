@@ -32,32 +32,57 @@ class Catalog:
         return self.project.root / "sequences"
 
     # -- poses -------------------------------------------------------------------------
-    def poses(self) -> list[dict[str, Any]]:
-        """Every pose file on the project's pose path (campaign first, then the shipped)."""
+    def poses(self, arm: Any = None) -> list[dict[str, Any]]:
+        """Every pose file on the project's pose path (campaign first, then the shipped).
+        With ``arm``: ``move_target`` says whether a move may go there, and ``why`` not (a
+        joint outside its limits: Park's j4, the power-on pose, lies 0.32° beyond -120°)."""
         from seqrun.service.poses import list_poses
 
         found: list[dict[str, Any]] = []
         for name, path, pose, error in list_poses(self.project.pose_path):
             if pose is None:
-                found.append({"name": name, "file": str(path), "error": error})
+                found.append({"name": name, "file": str(path), "error": error,
+                              "move_target": False, "why": error})
                 continue
-            found.append({"name": name, "file": str(path), "description": pose.description,
-                          "joints_deg": dict(pose.joints_deg)})
+            entry: dict[str, Any] = {"name": name, "file": str(path),
+                                     "description": pose.description,
+                                     "joints_deg": dict(pose.joints_deg)}
+            if arm is not None:
+                outside = _outside_limits(arm, pose.joints_deg)
+                entry["move_target"] = not outside
+                if outside:
+                    entry["why"] = (f"{path}: {'; '.join(outside)}: not a move target "
+                                    "(a sequence may start there and move back inside)")
+            found.append(entry)
         return found
 
     # -- sequences ---------------------------------------------------------------------
     def sequences(self) -> list[dict[str, str]]:
+        """The sequences a run may name: every ``*.yaml`` under the folder that is one
+        (a symbolic link is listed when what it points to lies inside the folder, and then
+        runs; one pointing outside is neither listed nor run)."""
         folder = self.sequences_dir
         if not folder.is_dir():
             return []
-        return [{"name": p.relative_to(folder).as_posix(), "file": str(p)}
-                for p in sorted(folder.rglob("*.yaml")) if p.is_file()]
+        found = []
+        for path in sorted(folder.rglob("*.yaml")):
+            name = path.relative_to(folder).as_posix()
+            try:
+                target = self.sequence_path(name)
+            except Refused:
+                continue
+            found.append({"name": name, "file": str(target)})
+        return found
 
     def sequence_path(self, name: str) -> Path:
         """The file of a listed sequence; a name outside the sequences folder is refused."""
         folder = self.sequences_dir.resolve()
-        path = (folder / name).resolve()
-        if not path.is_relative_to(folder) or path.suffix != ".yaml" or not path.is_file():
+        try:
+            path = (folder / name).resolve()
+            ok = path.is_relative_to(folder) and path.suffix == ".yaml" and path.is_file()
+        except (OSError, ValueError):  # a NUL in the name, a name too long, a loop
+            ok = False
+        if not ok:
             raise Refused(f"unknown sequence '{name}' (see GET /api/v1/sequences)")
         return path
 
@@ -120,9 +145,26 @@ class Catalog:
     def run_file(self, run_id: str, name: str) -> Path:
         """A file of a run folder (report.html, report.json, ...), never outside it."""
         root = self.runs_dir.resolve()
-        folder = (root / run_id).resolve()
-        path = (folder / name).resolve()
-        if (not folder.is_relative_to(root) or folder == root
-                or not path.is_relative_to(folder) or not path.is_file()):
+        try:
+            folder = (root / run_id).resolve()
+            path = (folder / name).resolve()
+            ok = (folder.is_relative_to(root) and folder != root
+                  and path.is_relative_to(folder) and path.is_file())
+        except (OSError, ValueError):  # a NUL in the name, a name too long, a loop
+            ok = False
+        if not ok:
             raise Refused(f"no file '{name}' in run '{run_id}'")
         return path
+
+
+def _outside_limits(arm: Any, joints_deg: Mapping[str, float]) -> list[str]:
+    """The joints of a pose outside the arm's limits, each as one phrase."""
+    out = []
+    for joint in arm.joints:
+        value = joints_deg.get(joint.name)
+        if value is None or joint.locked is not None:
+            continue
+        lo, hi = joint.limits_deg
+        if not lo <= value <= hi:
+            out.append(f"{joint.name} {value:g}° is outside its limits [{lo:g}, {hi:g}]°")
+    return out

@@ -3,10 +3,12 @@
 Checked for every HTTP request and every WebSocket before any handler runs (a pure ASGI
 middleware, so nothing reaches the session first):
 
-- **Token** (``--host``: the console listens beyond this machine): every request carries
-  the token printed at start, as ``Authorization: Bearer TOKEN``, a ``?token=TOKEN`` query
-  parameter (the URL printed at start, and WebSockets) or the cookie the page gets when it
-  is opened with the token. Anything else: 401.
+- **Token** (``seqrun console`` makes one at every start, on 127.0.0.1 too: any local
+  process could otherwise command the arm): every request carries the token printed at
+  start, as ``Authorization: Bearer TOKEN``, a ``?token=TOKEN`` query parameter (the URL
+  printed at start, and WebSockets) or the cookie the page gets when it is opened with the
+  token. Anything else: 401 — except STOP (``POST /api/v1/halt``): stopping the arm never
+  needs a token.
 - **Host** (default, 127.0.0.1): the Host header must name this machine, so a web page of
   another site cannot reach the console through a DNS name that resolves to 127.0.0.1.
 - **Origin**: a browser request from another site's page (its Origin is not this console)
@@ -70,10 +72,13 @@ def presented_token(scope: Scope) -> str | None:
 class AccessGuard:
     """ASGI middleware: refuses (401/403) before the application sees the request."""
 
-    def __init__(self, app: ASGIApp, *, token: str | None, local_only: bool) -> None:
+    def __init__(self, app: ASGIApp, *, token: str | None, local_only: bool,
+                 open_to_all: frozenset[tuple[str, str]] = frozenset()) -> None:
         self.app = app
         self.token = token
         self.local_only = local_only
+        #: (method, path) that need no token (STOP).
+        self.open_to_all = open_to_all
 
     def refusal(self, scope: Scope) -> tuple[int, str] | None:
         headers = _headers(scope)
@@ -83,7 +88,8 @@ class AccessGuard:
         origin = headers.get("origin")
         if origin is not None and urlsplit(origin).netloc != host:  # "null" too (file://)
             return 403, f"origin '{origin}' refused: only the console's own page may send commands"
-        if self.token is not None:
+        if self.token is not None and (scope.get("method"), scope.get("path")) \
+                not in self.open_to_all:
             given = presented_token(scope)
             if given is None or not hmac.compare_digest(given.encode(), self.token.encode()):
                 return 401, "token required: open the URL printed when the console started"
@@ -99,7 +105,11 @@ class AccessGuard:
             return
         status, message = refused
         body = json.dumps({"error": message}).encode()
-        start = {"status": status, "headers": [(b"content-type", b"application/json"),
+        kind = b"application/json"
+        if (scope["type"] == "http" and status == 401 and scope.get("path") == "/"
+                and scope.get("method") == "GET"):
+            body, kind = _TOKEN_PAGE.encode(), b"text/html; charset=utf-8"  # a person
+        start = {"status": status, "headers": [(b"content-type", kind),
                                                (b"content-length", str(len(body)).encode())]}
         if scope["type"] == "http":
             await send({"type": "http.response.start", **start})
@@ -112,3 +122,30 @@ class AccessGuard:
             await send({"type": "websocket.http.response.body", "body": body})
         else:
             await send({"type": "websocket.close", "code": 4000 + status, "reason": message})
+
+
+#: What a browser opened without the token shows: where to find the URL, and a STOP that
+#: works without it.
+_TOKEN_PAGE = """<!doctype html><html lang="en"><head><meta charset="utf-8">
+<title>seqrun console: token required</title>
+<style>body{font:16px system-ui,sans-serif;background:#15181c;color:#e4e7eb;margin:40px}
+button{font:800 28px system-ui;color:#fff;background:#c81e1e;border:4px solid #fde047;
+border-radius:10px;padding:18px 40px;cursor:pointer}</style></head><body>
+<h1>seqrun console: token required</h1>
+<p>Open the URL that <code>seqrun console</code> printed when it started: it carries the
+token (<code>?token=...</code>).</p>
+<p>Stopping the arm needs no token:</p>
+<button id="stop" type="button">STOP</button> <span id="said"></span>
+<script>
+document.getElementById("stop").addEventListener("pointerdown", async () => {
+  const said = document.getElementById("said");
+  try {
+    const r = await fetch("/api/v1/halt", {method: "POST"});
+    const answer = await r.json();
+    said.textContent = answer.message || answer.error || r.status;
+  } catch (err) {
+    said.textContent = "STOP FAILED: the console does not answer - use the emergency stop";
+  }
+});
+</script></body></html>
+"""

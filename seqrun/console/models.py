@@ -1,16 +1,24 @@
-"""Request bodies of the console's API: strict (unknown keys, NaN and infinity refused)."""
+"""Request bodies and live messages of the console's API, strictly typed.
+
+Strict (pydantic strict mode): a number is a JSON number (``true`` is not 1, ``"12"`` is not
+12), a boolean is ``true`` or ``false`` (never 0 or 1), a text is a JSON string; unknown keys,
+NaN and infinity are refused. Duplicate keys are refused before a model sees the body
+(:mod:`seqrun.console.bodies`).
+"""
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
+#: A live message's ``id``, echoed in its reply.
+MessageId = Annotated[str, Field(max_length=64)] | Annotated[int, Field(ge=0, le=2**53)] | None
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
 
 
 class HaltBody(_Strict):
@@ -40,10 +48,43 @@ class RunBody(_Strict):
 
 
 class AnswerBody(_Strict):
-    question_id: str | int
+    question_id: str = Field(min_length=1, max_length=40)
     yes: bool
 
 
 class SavePoseBody(_Strict):
     name: str = Field(min_length=1, max_length=100)
     overwrite: bool = False
+
+
+class TakeControlBody(_Strict):
+    name: str = Field("API client", min_length=1, max_length=60,
+                      description="Who takes control, as the others see it.")
+
+
+# -- live WebSocket messages (page -> server) ----------------------------------------------
+class HaltMessage(_Strict):
+    op: Literal["halt"]
+    id: MessageId = None
+    reason: str = Field("STOP (console)", max_length=200)
+
+
+class JogMessage(_Strict):
+    op: Literal["jog"]
+    id: MessageId = None
+    joint: str = Field(min_length=1, max_length=40)
+    speed_scale: Annotated[float, Field(ge=-1, le=1, allow_inf_nan=False)]
+
+
+class JogStopMessage(_Strict):
+    op: Literal["jog_stop"]
+    id: MessageId = None
+
+
+class PingMessage(_Strict):
+    op: Literal["ping"]
+    id: MessageId = None
+
+
+LIVE_MESSAGES: dict[str, type[_Strict]] = {
+    "halt": HaltMessage, "jog": JogMessage, "jog_stop": JogStopMessage, "ping": PingMessage}

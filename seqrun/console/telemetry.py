@@ -4,7 +4,13 @@ One daemon thread reads the session's events (its own bounded queue: the control
 waits for the console). Each measurement becomes one status snapshot (``session.status()``),
 serialised once and handed to every page; every other event is queued per page and kept in
 a short history for pages opened later. A page that cannot keep up gets the newest status
-only (older snapshots are replaced, never queued), so one slow tablet delays nobody.
+only (older snapshots are replaced, never queued) and its oldest events are dropped beyond
+:data:`PAGE_EVENTS` (counted), so one slow tablet delays nobody and holds little memory.
+
+The pages share a budget of :data:`STATUS_BUDGET_PER_S` status messages a second: each page
+gets at most the measurement rate, and fewer when many pages are open (100 pages: 5 a
+second each), and snapshots are built only as often as the pages may take them, so that
+building and sending them never takes the interpreter from the control loop for long.
 """
 
 from __future__ import annotations
@@ -31,6 +37,11 @@ MAX_STATUS_HZ = 150.0
 #: A status is pushed at least this often, measurement or not (the page shows it is alive).
 HEARTBEAT_S = 0.5
 HISTORY = 300
+#: Events kept for one page that has not been sent them yet (the oldest go first).
+PAGE_EVENTS = 500
+#: Status messages a second for all pages together (3 tabs: every measurement; 100 live
+#: clients: 5 a second each).
+STATUS_BUDGET_PER_S = 500.0
 #: Events that carry a new measurement of the arm, never a line of the event log. A
 #: ``measurement`` becomes a status snapshot (subscribers get one per cycle of a move and
 #: one per idle poll); a ``setpoint`` comes with the same cycle's measurement.
@@ -69,17 +80,25 @@ def dumps(message: dict[str, Any]) -> str:
 class PageFeed:
     """What one page has not been sent yet: events in order, and the newest status."""
 
-    def __init__(self, loop: asyncio.AbstractEventLoop, max_events: int = 1000) -> None:
+    def __init__(self, loop: asyncio.AbstractEventLoop, max_events: int = PAGE_EVENTS) -> None:
         self.loop = loop
         self.events: collections.deque[str] = collections.deque(maxlen=max_events)
         self.status: str | None = None
         self.ready = asyncio.Event()
+        #: Events dropped (the page did not take them in time) and statuses replaced by a
+        #: newer one before they were sent.
+        self.dropped_events = 0
+        self.replaced_statuses = 0
 
     def push_event(self, text: str) -> None:
+        if len(self.events) == self.events.maxlen:
+            self.dropped_events += 1
         self.events.append(text)
         self.ready.set()
 
     def push_status(self, text: str) -> None:
+        if self.status is not None:
+            self.replaced_statuses += 1
         self.status = text
         self.ready.set()
 
@@ -127,6 +146,22 @@ class Telemetry:
         with self._lock:
             self._feeds.discard(feed)
 
+    @property
+    def pages(self) -> int:
+        return len(self._feeds)
+
+    def status_gap_s(self) -> float:
+        """Least time between two statuses to one page: the budget shared by the pages."""
+        return max(1.0 / MAX_STATUS_HZ, len(self._feeds) / STATUS_BUDGET_PER_S)
+
+    def build_gap_s(self) -> float:
+        """Least time between two status snapshots: none is built faster than a page may be
+        sent one (twice as often, so that what a page gets is at most half its gap old).
+        A snapshot (forward kinematics, encoding) holds the interpreter a few hundred
+        microseconds: 100 a second for 100 pages that take 5 each was most of the console's
+        work."""
+        return max(1.0 / MAX_STATUS_HZ, self.status_gap_s() / 2)
+
     # -- the reader thread ----------------------------------------------------------------
     def start(self) -> None:
         self._subscription = self.session.subscribe(maxsize=2000, name="console")
@@ -163,7 +198,6 @@ class Telemetry:
         self._broadcast(dumps({"type": "status", "status": self.status_dict()}), status=True)
 
     def _run(self) -> None:
-        min_gap = 1.0 / MAX_STATUS_HZ
         last_status = 0.0
         while not self._stop.is_set():
             try:
@@ -175,7 +209,7 @@ class Telemetry:
                     continue
                 kind = getattr(event, "type", None)
                 if kind in MEASURING_EVENTS:
-                    if kind == "measurement" and now - last_status >= min_gap:
+                    if kind == "measurement" and now - last_status >= self.build_gap_s():
                         self.publish_status()
                         last_status = now
                     continue

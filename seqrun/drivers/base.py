@@ -83,6 +83,10 @@ class JointReading(NamedTuple):
     positions_deg: np.ndarray
     #: Per module id: the state the joint reported with this reading.
     states: dict[int, CycleState]
+    #: When each joint answered (clock times, joint order, from the bus's own time stamps;
+    #: None: not known, the reader's clock is used). Velocities come from these times,
+    #: never from when a possibly stalled host got round to the answers.
+    answered_at: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

@@ -43,6 +43,14 @@ class Measurement:
     short_state: dict[int, CycleState]   # per module id: the state sent with the reading
     #: Full states, where this reading includes them (after home/reset/halt, a fault).
     state_words: dict[int, JointState] | None = None
+    #: When each joint answered (clock times, joint order, from the bus's own stamps;
+    #: None: not known, ``t`` stands for all of them).
+    answered_at: np.ndarray | None = None
+
+    @property
+    def at(self) -> float:
+        """The reading's time: when the joints answered (their mean) where known."""
+        return self.t if self.answered_at is None else float(self.answered_at.mean())
 
 
 class Run(Protocol):
@@ -79,6 +87,8 @@ class Run(Protocol):
     def beat(self) -> None: ...
 
     def idle(self, seconds: float) -> None: ...
+
+    def since_start(self, t: float) -> float: ...
 
     def idle_until(self, t: float) -> None: ...
 

@@ -195,11 +195,14 @@ class Streaming:
                                  module=run.modules[worst])
             logged_planned, logged_measured = rounded(planned_deg), rounded(measured)
             event_t = round(run.elapsed_s(), 6)
+            # When the joints answered (the bus's own stamps): after a host stall the
+            # event's time is late, the reading's is not.
+            read_t = self.read_t(m)
             if self.tracking is not None:
                 # The figures come from the logged values, so events.jsonl reproduces them.
-                self.tracking.add(event_t, logged_planned, logged_measured)
-            run.emit("setpoint", t=event_t, plan_t=round(t, 4), planned_deg=logged_planned,
-                     measured_deg=logged_measured,
+                self.tracking.add(read_t, logged_planned, logged_measured)
+            run.emit("setpoint", t=event_t, read_t=read_t, plan_t=round(t, 4),
+                     planned_deg=logged_planned, measured_deg=logged_measured,
                      planned_vel_deg_s=rounded(np.degrees(planned_vel), 2),
                      state=run.states_of(m))
             if t >= plan.duration:
@@ -216,6 +219,21 @@ class Streaming:
             # Next cycle slot; slots missed while waiting on the bus are skipped, not
             # made up in a burst.
             k = max(k + 1, math.ceil((run.clock.now() - t_start) / run.cycle))
+
+    #: Joints that answered further apart than this (s) in one reading get a time each in
+    #: the log (a host stall split the cycle's exchange); closer, one time stands for all.
+    READ_SPREAD_S = 0.002
+
+    def read_t(self, m: Measurement) -> float | list[float]:
+        """A reading's time as logged (``read_t``): s since the run start, one for all
+        joints, or one per joint when they answered far apart."""
+        run = self.run
+        if m.answered_at is None:
+            return round(run.since_start(m.t), 6)
+        at = [run.since_start(float(x)) for x in m.answered_at]
+        if max(at) - min(at) > self.READ_SPREAD_S:
+            return [round(x, 6) for x in at]
+        return round(sum(at) / len(at), 6)
 
     def controlled_stop(self, plan: MovePlan, t: float, moving: list[int]) -> None:
         """ruckig to zero velocity from the plan's current state, streamed, then hold."""

@@ -37,7 +37,8 @@ class SubscriberFields:
         if joints is None:
             return {}
         run = self._run
-        self._velocity.add(run.clock.now(), joints)
+        # the reading's time: when the joints answered (a stalled host stamps late)
+        self._velocity.add(run.last.at if run.last is not None else run.clock.now(), joints)
         # The reading this event reports (read_arm and refresh_measurement set it first),
         # decoded by the driver; its full states only for a measurement that shows them.
         m = run.last

@@ -83,6 +83,7 @@ from seqrun.powercube.protocol import (
     ShortState,
     StateFlag,
 )
+from seqrun.powercube.wire_time import WireTime
 
 if TYPE_CHECKING:  # python-can only for a bus of python-can's (see _message_class)
     import can
@@ -197,6 +198,13 @@ class PowerCubeClient:
         self._watchdog_due: float | None = None
         self._closed = False
         self.watchdog_period = watchdog_period
+        self._wire_time = WireTime()
+        #: When the last frame received was on the wire (clock time, from the interface's
+        #: own stamp; None before the first): a reading's time, even after a host stall.
+        self.last_rx_at: float | None = None
+        #: Per request of the last exchange: when its acknowledge was on the wire (None:
+        #: not answered, or a broadcast).
+        self.last_ack_times: list[float | None] = []
 
     # ------------------------------------------------------------------ lifecycle
     def close(self) -> None:
@@ -301,6 +309,7 @@ class PowerCubeClient:
         keys = [expected_ack_key(r) for r in requests]
         results: list[Ack | None] = [None] * len(requests)
         with self._lock:
+            self.last_ack_times = [None] * len(requests)
             self._check_open()
             if self._taints:  # (nothing in quarantine, the usual case: nothing to wait for)
                 self._drain_tainted({k for k in keys if k is not None})
@@ -432,6 +441,7 @@ class PowerCubeClient:
                 del pending[key]
             del deadlines[index]
             results[index] = ack
+            self.last_ack_times[index] = self.last_rx_at
             self.stats.acks_matched += 1
             if busy is not None:
                 busy.pop(ack.module, None)
@@ -582,14 +592,17 @@ class PowerCubeClient:
 
     def _bus_recv(self, timeout: float) -> can.Message | None:
         """The next frame within ``timeout`` (None: none came), stamped with the clock's
-        now, counted and shown to the frame listeners."""
+        now, counted and shown to the frame listeners; :attr:`last_rx_at` is when it was
+        on the wire (from the interface's own time stamp)."""
         try:
             msg = self.bus.recv(timeout=timeout)
         except Exception as exc:  # a lost connection is a bus fault, whatever raised it
             raise BusError(f"receiving from the bus failed: {_what(exc)}") from exc
         if msg is not None:
+            now = self.clock.now()
+            self.last_rx_at = self._wire_time.place(msg.timestamp, now)
             msg.is_rx = True
-            msg.timestamp = self.clock.now()
+            msg.timestamp = now
             self.stats.frames_received += 1
             self._notify(msg)
         return msg

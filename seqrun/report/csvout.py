@@ -4,7 +4,7 @@
 monitoring cycle of a wait or checkpoint), full resolution:
 
 ==========================  ================================================================
-``t_s``                     seconds since the run start
+``t_s``                     seconds since the run start, when the joints answered (read_t)
 ``step``                    step number
 ``streamed``                1 when a plan was being streamed (a move), else 0
 ``<j>_planned_deg``         planned position (empty when nothing was streamed)

@@ -17,7 +17,7 @@ from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
-from seqrun.arm.tracking import VelocityStream
+from seqrun.arm.tracking import VelocityStream, sample_time
 
 #: Event types that carry one reading of the whole arm.
 SAMPLE_EVENTS = ("setpoint", "measurement")
@@ -42,6 +42,9 @@ class Series:
     planned_vel: np.ndarray
     measured_vel: np.ndarray
     state: np.ndarray
+    #: Each joint's own sample time (samples × joints): ``t`` unless the joints of a
+    #: reading answered apart (``read_t`` per joint).
+    t_joint: np.ndarray
 
     def __len__(self) -> int:
         return len(self.t)
@@ -50,7 +53,7 @@ class Series:
     def empty(cls, dof: int) -> Series:
         nothing = np.zeros((0, dof))
         return cls(np.zeros(0), np.zeros(0, int), np.zeros(0, bool), nothing, nothing,
-                   nothing, nothing, np.zeros((0, dof), int))
+                   nothing, nothing, np.zeros((0, dof), int), nothing)
 
     @classmethod
     def concatenate(cls, chunks: list[Series], dof: int) -> Series:
@@ -119,7 +122,18 @@ class Chunker:
         if not rows:
             return None
         n, dof = len(rows), self.dof
-        t = np.array([e["t"] for e in rows], dtype=float)
+        # a reading's time is when the joints answered (read_t: one, or one per joint),
+        # where the log has it; else when it was logged
+        t = np.empty(n)
+        t_joint = np.empty((n, dof))
+        for i, e in enumerate(rows):
+            read_t = e.get("read_t")
+            if isinstance(read_t, list) and len(read_t) == dof:
+                t[i] = sample_time(read_t)
+                t_joint[i] = read_t
+            else:
+                t[i] = read_t if isinstance(read_t, (int, float)) else e["t"]
+                t_joint[i] = t[i]
         step = np.array([e.get("step") or 0 for e in rows], dtype=int)
         measured = np.array([joints_of(e) for e in rows], dtype=float)
         streamed = np.array([e["type"] == "setpoint" for e in rows], dtype=bool)
@@ -132,10 +146,12 @@ class Chunker:
         _fill(state, rows, lambda e: e.get("state"))
         if np.any(np.diff(t) < 0):   # a log written out of order: this chunk in time order
             order = np.argsort(t, kind="stable")
-            t, step, streamed, planned, measured, planned_vel, state = (
-                a[order] for a in (t, step, streamed, planned, measured, planned_vel, state))
-        measured_vel = self.velocity.feed(t, measured)
-        return Series(t, step, streamed, planned, measured, planned_vel, measured_vel, state)
+            t, step, streamed, planned, measured, planned_vel, state, t_joint = (
+                a[order] for a in (t, step, streamed, planned, measured, planned_vel, state,
+                                   t_joint))
+        measured_vel = self.velocity.feed(t, measured, t_joint)
+        return Series(t, step, streamed, planned, measured, planned_vel, measured_vel, state,
+                      t_joint)
 
 
 def _fill(target: np.ndarray, rows: list[dict], value: Callable[[dict], list | None]) -> None:

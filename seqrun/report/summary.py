@@ -140,7 +140,8 @@ class SummaryBuilder:
             else np.fmax(summary.max_following_error_deg, worst)
         if self._step_velocity is None or self._step_velocity[0] != number:
             self._step_velocity = (number, VelocityStream(self.window_s))
-        peak = peak_abs(self._step_velocity[1].feed(s.t[idx], s.measured[idx]))
+        peak = peak_abs(self._step_velocity[1].feed(s.t[idx], s.measured[idx],
+                                                    s.t_joint[idx]))
         summary.peak_measured_velocity_deg_s = peak if summary.peak_measured_velocity_deg_s \
             is None else np.maximum(summary.peak_measured_velocity_deg_s, peak)
         summary.last_planned_deg = s.planned[idx[-1]].copy()

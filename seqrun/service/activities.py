@@ -61,9 +61,11 @@ def activity_result(kind: str, run, run_dir: Path | None = None) -> ActivityResu
 class Activity:
     """A handle on something the session does in the background (a move, a jog, a run)."""
 
-    def __init__(self, kind: str, activity_id: int) -> None:
+    def __init__(self, kind: str, activity_id: int, started_by: str | None = None) -> None:
         self.kind = kind
         self.id = activity_id
+        #: Who started it (a face's client name), when the face said.
+        self.started_by = started_by
         self._done = threading.Event()
         self._result: ActivityResult | None = None
 
@@ -126,6 +128,8 @@ class Activities:
         #: The sequence run under way (a RunInfo) and whether it is paused.
         self.run_info: Any = None
         self.paused = False
+        #: The current activity's Halt was sent and the modules read back.
+        self.halt_read_back = False
 
     @property
     def current(self) -> Activity | None:
@@ -137,6 +141,8 @@ class Activities:
         activity = self._current
         if activity is None:
             return None
+        if self.halt_read_back:
+            return "halted"  # (the activity may still be ending: its report, its log)
         if activity.kind == "run":
             return "paused" if self.paused else "running"
         return "jogging" if activity.kind == "jog" else "moving"
@@ -157,7 +163,8 @@ class Activities:
                 self.paused = False
 
     # ------------------------------------------------------------------ start and end
-    def begin(self, kind: str, detail: Mapping[str, Any] | None = None) -> Activity:
+    def begin(self, kind: str, detail: Mapping[str, Any] | None = None,
+              by: str | None = None) -> Activity:
         """Register ``kind`` as the activity under way; Refused if one is."""
         with self._state:
             if self._session.closed:
@@ -166,9 +173,13 @@ class Activities:
                 raise Refused(f"a {self._current.kind} is under way: wait for it to end, "
                               "or stop it first")
             self._ids += 1
-            activity = Activity(kind, self._ids)
+            activity = Activity(kind, self._ids, by)
             self._current = activity
-        self._publish("activity_started", kind=kind, detail=dict(detail or {}))
+            self.halt_read_back = False
+        detail = dict(detail or {})
+        if by is not None:
+            detail["by"] = by
+        self._publish("activity_started", kind=kind, detail=detail)
         return activity
 
     def end(self, activity: Activity, result: ActivityResult) -> None:
@@ -237,7 +248,21 @@ class Activities:
         its construction) and idles through the session's idle hooks."""
         with self._state:
             self.executor = executor
+            self.halt_read_back = False
             executor.idle_hooks.extend(self._idle_hooks)
+        # A recorder (called on the loop's thread before any subscriber gets the event):
+        # the status says "halted" the moment the Halt was read back, while the run still
+        # writes its report, and before any face hears of it.
+        executor.listeners.append(self._note_halt_read_back)
+
+    #: The executor's events that say a Halt was sent and the modules read back.
+    HALT_READ_BACK = frozenset({"halt_confirmed", "halt_unconfirmed", "halt_failed"})
+
+    def _note_halt_read_back(self, event: Any) -> None:
+        if event.type in self.HALT_READ_BACK:
+            self._session.telemetry.mark_halted("fault", unless_already=True)
+            with self._state:
+                self.halt_read_back = True
 
     def stop_pending(self) -> bool:
         """A stop request is posted for the current activity's executor."""

@@ -26,11 +26,13 @@ DEFAULT_MOVE_SHARE = 0.25
 
 
 def finite(value: Any, what: str) -> float:
-    """``value`` as a finite float, or Refused naming ``what``."""
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise Refused(f"{what}: {value!r} is not a number") from None
+    """``value`` as a finite float, or Refused naming ``what``; a boolean or a text is not
+    a number (``True`` is not 1 and ``"12"`` not 12: every face passes typed values on)."""
+    import numbers
+
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise Refused(f"{what}: {value!r} is not a number")
+    x = float(value)
     if not math.isfinite(x):
         raise Refused(f"{what}: {value!r} is not a finite number")
     return x
@@ -173,12 +175,24 @@ class Motion:
         start = self._session.telemetry.joints_deg()
         check = validate_sequence(loaded, self._session.arm, start, started=True)
         if check.errors:
-            raise Refused(f"{what}: {check.errors[0].message}")
+            raise Refused(f"{what}: {self._own_words(check.errors[0])}")
         return loaded
 
-    def _start_move(self, kind: str, loaded, detail: dict) -> Activity:
+    def _own_words(self, error) -> str:
+        """A finding about a session command in the operator's terms: where it is when that
+        is a file of theirs (a pose file), never the session's private one-step file."""
+        import re
+
+        private = str(self._tmp or "\0")
+        message = re.sub(r"\s*\(used at [^()]*" + re.escape(private) + r"[^()]*\)", "",
+                         error.message)
+        if str(error.file).startswith(private):
+            return message
+        return f"{error.file}:{error.line}:{error.column}: {message}"
+
+    def _start_move(self, kind: str, loaded, detail: dict, by: str | None = None) -> Activity:
         s = self._session
-        activity = s.activities.begin(kind, detail)
+        activity = s.activities.begin(kind, detail, by)
 
         def work() -> ActivityResult:
             executor = s.activities.new_executor(loaded)
@@ -188,7 +202,8 @@ class Motion:
 
         return s.activities.launch(activity, work, background=True)
 
-    def move_to_pose(self, name: str, *, velocity_scale: float | None = None) -> Activity:
+    def move_to_pose(self, name: str, *, velocity_scale: float | None = None,
+                     by: str | None = None) -> Activity:
         """Move to a named pose (a pose file), as a one-step sequence: validated, executed
         by the executor. Non-blocking."""
         import json
@@ -202,10 +217,10 @@ class Motion:
             params["velocity_deg_s"] = self.move_velocities()
         loaded = self._validated_move("move", f"move: {json.dumps(params)}",
                                       f"move to {name}")
-        return self._start_move("move", loaded, {"pose": name})
+        return self._start_move("move", loaded, {"pose": name}, by)
 
     def move_to_joints(self, joints_deg: Mapping[str, float], *,
-                       velocity_scale: float | None = None) -> Activity:
+                       velocity_scale: float | None = None, by: str | None = None) -> Activity:
         """Move the named joints to user-degree targets (others stay). Non-blocking."""
         import json
 
@@ -226,10 +241,10 @@ class Motion:
         params["velocity_deg_s"] = {n: v for n, v in self.move_velocities().items()
                                     if n in targets}
         loaded = self._validated_move("move", f"move: {json.dumps(params)}", "move")
-        return self._start_move("move", loaded, {"joints": targets})
+        return self._start_move("move", loaded, {"joints": targets}, by)
 
     # ------------------------------------------------------------------ jog
-    def jog(self, joint: str, speed_scale: float) -> Activity:
+    def jog(self, joint: str, speed_scale: float, *, by: str | None = None) -> Activity:
         """Jog one joint at ``speed_scale`` (-1..1) of its move velocity. Call again at
         least every :data:`JOG_DEADMAN_S` (same joint and direction: renews; the speed
         stays the first call's) or the jog ends with a controlled stop. Refused near a
@@ -245,18 +260,18 @@ class Motion:
         if current is not None and current.kind == "jog" and deadman is not None:
             if (plan is not None and plan.joint == joint
                     and isinstance(speed_scale, (int, float))
+                    and not isinstance(speed_scale, bool)
                     and speed_scale * plan.direction > 0 and not deadman.expired):
                 deadman.renew()  # the speed stays the jog's first
                 return current
             raise Refused("jog: another jog is under way (release it first)")
         self.check_movable("jog")
-        if not isinstance(speed_scale, (int, float)):
-            raise Refused(f"jog: speed scale {speed_scale!r} is not a number")
+        speed_scale = finite(speed_scale, "jog: speed scale")
         joints = np.array(s.telemetry.condition().joints, dtype=float)
         velocity = self._velocities.get(joint, 0.0)
         plan = plan_jog(s.arm, joint, float(speed_scale), joints, velocity)
         deadman = Deadman(s.clock, self.jog_deadman_s)
-        activity = activities.begin("jog", {"joint": joint, "speed_scale": speed_scale})
+        activity = activities.begin("jog", {"joint": joint, "speed_scale": speed_scale}, by)
         activities.deadman, activities.jog_plan = deadman, plan
 
         def work() -> ActivityResult:

@@ -37,9 +37,11 @@ class Questions:
         pending abort or STOP answers "no" at once).
     """
 
-    def __init__(self, publish: Callable[..., None], stop_pending: Callable[[], bool]) -> None:
+    def __init__(self, publish: Callable[..., None], stop_pending: Callable[[], bool],
+                 started_by: Callable[[], str | None] = lambda: None) -> None:
         self._publish = publish
         self._stop_pending = stop_pending
+        self._started_by = started_by
         self._lock = threading.Lock()
         self._open: dict[str, Question] = {}
         self._ids = 0
@@ -50,7 +52,9 @@ class Questions:
             self._ids += 1
             q = Question(f"q{self._ids}", text, step)
             self._open[q.id] = q
-        self._publish("confirm_requested", question_id=q.id, text=text)
+        by = self._started_by()  # who started the run the question is about
+        self._publish("confirm_requested", question_id=q.id, text=text,
+                      **({"started_by": by} if by is not None else {}))
         while not q.answered.wait(POLL_S):
             # A stop request posted meanwhile (abort, STOP) answers no at once.
             if self._stop_pending():

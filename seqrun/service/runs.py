@@ -31,7 +31,7 @@ class Runs:
     def run_sequence(self, file: str | Path, *, speed: float = 1.0, step_mode: bool = False,
                      first_step: int = 1, command_mode: str | None = None,
                      log_dir: Path | None = None, html_report: bool = True,
-                     loaded=None, assume_yes: bool = False) -> Activity:
+                     loaded=None, assume_yes: bool = False, by: str | None = None) -> Activity:
         """Validate ``file`` (refused with its first error line when invalid), then run it in
         a worker thread with a run folder like ``seqrun run``. Questions (confirm steps,
         ``step_mode``'s before-step question, clearing a latched fault) are published as
@@ -72,7 +72,8 @@ class Runs:
             folder = prepare_run_folder(log_dir, loaded.name, s.log_root)
         except OSError as exc:
             raise Refused(f"cannot create the run folder: {exc.strerror or exc}") from None
-        activity = s.activities.begin("run", {"file": str(file), "run_dir": str(folder)})
+        activity = s.activities.begin("run", {"file": str(file), "run_dir": str(folder)},
+                                       by)
         s.activities.run_info = RunInfo(str(file), None, None, len(loaded.steps), str(folder))
         total = len(loaded.steps)
 

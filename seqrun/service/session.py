@@ -50,6 +50,7 @@ from seqrun.errors import Refused
 from seqrun.events import Event, EventHub, Subscription, make_event
 from seqrun.service.activities import (EXIT_FAULT_CODE, Activities, Activity,
                                        ActivityResult)
+from seqrun.service.control import ControlDesk
 from seqrun.service.motion import DEFAULT_MOVE_SHARE, JOG_DEADMAN_S, Motion
 from seqrun.service.questions import Questions
 from seqrun.service.runs import Runs
@@ -107,13 +108,16 @@ class ArmSession:
         self._closed = False
         self._closing = threading.Lock()
         # The services, each one concept (module docstring).
-        self.questions = Questions(self.publish, lambda: self.activities.stop_pending())
+        self.questions = Questions(self.publish, lambda: self.activities.stop_pending(),
+                                   self._started_by)
         self.activities = Activities(self, self.publish, self._activity_ended,
                                      loop_priority=loop_priority)
         self.telemetry = ArmTelemetry(self, self._hub, self._t0)
         self.stopping = Stopping(self)
         self.motion = Motion(self, jog_deadman_s=jog_deadman_s)
         self.runs = Runs(self)
+        #: Who holds control and who watches (every face of this session shares it).
+        self.control = ControlDesk(publish=self.publish, clock=self.clock.now)
         self._status_listener = self._hub.add_listener(self._on_event, "session status",
                                                        maxsize=10_000)
         if status_hz > 0:
@@ -158,7 +162,16 @@ class ArmSession:
 
     @property
     def jog_deadman_s(self) -> float:
+        """A jog not renewed within this time (s) ends with a controlled stop."""
         return self.motion.jog_deadman_s
+
+    @jog_deadman_s.setter
+    def jog_deadman_s(self, seconds: float) -> None:
+        self.motion.jog_deadman_s = seconds
+
+    def _started_by(self) -> str | None:
+        activity = self.activities.current
+        return activity.started_by if activity is not None else None
 
     @property
     def activity(self) -> Activity | None:
@@ -256,15 +269,16 @@ class ArmSession:
     def move_velocities(self) -> dict[str, float]:
         return self.motion.move_velocities()
 
-    def move_to_pose(self, name: str, *, velocity_scale: float | None = None) -> Activity:
-        return self.motion.move_to_pose(name, velocity_scale=velocity_scale)
+    def move_to_pose(self, name: str, *, velocity_scale: float | None = None,
+                     by: str | None = None) -> Activity:
+        return self.motion.move_to_pose(name, velocity_scale=velocity_scale, by=by)
 
     def move_to_joints(self, joints_deg: Mapping[str, float], *,
-                       velocity_scale: float | None = None) -> Activity:
-        return self.motion.move_to_joints(joints_deg, velocity_scale=velocity_scale)
+                       velocity_scale: float | None = None, by: str | None = None) -> Activity:
+        return self.motion.move_to_joints(joints_deg, velocity_scale=velocity_scale, by=by)
 
-    def jog(self, joint: str, speed_scale: float) -> Activity:
-        return self.motion.jog(joint, speed_scale)
+    def jog(self, joint: str, speed_scale: float, *, by: str | None = None) -> Activity:
+        return self.motion.jog(joint, speed_scale, by=by)
 
     def jog_stop(self) -> ActivityResult | None:
         return self.motion.jog_stop()
@@ -273,13 +287,13 @@ class ArmSession:
     def run_sequence(self, file: str | Path, *, speed: float = 1.0, step_mode: bool = False,
                      first_step: int = 1, command_mode: str | None = None,
                      log_dir: Path | None = None, html_report: bool = True,
-                     loaded=None, assume_yes: bool = False) -> Activity:
+                     loaded=None, assume_yes: bool = False, by: str | None = None) -> Activity:
         """Validate and run ``file`` in a worker, questions as events
-        (:meth:`Runs.run_sequence`)."""
+        (:meth:`Runs.run_sequence`); ``by``: who started it (a face's client)."""
         return self.runs.run_sequence(file, speed=speed, step_mode=step_mode,
                                       first_step=first_step, command_mode=command_mode,
                                       log_dir=log_dir, html_report=html_report,
-                                      loaded=loaded, assume_yes=assume_yes)
+                                      loaded=loaded, assume_yes=assume_yes, by=by)
 
     def run_loaded(self, loaded, *, log_dir: Path | None, speed: float = 1.0,
                    first_step: int = 1, command_mode: str | None = None,

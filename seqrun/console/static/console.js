@@ -18,6 +18,7 @@ const state = {
   latched: {}, poses: [], hoverPose: null, slidersTouched: false,
   jog: null, question: null, selected: null, checked: null,
   statusCount: 0, eventCount: 0, lastReplies: [], stopTimes: [],
+  control: null, lost: true, lastHeardAt: 0, pendingStop: null,
 };
 window.seqrunConsole = state;  // for the browser tests and the bench
 state.frames = frames;
@@ -63,17 +64,54 @@ async function command(label, method, path, body) {
 
 // ---------------------------------------------------------------- STOP
 // event: the click or key (its timeStamp is when the operator pressed; the bench reads it).
+// Sent on the live connection; when that is down, or has not confirmed within
+// STOP_CONFIRM_MS, over HTTP as well; when neither answers, the page says so in full.
+const STOP_CONFIRM_MS = 1500;
+const STOP_FAILED = "STOP FAILED: the console is unreachable and the arm's state is unknown - use the emergency stop";
+
 function stop(event) {
   state.stopTimes.push(performance.timeOrigin + (event ? event.timeStamp : performance.now()));
   $("#stop").classList.add("pressed");
   setTimeout(() => $("#stop").classList.remove("pressed"), 200);
   releaseJog(false);
-  if (state.ws && state.ws.readyState === WebSocket.OPEN) {
-    state.ws.send(JSON.stringify({ op: "halt", id: ++state.msgId, reason: "STOP (console)" }));
+  if (state.ws && state.ws.readyState === WebSocket.OPEN && !state.lost) {
+    const id = ++state.msgId;
+    state.pendingStop = id;
+    state.ws.send(JSON.stringify({ op: "halt", id, reason: "STOP (console)" }));
+    say("STOP sent");
+    setTimeout(() => {
+      if (state.pendingStop === id) stopOverHttp("the live connection did not confirm it");
+    }, STOP_CONFIRM_MS);
   } else {
-    api("POST", "/halt", { reason: "STOP (console, no live connection)" }).catch(() => {});
+    say("STOP sent (no live connection)");
+    stopOverHttp("no live connection");
   }
-  say("STOP sent");
+}
+
+async function stopOverHttp(why) {
+  const abort = new AbortController();
+  const timer = setTimeout(() => abort.abort(), STOP_CONFIRM_MS);
+  try {
+    const response = await fetch(API + "/halt", {
+      method: "POST", headers: { "Content-Type": "application/json", Accept: "application/json" },
+      body: JSON.stringify({ reason: `STOP (console, ${why})` }), signal: abort.signal });
+    const data = await response.json();
+    state.pendingStop = null;
+    say(data.message || data.error || `STOP: HTTP ${response.status}`, !data.halt_confirmed);
+  } catch (err) {
+    stopFailed();
+  } finally {
+    clearTimeout(timer);
+  }
+}
+
+function stopFailed() {
+  state.pendingStop = null;
+  say(STOP_FAILED, true);
+  // in full where nothing cuts it short, whether or not contact was lost before
+  if (!state.lost) setLost(true, "");
+  $("#lost-stop").textContent = STOP_FAILED;
+  $("#lost-stop").hidden = false;
 }
 
 function isTyping(target) {
@@ -93,6 +131,10 @@ window.addEventListener("keyup", (e) => {
 }, true);
 
 // ---------------------------------------------------------------- live connection
+// The console sends a status at least every 0.5 s: a page that heard nothing for LOST_MS
+// (a console killed, frozen or cut off without a TCP close) has lost contact.
+const LOST_MS = 2000;
+
 function connect() {
   const ws = new WebSocket(`${location.protocol === "https:" ? "wss" : "ws"}://${location.host}${API}/live`);
   state.ws = ws;
@@ -107,20 +149,55 @@ function connect() {
     $("#conn").textContent = "offline"; $("#conn").className = "badge off";
     state.client = null;
     releaseJog(false);
+    setLost(true, "The live connection closed.");
     setTimeout(connect, 1000);
   };
   ws.onmessage = (msg) => {
+    state.lastHeardAt = performance.now();
+    if (state.lost && state.client) setLost(false);  // a console that was frozen, back
     const data = JSON.parse(msg.data);
     if (data.type === "status") showStatus(data.status);
     else if (data.type === "event") showEvent(data.event);
-    else if (data.type === "hello") { state.client = data.client; showStatus(data.status); }
-    else if (data.type === "reply") onReply(data);
+    else if (data.type === "hello") {
+      state.client = data.client;
+      setLost(false);
+      showControl(data.control);
+      showStatus(data.status);
+    } else if (data.type === "reply") onReply(data);
   };
+}
+
+setInterval(() => {
+  if (!state.lost && performance.now() - state.lastHeardAt > LOST_MS) {
+    setLost(true, `No word from the console for ${LOST_MS / 1000} s.`);
+  }
+}, 250);
+
+// Lost contact: whatever the page shows is old. Everything greys out under a banner, the
+// activity reads "unknown"; STOP stays red and still tries (and says if it fails).
+function setLost(lost, why = "") {
+  if (lost === state.lost && (!lost || !why)) return;
+  state.lost = lost;
+  document.body.classList.toggle("lost", lost);
+  $("#lost-banner").hidden = !lost;
+  $("#lost-why").textContent = why;
+  if (!lost) $("#lost-stop").hidden = true;
+  if (lost) {
+    setText($("#activity"), "unknown");
+    $("#activity").className = "badge unknown";
+    say("The console is unreachable: the arm's state is unknown - use the emergency stop", true);
+  } else {
+    if (state.status) drawBadges(state.status);
+    if ($("#message").textContent.startsWith("The console is unreachable")) say("");
+  }
+  applyControl();
 }
 
 function onReply(reply) {
   state.lastReplies.push(reply);
   if (state.lastReplies.length > 50) state.lastReplies.shift();
+  if (reply.id !== null && reply.id === state.pendingStop) state.pendingStop = null;
+  if (reply.note) say(reply.note, true);
   if (!reply.ok) {
     say(reply.error, true);
     if (state.jog) releaseJog(false);
@@ -138,7 +215,12 @@ function onReply(reply) {
 // frameHz() frames a second (the numbers at most NUMBERS_HZ): none while hidden.
 // Flags shown as A|B|C, with a line break allowed after each bar (a narrow panel wraps there).
 const FLAG_SEP = "|\u200b";
+// The numbers never wait for the 3D view: they are drawn on a timer of their own (at most
+// NUMBERS_HZ), the 3D view in animation frames of its own (at most frameHz(): with WebGL in
+// software a frame can take a quarter of a second). What must be seen at once - the
+// activity (HALTED), lost contact - is drawn the moment it arrives.
 const NUMBERS_HZ = 10;
+const NUMBERS_HZ_SLOW = 4;   // without the focus
 const FRAME_HZ = 20;         // the focused page on a GPU
 const FRAME_HZ_SLOW = 4;     // without the focus, or with software-rendered WebGL
 state.drawCount = 0;  // redraws of the numbers (tests, bench)
@@ -149,40 +231,65 @@ function frameHz() {
   return FRAME_HZ;
 }
 
+function numbersHz() {
+  if (document.hidden) return 0;
+  return document.hasFocus() ? NUMBERS_HZ : NUMBERS_HZ_SLOW;
+}
+
 function showStatus(s) {
+  const before = state.status;
   state.status = s;
   state.statusCount += 1;
   if (!DRAW) return;
   for (const j of s.joints) if (j.fault) state.latched[j.name] = j.flags.join(FLAG_SEP);
+  if (!before || before.activity !== s.activity || before.stale !== s.stale) drawBadges(s);
   state.statusDirty = true;
-  if (state.view) state.view.setMeasured(s.joints.map((j) => j.position_deg));
-  scheduleFrame();
+  scheduleNumbers();
+  if (state.view) { state.view.setMeasured(s.joints.map((j) => j.position_deg)); scheduleView(); }
 }
 
-function scheduleFrame() {
+function scheduleNumbers() {
+  const hz = numbersHz();
+  if (state.numbersPending || hz === 0 || !state.status) return;
+  state.numbersPending = true;
+  const wait = Math.max(0, (state.drawnAt ?? -Infinity) + 1000 / hz - performance.now());
+  setTimeout(() => {
+    state.numbersPending = false;
+    if (document.hidden) return;  // drawn when shown again (visibilitychange)
+    state.drawnAt = performance.now();
+    if (state.statusDirty) {
+      state.statusDirty = false;
+      drawStatus(state.status);
+    }
+  }, wait);
+}
+
+function scheduleView() {
   const hz = frameHz();
-  if (state.framePending || hz === 0 || !state.status) return;
+  if (state.framePending || hz === 0 || !state.view) return;
   state.framePending = true;
   const wait = Math.max(0, (state.frameAt ?? -Infinity) + 1000 / hz - performance.now());
   setTimeout(() => requestAnimationFrame((now) => {
     state.framePending = false;
-    if (document.hidden) return;  // painted when shown again (visibilitychange)
+    if (document.hidden) return;  // drawn when shown again (visibilitychange)
     state.frameAt = now;
-    if (state.statusDirty && now - (state.drawnAt ?? -Infinity) >= 1000 / NUMBERS_HZ - 2) {
-      state.statusDirty = false;
-      state.drawnAt = now;
-      drawStatus(state.status);
-    }
-    if (state.view) state.view.renderIfDirty();
-    if (state.statusDirty || (state.view && state.view.dirty)) scheduleFrame();
+    state.view.renderIfDirty();
   }), wait);
 }
-document.addEventListener("visibilitychange", scheduleFrame);
-window.addEventListener("focus", scheduleFrame);
+for (const [target, kind] of [[document, "visibilitychange"], [window, "focus"]]) {
+  target.addEventListener(kind, () => { scheduleNumbers(); scheduleView(); });
+}
 
 // textContent only when it changed: an unchanged field costs no layout.
 function setText(node, text) {
   if (node.textContent !== text) node.textContent = text;
+}
+
+function drawBadges(s) {
+  if (state.lost) return;  // "unknown" until contact is back
+  const act = $("#activity");
+  setText(act, s.stale ? `${s.activity} (stale)` : s.activity);
+  act.className = `badge ${s.activity}`;
 }
 
 function drawStatus(s) {
@@ -193,9 +300,7 @@ function drawStatus(s) {
     $("#title").textContent = title;
     $("#title").className = s.simulator ? "sim" : "";
   }
-  const act = $("#activity");
-  setText(act, s.stale ? `${s.activity} (stale)` : s.activity);
-  act.className = `badge ${s.activity}`;
+  drawBadges(s);
   setText($("#zero"), s.zero_reference ? `zero: ${s.zero_reference}` : "");
   setText($("#bus"), s.bus);
   setText($("#updated"), s.updated_at === null ? "never" : fmt(s.updated_at, 2));
@@ -220,7 +325,6 @@ function drawStatus(s) {
   setText($("#ee-xyz"), ee ? ee.position_mm.map((v) => fmt(v, 1)).join("  ") : "-");
   setText($("#ee-rpy"), ee ? ee.rpy_deg.map((v) => fmt(v, 2)).join("  ") : "-");
   const q = s.joints.map((j) => j.position_deg);
-  if (state.view) state.view.setMeasured(q);
   if (!state.slidersTouched) setSliders(q);
   updateGhost();
   highlightStep(s.run);
@@ -253,6 +357,14 @@ function showEvent(e) {
   while (log.children.length > 400) log.firstChild.remove();
   log.scrollTop = log.scrollHeight;
   if (e.type === "activity_finished" && e.exit_code !== 0) say(`${e.kind} ${e.status}: ${e.message}`, true);
+  if (e.type === "activity_started" && !ownSliderMove(e)) followArm();
+  if (e.type === "activity_finished") followArm();
+  if (["control_taken", "control_released", "client_joined", "client_left"].includes(e.type)) {
+    const took = e.type === "control_taken" && e.previous && e.previous.id === state.client
+      && (!e.holder || e.holder.id !== state.client);
+    if (took) say(`Control taken by ${e.holder.name}: this page watches now (STOP still works)`, true);
+    showControl(e);
+  }
   if (e.type === "confirm_requested") askOperator(e);
   else if (e.type === "confirm_answered" && state.question && state.question.question_id === e.question_id) closeQuestion();
   else if (e.type === "run_finished" || e.type === "activity_finished") { if (e.type === "run_finished") loadRuns(); closeQuestionIfRunEnded(e); }
@@ -260,11 +372,64 @@ function showEvent(e) {
   else if (e.type === "run_started") markStep(0);
 }
 
+// ---------------------------------------------------------------- control
+// One page or API client holds control and commands; the others watch (their commands are
+// disabled; STOP, Pause and Abort never are) and may take control explicitly.
+function myName() {
+  const me = state.control && state.control.clients.find((c) => c.id === state.client);
+  return me ? me.name : null;
+}
+
+function holdsControl() {
+  return Boolean(!state.lost && state.control && state.control.holder && state.client
+    && state.control.holder.id === state.client);
+}
+
+function showControl(c) {
+  if (!c) return;
+  state.control = { holder: c.holder ?? null, clients: c.clients ?? [] };
+  applyControl();
+}
+
+function applyControl() {
+  const c = state.control || { holder: null, clients: [] };
+  const mine = holdsControl();
+  const badge = $("#control-state");
+  badge.textContent = state.lost ? "control: unknown" : mine ? "in control" : c.holder ? "watching" : "nobody in control";
+  badge.className = `badge ${state.lost ? "unknown" : mine ? "mine" : "watching"}`;
+  badge.title = c.holder ? `${c.holder.name} holds control` : "nobody holds control";
+  $("#take-control").hidden = mine || state.lost || !state.client;
+  const others = c.clients.filter((x) => x.id !== state.client).map((x) => x.name + (c.holder && x.id === c.holder.id ? " (in control)" : ""));
+  $("#clients").textContent = state.lost ? "The console is unreachable: who holds control is unknown."
+    : mine ? `You hold control.${others.length ? ` Watching: ${others.join(", ")}.` : ""}`
+    : `${c.holder ? `${c.holder.name} holds control` : "Nobody holds control"}: this page watches (STOP, Pause and Abort still work).`;
+  document.body.classList.toggle("watching", !mine);
+  document.querySelectorAll(".needs-control").forEach((b) => {
+    b.disabled = !mine || (b.dataset.why !== undefined);
+  });
+  if (state.question) showQuestionWho(state.question);
+}
+
+$("#take-control").addEventListener("click", () => {
+  const holder = state.control && state.control.holder;
+  if (holder && !window.confirm(`${holder.name} holds control. Take it? (That page is told.)`)) return;
+  command("Take control", "POST", "/control/take");
+});
+
 // ---------------------------------------------------------------- confirm dialog
 function askOperator(e) {
   state.question = e;
   $("#confirm-text").textContent = e.text;
+  showQuestionWho(e);
   $("#confirm-dialog").hidden = false;
+}
+
+function showQuestionWho(e) {
+  $("#confirm-who").textContent = e.local ? "" : `Asked by the run ${e.started_by ? `${e.started_by} started` : "under way"}.`;
+  const mine = holdsControl();
+  const holder = state.control && state.control.holder;
+  $("#confirm-note").hidden = mine;
+  $("#confirm-note").textContent = mine ? "" : `Only the page in control answers (${holder ? holder.name : "nobody holds control"}).`;
 }
 function closeQuestion() { state.question = null; $("#confirm-dialog").hidden = true; }
 function closeQuestionIfRunEnded(e) { if (e.type === "run_finished") closeQuestion(); }
@@ -306,9 +471,9 @@ async function loadPoses() {
   const box = $("#poses");
   box.replaceChildren();
   for (const p of state.poses) {
-    const b = el("button", { type: "button", textContent: p.name, title: p.description || p.file });
+    const b = el("button", { type: "button", textContent: p.name, title: p.description || p.file, className: "needs-control" });
     b.dataset.pose = p.name;
-    if (p.error) { b.disabled = true; b.title = p.error; }
+    if (p.error || p.move_target === false) { b.dataset.why = p.why || p.error; b.title = b.dataset.why; }
     b.addEventListener("click", () => command(`To ${p.name}`, "POST", "/move/pose", { name: p.name }));
     const show = () => { state.hoverPose = p; updateGhost(); };
     const hide = () => { if (state.hoverPose === p) state.hoverPose = null; updateGhost(); };
@@ -316,6 +481,7 @@ async function loadPoses() {
     b.addEventListener("pointerleave", hide); b.addEventListener("blur", hide);
     box.append(b);
   }
+  applyControl();
 }
 
 // ---- MOVE sliders and ALLVEL boxes
@@ -336,8 +502,8 @@ function buildJointControls() {
     box.placeholder = j.name;
     vel.append(box);
     if (j.locked === null) {
-      const minus = el("button", { type: "button", textContent: `${j.name} -`, className: "jog-minus" });
-      const plus = el("button", { type: "button", textContent: `${j.name} +`, className: "jog-plus" });
+      const minus = el("button", { type: "button", textContent: `${j.name} -`, className: "jog-minus needs-control" });
+      const plus = el("button", { type: "button", textContent: `${j.name} +`, className: "jog-plus needs-control" });
       minus.dataset.joint = j.name; plus.dataset.joint = j.name;
       holdToJog(minus, j.name, -1); holdToJog(plus, j.name, +1);
       jog.append(el("span", { className: "jog-pair" }, minus, plus));
@@ -378,11 +544,20 @@ function updateGhost() {
   state.view.setGhost(null);
 }
 
-$("#move-from-arm").addEventListener("click", () => {
+// The sliders and the ghost follow the arm again once something else moves it (a run, a
+// pose, a jog, another page) and when any activity ends; only this page's own MOVE keeps
+// its targets on show while it runs.
+function followArm() {
   state.slidersTouched = false;
   if (state.status) setSliders(state.status.joints.map((j) => j.position_deg));
   updateGhost();
-});
+}
+
+function ownSliderMove(e) {
+  return e.kind === "move" && e.detail && e.detail.joints && e.detail.by && e.detail.by === myName();
+}
+
+$("#move-from-arm").addEventListener("click", followArm);
 // MOVE sends the joints whose target differs from where they are: the others stay (and a
 // joint that stands just outside its limits, as j4 at Park, is not asked to go there).
 function changedTargets() {
@@ -465,7 +640,7 @@ async function openSequence(name) {
   $("#seq-dryrun").replaceChildren();
   $("#seq-steps").replaceChildren();
   let check;
-  try { check = await api("GET", `/sequences/${encodeURI(name)}/check`); } catch (err) { $("#seq-findings").replaceChildren(); return; }
+  try { check = await api("POST", `/sequences/${encodeURI(name)}/check`); } catch (err) { $("#seq-findings").replaceChildren(); return; }
   if (state.selected !== name) return;
   state.checked = check;
   const findings = [el("p", { className: check.valid ? "passed" : "failed", id: "seq-verdict", textContent: check.valid ? "valid" : `invalid: ${check.errors.length} error(s)` })];
@@ -532,6 +707,7 @@ $("#runs-refresh").addEventListener("click", loadRuns);
 async function start() {
   state.arm = await api("GET", "/arm");
   buildJointControls();
+  applyControl();
   if (DRAW) try { state.view = new ArmView($("#view3d"), state.arm); } catch (err) { say(`3D view unavailable: ${err.message}`, true); }
   connect();
   await Promise.all([loadPoses(), loadSequences(), loadRuns()]);

@@ -244,6 +244,7 @@ class PowerCubeDriver:
                 batch, on_ack=_raise_on_not_ok if halt_early else None)
         except _NotOkAcknowledge as refused:
             raise MotionRefused(refused.module, refused.state) from None
+        times = list(getattr(self.client, "last_ack_times", ()))
         lost = [i for i, (r, a) in enumerate(zip(batch, acks)) if a is None and _acked(r)]
         if any(not isinstance(batch[i], GetParam) for i in lost):
             unanswered = next(batch[i] for i in lost if not isinstance(batch[i], GetParam))
@@ -265,21 +266,29 @@ class PowerCubeDriver:
                                  "acknowledge", module=unanswered.module)
             self.emit("retry", modules=modules, what="read")
             batch, acks = batch + retry, acks + self.transact(retry)
+            times += list(getattr(self.client, "last_ack_times", ()))
         positions: dict[int, float] = {}
         states: dict[int, ShortState] = {}
-        for ack in acks:
+        # when each position was answered (the modules measure as they answer)
+        answered: dict[int, float | None] = {}
+        for ack, at in zip(acks, times + [None] * (len(acks) - len(times))):
             if isinstance(ack, MotionExtAck):
                 positions[ack.module], states[ack.module] = ack.position, ack.state
+                answered[ack.module] = at
             elif isinstance(ack, GetParamAck):
                 if ack.param == ParamId.FPOS_STATE_DIO:
                     positions[ack.module] = ack.value.position
                     states[ack.module] = ack.value.state
+                    answered[ack.module] = at
                 elif ack.param == ParamId.ACT_POS:
                     positions[ack.module] = float(ack.value)
+                    answered[ack.module] = at
                 elif ack.param == ParamId.CUBE_STATE:
                     states[ack.module] = short_state(StateFlag(ack.value))
         module_rad = np.array([positions[m] for m in self.modules])
-        return JointReading(self.units.user_deg(module_rad), states)  # type: ignore[arg-type]
+        stamps = [answered.get(m) for m in self.modules]
+        at = None if None in stamps else np.array(stamps, dtype=float)
+        return JointReading(self.units.user_deg(module_rad), states, at)  # type: ignore[arg-type]
 
     # ------------------------------------------------------------------ commands
     def reset(self, modules: Sequence[int] | None) -> None:
