@@ -45,6 +45,27 @@ class ControlHandler(Protocol):
     def halt(self, reason: str) -> dict: ...
 
 
+def halt_reply(result: Any, joint_names: dict[int, str], by: str) -> dict:
+    """The ``halt`` op's answer, whoever owns the bus (a run or a console's session):
+    ``confirmed``, ``sent``, ``modules_confirmed``, ... of a driver's
+    :class:`~seqrun.drivers.base.CommandConfirmation`, and its one-line ``message``."""
+    return {"confirmed": result.confirmed, "sent": result.sent,
+            "modules_confirmed": list(result.modules_confirmed),
+            "modules_unconfirmed": list(result.modules_unconfirmed),
+            "attempts": result.attempts, "error": result.error,
+            "states": {str(k): getattr(v, "text", str(v)) for k, v in result.states.items()},
+            "message": result.describe(joint_names), "confirmed_by": by}
+
+
+def reading_row(joint: str, module: int, position_deg: float | None,
+                velocity_deg_s: float | None, state: str | None, fault: bool,
+                stale: bool) -> dict:
+    """One joint of the ``status`` op's answer: the row ``seqrun status`` prints (the
+    shape of :func:`seqrun.service.arm_access.status_rows`), whoever owns the bus."""
+    return {"joint": joint, "module": module, "position_deg": position_deg,
+            "velocity_deg_s": velocity_deg_s, "state": state, "fault": fault, "stale": stale}
+
+
 def handle_request(handler: ControlHandler, line: bytes) -> dict:
     """The reply to one request line (never raises)."""
     try:
