@@ -46,7 +46,7 @@ def test_status_beside_the_console_prints_its_reading(console_session):
     server, _ = console_session
     result = CliRunner().invoke(app, ["status", *_args(server)])
     assert result.exit_code == 0, result.output
-    assert "from the running seqrun" in result.output
+    assert "via the running seqrun" in result.output
     assert "-90.000" in result.output   # j2 at Park, from the console's measurement
 
 
