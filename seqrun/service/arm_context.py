@@ -249,6 +249,7 @@ def resolve_bus(project: Project | None, *, interface: str | None = None,
     if sim:
         if interface or channel:
             raise UserInputError("--sim cannot be combined with -i/-c")
+        _check_simulator_switches(extra)
         return BusChoice(None, None, bitrate, extra, True, "--sim", {})
     source = "the command line"
     config = getattr(project, "config", None)
@@ -262,7 +263,23 @@ def resolve_bus(project: Project | None, *, interface: str | None = None,
     resolved = resolve_config(interface, channel, bitrate, extra)
     if not resolved:
         source = "nothing configured" if source != "the command line" else source
+        _check_simulator_switches(extra)
     return BusChoice(interface, channel, bitrate, extra, False, source, resolved)
+
+
+def _check_simulator_switches(extra: Mapping[str, Any]) -> None:
+    """``--bus-kwargs`` for the built-in simulator: its switches only, well typed (one
+    line before anything else is decided)."""
+    from seqrun.sim.options import SWITCHES, module_options
+
+    if others := sorted(set(extra) - SWITCHES):
+        raise UserInputError(f"--bus-kwargs {', '.join(others)}: the built-in simulator "
+                             "takes only its switches (e.g. home_ok_at_power_on=true); "
+                             "name an interface with -i")
+    try:
+        module_options(extra)
+    except ValueError as exc:
+        raise UserInputError(f"--bus-kwargs: {exc}") from None
 
 
 def resolve_context(*, project_dir: Path | None = None, project: Project | None = None,
