@@ -90,14 +90,15 @@ def status_command(
         context = _context(arm_file, project_dir, interface, channel, bitrate, bus_kwargs,
                            sim, response_timeout_ms)
         arm = context.arm
-        live = live_targets(context, "status", pid)
+        through = live_targets(context, "status", pid)
     console = make_console()
     warn = warn_once_in(5.0, lambda text: typer.echo(f"warning: {text}", err=True))
     # Reads only: a run holding the bus is asked over its socket, else the bus is read
     # (seqrun/cli/bus_owner.py).
     source = StatusSource(arm, context.bus.key,
                           lambda: context.open_arm(claim=False), warn,
-                          zero_store=context.zero_store(), live=live[0] if live else None)
+                          zero_store=context.zero_store(),
+                          live=through[0] if through else None)
     try:
         with user_errors():
             status = source.read(tolerate_loss=watch)

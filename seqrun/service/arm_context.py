@@ -257,7 +257,8 @@ def resolve_bus(project: Project | None, *, interface: str | None = None,
             and config.bus.interface is not None:
         b = config.bus
         interface, channel, bitrate, extra = b.interface, b.channel, b.bitrate, dict(b.kwargs)
-        source = _shown(project.config_path) if project.config_path else "seqrun.toml"
+        path = getattr(project, "config_path", None)
+        source = _shown(path) if path else "seqrun.toml"
     elif not (interface or channel or bitrate or extra):
         source = "python-can's configuration"
     resolved = resolve_config(interface, channel, bitrate, extra)
