@@ -187,7 +187,8 @@ def test_a_sequence_may_still_be_rehearsed_on_a_private_simulator(live_console):
 
 
 @pytest.mark.slow
-def test_halt_and_status_with_no_bus_act_through_the_live_run(nowhere, tmp_path):
+def test_halt_and_status_with_no_bus_act_through_the_live_run(nowhere, tmp_path,
+                                                              private_runtime_dir):
     """A run on the built-in simulator, and `seqrun status` / `seqrun halt` typed beside it
     without -i: they reach the run (its control socket), the run halts and ends exit 3."""
     run = subprocess.Popen([sys.executable, "-m", "seqrun", "run", "--plain", "--no-report",
@@ -214,6 +215,7 @@ def test_halt_and_status_with_no_bus_act_through_the_live_run(nowhere, tmp_path)
                "seqrun" in result.output
         output, _ = run.communicate(timeout=60)
         assert run.returncode == 3, output
+        assert not list(private_runtime_dir.glob("seqrun-sim*"))   # nothing left behind
     finally:
         if run.poll() is None:
             run.kill()

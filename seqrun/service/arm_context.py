@@ -180,8 +180,8 @@ class ArmContext:
         if live:
             raise UserInputError(
                 f"no bus configured, and {_list(live)} live on this machine: '{what}' would "
-                "act on a private simulator, not the arm it drives; name its bus with "
-                "-i/-c (or --sim for a private simulator)")
+                "act on a private simulator, not the arm it drives; use that arm through "
+                "it, name a bus with -i/-c, or give --sim for a private simulator")
 
     def open_connection(self, *, claim: bool = True, transient: bool = False,
                         live: bool = False, **extra: Any) -> Connection:
@@ -204,11 +204,15 @@ class ArmContext:
             from seqrun.service.bus_claim import claim_bus
 
             try:
-                connection.claim = claim_bus(SIMULATOR_CLAIM_INTERFACE,
-                                             f"pid{os.getpid()}-{id(connection):x}")
+                claim = claim_bus(SIMULATOR_CLAIM_INTERFACE,
+                                  f"pid{os.getpid()}-{id(connection):x}")
             except Exception:
                 connection.close()
                 raise
+            # A name nobody else claims: its lock file goes with it (no litter per run).
+            lock = claim.directory / f"{claim.stem}.lock"
+            claim.on_release(lambda: lock.unlink(missing_ok=True))
+            connection.claim = claim
         return connection
 
     def open_arm(self, *, claim: bool = True, transient: bool = True
