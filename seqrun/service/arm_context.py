@@ -204,15 +204,15 @@ class ArmContext:
             from seqrun.service.bus_claim import claim_bus
 
             try:
-                claim = claim_bus(SIMULATOR_CLAIM_INTERFACE,
-                                  f"pid{os.getpid()}-{id(connection):x}")
+                held = claim_bus(SIMULATOR_CLAIM_INTERFACE,
+                                 f"pid{os.getpid()}-{id(connection):x}")
             except Exception:
                 connection.close()
                 raise
             # A name nobody else claims: its lock file goes with it (no litter per run).
-            lock = claim.directory / f"{claim.stem}.lock"
-            claim.on_release(lambda: lock.unlink(missing_ok=True))
-            connection.claim = claim
+            lock = held.directory / f"{held.stem}.lock"
+            held.on_release(lambda: lock.unlink(missing_ok=True))
+            connection.claim = held
         return connection
 
     def open_arm(self, *, claim: bool = True, transient: bool = True
