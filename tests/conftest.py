@@ -6,6 +6,8 @@ Property tests draw a quarter of their examples in the fast loop (tiers.py)."""
 
 from __future__ import annotations
 
+import shutil
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -29,3 +31,14 @@ def arm() -> ArmDescription:
 def project(tmp_path: Path) -> Path:
     """A campaign of the test's own: seqrun.toml, arms/, poses/, sequences/startup.yaml."""
     return make_project(tmp_path / "project")
+
+
+@pytest.fixture(autouse=True)
+def private_runtime_dir(monkeypatch):
+    """Every test its own runtime directory (bus claims, control sockets): a run or console
+    of one test (or of another checkout's tests on this machine) is never "live" for
+    another test's ``seqrun halt``. Short, under /tmp: a unix socket path has ~100 bytes."""
+    folder = tempfile.mkdtemp(prefix="sqrt-")
+    monkeypatch.setenv("SEQRUN_RUNTIME_DIR", folder)
+    yield Path(folder)
+    shutil.rmtree(folder, ignore_errors=True)

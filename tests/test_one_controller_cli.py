@@ -57,8 +57,10 @@ def test_commands_are_refused_naming_the_holder(held, command, tmp_path):
 def test_halt_is_sent_all_the_same_but_not_claimed_as_confirmed(held):
     result = CliRunner().invoke(app, ["halt", *_args(held)])
     assert result.exit_code == 3, result.output
+    first, last = result.output.strip().splitlines()
+    assert first.startswith("arm ") and "socketcand" in first   # which arm, which bus
     assert re.fullmatch(r"error: Halt broadcast sent, but not confirmed: " + HELD[7:],
-                        result.output.strip()), result.output
+                        last), result.output
     # The broadcast reached the modules.
     with can.Bus(interface="socketcand", host="127.0.0.1", port=held.port, channel="can0",
                  ignore_config=True) as bus:

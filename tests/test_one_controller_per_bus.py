@@ -121,14 +121,15 @@ def test_second_controller_refused_status_and_halt_through_the_run(bus, tmp_path
             set(reading["joints"][0])
         assert len(reading["end_effector"]["position_mm"]) == 3
         table = bus.seqrun("status")
-        assert table.returncode == 0 and f"from the running seqrun (pid {run.pid}" in \
-            table.stdout
+        assert table.returncode == 0 and f"via the running seqrun (pid {run.pid}" in \
+            table.stdout.splitlines()[0]
         # halt: broadcast straight to the bus, confirmed by the run; the run ends halted.
         halt = bus.seqrun("halt")
         t0 = time.monotonic()
         assert halt.returncode == 0, halt.stdout + halt.stderr
         assert re.match(rf"Halt confirmed by modules 1, 2, 3, 4, 5, 6, 7, read back by the "
-                        rf"running seqrun \(pid {run.pid}", halt.stdout), halt.stdout
+                        rf"running seqrun \(pid {run.pid}", halt.stdout.splitlines()[-1]), \
+            halt.stdout
         out = _finish(run, timeout=60)
         took = time.monotonic() - t0
         assert run.returncode == 3, out
@@ -190,4 +191,6 @@ def test_a_killed_holder_leaves_the_bus_free(bus, tmp_path):
     assert "from" not in json.loads(status.stdout)
     halt = bus.seqrun("halt")
     assert halt.returncode == 0, halt.stdout + halt.stderr
-    assert halt.stdout.startswith("Halt confirmed by modules 1, 2, 3, 4, 5, 6, 7 (")
+    headline, confirmed = halt.stdout.splitlines()
+    assert headline.startswith("arm ") and "socketcand" in headline   # which arm and bus
+    assert confirmed.startswith("Halt confirmed by modules 1, 2, 3, 4, 5, 6, 7 (")

@@ -1,9 +1,13 @@
 """``seqrun status``, ``seqrun halt``, ``seqrun reset``: the arm outside a sequence.
 
-With no interface configured these talk to a fresh simulator (they say so); point them at
-a shared simulator with ``-i socketcand`` (``seqrun sim serve``) or at the real bus.
-``halt`` and ``reset`` succeed only when every module confirms (its state read back by the
-arm's driver); ``status --watch`` survives lost answers (shown as stale).
+They talk to the bus of the arm context (seqrun/service/arm_context.py: the command
+line, else the campaign's ``[bus]``, else python-can's configuration). With no bus
+configured they never act on a private simulator of their own: ``status`` and ``halt`` act
+through the seqrun run or console live on this machine (its control socket), and with
+nothing live there is no arm (exit 2); ``--sim`` asks for a private simulator. ``halt`` and
+``reset`` succeed only when every module confirms (its state read back by the arm's
+driver); ``status --watch`` survives lost answers (shown as stale). The first line says
+which arm and bus.
 """
 
 from __future__ import annotations
@@ -18,10 +22,9 @@ from typing import TYPE_CHECKING, Annotated, Optional
 import typer
 
 from seqrun.cli.app import app
-from seqrun.cli.common import (EXIT_FAULT, ArmOption, BitrateOption, BusKwargsOption,
-                               ChannelOption, InterfaceOption, ResponseTimeoutOption,
-                               SimOption, connect, fail, load_arm_file, user_errors)
-from seqrun.defaults import DEFAULT_ARM
+from seqrun.cli.common import (EXIT_FAULT, ArmFileOption, BitrateOption, BusKwargsOption,
+                               CampaignOption, ChannelOption, InterfaceOption,
+                               ResponseTimeoutOption, SimOption, fail, user_errors)
 from seqrun.errors import BusError
 
 if TYPE_CHECKING:  # imported where used: `seqrun --help` stays light
@@ -64,7 +67,9 @@ def status_command(
         "--period", help="Refresh period with --watch, s.")] = 0.2,
     count: Annotated[Optional[int], typer.Option(
         "--count", min=1, help="With --watch: stop after this many refreshes.")] = None,
-    arm_file: ArmOption = DEFAULT_ARM, interface: InterfaceOption = None,
+    pid: PidOption = None,
+    arm_file: ArmFileOption = None, project_dir: CampaignOption = None,
+    interface: InterfaceOption = None,
     channel: ChannelOption = None, bitrate: BitrateOption = None,
     bus_kwargs: BusKwargsOption = None, sim: SimOption = False,
     response_timeout_ms: ResponseTimeoutOption = None,
@@ -72,35 +77,39 @@ def status_command(
     """Joints, state flags and end-effector pose (reads only; nothing moves).
 
     With --watch a lost answer does not end the watch: the joint shows its last value,
-    marked stale, and the next refresh asks again.
+    marked stale, and the next refresh asks again. With no bus configured: the seqrun run
+    or console live on this machine (--pid to pick one), else exit 2.
     """
     from rich.live import Live
 
-    from seqrun.cli.bus_owner import (OwnerDidNotAnswer, StatusSource, owner_text,
-                                      warn_once_in)
+    from seqrun.cli.bus_owner import (OwnerDidNotAnswer, StatusSource, live_targets,
+                                      owner_text, warn_once_in)
     from seqrun.cli.output import make_console
 
     with user_errors():
-        arm = load_arm_file(arm_file)
-        key = _bus_key(arm, interface, channel, bitrate, bus_kwargs, sim, response_timeout_ms)
+        context = _context(arm_file, project_dir, interface, channel, bitrate, bus_kwargs,
+                           sim, response_timeout_ms)
+        arm = context.arm
+        through = live_targets(context, "status", pid)
     console = make_console()
     warn = warn_once_in(5.0, lambda text: typer.echo(f"warning: {text}", err=True))
     # Reads only: a run holding the bus is asked over its socket, else the bus is read
     # (seqrun/cli/bus_owner.py).
-    source = StatusSource(arm, key, lambda: connect(
-        arm, interface, channel, bitrate, bus_kwargs, sim,
-        response_timeout_ms=response_timeout_ms, claim=False), warn)
+    source = StatusSource(arm, context.bus.key,
+                          lambda: context.open_arm(claim=False), warn,
+                          zero_store=context.zero_store(),
+                          live=through[0] if through else None)
     try:
         with user_errors():
             status = source.read(tolerate_loss=watch)
         if not as_json:
             if source.holder is not None:
-                console.print(f"from {owner_text(source.holder)}: "
+                console.print(f"{context.arm_text()} via {owner_text(source.holder)} on "
                               f"{status.get('bus') or ''}", style="bold", highlight=False,
-                              markup=False)
+                              markup=False, soft_wrap=True)
             else:
-                console.print(source.description, style="bold", highlight=False,
-                              markup=False)
+                console.print(context.headline(source.connection), style="bold",
+                              highlight=False, markup=False, soft_wrap=True)
                 console.print(source.zero_text, highlight=False, markup=False)
         if not watch:
             if as_json:
@@ -127,14 +136,24 @@ def status_command(
         source.close()
 
 
-def _bus_key(arm, interface, channel, bitrate, bus_kwargs, sim, response_timeout_ms):
-    """The claim key of the bus these options name (None: the simulator); checks the
-    options first, as connecting would."""
-    from seqrun.service.connection import parse_bus_kwargs, response_timeout_s, shared_bus
+PidOption = Annotated[Optional[int], typer.Option(
+    "--pid", metavar="PID", help="With no bus given: the live seqrun run or console to ask "
+                                 "(when several are live on this machine).")]
 
-    response_timeout_s(arm, response_timeout_ms)
-    return shared_bus(interface=interface, channel=channel, bitrate=bitrate,
-                      bus_kwargs=parse_bus_kwargs(bus_kwargs or []), force_sim=sim)
+
+def _context(arm_file, project_dir, interface, channel, bitrate, bus_kwargs, sim,
+             response_timeout_ms):
+    """The arm context of these options (seqrun/service/arm_context.py); checks the
+    response timeout first, as connecting would."""
+    from seqrun.service.arm_context import resolve_context
+    from seqrun.service.connection import response_timeout_s
+
+    context = resolve_context(project_dir=project_dir, arm_file=arm_file,
+                              interface=interface, channel=channel, bitrate=bitrate,
+                              bus_kwargs=bus_kwargs or [], sim=sim,
+                              response_timeout_ms=response_timeout_ms)
+    response_timeout_s(context.arm, response_timeout_ms)
+    return context
 
 
 def _title(arm, source, status: dict) -> str:
@@ -183,15 +202,13 @@ def _watch_json(source, status: dict, period: float, count: int | None, warn) ->
         sys.stdout.flush()
 
 
-def _broadcast(what: str, arm_file, interface, channel, bitrate, bus_kwargs, sim,
-               response_timeout_ms) -> None:
+def _broadcast(what: str, context) -> None:
     """Broadcast Halt or Reset, then confirm it module by module (exit 3 if not all do)."""
     from seqrun.service.arm_access import broadcast_and_confirm
 
     with user_errors():
-        arm = load_arm_file(arm_file)
-        connection, driver = connect(arm, interface, channel, bitrate, bus_kwargs, sim,
-                                     response_timeout_ms=response_timeout_ms)
+        connection, driver = context.open_arm()
+    typer.echo(context.headline(connection))
     try:
         result = broadcast_and_confirm(driver, what)
     finally:
@@ -208,27 +225,61 @@ def _broadcast(what: str, arm_file, interface, channel, bitrate, bus_kwargs, sim
 
 
 @app.command("halt")
-def halt_command(arm_file: ArmOption = DEFAULT_ARM, interface: InterfaceOption = None,
+def halt_command(arm_file: ArmFileOption = None, project_dir: CampaignOption = None,
+                 interface: InterfaceOption = None,
                  channel: ChannelOption = None, bitrate: BitrateOption = None,
                  bus_kwargs: BusKwargsOption = None, sim: SimOption = False,
-                 response_timeout_ms: ResponseTimeoutOption = None) -> None:
+                 response_timeout_ms: ResponseTimeoutOption = None,
+                 pid: PidOption = None) -> None:
     """Broadcast Halt: every module stops at once and refuses motion until Reset.
     Confirmed by reading every module's state back (HALTED); exit 3 naming the modules
     that did not confirm. While another seqrun holds the bus (a run), the Halt goes
-    straight to the bus all the same, and that seqrun confirms it."""
+    straight to the bus all the same, and that seqrun confirms it. With no bus configured:
+    the seqrun runs and consoles live on this machine are halted through their control
+    sockets; with none live, exit 2 (there is no arm to halt)."""
+    from seqrun.cli.bus_owner import live_targets
+
     with user_errors():
-        arm = load_arm_file(arm_file)
-        key = _bus_key(arm, interface, channel, bitrate, bus_kwargs, sim, response_timeout_ms)
-    if key is None:   # the simulator of this process: nobody else's bus
-        _broadcast("halt", arm_file, interface, channel, bitrate, bus_kwargs, sim,
-                   response_timeout_ms)
+        context = _context(arm_file, project_dir, interface, channel, bitrate, bus_kwargs,
+                           sim, response_timeout_ms)
+        live = live_targets(context, "halt", pid)
+    if live:
+        _halt_through(context, live)
         return
-    _halt_shared_bus(arm, key, lambda: connect(
-        arm, interface, channel, bitrate, bus_kwargs, sim,
-        response_timeout_ms=response_timeout_ms, claim=False))
+    key = context.bus.key
+    if key is None:   # the simulator of this process, asked for with --sim
+        _broadcast("halt", context)
+        return
+    _halt_shared_bus(context, key, lambda: context.open_arm(claim=False))
 
 
-def _halt_shared_bus(arm, key: tuple[str, str], open_bus) -> None:
+def _halt_through(context, live: list) -> None:
+    """Halt the live runs/consoles found with no bus given, each through its control
+    socket; each confirms by reading its modules back. Exit 3 unless every one did."""
+    import os
+
+    from seqrun.cli.bus_owner import holder_bus, owner_text
+    from seqrun.service.control_socket import ask_holder
+
+    failed = []
+    for holder in live:
+        who = owner_text(holder.as_dict())
+        typer.echo(f"{context.arm_text()} via {who} on {holder_bus(holder)}")
+        reply = ask_holder(holder, "halt",
+                           reason=f"seqrun halt from another process (pid {os.getpid()})")
+        halt = (reply or {}).get("halt") or {}
+        if reply is not None and reply.get("ok") and halt.get("confirmed"):
+            typer.echo(f"Halt confirmed by modules "
+                       f"{', '.join(map(str, halt['modules_confirmed']))}, read back by {who}")
+            continue
+        why = ("it has ended" if reply is None else
+               halt.get("message") or halt.get("error") or reply.get("error"))
+        failed.append(f"{who} did not confirm the Halt: {why}")
+    if failed:
+        fail("; ".join(failed), EXIT_FAULT)
+
+
+def _halt_shared_bus(context, key: tuple[str, str], open_bus) -> None:
     """Halt broadcast first, unclaimed (it needs no answer: always safe, even beside a
     run); then the bus owner confirms, or, with no owner, this process claims the bus and
     confirms by reading the modules back."""
@@ -242,6 +293,7 @@ def _halt_shared_bus(arm, key: tuple[str, str], open_bus) -> None:
 
     with user_errors():
         connection, driver = open_bus()
+    typer.echo(context.headline(connection))
     try:
         try:
             driver.halt_now()
@@ -279,12 +331,19 @@ def _halt_shared_bus(arm, key: tuple[str, str], open_bus) -> None:
 
 
 @app.command("reset")
-def reset_command(arm_file: ArmOption = DEFAULT_ARM, interface: InterfaceOption = None,
+def reset_command(arm_file: ArmFileOption = None, project_dir: CampaignOption = None,
+                  interface: InterfaceOption = None,
                   channel: ChannelOption = None, bitrate: BitrateOption = None,
                   bus_kwargs: BusKwargsOption = None, sim: SimOption = False,
                   response_timeout_ms: ResponseTimeoutOption = None) -> None:
     """Broadcast Reset: clears ERROR/HALTED (motion still needs Home). Confirmed by reading
     every module's state back (no ERROR, no HALTED); exit 3 naming the modules that did
-    not confirm."""
-    _broadcast("reset", arm_file, interface, channel, bitrate, bus_kwargs, sim,
-               response_timeout_ms)
+    not confirm. With no bus configured: exit 2 (a live run or console resets its arm
+    itself)."""
+    from seqrun.cli.bus_owner import live_targets
+
+    with user_errors():
+        context = _context(arm_file, project_dir, interface, channel, bitrate, bus_kwargs,
+                           sim, response_timeout_ms)
+        live_targets(context, "reset")
+    _broadcast("reset", context)

@@ -26,6 +26,66 @@ def owner_text(holder: dict) -> str:
     return f"the running seqrun (pid {holder['pid']}: {holder['command']})"
 
 
+def live_targets(context, what: str, pid: int | None = None) -> list | None:
+    """The live seqrun runs/consoles a command with no bus acts through (None: the command
+    acts on its bus as resolved). ``what``: "status", "halt" or "reset".
+
+    With no bus configured a command never acts on a private simulator of its own: it acts
+    through the live run or console (``status``: exactly one, or ``--pid``), and with
+    nothing live there is no arm (:class:`~seqrun.service.arm_context.NoArm`, exit 2).
+    ``--sim`` (a private simulator asked for) is refused for ``halt`` beside a live run or
+    console: its "confirmed" would be about the wrong arm.
+    """
+    from seqrun.errors import UserInputError
+    from seqrun.service.arm_context import NoArm
+
+    bus = context.bus
+    if bus.force_sim:
+        live = context.live_controllers() if what == "halt" else []
+        if live:
+            raise UserInputError(f"--sim halts a private simulator, not the arm "
+                                 f"{_names(live)} drives on this machine: leave out --sim "
+                                 "to halt it")
+        return None
+    if not bus.defaulted_to_simulator:
+        if pid is not None:
+            raise UserInputError("--pid applies when no bus is given")
+        return None
+    live = context.live_controllers()
+    if pid is not None:
+        live = [h for h in live if h.pid == pid]
+        if not live:
+            raise UserInputError(f"no live seqrun run or console with pid {pid} on this "
+                                 "machine")
+    if not live:
+        doing = {"status": "read"}.get(what, what)
+        raise NoArm(f"no arm to {doing}: no bus configured (no -i/-c, no [bus] in a "
+                    "seqrun.toml, no python-can configuration) and no seqrun run or console "
+                    "is live on this machine; name the bus with -i/-c, or give --sim for a "
+                    "private simulator")
+    if what == "reset":
+        raise UserInputError(f"no bus configured, and {_names(live)} live on this machine: "
+                             "reset the arm through it (the console's Reset, the run's "
+                             "sequence), or name its bus with -i/-c")
+    if what == "status" and len(live) > 1:
+        raise UserInputError(f"{_names(live)} live on this machine: pick one with --pid PID")
+    return live
+
+
+def _names(holders) -> str:
+    names = [f"seqrun pid {h.pid} ({h.command})" for h in holders]
+    return names[0] + " is" if len(names) == 1 else ", ".join(names) + " are"
+
+
+def holder_bus(holder) -> str:
+    """The bus a live holder drives, for the operator."""
+    from seqrun.service.arm_context import SIMULATOR_CLAIM_INTERFACE
+
+    if not holder.bus or holder.bus.startswith(SIMULATOR_CLAIM_INTERFACE + ":"):
+        return "its built-in simulator"
+    return holder.bus
+
+
 class StatusSource:
     """Where ``seqrun status`` gets a reading: the bus owner, else the bus itself.
 
@@ -35,9 +95,14 @@ class StatusSource:
     """
 
     def __init__(self, arm, key: tuple[str, str] | None,
-                 open_bus: Callable[[], tuple], warn: Warn) -> None:
+                 open_bus: Callable[[], tuple], warn: Warn, *, zero_store: Any = None,
+                 live: Any = None) -> None:
         self.arm = arm
         self.key = key
+        #: The zero store of the arm context (the one every command reads).
+        self.zero_store = zero_store
+        #: A live run or console found with no bus given: every reading comes from it.
+        self.live = live
         self.open_bus = open_bus
         self.warn = warn
         self.connection: Any = None
@@ -56,17 +121,23 @@ class StatusSource:
         :raises ~seqrun.errors.Refused: the bus is held by a controller that serves no
             socket.
         """
-        if self.key is not None:
-            from seqrun.service.control_socket import ask_owner
+        from seqrun.service.control_socket import ask_holder, ask_owner
 
+        reply = None
+        if self.live is not None:
+            reply = ask_holder(self.live, "status")
+            if reply is None:
+                raise OwnerDidNotAnswer(f"seqrun pid {self.live.pid} ({self.live.command}) "
+                                        "has ended")
+        elif self.key is not None:
             reply = ask_owner(*self.key, "status")
-            if reply is not None:
-                self._close_bus()   # the run's frames must not queue up here meanwhile
-                self.holder = reply["holder"]
-                if not reply.get("ok"):
-                    raise OwnerDidNotAnswer(f"{owner_text(self.holder)} did not answer: "
-                                            f"{reply.get('error')}")
-                return reply["status"]
+        if reply is not None:
+            self._close_bus()   # the run's frames must not queue up here meanwhile
+            self.holder = reply["holder"]
+            if not reply.get("ok"):
+                raise OwnerDidNotAnswer(f"{owner_text(self.holder)} did not answer: "
+                                        f"{reply.get('error')}")
+            return reply["status"]
         self.holder = None
         return self._read_bus(previous, tolerate_loss)
 
@@ -100,7 +171,8 @@ class StatusSource:
 
         self.connection, self.driver = self.open_bus()
         self.driver.watch_foreign(self._foreign.append)
-        self._arm_read, text = zero_for_reading(self.connection, self.arm)
+        self._arm_read, text = zero_for_reading(self.connection, self.arm,
+                                                store=self.zero_store)
         self.driver.use_arm(self._arm_read)  # positions in the zero reference in force
         if self.zero_text is None:
             self.zero_text = text

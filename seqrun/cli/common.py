@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, NoReturn, Optional
+from typing import Annotated, NoReturn, Optional
 
 import typer
 
@@ -15,12 +15,11 @@ from seqrun.errors import Refused, SequenceInvalid, UserInputError
 # The arm file and the poses a command reads (the campaign's, else the shipped ones).
 from seqrun.service.campaigns import load_arm_file, pose_search_path  # noqa: F401
 
-if TYPE_CHECKING:
-    from seqrun.arm.description import ArmDescription
-
 ArmOption = Annotated[Path, typer.Option("--arm", metavar="FILE", help="Arm description file.")]
-#: An arm file only where one is given (None: the command finds the campaign's).
-ArmFileOption = Annotated[Optional[Path], typer.Option("--arm", metavar="FILE", help="Arm file.")]
+#: An arm file only where one is given (None: the arm context's, seqrun/service/arm_context.py).
+ArmFileOption = Annotated[Optional[Path], typer.Option(
+    "--arm", metavar="FILE", help="Arm file (default: the campaign's arm, else the shipped "
+                                  "lwa3).")]
 #: The campaign of the current directory unless one is given.
 CampaignOption = Annotated[Optional[Path], typer.Option(
     "--project", metavar="DIR", help="Campaign folder (default: the one holding the current "
@@ -64,17 +63,3 @@ ResponseTimeoutOption = Annotated[Optional[float], typer.Option(
     "--response-timeout-ms", metavar="MS",
     help="How long to wait for each module's answer (default: $SEQRUN_RESPONSE_TIMEOUT_MS, "
          "else the arm file's can.response_timeout_s, 50 ms).")]
-
-
-def connect(arm: ArmDescription, interface: Optional[str], channel: Optional[str],
-            bitrate: Optional[int], bus_kwargs: Optional[list[str]], sim: bool,
-            faults: Optional[list[str]] = None, *,
-            response_timeout_ms: Optional[float] = None, claim: bool = True):
-    """Open the bus and the arm's driver on it: ``(connection, driver)``. The bus is
-    claimed for a moment (these commands are done in a second or two): a run's claim
-    refuses them, naming it (exit 2)."""
-    from seqrun.service.arm_access import open_arm
-
-    return open_arm(arm, interface=interface, channel=channel, bitrate=bitrate,
-                    bus_kwargs=bus_kwargs or [], sim=sim, faults=faults or [],
-                    response_timeout_ms=response_timeout_ms, claim=claim)

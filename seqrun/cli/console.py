@@ -18,11 +18,10 @@ from typing import Annotated, Optional
 import typer
 
 from seqrun.cli.app import app
-from seqrun.cli.common import (EXIT_FAULT, ArmOption, BitrateOption, BusKwargsOption,
+from seqrun.cli.common import (EXIT_FAULT, ArmFileOption, BitrateOption, BusKwargsOption,
                                CampaignOption, ChannelOption, InterfaceOption,
-                               ResponseTimeoutOption, SimOption, fail, load_arm_file,
-                               user_errors)
-from seqrun.defaults import DEFAULT_ARM, EXIT_OPERATOR_ABORT
+                               ResponseTimeoutOption, SimOption, fail, user_errors)
+from seqrun.defaults import EXIT_OPERATOR_ABORT
 
 
 @app.command("console")
@@ -37,7 +36,7 @@ def console_command(
         "--host", metavar="ADDR",
         help="Listen on ADDR instead of 127.0.0.1 (e.g. 0.0.0.0 for a tablet); every "
              "request but STOP needs the token printed at start, wherever it listens.")] = None,
-    arm_file: ArmOption = DEFAULT_ARM,
+    arm_file: ArmFileOption = None,
     project_dir: CampaignOption = None,
     log_dir: Annotated[Optional[Path], typer.Option(
         "--log-dir", metavar="DIR", help="Where run folders go (default: the project's runs/).")]
@@ -54,29 +53,24 @@ def console_command(
     = False,
 ) -> None:
     """Serve the operator console (STOP, telemetry, 3D view, commands, sequences)."""
-    import types
-
-    from seqrun.service import campaign_records
-    from seqrun.service.campaigns import campaign_bus
     from seqrun.cli.zero import zero_at_run_start
-    from seqrun.service.connection import open_connection, parse_bus_kwargs, response_timeout_s
     from seqrun.errors import BusError
-    from seqrun.service.campaigns import campaign_here
+    from seqrun.service.arm_context import resolve_context
+    from seqrun.service.connection import response_timeout_s
 
     with user_errors():
         if not 0 <= port <= 65535:
             fail(f"--port must lie in 0-65535, got {port}")
         if rt_priority is not None and not _use_realtime(rt_priority):
             rt_priority = None  # (before any thread starts: they inherit the policy)
-        project = campaign_here(project_dir)
-        if arm_file == DEFAULT_ARM and not arm_file.is_file():
-            arm_file = project.arm_path(None)
-        arm = load_arm_file(arm_file)
+        # The arm context: the campaign here, its arm, its bus (seqrun/service/arm_context.py).
+        context = resolve_context(project_dir=project_dir, arm_file=arm_file,
+                                  log_dir=log_dir, interface=interface, channel=channel,
+                                  bitrate=bitrate, bus_kwargs=bus_kwargs or [], sim=sim,
+                                  response_timeout_ms=response_timeout_ms)
+        project, arm = context.project, context.arm
         timeout = response_timeout_s(arm, response_timeout_ms)
-        extra = parse_bus_kwargs(bus_kwargs or [])
-        if not (interface or channel or bitrate or extra or sim):  # the campaign's bus
-            interface, channel, bitrate, extra = campaign_bus(
-                types.SimpleNamespace(project=project), extra)
+        context.refuse_private_simulator("console")
         from seqrun.console.server import LOCALHOST, bind, is_loopback, url_of
 
         from seqrun.console.guard import new_token
@@ -87,15 +81,14 @@ def console_command(
             sock = bind(listen, port)  # before the bus: a port in use costs nothing
         except OSError as exc:
             fail(f"cannot listen on {listen}:{port}: {exc.strerror or exc}")
-        connection = open_connection(interface=interface, channel=channel, bitrate=bitrate,
-                                     bus_kwargs=extra, force_sim=sim,
-                                     default_bitrate=arm.can.bitrate)
+        connection = context.open_connection(live=True)
+    typer.echo(context.headline(connection))
     try:
         with user_errors():
             try:
                 zero = zero_at_run_start(connection, arm, project,
                                          lambda q: yes or typer.confirm(q, default=False),
-                                         typer.echo)
+                                         typer.echo, store=context.zero_store())
             except BusError as exc:
                 fail(f"cannot read the modules' state: {exc}", EXIT_FAULT)
             arm = arm.with_zero_reference(zero.pose)
@@ -103,7 +96,7 @@ def console_command(
         sock.close()
         connection.close()
         raise
-    runs = (log_dir or project.runs_dir)
+    runs = context.runs_dir
     runs = runs if runs.is_absolute() else Path.cwd() / runs
 
     from seqrun.console.app import create_app

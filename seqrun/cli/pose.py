@@ -8,11 +8,10 @@ from typing import TYPE_CHECKING, Annotated, Optional
 import typer
 
 from seqrun.cli.app import pose_app
-from seqrun.cli.common import (BitrateOption, BusKwargsOption, ChannelOption, InterfaceOption,
-                               SimOption, connect, fail,
-                               EXIT_INVALID, ArmOption, PosesDirOption, load_arm_file,
-                               pose_search_path, user_errors)
-from seqrun.defaults import DEFAULT_ARM, DEFAULT_POSES_DIR
+from seqrun.cli.common import (BitrateOption, BusKwargsOption, CampaignOption, ChannelOption,
+                               InterfaceOption, SimOption, fail,
+                               EXIT_INVALID, ArmFileOption, PosesDirOption, user_errors)
+from seqrun.defaults import DEFAULT_POSES_DIR
 from seqrun.errors import UserInputError
 
 if TYPE_CHECKING:
@@ -25,6 +24,15 @@ def load_named_pose(name: str, poses_dir: Path) -> PoseFile:
     return find_named_pose(name, poses_dir)
 
 
+def _context(project_dir: Path | None = None, poses_dir: Path | None = None,
+             arm_file: Path | None = None, **bus):
+    """The arm context of a pose command (seqrun/service/arm_context.py)."""
+    from seqrun.service.arm_context import resolve_context
+
+    return resolve_context(project_dir=project_dir, poses_dir=poses_dir, arm_file=arm_file,
+                           **bus)
+
+
 def format_numbers(values, decimals: int = 3) -> str:
     # Rounded first, then + 0.0: -0.0001 prints as 0.000, not -0.000.
     return "[" + ", ".join(f"{round(float(v), decimals) + 0.0:.{decimals}f}"
@@ -32,12 +40,13 @@ def format_numbers(values, decimals: int = 3) -> str:
 
 
 @pose_app.command("list")
-def list_poses(poses_dir: PosesDirOption = DEFAULT_POSES_DIR) -> None:
+def list_poses(poses_dir: PosesDirOption = DEFAULT_POSES_DIR,
+               project_dir: CampaignOption = None) -> None:
     """List the pose files: name, source and description."""
     from seqrun.service.poses import list_poses
 
     with user_errors():
-        poses = list_poses(pose_search_path(poses_dir))
+        poses = list_poses(_context(project_dir, poses_dir).pose_path)
         if not poses:
             raise UserInputError(f"no pose files in {poses_dir}")
         width = max(len(name) for name, *_ in poses)
@@ -53,14 +62,16 @@ def list_poses(poses_dir: PosesDirOption = DEFAULT_POSES_DIR) -> None:
 def show_pose(
     name: Annotated[str, typer.Argument(help="Pose name (file poses/<name>.yaml).")],
     poses_dir: PosesDirOption = DEFAULT_POSES_DIR,
-    arm_file: ArmOption = DEFAULT_ARM,
+    arm_file: ArmFileOption = None,
+    project_dir: CampaignOption = None,
 ) -> None:
     """Show a pose and check it against the arm (exit 1 if it has problems)."""
     from seqrun.service.poses import pose_findings
 
     with user_errors():
-        pose = load_named_pose(name, poses_dir)
-        arm = load_arm_file(arm_file)
+        context = _context(project_dir, poses_dir, arm_file)
+        pose = load_named_pose(name, context.pose_path)
+        arm = context.arm
     typer.echo(f"name          {pose.name}")
     typer.echo(f"description   {pose.description}")
     typer.echo(f"arm           {pose.arm}")
@@ -87,7 +98,8 @@ def save_pose_command(
                                              help="What the pose is for.")] = "",
     force: Annotated[bool, typer.Option("--force", help="Overwrite an existing file.")] = False,
     poses_dir: PosesDirOption = DEFAULT_POSES_DIR,
-    arm_file: ArmOption = DEFAULT_ARM, interface: InterfaceOption = None,
+    arm_file: ArmFileOption = None, project_dir: CampaignOption = None,
+    interface: InterfaceOption = None,
     channel: ChannelOption = None, bitrate: BitrateOption = None,
     bus_kwargs: BusKwargsOption = None, sim: SimOption = False,
 ) -> None:
@@ -101,22 +113,27 @@ def save_pose_command(
 
     with user_errors():
         check_pose_name(name)  # before anything is opened
-        arm = load_arm_file(arm_file)
+        context = _context(project_dir, poses_dir, arm_file, interface=interface,
+                           channel=channel, bitrate=bitrate, bus_kwargs=bus_kwargs or [],
+                           sim=sim)
+        arm = context.arm
+        if output is None and poses_dir == DEFAULT_POSES_DIR and context.project.is_campaign:
+            poses_dir = context.project.poses_dir   # the campaign's poses/, from anywhere in it
         path = output or (poses_dir / f"{name}.yaml")
         if path.exists() and not force:
             fail(f"{path} exists (use --force to overwrite)")
-        connection, driver = connect(arm, interface, channel, bitrate, bus_kwargs, sim)
-    if connection.is_simulator and not sim:
-        driver.close()
-        connection.close()
-        fail("no CAN interface configured: pose save reads the arm on a bus (-i/-c or "
-             "python-can's configuration); give --sim to read the built-in simulator")
-    if connection.is_simulator:
-        typer.secho(connection.description, fg="yellow", bold=True, err=True)
+        if context.bus.defaulted_to_simulator:
+            fail("no CAN interface configured: pose save reads the arm on a bus (-i/-c, the "
+                 "campaign's [bus] or python-can's configuration); give --sim to read the "
+                 "built-in simulator")
+        connection, driver = context.open_arm()
+    typer.secho(context.headline(connection), fg="yellow" if connection.is_simulator else None,
+                bold=True, err=True)
     try:
         from seqrun.cli.zero import zero_for_reading
 
-        arm, zero_text = zero_for_reading(connection, arm)
+        # The zero of the arm context: the same store every command reads.
+        arm, zero_text = zero_for_reading(connection, arm, store=context.zero_store())
         typer.echo(zero_text)
         driver.use_arm(arm)
         reading = driver.read()

@@ -165,7 +165,8 @@ def _confirm_start(console: Console, run, yes: bool):
 
     connection, loaded = run.connection, run.loaded
     style = "bold black on yellow" if connection.is_simulator else "bold white on red"
-    console.print(f" {connection.description} ", style=style, highlight=False, markup=False)
+    headline = run.context.headline(connection) if run.context else connection.description
+    console.print(f" {headline} ", style=style, highlight=False, markup=False, soft_wrap=True)
     if not connection.is_simulator and not _ask(
             console, f"Run '{loaded.name}' on the REAL arm?", yes):
         console.print("Not started: the operator declined. Nothing was sent.")
@@ -180,7 +181,9 @@ def _confirm_start(console: Console, run, yes: bool):
                                          lambda question: _ask(console, question, yes),
                                          lambda text: console.print(text, style="bold",
                                                                     highlight=False,
-                                                                    markup=False))
+                                                                    markup=False),
+                                         store=run.context.zero_store(run.arm)
+                                         if run.context else None)
             except BusError as exc:  # before user_errors: a timeout is no usage error
                 fail(f"cannot read the modules' state: {exc}", EXIT_FAULT)
             run.arm = run.arm.with_zero_reference(zero.pose)
@@ -276,7 +279,9 @@ def _run_in_session(console: Console, run, zero, folder: Path, control, requests
             meta={"zero": zero.as_dict()}, html_report=not no_report,
             # The built-in simulator keeps no record: its zero is its power-on pose.
             record_zero=(None if connection.is_simulator
-                         else campaign_records.zero_recorder(arm, loaded)))
+                         else campaign_records.zero_recorder(
+                             arm, loaded, run.context.zero_store(arm) if run.context
+                             else None)))
     finally:
         if live and displays:
             session.remove_idle_hook(displays[0].on_idle)

@@ -32,11 +32,11 @@ def runs_command(
                                      "runs/).")] = None,
 ) -> None:
     """List past runs: when, sequence, result, duration, exit code (oldest first)."""
-    from seqrun.service.campaigns import runs_dir_here
+    from seqrun.service.arm_context import resolve_context
 
     with user_errors():
-        if runs_dir is None:
-            runs_dir = runs_dir_here(project_dir)
+        if runs_dir is None:  # the arm context's log folder
+            runs_dir = resolve_context(project_dir=project_dir).runs_dir
         runs = list_runs(runs_dir)
     if as_json:
         typer.echo(json.dumps(runs, indent=2))

@@ -24,12 +24,10 @@ zero_app = typer.Typer(help="The zero reference: where the arm was powered off."
 app.add_typer(zero_app, name="zero")
 
 def _arm_and_store(arm_file: Optional[Path], project_dir: Optional[Path]):
-    from seqrun.service.campaigns import load_arm_file, zero_campaign
+    from seqrun.service.arm_context import resolve_context
 
-    project = zero_campaign(project_dir)
-    arm_path = arm_file if arm_file is not None else project.arm_path(None)
-    arm = load_arm_file(Path(arm_path))
-    return arm, ZeroStore.for_arm(arm.name, project)
+    context = resolve_context(project_dir=project_dir, arm_file=arm_file)
+    return context.arm, context.zero_store()
 
 
 @zero_app.command("show")
@@ -76,7 +74,8 @@ def set_command(
 
 
 def zero_at_run_start(connection, arm, project, ask: Callable[[str], bool],
-                      show: Callable[[str], None]) -> ZeroInForce:
+                      show: Callable[[str], None], *, store: ZeroStore | None = None
+                      ) -> ZeroInForce:
     """Decide the zero reference of a run, show it, and on real hardware after a power-on
     ask the operator to confirm the pose before anything moves.
 
@@ -85,7 +84,7 @@ def zero_at_run_start(connection, arm, project, ask: Callable[[str], bool],
     """
     from seqrun.service.arm_access import modules_homed
 
-    store = ZeroStore.for_arm(arm.name, project)
+    store = store or ZeroStore.for_arm(arm.name, project)
     homed = False if connection.is_simulator else modules_homed(connection, arm)
     zero = zero_for_run(arm, store, homed=homed,
                         simulator_pose=connection.power_on_pose if connection.is_simulator
@@ -105,11 +104,12 @@ def zero_at_run_start(connection, arm, project, ask: Callable[[str], bool],
 __all__ = ["zero_at_run_start", "BusError", "UserInputError"]
 
 
-def zero_for_reading(connection, arm, project=None):
+def zero_for_reading(connection, arm, project=None, *, store: ZeroStore | None = None):
     """The arm with the zero reference in force for reading positions (status, pose save):
     ``(arm, text)``. Never asks and never refuses (nothing moves); without a usable record
-    the text says the positions use the arm file's offsets."""
-    store = ZeroStore.for_arm(arm.name, project)
+    the text says the positions use the arm file's offsets. ``store``: the arm context's
+    (:meth:`~seqrun.service.arm_context.ArmContext.zero_store`)."""
+    store = store or ZeroStore.for_arm(arm.name, project)
     try:
         from seqrun.service.arm_access import modules_homed
 

@@ -1,6 +1,7 @@
 """The arm outside a run, for the short commands (``seqrun status``, ``halt``, ``reset``,
-``pose save``, the zero-reference check at a run's start): open the bus and the arm's
-driver, read the whole arm's status, check Home, broadcast Halt/Reset and confirm it.
+``pose save``, the zero-reference check at a run's start): read the whole arm's status,
+check Home, broadcast Halt/Reset and confirm it. (The bus and the driver are opened by
+the arm context: :meth:`seqrun.service.arm_context.ArmContext.open_arm`.)
 
 The faces (cli/, console/) call these and hold what they return; they never see a
 protocol (``tests/test_architecture.py`` holds them to it). Everything heavy is imported
@@ -9,7 +10,6 @@ inside the functions: the CLI's start-up stays light.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
@@ -17,26 +17,9 @@ if TYPE_CHECKING:
     from seqrun.drivers.base import ArmDriver, CommandConfirmation
     from seqrun.service.connection import Connection
 
-__all__ = ["modules_homed", "open_arm", "read_joints", "read_status", "status_rows"]
+__all__ = ["modules_homed", "read_joints", "read_status", "status_rows"]
 
 
-def open_arm(arm: ArmDescription, *, interface: str | None, channel: str | None,
-             bitrate: int | None, bus_kwargs: Sequence[str] = (), sim: bool = False,
-             faults: Sequence[str] = (), response_timeout_ms: float | None = None,
-             claim: bool = True, transient: bool = True) -> tuple[Connection, ArmDriver]:
-    """Open the bus and the arm's driver on it: ``(connection, driver)``. The bus is
-    claimed (for a moment with ``transient``): a run's claim refuses it, naming the run."""
-    from seqrun.drivers.registry import open_driver
-    from seqrun.service.connection import (open_connection, parse_bus_kwargs, parse_faults,
-                                           response_timeout_s)
-
-    timeout = response_timeout_s(arm, response_timeout_ms)  # (checked before connecting)
-    connection = open_connection(interface=interface, channel=channel, bitrate=bitrate,
-                                 bus_kwargs=parse_bus_kwargs(list(bus_kwargs)), force_sim=sim,
-                                 faults=parse_faults(list(faults)),
-                                 default_bitrate=arm.can.bitrate, claim=claim,
-                                 transient=transient)
-    return connection, open_driver(arm, connection, response_timeout_s=timeout)
 
 
 def status_rows(arm: ArmDescription, poll, previous: dict | None = None) -> list[dict]:

@@ -101,6 +101,7 @@ class Holder:
     argv: tuple[str, ...] = ()
     socket: str | None = None        # the control socket's path, when it serves one
     transient: bool = False
+    bus: str = ""                    # the bus's name (bus_name), for a list of holders
 
     def describe(self) -> str:
         """``pid 1234 (seqrun run totem.yaml) since 14:02:11``."""
@@ -109,13 +110,15 @@ class Holder:
 
     def as_dict(self) -> dict:
         return {"pid": self.pid, "command": self.command, "since": self.since,
-                "argv": list(self.argv), "socket": self.socket, "transient": self.transient}
+                "argv": list(self.argv), "socket": self.socket, "transient": self.transient,
+                "bus": self.bus}
 
     @classmethod
     def from_dict(cls, data: dict) -> Holder:
         return cls(pid=int(data["pid"]), command=str(data.get("command", "?")),
                    since=float(data.get("since", 0.0)), argv=tuple(data.get("argv") or ()),
-                   socket=data.get("socket"), transient=bool(data.get("transient", False)))
+                   socket=data.get("socket"), transient=bool(data.get("transient", False)),
+                   bus=str(data.get("bus") or ""))
 
 
 def read_holder(interface: str, channel: str, *, directory: Path | None = None
@@ -126,6 +129,18 @@ def read_holder(interface: str, channel: str, *, directory: Path | None = None
         return Holder.from_dict(json.loads(path.read_text()))
     except (OSError, ValueError, KeyError, TypeError):
         return None
+
+
+def holders(*, directory: Path | None = None) -> list[Holder]:
+    """The records of every claim in the runtime directory (their holders may have died:
+    the caller checks)."""
+    found = []
+    for path in sorted((directory or runtime_dir()).glob("*.json")):
+        try:
+            found.append(Holder.from_dict(json.loads(path.read_text())))
+        except (OSError, ValueError, KeyError, TypeError):
+            continue
+    return found
 
 
 class BusClaim:
@@ -254,7 +269,7 @@ def claim_bus(interface: str, channel: str, command: str | None = None, *,
         os.close(fd)
         raise
     holder = Holder(pid=os.getpid(), command=command or command_line(), since=time.time(),
-                    argv=tuple(sys.argv), transient=transient)
+                    argv=tuple(sys.argv), transient=transient, bus=bus_name(interface, channel))
     return BusClaim(interface, channel, fd, holder, directory)
 
 

@@ -49,11 +49,12 @@ def record_run(folder: Path, loaded: Any, arm_path: Path, bus: str, zero: Any) -
                         zero=zero.as_dict() if zero is not None else None)
 
 
-def zero_recorder(arm: Any, loaded: Any) -> Callable[[str], str]:
-    """What the ``power_off`` step calls: record the pose for the next power-on."""
+def zero_recorder(arm: Any, loaded: Any, store: Any = None) -> Callable[[str], str]:
+    """What the ``power_off`` step calls: record the pose for the next power-on (in
+    ``store``, the arm context's zero store)."""
     from seqrun.service.zero import ZeroStore, pose_title
 
-    store = ZeroStore.for_arm(arm.name, getattr(loaded, "project", None))
+    store = store or ZeroStore.for_arm(arm.name, getattr(loaded, "project", None))
 
     def record(pose: str) -> str:
         entry = store.set_record(pose, by=Path(str(loaded.file)).name)

@@ -2,8 +2,8 @@
 
 Every face finds these here: the campaign of the current directory (or ``--project``),
 of a sequence, the arm file a command reads (``--arm``, else the campaign's, else the
-shipped one), the pose search path, the campaign's ``[bus]``. (Issue 23 makes this the
-one arm context every command resolves once.)
+shipped one), the pose search path. The arm context every command resolves once
+(:mod:`seqrun.service.arm_context`) is built from these.
 """
 
 from __future__ import annotations
@@ -18,8 +18,7 @@ if TYPE_CHECKING:
     from seqrun.arm.description import ArmDescription
     from seqrun.sequence.project import Project
 
-__all__ = ["CONFIG_NAME", "campaign_bus", "campaign_here", "campaign_of", "load_arm_file",
-           "pose_search_path", "runs_dir_here", "zero_campaign"]
+__all__ = ["CONFIG_NAME", "campaign_here", "campaign_of", "load_arm_file", "pose_search_path"]
 
 def campaign_of(path: Path, project_dir: Path | None = None) -> Project:
     """The campaign of a sequence (or folder) ``path``: ``project_dir`` if given, else the
@@ -36,24 +35,8 @@ def campaign_here(project_dir: Path | None = None) -> Project:
     return open_project(project_dir) if project_dir else project_for(Path.cwd())
 
 
-def zero_campaign(project_dir: Path | None = None) -> Project:
-    """The campaign whose zero reference a command reads (``--project DIR``, else the
-    nearest seqrun.toml above the current directory, else the folder itself)."""
-    from seqrun.sequence.project import find_campaign, open_project, project_for
-
-    if project_dir is not None:
-        return open_project(project_dir)
-    campaign = find_campaign(Path.cwd())
-    return open_project(campaign) if campaign is not None else project_for(Path.cwd())
 
 
-def runs_dir_here(project_dir: Path | None = None) -> Path:
-    """Where the run folders of the campaign here are (``runs/`` outside a campaign)."""
-    from seqrun.sequence.project import find_campaign, open_project
-
-    if project_dir is None:
-        project_dir = find_campaign(Path.cwd())
-    return open_project(project_dir).runs_dir if project_dir else Path("runs")
 
 
 def load_arm_file(path: Path) -> ArmDescription:
@@ -79,12 +62,3 @@ def pose_search_path(poses_dir: Path) -> Any:
         return poses_dir
     return campaign_of(Path.cwd()).pose_path
 
-
-def campaign_bus(loaded: Any, extra: dict) -> tuple:
-    """``(interface, channel, bitrate, bus kwargs)`` of the campaign's ``[bus]`` table (all
-    None when it names none: then python-can's configuration, else the simulator)."""
-    config = getattr(getattr(loaded, "project", None), "config", None)
-    if config is None or config.bus.interface is None:
-        return None, None, None, extra
-    bus = config.bus
-    return bus.interface, bus.channel, bus.bitrate, {**bus.kwargs, **extra}

@@ -26,7 +26,7 @@ import threading
 from pathlib import Path
 from typing import Any, Protocol
 
-from seqrun.service.bus_claim import BusClaim, Holder, read_holder
+from seqrun.service.bus_claim import BusClaim, Holder, holders, read_holder
 
 #: The protocol's version, in every message.
 PROTOCOL_VERSION = 1
@@ -43,6 +43,27 @@ class ControlHandler(Protocol):
     def status_dict(self) -> dict: ...
 
     def halt(self, reason: str) -> dict: ...
+
+
+def halt_reply(result: Any, joint_names: dict[int, str], by: str) -> dict:
+    """The ``halt`` op's answer, whoever owns the bus (a run or a console's session):
+    ``confirmed``, ``sent``, ``modules_confirmed``, ... of a driver's
+    :class:`~seqrun.drivers.base.CommandConfirmation`, and its one-line ``message``."""
+    return {"confirmed": result.confirmed, "sent": result.sent,
+            "modules_confirmed": list(result.modules_confirmed),
+            "modules_unconfirmed": list(result.modules_unconfirmed),
+            "attempts": result.attempts, "error": result.error,
+            "states": {str(k): getattr(v, "text", str(v)) for k, v in result.states.items()},
+            "message": result.describe(joint_names), "confirmed_by": by}
+
+
+def reading_row(joint: str, module: int, position_deg: float | None,
+                velocity_deg_s: float | None, state: str | None, fault: bool,
+                stale: bool) -> dict:
+    """One joint of the ``status`` op's answer: the row ``seqrun status`` prints (the
+    shape of :func:`seqrun.service.arm_access.status_rows`), whoever owns the bus."""
+    return {"joint": joint, "module": module, "position_deg": position_deg,
+            "velocity_deg_s": velocity_deg_s, "state": state, "fault": fault, "stale": stale}
 
 
 def handle_request(handler: ControlHandler, line: bytes) -> dict:
@@ -201,17 +222,17 @@ def owner(interface: str, channel: str, *, directory: Path | None = None) -> Hol
     return holder
 
 
-def ask_owner(interface: str, channel: str, op: str, *, reason: str | None = None,
-              timeout: float = IO_TIMEOUT_S, directory: Path | None = None
-              ) -> dict | None:
-    """Ask the process that holds the bus (``op``: ``status`` or ``halt``).
+def live_owners(*, directory: Path | None = None) -> list[Holder]:
+    """Every live seqrun (run or console) of this user on this machine that serves a
+    control socket, whatever its bus (the built-in simulator's included)."""
+    return [h for h in holders(directory=directory)
+            if h.socket and not h.transient and _pid_alive(h.pid) and Path(h.socket).exists()]
 
-    :return: None when nobody holds it or the holder serves no socket (then the caller may
-        claim the bus itself); else the reply, with ``"holder"`` (its record as a dict)
-        added. A holder that did not answer gives ``{"ok": False, "error": ...}``.
-    """
-    holder = owner(interface, channel, directory=directory)
-    if holder is None or holder.socket is None:
+
+def ask_holder(holder: Holder, op: str, *, reason: str | None = None,
+               timeout: float = IO_TIMEOUT_S) -> dict | None:
+    """:func:`ask_owner` for a holder already found (:func:`live_owners`)."""
+    if holder.socket is None:
         return None
     request: dict[str, Any] = {"op": op}
     if reason is not None:
@@ -224,3 +245,18 @@ def ask_owner(interface: str, channel: str, op: str, *, reason: str | None = Non
         reply = _error(f"no answer from pid {holder.pid}: {exc.strerror or exc}")
     reply["holder"] = holder.as_dict()
     return reply
+
+
+def ask_owner(interface: str, channel: str, op: str, *, reason: str | None = None,
+              timeout: float = IO_TIMEOUT_S, directory: Path | None = None
+              ) -> dict | None:
+    """Ask the process that holds the bus (``op``: ``status`` or ``halt``).
+
+    :return: None when nobody holds it or the holder serves no socket (then the caller may
+        claim the bus itself); else the reply, with ``"holder"`` (its record as a dict)
+        added. A holder that did not answer gives ``{"ok": False, "error": ...}``.
+    """
+    holder = owner(interface, channel, directory=directory)
+    if holder is None:
+        return None
+    return ask_holder(holder, op, reason=reason, timeout=timeout)

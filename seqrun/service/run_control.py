@@ -84,6 +84,7 @@ class RunControl:
         """What ``seqrun status`` prints, from the run's last reading (the same shape as a
         reading of the bus: joints, end effector), plus the run's activity."""
         from seqrun.drivers.registry import cycle_state
+        from seqrun.service.control_socket import reading_row
         from seqrun.service.kinematics import end_effector
 
         readings = list(self._readings)
@@ -93,13 +94,12 @@ class RunControl:
         for k, joint in enumerate(self.arm.joints):
             short = cycle_state(self.arm, self._states[k]) if k < len(self._states) else None
             word = self._words.get(str(joint.module))
-            joints_out.append({
-                "joint": joint.name, "module": joint.module,
-                "position_deg": None if last is None else round(float(last[k]), 4),
-                "velocity_deg_s": None if velocity is None else round(velocity[k], 4),
-                "state": word or (short.describe() if short is not None else None),
-                "fault": bool(short is not None and short.refuses_motion),
-                "stale": last is None})
+            joints_out.append(reading_row(
+                joint.name, joint.module,
+                None if last is None else round(float(last[k]), 4),
+                None if velocity is None else round(velocity[k], 4),
+                word or (short.describe() if short is not None else None),
+                bool(short is not None and short.refuses_motion), last is None))
         status: dict[str, Any] = {"joints": joints_out, "end_effector": None}
         if last is not None:
             status["end_effector"] = end_effector(self.arm, last)
@@ -133,14 +133,9 @@ class RunControl:
         return self._confirmation(executor.driver.halt_and_confirm(), "the run's process")
 
     def _confirmation(self, result, by: str) -> dict:
-        names = {j.module: j.name for j in self.arm.joints}
-        return {"confirmed": result.confirmed, "sent": result.sent,
-                "modules_confirmed": list(result.modules_confirmed),
-                "modules_unconfirmed": list(result.modules_unconfirmed),
-                "attempts": result.attempts, "error": result.error,
-                "states": {str(k): getattr(v, "text", str(v))
-                           for k, v in result.states.items()},
-                "message": result.describe(names), "confirmed_by": by}
+        from seqrun.service.control_socket import halt_reply
+
+        return halt_reply(result, {j.module: j.name for j in self.arm.joints}, by)
 
 
 def _velocities(readings: list[tuple[float, list[float]]]) -> list[float] | None:

@@ -20,6 +20,7 @@ from seqrun.errors import SeqrunError, SequenceInvalid, UserInputError
 if TYPE_CHECKING:
     from seqrun.arm.description import ArmDescription
     from seqrun.sequence.loader import LoadedSequence
+    from seqrun.service.arm_context import ArmContext
     from seqrun.service.connection import Connection
 
 __all__ = ["PreparedRun", "RunInvalid", "RunRequest", "prepare_run", "run_folder"]
@@ -60,6 +61,8 @@ class PreparedRun:
     arm_path: Path = field(default_factory=Path)
     #: The sequence file as the operator named it.
     file: Path = field(default_factory=Path)
+    #: The arm context the run was resolved in (its zero store, its headline).
+    context: ArmContext | None = None
 
 
 class RunInvalid(SeqrunError):
@@ -82,9 +85,9 @@ def prepare_run(request: RunRequest) -> PreparedRun:
     from seqrun.clock import VirtualClock
     from seqrun.sequence.loader import load_sequence
     from seqrun.service import campaign_records
-    from seqrun.service.campaigns import campaign_bus, load_arm_file
+    from seqrun.service.arm_context import resolve_context
     from seqrun.service.checking import check_for_run, errors_before_bus
-    from seqrun.service.connection import open_connection, parse_bus_kwargs, parse_faults
+    from seqrun.service.connection import parse_bus_kwargs, parse_faults
 
     r = request
     if not 0 < r.speed <= 1:
@@ -105,13 +108,16 @@ def prepare_run(request: RunRequest) -> PreparedRun:
                                    project_dir=r.project_dir)
         campaign_records.refuse_unloadable(r.file, r.project_dir, errors, r.log_dir)
         raise SequenceInvalid(errors) from None
-    arm_path = r.arm_file or loaded.arm_path
-    arm = load_arm_file(arm_path)
+    # The arm context: the sequence's campaign and arm, the bus (command line, else the
+    # campaign's, else python-can's configuration, else the simulator).
+    context = resolve_context(project=loaded.project, arm_file=r.arm_file,
+                              arm_path=loaded.arm_path, interface=r.interface,
+                              channel=r.channel, bitrate=r.bitrate, bus_kwargs=extra,
+                              sim=r.sim)
+    arm_path = context.arm_path
+    arm = context.arm
     if r.power_on_at is not None:
         arm.power_off_pose(r.power_on_at)  # one of the arm's power-off poses
-    interface, channel, bitrate = r.interface, r.channel, r.bitrate
-    if not (interface or channel or bitrate or extra or r.sim):  # the campaign's bus
-        interface, channel, bitrate, extra = campaign_bus(loaded, extra)
     if not 1 <= r.from_step <= len(loaded.steps):
         raise UserInputError(f"--from {r.from_step}: the sequence has steps "
                              f"1-{len(loaded.steps)}")
@@ -121,17 +127,17 @@ def prepare_run(request: RunRequest) -> PreparedRun:
     if static.errors:
         campaign_records.refuse(loaded, arm_path, static.errors, r.log_dir)
         raise RunInvalid(loaded.file, list(static.errors))
-    if r.virtual_time and not (r.sim or faults or not (interface or channel or extra)):
+    if r.virtual_time and not context.bus.is_simulator:
         raise UserInputError("--virtual-time needs the simulator")
+    if not r.virtual_time:   # (virtual time is the simulator, asked for)
+        context.refuse_private_simulator("run")
     for fault in faults:  # the simulated arm has the arm file's modules
         if fault.module is not None and fault.module not in arm.module_ids:
             raise UserInputError(f"--sim-fault '{fault.spec}': the arm has no module "
                                  f"{fault.module} (modules {', '.join(map(str, arm.module_ids))})")
-    connection = open_connection(interface=interface, channel=channel, bitrate=bitrate,
-                                 bus_kwargs=extra, force_sim=r.sim, faults=faults,
-                                 default_bitrate=arm.can.bitrate,
-                                 clock=VirtualClock() if r.virtual_time else None,
-                                 power_on_pose=r.power_on_at.lower() if r.power_on_at else None)
+    connection = context.open_connection(
+        faults=faults, clock=VirtualClock() if r.virtual_time else None,
+        power_on_pose=r.power_on_at.lower() if r.power_on_at else None, live=True)
     if r.virtual_time and not connection.is_simulator:
         connection.close()
         raise UserInputError("--virtual-time needs the simulator")
@@ -139,7 +145,7 @@ def prepare_run(request: RunRequest) -> PreparedRun:
         connection.close()
         raise UserInputError("--power-on-at applies to the built-in simulator (seqrun sim "
                              "serve has its own)")
-    return PreparedRun(loaded, arm, connection, Path(arm_path), r.file)
+    return PreparedRun(loaded, arm, connection, Path(arm_path), r.file, context)
 
 
 def run_folder(loaded: LoadedSequence, log_dir: Path | None) -> Path:

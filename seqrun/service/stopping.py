@@ -103,13 +103,33 @@ class Stopping:
 
 class ControlHandler:
     """What a control socket (:mod:`seqrun.service.control_socket`) serves for a session:
-    ``status_dict()`` and ``halt(reason) -> dict``."""
+    ``status_dict()`` and ``halt(reason) -> dict``, in the socket's shapes (the same as a
+    run's: ``seqrun status`` and ``seqrun halt`` read either the same way)."""
 
     def __init__(self, session: Any) -> None:
         self._session = session
 
     def status_dict(self) -> dict[str, Any]:
-        return self._session.status_dict()
+        from seqrun.service.control_socket import reading_row
+
+        status = self._session.status()
+        stale = status.stale or status.updated_at is None
+        joints = [reading_row(j.name, j.module, j.position_deg, j.velocity_deg_s,
+                              "|".join(j.flags) or None, j.fault,
+                              stale or j.position_deg is None)
+                  for j in status.joints]
+        ee = None
+        if status.end_effector_mm is not None:
+            ee = {"position_mm": [round(v, 3) for v in status.end_effector_mm],
+                  "rpy_deg": [round(v, 3) for v in status.end_effector_rpy_deg or ()]}
+        run = status.run
+        return {"joints": joints, "end_effector": ee, "activity": status.activity,
+                "step": ({"step": run.step, "label": run.label} if run is not None else None),
+                "bus": status.bus, "zero_reference": status.zero_reference}
 
     def halt(self, reason: str) -> dict[str, Any]:
-        return self._session.halt_dict(reason)
+        from seqrun.service.control_socket import halt_reply
+
+        arm = self._session.arm
+        return halt_reply(self._session.halt(reason), dict(zip(arm.module_ids, arm.joint_names)),
+                          "the console's session")

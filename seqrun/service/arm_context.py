@@ -1,0 +1,321 @@
+"""Which arm a command talks to: the arm context, resolved once.
+
+Every command and face (``run``, ``validate``, ``status``, ``halt``, ``reset``, ``pose``,
+``zero``, ``console``, ``runs``) builds one :class:`ArmContext` with :func:`resolve_context`
+and takes everything from it: the campaign, the arm file (and so its tools), the pose
+search path, the zero store, the folder run logs go to, and the bus. Nothing else decides
+these. The order, each time the same:
+
+- campaign: ``--project DIR``, else the campaign of the sequence (for ``run``), else the
+  nearest ``seqrun.toml`` above the current directory, else the nearest folder with
+  ``arms/`` or ``poses/`` (the checkout), else the current directory;
+- arm file: ``--arm FILE``, else the sequence's ``arm:``, else the campaign's
+  ``[campaign] arm``, else the shipped ``lwa3``;
+- bus: the command line (``-i/-c/-b/--bus-kwargs``, or ``--sim``), else the campaign's
+  ``[bus]``, else python-can's configuration (``CAN_INTERFACE``, ``~/.canrc``, ...), else
+  the built-in simulator.
+
+A command never acts on a private simulator while the operator means an arm
+(:meth:`ArmContext.refuse_private_simulator`): with no bus configured, ``halt`` and
+``status`` act through the seqrun run or console that is live on this machine (its
+control socket), and with nothing live they say there is no arm (exit 2).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
+
+from seqrun.errors import UserInputError
+
+if TYPE_CHECKING:
+    from seqrun.arm.description import ArmDescription
+    from seqrun.drivers.base import ArmDriver
+    from seqrun.sequence.project import Project
+    from seqrun.service.bus_claim import Holder
+    from seqrun.service.connection import Connection
+    from seqrun.service.zero import ZeroStore
+
+__all__ = ["ArmContext", "BusChoice", "NoArm", "SIMULATOR_CLAIM_INTERFACE", "resolve_context"]
+
+#: The claim a run or console on the built-in simulator holds, so that ``seqrun halt`` and
+#: ``seqrun status`` in another terminal find it (its channel names the process).
+SIMULATOR_CLAIM_INTERFACE = "seqrun-sim"
+
+
+class NoArm(UserInputError):
+    """No bus is configured and no seqrun run or console is live: there is no arm to act on
+    (exit 2; never a private simulator's "confirmed")."""
+
+
+@dataclass(frozen=True)
+class BusChoice:
+    """The bus a command talks to, and who chose it."""
+
+    interface: str | None = None
+    channel: str | None = None
+    bitrate: int | None = None
+    kwargs: Mapping[str, Any] = field(default_factory=dict)
+    #: ``--sim``: the operator asked for the built-in simulator.
+    force_sim: bool = False
+    #: Who chose it: "--sim", "the command line", "<campaign>/seqrun.toml",
+    #: "python-can's configuration" or "nothing configured".
+    source: str = "nothing configured"
+    #: python-can's merged configuration ({}: the built-in simulator).
+    config: Mapping[str, Any] = field(default_factory=dict)
+
+    @property
+    def is_simulator(self) -> bool:
+        from seqrun.service.connection import SIM_INTERFACE
+
+        return (self.force_sim or not self.config.get("interface")
+                or self.config.get("interface") == SIM_INTERFACE)
+
+    @property
+    def defaulted_to_simulator(self) -> bool:
+        """The built-in simulator because nothing names a bus (not asked for)."""
+        from seqrun.service.connection import SIM_INTERFACE
+
+        return self.is_simulator and not self.force_sim and self.interface != SIM_INTERFACE
+
+    @property
+    def key(self) -> tuple[str, str] | None:
+        """The claim key of a bus other processes can reach; None for the simulator."""
+        from seqrun.service.connection import bus_key
+
+        return None if self.is_simulator else bus_key(self.config)
+
+    def describe(self) -> str:
+        if self.is_simulator:
+            why = "--sim" if self.force_sim else f"from {self.source}" \
+                if self.source != "nothing configured" else "no bus configured"
+            return f"the built-in simulator ({why}): no hardware is moved"
+        config = self.config
+        return (f"CAN interface '{config.get('interface')}' channel '{config.get('channel')}'"
+                f" (from {self.source})")
+
+
+@dataclass
+class ArmContext:
+    """The arm, its files and its bus, as one command sees them (see the module doc)."""
+
+    project: Project
+    pose_path: Any
+    runs_dir: Path
+    response_timeout_ms: float | None = None
+    #: Simulator fault specs (``--sim-fault``), parsed when the bus opens.
+    faults: Sequence[str] = ()
+    #: ``--arm``, else the arm the sequence names (None: the campaign's).
+    given_arm: Path | None = None
+    #: The bus options as given (resolved on first use: ``runs`` needs none).
+    bus_options: Mapping[str, Any] = field(default_factory=dict)
+    _arm: ArmDescription | None = field(default=None, repr=False)
+
+    # ------------------------------------------------------------------ the arm
+    @cached_property
+    def arm_path(self) -> Path:
+        """The arm file: ``--arm``, else the sequence's, else the campaign's, else the
+        shipped one."""
+        if self.given_arm is not None:
+            return Path(self.given_arm).resolve()
+        return self.project.arm_path(None)
+
+    @cached_property
+    def bus(self) -> BusChoice:
+        return resolve_bus(self.project, **self.bus_options)
+
+    @property
+    def arm(self) -> ArmDescription:
+        """The arm file, loaded once."""
+        if self._arm is None:
+            if not self.arm_path.is_file():
+                raise UserInputError(f"arm file {self.arm_path} not found "
+                                     "(give one with --arm FILE)")
+            from seqrun.arm.description import load_arm
+
+            self._arm = load_arm(self.arm_path)
+        return self._arm
+
+    @property
+    def tools(self) -> Any:
+        """The arm file's tools (the arm file is the one place a tool is defined)."""
+        return self.arm.tools
+
+    def zero_store(self, arm: ArmDescription | None = None) -> ZeroStore:
+        """The zero store of this arm: the one function every command gets it through."""
+        from seqrun.service.zero import ZeroStore
+
+        return ZeroStore.for_arm((arm or self.arm).name, self.project)
+
+    # ------------------------------------------------------------------ what it says
+    def arm_text(self) -> str:
+        where = _shown(self.arm_path)
+        return f"arm '{self.arm.name}' ({where})"
+
+    def headline(self, connection: Connection | None = None) -> str:
+        """The first line of every command: which arm, on which bus, chosen by whom."""
+        if connection is None:
+            return f"{self.arm_text()} on {self.bus.describe()}"
+        chosen = "" if connection.is_simulator else f" (from {self.bus.source})"
+        return f"{self.arm_text()} on {connection.description}{chosen}"
+
+    # ------------------------------------------------------------------ the bus
+    def live_controllers(self) -> list[Holder]:
+        """The seqrun runs and consoles live on this machine (this user's), serving a
+        control socket."""
+        from seqrun.service.control_socket import live_owners
+
+        return live_owners()
+
+    def refuse_private_simulator(self, what: str) -> None:
+        """A command about to act on "the arm" (``what``: "halt", "reset", "run", ...)
+        that would get a private simulator the operator did not ask for, while a seqrun
+        run or console is live on this machine: :class:`UserInputError` naming it."""
+        if not self.bus.defaulted_to_simulator:
+            return
+        live = self.live_controllers()
+        if live:
+            raise UserInputError(
+                f"no bus configured, and {_list(live)} live on this machine: '{what}' would "
+                "act on a private simulator, not the arm it drives; use that arm through "
+                "it, name a bus with -i/-c, or give --sim for a private simulator")
+
+    def open_connection(self, *, claim: bool = True, transient: bool = False,
+                        live: bool = False, **extra: Any) -> Connection:
+        """Open the bus (:func:`seqrun.service.connection.open_connection`). ``live`` (a
+        run, a console): on the built-in simulator the process also claims a name of its
+        own and serves its control socket there, so that ``seqrun halt`` finds it."""
+        from seqrun.service.connection import open_connection, parse_faults, response_timeout_s
+
+        arm = self.arm
+        response_timeout_s(arm, self.response_timeout_ms)  # a bad value: before the bus
+        b = self.bus
+        connection = open_connection(interface=b.interface, channel=b.channel,
+                                     bitrate=b.bitrate, bus_kwargs=dict(b.kwargs),
+                                     force_sim=b.force_sim,
+                                     faults=extra.pop("faults", None)
+                                     or parse_faults(list(self.faults)),
+                                     default_bitrate=arm.can.bitrate, claim=claim,
+                                     transient=transient, **extra)
+        if live and connection.is_simulator and connection.claim is None:
+            from seqrun.service.bus_claim import claim_bus
+
+            try:
+                held = claim_bus(SIMULATOR_CLAIM_INTERFACE,
+                                 f"pid{os.getpid()}-{id(connection):x}")
+            except Exception:
+                connection.close()
+                raise
+            # A name nobody else claims: its lock file goes with it (no litter per run).
+            lock = held.directory / f"{held.stem}.lock"
+            held.on_release(lambda: lock.unlink(missing_ok=True))
+            connection.claim = held
+        return connection
+
+    def open_arm(self, *, claim: bool = True, transient: bool = True
+                 ) -> tuple[Connection, ArmDriver]:
+        """The bus and the arm's driver on it: ``(connection, driver)``."""
+        from seqrun.drivers.registry import open_driver
+        from seqrun.service.connection import response_timeout_s
+
+        connection = self.open_connection(claim=claim, transient=transient)
+        timeout = response_timeout_s(self.arm, self.response_timeout_ms)
+        return connection, open_driver(self.arm, connection, response_timeout_s=timeout)
+
+
+def _shown(path: Path) -> str:
+    """A path inside the current directory relative to it, else whole."""
+    path = Path(path)
+    try:
+        return str(path.resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(path)
+
+
+def _list(holders: Sequence[Holder]) -> str:
+    names = [f"seqrun pid {h.pid} ({h.command})" for h in holders]
+    return names[0] + " is" if len(names) == 1 else ", ".join(names) + " are"
+
+
+def resolve_bus(project: Project | None, *, interface: str | None = None,
+                channel: str | None = None, bitrate: int | None = None,
+                bus_kwargs: Sequence[str] | Mapping[str, Any] = (), sim: bool = False
+                ) -> BusChoice:
+    """The bus of a command: command line, else the campaign's ``[bus]``, else python-can's
+    configuration, else the built-in simulator (see the module doc)."""
+    from seqrun.service.connection import parse_bus_kwargs, resolve_config
+
+    extra = dict(bus_kwargs) if isinstance(bus_kwargs, Mapping) else \
+        parse_bus_kwargs(list(bus_kwargs))
+    if sim:
+        if interface or channel:
+            raise UserInputError("--sim cannot be combined with -i/-c")
+        _check_simulator_switches(extra)
+        return BusChoice(None, None, bitrate, extra, True, "--sim", {})
+    source = "the command line"
+    config = getattr(project, "config", None)
+    if not (interface or channel or bitrate or extra) and config is not None \
+            and config.bus.interface is not None:
+        b = config.bus
+        interface, channel, bitrate, extra = b.interface, b.channel, b.bitrate, dict(b.kwargs)
+        path = getattr(project, "config_path", None)
+        source = _shown(path) if path else "seqrun.toml"
+    elif not (interface or channel or bitrate or extra):
+        source = "python-can's configuration"
+    resolved = resolve_config(interface, channel, bitrate, extra)
+    if not resolved:
+        source = "nothing configured" if source != "the command line" else source
+        _check_simulator_switches(extra)
+    return BusChoice(interface, channel, bitrate, extra, False, source, resolved)
+
+
+def _check_simulator_switches(extra: Mapping[str, Any]) -> None:
+    """``--bus-kwargs`` for the built-in simulator: its switches only, well typed (one
+    line before anything else is decided)."""
+    from seqrun.sim.options import SWITCHES, module_options
+
+    if others := sorted(set(extra) - SWITCHES):
+        raise UserInputError(f"--bus-kwargs {', '.join(others)}: the built-in simulator "
+                             "takes only its switches (e.g. home_ok_at_power_on=true); "
+                             "name an interface with -i")
+    try:
+        module_options(extra)
+    except ValueError as exc:
+        raise UserInputError(f"--bus-kwargs: {exc}") from None
+
+
+def resolve_context(*, project_dir: Path | None = None, project: Project | None = None,
+                    arm_file: Path | None = None, arm_path: Path | None = None,
+                    poses_dir: Path | None = None, log_dir: Path | None = None,
+                    interface: str | None = None, channel: str | None = None,
+                    bitrate: int | None = None,
+                    bus_kwargs: Sequence[str] | Mapping[str, Any] = (), sim: bool = False,
+                    response_timeout_ms: float | None = None,
+                    faults: Sequence[str] = ()) -> ArmContext:
+    """The one place the arm context is decided (see the module doc).
+
+    :param project: the campaign already found (a loaded sequence's); else ``project_dir``
+        or the campaign of the current directory.
+    :param arm_file: ``--arm``; ``arm_path``: the arm the sequence names (``run``).
+    :raises UserInputError: a campaign, arm or bus option that cannot be used.
+    """
+    from seqrun.defaults import DEFAULT_POSES_DIR
+
+    if project is None:
+        from seqrun.service.campaigns import campaign_here
+
+        project = campaign_here(project_dir)
+    if arm_file is not None and not Path(arm_file).is_file():
+        raise UserInputError(f"arm file {arm_file} not found (give one with --arm FILE)")
+    given = arm_file if arm_file is not None else arm_path
+    pose_path: Any = project.pose_path
+    if poses_dir is not None and Path(poses_dir) != DEFAULT_POSES_DIR:
+        pose_path = Path(poses_dir)
+    runs = Path(log_dir) if log_dir is not None else project.runs_dir
+    return ArmContext(project, pose_path, runs, response_timeout_ms, tuple(faults),
+                      Path(given) if given is not None else None,
+                      {"interface": interface, "channel": channel, "bitrate": bitrate,
+                       "bus_kwargs": bus_kwargs, "sim": sim})
