@@ -144,8 +144,22 @@ def test_an_unknown_project_folder_is_one_line(tmp_path):
     ('[campaign]\nname = "x"\n\n[bus]\nbitrate = 99\n', "5:1", "bus.bitrate: "),
     ('[runs]\nfolder = "r"\n', "2:1", "runs.folder: unknown key (expected: dir)"),
     ('[campain]\n', "1:1", "campain: unknown key (expected: campaign, bus, runs)"),
+    # Hostile files (issue 23, item 6): one line at the toml's own line, never a traceback.
+    ('[campaign]\nname = "x\0y"\n', "2:10", "invalid TOML: Illegal character"),
+    ('[bus]\nbitrate = 500000.0\n', "2:1", "bus.bitrate: a bit rate is a whole number"),
+    ('[bus]\nbitrate = true\n', "2:1", "bus.bitrate: a bit rate is a whole number"),
+    ("\n\nbomb = " + "[" * 100_000 + "]" * 100_000 + "\n", "3:40",
+     "invalid TOML: arrays or tables nested more than 32 deep"),
+    ('[bus]\nkwargs = {a = ' + "{b = " * 3000 + "1" + "}" * 3000 + "}\n", "2:170",
+     "invalid TOML: arrays or tables nested more than 32 deep"),
+    ('[campaign]\nname = "' + "[" * 50 + '"\n', None, None),  # brackets in a string: fine
+    ('[campaign]\nname = """\n' + "{" * 50 + '\n"""\n', None, None),
 ])
 def test_a_broken_config_is_file_line_col_and_exit_2(campaign, text, where, message):
+    if where is None:  # not broken: the scan for nesting skips strings
+        (campaign / "seqrun.toml").write_text(text)
+        load_config(campaign / "seqrun.toml")
+        return
     (campaign / "seqrun.toml").write_text(text)
     with pytest.raises(ConfigInvalid) as info:
         load_config(campaign / "seqrun.toml")
