@@ -166,6 +166,9 @@ def _confirm_start(console: Console, run, yes: bool):
     connection, loaded = run.connection, run.loaded
     style = "bold black on yellow" if connection.is_simulator else "bold white on red"
     console.print(f" {connection.description} ", style=style, highlight=False, markup=False)
+    for note in run.overrides:  # files used in place of shipped ones: said before any yes
+        console.print(f"note: {note}", style="yellow", highlight=False, markup=False,
+                      soft_wrap=True)
     if not connection.is_simulator and not _ask(
             console, f"Run '{loaded.name}' on the REAL arm?", yes):
         console.print("Not started: the operator declined. Nothing was sent.")
@@ -231,7 +234,13 @@ def _run_in_session(console: Console, run, zero, folder: Path, control, requests
     # From here on signals only post stop requests (seqrun/cli/interrupts.py); the control
     # loop acts on them, a question is answered "no".
     signals = RunSignals(requests)
-    campaign_records.record_run(folder, loaded, run.arm_path, connection.description, zero)
+    try:  # the bytes validated, not the files again (one may have changed meanwhile)
+        campaign_records.record_run(folder, loaded, run.arm_path, connection.description,
+                                    zero, arm=arm, overrides=run.overrides)
+    except OSError as exc:
+        connection.close()
+        fail(f"cannot write the run record in {folder} ({exc.strerror or exc}); "
+             "nothing was sent")
     displays: list = []
 
     def confirm(prompt: str) -> bool:
@@ -273,7 +282,10 @@ def _run_in_session(console: Console, run, zero, folder: Path, control, requests
             command_mode=command_mode, confirm=confirm, before_step=before_step,
             run_control=control, requests=requests, warn=warn,
             confirm_clear_latched=(None if connection.is_simulator else confirm_clear_latched),
-            meta={"zero": zero.as_dict()}, html_report=not no_report,
+            meta={"zero": zero.as_dict(),
+                  **({"overrides": [str(n) for n in run.overrides]} if run.overrides
+                     else {})},
+            html_report=not no_report,
             # The built-in simulator keeps no record: its zero is its power-on pose.
             record_zero=(None if connection.is_simulator
                          else campaign_records.zero_recorder(arm, loaded)))

@@ -14,6 +14,7 @@ from pathlib import Path
 
 from seqrun.arm.description import ArmDescription
 from seqrun.report.data import RunData, load_run
+from seqrun.service.logfile import write_whole
 
 HTML_NAME = "report.html"
 
@@ -27,9 +28,9 @@ def write_html(folder: str | Path, out: str | Path | None = None, *,
     data = data if data is not None else load_run(folder, arm=arm)
     target = Path(out) if out is not None else Path(folder) / HTML_NAME
     page = render_html(data, render_plots(data))
-    tmp = target.with_name(target.name + ".tmp")
-    tmp.write_text(page, encoding="utf-8")
-    tmp.replace(target)
+    error = write_whole(target, page)  # a full disk leaves no report.html.tmp behind
+    if error is not None:
+        raise error
     return target
 
 

@@ -60,6 +60,8 @@ class PreparedRun:
     arm_path: Path = field(default_factory=Path)
     #: The sequence file as the operator named it.
     file: Path = field(default_factory=Path)
+    #: The files used in place of shipped ones (arm, poses), as ``validate`` notes them.
+    overrides: list = field(default_factory=list)
 
 
 class RunInvalid(SeqrunError):
@@ -83,7 +85,7 @@ def prepare_run(request: RunRequest) -> PreparedRun:
     from seqrun.sequence.loader import load_sequence
     from seqrun.service import campaign_records
     from seqrun.service.campaigns import campaign_bus, load_arm_file
-    from seqrun.service.checking import check_for_run, errors_before_bus
+    from seqrun.service.checking import check_for_run, errors_before_bus, override_notes
     from seqrun.service.connection import open_connection, parse_bus_kwargs, parse_faults
 
     r = request
@@ -119,7 +121,7 @@ def prepare_run(request: RunRequest) -> PreparedRun:
     # the measured state before the first motion.
     static = check_for_run(loaded, arm, r.start, r.started, r.from_step)
     if static.errors:
-        campaign_records.refuse(loaded, arm_path, static.errors, r.log_dir)
+        campaign_records.refuse(loaded, arm_path, static.errors, r.log_dir, arm=arm)
         raise RunInvalid(loaded.file, list(static.errors))
     if r.virtual_time and not (r.sim or faults or not (interface or channel or extra)):
         raise UserInputError("--virtual-time needs the simulator")
@@ -139,7 +141,8 @@ def prepare_run(request: RunRequest) -> PreparedRun:
         connection.close()
         raise UserInputError("--power-on-at applies to the built-in simulator (seqrun sim "
                              "serve has its own)")
-    return PreparedRun(loaded, arm, connection, Path(arm_path), r.file)
+    return PreparedRun(loaded, arm, connection, Path(arm_path), r.file,
+                       override_notes(loaded, Path(arm_path)))
 
 
 def run_folder(loaded: LoadedSequence, log_dir: Path | None) -> Path:
