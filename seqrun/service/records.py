@@ -180,22 +180,84 @@ def write_refusal(folder: Path, *, sequence: str, file: str, errors: list[dict],
                      arm=arm)
 
 
+#: The result ``seqrun runs`` gives a folder whose files cannot be read as a run's.
+CORRUPTED = "corrupted"
+
+
 def list_runs(runs_dir: Path) -> list[dict]:
     """One entry per run folder under ``runs_dir`` (oldest first): when, sequence, result,
-    duration, exit code, folder."""
+    duration, exit code, bus (and whether it was the simulator), folder. A folder whose
+    report.json is missing, unreadable or not a run's report is listed with the result
+    ``corrupted`` and the ``problem``: it never hides the other runs."""
     runs: list[dict] = []
     if not Path(runs_dir).is_dir():
         return runs
     for folder in sorted(Path(runs_dir).iterdir()):
-        report_file = folder / "report.json"
-        if not folder.is_dir() or not report_file.is_file():
-            continue
-        try:
-            report = json.loads(report_file.read_text(encoding="utf-8"))
-        except (OSError, ValueError):
-            report = {"status": "unreadable report.json"}
-        runs.append({"when": report.get("start"), "sequence": report.get("sequence"),
-                     "result": report.get("status"), "duration_s": report.get("duration_s"),
-                     "exit_code": report.get("exit_code"), "folder": str(folder)})
+        if folder.is_dir():
+            entry = _run_entry(folder)
+            if entry is not None:
+                runs.append(entry)
     runs.sort(key=lambda r: (r["when"] or "", r["folder"]))
     return runs
+
+
+def _read_json(path: Path) -> tuple[Any, str | None]:
+    """``(data, None)``, or ``(None, what is wrong)``."""
+    try:
+        return json.loads(path.read_text(encoding="utf-8")), None
+    except OSError as exc:
+        return None, f"{path.name}: {exc.strerror or exc}"
+    except UnicodeDecodeError:
+        return None, f"{path.name}: not UTF-8 text"
+    except ValueError as exc:
+        return None, f"{path.name}: not JSON ({exc})"
+    except RecursionError:
+        return None, f"{path.name}: nested too deep"
+
+
+def _run_entry(folder: Path) -> dict | None:
+    """The listing of one folder; None when it holds no run at all."""
+    report_file = folder / "report.json"
+    looks_like_a_run = any((folder / name).exists() for name in (
+        "report.json", "record.json", "events.jsonl", "trace.log"))
+    if not looks_like_a_run:
+        return None
+    problem = None
+    report: Any = {}
+    if not report_file.is_file():
+        problem = "no report.json"
+    else:
+        report, problem = _read_json(report_file)
+        if problem is None and not isinstance(report, dict):
+            problem, report = "report.json: not a run's report", {}
+    report = report if isinstance(report, dict) else {}
+    record, _ = _read_json(folder / "record.json") if (folder / "record.json").is_file() \
+        else ({}, None)
+    record = record if isinstance(record, dict) else {}
+
+    def text(value: Any) -> str | None:
+        return value if isinstance(value, str) else None
+
+    def number(value: Any) -> float | None:
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+        return float(value) if ok and value == value else None
+
+    exit_code = report.get("exit_code")
+    exit_code = exit_code if isinstance(exit_code, int) and not isinstance(exit_code, bool) \
+        else None
+    result = text(report.get("status"))
+    if problem is None and result is None:
+        problem = "report.json: no status"
+    bus = text(record.get("bus")) or text(report.get("bus"))
+    return {"when": text(report.get("start")), "sequence": text(report.get("sequence")),
+            "result": CORRUPTED if problem else result,
+            "duration_s": number(report.get("duration_s")), "exit_code": exit_code,
+            "bus": bus, "simulator": _is_simulator(bus), "folder": str(folder),
+            **({"problem": problem} if problem else {})}
+
+
+def _is_simulator(bus: str | None) -> bool | None:
+    """Whether a recorded bus description is a simulator's (None: no bus was opened)."""
+    if bus is None or bus.startswith("none"):
+        return None
+    return bus.startswith("SIMULATOR")
