@@ -416,7 +416,6 @@ def test_csv_cells_that_a_spreadsheet_would_run_are_neutralised(tmp_path):
     starting with = + - @ is a formula to a spreadsheet. It gets a leading ', while
     negative numbers stay numbers."""
     from projecttree import make_project, write_sequence
-    from seqrun.report.csvout import neutralise
 
     project = make_project(tmp_path / "p")
     seq = write_sequence(project, """\
@@ -441,5 +440,7 @@ def test_csv_cells_that_a_spreadsheet_would_run_are_neutralised(tmp_path):
         rows = list(csv.DictReader(f))
     negative = [r["j4_measured_deg"] for r in rows if r["j4_measured_deg"].startswith("-")]
     assert negative and all(float(v) < 0 for v in negative)  # Park's j4 is -120.32
+    from seqrun.report.csvout import neutralise
+
     assert [neutralise(c) for c in ("-0.5", "+2", "=1", "-inf", "-", "", 3.0)] == [
         "-0.5", "+2", "'=1", "'-inf", "'-", "", 3.0]
