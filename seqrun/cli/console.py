@@ -22,6 +22,7 @@ from seqrun.cli.common import (EXIT_FAULT, ArmOption, BitrateOption, BusKwargsOp
                                CampaignOption, ChannelOption, InterfaceOption,
                                ResponseTimeoutOption, SimOption, fail, load_arm_file,
                                user_errors)
+from seqrun.cli.questions import ask
 from seqrun.defaults import DEFAULT_ARM, EXIT_OPERATOR_ABORT
 
 
@@ -94,7 +95,7 @@ def console_command(
         with user_errors():
             try:
                 zero = zero_at_run_start(connection, arm, project,
-                                         lambda q: yes or typer.confirm(q, default=False),
+                                         lambda q: ask(q, yes),
                                          typer.echo)
             except BusError as exc:
                 fail(f"cannot read the modules' state: {exc}", EXIT_FAULT)

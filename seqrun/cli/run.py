@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import functools
 import os
-import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Callable, Optional
 
@@ -19,7 +18,7 @@ from seqrun.cli.app import app
 from seqrun.cli.common import (BitrateOption, BusKwargsOption, ChannelOption, InterfaceOption,
                                SimOption, fail, user_errors)
 from seqrun.defaults import EXIT_FAULT, EXIT_INVALID, EXIT_OPERATOR_ABORT
-from seqrun.errors import BusError
+from seqrun.errors import BusError, SequenceInvalid
 
 if TYPE_CHECKING:
     from rich.console import Console
@@ -28,20 +27,15 @@ if TYPE_CHECKING:
 
 def _ask(console: Console, question: str, assume_yes: bool,
          read: Callable[[], str | None] | None = None) -> bool:
-    """Ask the operator; EOF on stdin (no operator) is a no. ``read`` returns None when
-    a signal interrupted the question (a no as well)."""
-    if assume_yes:
-        console.print(f"{question} yes (--yes)", highlight=False, markup=False, soft_wrap=True)
-        return True
-    console.print(f"{question} [y/N] ", end="", highlight=False, markup=False, soft_wrap=True)
-    if read is None:
-        try:
-            answer = sys.stdin.readline()
-        except KeyboardInterrupt:
-            return False
-    else:
-        answer = read()
-    return answer is not None and answer.strip().lower() in ("y", "yes")
+    """Ask the operator (cli/questions.py); EOF on stdin (no operator) is a no, said on
+    the question's line. ``read`` returns None when a signal interrupted the question (a
+    no as well)."""
+    from seqrun.cli.questions import ask
+
+    def say(text: str, end: str = "\n") -> None:
+        console.print(text, end=end, highlight=False, markup=False, soft_wrap=True)
+
+    return ask(question, assume_yes, say=say, read=read)
 
 
 def _ask_shown(console: Console, displays: list, question: str, assume_yes: bool, *,
@@ -142,20 +136,54 @@ def run_command(
                 typer.echo(str(error), err=True)
             typer.echo(str(exc), err=True)
             raise typer.Exit(EXIT_INVALID) from None
+        except SequenceInvalid as exc:  # it does not even load: the same last line
+            for error in exc.errors:
+                typer.echo(f"error: {error}", err=True)
+            typer.echo(str(RunInvalid(str(file), list(exc.errors))), err=True)
+            raise typer.Exit(EXIT_INVALID) from None
     # From here `seqrun status` / `seqrun halt` in another terminal ask this run.
     from seqrun.service.run_control import RunControl
     from seqrun.stop_requests import StopRequests
 
     requests = StopRequests()
     control = RunControl.serve(run.connection, run.arm, requests)
-    zero = _confirm_start(console, run, yes)
+    zero = _confirm_start_or_record(console, run, yes, log_dir)
     _use_realtime(console, rt_priority)
     folder = _run_folder(console, run, log_dir)
     outcome = _run_in_session(console, run, zero, folder, control, requests, step=step,
                               yes=yes, plain=plain, speed=speed, from_step=from_step,
                               command_mode=command_mode, no_report=no_report)
-    _print_outcome(console, outcome, folder)
+    try:  # the run has ended: a Ctrl-C now changes neither its exit code nor its story
+        _print_outcome(console, outcome, folder)
+    except KeyboardInterrupt:
+        pass
     raise typer.Exit(outcome.result.exit_code)
+
+
+def _confirm_start_or_record(console: Console, run, yes: bool, log_dir: Path | None):
+    """:func:`_confirm_start`, where SIGTERM, SIGHUP or SIGQUIT at a question (the REAL
+    arm's, the zero reference's) end the command in one line, exit 130, and a run not
+    started (a no, a signal) leaves a run folder saying that nothing was sent."""
+    from seqrun.cli.questions import QuestionInterrupted, signals_end_the_question
+    from seqrun.service import campaign_records
+
+    def record(message: str) -> None:
+        campaign_records.not_started(run.loaded, run.arm_path, log_dir, message,
+                                     arm=run.arm, bus=run.connection.description)
+
+    try:
+        with signals_end_the_question():
+            return _confirm_start(console, run, yes)
+    except QuestionInterrupted as exc:
+        run.connection.close()  # (closing twice is harmless)
+        record(f"not started: {exc.name} before the run started; nothing was sent")
+        typer.echo(f"seqrun run: {exc.name} before the run started; nothing was sent",
+                   err=True)
+        raise typer.Exit(EXIT_OPERATOR_ABORT) from None
+    except typer.Exit as exc:
+        if exc.exit_code == EXIT_OPERATOR_ABORT:  # the operator said no
+            record("not started: the operator declined; nothing was sent")
+        raise
 
 
 def _confirm_start(console: Console, run, yes: bool):
@@ -295,9 +323,11 @@ def _run_in_session(console: Console, run, zero, folder: Path, control, requests
             displays[0].__exit__(None, None, None)
         elif displays:
             displays[0].close(timeout=5.0)  # every line printed before the summary
-        signals.restore()
-        session.close()
-        connection.close()
+        try:
+            session.close()
+            connection.close()
+        finally:  # until here a signal is a request: a Ctrl-C never cuts the closing short
+            signals.restore()
 
 
 def _print_outcome(console: Console, outcome, folder: Path) -> None:

@@ -32,6 +32,19 @@ def refuse(loaded: Any, arm_path: Path, errors: list, log_dir: Path | None,
         pass
 
 
+def not_started(loaded: Any, arm_path: Path, log_dir: Path | None, message: str, *,
+                arm: Any = None, bus: str | None = None, exit_code: int = 130) -> None:
+    """The record of a run that ended at a question before it started (declined, or a
+    signal): nothing was sent. Best effort, as a refusal."""
+    try:
+        folder = prepare_run_folder(log_dir, loaded.name, runs_dir(loaded))
+        write_refusal(folder, sequence=loaded.name, file=str(loaded.file), errors=[],
+                      loaded=loaded, arm_path=Path(arm_path), bus=bus, arm=arm,
+                      exit_code=exit_code, status="aborted", message=message)
+    except OSError:
+        pass
+
+
 def refuse_unloadable(file: Path, project_dir: Path | None, errors: list,
                       log_dir: Path | None) -> None:
     """The record of a sequence that could not even be loaded (its own errors)."""

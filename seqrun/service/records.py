@@ -161,16 +161,18 @@ def write_record(folder: Path, *, loaded: Any, arm_path: Path, bus: str,
 
 def write_refusal(folder: Path, *, sequence: str, file: str, errors: list[dict],
                   loaded: Any = None, arm_path: Path | None = None, bus: str | None = None,
-                  exit_code: int = 1, arm: Any = None) -> None:
-    """The short record of a run that validation refused: nothing was sent."""
+                  exit_code: int = 1, arm: Any = None, status: str = "refused",
+                  message: str | None = None) -> None:
+    """The short record of a run that validation refused (or, with ``status`` and
+    ``message``, that ended before it started): nothing was sent."""
     now = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="milliseconds")
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     report = {"sequence": sequence, "file": file, "start": now, "end": now,
-              "status": "refused", "exit_code": exit_code,
-              "message": f"refused by validation ({len(errors)} error"
-                         f"{'s' * (len(errors) != 1)}); nothing was sent",
-              "duration_s": 0.0, "errors": errors}
+              "status": status, "exit_code": exit_code,
+              "message": message or f"refused by validation ({len(errors)} error"
+                                    f"{'s' * (len(errors) != 1)}); nothing was sent",
+              "duration_s": 0.0, "nothing_sent": True, "errors": errors}
     error = write_whole(folder / "report.json", json.dumps(report, indent=2) + "\n")
     if error is not None:
         raise error
