@@ -266,3 +266,21 @@ def test_a_sequence_may_name_its_arm_by_name_or_by_file(campaign):
         load_sequence(seq)
     assert f"arm file 'arms/other.yaml' not found (looked for " \
            f"{campaign.resolve() / 'arms' / 'other.yaml'})" in str(info.value.errors[0])
+
+
+def test_every_schema_a_campaign_file_names_exists(campaign):
+    """Issue 23 (item 8): startup.yaml named ../docs/schema/sequence.schema.json, which a
+    campaign did not have. seqrun init writes the schemas the files name (those of
+    docs/schema/), and the starter names its schema too."""
+    named = {}
+    for path in campaign.rglob("*.yaml"):
+        first = path.read_text(encoding="utf-8").splitlines()[0]
+        assert first.startswith("# yaml-language-server: $schema="), path
+        named[path] = path.parent / first.split("$schema=", 1)[1]
+    assert {p.name for p in named} == {"first.yaml", "startup.yaml"}
+    for path, schema in named.items():
+        assert schema.is_file(), f"{path} names {schema}, which does not exist"
+        assert schema.read_text() == (ROOT / "docs" / "schema" / schema.name).read_text()
+    pose_schema = campaign / "poses" / "../docs/schema/pose.schema.json"  # pose save's comment
+    assert pose_schema.is_file()
+    assert invoke("validate", campaign).exit_code == 0
