@@ -284,3 +284,25 @@ def test_every_schema_a_campaign_file_names_exists(campaign):
     pose_schema = campaign / "poses" / "../docs/schema/pose.schema.json"  # pose save's comment
     assert pose_schema.is_file()
     assert invoke("validate", campaign).exit_code == 0
+
+
+@pytest.mark.parametrize("command", [["status"], ["halt"], ["reset"], ["fk"], ["ik"],
+                                     ["console"], ["pose", "save"], ["zero", "show"]])
+def test_the_arm_option_says_what_it_really_uses(command):
+    """Issue 23 (item 8): the help said "[default: arms/lwa3.yaml]" while the command used
+    the campaign's arm (or the shipped one) when there is no such file."""
+    help_text = " ".join(invoke(*command, "--help").output.split())
+    assert "[default: arms/lwa3.yaml]" not in help_text
+    assert "the arm of the campaign here (its seqrun.toml), else the shipped lwa3" in help_text
+
+
+def test_status_uses_the_arm_its_help_names(campaign, monkeypatch):
+    mine = (shipped_dir("arms") / "lwa3.yaml").read_text().replace(
+        "name: ", "name: Mine, not ", 1)
+    write(campaign / "arms" / "mine.yaml", mine)
+    config = campaign / "seqrun.toml"
+    config.write_text(config.read_text().replace('arm = "lwa3"', 'arm = "arms/mine.yaml"'))
+    monkeypatch.chdir(campaign)
+    result = invoke("status", "--sim")
+    assert result.exit_code == 0, result.output
+    assert "Mine, not " in result.output
