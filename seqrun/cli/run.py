@@ -2,7 +2,9 @@
 
 Exit codes: 0 success, 1 invalid sequence (no motion), 2 usage error, 3 aborted by a fault,
 timeout or failed checkpoint (arm halted), or by SIGHUP / SIGQUIT (Halt), 130 operator abort
-(controlled stop; a second Ctrl-C or SIGTERM halts instead). Signals: cli/interrupts.py.
+(controlled stop; a second Ctrl-C or SIGTERM halts instead). Signals: cli/interrupts.py;
+before the run starts (its questions) SIGTERM, SIGHUP and SIGQUIT end it with exit 130,
+nothing sent (cli/questions.py).
 """
 
 from __future__ import annotations
