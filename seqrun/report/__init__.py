@@ -14,7 +14,7 @@ from pathlib import Path
 
 from seqrun.arm.description import ArmDescription
 from seqrun.report.data import RunData, load_run
-from seqrun.service.logfile import write_whole
+from seqrun.service.logfile import write_streamed
 
 HTML_NAME = "report.html"
 
@@ -22,13 +22,14 @@ HTML_NAME = "report.html"
 def write_html(folder: str | Path, out: str | Path | None = None, *,
                arm: ArmDescription | None = None, data: RunData | None = None) -> Path:
     """Draw the report of run folder ``folder`` into ``out`` (default folder/report.html)."""
-    from seqrun.report.html import render_html
-    from seqrun.report.plots import render_plots
+    from seqrun.report.html import html_parts
+    from seqrun.report.plots import iter_plots
 
     data = data if data is not None else load_run(folder, arm=arm)
     target = Path(out) if out is not None else Path(folder) / HTML_NAME
-    page = render_html(data, render_plots(data))
-    error = write_whole(target, page)  # a full disk leaves no report.html.tmp behind
+    plots = iter_plots(data)   # drawn one at a time as the page is written
+    # Through the run folder's writer: a full disk leaves no report.html.tmp behind.
+    error = write_streamed(target, html_parts(data, plots))
     if error is not None:
         raise error
     return target
