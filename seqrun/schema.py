@@ -123,10 +123,16 @@ def _yaml_file(value: str) -> str:
     return value
 
 
+#: Where an include may reach (seqrun.sequence.project.Project.include_tree), as the
+#: docs and the README say it.
+INCLUDE_REACH = ("Path of the sequence to include, relative to this file. In a campaign "
+                 "(a folder with seqrun.toml) it may be anywhere inside the campaign folder; "
+                 "without one it must stay inside the project's sequences/ folder (else the "
+                 "folder of the file given to seqrun).")
+
 IncludeFile = Annotated[str, Field(min_length=1), AfterValidator(_yaml_file), Field(
     json_schema_extra={"pattern": _YAML_FILE_RE.pattern},
-    description="Path of the sequence to include, relative to this file; it must stay "
-                "inside the sequences folder.")]
+    description=INCLUDE_REACH)]
 
 
 class IncludeParams(StepParams):
@@ -135,9 +141,7 @@ class IncludeParams(StepParams):
     kind: ClassVar[str] = "include"
     yaml_name: ClassVar[str] = "include"
     file: IncludeFile = Field(  # type: ignore[valid-type]
-        description="Path of the sequence to include, relative to this file; it must stay "
-                    "inside the sequences folder (the project's sequences/, else the folder "
-                    "of the file given to seqrun).")
+        description=INCLUDE_REACH)
 
     @classmethod
     def from_shorthand(cls, value: Any) -> StepParams:

@@ -411,6 +411,8 @@ class Document:
     _index: dict[int, dict[Any, tuple[Node, Any]]] = field(repr=False, default_factory=dict)
     #: SHA-256 (hex) of the bytes read: what a run records of the files it validated.
     sha256: str = ""
+    #: The bytes read: a run folder's copy of the file is these, never the file read again.
+    source: bytes = field(repr=False, default=b"")
 
     # -- locating
     def location(self, node: Any) -> Location:
@@ -520,6 +522,12 @@ def read_text(path: Path, file: str) -> str:
 
 def read_source(path: Path, file: str) -> tuple[str, str]:
     """``(text, sha256 of the bytes)`` of a file, checked as :func:`read_text` says."""
+    text, data = read_checked(path, file)
+    return text, hashlib.sha256(data).hexdigest()
+
+
+def read_checked(path: Path, file: str) -> tuple[str, bytes]:
+    """``(text, the bytes read)`` of a file, checked as :func:`read_text` says."""
     path = Path(path)
     try:
         if path.is_dir():
@@ -549,7 +557,7 @@ def read_source(path: Path, file: str) -> tuple[str, str]:
     text = text.removeprefix("\ufeff")
     if not text.strip():
         raise SequenceInvalid([SourceError(file, 1, 1, "the file is empty")])
-    return text, hashlib.sha256(data).hexdigest()
+    return text, data
 
 
 #: PyYAML's problem texts that a test engineer would not understand, reworded.
@@ -643,7 +651,7 @@ def load_document(path: str | os.PathLike[str], *, file: str | None = None) -> D
     """
     path = Path(path)
     file = file if file is not None else display_path(path)
-    text, digest = read_source(path, file)
+    text, source = read_checked(path, file)
     with _no_gc_pauses():
         try:
             root = compose(text)  # nodes only: nothing is constructed
@@ -662,7 +670,7 @@ def load_document(path: str | os.PathLike[str], *, file: str | None = None) -> D
     if converter.problems:
         raise SequenceInvalid(sort_errors([_problem_error(file, p) for p in converter.problems]))
     return Document(path=path, file=file, root=root, data=data, _index=converter.index,
-                    sha256=digest)
+                    sha256=hashlib.sha256(source).hexdigest(), source=source)
 
 
 def _problem_error(file: str, exc: _Problem) -> SourceError:

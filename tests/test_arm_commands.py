@@ -221,3 +221,17 @@ def test_bad_response_timeout_is_one_line(monkeypatch):
     monkeypatch.delenv("SEQRUN_RESPONSE_TIMEOUT_MS", raising=False)
     result = CliRunner().invoke(app, ["status", "--sim", "--response-timeout-ms", "-5"])
     assert result.exit_code == 2 and "--response-timeout-ms" in result.output
+
+
+def test_status_watch_into_a_file_or_pipe_is_one_whole_line_per_refresh():
+    """Issue 23 (item 8): redirected, the live table left only its last frame, cut at 80
+    columns. Not a terminal: one line per refresh, every joint and the end-effector."""
+    result = CliRunner().invoke(app, ["status", "--watch", "--count", "3", "--period", "0",
+                                      "--sim"])
+    assert result.exit_code == 0, result.output
+    lines = [line for line in result.output.splitlines() if line[:2].isdigit()]
+    assert len(lines) == 3, result.output
+    for line in lines:
+        assert all(f"j{n} " in line for n in range(1, 8)), line
+        assert "j4 -120.320 " in line and line.endswith("ee [365.9, -0.1, 47.9] mm"), line
+    assert not any(ch in result.output for ch in "┃│┏━"), result.output  # no table frame

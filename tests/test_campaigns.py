@@ -144,8 +144,22 @@ def test_an_unknown_project_folder_is_one_line(tmp_path):
     ('[campaign]\nname = "x"\n\n[bus]\nbitrate = 99\n', "5:1", "bus.bitrate: "),
     ('[runs]\nfolder = "r"\n', "2:1", "runs.folder: unknown key (expected: dir)"),
     ('[campain]\n', "1:1", "campain: unknown key (expected: campaign, bus, runs)"),
+    # Hostile files (issue 23, item 6): one line at the toml's own line, never a traceback.
+    ('[campaign]\nname = "x\0y"\n', "2:10", "invalid TOML: Illegal character"),
+    ('[bus]\nbitrate = 500000.0\n', "2:1", "bus.bitrate: a bit rate is a whole number"),
+    ('[bus]\nbitrate = true\n', "2:1", "bus.bitrate: a bit rate is a whole number"),
+    ("\n\nbomb = " + "[" * 100_000 + "]" * 100_000 + "\n", "3:40",
+     "invalid TOML: arrays or tables nested more than 32 deep"),
+    ('[bus]\nkwargs = {a = ' + "{b = " * 3000 + "1" + "}" * 3000 + "}\n", "2:170",
+     "invalid TOML: arrays or tables nested more than 32 deep"),
+    ('[campaign]\nname = "' + "[" * 50 + '"\n', None, None),  # brackets in a string: fine
+    ('[campaign]\nname = """\n' + "{" * 50 + '\n"""\n', None, None),
 ])
 def test_a_broken_config_is_file_line_col_and_exit_2(campaign, text, where, message):
+    if where is None:  # not broken: the scan for nesting skips strings
+        (campaign / "seqrun.toml").write_text(text)
+        load_config(campaign / "seqrun.toml")
+        return
     (campaign / "seqrun.toml").write_text(text)
     with pytest.raises(ConfigInvalid) as info:
         load_config(campaign / "seqrun.toml")
@@ -252,3 +266,43 @@ def test_a_sequence_may_name_its_arm_by_name_or_by_file(campaign):
         load_sequence(seq)
     assert f"arm file 'arms/other.yaml' not found (looked for " \
            f"{campaign.resolve() / 'arms' / 'other.yaml'})" in str(info.value.errors[0])
+
+
+def test_every_schema_a_campaign_file_names_exists(campaign):
+    """Issue 23 (item 8): startup.yaml named ../docs/schema/sequence.schema.json, which a
+    campaign did not have. seqrun init writes the schemas the files name (those of
+    docs/schema/), and the starter names its schema too."""
+    named = {}
+    for path in campaign.rglob("*.yaml"):
+        first = path.read_text(encoding="utf-8").splitlines()[0]
+        assert first.startswith("# yaml-language-server: $schema="), path
+        named[path] = path.parent / first.split("$schema=", 1)[1]
+    assert {p.name for p in named} == {"first.yaml", "startup.yaml"}
+    for path, schema in named.items():
+        assert schema.is_file(), f"{path} names {schema}, which does not exist"
+        assert schema.read_text() == (ROOT / "docs" / "schema" / schema.name).read_text()
+    pose_schema = campaign / "poses" / "../docs/schema/pose.schema.json"  # pose save's comment
+    assert pose_schema.is_file()
+    assert invoke("validate", campaign).exit_code == 0
+
+
+@pytest.mark.parametrize("command", [["status"], ["halt"], ["reset"], ["fk"], ["ik"],
+                                     ["console"], ["pose", "save"], ["zero", "show"]])
+def test_the_arm_option_says_what_it_really_uses(command):
+    """Issue 23 (item 8): the help said "[default: arms/lwa3.yaml]" while the command used
+    the campaign's arm (or the shipped one) when there is no such file."""
+    help_text = " ".join(invoke(*command, "--help").output.split())
+    assert "[default: arms/lwa3.yaml]" not in help_text
+    assert "the arm of the campaign here (its seqrun.toml), else the shipped lwa3" in help_text
+
+
+def test_status_uses_the_arm_its_help_names(campaign, monkeypatch):
+    mine = (shipped_dir("arms") / "lwa3.yaml").read_text().replace(
+        "name: ", "name: Mine, not ", 1)
+    write(campaign / "arms" / "mine.yaml", mine)
+    config = campaign / "seqrun.toml"
+    config.write_text(config.read_text().replace('arm = "lwa3"', 'arm = "arms/mine.yaml"'))
+    monkeypatch.chdir(campaign)
+    result = invoke("status", "--sim")
+    assert result.exit_code == 0, result.output
+    assert "Mine, not " in result.output

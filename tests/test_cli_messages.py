@@ -4,8 +4,11 @@ JSON when asked for, include labels shown, cut labels marked, the right referenc
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 from pathlib import Path
 
+import pytest
 from typer.testing import CliRunner
 
 import seqrun.cli  # noqa: F401  (registers every command)
@@ -85,3 +88,16 @@ def test_schema_pose_markdown_is_the_pose_reference():
     assert "### `move`" not in result.stdout
     arm = run("schema", "arm", "--markdown").stdout
     assert arm.startswith("# Arm files\n") and "| `control.max_wait_s` |" in arm
+
+
+@pytest.mark.parametrize("flag", ["--version", "-V"])
+def test_version_is_printed(flag):
+    """Issue 23 (item 8): `seqrun --version` was 'No such option', exit 2."""
+    from seqrun import __version__
+
+    result = CliRunner().invoke(app, [flag])
+    assert result.exit_code == 0, result.output
+    assert result.output == f"seqrun {__version__}\n"
+    out = subprocess.run([sys.executable, "-m", "seqrun", flag], capture_output=True,
+                         text=True, timeout=60)
+    assert out.returncode == 0 and out.stdout == f"seqrun {__version__}\n", out

@@ -410,3 +410,38 @@ def test_decimation_keeps_the_envelope():
     assert len(td) <= 3000 and np.all(np.diff(td) > 0)
     assert np.nanmax(yd) == 40.0 and np.nanmin(yd) == pytest.approx(np.nanmin(y))
     assert np.any(np.isnan(yd))
+
+
+def test_csv_cells_that_a_spreadsheet_would_run_are_neutralised(tmp_path):
+    """Issue 23 (item 6): a step label from a sequence file is a cell of steps.csv; one
+    starting with = + - @ is a formula to a spreadsheet. It gets a leading ', while
+    negative numbers stay numbers."""
+    from projecttree import make_project, write_sequence
+
+    project = make_project(tmp_path / "p")
+    seq = write_sequence(project, """\
+        - include: startup.yaml
+        - confirm: {prompt: "=HYPERLINK(\\"http://x\\")", label: "=HYPERLINK(1)"}
+        - wait: {seconds: 0.1, label: "+cmd|' /C calc'!A0"}
+        - wait: {seconds: 0.1, label: "@SUM(A1:A9)"}
+        - wait: {seconds: 0.1, label: "-2+3"}
+        - wait: {seconds: 0.1, label: "-1.5"}
+    """)
+    run = tmp_path / "run"
+    result = CliRunner().invoke(app, ["run", str(seq), "--yes", "--virtual-time", "--plain",
+                                      "--no-report", "--log-dir", str(run)])
+    assert result.exit_code == 0, result.output
+    out = tmp_path / "csv"
+    assert CliRunner().invoke(app, ["report", str(run), "--csv", str(out)]).exit_code == 0
+    with open(out / "steps.csv", newline="") as f:
+        labels = [row["label"] for row in csv.DictReader(f)][-5:]
+    assert labels == ["'=HYPERLINK(1)", "'+cmd|' /C calc'!A0", "'@SUM(A1:A9)", "'-2+3",
+                      "-1.5"]
+    with open(out / "timeseries.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    negative = [r["j4_measured_deg"] for r in rows if r["j4_measured_deg"].startswith("-")]
+    assert negative and all(float(v) < 0 for v in negative)  # Park's j4 is -120.32
+    from seqrun.report.csvout import neutralise
+
+    assert [neutralise(c) for c in ("-0.5", "+2", "=1", "-inf", "-", "", 3.0)] == [
+        "-0.5", "+2", "'=1", "'-inf", "'-", "", 3.0]

@@ -114,3 +114,60 @@ def test_runs_lists_past_runs(campaign, monkeypatch):
     text = invoke("runs").output
     assert "First" in text and "refused" in text and "2 runs in" in text
     assert list_runs(campaign / "nothing") == []
+
+
+def test_runs_marks_corrupted_folders_and_lists_the_rest(campaign, monkeypatch):
+    """Issue 23 (item 6): one broken report.json must not hide (or crash) the listing."""
+    invoke("run", campaign / "sequences" / "first.yaml", "--yes", "--virtual-time", "--plain",
+           "--no-report")
+    runs = campaign / "runs"
+    broken = {"a-list": "[1, 2]", "b-garbage": "\x00\x01{not json", "c-types":
+              json.dumps({"status": "passed", "start": 5, "duration_s": "long",
+                          "exit_code": True, "sequence": {"x": 1}}),
+              "d-deep": "[" * 100_000 + "]" * 100_000, "e-binary": None}
+    for name, text in broken.items():
+        (runs / name).mkdir()
+        if text is None:
+            (runs / name / "report.json").write_bytes(b"\xff\xfe\x00garbage")
+        else:
+            (runs / name / "report.json").write_text(text)
+    (runs / "f-killed").mkdir()
+    (runs / "f-killed" / "events.jsonl").write_text('{"type": "run_started"}\n')
+    (runs / "not-a-run").mkdir()  # an empty folder is no run: not listed
+    monkeypatch.chdir(campaign)
+    result = invoke("runs")
+    assert result.exit_code == 0, result.output
+    assert "Traceback" not in result.output
+    lines = result.output.splitlines()
+    assert lines[-1].startswith("7 runs in ") and lines[-1].endswith(", 5 corrupted"), lines
+    for name in ("a-list", "b-garbage", "d-deep", "e-binary", "f-killed"):
+        line = next(line for line in lines if f"({name})" in line)
+        assert " corrupted " in line, line
+    assert any("First" in line and "passed" in line for line in lines)
+    listed = json.loads(invoke("runs", "--json").output)
+    by_folder = {Path(r["folder"]).name: r for r in listed}
+    assert by_folder["f-killed"]["problem"] == "no report.json"
+    # Fields of the wrong type are shown as unknown, never crash the table.
+    assert by_folder["c-types"]["result"] == "passed" and "problem" not in by_folder["c-types"]
+    assert by_folder["c-types"]["duration_s"] is None and by_folder["c-types"]["when"] is None
+    assert by_folder["c-types"]["exit_code"] is None and by_folder["c-types"]["sequence"] is None
+    assert "not-a-run" not in by_folder
+
+
+def test_runs_says_simulator_or_real_bus(campaign, monkeypatch):
+    """Issue 23 (item 8): which runs moved a real arm, at a glance."""
+    invoke("run", campaign / "sequences" / "first.yaml", "--yes", "--virtual-time", "--plain",
+           "--no-report")
+    real = campaign / "runs" / "zz-real"
+    real.mkdir()
+    (real / "report.json").write_text(json.dumps({
+        "sequence": "Real", "status": "passed", "exit_code": 0, "duration_s": 3.0,
+        "start": "2099-01-01T00:00:00+00:00"}))
+    (real / "record.json").write_text(json.dumps({"bus": "ixxat channel 0, 1000000 bit/s"}))
+    monkeypatch.chdir(campaign)
+    listed = json.loads(invoke("runs", "--json").output)
+    assert [(r["sequence"], r["simulator"]) for r in listed] == [("First", True),
+                                                                 ("Real", False)]
+    lines = invoke("runs").output.splitlines()
+    assert lines[0].split()[-1] == "bus"
+    assert lines[1].split()[-1] == "sim" and lines[2].split()[-1] == "REAL"

@@ -32,15 +32,27 @@ from seqrun.sequence.loader import load_sequence
 TOTEM = ROOT / "sequences" / "totem.yaml"
 
 
-class FullDisk:
-    """``os.write`` for the run folder with ``budget`` bytes of space: a write that does
-    not fit is short (what fits), the next one fails with ENOSPC, like a filling disk."""
+def _record_file(fd: int) -> bool:
+    """Whether ``fd`` is a file of the run's record (record.json, inputs/), written before
+    the run starts."""
+    name = os.readlink(f"/proc/self/fd/{fd}")
+    return "/inputs/" in name or os.path.basename(name).startswith("record.json")
 
-    def __init__(self, budget: int) -> None:
+
+class FullDisk:
+    """``os.write`` for the run folder with ``budget`` bytes of space after the run's
+    record (record.json, inputs/): a write that does not fit is short (what fits), the
+    next one fails with ENOSPC, like a filling disk. ``record=True``: the record's files
+    count too."""
+
+    def __init__(self, budget: int, *, record: bool = False) -> None:
         self.left = budget
         self.failures = 0
+        self.record = record
 
     def __call__(self, fd: int, data) -> int:
+        if not self.record and _record_file(fd):
+            return os.write(fd, data)
         if self.left <= 0:
             self.failures += 1
             raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
@@ -84,6 +96,46 @@ def test_a_full_disk_never_disturbs_the_run(tmp_path, monkeypatch, budget, fault
     assert "No space left on device" in warnings[0]
     assert ("PASSED" if code == 0 else "FAILED") in result.output
     assert_readable(folder)
+
+
+@pytest.mark.parametrize("budget", [0, 2_000])
+def test_a_full_disk_at_the_record_copy_is_one_line_and_nothing_moves(tmp_path, monkeypatch,
+                                                                      budget):
+    """Issue 23 (item 6): the record of what runs cannot be written: no run without it.
+    One line, exit 2, no motion (no trace, no events), no temporary file left."""
+    disk = FullDisk(budget, record=True)
+    monkeypatch.setattr(logfile, "_write", disk)
+    folder = tmp_path / "run"
+    result = run_cli(folder)
+    assert result.exit_code == 2, result.output
+    assert "Traceback" not in result.output and disk.failures >= 1
+    errors = [line for line in result.output.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1, result.output
+    assert "cannot write the run record" in errors[0] and "nothing was sent" in errors[0]
+    assert "No space left on device" in errors[0]
+    assert not list(folder.glob("trace.log*")) and not (folder / "events.jsonl").exists()
+    assert not list(folder.rglob("*.tmp")), list(folder.rglob("*"))
+
+
+@pytest.mark.parametrize("budget", [5_000, 60_000])
+def test_a_disk_filling_up_during_the_run_leaves_a_finished_report(tmp_path, monkeypatch,
+                                                                   budget):
+    """Issue 23 (item 6): report.json said "running" of a run that had ended, and
+    report.html.tmp was left behind. The ending is written into the room the running
+    report keeps; report.html fails in one line with nothing left behind."""
+    disk = FullDisk(budget)
+    monkeypatch.setattr(logfile, "_write", disk)
+    folder = tmp_path / "run"
+    result = CliRunner().invoke(app, ["run", str(TOTEM), "--virtual-time", "--yes",
+                                      "--plain", "--log-dir", str(folder)])
+    assert result.exit_code == 0, result.output
+    assert disk.failures >= 1, "the disk never filled up"
+    report = json.loads((folder / "report.json").read_text())
+    assert report["status"] == "passed" and report["exit_code"] == 0, report
+    assert report["log_errors"] and "No space left on device" in report["log_errors"][0]
+    assert not list(folder.rglob("*.tmp")), list(folder.rglob("*"))
+    assert "report.html not written" in result.output
+    assert not (folder / "report.html").exists()
 
 
 def test_a_full_disk_leaves_the_arm_behaviour_unchanged(tmp_path, monkeypatch):

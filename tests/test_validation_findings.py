@@ -166,3 +166,33 @@ def test_a_tight_checkpoint_says_how_far_off_it_is(project):
     assert "(tolerance 1e-06 mm)" in message
     shown = message.split("end-effector ")[1].split(" mm")[0]
     assert float(shown) > 1e-06, message  # never "0.00 mm"
+
+
+@pytest.mark.parametrize("unreachable", [
+    "- move: {position_mm: [2000, 0, 500], rpy_deg: [0, 0, 0]}",
+    "- move_linear: {position_mm: [2000, 0, 500], rpy_deg: [0, 0, 0], speed_mm_s: 50}",
+])
+def test_after_an_unreachable_target_later_checkpoints_add_no_second_error(project,
+                                                                         unreachable):
+    """Issue 23 (item 6): the checkpoint after an unreachable target said "cannot pass:
+    after the moves before it the end-effector is at [Totem]", a second, misleading
+    error: the run never gets past the unreachable step. A move to a whole pose after it
+    makes the position known again."""
+    path = write(project, f"""\
+        - move: totem
+        {unreachable}
+        - checkpoint: {{position_mm: [2000, 0, 500], rpy_deg: [0, 0, 0]}}
+        - checkpoint: {{moved_mm: [0, 0, 10]}}
+        - move: {{joints: {{j2: 10}}, relative: true}}
+        - move: opsafe
+        - checkpoint: totem
+        """)
+    check = static_check(path)
+    errors = found(check)
+    assert len(errors) == 2, errors
+    assert errors[0][1] == 6
+    # After the move to Op-safe the position is known again: checked, and it is wrong.
+    assert errors[1][1] == 11 and "this checkpoint cannot pass" in errors[1][3]
+    notes = {e.line: e.message for e in check.notes}
+    assert "not checked before the run: the run cannot get past step" in notes[7]
+    assert "not checked before the run" in notes[8]

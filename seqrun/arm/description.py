@@ -263,11 +263,17 @@ class ArmDescription(_Strict):
     # SHA-256 of the file it was loaded from (recorded in run folders); not a file key.
     _sha256: str = PrivateAttr("")
     _file: str = PrivateAttr("")
+    _source: bytes = PrivateAttr(b"")
     _notes: list = PrivateAttr(default_factory=_no_items)
 
     @property
     def sha256(self) -> str:
         return self._sha256
+
+    @property
+    def source_bytes(self) -> bytes:
+        """The bytes of the file it was loaded from, as read (b"" if built in code)."""
+        return self._source
 
     @property
     def source_file(self) -> str:
@@ -424,7 +430,7 @@ def load_arm(path: str | Path) -> ArmDescription:
 
     document = load_document(Path(path))
     arm = document.validate(ArmDescription)
-    arm._sha256, arm._file = document.sha256, document.file
+    arm._sha256, arm._file, arm._source = document.sha256, document.file, document.source
     if arm.control.dry_run_cycle_hz is not None:
         arm._notes.append(document.error(
             ("control", "dry_run_cycle_hz"), "control.dry_run_cycle_hz is no longer used and "

@@ -30,3 +30,18 @@ sim_app = typer.Typer(help="The simulated arm.", no_args_is_help=True)
 pose_app = typer.Typer(help="Predefined poses.", no_args_is_help=True)
 app.add_typer(sim_app, name="sim")
 app.add_typer(pose_app, name="pose")
+
+
+def _show_version(value: bool) -> None:
+    if value:
+        from seqrun import __version__
+
+        typer.echo(f"seqrun {__version__}")
+        raise typer.Exit(0)
+
+
+@app.callback()
+def _seqrun(version: bool = typer.Option(
+        False, "--version", "-V", is_eager=True, callback=_show_version,
+        help="Print seqrun's version and exit.")) -> None:
+    """Declarative sequence runner for PowerCube robot arms (Schunk LWA 3)."""

@@ -120,6 +120,15 @@ def status_command(
         if as_json:
             _watch_json(source, status, period, count, warn)
             return
+        if not console.is_terminal:  # a file or a pipe: one whole line per refresh
+            from seqrun.cli.status_line import status_line
+
+            for index in _refreshes(period, count):
+                if index:
+                    status = _next_reading(source, status, warn)
+                typer.echo(status_line(status))
+                sys.stdout.flush()
+            return
         # No auto-refresh thread: drawing the table between reads, never during one, keeps
         # it from holding the interpreter while acknowledges wait to be read.
         with Live(console=console, auto_refresh=False) as live:

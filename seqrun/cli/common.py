@@ -15,11 +15,15 @@ from seqrun.errors import Refused, SequenceInvalid, UserInputError
 # The arm file and the poses a command reads (the campaign's, else the shipped ones).
 from seqrun.service.campaigns import load_arm_file, pose_search_path  # noqa: F401
 
-ArmOption = Annotated[Path, typer.Option("--arm", metavar="FILE", help="Arm description file.")]
-#: An arm file only where one is given (None: the arm context's, seqrun/service/arm_context.py).
+#: The help says what load_arm_file really does with the default (not "arms/lwa3.yaml").
+ArmOption = Annotated[Path, typer.Option(
+    "--arm", metavar="FILE", show_default=False,
+    help="Arm file (default: ./arms/lwa3.yaml if there is one, else the arm of the campaign "
+         "here (its seqrun.toml), else the shipped lwa3).")]
+#: An arm file only where one is given (None: the command finds the campaign's).
 ArmFileOption = Annotated[Optional[Path], typer.Option(
-    "--arm", metavar="FILE", help="Arm file (default: the campaign's arm, else the shipped "
-                                  "lwa3).")]
+    "--arm", metavar="FILE", help="Arm file (default: the arm of the campaign here (its "
+                                  "seqrun.toml), else the shipped lwa3).")]
 #: The campaign of the current directory unless one is given.
 CampaignOption = Annotated[Optional[Path], typer.Option(
     "--project", metavar="DIR", help="Campaign folder (default: the one holding the current "

@@ -21,6 +21,7 @@ from seqrun.cli.app import app
 from seqrun.cli.common import (EXIT_FAULT, ArmFileOption, BitrateOption, BusKwargsOption,
                                CampaignOption, ChannelOption, InterfaceOption,
                                ResponseTimeoutOption, SimOption, fail, user_errors)
+from seqrun.cli.questions import ask
 from seqrun.defaults import EXIT_OPERATOR_ABORT
 
 
@@ -87,7 +88,7 @@ def console_command(
         with user_errors():
             try:
                 zero = zero_at_run_start(connection, arm, project,
-                                         lambda q: yes or typer.confirm(q, default=False),
+                                         lambda q: ask(q, yes),
                                          typer.echo, store=context.zero_store())
             except BusError as exc:
                 fail(f"cannot read the modules' state: {exc}", EXIT_FAULT)

@@ -31,7 +31,13 @@ arm = "{arm}"               # a shipped arm (lwa3) or a file in this folder (arm
 dir = "runs"                # run folders, relative to this folder
 """
 
+#: Where the YAML files' ``# yaml-language-server: $schema=../docs/schema/...`` comments
+#: point from sequences/, poses/ and arms/: the campaign gets its own copy of the schemas
+#: (a campaign lives outside seqrun's source, whose docs/ they name otherwise).
+SCHEMA_DIR = "docs/schema"
+
 STARTER = """\
+# yaml-language-server: $schema=../docs/schema/sequence.schema.json
 name: First
 description: >-
   A starter: start up a freshly powered-on arm and bring it to Totem, the working home.
@@ -60,8 +66,12 @@ def init_command(
     arm: Annotated[str, typer.Option("--arm", help="Shipped arm name or arm file relative "
                                                    "to the campaign.")] = DEFAULT_ARM_NAME,
 ) -> None:
-    """Create a campaign folder: seqrun.toml, sequences/ with a starter, poses/."""
+    """Create a campaign folder: seqrun.toml, sequences/ with a starter, poses/, and the
+    JSON Schemas the files name for editors (docs/schema/)."""
+    import json
+
     from seqrun.service.campaigns import CONFIG_NAME
+    from seqrun.service.formats import FORMATS, format_schema
 
     if folder.exists() and not folder.is_dir():
         fail(f"{folder} exists and is not a folder")
@@ -75,6 +85,9 @@ def init_command(
         "sequences/first.yaml": STARTER,
         "poses/README.md": POSES_README,
         ".gitignore": GITIGNORE,
+        **{f"{SCHEMA_DIR}/{kind}.schema.json":
+           json.dumps(format_schema(kind), indent=2, ensure_ascii=False) + "\n"
+           for kind in FORMATS},
     }
     try:
         for relative, text in files.items():
@@ -86,5 +99,5 @@ def init_command(
     except OSError as exc:
         fail(f"cannot create the campaign in {folder}: {exc.strerror or exc}")
     typer.echo(f"campaign created in {folder}: {CONFIG_NAME}, sequences/first.yaml, "
-               "sequences/startup.yaml, poses/")
+               f"sequences/startup.yaml, poses/, {SCHEMA_DIR}/")
     typer.echo(f"next: seqrun validate {folder}")

@@ -2,14 +2,15 @@
 
 Exit codes: 0 success, 1 invalid sequence (no motion), 2 usage error, 3 aborted by a fault,
 timeout or failed checkpoint (arm halted), or by SIGHUP / SIGQUIT (Halt), 130 operator abort
-(controlled stop; a second Ctrl-C or SIGTERM halts instead). Signals: cli/interrupts.py.
+(controlled stop; a second Ctrl-C or SIGTERM halts instead). Signals: cli/interrupts.py;
+before the run starts (its questions) SIGTERM, SIGHUP and SIGQUIT end it with exit 130,
+nothing sent (cli/questions.py).
 """
 
 from __future__ import annotations
 
 import functools
 import os
-import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Callable, Optional
 
@@ -19,7 +20,7 @@ from seqrun.cli.app import app
 from seqrun.cli.common import (BitrateOption, BusKwargsOption, ChannelOption, InterfaceOption,
                                SimOption, fail, user_errors)
 from seqrun.defaults import EXIT_FAULT, EXIT_INVALID, EXIT_OPERATOR_ABORT
-from seqrun.errors import BusError
+from seqrun.errors import BusError, SequenceInvalid
 
 if TYPE_CHECKING:
     from rich.console import Console
@@ -28,20 +29,15 @@ if TYPE_CHECKING:
 
 def _ask(console: Console, question: str, assume_yes: bool,
          read: Callable[[], str | None] | None = None) -> bool:
-    """Ask the operator; EOF on stdin (no operator) is a no. ``read`` returns None when
-    a signal interrupted the question (a no as well)."""
-    if assume_yes:
-        console.print(f"{question} yes (--yes)", highlight=False, markup=False, soft_wrap=True)
-        return True
-    console.print(f"{question} [y/N] ", end="", highlight=False, markup=False, soft_wrap=True)
-    if read is None:
-        try:
-            answer = sys.stdin.readline()
-        except KeyboardInterrupt:
-            return False
-    else:
-        answer = read()
-    return answer is not None and answer.strip().lower() in ("y", "yes")
+    """Ask the operator (cli/questions.py); EOF on stdin (no operator) is a no, said on
+    the question's line. ``read`` returns None when a signal interrupted the question (a
+    no as well)."""
+    from seqrun.cli.questions import ask
+
+    def say(text: str, end: str = "\n") -> None:
+        console.print(text, end=end, highlight=False, markup=False, soft_wrap=True)
+
+    return ask(question, assume_yes, say=say, read=read)
 
 
 def _ask_shown(console: Console, displays: list, question: str, assume_yes: bool, *,
@@ -142,20 +138,54 @@ def run_command(
                 typer.echo(str(error), err=True)
             typer.echo(str(exc), err=True)
             raise typer.Exit(EXIT_INVALID) from None
+        except SequenceInvalid as exc:  # it does not even load: the same last line
+            for error in exc.errors:
+                typer.echo(f"error: {error}", err=True)
+            typer.echo(str(RunInvalid(str(file), list(exc.errors))), err=True)
+            raise typer.Exit(EXIT_INVALID) from None
     # From here `seqrun status` / `seqrun halt` in another terminal ask this run.
     from seqrun.service.run_control import RunControl
     from seqrun.stop_requests import StopRequests
 
     requests = StopRequests()
     control = RunControl.serve(run.connection, run.arm, requests)
-    zero = _confirm_start(console, run, yes)
+    zero = _confirm_start_or_record(console, run, yes, log_dir)
     _use_realtime(console, rt_priority)
     folder = _run_folder(console, run, log_dir)
     outcome = _run_in_session(console, run, zero, folder, control, requests, step=step,
                               yes=yes, plain=plain, speed=speed, from_step=from_step,
                               command_mode=command_mode, no_report=no_report)
-    _print_outcome(console, outcome, folder)
+    try:  # the run has ended: a Ctrl-C now changes neither its exit code nor its story
+        _print_outcome(console, outcome, folder)
+    except KeyboardInterrupt:
+        pass
     raise typer.Exit(outcome.result.exit_code)
+
+
+def _confirm_start_or_record(console: Console, run, yes: bool, log_dir: Path | None):
+    """:func:`_confirm_start`, where SIGTERM, SIGHUP or SIGQUIT at a question (the REAL
+    arm's, the zero reference's) end the command in one line, exit 130, and a run not
+    started (a no, a signal) leaves a run folder saying that nothing was sent."""
+    from seqrun.cli.questions import QuestionInterrupted, signals_end_the_question
+    from seqrun.service import campaign_records
+
+    def record(message: str) -> None:
+        campaign_records.not_started(run.loaded, run.arm_path, log_dir, message,
+                                     arm=run.arm, bus=run.connection.description)
+
+    try:
+        with signals_end_the_question():
+            return _confirm_start(console, run, yes)
+    except QuestionInterrupted as exc:
+        run.connection.close()  # (closing twice is harmless)
+        record(f"not started: {exc.name} before the run started; nothing was sent")
+        typer.echo(f"seqrun run: {exc.name} before the run started; nothing was sent",
+                   err=True)
+        raise typer.Exit(EXIT_OPERATOR_ABORT) from None
+    except typer.Exit as exc:
+        if exc.exit_code == EXIT_OPERATOR_ABORT:  # the operator said no
+            record("not started: the operator declined; nothing was sent")
+        raise
 
 
 def _confirm_start(console: Console, run, yes: bool):
@@ -167,6 +197,9 @@ def _confirm_start(console: Console, run, yes: bool):
     style = "bold black on yellow" if connection.is_simulator else "bold white on red"
     headline = run.context.headline(connection) if run.context else connection.description
     console.print(f" {headline} ", style=style, highlight=False, markup=False, soft_wrap=True)
+    for note in run.overrides:  # files used in place of shipped ones: said before any yes
+        console.print(f"note: {note}", style="yellow", highlight=False, markup=False,
+                      soft_wrap=True)
     if not connection.is_simulator and not _ask(
             console, f"Run '{loaded.name}' on the REAL arm?", yes):
         console.print("Not started: the operator declined. Nothing was sent.")
@@ -234,7 +267,13 @@ def _run_in_session(console: Console, run, zero, folder: Path, control, requests
     # From here on signals only post stop requests (seqrun/cli/interrupts.py); the control
     # loop acts on them, a question is answered "no".
     signals = RunSignals(requests)
-    campaign_records.record_run(folder, loaded, run.arm_path, connection.description, zero)
+    try:  # the bytes validated, not the files again (one may have changed meanwhile)
+        campaign_records.record_run(folder, loaded, run.arm_path, connection.description,
+                                    zero, arm=arm, overrides=run.overrides)
+    except OSError as exc:
+        connection.close()
+        fail(f"cannot write the run record in {folder} ({exc.strerror or exc}); "
+             "nothing was sent")
     displays: list = []
 
     def confirm(prompt: str) -> bool:
@@ -276,7 +315,10 @@ def _run_in_session(console: Console, run, zero, folder: Path, control, requests
             command_mode=command_mode, confirm=confirm, before_step=before_step,
             run_control=control, requests=requests, warn=warn,
             confirm_clear_latched=(None if connection.is_simulator else confirm_clear_latched),
-            meta={"zero": zero.as_dict()}, html_report=not no_report,
+            meta={"zero": zero.as_dict(),
+                  **({"overrides": [str(n) for n in run.overrides]} if run.overrides
+                     else {})},
+            html_report=not no_report,
             # The built-in simulator keeps no record: its zero is its power-on pose.
             record_zero=(None if connection.is_simulator
                          else campaign_records.zero_recorder(
@@ -288,9 +330,11 @@ def _run_in_session(console: Console, run, zero, folder: Path, control, requests
             displays[0].__exit__(None, None, None)
         elif displays:
             displays[0].close(timeout=5.0)  # every line printed before the summary
-        signals.restore()
-        session.close()
-        connection.close()
+        try:
+            session.close()
+            connection.close()
+        finally:  # until here a signal is a request: a Ctrl-C never cuts the closing short
+            signals.restore()
 
 
 def _print_outcome(console: Console, outcome, folder: Path) -> None:

@@ -44,11 +44,18 @@ def runs_command(
     if not runs:
         typer.echo(f"no runs in {runs_dir}")
         return
-    typer.echo(f"{'when':19s} {'sequence':24s} {'result':10s} {'duration':>9s} {'exit':>4s}")
+    typer.echo(f"{'when':19s} {'sequence':24s} {'result':10s} {'duration':>9s} {'exit':>4s} "
+               f"{'bus':4s}")
     for run in runs:
         duration = run["duration_s"]
-        typer.echo(f"{_local(run['when']):19s} {str(run['sequence'] or '-')[:24]:24s} "
-                   f"{str(run['result'] or '-')[:10]:10s} "
-                   f"{'-' if duration is None else f'{duration:.2f} s':>9s} "
-                   f"{'-' if run['exit_code'] is None else run['exit_code']:>4}")
-    typer.echo(f"{len(runs)} run{'s' * (len(runs) != 1)} in {runs_dir}")
+        bus = {True: "sim", False: "REAL", None: "-"}[run["simulator"]]
+        line = (f"{_local(run['when']):19s} {str(run['sequence'] or '-')[:24]:24s} "
+                f"{str(run['result'] or '-')[:10]:10s} "
+                f"{'-' if duration is None else f'{duration:.2f} s':>9s} "
+                f"{'-' if run['exit_code'] is None else run['exit_code']:>4} {bus:4s}")
+        if run.get("problem"):  # what is wrong, and where
+            line += f" {run['problem']} ({Path(run['folder']).name})"
+        typer.echo(line.rstrip())
+    corrupted = sum(1 for run in runs if run.get("problem"))
+    typer.echo(f"{len(runs)} run{'s' * (len(runs) != 1)} in {runs_dir}"
+               + (f", {corrupted} corrupted" if corrupted else ""))

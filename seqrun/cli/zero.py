@@ -16,6 +16,7 @@ import typer
 
 from seqrun.cli.app import app
 from seqrun.cli.common import ArmFileOption, CampaignOption, fail, user_errors
+from seqrun.cli.questions import ask
 from seqrun.errors import BusError, UserInputError
 from seqrun.service.zero import ZeroInForce, ZeroStore, pose_title, zero_for_run
 
@@ -67,7 +68,7 @@ def set_command(
                 "The next power-on takes its zero there.")
     if yes:
         typer.echo(f"{question} yes (--yes)")
-    elif not typer.confirm(question, default=False):
+    elif not ask(question):  # (an empty stdin is a no, as in every question)
         fail("nothing recorded", 130)
     record = store.set_record(name, by="seqrun zero set")
     typer.echo(f"zero reference recorded: {record.describe(pose_title(name))} ({store.path})")

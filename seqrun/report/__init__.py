@@ -14,6 +14,7 @@ from pathlib import Path
 
 from seqrun.arm.description import ArmDescription
 from seqrun.report.data import RunData, load_run
+from seqrun.service.logfile import write_streamed
 
 HTML_NAME = "report.html"
 
@@ -27,15 +28,10 @@ def write_html(folder: str | Path, out: str | Path | None = None, *,
     data = data if data is not None else load_run(folder, arm=arm)
     target = Path(out) if out is not None else Path(folder) / HTML_NAME
     plots = iter_plots(data)   # drawn one at a time as the page is written
-    tmp = target.with_name(target.name + ".tmp")
-    try:
-        with open(tmp, "w", encoding="utf-8") as f:
-            for part in html_parts(data, plots):
-                f.write(part)
-        tmp.replace(target)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    # Through the run folder's writer: a full disk leaves no report.html.tmp behind.
+    error = write_streamed(target, html_parts(data, plots))
+    if error is not None:
+        raise error
     return target
 
 

@@ -54,7 +54,7 @@ def _timeseries(data: RunData, path: Path) -> Path:
         header += list(_POSE)
     states: dict[int, str] = {}
     with open(path, "w", newline="", encoding="utf-8") as f:
-        w = csv.writer(f)
+        w = _SafeWriter(f)
         w.writerow(header)
         for s in data.readings():
             pose = end_effector_pose(data.arm, s.measured) if data.arm is not None else None
@@ -81,7 +81,7 @@ def _steps(data: RunData, path: Path) -> Path:
     for key in _STEP_FIGURES:
         header += [f"{n}_{key}" for n in names]
     with open(path, "w", newline="", encoding="utf-8") as f:
-        w = csv.writer(f)
+        w = _SafeWriter(f)
         w.writerow(header)
         for step in data.steps:
             figures = move_figures(data, step)[0] if step.kind == "move" else {}
@@ -93,6 +93,34 @@ def _steps(data: RunData, path: Path) -> Path:
                 row += [_f(v, 3) for v in values]
             w.writerow(row)
     return path
+
+
+#: A cell starting with one of these is a formula to a spreadsheet (a label such as
+#: ``=HYPERLINK(...)`` from a sequence file would run when the CSV is opened).
+_FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
+
+
+def neutralise(cell: object) -> object:
+    """``cell`` as a spreadsheet shows it and never runs it: a text starting like a formula
+    gets a leading ``'``; a number (``-1.5``, ``+3``, ``-inf`` is not one) stays a number."""
+    if not isinstance(cell, str) or not cell.startswith(_FORMULA_START):
+        return cell
+    try:
+        if math.isfinite(float(cell)):
+            return cell
+    except ValueError:
+        pass
+    return "'" + cell
+
+
+class _SafeWriter:
+    """csv.writer whose every cell goes through :func:`neutralise`."""
+
+    def __init__(self, stream) -> None:
+        self._writer = csv.writer(stream)
+
+    def writerow(self, row: list) -> None:
+        self._writer.writerow([neutralise(cell) for cell in row])
 
 
 def _f(x, nd: int) -> str:

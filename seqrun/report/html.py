@@ -24,7 +24,8 @@ from seqrun.report.plots import Plot
 _KNOWN = {"sequence", "file", "start", "end", "arm", "bus", "simulator", "faults", "speed",
           "first_step", "seqrun", "status", "exit_code", "message", "duration_s",
           "planned_duration_s", "fault", "steps", "checkpoints", "not_verified",
-          "min_heights_mm", "inputs", "zero_reference", "zero", "steps_finished", "errors"}
+          "min_heights_mm", "inputs", "zero_reference", "zero", "steps_finished", "errors",
+          "overrides"}
 
 _FIGURE_ROWS = (
     ("max_following_error_deg", "largest following error (°)"),
@@ -167,6 +168,8 @@ def _identity(data: RunData) -> str:
         ("injected simulator faults", ", ".join(r.get("faults") or []) or None),
         ("first step", r.get("first_step")),
         ("zero reference", _zero(r.get("zero_reference", r.get("zero", data.record.get("zero"))))),
+        ("files in place of shipped ones",
+         "; ".join(map(str, r.get("overrides") or data.record.get("overrides") or [])) or None),
         ("campaign", data.record.get("campaign")),
         ("campaign git", data.record.get("git")),
         ("result", r.get("status")), ("exit code", r.get("exit_code")),

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from seqrun.shipped import DEFAULT_ARM_NAME
 
@@ -28,6 +28,16 @@ class BusSection(_Strict):
     bitrate: Literal[125000, 250000, 500000, 1000000] | None = Field(
         None, description="Bit rate (-b); default the arm file's.")
     kwargs: dict[str, Any] = Field({}, description="Extra python-can bus arguments.")
+
+    @field_validator("bitrate", mode="before")
+    @classmethod
+    def _whole_number(cls, value: Any) -> Any:
+        # The Literal alone lets 500000.0 through (it compares equal): a bit rate is an
+        # integer; a float or a boolean is a typing mistake worth a line.
+        if value is not None and type(value) is not int:
+            raise ValueError(f"a bit rate is a whole number (125000, 250000, 500000 or "
+                             f"1000000), got {value!r}")
+        return value
 
 
 class RunsSection(_Strict):

@@ -62,6 +62,9 @@ class LoadedSequence:
     poses: Mapping[str, FrozenPose] = field(default_factory=dict)
     #: SHA-256 of every sequence file read (same order as ``files``).
     digests: tuple[str, ...] = ()
+    #: The bytes of every sequence file as read and validated (same order as ``files``):
+    #: what a run folder keeps, never the files read again.
+    sources: tuple[bytes, ...] = field(default=(), repr=False)
 
     @property
     def location(self) -> Location:
@@ -106,6 +109,7 @@ class _Loader:
         self.pose_problems: dict[str, str | None] = {}
         self.poses: dict[str, FrozenPose] = {}
         self.digests: list[str] = []
+        self.sources: list[bytes] = []
         self.include_titles: dict[Location, str] = {}
         self.top: Any = None  # the top file's data, when it could be read
 
@@ -123,6 +127,7 @@ class _Loader:
             return None
         self.files.append(path)
         self.digests.append(doc.sha256)
+        self.sources.append(doc.source)
         if not chain:
             self.top = doc.data
         try:
@@ -315,6 +320,7 @@ def load_sequence_partial(path: str | os.PathLike[str], *,
                           poses_dir=loader.poses_dir, arm_path=loader.arm_path,
                           steps=tuple(loader.steps), files=tuple(loader.files),
                           pose_path=tuple(loader.pose_path), project=project,
-                          poses=dict(loader.poses), digests=tuple(loader.digests)), errors
+                          poses=dict(loader.poses), digests=tuple(loader.digests),
+                          sources=tuple(loader.sources)), errors
 
 

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import os
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -63,16 +63,72 @@ def _config_location(text: str, loc: tuple) -> tuple[int, int]:
     return (header_line, 1) if header_line else (1, 1)
 
 
+#: How deep arrays and inline tables of a seqrun.toml may nest (a real one needs 2; a
+#: "nesting bomb" would exhaust the parser's recursion).
+MAX_CONFIG_NESTING = 32
+
+
+def _too_deep(text: str) -> tuple[int, int] | None:
+    """Line and column where arrays / inline tables nest deeper than
+    :data:`MAX_CONFIG_NESTING` (strings and comments skipped), else None."""
+    depth, quote, line, column = 0, "", 1, 0
+    i, n = 0, len(text)
+    while i < n:
+        ch = text[i]
+        column += 1
+        if ch == "\n":
+            line, column = line + 1, 0
+            if quote in ('"', "'"):
+                quote = ""  # a one-line string does not continue (the parser says why)
+        elif quote:
+            if quote in ('"', '"""') and ch == "\\":
+                i += 1
+                column += 1
+            elif text.startswith(quote, i):
+                i += len(quote) - 1
+                column += len(quote) - 1
+                quote = ""
+        elif ch == "#":
+            end = text.find("\n", i)
+            i = n if end < 0 else end
+            continue
+        elif ch in "\"'":
+            quote = ch * 3 if text.startswith(ch * 3, i) else ch
+            i += len(quote) - 1
+            column += len(quote) - 1
+        elif ch in "[{":
+            depth += 1
+            if depth > MAX_CONFIG_NESTING:
+                return line, column
+        elif ch in "]}":
+            depth = max(0, depth - 1)
+        i += 1
+    return None
+
+
 def load_config(path: Path) -> CampaignConfig:
     """Read ``seqrun.toml``; :class:`ConfigInvalid` with ``file:line:col`` errors."""
+    return read_config(path)[0]
+
+
+def read_config(path: Path) -> tuple[CampaignConfig, bytes]:
+    """``seqrun.toml`` and the bytes it was read from (a run folder keeps these);
+    :class:`ConfigInvalid` with ``file:line:col`` errors."""
     shown = os.path.relpath(path) if path.is_absolute() else str(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        source = path.read_bytes()
+        text = source.decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise ConfigInvalid([SourceError(shown, 1, 1, f"not UTF-8 text ({exc.reason})")]) \
-            from None
+        line = source.count(b"\n", 0, exc.start) + 1
+        column = exc.start - (source.rfind(b"\n", 0, exc.start) + 1) + 1
+        raise ConfigInvalid([SourceError(shown, line, column,
+                                         f"not UTF-8 text ({exc.reason})")]) from None
     except OSError as exc:
         raise UserInputError(f"{shown}: {exc.strerror or exc}") from None
+    deep = _too_deep(text)
+    if deep is not None:
+        raise ConfigInvalid([SourceError(shown, *deep, "invalid TOML: arrays or tables "
+                                         f"nested more than {MAX_CONFIG_NESTING} deep")])
     import tomllib  # only where a seqrun.toml is read (it compiles its regexes at import)
 
     try:
@@ -84,20 +140,24 @@ def load_config(path: Path) -> CampaignConfig:
         message = re.sub(r"\s*\(at (line \d+, column \d+|end of document)\)", "", message)
         raise ConfigInvalid([SourceError(shown, line, column,
                                            f"invalid TOML: {message}")]) from None
+    except RecursionError:  # nesting the scan above did not see (it skips strings)
+        raise ConfigInvalid([SourceError(shown, 1, 1, "invalid TOML: nested too "
+                                                      "deep")]) from None
     # the models only where a seqrun.toml is read (four pydantic models, built at import)
     from pydantic import ValidationError
 
     from seqrun.sequence.campaign_config import CampaignConfig
 
     try:
-        return CampaignConfig.model_validate(data)
+        return CampaignConfig.model_validate(data), source
     except ValidationError as exc:
         errors = []
         for error in exc.errors():
             line, column = _config_location(text, tuple(error["loc"]))
             where = ".".join(str(k) for k in error["loc"])
             message = ("unknown key (expected: " + _expected(error["loc"]) + ")"
-                       if error["type"] == "extra_forbidden" else error["msg"])
+                       if error["type"] == "extra_forbidden"
+                       else error["msg"].removeprefix("Value error, "))
             errors.append(SourceError(shown, line, column, f"{where}: {message}"))
         raise ConfigInvalid(errors) from None
 
@@ -141,6 +201,8 @@ class Project:
     root: Path
     config_path: Path | None = None
     config: CampaignConfig | None = None
+    #: The bytes ``config`` was read from (a run folder keeps these, not the file again).
+    config_source: bytes = field(default=b"", repr=False, compare=False)
 
     @property
     def is_campaign(self) -> bool:
@@ -213,7 +275,8 @@ def open_project(folder: Path) -> Project:
         raise UserInputError(f"project folder {folder} does not exist")
     config_path = folder / CONFIG_NAME
     if config_path.is_file():
-        return Project(folder.resolve(), config_path.resolve(), load_config(config_path))
+        config, source = read_config(config_path)
+        return Project(folder.resolve(), config_path.resolve(), config, source)
     return Project(folder.resolve())
 
 

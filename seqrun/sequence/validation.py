@@ -165,6 +165,9 @@ class Checker:
         self.targets_deg: dict[int, np.ndarray] = {}
         self.proximities: dict[int, Proximity] = {}
         self.motion_start_deg: np.ndarray | None = None  # where the last move started
+        # The step after which where the arm stands is not known (an unreachable target):
+        # the checks that compare with it are left out until a move says again.
+        self.lost_at: ResolvedStep | None = None
         # Limits the file itself sets (arm file, its set_limits): exceeding them is an
         # error. ``limits`` adds what the modules hold: moves are planned within it.
         self.file_limits = LimitsInForce(arm)
@@ -455,6 +458,7 @@ class Checker:
         """An end-effector target's solution (every joint): tracked from here on, and kept
         for the run to compare its own solution with."""
         self.targets_deg[step.number] = np.asarray(joints_deg, dtype=float).copy()
+        self.lost_at = None
         for name in self.unlocked_names():
             state = self.joints[name]
             value = float(joints_deg[self.arm.index(name)])

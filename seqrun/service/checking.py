@@ -75,7 +75,7 @@ def check_sequence(file: Path, *, start: str | None = None,
     static = static_check(file, start=start, start_deg=start_deg, arm_file=arm_file,
                           started=started, speed=speed, project_dir=project_dir)
     if static.loaded is not None:
-        static.notes = list(static.notes) + override_notes(static.loaded)
+        static.notes = list(static.notes) + override_notes(static.loaded, arm_file)
     check = SequenceCheck(static)
     if static.valid and dry_run:
         from seqrun.service.dryrun import dry_run as run_dry
@@ -94,13 +94,17 @@ def check_sequence(file: Path, *, start: str | None = None,
     return check
 
 
-def override_notes(loaded: LoadedSequence) -> list:
-    """A note for every pose the sequence uses that the campaign's poses/ overrides."""
+def override_notes(loaded: LoadedSequence, arm_path: Path | None = None) -> list:
+    """A note for every file the sequence uses in place of a shipped one: each pose the
+    campaign's poses/ overrides, an arm file that shadows the shipped arm of its name (its
+    guards, tools and limits are not the shipped ones) or lies outside the campaign.
+    ``arm_path``: the arm file in use (``--arm``), default the sequence's."""
     from seqrun.arm.poses import pose_overrides
     from seqrun.steps.registry import step_kind
 
+    notes = _arm_notes(loaded, Path(arm_path or loaded.arm_path))
     overrides = pose_overrides(loaded.pose_path or loaded.poses_dir)
-    notes, seen = [], set()
+    seen = set()
     for step in loaded.steps:
         for name in step_kind(step.kind).poses(step.params):  # the pose files it names
             if name in overrides and name not in seen:
@@ -110,6 +114,39 @@ def override_notes(loaded: LoadedSequence) -> list:
                                         f"overrides {', '.join(str(h) for h in hidden)}",
                                         "pose"))
     return notes
+
+
+def _arm_notes(loaded: LoadedSequence, arm_path: Path) -> list:
+    """The note on an arm file that is not the shipped one it looks like."""
+    from seqrun.shipped import shipped_arm, shipped_dir
+    from seqrun.yamlsource import Location
+
+    try:
+        used = arm_path.resolve()
+    except (OSError, RuntimeError):
+        return []
+    if used.is_relative_to(shipped_dir("arms").resolve()):
+        return []
+    project = loaded.project
+    root = Path(getattr(project, "root", loaded.project_root)).resolve()
+    what = "the campaign's" if getattr(project, "is_campaign", False) else "the project's"
+    shipped = shipped_arm(used.stem)
+    if not used.is_relative_to(root):
+        text = (f"arm file {used} lies outside {what} folder {root}"
+                + (f" and shadows the shipped {shipped}" if shipped is not None else "")
+                + ": its guards, tools and limits are used")
+    elif shipped is not None:
+        text = (f"arm file {used} is {what}, which shadows the shipped {shipped}: its "
+                "guards, tools and limits are used")
+    else:
+        return []
+    line = 1
+    top = loaded.sources[0] if loaded.sources else b""
+    for number, raw in enumerate(top.splitlines(), start=1):
+        if raw.startswith(b"arm:"):
+            line = number
+            break
+    return [Location(loaded.file, line, 1).error(text)]
 
 
 def errors_before_bus(file: Path, load_errors: list, **check: Any) -> list:

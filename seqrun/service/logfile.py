@@ -20,7 +20,7 @@ import gzip
 import os
 import zlib
 from pathlib import Path
-from typing import Callable, Iterator
+from typing import Callable, Iterable, Iterator
 
 #: Every byte of the run folder goes through this (tests put a full disk in its place).
 _write = os.write
@@ -157,14 +157,15 @@ class GzipLineFile:
         self._fd = None
 
 
-def write_whole(path: Path, text: str) -> OSError | None:
-    """Replace ``path`` by ``text`` atomically; the error (nothing left behind) or None."""
+def write_whole(path: Path, text: str | bytes) -> OSError | None:
+    """Replace ``path`` by ``text`` (or bytes) atomically; the error (nothing left behind)
+    or None."""
     path = Path(path)
     tmp = path.with_name(path.name + ".tmp")
     fd = None
     try:
         fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
-        _write_all(fd, text.encode("utf-8"))
+        _write_all(fd, text.encode("utf-8") if isinstance(text, str) else bytes(text))
         os.close(fd)
         fd = None
         os.replace(tmp, path)
@@ -180,6 +181,60 @@ def write_whole(path: Path, text: str) -> OSError | None:
         except OSError:
             pass
         return exc
+
+
+def write_streamed(path: Path, parts: Iterable[str]) -> OSError | None:
+    """Replace ``path`` atomically by the texts of ``parts``, written as they come (a
+    large page never whole in memory); the error (nothing left behind) or None. Any other
+    exception from ``parts`` removes the temporary file and goes on."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".tmp")
+    fd = None
+    try:
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        for part in parts:
+            _write_all(fd, part.encode("utf-8"))
+        os.close(fd)
+        fd = None
+        os.replace(tmp, path)
+        return None
+    except BaseException as exc:
+        if fd is not None:
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        if isinstance(exc, OSError):
+            return exc
+        raise
+
+
+def overwrite_in_place(path: Path, text: str) -> OSError | None:
+    """Write ``text`` over the start of the existing file ``path`` and cut it there: no
+    new block is needed when ``text`` is no longer than the file (a full disk can still
+    take it). The error, or None; a text longer than the file is refused (ENOSPC)."""
+    data = text.encode("utf-8")
+    try:
+        fd = os.open(path, os.O_WRONLY)
+    except OSError as exc:
+        return exc
+    try:
+        if len(data) > os.fstat(fd).st_size:
+            return OSError(errno.ENOSPC, "no room for it in the file")
+        view = memoryview(data)
+        offset = 0
+        while offset < len(data):  # the blocks exist already: pwrite, not the disk's _write
+            offset += os.pwrite(fd, view[offset:], offset)
+        os.ftruncate(fd, len(data))
+        return None
+    except OSError as exc:
+        return exc
+    finally:
+        os.close(fd)
 
 
 def read_lines(path: Path) -> Iterator[bytes]:

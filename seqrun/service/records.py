@@ -14,24 +14,16 @@ import datetime as _dt
 import hashlib
 import json
 import os
-import shutil
 import subprocess
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
+from seqrun.service.logfile import write_whole
 from seqrun.shipped import shipped_dir
 
 #: How long ``git rev-parse`` may take before the record says "unknown".
 GIT_TIMEOUT_S = 5.0
-
-
-def sha256_file(path: Path) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as handle:
-        for block in iter(lambda: handle.read(1 << 16), b""):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 def _copy_name(path: Path, root: Path | None) -> str:
@@ -49,45 +41,74 @@ def _copy_name(path: Path, root: Path | None) -> str:
 
 def freeze_inputs(folder: Path, paths: Iterable[Path], root: Path | None = None) -> list[dict]:
     """Copy every file of ``paths`` into ``folder/inputs/`` and return one entry per file:
-    ``{"path", "copy", "sha256", "bytes"}`` (duplicates dropped, order kept). The sha256 is
-    of the copy, so record and copy always agree."""
+    ``{"path", "copy", "sha256", "bytes"}`` (duplicates dropped, order kept)."""
+    sources = []
+    for path in paths:
+        path = Path(path)
+        if path.is_file():
+            sources.append((path, path.read_bytes()))
+    return freeze_sources(folder, sources, root)
+
+
+def freeze_sources(folder: Path, sources: Iterable[tuple[Path, bytes]],
+                   root: Path | None = None) -> list[dict]:
+    """Write the bytes of every ``(path, bytes)`` into ``folder/inputs/`` (where
+    :func:`_copy_name` says) and return one entry per file: ``{"path", "copy", "sha256",
+    "bytes"}`` (duplicates dropped, order kept). The bytes are those that were read and
+    validated, never the file read again: a file edited since is recorded as it was used.
+    An OSError (a full disk) is raised, with no partial copy left."""
     entries: list[dict] = []
     seen: set[Path] = set()
-    for path in paths:
+    for path, data in sources:
         path = Path(path).resolve()
-        if path in seen or not path.is_file():
+        if path in seen:
             continue
         seen.add(path)
         name = _copy_name(path, root)
         target = Path(folder) / "inputs" / name
         target.parent.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(path, target)
+        error = write_whole(target, data)
+        if error is not None:
+            raise error
         entries.append({"path": str(path), "copy": f"inputs/{name}",
-                        "sha256": sha256_file(target), "bytes": target.stat().st_size})
+                        "sha256": hashlib.sha256(data).hexdigest(), "bytes": len(data)})
     return entries
 
 
-def input_paths(loaded: Any, arm_path: Path | None = None) -> list[Path]:
-    """The files a loaded sequence uses: itself and its includes, the pose files its steps
-    name, the arm file and the campaign config."""
-    from seqrun.errors import SeqrunError
-    from seqrun.arm.poses import find_pose
+def input_sources(loaded: Any, arm: Any = None,
+                  arm_path: Path | None = None) -> list[tuple[Path, bytes]]:
+    """The files a loaded sequence was validated from, as the bytes read then: itself and
+    its includes, the pose files its steps name, the arm file and the campaign config.
+    (A file the loader did not keep, e.g. of a sequence built in code, is read now.)"""
+    def read(path: Path) -> tuple[Path, bytes] | None:
+        return (path, path.read_bytes()) if path.is_file() else None
 
-    paths = [Path(p) for p in loaded.files]
-    pose_path = loaded.pose_path or loaded.poses_dir
-    for name in ("park",) + tuple(dict.fromkeys(
-            getattr(s.params, "pose", None) for s in loaded.steps)):
-        if name is None:
-            continue
-        try:
-            paths.append(find_pose(name, pose_path))
-        except SeqrunError:  # a power_off pose is in the arm file, not a pose file
-            pass
-    paths.append(Path(arm_path or loaded.arm_path))
-    config = getattr(loaded.project, "config_path", None)
+    files = [Path(p) for p in loaded.files]
+    kept = list(getattr(loaded, "sources", ()) or ())
+    sources = list(zip(files, kept)) if len(kept) == len(files) else \
+        [s for s in map(read, files) if s is not None]
+    for pose in (getattr(loaded, "poses", None) or {}).values():
+        sources.append((Path(pose.document.path), pose.document.source))
+    arm_file = Path(arm_path or loaded.arm_path)
+    arm_bytes: bytes = getattr(arm, "source_bytes", None) or b""
+    if arm_bytes:
+        sources.append((arm_file, arm_bytes))
+    elif (found := read(arm_file)) is not None:
+        sources.append(found)
+    project = getattr(loaded, "project", None)
+    config = getattr(project, "config_path", None)
     if config is not None:
-        paths.append(Path(config))
-    return paths
+        source = getattr(project, "config_source", b"")
+        if source:
+            sources.append((Path(config), source))
+        elif (found := read(Path(config))) is not None:
+            sources.append(found)
+    return sources
+
+
+def input_paths(loaded: Any, arm_path: Path | None = None) -> list[Path]:
+    """The paths of :func:`input_sources`."""
+    return [path for path, _ in input_sources(loaded, None, arm_path)]
 
 
 def git_state(folder: Path) -> dict | None:
@@ -111,14 +132,16 @@ def git_state(folder: Path) -> dict | None:
 
 
 def write_record(folder: Path, *, loaded: Any, arm_path: Path, bus: str,
-                 zero: dict | None, inputs: list[dict] | None = None) -> dict:
-    """Freeze the inputs (unless given) and write ``record.json``; returns the record."""
+                 zero: dict | None, inputs: list[dict] | None = None, arm: Any = None,
+                 overrides: list[str] | None = None) -> dict:
+    """Freeze the inputs (unless given: the bytes validated, of ``loaded`` and ``arm``)
+    and write ``record.json``; returns the record. Raises OSError (a full disk)."""
     from seqrun import __version__
 
     project = getattr(loaded, "project", None)
     root = getattr(project, "root", None)
     if inputs is None:
-        inputs = freeze_inputs(folder, input_paths(loaded, arm_path), root)
+        inputs = freeze_sources(folder, input_sources(loaded, arm, arm_path), root)
     record = {
         "seqrun": __version__,
         "sequence": loaded.name,
@@ -128,47 +151,116 @@ def write_record(folder: Path, *, loaded: Any, arm_path: Path, bus: str,
         "bus": bus,
         "zero": zero,
         "inputs": inputs,
+        **({"overrides": list(overrides)} if overrides else {}),
     }
     Path(folder).mkdir(parents=True, exist_ok=True)
-    (Path(folder) / "record.json").write_text(json.dumps(record, indent=2) + "\n",
-                                              encoding="utf-8")
+    error = write_whole(Path(folder) / "record.json", json.dumps(record, indent=2) + "\n")
+    if error is not None:
+        raise error
     return record
 
 
 def write_refusal(folder: Path, *, sequence: str, file: str, errors: list[dict],
                   loaded: Any = None, arm_path: Path | None = None, bus: str | None = None,
-                  exit_code: int = 1) -> None:
-    """The short record of a run that validation refused: nothing was sent."""
+                  exit_code: int = 1, arm: Any = None, status: str = "refused",
+                  message: str | None = None) -> None:
+    """The short record of a run that validation refused (or, with ``status`` and
+    ``message``, that ended before it started): nothing was sent."""
     now = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="milliseconds")
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     report = {"sequence": sequence, "file": file, "start": now, "end": now,
-              "status": "refused", "exit_code": exit_code,
-              "message": f"refused by validation ({len(errors)} error"
-                         f"{'s' * (len(errors) != 1)}); nothing was sent",
-              "duration_s": 0.0, "errors": errors}
-    (folder / "report.json").write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+              "status": status, "exit_code": exit_code,
+              "message": message or f"refused by validation ({len(errors)} error"
+                                    f"{'s' * (len(errors) != 1)}); nothing was sent",
+              "duration_s": 0.0, "nothing_sent": True, "errors": errors}
+    error = write_whole(folder / "report.json", json.dumps(report, indent=2) + "\n")
+    if error is not None:
+        raise error
     if loaded is not None:
         write_record(folder, loaded=loaded, arm_path=arm_path or loaded.arm_path,
-                     bus=bus or "none (refused before the bus was opened)", zero=None)
+                     bus=bus or "none (refused before the bus was opened)", zero=None,
+                     arm=arm)
+
+
+#: The result ``seqrun runs`` gives a folder whose files cannot be read as a run's.
+CORRUPTED = "corrupted"
 
 
 def list_runs(runs_dir: Path) -> list[dict]:
     """One entry per run folder under ``runs_dir`` (oldest first): when, sequence, result,
-    duration, exit code, folder."""
+    duration, exit code, bus (and whether it was the simulator), folder. A folder whose
+    report.json is missing, unreadable or not a run's report is listed with the result
+    ``corrupted`` and the ``problem``: it never hides the other runs."""
     runs: list[dict] = []
     if not Path(runs_dir).is_dir():
         return runs
     for folder in sorted(Path(runs_dir).iterdir()):
-        report_file = folder / "report.json"
-        if not folder.is_dir() or not report_file.is_file():
-            continue
-        try:
-            report = json.loads(report_file.read_text(encoding="utf-8"))
-        except (OSError, ValueError):
-            report = {"status": "unreadable report.json"}
-        runs.append({"when": report.get("start"), "sequence": report.get("sequence"),
-                     "result": report.get("status"), "duration_s": report.get("duration_s"),
-                     "exit_code": report.get("exit_code"), "folder": str(folder)})
+        if folder.is_dir():
+            entry = _run_entry(folder)
+            if entry is not None:
+                runs.append(entry)
     runs.sort(key=lambda r: (r["when"] or "", r["folder"]))
     return runs
+
+
+def _read_json(path: Path) -> tuple[Any, str | None]:
+    """``(data, None)``, or ``(None, what is wrong)``."""
+    try:
+        return json.loads(path.read_text(encoding="utf-8")), None
+    except OSError as exc:
+        return None, f"{path.name}: {exc.strerror or exc}"
+    except UnicodeDecodeError:
+        return None, f"{path.name}: not UTF-8 text"
+    except ValueError as exc:
+        return None, f"{path.name}: not JSON ({exc})"
+    except RecursionError:
+        return None, f"{path.name}: nested too deep"
+
+
+def _run_entry(folder: Path) -> dict | None:
+    """The listing of one folder; None when it holds no run at all."""
+    report_file = folder / "report.json"
+    looks_like_a_run = any((folder / name).exists() for name in (
+        "report.json", "record.json", "events.jsonl", "trace.log"))
+    if not looks_like_a_run:
+        return None
+    problem = None
+    report: Any = {}
+    if not report_file.is_file():
+        problem = "no report.json"
+    else:
+        report, problem = _read_json(report_file)
+        if problem is None and not isinstance(report, dict):
+            problem, report = "report.json: not a run's report", {}
+    report = report if isinstance(report, dict) else {}
+    record, _ = _read_json(folder / "record.json") if (folder / "record.json").is_file() \
+        else ({}, None)
+    record = record if isinstance(record, dict) else {}
+
+    def text(value: Any) -> str | None:
+        return value if isinstance(value, str) else None
+
+    def number(value: Any) -> float | None:
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+        return float(value) if ok and value == value else None
+
+    exit_code = report.get("exit_code")
+    exit_code = exit_code if isinstance(exit_code, int) and not isinstance(exit_code, bool) \
+        else None
+    result = text(report.get("status"))
+    if problem is None and result is None:
+        problem = "report.json: no status"
+    bus = text(record.get("bus")) or text(report.get("bus"))
+    return {"when": text(report.get("start")), "sequence": text(report.get("sequence")),
+            "result": CORRUPTED if problem else result,
+            "duration_s": number(report.get("duration_s")), "exit_code": exit_code,
+            "bus": bus, "simulator": _is_simulator(bus), "folder": str(folder),
+            **({"problem": problem} if problem else {})}
+
+
+def _is_simulator(bus: str | None) -> bool | None:
+    """Whether a recorded bus description is a simulator's (None: no bus was opened)."""
+    if bus is None or bus.startswith("none"):
+        return None
+    return bus.startswith("SIMULATOR")

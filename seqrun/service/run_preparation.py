@@ -13,7 +13,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from seqrun.errors import SeqrunError, SequenceInvalid, UserInputError
 
@@ -63,6 +63,8 @@ class PreparedRun:
     file: Path = field(default_factory=Path)
     #: The arm context the run was resolved in (its zero store, its headline).
     context: ArmContext | None = None
+    #: The files used in place of shipped ones (arm, poses), as ``validate`` notes them.
+    overrides: list = field(default_factory=list)
 
 
 class RunInvalid(SeqrunError):
@@ -86,7 +88,7 @@ def prepare_run(request: RunRequest) -> PreparedRun:
     from seqrun.sequence.loader import load_sequence
     from seqrun.service import campaign_records
     from seqrun.service.arm_context import resolve_context
-    from seqrun.service.checking import check_for_run, errors_before_bus
+    from seqrun.service.checking import check_for_run, errors_before_bus, override_notes
     from seqrun.service.connection import parse_bus_kwargs, parse_faults
 
     r = request
@@ -125,7 +127,7 @@ def prepare_run(request: RunRequest) -> PreparedRun:
     # the measured state before the first motion.
     static = check_for_run(loaded, arm, r.start, r.started, r.from_step)
     if static.errors:
-        campaign_records.refuse(loaded, arm_path, static.errors, r.log_dir)
+        campaign_records.refuse(loaded, arm_path, static.errors, r.log_dir, arm=arm)
         raise RunInvalid(loaded.file, list(static.errors))
     if r.virtual_time and not context.bus.is_simulator:
         raise UserInputError("--virtual-time needs the simulator")
@@ -145,7 +147,8 @@ def prepare_run(request: RunRequest) -> PreparedRun:
         connection.close()
         raise UserInputError("--power-on-at applies to the built-in simulator (seqrun sim "
                              "serve has its own)")
-    return PreparedRun(loaded, arm, connection, Path(arm_path), r.file, context)
+    return PreparedRun(loaded, arm, connection, Path(arm_path), r.file, context,
+                       override_notes(loaded, Path(arm_path)))
 
 
 def run_folder(loaded: LoadedSequence, log_dir: Path | None) -> Path:

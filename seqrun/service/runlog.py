@@ -42,10 +42,19 @@ import can
 
 from seqrun.events import Event
 from seqrun.results import RunResult, StepResult
-from seqrun.service.logfile import GzipLineFile, LineFile, read_lines, write_whole
+from seqrun.service.logfile import (GzipLineFile, LineFile, overwrite_in_place, read_lines,
+                                    write_whole)
 
 #: The running report.json is rewritten at most this often (seconds of real time).
 REPORT_INTERVAL_S = 1.0
+
+#: The running report.json is padded to this size: the room its ending takes when the
+#: disk is full by then (the short ending below fits in it).
+REPORT_RESERVE_BYTES = 4096
+
+#: What the ending of a run says when the disk has room for no more (report.json).
+_ENDING_KEYS = ("sequence", "file", "start", "end", "status", "exit_code", "message",
+                "duration_s", "planned_duration_s")
 
 #: The CAN trace of a run; older versions wrote it uncompressed (the second name).
 TRACE_NAME = "trace.log.gz"
@@ -267,8 +276,21 @@ class RunLog:
                   **body}
         if ended and self.errors:
             report["log_errors"] = list(self.errors)
-        error = write_whole(self.folder / "report.json",
-                            json.dumps(report, indent=2, default=str))
+        text = json.dumps(report, indent=2, default=str)
+        if not ended:  # room kept on disk for the final report, whatever fills the disk
+            text = text.ljust(REPORT_RESERVE_BYTES - 1) + "\n"
+        error = write_whole(self.folder / "report.json", text)
+        if error is not None and ended:
+            # The disk is full: the ending in the room the running report holds, so that
+            # report.json never says "running" of a run that ended.
+            self.errors.append(f"writing {self.folder / 'report.json'} failed "
+                               f"({error.strerror or error}); it holds the result only")
+            short = {k: report.get(k) for k in _ENDING_KEYS if k in report}
+            short["message"] = str(short.get("message"))[:1000]
+            short["log_errors"] = [e[:500] for e in self.errors[:3]]
+            if overwrite_in_place(self.folder / "report.json",
+                                  json.dumps(short, default=str)) is None:
+                error = None
         if error is not None:
             self._failed(self.folder / "report.json", error)
         return report

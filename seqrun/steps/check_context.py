@@ -73,6 +73,9 @@ class CheckContext(Protocol):
     file_limits: LimitsInForce          # the limits the files set (exceeding them: an error)
     limits: LimitsInForce               # ... and what the modules hold (moves planned within)
     motion_start_deg: np.ndarray | None  # where the last move started (user degrees)
+    #: The step after which where the arm stands is not known (its target unreachable,
+    #: outside the limits): a check comparing with the tracked joints says nothing.
+    lost_at: ResolvedStep | None
     powered_off: ResolvedStep | None    # the power_off step, once there is one
     #: Per pose: the joints outside the arm's limits and the finding at the pose file's line.
     pose_limit_findings: dict[str, dict[str, SourceError]]

@@ -149,6 +149,8 @@ def check(checker: CheckContext,
         return
     if checker.incomplete:
         return  # where the joints are after the moves before is not known
+    if _lost(checker, step):
+        return
     pose = pose_from_user_deg(checker.arm, {n: s.position for n, s in checker.joints.items()})
     distance = float(np.linalg.norm(pose.position_mm - position))
     angle = math.degrees(float(orientation_error(rotation, pose.rotation)))
@@ -161,6 +163,17 @@ def check(checker: CheckContext,
             f"expected pose (tolerances {f(pos_tol)} mm, {f(ang_tol)}°)"))
 
 
+def _lost(checker: CheckContext, step: ResolvedStep[CheckpointParams]) -> bool:
+    """After a target that cannot be reached the run ends there: a note, not a second
+    error about where the arm would be (it stays where the step before left it)."""
+    lost = checker.lost_at
+    if lost is None:
+        return False
+    checker.notes.append(step.error(f"not checked before the run: the run cannot get past "
+                                    f"step {lost.number} ({lost.location})"))
+    return True
+
+
 def _relative_checkpoint(checker: CheckContext, step: ResolvedStep[CheckpointParams],
                          params: CheckpointParams) -> None:
     """'The tool moved 50 mm along z': the tracked tool pose now against where the last
@@ -171,6 +184,8 @@ def _relative_checkpoint(checker: CheckContext, step: ResolvedStep[CheckpointPar
     from seqrun.formatting import format_number as f
 
     assert params.moved_mm is not None  # (check() comes here only for a moved_mm checkpoint)
+    if checker.incomplete or _lost(checker, step):
+        return  # where the last move took the tool is not known
     if checker.motion_start_deg is None:
         checker.errors.append(step.error("a relative checkpoint (moved_mm) needs a move before "
                                          "it", "moved_mm"))

@@ -197,7 +197,7 @@ def check(checker: CheckContext, step: ResolvedStep[MoveParams], params: MovePar
             "set_limits"
         if name in pose_limits:
             refused.add(name)  # outside the arm's limits: the pose file's error
-        elif params.relative and checker.incomplete:
+        elif params.relative and (checker.incomplete or checker.lost_at is not None):
             refused.add(name)  # where it starts is not known
         elif not lo <= value <= hi:
             refused.add(name)
@@ -212,8 +212,8 @@ def check(checker: CheckContext, step: ResolvedStep[MoveParams], params: MovePar
             checker.notes.append(step.error(
                 f"{name} {verb} {f(state.position)}°, {f(outside)}° outside its limit "
                 f"{format_range(lo, hi)}; this move brings it back inside", *where[name]))
-    if not checker.incomplete and not refused:  # a target outside its limits: that error only
-        checker.guards_along_plan(step, params, target)
+    if not checker.incomplete and not refused and checker.lost_at is None:
+        checker.guards_along_plan(step, params, target)  # (a target outside: that error only)
     _timeout(checker, step, params, target, [n for n in names if n not in refused])
     for name in names:
         if name in refused:
@@ -222,6 +222,8 @@ def check(checker: CheckContext, step: ResolvedStep[MoveParams], params: MovePar
         if target[name] != state.position:
             state.at_start = False
         state.position = target[name]
+    if not refused and not params.relative and set(names) >= set(checker.unlocked_names()):
+        checker.lost_at = None  # every joint is where this move says again
 
 
 def _velocities(checker: CheckContext, step: ResolvedStep[MoveParams], params: MoveParams) -> None:
@@ -311,9 +313,11 @@ def _move_to_tool_pose(checker: CheckContext, step: ResolvedStep[MoveParams],
         solution = solver_for(checker.arm, params.tool).solve(target, checker.tracked())
     except Unreachable as exc:
         checker.errors.append(step.error(f"end-effector target {exc}", "position_mm"))
+        checker.lost_at = step  # the run ends here: no second error about the steps after
         return
     joints = solution.joints_deg
     if checker.outside_limits(step, joints, "the end-effector target"):
+        checker.lost_at = step
         return
     checker.solution_note(step, joints)
     checker.guards_along_plan(step, params, dict(zip(checker.arm.joint_names, joints)))

@@ -98,8 +98,10 @@ def check(checker: CheckContext,
             jerk_mm_s3=params.jerk_mm_s3 * checker.speed, max_velocity_deg_s=max_velocity)
     except PathError as exc:
         checker.errors.append(step.error(f"straight line: {exc}", "position_mm"))
+        checker.lost_at = step  # the run ends here: no second error about the steps after
         return
     if checker.outside_limits(step, linear.joints_deg[1:], "the straight line"):
+        checker.lost_at = step
         return
     checker.check_path_guards(step, linear.plan.times, linear.plan.positions,
                               what="straight line of the tool")
