@@ -115,15 +115,46 @@ class Workspace(_Strict):
     guards: list[Guard] = []
 
 
+class ToolCapsule(_Strict):
+    """A part of a tool's volume: the segment between two points of the end-effector frame,
+    thickened by a radius (a link volume's shape, carried by the flange)."""
+
+    name: str | None = Field(None, min_length=1, description="Names the part in messages "
+                                                             "(tool probe/shaft).")
+    start_mm: tuple[Finite, Finite, Finite] = Field(
+        (0.0, 0.0, 0.0), description="One end, in the end-effector frame, mm.")
+    end_mm: tuple[Finite, Finite, Finite] = Field(
+        description="The other end, in the end-effector frame, mm (a tool along the flange's "
+                    "axis: [0, 0, -length]).")
+    radius_mm: Positive
+
+
 class Tool(_Strict):
-    """A tool centre point (TCP): where a Cartesian target of a sequence puts the tool."""
+    """A tool on the flange: its tip frame (the tool centre point, TCP), where a Cartesian
+    target of a sequence puts the tool, and its volume, checked against the obstacles, the
+    links and the workspace guards as the links are."""
 
     name: str = Field(min_length=1, description="Name used in sequences and `seqrun ik --tool`.")
     xyz_mm: tuple[Finite, Finite, Finite] = Field(
-        description="TCP position in the end-effector frame (kinematics.tool), mm.")
+        description="TCP position in the end-effector frame (kinematics.tool), mm. The "
+                    "end-effector frame's z axis points back into the arm: a tool sticking out "
+                    "of the flange ends at [0, 0, -length].")
     rpy_deg: tuple[Finite, Finite, Finite] = Field(
         (0.0, 0.0, 0.0), description="TCP orientation in the end-effector frame, roll/pitch/yaw "
-                                     "deg (R = Rz Ry Rx).")
+                                     "deg (R = Rz Ry Rx). [180, 0, 0] turns the TCP's z axis "
+                                     "to point out along the tool.")
+    capsules: list[ToolCapsule] | None = Field(
+        None, description="The tool's volume. Not given: the line from the end-effector to "
+                          "the TCP (no thickness) is checked; [] : the TCP is a point in the "
+                          "air with no body (a camera's focus), nothing is checked.")
+
+    @model_validator(mode="after")
+    def _part_names(self) -> "Tool":
+        names = [c.name for c in self.capsules or []]
+        if len(names) > 1 and (None in names or len(set(names)) != len(names)):
+            raise ValueError(f"tool {self.name}: a tool of several capsules names each one, "
+                             "differently")
+        return self
 
 
 FramePoint = Annotated[str, Field(
@@ -317,15 +348,16 @@ class ArmDescription(_Strict):
                 if point not in points:
                     raise ValueError(f"capsule {capsule.name}: unknown frame '{point}' (base, "
                                      f"{', '.join(self.joint_names)} or end_effector)")
-        names = capsules + [o.name for o in self.geometry.obstacles]
+        tools = [t.name for t in self.tools]
+        names = capsules + [o.name for o in self.geometry.obstacles] + tools
         dup = sorted({n for n in names if names.count(n) > 1})
         if dup:
-            raise ValueError(f"duplicate capsule/obstacle name(s): {', '.join(dup)}")
+            raise ValueError(f"duplicate capsule/obstacle/tool name(s): {', '.join(dup)}")
         for obstacle in self.geometry.obstacles:
-            unknown = [n for n in obstacle.ignore_links if n not in capsules]
+            unknown = [n for n in obstacle.ignore_links if n not in capsules + tools]
             if unknown:
-                raise ValueError(f"obstacle {obstacle.name}: unknown capsule(s) in ignore_links: "
-                                 f"{', '.join(unknown)}")
+                raise ValueError(f"obstacle {obstacle.name}: unknown capsule(s) or tool(s) in "
+                                 f"ignore_links: {', '.join(unknown)}")
         return self
 
     def tool(self, name: str | None) -> Tool | None:
