@@ -94,8 +94,9 @@ Every step takes an optional `label`, the text the operator sees.
   sample must be reachable, inside the limits in force, within the joint velocity limits
   and away from singular configurations (`cartesian.min_manipulability`); during the run
   the tool further than `max_deviation_mm` from the line is a fault.
-- A checkpoint must agree with the end-effector of the joints tracked so far; a relative
-  one (`moved_mm`) with how far the tool moved during the last move. A checkpoint or a
+- A checkpoint must agree with the tool pose of the joints tracked so far (the same frame
+  a move's `position_mm` means: see "Tools and frames"); a relative one (`moved_mm`) with
+  how far the tool moved during the last move. A checkpoint or a
   wait after a `halt` (and no `reset`) can never pass and is an error.
 - Every pose a step names is checked against the arm at the pose file's own lines: it lists
   every joint (the locked one at its locked value), its `end_effector` agrees with forward
