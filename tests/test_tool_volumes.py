@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from pydantic import ValidationError
 
-from projecttree import make_project, shipped_arm, write_sequence
+from projecttree import ROOT, make_project, shipped_arm, write_sequence
 from seqrun.arm.cartesian import solver_for, tool_pose
 from seqrun.arm.description import ArmDescription, load_arm
 from seqrun.arm.geometry import Geometry
@@ -213,3 +213,15 @@ def test_allowed_pairs_and_ignore_links_may_name_a_tool():
 def test_the_arm_file_refuses_a_malformed_tool(tools, message):
     with pytest.raises(ValidationError, match=message.replace("(", r"\(").replace(")", r"\)")):
         arm_with(*tools)
+
+
+def test_the_arm_files_commented_tool_example_is_a_valid_tool(tmp_path):
+    text = (ROOT / "arms" / "lwa3.yaml").read_text(encoding="utf-8")
+    start = text.index("# tools:\n")
+    end = text.index("# default_tool: probe\n") + len("# default_tool: probe\n")
+    example = "".join(line[2:] + "\n" for line in text[start:end].splitlines())
+    path = tmp_path / "arm.yaml"
+    path.write_text(text[:start] + example + text[end:], encoding="utf-8")
+    arm = load_arm(path)
+    assert arm.default_tool == "probe" and arm.tools[0].capsules[0].radius_mm == 15
+    assert Geometry(arm).smallest(np.radians([70, 30, 0, 70, 20, 50, 0])).distance_mm > 50

@@ -62,6 +62,39 @@ def unknown_tool(arm: ArmDescription, tool: str | None) -> str:
     return f"unknown tool '{tool}' (the arm file's tools: {names})"
 
 
+def tool_axis(arm: ArmDescription, tool: str | None) -> np.ndarray:
+    """The unit vector, in the tool's own tip frame, along which the tool sticks out of the
+    flange: the end-effector frame's -z (its z axis points back into the arm), turned by
+    the tool's rpy_deg. KeyError for an unknown tool."""
+    from seqrun.arm.kinematics import frame_matrix
+
+    found = arm.tool(tool)
+    if found is None:
+        return np.array([0.0, 0.0, -1.0])
+    return frame_matrix(found)[:3, :3].T @ np.array([0.0, 0.0, -1.0])
+
+
+def pointing_up_hint(arm: ArmDescription, tool: str | None, target: np.ndarray) -> str:
+    """For an unreachable target that points the tool upwards: the rpy that points it down
+    instead (the usual intent near the desk), else ""."""
+    axis = tool_axis(arm, tool)
+    if float((target[:3, :3] @ axis)[2]) < 0.5:
+        return ""
+    down = np.array([0.0, 0.0, -1.0])
+    turn = np.cross(axis, down)
+    if float(np.linalg.norm(turn)) < 1e-9:  # the axis is -z (no turn) or +z (half a turn)
+        rotation = np.eye(3) if float(axis @ down) > 0 else np.diag([1.0, -1.0, -1.0])
+    else:
+        angle = math.atan2(float(np.linalg.norm(turn)), float(axis @ down))
+        rotation = _rodrigues(turn / np.linalg.norm(turn) * angle)
+    from seqrun.arm.kinematics import rpy_from_matrix
+
+    rpy = ", ".join(f"{round(float(v), 3) + 0.0:g}" for v in np.degrees(rpy_from_matrix(rotation)))
+    return (f"; this orientation points the tool up (the end-effector's z axis points back "
+            f"into the arm: [180, 0, 0] is Totem's); pointing down is rpy_deg [{rpy}] with any "
+            f"yaw (docs/sequence-format.md, 'Tools and frames')")
+
+
 def tool_pose(solver: IkSolver, joints_deg: npt.ArrayLike) -> np.ndarray:
     """The tool frame (4x4, mm) at every-joint user degrees."""
     q = np.radians(np.asarray(joints_deg, dtype=float))[solver.active]
