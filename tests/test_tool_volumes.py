@@ -225,3 +225,16 @@ def test_the_arm_files_commented_tool_example_is_a_valid_tool(tmp_path):
     arm = load_arm(path)
     assert arm.default_tool == "probe" and arm.tools[0].capsules[0].radius_mm == 15
     assert Geometry(arm).smallest(np.radians([70, 30, 0, 70, 20, 50, 0])).distance_mm > 50
+
+
+def test_a_jog_ends_short_of_the_guard_for_the_tool(probe):
+    """A jog is planned to end a margin above the guards; the tool's tip counts as the
+    end-effector does (else the run-time check would halt the jog with a fault)."""
+    from seqrun.service.jog import plan_jog
+
+    _, arm = probe
+    above_the_spot = np.array([90.014, 24.475, 0, 48.83, 0, 106.695, -89.986])  # tip 100 mm
+    with_tool = plan_jog(arm, "j2", 0.5, above_the_spot, 10.0)
+    bare = plan_jog(shipped_arm(), "j2", 0.5, above_the_spot, 10.0)
+    assert with_tool.why_end == bare.why_end == "workspace guard 'desk'"
+    assert with_tool.end_deg < 40 < 80 < bare.end_deg

@@ -108,7 +108,10 @@ class Control(_Strict):
 class Guard(_Strict):
     name: str
     min_z_mm: Finite = Field(description="Every watched point must stay above this height (mm).")
-    points: list[GuardPoint] = Field(min_length=1)
+    points: list[GuardPoint] = Field(
+        min_length=1, description="The points watched: joint axis points (shoulder, elbow, "
+                                  "wrist, flange) and end_effector; a guard that watches "
+                                  "end_effector watches every tool's volume too.")
 
 
 class Workspace(_Strict):
@@ -198,8 +201,8 @@ class Obstacle(_Strict):
     box: Box | None = None
     cylinder: Cylinder | None = None
     ignore_links: list[str] = Field(
-        default_factory=_no_items, description="Capsules that touch it by design (the column "
-                                          "standing on the desk).")
+        default_factory=_no_items, description="Capsules (or tools, by name) that touch it by "
+                                               "design (the column standing on the desk).")
 
     @model_validator(mode="after")
     def _one(self) -> "Obstacle":
@@ -233,7 +236,8 @@ class GeometrySpec(_Strict):
                                           "other (self-collision).")
     obstacles: list[Obstacle] = Field(default_factory=_no_items)
     allowed_pairs: list[tuple[str, str]] = Field(
-        default_factory=_no_items, description="Capsule pairs never checked against each other.")
+        default_factory=_no_items, description="Capsule pairs never checked against each other "
+                                               "(a tool by its name: [column, probe]).")
 
 
 class Cartesian(_Strict):
@@ -278,8 +282,10 @@ class ArmDescription(_Strict):
     workspace: Workspace = Workspace()
     tools: list[Tool] = Field(
         default_factory=_no_items,
-        description="Named tool centre points. Cartesian targets (seqrun ik, move to a pose in "
-                    "mm) mean the tool; without a tool they mean the end-effector frame.")
+        description="The tools on the flange: tip frames and volumes. Cartesian targets and "
+                    "checkpoints (seqrun ik, move to a pose in mm) mean the tool; without a "
+                    "tool they mean the end-effector frame. Every tool's volume is checked on "
+                    "every move, whichever tool a step names: list what is mounted.")
     cartesian: Cartesian = Cartesian()
     geometry: GeometrySpec = GeometrySpec()
     default_tool: str | None = Field(
