@@ -238,3 +238,27 @@ def test_a_jog_ends_short_of_the_guard_for_the_tool(probe):
     bare = plan_jog(shipped_arm(), "j2", 0.5, above_the_spot, 10.0)
     assert with_tool.why_end == bare.why_end == "workspace guard 'desk'"
     assert with_tool.end_deg < 40 < 80 < bare.end_deg
+
+
+@settings(max_examples=examples(100), deadline=None)
+@given(q=arrays(np.float64, 7, elements=st.floats(-3.2, 3.2)),
+       tip=st.tuples(*[st.floats(-300, 300)] * 3), radius=st.floats(1, 80))
+def test_the_run_time_lowest_tool_point_is_the_validations(q, tip, radius):
+    """The run's per-cycle guard height of the tools (plain floats) and the validation's
+    (batched) agree, for any tool and any joints."""
+    from seqrun.arm.kinematics import heights_of_points
+    from seqrun.arm.tools import ToolVolumes
+
+    arm = arm_with({"name": "t", "xyz_mm": list(tip),
+                    "capsules": [{"start_mm": [0, 0, -10], "end_mm": list(tip),
+                                  "radius_mm": radius}]},
+                   {"name": "line", "xyz_mm": [0, 50, -100]})
+    tools = ToolVolumes(arm)
+    chain = Chain.from_arm(arm)
+    _, tool_z = heights_of_points(chain, q, tools.points_mm)
+    run_time, label = tools.lowest_z(tool_z)
+    origins = frame_origins(chain, q[None], tools.points_mm)
+    lowest, part = tools.lowest(origins[:, 8:, :])
+    assert run_time == pytest.approx(float(lowest[0, 2]), abs=1e-9)
+    assert label == tools.parts[int(part[0])].label or run_time == pytest.approx(
+        float(np.min(origins[0, 8:, 2] - tools.point_radii)), abs=1e-9)
