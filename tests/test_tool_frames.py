@@ -107,3 +107,16 @@ def test_the_linear_example_approaches_along_the_tool_and_passes():
     assert approach.detail["max_deviation_mm"] < 0.05
     moved = next(s for s in run.result.steps if s.detail.get("moved_mm") is not None)
     assert moved.detail["moved_mm"] == pytest.approx([0, 0, -100], abs=0.05)
+
+
+def test_a_straight_line_to_a_tool_pointing_up_says_how_to_point_it_down(project):
+    steps = ("- reset\n- home\n- set_limits\n- move: totem\n- move: opsafe\n"
+             "- move_linear: {position_mm: [0, 400, 100], rpy_deg: [180, 0, 0], "
+             "speed_mm_s: 20}\n")
+    result = validate_sequence(load_sequence(write_sequence(project, steps)), ARM, PARK)
+    [error] = result.errors
+    assert (error.line, error.column) == (9, 30)
+    assert error.message.startswith("straight line: ")  # (a joint limit on the way)
+    assert "; this orientation points the tool up" in error.message
+    assert error.message.endswith("pointing down is rpy_deg [0, 0, 0] with any yaw "
+                                  "(docs/sequence-format.md, 'Tools and frames')")

@@ -37,9 +37,11 @@ __all__ = ["LinearPath", "LinearPlan", "PathError", "displacement", "manipulabil
 class PathError(SeqrunError):
     """A straight-line move that cannot be done as asked; ``fraction`` is where (0..1)."""
 
-    def __init__(self, message: str, fraction: float | None = None) -> None:
+    def __init__(self, message: str, fraction: float | None = None, *,
+                 unreachable: bool = False) -> None:
         super().__init__(message)
         self.fraction = fraction
+        self.unreachable = unreachable  # a sample no configuration reaches
 
 
 _SOLVERS: dict[tuple[int, str | None, bool], IkSolver] = {}
@@ -244,11 +246,11 @@ def plan_linear(arm: ArmDescription, tool: str | None, start_deg: npt.ArrayLike,
                     bound = lo if previous[i] - lo < hi - previous[i] else hi
                     raise PathError(f"{joint.name} reaches its limit {bound:g}° {where}: the "
                                     "line cannot go on inside the joint limits",
-                                    float(fractions[k])) from None
+                                    float(fractions[k]), unreachable=True) from None
             raise PathError(
                 f"the line leaves the workspace {where} (no solution next to the previous "
                 f"sample; closest {exc.position_error_mm:.2f} mm away)",
-                float(fractions[k])) from None
+                float(fractions[k]), unreachable=True) from None
     limit = (max_velocity_deg_s if max_velocity_deg_s is not None else
              np.array([j.max_velocity_deg_s for j in arm.joints])
              * (1 - arm.control.tracking_reserve))
