@@ -269,7 +269,7 @@ def frame_origins(chain: Chain, q_rad: np.ndarray | Sequence[float],
         origins[..., k, :] = current[..., :3, 3]
     end = current @ chain.tool
     origins[..., n, :] = end[..., :3, 3]
-    if extra:
+    if ee_points is not None and extra:
         origins[..., n + 1:, :] = (np.einsum("...ij,mj->...mi", end[..., :3, :3], ee_points)
                                    + end[..., None, :3, 3])
     return origins
@@ -311,7 +311,15 @@ def point_heights(chain: Chain, q_rad: np.ndarray | Sequence[float]) -> dict[Gua
     """z (mm) of every guard point of one configuration ``(n,)``: the z of
     :func:`point_positions`, bit for bit, without the frames array and the position views
     (the run-time guard check asks every control cycle)."""
-    return heights_of_points(chain, q_rad)[0]
+    q = _joint_angles(chain, q_rad)
+    if q.ndim != 1:
+        raise ValueError(f"expected one configuration of shape ({chain.dof},), got {q.shape}")
+    _check_guard_frames(chain.dof)
+    frames = _frames_of_one(chain, _turned_frames(chain, q))
+    heights: dict[GuardPoint, float] = {
+        name: float(frames[index][2, 3]) for name, index in GUARD_POINT_FRAMES.items()}
+    heights["end_effector"] = float(frames[-1][2, 3])
+    return heights
 
 
 def heights_of_points(chain: Chain, q_rad: np.ndarray | Sequence[float],

@@ -34,19 +34,22 @@ class ToolPart:
         return {self.tool, self.label, self.label.removeprefix("tool ")}
 
 
+def _xyz(values) -> tuple[float, float, float]:
+    return float(values[0]), float(values[1]), float(values[2])
+
+
 def tool_parts(arm: ArmDescription) -> list[ToolPart]:
     """Every tool's volume, in the order of the arm file."""
     parts: list[ToolPart] = []
     for tool in arm.tools:
         if tool.capsules is None:
             parts.append(ToolPart(f"tool {tool.name}", tool.name, (0.0, 0.0, 0.0),
-                                  tuple(float(v) for v in tool.xyz_mm), 0.0))
+                                  _xyz(tool.xyz_mm), 0.0))
             continue
         for capsule in tool.capsules:
             label = f"tool {tool.name}" + (f"/{capsule.name}" if capsule.name else "")
-            parts.append(ToolPart(label, tool.name, tuple(float(v) for v in capsule.start_mm),
-                                  tuple(float(v) for v in capsule.end_mm),
-                                  float(capsule.radius_mm)))
+            parts.append(ToolPart(label, tool.name, _xyz(capsule.start_mm),
+                                  _xyz(capsule.end_mm), float(capsule.radius_mm)))
     return parts
 
 

@@ -44,6 +44,7 @@ class ReadingChecks:
         #: of each cycle), mm.
         self.min_distances_mm: dict[str, float] = {}
         self._geometry: Geometry | None = None
+        self._watching: list[list[str]] | None = None
 
     # ------------------------------------------------------------------ state flags
     def check_states(self, short_state: dict[int, CycleState], *,
@@ -100,16 +101,17 @@ class ReadingChecks:
         if not guards:
             return
         tools = self.geometry.tools
-        if tools.empty:
-            heights: dict[str, float] = dict(kinematics.point_heights(self.chain, q))
+        if not tools.parts:
+            heights: dict[str, float] = kinematics.point_heights(  # type: ignore[assignment]
+                self.chain, q)
+            watching = self._watched_points(False)
         else:
             # a guard that watches the end-effector watches what the flange carries too
             found, tool_z = kinematics.heights_of_points(self.chain, q, tools.points_mm)
-            heights = dict(found)
+            heights = dict(found.items())
             heights["tool"], part = tools.lowest_z(tool_z)
-        for guard in guards:
-            watched = guard.points if tools.empty or "end_effector" not in guard.points \
-                else [*guard.points, "tool"]
+            watching = self._watched_points(True)
+        for guard, watched in zip(guards, watching):
             for name in watched:
                 z = heights[name]
                 key = f"{guard.name}:{name}"
@@ -119,6 +121,15 @@ class ReadingChecks:
                     raise RunAborted("workspace_guard",
                                      f"workspace guard '{guard.name}': {what} at z = {z:.1f} mm, "
                                      f"below {guard.min_z_mm:.1f} mm")
+
+    def _watched_points(self, tools: bool) -> list[list[str]]:
+        """Each guard's watched points (with "tool" where it watches the end-effector and
+        the arm has tool volumes), worked out once per run."""
+        if self._watching is None:
+            self._watching = [
+                [*guard.points, "tool"] if tools and "end_effector" in guard.points
+                else list(guard.points) for guard in self.arm.workspace.guards]
+        return self._watching
 
     def check_geometry(self, q_rad: np.ndarray) -> None:
         """Link volumes against the arm file's obstacles and each other (measured joints)."""

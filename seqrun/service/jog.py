@@ -98,7 +98,7 @@ def _lowest_guard(arm, chain, q_rad, tools: ToolVolumes | None = None
     tools = tools if tools is not None else ToolVolumes(arm)
     heights, tool_z = kinematics.heights_of_points(
         chain, q_rad, None if tools.empty else tools.points_mm)
-    found: dict[str, float] = dict(heights)
+    found: dict[str, float] = dict(heights.items())
     tool_label = ""
     if not tools.empty:
         found["tool"], tool_label = tools.lowest_z(tool_z)
