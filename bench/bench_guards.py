@@ -96,7 +96,7 @@ def record(sequence: Path) -> tuple[dict, str]:
                         for v in c.proximities.values()],
         "min_heights_mm": [{k: repr(v) for k, v in e.min_heights_mm.items()}
                            for e in executors.values()],
-        "min_distances_mm": [{k: repr(v) for k, v in e.min_distances_mm.items()}
+        "min_distances_mm": [{k: repr(v) for k, v in e.checks.min_distances_mm.items()}
                              for e in executors.values()],
         "errors": [str(e) for c in checkers.values() for e in c.errors],
         "dry_run": [run.passed, repr(run.simulated_s)],

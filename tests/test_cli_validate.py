@@ -18,7 +18,7 @@ from seqrun.schema import sequence_json_schema
 from seqrun.yamlsource import display_path
 
 BAD = ROOT / "tests" / "data" / "bad"
-SHIPPED = ["startup", "totem", "opsafe", "park", "shutdown"]
+SHIPPED = ["startup", "totem", "opsafe", "park", "shutdown", "linear_approach"]
 
 runner = CliRunner()
 

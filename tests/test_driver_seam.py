@@ -34,7 +34,6 @@ from seqrun.errors import UserInputError
 from seqrun.executor import Executor
 from seqrun.results import EXIT_FAULT, EXIT_OK
 from seqrun.sequence.loader import load_sequence
-from seqrun.arm.poses import pose_joints_deg
 from seqrun.service.runner import run_sequence
 
 ARM = shipped_arm()

@@ -23,7 +23,6 @@ from seqrun.powercube.protocol import ParamId
 from seqrun.service.runner import run_sequence
 from seqrun.sequence.loader import load_sequence
 from seqrun.arm.poses import park_deg
-from seqrun.arm.poses import park_deg
 from seqrun.drivers.powercube.units import to_module_rad
 from simrun import run_on_sim
 

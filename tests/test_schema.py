@@ -17,7 +17,7 @@ from seqrun.sequence.loader import find_project_root, load_sequence
 from seqrun.yamlsource import display_path
 
 SHIPPED = [ROOT / "sequences" / f"{name}.yaml"
-           for name in ("startup", "totem", "opsafe", "park", "shutdown")]
+           for name in ("startup", "totem", "opsafe", "park", "shutdown", "linear_approach")]
 
 
 @pytest.fixture

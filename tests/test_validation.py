@@ -33,7 +33,7 @@ NO_GEOMETRY = ARM.model_copy(update={"geometry": ARM.geometry.model_copy(
     update={"capsules": [], "obstacles": []})})
 PARK = park_deg(POSES)
 TOTEM = {name: 0.0 for name in ARM.joint_names}
-SHIPPED = ["startup", "totem", "opsafe", "park", "shutdown"]
+SHIPPED = ["startup", "totem", "opsafe", "park", "shutdown", "linear_approach"]
 STARTUP = "- reset\n- home\n- set_limits\n"
 
 

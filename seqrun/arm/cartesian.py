@@ -37,9 +37,11 @@ __all__ = ["LinearPath", "LinearPlan", "PathError", "displacement", "manipulabil
 class PathError(SeqrunError):
     """A straight-line move that cannot be done as asked; ``fraction`` is where (0..1)."""
 
-    def __init__(self, message: str, fraction: float | None = None) -> None:
+    def __init__(self, message: str, fraction: float | None = None, *,
+                 unreachable: bool = False) -> None:
         super().__init__(message)
         self.fraction = fraction
+        self.unreachable = unreachable  # a sample no configuration reaches
 
 
 _SOLVERS: dict[tuple[int, str | None, bool], IkSolver] = {}
@@ -60,6 +62,39 @@ def unknown_tool(arm: ArmDescription, tool: str | None) -> str:
     """The one line for a tool name the arm file does not define."""
     names = ", ".join(t.name for t in arm.tools) or "none defined"
     return f"unknown tool '{tool}' (the arm file's tools: {names})"
+
+
+def tool_axis(arm: ArmDescription, tool: str | None) -> np.ndarray:
+    """The unit vector, in the tool's own tip frame, along which the tool sticks out of the
+    flange: the end-effector frame's -z (its z axis points back into the arm), turned by
+    the tool's rpy_deg. KeyError for an unknown tool."""
+    from seqrun.arm.kinematics import frame_matrix
+
+    found = arm.tool(tool)
+    if found is None:
+        return np.array([0.0, 0.0, -1.0])
+    return frame_matrix(found)[:3, :3].T @ np.array([0.0, 0.0, -1.0])
+
+
+def pointing_up_hint(arm: ArmDescription, tool: str | None, target: np.ndarray) -> str:
+    """For an unreachable target that points the tool upwards: the rpy that points it down
+    instead (the usual intent near the desk), else ""."""
+    axis = tool_axis(arm, tool)
+    if float((target[:3, :3] @ axis)[2]) < 0.5:
+        return ""
+    down = np.array([0.0, 0.0, -1.0])
+    turn = np.cross(axis, down)
+    if float(np.linalg.norm(turn)) < 1e-9:  # the axis is -z (no turn) or +z (half a turn)
+        rotation = np.eye(3) if float(axis @ down) > 0 else np.diag([1.0, -1.0, -1.0])
+    else:
+        angle = math.atan2(float(np.linalg.norm(turn)), float(axis @ down))
+        rotation = _rodrigues(turn / np.linalg.norm(turn) * angle)
+    from seqrun.arm.kinematics import rpy_from_matrix
+
+    rpy = ", ".join(f"{round(float(v), 3) + 0.0:g}" for v in np.degrees(rpy_from_matrix(rotation)))
+    return (f"; this orientation points the tool up (the end-effector's z axis points back "
+            f"into the arm: [180, 0, 0] is Totem's); pointing down is rpy_deg [{rpy}] with any "
+            f"yaw (docs/sequence-format.md, 'Tools and frames')")
 
 
 def tool_pose(solver: IkSolver, joints_deg: npt.ArrayLike) -> np.ndarray:
@@ -211,11 +246,11 @@ def plan_linear(arm: ArmDescription, tool: str | None, start_deg: npt.ArrayLike,
                     bound = lo if previous[i] - lo < hi - previous[i] else hi
                     raise PathError(f"{joint.name} reaches its limit {bound:g}° {where}: the "
                                     "line cannot go on inside the joint limits",
-                                    float(fractions[k])) from None
+                                    float(fractions[k]), unreachable=True) from None
             raise PathError(
                 f"the line leaves the workspace {where} (no solution next to the previous "
                 f"sample; closest {exc.position_error_mm:.2f} mm away)",
-                float(fractions[k])) from None
+                float(fractions[k]), unreachable=True) from None
     limit = (max_velocity_deg_s if max_velocity_deg_s is not None else
              np.array([j.max_velocity_deg_s for j in arm.joints])
              * (1 - arm.control.tracking_reserve))

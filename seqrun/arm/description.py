@@ -108,22 +108,56 @@ class Control(_Strict):
 class Guard(_Strict):
     name: str
     min_z_mm: Finite = Field(description="Every watched point must stay above this height (mm).")
-    points: list[GuardPoint] = Field(min_length=1)
+    points: list[GuardPoint] = Field(
+        min_length=1, description="The points watched: joint axis points (shoulder, elbow, "
+                                  "wrist, flange) and end_effector; a guard that watches "
+                                  "end_effector watches every tool's volume too.")
 
 
 class Workspace(_Strict):
     guards: list[Guard] = []
 
 
+class ToolCapsule(_Strict):
+    """A part of a tool's volume: the segment between two points of the end-effector frame,
+    thickened by a radius (a link volume's shape, carried by the flange)."""
+
+    name: str | None = Field(None, min_length=1, description="Names the part in messages "
+                                                             "(tool probe/shaft).")
+    start_mm: tuple[Finite, Finite, Finite] = Field(
+        (0.0, 0.0, 0.0), description="One end, in the end-effector frame, mm.")
+    end_mm: tuple[Finite, Finite, Finite] = Field(
+        description="The other end, in the end-effector frame, mm (a tool along the flange's "
+                    "axis: [0, 0, -length]).")
+    radius_mm: Positive
+
+
 class Tool(_Strict):
-    """A tool centre point (TCP): where a Cartesian target of a sequence puts the tool."""
+    """A tool on the flange: its tip frame (the tool centre point, TCP), where a Cartesian
+    target of a sequence puts the tool, and its volume, checked against the obstacles, the
+    links and the workspace guards as the links are."""
 
     name: str = Field(min_length=1, description="Name used in sequences and `seqrun ik --tool`.")
     xyz_mm: tuple[Finite, Finite, Finite] = Field(
-        description="TCP position in the end-effector frame (kinematics.tool), mm.")
+        description="TCP position in the end-effector frame (kinematics.tool), mm. The "
+                    "end-effector frame's z axis points back into the arm: a tool sticking out "
+                    "of the flange ends at [0, 0, -length].")
     rpy_deg: tuple[Finite, Finite, Finite] = Field(
         (0.0, 0.0, 0.0), description="TCP orientation in the end-effector frame, roll/pitch/yaw "
-                                     "deg (R = Rz Ry Rx).")
+                                     "deg (R = Rz Ry Rx). [180, 0, 0] turns the TCP's z axis "
+                                     "to point out along the tool.")
+    capsules: list[ToolCapsule] | None = Field(
+        None, description="The tool's volume. Not given: the line from the end-effector to "
+                          "the TCP (no thickness) is checked; [] : the TCP is a point in the "
+                          "air with no body (a camera's focus), nothing is checked.")
+
+    @model_validator(mode="after")
+    def _part_names(self) -> "Tool":
+        names = [c.name for c in self.capsules or []]
+        if len(names) > 1 and (None in names or len(set(names)) != len(names)):
+            raise ValueError(f"tool {self.name}: a tool of several capsules names each one, "
+                             "differently")
+        return self
 
 
 FramePoint = Annotated[str, Field(
@@ -167,8 +201,8 @@ class Obstacle(_Strict):
     box: Box | None = None
     cylinder: Cylinder | None = None
     ignore_links: list[str] = Field(
-        default_factory=_no_items, description="Capsules that touch it by design (the column "
-                                          "standing on the desk).")
+        default_factory=_no_items, description="Capsules (or tools, by name) that touch it by "
+                                               "design (the column standing on the desk).")
 
     @model_validator(mode="after")
     def _one(self) -> "Obstacle":
@@ -202,7 +236,8 @@ class GeometrySpec(_Strict):
                                           "other (self-collision).")
     obstacles: list[Obstacle] = Field(default_factory=_no_items)
     allowed_pairs: list[tuple[str, str]] = Field(
-        default_factory=_no_items, description="Capsule pairs never checked against each other.")
+        default_factory=_no_items, description="Capsule pairs never checked against each other "
+                                               "(a tool by its name: [column, probe]).")
 
 
 class Cartesian(_Strict):
@@ -247,8 +282,10 @@ class ArmDescription(_Strict):
     workspace: Workspace = Workspace()
     tools: list[Tool] = Field(
         default_factory=_no_items,
-        description="Named tool centre points. Cartesian targets (seqrun ik, move to a pose in "
-                    "mm) mean the tool; without a tool they mean the end-effector frame.")
+        description="The tools on the flange: tip frames and volumes. Cartesian targets and "
+                    "checkpoints (seqrun ik, move to a pose in mm) mean the tool; without a "
+                    "tool they mean the end-effector frame. Every tool's volume is checked on "
+                    "every move, whichever tool a step names: list what is mounted.")
     cartesian: Cartesian = Cartesian()
     geometry: GeometrySpec = GeometrySpec()
     default_tool: str | None = Field(
@@ -323,15 +360,16 @@ class ArmDescription(_Strict):
                 if point not in points:
                     raise ValueError(f"capsule {capsule.name}: unknown frame '{point}' (base, "
                                      f"{', '.join(self.joint_names)} or end_effector)")
-        names = capsules + [o.name for o in self.geometry.obstacles]
+        tools = [t.name for t in self.tools]
+        names = capsules + [o.name for o in self.geometry.obstacles] + tools
         dup = sorted({n for n in names if names.count(n) > 1})
         if dup:
-            raise ValueError(f"duplicate capsule/obstacle name(s): {', '.join(dup)}")
+            raise ValueError(f"duplicate capsule/obstacle/tool name(s): {', '.join(dup)}")
         for obstacle in self.geometry.obstacles:
-            unknown = [n for n in obstacle.ignore_links if n not in capsules]
+            unknown = [n for n in obstacle.ignore_links if n not in capsules + tools]
             if unknown:
-                raise ValueError(f"obstacle {obstacle.name}: unknown capsule(s) in ignore_links: "
-                                 f"{', '.join(unknown)}")
+                raise ValueError(f"obstacle {obstacle.name}: unknown capsule(s) or tool(s) in "
+                                 f"ignore_links: {', '.join(unknown)}")
         return self
 
     def tool(self, name: str | None) -> Tool | None:

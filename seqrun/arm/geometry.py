@@ -3,7 +3,8 @@
 The links are capsules (a segment between two frame origins of the chain, and a radius);
 the facility's obstacles are planes (half-spaces), boxes and finite cylinders, all in the
 base frame; self-collision is checked between links that are not neighbours in the
-chain. Everything is vectorised over configurations: ``(..., dof)`` joint angles in,
+chain. The tools' volumes (:mod:`seqrun.arm.tools`) are capsules too, carried by the
+end-effector frame, checked against the obstacles and every link they are not bolted to. Everything is vectorised over configurations: ``(..., dof)`` joint angles in,
 ``(...)`` distances out, one Python loop over the (few) capsules and obstacles only.
 
 Distances are *clearances*: surface to surface, in mm, negative when they overlap. A
@@ -23,6 +24,7 @@ import numpy as np
 
 from seqrun.arm.description import ArmDescription, Obstacle
 from seqrun.arm.kinematics import Chain, frame_origins, matrix_from_rpy
+from seqrun.arm.tools import ToolVolumes
 
 __all__ = ["EXACT_WITHIN_MM", "Clearance", "Geometry"]
 
@@ -224,32 +226,55 @@ class Geometry:
         self._frame = {name: i for i, name in enumerate(names)}
         self.capsules = list(spec.capsules)
         self.capsule_names = [c.name for c in self.capsules]
-        self._ends = np.array([[self._frame[c.start], self._frame[c.end]] for c in self.capsules],
-                              dtype=int).reshape(-1, 2)
-        self._radii = np.array([c.radius_mm for c in self.capsules], dtype=float)
+        # the tools' volumes follow the links' (seqrun/arm/tools.py): their ends are points
+        # of the end-effector frame, appended after the chain's frame origins
+        self.tools = ToolVolumes(arm)
+        parts = self.tools.parts
+        links = len(self.capsules)
+        ends = [[self._frame[c.start], self._frame[c.end]] for c in self.capsules]
+        ends += [[len(names) + 2 * k, len(names) + 2 * k + 1] for k in range(len(parts))]
+        self._ends = np.array(ends, dtype=int).reshape(-1, 2)
+        self._radii = np.array([c.radius_mm for c in self.capsules]
+                               + [part.radius_mm for part in parts], dtype=float)
         self._max_radius = float(self._radii.max()) if len(self._radii) else 0.0
+        volume_names = self.capsule_names + [part.label for part in parts]
         # self-collision: links that are not neighbours in the list (chain order)
-        self.pairs = [(i, j) for i in range(len(self.capsules))
-                      for j in range(i + 2, len(self.capsules))
+        self.pairs = [(i, j) for i in range(links) for j in range(i + 2, links)
                       if (self.capsules[i].name, self.capsules[j].name) not in spec.allowed_pairs
                       and (self.capsules[j].name, self.capsules[i].name) not in spec.allowed_pairs]
+        # a tool against every link but those it is bolted to (touching the flange or the
+        # end-effector); a tool's parts and different tools are one rigid body
+        flange = {arm.joints[-1].name, "end_effector"}
+        allowed = {frozenset(pair) for pair in spec.allowed_pairs}
+        for t, part in enumerate(parts):
+            for i, capsule in enumerate(self.capsules):
+                if capsule.start in flange or capsule.end in flange:
+                    continue
+                if any(frozenset((capsule.name, name)) in allowed for name in part.names()):
+                    continue
+                self.pairs.append((i, links + t))
         self.obstacles = list(spec.obstacles)
         # what is evaluated, in column order: obstacles (their capsules), then link pairs
         self._checked: list[tuple[Obstacle, np.ndarray]] = []
         self._names: list[str] = []
         for obstacle in self.obstacles:
-            links = [k for k, c in enumerate(self.capsules) if c.name not in obstacle.ignore_links]
-            if links:
-                self._checked.append((obstacle, np.array(links, dtype=int)))
-                self._names += [f"{self.capsules[k].name}~{obstacle.name}" for k in links]
+            ignored = set(obstacle.ignore_links)
+            checked = [k for k, c in enumerate(self.capsules) if c.name not in ignored]
+            checked += [links + t for t, part in enumerate(parts) if not part.names() & ignored]
+            if checked:
+                self._checked.append((obstacle, np.array(checked, dtype=int)))
+                self._names += [f"{volume_names[k]}~{obstacle.name}" for k in checked]
         self._pair_index = (np.array([i for i, _ in self.pairs], dtype=int),
                             np.array([j for _, j in self.pairs], dtype=int))
-        self._names += [f"{self.capsules[i].name}~{self.capsules[j].name}" for i, j in self.pairs]
+        self._names += [f"{volume_names[i]}~{volume_names[j]}" for i, j in self.pairs]
         # plain-float copies for the single-configuration path
         self._radii_list = self._radii.tolist()
         frames = [self.chain.base, *self.chain.links]
         self._rows = [tuple(float(x) for x in (*f[:3, :3].ravel(), *f[:3, 3])) for f in frames]
-        self._tool_xyz = tuple(float(x) for x in self.chain.tool[:3, 3])
+        # the end-effector's origin and the tools' points in the last joint's frame
+        flange_points = np.concatenate([np.zeros((1, 3)), self.tools.points_mm])
+        flange_points = flange_points @ self.chain.tool[:3, :3].T + self.chain.tool[:3, 3]
+        self._flange_points = [tuple(float(x) for x in p) for p in flange_points]
         self._planes_only = all(o.kind == "plane" for o in self.obstacles)
         self._planes = {}
         for o in self.obstacles:
@@ -263,21 +288,29 @@ class Geometry:
         names_iter = iter(self._names)
         self._plane_columns = [
             (*ends[k], *self._planes[obstacle.name], self._radii_list[k], next(names_iter))
-            for obstacle, links in self._checked if obstacle.kind == "plane"
-            for k in links.tolist()] if self._planes_only else []
+            for obstacle, checked in self._checked if obstacle.kind == "plane"
+            for k in checked.tolist()] if self._planes_only else []
         self._pair_columns = [
             (*ends[i], *ends[j], self._radii_list[i], self._radii_list[j], next(names_iter))
             for i, j in self.pairs] if self._planes_only else []
 
     @property
     def empty(self) -> bool:
-        return not self.capsules
+        return not len(self._radii)
+
+    @property
+    def ee_points(self) -> np.ndarray | None:
+        """The points of the end-effector frame the volumes need (the tools'), for
+        :func:`~seqrun.arm.kinematics.frame_origins`; None without tools."""
+        return None if self.tools.empty else self.tools.points_mm
 
     def endpoints(self, q_rad: np.ndarray, origins: np.ndarray | None = None) -> np.ndarray:
-        """Capsule segments ``(..., capsules, 2, 3)`` at joint angles (rad); ``origins``:
-        their :func:`~seqrun.arm.kinematics.frame_origins` when the caller has them."""
-        if origins is None:
-            origins = frame_origins(self.chain, q_rad)  # (..., n+1, 3)
+        """Capsule segments ``(..., capsules, 2, 3)`` at joint angles (rad), the links' then
+        the tools'; ``origins``: their :func:`~seqrun.arm.kinematics.frame_origins` with
+        :attr:`ee_points` when the caller has them."""
+        expected = self.chain.dof + 1 + len(self.tools.points_mm)
+        if origins is None or origins.shape[-2] != expected:
+            origins = frame_origins(self.chain, q_rad, self.ee_points)  # (..., n+1+2m, 3)
         origin = np.zeros(origins.shape[:-2] + (1, 3))
         points = np.concatenate([origin, origins], axis=-2)  # "base" = the mount, index 0
         return points[..., self._ends, :]
@@ -339,8 +372,8 @@ class Geometry:
         return bound
 
     def _origins(self, q) -> list[tuple[float, float, float]]:
-        """Frame origins (mount, joints 1..n, end-effector) of one configuration, in plain
-        floats: the run-time check does this every control cycle."""
+        """Frame origins (mount, joints 1..n, end-effector, the tools' points) of one
+        configuration, in plain floats: the run-time check does this every control cycle."""
         rows = self._rows
         (r00, r01, r02, r10, r11, r12, r20, r21, r22, px, py, pz) = rows[0]
         points = [(0.0, 0.0, 0.0), (px, py, pz)]
@@ -367,9 +400,10 @@ class Geometry:
             r00, r01 = c * r00 + s * r01, c * r01 - s * r00
             r10, r11 = c * r10 + s * r11, c * r11 - s * r10
             r20, r21 = c * r20 + s * r21, c * r21 - s * r20
-        ax, ay, az = self._tool_xyz
-        points.append((px + r00 * ax + r01 * ay + r02 * az, py + r10 * ax + r11 * ay + r12 * az,
-                       pz + r20 * ax + r21 * ay + r22 * az))
+        for ax, ay, az in self._flange_points:  # the end-effector, then the tools' points
+            points.append((px + r00 * ax + r01 * ay + r02 * az,
+                           py + r10 * ax + r11 * ay + r12 * az,
+                           pz + r20 * ax + r21 * ay + r22 * az))
         return points
 
     def _smallest_one(self, q) -> Clearance:

@@ -38,6 +38,7 @@ __all__ = [
     "Pose",
     "fk",
     "frame_transforms",
+    "heights_of_points",
     "jacobian",
     "matrix_from_rpy",
     "orientation_error",
@@ -250,19 +251,27 @@ def frame_transforms(chain: Chain, q_rad: np.ndarray | Sequence[float]) -> np.nd
     return frames
 
 
-def frame_origins(chain: Chain, q_rad: np.ndarray | Sequence[float]) -> np.ndarray:
+def frame_origins(chain: Chain, q_rad: np.ndarray | Sequence[float],
+                  ee_points: np.ndarray | None = None) -> np.ndarray:
     """The origins (mm) of :func:`frame_transforms`' frames, ``(..., n+1, 3)``, the same bits
-    without keeping every 4x4 frame (guards and link volumes along a path need the points)."""
+    without keeping every 4x4 frame (guards and link volumes along a path need the points).
+    ``ee_points`` ``(m, 3)``: points of the end-effector frame (a tool's volume), appended
+    in the base frame: ``(..., n+1+m, 3)``."""
     q = _joint_angles(chain, q_rad)
     turned = _turned_frames(chain, q)
     n = chain.dof
-    origins = np.empty(q.shape[:-1] + (n + 1, 3))
+    extra = 0 if ee_points is None else len(ee_points)
+    origins = np.empty(q.shape[:-1] + (n + 1 + extra, 3))
     current = turned[..., 0, :, :]
     origins[..., 0, :] = current[..., :3, 3]
     for k in range(1, n):
         current = current @ turned[..., k, :, :]
         origins[..., k, :] = current[..., :3, 3]
-    origins[..., n, :] = (current @ chain.tool)[..., :3, 3]
+    end = current @ chain.tool
+    origins[..., n, :] = end[..., :3, 3]
+    if ee_points is not None and extra:
+        origins[..., n + 1:, :] = (np.einsum("...ij,mj->...mi", end[..., :3, :3], ee_points)
+                                   + end[..., None, :3, 3])
     return origins
 
 
@@ -313,6 +322,25 @@ def point_heights(chain: Chain, q_rad: np.ndarray | Sequence[float]) -> dict[Gua
     return heights
 
 
+def heights_of_points(chain: Chain, q_rad: np.ndarray | Sequence[float],
+                      ee_points: np.ndarray | None = None
+                      ) -> tuple[dict[GuardPoint, float], list[float]]:
+    """:func:`point_heights`, and the z (mm) of ``ee_points`` ``(m, 3)`` of the end-effector
+    frame (a tool's volume) from the same forward kinematics."""
+    q = _joint_angles(chain, q_rad)
+    if q.ndim != 1:
+        raise ValueError(f"expected one configuration of shape ({chain.dof},), got {q.shape}")
+    _check_guard_frames(chain.dof)
+    frames = _frames_of_one(chain, _turned_frames(chain, q))
+    heights: dict[GuardPoint, float] = {
+        name: float(frames[index][2, 3]) for name, index in GUARD_POINT_FRAMES.items()}
+    end = frames[-1]
+    heights["end_effector"] = float(end[2, 3])
+    if ee_points is None or not len(ee_points):
+        return heights, []
+    return heights, (ee_points @ end[2, :3] + end[2, 3]).tolist()
+
+
 def _check_guard_frames(dof: int) -> None:
     needed = max(GUARD_POINT_FRAMES.values()) + 1
     if dof < needed:
@@ -320,13 +348,16 @@ def _check_guard_frames(dof: int) -> None:
                          f"this chain has {dof}")
 
 
-def points_of_origins(origins: np.ndarray) -> dict[GuardPoint, np.ndarray]:
+def points_of_origins(origins: np.ndarray, dof: int | None = None
+                      ) -> dict[GuardPoint, np.ndarray]:
     """:func:`point_positions` from :func:`frame_origins` already computed (one forward
-    kinematics for the guards and the link volumes along a path)."""
-    _check_guard_frames(origins.shape[-2] - 1)
+    kinematics for the guards and the link volumes along a path); ``dof``: the chain's,
+    when the origins end with points of the end-effector frame."""
+    dof = origins.shape[-2] - 1 if dof is None else dof
+    _check_guard_frames(dof)
     points: dict[GuardPoint, np.ndarray] = {
         name: origins[..., index, :] for name, index in GUARD_POINT_FRAMES.items()}
-    points["end_effector"] = origins[..., -1, :]
+    points["end_effector"] = origins[..., dof, :]
     return points
 
 

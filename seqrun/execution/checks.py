@@ -18,6 +18,7 @@ from seqrun.arm import kinematics
 from seqrun.errors import BusError, RunAborted
 
 if TYPE_CHECKING:
+    from seqrun.arm.geometry import Geometry
     from seqrun.arm.description import ArmDescription
     from seqrun.arm.planner import MovePlan
     from seqrun.drivers.base import CycleState, JointState
@@ -42,7 +43,8 @@ class ReadingChecks:
         #: Smallest clearance seen per pair of link volumes / obstacles (the closest pair
         #: of each cycle), mm.
         self.min_distances_mm: dict[str, float] = {}
-        self._geometry: Any = None
+        self._geometry: Geometry | None = None
+        self._watching: list[list[str]] | None = None
 
     # ------------------------------------------------------------------ state flags
     def check_states(self, short_state: dict[int, CycleState], *,
@@ -82,6 +84,15 @@ class ReadingChecks:
         return RunAborted(flags.cause, f"{text} [state {flags.describe()}]", module=module)
 
     # ------------------------------------------------------------------ where the arm is
+    @property
+    def geometry(self) -> Geometry:
+        """The link and tool volumes (built at the first reading that needs them)."""
+        if self._geometry is None:
+            from seqrun.arm.geometry import Geometry
+
+            self._geometry = Geometry(self.arm)
+        return self._geometry
+
     def check_guards(self, user_deg: np.ndarray) -> None:
         """Workspace guards and link volumes at the measured joints."""
         q = np.radians(user_deg)
@@ -89,24 +100,40 @@ class ReadingChecks:
         guards = self.arm.workspace.guards
         if not guards:
             return
-        heights = kinematics.point_heights(self.chain, q)
-        for guard in guards:
-            for name in guard.points:
+        tools = self.geometry.tools
+        if not tools.parts:
+            heights: dict[str, float] = kinematics.point_heights(  # type: ignore[assignment]
+                self.chain, q)
+            watching = self._watched_points(False)
+        else:
+            # a guard that watches the end-effector watches what the flange carries too
+            found, tool_z = kinematics.heights_of_points(self.chain, q, tools.points_mm)
+            heights = dict(found.items())
+            heights["tool"], part = tools.lowest_z(tool_z)
+            watching = self._watched_points(True)
+        for guard, watched in zip(guards, watching):
+            for name in watched:
                 z = heights[name]
                 key = f"{guard.name}:{name}"
                 self.min_heights_mm[key] = min(self.min_heights_mm.get(key, math.inf), z)
                 if z < guard.min_z_mm:
+                    what = part if name == "tool" else name
                     raise RunAborted("workspace_guard",
-                                     f"workspace guard '{guard.name}': {name} at z = {z:.1f} mm, "
+                                     f"workspace guard '{guard.name}': {what} at z = {z:.1f} mm, "
                                      f"below {guard.min_z_mm:.1f} mm")
+
+    def _watched_points(self, tools: bool) -> list[list[str]]:
+        """Each guard's watched points (with "tool" where it watches the end-effector and
+        the arm has tool volumes), worked out once per run."""
+        if self._watching is None:
+            self._watching = [
+                [*guard.points, "tool"] if tools and "end_effector" in guard.points
+                else list(guard.points) for guard in self.arm.workspace.guards]
+        return self._watching
 
     def check_geometry(self, q_rad: np.ndarray) -> None:
         """Link volumes against the arm file's obstacles and each other (measured joints)."""
-        geometry = self._geometry
-        if geometry is None:
-            from seqrun.arm.geometry import Geometry
-
-            geometry = self._geometry = Geometry(self.arm)
+        geometry = self.geometry
         if geometry.empty:
             return
         smallest = geometry.smallest(q_rad)

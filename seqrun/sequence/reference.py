@@ -94,8 +94,9 @@ Every step takes an optional `label`, the text the operator sees.
   sample must be reachable, inside the limits in force, within the joint velocity limits
   and away from singular configurations (`cartesian.min_manipulability`); during the run
   the tool further than `max_deviation_mm` from the line is a fault.
-- A checkpoint must agree with the end-effector of the joints tracked so far; a relative
-  one (`moved_mm`) with how far the tool moved during the last move. A checkpoint or a
+- A checkpoint must agree with the tool pose of the joints tracked so far (the same frame
+  a move's `position_mm` means: see "Tools and frames"); a relative one (`moved_mm`) with
+  how far the tool moved during the last move. A checkpoint or a
   wait after a `halt` (and no `reset`) can never pass and is an error.
 - Every pose a step names is checked against the arm at the pose file's own lines: it lists
   every joint (the locked one at its locked value), its `end_effector` agrees with forward
@@ -105,6 +106,59 @@ Every step takes an optional `label`, the text the operator sees.
 - A run uses exactly what was validated: the sequence, its includes, the poses and the arm
   file are read once; their SHA-256 is in the run report (`inputs`).
 - Validation starts from Park (`--start POSE` to choose another pose).
+
+## Tools and frames
+
+Positions are millimetres in the base frame: its origin where the arm is mounted on the desk,
+z up (the arm stands along +z in Totem). Orientations are `rpy_deg` = [roll, pitch, yaw],
+R = Rz(yaw) Ry(pitch) Rx(roll), of the frame that moves.
+
+- **The end-effector frame** (`kinematics.tool` of the arm file, 36.9 mm beyond the last
+  module's flange on the LWA 3) has its **z axis pointing back into the arm**: in Totem the
+  arm points up and the end-effector's rotation is diag(1, −1, −1), rpy [180, 0, 0]. What is
+  bolted to the flange sticks out along the end-effector's **−z**.
+- **A tool** of the arm file (`tools:`) is a tip frame given in the end-effector frame
+  (`xyz_mm`, `rpy_deg`) and a volume (`capsules`). A 120 mm probe on the flange's axis:
+  `{name: probe, xyz_mm: [0, 0, -120]}`; its tip frame keeps the end-effector's axes, so it
+  points along its own −z too. A tool given `rpy_deg: [180, 0, 0]` has its tip frame's z
+  axis pointing out along the tool (the convention of many robot controllers).
+- **One frame for every Cartesian number of a sequence**: `position_mm`/`rpy_deg` of `move`
+  and `move_linear`, `frame: tool` displacements, a `checkpoint`'s position, pose or
+  `moved_mm` all mean the step's `tool:`, else the arm's `default_tool`, else the
+  end-effector frame. A checkpoint at the point a move went to checks that same point.
+- **A tool's volume is checked as the links' are**: against the obstacles, the links it is
+  not bolted to, and every workspace guard that watches `end_effector`, along every planned
+  path and every control cycle, whichever tool a step names and for moves to joint angles
+  too. Without `capsules` its tip line (end-effector to tip, no thickness) is checked;
+  `capsules: []` marks a tip that is a point in the air (a camera's focus). A long tool
+  may not fit in Park: the first move's start is then refused.
+
+Where the tool points (base frame), and the `rpy_deg` of its tip frame that says so (the
+rotation about the tool's own axis is free: any yaw for up and down):
+
+| the tool points | end-effector, or a tool with `rpy_deg: [0, 0, 0]` | a tool with `rpy_deg: [180, 0, 0]` |
+|---|---|---|
+| down (−z, at the desk) | `[0, 0, 0]` | `[180, 0, 0]` |
+| up (+z, as in Totem) | `[180, 0, 0]` | `[0, 0, 0]` |
+| forward (+x) | `[0, -90, 0]` | `[0, 90, 0]` |
+| back (−x) | `[0, 90, 0]` | `[0, -90, 0]` |
+| left (+y) | `[90, 0, 0]` | `[-90, 0, 0]` |
+| right (−y) | `[-90, 0, 0]` | `[90, 0, 0]` |
+
+So "the tool pointing down" is `rpy_deg: [0, 0, 0]` (or `[0, 0, yaw]`) for the end-effector
+and for tools defined without a rotation. `[180, 0, 0]` points such a tool *up*, which is
+why it is unreachable near the desk; `seqrun validate` says so and gives the rpy that points
+down. `seqrun ik --tool NAME` takes the same frames (`seqrun fk` prints the end-effector's).
+
+A straight approach along the tool, checked sample by sample, is
+`sequences/linear_approach.yaml`:
+
+```yaml
+  - move: {position_mm: [0, 500, 300], rpy_deg: [0, 0, 90]}   # above the spot, pointing down
+  - move_linear:                        # 100 mm along the tool, i.e. along its -z: down here
+      {position_mm: [0, 0, -100], relative: true, frame: tool, speed_mm_s: 20}
+  - checkpoint: {moved_mm: [0, 0, -100]}                       # 100 mm down, base frame
+```
 
 ## Steps
 """
@@ -259,5 +313,10 @@ def arm_reference_markdown() -> str:
     return file_reference_markdown(
         ArmDescription, "Arm files",
         "`arms/<name>.yaml`: every number about the arm (joints, limits, offsets, "
-        "kinematics, CAN and control-loop settings, workspace guards). Angles in degrees, "
-        "user coordinates.")
+        "kinematics, CAN and control-loop settings, workspace guards, tools and volumes). "
+        "Angles in degrees, user coordinates. The end-effector frame's z axis points back "
+        "into the arm: a tool on the flange's axis ends at `xyz_mm: [0, 0, -length]` and "
+        "points along its frame's -z (docs/sequence-format.md, 'Tools and frames', has the "
+        "table of directions and rpy). A tool's `capsules` are its volume, checked against "
+        "the obstacles, the links it is not bolted to and the guards that watch "
+        "end_effector; without them its tip line is checked.")

@@ -52,6 +52,7 @@ from seqrun.steps.registry import step_kind
 from seqrun.yamlsource import sort_errors
 
 if TYPE_CHECKING:
+    from seqrun.arm.geometry import Geometry
     from seqrun.arm.ik import IkSolver
     from seqrun.arm.kinematics import Chain
     from seqrun.sequence.loader import LoadedSequence
@@ -160,6 +161,7 @@ class Checker:
         self.notes: list[SourceError] = []
         self.joints: dict[str, TrackedJoint] = {}
         self._chain: Chain | None = None
+        self._geometry: Geometry | None = None
         self.speed = 1.0  # the run's speed override: the plans guards are checked along
         self.clearances: dict[int, Clearance] = {}
         self.targets_deg: dict[int, np.ndarray] = {}
@@ -353,32 +355,48 @@ class Checker:
         """Guards along sampled joint configurations (rad) at ``times`` (s): one error per
         guard, at the watched point that goes lowest; the smallest clearance is kept. Then
         the link volumes against the obstacles and each other (:meth:`_check_path_geometry`)."""
+        from seqrun.arm.geometry import Geometry
         from seqrun.arm.kinematics import Chain, frame_origins, points_of_origins
 
         guards = self.arm.workspace.guards
-        if not guards and self.arm.geometry.capsules == []:
+        if not guards and self.arm.geometry.capsules == [] and not self.arm.tools:
             return
         if self._chain is None:
             self._chain = Chain.from_arm(self.arm)
-        # one forward kinematics of the samples for the link volumes and the guards
-        origins = frame_origins(self._chain, path_rad)
+        if self._geometry is None:
+            self._geometry = Geometry(self.arm)
+        # one forward kinematics of the samples for the link and tool volumes and the guards
+        origins = frame_origins(self._chain, path_rad, self._geometry.ee_points)
         self._check_path_geometry(step, times, path_rad, what=what, origins=origins)
         if not guards:
             return
-        points = points_of_origins(origins)
+        dof = self._chain.dof
+        points: dict[str, np.ndarray] = dict(points_of_origins(origins, dof))
+        labels: dict[str, str] = {}
+        tools = self._geometry.tools
+        if not tools.empty:
+            # a guard that watches the end-effector watches what the flange carries too
+            lowest_tool, part = tools.lowest(origins[..., dof + 1:, :])
+            points["tool"] = lowest_tool
+            labels = {"tool": tools.parts[int(part[int(np.argmin(lowest_tool[:, 2]))])].label}
         duration = float(times[-1]) if len(times) else 0.0
         for guard in guards:
-            lowest = min(guard.points, key=lambda p: float(points[p][:, 2].min()))
+            watched = list(guard.points)
+            if "end_effector" in watched and "tool" in points:
+                watched.append("tool")
+            lowest = min(watched, key=lambda p: float(points[p][:, 2].min()))
             heights = points[lowest][:, 2]
             i = int(np.argmin(heights))
-            clearance = Clearance(step.number, guard.name, lowest, float(heights[i]),
-                                  float(heights[i]) - guard.min_z_mm, float(times[i]), duration)
+            clearance = Clearance(step.number, guard.name, labels.get(lowest, lowest),
+                                  float(heights[i]), float(heights[i]) - guard.min_z_mm,
+                                  float(times[i]), duration)
             kept = self.clearances.get(step.number)
             if kept is None or clearance.margin_mm < kept.margin_mm:
                 self.clearances[step.number] = clearance
             if heights[i] < guard.min_z_mm:
+                name = labels.get(lowest, lowest.replace('_', '-'))
                 self.errors.append(step.error(
-                    f"this move takes the {lowest.replace('_', '-')} down to z = "
+                    f"this move takes the {name} down to z = "
                     f"{_f(heights[i])} mm (at {times[i]:.2f} s of {duration:.2f} s, {what}), "
                     f"below the '{guard.name}' guard at {_f(guard.min_z_mm)} mm"))
 
@@ -386,12 +404,8 @@ class Checker:
                              *, what: str, origins: np.ndarray) -> None:
         """Link capsules against obstacles and non-neighbouring links along the samples
         (``origins``: their frames' origins, :func:`~seqrun.arm.kinematics.frame_origins`)."""
-        if self.arm.geometry.capsules == []:
+        if self._geometry is None or self._geometry.empty:
             return
-        from seqrun.arm.geometry import Geometry
-
-        if getattr(self, "_geometry", None) is None:
-            self._geometry = Geometry(self.arm)
         smallest = self._geometry.smallest(path_rad, origins)
         if smallest is None:
             return

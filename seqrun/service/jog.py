@@ -19,6 +19,7 @@ from typing import Callable
 import numpy as np
 
 from seqrun.arm import kinematics
+from seqrun.arm.tools import ToolVolumes
 from seqrun.errors import Refused
 
 #: Margin (deg) a jog keeps to the joint's limits: it is refused closer than this.
@@ -65,8 +66,9 @@ def plan_jog(arm, joint: str, speed_scale: float, joints_deg: np.ndarray,
                       f"{'upper' if direction > 0 else 'lower'} limit "
                       f"({hi if direction > 0 else lo:g}°, margin {LIMIT_MARGIN_DEG:g}°)")
     chain = kinematics.Chain.from_arm(arm)
+    tools = ToolVolumes(arm)
     q = np.radians(np.asarray(joints_deg, dtype=float))
-    low = _lowest_guard(arm, chain, q)
+    low = _lowest_guard(arm, chain, q, tools)
     if low is not None and low[1] < low[2]:
         raise Refused(f"jog: the arm is outside its workspace guard '{low[0]}' "
                       f"({low[3]} at z = {low[1]:.1f} mm, below {low[2]:.1f} mm); move it "
@@ -77,7 +79,7 @@ def plan_jog(arm, joint: str, speed_scale: float, joints_deg: np.ndarray,
         x = start + direction * min(k * SEARCH_STEP_DEG, abs(limit - start))
         q_k = q.copy()
         q_k[index] = math.radians(x)
-        low = _lowest_guard(arm, chain, q_k)
+        low = _lowest_guard(arm, chain, q_k, tools)
         if low is not None and low[1] < low[2] + GUARD_MARGIN_MM:
             end = start + direction * (k - 1) * SEARCH_STEP_DEG
             why = f"workspace guard '{low[0]}'"
@@ -89,15 +91,26 @@ def plan_jog(arm, joint: str, speed_scale: float, joints_deg: np.ndarray,
                    jog_velocity_deg_s * abs(speed_scale), why)
 
 
-def _lowest_guard(arm, chain, q_rad) -> tuple[str, float, float, str] | None:
-    """(guard, z of its lowest point, min_z, point) for the guard closest to being broken."""
-    points = kinematics.point_positions(chain, q_rad)
+def _lowest_guard(arm, chain, q_rad, tools: ToolVolumes | None = None
+                  ) -> tuple[str, float, float, str] | None:
+    """(guard, z of its lowest point, min_z, point) for the guard closest to being broken;
+    a guard that watches the end-effector watches the tools' volumes too (as a run does)."""
+    tools = tools if tools is not None else ToolVolumes(arm)
+    heights, tool_z = kinematics.heights_of_points(
+        chain, q_rad, None if tools.empty else tools.points_mm)
+    found: dict[str, float] = dict(heights.items())
+    tool_label = ""
+    if not tools.empty:
+        found["tool"], tool_label = tools.lowest_z(tool_z)
     worst = None
     for guard in arm.workspace.guards:
-        for name in guard.points:
-            z = float(points[name][2])
+        watched = list(guard.points)
+        if "end_effector" in watched and tool_label:
+            watched.append("tool")
+        for name in watched:
+            z = found[name]
             if worst is None or z - guard.min_z_mm < worst[1] - worst[2]:
-                worst = (guard.name, z, guard.min_z_mm, name)
+                worst = (guard.name, z, guard.min_z_mm, tool_label if name == "tool" else name)
     return worst
 
 

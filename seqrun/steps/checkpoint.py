@@ -1,5 +1,7 @@
-"""checkpoint: forward kinematics of the measured joints against an expected pose, or how
-far the tool moved during the last move (``moved_mm``)."""
+"""checkpoint: forward kinematics of the measured joints against an expected tool pose, or
+how far the tool moved during the last move (``moved_mm``). Every Cartesian number of a
+sequence means the same frame: the step's tool, else the arm's default_tool, else the
+end-effector."""
 
 from __future__ import annotations
 
@@ -24,8 +26,10 @@ if TYPE_CHECKING:
 
 
 class CheckpointParams(StepParams):
-    """Check the measured end-effector pose (forward kinematics of the joints) against an
-    expected one; the run stops if it is off by more than the tolerances."""
+    """Check the measured tool pose (forward kinematics of the joints) against an expected
+    one; the run stops if it is off by more than the tolerances. The tool is the step's
+    tool:, else the arm's default_tool, else the end-effector frame: the frame a move's
+    position_mm means, so a checkpoint at the point a move went to checks that point."""
 
     kind: ClassVar[str] = "checkpoint"
     yaml_name: ClassVar[str] = "checkpoint"
@@ -34,7 +38,7 @@ class CheckpointParams(StepParams):
         {"required": ["moved_mm"]}]})
 
     pose: PoseName | None = Field(
-        None, description="Expect the end-effector pose of this pose file.")
+        None, description="Expect the tool where this pose file puts it.")
     moved_mm: Vector3 | None = Field(
         None, description="Relative checkpoint: the tool moved by this [x, y, z] in mm during "
                           "the last move before it (from where that move started), in the "
@@ -42,14 +46,16 @@ class CheckpointParams(StepParams):
                           "move started), e.g. [0, 0, -300] with frame: tool.")
     frame: Literal["base", "tool"] = Field(
         "base", description="With moved_mm: the frame the displacement is given in.")
-    tool: str | None = Field(None, min_length=1, description="With moved_mm: the arm file's "
-                                                             "tool (default: the arm's "
+    tool: str | None = Field(None, min_length=1, description="The arm file's tool whose tip "
+                                                             "frame is checked, as a move's "
+                                                             "tool: is (default: the arm's "
                                                              "default_tool, else the "
                                                              "end-effector frame).")
     position_mm: Vector3 | None = Field(
-        None, description="Expected end-effector position [x, y, z] in mm (base frame).")
+        None, description="Expected tool position [x, y, z] in mm (base frame): the point a "
+                          "move to this position_mm with the same tool puts there.")
     rpy_deg: Vector3 | None = Field(
-        None, description="Expected orientation [roll, pitch, yaw] in degrees, "
+        None, description="Expected tool orientation [roll, pitch, yaw] in degrees, "
                           "R = Rz(yaw) Ry(pitch) Rx(roll).")
     position_tolerance_mm: Positive = Field(
         7.0, description="Largest allowed distance from the expected position, mm. The "
@@ -67,8 +73,8 @@ class CheckpointParams(StepParams):
                 raise PydanticCustomError("checkpoint_what", "a relative checkpoint (moved_mm) "
                                           "takes no {others}", {"others": ", ".join(others)})
             return self
-        if self.frame != "base" or self.tool is not None:
-            raise PydanticCustomError("checkpoint_what", "frame and tool belong to a relative "
+        if self.frame != "base":
+            raise PydanticCustomError("checkpoint_what", "frame belongs to a relative "
                                                          "checkpoint (moved_mm)")
         explicit = self.position_mm is not None or self.rpy_deg is not None
         if self.pose is not None and explicit:
@@ -92,8 +98,15 @@ def describe(params: CheckpointParams) -> str:
     if params.moved_mm is not None:
         xyz = ", ".join(f"{v:g}" for v in params.moved_mm)
         return f"checkpoint: the tool moved [{xyz}] mm ({params.frame} frame)"
-    return (f"checkpoint: pose {params.pose}" if params.pose is not None
-            else "checkpoint: end-effector pose")
+    what = f" (tool {params.tool})" if params.tool is not None else ""
+    return (f"checkpoint: pose {params.pose}{what}" if params.pose is not None
+            else f"checkpoint: tool pose{what}")
+
+
+def _frame_name(arm: ArmDescription, tool: str | None) -> str:
+    """What a checkpoint checks, for messages: "the tool probe" or "the end-effector"."""
+    found = arm.tool(tool)
+    return "the end-effector" if found is None else f"the tool {found.name}"
 
 
 def poses(params: CheckpointParams) -> tuple[str, ...]:
@@ -102,20 +115,23 @@ def poses(params: CheckpointParams) -> tuple[str, ...]:
 
 def resolve_checkpoint(params: CheckpointParams, arm: ArmDescription, poses: PoseSource
                        ) -> tuple[np.ndarray, np.ndarray, float, float]:
-    """Expected end-effector of a checkpoint: ``(position_mm (3,), rotation (3, 3),
-    position_tolerance_mm, angle_tolerance_deg)``. ``poses``: the sequence's frozen poses
-    (a run uses only these) or a pose folder."""
+    """Expected tool frame of a checkpoint (the step's tool, else the arm's default tool,
+    else the end-effector: the frame a move's position_mm means): ``(position_mm (3,),
+    rotation (3, 3), position_tolerance_mm, angle_tolerance_deg)``. ``poses``: the
+    sequence's frozen poses (a run uses only these) or a pose folder. KeyError for a tool
+    the arm does not define."""
     import numpy as np
 
-    from seqrun.arm.kinematics import matrix_from_rpy, pose_from_user_deg
+    from seqrun.arm.cartesian import solver_for, tool_pose
+    from seqrun.arm.kinematics import matrix_from_rpy, user_joint_values
     from seqrun.arm.poses import pose_joints_deg
 
     if params.pose is not None:
         joints = pose_joints_deg(params.pose, poses)
         joints = {j.name: (j.locked if j.locked is not None else joints.get(j.name, 0.0))
                   for j in arm.joints}
-        pose = pose_from_user_deg(arm, joints)
-        position, rotation = pose.position_mm, pose.rotation
+        frame = tool_pose(solver_for(arm, params.tool), user_joint_values(arm, joints))
+        position, rotation = frame[:3, 3], frame[:3, :3]
     else:
         assert params.position_mm is not None and params.rpy_deg is not None
         position = np.asarray(params.position_mm, dtype=float)
@@ -132,13 +148,17 @@ def check(checker: CheckContext,
         return
     import numpy as np
 
+    from seqrun.arm.cartesian import tool_pose
+    from seqrun.arm.kinematics import orientation_error, rpy_from_matrix
     from seqrun.errors import SequenceInvalid, UserInputError
-    from seqrun.arm.kinematics import orientation_error, pose_from_user_deg
     from seqrun.formatting import format_number as f
 
     checker.after_halt(step, "checkpoint")
     if params.pose is not None and checker.pose(step, params.pose, target=False) is None:
         return  # unknown pose or its file has errors: reported already
+    solver = checker.tool_solver(step, params)
+    if solver is None:
+        return  # an unknown tool: reported
     try:
         position, rotation, pos_tol, ang_tol = resolve_checkpoint(params, checker.arm,
                                                                   checker.poses)
@@ -151,14 +171,15 @@ def check(checker: CheckContext,
         return  # where the joints are after the moves before is not known
     if _lost(checker, step):
         return
-    pose = pose_from_user_deg(checker.arm, {n: s.position for n, s in checker.joints.items()})
-    distance = float(np.linalg.norm(pose.position_mm - position))
-    angle = math.degrees(float(orientation_error(rotation, pose.rotation)))
+    frame = tool_pose(solver, checker.tracked())
+    distance = float(np.linalg.norm(frame[:3, 3] - position))
+    angle = math.degrees(float(orientation_error(rotation, frame[:3, :3])))
     if distance > pos_tol or angle > ang_tol:
-        at = ", ".join(f(v) for v in pose.position_mm)
-        rpy = ", ".join(f(v) for v in pose.rpy_deg)
+        at = ", ".join(f(v) for v in frame[:3, 3])
+        rpy = ", ".join(f(v) for v in np.degrees(rpy_from_matrix(frame[:3, :3])))
         checker.errors.append(step.error(
-            f"this checkpoint cannot pass: after the moves before it the end-effector is at "
+            f"this checkpoint cannot pass: after the moves before it "
+            f"{_frame_name(checker.arm, params.tool)} is at "
             f"[{at}] mm, rpy [{rpy}]°, {f(distance)} mm and {f(angle)}° from the "
             f"expected pose (tolerances {f(pos_tol)} mm, {f(ang_tol)}°)"))
 
@@ -214,9 +235,11 @@ def run(step: ResolvedStep[CheckpointParams], ex: StepContext) -> dict:
 
     if step.params.moved_mm is not None:
         return _relative(step, ex)
+    from seqrun.arm.cartesian import solver_for, tool_pose
+
     position, rotation, pos_tol, ang_tol = resolve_checkpoint(step.params, ex.arm, ex.poses)
     measured = ex.monitor()
-    T = kinematics.fk(ex.chain, np.radians(measured.user_deg))
+    T = tool_pose(solver_for(ex.arm, step.params.tool), measured.user_deg)
     reached = T[:3, 3]
     pos_err = float(np.linalg.norm(reached - np.asarray(position)))
     ang_err = math.degrees(float(kinematics.orientation_error(np.asarray(rotation), T[:3, :3])))
@@ -228,10 +251,14 @@ def run(step: ResolvedStep[CheckpointParams], ex: StepContext) -> dict:
         "position_error_mm": round(pos_err, 3), "angle_error_deg": round(ang_err, 4),
         "position_tolerance_mm": pos_tol, "angle_tolerance_deg": ang_tol,
     }
+    tool = ex.arm.tool(step.params.tool)
+    if tool is not None:
+        detail["tool"] = tool.name
     ex.emit("checkpoint", **detail)
     if pos_err > pos_tol or ang_err > ang_tol:
         raise RunAborted("checkpoint",
-                         f"checkpoint failed: end-effector {format_number(pos_err)} mm "
+                         f"checkpoint failed: {_frame_name(ex.arm, step.params.tool)} "
+                         f"{format_number(pos_err)} mm "
                          f"(tolerance {format_number(pos_tol)} mm) and "
                          f"{format_number(ang_err)}° (tolerance {format_number(ang_tol)}°) "
                          "from the expected pose",

@@ -301,7 +301,7 @@ def _move_to_tool_pose(checker: CheckContext, step: ResolvedStep[MoveParams],
                        params: MoveParams) -> None:
     """A move to an end-effector pose: IK from the tracked joints (the solution nearest
     them), then the same checks as a move to those joints."""
-    from seqrun.arm.cartesian import solver_for
+    from seqrun.arm.cartesian import pointing_up_hint, solver_for
     from seqrun.arm.ik import Unreachable
 
     _velocities(checker, step, params)
@@ -312,7 +312,8 @@ def _move_to_tool_pose(checker: CheckContext, step: ResolvedStep[MoveParams],
     try:
         solution = solver_for(checker.arm, params.tool).solve(target, checker.tracked())
     except Unreachable as exc:
-        checker.errors.append(step.error(f"end-effector target {exc}", "position_mm"))
+        hint = pointing_up_hint(checker.arm, params.tool, target)
+        checker.errors.append(step.error(f"end-effector target {exc}{hint}", "position_mm"))
         checker.lost_at = step  # the run ends here: no second error about the steps after
         return
     joints = solution.joints_deg

@@ -80,7 +80,7 @@ def check(checker: CheckContext,
     limits, joint speeds, manipulability, guards along the samples)."""
     import numpy as np
 
-    from seqrun.arm.cartesian import PathError, plan_linear
+    from seqrun.arm.cartesian import PathError, plan_linear, pointing_up_hint
 
     checker.motion_allowed(step, checker.unlocked_names())
     target = checker.tool_target(step, params)
@@ -97,7 +97,8 @@ def check(checker: CheckContext,
             acceleration_mm_s2=params.acceleration_mm_s2 * checker.speed,
             jerk_mm_s3=params.jerk_mm_s3 * checker.speed, max_velocity_deg_s=max_velocity)
     except PathError as exc:
-        checker.errors.append(step.error(f"straight line: {exc}", "position_mm"))
+        hint = pointing_up_hint(checker.arm, params.tool, target) if exc.unreachable else ""
+        checker.errors.append(step.error(f"straight line: {exc}{hint}", "position_mm"))
         checker.lost_at = step  # the run ends here: no second error about the steps after
         return
     if checker.outside_limits(step, linear.joints_deg[1:], "the straight line"):
