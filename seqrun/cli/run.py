@@ -123,6 +123,11 @@ def run_command(
     no_report: Annotated[bool, typer.Option(
         "--no-report", help="Do not draw report.html after the run (bulk runs; "
                             "'seqrun report RUN_DIR' draws it later).")] = False,
+    zero_confirmed: Annotated[Optional[str], typer.Option(
+        "--zero-confirmed", metavar="POSE", help="Answer 'does the arm stand in POSE?' after "
+        "a power-on without asking: the operator's word that the arm stands in the recorded "
+        "power-off pose POSE (a different record refuses the run). --yes never answers it.")]
+    = None,
 ) -> None:
     """Run a sequence: validate, read the arm, re-validate from where it stands, move."""
     # Imported here, not at the top: `seqrun --help` and the other commands stay light.
@@ -148,7 +153,7 @@ def run_command(
 
     requests = StopRequests()
     control = RunControl.serve(run.connection, run.arm, requests)
-    zero = _confirm_start(console, run, yes)
+    zero = _confirm_start(console, run, yes, zero_confirmed)
     _use_realtime(console, rt_priority)
     folder = _run_folder(console, run, log_dir)
     outcome = _run_in_session(console, run, zero, folder, control, requests, step=step,
@@ -158,7 +163,7 @@ def run_command(
     raise typer.Exit(outcome.result.exit_code)
 
 
-def _confirm_start(console: Console, run, yes: bool):
+def _confirm_start(console: Console, run, yes: bool, zero_confirmed: str | None = None):
     """The bus banner, on real hardware the operator's yes, and the zero reference in
     force (on real hardware after a power-on, confirmed); the arm of the run gets it."""
     from seqrun.cli.zero import zero_at_run_start
@@ -172,18 +177,26 @@ def _confirm_start(console: Console, run, yes: bool):
         connection.close()
         raise typer.Exit(EXIT_OPERATOR_ABORT)
     # The modules' zeros are where they were powered off: use (and on real hardware after
-    # a power-on, confirm) the recorded pose's offsets before anything moves.
+    # a power-on, confirm) the recorded pose's offsets before anything moves. --yes never
+    # answers that question: a wrong zero drives the arm anywhere, and every check with it.
+    def ask_zero(question: str) -> bool:
+        if yes:
+            console.print("(--yes does not answer the zero question: the operator does, or "
+                          "--zero-confirmed POSE)", highlight=False, markup=False,
+                          soft_wrap=True)
+        return _ask(console, question, False)
+
     try:
         with user_errors():
             try:
-                zero = zero_at_run_start(connection, run.arm, loaded.project,
-                                         lambda question: _ask(console, question, yes),
+                zero = zero_at_run_start(connection, run.arm, loaded.project, ask_zero,
                                          lambda text: console.print(text, style="bold",
                                                                     highlight=False,
-                                                                    markup=False))
+                                                                    markup=False),
+                                         confirmed=zero_confirmed)
             except BusError as exc:  # before user_errors: a timeout is no usage error
                 fail(f"cannot read the modules' state: {exc}", EXIT_FAULT)
-            run.arm = run.arm.with_zero_reference(zero.pose)
+            run.arm = zero.apply(run.arm)
     except BaseException:
         connection.close()
         raise
@@ -275,8 +288,8 @@ def _run_in_session(console: Console, run, zero, folder: Path, control, requests
             confirm_clear_latched=(None if connection.is_simulator else confirm_clear_latched),
             meta={"zero": zero.as_dict()}, html_report=not no_report,
             # The built-in simulator keeps no record: its zero is its power-on pose.
-            record_zero=(None if connection.is_simulator
-                         else campaign_records.zero_recorder(arm, loaded)))
+            record_zero=(None if connection.is_simulator or zero.store is None
+                         else campaign_records.zero_recorder(zero.store, arm, loaded)))
     finally:
         if live and displays:
             session.remove_idle_hook(displays[0].on_idle)

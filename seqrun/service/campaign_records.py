@@ -49,13 +49,11 @@ def record_run(folder: Path, loaded: Any, arm_path: Path, bus: str, zero: Any) -
                         zero=zero.as_dict() if zero is not None else None)
 
 
-def zero_recorder(arm: Any, loaded: Any) -> Callable[[str], str]:
-    """What the ``power_off`` step calls: record the pose for the next power-on."""
-    from seqrun.service.zero import ZeroStore, pose_title
-
-    store = ZeroStore.for_arm(arm.name, getattr(loaded, "project", None))
+def zero_recorder(store: Any, arm: Any, loaded: Any) -> Callable[[str], str]:
+    """What the ``power_off`` step calls: record the pose for the next power-on, in the
+    connected arm's own store (:class:`~seqrun.service.zero.ZeroStore`)."""
 
     def record(pose: str) -> str:
-        entry = store.set_record(pose, by=Path(str(loaded.file)).name)
-        return f"{entry.describe(pose_title(pose))} ({store.path})"
+        entry = store.set_record(pose, by=Path(str(loaded.file)).name, arm_name=arm.name)
+        return f"{entry.describe()} ({store.path})"
     return record
