@@ -130,9 +130,13 @@ class SimArm:
     @property
     def serials(self) -> dict[int, int]:
         """What each module says its serial number is (DefCubeSerial), by module id."""
+        serials = {}
         with self._lock:
-            return {m: int(module.parameter(ParamId.DEF_CUBE_SERIAL))
-                    for m, module in sorted(self._modules.items())}
+            for m, module in sorted(self._modules.items()):
+                serial = module.parameter(ParamId.DEF_CUBE_SERIAL)
+                assert isinstance(serial, int)  # (a u32 parameter)
+                serials[m] = serial
+        return serials
 
     @property
     def module_ids(self) -> list[int]:
