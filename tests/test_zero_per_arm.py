@@ -209,7 +209,7 @@ def test_an_in_use_edited_by_hand_is_refused_not_used(served):
 
 
 # --------------------------------------------------------------------------- --yes
-def test_yes_does_not_answer_does_the_arm_stand_in_totem(served):
+def test_yes_does_not_answer_does_the_arm_stand_in_totem(served, tmp_path):
     """With --yes and nobody at the keyboard the zero question is still asked, and
     unanswered it is a no: nothing moves. --zero-confirmed names the pose; a different
     pose than the record refuses."""
@@ -229,6 +229,21 @@ def test_yes_does_not_answer_does_the_arm_stand_in_totem(served):
         " ".join(wrong.output.split())
     assert store_of().in_use is None
     assert list(arm.positions().values()) == [0.0] * 7
+    confirmed = invoke("run", sequence, "--yes", "--zero-confirmed", "totem", "--plain",
+                       "--no-report", "--log-dir", tmp_path / "run", *bus)
+    assert confirmed.exit_code == 0, confirmed.output
+    assert "Totem now (j1 0°, j2 0°, j3 0°, j4 0°, j5 0°, j6 0°, j7 0°)? yes " \
+        "(--zero-confirmed totem)" in " ".join(confirmed.output.split())
+    assert store_of().in_use.pose == "totem"
+
+
+def test_zero_set_on_the_built_in_simulator_is_one_line():
+    """The built-in simulator's zero is its power-on pose: there is no arm to record."""
+    result = invoke("zero", "set", "totem", "--yes")
+    assert result.exit_code == 2, result.output
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: no arm named: the built-in "
+                                                   "simulator takes its zero from")
 
 
 # --------------------------------------------------------------------------- power loss
