@@ -274,3 +274,24 @@ def test_zero_set_deg_records_a_power_loss_pose_and_the_run_uses_it(served):
     expected = [q - lost for q, lost in zip(opsafe, lost_at)]
     assert physical == pytest.approx(expected, abs=0.25)
     assert not math.isclose(physical[0], opsafe[0], abs_tol=1.0)
+
+
+# --------------------------------------------------------------------------- simulator
+def test_every_simulated_arm_has_serials_of_its_own_unless_named():
+    """Two simulated arms are two arms (their serials differ); serial_base names them, for
+    the built-in simulator too (--bus-kwargs / SEQRUN_SIM_OPTIONS)."""
+    from seqrun.service.connection import open_connection
+
+    clock = VirtualClock()
+    first, second = SimArm(clock).serials, SimArm(clock).serials
+    assert first != second and len(set(first.values())) == 7
+    named = SimArm(clock, options=ModuleOptions(serial_base=7_000_000)).serials
+    assert named == {m: 7_000_000 + m for m in range(1, 8)}
+    connection = open_connection(force_sim=True, clock=VirtualClock(),
+                                 bus_kwargs={"serial_base": "4400"})
+    try:
+        assert connection.bus.arm.serials[3] == 4403
+    finally:
+        connection.close()
+    with pytest.raises(ValueError, match="serials are 32-bit"):
+        SimArm(clock, options=ModuleOptions(serial_base=2**32 - 3))
