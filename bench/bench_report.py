@@ -117,7 +117,7 @@ def main() -> None:
         result = {
             "machine": info,
             "run": {"simulated_s": report.get("duration_s"), "steps": len(report.get("steps", [])),
-                    "arm_readings": len(data.series), "events": len(data.events),
+                    "arm_readings": data.reading_count, "events": data.event_count,
                     "synthesis_wall_s": None if synth_wall is None else round(synth_wall, 1)},
             "folder_bytes": sizes(folder),
             "report_html_bytes": page.stat().st_size,

@@ -236,6 +236,10 @@ class Executor:
         """Seconds since the run started (the events' time base)."""
         return self.clock.now() - self._t0
 
+    def since_start(self, t: float) -> float:
+        """Clock time ``t`` as seconds since the run started (the events' time base)."""
+        return t - self._t0
+
     def refresh_measurement(self, after: str,
                             words: dict[int, JointState] | None = None) -> None:
         """Emit the arm's state after a step that changes the modules without moving them

@@ -1,5 +1,6 @@
 """What a run left in its folder, read as written: report.json, steps.jsonl, events.jsonl,
-trace.log (the tests' one reader of a run folder)."""
+the CAN trace (trace.log.gz; trace.log of older runs) (the tests' one reader of a run
+folder)."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ from pathlib import Path
 
 import can
 
-from seqrun.service.runlog import read_trace
+from seqrun.service.runlog import read_trace, trace_path, trace_text
 
 
 @dataclass(frozen=True)
@@ -35,11 +36,25 @@ class RunFolder:
         return events if type is None else [e for e in events if e["type"] == type]
 
     def trace(self) -> list[can.Message]:
-        """The frames of trace.log, stamped on the run's clock."""
+        """The frames of the trace, stamped on the run's clock."""
         return read_trace(self.path, run_clock=True)
 
+    def trace_frames(self) -> list[can.Message]:
+        """The frames as python-can's own reader reads the file (wall-clock stamps)."""
+        path = self.trace_path()
+        assert path is not None, f"no trace in {self.path}"
+        return list(can.LogReader(str(path)))
+
+    def trace_path(self) -> Path | None:
+        """The trace file, None when the run wrote none (nothing was sent)."""
+        return trace_path(self.path)
+
+    def trace_text(self) -> str:
+        """The trace's candump lines as text (whole lines, however the file ends)."""
+        return trace_text(self.path)
+
     def trace_lines(self) -> list[str]:
-        return [line for line in (self.path / "trace.log").read_text().splitlines() if line]
+        return [line for line in self.trace_text().splitlines() if line]
 
 
 def _json_lines(path: Path, *, live: bool = False) -> list[dict]:

@@ -181,7 +181,7 @@ def check_file(path: Path, *, sandbox: Path, logs: Path, markers: tuple[Path, ..
         # holds only the short record of the refusal.
         assert r.spy.buses == 0, r.describe()
         assert r.spy.frames == [], r.describe()
-        assert not (folder / "trace.log").exists(), r.describe()
+        assert RunFolder(folder).trace_path() is None, r.describe()
         refused = RunFolder(folder).report()
         assert refused["status"] == "refused" and refused["exit_code"] == 1, r.describe()
     elif expected == "valid":

@@ -82,7 +82,7 @@ def test_invalid_file_sends_nothing(tmp_path, monkeypatch):
                                       "--log-dir", str(tmp_path / "run")])
     assert result.exit_code == EXIT_INVALID
     assert "out_of_limit.yaml:7:33:" in result.output
-    assert sent == [] and not (tmp_path / "run" / "trace.log").exists()
+    assert sent == [] and RunFolder(tmp_path / "run").trace_path() is None
     assert RunFolder(tmp_path / "run").report()["status"] == "refused"
 
 

@@ -93,6 +93,7 @@ from typer.testing import CliRunner
 import seqrun.cli  # noqa: F401  (registers the commands on the app)
 from projecttree import ROOT, shipped_arm
 from runfolder import RunFolder
+from seqrun.service.runlog import read_trace
 from seqrun.cli.app import app
 from seqrun.errors import CodecError
 from seqrun.powercube.codec import GetParam, ack_key, decode_ack, decode_request, expected_ack_key
@@ -655,9 +656,9 @@ def test_disk_full_with_a_fault(budget, phase, clean, tmp_path, monkeypatch):
     assert "FAILED (exit 3)" in run.output
     warnings = [line for line in run.output.splitlines() if "run log:" in line]
     assert len(warnings) == 1, run.output
-    text = (tmp_path / "trace.log").read_text()
+    text = RunFolder(tmp_path).trace_text()
     assert text == "" or text.endswith("\n")
-    assert len(list(can.LogReader(str(tmp_path / "trace.log")))) == len(text.splitlines())
+    assert len(read_trace(tmp_path)) == len(text.splitlines())
     for line in (tmp_path / "events.jsonl").read_text().splitlines():
         json.loads(line)
     assert not list(tmp_path.glob("*.tmp"))

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import can
 from typer.testing import CliRunner
 
 import seqrun.cli  # noqa: F401  (registers the commands)
@@ -39,7 +38,7 @@ def test_non_blending_framp_halts_cleanly_and_names_the_likely_cause(tmp_path, m
     assert "does not seem to blend FRAMP" in output
     assert fault["halt_sent"] and fault["halt_confirmed"]
     # Halted in the first move, long before the plan would have ended: no silent wrong pose.
-    sent = [m for m in can.LogReader(str(folder / "trace.log")) if not m.is_rx]
+    sent = [m for m in RunFolder(folder).trace_frames() if not m.is_rx]
     t_halt = next(m.timestamp for m in sent
                   if m.arbitration_id == 0x100 and m.data[:1] == b"\x02")
     after = [m for m in sent if m.timestamp >= t_halt and m.data[:1] in (b"\x0b", b"\x08")]

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import can
 import pytest
+from runfolder import RunFolder
 from zerostate import ZERO_CONFIRMED, serve_arm
 
 from seqrun.service.bus_claim import read_holder
@@ -109,7 +110,7 @@ def test_second_controller_refused_status_and_halt_through_the_run(bus, tmp_path
                 r"controller per bus; 'seqrun status' and 'seqrun halt' talk to it",
                 lines[0]), lines
             assert "Traceback" not in refused.stdout + refused.stderr
-        assert not (tmp_path / "second" / "trace.log").exists()
+        assert RunFolder(tmp_path / "second").trace_path() is None
         # status: the run answers (the same shape as a reading of the bus), as JSON and
         # as the table.
         status = bus.seqrun("status", "--json")

@@ -26,6 +26,7 @@ from runfolder import RunFolder
 from seqrun.cli.app import app
 from seqrun.report import load_run, write_html
 from seqrun.report.figures import decimate
+from seqrun.report.readings import Series
 
 OPSAFE = ROOT / "sequences" / "opsafe.yaml"
 ARM = shipped_arm()
@@ -392,9 +393,9 @@ def test_no_report_leaves_the_page_out_and_report_draws_it_later(tmp_path):
 
 def test_loader_reads_the_series_in_time_order(clean_run):
     data = load_run(clean_run)
-    s = data.series
-    assert np.all(np.diff(s.t) >= 0) and len(s) == len(
-        [e for e in RunFolder(clean_run).events() if e["type"] in ("setpoint", "measurement")])
+    s = Series.concatenate(list(data.readings()), data.dof)
+    readings = [e for e in RunFolder(clean_run).events() if e["type"] in ("setpoint", "measurement")]
+    assert np.all(np.diff(s.t) >= 0) and len(s) == len(readings) == data.reading_count
     assert data.arm is not None and data.arm.joint_names == JOINTS
     assert np.all(np.isnan(s.planned[~s.streamed])) and not np.any(np.isnan(s.planned[s.streamed]))
     assert np.all(s.state >= 0)

@@ -87,7 +87,7 @@ def test_a_run_refused_by_validation_leaves_a_short_record(campaign):
     report = RunFolder(folder).report()
     assert report["status"] == "refused" and report["exit_code"] == 1
     assert "j2 target 150° is outside its limits" in report["errors"][0]["message"]
-    assert not (folder / "trace.log").exists()  # nothing was sent
+    assert RunFolder(folder).trace_path() is None  # nothing was sent
     assert (folder / "inputs" / "sequences" / "bad.yaml").read_text() == bad.read_text()
 
 

@@ -4,9 +4,11 @@ cost per step and the report of a killed run. In process, at virtual time."""
 from __future__ import annotations
 
 import errno
+import gzip
 import hashlib
 import json
 import os
+import shutil
 import time
 from pathlib import Path
 
@@ -23,7 +25,7 @@ from seqrun.cli.app import app
 from seqrun.clock import VirtualClock
 from seqrun.service.connection import open_connection
 from seqrun.results import RunResult, StepResult
-from seqrun.service.runlog import RunLog, read_report, read_trace
+from seqrun.service.runlog import TRACE_FLUSH_S, RunLog, read_report, read_trace
 from seqrun.service.runner import run_sequence
 from seqrun.sequence.loader import load_sequence
 
@@ -55,16 +57,16 @@ def run_cli(folder: Path, *extra: str):
 def assert_readable(folder: Path) -> None:
     """Whatever is on disk reads back: whole trace lines only, events that parse, no
     temporary file left."""
-    text = (folder / "trace.log").read_text()
+    text = RunFolder(folder).trace_text()
     assert text == "" or text.endswith("\n")
-    assert len(list(can.LogReader(str(folder / "trace.log")))) == len(text.splitlines())
+    assert len(read_trace(folder)) == len(text.splitlines())
     for line in (folder / "events.jsonl").read_text().splitlines():
         json.loads(line)
     assert not list(folder.glob("*.tmp")), list(folder.iterdir())
 
 
 # ----------------------------------------------------------------------------- disk full
-@pytest.mark.parametrize("budget", [0, 3_000, 40_000, 150_000])
+@pytest.mark.parametrize("budget", [0, 3_000, 40_000, 100_000])
 @pytest.mark.parametrize("fault, code", [((), 0), (("--sim-fault", "4:tow_error@3"), 3)])
 def test_a_full_disk_never_disturbs_the_run(tmp_path, monkeypatch, budget, fault, code):
     """Issue: one traceback per CAN frame, exit 1 instead of 3, report.json.tmp left, a
@@ -114,7 +116,7 @@ def test_a_full_disk_is_recorded_in_the_report_when_the_report_fits(tmp_path, mo
     it): the report says which file stopped."""
     class TraceOnly(FullDisk):
         def __call__(self, fd, data):
-            if os.readlink(f"/proc/self/fd/{fd}").endswith("trace.log"):
+            if os.readlink(f"/proc/self/fd/{fd}").endswith("trace.log.gz"):
                 return super().__call__(fd, data)
             return os.write(fd, data)
 
@@ -123,7 +125,7 @@ def test_a_full_disk_is_recorded_in_the_report_when_the_report_fits(tmp_path, mo
     assert result.exit_code == 0
     report = RunFolder(tmp_path / "run").report()
     assert report["status"] == "passed"
-    assert any("trace.log" in e for e in report["log_errors"]), report.get("log_errors")
+    assert any("trace.log.gz" in e for e in report["log_errors"]), report.get("log_errors")
     kinds = [e["type"] for e in RunFolder(tmp_path / "run").events()]
     assert "log_failed" in kinds and kinds[-1] == "run_finished"
     assert "the run log is incomplete" in result.output
@@ -206,7 +208,7 @@ def test_the_trace_is_on_wall_clock_time_with_one_channel_and_converts(tmp_path)
     after = time.time()
     assert result.exit_code == 0
     folder = tmp_path / "run"
-    frames = list(can.LogReader(str(folder / "trace.log")))
+    frames = RunFolder(folder).trace_frames()                           # python-can reads it
     assert {m.channel for m in frames} == {frames[0].channel}           # one name
     assert {m.is_rx for m in frames} == {True, False}                   # both directions
     duration = RunFolder(folder).report()["duration_s"]
@@ -296,3 +298,74 @@ def test_a_finished_run_reads_back_whole(tmp_path):
     report = read_report(tmp_path / "run")
     assert report["status"] == "passed" and len(report["steps"]) == 5
     assert report == RunFolder(tmp_path / "run").report()
+
+
+# ----------------------------------------------------------------------------- compressed trace
+def frame_at(clock: VirtualClock, n: int) -> can.Message:
+    return can.Message(arbitration_id=0x0C0 + n % 7 + 1, data=bytes([0x0A, 0x3C, n % 256]),
+                       is_extended_id=False, timestamp=clock.now())
+
+
+def test_a_killed_run_leaves_its_trace_up_to_its_last_event(tmp_path):
+    """The trace is compressed; a run killed (nothing closed, no gzip trailer) leaves
+    every frame before its last event other than a reading, and whole lines only."""
+    clock = VirtualClock()
+    log = RunLog(tmp_path / "run", {"sequence": "killed"}, clock=clock, channel="can0")
+    log.on_event({"t": 0.0, "type": "run_started", "clock_s": 0.0})
+    for n in range(40):
+        log.on_frame(frame_at(clock, n))
+        clock.sleep(0.001)
+    log.on_event({"t": clock.now(), "type": "step_started", "step": 1, "kind": "wait",
+                  "label": "wait", "location": "f.yaml:1:3"})
+    for n in range(3):   # within the flush interval of the last flush: may be lost
+        log.on_frame(frame_at(clock, 100 + n))
+    # SIGKILL here: nothing is closed. What is on disk decodes to whole lines.
+    path = tmp_path / "run" / "trace.log.gz"
+    assert path.is_file() and not (tmp_path / "run" / "trace.log").exists()
+    frames = read_trace(tmp_path / "run")
+    assert 40 <= len(frames) <= 43
+    assert [m.data[2] for m in frames[:40]] == list(range(40))
+    assert RunFolder(tmp_path / "run").trace_text().endswith("\n")
+    log.close()
+    assert len(RunFolder(tmp_path / "run").trace_frames()) == 43   # closed: python-can reads all
+
+
+def test_a_killed_run_loses_at_most_the_flush_interval_of_its_trace(tmp_path):
+    # A long move streams readings only (no other event): frames at 100 Hz for 2 s.
+    clock = VirtualClock()
+    log = RunLog(tmp_path / "run", {"sequence": "killed"}, clock=clock, channel="can0")
+    log.on_event({"t": 0.0, "type": "run_started", "clock_s": 0.0})
+    for n in range(200):
+        log.on_frame(frame_at(clock, n))
+        log.on_event({"t": clock.now(), "type": "setpoint", "step": 1})
+        clock.sleep(0.01)
+    frames = read_trace(tmp_path / "run", run_clock=True)
+    assert frames and frames[-1].timestamp >= clock.now() - 0.01 - TRACE_FLUSH_S - 1e-6
+    assert [m.data[2] for m in frames] == list(range(len(frames)))
+    log.close()
+
+
+def test_an_uncompressed_trace_of_an_older_run_still_reads(tmp_path):
+    """Run folders of earlier versions hold trace.log: seqrun report, the CSV export
+    and the trace readers take it as they take trace.log.gz."""
+    new = tmp_path / "new"
+    assert run_cli(new).exit_code == 0
+    old = tmp_path / "old"
+    shutil.copytree(new, old)
+    (old / "trace.log").write_bytes(gzip.decompress((old / "trace.log.gz").read_bytes()))
+    (old / "trace.log.gz").unlink()
+    def frames(folder: Path) -> list[tuple]:
+        return [(m.timestamp, m.arbitration_id, bytes(m.data), m.is_rx, m.channel)
+                for m in read_trace(folder)]
+
+    assert frames(old) == frames(new) and len(frames(old)) > 100
+    assert RunFolder(old).trace_lines() == RunFolder(new).trace_lines()
+    for folder in (old, new):
+        result = CliRunner().invoke(app, ["report", str(folder), "--csv", str(folder / "csv"),
+                                          "--out", str(folder / "report.html")])
+        assert result.exit_code == 0, result.output
+    sent = len([m for m in read_trace(new) if not m.is_rx])
+    for folder in (old, new):
+        assert f"{sent} frames sent" in (folder / "report.html").read_text()
+    assert (old / "csv" / "timeseries.csv").read_bytes() == \
+        (new / "csv" / "timeseries.csv").read_bytes()

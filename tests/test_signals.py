@@ -142,7 +142,7 @@ class Frame:
 
 def trace(folder: Path) -> list[Frame]:
     frames = []
-    for line in (folder / "trace.log").read_text(encoding="utf-8").splitlines():
+    for line in RunFolder(folder).trace_lines():
         m = TRACE_LINE.match(line.strip())
         assert m, f"not a candump line: {line!r}"
         frames.append(Frame(float(m["t"]), int(m["id"], 16), bytes.fromhex(m["data"]),
@@ -335,7 +335,8 @@ def _kill_mid_move_once(tmp_path: Path, watchdog: bool):
                           "--bus-kwargs", f"port={port}", cwd=tmp_path)
         assert recorded.wait(60) == 0, stop(recorded)
         runner = seqrun("run", sequence, "-i", "socketcand", "--bus-kwargs", f"port={port}",
-                        "--yes", "--zero-confirmed", "park", "--plain", "--log-dir", folder, cwd=tmp_path)
+                        "--yes", "--zero-confirmed", "park", "--plain", "--log-dir", folder,
+                        cwd=tmp_path)
         cruising = poll_event(folder, runner, lambda e: e["type"] == "setpoint"
                               and e["measured_deg"][0] > 8.0)
         if cruising is None:
@@ -487,7 +488,7 @@ def test_a_signal_at_any_moment_ends_the_run_with_a_finished_folder(tmp_path, na
         assert halts(trace(folder)), "no Halt sent"
         assert report["fault"]["halt_sent"]
     # One time base in real time too: wall-clock stamps, one channel, events line up.
-    frames = list(can.LogReader(str(folder / "trace.log")))
+    frames = RunFolder(folder).trace_frames()
     started = next(e for e in RunFolder(folder).events(live=True) if e["type"] == "run_started")
     assert abs(frames[0].timestamp - started["start_epoch_s"]) < 1.0
     assert abs(started["start_epoch_s"] - time.time()) < 120

@@ -18,7 +18,8 @@ from seqrun.executor import Executor
 from seqrun.results import EXIT_OK
 from seqrun.powercube.client import PowerCubeClient
 from seqrun.sequence.loader import load_sequence
-from seqrun.arm.tracking import MoveTracking, peak_abs, velocity_window, windowed_velocity
+from seqrun.arm.tracking import (MoveTracking, VelocityStream, peak_abs, velocity_window,
+                                  windowed_velocity)
 from tiers import examples
 
 
@@ -162,3 +163,26 @@ def test_move_tracking_figures():
         steady.add(k * 0.01, [0.0], [-4.0 * k * 0.01])
     assert steady.figures([0.0])["peak_measured_velocity_deg_s"] == [4.0]
     assert peak_abs(np.array([[np.nan, np.nan]])).tolist() == [0.0, 0.0]
+
+
+@settings(max_examples=examples(60), deadline=None)
+@given(st.integers(2, 400), st.lists(st.integers(1, 60), min_size=1, max_size=20),
+       st.integers(0, 2**32 - 1))
+def test_velocity_streamed_in_chunks_equals_the_whole_series(n, cuts, seed):
+    # The report reads hours of readings a chunk at a time: every estimate must be the one
+    # of the whole series, whatever the chunks (windows reach back across their edges).
+    rng = np.random.default_rng(seed)
+    dt = rng.uniform(0.004, 0.016, n)
+    dt[rng.random(n) < 0.05] = 0.0               # equal times happen (a stalled clock)
+    t = np.cumsum(dt)
+    q = np.cumsum(rng.normal(0, 0.1, (n, 3)), axis=0)
+    whole = windowed_velocity(t, q, 0.1)
+    stream = VelocityStream(0.1)
+    parts, start = [], 0
+    for size in cuts * (n // max(1, sum(cuts)) + 1):
+        if start >= n:
+            break
+        parts.append(stream.feed(t[start:start + size], q[start:start + size]))
+        start += size
+    parts.append(stream.feed(t[start:], q[start:]))
+    np.testing.assert_allclose(np.concatenate(parts), whole, rtol=1e-9, atol=1e-9)

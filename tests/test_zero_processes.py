@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 
 from projecttree import ROOT
+from runfolder import RunFolder
 
 pytestmark = pytest.mark.slow
 
@@ -114,4 +115,4 @@ def test_shutdown_at_totem_then_start_up_then_a_wrong_record(tmp_path):
     assert wrong.returncode == 130, wrong.stdout + wrong.stderr
     assert "Does the arm stand in Park now" in flat(wrong.stdout)
     assert "Not started" in flat(wrong.stdout)
-    assert not (tmp_path / "wrong" / "attempt1" / "trace.log").exists()
+    assert RunFolder(tmp_path / "wrong" / "attempt1").trace_path() is None

@@ -89,6 +89,39 @@ def windowed_velocity(t: np.ndarray, q: np.ndarray, window_s: float,
     return v[:, 0] if flat else v
 
 
+class VelocityStream:
+    """:func:`windowed_velocity` of a series that arrives a chunk at a time, in bounded
+    memory: each chunk is estimated together with the samples of the one window before
+    it, so the estimates are those of the whole series (times in non-decreasing order)."""
+
+    def __init__(self, window_s: float) -> None:
+        self.window_s = float(window_s)
+        self._t = np.zeros(0)
+        self._q: np.ndarray | None = None
+        self._tj: np.ndarray | None = None
+
+    def feed(self, t: np.ndarray, q: np.ndarray,
+             t_joint: np.ndarray | None = None) -> np.ndarray:
+        """The estimates of the samples ``t``, ``q`` (samples × joints), the next chunk;
+        ``t_joint``: each joint's own sample times (as :func:`windowed_velocity`)."""
+        t = np.asarray(t, dtype=float)
+        q = np.asarray(q, dtype=float)
+        tj = (np.broadcast_to(t[:, None], q.shape) if t_joint is None
+              else np.asarray(t_joint, dtype=float).reshape(q.shape))
+        if self._q is None or self._tj is None or len(self._t) == 0:
+            tt, qq, ttj = t, q, tj
+        else:
+            tt, qq = np.concatenate([self._t, t]), np.concatenate([self._q, q])
+            ttj = np.concatenate([self._tj, tj])
+        v = windowed_velocity(tt, qq, self.window_s, ttj)[len(tt) - len(t):]
+        if len(tt):
+            # The next chunk's windows reach back at most one window (and the edge) from
+            # its first sample, which is no earlier than this chunk's last.
+            keep = np.searchsorted(tt, tt[-1] - self.window_s - 2 * _EDGE_S, side="left")
+            self._t, self._q, self._tj = tt[keep:], qq[keep:], ttj[keep:]
+        return v
+
+
 def sample_time(read_t: float | list[float]) -> float:
     """One time for a sample whose joints answered at ``read_t`` (one time, or one per
     joint): what chooses the samples of a velocity window (rounded as logged)."""

@@ -197,7 +197,7 @@ class Streaming:
             event_t = round(run.elapsed_s(), 6)
             # When the joints answered (the bus's own stamps): after a host stall the
             # event's time is late, the reading's is not.
-            read_t = self.read_t(m, event_t)
+            read_t = self.read_t(m)
             if self.tracking is not None:
                 # The figures come from the logged values, so events.jsonl reproduces them.
                 self.tracking.add(read_t, logged_planned, logged_measured)
@@ -224,18 +224,16 @@ class Streaming:
     #: the log (a host stall split the cycle's exchange); closer, one time stands for all.
     READ_SPREAD_S = 0.002
 
-    def read_t(self, m: Measurement, event_t: float) -> float | list[float]:
+    def read_t(self, m: Measurement) -> float | list[float]:
         """A reading's time as logged (``read_t``): s since the run start, one for all
-        joints, or one per joint when they answered far apart (``event_t``: when the loop
-        logs it, the run's time base)."""
+        joints, or one per joint when they answered far apart."""
         run = self.run
-        t0 = run.clock.now() - run.elapsed_s()
         if m.answered_at is None:
-            return round(m.t - t0, 6)
-        at = m.answered_at - t0
-        if float(at.max() - at.min()) > self.READ_SPREAD_S:
-            return [round(float(x), 6) for x in at]
-        return round(float(at.mean()), 6)
+            return round(run.since_start(m.t), 6)
+        at = [run.since_start(float(x)) for x in m.answered_at]
+        if max(at) - min(at) > self.READ_SPREAD_S:
+            return [round(x, 6) for x in at]
+        return round(sum(at) / len(at), 6)
 
     def controlled_stop(self, plan: MovePlan, t: float, moving: list[int]) -> None:
         """ruckig to zero velocity from the plan's current state, streamed, then hold."""

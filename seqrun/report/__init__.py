@@ -21,15 +21,21 @@ HTML_NAME = "report.html"
 def write_html(folder: str | Path, out: str | Path | None = None, *,
                arm: ArmDescription | None = None, data: RunData | None = None) -> Path:
     """Draw the report of run folder ``folder`` into ``out`` (default folder/report.html)."""
-    from seqrun.report.html import render_html
-    from seqrun.report.plots import render_plots
+    from seqrun.report.html import html_parts
+    from seqrun.report.plots import iter_plots
 
     data = data if data is not None else load_run(folder, arm=arm)
     target = Path(out) if out is not None else Path(folder) / HTML_NAME
-    page = render_html(data, render_plots(data))
+    plots = iter_plots(data)   # drawn one at a time as the page is written
     tmp = target.with_name(target.name + ".tmp")
-    tmp.write_text(page, encoding="utf-8")
-    tmp.replace(target)
+    try:
+        with open(tmp, "w", encoding="utf-8") as f:
+            for part in html_parts(data, plots):
+                f.write(part)
+        tmp.replace(target)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
     return target
 
 

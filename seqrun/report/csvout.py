@@ -43,32 +43,35 @@ def export_csv(data: RunData, out_dir: str | Path) -> list[Path]:
 
 
 def _timeseries(data: RunData, path: Path) -> Path:
-    s, names = data.series, data.joint_names
+    """One row per reading, written a chunk of readings at a time (events.jsonl streamed
+    once more, never held whole)."""
+    names = data.joint_names
     header = ["t_s", "step", "streamed"]
     for kind in ("planned_deg", "measured_deg", "planned_vel_deg_s", "measured_vel_deg_s",
                  "state"):
         header += [f"{n}_{kind}" for n in names]
-    pose = end_effector_pose(data.arm, s.measured) if data.arm is not None else None
-    if pose is not None:
+    if data.arm is not None:
         header += list(_POSE)
-    states = {}
+    states: dict[int, str] = {}
     with open(path, "w", newline="", encoding="utf-8") as f:
         w = csv.writer(f)
         w.writerow(header)
-        for k in range(len(s)):
-            row = [f"{s.t[k]:.6f}", int(s.step[k]), int(s.streamed[k])]
-            row += [_f(x, 3) for x in s.planned[k]]
-            row += [_f(x, 3) for x in s.measured[k]]
-            row += [_f(x, 2) for x in s.planned_vel[k]]
-            row += [_f(x, 3) for x in s.measured_vel[k]]
-            for code in s.state[k]:
-                code = int(code)
-                if code not in states:
-                    states[code] = "" if code < 0 else cycle_state(data.arm, code).describe()
-                row.append(states[code])
-            if pose is not None:
-                row += [_f(x, 3) for x in pose[k]]
-            w.writerow(row)
+        for s in data.readings():
+            pose = end_effector_pose(data.arm, s.measured) if data.arm is not None else None
+            for k in range(len(s)):
+                row = [f"{s.t[k]:.6f}", int(s.step[k]), int(s.streamed[k])]
+                row += [_f(x, 3) for x in s.planned[k]]
+                row += [_f(x, 3) for x in s.measured[k]]
+                row += [_f(x, 2) for x in s.planned_vel[k]]
+                row += [_f(x, 3) for x in s.measured_vel[k]]
+                for code in s.state[k]:
+                    code = int(code)
+                    if code not in states:
+                        states[code] = "" if code < 0 else cycle_state(data.arm, code).describe()
+                    row.append(states[code])
+                if pose is not None:
+                    row += [_f(x, 3) for x in pose[k]]
+                w.writerow(row)
     return path
 
 

@@ -1,10 +1,17 @@
 """Reading a run folder: the one loader every part of the report goes through.
 
 A run folder (``seqrun/service/runlog.py``) holds ``report.json`` (summary and per-step results),
-``events.jsonl`` (every executor event, one per line) and ``trace.log`` (CAN frames). The
-loader tolerates what a killed or older run leaves: a missing or ``running`` report.json,
-a torn last line in events.jsonl, events without the per-cycle fields of newer versions.
-Nothing here draws or writes; :mod:`seqrun.report.figures` computes, the rest renders.
+``events.jsonl`` (every executor event, one per line) and the CAN trace (``trace.log.gz``,
+or ``trace.log`` of older runs). The loader tolerates what a killed or older run leaves: a
+missing or ``running`` report.json, a torn last line in events.jsonl, events without the
+per-cycle fields of newer versions.
+
+events.jsonl is read once, as a stream: the arm's readings (hundreds of thousands an hour)
+are folded into per-step summaries and decimated plot lines (:mod:`seqrun.report.summary`)
+and never held all at once; of the other events, the steps' are folded into the step views
+and only the few the page shows are kept. :meth:`RunData.readings` streams the readings
+again at full resolution (the CSV export). Nothing here draws or writes;
+:mod:`seqrun.report.figures` computes, the rest renders.
 """
 
 from __future__ import annotations
@@ -12,42 +19,23 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterable, Iterator
 
-import numpy as np
 from pydantic import ValidationError
 
 from seqrun.arm.description import ArmDescription
 from seqrun.errors import UserInputError
-from seqrun.arm.tracking import sample_time, velocity_window, windowed_velocity
+from seqrun.arm.tracking import velocity_window
+from seqrun.report.readings import SAMPLE_EVENTS, EventLines, Series, split
+from seqrun.report.summary import Overview, StepSummary, SummaryBuilder
 
-#: Event types that carry one reading of the whole arm.
-SAMPLE_EVENTS = ("setpoint", "measurement")
+#: Points per plotted line at most (a min/max envelope beyond).
+MAX_POINTS = 3000
+#: Events the page reads besides the steps' (which are folded into the step views).
+KEPT_EVENTS = ("run_started", "preflight", "fault", "operator_abort", "run_finished",
+               "checkpoint", "zero_reference")
 
-
-@dataclass
-class Series:
-    """Every reading of the arm in time order (samples × joints, degrees, deg/s).
-
-    ``planned`` and ``planned_vel`` are NaN where no plan was streamed (waits, checkpoints);
-    ``state`` is the short state byte of each module (-1 where the log has none);
-    ``measured_vel`` is the windowed estimate of :mod:`seqrun.arm.tracking`.
-    """
-
-    t: np.ndarray
-    step: np.ndarray
-    streamed: np.ndarray          # True for setpoint samples (a plan was being streamed)
-    planned: np.ndarray
-    measured: np.ndarray
-    planned_vel: np.ndarray
-    measured_vel: np.ndarray
-    state: np.ndarray
-    #: Each joint's own sample time (samples × joints): ``t`` unless the joints of a
-    #: reading answered apart (``read_t`` per joint).
-    t_joint: np.ndarray | None = None
-
-    def __len__(self) -> int:
-        return len(self.t)
+__all__ = ["MAX_POINTS", "RunData", "SAMPLE_EVENTS", "Series", "StepView", "load_run"]
 
 
 @dataclass
@@ -71,17 +59,26 @@ class StepView:
 class RunData:
     folder: Path | None
     report: dict[str, Any]
+    #: The events the page reads (:data:`KEPT_EVENTS`), in order; the readings and the
+    #: steps' events are folded into ``overview``, ``step_summaries`` and ``steps``.
     events: list[dict]
     arm: ArmDescription | None
     steps: list[StepView]
-    series: Series
+    overview: Overview
+    step_summaries: dict[int, StepSummary]
     fault: dict[str, Any] | None       # with "t" when the event log has the fault event
     checkpoints: list[dict]
-    trace: dict[str, int] | None       # frames sent / received, when trace.log is there
+    trace: dict[str, Any] | None       # frames sent / received, when the trace is there
     run_started: dict[str, Any]
     torn_lines: int = 0                # unreadable lines in events.jsonl (a killed run)
     #: record.json of the run folder (inputs with sha256, git state, zero), when written.
     record: dict[str, Any] = field(default_factory=dict)
+    #: Every event of the log, readings included.
+    event_count: int = 0
+    #: Joints per reading (the arm's; else the log's).
+    dof: int = 0
+    #: Where the events come from again (events.jsonl, or the list they were given as).
+    source: Iterable[dict] = field(default=(), repr=False)
 
     @property
     def virtual_time(self) -> bool:
@@ -110,10 +107,21 @@ class RunData:
     def joint_names(self) -> list[str]:
         if self.arm is not None:
             return self.arm.joint_names
-        return [f"j{i + 1}" for i in range(self.series.measured.shape[1])]
+        return [f"j{i + 1}" for i in range(self.dof)]
+
+    @property
+    def reading_count(self) -> int:
+        return self.overview.readings
 
     def of_type(self, *types: str) -> list[dict]:
         return [e for e in self.events if e.get("type") in types]
+
+    def readings(self) -> Iterator[Series]:
+        """The arm's readings at full resolution, a chunk at a time (read anew)."""
+        for item in split(self.source, dof=lambda: self.dof or None,
+                          window_s=lambda: self.velocity_window_s):
+            if isinstance(item, Series):
+                yield item
 
 
 def load_run(folder: str | Path, *, arm: ArmDescription | None = None) -> RunData:
@@ -127,29 +135,12 @@ def load_run(folder: str | Path, *, arm: ArmDescription | None = None) -> RunDat
     if not events_path.is_file() and not (folder / "report.json").is_file():
         raise UserInputError(f"{folder}: not a run folder (no events.jsonl, no report.json)")
     # A run refused by validation leaves report.json (and record.json) only.
-    events, torn = read_events(events_path) if events_path.is_file() else ([], 0)
+    lines: Iterable[dict] = EventLines(events_path) if events_path.is_file() else []
     report = _read_json(folder / "report.json")
-    trace = _trace_summary(folder / "trace.log")
-    data = from_records(report, events, arm=arm, folder=folder, trace=trace, torn_lines=torn)
+    data = from_records(report, lines, arm=arm, folder=folder, trace=_trace_summary(folder))
+    data.torn_lines = lines.torn if isinstance(lines, EventLines) else 0
     data.record = _read_json(folder / "record.json")
     return data
-
-
-def read_events(path: Path) -> tuple[list[dict], int]:
-    """Every parseable line of events.jsonl, and how many were not (a torn last line)."""
-    events, torn = [], 0
-    with open(path, encoding="utf-8", errors="replace") as f:
-        for line in f:
-            if not line.strip():
-                continue
-            try:
-                event = json.loads(line)
-            except json.JSONDecodeError:
-                torn += 1
-                continue
-            if isinstance(event, dict) and "type" in event:
-                events.append(event)
-    return events, torn
 
 
 def _read_json(path: Path) -> dict:
@@ -160,46 +151,80 @@ def _read_json(path: Path) -> dict:
     return data if isinstance(data, dict) else {}
 
 
-def _trace_summary(path: Path) -> dict[str, int] | None:
-    """Frames sent and received (candump lines end in T or R); no full parse."""
-    if not path.is_file():
+def _trace_summary(folder: Path) -> dict[str, Any] | None:
+    """Frames sent and received (candump lines end in T or R); no full parse. A trace
+    cut short (a killed run) counts what it holds."""
+    from seqrun.service.logfile import read_lines
+    from seqrun.service.runlog import trace_path
+
+    path = trace_path(folder)
+    if path is None:
         return None
     sent = received = 0
-    with open(path, "rb") as f:
-        for line in f:
-            end = line.rstrip()[-2:]
-            if end == b" T":
-                sent += 1
-            elif end == b" R":
-                received += 1
-    return {"sent": sent, "received": received, "bytes": path.stat().st_size}
+    for line in read_lines(path):
+        end = line.rstrip()[-2:]
+        if end == b" T":
+            sent += 1
+        elif end == b" R":
+            received += 1
+    return {"sent": sent, "received": received, "bytes": path.stat().st_size,
+            "file": path.name}
 
 
-def from_records(report: dict, events: list[dict], *, arm: ArmDescription | None = None,
+def from_records(report: dict, events: Iterable[dict], *, arm: ArmDescription | None = None,
                  folder: Path | None = None, trace: dict | None = None,
                  torn_lines: int = 0) -> RunData:
-    """RunData from an already-read report and event list."""
-    started = next((e for e in events if e.get("type") == "run_started"), {})
-    if arm is None and isinstance(started.get("arm"), dict):
-        try:
-            arm = ArmDescription.model_validate(started["arm"])
-        except ValidationError:
-            arm = None
-    steps = _steps(report, events)
-    fault = _fault(report, events)
+    """RunData from an already-read report and the events (an iterable read once now, and
+    again by :meth:`RunData.readings`)."""
+    views = _report_steps(report)
+    data = RunData(folder, report, [], arm, [], Overview(), {}, None, [], trace, {},
+                   torn_lines, source=events)
+    builder: SummaryBuilder | None = None
+    fault_event = None
+    checkpoint_events = []
+    others = 0
+    for item in split(events, dof=lambda: data.arm.dof if data.arm is not None else None,
+                      window_s=lambda: data.velocity_window_s):
+        if isinstance(item, Series):
+            if builder is None:
+                data.dof = item.measured.shape[1]
+                builder = SummaryBuilder(data.arm, data.dof, data.velocity_window_s,
+                                         MAX_POINTS)
+            builder.add(item)
+            continue
+        others += 1
+        kind = item.get("type")
+        if kind == "run_started" and not data.run_started:
+            data.run_started = item
+            if arm is None and isinstance(item.get("arm"), dict):
+                try:
+                    data.arm = ArmDescription.model_validate(item["arm"])
+                except ValidationError:
+                    data.arm = None
+        elif kind == "fault":
+            fault_event = item
+        elif kind == "checkpoint":
+            checkpoint_events.append(item)
+        _fold_step_event(views, item)
+        if kind in KEPT_EVENTS:
+            data.events.append(item)
+    if builder is not None:
+        data.overview, data.step_summaries = builder.finish()
+    elif data.arm is not None:
+        data.dof = data.arm.dof
+    data.event_count = others + data.overview.readings
+    data.steps = [views[n] for n in sorted(views)]
+    data.fault = _fault(report, fault_event)
     checkpoints = report.get("checkpoints")
     if not isinstance(checkpoints, list):
         checkpoints = [dict(step=e.get("step"), **{k: v for k, v in e.items()
                                                    if k not in ("t", "type", "step")})
-                       for e in events if e.get("type") == "checkpoint"]
-    data = RunData(folder, report, events, arm, steps, _empty_series(arm), fault,
-                   checkpoints, trace, started, torn_lines)
-    data.series = _series(events, data.velocity_window_s,
-                          arm.dof if arm is not None else None)
+                       for e in checkpoint_events]
+    data.checkpoints = checkpoints
     return data
 
 
-def _steps(report: dict, events: list[dict]) -> list[StepView]:
+def _report_steps(report: dict) -> dict[int, StepView]:
     views: dict[int, StepView] = {}
     for s in report.get("steps") or []:
         if not isinstance(s, dict) or "number" not in s:
@@ -211,36 +236,38 @@ def _steps(report: dict, events: list[dict]) -> list[StepView]:
             s.get("status", "?"), duration_s=s.get("duration_s"),
             planned_duration_s=s.get("planned_duration_s"),
             detail={k: v for k, v in s.items() if k not in known})
-    for e in events:
-        kind, number = e.get("type"), e.get("step")
-        if number is None:
-            continue
-        if kind == "step_started":
-            view = views.setdefault(number, StepView(number, e.get("kind", "?"),
-                                                     e.get("label", ""),
-                                                     e.get("location", ""), "running"))
-            view.started_t = e["t"]
-        elif kind == "move_planned" and number in views:
-            views[number].move = e
-        elif kind == "step_finished" and number in views:
-            view = views[number]
-            view.finished_t = e["t"]
-            if view.status in ("running", "pending", "?"):
-                view.status = e.get("status", "passed")
-                view.duration_s = e.get("duration_s")
-                view.planned_duration_s = e.get("planned_duration_s")
-            skip = ("t", "type", "step", "status", "duration_s", "planned_duration_s")
-            for k, v in e.items():
-                if k not in skip:
-                    view.detail.setdefault(k, v)
-        elif kind in ("fault", "operator_abort") and number in views:
-            views[number].finished_t = views[number].finished_t or e["t"]
-    return [views[n] for n in sorted(views)]
+    return views
 
 
-def _fault(report: dict, events: list[dict]) -> dict | None:
+def _fold_step_event(views: dict[int, StepView], e: dict) -> None:
+    """What a step's event adds to its view (report.json's result comes first)."""
+    kind, number = e.get("type"), e.get("step")
+    if number is None:
+        return
+    if kind == "step_started":
+        view = views.setdefault(number, StepView(number, e.get("kind", "?"),
+                                                 e.get("label", ""),
+                                                 e.get("location", ""), "running"))
+        view.started_t = e["t"]
+    elif kind == "move_planned" and number in views:
+        views[number].move = e
+    elif kind == "step_finished" and number in views:
+        view = views[number]
+        view.finished_t = e["t"]
+        if view.status in ("running", "pending", "?"):
+            view.status = e.get("status", "passed")
+            view.duration_s = e.get("duration_s")
+            view.planned_duration_s = e.get("planned_duration_s")
+        skip = ("t", "type", "step", "status", "duration_s", "planned_duration_s")
+        for k, v in e.items():
+            if k not in skip:
+                view.detail.setdefault(k, v)
+    elif kind in ("fault", "operator_abort") and number in views:
+        views[number].finished_t = views[number].finished_t or e["t"]
+
+
+def _fault(report: dict, event: dict | None) -> dict | None:
     fault = report.get("fault")
-    event = next((e for e in reversed(events) if e.get("type") == "fault"), None)
     if fault is None and event is None:
         return None
     merged = dict(event or {})
@@ -249,64 +276,3 @@ def _fault(report: dict, events: list[dict]) -> dict | None:
     if event is not None:
         merged["t"] = event["t"]
     return merged
-
-
-def _empty_series(arm: ArmDescription | None) -> Series:
-    n = arm.dof if arm is not None else 0
-    empty = np.zeros((0, n))
-    return Series(np.zeros(0), np.zeros(0, int), np.zeros(0, bool), empty, empty, empty,
-                  empty, np.zeros((0, n), int))
-
-
-def _series(events: list[dict], window_s: float, dof: int | None) -> Series:
-    if dof is None:
-        dof = next((len(_joints(e)) for e in events
-                    if e.get("type") in SAMPLE_EVENTS and _joints(e)), 0)
-    # A reading without a full set of joints (another version, a hand-edited log) is left
-    # out rather than failing the whole report.
-    samples = [e for e in events if e.get("type") in SAMPLE_EVENTS
-               and isinstance(e.get("t"), (int, float)) and len(_joints(e)) == dof
-               and (e["type"] != "setpoint" or len(e.get("planned_deg") or ()) == dof)]
-    n = len(samples)
-    t = np.empty(n)
-    step = np.zeros(n, int)
-    streamed = np.zeros(n, bool)
-    planned = np.full((n, dof), np.nan)
-    measured = np.full((n, dof), np.nan)
-    planned_vel = np.full((n, dof), np.nan)
-    state = np.full((n, dof), -1, int)
-    t_joint = np.empty((n, dof))
-    for i, e in enumerate(samples):
-        # a reading's time is when the joints answered (read_t: one, or one per joint),
-        # where the log has it
-        read_t = e.get("read_t")
-        if isinstance(read_t, list) and len(read_t) == dof:
-            t[i] = sample_time(read_t)
-            t_joint[i] = read_t
-        else:
-            t[i] = read_t if isinstance(read_t, (int, float)) else e["t"]
-            t_joint[i] = t[i]
-        step[i] = e.get("step") or 0
-        measured[i] = _joints(e)
-        if e["type"] == "setpoint":
-            streamed[i] = True
-            planned[i] = e["planned_deg"]
-            if len(e.get("planned_vel_deg_s") or ()) == dof:
-                planned_vel[i] = e["planned_vel_deg_s"]
-        if len(e.get("state") or ()) == dof:
-            state[i] = e["state"]
-    order = np.argsort(t, kind="stable")
-    t, step, streamed, t_joint = t[order], step[order], streamed[order], t_joint[order]
-    planned, measured, planned_vel, state = (planned[order], measured[order],
-                                             planned_vel[order], state[order])
-    measured_vel = (windowed_velocity(t, measured, window_s, t_joint) if n
-                    else measured.copy())
-    return Series(t, step, streamed, planned, measured, planned_vel, measured_vel, state,
-                  t_joint)
-
-
-def _joints(event: dict) -> list:
-    """The measured joints of a reading (``measured_deg`` of a cycle, ``joints_deg`` of a
-    monitoring reading)."""
-    value = event.get("measured_deg", event.get("joints_deg"))
-    return value if isinstance(value, list) else []

@@ -1,9 +1,10 @@
 """What the report computes from a loaded run (pure: arrays in, arrays and dicts out).
 
 The per-move figures are recomputed here with the same definitions the executor uses
-(:mod:`seqrun.arm.tracking`), from the logged samples of the step: they fill in what
-report.json lacks (a move ended by a fault in an older version, a killed run) and let a
-test hold the two against each other.
+(:mod:`seqrun.arm.tracking`), from the step's summary of its logged samples (exact
+extremes gathered as events.jsonl streamed by, :mod:`seqrun.report.summary`): they fill
+in what report.json lacks (a move ended by a fault in an older version, a killed run)
+and let a test hold the two against each other.
 """
 
 from __future__ import annotations
@@ -14,32 +15,28 @@ import numpy as np
 
 from seqrun.arm import kinematics
 from seqrun.arm.description import ArmDescription
-from seqrun.report.data import RunData, Series, StepView
-from seqrun.arm.tracking import peak_abs, windowed_velocity
+from seqrun.report.data import RunData, StepView
+from seqrun.report.envelope import Envelope
 
 #: Per-joint figures of a move, in the order the report shows them.
 MOVE_FIGURES = ("max_following_error_deg", "final_error_deg", "peak_measured_velocity_deg_s")
 
 
-def step_samples(series: Series, number: int) -> np.ndarray:
-    """Indices of the streamed (setpoint) samples of step ``number``."""
-    return np.flatnonzero(series.streamed & (series.step == number))
-
-
 def recompute_move_figures(data: RunData, step: StepView) -> dict[str, Any]:
     """The step's tracking figures from its logged samples (empty if it streamed none)."""
-    idx = step_samples(data.series, step.number)
-    if idx.size == 0:
+    summary = data.step_summaries.get(step.number)
+    if summary is None or summary.streamed == 0:
         return {}
-    s = data.series
+    # (a step that streamed readings has every one of these)
+    assert summary.last_measured_deg is not None and summary.last_planned_deg is not None
+    assert summary.max_following_error_deg is not None
+    assert summary.peak_measured_velocity_deg_s is not None
     target = (np.asarray(step.move["target_deg"], dtype=float)
-              if step.move and "target_deg" in step.move else s.planned[idx[-1]])
-    velocity = windowed_velocity(s.t[idx], s.measured[idx], data.velocity_window_s,
-                                 None if s.t_joint is None else s.t_joint[idx])
+              if step.move and "target_deg" in step.move else summary.last_planned_deg)
     return {
-        "max_following_error_deg": _r(np.max(np.abs(s.planned[idx] - s.measured[idx]), axis=0)),
-        "final_error_deg": _r(np.abs(target - s.measured[idx[-1]])),
-        "peak_measured_velocity_deg_s": _r(peak_abs(velocity)),
+        "max_following_error_deg": _r(summary.max_following_error_deg),
+        "final_error_deg": _r(np.abs(target - summary.last_measured_deg)),
+        "peak_measured_velocity_deg_s": _r(summary.peak_measured_velocity_deg_s),
     }
 
 
@@ -51,15 +48,6 @@ def move_figures(data: RunData, step: StepView) -> tuple[dict[str, Any], bool]:
     return recompute_move_figures(data, step), False
 
 
-def guard_heights(arm: ArmDescription, measured_deg: np.ndarray) -> dict[str, dict[str, np.ndarray]]:
-    """Height (z, mm) of every guarded point over the samples: ``{guard: {point: z}}``."""
-    if len(measured_deg) == 0:
-        return {g.name: {p: np.zeros(0) for p in g.points} for g in arm.workspace.guards}
-    chain = kinematics.Chain.from_arm(arm)
-    points = kinematics.point_positions(chain, np.radians(measured_deg))
-    return {g.name: {p: points[p][..., 2] for p in g.points} for g in arm.workspace.guards}
-
-
 def end_effector_pose(arm: ArmDescription, joints_deg: np.ndarray) -> np.ndarray:
     """x, y, z (mm), roll, pitch, yaw (deg) of the end-effector per sample: ``(n, 6)``."""
     if len(joints_deg) == 0:
@@ -69,26 +57,39 @@ def end_effector_pose(arm: ArmDescription, joints_deg: np.ndarray) -> np.ndarray
     return np.concatenate([frames[:, :3, 3], rpy], axis=1)
 
 
-def loop_periods(series: Series) -> np.ndarray:
-    """Control-loop periods (s): time between consecutive streamed cycles of one step."""
-    if len(series) < 2:
-        return np.zeros(0)
-    same = (series.streamed[1:] & series.streamed[:-1]
-            & (series.step[1:] == series.step[:-1]))
-    return np.diff(series.t)[same]
+def loop_periods(data: RunData) -> tuple[np.ndarray, np.ndarray]:
+    """Control-loop periods (ms) and how often each occurred: time between consecutive
+    streamed cycles of one step (exact, to the log's microsecond)."""
+    periods = data.overview.periods_us
+    return (np.array(list(periods), dtype=float) / 1e3,
+            np.array(list(periods.values()), dtype=int))
 
 
-def period_stats(periods: np.ndarray) -> dict[str, float]:
-    if periods.size == 0:
+def period_stats(data: RunData) -> dict[str, float]:
+    """count, median, p99 and max (ms) of the control-loop periods, exactly as
+    ``np.median`` / ``np.percentile`` (linear) of the periods themselves."""
+    values, counts = loop_periods(data)
+    total = int(counts.sum())
+    if total == 0:
         return {}
-    return {"count": int(periods.size), "median_ms": float(np.median(periods) * 1e3),
-            "p99_ms": float(np.percentile(periods, 99) * 1e3),
-            "max_ms": float(np.max(periods) * 1e3)}
+    cumulative = np.cumsum(counts)
+
+    def order(k: int) -> float:   # the k-th smallest period (0-based)
+        return float(values[np.searchsorted(cumulative, k, side="right")])
+
+    def percentile(p: float) -> float:
+        position = p / 100 * (total - 1)
+        lo = int(np.floor(position))
+        hi = min(lo + 1, total - 1)
+        return order(lo) + (position - lo) * (order(hi) - order(lo))
+
+    return {"count": total, "median_ms": percentile(50), "p99_ms": percentile(99),
+            "max_ms": float(values[-1])}
 
 
 def step_spans(data: RunData) -> list[tuple[int, float, float | None]]:
     """(number, start, end) of every step that ran, in run time."""
-    end_of_run = data.series.t[-1] if len(data.series) else None
+    end_of_run = data.overview.t_last
     finished = next((e["t"] for e in reversed(data.events) if e.get("type") == "run_finished"),
                     end_of_run)
     spans = []
@@ -101,25 +102,12 @@ def step_spans(data: RunData) -> list[tuple[int, float, float | None]]:
 
 
 def decimate(t: np.ndarray, y: np.ndarray, max_points: int) -> tuple[np.ndarray, np.ndarray]:
-    """At most ~``max_points`` points of a line that keep its envelope: the minimum and
-    the maximum of each of ``max_points // 2`` buckets, in time order. NaN (gaps) stay."""
-    n = len(t)
-    if n <= max_points:
-        return t, y
-    buckets = max(1, max_points // 2)
-    size = int(np.ceil(n / buckets))
-    pad = buckets * size - n
-    yy = np.concatenate([y, np.full(pad, np.nan)]).reshape(buckets, size)
-    base = np.arange(buckets) * size
-    all_nan = np.all(np.isnan(yy), axis=1)
-    safe = np.where(np.isnan(yy), 0.0, yy)
-    lo = np.where(np.isnan(yy), np.inf, safe).argmin(axis=1) + base
-    hi = np.where(np.isnan(yy), -np.inf, safe).argmax(axis=1) + base
-    # A bucket without data keeps one NaN point, so the line shows the gap.
-    lo = np.where(all_nan, base, lo)
-    hi = np.where(all_nan, base, hi)
-    idx = np.unique(np.clip(np.concatenate([lo, hi]), 0, n - 1))
-    return t[idx], y[idx]
+    """At most ``max_points`` points of a line that keep its envelope: the minimum and the
+    maximum of each bucket of samples, in time order (:mod:`seqrun.report.envelope`).
+    NaN (gaps) stay."""
+    envelope = Envelope(1, max_points)
+    envelope.add(t, np.asarray(y, dtype=float)[:, None])
+    return envelope.finish()[0]
 
 
 def _r(a: np.ndarray, nd: int = 3) -> list[float]:

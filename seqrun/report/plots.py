@@ -1,25 +1,27 @@
 """The report's plots, drawn with matplotlib (Agg, no display) and kept as inline SVG.
 
 Every plot against time shows the step boundaries (grey, numbered at the top) and the
-fault, if any (red, at its time). Long runs are decimated to an envelope of
-``MAX_POINTS`` points per line (:func:`seqrun.report.figures.decimate`), which keeps
-the page a few MB for a 10-minute run. Text is drawn as paths: the SVG needs no font.
+fault, if any (red, at its time). Long runs come decimated to an envelope of
+``MAX_POINTS`` points per line (:mod:`seqrun.report.summary`), which keeps the page a few
+MB however long the run; the extremes the captions state are exact. Text is drawn as
+paths: the SVG needs no font.
 """
 
 from __future__ import annotations
 
+import gc
 import io
 import re
 from dataclasses import dataclass
+from collections.abc import Callable, Iterator
+from functools import partial
 
 import numpy as np
 
-from seqrun.report.data import RunData
-from seqrun.report.figures import (decimate, guard_heights, loop_periods, period_stats,
-                                   step_spans)
+from seqrun.report.data import MAX_POINTS, RunData
+from seqrun.report.figures import loop_periods, period_stats, step_spans
 
-#: Points per plotted line at most (min/max envelope beyond).
-MAX_POINTS = 3000
+__all__ = ["MAX_POINTS", "Plot", "iter_plots", "render_plots"]
 #: matplotlib drops path vertices closer than this (pixels) to the line: quantised noise
 #: (following errors in 0.001° steps) costs no bytes it could show.
 SIMPLIFY_THRESHOLD = 0.3
@@ -42,19 +44,31 @@ class Plot:
 
 def render_plots(data: RunData) -> list[Plot]:
     """Every plot of the report (none without samples or without the arm description)."""
+    return list(iter_plots(data))
+
+
+def iter_plots(data: RunData) -> Iterator[Plot]:
+    """The plots one at a time, each drawn when it is asked for (a page written as it is
+    drawn holds one plot's SVG at a time)."""
     import matplotlib
 
     matplotlib.use("Agg")
-    if data.arm is None or len(data.series) == 0:
-        return []
-    plots = [_joint_plot(data, i) for i in range(data.arm.dof)]
+    if data.arm is None or data.reading_count == 0 or data.dof != data.arm.dof:
+        return
+    drawings: list[Callable[[], Plot]] = [partial(_joint_plot, data, i)
+                                          for i in range(data.arm.dof)]
     if data.arm.workspace.guards:
-        plots.append(_guard_plot(data))
+        drawings.append(lambda: _guard_plot(data))
     if not data.virtual_time:
-        periods = loop_periods(data.series)
+        periods, counts = loop_periods(data)
         if periods.size:
-            plots.append(_period_plot(data, periods))
-    return plots
+            drawings.append(lambda: _period_plot(data, periods, counts))
+    for draw in drawings:
+        plot = draw()
+        # A drawn figure is a web of reference cycles (tens of MB for a long run's steps):
+        # collected before the next one is drawn, not whenever the collector comes by.
+        gc.collect()
+        yield plot
 
 
 # ---------------------------------------------------------------------------- helpers
@@ -101,21 +115,31 @@ def _round(m: re.Match) -> str:
     return "0" if text == "-0" else text
 
 
-def _line(ax, t, y, style) -> None:
-    td, yd = decimate(t, y, MAX_POINTS)
-    ax.plot(td, yd, **style)
+def _segments(ax, x0, y0, x1, y1, *, transform=None, **style) -> None:
+    """Straight segments (x0, y0)-(x1, y1) drawn as one line broken by NaN: one SVG path
+    however many a run of thousands of steps has (a dash pattern restarts per segment)."""
+    gap = np.full(len(x0), np.nan)
+    x = np.column_stack([x0, x1, gap]).ravel()
+    y = np.column_stack([y0, y1, gap]).ravel()
+    ax.plot(x, y, transform=transform if transform is not None else ax.transData, **style)
+
+
+def _line(ax, data: RunData, name: str, style) -> None:
+    t, y = data.overview.line(name)
+    ax.plot(t, y, **style)
 
 
 def _time_axes(data: RunData, axes, name: str, *, label_steps: bool = True) -> None:
     """Step boundaries, the fault and the x range on every axes of a time plot."""
     spans = step_spans(data)
-    end = max([s[2] or s[1] for s in spans] + [float(data.series.t[-1])])
+    end = max([s[2] or s[1] for s in spans] + [float(data.overview.t_last or 0.0)])
     fault_t = (data.fault or {}).get("t")
     starts = [start for _, start, _ in spans]
     for k, ax in enumerate(axes):
-        # One collection for all boundaries: a line object per step and axes made long
-        # runs (hundreds of steps) slow to draw.
-        ax.vlines(starts, 0, 1, transform=ax.get_xaxis_transform(), **STEP_LINE)
+        # One line for all boundaries: a line object per step and axes made long runs
+        # (hundreds of steps) slow to draw; a collection writes an SVG element per step.
+        _segments(ax, starts, [0.0] * len(starts), starts, [1.0] * len(starts),
+                  transform=ax.get_xaxis_transform(), **STEP_LINE)
         if fault_t is not None:
             # gid: the SVG group gets an id, so the marker can be found in the page.
             ax.axvline(fault_t, **FAULT_LINE, label="fault", gid=f"{name}-fault-{k}")
@@ -154,19 +178,19 @@ def _label_steps(ax, spans, end: float) -> None:
 
 # ---------------------------------------------------------------------------- plots
 def _joint_plot(data: RunData, i: int) -> Plot:
-    arm, s = data.arm, data.series
+    arm = data.arm
     assert arm is not None  # (plots() draws none without the arm)
     joint = arm.joints[i]
     fig, (pos, vel, err) = _figure(6.4, rows=3)
-    _line(pos, s.t, s.planned[:, i], PLANNED)
-    _line(pos, s.t, s.measured[:, i], MEASURED)
+    _line(pos, data, f"planned.{i}", PLANNED)
+    _line(pos, data, f"measured.{i}", MEASURED)
     lo, hi = joint.limits_deg
     pos.axhline(lo, **LIMIT, label=f"limits {lo:g}/{hi:g}°")
     pos.axhline(hi, **LIMIT)
     pos.set_ylabel("position (°)", fontsize=8)
 
-    _line(vel, s.t, s.planned_vel[:, i], PLANNED)
-    _line(vel, s.t, s.measured_vel[:, i], MEASURED)
+    _line(vel, data, f"planned_vel.{i}", PLANNED)
+    _line(vel, data, f"measured_vel.{i}", MEASURED)
     vmax = joint.max_velocity_deg_s
     vel.axhline(vmax, **LIMIT, label=f"arm limit ±{vmax:g}°/s")
     vel.axhline(-vmax, **LIMIT)
@@ -175,19 +199,21 @@ def _joint_plot(data: RunData, i: int) -> Plot:
         limit = (step.move or {}).get("velocity_limit_deg_s")
         if not limit or step.started_t is None:
             continue
-        end = step.finished_t if step.finished_t is not None else float(s.t[-1])
+        end = step.finished_t if step.finished_t is not None else float(
+            data.overview.t_last or step.started_t)
         limits += [limit[i], -limit[i]]
         begins += [step.started_t] * 2
         ends += [end] * 2
     if limits:
-        vel.hlines(limits, begins, ends, **MOVE_LIMIT, label="planner limit of the move")
+        _segments(vel, begins, limits, ends, limits, **MOVE_LIMIT,
+                  label="planner limit of the move")
     vel.set_ylabel("velocity (°/s)", fontsize=8)
 
-    error = s.planned[:, i] - s.measured[:, i]
-    _line(err, s.t, error, dict(color="#2ca02c", linewidth=0.9,
-                                label="planned − measured"))
+    _line(err, data, f"error.{i}", dict(color="#2ca02c", linewidth=0.9,
+                                        label="planned − measured"))
     bound = arm.control.max_following_error_deg
-    worst = float(np.nanmax(np.abs(error))) if np.any(np.isfinite(error)) else 0.0
+    worst_all = data.overview.worst_error_deg
+    worst = float(worst_all[i]) if worst_all is not None and np.isfinite(worst_all[i]) else 0.0
     if worst > 0.25 * bound:
         err.axhline(bound, **LIMIT, label=f"bound ±{bound:g}°")
         err.axhline(-bound, **LIMIT)
@@ -207,10 +233,9 @@ def _joint_plot(data: RunData, i: int) -> Plot:
 
 
 def _guard_plot(data: RunData) -> Plot:
-    arm, s = data.arm, data.series
+    arm = data.arm
     assert arm is not None  # (plots() draws none without the arm)
     fig, (ax,) = _figure(3.6)
-    heights = guard_heights(arm, s.measured)
     guard_colours = ["#d62728", "#8c564b", "#e377c2", "#7f7f7f"]
     point_colours = ["#1f77b4", "#2ca02c", "#9467bd", "#17becf", "#bcbd22", "#ff7f0e"]
     lines, k = [], 0
@@ -219,12 +244,13 @@ def _guard_plot(data: RunData) -> Plot:
                    linestyle="-.", linewidth=1.2,
                    label=f"guard '{guard.name}': {guard.min_z_mm:g} mm")
         for point in guard.points:
-            z = heights[guard.name][point]
-            _line(ax, s.t, z, dict(color=point_colours[k % len(point_colours)], linewidth=1.1,
-                                   label=f"{point.replace('_', ' ')} ({guard.name})"))
+            _line(ax, data, f"guard.{guard.name}.{point}",
+                  dict(color=point_colours[k % len(point_colours)], linewidth=1.1,
+                       label=f"{point.replace('_', ' ')} ({guard.name})"))
             k += 1
-            if z.size:
-                lines.append(f"{point} lowest {np.nanmin(z):.1f} mm")
+            lowest = data.overview.lowest_mm.get((guard.name, point))
+            if lowest is not None and np.isfinite(lowest):
+                lines.append(f"{point} lowest {lowest:.1f} mm")
     ax.set_ylabel("height above the base plane (mm)", fontsize=8)
     _time_axes(data, [ax], "plot-guards")
     ax.legend(fontsize=7, loc="upper right", framealpha=0.7)
@@ -234,15 +260,14 @@ def _guard_plot(data: RunData) -> Plot:
     return Plot("plot-guards", "Guard points", caption, _to_svg(fig, "guards"))
 
 
-def _period_plot(data: RunData, periods: np.ndarray) -> Plot:
+def _period_plot(data: RunData, periods_ms: np.ndarray, counts: np.ndarray) -> Plot:
     fig, (ax,) = _figure(3.0)
-    ms = periods * 1e3
-    ax.hist(ms, bins=80, color="#1f77b4")
+    ax.hist(periods_ms, bins=80, weights=counts, color="#1f77b4")
     ax.set_yscale("log")
     if data.cycle_s:
         ax.axvline(data.cycle_s * 1e3, **LIMIT, label=f"cycle {data.cycle_s * 1e3:g} ms")
         ax.legend(fontsize=7, loc="upper right")
-    stats = period_stats(periods)
+    stats = period_stats(data)
     ax.set_xlabel("control loop period (ms)", fontsize=8)
     ax.set_ylabel("cycles", fontsize=8)
     fig.suptitle("Control loop period", fontsize=10)

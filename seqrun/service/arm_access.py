@@ -17,7 +17,8 @@ if TYPE_CHECKING:
     from seqrun.drivers.base import ArmDriver, ArmIdentity, CommandConfirmation
     from seqrun.service.connection import Connection
 
-__all__ = ["identity_and_homed", "modules_homed", "open_arm", "read_joints", "read_status", "status_rows"]
+__all__ = ["identity_and_homed", "modules_homed", "open_arm", "read_joints", "read_status",
+           "status_rows"]
 
 
 def open_arm(arm: ArmDescription, *, interface: str | None, channel: str | None,
@@ -102,7 +103,8 @@ def modules_homed(connection: Connection, arm: ArmDescription) -> bool:
         driver.close()
 
 
-def identity_and_homed(connection: Connection, arm: ArmDescription) -> tuple[ArmIdentity, bool]:
+def identity_and_homed(connection: Connection,
+                       arm: ArmDescription) -> tuple[ArmIdentity, bool]:
     """Which physical arm is on the bus (its modules' serial numbers) and whether every
     module reports homed; reads only."""
     from seqrun.drivers.registry import open_driver

@@ -1,8 +1,11 @@
 """The run folder: everything a run leaves behind, written as the run goes.
 
 ``runs/<time>-<name>/``
-  trace.log     every CAN frame sent and received, candump format (``can.LogReader`` reads
-                it), wall-clock (epoch) time stamps, the bus channel's name in both directions
+  trace.log.gz  every CAN frame sent and received, candump format, gzip-compressed
+                (``can.LogReader`` reads it, so do ``zcat``/``zgrep``; ``zcat trace.log.gz |
+                canplayer`` replays it), wall-clock (epoch) time stamps, the bus channel's
+                name in both directions. Runs of older versions wrote ``trace.log``
+                (uncompressed); every reader here takes both.
   events.jsonl  one executor event per line; ``run_started`` carries ``start_epoch_s``, the
                 wall-clock time of the run's t = 0 (an event at ``t`` happened at
                 ``start_epoch_s + t``, the trace's time base)
@@ -15,15 +18,20 @@
                 properties, for CI dashboards
   report.html   drawn after the run from the files above (seqrun/report/)
 
-Every line goes to disk as it is written (one write per line): a run killed with SIGKILL
-leaves a readable folder. A failing disk never disturbs the run: the first error stops
-that file, is reported once (``warn``, an event, the report) and leaves whole lines only.
+Every line of the JSON files goes to disk as it is written (one write per line): a run
+killed with SIGKILL leaves a readable folder. The trace's compressed lines are made
+decodable on disk at every event other than a cycle's reading (step boundaries, faults,
+questions, the end) and at least every :data:`TRACE_FLUSH_S` of the run's clock: a run
+killed mid-move loses at most that much of its trace. A failing disk never disturbs the
+run: the first error stops that file, is reported once (``warn``, an event, the report)
+and leaves whole lines only.
 """
 
 from __future__ import annotations
 
 import copy
 import datetime as _dt
+import io
 import json
 import time
 from pathlib import Path
@@ -34,13 +42,27 @@ import can
 
 from seqrun.events import Event
 from seqrun.results import RunResult, StepResult
-from seqrun.service.logfile import LineFile, write_whole
+from seqrun.service.logfile import GzipLineFile, LineFile, read_lines, write_whole
 
 #: The running report.json is rewritten at most this often (seconds of real time).
 REPORT_INTERVAL_S = 1.0
 
+#: The CAN trace of a run; older versions wrote it uncompressed (the second name).
+TRACE_NAME = "trace.log.gz"
+TRACE_NAMES = (TRACE_NAME, "trace.log")
+#: The trace's lines are made decodable on disk at least this often (run clock, s).
+TRACE_FLUSH_S = 0.1
+#: Events that are a cycle's reading (the trace is not flushed for them).
+_READINGS = ("setpoint", "measurement")
+
 #: Files whose presence says a folder holds a run.
-RUN_FILES = ("report.json", "events.jsonl", "trace.log")
+RUN_FILES = ("report.json", "events.jsonl", *TRACE_NAMES)
+
+
+def trace_path(folder: Path) -> Path | None:
+    """The run folder's CAN trace (compressed, or an older run's plain one), if any."""
+    return next((Path(folder) / name for name in TRACE_NAMES
+                 if (Path(folder) / name).is_file()), None)
 
 
 def default_run_dir(sequence_name: str, root: Path = Path("runs")) -> Path:
@@ -89,9 +111,9 @@ def _iso(epoch: float) -> str:
 
 
 class _TraceSink:
-    """File object for python-can's candump writer: one line per write, to a LineFile."""
+    """File object for python-can's candump writer: one line per write, to the trace."""
 
-    def __init__(self, file: LineFile) -> None:
+    def __init__(self, file: GzipLineFile) -> None:
         self._file = file
 
     def write(self, text: str) -> int:
@@ -134,7 +156,8 @@ class RunLog:
         self.channel = str(channel) if channel is not None else "can0"
         self._events = LineFile(self.folder / "events.jsonl", self._failed)
         self._steps_file = LineFile(self.folder / "steps.jsonl", self._failed)
-        self._trace_file = LineFile(self.folder / "trace.log", self._failed)
+        self._trace_file = GzipLineFile(self.folder / TRACE_NAME, self._failed)
+        self._trace_flushed = -float("inf")   # run clock of the trace's last flush
         self._trace = can.CanutilsLogWriter(cast(TextIO, _TraceSink(self._trace_file)),
                                             channel=self.channel)
         self._closed = False
@@ -179,6 +202,8 @@ class RunLog:
             self._joint_names = [j.get("name", "") for j in
                                  (event.get("arm") or {}).get("joints", [])]
         self._events.write(json.dumps(event, separators=(",", ":"), default=str) + "\n")
+        if kind not in _READINGS:   # what led up to a step boundary, fault or question
+            self._trace_file.flush()
         if kind == "step_started":
             self._started[event.get("step", 0)] = event
         elif kind == "step_finished":
@@ -201,6 +226,9 @@ class RunLog:
         if self._clock0 is not None:
             line.timestamp = self._epoch0 + (msg.timestamp - self._clock0)
         self._trace.on_message_received(line)
+        if msg.timestamp - self._trace_flushed >= TRACE_FLUSH_S:
+            self._trace_flushed = msg.timestamp
+            self._trace_file.flush()
 
     # Final report -----------------------------------------------------------------
     def finish(self, result: RunResult) -> dict:
@@ -272,12 +300,20 @@ def read_report(folder: Path) -> dict:
     return report
 
 
+def trace_text(folder: Path) -> str:
+    """The trace's candump lines (compressed or not; a trace cut short by a killed run:
+    its whole lines)."""
+    path = trace_path(folder)
+    return b"".join(read_lines(path)).decode("utf-8") if path is not None else ""
+
+
 def read_trace(folder: Path, *, run_clock: bool = False) -> list[can.Message]:
-    """The frames of trace.log. With ``run_clock`` their stamps are readings of the run's
+    """The frames of the trace (trace.log.gz, or an older run's trace.log; a trace cut
+    short: its whole lines). With ``run_clock`` their stamps are readings of the run's
     clock (as the executor and the simulator saw them) instead of wall-clock time, to the
     microsecond the trace keeps: ``stamp - start_epoch_s + clock_s`` (from events.jsonl)."""
     folder = Path(folder)
-    frames = list(can.LogReader(str(folder / "trace.log")))
+    frames = list(can.CanutilsLogReader(io.StringIO(trace_text(folder))))
     if run_clock:
         started = next(e for e in _json_lines(folder / "events.jsonl")
                        if e.get("type") == "run_started")

@@ -162,7 +162,12 @@ class ArmSession:
 
     @property
     def jog_deadman_s(self) -> float:
+        """A jog not renewed within this time (s) ends with a controlled stop."""
         return self.motion.jog_deadman_s
+
+    @jog_deadman_s.setter
+    def jog_deadman_s(self, seconds: float) -> None:
+        self.motion.jog_deadman_s = seconds
 
     def _started_by(self) -> str | None:
         activity = self.activities.current

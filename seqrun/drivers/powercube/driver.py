@@ -27,7 +27,8 @@ import numpy as np
 
 from seqrun.arm.description import ArmDescription
 from seqrun.arm.planner import Limits, MovePlan
-from seqrun.drivers.base import (ArmIdentity, ArmPoll, CommandConfirmation, ConfirmedCommand, CycleState,
+from seqrun.drivers.base import (ArmIdentity, ArmPoll, CommandConfirmation, ConfirmedCommand,
+                                 CycleState,
                                  EventSink, ForeignTraffic, JointLimits, JointReading,
                                  JointState, LimitValues, MotionRefused)
 from seqrun.drivers.powercube.confirm import (DEFAULT_ATTEMPTS, command_and_confirm,

@@ -1,0 +1,467 @@
+"""A soak at virtual time: hours of random valid sequences and random faults, one process.
+
+    .venv/bin/python bench/soak.py [--hours 8] [--seed 1] [--out bench/results/soak.json]
+        [--keep DIR] [--clean 1] [--moves 8 40]
+
+Each run is ``seqrun run FILE --virtual-time --yes --plain [--sim-fault SPEC] --log-dir DIR``
+through the real CLI, in this process (the typer app, the arm session, the executor, the
+simulated wire, the run folder and report.html), one after the other until the runs'
+virtual motion adds up to ``--hours``:
+
+- the sequence is random and valid: the start-up, Park -> Totem, ``--moves`` moves of random
+  joints to random targets at random speeds (some to Op-safe or Totem), dwells and waits
+  for position, back to Totem and a checkpoint there; drawn again until
+  ``seqrun validate --static`` passes it;
+- the runs come in rounds of the six fault kinds (``tow_error``, ``halt``, ``no_ack``,
+  ``drop_acks`` at a random rate, ``stuck``, ``missing``) and ``--clean`` runs without a
+  fault, shuffled; a fault strikes a random module (or all), at a random time within the
+  sequence's planned duration.
+
+Each run is judged from its run folder, as an operator would read it:
+
+- a fault that happened (its time before the run's end) must end the run with exit 3, a
+  ``fault`` no earlier than the injection and on the faulted module, and a Halt broadcast
+  on the bus at or after the injection: *ended in Halt*. The exceptions are faults no
+  runner can see, which must pass: a ``stuck`` joint that is not commanded to move (its
+  plan stays within the position tolerance of where it stuck) and ``drop_acks`` whose
+  every lost answer was a read that was retried (a ``retry`` event each). Anything else is
+  a *missed halt*. A fault in the last 0.2 s of a run may go unseen (a silence is seen
+  50 ms after an answer is due): counted apart;
+- a run without a fault (or whose fault time lies after its end) must pass: anything else
+  is a *spurious fault*, as is a fault before the injection or on another module.
+
+Figures: runs, faults injected, faults ending in Halt, missed halts, spurious faults, the
+slope of the resident set over the hours of virtual motion (least squares over the runs
+after the first, KB/h; the RSS is read after each run), open files and threads before the
+first run and after the last. Before the first run come two warm-up runs, not counted (a
+clean one and a faulted one: what every run needs is then loaded for good - modules,
+caches, matplotlib's font files). Wall time depends on the host's load (reported).
+
+Run folders are deleted after each run unless ``--keep`` (kept anyway: the folders of runs
+judged wrong).
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import json
+import os
+import random
+import re
+import shutil
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from seqrun_runs import RESULTS, ROOT, machine, write_json  # noqa: E402
+
+from seqrun.sim.faults import FAULT_KINDS, Fault  # noqa: E402
+
+#: Faults this close to a run's end may go unseen (a silence is seen one response timeout
+#: after the answer is due; a state read comes every cycle).
+UNSEEN_S = 0.2
+#: Faults are injected from here on (after the start-up's Reset, which clears a module's
+#: error: a fault before it is a fault the sequence itself clears).
+FIRST_FAULT_S = 0.5
+#: Joint ranges of the random moves (user degrees): well inside the limits, and mostly
+#: clear of the desk (validation has the last word).
+RANGES = {"j1": (-150, 150), "j2": (-60, 60), "j4": (-80, 80), "j5": (-150, 150),
+          "j6": (-80, 80), "j7": (-150, 150)}
+BROADCAST_HALT = (0x100, "02")
+
+
+# ---------------------------------------------------------------------------- sequences
+def make_project(root: Path) -> Path:
+    """A project with the shipped arm, poses and start-up; returns its sequences folder."""
+    for name in ("arms", "poses"):
+        shutil.copytree(ROOT / name, root / name, dirs_exist_ok=True)
+    (root / "sequences").mkdir(parents=True, exist_ok=True)
+    shutil.copy(ROOT / "sequences" / "startup.yaml", root / "sequences")
+    return root / "sequences"
+
+
+def random_steps(rng: random.Random, moves: int) -> list[str]:
+    steps = ["  - include: startup.yaml",
+             "  - move: {pose: totem, velocity_scale: 0.5, label: Up to Totem}"]
+    for k in range(moves):
+        scale = round(rng.uniform(0.2, 1.0), 2)
+        if rng.random() < 0.1:
+            pose = rng.choice(["opsafe", "totem"])
+            steps.append(f"  - move: {{pose: {pose}, velocity_scale: {scale}, "
+                         f"label: move {k + 1}}}")
+        else:
+            joints = rng.sample(sorted(RANGES), rng.randint(1, 4))
+            target = ", ".join(f"{j}: {rng.uniform(*RANGES[j]):.1f}" for j in sorted(joints))
+            steps.append(f"  - move: {{joints: {{{target}}}, velocity_scale: {scale}, "
+                         f"label: move {k + 1}}}")
+        roll = rng.random()
+        if roll < 0.15:
+            steps.append(f"  - wait: {{seconds: {rng.uniform(0.1, 2.0):.2f}}}")
+        elif roll < 0.25:
+            steps.append("  - wait: {until: in_position}")
+    steps += ["  - move: {pose: totem, velocity_scale: 0.5, label: Back to Totem}",
+              "  - checkpoint: {pose: totem, label: At Totem}"]
+    return steps
+
+
+def random_sequence(rng: random.Random, folder: Path, name: str,
+                    moves: tuple[int, int]) -> tuple[Path, float]:
+    """A random sequence that passes static validation, and its planned duration (s)."""
+    from seqrun.sequence.checks import static_check
+
+    path = folder / f"{name}.yaml"
+    for _ in range(100):
+        steps = random_steps(rng, rng.randint(*moves))
+        path.write_text(f"name: {name}\ndescription: random soak sequence\nsteps:\n"
+                        + "\n".join(steps) + "\n")
+        check = static_check(path)
+        if check.valid:
+            planned = sum(c.duration_s for c in check.clearances)
+            planned += sum(float(m) for m in re.findall(r"seconds: ([0-9.]+)", path.read_text()))
+            return path, planned
+    raise RuntimeError("no valid random sequence in 100 draws: the ranges are wrong")
+
+
+class FaultDeck:
+    """Rounds of every fault kind once and ``clean`` runs without a fault, shuffled; each
+    fault on a random module (or all), at a random time, drop_acks at a random rate."""
+
+    def __init__(self, rng: random.Random, clean: int = 1) -> None:
+        self.rng = rng
+        self.clean = clean
+        self.deck: list[str | None] = []
+
+    def draw(self, planned_s: float) -> Fault | None:
+        if not self.deck:
+            self.deck = [*FAULT_KINDS, *[None] * self.clean]
+            self.rng.shuffle(self.deck)
+        kind = self.deck.pop()
+        if kind is None:
+            return None
+        module = None if self.rng.random() < 0.1 else self.rng.randint(1, 7)
+        at = round(self.rng.uniform(FIRST_FAULT_S, max(FIRST_FAULT_S + 0.1, planned_s)), 3)
+        rate = round(10 ** self.rng.uniform(-2.3, -0.3), 4) if kind == "drop_acks" else None
+        return Fault(module, kind, at, rate)
+
+
+# ---------------------------------------------------------------------------- one run
+@dataclass
+class Verdict:
+    spec: str | None
+    exit_code: int
+    duration_s: float
+    outcome: str            # clean, halted, unobservable, unseen_late, missed_halt, spurious
+    detail: str = ""
+    halt_latency_s: float | None = None
+    wall_s: float = 0.0
+
+
+def run_cli(sequence: Path, folder: Path, fault: Fault | None):
+    from typer.testing import CliRunner
+
+    import seqrun.cli  # noqa: F401  (registers the commands)
+    from seqrun.cli.app import app
+
+    args = ["run", str(sequence), "--virtual-time", "--yes", "--plain",
+            "--log-dir", str(folder)]
+    if fault is not None:
+        args += ["--sim-fault", fault.spec]
+    return CliRunner().invoke(app, args)
+
+
+def _frames(folder: Path, shift: float) -> list[tuple[float, int, str, bool]]:
+    """(run-clock time, id, data hex, sent) of every frame of the trace."""
+    from seqrun.service.runlog import trace_text
+
+    out = []
+    for line in trace_text(folder).splitlines():
+        stamp, _, frame, direction = line.split()
+        can_id, _, data = frame.partition("#")
+        out.append((round(float(stamp[1:-1]) + shift, 6), int(can_id, 16), data.upper(),
+                    direction == "T"))
+    return out
+
+
+def _events(folder: Path) -> list[dict]:
+    with open(folder / "events.jsonl", encoding="utf-8") as f:
+        return [json.loads(line) for line in f if line.strip()]
+
+
+def judge(fault: Fault | None, result, folder: Path, arm) -> Verdict:
+    """The verdict on one run (see the module docstring)."""
+    report = json.loads((folder / "report.json").read_text())
+    code = result.exit_code
+    duration = float(report.get("duration_s") or 0.0)
+    spec = fault.spec if fault is not None else None
+    if result.exception is not None and not isinstance(result.exception, SystemExit):
+        return Verdict(spec, code, duration, "spurious", f"exception {result.exception!r}")
+    happened = fault is not None and fault.at < duration
+    if not happened:
+        if code == 0:
+            return Verdict(spec, code, duration, "clean")
+        return Verdict(spec, code, duration, "spurious",
+                       f"exit {code} without a fault: {report.get('message')}")
+    assert fault is not None
+    events = _events(folder)
+    started = next(e for e in events if e["type"] == "run_started")
+    frames = _frames(folder, started["clock_s"] - started["start_epoch_s"])
+    fault_event = next((e for e in events if e["type"] == "fault"), None)
+    if code == 3 and fault_event is not None:
+        reported = report.get("fault") or {}
+        if fault_event["t"] < fault.at - 1e-6:
+            return Verdict(spec, code, duration, "spurious",
+                           f"fault at {fault_event['t']} before the injection at {fault.at}")
+        if fault.module is not None and reported.get("module") not in (fault.module, None):
+            return Verdict(spec, code, duration, "spurious",
+                           f"fault names module {reported.get('module')}, not {fault.module}")
+        halts = [t for t, can_id, data, sent in frames
+                 if sent and can_id == BROADCAST_HALT[0] and data.startswith(BROADCAST_HALT[1])
+                 and t >= fault.at - 1e-6]
+        if halts and reported.get("halt_sent"):
+            return Verdict(spec, code, duration, "halted",
+                           halt_latency_s=round(halts[0] - fault.at, 6))
+        return Verdict(spec, code, duration, "missed_halt",
+                       f"exit 3 but no Halt on the bus after {fault.at} s")
+    if code == 0:
+        why = _unobservable(fault, events, frames, arm)
+        if why:
+            return Verdict(spec, code, duration, "unobservable", why)
+        if fault.at >= duration - UNSEEN_S:
+            return Verdict(spec, code, duration, "unseen_late")
+        return Verdict(spec, code, duration, "missed_halt", "passed with the fault")
+    return Verdict(spec, code, duration, "missed_halt",
+                   f"exit {code}: {report.get('message')}")
+
+
+def _unobservable(fault: Fault, events: list[dict], frames, arm) -> str:
+    """Why a run that passed with ``fault`` could not have seen it ('' if it could)."""
+    modules = [fault.module] if fault.module is not None else [j.module for j in arm.joints]
+    if fault.kind == "stuck":
+        index = [i for i, j in enumerate(arm.joints) if j.module in modules]
+        before = [e for e in events if e["type"] in ("setpoint", "measurement")
+                  and e["t"] <= fault.at]
+        if not before:
+            return ""
+        where = before[-1].get("measured_deg") or before[-1].get("joints_deg")
+        worst = 0.0
+        for e in events:
+            if e["type"] == "setpoint" and e["t"] > fault.at:
+                worst = max(worst, max(abs(e["planned_deg"][i] - where[i]) for i in index))
+        bound = arm.control.position_tolerance_deg
+        return f"stuck joint planned within {worst:.3f} deg" if worst <= bound else ""
+    if fault.kind == "drop_acks":
+        lost = {m: 0 for m in modules}
+        waiting = {m: False for m in modules}
+        for t, can_id, _, sent in frames:
+            if t < fault.at:
+                continue
+            m = can_id & 0x1F
+            if m not in lost:
+                continue
+            if sent and (can_id & ~0x1F) in (0x0C0, 0x0E0):
+                lost[m] += waiting[m]
+                waiting[m] = True
+            elif not sent and (can_id & ~0x1F) == 0x0A0:
+                waiting[m] = False
+        retried = {m: sum(1 for e in events if e["type"] == "retry" and e["t"] >= fault.at
+                          and (e.get("module") == m or m in (e.get("modules") or ())))
+                   for m in modules}
+        if all(lost[m] <= retried[m] for m in modules):
+            return f"lost answers {sum(lost.values())}, all retried reads"
+    return ""
+
+
+# ---------------------------------------------------------------------------- the soak
+def rss_kb() -> int:
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") // 1024
+
+
+def open_files() -> int:
+    return len(os.listdir("/proc/self/fd"))
+
+
+def os_threads() -> int:
+    return len(os.listdir("/proc/self/task"))
+
+
+@dataclass
+class SoakResult:
+    virtual_s: float = 0.0
+    wall_s: float = 0.0
+    runs: int = 0
+    faults_injected: int = 0          # fault time before the run's end
+    faults_ended_in_halt: int = 0
+    faults_unobservable: int = 0      # passed, and no runner could have seen them
+    faults_unseen_late: int = 0       # in the last UNSEEN_S of a run, passed
+    faults_after_the_end: int = 0     # drawn for a time the run did not reach
+    missed_halts: int = 0
+    spurious_faults: int = 0
+    clean_runs: int = 0
+    kinds: dict[str, dict[str, int]] = field(default_factory=dict)
+    halt_latency_max_s: dict[str, float] = field(default_factory=dict)
+    rss_kb: list[tuple[float, int]] = field(default_factory=list)   # (virtual h, KB)
+    rss_slope_kb_per_h: float | None = None
+    #: After the warm-up and after the last run.
+    open_files: tuple[int, int] = (0, 0)
+    threads: tuple[int, int] = (0, 0)          # Python threads
+    os_threads: tuple[int, int] = (0, 0)
+    before_warm_up: dict[str, int] = field(default_factory=dict)
+    wrong: list[dict] = field(default_factory=list)
+
+
+def slope(points: list[tuple[float, int]]) -> float | None:
+    """Least-squares slope (KB per virtual hour) of the RSS after the first run."""
+    if len(points) < 3:
+        return None
+    import numpy as np
+
+    x = np.array([p[0] for p in points[1:]])
+    y = np.array([p[1] for p in points[1:]], dtype=float)
+    if np.ptp(x) == 0:
+        return None
+    return float(np.polyfit(x, y, 1)[0])
+
+
+def warm_up(sequences: Path, work: Path) -> None:
+    """A clean run and a faulted one (not counted): what every later run needs is then
+    loaded for good (modules, caches, matplotlib's font files, the bold one of a fault's
+    label), so that what is open after the last run compares with what was before."""
+    path = sequences / "warm-up.yaml"
+    path.write_text("name: warm-up\ndescription: soak warm-up\nsteps:\n"
+                    "  - include: startup.yaml\n  - move: {pose: totem, velocity_scale: 0.5}\n")
+    for n, fault in enumerate((None, Fault(4, "tow_error", 3.0))):
+        folder = work / f"warm-up-{n}"
+        result = run_cli(path, folder, fault)
+        if result.exit_code != (0 if fault is None else 3):
+            raise RuntimeError(f"warm-up run {n} exited {result.exit_code}:\n{result.output}")
+        shutil.rmtree(folder, ignore_errors=True)
+    path.unlink()
+
+
+def soak(virtual_s: float, *, seed: int = 1, clean: int = 1,
+         moves: tuple[int, int] = (8, 40), keep: Path | None = None,
+         progress=print) -> SoakResult:
+    from seqrun.arm.description import load_arm
+
+    rng = random.Random(seed)
+    deck = FaultDeck(rng, clean)
+    work = Path(tempfile.mkdtemp(prefix="seqrun-soak-"))
+    out = SoakResult()
+    try:
+        sequences = make_project(work / "project")
+        arm = load_arm(work / "project" / "arms" / "lwa3.yaml")
+        gc.collect()
+        out.before_warm_up = {"open_files": open_files(),
+                              "threads": threading.active_count(), "os_threads": os_threads()}
+        warm_up(sequences, work)
+        gc.collect()
+        files0, threads0, tasks0 = open_files(), threading.active_count(), os_threads()
+        wall0 = time.perf_counter()
+        while out.virtual_s < virtual_s:
+            n = out.runs + 1
+            sequence, planned = random_sequence(rng, sequences, f"soak-{n:04d}", moves)
+            fault = deck.draw(planned)
+            folder = (keep or work) / f"run-{n:04d}"
+            w0 = time.perf_counter()
+            result = run_cli(sequence, folder, fault)
+            verdict = judge(fault, result, folder, arm)
+            verdict.wall_s = round(time.perf_counter() - w0, 2)
+            _count(out, fault, verdict)
+            out.virtual_s += verdict.duration_s
+            out.runs = n
+            if verdict.outcome in ("missed_halt", "spurious"):
+                out.wrong.append({**asdict(verdict), "sequence": sequence.read_text(),
+                                  "folder": str(folder), "output": result.output[-2000:]})
+                kept = (keep or RESULTS) / "soak-wrong" / folder.name
+                if folder != kept:
+                    shutil.copytree(folder, kept, dirs_exist_ok=True)
+                    shutil.copy(sequence, kept / sequence.name)
+            if keep is None:
+                shutil.rmtree(folder, ignore_errors=True)
+            sequence.unlink()
+            gc.collect()
+            out.rss_kb.append((round(out.virtual_s / 3600, 4), rss_kb()))
+            progress(f"run {n:4d} {verdict.duration_s:8.1f} s virtual "
+                     f"{verdict.wall_s:6.1f} s wall  {verdict.spec or '-':<24} "
+                     f"exit {verdict.exit_code}  {verdict.outcome:<13} {verdict.detail}"[:160]
+                     + f"  | total {out.virtual_s / 3600:.2f} h, RSS {out.rss_kb[-1][1] / 1024:.0f} MB")
+        out.wall_s = round(time.perf_counter() - wall0, 1)
+        gc.collect()
+        out.open_files = (files0, open_files())
+        out.threads = (threads0, threading.active_count())
+        out.os_threads = (tasks0, os_threads())
+        out.rss_slope_kb_per_h = slope(out.rss_kb)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    return out
+
+
+def _count(out: SoakResult, fault: Fault | None, v: Verdict) -> None:
+    kind = fault.kind if fault is not None else "none"
+    per = out.kinds.setdefault(kind, {})
+    per[v.outcome] = per.get(v.outcome, 0) + 1
+    if fault is not None:
+        if fault.at < v.duration_s:
+            out.faults_injected += 1
+        else:
+            out.faults_after_the_end += 1
+    if v.outcome == "clean":
+        out.clean_runs += 1
+    elif v.outcome == "halted":
+        out.faults_ended_in_halt += 1
+        if v.halt_latency_s is not None:
+            out.halt_latency_max_s[kind] = max(out.halt_latency_max_s.get(kind, 0.0),
+                                               v.halt_latency_s)
+    elif v.outcome == "unobservable":
+        out.faults_unobservable += 1
+    elif v.outcome == "unseen_late":
+        out.faults_unseen_late += 1
+    elif v.outcome == "missed_halt":
+        out.missed_halts += 1
+    elif v.outcome == "spurious":
+        out.spurious_faults += 1
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--hours", type=float, default=8.0, help="virtual motion (hours)")
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--clean", type=int, default=1,
+                        help="runs without a fault per round of the six fault kinds")
+    parser.add_argument("--moves", type=int, nargs=2, default=(8, 40), metavar=("MIN", "MAX"))
+    parser.add_argument("--keep", type=Path, help="keep every run folder here")
+    parser.add_argument("--out", type=Path, default=RESULTS / "soak.json")
+    args = parser.parse_args()
+    info = machine()
+    result = soak(args.hours * 3600, seed=args.seed, clean=args.clean,
+                  moves=tuple(args.moves), keep=args.keep)
+    data = {"machine": info, "load_avg_at_end": os.getloadavg(), "hours": args.hours,
+            "seed": args.seed, **asdict(result)}
+    write_json(args.out, data)
+    r = result
+    print(f"\n{r.virtual_s / 3600:.2f} h of virtual motion in {r.wall_s / 60:.1f} min wall "
+          f"({r.virtual_s / max(r.wall_s, 1e-9):.1f}x real time), {r.runs} runs "
+          f"({r.clean_runs} clean)")
+    print(f"faults injected {r.faults_injected}: ended in Halt {r.faults_ended_in_halt}, "
+          f"unobservable (passed) {r.faults_unobservable}, in the last {UNSEEN_S} s and unseen "
+          f"{r.faults_unseen_late}; drawn after the run's end {r.faults_after_the_end}")
+    print(f"missed halts {r.missed_halts}, spurious faults {r.spurious_faults}")
+    print(f"RSS slope {r.rss_slope_kb_per_h if r.rss_slope_kb_per_h is None else round(r.rss_slope_kb_per_h)} "
+          f"KB/h (RSS {r.rss_kb[0][1] / 1024:.0f} MB after the first run, "
+          f"{r.rss_kb[-1][1] / 1024:.0f} MB after the last)")
+    print(f"before the first run -> after the last: open files {r.open_files[0]} -> "
+          f"{r.open_files[1]}, Python threads {r.threads[0]} -> {r.threads[1]}, OS threads "
+          f"{r.os_threads[0]} -> {r.os_threads[1]} (before the warm-up: {r.before_warm_up})")
+    print("per kind: " + "; ".join(f"{k} {v}" for k, v in sorted(r.kinds.items())))
+    print(f"load average at start {info['loadavg_at_start']}; written to {args.out}")
+
+
+if __name__ == "__main__":
+    main()
