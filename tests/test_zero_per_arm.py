@@ -209,10 +209,12 @@ def test_an_in_use_edited_by_hand_is_refused_not_used(served):
 
 
 # --------------------------------------------------------------------------- --yes
-def test_yes_does_not_answer_does_the_arm_stand_in_totem(served, tmp_path):
+def test_yes_does_not_answer_does_the_arm_stand_in_totem(served, tmp_path, monkeypatch):
     """With --yes and nobody at the keyboard the zero question is still asked, and
     unanswered it is a no: nothing moves. --zero-confirmed names the pose; a different
     pose than the record refuses."""
+    # (a real-time arm in this process on a loaded test machine: 200 ms per answer)
+    monkeypatch.setenv("SEQRUN_RESPONSE_TIMEOUT_MS", "200")
     bus, arm = served(FIRST)
     store_of().set_record("totem", by="shutdown.yaml")
     sequence = ROOT / "sequences" / "totem.yaml"

@@ -55,17 +55,18 @@ def _open_bus(arm, project, interface, channel, bitrate, bus_kwargs):
                            bus_kwargs=extra, default_bitrate=arm.can.bitrate, transient=True)
 
 
-def _arm_store(arm, connection) -> ZeroStore:
-    """The connected arm's store (its identity read from the modules); UserInputError on
-    the built-in simulator, whose zero is its power-on pose."""
+def _arm_store(arm, connection) -> tuple[ZeroStore, bool]:
+    """The connected arm's store (its identity read from the modules) and whether its
+    modules are homed; UserInputError on the built-in simulator, whose zero is its
+    power-on pose."""
     from seqrun.service.arm_access import identity_and_homed
 
     if connection.is_simulator:
         raise UserInputError("no arm named: the built-in simulator takes its zero from its "
                              "power-on pose (--power-on-at); name the arm's bus (-i/-c, the "
                              "campaign's seqrun.toml or python-can's configuration)")
-    identity, _ = identity_and_homed(connection, arm)
-    return ZeroStore(identity)
+    identity, homed = identity_and_homed(connection, arm)
+    return ZeroStore(identity), homed
 
 
 def _list_machine_records() -> None:
@@ -109,7 +110,7 @@ def show_command(
                 _list_machine_records()
                 return
             try:
-                store = _arm_store(arm, connection)
+                store, _ = _arm_store(arm, connection)
             except BusError as exc:
                 fail(f"cannot read the modules' serial numbers: {exc}", 3)
         finally:
@@ -170,11 +171,15 @@ def set_command(
         connection = _open_bus(arm, project, interface, channel, bitrate, bus_kwargs)
         try:
             try:
-                store = _arm_store(arm, connection)
+                store, homed = _arm_store(arm, connection)
             except BusError as exc:
                 fail(f"cannot read the modules' serial numbers: {exc}", 3)
         finally:
             connection.close()
+        try:
+            in_use = store.in_use if homed else None
+        except UserInputError:  # an untrusted file: this record replaces it
+            in_use = None
     angles = ", ".join(f"{n} {v:g}°" for n, v in stands.items())
     question = (f"Record that '{arm.name}' ({store.identity.describe()}) was powered off in "
                 f"{title} ({angles})? The next power-on takes its zero there.")
@@ -186,6 +191,10 @@ def set_command(
         record = store.set_record(name, by="seqrun zero set", joints_deg=joints,
                                   arm_name=arm.name)
     typer.echo(f"zero reference recorded: {record.describe()} ({store.path})")
+    if in_use is not None:
+        typer.echo(f"note: the modules are still on (homed): runs keep the zero confirmed at "
+                   f"this power-on ({in_use.describe()}) until they are powered off; the "
+                   "record is the zero of the next power-on")
 
 
 def zero_at_run_start(connection, arm, project, ask: Callable[[str], bool],
