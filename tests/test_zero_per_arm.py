@@ -297,3 +297,16 @@ def test_every_simulated_arm_has_serials_of_its_own_unless_named():
         connection.close()
     with pytest.raises(ValueError, match="serials are 32-bit"):
         SimArm(clock, options=ModuleOptions(serial_base=2**32 - 3))
+
+
+def test_zero_set_while_the_modules_are_on_says_the_zero_in_use_stays(served):
+    """A record made while the modules are homed is the next power-on's zero: the runs
+    until then keep the one confirmed at this power-on, and zero set says so."""
+    store = store_of()
+    store.set_in_use(store.set_record("park", by="test"))
+    bus, _ = served(FIRST, options=ModuleOptions(home_ok_at_power_on=True))
+    result = invoke("zero", "set", "totem", "--yes", *bus)
+    assert result.exit_code == 0, result.output
+    assert "note: the modules are still on (homed): runs keep the zero confirmed at this " \
+        "power-on (Park, recorded" in " ".join(result.output.split())
+    assert store.record.pose == "totem" and store.in_use.pose == "park"
