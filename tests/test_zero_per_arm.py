@@ -310,3 +310,20 @@ def test_zero_set_while_the_modules_are_on_says_the_zero_in_use_stays(served):
     assert "note: the modules are still on (homed): runs keep the zero confirmed at this " \
         "power-on (Park, recorded" in " ".join(result.output.split())
     assert store.record.pose == "totem" and store.in_use.pose == "park"
+
+
+def test_zero_confirmed_must_name_the_zero_in_force_on_the_simulator_too():
+    """--zero-confirmed is a statement about the arm: the simulator powered on at Park
+    refuses 'totem' (nothing sent) and takes 'park'."""
+    from seqrun.service.connection import open_connection
+
+    connection = open_connection(force_sim=True, clock=VirtualClock(), power_on_pose="park")
+    try:
+        with pytest.raises(UserInputError, match="--zero-confirmed totem: the zero "
+                                                 "reference in force is Park"):
+            zero_at_run_start(connection, ARM, None, lambda q: True, print, confirmed="totem")
+        zero = zero_at_run_start(connection, ARM, None, lambda q: False, print,
+                                 confirmed="Park")
+    finally:
+        connection.close()
+    assert zero.pose == "park" and zero.question is None
