@@ -327,3 +327,21 @@ def test_zero_confirmed_must_name_the_zero_in_force_on_the_simulator_too():
     finally:
         connection.close()
     assert zero.pose == "park" and zero.question is None
+
+
+def test_a_power_off_step_that_cannot_write_the_record_fails_the_run(tmp_path, monkeypatch):
+    """The shutdown's record cannot be written (a machine folder this user may not write):
+    the power_off step fails with one line saying the zero is not recorded."""
+    from seqrun.errors import RunAborted
+    from seqrun.service import campaign_records
+
+    blocked = tmp_path / "not-a-folder"
+    blocked.write_text("")  # the store's folder cannot be made under a file
+    monkeypatch.setenv("SEQRUN_STATE_DIR", str(blocked))
+    loaded = load_sequence(ROOT / "sequences" / "shutdown.yaml")
+    record = campaign_records.zero_recorder(store_of(), ARM, loaded)
+    with pytest.raises(RunAborted) as failed:
+        record("totem")
+    assert failed.value.cause == "power_off"
+    assert "cannot write the zero reference" in str(failed.value)
+    assert "NOT recorded" in str(failed.value) and "\n" not in str(failed.value)

@@ -54,6 +54,12 @@ def zero_recorder(store: Any, arm: Any, loaded: Any) -> Callable[[str], str]:
     connected arm's own store (:class:`~seqrun.service.zero.ZeroStore`)."""
 
     def record(pose: str) -> str:
-        entry = store.set_record(pose, by=Path(str(loaded.file)).name, arm_name=arm.name)
+        from seqrun.errors import RunAborted, UserInputError
+
+        try:
+            entry = store.set_record(pose, by=Path(str(loaded.file)).name, arm_name=arm.name)
+        except UserInputError as exc:  # (a folder this user may not write): the step fails
+            raise RunAborted("power_off", f"power_off: {exc}; the zero reference of the "
+                                          "next power-on is NOT recorded") from None
         return f"{entry.describe()} ({store.path})"
     return record
