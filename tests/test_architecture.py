@@ -124,15 +124,8 @@ def test_imports_go_to_the_same_layer_or_an_earlier_one():
     assert sorted(upward_imports(type_only=False)) == []
 
 
-#: Imports for the type checker only that still run back up: each one is a debt, named here
-#: with its reason; the test fails when it is paid, so that the line goes too.
-#: arm.telemetry's joint_flags reads the driver's decoded states (CycleState, JointState):
-#: it belongs behind the driver seam (issue 25, item 1).
-TYPE_ONLY_UPWARD = {("arm.telemetry", "drivers.base")}
-
-
 def test_imports_for_the_type_checker_go_the_same_way():
-    assert sorted(upward_imports(type_only=True)) == sorted(TYPE_ONLY_UPWARD)
+    assert sorted(upward_imports(type_only=True)) == []
 
 
 #: The layers a face may import (issue 25.4): the service layer, the events and the other

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
-from seqrun.arm.telemetry import joint_flags
+from seqrun.drivers.telemetry import joint_flags
 from seqrun.events import make_event
 from seqrun.execution.run import rounded
 

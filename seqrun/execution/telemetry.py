@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from seqrun.arm.telemetry import VelocityWindow, joint_flags
+from seqrun.drivers.telemetry import VelocityWindow, joint_flags
 from seqrun.arm.tracking import velocity_window
 
 if TYPE_CHECKING:

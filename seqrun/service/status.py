@@ -268,7 +268,7 @@ class ArmTelemetry:
     # ------------------------------------------------------------------ the idle poll
     def poll_once(self) -> None:
         """One reading of every module through the driver (the caller holds the bus)."""
-        from seqrun.arm.telemetry import joint_flags
+        from seqrun.drivers.telemetry import joint_flags
         from seqrun.service.arm_access import read_joints
 
         arm = self._session.arm
