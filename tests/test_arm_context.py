@@ -26,6 +26,8 @@ from seqrun.sim.network import SimNetwork
 from seqrun.sim.socketcand import SocketcandServer
 
 ARM = shipped_arm()
+#: The served arm's serial numbers (its zero record is keyed by them).
+SERIALS = {m: 7_300_000 + m for m in range(1, 8)}
 
 
 @pytest.fixture
@@ -43,7 +45,8 @@ def nowhere(tmp_path, monkeypatch):
 
 def served_arm(power_on_pose: str = "park") -> SocketcandServer:
     clock = RealClock()
-    server = SocketcandServer(SimNetwork(clock, SimArm(clock, power_on_pose=power_on_pose),
+    server = SocketcandServer(SimNetwork(clock, SimArm(clock, power_on_pose=power_on_pose,
+                                                       serials=SERIALS),
                                          spin_window=0.0), port=0)
     server.start()
     return server
@@ -106,19 +109,24 @@ def test_reset_in_a_campaign_uses_the_campaigns_bus(tmp_path, monkeypatch, nowhe
         server.shutdown()
 
 
-# ------------------------------------------------------------------ one zero per campaign
+# ------------------------------------------------------------------ the arm's own zero
+def record_zero(pose: str) -> None:
+    """The served arm's zero record (this machine's, the test's state folder)."""
+    from seqrun.drivers.base import ArmIdentity
+
+    ZeroStore(ArmIdentity.of(SERIALS)).set_record(pose, by="test", arm_name=ARM.name)
+
+
 @pytest.mark.parametrize("bus_from", ["campaign", "command line"])
-def test_status_in_a_campaign_reads_with_the_campaigns_zero(tmp_path, monkeypatch, nowhere,
-                                                            bus_from):
-    """The arm powered on at Totem, recorded so in the campaign; the per-user file (the
-    one outside campaigns) says Park. status shows where the arm stands: Totem."""
+def test_status_in_a_campaign_reads_with_the_arms_zero(tmp_path, monkeypatch, nowhere,
+                                                       bus_from):
+    """The arm powered on at Totem, its record says so. status in a campaign (the bus from
+    the campaign or the command line) shows where the arm stands: Totem (status and
+    run once resolved the zero each their own way)."""
     server = served_arm("totem")
     try:
         root = campaign_on(tmp_path, server if bus_from == "campaign" else None)
-        ZeroStore.for_arm(ARM.name).set_record("park", by="another campaign")
-        from seqrun.sequence.project import open_project
-
-        ZeroStore.for_arm(ARM.name, open_project(root)).set_record("totem", by="test")
+        record_zero("totem")
         monkeypatch.chdir(root)
         args = [] if bus_from == "campaign" else [
             "-i", "socketcand", "--bus-kwargs", "host=127.0.0.1", f"port={server.port}"]
@@ -131,14 +139,11 @@ def test_status_in_a_campaign_reads_with_the_campaigns_zero(tmp_path, monkeypatc
         server.shutdown()
 
 
-def test_pose_save_in_a_campaign_writes_the_campaigns_zero(tmp_path, monkeypatch, nowhere):
+def test_pose_save_in_a_campaign_writes_the_arms_zero(tmp_path, monkeypatch, nowhere):
     server = served_arm("totem")
     try:
         root = campaign_on(tmp_path, server)
-        ZeroStore.for_arm(ARM.name).set_record("park", by="another campaign")
-        from seqrun.sequence.project import open_project
-
-        ZeroStore.for_arm(ARM.name, open_project(root)).set_record("totem", by="test")
+        record_zero("totem")
         monkeypatch.chdir(root / "sequences")
         result = CliRunner().invoke(app, ["pose", "save", "here"])
         assert result.exit_code == 0, result.output

@@ -28,7 +28,7 @@ from seqrun.arm.planner import Limits, MovePlan
 from seqrun.arm.poses import pose_joints_deg
 from seqrun.clock import VirtualClock
 from seqrun.drivers import registry
-from seqrun.drivers.base import (ArmDriver, ArmPoll, CommandConfirmation, JointLimits,
+from seqrun.drivers.base import (ArmDriver, ArmIdentity, ArmPoll, CommandConfirmation, JointLimits,
                                  JointReading, JointState, LimitValues, MotionRefused)
 from seqrun.errors import UserInputError
 from seqrun.executor import Executor
@@ -231,6 +231,9 @@ class IdealArm:
 
     def poll(self, *, tolerate_loss: bool = False) -> ArmPoll:
         return ArmPoll(self.positions.tolist(), [0.0] * len(self.modules), self.read_states())
+
+    def identity(self) -> ArmIdentity:
+        return ArmIdentity.of({m: f"ideal-{m}" for m in self.modules})
 
     def homed(self) -> bool:
         return all(self.homed_.values())
@@ -439,3 +442,28 @@ def test_the_powercube_driver_confirms_home_by_reading_it_back():
         driver.close()
     finally:
         connection.close()
+
+
+def test_the_powercube_driver_reads_which_arm_it_is_from_the_modules_serials():
+    """The arm's identity is what its modules say (DefCubeSerial), read over the bus: two
+    simulated arms are two identities, the same serials the same one."""
+    from seqrun.clock import VirtualClock
+    from seqrun.drivers.registry import open_driver
+    from seqrun.service.connection import Connection
+    from seqrun.sim.bus import SimBus
+
+    identities = []
+    for name, serials in (("a", {m: 500 + m for m in range(1, 8)}),
+                          ("b", {m: 900 + m for m in range(1, 8)}),
+                          ("c", {m: 500 + m for m in range(1, 8)})):
+        clock = VirtualClock()
+        bus = SimBus(channel=f"identity-{name}-{id(clock)}", clock=clock, serials=serials)
+        driver = open_driver(ARM, Connection(bus, clock, False, "test"))
+        try:
+            identities.append(driver.identity())
+        finally:
+            driver.close()
+            bus.shutdown()
+    assert identities[0].by_module() == {m: str(500 + m) for m in range(1, 8)}
+    assert identities[0].key == ",".join(f"{m}={500 + m}" for m in range(1, 8))
+    assert identities[0] == identities[2] != identities[1]

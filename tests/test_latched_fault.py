@@ -17,7 +17,7 @@ from projecttree import ROOT
 from runfolder import RunFolder
 from seqrun.cli.app import app
 from simrun import run_on_sim
-from zerostate import serve_arm
+from zerostate import ZERO_CONFIRMED, serve_arm
 
 
 def cli_run(tmp_path: Path, *faults: str):
@@ -103,7 +103,8 @@ def test_on_a_real_interface_even_yes_does_not_clear_a_latched_fault_unasked(tmp
         folder = tmp_path / "run"
         proc = subprocess.run(
             [sys.executable, "-m", "seqrun", "run", "sequences/opsafe.yaml", "-i", "socketcand",
-             "--bus-kwargs", f"port={port}", "--yes", "--plain", "--log-dir", str(folder)],
+             "--bus-kwargs", f"port={port}", "--yes", *ZERO_CONFIRMED, "--plain",
+             "--log-dir", str(folder)],
             cwd=ROOT, env=env, stdin=subprocess.DEVNULL, capture_output=True, text=True,
             timeout=120)
     finally:

@@ -29,7 +29,7 @@ from seqrun.service.runner import run_sequence
 from seqrun.sequence.loader import load_sequence
 from seqrun.sim.bus import SimBus
 from wrapbus import WrapBus
-from zerostate import serve_arm
+from zerostate import ZERO_CONFIRMED, serve_arm
 
 _channels = itertools.count()
 #: Frames sent before the connection breaks: inside the first move of opsafe.yaml.
@@ -117,7 +117,8 @@ def test_a_killed_socketcand_server_mid_move_ends_the_run_with_exit_3(tmp_path):
         folder = tmp_path / "run"
         runner = subprocess.Popen(
             [sys.executable, "-m", "seqrun", "run", "sequences/opsafe.yaml", "-i", "socketcand",
-             "--bus-kwargs", f"port={port}", "--yes", "--plain", "--log-dir", str(folder)],
+             "--bus-kwargs", f"port={port}", "--yes", *ZERO_CONFIRMED, "--plain",
+             "--log-dir", str(folder)],
             cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         # Kill the server once the first move is under way.
         deadline = time.monotonic() + 60

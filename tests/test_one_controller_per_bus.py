@@ -17,7 +17,7 @@ from pathlib import Path
 import can
 import pytest
 from runfolder import RunFolder
-from zerostate import serve_arm
+from zerostate import ZERO_CONFIRMED, serve_arm
 
 from seqrun.service.bus_claim import read_holder
 from seqrun.service.control_socket import ask_owner
@@ -49,7 +49,8 @@ class Bus:
             # (a quarter of the speed: the run lasts about a minute, long enough for the
             # other terminal's commands on a loaded machine)
             [sys.executable, "-m", "seqrun", "run", "sequences/opsafe.yaml", "--yes",
-             "--plain", "--speed", "0.25", "--no-report", "--log-dir", str(folder), *self.args],
+             "--plain", "--speed", "0.25", "--no-report", "--log-dir", str(folder), *self.args,
+             *ZERO_CONFIRMED],
             cwd=ROOT, env=self.env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
 
     def wait_until_moving(self, run: subprocess.Popen, timeout: float = 60) -> dict:

@@ -93,10 +93,22 @@ def test_an_empty_stdin_at_a_confirm_step_is_a_no_like_declining(tmp_path):
 
 
 def test_an_empty_stdin_at_zero_set_is_a_no_like_declining(tmp_path, monkeypatch):
+    from seqrun.clock import RealClock
+    from seqrun.sim.arm import SimArm
+    from seqrun.sim.network import SimNetwork
+    from seqrun.sim.socketcand import SocketcandServer
+
     monkeypatch.setenv("SEQRUN_STATE_DIR", str(tmp_path / "state"))
     monkeypatch.chdir(tmp_path)
-    empty = invoke("zero", "set", "park", input="")
-    declined = invoke("zero", "set", "park", input="n\n")
+    clock = RealClock()
+    server = SocketcandServer(SimNetwork(clock, SimArm(clock), spin_window=0.0), port=0)
+    server.start()
+    try:
+        bus = ["-i", "socketcand", "--bus-kwargs", "host=127.0.0.1", f"port={server.port}"]
+        empty = invoke("zero", "set", "park", *bus, input="")
+        declined = invoke("zero", "set", "park", *bus, input="n\n")
+    finally:
+        server.shutdown()
     assert empty.exit_code == declined.exit_code == 130, (empty.output, declined.output)
     assert "Aborted" not in empty.output
     assert "(no answer: end of input) no" in empty.output

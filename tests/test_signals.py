@@ -331,10 +331,12 @@ def _kill_mid_move_once(tmp_path: Path, watchdog: bool):
         port = int(Lines(server).wait_for(r"socketcand 127\.0\.0\.1:([0-9]+)", 20)[1])
         # The simulated arm powers on at Park: record that, as the operator would.
         recorded = seqrun("zero", "set", "park", "--yes", "--arm",
-                          sequence.parents[1] / "arms" / "lwa3.yaml", cwd=tmp_path)
+                          sequence.parents[1] / "arms" / "lwa3.yaml", "-i", "socketcand",
+                          "--bus-kwargs", f"port={port}", cwd=tmp_path)
         assert recorded.wait(60) == 0, stop(recorded)
         runner = seqrun("run", sequence, "-i", "socketcand", "--bus-kwargs", f"port={port}",
-                        "--yes", "--plain", "--log-dir", folder, cwd=tmp_path)
+                        "--yes", "--zero-confirmed", "park", "--plain", "--log-dir", folder,
+                        cwd=tmp_path)
         cruising = poll_event(folder, runner, lambda e: e["type"] == "setpoint"
                               and e["measured_deg"][0] > 8.0)
         if cruising is None:

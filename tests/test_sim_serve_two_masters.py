@@ -15,14 +15,13 @@ import sys
 
 import pytest
 from projecttree import ROOT
-from zerostate import with_park_recorded
+from zerostate import ZERO_CONFIRMED, with_park_recorded
 
 ENV = {**os.environ, "PYTHONUNBUFFERED": "1"}
 
 
 @pytest.mark.slow
 def test_run_with_a_watcher_beside_it(tmp_path):
-    env = with_park_recorded(ENV, tmp_path)  # the served arm powers on at Park
     server = subprocess.Popen([sys.executable, "-m", "seqrun", "sim", "serve", "--port", "0"],
                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                               env=ENV)
@@ -30,6 +29,7 @@ def test_run_with_a_watcher_beside_it(tmp_path):
     try:
         port = int(re.search(r"127\.0\.0\.1:(\d+)", server.stdout.readline()).group(1))
         bus = ["-i", "socketcand", "--bus-kwargs", "host=127.0.0.1", f"port={port}"]
+        env = with_park_recorded(ENV, tmp_path, port)  # the served arm powers on at Park
         watcher = subprocess.Popen(
             [sys.executable, "-m", "seqrun", "status", "--watch", "--json", *bus],
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
@@ -37,7 +37,7 @@ def test_run_with_a_watcher_beside_it(tmp_path):
         # machine: this test is about the server and the watcher, not host stalls)
         run = subprocess.run(
             [sys.executable, "-m", "seqrun", "run", "sequences/opsafe.yaml", "--yes",
-             "--plain", "--log-dir", str(tmp_path / "run"), *bus],
+             *ZERO_CONFIRMED, "--plain", "--log-dir", str(tmp_path / "run"), *bus],
             capture_output=True, text=True, env={**env, "SEQRUN_RESPONSE_TIMEOUT_MS": "200"},
             cwd=ROOT, timeout=180)
         assert watcher.poll() is None, "the watch ended during the run"

@@ -51,10 +51,10 @@ def test_a_pose_edited_while_the_run_waits_is_recorded_as_validated(campaign, mo
     validated = totem.read_bytes()
     real_confirm_start = cli_run._confirm_start
 
-    def edit_while_asking(console, run, yes):  # the operator takes their time to answer
+    def edit_while_asking(console, run, yes, *more):  # the operator takes their time
         totem.write_bytes(validated.replace(b"j2:", b"j2: 0  # edited\n  old_j2:", 1)
                           + b"# edited during the question\n")
-        return real_confirm_start(console, run, yes)
+        return real_confirm_start(console, run, yes, *more)
 
     monkeypatch.setattr(cli_run, "_confirm_start", edit_while_asking)
     result = invoke("run", campaign / "sequences" / "first.yaml", "--yes", "--virtual-time",

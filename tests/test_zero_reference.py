@@ -32,6 +32,7 @@ from seqrun.sequence.loader import load_sequence
 from seqrun.sim.bus import SimBus
 from seqrun.sequence.validation import validate_sequence
 from seqrun.service.zero import ZeroStore, zero_for_run
+from seqrun.drivers.base import ArmIdentity
 from seqrun.drivers.powercube.units import to_module_rad, to_user_deg
 
 ARM = shipped_arm()
@@ -46,11 +47,21 @@ def state_dir(tmp_path, monkeypatch):
     return folder
 
 
-def hardware(clock=None, channel="hw") -> Connection:
-    """A simulated arm behind a connection seqrun treats as real hardware."""
+#: The serial numbers of the tests' "real" arm (one physical arm, powered on again and again).
+SERIALS = {m: 4_200_000 + m for m in range(1, 8)}
+
+
+def hardware(clock=None, channel="hw", serials=SERIALS) -> Connection:
+    """A simulated arm (the one with ``serials``) behind a connection seqrun treats as
+    real hardware."""
     clock = clock or VirtualClock()
-    bus = SimBus(channel=f"{channel}-{id(clock)}", clock=clock)
+    bus = SimBus(channel=f"{channel}-{id(clock)}", clock=clock, serials=serials)
     return Connection(bus, clock, False, "test bus (treated as real hardware)")
+
+
+def store_of(serials=SERIALS) -> ZeroStore:
+    """The zero-reference store of the arm with ``serials`` on this (test) machine."""
+    return ZeroStore(ArmIdentity.of(serials))
 
 
 def motion_frames(frames):
@@ -111,7 +122,7 @@ def test_the_run_converts_with_the_offsets_of_the_zero_in_force(zero):
 # --------------------------------------------------------------------------- power_off step
 def test_shutdown_records_totem_through_the_power_off_step(state_dir):
     loaded = load_sequence(ROOT / "sequences" / "shutdown.yaml")
-    store = ZeroStore.for_arm(ARM.name)
+    store = store_of()
     connection = hardware()
 
     def attach(executor):
@@ -123,7 +134,7 @@ def test_shutdown_records_totem_through_the_power_off_step(state_dir):
         connection.close()
     assert outcome.result.exit_code == EXIT_OK
     assert store.record.pose == "totem" and store.record.by == "shutdown.yaml"
-    assert store.path.parent == state_dir
+    assert store.path.parent == state_dir / "arms"
     assert "recorded 20" in store.record.describe("Totem")
 
 
@@ -189,13 +200,13 @@ def test_real_hardware_without_a_record_refuses_with_the_command_that_sets_one(s
             zero_at_run_start(connection, ARM, None, lambda q: True, print)
     finally:
         connection.close()
-    assert "no zero reference recorded" in str(info.value)
-    assert "'seqrun zero set POSE' (POSE: park, totem)" in str(info.value)
+    assert "no zero reference recorded for this arm (serials 1:4200001" in str(info.value)
+    assert "'seqrun zero set POSE' on its bus (POSE: park, totem" in str(info.value)
     assert str(state_dir) in str(info.value)
 
 
 def test_after_a_power_on_the_record_is_shown_and_confirmed_then_in_use(state_dir):
-    store = ZeroStore.for_arm(ARM.name)
+    store = store_of()
     store.set_record("totem", by="shutdown.yaml")
     connection = hardware()
     questions, shown = [], []
@@ -212,7 +223,7 @@ def test_after_a_power_on_the_record_is_shown_and_confirmed_then_in_use(state_di
 
 def test_homed_modules_keep_the_zero_in_use_even_after_a_new_record():
     """power_off records Totem while the modules stay on: their zeros do not move."""
-    store = ZeroStore.for_arm(ARM.name)
+    store = store_of()
     store.set_in_use(store.set_record("park", by="test"))
     store.set_record("totem", by="shutdown.yaml")
     zero = zero_for_run(ARM, store, simulator_pose=None, homed=True)
@@ -222,7 +233,7 @@ def test_homed_modules_keep_the_zero_in_use_even_after_a_new_record():
 
 def _run_after_power_on_at_totem(record: str, answer: bool):
     """The arm was powered off (and on) in Totem; the record says ``record``."""
-    ZeroStore.for_arm(ARM.name).set_record(record, by="test")
+    store_of().set_record(record, by="test")
     clock = VirtualClock()
     connection = hardware(clock)
     sent = []
@@ -245,7 +256,7 @@ def test_a_start_up_after_a_shutdown_at_totem_reaches_opsafe():
 
 
 def test_a_wrong_record_is_stopped_by_the_confirm_before_anything_moves():
-    ZeroStore.for_arm(ARM.name).set_record("park", by="test")
+    store_of().set_record("park", by="test")
     connection = hardware()
     sent = []
     connection.bus.arm  # the arm stands in Totem, its modules read zero there
@@ -271,20 +282,38 @@ def test_without_the_confirm_a_wrong_record_would_drive_the_arm_into_itself():
 
 
 # --------------------------------------------------------------------------- CLI
-def test_zero_set_asks_and_show_prints_the_record(state_dir):
+@pytest.fixture
+def served_arm():
+    """The tests' arm served over socketcand in this process: ``-i socketcand`` options."""
+    from seqrun.clock import RealClock
+    from seqrun.sim.arm import SimArm
+    from seqrun.sim.network import SimNetwork
+    from seqrun.sim.socketcand import SocketcandServer
+
+    clock = RealClock()
+    arm = SimArm(clock, serials=SERIALS)
+    with SocketcandServer(SimNetwork(clock, arm, spin_window=0.0), port=0) as server:
+        server.start()
+        yield ["-i", "socketcand", "--bus-kwargs", "host=127.0.0.1", f"port={server.port}"]
+
+
+def test_zero_set_asks_and_show_prints_the_record(state_dir, served_arm):
     runner = CliRunner()
-    declined = runner.invoke(app, ["zero", "set", "totem", "--arm",
-                                   str(ROOT / "arms" / "lwa3.yaml")], input="n\n")
-    assert declined.exit_code == 130 and not any(state_dir.glob("*"))
-    accepted = runner.invoke(app, ["zero", "set", "totem", "--arm",
-                                   str(ROOT / "arms" / "lwa3.yaml")], input="y\n")
+    arm = ["--arm", str(ROOT / "arms" / "lwa3.yaml")]
+    declined = runner.invoke(app, ["zero", "set", "totem", *arm, *served_arm], input="n\n")
+    assert declined.exit_code == 130 and not any(state_dir.rglob("*.json"))
+    accepted = runner.invoke(app, ["zero", "set", "totem", *arm, *served_arm], input="y\n")
     assert accepted.exit_code == 0, accepted.output
+    assert "(serials 1:4200001, 2:4200002" in accepted.output
     assert "was powered off in Totem (j1 0°" in accepted.output
-    shown = runner.invoke(app, ["zero", "show", "--arm", str(ROOT / "arms" / "lwa3.yaml")])
+    shown = runner.invoke(app, ["zero", "show", *arm, *served_arm])
     assert "record   Totem, recorded " in shown.output and "by seqrun zero set" in shown.output
-    data = json.loads(next(state_dir.glob("zero-*.json")).read_text())
-    entry = data["arms"][ARM.name]["record"]
-    assert entry["pose"] == "totem" and entry["user"]
+    data = json.loads(next(state_dir.glob("arms/arm-*.json")).read_text())
+    assert data["record"]["pose"] == "totem" and data["record"]["user"]
+    assert data["arm"]["serials"] == {str(m): str(s) for m, s in SERIALS.items()}
+    listed = runner.invoke(app, ["zero", "show", *arm])  # no bus: every arm of this machine
+    assert listed.exit_code == 0, listed.output
+    assert "serials 1:4200001" in listed.output and "record Totem, recorded" in listed.output
 
 
 def test_zero_set_of_an_unknown_pose_is_one_line():
@@ -324,7 +353,7 @@ def test_status_and_pose_save_read_positions_with_the_recorded_zero():
         arm, text = zero_for_reading(connection, ARM)
         assert "zero: unknown (no zero reference recorded" in text
         assert [j.offset_deg for j in arm.joints] == [j.offset_deg for j in ARM.joints]
-        ZeroStore.for_arm(ARM.name).set_record("totem", by="shutdown.yaml")
+        store_of().set_record("totem", by="shutdown.yaml")
         arm, text = zero_for_reading(connection, ARM)
     finally:
         connection.close()
@@ -332,22 +361,21 @@ def test_status_and_pose_save_read_positions_with_the_recorded_zero():
     assert [to_user_deg(j, 0.0) for j in arm.joints] == [0.0] * 7
 
 
-def test_a_campaign_keeps_its_own_record_and_says_how_to_set_it(tmp_path):
+def test_every_campaign_shares_the_arms_one_record(tmp_path, state_dir, served_arm):
+    """Recorded from campaign A, the record is the arm's: campaign B (and no campaign) use
+    it; nothing is written into a campaign."""
     from seqrun.sequence.project import open_project
 
-    assert CliRunner().invoke(app, ["init", str(tmp_path / "camp")]).exit_code == 0
-    project = open_project(tmp_path / "camp")
-    connection = hardware()
-    try:
-        with pytest.raises(UserInputError) as info:
-            zero_at_run_start(connection, ARM, project, lambda q: True, print)
-        result = CliRunner().invoke(app, ["zero", "set", "totem", "--yes", "--project",
-                                          str(tmp_path / "camp")])
-        assert result.exit_code == 0, result.output
-        zero = zero_at_run_start(connection, ARM, project, lambda q: True, print)
-    finally:
-        connection.close()
-    assert f"'seqrun zero set POSE --project {project.root}'" in str(info.value)
-    assert zero.pose == "totem"
-    assert (project.root / ".seqrun" / "zero.json").is_file()
-    assert ".seqrun/" in (project.root / ".gitignore").read_text()
+    for name in ("a", "b"):
+        assert CliRunner().invoke(app, ["init", str(tmp_path / name)]).exit_code == 0
+    result = CliRunner().invoke(app, ["zero", "set", "totem", "--yes", "--project",
+                                      str(tmp_path / "a"), *served_arm])
+    assert result.exit_code == 0, result.output
+    for project in (open_project(tmp_path / "b"), None):
+        connection = hardware()
+        try:
+            zero = zero_at_run_start(connection, ARM, project, lambda q: True, print)
+        finally:
+            connection.close()
+        assert zero.pose == "totem" and zero.store.path.parent == state_dir / "arms"
+    assert not (tmp_path / "a" / ".seqrun" / "zero.json").exists()

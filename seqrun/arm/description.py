@@ -10,6 +10,7 @@ nothing about the arm is hard-coded elsewhere. Angles are degrees in user coordi
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Literal
 
@@ -434,6 +435,14 @@ class ArmDescription(_Strict):
                   for j in self.joints]
         key = name if name in self.power_off_poses else name.lower()
         return self.model_copy(update={"joints": joints, "default_power_off": key})
+
+    def with_power_off_joints(self, joints_deg: Mapping[str, float]) -> "ArmDescription":
+        """This arm with its modules' zeros at ``joints_deg`` (user degrees by joint name):
+        where it was powered off when that was none of its power-off poses (a power loss
+        mid-move). Every module reads zero there, so offset = -angle."""
+        joints = [j.model_copy(update={"offset_deg": -float(joints_deg[j.name]) + 0.0})
+                  for j in self.joints]
+        return self.model_copy(update={"joints": joints, "default_power_off": None})
 
     # Convenience views used everywhere.
     @property

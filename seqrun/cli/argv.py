@@ -2,7 +2,8 @@
 
 python-can's tools take several ``KEY=VALUE`` after one ``--bus-kwargs`` (``python -m
 can.viewer -i socketcand --bus-kwargs host=127.0.0.1 port=29536``); click options take
-one value each. :func:`expand_bus_kwargs` turns the first form into repeated options.
+one value each. :func:`expand_bus_kwargs` turns the first form into repeated options; the
+same for the joint angles after ``seqrun zero set --deg`` (negative numbers included).
 No imports beyond the standard library: this runs before every command.
 """
 
@@ -13,6 +14,8 @@ from collections.abc import Sequence
 
 _OPTION = "--bus-kwargs"
 _KEY_VALUE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*=")
+_DEGREES = "--deg"
+_NUMBER = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
 
 
 def expand_bus_kwargs(args: Sequence[str]) -> list[str]:
@@ -35,5 +38,12 @@ def expand_bus_kwargs(args: Sequence[str]) -> list[str]:
                 i += 1
             while i < len(words) and _KEY_VALUE.match(words[i]):
                 out += [_OPTION, words[i]]
+                i += 1
+        elif word == _DEGREES:
+            if i < len(words):
+                out.append(words[i])  # its own value, whatever it is
+                i += 1
+            while i < len(words) and _NUMBER.match(words[i]):
+                out += [_DEGREES, words[i]]
                 i += 1
     return out

@@ -97,7 +97,6 @@ def status_command(
     # (seqrun/cli/bus_owner.py).
     source = StatusSource(arm, context.bus.key,
                           lambda: context.open_arm(claim=False), warn,
-                          zero_store=context.zero_store(),
                           live=through[0] if through else None)
     try:
         with user_errors():

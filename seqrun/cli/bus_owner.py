@@ -95,12 +95,9 @@ class StatusSource:
     """
 
     def __init__(self, arm, key: tuple[str, str] | None,
-                 open_bus: Callable[[], tuple], warn: Warn, *, zero_store: Any = None,
-                 live: Any = None) -> None:
+                 open_bus: Callable[[], tuple], warn: Warn, *, live: Any = None) -> None:
         self.arm = arm
         self.key = key
-        #: The zero store of the arm context (the one every command reads).
-        self.zero_store = zero_store
         #: A live run or console found with no bus given: every reading comes from it.
         self.live = live
         self.open_bus = open_bus
@@ -171,8 +168,7 @@ class StatusSource:
 
         self.connection, self.driver = self.open_bus()
         self.driver.watch_foreign(self._foreign.append)
-        self._arm_read, text = zero_for_reading(self.connection, self.arm,
-                                                store=self.zero_store)
+        self._arm_read, text = zero_for_reading(self.connection, self.arm)
         self.driver.use_arm(self._arm_read)  # positions in the zero reference in force
         if self.zero_text is None:
             self.zero_text = text

@@ -50,8 +50,11 @@ def console_command(
              "to, e.g. root or CAP_SYS_NICE). Keeps the 100 Hz loop on time beside busy "
              "browser tabs.")] = None,
     yes: Annotated[bool, typer.Option(
-        "--yes", "-y", help="Do not ask to confirm the zero reference after a power-on.")]
-    = False,
+        "--yes", "-y", help="Kept for scripts; it does not answer the zero question "
+                            "(--zero-confirmed POSE does).")] = False,
+    zero_confirmed: Annotated[Optional[str], typer.Option(
+        "--zero-confirmed", metavar="POSE", help="Answer 'does the arm stand in POSE?' after "
+        "a power-on without asking (a different record refuses to start).")] = None,
 ) -> None:
     """Serve the operator console (STOP, telemetry, 3D view, commands, sequences)."""
     from seqrun.cli.zero import zero_at_run_start
@@ -88,11 +91,11 @@ def console_command(
         with user_errors():
             try:
                 zero = zero_at_run_start(connection, arm, project,
-                                         lambda q: ask(q, yes),
-                                         typer.echo, store=context.zero_store())
+                                         lambda q: ask(q, False),
+                                         typer.echo, confirmed=zero_confirmed)
             except BusError as exc:
                 fail(f"cannot read the modules' state: {exc}", EXIT_FAULT)
-            arm = arm.with_zero_reference(zero.pose)
+            arm = zero.apply(arm)
     except BaseException:
         sock.close()
         connection.close()

@@ -133,7 +133,7 @@ def save_pose_command(
         from seqrun.cli.zero import zero_for_reading
 
         # The zero of the arm context: the same store every command reads.
-        arm, zero_text = zero_for_reading(connection, arm, store=context.zero_store())
+        arm, zero_text = zero_for_reading(connection, arm)
         typer.echo(zero_text)
         driver.use_arm(arm)
         reading = driver.read()

@@ -119,6 +119,11 @@ def run_command(
     no_report: Annotated[bool, typer.Option(
         "--no-report", help="Do not draw report.html after the run (bulk runs; "
                             "'seqrun report RUN_DIR' draws it later).")] = False,
+    zero_confirmed: Annotated[Optional[str], typer.Option(
+        "--zero-confirmed", metavar="POSE", help="Answer 'does the arm stand in POSE?' after "
+        "a power-on without asking: the operator's word that the arm stands in the recorded "
+        "power-off pose POSE (a different record refuses the run). --yes never answers it.")]
+    = None,
 ) -> None:
     """Run a sequence: validate, read the arm, re-validate from where it stands, move."""
     # Imported here, not at the top: `seqrun --help` and the other commands stay light.
@@ -149,7 +154,7 @@ def run_command(
 
     requests = StopRequests()
     control = RunControl.serve(run.connection, run.arm, requests)
-    zero = _confirm_start_or_record(console, run, yes, log_dir)
+    zero = _confirm_start_or_record(console, run, yes, log_dir, zero_confirmed)
     _use_realtime(console, rt_priority)
     folder = _run_folder(console, run, log_dir)
     outcome = _run_in_session(console, run, zero, folder, control, requests, step=step,
@@ -162,7 +167,8 @@ def run_command(
     raise typer.Exit(outcome.result.exit_code)
 
 
-def _confirm_start_or_record(console: Console, run, yes: bool, log_dir: Path | None):
+def _confirm_start_or_record(console: Console, run, yes: bool, log_dir: Path | None,
+                             zero_confirmed: str | None = None):
     """:func:`_confirm_start`, where SIGTERM, SIGHUP or SIGQUIT at a question (the REAL
     arm's, the zero reference's) end the command in one line, exit 130, and a run not
     started (a no, a signal) leaves a run folder saying that nothing was sent."""
@@ -175,7 +181,7 @@ def _confirm_start_or_record(console: Console, run, yes: bool, log_dir: Path | N
 
     try:
         with signals_end_the_question():
-            return _confirm_start(console, run, yes)
+            return _confirm_start(console, run, yes, zero_confirmed)
     except QuestionInterrupted as exc:
         run.connection.close()  # (closing twice is harmless)
         record(f"not started: {exc.name} before the run started; nothing was sent")
@@ -188,7 +194,7 @@ def _confirm_start_or_record(console: Console, run, yes: bool, log_dir: Path | N
         raise
 
 
-def _confirm_start(console: Console, run, yes: bool):
+def _confirm_start(console: Console, run, yes: bool, zero_confirmed: str | None = None):
     """The bus banner, on real hardware the operator's yes, and the zero reference in
     force (on real hardware after a power-on, confirmed); the arm of the run gets it."""
     from seqrun.cli.zero import zero_at_run_start
@@ -206,20 +212,26 @@ def _confirm_start(console: Console, run, yes: bool):
         connection.close()
         raise typer.Exit(EXIT_OPERATOR_ABORT)
     # The modules' zeros are where they were powered off: use (and on real hardware after
-    # a power-on, confirm) the recorded pose's offsets before anything moves.
+    # a power-on, confirm) the recorded pose's offsets before anything moves. --yes never
+    # answers that question: a wrong zero drives the arm anywhere, and every check with it.
+    def ask_zero(question: str) -> bool:
+        if yes:
+            console.print("(--yes does not answer the zero question: the operator does, or "
+                          "--zero-confirmed POSE)", highlight=False, markup=False,
+                          soft_wrap=True)
+        return _ask(console, question, False)
+
     try:
         with user_errors():
             try:
-                zero = zero_at_run_start(connection, run.arm, loaded.project,
-                                         lambda question: _ask(console, question, yes),
+                zero = zero_at_run_start(connection, run.arm, loaded.project, ask_zero,
                                          lambda text: console.print(text, style="bold",
                                                                     highlight=False,
                                                                     markup=False),
-                                         store=run.context.zero_store(run.arm)
-                                         if run.context else None)
+                                         confirmed=zero_confirmed)
             except BusError as exc:  # before user_errors: a timeout is no usage error
                 fail(f"cannot read the modules' state: {exc}", EXIT_FAULT)
-            run.arm = run.arm.with_zero_reference(zero.pose)
+            run.arm = zero.apply(run.arm)
     except BaseException:
         connection.close()
         raise
@@ -320,10 +332,8 @@ def _run_in_session(console: Console, run, zero, folder: Path, control, requests
                      else {})},
             html_report=not no_report,
             # The built-in simulator keeps no record: its zero is its power-on pose.
-            record_zero=(None if connection.is_simulator
-                         else campaign_records.zero_recorder(
-                             arm, loaded, run.context.zero_store(arm) if run.context
-                             else None)))
+            record_zero=(None if connection.is_simulator or zero.store is None
+                         else campaign_records.zero_recorder(zero.store, arm, loaded)))
     finally:
         if live and displays:
             session.remove_idle_hook(displays[0].on_idle)

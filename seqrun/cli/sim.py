@@ -3,6 +3,10 @@
     seqrun sim serve                                   # 127.0.0.1:29536, channel can0
     seqrun sim serve --port 29600 --fault 4:tow_error@2.5 --fault 3:drop_acks=0.3@0
     seqrun sim serve --home-ok-at-power-on --addressed-refresh-arms-watchdog
+    seqrun sim serve --serial-base 5230100 --power-on-at totem   # the same arm, powered on again
+
+Every server is an arm of its own: its modules' serial numbers (which key the zero
+reference) are drawn afresh unless ``--serial-base`` names them.
 
 Connect with python-can: ``can.Bus(interface="socketcand", host="127.0.0.1",
 port=29536, channel="can0")``. Runs in real time until Ctrl-C.
@@ -47,6 +51,10 @@ def serve(
     power_on_at: Annotated[str, typer.Option(
         "--power-on-at", metavar="POSE", help="The power-off pose the simulated arm stands in "
         "at power-on (its modules read zero there): park or totem.")] = "park",
+    serial_base: Annotated[int, typer.Option(
+        "--serial-base", metavar="N", help="Module M says serial number N+M (DefCubeSerial). "
+        "Default: a base drawn for this server alone (every server is another arm); give "
+        "the same N to power the same arm on again.")] = 0,
 ) -> None:
     """Serve a simulated LWA 3 (7 modules, powered on at Park or --power-on-at, real time)
     over socketcand."""
@@ -58,6 +66,8 @@ def serve(
         switches["home_ok_at_power_on"] = True
     if addressed_refresh_arms_watchdog:
         switches["addressed_refresh_arms_watchdog"] = True
+    if serial_base:
+        switches["serial_base"] = serial_base
     try:
         served = serve_simulated_arm(host=host, port=port, channel=channel,
                                      faults=fault or [], bitrate=bitrate,
@@ -69,6 +79,7 @@ def serve(
     typer.echo(f"simulated LWA 3 (modules 1-7, {bitrate} bit/s, powered on at "
                f"{served.power_on_pose}) on socketcand {server.host}:{server.port}, "
                f"channel {channel}")
+    typer.echo("  serials " + ", ".join(f"{m}:{n}" for m, n in served.serials.items()))
     for spec in served.faults:
         typer.echo(f"  fault {spec}")
     for switch, value in served.switches.items():

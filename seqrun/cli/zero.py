@@ -1,10 +1,15 @@
-"""``seqrun zero set POSE`` / ``seqrun zero show``, and the zero check at the start of a run.
+"""``seqrun zero set POSE`` / ``seqrun zero set --deg Q1 ... Q7`` / ``seqrun zero show``, and
+the zero check at the start of a run.
 
-    seqrun zero show                      # the record and the zero in use
-    seqrun zero set totem                 # after a sudden power loss with the arm in Totem
+    seqrun zero show -i socketcan -c can0          # this arm's record and the zero in use
+    seqrun zero show                               # every arm recorded on this machine
+    seqrun zero set totem -i socketcan -c can0     # after a sudden power loss in Totem
+    seqrun zero set --deg 12 -35 0 80 0 40 0 -i socketcan -c can0   # ... anywhere else
 
-The record says where the arm was powered off (see :mod:`seqrun.service.zero`); the ``power_off``
-step of ``sequences/shutdown.yaml`` writes it at a normal shutdown.
+The record belongs to the physical arm: its modules' serial numbers, read over the bus
+(the campaign's, python-can's configuration, or -i/-c), say which one (see
+:mod:`seqrun.service.zero`). The ``power_off`` step of ``sequences/shutdown.yaml`` writes
+it at a normal shutdown.
 """
 
 from __future__ import annotations
@@ -15,111 +20,205 @@ from typing import Annotated, Callable, Optional
 import typer
 
 from seqrun.cli.app import app
-from seqrun.cli.common import ArmFileOption, CampaignOption, fail, user_errors
+from seqrun.cli.common import (ArmFileOption, BitrateOption, BusKwargsOption, CampaignOption,
+                               ChannelOption, InterfaceOption, fail, user_errors)
 from seqrun.cli.questions import ask
 from seqrun.errors import BusError, UserInputError
-from seqrun.service.zero import ZeroInForce, ZeroStore, pose_title, zero_for_run
+from seqrun.service.zero import (POSE_IN_DEGREES, ZeroInForce, ZeroNotConfirmed, ZeroStore,
+                                 pose_title, zero_at_start)
+
+#: ``zero set`` with no bus named: there is no arm to record.
+NO_ARM_NAMED = ("no arm named: the built-in simulator takes its zero from its power-on pose "
+                "(--power-on-at); name the arm's bus (-i/-c, the campaign's seqrun.toml or "
+                "python-can's configuration)")
 
 zero_app = typer.Typer(help="The zero reference: where the arm was powered off.",
                        no_args_is_help=True)
 app.add_typer(zero_app, name="zero")
 
-def _arm_and_store(arm_file: Optional[Path], project_dir: Optional[Path]):
+
+def _context(arm_file: Optional[Path], project_dir: Optional[Path], interface, channel,
+             bitrate, bus_kwargs):
+    """The arm context (seqrun/service/arm_context.py): the arm file, and the arm's bus
+    (the options, else the campaign's, else python-can's configuration)."""
     from seqrun.service.arm_context import resolve_context
 
-    context = resolve_context(project_dir=project_dir, arm_file=arm_file)
-    return context.arm, context.zero_store()
+    return resolve_context(project_dir=project_dir, arm_file=arm_file, interface=interface,
+                           channel=channel, bitrate=bitrate, bus_kwargs=bus_kwargs or ())
+
+
+def _arm_store(arm, connection) -> tuple[ZeroStore, bool]:
+    """The connected arm's store (its identity read from the modules) and whether its
+    modules are homed; UserInputError on the built-in simulator, whose zero is its
+    power-on pose."""
+    from seqrun.service.arm_access import identity_and_homed
+
+    if connection.is_simulator:
+        raise UserInputError(NO_ARM_NAMED)
+    identity, homed = identity_and_homed(connection, arm)
+    return ZeroStore(identity), homed
+
+
+def _list_machine_records() -> None:
+    import json
+
+    from seqrun.service.zero import ZeroRecord, state_dir
+
+    folder = state_dir() / "arms"
+    files = sorted(folder.glob("arm-*.json")) if folder.is_dir() else []
+    typer.echo(f"arms recorded on this machine ({folder}): {len(files) or 'none'}")
+    for path in files:
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+            serials = ", ".join(f"{m}:{s}" for m, s in data["arm"]["serials"].items())
+            record = ZeroRecord.from_dict(data.get("record"))
+        except (OSError, ValueError, KeyError, TypeError, AttributeError):
+            typer.echo(f"  {path.name}: unreadable")
+            continue
+        name = data["arm"].get("name") or "arm"
+        typer.echo(f"  {name} (serials {serials})")
+        typer.echo("    record " + (record.describe() if record else "none"))
+    typer.echo("name the arm's bus (-i/-c) to see whether its record can be used")
 
 
 @zero_app.command("show")
 def show_command(
     project_dir: CampaignOption = None,
     arm_file: ArmFileOption = None,
+    interface: InterfaceOption = None,
+    channel: ChannelOption = None,
+    bitrate: BitrateOption = None,
+    bus_kwargs: BusKwargsOption = None,
 ) -> None:
-    """Where the arm was last powered off, and the zero in use since the last power-on
-    (outside a campaign: the per-arm state file)."""
+    """The connected arm's zero reference: where it was last powered off, and the zero in
+    use since the last power-on. Without a bus: every arm recorded on this machine."""
     with user_errors():
-        arm, store = _arm_and_store(arm_file, project_dir)
+        context = _context(arm_file, project_dir, interface, channel, bitrate, bus_kwargs)
+        arm = context.arm
+        if context.bus.is_simulator:  # no arm named: what this machine has recorded
+            _list_machine_records()
+            return
+        connection = context.open_connection(transient=True)
+        typer.echo(context.headline(connection))
+        try:
+            try:
+                store, _ = _arm_store(arm, connection)
+            except BusError as exc:
+                fail(f"cannot read the modules' serial numbers: {exc}", 3)
+        finally:
+            connection.close()
         record, in_use = store.record, store.in_use
-    typer.echo(f"arm      {arm.name}")
+    typer.echo(f"arm      {arm.name} ({store.identity.describe()})")
     typer.echo(f"file     {store.path}")
-    typer.echo("record   " + (record.describe(pose_title(record.pose)) if record else
-                              "none (set one with 'seqrun zero set POSE')"))
-    typer.echo("in use   " + (in_use.describe(pose_title(in_use.pose)) if in_use else
+    typer.echo("record   " + (record.describe() if record else
+                              f"none (set one with '{store.set_command}')"))
+    typer.echo("in use   " + (in_use.describe() if in_use else
                               "none confirmed since a power-on"))
     typer.echo("poses    " + ", ".join(arm.power_off_poses or ["(the arm names none)"]))
 
 
 @zero_app.command("set")
 def set_command(
-    pose: Annotated[str, typer.Argument(help="The power-off pose the arm stands in "
-                                             "(power_off_poses of the arm file).")],
-    yes: Annotated[bool, typer.Option("--yes", "-y", help="Do not ask.")] = False,
+    pose: Annotated[Optional[str], typer.Argument(
+        help="The power-off pose the arm stands in (power_off_poses of the arm file).")]
+    = None,
+    degrees: Annotated[Optional[list[float]], typer.Option(
+        "--deg", metavar="Q1 ... Qn", help="Instead of POSE: the joint angles (user degrees, "
+        "every joint in order) the arm stands in, e.g. after a power loss mid-move.")] = None,
+    yes: Annotated[bool, typer.Option(
+        "--yes", "-y", help="Do not ask (the pose is the one named on this command line).")]
+    = False,
     project_dir: CampaignOption = None,
     arm_file: ArmFileOption = None,
+    interface: InterfaceOption = None,
+    channel: ChannelOption = None,
+    bitrate: BitrateOption = None,
+    bus_kwargs: BusKwargsOption = None,
 ) -> None:
-    """Record where the arm was powered off (after a sudden power loss); asks first."""
+    """Record where the connected arm was powered off (after a sudden power loss); asks
+    first. The arm is named by its modules' serial numbers, read over its bus."""
+    import math
+
     with user_errors():
-        arm, store = _arm_and_store(arm_file, project_dir)
-        arm.power_off_pose(pose)
-    name = pose if pose in arm.power_off_poses else pose.lower()
-    joints = ", ".join(f"{n} {v:g}°" for n, v in arm.power_off_joints_deg(name).items())
-    question = (f"Record that '{arm.name}' was powered off in {pose_title(name)} ({joints})? "
-                "The next power-on takes its zero there.")
+        context = _context(arm_file, project_dir, interface, channel, bitrate, bus_kwargs)
+        arm = context.arm
+        if (pose is None) == (degrees is None):
+            raise UserInputError("give the power-off pose (POSE) or the joint angles "
+                                 "(--deg Q1 ... Qn), one of them")
+        joints: dict[str, float] | None = None
+        if degrees is not None:
+            if len(degrees) != arm.dof:
+                raise UserInputError(f"--deg: the arm has {arm.dof} joints "
+                                     f"({', '.join(arm.joint_names)}), got {len(degrees)} "
+                                     "angles")
+            if not all(math.isfinite(q) for q in degrees):
+                raise UserInputError("--deg: angles must be finite numbers")
+            joints = dict(zip(arm.joint_names, degrees))
+            name, title = POSE_IN_DEGREES, "the pose"
+        else:
+            assert pose is not None
+            arm.power_off_pose(pose)
+            name = pose if pose in arm.power_off_poses else pose.lower()
+            joints, title = None, pose_title(name)
+        stands = joints if joints is not None else arm.power_off_joints_deg(name)
+        if context.bus.is_simulator:
+            raise UserInputError(NO_ARM_NAMED)
+        connection = context.open_connection(transient=True)
+        typer.echo(context.headline(connection))
+        try:
+            try:
+                store, homed = _arm_store(arm, connection)
+            except BusError as exc:
+                fail(f"cannot read the modules' serial numbers: {exc}", 3)
+        finally:
+            connection.close()
+        try:
+            in_use = store.in_use if homed else None
+        except UserInputError:  # an untrusted file: this record replaces it
+            in_use = None
+    angles = ", ".join(f"{n} {v:g}°" for n, v in stands.items())
+    question = (f"Record that '{arm.name}' ({store.identity.describe()}) was powered off in "
+                f"{title} ({angles})? The next power-on takes its zero there.")
     if yes:
         typer.echo(f"{question} yes (--yes)")
     elif not ask(question):  # (an empty stdin is a no, as in every question)
         fail("nothing recorded", 130)
-    record = store.set_record(name, by="seqrun zero set")
-    typer.echo(f"zero reference recorded: {record.describe(pose_title(name))} ({store.path})")
+    with user_errors():
+        record = store.set_record(name, by="seqrun zero set", joints_deg=joints,
+                                  arm_name=arm.name)
+    typer.echo(f"zero reference recorded: {record.describe()} ({store.path})")
+    if in_use is not None:
+        typer.echo(f"note: the modules are still on (homed): runs keep the zero confirmed at "
+                   f"this power-on ({in_use.describe()}) until they are powered off; the "
+                   "record is the zero of the next power-on")
 
 
 def zero_at_run_start(connection, arm, project, ask: Callable[[str], bool],
-                      show: Callable[[str], None], *, store: ZeroStore | None = None
-                      ) -> ZeroInForce:
+                      show: Callable[[str], None], confirmed: str | None = None,
+                      store: ZeroStore | None = None) -> ZeroInForce:
     """Decide the zero reference of a run, show it, and on real hardware after a power-on
-    ask the operator to confirm the pose before anything moves.
+    have the operator confirm the pose before anything moves (``ask``, or ``confirmed``:
+    ``--zero-confirmed POSE``; ``--yes`` never answers it). ``project`` is not used: the
+    record belongs to the arm, not to a campaign.
 
-    Raises :class:`UserInputError` (no record: nothing moves), :class:`BusError`, or
-    ``typer.Exit(130)`` when the operator says the arm is not in that pose.
+    Raises :class:`UserInputError` (no record, an untrusted file: nothing moves),
+    :class:`BusError`, or ``typer.Exit(130)`` when the operator says the arm is not in that
+    pose.
     """
-    from seqrun.service.arm_access import modules_homed
-
-    store = store or ZeroStore.for_arm(arm.name, project)
-    homed = False if connection.is_simulator else modules_homed(connection, arm)
-    zero = zero_for_run(arm, store, homed=homed,
-                        simulator_pose=connection.power_on_pose if connection.is_simulator
-                        else None)
-    show(zero.text)
-    if zero.question is not None:
-        if not ask(zero.question):
-            show("Not started: the operator says the arm is not in the recorded power-off "
-                 "pose. Nothing was sent. Record the pose it was really powered off in with "
-                 "'seqrun zero set POSE' and run again.")
-            raise typer.Exit(130)
-        assert zero.record is not None  # a question is asked about a record
-        store.set_in_use(zero.record)
-    return zero
-
-
-__all__ = ["zero_at_run_start", "BusError", "UserInputError"]
-
-
-def zero_for_reading(connection, arm, project=None, *, store: ZeroStore | None = None):
-    """The arm with the zero reference in force for reading positions (status, pose save):
-    ``(arm, text)``. Never asks and never refuses (nothing moves); without a usable record
-    the text says the positions use the arm file's offsets. ``store``: the arm context's
-    (:meth:`~seqrun.service.arm_context.ArmContext.zero_store`)."""
-    store = store or ZeroStore.for_arm(arm.name, project)
     try:
-        from seqrun.service.arm_access import modules_homed
+        return zero_at_start(connection, arm, ask=ask, show=show, confirmed=confirmed,
+                             store=store)
+    except ZeroNotConfirmed as exc:
+        show(str(exc))
+        raise typer.Exit(130) from None
 
-        homed = False if connection.is_simulator else modules_homed(connection, arm)
-        zero = zero_for_run(arm, store, homed=homed,
-                            simulator_pose=connection.power_on_pose if connection.is_simulator
-                            else None)
-    except (UserInputError, BusError) as exc:
-        return arm, (f"zero: unknown ({exc}); positions use the arm file's offsets "
-                     f"({arm.default_power_off or 'as written'})")
-    text = zero.text + (" (not yet confirmed at this power-on)" if zero.question else "")
-    return arm.with_zero_reference(zero.pose), text
+
+def zero_for_reading(connection, arm, project=None):
+    """The arm with the zero reference in force for reading positions (status, pose save):
+    ``(arm, text)``; see :func:`seqrun.service.zero.zero_for_reading`."""
+    from seqrun.service.zero import zero_for_reading as reading
+
+    return reading(connection, arm)
+
+
+__all__ = ["zero_at_run_start", "zero_for_reading", "BusError", "UserInputError"]

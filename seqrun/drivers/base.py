@@ -128,6 +128,31 @@ class LimitValues:
     max_acceleration_deg_s2: float | None = None
 
 
+@dataclass(frozen=True)
+class ArmIdentity:
+    """Which physical arm this is: what its modules say about themselves (their serial
+    numbers, by module id). Read at connect; the zero reference is keyed by it."""
+
+    #: ``(module id, serial number as the drive states it)``, in joint order.
+    serials: tuple[tuple[int, str], ...]
+
+    @classmethod
+    def of(cls, serials: Mapping[int, Any]) -> ArmIdentity:
+        return cls(tuple((int(m), str(s)) for m, s in serials.items()))
+
+    @property
+    def key(self) -> str:
+        """``1=41001,2=41002,...``: the same arm gives the same key, on any machine."""
+        return ",".join(f"{m}={s}" for m, s in self.serials)
+
+    def by_module(self) -> dict[int, str]:
+        return dict(self.serials)
+
+    def describe(self) -> str:
+        """``serials 1:41001, 2:41002, ...`` for the operator."""
+        return "serials " + ", ".join(f"{m}:{s}" for m, s in self.serials)
+
+
 class MotionRefused(Exception):
     """A joint refused a motion command mid-cycle (its answer said it refuses motion).
 
@@ -292,6 +317,10 @@ class ArmDriver(Protocol):
         did not confirm. Never raises for the bus."""
 
     # -- the arm outside a run (status, the zero decision)
+    def identity(self) -> ArmIdentity:
+        """What the modules say about themselves (serial numbers): which physical arm
+        this is. Reads only, nothing moves; a lost answer asked again."""
+
     def poll(self, *, tolerate_loss: bool = False) -> ArmPoll:
         """Position, velocity and full state of every joint (reads only). A lost answer
         raises :class:`~seqrun.errors.BusError`, or with ``tolerate_loss`` leaves its

@@ -14,10 +14,10 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from seqrun.arm.description import ArmDescription
-    from seqrun.drivers.base import ArmDriver, CommandConfirmation
+    from seqrun.drivers.base import ArmDriver, ArmIdentity, CommandConfirmation
     from seqrun.service.connection import Connection
 
-__all__ = ["modules_homed", "read_joints", "read_status", "status_rows"]
+__all__ = ["identity_and_homed", "modules_homed", "read_joints", "read_status", "status_rows"]
 
 
 
@@ -81,6 +81,19 @@ def modules_homed(connection: Connection, arm: ArmDescription) -> bool:
     driver = open_driver(arm, connection)
     try:
         return driver.homed()
+    finally:
+        driver.close()
+
+
+def identity_and_homed(connection: Connection,
+                       arm: ArmDescription) -> tuple[ArmIdentity, bool]:
+    """Which physical arm is on the bus (its modules' serial numbers) and whether every
+    module reports homed; reads only."""
+    from seqrun.drivers.registry import open_driver
+
+    driver = open_driver(arm, connection)
+    try:
+        return driver.identity(), driver.homed()
     finally:
         driver.close()
 

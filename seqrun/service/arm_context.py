@@ -3,8 +3,10 @@
 Every command and face (``run``, ``validate``, ``status``, ``halt``, ``reset``, ``pose``,
 ``zero``, ``console``, ``runs``) builds one :class:`ArmContext` with :func:`resolve_context`
 and takes everything from it: the campaign, the arm file (and so its tools), the pose
-search path, the zero store, the folder run logs go to, and the bus. Nothing else decides
-these. The order, each time the same:
+search path, the folder run logs go to, and the bus. Nothing else decides these. The zero
+reference follows from the bus: it belongs to the physical arm found there, named by the
+serial numbers its modules report (:mod:`seqrun.service.zero`, one store per arm on this
+machine, shared by every campaign). The order, each time the same:
 
 - campaign: ``--project DIR``, else the campaign of the sequence (for ``run``), else the
   nearest ``seqrun.toml`` above the current directory, else the nearest folder with
@@ -37,7 +39,6 @@ if TYPE_CHECKING:
     from seqrun.sequence.project import Project
     from seqrun.service.bus_claim import Holder
     from seqrun.service.connection import Connection
-    from seqrun.service.zero import ZeroStore
 
 __all__ = ["ArmContext", "BusChoice", "NoArm", "SIMULATOR_CLAIM_INTERFACE", "resolve_context"]
 
@@ -143,12 +144,6 @@ class ArmContext:
     def tools(self) -> Any:
         """The arm file's tools (the arm file is the one place a tool is defined)."""
         return self.arm.tools
-
-    def zero_store(self, arm: ArmDescription | None = None) -> ZeroStore:
-        """The zero store of this arm: the one function every command gets it through."""
-        from seqrun.service.zero import ZeroStore
-
-        return ZeroStore.for_arm((arm or self.arm).name, self.project)
 
     # ------------------------------------------------------------------ what it says
     def arm_text(self) -> str:

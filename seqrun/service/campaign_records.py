@@ -68,14 +68,17 @@ def record_run(folder: Path, loaded: Any, arm_path: Path, bus: str, zero: Any,
                         overrides=[str(n) for n in overrides or ()])
 
 
-def zero_recorder(arm: Any, loaded: Any, store: Any = None) -> Callable[[str], str]:
-    """What the ``power_off`` step calls: record the pose for the next power-on (in
-    ``store``, the arm context's zero store)."""
-    from seqrun.service.zero import ZeroStore, pose_title
-
-    store = store or ZeroStore.for_arm(arm.name, getattr(loaded, "project", None))
+def zero_recorder(store: Any, arm: Any, loaded: Any) -> Callable[[str], str]:
+    """What the ``power_off`` step calls: record the pose for the next power-on, in the
+    connected arm's own store (:class:`~seqrun.service.zero.ZeroStore`)."""
 
     def record(pose: str) -> str:
-        entry = store.set_record(pose, by=Path(str(loaded.file)).name)
-        return f"{entry.describe(pose_title(pose))} ({store.path})"
+        from seqrun.errors import RunAborted, UserInputError
+
+        try:
+            entry = store.set_record(pose, by=Path(str(loaded.file)).name, arm_name=arm.name)
+        except UserInputError as exc:  # (a folder this user may not write): the step fails
+            raise RunAborted("power_off", f"power_off: {exc}; the zero reference of the "
+                                          "next power-on is NOT recorded") from None
+        return f"{entry.describe()} ({store.path})"
     return record

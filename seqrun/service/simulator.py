@@ -27,6 +27,8 @@ class SimulatedArmServer:
     power_on_pose: str
     faults: list[str]
     switches: dict[str, Any]
+    #: What each module says its serial number is (the arm's identity), by module id.
+    serials: dict[int, int]
 
 
 def _power_off_pose(name: str) -> str:
@@ -81,7 +83,7 @@ def serve_simulated_arm(*, host: str, port: int, channel: str, faults: Sequence[
     clock = RealClock()
     try:
         arm = SimArm(clock, faults=injected, options=options, power_on_pose=pose)
-    except ValueError as exc:  # a fault for a module the arm does not have
+    except ValueError as exc:  # a fault for a module the arm does not have, a bad serial
         raise UserInputError(str(exc)) from None
     # No spinning: TCP adds more latency than a late wake-up, and clients may be many.
     network = SimNetwork(clock, arm, bitrate, spin_window=0.0)
@@ -92,4 +94,5 @@ def serve_simulated_arm(*, host: str, port: int, channel: str, faults: Sequence[
     except OSError as exc:
         raise UserInputError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from None
     return SimulatedArmServer(server, channel, bitrate, pose, [f.spec for f in injected],
-                              {name: getattr(options, name) for name in settings})
+                              {name: getattr(options, name) for name in settings},
+                              arm.serials)

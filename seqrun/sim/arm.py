@@ -32,7 +32,7 @@ from seqrun.powercube.codec import (
     decode_request,
     encode,
 )
-from seqrun.powercube.protocol import GET_BASE, SET_BASE, StateFlag
+from seqrun.powercube.protocol import GET_BASE, SET_BASE, ParamId, StateFlag
 from seqrun.sim.faults import Fault, parse_faults
 from seqrun.sim.module import ModuleOptions, SimModule
 
@@ -42,6 +42,11 @@ _new_tuple = tuple.__new__
 DEFAULT_MODULE_LATENCY = 100e-6
 _GET_EXTENDED = 0x0A
 _GET_EXTENDED_BYTE = bytes([_GET_EXTENDED])
+
+
+def draw_serial_base() -> int:
+    """A serial base of its own for one simulated arm: ``NNNNN00`` (module M: ``+ M``)."""
+    return random.SystemRandom().randrange(10_000, 100_000) * 100
 
 
 class Reply(NamedTuple):
@@ -66,6 +71,9 @@ class SimArm:
     :param power_on_pose: the pose the arm physically stands in at power-on (the modules'
         zeros: they read 0 wherever they were powered off). The encoders read the same
         either way; this names where that is, for the zero reference (``--power-on-at``).
+    :param serials: serial numbers (DefCubeSerial) by module id, for the modules it names;
+        the others say ``options.serial_base + id``, or with base 0 a base drawn for this
+        arm alone (:func:`draw_serial_base`).
     """
 
     def __init__(self, clock: Clock, modules: Iterable[int] = range(1, 8),
@@ -73,7 +81,8 @@ class SimArm:
                  module_latency: float = DEFAULT_MODULE_LATENCY, seed: int = 0,
                  options: ModuleOptions | None = None,
                  positions: Mapping[int, float] | Sequence[float] | None = None,
-                 power_on_pose: str = "park") -> None:
+                 power_on_pose: str = "park",
+                 serials: Mapping[int, int] | None = None) -> None:
         if module_latency < 0:
             raise ValueError(f"module_latency must be >= 0, got {module_latency}")
         self.clock = clock
@@ -84,7 +93,17 @@ class SimArm:
         self.power_on_pose = power_on_pose
         self.options = options or ModuleOptions()
         self._lock = threading.RLock()
-        self._modules = {m: SimModule(m, clock, options=self.options) for m in modules}
+        modules = list(modules)
+        base = self.options.serial_base or draw_serial_base()
+        if not 0 <= base <= 0xFFFFFFFF - max(modules, default=0):
+            raise ValueError(f"serial_base {base}: serials are 32-bit (0 < base + module "
+                             "< 2^32)")
+        given = dict(serials or {})
+        self._modules = {m: SimModule(m, clock, options=self.options, parameters={
+            ParamId.DEF_CUBE_SERIAL: given.pop(m, base + m)}) for m in modules}
+        if given:
+            raise ValueError(f"serials for module(s) {sorted(given)}: the simulated arm has "
+                             f"modules {sorted(self._modules)}")
         if not self._modules:
             raise ValueError("a simulated arm needs at least one module")
         self._pending: list[Fault] = []
@@ -107,6 +126,17 @@ class SimArm:
             self.inject(fault)
 
     # -- inspection and set-up ------------------------------------------------------------
+
+    @property
+    def serials(self) -> dict[int, int]:
+        """What each module says its serial number is (DefCubeSerial), by module id."""
+        serials = {}
+        with self._lock:
+            for m, module in sorted(self._modules.items()):
+                serial = module.parameter(ParamId.DEF_CUBE_SERIAL)
+                assert isinstance(serial, int)  # (a u32 parameter)
+                serials[m] = serial
+        return serials
 
     @property
     def module_ids(self) -> list[int]:

@@ -75,6 +75,7 @@ class SimBus(BusABC):
     :param positions: start positions in rad, module coordinates (first bus only).
     :param modules: module ids of the arm, default 1..7 (first bus only).
     :param power_on_pose: where the arm stood at power-on (first bus only; see SimArm).
+    :param serials: the modules' serial numbers by id (first bus only; see SimArm).
     :param tx_queue_size: frames that may wait for the wire before ``send`` waits.
     """
 
@@ -87,6 +88,7 @@ class SimBus(BusABC):
                  positions: Mapping[int, float] | Sequence[float] | None = None,
                  modules: Iterable[int] | None = None,
                  power_on_pose: str | None = None,
+                 serials: Mapping[int, int] | None = None,
                  tx_queue_size: int = DEFAULT_TX_QUEUE_SIZE,
                  fd: bool = False, timing: Any = None, **kwargs: Any) -> None:
         if fd:
@@ -97,7 +99,8 @@ class SimBus(BusABC):
                                  receive_own_messages=receive_own_messages,
                                  module_latency=module_latency, seed=seed, options=options,
                                  positions=positions, modules=modules,
-                                 power_on_pose=power_on_pose, tx_queue_size=tx_queue_size,
+                                 power_on_pose=power_on_pose, serials=serials,
+                                 tx_queue_size=tx_queue_size,
                                  **pop_switches(kwargs))
         except SimSetupError as exc:
             raise CanInitializationError(str(exc)) from None

@@ -158,11 +158,19 @@ class ModuleOptions:
     #: the current position instead of from the current velocity. No published driver
     #: streams FRAMP, so real firmware behaviour is unconfirmed [I].
     framp_from_standstill: bool = False
+    #: Serial numbers (DefCubeSerial, 0x1A): module M says ``serial_base + M``. 0: every
+    #: simulated arm draws a base of its own (two ``seqrun sim serve`` are two arms, as
+    #: the zero reference, keyed by the serials, must see them).
+    serial_base: int = 0
 
 
 #: Environment variable the command line reads simulator options from, e.g.
 #: ``SEQRUN_SIM_OPTIONS="framp_from_standstill drop_request_while_busy"``.
 SIM_OPTIONS_ENV = "SEQRUN_SIM_OPTIONS"
+
+
+#: The serial base of a module made on its own (no arm around it to choose one).
+DEFAULT_SERIAL_BASE = 41000
 
 
 def default_parameters(module_id: int) -> dict[ParamId, float | int]:
@@ -182,7 +190,7 @@ def default_parameters(module_id: int) -> dict[ParamId, float | int]:
         ParamId.DEF_MAX_CUR: max_cur,
         ParamId.DEF_HOME_VEL: 0.1,
         ParamId.DEF_HOME_ACC: 0.5,
-        ParamId.DEF_CUBE_SERIAL: 41000 + module_id,
+        ParamId.DEF_CUBE_SERIAL: DEFAULT_SERIAL_BASE + module_id,
         ParamId.DEF_CONFIG: int(ConfigFlag.BRAKE_PRESENT | ConfigFlag.BRAKE_AT_POWERON),
         ParamId.DEF_PULSES_PER_TURN: pulses_per_turn,
         ParamId.DEF_CUBE_VERSION: DEFAULT_CUBE_VERSION,

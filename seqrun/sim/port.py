@@ -171,6 +171,7 @@ class SimPort:
                  positions: Mapping[int, float] | Sequence[float] | None = None,
                  modules: Iterable[int] | None = None,
                  power_on_pose: str | None = None,
+                 serials: Mapping[int, int] | None = None,
                  tx_queue_size: int = DEFAULT_TX_QUEUE_SIZE, **switches: Any) -> None:
         channel = "arm0" if channel is None else str(channel)
         try:
@@ -182,7 +183,7 @@ class SimPort:
         arm_kwargs = {"module_latency": module_latency, "seed": seed, "options": options,
                       "positions": positions,
                       "modules": None if modules is None else list(modules),
-                      "power_on_pose": power_on_pose}
+                      "power_on_pose": power_on_pose, "serials": serials}
         self.network = _join_channel(channel, clock, check_bitrate(bitrate), fault_list,
                                      arm_kwargs)
         #: The simulated arm behind this port (shared by every port on the channel).

@@ -27,7 +27,8 @@ import numpy as np
 
 from seqrun.arm.description import ArmDescription
 from seqrun.arm.planner import Limits, MovePlan
-from seqrun.drivers.base import (ArmPoll, CommandConfirmation, ConfirmedCommand, CycleState,
+from seqrun.drivers.base import (ArmIdentity, ArmPoll, CommandConfirmation, ConfirmedCommand,
+                                 CycleState,
                                  EventSink, ForeignTraffic, JointLimits, JointReading,
                                  JointState, LimitValues, MotionRefused)
 from seqrun.drivers.powercube.confirm import (DEFAULT_ATTEMPTS, command_and_confirm,
@@ -345,6 +346,12 @@ class PowerCubeDriver:
             velocities.append(math.degrees(float(vel)))
             states[module] = joint_state(int(state))
         return ArmPoll(positions, velocities, states)
+
+    def identity(self) -> ArmIdentity:
+        """DefCubeSerial (0x1A) of every module, pipelined."""
+        acks = self.transact([GetParam(m, ParamId.DEF_CUBE_SERIAL) for m in self.modules],
+                             idempotent=True)
+        return ArmIdentity.of({m: int(a.value) for m, a in zip(self.modules, acks)})
 
     def homed(self) -> bool:
         for attempt in range(self.HOMED_ATTEMPTS):
