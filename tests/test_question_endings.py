@@ -175,7 +175,8 @@ def test_a_signal_at_a_question_before_the_run_is_one_line_and_exit_130(tmp_path
         port = served.text.split("socketcand 127.0.0.1:")[1].split()[0].strip(" ,;)")
         if question == "zero":  # a record: after the power-on its pose is asked about
             recorded = _seqrun("zero", "set", "park", "--yes", "--project", project,
-                               cwd=tmp_path)
+                               "-i", "socketcand", "--bus-kwargs", f"port={int(port)}",
+                               cwd=tmp_path)  # (the record belongs to the served arm)
             assert recorded.wait(60) == 0, recorded.communicate()
         runner = _seqrun("run", sequence, "-i", "socketcand", "--bus-kwargs",
                          f"port={int(port)}", "--plain", "--log-dir", folder, cwd=tmp_path,
