@@ -160,40 +160,20 @@ class GzipLineFile:
 def write_whole(path: Path, text: str | bytes) -> OSError | None:
     """Replace ``path`` by ``text`` (or bytes) atomically; the error (nothing left behind)
     or None."""
-    path = Path(path)
-    tmp = path.with_name(path.name + ".tmp")
-    fd = None
-    try:
-        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
-        _write_all(fd, text.encode("utf-8") if isinstance(text, str) else bytes(text))
-        os.close(fd)
-        fd = None
-        os.replace(tmp, path)
-        return None
-    except OSError as exc:
-        if fd is not None:
-            try:
-                os.close(fd)
-            except OSError:
-                pass
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        return exc
+    return write_streamed(path, (text,))
 
 
-def write_streamed(path: Path, parts: Iterable[str]) -> OSError | None:
-    """Replace ``path`` atomically by the texts of ``parts``, written as they come (a
-    large page never whole in memory); the error (nothing left behind) or None. Any other
-    exception from ``parts`` removes the temporary file and goes on."""
+def write_streamed(path: Path, parts: Iterable[str | bytes]) -> OSError | None:
+    """Replace ``path`` atomically by the texts (or bytes) of ``parts``, written as they
+    come (a large page never whole in memory); the error (nothing left behind) or None.
+    Any other exception from ``parts`` removes the temporary file and goes on."""
     path = Path(path)
     tmp = path.with_name(path.name + ".tmp")
     fd = None
     try:
         fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
         for part in parts:
-            _write_all(fd, part.encode("utf-8"))
+            _write_all(fd, part.encode("utf-8") if isinstance(part, str) else bytes(part))
         os.close(fd)
         fd = None
         os.replace(tmp, path)
