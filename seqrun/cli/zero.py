@@ -59,6 +59,19 @@ def _arm_store(arm, connection) -> tuple[ZeroStore, bool]:
     return ZeroStore(identity), homed
 
 
+def _connected_store(context) -> tuple[ZeroStore, bool]:
+    """Open the context's bus (its first line said), and :func:`_arm_store` of the arm
+    there; the bus is closed again. Exit 3 when the modules do not answer."""
+    connection = context.open_connection(transient=True)
+    typer.echo(context.headline(connection))
+    try:
+        return _arm_store(context.arm, connection)
+    except BusError as exc:
+        fail(f"cannot read the modules' serial numbers: {exc}", 3)
+    finally:
+        connection.close()
+
+
 def _list_machine_records() -> None:
     import json
 
@@ -98,15 +111,7 @@ def show_command(
         if context.bus.is_simulator:  # no arm named: what this machine has recorded
             _list_machine_records()
             return
-        connection = context.open_connection(transient=True)
-        typer.echo(context.headline(connection))
-        try:
-            try:
-                store, _ = _arm_store(arm, connection)
-            except BusError as exc:
-                fail(f"cannot read the modules' serial numbers: {exc}", 3)
-        finally:
-            connection.close()
+        store, _ = _connected_store(context)
         record, in_use = store.record, store.in_use
     typer.echo(f"arm      {arm.name} ({store.identity.describe()})")
     typer.echo(f"file     {store.path}")
@@ -163,15 +168,7 @@ def set_command(
         stands = joints if joints is not None else arm.power_off_joints_deg(name)
         if context.bus.is_simulator:
             raise UserInputError(NO_ARM_NAMED)
-        connection = context.open_connection(transient=True)
-        typer.echo(context.headline(connection))
-        try:
-            try:
-                store, homed = _arm_store(arm, connection)
-            except BusError as exc:
-                fail(f"cannot read the modules' serial numbers: {exc}", 3)
-        finally:
-            connection.close()
+        store, homed = _connected_store(context)
         try:
             in_use = store.in_use if homed else None
         except UserInputError:  # an untrusted file: this record replaces it
