@@ -219,6 +219,83 @@ def test_joint_states_come_at_50_hz_or_more(graph):
     assert rate >= 50, f"{rate:.1f} Hz"
 
 
+def test_the_tf_body_is_the_chain_at_the_measured_joints(graph):
+    """/tf itself needs tf2_msgs (a ROS host); its TransformStamped list is built here."""
+    from builtin_interfaces.msg import Time
+
+    joints = list(graph.session.status().joints_deg.values())
+    frames = graph.seqrun.transforms(joints, Time(sec=5, nanosec=7))
+    assert [(t.header.frame_id, t.child_frame_id) for t in frames][0] == ("lwa3/base", "lwa3/j1")
+    assert frames[-1].child_frame_id == "lwa3/end_effector" and len(frames) == 8
+    assert all(t.header.stamp.sec == 5 and t.header.stamp.nanosec == 7 for t in frames)
+    # Park: the end effector's frame sits on the last joint's z axis, metres
+    assert frames[-1].transform.translation.x == pytest.approx(0, abs=1e-9)
+
+
+@pytest.mark.slow
+def test_the_command_serves_the_arm_and_halts_on_sigterm(tmp_path, monkeypatch):
+    """``seqrun ros --sim`` as a process: ~/reset and ~/home, a trajectory, then SIGTERM
+    ends it with a confirmed Halt (exit 130)."""
+    import signal as signals
+
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    domain = domain_id()
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain))
+    proc = subprocess.Popen([sys.executable, "-m", "seqrun", "ros", "--sim", "--log-dir",
+                             str(tmp_path / "runs")], cwd=ROOT, env=env, text=True,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    printed: list[str] = []
+    try:
+        for line in proc.stdout:
+            printed.append(line)
+            if line.startswith("seqrun ros on SIMULATOR"):
+                break
+        assert "/lwa3/joint_trajectory" in printed[-1], "".join(printed)
+        context = rclpy.Context()
+        rclpy.init(context=context, domain_id=domain)
+        client = Node("seqrun_command_client", context=context)
+        states: list = []
+        events: list = []
+        client.create_subscription(JointState, "/lwa3/joint_states", states.append, 100)
+        client.create_subscription(String, "/seqrun/events",
+                                   lambda m: events.append(json.loads(m.data)), 100)
+        publisher = client.create_publisher(JointTrajectory, "/lwa3/joint_trajectory", 10)
+        spinner = MultiThreadedExecutor(num_threads=2, context=context)
+        spinner.add_node(client)
+        thread = threading.Thread(target=spinner.spin, daemon=True)
+        thread.start()
+        try:
+            for name in ("reset", "home"):
+                service = client.create_client(Trigger, f"/seqrun/{name}")
+                Graph.wait_for(service.service_is_ready, f"~/{name}")
+                future = service.call_async(Trigger.Request())
+                Graph.wait_for(future.done, f"~/{name}'s answer")
+                assert future.result().success, future.result().message
+            Graph.wait_for(lambda: states and publisher.get_subscription_count() > 0,
+                           "joint_states")
+            msg = JointTrajectory(joint_names=["j1"], points=[JointTrajectoryPoint(
+                positions=[math.radians(5)], time_from_start=Duration(sec=1))])
+            publisher.publish(msg)
+            Graph.wait_for(lambda: any(e["type"] == "trajectory_finished" for e in events),
+                           "the trajectory's end")
+            finished = [e for e in events if e["type"] == "trajectory_finished"][0]
+            assert finished["exit_code"] == 0, finished
+            assert math.degrees(states[-1].position[0]) == pytest.approx(5, abs=0.1)
+        finally:
+            spinner.shutdown()
+            thread.join(timeout=10)
+            client.destroy_node()
+            rclpy.shutdown(context=context)
+        proc.send_signal(signals.SIGTERM)
+        out, _ = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 130, "".join(printed) + out
+    assert "seqrun ros: ended by SIGTERM; " in out and "Traceback" not in out
+
+
 # ---------------------------------------------------------------------- without the extra
 def test_without_rclpy_seqrun_ros_says_in_one_line_how_to_install_it(tmp_path):
     """rclpy made unimportable the public way: a package of that name that raises

@@ -158,3 +158,13 @@ def test_the_link_transforms_compose_to_the_end_effector(arm, joints):
         total = total @ step
     expected = end_effector(arm, joints)["position_mm"]
     assert total[:3, 3] * 1000 == pytest.approx(expected, abs=1e-3)
+
+
+def test_the_runs_own_messages_name_the_trajectory_not_its_private_file():
+    from seqrun.service.trajectories import in_trajectory_terms
+
+    message = ("not valid from the arm's measured state: /tmp/seqrun-trajectories-q4dt1f0u/"
+               "ros_trajectory_12.yaml:4:5: move before home: the modules refuse motion")
+    assert in_trajectory_terms(message) == ("not valid from the arm's measured state: "
+                                            "trajectory: move before home: the modules "
+                                            "refuse motion")

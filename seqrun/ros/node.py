@@ -10,8 +10,9 @@ What it offers (``<arm>``: the arm file's name, e.g. ``lwa3``; ``~``: the node, 
 - ``/<arm>/joint_trajectory`` (``trajectory_msgs/JointTrajectory``) accepted: each one checked
   as a sequence from where the arm stands and run through the session
   (:mod:`seqrun.service.trajectories`); a refusal is one line on ``~/events`` and the log;
-- ``~/stop`` (a Halt, confirmed by reading every module back), ``~/home``, ``~/reset``
-  (``std_srvs/Trigger``: ``success`` is what the modules read back);
+- ``~/stop`` (a Halt, confirmed by reading every module back), ``~/reset`` (Reset and the
+  arm file's limits written: the console's Arm), ``~/home`` (``std_srvs/Trigger``:
+  ``success`` is what the modules read back);
 - ``~/events`` (``std_msgs/String``, one JSON object each): the session's events (a run's
   steps, results, faults, halts; not the per-cycle measurements: ``joint_states`` has them)
   and the node's own (``trajectory_accepted``, ``trajectory_refused``,
@@ -43,7 +44,8 @@ from trajectory_msgs.msg import JointTrajectory as JointTrajectoryMsg
 
 from seqrun.errors import Refused
 from seqrun.ros import optional_module
-from seqrun.service.trajectories import JointTrajectory, TrajectoryPoint, run_trajectory
+from seqrun.service.trajectories import (JointTrajectory, TrajectoryPoint, in_trajectory_terms,
+                                         run_trajectory)
 
 __all__ = ["DEFAULT_RATE_HZ", "NODE_NAME", "SeqrunNode", "ros_name"]
 
@@ -142,16 +144,19 @@ class SeqrunNode:
             msg.velocity = [math.radians(v) for v in speeds]
         self.joint_states.publish(msg)
         if self.tf is not None and self._tf_message is not None:
-            self.tf.publish(self._tf_message(transforms=self._transforms(degrees, msg)))
+            self.tf.publish(self._tf_message(transforms=self.transforms(degrees,
+                                                                        msg.header.stamp)))
 
-    def _transforms(self, degrees: list, state: Any) -> list:
+    def transforms(self, degrees: list, stamp: Any) -> list:
+        """``geometry_msgs/TransformStamped`` of every frame of the chain at ``degrees``
+        (user degrees, every joint): ``/tf``'s message body."""
         from seqrun.service.kinematics import link_transforms
 
         out = []
         for parent, child, xyz, quaternion in link_transforms(self.session.arm, degrees,
                                                               f"{self.arm}/"):
             t = TransformStamped()
-            t.header.stamp = state.header.stamp
+            t.header.stamp = stamp
             t.header.frame_id = parent
             t.child_frame_id = child
             t.transform.translation.x, t.transform.translation.y, \
@@ -190,7 +195,8 @@ class SeqrunNode:
         def finished() -> None:
             result = activity.wait()
             self.announce("trajectory_finished", status=result.status,
-                          exit_code=result.exit_code, message=result.message,
+                          exit_code=result.exit_code,
+                          message=in_trajectory_terms(result.message),
                           run_dir=str(result.run_dir) if result.run_dir else None, by=by)
 
         threading.Thread(target=finished, name="ros trajectory end", daemon=True).start()
@@ -219,17 +225,22 @@ class SeqrunNode:
         try:
             result = getattr(self.session, what)()
         except Refused as exc:
-            response.success, response.message = False, f"{what} refused: {exc}"
+            response.success = False
+            response.message = f"{what.replace('arm_up', 'reset')} refused: {exc}"
             return response
         response.success = bool(result.ok)
-        response.message = f"{what}: {result.message or result.status}"
+        response.message = f"{what.replace('arm_up', 'reset')}: " \
+            f"{result.message or result.status}"
         return response
 
     def _home(self, request: Any, response: Any) -> Any:
         return self._command("home", response)
 
     def _reset(self, request: Any, response: Any) -> Any:
-        return self._command("reset", response)
+        """Reset, then the arm file's limits written to the drives (the console's Arm):
+        after a STOP, ~/reset is what makes the arm movable again (the modules keep their
+        Home)."""
+        return self._command("arm_up", response)
 
     # ------------------------------------------------------------------ the action
     def _follow_joint_trajectory(self) -> Any:

@@ -36,7 +36,7 @@ from typing import Any
 from seqrun.errors import Refused
 
 __all__ = ["MAX_POINTS", "JointTrajectory", "TrajectoryPoint", "check_trajectory",
-           "run_trajectory", "trajectory_steps"]
+           "in_trajectory_terms", "run_trajectory", "trajectory_steps"]
 
 #: More points than this is refused (each is a move that ends at rest).
 MAX_POINTS = 500
@@ -157,6 +157,15 @@ def _sequence_text(steps: Sequence[str]) -> str:
     return ("name: ros_trajectory\n"
             "description: a joint trajectory received over ROS 2 (seqrun ros)\n"
             "steps:\n" + "".join(f"  - {s}\n" for s in steps))
+
+
+def in_trajectory_terms(text: str) -> str:
+    """A run's message about a trajectory's sequence file (the executor's checks from the
+    measured arm) with the private file named as the trajectory."""
+    import re
+
+    return re.sub(r"\S*seqrun-trajectories-[^/\s]*/ros_trajectory_\d+\.yaml(:\d+:\d+)?",
+                  "trajectory", text)
 
 
 def _same_file(named: Any, file: Path) -> bool:
