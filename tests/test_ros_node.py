@@ -204,6 +204,73 @@ def test_home_is_refused_in_one_line_while_halted(graph):
     assert "halted" in answer.message and "\n" not in answer.message
 
 
+# ---------------------------------------------------------------------- FollowJointTrajectory
+class Codes:
+    """control_msgs/FollowJointTrajectory's result codes (no control_msgs wheel exists: the
+    action server itself needs a ROS host; what a goal does is tested here)."""
+
+    SUCCESSFUL, INVALID_GOAL, PATH_TOLERANCE_VIOLATED = 0, -1, -4
+
+
+class Goal:
+    """A goal handle as rclpy's action server hands one to its execute callback."""
+
+    def __init__(self) -> None:
+        self.is_cancel_requested = False
+        self.ended: list[str] = []
+
+    def succeed(self) -> None:
+        self.ended.append("succeeded")
+
+    def abort(self) -> None:
+        self.ended.append("aborted")
+
+    def canceled(self) -> None:
+        self.ended.append("canceled")
+
+
+def joint_trajectory(names, *points):
+    from seqrun.service.trajectories import JointTrajectory as Plain, TrajectoryPoint
+
+    return Plain(tuple(names), tuple(TrajectoryPoint(tuple(math.radians(d) for d in p[:-1]),
+                                                     p[-1]) for p in points))
+
+
+def test_a_follow_joint_trajectory_goal_runs_like_the_topic(graph):
+    goal = Goal()
+    code, text = graph.seqrun.follow_trajectory(joint_trajectory(("j1",), (6, 0.5)), goal,
+                                                Codes)
+    assert (code, goal.ended) == (Codes.SUCCESSFUL, ["succeeded"]), text
+    assert graph.session.poll_status().joints_deg["j1"] == pytest.approx(6, abs=0.1)
+
+
+def test_a_goal_through_the_desk_is_aborted_as_invalid_with_the_reason(graph):
+    goal = Goal()
+    code, text = graph.seqrun.follow_trajectory(joint_trajectory(("j2",), (-110, 2.0)), goal,
+                                                Codes)
+    assert (code, goal.ended) == (Codes.INVALID_GOAL, ["aborted"])
+    assert text.startswith("trajectory point 1/1: ") and "desk" in text
+    assert graph.motion_frames() == []
+
+
+def test_a_cancelled_goal_ends_in_a_controlled_stop(graph):
+    goal = Goal()
+    outcome: list = []
+    worker = threading.Thread(target=lambda: outcome.append(graph.seqrun.follow_trajectory(
+        joint_trajectory(("j1",), (60, 6.0)), goal, Codes)))
+    worker.start()
+    graph.wait_for(lambda: graph.session.status().joints_deg["j1"] > 2, "the arm moving")
+    goal.is_cancel_requested = True
+    worker.join(timeout=30)
+    assert goal.ended == ["canceled"] and outcome[0][1].startswith("cancelled: ")
+    stopped = graph.session.poll_status()
+    assert graph.session.activity is None and 2 < stopped.joints_deg["j1"] < 50
+    assert not graph.halt_broadcasts()  # a controlled stop, not a Halt
+    time.sleep(0.3)
+    assert graph.session.poll_status().joints_deg["j1"] == pytest.approx(
+        stopped.joints_deg["j1"], abs=0.05)
+
+
 @pytest.mark.slow
 def test_joint_states_come_at_50_hz_or_more(graph):
     """Counted against the publisher's own stamps over 3 s (the subscriber's delays under

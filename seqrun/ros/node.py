@@ -243,6 +243,12 @@ class SeqrunNode:
         return self._command("arm_up", response)
 
     # ------------------------------------------------------------------ the action
+    def follow_trajectory(self, trajectory: JointTrajectory, goal: Any,
+                          codes: Any) -> tuple[int, str]:
+        """What a FollowJointTrajectory goal does (:func:`_follow`); the action server (on a
+        ROS host) calls it with its goal handle."""
+        return _follow(self, trajectory, goal, codes)
+
     def _follow_joint_trajectory(self) -> Any:
         """``control_msgs/FollowJointTrajectory`` on ``/<arm>/follow_joint_trajectory`` when
         control_msgs can be imported; None otherwise."""
@@ -252,41 +258,11 @@ class SeqrunNode:
         from rclpy.action import ActionServer, CancelResponse, GoalResponse
 
         action = control_msgs.FollowJointTrajectory
-        node = self
 
         def execute(goal_handle: Any) -> Any:
             result = action.Result()
-            try:
-                activity = node.start_trajectory(trajectory_of(goal_handle.request.trajectory),
-                                                 "ros action")
-            except Refused as exc:
-                goal_handle.abort()
-                result.error_code = action.Result.INVALID_GOAL
-                result.error_string = str(exc)
-                return result
-            while not activity.done:
-                if goal_handle.is_cancel_requested:
-                    node.session.abort("FollowJointTrajectory cancelled")
-                    try:
-                        ended = activity.wait(timeout=30.0)
-                    except TimeoutError:
-                        node.session.halt("FollowJointTrajectory cancelled: no stop")
-                        ended = activity.wait()
-                    goal_handle.canceled()
-                    result.error_string = f"cancelled: {ended.message}"
-                    return result
-                try:
-                    activity.wait(timeout=0.05)
-                except TimeoutError:
-                    pass
-            ended = activity.wait()
-            if ended.ok:
-                goal_handle.succeed()
-                result.error_code = action.Result.SUCCESSFUL
-            else:
-                goal_handle.abort()
-                result.error_code = action.Result.PATH_TOLERANCE_VIOLATED
-            result.error_string = ended.message or ended.status
+            result.error_code, result.error_string = self.follow_trajectory(
+                trajectory_of(goal_handle.request.trajectory), goal_handle, action.Result)
             return result
 
         return ActionServer(self.node, action, f"/{self.arm}/follow_joint_trajectory",
@@ -294,6 +270,41 @@ class SeqrunNode:
                             goal_callback=lambda goal: GoalResponse.ACCEPT,
                             cancel_callback=lambda goal: CancelResponse.ACCEPT,
                             callback_group=ReentrantCallbackGroup())
+
+
+def _follow(node: SeqrunNode, trajectory: JointTrajectory, goal: Any,
+            codes: Any) -> tuple[int, str]:
+    """FollowJointTrajectory's execution: the trajectory through :meth:`start_trajectory`,
+    then the run watched until it ends or the client cancels (a controlled stop; a Halt if
+    that does not end it). ``goal``: the goal handle (``is_cancel_requested``, ``succeed``,
+    ``abort``, ``canceled``); ``codes``: the result's error codes. Returns (error_code,
+    error_string)."""
+    try:
+        activity = node.start_trajectory(trajectory, "ros action")
+    except Refused as exc:
+        goal.abort()
+        return codes.INVALID_GOAL, str(exc)
+    while not activity.done:
+        if goal.is_cancel_requested:
+            node.session.abort("FollowJointTrajectory cancelled")
+            try:
+                ended = activity.wait(timeout=30.0)
+            except TimeoutError:
+                node.session.halt("FollowJointTrajectory cancelled: no controlled stop")
+                ended = activity.wait()
+            goal.canceled()
+            return codes.SUCCESSFUL, f"cancelled: {in_trajectory_terms(ended.message)}"
+        try:
+            activity.wait(timeout=0.05)
+        except TimeoutError:
+            pass
+    ended = activity.wait()
+    message = in_trajectory_terms(ended.message or ended.status)
+    if ended.ok:
+        goal.succeed()
+        return codes.SUCCESSFUL, message
+    goal.abort()
+    return codes.PATH_TOLERANCE_VIOLATED, message
 
 
 def spin(node: SeqrunNode, *, threads: int = 4, context: Any = None) -> None:
