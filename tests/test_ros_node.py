@@ -3,8 +3,9 @@ same process: the simulated arm in real time, discovery on this host only
 (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST) and a ROS domain of each test worker's own, so
 parallel workers (and other test runs on this machine) do not see each other's nodes.
 
-A trajectory moves the arm; one through the desk is refused with the reason and moves
-nothing; ~/stop halts mid-move and says so only when every module read back HALTED;
+Each test's node and topics have names of its own too (another test run on this machine may
+draw the same domain). A trajectory moves the arm; one through the desk is refused with the
+reason and moves nothing; ~/stop halts mid-move and says so only when every module read back HALTED;
 ~/reset and ~/home; joint_states at 50 Hz or more; without rclpy, one line."""
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import subprocess
 import sys
 import threading
 import time
+import uuid
 from pathlib import Path
 
 import pytest
@@ -51,6 +53,9 @@ class Graph:
     """The node on a real-time simulated arm, a client node, both spun in one executor."""
 
     def __init__(self, tmp_path: Path) -> None:
+        # names of this test's own: other test runs on the machine may share the domain
+        token = uuid.uuid4().hex[:8]
+        self.arm, self.name = f"lwa3_{token}", f"seqrun_{token}"
         self.context = rclpy.Context()
         rclpy.init(context=self.context, domain_id=domain_id())
         connection = open_connection(force_sim=True, clock=RealClock())
@@ -61,17 +66,18 @@ class Graph:
         self.session.poll_status()
         assert self.session.arm_up().ok and self.session.home().ok
         self.session.poll_status()
-        self.seqrun = SeqrunNode(self.session, arm_name="lwa3", context=self.context)
+        self.seqrun = SeqrunNode(self.session, arm_name=self.arm, context=self.context,
+                                 node_name=self.name)
         self.client = Node("seqrun_test_client", context=self.context)
         self.states: list = []
         self.events: list = []
-        self.client.create_subscription(JointState, "/lwa3/joint_states", self.states.append,
-                                        100)
-        self.client.create_subscription(
-            String, "/seqrun/events", lambda m: self.events.append(json.loads(m.data)), 1000)
+        self.client.create_subscription(JointState, f"/{self.arm}/joint_states",
+                                        self.states.append, 100)
+        self.client.create_subscription(String, f"/{self.name}/events",
+                                        lambda m: self.events.append(json.loads(m.data)), 1000)
         self.trajectories = self.client.create_publisher(JointTrajectory,
-                                                         "/lwa3/joint_trajectory", 10)
-        self.services = {name: self.client.create_client(Trigger, f"/seqrun/{name}")
+                                                         f"/{self.arm}/joint_trajectory", 10)
+        self.services = {name: self.client.create_client(Trigger, f"/{self.name}/{name}")
                          for name in ("stop", "home", "reset")}
         self.executor = MultiThreadedExecutor(num_threads=4, context=self.context)
         self.executor.add_node(self.seqrun.node)
@@ -125,9 +131,10 @@ class Graph:
         return {n: math.degrees(p) for n, p in zip(last.name, last.position)}
 
     def close(self) -> None:
-        self.executor.shutdown()  # the spin ends before the nodes go
+        self.executor.shutdown()  # the spin ends before the nodes go ...
         self.thread.join(timeout=10)
         assert not self.thread.is_alive()
+        time.sleep(0.1)  # ... and so do callbacks under way (shutdown does not wait for them)
         self.seqrun.close()
         self.client.destroy_node()
         self.session.close()
@@ -292,8 +299,9 @@ def test_the_tf_body_is_the_chain_at_the_measured_joints(graph):
 
     joints = list(graph.session.status().joints_deg.values())
     frames = graph.seqrun.transforms(joints, Time(sec=5, nanosec=7))
-    assert [(t.header.frame_id, t.child_frame_id) for t in frames][0] == ("lwa3/base", "lwa3/j1")
-    assert frames[-1].child_frame_id == "lwa3/end_effector" and len(frames) == 8
+    first = (frames[0].header.frame_id, frames[0].child_frame_id)
+    assert first == (f"{graph.arm}/base", f"{graph.arm}/j1")
+    assert frames[-1].child_frame_id == f"{graph.arm}/end_effector" and len(frames) == 8
     assert all(t.header.stamp.sec == 5 and t.header.stamp.nanosec == 7 for t in frames)
     # Park: the end effector's frame sits on the last joint's z axis, metres
     assert frames[-1].transform.translation.x == pytest.approx(0, abs=1e-9)
@@ -308,8 +316,11 @@ def test_the_command_serves_the_arm_and_halts_on_sigterm(tmp_path, monkeypatch):
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     domain = domain_id()
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain))
+    token = uuid.uuid4().hex[:8]
+    arm, name = f"lwa3_{token}", f"seqrun_{token}"
     proc = subprocess.Popen([sys.executable, "-m", "seqrun", "ros", "--sim", "--log-dir",
-                             str(tmp_path / "runs")], cwd=ROOT, env=env, text=True,
+                             str(tmp_path / "runs"), "--arm-name", arm, "--node-name", name],
+                            cwd=ROOT, env=env, text=True,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
     printed: list[str] = []
     try:
@@ -317,26 +328,27 @@ def test_the_command_serves_the_arm_and_halts_on_sigterm(tmp_path, monkeypatch):
             printed.append(line)
             if line.startswith("seqrun ros on SIMULATOR"):
                 break
-        assert "/lwa3/joint_trajectory" in printed[-1], "".join(printed)
+        assert f"/{arm}/joint_trajectory" in printed[-1], "".join(printed)
+        assert f"/{name}/stop" in printed[-1]
         context = rclpy.Context()
         rclpy.init(context=context, domain_id=domain)
         client = Node("seqrun_command_client", context=context)
         states: list = []
         events: list = []
-        client.create_subscription(JointState, "/lwa3/joint_states", states.append, 100)
-        client.create_subscription(String, "/seqrun/events",
+        client.create_subscription(JointState, f"/{arm}/joint_states", states.append, 100)
+        client.create_subscription(String, f"/{name}/events",
                                    lambda m: events.append(json.loads(m.data)), 100)
-        publisher = client.create_publisher(JointTrajectory, "/lwa3/joint_trajectory", 10)
+        publisher = client.create_publisher(JointTrajectory, f"/{arm}/joint_trajectory", 10)
         spinner = MultiThreadedExecutor(num_threads=2, context=context)
         spinner.add_node(client)
         thread = threading.Thread(target=spinner.spin, daemon=True)
         thread.start()
         try:
-            for name in ("reset", "home"):
-                service = client.create_client(Trigger, f"/seqrun/{name}")
-                Graph.wait_for(service.service_is_ready, f"~/{name}")
+            for what in ("reset", "home"):
+                service = client.create_client(Trigger, f"/{name}/{what}")
+                Graph.wait_for(service.service_is_ready, f"~/{what}")
                 future = service.call_async(Trigger.Request())
-                Graph.wait_for(future.done, f"~/{name}'s answer")
+                Graph.wait_for(future.done, f"~/{what}'s answer")
                 assert future.result().success, future.result().message
             Graph.wait_for(lambda: states and publisher.get_subscription_count() > 0,
                            "joint_states")

@@ -41,6 +41,10 @@ def ros_command(
         "--arm-name", metavar="NAME",
         help="The <arm> of /<arm>/joint_states and /<arm>/joint_trajectory (default: the "
              "arm file's name, e.g. lwa3).")] = None,
+    node_name: Annotated[str, typer.Option(
+        "--node-name", metavar="NAME",
+        help="The node's name: its services and events are /NAME/stop, /NAME/home, "
+             "/NAME/reset, /NAME/events (a second arm's node needs another).")] = "seqrun",
     rate: Annotated[float, typer.Option(
         "--rate", metavar="HZ", help="joint_states (and /tf) rate in Hz (at least 50).")]
     = 100.0,
@@ -101,11 +105,11 @@ def ros_command(
     previous = signal.signal(signal.SIGTERM, _terminated)
     node = None
     try:
-        node = SeqrunNode(session, arm_name=name, rate_hz=rate)
+        node = SeqrunNode(session, arm_name=name, rate_hz=rate, node_name=node_name)
         banner = "SIMULATOR" if connection.is_simulator else connection.description
         typer.echo(f"seqrun ros on {banner}: /{node.arm}/joint_states, "
-                   f"/{node.arm}/joint_trajectory, /seqrun/stop; Ctrl-C ends it "
-                   "(any motion is stopped first)")
+                   f"/{node.arm}/joint_trajectory, {node.node.get_fully_qualified_name()}/stop;"
+                   " Ctrl-C ends it (any motion is stopped first)")
         spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         typer.echo("seqrun ros: ended by Ctrl-C; anything still moving is stopped")

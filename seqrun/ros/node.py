@@ -77,14 +77,17 @@ def trajectory_of(msg: Any) -> JointTrajectory:
 
 class SeqrunNode:
     """The node on ``session`` (an :class:`~seqrun.service.session.ArmSession`), in the rclpy
-    ``context`` (None: the default one). Add :attr:`node` to a multi-threaded executor."""
+    ``context`` (None: the default one), named ``node_name`` (its services and events are
+    ``/<node_name>/stop`` ...: two arms on one graph need two names). Add :attr:`node` to a
+    multi-threaded executor."""
 
     def __init__(self, session: Any, *, arm_name: str, rate_hz: float = DEFAULT_RATE_HZ,
-                 context: Any = None, log_dir: Path | None = None) -> None:
+                 context: Any = None, log_dir: Path | None = None,
+                 node_name: str = NODE_NAME) -> None:
         self.session = session
         self.arm = ros_name(arm_name)
         self.log_dir = log_dir
-        self.node = Node(NODE_NAME, context=context)
+        self.node = Node(ros_name(node_name), context=context)
         self._names = list(session.arm.joint_names)
         self._closed = False
         self._stop_group = MutuallyExclusiveCallbackGroup()
@@ -121,6 +124,7 @@ class SeqrunNode:
         if self._closed:
             return
         self._closed = True
+        self._timer.cancel()
         self._listener.close(timeout=1.0)
         if self.action_server is not None:
             self.action_server.destroy()
@@ -129,6 +133,8 @@ class SeqrunNode:
     # ------------------------------------------------------------------ state
     def publish_state(self) -> None:
         """``joint_states`` (and ``/tf``) from the session's latest measurement."""
+        if self._closed:
+            return
         status = self.session.status()
         if status.updated_at is None:
             return  # nothing measured yet
