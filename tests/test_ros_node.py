@@ -134,7 +134,7 @@ class Graph:
         self.executor.shutdown()  # the spin ends before the nodes go ...
         self.thread.join(timeout=10)
         assert not self.thread.is_alive()
-        time.sleep(0.1)  # ... and so do callbacks under way (shutdown does not wait for them)
+        time.sleep(0.5)  # ... and so do callbacks under way (shutdown does not wait for them)
         self.seqrun.close()
         self.client.destroy_node()
         self.session.close()
