@@ -36,13 +36,10 @@ def volumes_in_facility(geometry: Geometry, base: np.ndarray, q_rad: np.ndarray
     return seg @ base[:3, :3].T + base[:3, 3]
 
 
-def between_arms(first: tuple[str, Geometry, np.ndarray], second: tuple[str, Geometry,
-                 np.ndarray], q_first: np.ndarray, q_second: np.ndarray) -> Clearance | None:
-    """The smallest clearance between two arms over time-aligned samples: ``first`` and
-    ``second`` are (arm id, geometry, base transform), ``q_first[k]`` and ``q_second[k]``
-    the two arms' joints (rad) at the same instant. The pair reads
-    ``"A.forearm~B.wrist"``; ``index`` the sample where it occurs. None: no volumes."""
-    (id_a, geo_a, base_a), (id_b, geo_b, base_b) = first, second
+def _distances(first: tuple[str, Geometry, np.ndarray], second: tuple[str, Geometry,
+               np.ndarray], q_first: np.ndarray, q_second: np.ndarray) -> np.ndarray | None:
+    """Every volume of one arm against every volume of the other: ``(k, na, nb)`` mm."""
+    (_, geo_a, base_a), (_, geo_b, base_b) = first, second
     qa, qb = np.atleast_2d(q_first), np.atleast_2d(q_second)
     if geo_a.empty or geo_b.empty or not len(qa):
         return None
@@ -50,13 +47,35 @@ def between_arms(first: tuple[str, Geometry, np.ndarray], second: tuple[str, Geo
         raise ValueError("the two arms need the same number of samples")
     seg_a = volumes_in_facility(geo_a, base_a, qa)  # (k, na, 2, 3)
     seg_b = volumes_in_facility(geo_b, base_b, qb)  # (k, nb, 2, 3)
-    ra, rb = geo_a.radii_mm, geo_b.radii_mm
     d = segment_segment(seg_a[:, :, None, 0, :], seg_a[:, :, None, 1, :],
                         seg_b[:, None, :, 0, :], seg_b[:, None, :, 1, :])
-    d = d - ra[None, :, None] - rb[None, None, :]  # (k, na, nb)
-    flat = int(np.argmin(d))
-    index, rest = divmod(flat, d.shape[1] * d.shape[2])
-    i, j = divmod(rest, d.shape[2])
-    names_a, names_b = geo_a.volume_names, geo_b.volume_names
-    return Clearance(float(d.reshape(-1)[flat]), f"{id_a}.{names_a[i]}~{id_b}.{names_b[j]}",
+    return d - geo_a.radii_mm[None, :, None] - geo_b.radii_mm[None, None, :]
+
+
+def _at(first, second, d: np.ndarray, index: int) -> Clearance:
+    row = d[index]
+    i, j = np.unravel_index(int(np.argmin(row)), row.shape)
+    names_a, names_b = first[1].volume_names, second[1].volume_names
+    return Clearance(float(row[i, j]), f"{first[0]}.{names_a[i]}~{second[0]}.{names_b[j]}",
                      index)
+
+
+def between_arms(first: tuple[str, Geometry, np.ndarray], second: tuple[str, Geometry,
+                 np.ndarray], q_first: np.ndarray, q_second: np.ndarray,
+                 below_mm: float | None = None) -> tuple[Clearance, Clearance | None] | None:
+    """The smallest clearance between two arms over time-aligned samples: ``first`` and
+    ``second`` are (arm id, geometry, base transform), ``q_first[k]`` and ``q_second[k]``
+    the two arms' joints (rad) at the same instant. Returns ``(smallest, first sample
+    below below_mm or None)``; a pair reads ``"A.forearm~B.wrist"``, ``index`` is the
+    sample. None: an arm has no volumes."""
+    d = _distances(first, second, q_first, q_second)
+    if d is None:
+        return None
+    per_sample = d.reshape(len(d), -1).min(axis=1)
+    smallest = _at(first, second, d, int(np.argmin(per_sample)))
+    early = None
+    if below_mm is not None:
+        below = np.flatnonzero(per_sample < below_mm)
+        if len(below):
+            early = _at(first, second, d, int(below[0]))
+    return smallest, early
