@@ -4,6 +4,8 @@ today's one-arm format keeps resolving as before."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -96,3 +98,97 @@ def test_a_bad_arms_table_is_file_line_col(quiet_env, text, where, message):
         campaign(quiet_env / "bad", text)
     line = str(caught.value).splitlines()[0]
     assert f"seqrun.toml:{where}:" in line and message in line, line
+
+
+# ------------------------------------------------------------------ status / halt / reset
+def served(serial_base: int, power_on_pose: str):
+    from seqrun.clock import RealClock
+    from seqrun.sim.arm import SimArm
+    from seqrun.sim.network import SimNetwork
+    from seqrun.sim.socketcand import SocketcandServer
+
+    clock = RealClock()
+    serials = {m: serial_base + m for m in range(1, 8)}
+    server = SocketcandServer(SimNetwork(clock, SimArm(clock, power_on_pose=power_on_pose,
+                                                       serials=serials),
+                                         spin_window=0.0), port=0)
+    server.start()
+    return server
+
+
+@pytest.fixture
+def two_served(quiet_env, monkeypatch):
+    """Two simulated arms, each its own server (own serials and power-on pose), named by
+    a campaign with arms A and B."""
+    first, second = served(5_100_000, "park"), served(5_200_000, "totem")
+    folder = quiet_env / "dual"
+    folder.mkdir()
+    (folder / "seqrun.toml").write_text(f"""\
+[arms.A]
+bus = {{ interface = "socketcand", channel = "can0", kwargs = {{ host = "127.0.0.1", port = {first.port} }} }}
+
+[arms.B]
+bus = {{ interface = "socketcand", channel = "can0", kwargs = {{ host = "127.0.0.1", port = {second.port} }} }}
+base = {{ position_mm = [0, 900, 0], rpy_deg = [0, 0, 180] }}
+""")
+    monkeypatch.chdir(folder)
+    yield {"A": first, "B": second}
+    first.shutdown()
+    second.shutdown()
+
+
+def halted(server) -> bool:
+    from seqrun.powercube.protocol import StateFlag
+
+    return all(StateFlag(s) & StateFlag.HALTED for s in server.network.arm.states().values())
+
+
+def test_halt_halts_every_arm_and_confirms_each(two_served):
+    from typer.testing import CliRunner
+
+    from seqrun.cli import app
+
+    result = CliRunner().invoke(app, ["halt"])
+    assert result.exit_code == 0, result.output
+    lines = result.output.splitlines()
+    assert [l.startswith("arm A: ") for l in lines].count(True) == 1
+    assert [l.startswith("arm B: ") for l in lines].count(True) == 1
+    assert sum("Halt confirmed by modules 1, 2, 3, 4, 5, 6, 7" in l for l in lines) == 2
+    assert halted(two_served["A"]) and halted(two_served["B"])
+
+
+def test_halt_and_reset_one_arm_by_its_id(two_served):
+    from typer.testing import CliRunner
+
+    from seqrun.cli import app
+
+    result = CliRunner().invoke(app, ["halt", "--arm-id", "B"])
+    assert result.exit_code == 0, result.output
+    assert halted(two_served["B"]) and not halted(two_served["A"])
+    assert "arm A" not in result.output
+    result = CliRunner().invoke(app, ["reset", "--arm-id", "B"])
+    assert result.exit_code == 0, result.output
+    assert not halted(two_served["B"])
+    result = CliRunner().invoke(app, ["halt", "--arm-id", "C"])
+    assert result.exit_code == 2
+    assert result.output.strip() == "error: unknown arm 'C': campaign " \
+        f"{Path.cwd()} has arms A, B"
+
+
+def test_status_of_every_arm_reads_each_its_own_arm(two_served):
+    import json
+
+    from typer.testing import CliRunner
+
+    from seqrun.cli import app
+
+    from seqrun.powercube.protocol import StateFlag
+
+    two_served["B"].network.arm.module(3)._flags |= StateFlag.HALTED  # only B's j3
+    result = CliRunner().invoke(app, ["status", "--json"])
+    assert result.exit_code == 0, result.output
+    a, b = [json.loads(line) for line in result.output.splitlines() if line.startswith("{")]
+    assert "HALTED" not in (a["joints"][2]["state"] or "")
+    assert "HALTED" in b["joints"][2]["state"]
+    result = CliRunner().invoke(app, ["status", "--watch"])
+    assert result.exit_code == 2 and "--watch follows one arm" in result.output

@@ -122,8 +122,8 @@ class CampaignConfig(_Strict):
             keys = [_bus_identity(a.bus) for a in self.arms.values()
                     if a.bus.interface is not None]
             if len(keys) != len(set(keys)):
-                raise ValueError("two arms name the same bus (interface and channel): give "
-                                 "each arm a bus of its own")
+                raise ValueError("two arms name the same bus (interface, channel and "
+                                 "kwargs): give each arm a bus of its own")
         return self
 
     @property
@@ -132,5 +132,6 @@ class CampaignConfig(_Strict):
         return tuple(self.arms)
 
 
-def _bus_identity(bus: BusSection) -> tuple[str, str]:
-    return (str(bus.interface), str(bus.channel))
+def _bus_identity(bus: BusSection) -> tuple[str, str, str]:
+    # the same interface and channel on another host or port (socketcand) is another bus
+    return (str(bus.interface), str(bus.channel), repr(sorted(bus.kwargs.items())))

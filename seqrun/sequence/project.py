@@ -162,7 +162,8 @@ def read_config(path: Path) -> tuple[CampaignConfig, bytes]:
             message = ("unknown key (expected: " + _expected(error["loc"]) + ")"
                        if error["type"] == "extra_forbidden"
                        else error["msg"].removeprefix("Value error, "))
-            errors.append(SourceError(shown, line, column, f"{where}: {message}"))
+            errors.append(SourceError(shown, line, column,
+                                      f"{where}: {message}" if where else message))
         raise ConfigInvalid(errors) from None
 
 
