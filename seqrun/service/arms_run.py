@@ -22,7 +22,8 @@ from typing import Any
 
 from seqrun.results import EXIT_OK, RunResult
 
-__all__ = ["ArmOutcome", "ArmsOutcome", "EventBoard", "OTHER_ARM_FAULT", "run_tracks"]
+__all__ = ["ArmOutcome", "ArmsOutcome", "EventBoard", "OTHER_ARM_FAULT", "run_arms_live",
+           "run_tracks"]
 
 #: The stop cause of an arm halted because another arm faulted.
 OTHER_ARM_FAULT = "other_arm_fault"
@@ -122,12 +123,14 @@ def run_tracks(tracks: Mapping[str, Any], arms: Mapping[str, Any],
                on_executor: Callable[[str, Any], None] | None = None,
                clock_views: Mapping[str, Any] | None = None,
                before_run: Callable[[str], None] | None = None,
+               requests_by_arm: Mapping[str, Any] | None = None,
                **run: Any) -> ArmsOutcome:
     """Run every arm's track on its connection, each on a thread of its own (see the
     module doc). ``clock_views``: each arm's :class:`~seqrun.clock.LockstepView` (the dry
     run), left when its run ends. ``before_run(arm_id)``: on the arm's thread before its
-    run (the dry run's start-up of ``--started``). ``run``: further :func:`run_sequence`
-    options."""
+    run (the dry run's start-up of ``--started``). ``requests_by_arm``: each arm's
+    stop-request inbox (the signal handlers post to every one). ``run``: further
+    :func:`run_sequence` options."""
     from seqrun.service.runner import run_sequence
 
     board = EventBoard(signallers(tracks))
@@ -158,7 +161,8 @@ def run_tracks(tracks: Mapping[str, Any], arms: Mapping[str, Any],
                 before_run(arm_id)
             outcome = run_sequence(tracks[arm_id], arms[arm_id], connections[arm_id],
                                    log_dir=(log_dirs or {}).get(arm_id), dry_run=dry_run,
-                                   on_executor=hook(arm_id), **run)
+                                   on_executor=hook(arm_id),
+                                   requests=(requests_by_arm or {}).get(arm_id), **run)
             result = outcome.result
             outcomes[arm_id] = ArmOutcome(arm_id, result, outcome)
         except BaseException as exc:  # noqa: BLE001 - said in the outcome; the others halt
@@ -187,7 +191,8 @@ def run_tracks(tracks: Mapping[str, Any], arms: Mapping[str, Any],
     for thread in threads:
         thread.start()
     for thread in threads:
-        thread.join()
+        while thread.is_alive():  # a signal handler runs between the waits
+            thread.join(0.1)
     if errors:
         arm_id, exc = next(iter(errors.items()))
         raise exc
@@ -205,3 +210,21 @@ def run_tracks(tracks: Mapping[str, Any], arms: Mapping[str, Any],
                                 "(on_fault = halt_faulted in seqrun.toml); the other arms "
                                 "went on")
     return result
+
+
+def run_arms_live(tracks: Mapping[str, Any], arms: Mapping[str, Any],
+                  connections: Mapping[str, Any], *, controls: Mapping[str, Any],
+                  on_event: Callable[[str, Any], None] | None = None,
+                  **options: Any) -> ArmsOutcome:
+    """:func:`run_tracks` for ``seqrun run``: each arm's run control (``seqrun status|halt``
+    from another terminal, None where its bus has no claim) follows its executor, and
+    ``on_event(arm_id, event)`` gets every typed event of every arm (on that arm's loop
+    thread: it must be quick)."""
+    def attach(arm_id: str, executor: Any) -> None:
+        control = controls.get(arm_id)
+        if control is not None:
+            control.attach(executor)
+        if on_event is not None:
+            executor.listeners.append(lambda event: on_event(arm_id, event))
+
+    return run_tracks(tracks, arms, connections, on_executor=attach, **options)
