@@ -253,3 +253,18 @@ def test_the_lockstep_clock_moves_only_when_every_thread_sleeps():
         t.join(5)
     assert [t for _, t in seen] == sorted(t for _, t in seen)
     assert sorted(seen) == [("a", 0.3), ("a", 0.6), ("a", 0.9), ("b", 0.5), ("b", 1.0)]
+
+
+def test_validating_the_campaign_folder_checks_each_file_as_it_runs(campaign):
+    """A two-arm sequence as two arms; a fragment naming no arm (startup.yaml, included
+    per arm) as one arm's sequence against the first arm's arm file."""
+    result = CliRunner().invoke(app, ["validate", ".", "--static", "--json"])
+    assert result.exit_code == 1, result.output
+    import json
+
+    rows = {r["file"]: r for r in json.loads(result.output)["results"]}
+    assert rows["sequences/hold_and_approach.yaml"]["result"] == "valid"
+    assert "between arms" in rows["sequences/hold_and_approach.yaml"][
+        "lowest_guard_clearance_at"]
+    assert rows["sequences/paths_cross.yaml"]["result"] == "invalid"
+    assert rows["sequences/startup.yaml"]["result"] == "valid"

@@ -243,7 +243,7 @@ class Project:
         """The files an arm reference may mean, in search order. ``name``: what a sequence's
         ``arm:`` says (a file relative to the project), else the campaign's arm."""
         if name is None and self.config is not None:
-            name = self.config.campaign.arm
+            name = self._default_arm()
         if name is None:
             return [self.root / "arms" / f"{DEFAULT_ARM_NAME}.yaml",
                     shipped_dir("arms") / f"{DEFAULT_ARM_NAME}.yaml"]
@@ -262,10 +262,18 @@ class Project:
             if path.is_file():
                 return path.resolve()
         if name is None and self.config is not None:
-            name = self.config.campaign.arm
+            name = self._default_arm()
         what = f"arm '{name}'" if name else "the arm"
         raise UserInputError(f"{what} not found (looked for "
                              + ", ".join(str(p) for p in candidates) + ")")
+
+    def _default_arm(self) -> str:
+        """The campaign's arm; with several arms ([arms.ID]) the first one's (a sequence
+        fragment that names no arm is checked against it)."""
+        assert self.config is not None
+        if self.config.arms:
+            return next(iter(self.config.arms.values())).arm
+        return self.config.campaign.arm
 
     def describe(self) -> str:
         if self.config_path is not None:

@@ -87,13 +87,39 @@ class ArmsCheck:
 
 
 def campaign_has_arms(file: Path, project_dir: Path | None = None) -> Any:
-    """The campaign of ``file`` when its ``seqrun.toml`` names arms (``[arms.ID]``), else
-    None: the file is an ordinary one-arm sequence."""
+    """The campaign of ``file`` when its ``seqrun.toml`` names arms (``[arms.ID]``) and the
+    file addresses them, else None: an ordinary one-arm sequence, or a fragment of a
+    campaign with several arms that names no arm (``startup.yaml``, included per arm),
+    checked as one arm's sequence against the first arm's arm file."""
     from seqrun.sequence.project import project_for
 
     project = project_for(Path(file).resolve(), project_dir)
     config = project.config
-    return project if config is not None and config.arm_ids else None
+    if config is None or not config.arm_ids:
+        return None
+    return project if _addresses_arms(Path(file)) else None
+
+
+def _addresses_arms(file: Path) -> bool:
+    """Whether a sequence file names arms (``arm:`` in a step, ``parallel:``); one that
+    cannot be read is taken as one (its errors come from the arms' loader)."""
+    import yaml
+
+    try:
+        data = yaml.safe_load(file.read_text(encoding="utf-8"))
+    except (OSError, ValueError, yaml.YAMLError):
+        return True
+    steps = data.get("steps") if isinstance(data, dict) else None
+    if not isinstance(steps, list):
+        return True
+    for item in steps:
+        if not isinstance(item, dict):
+            continue
+        if "arm" in item or "parallel" in item:
+            return True
+        if any(isinstance(v, dict) and "arm" in v for v in item.values()):
+            return True
+    return False
 
 
 def check_arms_sequence(file: Path, project: Any, *, start: str | None = None,
