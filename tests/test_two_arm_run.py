@@ -106,3 +106,17 @@ def test_one_arm_options_are_refused_with_several_arms(campaign):
     assert "--arm: not for a campaign with several arms" in result.output
     result = run("sequences/short.yaml", "--sim-fault", "3:halt@1")
     assert result.exit_code == 2 and "ARM/SPEC" in result.output
+
+
+def test_a_stop_request_goes_to_every_arm():
+    """Ctrl-C and SIGTERM reach every arm's inbox (the signal handler posts once)."""
+    from seqrun.cli.run_arms import EveryArm
+    from seqrun.stop_requests import StopRequests
+
+    inboxes = [StopRequests(), StopRequests()]
+    every = EveryArm(inboxes)
+    every.abort("Ctrl-C: controlled stop")
+    every.halt("SIGTERM")
+    for inbox in inboxes:
+        kinds = [(r.kind, r.reason) for r in inbox.take()]
+        assert kinds == [("abort", "Ctrl-C: controlled stop"), ("halt", "SIGTERM")]

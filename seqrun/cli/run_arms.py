@@ -187,7 +187,7 @@ def _run(file: Path, check, contexts, connections, arms, clock_views, *, speed: 
     signals = RunSignals(EveryArm(list(inboxes.values())))
     signals.install()
     try:
-        outcome = run_arms_live(tracks, {a: arms[a][0] for a in tracks}, connections,
+        outcome = _arms_live(run_arms_live, tracks, {a: arms[a][0] for a in tracks}, connections,
                                 controls=controls, on_event=show, dry_run=False,
                                 on_fault=_on_fault(check.tracks.project), log_dirs=log_dirs,
                                 clock_views=clock_views, speed=speed, confirm=confirm,
@@ -195,6 +195,8 @@ def _run(file: Path, check, contexts, connections, arms, clock_views, *, speed: 
                                 requests_by_arm=inboxes, file=str(file))
     finally:
         signals.restore()
+    if outcome is None:
+        fail(f"the run ended in an error (every arm was halted); log: {folder}", EXIT_FAULT)
     for arm_id, arm in outcome.arms.items():
         r = arm.result
         why = f" (halted because arm {arm.halted_for} faulted)" if arm.halted_for else ""
@@ -204,6 +206,16 @@ def _run(file: Path, check, contexts, connections, arms, clock_views, *, speed: 
     _write_summary(folder, check, outcome)
     typer.echo(f"log: {folder}")
     return outcome.exit_code
+
+
+def _arms_live(run, *args: Any, **kwargs: Any) -> Any:
+    """The run; an error outside every step (a bug: each arm's run has halted its arm and
+    the others were halted for it) is one line, never a traceback (None)."""
+    try:
+        return run(*args, **kwargs)
+    except Exception as exc:  # noqa: BLE001 - said in one line, the arms are halted
+        typer.echo(f"error: {type(exc).__name__}: {exc}", err=True)
+        return None
 
 
 def _write_summary(folder: Path, check, outcome) -> None:
