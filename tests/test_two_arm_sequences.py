@@ -72,6 +72,7 @@ def test_the_crossing_example_is_refused_at_the_step_that_crosses(campaign):
     assert found.dry_run is None  # nothing runs after a refusal
 
 
+@pytest.mark.slow
 def test_validate_cli_refuses_the_crossing_example_with_file_line_col(campaign):
     result = CliRunner().invoke(app, ["validate", "sequences/paths_cross.yaml", "--static"])
     assert result.exit_code == 1, result.output
@@ -116,7 +117,8 @@ def test_steps_are_split_into_one_track_per_arm_with_the_order_in_them(campaign)
 @pytest.mark.parametrize("steps, where, message", [
     ("  - move: {pose: totem, arm: C}\n", "4:30", "unknown arm 'C' (this campaign has arms A, B)"),
     ("  - {arm: 7, move: totem}\n", "4:11", "unknown arm '7'"),
-    ("  - move: totem\n", "4:5", "which arm? this campaign has arms A, B"),
+    ("  - move: {pose: totem, arm: A}\n  - move: totem\n", "5:5",
+     "which arm? this campaign has arms A, B"),
     ("  - parallel:\n      - {arm: A, steps: [wait: 1]}\n      - {arm: A, steps: [wait: 1]}\n",
      "6:15", "two branches on arm A (the other at line 5)"),
     ("  - parallel:\n      - arm: A\n        steps: [{move: {pose: totem, arm: B}}]\n",
@@ -255,6 +257,7 @@ def test_the_lockstep_clock_moves_only_when_every_thread_sleeps():
     assert sorted(seen) == [("a", 0.3), ("a", 0.6), ("a", 0.9), ("b", 0.5), ("b", 1.0)]
 
 
+@pytest.mark.slow
 def test_validating_the_campaign_folder_checks_each_file_as_it_runs(campaign):
     """A two-arm sequence as two arms; a fragment naming no arm (startup.yaml, included
     per arm) as one arm's sequence against the first arm's arm file."""
