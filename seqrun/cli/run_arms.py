@@ -180,6 +180,10 @@ def _run(file: Path, check, contexts, connections, arms, clock_views, *, speed: 
             return ask(prompt, yes, say=_say)
 
     printers = {a: _printer(a) for a in tracks}
+    # the built-in simulator keeps no record: its zero is its power-on pose
+    recorders = {a: None if connections[a].is_simulator or arms[a][1].store is None
+                 else campaign_records.zero_recorder(arms[a][1].store, arms[a][0], tracks[a])
+                 for a in tracks}
 
     def show(arm_id: str, event: Any) -> None:
         printers[arm_id](event)
@@ -188,7 +192,9 @@ def _run(file: Path, check, contexts, connections, arms, clock_views, *, speed: 
     signals.install()
     try:
         outcome = _arms_live(run_arms_live, tracks, {a: arms[a][0] for a in tracks}, connections,
-                                controls=controls, on_event=show, dry_run=False,
+                                controls=controls, on_event=show,
+                                zeros={a: arms[a][1] for a in tracks},
+                                record_zero=recorders,
                                 on_fault=_on_fault(check.tracks.project), log_dirs=log_dirs,
                                 clock_views=clock_views, speed=speed, confirm=confirm,
                                 command_mode=command_mode, html_report=not no_report,

@@ -124,13 +124,15 @@ def run_tracks(tracks: Mapping[str, Any], arms: Mapping[str, Any],
                clock_views: Mapping[str, Any] | None = None,
                before_run: Callable[[str], None] | None = None,
                requests_by_arm: Mapping[str, Any] | None = None,
+               runner: Callable[..., Any] | None = None,
                **run: Any) -> ArmsOutcome:
     """Run every arm's track on its connection, each on a thread of its own (see the
     module doc). ``clock_views``: each arm's :class:`~seqrun.clock.LockstepView` (the dry
     run), left when its run ends. ``before_run(arm_id)``: on the arm's thread before its
     run (the dry run's start-up of ``--started``). ``requests_by_arm``: each arm's
-    stop-request inbox (the signal handlers post to every one). ``run``: further
-    :func:`run_sequence` options."""
+    stop-request inbox (the signal handlers post to every one). ``runner(arm_id, loaded,
+    **options)``: how one arm's run is made (default :func:`run_sequence` on its
+    connection; ``seqrun run``: the arm's session). ``run``: further options."""
     from seqrun.service.runner import run_sequence
 
     board = EventBoard(signallers(tracks))
@@ -159,10 +161,14 @@ def run_tracks(tracks: Mapping[str, Any], arms: Mapping[str, Any],
         try:
             if before_run is not None:
                 before_run(arm_id)
-            outcome = run_sequence(tracks[arm_id], arms[arm_id], connections[arm_id],
-                                   log_dir=(log_dirs or {}).get(arm_id), dry_run=dry_run,
-                                   on_executor=hook(arm_id),
-                                   requests=(requests_by_arm or {}).get(arm_id), **run)
+            options = dict(run, log_dir=(log_dirs or {}).get(arm_id),
+                           on_executor=hook(arm_id),
+                           requests=(requests_by_arm or {}).get(arm_id))
+            if runner is not None:
+                outcome = runner(arm_id, tracks[arm_id], **options)
+            else:
+                outcome = run_sequence(tracks[arm_id], arms[arm_id], connections[arm_id],
+                                       dry_run=dry_run, **options)
             result = outcome.result
             outcomes[arm_id] = ArmOutcome(arm_id, result, outcome)
         except BaseException as exc:  # noqa: BLE001 - said in the outcome; the others halt
@@ -215,11 +221,22 @@ def run_tracks(tracks: Mapping[str, Any], arms: Mapping[str, Any],
 def run_arms_live(tracks: Mapping[str, Any], arms: Mapping[str, Any],
                   connections: Mapping[str, Any], *, controls: Mapping[str, Any],
                   on_event: Callable[[str, Any], None] | None = None,
+                  zeros: Mapping[str, Any] | None = None,
+                  record_zero: Mapping[str, Any] | None = None,
                   **options: Any) -> ArmsOutcome:
-    """:func:`run_tracks` for ``seqrun run``: each arm's run control (``seqrun status|halt``
-    from another terminal, None where its bus has no claim) follows its executor, and
-    ``on_event(arm_id, event)`` gets every typed event of every arm (on that arm's loop
-    thread: it must be quick)."""
+    """:func:`run_tracks` for ``seqrun run``: every arm runs in an arm session of its own
+    (:class:`~seqrun.service.session.ArmSession`, its driver, zero and activities, as one
+    arm's run), each arm's run control (``seqrun status|halt`` from another terminal, None
+    where its bus has no claim) follows its run, and ``on_event(arm_id, event)`` gets
+    every typed event of every arm (on that arm's loop thread: it must be quick).
+    ``record_zero``: per arm, what records its zero at a power_off step (None: the
+    simulator)."""
+    from seqrun.service.session import ArmSession
+
+    sessions = {a: ArmSession(arms[a], connections[a], project=tracks[a].project,
+                              zero=(zeros or {}).get(a), status_hz=0, own_connection=False)
+                for a in tracks}
+
     def attach(arm_id: str, executor: Any) -> None:
         control = controls.get(arm_id)
         if control is not None:
@@ -227,4 +244,16 @@ def run_arms_live(tracks: Mapping[str, Any], arms: Mapping[str, Any],
         if on_event is not None:
             executor.listeners.append(lambda event: on_event(arm_id, event))
 
-    return run_tracks(tracks, arms, connections, on_executor=attach, **options)
+    def runner(arm_id: str, loaded: Any, **run: Any) -> Any:
+        zero = (zeros or {}).get(arm_id)
+        return sessions[arm_id].run_loaded(
+            loaded, record_zero=(record_zero or {}).get(arm_id),
+            meta={"arm_id": arm_id, **({"zero": zero.as_dict()} if zero is not None else {})},
+            **run)
+
+    try:
+        return run_tracks(tracks, arms, connections, on_executor=attach, runner=runner,
+                          dry_run=False, **options)
+    finally:
+        for session in sessions.values():
+            session.close()
