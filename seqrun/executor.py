@@ -73,6 +73,8 @@ class Executor:
     #: Records the zero reference at a power_off step (set by whoever runs the sequence;
     #: None: a dry run or the built-in simulator, nothing is recorded).
     record_zero: Callable[[str], Any] | None = None
+    #: The events between the arms of a campaign run (signal, wait_for; None: one arm).
+    sync: Any = None
 
     def __init__(self, driver: ArmDriver | Any, arm: ArmDescription, clock: Clock, *,
                  poses_dir: PoseDirs | None = None, speed: float = 1.0,

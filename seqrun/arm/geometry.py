@@ -299,6 +299,16 @@ class Geometry:
         return not len(self._radii)
 
     @property
+    def radii_mm(self) -> np.ndarray:
+        """The volumes' radii, in :meth:`endpoints` order (links, then tools)."""
+        return self._radii
+
+    @property
+    def volume_names(self) -> list[str]:
+        """The volumes' names, in :meth:`endpoints` order (links, then tools)."""
+        return self.capsule_names + [part.label for part in self.tools.parts]
+
+    @property
     def ee_points(self) -> np.ndarray | None:
         """The points of the end-effector frame the volumes need (the tools'), for
         :func:`~seqrun.arm.kinematics.frame_origins`; None without tools."""

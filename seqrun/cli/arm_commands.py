@@ -73,13 +73,26 @@ def status_command(
     channel: ChannelOption = None, bitrate: BitrateOption = None,
     bus_kwargs: BusKwargsOption = None, sim: SimOption = False,
     response_timeout_ms: ResponseTimeoutOption = None,
+    arm_id: ArmIdOption = None,
 ) -> None:
     """Joints, state flags and end-effector pose (reads only; nothing moves).
 
     With --watch a lost answer does not end the watch: the joint shows its last value,
     marked stale, and the next refresh asks again. With no bus configured: the seqrun run
-    or console live on this machine (--pid to pick one), else exit 2.
+    or console live on this machine (--pid to pick one), else exit 2. In a campaign with
+    several arms: every arm, one table each (--arm-id ID: that one; --watch: one arm).
     """
+    with user_errors():
+        ids = _arm_ids(arm_id, project_dir, interface, channel, arm_file)
+    if len(ids) > 1 and watch:
+        fail(f"--watch follows one arm: name it with --arm-id ({', '.join(map(str, ids))})")
+    _each_arm(ids, lambda one: _status_of(
+        one, watch, as_json, period, count, pid, arm_file, project_dir, interface, channel,
+        bitrate, bus_kwargs, sim, response_timeout_ms))
+
+
+def _status_of(arm_id, watch, as_json, period, count, pid, arm_file, project_dir, interface,
+               channel, bitrate, bus_kwargs, sim, response_timeout_ms) -> None:
     from rich.live import Live
 
     from seqrun.cli.bus_owner import (OwnerDidNotAnswer, StatusSource, live_targets,
@@ -88,7 +101,7 @@ def status_command(
 
     with user_errors():
         context = _context(arm_file, project_dir, interface, channel, bitrate, bus_kwargs,
-                           sim, response_timeout_ms)
+                           sim, response_timeout_ms, arm_id)
         arm = context.arm
         through = live_targets(context, "status", pid)
     console = make_console()
@@ -144,13 +157,19 @@ def status_command(
         source.close()
 
 
+#: ``--arm-id ID`` (repeatable): in a campaign with several arms ([arms.ID]), which ones
+#: (default: every arm of the campaign).
+ArmIdOption = Annotated[Optional[list[str]], typer.Option(
+    "--arm-id", metavar="ID", help="In a campaign with several arms: this arm (repeatable; "
+                                   "default every arm).")]
+
 PidOption = Annotated[Optional[int], typer.Option(
     "--pid", metavar="PID", help="With no bus given: the live seqrun run or console to ask "
                                  "(when several are live on this machine).")]
 
 
 def _context(arm_file, project_dir, interface, channel, bitrate, bus_kwargs, sim,
-             response_timeout_ms):
+             response_timeout_ms, arm_id: str | None = None):
     """The arm context of these options (seqrun/service/arm_context.py); checks the
     response timeout first, as connecting would."""
     from seqrun.service.arm_context import resolve_context
@@ -159,9 +178,40 @@ def _context(arm_file, project_dir, interface, channel, bitrate, bus_kwargs, sim
     context = resolve_context(project_dir=project_dir, arm_file=arm_file,
                               interface=interface, channel=channel, bitrate=bitrate,
                               bus_kwargs=bus_kwargs or [], sim=sim,
-                              response_timeout_ms=response_timeout_ms)
+                              response_timeout_ms=response_timeout_ms, arm_id=arm_id)
     response_timeout_s(context.arm, response_timeout_ms)
     return context
+
+
+def _arm_ids(arm_ids, project_dir, interface=None, channel=None,
+             arm_file=None) -> list[str | None]:
+    """The arms a command acts on: ``--arm-id`` (checked), else every arm of a campaign
+    with several, else the one arm (None). One bus or arm file on the command line for
+    several arms: refused (each has its own)."""
+    from seqrun.service.arm_context import resolve_contexts
+
+    contexts = resolve_contexts(arm_ids=arm_ids or None, project_dir=project_dir,
+                                interface=interface, channel=channel, arm_file=arm_file)
+    return [c.arm_id for c in contexts]
+
+
+def _each_arm(ids: list[str | None], act) -> None:
+    """``act(arm_id)`` for every arm; with several, one arm's failure (its own ``error:``
+    line) does not keep the next from being acted on; the exit code is the worst."""
+    if len(ids) == 1:
+        act(ids[0])
+        return
+    failed: list[tuple[str, int]] = []
+    for arm_id in ids:
+        try:
+            act(arm_id)
+        except typer.Exit as exc:
+            if exc.exit_code:
+                failed.append((str(arm_id), exc.exit_code))
+    if failed:
+        fail(f"not confirmed for arm{'s' * (len(failed) > 1)} "
+             f"{', '.join(a for a, _ in failed)} (every arm was asked)",
+             max(code for _, code in failed))
 
 
 def _title(arm, source, status: dict) -> str:
@@ -238,18 +288,28 @@ def halt_command(arm_file: ArmFileOption = None, project_dir: CampaignOption = N
                  channel: ChannelOption = None, bitrate: BitrateOption = None,
                  bus_kwargs: BusKwargsOption = None, sim: SimOption = False,
                  response_timeout_ms: ResponseTimeoutOption = None,
-                 pid: PidOption = None) -> None:
+                 pid: PidOption = None, arm_id: ArmIdOption = None) -> None:
     """Broadcast Halt: every module stops at once and refuses motion until Reset.
     Confirmed by reading every module's state back (HALTED); exit 3 naming the modules
     that did not confirm. While another seqrun holds the bus (a run), the Halt goes
     straight to the bus all the same, and that seqrun confirms it. With no bus configured:
     the seqrun runs and consoles live on this machine are halted through their control
-    sockets; with none live, exit 2 (there is no arm to halt)."""
+    sockets; with none live, exit 2 (there is no arm to halt). In a campaign with several
+    arms every arm is halted and confirms, one after the other (--arm-id ID: that one); one
+    arm that does not confirm does not keep the next from being halted (exit 3)."""
+    with user_errors():
+        ids = _arm_ids(arm_id, project_dir, interface, channel, arm_file)
+    _each_arm(ids, lambda one: _halt_arm(one, arm_file, project_dir, interface, channel,
+                                         bitrate, bus_kwargs, sim, response_timeout_ms, pid))
+
+
+def _halt_arm(arm_id, arm_file, project_dir, interface, channel, bitrate, bus_kwargs, sim,
+              response_timeout_ms, pid) -> None:
     from seqrun.cli.bus_owner import live_targets
 
     with user_errors():
         context = _context(arm_file, project_dir, interface, channel, bitrate, bus_kwargs,
-                           sim, response_timeout_ms)
+                           sim, response_timeout_ms, arm_id)
         live = live_targets(context, "halt", pid)
     if live:
         _halt_through(context, live)
@@ -343,15 +403,24 @@ def reset_command(arm_file: ArmFileOption = None, project_dir: CampaignOption = 
                   interface: InterfaceOption = None,
                   channel: ChannelOption = None, bitrate: BitrateOption = None,
                   bus_kwargs: BusKwargsOption = None, sim: SimOption = False,
-                  response_timeout_ms: ResponseTimeoutOption = None) -> None:
+                  response_timeout_ms: ResponseTimeoutOption = None,
+                  arm_id: ArmIdOption = None) -> None:
     """Broadcast Reset: clears ERROR/HALTED (motion still needs Home). Confirmed by reading
     every module's state back (no ERROR, no HALTED); exit 3 naming the modules that did
     not confirm. With no bus configured: exit 2 (a live run or console resets its arm
-    itself)."""
+    itself). In a campaign with several arms: every arm (--arm-id ID: that one)."""
+    with user_errors():
+        ids = _arm_ids(arm_id, project_dir, interface, channel, arm_file)
+    _each_arm(ids, lambda one: _reset_arm(one, arm_file, project_dir, interface, channel,
+                                          bitrate, bus_kwargs, sim, response_timeout_ms))
+
+
+def _reset_arm(arm_id, arm_file, project_dir, interface, channel, bitrate, bus_kwargs, sim,
+               response_timeout_ms) -> None:
     from seqrun.cli.bus_owner import live_targets
 
     with user_errors():
         context = _context(arm_file, project_dir, interface, channel, bitrate, bus_kwargs,
-                           sim, response_timeout_ms)
+                           sim, response_timeout_ms, arm_id)
         live_targets(context, "reset")
     _broadcast("reset", context)

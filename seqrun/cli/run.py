@@ -124,7 +124,26 @@ def run_command(
         "power-off pose POSE (a different record refuses the run). --yes never answers it.")]
     = None,
 ) -> None:
-    """Run a sequence: validate, read the arm, re-validate from where it stands, move."""
+    """Run a sequence: validate, read the arm, re-validate from where it stands, move.
+    In a campaign with several arms ([arms.ID]): every arm its track, together
+    (docs/two-arms.md; --sim-fault ARM/SPEC)."""
+    with user_errors():
+        from seqrun.service.arms_check import campaign_has_arms
+
+        arms_project = campaign_has_arms(file, project_dir) if file.exists() else None
+    if arms_project is not None:
+        from seqrun.cli.run_arms import run_arms
+
+        run_arms(file, arms_project, sim=sim, sim_fault=sim_fault or [], speed=speed,
+                 yes=yes, log_dir=log_dir, start=start, started=started,
+                 virtual_time=virtual_time, no_report=no_report, command_mode=command_mode,
+                 refused={"--arm": arm_file is not None,
+                          "-i/-c/-b/--bus-kwargs": bool(interface or channel or bitrate
+                                                        or bus_kwargs),
+                          "--from": from_step != 1, "--step": step,
+                          "--power-on-at": power_on_at is not None,
+                          "--zero-confirmed": zero_confirmed is not None,
+                          "--rt-priority": rt_priority is not None})
     # Imported here, not at the top: `seqrun --help` and the other commands stay light.
     from seqrun.cli.output import keep_running_on_broken_pipe, make_console
     from seqrun.service.run_preparation import RunInvalid, RunRequest, prepare_run

@@ -181,7 +181,7 @@ def validate_command(
     sim_fault: Annotated[list[str] | None, typer.Option(
         "--sim-fault", metavar="SPEC", help="Rehearse a simulator fault in the dry run, as "
         "seqrun run --sim-fault injects it: MODULE:KIND@SECONDS from the start (e.g. "
-        "4:tow_error@2.5, all:halt@3, 3:drop_acks=0.3@0); repeatable.")] = None,
+        "4:tow_error@2.5, all:halt@3, 3:drop_acks=0.3@0); with several arms ARM/SPEC (B/4:tow_error@2); repeatable.")] = None,
     junit_file: Annotated[Path | None, typer.Option(
         "--junit", metavar="FILE", help="Also write a JUnit report (one test per file; "
                                         "gives the summary table).")] = None,
@@ -199,6 +199,23 @@ def validate_command(
     """
     if not 0 < speed <= 1:
         fail(f"--speed must lie in (0, 1], got {speed:g}")
+    if len(files) == 1 and not _is_dir(files[0]) and junit_file is None:
+        file = files[0]
+        try:
+            from seqrun.service.arms_check import campaign_has_arms
+
+            arms_project = campaign_has_arms(file, project_dir)
+        except UserInputError as exc:
+            _unusable(str(exc), as_json)
+            return
+        except OSError:
+            arms_project = None  # said below, where the file is read
+        if arms_project is not None:
+            from seqrun.cli.validate_arms import validate_arms
+
+            validate_arms(file, arms_project, as_json=as_json, start=start, arm_file=arm_file,
+                          static=static, started=started, speed=speed, faults=sim_fault or [],
+                          report_file=report_file)
     faults = _faults(sim_fault or [])
     if faults and static:
         fail("--sim-fault rehearses a fault in the dry run: leave out --static")

@@ -65,6 +65,9 @@ class LoadedSequence:
     #: The bytes of every sequence file as read and validated (same order as ``files``):
     #: what a run folder keeps, never the files read again.
     sources: tuple[bytes, ...] = field(default=(), repr=False)
+    #: The arm these steps run on in a campaign with several arms (its track of the
+    #: sequence, seqrun.sequence.arm_tracks); None: the one arm.
+    arm_id: str | None = None
 
     @property
     def location(self) -> Location:
@@ -84,6 +87,50 @@ class LoadedSequence:
         items += [{"kind": "pose", "file": pose.document.file, "sha256": pose.document.sha256}
                   for pose in self.poses.values()]
         return items
+
+
+class StepCollector:
+    """Collects resolved steps handed to it one file's items at a time, includes expanded
+    and poses frozen as :func:`load_sequence` does: each arm of a campaign with several
+    arms collects its own track (:mod:`seqrun.sequence.arm_tracks`)."""
+
+    def __init__(self, top: Path, project: Any) -> None:
+        self._loader = _Loader(top, project)
+
+    def add(self, doc: Document, path: Path, steps: list, nodes: list) -> None:
+        """Validated step models (``step_adapter``) and their YAML nodes, in order."""
+        self._loader._steps(doc, path, steps, nodes, (), ())
+
+    def append(self, step: ResolvedStep) -> ResolvedStep:
+        """A step made by the caller (a synchronisation step), numbered in this track."""
+        step = replace(step, number=len(self._loader.steps) + 1)
+        self._loader.steps.append(step)
+        return step
+
+    @property
+    def steps(self) -> list[ResolvedStep]:
+        return self._loader.steps
+
+    @property
+    def errors(self) -> list[SourceError]:
+        return self._loader.errors
+
+    @property
+    def poses(self) -> dict[str, FrozenPose]:
+        return self._loader.poses
+
+    @property
+    def files(self) -> list[Path]:
+        """The included files read (the caller's own file is not among them)."""
+        return self._loader.files
+
+    @property
+    def digests(self) -> list[str]:
+        return self._loader.digests
+
+    @property
+    def sources(self) -> list[bytes]:
+        return self._loader.sources
 
 
 def find_project_root(path: str | os.PathLike[str]) -> Path:

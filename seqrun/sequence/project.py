@@ -41,26 +41,30 @@ class ConfigInvalid(UserInputError):
 
 
 def _config_location(text: str, loc: tuple) -> tuple[int, int]:
-    """Line and column of a key path such as ('bus', 'bitrate') in TOML text (best effort:
-    the key's line inside its table, else the table header, else 1:1)."""
+    """Line and column of a key path such as ('bus', 'bitrate') or ('arms', 'B', 'bus',
+    'channel') in TOML text (best effort: the key's line inside its table, the longest table
+    first, else the table header, else 1:1)."""
     lines = text.splitlines()
-    table: str | None = None
-    header_line = None
     keys = [str(k) for k in loc if not isinstance(k, int)]
-    want_table = keys[0] if len(keys) > 1 else None
-    want_key = keys[-1] if keys else None
-    for number, raw in enumerate(lines, start=1):
-        line = raw.strip()
-        match = re.match(r"^\[\s*([^\]]+?)\s*\]", line)
-        if match:
-            table = match.group(1)
-            if table == want_table:
-                header_line = number
-            continue
-        key = re.match(r"^([A-Za-z0-9_\-\"']+)\s*=", line)
-        if key and key.group(1).strip("\"'") == want_key and table == want_table:
-            return number, raw.index(key.group(1)) + 1
-    return (header_line, 1) if header_line else (1, 1)
+    headers: dict[str, int] = {}
+    for cut in range(len(keys) - 1, -1, -1):
+        want_table = ".".join(keys[:cut]) or None
+        want_key = keys[cut]
+        table: str | None = None
+        for number, raw in enumerate(lines, start=1):
+            line = raw.strip()
+            match = re.match(r"^\[\s*([^\]]+?)\s*\]", line)
+            if match:
+                table = re.sub(r"\s*\.\s*", ".", match.group(1))
+                headers.setdefault(table, number)
+                continue
+            key = re.match(r"^([A-Za-z0-9_\-\"']+)\s*=", line)
+            if key and key.group(1).strip("\"'") == want_key and table == want_table:
+                return number, raw.index(key.group(1)) + 1
+    for cut in range(len(keys), 0, -1):
+        if ".".join(keys[:cut]) in headers:
+            return headers[".".join(keys[:cut])], 1
+    return (1, 1)
 
 
 #: How deep arrays and inline tables of a seqrun.toml may nest (a real one needs 2; a
@@ -158,7 +162,8 @@ def read_config(path: Path) -> tuple[CampaignConfig, bytes]:
             message = ("unknown key (expected: " + _expected(error["loc"]) + ")"
                        if error["type"] == "extra_forbidden"
                        else error["msg"].removeprefix("Value error, "))
-            errors.append(SourceError(shown, line, column, f"{where}: {message}"))
+            errors.append(SourceError(shown, line, column,
+                                      f"{where}: {message}" if where else message))
         raise ConfigInvalid(errors) from None
 
 
@@ -238,7 +243,7 @@ class Project:
         """The files an arm reference may mean, in search order. ``name``: what a sequence's
         ``arm:`` says (a file relative to the project), else the campaign's arm."""
         if name is None and self.config is not None:
-            name = self.config.campaign.arm
+            name = self._default_arm()
         if name is None:
             return [self.root / "arms" / f"{DEFAULT_ARM_NAME}.yaml",
                     shipped_dir("arms") / f"{DEFAULT_ARM_NAME}.yaml"]
@@ -257,10 +262,18 @@ class Project:
             if path.is_file():
                 return path.resolve()
         if name is None and self.config is not None:
-            name = self.config.campaign.arm
+            name = self._default_arm()
         what = f"arm '{name}'" if name else "the arm"
         raise UserInputError(f"{what} not found (looked for "
                              + ", ".join(str(p) for p in candidates) + ")")
+
+    def _default_arm(self) -> str:
+        """The campaign's arm; with several arms ([arms.ID]) the first one's (a sequence
+        fragment that names no arm is checked against it)."""
+        assert self.config is not None
+        if self.config.arms:
+            return next(iter(self.config.arms.values())).arm
+        return self.config.campaign.arm
 
     def describe(self) -> str:
         if self.config_path is not None:

@@ -133,6 +133,9 @@ class ValidationResult:
     targets_deg: dict[int, np.ndarray] = field(default_factory=dict)
     #: Smallest link-volume clearance of each move (step number -> Proximity).
     proximities: dict[int, "Proximity"] = field(default_factory=dict)
+    #: The sampled planned path of each move (step number -> (times s, joints rad)).
+    paths: dict[int, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict,
+                                                            repr=False)
 
     @property
     def valid(self) -> bool:
@@ -179,6 +182,11 @@ class Checker:
         self.pose_limit_findings: dict[str, dict[str, SourceError]] = {}
         self.reported_pose_limits: set[tuple[str, str]] = set()
         self.powered_off: ResolvedStep | None = None  # the power_off step, once there is one
+        #: The arm's id in a campaign with several arms (None: the one arm).
+        self.arm_id: str | None = getattr(loaded, "arm_id", None)
+        #: The sampled planned path of each move (step number -> (times s, joints rad)):
+        #: the arms of a campaign are checked against each other along them.
+        self.paths: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         for joint in arm.joints:
             position = joint.locked if joint.locked is not None else start_deg.get(joint.name)
             if position is None or not math.isfinite(position):
@@ -358,6 +366,7 @@ class Checker:
         from seqrun.arm.geometry import Geometry
         from seqrun.arm.kinematics import Chain, frame_origins, points_of_origins
 
+        self.paths[step.number] = (times, path_rad)
         guards = self.arm.workspace.guards
         if not guards and self.arm.geometry.capsules == [] and not self.arm.tools:
             return
@@ -509,6 +518,7 @@ class Checker:
         result.clearances = dict(self.clearances)
         result.targets_deg = dict(self.targets_deg)
         result.proximities = dict(self.proximities)
+        result.paths = dict(self.paths)
         return result
 
 

@@ -34,13 +34,17 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 from seqrun.errors import UserInputError
 
 if TYPE_CHECKING:
+    import numpy as np
+
     from seqrun.arm.description import ArmDescription
     from seqrun.drivers.base import ArmDriver
+    from seqrun.sequence.campaign_config import BasePose, BusSection
     from seqrun.sequence.project import Project
     from seqrun.service.bus_claim import Holder
     from seqrun.service.connection import Connection
 
-__all__ = ["ArmContext", "BusChoice", "NoArm", "SIMULATOR_CLAIM_INTERFACE", "resolve_context"]
+__all__ = ["ArmContext", "BusChoice", "NoArm", "SIMULATOR_CLAIM_INTERFACE", "resolve_context",
+           "resolve_contexts"]
 
 #: The claim a run or console on the built-in simulator holds, so that ``seqrun halt`` and
 #: ``seqrun status`` in another terminal find it (its channel names the process).
@@ -114,6 +118,27 @@ class ArmContext:
     #: The bus options as given (resolved on first use: ``runs`` needs none).
     bus_options: Mapping[str, Any] = field(default_factory=dict)
     _arm: ArmDescription | None = field(default=None, repr=False)
+    #: The arm's id in a campaign with several arms (``[arms.B]``: "B"); None: the one arm.
+    arm_id: str | None = None
+    #: Its ``[arms.ID]`` table's arm reference and bus (None: the one-arm format's).
+    arm_ref: str | None = None
+    bus_section: BusSection | None = None
+    #: Where its base frame stands in the facility frame (None: the facility frame).
+    base: BasePose | None = None
+
+    @property
+    def part(self) -> str:
+        """This arm's part of a run folder (its subfolder; "" for the one arm)."""
+        return self.arm_id or ""
+
+    def base_transform(self) -> np.ndarray:
+        """4x4: the arm's base frame in the common facility frame (millimetres)."""
+        from seqrun.arm.between_arms import base_transform
+
+        base = self.base
+        if base is None:
+            return base_transform((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+        return base_transform(base.position_mm, base.rpy_deg)
 
     # ------------------------------------------------------------------ the arm
     @cached_property
@@ -122,11 +147,11 @@ class ArmContext:
         shipped one."""
         if self.given_arm is not None:
             return Path(self.given_arm).resolve()
-        return self.project.arm_path(None)
+        return self.project.arm_path(self.arm_ref)
 
     @cached_property
     def bus(self) -> BusChoice:
-        return resolve_bus(self.project, **self.bus_options)
+        return resolve_bus(self.project, section=self.bus_section, **self.bus_options)
 
     @property
     def arm(self) -> ArmDescription:
@@ -148,7 +173,8 @@ class ArmContext:
     # ------------------------------------------------------------------ what it says
     def arm_text(self) -> str:
         where = _shown(self.arm_path)
-        return f"arm '{self.arm.name}' ({where})"
+        named = f"arm {self.arm_id}: " if self.arm_id else ""
+        return f"{named}arm '{self.arm.name}' ({where})"
 
     def headline(self, connection: Connection | None = None) -> str:
         """The first line of every command: which arm, on which bus, chosen by whom."""
@@ -237,10 +263,13 @@ def _list(holders: Sequence[Holder]) -> str:
 
 def resolve_bus(project: Project | None, *, interface: str | None = None,
                 channel: str | None = None, bitrate: int | None = None,
-                bus_kwargs: Sequence[str] | Mapping[str, Any] = (), sim: bool = False
-                ) -> BusChoice:
-    """The bus of a command: command line, else the campaign's ``[bus]``, else python-can's
-    configuration, else the built-in simulator (see the module doc)."""
+                bus_kwargs: Sequence[str] | Mapping[str, Any] = (), sim: bool = False,
+                section: BusSection | None = None) -> BusChoice:
+    """The bus of a command: command line, else the campaign's ``[bus]`` (``section``: an
+    arm's ``[arms.ID]`` bus instead), else python-can's configuration, else the built-in
+    simulator (see the module doc). An arm of a campaign with several arms whose bus names
+    no interface gets a simulated bus of its own (python-can's configuration names one bus,
+    not one per arm)."""
     from seqrun.service.connection import parse_bus_kwargs, resolve_config
 
     extra = dict(bus_kwargs) if isinstance(bus_kwargs, Mapping) else \
@@ -252,9 +281,19 @@ def resolve_bus(project: Project | None, *, interface: str | None = None,
         return BusChoice(None, None, bitrate, extra, True, "--sim", {})
     source = "the command line"
     config = getattr(project, "config", None)
-    if not (interface or channel or bitrate or extra) and config is not None \
-            and config.bus.interface is not None:
-        b = config.bus
+    chosen = section if section is not None else \
+        (config.bus if config is not None else None)
+    if section is not None and not (interface or channel or bitrate or extra) \
+            and section.interface is None:
+        # an arm of several with no bus of its own: its own simulated bus
+        extra = dict(section.kwargs)
+        _check_simulator_switches(extra)
+        path = getattr(project, "config_path", None)
+        return BusChoice(None, None, section.bitrate, extra, False,
+                         _shown(path) if path else "seqrun.toml", {})
+    if not (interface or channel or bitrate or extra) and chosen is not None \
+            and chosen.interface is not None:
+        b = chosen
         interface, channel, bitrate, extra = b.interface, b.channel, b.bitrate, dict(b.kwargs)
         path = getattr(project, "config_path", None)
         source = _shown(path) if path else "seqrun.toml"
@@ -289,12 +328,14 @@ def resolve_context(*, project_dir: Path | None = None, project: Project | None 
                     bitrate: int | None = None,
                     bus_kwargs: Sequence[str] | Mapping[str, Any] = (), sim: bool = False,
                     response_timeout_ms: float | None = None,
-                    faults: Sequence[str] = ()) -> ArmContext:
+                    faults: Sequence[str] = (), arm_id: str | None = None) -> ArmContext:
     """The one place the arm context is decided (see the module doc).
 
     :param project: the campaign already found (a loaded sequence's); else ``project_dir``
         or the campaign of the current directory.
     :param arm_file: ``--arm``; ``arm_path``: the arm the sequence names (``run``).
+    :param arm_id: in a campaign with several arms (``[arms.ID]``), which one (None: the
+        only one; refused when there are several).
     :raises UserInputError: a campaign, arm or bus option that cannot be used.
     """
     from seqrun.defaults import DEFAULT_POSES_DIR
@@ -310,7 +351,71 @@ def resolve_context(*, project_dir: Path | None = None, project: Project | None 
     if poses_dir is not None and Path(poses_dir) != DEFAULT_POSES_DIR:
         pose_path = Path(poses_dir)
     runs = Path(log_dir) if log_dir is not None else project.runs_dir
+    entry = _arm_entry(project, arm_id)
     return ArmContext(project, pose_path, runs, response_timeout_ms, tuple(faults),
                       Path(given) if given is not None else None,
                       {"interface": interface, "channel": channel, "bitrate": bitrate,
-                       "bus_kwargs": bus_kwargs, "sim": sim})
+                       "bus_kwargs": bus_kwargs, "sim": sim},
+                      arm_id=entry[0] if entry else None,
+                      arm_ref=entry[1].arm if entry else None,
+                      bus_section=entry[1].bus if entry else None,
+                      base=entry[1].base if entry else None)
+
+
+def campaign_arm_ids(project: Project) -> tuple[str, ...]:
+    """The arm ids of a campaign with several arms (``[arms.ID]``); () for the one arm."""
+    config = getattr(project, "config", None)
+    return config.arm_ids if config is not None else ()
+
+
+def _arm_entry(project: Project, arm_id: str | None) -> tuple[str, Any] | None:
+    ids = campaign_arm_ids(project)
+    if not ids:
+        if arm_id is not None:
+            raise UserInputError(f"arm '{arm_id}': {project.describe()} names no arms "
+                                 "([arms.ID] in seqrun.toml); leave the arm id out")
+        return None
+    if arm_id is None:
+        if len(ids) > 1:
+            raise UserInputError(f"{project.describe()} has arms {', '.join(ids)}: name "
+                                 "one (--arm-id ID)")
+        arm_id = ids[0]
+    if arm_id not in ids:
+        raise UserInputError(f"unknown arm '{arm_id}': {project.describe()} has arms "
+                             f"{', '.join(ids)}")
+    assert project.config is not None
+    return arm_id, project.config.arms[arm_id]
+
+
+def resolve_contexts(*, arm_ids: Sequence[str] | None = None, **options: Any
+                     ) -> list[ArmContext]:
+    """Every arm of the campaign (``arm_ids``: only these, in the campaign's order), each
+    resolved by :func:`resolve_context`; a one-arm campaign gives its one context.
+
+    :raises UserInputError: an unknown arm id, or one bus from the command line (-i/-c)
+        for several arms (each has its own: name one arm).
+    """
+    project = options.pop("project", None)
+    if project is None:
+        from seqrun.service.campaigns import campaign_here
+
+        project = campaign_here(options.pop("project_dir", None))
+    else:
+        options.pop("project_dir", None)
+    ids = campaign_arm_ids(project)
+    if not ids:
+        if arm_ids:
+            _arm_entry(project, arm_ids[0])  # says why
+        return [resolve_context(project=project, **options)]
+    wanted = list(dict.fromkeys(arm_ids)) if arm_ids else list(ids)
+    for name in wanted:
+        if name not in ids:
+            _arm_entry(project, name)
+    wanted = [name for name in ids if name in wanted]
+    if len(wanted) > 1 and (options.get("interface") or options.get("channel")):
+        raise UserInputError("-i/-c name one bus, and each arm of this campaign has its own: "
+                             "name one arm (--arm-id ID)")
+    if len(wanted) > 1 and options.get("arm_file") is not None:
+        raise UserInputError("--arm names one arm file, and each arm of this campaign has its "
+                             "own: name one arm (--arm-id ID)")
+    return [resolve_context(project=project, arm_id=name, **options) for name in wanted]

@@ -82,6 +82,16 @@ def _sequence(path: Path, options: dict) -> FileResult:
 
     result = FileResult(str(path), "sequence")
     try:
+        from seqrun.service.arms_check import campaign_has_arms
+
+        arms = campaign_has_arms(path, options["project_dir"])
+    except (UserInputError, OSError) as exc:
+        result.result = "error"
+        result.errors.append(str(exc))
+        return result
+    if arms is not None:
+        return _arms_sequence(path, arms, options, result)
+    try:
         check = check_sequence(path, start=options["start"], arm_file=options["arm_file"],
                                started=options["started"], project_dir=options["project_dir"],
                                dry_run=not options["static"], speed=options["speed"],
@@ -111,6 +121,43 @@ def _sequence(path: Path, options: dict) -> FileResult:
     if not run.passed:
         result.result = "dry run failed"
         result.errors.append(f"dry run {run.result.status}: {run.result.message}")
+    return result
+
+
+def _arms_sequence(path: Path, project: Any, options: dict, result: FileResult) -> FileResult:
+    """A sequence of a campaign with several arms (docs/two-arms.md), checked as
+    ``seqrun validate FILE`` checks it; the clearance column is the smallest between
+    the arms."""
+    from seqrun.service.arms_check import check_arms_sequence
+
+    try:
+        faults = options.get("faults") or ()
+        if faults:
+            raise UserInputError("--sim-fault with several arms: validate one file "
+                                 "(ARM/SPEC)")
+        check = check_arms_sequence(path, project, start=options["start"],
+                                    started=options["started"], speed=options["speed"],
+                                    dry_run=not options["static"])
+    except (UserInputError, OSError) as exc:
+        result.result = "error"
+        result.errors.append(str(exc))
+        return result
+    result.errors = [str(e) for e in check.errors]
+    result.notes = [f"{n.file}:{n.line}:{n.column}: note: {n.message}" for n in check.notes]
+    if check.errors:
+        result.result = "invalid"
+        return result
+    if check.between:
+        closest = min(check.between, key=lambda b: b.distance_mm)
+        result.clearance_mm = round(closest.distance_mm, 1)
+        result.clearance_at = f"{closest.pair} (between arms)"
+    run = check.dry_run
+    if run is not None:
+        result.simulated_s = round(run.simulated_s, 2)
+        if not run.passed:
+            result.result = "dry run failed"
+            result.errors += [f"dry run arm {a}: {o.result.status}: {o.result.message}"
+                              for a, o in run.outcome.arms.items() if o.result.exit_code]
     return result
 
 

@@ -77,6 +77,9 @@ class CheckContext(Protocol):
     #: outside the limits): a check comparing with the tracked joints says nothing.
     lost_at: ResolvedStep | None
     powered_off: ResolvedStep | None    # the power_off step, once there is one
+    #: The arm's id in a campaign with several arms (None: the one arm; signal and
+    #: wait_for have nobody to talk to).
+    arm_id: str | None
     #: Per pose: the joints outside the arm's limits and the finding at the pose file's line.
     pose_limit_findings: dict[str, dict[str, SourceError]]
     # -- the findings, each at the file:line:col of the value it is about

@@ -21,7 +21,7 @@ if TYPE_CHECKING:
     from seqrun.arm.limits import LimitsInForce
     from seqrun.arm.planner import Limits
 
-__all__ = ["JointReading", "StepContext"]
+__all__ = ["ArmEvents", "JointReading", "StepContext"]
 
 
 class JointReading(Protocol):
@@ -29,6 +29,18 @@ class JointReading(Protocol):
 
     t: float
     user_deg: np.ndarray  # every joint, user degrees, arm order
+
+
+class ArmEvents(Protocol):
+    """The named events between the arms of a campaign run (signal, wait_for)."""
+
+    def signal(self, name: str) -> None: ...
+
+    def fired(self, name: str) -> bool: ...
+
+    def never(self, name: str) -> str | None:
+        """Why ``name`` can no longer come (the arm that would signal it has ended, the
+        run is stopping), else None."""
 
 
 class StepContext(Protocol):
@@ -53,6 +65,8 @@ class StepContext(Protocol):
     #: Records the zero reference at a power_off step (None: a dry run or the built-in
     #: simulator, nothing is recorded).
     record_zero: Callable[[str], Any] | None
+    #: The events between the arms of a campaign run (None: one arm).
+    sync: ArmEvents | None
 
     # -- the drives, in joint terms (``modules=None``: all of them at once), faults checked
     def reset_modules(self, modules: list[int] | None) -> None: ...

@@ -14,7 +14,7 @@ from collections.abc import Callable
 from typing import Any
 
 from seqrun.steps import (checkpoint, confirm, halt, home, move, move_linear, power_off, reset,
-                          set_limits, wait)
+                          set_limits, signal, wait, wait_for)
 from seqrun.steps.kind import StepKind
 
 __all__ = ["HANDLERS", "KINDS", "Handler", "StepKind", "step_kind"]
@@ -30,6 +30,8 @@ KINDS: tuple[StepKind, ...] = (
     checkpoint.KIND,
     confirm.KIND,
     power_off.KIND,
+    signal.KIND,
+    wait_for.KIND,
 )
 
 _BY_NAME: dict[str, StepKind] = {kind.name: kind for kind in KINDS}

@@ -1,0 +1,263 @@
+"""``seqrun run FILE`` in a campaign with several arms (docs/two-arms.md).
+
+The same promises as one arm's run: nothing is opened before the sequence passes every
+check (each arm's track against its own arm, the arms against each other along the
+planned paths); each arm's bus is claimed and its zero reference decided (and on real
+hardware after a power-on confirmed) before anything moves; on real hardware the operator
+says yes first. Every arm then runs its track on its own executor and thread
+(:func:`seqrun.service.arms_run.run_tracks`); one arm's fault halts every arm (each
+confirmed by its executor) unless ``on_fault = "halt_faulted"``. Ctrl-C stops every arm
+(a controlled stop; a second one halts them), SIGTERM halts them all. ``seqrun halt`` /
+``seqrun status`` in another terminal reach each arm's run through its bus claim. The
+run folder holds one part per arm (``<run>/A/``, ``<run>/B/``: each a whole run folder).
+Plain line output: each arm's steps as they start and end, prefixed by the arm.
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import replace
+from pathlib import Path
+from typing import Any, NoReturn
+
+import typer
+
+from seqrun.cli.common import fail, user_errors
+from seqrun.defaults import EXIT_FAULT, EXIT_INVALID, EXIT_OPERATOR_ABORT
+from seqrun.errors import BusError, UserInputError
+from seqrun.stop_requests import OPERATOR_HALT, StopRequests
+
+
+class EveryArm(StopRequests):
+    """One inbox the signal handlers post to that hands each request to every arm's
+    inbox (lock-free appends, as :class:`StopRequests`)."""
+
+    def __init__(self, inboxes: list[StopRequests]) -> None:
+        super().__init__()
+        self.inboxes = inboxes
+
+    def abort(self, reason: str) -> None:
+        for inbox in self.inboxes:
+            inbox.abort(reason)
+
+    def halt(self, reason: str, cause: str = OPERATOR_HALT) -> None:
+        for inbox in self.inboxes:
+            inbox.halt(reason, cause)
+
+
+def _arm_faults(specs: list[str], ids: tuple[str, ...]) -> dict[str, list[str]]:
+    faults: dict[str, list[str]] = {a: [] for a in ids}
+    for spec in specs:
+        arm, sep, rest = spec.partition("/")
+        if not sep or arm not in ids:
+            fail(f"--sim-fault '{spec}': with several arms name the arm first, ARM/SPEC "
+                 f"(arms {', '.join(ids)}), e.g. {ids[-1]}/4:tow_error@2")
+        faults[arm].append(rest)
+    return faults
+
+
+def run_arms(file: Path, project: Any, *, sim: bool, sim_fault: list[str], speed: float,
+             yes: bool, log_dir: Path | None, start: str | None, started: bool,
+             virtual_time: bool, no_report: bool, command_mode: str | None,
+             refused: dict[str, bool]) -> NoReturn:
+    from seqrun.service.arm_context import resolve_context
+    from seqrun.service.arms_check import check_arms_sequence
+
+    given = [name for name, used in refused.items() if used]
+    if given:
+        fail(f"{', '.join(given)}: not for a campaign with several arms (each arm's arm file "
+             "and bus are in seqrun.toml)")
+    ids = project.config.arm_ids
+    faults = _arm_faults(sim_fault, ids)
+    with user_errors():
+        check = check_arms_sequence(file, project, start=start, started=started, speed=speed,
+                                    dry_run=False)
+    if check.errors:  # nothing is opened before the checks pass
+        for error in check.errors:
+            typer.echo(str(error), err=True)
+        count = len(check.errors)
+        typer.echo(f"{check.file}: not run: {count} error{'s' * (count != 1)} "
+                   "(nothing was sent)", err=True)
+        raise typer.Exit(EXIT_INVALID)
+    tracks = check.tracks.tracks
+    for between in check.between:
+        typer.echo(f"  {between.text()}")
+    with user_errors():
+        contexts = {a: resolve_context(project=project, arm_id=a, sim=sim, faults=faults[a])
+                    for a in tracks}
+        for context in contexts.values():
+            context.refuse_private_simulator("run")
+    if virtual_time and not all(c.bus.is_simulator for c in contexts.values()):
+        fail("--virtual-time runs on simulators only: every arm's bus must be one")
+    clock_views: dict[str, Any] = {}
+    connections: dict[str, Any] = {}
+    if virtual_time:
+        from seqrun.clock import LockstepClock
+
+        shared = LockstepClock()
+        clock_views = {a: shared.view() for a in tracks}
+    try:
+        with user_errors():
+            for arm_id, context in contexts.items():
+                extra = {"clock": clock_views[arm_id]} if virtual_time else {}
+                connections[arm_id] = context.open_connection(live=True, **extra)
+        arms = _confirm_and_zero(contexts, connections, check, yes)
+        code = _run(file, check, contexts, connections, arms, clock_views, speed=speed,
+                    yes=yes, log_dir=log_dir, no_report=no_report, command_mode=command_mode)
+    finally:
+        for connection in connections.values():
+            connection.close()
+    raise typer.Exit(code)
+
+
+def _confirm_and_zero(contexts, connections, check, yes: bool) -> dict[str, Any]:
+    """The banner per arm, the operator's yes on real hardware, each arm's zero."""
+    from seqrun.cli.questions import ask
+    from seqrun.cli.zero import zero_at_run_start
+
+    for arm_id, context in contexts.items():
+        typer.echo(context.headline(connections[arm_id]))
+    real = [a for a, c in connections.items() if not c.is_simulator]
+    if real and not ask(f"Run '{check.tracks.name}' on the REAL arms "
+                        f"{', '.join(real)}?", yes, say=_say):
+        typer.echo("Not started: the operator declined. Nothing was sent.")
+        raise typer.Exit(EXIT_OPERATOR_ABORT)
+    arms = {}
+    for arm_id, context in contexts.items():
+        def ask_zero(question: str, arm_id: str = arm_id) -> bool:
+            return ask(f"arm {arm_id}: {question}", False, say=_say)
+
+        def show_zero(text: str, arm_id: str = arm_id) -> None:
+            typer.echo(f"arm {arm_id}: {text}")
+
+        with user_errors():
+            try:
+                zero = zero_at_run_start(connections[arm_id], context.arm, context.project,
+                                         ask_zero, show_zero)
+            except BusError as exc:
+                fail(f"arm {arm_id}: cannot read the modules' state: {exc}", EXIT_FAULT)
+        arms[arm_id] = (zero.apply(context.arm), zero)
+    return arms
+
+
+def _say(text: str, end: str = "\n") -> None:
+    typer.echo(text, nl=end == "\n")
+
+
+def _run(file: Path, check, contexts, connections, arms, clock_views, *, speed: float,
+         yes: bool, log_dir: Path | None, no_report: bool, command_mode: str | None) -> int:
+    from seqrun.cli.interrupts import RunSignals
+    from seqrun.cli.questions import ask
+    from seqrun.service import campaign_records
+    from seqrun.service.arms_run import run_arms_live
+    from seqrun.service.run_control import RunControl
+    from seqrun.service.run_preparation import run_folder
+
+    tracks = check.tracks.tracks
+    first = next(iter(tracks.values()))
+    try:
+        folder = run_folder(replace(first, name=check.tracks.name), log_dir)
+    except UserInputError as exc:
+        fail(str(exc))
+    inboxes = {a: StopRequests() for a in tracks}
+    controls = {a: RunControl.serve(connections[a], arms[a][0], inboxes[a]) for a in tracks}
+    log_dirs = {}
+    for arm_id, loaded in tracks.items():
+        part = folder / arm_id
+        try:
+            part.mkdir(parents=True, exist_ok=True)
+            campaign_records.record_run(part, loaded, contexts[arm_id].arm_path,
+                                        connections[arm_id].description, arms[arm_id][1],
+                                        arm=arms[arm_id][0])
+        except OSError as exc:
+            fail(f"cannot write the run record in {part} ({exc.strerror or exc}); nothing "
+                 "was sent")
+        log_dirs[arm_id] = part
+    lock = threading.Lock()
+
+    def confirm(prompt: str) -> bool:
+        with lock:  # one question at a time
+            return ask(prompt, yes, say=_say)
+
+    printers = {a: _printer(a) for a in tracks}
+    # the built-in simulator keeps no record: its zero is its power-on pose
+    recorders = {a: None if connections[a].is_simulator or arms[a][1].store is None
+                 else campaign_records.zero_recorder(arms[a][1].store, arms[a][0], tracks[a])
+                 for a in tracks}
+
+    def show(arm_id: str, event: Any) -> None:
+        printers[arm_id](event)
+
+    signals = RunSignals(EveryArm(list(inboxes.values())))
+    signals.install()
+    try:
+        outcome = _arms_live(run_arms_live, tracks, {a: arms[a][0] for a in tracks}, connections,
+                                controls=controls, on_event=show,
+                                zeros={a: arms[a][1] for a in tracks},
+                                record_zero=recorders,
+                                on_fault=_on_fault(check.tracks.project), log_dirs=log_dirs,
+                                clock_views=clock_views, speed=speed, confirm=confirm,
+                                command_mode=command_mode, html_report=not no_report,
+                                requests_by_arm=inboxes, file=str(file))
+    finally:
+        signals.restore()
+    if outcome is None:
+        fail(f"the run ended in an error (every arm was halted); log: {folder}", EXIT_FAULT)
+    for arm_id, arm in outcome.arms.items():
+        r = arm.result
+        why = f" (halted because arm {arm.halted_for} faulted)" if arm.halted_for else ""
+        typer.echo(f"arm {arm_id}: {r.status.upper()} (exit {r.exit_code}): {r.message}{why}")
+    for note in outcome.notes:
+        typer.echo(note)
+    _write_summary(folder, check, outcome)
+    typer.echo(f"log: {folder}")
+    return outcome.exit_code
+
+
+def _arms_live(run, *args: Any, **kwargs: Any) -> Any:
+    """The run; an error outside every step (a bug: each arm's run has halted its arm and
+    the others were halted for it) is one line, never a traceback (None)."""
+    try:
+        return run(*args, **kwargs)
+    except Exception as exc:  # noqa: BLE001 - said in one line, the arms are halted
+        typer.echo(f"error: {type(exc).__name__}: {exc}", err=True)
+        return None
+
+
+def _write_summary(folder: Path, check, outcome) -> None:
+    """``<run>/arms.json``: the campaign run at a glance (each arm's part is a whole run
+    folder of its own)."""
+    import json
+
+    summary = {"sequence": check.tracks.name, "file": check.file,
+               "exit_code": outcome.exit_code, "on_fault": outcome.on_fault,
+               "first_fault": outcome.first_fault, "notes": list(outcome.notes),
+               "between_arms": [b.as_dict() for b in check.between],
+               "arms": {a: {"status": o.result.status, "exit_code": o.result.exit_code,
+                            "message": o.result.message, "halted_because_arm": o.halted_for,
+                            "part": a}
+                        for a, o in outcome.arms.items()}}
+    try:
+        (folder / "arms.json").write_text(json.dumps(summary, indent=2) + "\n")
+    except OSError as exc:
+        typer.echo(f"warning: {folder}/arms.json not written ({exc.strerror or exc})",
+                   err=True)
+
+
+def _on_fault(project: Any) -> str:
+    config = getattr(project, "config", None)
+    return config.campaign.on_fault if config is not None else "halt_all"
+
+
+def _printer(arm_id: str):
+    """Each step's start and end, prefixed by the arm (the executor's listener: one
+    short line per step)."""
+    def listener(event) -> None:
+        kind = event.type
+        step = getattr(event, "step", None)
+        if kind == "step_started":
+            typer.echo(f"[{arm_id}] {event.t:8.2f} s  step {step}: "
+                       f"{getattr(event, 'label', '')}")
+        elif kind == "step_finished" and getattr(event, "status", "passed") != "passed":
+            typer.echo(f"[{arm_id}] {event.t:8.2f} s  step {step} {event.status}")
+    return listener

@@ -1,0 +1,122 @@
+"""Two arms, one campaign (issue 28, items 1 and 4): ``seqrun run`` of a sequence for two
+arms runs both together, each on its own (simulated) bus with its own run folder part;
+one arm's fault halts both, or only itself when the campaign says so; a sequence whose
+arms' paths cross is refused before anything opens."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from seqrun.cli import app
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLE = ROOT / "examples" / "two-arms"
+
+SHORT = """\
+name: Short
+description: Both arms turn, B after A has.
+steps:
+  - parallel:
+      - arm: A
+        steps: [include: startup.yaml, {move: {joints: {j1: 10}}}, signal: A_turned]
+      - arm: B
+        steps: [include: startup.yaml, wait_for: A_turned, {move: {joints: {j1: -10}}}]
+  - parallel:
+      - {arm: A, steps: [{move: {joints: {j1: 0}}}]}
+      - {arm: B, steps: [{move: {joints: {j1: 0}}}]}
+"""
+
+
+@pytest.fixture
+def campaign(tmp_path, monkeypatch):
+    for name in ("CAN_INTERFACE", "CAN_CHANNEL", "CAN_BITRATE", "CAN_CONFIG"):
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setenv("HOME", str(tmp_path))
+    monkeypatch.setenv("SEQRUN_STATE_DIR", str(tmp_path / "state"))
+    folder = tmp_path / "two-arms"
+    shutil.copytree(EXAMPLE, folder)
+    (folder / "sequences" / "short.yaml").write_text(SHORT)
+    monkeypatch.chdir(folder)
+    return folder
+
+
+def run(*args: str):
+    return CliRunner().invoke(app, ["run", *args, "--virtual-time", "--yes", "--no-report"])
+
+
+def test_both_arms_run_together_each_in_its_part_of_the_run_folder(campaign, tmp_path):
+    result = run("sequences/short.yaml", "--log-dir", str(tmp_path / "run"))
+    assert result.exit_code == 0, result.output
+    assert "arm A: PASSED" in result.output and "arm B: PASSED" in result.output
+    summary = json.loads((tmp_path / "run" / "arms.json").read_text())
+    assert summary["exit_code"] == 0 and set(summary["arms"]) == {"A", "B"}
+    for arm in "AB":
+        report = json.loads((tmp_path / "run" / arm / "report.json").read_text())
+        assert report["status"] == "passed"
+    a = [json.loads(l) for l in (tmp_path / "run" / "A" / "steps.jsonl").read_text().splitlines()]
+    b = [json.loads(l) for l in (tmp_path / "run" / "B" / "steps.jsonl").read_text().splitlines()]
+    a_turn = next(s for s in a if s.get("kind") == "move")
+    b_turn = next(s for s in b if s.get("kind") == "move")
+    # one time base: B's turn starts when A's has ended (it waited for A_turned); "t" is
+    # when a step ended
+    assert b_turn["t"] - b_turn["duration_s"] == pytest.approx(a_turn["t"], abs=0.03)
+
+
+def test_a_fault_on_one_arm_halts_both_and_exits_3(campaign, tmp_path):
+    result = run("sequences/short.yaml", "--log-dir", str(tmp_path / "run"),
+                 "--sim-fault", "A/3:tow_error@0.2")
+    assert result.exit_code == 3, result.output
+    summary = json.loads((tmp_path / "run" / "arms.json").read_text())
+    assert summary["first_fault"] == "A"
+    assert summary["arms"]["B"]["halted_because_arm"] == "A"
+    for arm in "AB":
+        report = json.loads((tmp_path / "run" / arm / "report.json").read_text())
+        assert report["fault"]["halt_sent"] and report["fault"]["halt_confirmed"], report
+    assert "every arm was halted (on_fault = halt_all)" in result.output
+
+
+@pytest.mark.parametrize("spec", ["B/4:tow_error@1.5", "B/all:halt@1.2", "B/2:drop_acks=1@1"])
+def test_the_fault_campaign_on_one_arm_while_both_move(campaign, tmp_path, spec):
+    result = run("sequences/short.yaml", "--log-dir", str(tmp_path / "run"), "--sim-fault",
+                 spec)
+    assert result.exit_code == 3, result.output
+    summary = json.loads((tmp_path / "run" / "arms.json").read_text())
+    assert summary["first_fault"] == "B"
+    assert summary["arms"]["A"]["exit_code"] == 3
+    report = json.loads((tmp_path / "run" / "A" / "report.json").read_text())
+    assert report["fault"]["halt_sent"]
+
+
+def test_crossing_paths_are_refused_before_anything_opens(campaign, tmp_path):
+    result = run("sequences/paths_cross.yaml", "--log-dir", str(tmp_path / "run"))
+    assert result.exit_code == 1
+    assert "the arms' paths cross" in result.output
+    assert "nothing was sent" in result.output
+    assert not (tmp_path / "run").exists()
+
+
+def test_one_arm_options_are_refused_with_several_arms(campaign):
+    result = run("sequences/short.yaml", "--arm", "x.yaml")
+    assert result.exit_code == 2
+    assert "--arm: not for a campaign with several arms" in result.output
+    result = run("sequences/short.yaml", "--sim-fault", "3:halt@1")
+    assert result.exit_code == 2 and "ARM/SPEC" in result.output
+
+
+def test_a_stop_request_goes_to_every_arm():
+    """Ctrl-C and SIGTERM reach every arm's inbox (the signal handler posts once)."""
+    from seqrun.cli.run_arms import EveryArm
+    from seqrun.stop_requests import StopRequests
+
+    inboxes = [StopRequests(), StopRequests()]
+    every = EveryArm(inboxes)
+    every.abort("Ctrl-C: controlled stop")
+    every.halt("SIGTERM")
+    for inbox in inboxes:
+        kinds = [(r.kind, r.reason) for r in inbox.take()]
+        assert kinds == [("abort", "Ctrl-C: controlled stop"), ("halt", "SIGTERM")]
