@@ -312,9 +312,12 @@ class ArmDriver(Protocol):
 
     def confirm(self, command: ConfirmedCommand,
                 modules: Sequence[int] | None = None) -> CommandConfirmation:
-        """``seqrun halt|reset`` (and Home): broadcast ``command`` and confirm it on every
-        module (None: all) by reading its state back, repeating it for the modules that
-        did not confirm. Never raises for the bus."""
+        """``seqrun halt|reset|home``: send ``command`` and confirm it on every module
+        (None: all) by reading its state back. Halt and Reset are broadcast and repeated
+        for the modules that did not confirm; Home is refused (nothing sent, ``error``
+        says why) while a module is halted or in error, sent once (broadcast for the
+        whole arm, else addressed) and confirmed when every module reports homed and at
+        rest (a module may travel to its home switch first). Never raises for the bus."""
 
     # -- the arm outside a run (status, the zero decision)
     def identity(self) -> ArmIdentity:

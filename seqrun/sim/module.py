@@ -14,7 +14,11 @@ Behaviour (sources in the reference; **[I]** marks an assumption that is an opti
 - Power-on: encoders at the given position (0 for an arm homed at Park), limits the
   module's stored ones (:func:`default_parameters`), HOME_OK clear and the brake engaged
   until Home [I: thesis 5.1; PRL drivers elsewhere saw HOME_OK at boot —
-  ``home_ok_at_power_on``]. Home sets HOME_OK without moving.
+  ``home_ok_at_power_on``]. Home sets HOME_OK without moving (a PRL has absolute
+  encoders). [I: ``homing_travel``, for modules with incremental encoders: Home clears
+  HOME_OK and travels to the home switch (``home_switch_position``, module rad) at
+  |FHomeVel| with DefHomeAcc, MOTION set and motion commands refused on the way; on the
+  switch HOME_OK and SWR are set. Halt or Reset on the way leave it not homed.]
 - Motion (SetMotion) is refused before Home, while ERROR/HALTED or any other fault bit is
   set, for current and loop modes (not simulated), and when it would take a module that is
   at or beyond a soft limit further out. A refused command is still acknowledged and its
@@ -49,7 +53,7 @@ Behaviour (sources in the reference; **[I]** marks an assumption that is an opti
 
 Not simulated: current control and current readings (Cur is a made-up, deterministic
 function of the motion), following-error monitoring (TOW_ERROR only as an injected fault),
-brake timing, homing travel, hard limits, temperatures and supply voltages (constants),
+brake timing, hard limits, temperatures and supply voltages (constants),
 parameter persistence (SaveParams is acknowledged), the state frame 0x060+id, the
 Internal (0x04) and SetIStep (0x0D) commands (the codec does not decode them).
 """
@@ -158,6 +162,11 @@ class ModuleOptions:
     #: the current position instead of from the current velocity. No published driver
     #: streams FRAMP, so real firmware behaviour is unconfirmed [I].
     framp_from_standstill: bool = False
+    #: Home travels to the home switch before HOME_OK (modules with incremental
+    #: encoders); False: HOME_OK at once, no travel (a PRL: absolute encoders, thesis 5.1).
+    homing_travel: bool = False
+    #: Where the home switch is (module coordinates, rad) with ``homing_travel``.
+    home_switch_position: float = 0.0
     #: Serial numbers (DefCubeSerial, 0x1A): module M says ``serial_base + M``. 0: every
     #: simulated arm draws a base of its own (two ``seqrun sim serve`` are two arms, as
     #: the zero reference, keyed by the serials, must see them).
@@ -285,7 +294,7 @@ class _Profile:
     """A motion from ``(p0, v0)`` at ``t0``; ``target`` is where it ends exactly (None for
     velocity mode, which runs until a soft limit or a new command)."""
 
-    kind: str  # "ramp" | "step" | "velocity"
+    kind: str  # "ramp" | "step" | "velocity" | "home" (travel to the home switch)
     t0: float
     segments: list[_Segment]
     target: float | None
@@ -598,6 +607,8 @@ class SimModule:
         assert profile is not None
         self._rest, _, _ = profile.sample(profile.end)
         self._profile = None
+        if profile.kind == "home":
+            self._homed_on_switch()
         if self._buffered_step is not None:
             target, seconds = self._buffered_step
             self._buffered_step = None
@@ -799,9 +810,14 @@ class SimModule:
             self._flags &= ~RESETTABLE
             self._watchdog_deadline = None
         elif command == CommandId.HOME:
-            # A PRL has absolute encoders: Home enables the motor (the click), no travel.
             if not self._flags & (_F.ERROR | _F.HALTED):
-                self._flags = (self._flags | _F.HOME_OK) & ~_F.BRAKEACTIVE
+                self._flags &= ~_F.BRAKEACTIVE
+                if self.options.homing_travel:
+                    self._start_homing()
+                else:
+                    # A PRL has absolute encoders: Home enables the motor (the click), no
+                    # travel.
+                    self._flags |= _F.HOME_OK
         elif command == CommandId.HALT:
             self._stop(_F.HALTED)
         elif command == CommandId.WATCHDOG_REFRESH:
@@ -810,6 +826,23 @@ class SimModule:
                 return None
         # TOGGLE_HOME, RECALC_PID, SAVE_PARAMS, RESET_TIME: acknowledged, no simulated effect.
         return CommandAck(self.module_id, command)
+
+    def _start_homing(self) -> None:
+        """Travel to the home switch (``homing_travel``): HOME_OK clear until there."""
+        self._flags &= ~(_F.HOME_OK | _F.SWR)
+        self._buffered_step = self._held = None
+        position, velocity, _ = self._commanded()
+        target = self.options.home_switch_position
+        vmax = abs(float(self._params[ParamId.FHOME_VEL])) or 0.1
+        amax = abs(float(self._params[ParamId.DEF_HOME_ACC])) or 0.5
+        pieces = plan_ramp(position, velocity, target, vmax, amax)
+        self._start(_build_profile("home", self._t, position, velocity, pieces, target),
+                    rest=target)
+        if self._profile is None:  # already on the switch
+            self._homed_on_switch()
+
+    def _homed_on_switch(self) -> None:
+        self._flags |= _F.HOME_OK | _F.SWR
 
     def _refresh_watchdog(self, addressed: bool = False) -> None:
         if self.options.addressed_refresh_arms_watchdog:
@@ -874,7 +907,7 @@ class SimModule:
         if self._profile is None:
             return 0
         return {"ramp": MotionMode.FRAMP, "step": MotionMode.FSTEP,
-                "velocity": MotionMode.FVEL}[self._profile.kind]
+                "velocity": MotionMode.FVEL}.get(self._profile.kind, 0)
 
     def _current(self) -> float:
         """Not a motor model: a deterministic stand-in that is 0 at rest and grows with
@@ -1022,6 +1055,7 @@ class SimModule:
                                    [(seconds, 0.0)], target))
 
     def _start(self, profile: _Profile | None, rest: float | None = None) -> None:
+        self._flags &= ~_F.SWR  # leaves the home switch (set again by homing's end)
         if profile is not None and profile.end <= self._t:  # nothing to do: already there
             rest, profile = profile.sample(profile.end)[0], None
         self._profile = profile

@@ -33,6 +33,7 @@ from seqrun.drivers.base import (ArmIdentity, ArmPoll, CommandConfirmation, Conf
                                  JointState, LimitValues, MotionRefused)
 from seqrun.drivers.powercube.confirm import (DEFAULT_ATTEMPTS, command_and_confirm,
                                               confirm_command)
+from seqrun.drivers.powercube.homing import home_and_confirm
 from seqrun.drivers.powercube.messages import user_message
 from seqrun.drivers.powercube.setpoints import SetpointLaw, setpoint_law
 from seqrun.drivers.powercube.states import (FAULT_FLAGS, HOMED_FLAG, cycle_state,
@@ -101,6 +102,9 @@ class PowerCubeDriver:
     READ_RETRIES = 1
     #: Attempts of the HOME_OK reading of :meth:`homed` (a read is idempotent).
     HOMED_ATTEMPTS = 3
+    #: Seconds ``confirm("home")`` waits for every module to report HOME_OK at rest (a
+    #: PRL homes at once; a module that travels to its home switch takes seconds).
+    HOME_TIMEOUT_S = 60.0
     FAULT_FLAGS: ClassVar[frozenset[str]] = FAULT_FLAGS
     HOMED_FLAG: ClassVar[str] = HOMED_FLAG
 
@@ -318,6 +322,11 @@ class PowerCubeDriver:
     def confirm(self, command: ConfirmedCommand,
                 modules: Sequence[int] | None = None,
                 attempts: int = DEFAULT_ATTEMPTS) -> CommandConfirmation:
+        if command == "home":  # sent once, then read until homed (it may travel)
+            wanted = list(self.modules if modules is None else modules)
+            return home_and_confirm(self.client, wanted,
+                                    whole_arm=set(wanted) >= set(self.modules),
+                                    timeout_s=self.HOME_TIMEOUT_S)
         return command_and_confirm(self.client, CommandId[command.upper()],
                                    self.modules if modules is None else modules,
                                    attempts=attempts)
