@@ -47,6 +47,10 @@ class Joint(_Strict):
     max_velocity_deg_s: Positive = Field(description="Velocity limit, deg/s.")
     max_acceleration_deg_s2: Positive = Field(description="Acceleration limit, deg/s^2.")
     max_jerk_deg_s3: Positive = Field(description="Jerk limit for ruckig, deg/s^3.")
+    max_current_a: Positive | None = Field(
+        None, description="Current limit (MaxCur), A: written by set_limits (the thesis "
+                          "wrote 2 A); a step may only lower it. Not given: the module's "
+                          "stored MaxCur is left as it is.")
 
     @model_validator(mode="after")
     def _check(self) -> "Joint":

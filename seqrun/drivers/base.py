@@ -110,22 +110,26 @@ class ArmPoll:
 
 @dataclass(frozen=True)
 class JointLimits:
-    """The limits a joint's drive holds, in user units (deg, deg/s, deg/s^2)."""
+    """The limits a joint's drive holds, in user units (deg, deg/s, deg/s^2, A)."""
 
     min_deg: float
     max_deg: float
     max_velocity_deg_s: float
     max_acceleration_deg_s2: float
+    #: The current limit (MaxCur), A; None: a driver that does not read it.
+    max_current_a: float | None = None
 
 
 @dataclass(frozen=True)
 class LimitValues:
-    """Limits to write to one joint, user units (deg, deg/s, deg/s^2); None: left as is."""
+    """Limits to write to one joint, user units (deg, deg/s, deg/s^2, A); None: left as
+    is."""
 
     min_deg: float
     max_deg: float
     max_velocity_deg_s: float | None = None
     max_acceleration_deg_s2: float | None = None
+    max_current_a: float | None = None
 
 
 @dataclass(frozen=True)

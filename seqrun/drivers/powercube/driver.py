@@ -46,6 +46,8 @@ from seqrun.powercube.protocol import CommandId, ConfigFlag, ParamId, ShortState
 
 #: float32 on the wire: a read-back equal within this is the value written.
 READBACK_TOLERANCE_RAD = 1e-6
+#: A current limit reads back as written within this (float32 of a few amperes: 1e-6 A).
+READBACK_TOLERANCE_A = 1e-5
 
 
 def _no_events(type_: str, **data: Any) -> None:
@@ -386,7 +388,8 @@ class PowerCubeDriver:
         self.client.remove_frame_listener(listener)
 
     # ------------------------------------------------------------------ limits
-    _LIMIT_PARAMS = (ParamId.MIN_POS, ParamId.MAX_POS, ParamId.MAX_VEL, ParamId.MAX_ACC)
+    _LIMIT_PARAMS = (ParamId.MIN_POS, ParamId.MAX_POS, ParamId.MAX_VEL, ParamId.MAX_ACC,
+                     ParamId.MAX_CUR)
 
     def read_limits(self) -> list[JointLimits]:
         params, units = self._LIMIT_PARAMS, self.units
@@ -394,11 +397,12 @@ class PowerCubeDriver:
                                idempotent=True)
         limits = []
         for k, joint in enumerate(self.arm.joints):
-            low, high, velocity, acceleration = (float(a.value) for a in
-                                                 stored[len(params) * k:len(params) * (k + 1)])
+            low, high, velocity, acceleration, current = (
+                float(a.value) for a in stored[len(params) * k:len(params) * (k + 1)])
             limits.append(JointLimits(units.joint_user_deg(joint.module, low),
                                       units.joint_user_deg(joint.module, high),
-                                      math.degrees(velocity), math.degrees(acceleration)))
+                                      math.degrees(velocity), math.degrees(acceleration),
+                                      current))
         return limits
 
     def write_limits(self, values: Mapping[str, LimitValues]) -> int:
@@ -417,12 +421,18 @@ class PowerCubeDriver:
             if value.max_acceleration_deg_s2 is not None:
                 writes.append((joint.module, ParamId.MAX_ACC,
                                math.radians(value.max_acceleration_deg_s2)))
+            if value.max_current_a is not None:
+                writes.append((joint.module, ParamId.MAX_CUR, value.max_current_a))
         self.transact([SetParam(m, p, v) for m, p, v in writes])
         acks = self.transact([GetParam(m, p) for m, p, _ in writes], idempotent=True)
         for (module, param, wrote_rad), ack in zip(writes, acks):
-            if abs(float(ack.value) - wrote_rad) > READBACK_TOLERANCE_RAD:
+            tolerance = (READBACK_TOLERANCE_A if param == ParamId.MAX_CUR
+                         else READBACK_TOLERANCE_RAD)
+            if abs(float(ack.value) - wrote_rad) > tolerance:
                 joint = next(j for j in self.arm.joints if j.module == module)
-                if param in (ParamId.MIN_POS, ParamId.MAX_POS):  # user coordinates, degrees
+                if param == ParamId.MAX_CUR:
+                    read, wrote, unit = float(ack.value), wrote_rad, " A"
+                elif param in (ParamId.MIN_POS, ParamId.MAX_POS):  # user coordinates, degrees
                     read, wrote, unit = (self.units.joint_user_deg(module, float(ack.value)),
                                          self.units.joint_user_deg(module, wrote_rad), "°")
                 else:
