@@ -146,3 +146,25 @@ def test_seqrun_home_of_a_halted_arm_exits_3_saying_reset_first():
     last = result.output.strip().splitlines()[-1]
     assert last.startswith("error: home not sent: module(s) 3 halted or in error: reset "
                            "them first"), result.output
+
+
+# -- the console's Home (the session) -------------------------------------------------------
+
+def test_the_sessions_home_waits_for_a_module_travelling_to_its_switch(tmp_path, monkeypatch):
+    from seqrun.arm.description import load_arm
+    from seqrun.service.connection import open_connection
+    from seqrun.service.session import ArmSession
+    from projecttree import ROOT
+
+    monkeypatch.setenv("SEQRUN_SIM_OPTIONS", "homing_travel home_switch_position=0.6")
+    connection = open_connection(force_sim=True, clock=VirtualClock())
+    session = ArmSession(load_arm(ROOT / "arms" / "lwa3.yaml"), connection, status_hz=0,
+                         log_root=tmp_path / "runs", poses_dir=ROOT / "poses")
+    try:
+        result = session.home()      # 0.6 rad at 0.1 rad/s: over 6 s
+        assert result.ok, result
+        arm = connection.bus.arm
+        assert all(s & F.HOME_OK and s & F.SWR for s in arm.states().values())
+        assert arm.module(2).position() == pytest.approx(0.6)
+    finally:
+        session.close()
