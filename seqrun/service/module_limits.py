@@ -71,9 +71,11 @@ def _rounded(value: float | None) -> float | None:
 
 
 def compare_limits(arm: ArmDescription, held: Sequence[JointLimits]) -> list[LimitRow]:
-    """The rows of ``limits show``: every joint's held limits beside the arm file's."""
+    """The rows of ``limits show``: every joint's held limits beside the arm file's (a
+    joint declared absent: none held)."""
     return [LimitRow(joint.name, joint.module,
-                     {key: getattr(limits, key) for key, *_ in LIMIT_FIELDS},
+                     {key: getattr(limits, key) if joint.present else None
+                      for key, *_ in LIMIT_FIELDS},   # an absent joint has no module
                      _arm_values(joint))
             for joint, limits in zip(arm.joints, held)]
 
