@@ -280,8 +280,11 @@ def open_connection(*, interface: str | None = None, channel: str | None = None,
     except (can.CanError, OSError, ValueError, TypeError, ImportError) as exc:
         if held is not None:
             held.release()
+        from seqrun.service.adapters import adapter_hint
+
+        hint = adapter_hint(config["interface"], sys.platform)
         raise UserInputError(f"cannot open CAN interface '{config['interface']}' "
-                             f"channel '{config.get('channel')}': {exc}") from None
+                             f"channel '{config.get('channel')}': {hint or exc}") from None
     except BaseException:
         if held is not None:
             held.release()
