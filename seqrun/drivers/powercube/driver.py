@@ -175,8 +175,7 @@ class PowerCubeDriver:
         return [m for m in modules if m not in absent] if absent else list(modules)
 
     def _absent_module_rad(self, module: int) -> float:
-        joint = self._absent[module]
-        return math.radians(joint.locked + joint.offset_deg)
+        return self.units.joint_module_rad(module, self._absent[module].locked)
 
     # ------------------------------------------------------------------ the run
     def configure(self, *, cycle_s: float, run_limits: Limits, command_mode: str,
