@@ -74,7 +74,7 @@ def test_halt_with_no_bus_and_nothing_live_says_there_is_no_arm(nowhere):
     assert "confirmed" not in result.output
 
 
-@pytest.mark.parametrize("command", [["status"], ["status", "--json"], ["reset"]])
+@pytest.mark.parametrize("command", [["status"], ["status", "--json"], ["reset"], ["home"]])
 def test_status_and_reset_with_no_bus_and_nothing_live_refuse(nowhere, command):
     result = CliRunner().invoke(app, command)
     assert result.exit_code == 2, result.output

@@ -435,8 +435,8 @@ def test_the_powercube_driver_confirms_home_by_reading_it_back():
         assert home.confirmed and home.command == "home" and driver.homed(), home.describe()
         halt = driver.confirm("halt")
         assert halt.confirmed and all(s.halted for s in halt.states.values())
-        home = driver.confirm("home")       # halted: Home does not clear it, not confirmed
-        assert home.sent and not home.confirmed and home.attempts == 3
+        home = driver.confirm("home")       # halted: Home is not a Reset, not even sent
+        assert not home.sent and not home.confirmed and "reset them first" in home.error
         assert "HALTED" in home.describe_unconfirmed()
         assert driver.confirm("reset").confirmed
         driver.close()

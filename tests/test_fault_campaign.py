@@ -267,7 +267,7 @@ def test_clean_run_passes_and_follows_the_timeline(clean):
     assert run.halts == []
     assert [e["step"] for e in run.of_type("step_finished")] == list(range(1, 10))
     # The timeline the campaign's phases are defined on (virtual seconds).
-    assert clean.finish[3] <= clean.start[5] < 0.016  # preflight reads MinPos, MaxPos, MaxVel, MaxAcc
+    assert clean.finish[3] <= clean.start[5] < 0.02  # preflight reads MinPos … MaxCur; MaxCur written
     assert clean.start[5] < 3.0 < clean.finish[5] == pytest.approx(8.50, abs=0.05)
     assert clean.start[6] < 10.0 < clean.finish[6] == pytest.approx(13.62, abs=0.05)
     assert clean.start[8] < 14.0 < clean.finish[8] == clean.start[9]

@@ -44,7 +44,7 @@ HELD = (r"error: socketcand:127\.0\.0\.1:\d+/can0 is held by pid \d+ \(seqrun ru
         r"'seqrun halt' talk to it")
 
 
-@pytest.mark.parametrize("command", [["reset"], ["status"], ["status", "--json"],
+@pytest.mark.parametrize("command", [["reset"], ["home"], ["limits", "show"], ["limits", "set"], ["status"], ["status", "--json"],
                                      ["pose", "save", "x", "-o", "{tmp}/x.yaml"]])
 def test_commands_are_refused_naming_the_holder(held, command, tmp_path):
     command = [part.format(tmp=tmp_path) for part in command]

@@ -38,7 +38,13 @@ def _no_items() -> list:
 
 class Joint(_Strict):
     name: str = Field(description="Joint name used in sequences, e.g. j1.")
-    module: int = Field(ge=1, le=31, description="PowerCube module id on the CAN bus.")
+    module: int = Field(ge=1, le=31, description="PowerCube module id on the CAN bus (any "
+                                                 "1..31: a second arm on other ids is a "
+                                                 "file, not code).")
+    present: bool = Field(
+        True, description="false: no module of this joint is on the bus (nothing is sent "
+                          "to its id, nothing read); the joint must be locked, and the "
+                          "kinematics keep its locked angle.")
     limits_deg: tuple[Finite, Finite] = Field(
         description="User-coordinate limits [min, max] in degrees, written as MinPos/MaxPos.")
     offset_deg: Finite = Field(0.0, description="module position minus user position, degrees.")
@@ -47,6 +53,10 @@ class Joint(_Strict):
     max_velocity_deg_s: Positive = Field(description="Velocity limit, deg/s.")
     max_acceleration_deg_s2: Positive = Field(description="Acceleration limit, deg/s^2.")
     max_jerk_deg_s3: Positive = Field(description="Jerk limit for ruckig, deg/s^3.")
+    max_current_a: Positive | None = Field(
+        None, description="Current limit (MaxCur), A: written by set_limits (the thesis "
+                          "wrote 2 A); a step may only lower it. Not given: the module's "
+                          "stored MaxCur is left as it is.")
 
     @model_validator(mode="after")
     def _check(self) -> "Joint":
@@ -55,6 +65,9 @@ class Joint(_Strict):
             raise ValueError(f"limits_deg of {self.name}: min {lo} must be below max {hi}")
         if self.locked is not None and not lo <= self.locked <= hi:
             raise ValueError(f"locked value {self.locked} of {self.name} is outside its limits")
+        if not self.present and self.locked is None:
+            raise ValueError(f"{self.name} is not present (present: false): give its fixed "
+                             "angle as locked, for the kinematics")
         return self
 
 
@@ -456,6 +469,11 @@ class ArmDescription(_Strict):
     @property
     def module_ids(self) -> list[int]:
         return [j.module for j in self.joints]
+
+    @property
+    def present_module_ids(self) -> list[int]:
+        """The modules on the bus: those of the joints not declared absent."""
+        return [j.module for j in self.joints if j.present]
 
     def joint(self, name: str) -> Joint:
         for j in self.joints:

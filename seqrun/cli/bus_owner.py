@@ -28,7 +28,7 @@ def owner_text(holder: dict) -> str:
 
 def live_targets(context, what: str, pid: int | None = None) -> list | None:
     """The live seqrun runs/consoles a command with no bus acts through (None: the command
-    acts on its bus as resolved). ``what``: "status", "halt" or "reset".
+    acts on its bus as resolved). ``what``: "status", "halt", "reset" or "home".
 
     With no bus configured a command never acts on a private simulator of its own: it acts
     through the live run or console (``status``: exactly one, or ``--pid``), and with
@@ -66,6 +66,10 @@ def live_targets(context, what: str, pid: int | None = None) -> list | None:
     if what == "reset":
         raise UserInputError(f"no bus configured, and {_names(live)} live on this machine: "
                              "reset the arm through it (the console's Reset, the run's "
+                             "sequence), or name its bus with -i/-c")
+    if what == "home":
+        raise UserInputError(f"no bus configured, and {_names(live)} live on this machine: "
+                             "home the arm through it (the console's Home, the run's "
                              "sequence), or name its bus with -i/-c")
     if what == "status" and len(live) > 1:
         raise UserInputError(f"{_names(live)} live on this machine: pick one with --pid PID")

@@ -110,22 +110,26 @@ class ArmPoll:
 
 @dataclass(frozen=True)
 class JointLimits:
-    """The limits a joint's drive holds, in user units (deg, deg/s, deg/s^2)."""
+    """The limits a joint's drive holds, in user units (deg, deg/s, deg/s^2, A)."""
 
     min_deg: float
     max_deg: float
     max_velocity_deg_s: float
     max_acceleration_deg_s2: float
+    #: The current limit (MaxCur), A; None: a driver that does not read it.
+    max_current_a: float | None = None
 
 
 @dataclass(frozen=True)
 class LimitValues:
-    """Limits to write to one joint, user units (deg, deg/s, deg/s^2); None: left as is."""
+    """Limits to write to one joint, user units (deg, deg/s, deg/s^2, A); None: left as
+    is."""
 
     min_deg: float
     max_deg: float
     max_velocity_deg_s: float | None = None
     max_acceleration_deg_s2: float | None = None
+    max_current_a: float | None = None
 
 
 @dataclass(frozen=True)
@@ -312,9 +316,12 @@ class ArmDriver(Protocol):
 
     def confirm(self, command: ConfirmedCommand,
                 modules: Sequence[int] | None = None) -> CommandConfirmation:
-        """``seqrun halt|reset`` (and Home): broadcast ``command`` and confirm it on every
-        module (None: all) by reading its state back, repeating it for the modules that
-        did not confirm. Never raises for the bus."""
+        """``seqrun halt|reset|home``: send ``command`` and confirm it on every module
+        (None: all) by reading its state back. Halt and Reset are broadcast and repeated
+        for the modules that did not confirm; Home is refused (nothing sent, ``error``
+        says why) while a module is halted or in error, sent once (broadcast for the
+        whole arm, else addressed) and confirmed when every module reports homed and at
+        rest (a module may travel to its home switch first). Never raises for the bus."""
 
     # -- the arm outside a run (status, the zero decision)
     def identity(self) -> ArmIdentity:

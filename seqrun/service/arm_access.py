@@ -17,7 +17,8 @@ if TYPE_CHECKING:
     from seqrun.drivers.base import ArmDriver, ArmIdentity, CommandConfirmation
     from seqrun.service.connection import Connection
 
-__all__ = ["identity_and_homed", "modules_homed", "read_joints", "read_status", "status_rows"]
+__all__ = ["home_and_confirm", "identity_and_homed", "modules_homed", "modules_of",
+           "read_joints", "read_status", "status_rows"]
 
 
 
@@ -102,3 +103,27 @@ def broadcast_and_confirm(driver: ArmDriver, what: str) -> CommandConfirmation:
     """Broadcast ``what`` ("halt" or "reset") and confirm it on every module by reading
     their states back."""
     return driver.confirm(what)  # type: ignore[arg-type]
+
+
+def modules_of(arm: ArmDescription, joint_names: list[str] | None) -> list[int] | None:
+    """The module ids of the joints named (None: every module of the arm). An unknown or
+    repeated name is a :class:`~seqrun.errors.UserInputError` naming the arm's joints."""
+    from seqrun.errors import UserInputError
+
+    if joint_names is None:
+        return None
+    known = {j.name: j.module for j in arm.joints}
+    if not joint_names:
+        raise UserInputError(f"--joints names no joint (the arm's: {', '.join(known)})")
+    unknown = [n for n in joint_names if n not in known]
+    if unknown:
+        raise UserInputError(f"unknown joint(s) {', '.join(unknown)}: arm '{arm.name}' has "
+                             f"{', '.join(known)}")
+    return list(dict.fromkeys(known[n] for n in joint_names))
+
+
+def home_and_confirm(driver: ArmDriver,
+                     modules: list[int] | None = None) -> CommandConfirmation:
+    """Home ``modules`` (None: the whole arm) and confirm it by reading every module back
+    (HOME_OK, at rest); a halted or faulted module is not homed (its error says so)."""
+    return driver.confirm("home", modules)

@@ -220,7 +220,10 @@ class ArmContext:
                                      faults=extra.pop("faults", None)
                                      or parse_faults(list(self.faults)),
                                      default_bitrate=arm.can.bitrate, claim=claim,
-                                     transient=transient, **extra)
+                                     transient=transient,
+                                     # the simulator: the arm file's modules on the bus
+                                     sim_modules=extra.pop("sim_modules", None)
+                                     or arm.present_module_ids, **extra)
         if live and connection.is_simulator and connection.claim is None:
             from seqrun.service.bus_claim import claim_bus
 

@@ -193,6 +193,7 @@ def open_connection(*, interface: str | None = None, channel: str | None = None,
                     force_sim: bool = False, faults: Sequence[Fault] = (),
                     clock: Clock | None = None,
                     sim_positions: Mapping[int, float] | Sequence[float] | None = None,
+                    sim_modules: Sequence[int] | None = None,
                     default_bitrate: int = 1_000_000,
                     power_on_pose: str | None = None,
                     python_can: bool = True, claim: bool = True,
@@ -238,7 +239,7 @@ def open_connection(*, interface: str | None = None, channel: str | None = None,
             bus = bus_class(channel=name, clock=clock, faults=list(faults),
                             bitrate=bitrate or config.get("bitrate") or default_bitrate,
                             positions=sim_positions, options=options,
-                            power_on_pose=power_on_pose, **switches)
+                            power_on_pose=power_on_pose, modules=sim_modules, **switches)
         except refused as exc:
             raise UserInputError(f"--bus-kwargs: {exc}") from None
         kind = "virtual time" if clock.is_virtual else "real time"
@@ -279,8 +280,11 @@ def open_connection(*, interface: str | None = None, channel: str | None = None,
     except (can.CanError, OSError, ValueError, TypeError, ImportError) as exc:
         if held is not None:
             held.release()
+        from seqrun.service.adapters import adapter_hint
+
+        hint = adapter_hint(config["interface"], sys.platform)
         raise UserInputError(f"cannot open CAN interface '{config['interface']}' "
-                             f"channel '{config.get('channel')}': {exc}") from None
+                             f"channel '{config.get('channel')}': {hint or exc}") from None
     except BaseException:
         if held is not None:
             held.release()

@@ -154,6 +154,7 @@ def _dry_run_unfrozen(loaded: LoadedSequence, arm: ArmDescription,
     clock = VirtualClock()
     positions = simulator_positions(arm, start_deg)
     connection = open_connection(force_sim=True, clock=clock, sim_positions=positions,
+                                 sim_modules=arm.present_module_ids,
                                  faults=list(faults), default_bitrate=arm.can.bitrate,
                                  python_can=False)
     hz = cycle_hz or arm.control.cycle_hz

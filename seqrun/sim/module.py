@@ -14,7 +14,11 @@ Behaviour (sources in the reference; **[I]** marks an assumption that is an opti
 - Power-on: encoders at the given position (0 for an arm homed at Park), limits the
   module's stored ones (:func:`default_parameters`), HOME_OK clear and the brake engaged
   until Home [I: thesis 5.1; PRL drivers elsewhere saw HOME_OK at boot —
-  ``home_ok_at_power_on``]. Home sets HOME_OK without moving.
+  ``home_ok_at_power_on``]. Home sets HOME_OK without moving (a PRL has absolute
+  encoders). [I: ``homing_travel``, for modules with incremental encoders: Home clears
+  HOME_OK and travels to the home switch (``home_switch_position``, module rad) at
+  |FHomeVel| with DefHomeAcc, MOTION set and motion commands refused on the way; on the
+  switch HOME_OK and SWR are set. Halt or Reset on the way leave it not homed.]
 - Motion (SetMotion) is refused before Home, while ERROR/HALTED or any other fault bit is
   set, for current and loop modes (not simulated), and when it would take a module that is
   at or beyond a soft limit further out. A refused command is still acknowledged and its
@@ -47,9 +51,15 @@ Behaviour (sources in the reference; **[I]** marks an assumption that is an opti
 - Extended acks report the position and short state at receipt (before the command acts).
 - Config DISABLE_ACK suppresses every acknowledge [I, from the bit's name only].
 
-Not simulated: current control and current readings (Cur is a made-up, deterministic
-function of the motion), following-error monitoring (TOW_ERROR only as an injected fault),
-brake timing, homing travel, hard limits, temperatures and supply voltages (constants),
+- Current limit: a motion needs a current (a made-up, deterministic motor model: a fraction
+  of the module's rated DefMaxCur per rad/s^2 and per rad/s, :func:`required_current`);
+  Cur reads it, at most MaxCur. A motion whose ramp needs more than MaxCur sets CURLIMIT
+  and runs with its acceleration and speed scaled down until it needs MaxCur (steps take
+  longer): the joint lags its host's plan, whose following-error monitor halts it [I:
+  ``current_limit_halts``: the module stops at once with CURLIMIT|ERROR instead].
+
+Not simulated: current control, following-error monitoring (TOW_ERROR only as an injected fault),
+brake timing, hard limits, temperatures and supply voltages (constants),
 parameter persistence (SaveParams is acknowledged), the state frame 0x060+id, the
 Internal (0x04) and SetIStep (0x0D) commands (the codec does not decode them).
 """
@@ -158,6 +168,14 @@ class ModuleOptions:
     #: the current position instead of from the current velocity. No published driver
     #: streams FRAMP, so real firmware behaviour is unconfirmed [I].
     framp_from_standstill: bool = False
+    #: Home travels to the home switch before HOME_OK (modules with incremental
+    #: encoders); False: HOME_OK at once, no travel (a PRL: absolute encoders, thesis 5.1).
+    homing_travel: bool = False
+    #: Where the home switch is (module coordinates, rad) with ``homing_travel``.
+    home_switch_position: float = 0.0
+    #: A motion needing more current than MaxCur stops the module at once with
+    #: CURLIMIT|ERROR; False: it runs slower (the current clamped), the joint lags.
+    current_limit_halts: bool = False
     #: Serial numbers (DefCubeSerial, 0x1A): module M says ``serial_base + M``. 0: every
     #: simulated arm draws a base of its own (two ``seqrun sim serve`` are two arms, as
     #: the zero reference, keyed by the serials, must see them).
@@ -167,6 +185,13 @@ class ModuleOptions:
 #: Environment variable the command line reads simulator options from, e.g.
 #: ``SEQRUN_SIM_OPTIONS="framp_from_standstill drop_request_while_busy"``.
 SIM_OPTIONS_ENV = "SEQRUN_SIM_OPTIONS"
+
+
+#: The motor model of the current limit: current needed per rad/s^2 and per rad/s, as a
+#: fraction of the module's rated current (DefMaxCur) at DefMaxAcc and at DefMaxVel. With
+#: it the arm file's limits (30 deg/s, 60 deg/s^2) need under 0.8 A on every module: the
+#: thesis' 2 A limit never binds; 0.5 A on joint 1 does.
+CURRENT_PER_ACCELERATION, CURRENT_PER_VELOCITY = 0.1, 0.05
 
 
 #: The serial base of a module made on its own (no arm around it to choose one).
@@ -285,7 +310,7 @@ class _Profile:
     """A motion from ``(p0, v0)`` at ``t0``; ``target`` is where it ends exactly (None for
     velocity mode, which runs until a soft limit or a new command)."""
 
-    kind: str  # "ramp" | "step" | "velocity"
+    kind: str  # "ramp" | "step" | "velocity" | "home" (travel to the home switch)
     t0: float
     segments: list[_Segment]
     target: float | None
@@ -598,6 +623,8 @@ class SimModule:
         assert profile is not None
         self._rest, _, _ = profile.sample(profile.end)
         self._profile = None
+        if profile.kind == "home":
+            self._homed_on_switch()
         if self._buffered_step is not None:
             target, seconds = self._buffered_step
             self._buffered_step = None
@@ -799,9 +826,14 @@ class SimModule:
             self._flags &= ~RESETTABLE
             self._watchdog_deadline = None
         elif command == CommandId.HOME:
-            # A PRL has absolute encoders: Home enables the motor (the click), no travel.
             if not self._flags & (_F.ERROR | _F.HALTED):
-                self._flags = (self._flags | _F.HOME_OK) & ~_F.BRAKEACTIVE
+                self._flags &= ~_F.BRAKEACTIVE
+                if self.options.homing_travel:
+                    self._start_homing()
+                else:
+                    # A PRL has absolute encoders: Home enables the motor (the click), no
+                    # travel.
+                    self._flags |= _F.HOME_OK
         elif command == CommandId.HALT:
             self._stop(_F.HALTED)
         elif command == CommandId.WATCHDOG_REFRESH:
@@ -810,6 +842,23 @@ class SimModule:
                 return None
         # TOGGLE_HOME, RECALC_PID, SAVE_PARAMS, RESET_TIME: acknowledged, no simulated effect.
         return CommandAck(self.module_id, command)
+
+    def _start_homing(self) -> None:
+        """Travel to the home switch (``homing_travel``): HOME_OK clear until there."""
+        self._flags &= ~(_F.HOME_OK | _F.SWR)
+        self._buffered_step = self._held = None
+        position, velocity, _ = self._commanded()
+        target = self.options.home_switch_position
+        vmax = abs(float(self._params[ParamId.FHOME_VEL])) or 0.1
+        amax = abs(float(self._params[ParamId.DEF_HOME_ACC])) or 0.5
+        pieces = plan_ramp(position, velocity, target, vmax, amax)
+        self._start(_build_profile("home", self._t, position, velocity, pieces, target),
+                    rest=target)
+        if self._profile is None:  # already on the switch
+            self._homed_on_switch()
+
+    def _homed_on_switch(self) -> None:
+        self._flags |= _F.HOME_OK | _F.SWR
 
     def _refresh_watchdog(self, addressed: bool = False) -> None:
         if self.options.addressed_refresh_arms_watchdog:
@@ -874,18 +923,42 @@ class SimModule:
         if self._profile is None:
             return 0
         return {"ramp": MotionMode.FRAMP, "step": MotionMode.FSTEP,
-                "velocity": MotionMode.FVEL}[self._profile.kind]
+                "velocity": MotionMode.FVEL}.get(self._profile.kind, 0)
 
     def _current(self) -> float:
-        """Not a motor model: a deterministic stand-in that is 0 at rest and grows with
-        acceleration and speed, so readings change while the joint moves."""
+        """The motor model's current now (:meth:`required_current`), at most MaxCur: 0 at
+        rest, growing with acceleration and speed."""
         if self._profile is None or self._stuck_at is not None:
             return 0.0
         _, velocity, segment = self._profile.sample(self._t)
+        need = self.required_current(segment.a, velocity)
+        max_cur = abs(float(self._params[_P_MAX_CUR]))
+        return max(-max_cur, min(max_cur, need))
+
+    def required_current(self, acceleration: float, velocity: float) -> float:
+        """Amperes a motion at ``acceleration`` (rad/s^2) and ``velocity`` (rad/s) needs
+        (the motor model, module docstring); signed like the acceleration, else the
+        velocity."""
+        rated = float(self._params[ParamId.DEF_MAX_CUR])
+        need = rated * (CURRENT_PER_ACCELERATION * abs(acceleration)
+                        / (float(self._params[ParamId.DEF_MAX_ACC]) or 1.0)
+                        + CURRENT_PER_VELOCITY * abs(velocity)
+                        / (float(self._params[ParamId.DEF_MAX_VEL]) or 1.0))
+        return math.copysign(need, acceleration if acceleration else velocity)
+
+    def _current_scale(self, vmax: float, amax: float) -> float:
+        """1 when a motion bounded by ``vmax``/``amax`` stays within MaxCur, else the
+        factor both must shrink by (CURLIMIT set); 0 when the module stopped instead
+        (``current_limit_halts``)."""
+        need = abs(self.required_current(amax, 0.0)) + abs(self.required_current(0.0, vmax))
         max_cur = float(self._params[_P_MAX_CUR])
-        amax = float(self._params[_P_MAX_ACC]) or 1.0
-        vmax = float(self._params[_P_MAX_VEL]) or 1.0
-        return max_cur * (0.3 * segment.a / amax + 0.1 * velocity / vmax)
+        if need <= max_cur:
+            return 1.0
+        if self.options.current_limit_halts or max_cur <= 0:
+            self._stop(_F.CURLIMIT | _F.ERROR)
+            return 0.0
+        self._flags |= _F.CURLIMIT
+        return max_cur / need
 
     def _write(self, param: ParamId, value: float) -> None:
         if param not in WRITABLE_PARAMS:
@@ -968,12 +1041,26 @@ class SimModule:
     def _execute(self, motion: _HeldMotion) -> None:
         """Start an accepted motion now (at ``self._t``)."""
         lo, hi = self._limits()
+        if motion.mode in _STEP_MODES:
+            position = self._commanded()[0]
+            target = min(max(motion.value, lo), hi)
+            step_s = (motion.time_ms or 0) / 1000.0
+            speed = abs(target - position) / step_s if step_s > 0 else float(
+                self._params[_P_MAX_VEL])
+            scale = self._current_scale(speed, 0.0)
+        else:
+            scale = self._current_scale(motion.vmax, motion.amax)
+        if scale == 0.0:
+            return  # stopped at the current limit (current_limit_halts)
+        if scale < 1.0:
+            motion = _HeldMotion(motion.mode, motion.value, motion.time_ms,
+                                 vmax=motion.vmax * scale, amax=motion.amax * scale)
         # Plans start from the setpoint (position and velocity); for a stuck joint that is
         # where the controller believes it is, not where the joint is.
         position, velocity, _ = self._commanded()
         if motion.mode in _STEP_MODES:
             target = min(max(motion.value, lo), hi)
-            seconds = (motion.time_ms or 0) / 1000.0
+            seconds = (motion.time_ms or 0) / 1000.0 / scale
             self._last_target = target
             running_step = self._profile is not None and self._profile.kind == "step"
             if running_step and self.options.step_buffering:
@@ -991,7 +1078,7 @@ class SimModule:
             pieces = plan_ramp(position, velocity, target, motion.vmax, motion.amax)
             self._start(_build_profile("ramp", self._t, position, velocity, pieces, target))
         else:
-            vmax = float(self._params[_P_MAX_VEL])
+            vmax = float(self._params[_P_MAX_VEL]) * scale
             wanted = min(max(motion.value, -vmax), vmax)
             if self.options.velocity_mode_acceleration:
                 change = abs(wanted - velocity) / motion.amax
@@ -1022,6 +1109,7 @@ class SimModule:
                                    [(seconds, 0.0)], target))
 
     def _start(self, profile: _Profile | None, rest: float | None = None) -> None:
+        self._flags &= ~_F.SWR  # leaves the home switch (set again by homing's end)
         if profile is not None and profile.end <= self._t:  # nothing to do: already there
             rest, profile = profile.sample(profile.end)[0], None
         self._profile = profile

@@ -13,8 +13,9 @@ if TYPE_CHECKING:
     from seqrun.steps.context import StepContext
     from seqrun.steps.resolved import ResolvedStep
 
-#: PRL modules home without moving; this bounds the wait for HOME_OK.
-HOME_TIMEOUT_S = 5.0
+#: PRL modules home without moving; a module that travels to its home switch takes
+#: seconds (as the driver's confirmed Home, it is waited for). This bounds the wait.
+HOME_TIMEOUT_S = 60.0
 
 
 class HomeParams(ModulesParams):

@@ -1,4 +1,5 @@
-"""set_limits: write MinPos/MaxPos (and MaxVel/MaxAcc where given), then read them back."""
+"""set_limits: write MinPos/MaxPos and MaxCur (and MaxVel/MaxAcc where given), then read
+them back."""
 
 from __future__ import annotations
 
@@ -17,9 +18,10 @@ if TYPE_CHECKING:
 
 
 class SetLimitsParams(StepParams):
-    """Write the position limits (MinPos/MaxPos) into every joint's module, and the velocity
-    and acceleration limits (MaxVel/MaxAcc) of the joints named here. Values default to the
-    arm file's; overrides may only narrow them."""
+    """Write the position limits (MinPos/MaxPos) and the current limit (MaxCur, where the
+    arm file gives one) into every joint's module, and the velocity and acceleration limits
+    (MaxVel/MaxAcc) of the joints named here. Values default to the arm file's; overrides
+    may only narrow them."""
 
     kind: ClassVar[str] = "set_limits"
     yaml_name: ClassVar[str] = "set_limits"
@@ -35,6 +37,10 @@ class SetLimitsParams(StepParams):
         default_factory=dict,
         description="Per-joint MaxAcc in deg/s^2, at most the arm file's maximum; written "
                     "only for the joints named.")
+    max_current_a: dict[JointName, Positive] = Field(
+        default_factory=dict,
+        description="Per-joint MaxCur in A, at most the arm file's max_current_a (which the "
+                    "joints not named get, where it is given).")
 
     @model_validator(mode="after")
     def _ordered(self) -> SetLimitsParams:
@@ -84,6 +90,17 @@ def check(checker: CheckContext,
                 checker.errors.append(step.error(
                     f"{key} of {name} {f(values[name])} {unit} is above the arm's "
                     f"maximum {f(maximum)} {unit}", key, name))
+    for name in checker.names(step, params.max_current_a, ("max_current_a",), as_keys=True,
+                              what="writing limits to"):
+        maximum = joints[name].joint.max_current_a
+        if maximum is None:
+            checker.errors.append(step.error(
+                f"max_current_a of {name}: the arm file gives no max_current_a for {name} "
+                "(add it there first: a step may only lower it)", "max_current_a", name))
+        elif params.max_current_a[name] > maximum:
+            checker.errors.append(step.error(
+                f"max_current_a of {name} {f(params.max_current_a[name])} A is above the "
+                f"arm's maximum {f(maximum)} A", "max_current_a", name))
     for state in unlocked:
         name = state.joint.name
         override = params.limits_deg.get(name)
@@ -106,7 +123,9 @@ def run(step: ResolvedStep[SetLimitsParams], ex: StepContext) -> dict:
         lo, hi = params.limits_deg.get(joint.name, joint.limits_deg)
         values[joint.name] = LimitValues(lo, hi,
                                          params.max_velocity_deg_s.get(joint.name),
-                                         params.max_acceleration_deg_s2.get(joint.name))
+                                         params.max_acceleration_deg_s2.get(joint.name),
+                                         params.max_current_a.get(joint.name,
+                                                                  joint.max_current_a))
     # The driver reads every value back: one that differs is a fault (limits_not_written).
     written = ex.write_limits(values)
     # From now on the modules hold these: later moves are planned within them.

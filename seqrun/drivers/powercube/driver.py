@@ -18,6 +18,7 @@ Everything that knows PowerCube frames lives here (or in the client and codec be
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import threading
 from collections.abc import Callable, Mapping, Sequence
@@ -33,6 +34,7 @@ from seqrun.drivers.base import (ArmIdentity, ArmPoll, CommandConfirmation, Conf
                                  JointState, LimitValues, MotionRefused)
 from seqrun.drivers.powercube.confirm import (DEFAULT_ATTEMPTS, command_and_confirm,
                                               confirm_command)
+from seqrun.drivers.powercube.homing import home_and_confirm
 from seqrun.drivers.powercube.messages import user_message
 from seqrun.drivers.powercube.setpoints import SetpointLaw, setpoint_law
 from seqrun.drivers.powercube.states import (FAULT_FLAGS, HOMED_FLAG, cycle_state,
@@ -45,6 +47,12 @@ from seqrun.powercube.protocol import CommandId, ConfigFlag, ParamId, ShortState
 
 #: float32 on the wire: a read-back equal within this is the value written.
 READBACK_TOLERANCE_RAD = 1e-6
+#: The state of a joint declared absent (no module on the bus): homed, at rest, no fault.
+ABSENT_STATE = dataclasses.replace(joint_state(StateFlag.HOME_OK | StateFlag.RAMP_END),
+                                   text="ABSENT (no module)")
+ABSENT_SHORT_STATE = ShortState.RAMP_END
+#: A current limit reads back as written within this (float32 of a few amperes: 1e-6 A).
+READBACK_TOLERANCE_A = 1e-5
 
 
 def _no_events(type_: str, **data: Any) -> None:
@@ -101,6 +109,9 @@ class PowerCubeDriver:
     READ_RETRIES = 1
     #: Attempts of the HOME_OK reading of :meth:`homed` (a read is idempotent).
     HOMED_ATTEMPTS = 3
+    #: Seconds ``confirm("home")`` waits for every module to report HOME_OK at rest (a
+    #: PRL homes at once; a module that travels to its home switch takes seconds).
+    HOME_TIMEOUT_S = 60.0
     FAULT_FLAGS: ClassVar[frozenset[str]] = FAULT_FLAGS
     HOMED_FLAG: ClassVar[str] = HOMED_FLAG
 
@@ -109,6 +120,7 @@ class PowerCubeDriver:
         self.arm = arm
         self.clock = client.clock
         self.modules: list[int] = arm.module_ids
+        self._joints_on_bus(arm)
         self.units = ModuleUnits(arm)
         #: The transport hands this process its own frames back (``receive_own_messages``).
         self.echoes_own = echoes_own
@@ -147,7 +159,23 @@ class PowerCubeDriver:
 
     def use_arm(self, arm: ArmDescription) -> None:
         self.arm = arm
+        self._joints_on_bus(arm)
         self.units = ModuleUnits(arm)
+
+    def _joints_on_bus(self, arm: ArmDescription) -> None:
+        """Which modules are on the bus. A joint declared absent (``present: false``) has
+        none: nothing is sent to its id; readings give its locked angle and a state of
+        "absent" (homed, at rest, no fault), so every reading stays in joint order."""
+        #: The modules on the bus (every request goes to one of them).
+        self.bus_modules: list[int] = arm.present_module_ids
+        self._absent: dict[int, Any] = {j.module: j for j in arm.joints if not j.present}
+
+    def _on_bus(self, modules: Sequence[int]) -> list[int]:
+        absent = self._absent
+        return [m for m in modules if m not in absent] if absent else list(modules)
+
+    def _absent_module_rad(self, module: int) -> float:
+        return self.units.joint_module_rad(module, self._absent[module].locked)
 
     # ------------------------------------------------------------------ the run
     def configure(self, *, cycle_s: float, run_limits: Limits, command_mode: str,
@@ -194,13 +222,17 @@ class PowerCubeDriver:
         return self._cycle([], [])
 
     def read_state(self, module: int) -> JointState:
+        if module in self._absent:
+            return ABSENT_STATE
         return joint_state(self.client.read_state(module))
 
     def read_states(self, modules: Sequence[int] | None = None) -> dict[int, JointState]:
-        """CubeState of several modules, pipelined."""
-        modules = self.modules if modules is None else list(modules)
-        acks = self.transact([GetParam(m, ParamId.CUBE_STATE) for m in modules], idempotent=True)
-        return {m: joint_state(a.value) for m, a in zip(modules, acks)}
+        """CubeState of several modules, pipelined (an absent joint's: "absent")."""
+        wanted = self.modules if modules is None else list(modules)
+        on_bus = self._on_bus(wanted)
+        acks = self.transact([GetParam(m, ParamId.CUBE_STATE) for m in on_bus], idempotent=True)
+        states = {m: joint_state(a.value) for m, a in zip(on_bus, acks)}
+        return {m: states.get(m, ABSENT_STATE) for m in wanted}
 
     # ------------------------------------------------------------------ motion
     def start_motion(self, moving: list[int], limits: Limits, *,
@@ -238,7 +270,7 @@ class PowerCubeDriver:
         of the batch is collected.
         """
         moving_modules = {self.modules[i] for i in moving}
-        reads = [r for m in self.modules if m not in moving_modules for r in self._reads(m)]
+        reads = [r for m in self.bus_modules if m not in moving_modules for r in self._reads(m)]
         batch: list[Any] = requests + reads   # (addressed requests: every one has a module)
         try:
             acks = self.client.transact_partial(
@@ -286,9 +318,17 @@ class PowerCubeDriver:
                     answered[ack.module] = at
                 elif ack.param == ParamId.CUBE_STATE:
                     states[ack.module] = short_state(StateFlag(ack.value))
+        for module in self._absent:
+            positions[module] = self._absent_module_rad(module)
+            states[module] = ABSENT_SHORT_STATE
         module_rad = np.array([positions[m] for m in self.modules])
-        stamps = [answered.get(m) for m in self.modules]
-        at = None if None in stamps else np.array(stamps, dtype=float)
+        stamps = [answered.get(m) for m in self.bus_modules]
+        if None in stamps:
+            at = None
+        elif self._absent:   # an absent joint "answers" with the first module on the bus
+            at = np.array([answered.get(m, stamps[0]) for m in self.modules], dtype=float)
+        else:
+            at = np.array(stamps, dtype=float)
         return JointReading(self.units.user_deg(module_rad), states, at)  # type: ignore[arg-type]
 
     # ------------------------------------------------------------------ commands
@@ -301,8 +341,10 @@ class PowerCubeDriver:
     def halt(self, modules: Sequence[int] | None) -> None:
         self._command(self.client.halt, modules)
 
-    @staticmethod
-    def _command(send: Callable[[int | None], None], modules: Sequence[int] | None) -> None:
+    def _command(self, send: Callable[[int | None], None],
+                 modules: Sequence[int] | None) -> None:
+        if modules is not None:
+            modules = self._on_bus(modules)
         if modules is None:
             send(None)          # one broadcast
         else:
@@ -310,7 +352,7 @@ class PowerCubeDriver:
                 send(module)
 
     def halt_and_confirm(self) -> CommandConfirmation:
-        return confirm_command(self.client, CommandId.HALT, self.modules)
+        return confirm_command(self.client, CommandId.HALT, self.bus_modules)
 
     def halt_now(self, *, wait: bool = True) -> None:
         self.client.halt_now(wait=wait)
@@ -318,8 +360,14 @@ class PowerCubeDriver:
     def confirm(self, command: ConfirmedCommand,
                 modules: Sequence[int] | None = None,
                 attempts: int = DEFAULT_ATTEMPTS) -> CommandConfirmation:
+        if command == "home":  # sent once, then read until homed (it may travel)
+            wanted = self._on_bus(self.bus_modules if modules is None else modules)
+            return home_and_confirm(self.client, wanted,
+                                    whole_arm=set(wanted) >= set(self.bus_modules),
+                                    timeout_s=self.HOME_TIMEOUT_S)
         return command_and_confirm(self.client, CommandId[command.upper()],
-                                   self.modules if modules is None else modules,
+                                   self._on_bus(self.bus_modules if modules is None
+                                                else modules),
                                    attempts=attempts)
 
     # ------------------------------------------------------------------ outside a run
@@ -328,13 +376,22 @@ class PowerCubeDriver:
     def poll(self, *, tolerate_loss: bool = False) -> ArmPoll:
         """ActPos, ActVel and CubeState of every module, pipelined."""
         params = self._STATUS_PARAMS
-        requests = [GetParam(m, p) for m in self.modules for p in params]
+        on_bus = self.bus_modules
+        requests = [GetParam(m, p) for m in on_bus for p in params]
+        answers_of = dict(zip(on_bus, range(len(on_bus))))
         acks = (self.client.transact_partial(requests) if tolerate_loss
                 else self.client.transact(requests))
         positions: list[float | None] = []
         velocities: list[float | None] = []
         states: dict[int, JointState | None] = {}
-        for k, module in enumerate(self.modules):
+        for module in self.modules:
+            if module in self._absent:
+                positions.append(self.units.joint_user_deg(
+                    module, self._absent_module_rad(module)))
+                velocities.append(0.0)
+                states[module] = ABSENT_STATE
+                continue
+            k = answers_of[module]
             answers = acks[len(params) * k:len(params) * (k + 1)]
             if any(a is None for a in answers):
                 positions.append(None)
@@ -349,15 +406,15 @@ class PowerCubeDriver:
 
     def identity(self) -> ArmIdentity:
         """DefCubeSerial (0x1A) of every module, pipelined."""
-        acks = self.transact([GetParam(m, ParamId.DEF_CUBE_SERIAL) for m in self.modules],
+        acks = self.transact([GetParam(m, ParamId.DEF_CUBE_SERIAL) for m in self.bus_modules],
                              idempotent=True)
-        return ArmIdentity.of({m: int(a.value) for m, a in zip(self.modules, acks)})
+        return ArmIdentity.of({m: int(a.value) for m, a in zip(self.bus_modules, acks)})
 
     def homed(self) -> bool:
         for attempt in range(self.HOMED_ATTEMPTS):
             try:
                 acks = self.client.transact([GetParam(m, ParamId.CUBE_STATE)
-                                             for m in self.modules])
+                                             for m in self.bus_modules])
                 break
             except ModuleTimeoutError:
                 if attempt + 1 == self.HOMED_ATTEMPTS:
@@ -377,26 +434,34 @@ class PowerCubeDriver:
         self.client.remove_frame_listener(listener)
 
     # ------------------------------------------------------------------ limits
-    _LIMIT_PARAMS = (ParamId.MIN_POS, ParamId.MAX_POS, ParamId.MAX_VEL, ParamId.MAX_ACC)
+    _LIMIT_PARAMS = (ParamId.MIN_POS, ParamId.MAX_POS, ParamId.MAX_VEL, ParamId.MAX_ACC,
+                     ParamId.MAX_CUR)
 
     def read_limits(self) -> list[JointLimits]:
         params, units = self._LIMIT_PARAMS, self.units
-        stored = self.transact([GetParam(j.module, p) for j in self.arm.joints for p in params],
+        on_bus = [j for j in self.arm.joints if j.present]
+        stored = self.transact([GetParam(j.module, p) for j in on_bus for p in params],
                                idempotent=True)
         limits = []
-        for k, joint in enumerate(self.arm.joints):
-            low, high, velocity, acceleration = (float(a.value) for a in
-                                                 stored[len(params) * k:len(params) * (k + 1)])
+        for joint in self.arm.joints:
+            if not joint.present:   # no module: the arm file's values (nothing differs)
+                limits.append(JointLimits(*joint.limits_deg, joint.max_velocity_deg_s,
+                                          joint.max_acceleration_deg_s2, joint.max_current_a))
+                continue
+            k = on_bus.index(joint)
+            low, high, velocity, acceleration, current = (
+                float(a.value) for a in stored[len(params) * k:len(params) * (k + 1)])
             limits.append(JointLimits(units.joint_user_deg(joint.module, low),
                                       units.joint_user_deg(joint.module, high),
-                                      math.degrees(velocity), math.degrees(acceleration)))
+                                      math.degrees(velocity), math.degrees(acceleration),
+                                      current))
         return limits
 
     def write_limits(self, values: Mapping[str, LimitValues]) -> int:
         writes: list[tuple[int, ParamId, float]] = []
         for joint in self.arm.joints:
             value = values.get(joint.name)
-            if value is None:
+            if value is None or not joint.present:
                 continue
             writes.append((joint.module, ParamId.MIN_POS,
                            self.units.joint_module_rad(joint.module, value.min_deg)))
@@ -408,12 +473,18 @@ class PowerCubeDriver:
             if value.max_acceleration_deg_s2 is not None:
                 writes.append((joint.module, ParamId.MAX_ACC,
                                math.radians(value.max_acceleration_deg_s2)))
+            if value.max_current_a is not None:
+                writes.append((joint.module, ParamId.MAX_CUR, value.max_current_a))
         self.transact([SetParam(m, p, v) for m, p, v in writes])
         acks = self.transact([GetParam(m, p) for m, p, _ in writes], idempotent=True)
         for (module, param, wrote_rad), ack in zip(writes, acks):
-            if abs(float(ack.value) - wrote_rad) > READBACK_TOLERANCE_RAD:
+            tolerance = (READBACK_TOLERANCE_A if param == ParamId.MAX_CUR
+                         else READBACK_TOLERANCE_RAD)
+            if abs(float(ack.value) - wrote_rad) > tolerance:
                 joint = next(j for j in self.arm.joints if j.module == module)
-                if param in (ParamId.MIN_POS, ParamId.MAX_POS):  # user coordinates, degrees
+                if param == ParamId.MAX_CUR:
+                    read, wrote, unit = float(ack.value), wrote_rad, " A"
+                elif param in (ParamId.MIN_POS, ParamId.MAX_POS):  # user coordinates, degrees
                     read, wrote, unit = (self.units.joint_user_deg(module, float(ack.value)),
                                          self.units.joint_user_deg(module, wrote_rad), "°")
                 else:
@@ -433,10 +504,10 @@ class PowerCubeDriver:
         # Due at half the period: a refresh sent late (a loaded host, the GIL) still comes
         # within refresh_period_s of the last one, well inside the modules' timeout.
         self.client.watchdog_period = wd.refresh_period_s / 2
-        configs = self.transact([GetParam(m, ParamId.CONFIG) for m in self.modules],
+        configs = self.transact([GetParam(m, ParamId.CONFIG) for m in self.bus_modules],
                                 idempotent=True)
         self.transact([SetParam(m, ParamId.CONFIG, int(a.value) | ConfigFlag.WATCHDOG_ENABLE)
-                       for m, a in zip(self.modules, configs)])
+                       for m, a in zip(self.bus_modules, configs)])
         self.client.refresh_watchdog()
         if not self.clock.is_virtual:
             self._keeper_stop.clear()
@@ -467,11 +538,11 @@ class PowerCubeDriver:
             return
         self._keeper_stop.set()
         try:
-            configs = self.transact([GetParam(m, ParamId.CONFIG) for m in self.modules],
+            configs = self.transact([GetParam(m, ParamId.CONFIG) for m in self.bus_modules],
                                     idempotent=True)
             self.transact([SetParam(m, ParamId.CONFIG,
                                     int(a.value) & ~int(ConfigFlag.WATCHDOG_ENABLE))
-                           for m, a in zip(self.modules, configs)])
+                           for m, a in zip(self.bus_modules, configs)])
             self.client.watchdog_period = None
             self.emit("watchdog_disabled")
         except BusError as exc:

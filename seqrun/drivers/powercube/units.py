@@ -59,5 +59,6 @@ class ModuleUnits:
 
 def module_positions(arm: ArmDescription, joints_deg: Mapping[str, float]) -> dict[int, float]:
     """What the modules' encoders read (module radians, by module id) while the arm stands
-    at ``joints_deg`` (user degrees, every joint): a simulated arm's start."""
-    return {j.module: to_module_rad(j, joints_deg[j.name]) for j in arm.joints}
+    at ``joints_deg`` (user degrees, every joint): a simulated arm's start. A joint
+    declared absent has no module, so no entry."""
+    return {j.module: to_module_rad(j, joints_deg[j.name]) for j in arm.joints if j.present}

@@ -1,0 +1,72 @@
+"""``seqrun home [--joints j1,j2]``: Home the modules, confirmed by reading each one back.
+
+Like ``seqrun reset`` it acts on the bus of the arm context (seqrun/service/arm_context.py)
+and claims it: refused (exit 2, one line naming the holder) while a run or a console holds
+the bus, and with no bus configured it never homes a private simulator of its own (a live
+console has a Home button). A module that is halted or in error is not homed: Home is
+not a Reset (exit 3, naming it). Success means every module named reported HOME_OK at
+rest; a module that travels to its home switch is waited for.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Optional
+
+import typer
+
+from seqrun.cli.app import app
+from seqrun.cli.common import (EXIT_FAULT, ArmFileOption, BitrateOption, BusKwargsOption,
+                               CampaignOption, ChannelOption, InterfaceOption,
+                               ResponseTimeoutOption, SimOption, fail, user_errors)
+
+JointsOption = Annotated[Optional[str], typer.Option(
+    "--joints", metavar="J1,J2", help="Home only these joints (names, comma-separated; "
+                                      "default: every module of the arm, broadcast).")]
+
+
+@app.command("home")
+def home_command(joints: JointsOption = None,
+                 arm_file: ArmFileOption = None, project_dir: CampaignOption = None,
+                 interface: InterfaceOption = None,
+                 channel: ChannelOption = None, bitrate: BitrateOption = None,
+                 bus_kwargs: BusKwargsOption = None, sim: SimOption = False,
+                 response_timeout_ms: ResponseTimeoutOption = None) -> None:
+    """Home the modules (enables the motors; a PRL does not move). Confirmed by reading
+    every module back (HOME_OK, not moving); exit 3 naming the modules that did not
+    confirm, or that are halted or in error (seqrun reset first). Refused while a run or
+    console holds the bus. With no bus configured: exit 2 (a live console homes its arm
+    with its Home button)."""
+    from seqrun.cli.bus_owner import live_targets
+    from seqrun.service.arm_access import home_and_confirm, modules_of
+    from seqrun.service.arm_context import resolve_context
+    from seqrun.service.connection import response_timeout_s
+
+    with user_errors():
+        context = resolve_context(project_dir=project_dir, arm_file=arm_file,
+                                  interface=interface, channel=channel, bitrate=bitrate,
+                                  bus_kwargs=bus_kwargs or [], sim=sim,
+                                  response_timeout_ms=response_timeout_ms)
+        response_timeout_s(context.arm, response_timeout_ms)
+        modules = modules_of(context.arm, _names(joints))
+        live_targets(context, "home")
+        connection, driver = context.open_arm()
+    typer.echo(context.headline(connection))
+    try:
+        result = home_and_confirm(driver, modules)
+    finally:
+        driver.close()
+        connection.close()
+    if not result.sent:
+        fail(f"home not sent: {result.error}", EXIT_FAULT)
+    if not result.confirmed:
+        error = f"; {result.error}" if result.error else ""
+        fail(f"Home sent, but not confirmed by {result.describe_unconfirmed()} "
+             f"({connection.description}{error})", EXIT_FAULT)
+    typer.echo(f"Home confirmed by modules {', '.join(map(str, sorted(result.states)))} "
+               f"in {result.duration_s:.2f} s ({connection.description})")
+
+
+def _names(joints: str | None) -> list[str] | None:
+    if joints is None:
+        return None
+    return [name.strip() for name in joints.split(",") if name.strip()]
