@@ -13,8 +13,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from seqrun.steps import (checkpoint, confirm, halt, home, move, move_linear, power_off, reset,
-                          set_limits, wait)
+from seqrun.steps import (checkpoint, confirm, halt, home, move, move_linear, move_velocity,
+                          power_off, reset, set_limits, wait)
 from seqrun.steps.kind import StepKind
 
 __all__ = ["HANDLERS", "KINDS", "Handler", "StepKind", "step_kind"]
@@ -26,6 +26,7 @@ KINDS: tuple[StepKind, ...] = (
     set_limits.KIND,
     move.KIND,
     move_linear.KIND,
+    move_velocity.KIND,
     wait.KIND,
     checkpoint.KIND,
     confirm.KIND,

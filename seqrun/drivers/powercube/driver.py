@@ -120,6 +120,10 @@ class PowerCubeDriver:
         self._law: SetpointLaw | None = None
         self._keeper: threading.Thread | None = None
         self._keeper_stop = threading.Event()
+        #: What says the control loop is alive (given to :meth:`enable_watchdog`).
+        self._alive: Callable[[float], bool] | None = None
+        #: The watchdog was armed for a velocity motion (the arm file leaves it off).
+        self._velocity_watchdog = False
 
     # ------------------------------------------------------------------ the family
     @classmethod
@@ -210,6 +214,9 @@ class PowerCubeDriver:
             raise RuntimeError("PowerCubeDriver.configure() was not called")
         if command_mode is not None and command_mode != self.command_mode:
             law = setpoint_law(command_mode, self.arm, self.cycle_s, self.run_limits)
+        if command_mode == "velocity":
+            # FVEL is open-ended on the module: never without its watchdog (item D.5).
+            self._arm_watchdog_for_velocity()
         self._law = law
         start = law.start(moving, limits)
         if start:
@@ -427,9 +434,25 @@ class PowerCubeDriver:
     # ------------------------------------------------------------------ watchdog
     def enable_watchdog(self, alive: Callable[[float], bool]) -> None:
         """Arm the modules' watchdogs (read-modify-write of Config) and keep them fed."""
+        self._alive = alive  # a velocity motion arms the watchdog even when the file does not
         wd = self.arm.can.watchdog
         if not wd.enabled:
             return
+        self._arm_watchdog(alive)
+
+    def _arm_watchdog_for_velocity(self) -> None:
+        """Before the first FVEL of a motion: the watchdog armed (once) and refreshed by
+        every exchange from now on, whatever the arm file says, so that the joints stop
+        within the modules' watchdog timeout when this process stops talking. Stays armed
+        until :meth:`disable_watchdog` (a clean end) or the end of the session."""
+        if self.client.watchdog_period is not None:
+            return  # armed already (the arm file asks for it, or an earlier motion)
+        self._velocity_watchdog = True
+        alive = self._alive if self._alive is not None else (lambda within_s: False)
+        self._arm_watchdog(alive)
+
+    def _arm_watchdog(self, alive: Callable[[float], bool]) -> None:
+        wd = self.arm.can.watchdog
         # Due at half the period: a refresh sent late (a loaded host, the GIL) still comes
         # within refresh_period_s of the last one, well inside the modules' timeout.
         self.client.watchdog_period = wd.refresh_period_s / 2
@@ -463,8 +486,9 @@ class PowerCubeDriver:
 
     def disable_watchdog(self) -> None:
         """After a clean end the arm keeps holding: clear WATCHDOG_ENABLE again."""
-        if not self.arm.can.watchdog.enabled:
+        if not self.arm.can.watchdog.enabled and not self._velocity_watchdog:
             return
+        self._velocity_watchdog = False
         self._keeper_stop.set()
         try:
             configs = self.transact([GetParam(m, ParamId.CONFIG) for m in self.modules],
