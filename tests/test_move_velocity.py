@@ -18,6 +18,7 @@ import pytest
 from projecttree import make_project, shipped_arm, write_sequence
 from seqrun.arm.velocity import VelocityPlan, stop_position
 from seqrun.errors import SequenceInvalid
+from seqrun.powercube.protocol import ConfigFlag, ParamId, StateFlag
 from seqrun.service.dryrun import dry_run
 from seqrun.sequence.loader import load_sequence
 from seqrun.sequence.validation import validate_sequence
@@ -171,8 +172,12 @@ def test_the_velocity_move_goes_out_as_fvel_with_the_watchdog_armed(tmp_path):
     refreshes = [k for k, m in enumerate(sent)
                  if m.arbitration_id == 0x100 and bytes(m.data[:1]) == b"\x07"]
     assert refreshes and refreshes[0] < first_fvel  # armed before the first FVEL
-    # the modules' watchdog was disarmed again at the clean end: the arm holds, no fault
-    assert sim.sim.module(1).state() & 0x1 == 0  # no ERROR bit
+    # FVEL 0 at the end: nothing left creeping; the watchdog disarmed: no fault later
+    later = sim.connection.clock.now() + 1.0
+    assert sim.sim.module(1).velocity(later) == 0.0 and sim.sim.module(4).velocity(later) == 0.0
+    assert fvel[-1].data[2:6] == b"\x00\x00\x00\x00"
+    assert not sim.sim.module(1).state() & StateFlag.ERROR
+    assert not int(sim.sim.module(1).parameter(ParamId.CONFIG)) & ConfigFlag.WATCHDOG_ENABLE
 
 
 def test_a_silent_seqrun_is_stopped_by_the_watchdog_within_its_bound(tmp_path):

@@ -342,7 +342,7 @@ def build_router(console: Console) -> APIRouter:
     def jog(body: models.JogBody = json_body(models.JogBody),
             client: ClientHeader = None) -> dict[str, Any]:
         by = commander(client, "jog")
-        session.jog(body.joint, body.speed_scale, by=by)
+        session.jog(body.joint, body.speed_scale, by=by, mode=body.mode)
         motions.started(client, "jog")
         return {"accepted": True}
 

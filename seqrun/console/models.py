@@ -37,6 +37,9 @@ class JointMap(_Strict):
 class JogBody(_Strict):
     joint: str = Field(min_length=1, max_length=40)
     speed_scale: Annotated[float, Field(ge=-1, le=1, allow_inf_nan=False)]
+    mode: Literal["position", "velocity"] = Field(
+        "position", description="position: FRAMP setpoints; velocity: FVEL (the thesis "
+                                "GUI's jog) with the modules' watchdog armed.")
 
 
 class RunBody(_Strict):
@@ -74,6 +77,7 @@ class JogMessage(_Strict):
     id: MessageId = None
     joint: str = Field(min_length=1, max_length=40)
     speed_scale: Annotated[float, Field(ge=-1, le=1, allow_inf_nan=False)]
+    mode: Literal["position", "velocity"] = "position"
 
 
 class JogStopMessage(_Strict):

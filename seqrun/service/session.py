@@ -277,8 +277,9 @@ class ArmSession:
                        velocity_scale: float | None = None, by: str | None = None) -> Activity:
         return self.motion.move_to_joints(joints_deg, velocity_scale=velocity_scale, by=by)
 
-    def jog(self, joint: str, speed_scale: float, *, by: str | None = None) -> Activity:
-        return self.motion.jog(joint, speed_scale, by=by)
+    def jog(self, joint: str, speed_scale: float, *, by: str | None = None,
+            mode: str = "position") -> Activity:
+        return self.motion.jog(joint, speed_scale, by=by, mode=mode)
 
     def jog_stop(self) -> ActivityResult | None:
         return self.motion.jog_stop()

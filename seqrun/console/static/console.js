@@ -587,7 +587,8 @@ $("#jog-scale").addEventListener("input", () => { $("#jog-scale-value").textCont
 function sendJog() {
   if (!state.jog || !state.ws || state.ws.readyState !== WebSocket.OPEN) return;
   const scale = Number($("#jog-scale").value) * state.jog.direction;
-  state.ws.send(JSON.stringify({ op: "jog", id: ++state.msgId, joint: state.jog.joint, speed_scale: scale }));
+  const mode = $("#jog-velocity-mode").checked ? "velocity" : "position";
+  state.ws.send(JSON.stringify({ op: "jog", id: ++state.msgId, joint: state.jog.joint, speed_scale: scale, mode }));
 }
 
 function holdToJog(button, joint, direction) {

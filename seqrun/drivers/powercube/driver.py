@@ -230,7 +230,15 @@ class PowerCubeDriver:
         return self._cycle(law.cycle(plan, t, moving, measured_deg), moving, halt_early=True)
 
     def end_motion(self) -> None:
-        self._law = self._run_law
+        law, self._law = self._law, self._run_law
+        finish = getattr(law, "finish", None)  # a velocity law: FVEL 0, never left standing
+        if finish is not None:
+            requests = finish()
+            if requests:
+                try:
+                    self.transact(requests)
+                except BusError as exc:  # a failing motion: the executor's Halt follows
+                    self.emit("velocity_zero_failed", error=str(exc))
 
     def _cycle(self, requests: list[Request], moving: list[int], *,
                halt_early: bool = False) -> JointReading:

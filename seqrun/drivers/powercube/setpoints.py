@@ -144,7 +144,12 @@ class VelocitySetpoints(_Law):
     #: is slowed, so the following error stays small.
     CATCH_UP_GAIN = 10.0
 
+    def __init__(self, arm: ArmDescription, cycle_s: float, run_limits: Limits) -> None:
+        super().__init__(arm, cycle_s, run_limits)
+        self._commanded: list[int] = []
+
     def start(self, moving: list[int], limits: Limits) -> list[Request]:
+        self._commanded = list(moving)
         # FVEL changes velocity at min(TargetAcc, MaxAcc): the module must be able to
         # follow the plan's ramps (as for FRAMP).
         factor = self.arm.control.module_acceleration_factor
@@ -165,6 +170,13 @@ class VelocitySetpoints(_Law):
             velocity = min(max(velocity, -ceiling), ceiling)
             requests.append(SetMotion(self.modules[i], MotionMode.FVEL_ACK, velocity))
         return requests
+
+    def finish(self) -> list[Request]:
+        """When the motion ends (in position, stopped or failed): FVEL 0 to every joint it
+        commanded. The last cycle's velocity held the position pull of a small residual
+        error; left standing, FVEL would keep the joint creeping."""
+        commanded, self._commanded = self._commanded, []
+        return [SetMotion(self.modules[i], MotionMode.FVEL_ACK, 0.0) for i in commanded]
 
 
 LAWS: dict[str, type[RampSetpoints] | type[StepSetpoints] | type[VelocitySetpoints]] = {
