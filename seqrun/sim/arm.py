@@ -101,6 +101,18 @@ class SimArm:
         given = dict(serials or {})
         self._modules = {m: SimModule(m, clock, options=self.options, parameters={
             ParamId.DEF_CUBE_SERIAL: given.pop(m, base + m)}) for m in modules}
+        #: The gripper's module id (``options.gripper_module``), None without one.
+        self.gripper_id: int | None = None
+        if self.options.gripper_module:
+            from seqrun.sim.gripper import SimGripper
+
+            gid = self.options.gripper_module
+            if gid in self._modules or not 1 <= gid <= 31:
+                raise ValueError(f"gripper_module {gid}: a joint's id or not 1..31")
+            self._modules[gid] = SimGripper(
+                gid, clock, part_m=self.options.gripper_part_mm / 1000.0, options=self.options,
+                parameters={ParamId.DEF_CUBE_SERIAL: given.pop(gid, base + gid)})
+            self.gripper_id = gid
         if given:
             raise ValueError(f"serials for module(s) {sorted(given)}: the simulated arm has "
                              f"modules {sorted(self._modules)}")
@@ -177,10 +189,11 @@ class SimArm:
         with self._lock:
             if not isinstance(positions, Mapping):
                 values = list(positions)
-                if len(values) != len(self._modules):
-                    raise ValueError(f"expected {len(self._modules)} positions, "
+                joints = [m for m in self.module_ids if m != self.gripper_id]
+                if len(values) != len(joints):
+                    raise ValueError(f"expected {len(joints)} positions, "
                                      f"got {len(values)}")
-                positions = dict(zip(self.module_ids, values))
+                positions = dict(zip(joints, values))
             t = self._now(None)
             for module_id, position in positions.items():
                 if module_id not in self._modules:

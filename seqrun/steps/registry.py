@@ -13,8 +13,9 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from seqrun.steps import (checkpoint, confirm, halt, home, move, move_linear, move_velocity,
-                          power_off, reset, set_limits, wait)
+from seqrun.steps import (check_gripper, checkpoint, confirm, grip, halt, home, move,
+                          move_linear, move_velocity, power_off, release, reset, set_limits,
+                          wait)
 from seqrun.steps.kind import StepKind
 
 __all__ = ["HANDLERS", "KINDS", "Handler", "StepKind", "step_kind"]
@@ -29,6 +30,9 @@ KINDS: tuple[StepKind, ...] = (
     move_velocity.KIND,
     wait.KIND,
     checkpoint.KIND,
+    grip.KIND,
+    release.KIND,
+    check_gripper.KIND,
     confirm.KIND,
     power_off.KIND,
 )

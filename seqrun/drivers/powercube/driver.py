@@ -439,6 +439,43 @@ class PowerCubeDriver:
                                  f"{read:.3f}{unit}, wrote {wrote:.3f}{unit}", module=module)
         return len(writes)
 
+    # ------------------------------------------------------------------ the gripper
+    def _gripper(self):
+        spec = self.arm.gripper
+        if spec is None:
+            raise RunAborted("no_gripper", "the arm file has no gripper")
+        return spec
+
+    def gripper_current_limit(self, current_a: float) -> float:
+        from seqrun.drivers.powercube.gripper import CURRENT_TOLERANCE_A
+
+        module = self._gripper().module
+        self.transact([SetParam(module, ParamId.MAX_CUR, float(current_a))])
+        [ack] = self.transact([GetParam(module, ParamId.MAX_CUR)], idempotent=True)
+        read = float(ack.value)
+        if abs(read - current_a) > CURRENT_TOLERANCE_A:
+            raise RunAborted("limits_not_written", f"gripper (module {module}): MaxCur reads "
+                             f"back {read:.3f} A, wrote {current_a:.3f} A", module=module)
+        return read
+
+    def gripper_move(self, width_mm: float, speed_mm_s: float) -> None:
+        from seqrun.drivers.powercube.gripper import move_requests
+
+        spec = self._gripper()
+        acks = self.transact(move_requests(spec, width_mm, speed_mm_s))
+        motion = acks[-1]
+        if isinstance(motion, MotionExtAck) and motion.state.refuses_motion:
+            state = self.read_state(spec.module)
+            raise RunAborted("gripper_refused", f"gripper (module {spec.module}) refuses "
+                             f"to move: {state.text}", module=spec.module)
+
+    def gripper_read(self):
+        from seqrun.drivers.powercube.gripper import read_requests, reading
+
+        position, velocity, state = self.transact(read_requests(self._gripper()),
+                                                  idempotent=True)
+        return reading(float(position.value), float(velocity.value), int(state.value))
+
     # ------------------------------------------------------------------ watchdog
     def enable_watchdog(self, alive: Callable[[float], bool]) -> None:
         """Arm the modules' watchdogs (read-modify-write of Config) and keep them fed."""
