@@ -42,6 +42,15 @@ class JogBody(_Strict):
                                 "GUI's jog) with the modules' watchdog armed.")
 
 
+class GripBody(_Strict):
+    part_width_mm: Annotated[float, Field(gt=0, allow_inf_nan=False)]
+    force_n: Annotated[float, Field(gt=0, allow_inf_nan=False)]
+
+
+class ReleaseBody(_Strict):
+    width_mm: Annotated[float, Field(gt=0, allow_inf_nan=False)]
+
+
 class RunBody(_Strict):
     sequence: str = Field(min_length=1, max_length=400,
                           description="A sequence name as listed by GET /sequences.")

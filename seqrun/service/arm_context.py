@@ -195,6 +195,12 @@ class ArmContext:
                                      or parse_faults(list(self.faults)),
                                      default_bitrate=arm.can.bitrate, claim=claim,
                                      transient=transient, **extra)
+        if arm.gripper is not None and connection.is_simulator:
+            # the built-in simulator carries the arm file's gripper (no part between its
+            # jaws unless the switches put one there)
+            sim = getattr(connection.bus, "arm", None)
+            if sim is not None and sim.gripper_id is None:
+                sim.add_gripper(arm.gripper.module)
         if live and connection.is_simulator and connection.claim is None:
             from seqrun.service.bus_claim import claim_bus
 

@@ -178,6 +178,16 @@ class Motion:
             raise Refused(f"{what}: {self._own_words(check.errors[0])}")
         return loaded
 
+    def validated_step(self, kind: str, step: str, what: str):
+        """A one-step sequence of ``step`` (YAML text), validated from the measured joints
+        (Refused on errors): what a face's command runs (the gripper's too)."""
+        return self._validated_move(kind, step, what)
+
+    def start_steps(self, kind: str, loaded, detail: dict,
+                    by: str | None = None) -> Activity:
+        """Run a validated one-off sequence as the session's activity (non-blocking)."""
+        return self._start_move(kind, loaded, detail, by)
+
     def _own_words(self, error) -> str:
         """A finding about a session command in the operator's terms: where it is when that
         is a file of theirs (a pose file), never the session's private one-step file."""
