@@ -212,3 +212,56 @@ def test_a_silent_seqrun_is_stopped_by_the_watchdog_within_its_bound(tmp_path):
     assert 0 <= moved <= bound, (moved, bound)
     assert sim.outcome.result.fault["halt_sent"] is True
     assert "COMM_ERROR" in sim.outcome.result.message, sim.outcome.result.message
+
+
+# --------------------------------------------------------------------------- the cycle check
+class _Reading:
+    def __init__(self, t: float, j1: float) -> None:
+        self.t = t
+        self.user_deg = np.array([j1, 0, 0, 0, 0, 0, 0], float)
+
+
+class _Context:
+    """Just enough of a StepContext to run the handler: ``follow`` feeds the step's path
+    check the readings given (a joint running ahead of its plan)."""
+
+    arm, speed = ARM, 1.0
+    limits_in_force = type("L", (), {"maxima": staticmethod(lambda: ({}, {}))})()
+
+    def __init__(self, readings: list[_Reading]) -> None:
+        self.readings = readings
+        self.seen: list[float] = []
+
+    def read_arm(self):
+        return self.readings[0]
+
+    def emit(self, type_: str, **data) -> None:
+        pass
+
+    def follow(self, plan, *, path_check, **kw):
+        for m in self.readings[1:]:
+            path_check(m)
+            self.seen.append(float(m.user_deg[0]))
+        return {}
+
+
+def handler_step(project):
+    loaded = load(project, "- move_velocity: {velocity_deg_s: {j1: 5}, duration_s: 2, "
+                           "envelope_deg: {j1: [-5, 15]}}\n")
+    return loaded.steps[-1]
+
+
+def test_every_cycle_halts_a_joint_whose_stop_would_leave_the_envelope(project):
+    from seqrun.errors import RunAborted
+    from seqrun.steps.move_velocity import run
+
+    # A joint running on (further than planned) at 5 deg/s; braking at 60 deg/s^2 takes
+    # 0.21 deg: at 14.75 it would stop at 14.96 (in), at 14.80 at 15.01 (out): the run
+    # stops there, before the joint itself reaches the edge.
+    readings = [_Reading(0.0, 0.0), _Reading(2.94, 14.70), _Reading(2.95, 14.75),
+                _Reading(2.96, 14.80), _Reading(2.97, 14.85)]
+    ex = _Context(readings)
+    with pytest.raises(RunAborted, match=r"j1 at 14.80° moving \+5.00 deg/s would stop at "
+                                         r"15.01°, outside its envelope -5…15"):
+        run(handler_step(project), ex)
+    assert ex.seen == [14.7, 14.75]
