@@ -365,18 +365,6 @@ class ArmDriver(Protocol):
         (``limits_not_written``) for a value that reads back different. Returns the
         number of values written."""
 
-    # -- the gripper (the arm file's ``gripper``; raise RunAborted without one)
-    def gripper_current_limit(self, current_a: float) -> float:
-        """Write the gripper's current limit (its grip force) and read it back; returns
-        what it reads. RunAborted (``limits_not_written``) when it differs."""
-
-    def gripper_move(self, width_mm: float, speed_mm_s: float) -> None:
-        """Start the jaws towards ``width_mm`` at ``speed_mm_s``; RunAborted when the
-        module refuses."""
-
-    def gripper_read(self) -> GripperReading:
-        """Width, velocity and state of the gripper."""
-
     # -- watchdog (a drive that stops by itself when its master goes silent)
     def enable_watchdog(self, alive: Callable[[float], bool]) -> None:
         """Arm the drives' watchdogs (if the arm file asks) and keep them fed while
@@ -393,6 +381,24 @@ class ArmDriver(Protocol):
 
     def close(self) -> None:
         """Stop using the bus (the connection stays open: its owner closes it)."""
+
+
+@runtime_checkable
+class GripperDriver(Protocol):
+    """A driver that also drives the arm file's gripper (optional: the executor refuses
+    the gripper steps on a driver without these)."""
+
+    def gripper_current_limit(self, current_a: float) -> float:
+        """Write the gripper's current limit (its grip force) and read it back; returns
+        what it reads. RunAborted (``limits_not_written``) when it differs, or without a
+        gripper."""
+
+    def gripper_move(self, width_mm: float, speed_mm_s: float) -> None:
+        """Start the jaws towards ``width_mm`` at ``speed_mm_s``; RunAborted when the
+        module refuses."""
+
+    def gripper_read(self) -> GripperReading:
+        """Width, velocity and state of the gripper."""
 
 
 class DriverFamily(Protocol):

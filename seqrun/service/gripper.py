@@ -17,7 +17,6 @@ from seqrun.errors import Refused
 
 if TYPE_CHECKING:
     from seqrun.service.activities import Activity
-    from seqrun.service.session import ArmSession
 
 __all__ = ["GripperControl"]
 
@@ -25,7 +24,7 @@ __all__ = ["GripperControl"]
 class GripperControl:
     """``session.gripper``: grip, release, state."""
 
-    def __init__(self, session: ArmSession) -> None:
+    def __init__(self, session: Any) -> None:  # the ArmSession it is part of
         self._session = session
         self._lock = threading.Lock()
         self._last: dict[str, Any] | None = None
@@ -70,6 +69,10 @@ class GripperControl:
         if bus.acquire(blocking=False):
             try:
                 if s.activities.current is None and not s.driver.closed:
+                    from seqrun.drivers.base import GripperDriver
+
+                    if not isinstance(s.driver, GripperDriver):
+                        raise Refused("the arm's driver does not drive a gripper")
                     reading = s.driver.gripper_read()
                     with self._lock:
                         self._last = {"name": spec.name, "width_mm": round(reading.width_mm, 2),
