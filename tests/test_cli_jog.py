@@ -10,7 +10,10 @@ import sys
 from projecttree import ARM_FILE
 
 SEQRUN = [sys.executable, "-m", "seqrun"]
-HOMED = ["--sim", "--bus-kwargs", "home_ok_at_power_on=true", "--arm", str(ARM_FILE)]
+# (a generous simulated watchdog: these tests are about the command, not a loaded host's
+# timing; tests/test_jog_velocity.py holds the watchdog's bound at virtual time)
+HOMED = ["--sim", "--bus-kwargs", "home_ok_at_power_on=true", "--bus-kwargs",
+         "watchdog_timeout=0.5", "--arm", str(ARM_FILE)]
 
 
 def seqrun(*args: str) -> subprocess.CompletedProcess:

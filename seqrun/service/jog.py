@@ -242,6 +242,11 @@ def run_jog(executor, plan: JogPlan, deadman: Deadman) -> tuple[str, int, str]:
     try:
         m = executor.read_arm()
         executor.check_states(m)
+        if plan.mode == "velocity":
+            # The watchdog the driver arms for FVEL is fed between cycles only while this
+            # loop shows signs of life (as in a run).
+            executor.beat()
+            executor.driver.enable_watchdog(executor.loop_alive)
         target = m.user_deg.copy()
         target[plan.index] = plan.end_deg
         velocity, acceleration = executor.limits_in_force.maxima()
