@@ -351,6 +351,36 @@ class WatchdogDisableFailed(Event):
     error: str
 
 
+@dataclass(frozen=True, kw_only=True)
+class VelocityZeroFailed(Event):
+    type: ClassVar[str] = "velocity_zero_failed"
+    when: ClassVar[str] = ("FVEL 0 at the end of a velocity motion got no answer (a failing "
+                           "motion: the Halt follows; the watchdog stays armed)")
+    error: str
+
+
+@dataclass(frozen=True, kw_only=True)
+class VelocityMovePlanned(Event):
+    type: ClassVar[str] = "velocity_move_planned"
+    when: ClassVar[str] = ("a move_velocity step starts: its planned duration, each joint's "
+                           "velocity and the envelope every cycle is checked against")
+    duration_s: float
+    velocity_deg_s: dict[str, float]
+    envelope_deg: dict[str, list[float]]
+
+
+@dataclass(frozen=True, kw_only=True)
+class GripperCommand(Event):
+    type: ClassVar[str] = "gripper_command"
+    when: ClassVar[str] = ("a grip or release starts: the jaws' target width and speed (a grip "
+                           "closes fully: the part stops the jaws), its force as current limit")
+    command: str
+    target_mm: float
+    speed_mm_s: float
+    force_n: float | None = None
+    current_a: float | None = None
+
+
 # ====================================================================== operator control
 @dataclass(frozen=True, kw_only=True)
 class AbortRequested(Event):
@@ -541,6 +571,8 @@ class JogStarted(Event):
     velocity_deg_s: float
     end_deg: float
     end_reason: str
+    #: "position" (FRAMP) or "velocity" (FVEL).
+    mode: str = "position"
 
 
 @dataclass(frozen=True, kw_only=True)

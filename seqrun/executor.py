@@ -59,6 +59,7 @@ from seqrun.stop_requests import OPERATOR_HALT, StopRequests
 
 if TYPE_CHECKING:
     from seqrun.arm.poses import PoseDirs
+    from seqrun.drivers.base import GripperDriver, GripperReading
 
 #: A synchronous recorder: gets every typed event (it reads like the events.jsonl dict).
 Listener = Callable[[Any], None]
@@ -430,6 +431,26 @@ class Executor:
         """Before a Reset clears a fault latched before the run: the operator's word on
         real hardware (an operator abort without it)."""
         self.latched.confirm_clearing(modules)
+
+    # ------------------------------------------------------------------ the gripper
+    def _gripper_driver(self) -> GripperDriver:
+        from seqrun.drivers.base import GripperDriver
+        from seqrun.errors import RunAborted
+
+        if not isinstance(self.driver, GripperDriver):
+            raise RunAborted("no_gripper", f"the arm's driver ({self.arm.driver}) does not "
+                             "drive a gripper")
+        return self.driver
+
+    def gripper_current_limit(self, current_a: float) -> float:
+        return self._gripper_driver().gripper_current_limit(current_a)
+
+    def gripper_move(self, width_mm: float, speed_mm_s: float) -> None:
+        self.beat()
+        self._gripper_driver().gripper_move(width_mm, speed_mm_s)
+
+    def gripper_read(self) -> GripperReading:
+        return self._gripper_driver().gripper_read()
 
     # ------------------------------------------------------------------ watchdog
     def loop_alive(self, within_s: float) -> bool:

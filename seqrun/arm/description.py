@@ -16,6 +16,8 @@ from typing import TYPE_CHECKING, Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, field_validator, model_validator
 
+from seqrun.arm.gripper import GripperSpec
+
 if TYPE_CHECKING:
     from seqrun.errors import SourceError
 
@@ -311,6 +313,9 @@ class ArmDescription(_Strict):
                         "default_power_off.")
     default_power_off: str | None = Field(
         None, description="The power-off pose whose offsets the joints' offset_deg are.")
+    gripper: GripperSpec | None = Field(
+        None, description="A PowerCube gripper module on the same bus (e.g. Schunk PG 70), "
+                          "for the grip/release/check_gripper steps; none when absent.")
     # SHA-256 of the file it was loaded from (recorded in run folders); not a file key.
     _sha256: str = PrivateAttr("")
     _file: str = PrivateAttr("")
@@ -352,6 +357,12 @@ class ArmDescription(_Strict):
         if len(self.kinematics.links) != len(self.joints) - 1:
             raise ValueError(f"kinematics.links needs {len(self.joints) - 1} frames "
                              f"(one per joint after the first), has {len(self.kinematics.links)}")
+        return self
+
+    @model_validator(mode="after")
+    def _gripper_module_free(self) -> "ArmDescription":
+        if self.gripper is not None and self.gripper.module in [j.module for j in self.joints]:
+            raise ValueError(f"gripper.module {self.gripper.module} is a joint's module id")
         return self
 
     @model_validator(mode="after")

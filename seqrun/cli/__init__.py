@@ -33,6 +33,7 @@ COMMAND_MODULES = (
     "seqrun.cli.report",
     "seqrun.cli.console",
     "seqrun.cli.ros",
+    "seqrun.cli.jog",
 )
 
 
@@ -58,6 +59,7 @@ COMMAND_WORDS = {
     "report": "seqrun.cli.report",
     "console": "seqrun.cli.console",
     "ros": "seqrun.cli.ros",
+    "jog": "seqrun.cli.jog",
 }
 
 

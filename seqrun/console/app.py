@@ -342,7 +342,7 @@ def build_router(console: Console) -> APIRouter:
     def jog(body: models.JogBody = json_body(models.JogBody),
             client: ClientHeader = None) -> dict[str, Any]:
         by = commander(client, "jog")
-        session.jog(body.joint, body.speed_scale, by=by)
+        session.jog(body.joint, body.speed_scale, by=by, mode=body.mode)
         motions.started(client, "jog")
         return {"accepted": True}
 
@@ -351,6 +351,28 @@ def build_router(console: Console) -> APIRouter:
         result = session.jog_stop()  # a controlled stop
         motions.jog_ended(client)
         return jsonable(result)
+
+    @api.get("/gripper", summary="The gripper: width, holding, state (null: none)")
+    def gripper() -> Any:
+        return jsonable(session.gripper_state())
+
+    @api.post("/gripper/grip", summary="Grip a part of a width with a force (N)",
+              openapi_extra=documented(models.GripBody))
+    def grip(body: models.GripBody = json_body(models.GripBody),
+             client: ClientHeader = None) -> dict[str, Any]:
+        by = commander(client, "grip")
+        activity = session.grip(body.part_width_mm, body.force_n, by=by)
+        motions.started(client, "move", activity)
+        return _activity(activity)
+
+    @api.post("/gripper/release", summary="Open the gripper to a width (mm)",
+              openapi_extra=documented(models.ReleaseBody))
+    def release(body: models.ReleaseBody = json_body(models.ReleaseBody),
+                client: ClientHeader = None) -> dict[str, Any]:
+        by = commander(client, "release")
+        activity = session.release(body.width_mm, by=by)
+        motions.started(client, "move", activity)
+        return _activity(activity)
 
     @api.post("/run", summary="Run a sequence (validated first; a run folder as seqrun run)",
               openapi_extra=documented(models.RunBody))

@@ -178,7 +178,8 @@ async def _live(console: Console, ws: WebSocket) -> None:
                     console.control.require(client, "jog")
                     await asyncio.to_thread(console.session.jog, message.joint,
                                             message.speed_scale,
-                                            by=console.control.name_of(client))
+                                            by=console.control.name_of(client),
+                                            mode=message.mode)
                     console.motions.started(client, "jog")
                 else:
                     await asyncio.to_thread(console.session.jog_stop)

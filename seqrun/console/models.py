@@ -37,6 +37,18 @@ class JointMap(_Strict):
 class JogBody(_Strict):
     joint: str = Field(min_length=1, max_length=40)
     speed_scale: Annotated[float, Field(ge=-1, le=1, allow_inf_nan=False)]
+    mode: Literal["position", "velocity"] = Field(
+        "position", description="position: FRAMP setpoints; velocity: FVEL (the thesis "
+                                "GUI's jog) with the modules' watchdog armed.")
+
+
+class GripBody(_Strict):
+    part_width_mm: Annotated[float, Field(gt=0, allow_inf_nan=False)]
+    force_n: Annotated[float, Field(gt=0, allow_inf_nan=False)]
+
+
+class ReleaseBody(_Strict):
+    width_mm: Annotated[float, Field(gt=0, allow_inf_nan=False)]
 
 
 class RunBody(_Strict):
@@ -74,6 +86,7 @@ class JogMessage(_Strict):
     id: MessageId = None
     joint: str = Field(min_length=1, max_length=40)
     speed_scale: Annotated[float, Field(ge=-1, le=1, allow_inf_nan=False)]
+    mode: Literal["position", "velocity"] = "position"
 
 
 class JogStopMessage(_Strict):

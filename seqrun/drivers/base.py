@@ -133,6 +133,21 @@ class LimitValues:
 
 
 @dataclass(frozen=True)
+class GripperReading:
+    """One reading of the gripper, in the user's units (mm, mm/s)."""
+
+    width_mm: float
+    velocity_mm_s: float
+    #: The drive reports motion (it may still push against a part at zero velocity).
+    moving: bool
+    #: The motor is at its current limit (CURLIMIT): it pushes against something.
+    at_current_limit: bool
+    faulted: bool
+    #: Every state flag by the drive's names, for the operator.
+    text: str
+
+
+@dataclass(frozen=True)
 class ArmIdentity:
     """Which physical arm this is: what its modules say about themselves (their serial
     numbers, by module id). Read at connect; the zero reference is keyed by it."""
@@ -373,6 +388,24 @@ class ArmDriver(Protocol):
 
     def close(self) -> None:
         """Stop using the bus (the connection stays open: its owner closes it)."""
+
+
+@runtime_checkable
+class GripperDriver(Protocol):
+    """A driver that also drives the arm file's gripper (optional: the executor refuses
+    the gripper steps on a driver without these)."""
+
+    def gripper_current_limit(self, current_a: float) -> float:
+        """Write the gripper's current limit (its grip force) and read it back; returns
+        what it reads. RunAborted (``limits_not_written``) when it differs, or without a
+        gripper."""
+
+    def gripper_move(self, width_mm: float, speed_mm_s: float) -> None:
+        """Start the jaws towards ``width_mm`` at ``speed_mm_s``; RunAborted when the
+        module refuses."""
+
+    def gripper_read(self) -> GripperReading:
+        """Width, velocity and state of the gripper."""
 
 
 class DriverFamily(Protocol):

@@ -80,6 +80,18 @@ Every step takes an optional `label`, the text the operator sees.
   first motion; they stay stored in a module until written again or powered off). The
   dry-run table and the run report say which limit applied and where it came from.
 - A move's `timeout_s` may not be shorter than the move as planned.
+- A velocity move (`move_velocity`) is never open-ended: it needs `duration_s` and an
+  `envelope_deg` for every joint it moves, inside the limits in force. Each joint ramps to
+  its velocity, holds it until `duration_s` and brakes at the step's acceleration; where it
+  comes to rest must lie inside its envelope by the position tolerance, so a wrong sign or
+  too long a duration is refused at the velocity's line. The run checks every cycle that
+  the measured position plus the stopping distance at the measured velocity stays inside
+  the envelope and the joint's limits (else Halt). The modules' watchdog is armed before
+  the first FVEL and refreshed by every exchange: if seqrun stops talking, each module stops
+  by itself within the watchdog timeout (about 50 ms) plus half the refresh period
+  (`can.watchdog.refresh_period_s`), i.e. after at most
+  v × (timeout + refresh period) + v² / (2 × MaxAcc) of travel (0.6° for j1 at 5 deg/s with
+  the shipped arm file's values). A clean end disarms it again.
 - Waits (`seconds`, `timeout_s`) and move timeouts stay within the arm file's
   `control.max_wait_s`; a dry run stops after `control.max_dry_run_s` of simulated time.
 - Workspace guards of the arm file hold along each move's planned trajectory (the ruckig plan

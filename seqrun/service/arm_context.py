@@ -224,6 +224,12 @@ class ArmContext:
                                      # the simulator: the arm file's modules on the bus
                                      sim_modules=extra.pop("sim_modules", None)
                                      or arm.present_module_ids, **extra)
+        if arm.gripper is not None and connection.is_simulator:
+            # the built-in simulator carries the arm file's gripper (a part between its
+            # jaws only where the switches put one: gripper_part_mm)
+            sim = getattr(connection.bus, "arm", None)
+            if sim is not None and sim.gripper_id is None:
+                sim.add_gripper(arm.gripper.module, sim.options.gripper_part_mm)
         if live and connection.is_simulator and connection.claim is None:
             from seqrun.service.bus_claim import claim_bus
 

@@ -156,7 +156,7 @@ def _dry_run_unfrozen(loaded: LoadedSequence, arm: ArmDescription,
     connection = open_connection(force_sim=True, clock=clock, sim_positions=positions,
                                  sim_modules=arm.present_module_ids,
                                  faults=list(faults), default_bitrate=arm.can.bitrate,
-                                 python_can=False)
+                                 python_can=False, bus_kwargs=gripper_switches(arm, loaded))
     hz = cycle_hz or arm.control.cycle_hz
     events: list[dict] = []
     try:
@@ -173,6 +173,16 @@ def _dry_run_unfrozen(loaded: LoadedSequence, arm: ArmDescription,
         connection.close()
     return DryRun(outcome.result, start_pose, hz, wall, events,
                   faults=[f.spec for f in faults])
+
+
+def gripper_switches(arm: ArmDescription, loaded: LoadedSequence) -> dict[str, object]:
+    """The simulator's gripper for an arm file with one: at its module id, with the part
+    the sequence's first grip names between its jaws (the dry run assumes the part is
+    there; a run on the arm finds out)."""
+    if arm.gripper is None:
+        return {}
+    part = next((s.params.part_width_mm for s in loaded.steps if s.kind == "grip"), 0.0)
+    return {"gripper_module": arm.gripper.module, "gripper_part_mm": part}
 
 
 def _bounded(seconds: float):

@@ -7,6 +7,12 @@ workspace guard. The deadman is checked on the control loop's own thread, once p
 (an executor idle hook): when no renewal came within ``deadman_s`` it posts an abort, and the
 executor brings the joint to rest with its controlled stop (ruckig to zero velocity) and
 holds. Nothing restarts the motion: a new jog is a new command.
+
+In velocity mode (``mode="velocity"``, the thesis GUI's FVEL jog) the same plan is streamed
+as FVEL setpoints (the driver's velocity law): the driver arms the modules' watchdog before
+the first FVEL, so a silent host stops the joint within the watchdog timeout, and every cycle
+checks that the joint's position plus its stopping distance stays inside its limits (less
+half the margin); a clean end disarms the watchdog again.
 """
 
 from __future__ import annotations
@@ -28,6 +34,8 @@ LIMIT_MARGIN_DEG = 1.0
 GUARD_MARGIN_MM = 10.0
 #: Step (deg) of the search along the joint for the guard-limited end of the jog.
 SEARCH_STEP_DEG = 0.5
+#: How a jog is streamed: position setpoints (FRAMP, the run's law) or velocities (FVEL).
+JOG_MODES = ("position", "velocity")
 
 
 @dataclass(frozen=True)
@@ -39,14 +47,17 @@ class JogPlan:
     end_deg: float
     velocity_deg_s: float
     why_end: str
+    mode: str = "position"
 
 
 def plan_jog(arm, joint: str, speed_scale: float, joints_deg: np.ndarray,
-             jog_velocity_deg_s: float) -> JogPlan:
+             jog_velocity_deg_s: float, mode: str = "position") -> JogPlan:
     """Where a jog of ``joint`` from ``joints_deg`` (user degrees) may go; raises
     :class:`Refused` (one line) for an unknown or locked joint, a scale outside [-1, 1] or 0,
     a joint at its limit (within :data:`LIMIT_MARGIN_DEG`, moving towards it) or an arm
     outside its workspace guards, or one that would leave them at once."""
+    if mode not in JOG_MODES:
+        raise Refused(f"jog: mode {mode!r} must be one of {', '.join(JOG_MODES)}")
     if joint not in arm.joint_names:
         raise Refused(f"jog: unknown joint '{joint}' (joints: {', '.join(arm.joint_names)})")
     index = arm.joint_names.index(joint)
@@ -88,7 +99,7 @@ def plan_jog(arm, joint: str, speed_scale: float, joints_deg: np.ndarray,
         raise Refused(f"jog: {joint} {'+' if direction > 0 else '-'} would bring the arm "
                       f"within {GUARD_MARGIN_MM:g} mm of its {why}")
     return JogPlan(joint, index, direction, start, end,
-                   jog_velocity_deg_s * abs(speed_scale), why)
+                   jog_velocity_deg_s * abs(speed_scale), why, mode)
 
 
 def _lowest_guard(arm, chain, q_rad, tools: ToolVolumes | None = None
@@ -180,6 +191,44 @@ class Deadman:
             self.check()
 
 
+def _follow_in_velocity_mode(executor, plan: JogPlan, target: np.ndarray, limits,
+                             start) -> None:
+    """The jog's plan streamed as FVEL (driver's velocity law), with the limits and
+    stopping-distance check of every cycle; a clean end disarms the watchdog the
+    driver armed for it."""
+    from seqrun.arm.planner import plan_move
+    from seqrun.arm.velocity import stop_position
+    from seqrun.errors import RunAborted
+    from seqrun.results import OperatorAbort
+
+    arm = executor.arm
+    i = plan.index
+    lo, hi = arm.joints[i].limits_deg
+    lo, hi = lo + LIMIT_MARGIN_DEG / 2, hi - LIMIT_MARGIN_DEG / 2
+    braking = float(np.degrees(limits.acceleration[i]))
+    last = [start]
+
+    def inside_limits(m) -> None:
+        before, last[0] = last[0], m
+        dt = m.t - before.t
+        velocity = (m.user_deg[i] - before.user_deg[i]) / dt if dt > 0 else 0.0
+        stop = stop_position(float(m.user_deg[i]), float(velocity), braking)
+        if not lo <= stop <= hi:
+            raise RunAborted("envelope", f"jog {plan.joint}: at {m.user_deg[i]:.2f}° moving "
+                             f"{velocity:+.2f} deg/s it would stop at {stop:.2f}°, beyond "
+                             f"{lo:g}…{hi:g}°", module=arm.joints[i].module)
+
+    path = plan_move(np.radians(start.user_deg), np.radians(target), limits, [i])
+    try:
+        executor.follow(path, tolerance_deg=arm.control.position_tolerance_deg,
+                        timeout_s=None, path_check=inside_limits, command_mode="velocity",
+                        start=start)
+    except OperatorAbort:  # released: a controlled stop, the joint holds
+        executor.driver.disable_watchdog()
+        raise
+    executor.driver.disable_watchdog()
+
+
 def run_jog(executor, plan: JogPlan, deadman: Deadman) -> tuple[str, int, str]:
     """Stream the jog with ``executor`` (owned by the caller); returns (status, exit code,
     message). Any fault -> Halt (the executor's emergency Halt), exit 3."""
@@ -193,6 +242,11 @@ def run_jog(executor, plan: JogPlan, deadman: Deadman) -> tuple[str, int, str]:
     try:
         m = executor.read_arm()
         executor.check_states(m)
+        if plan.mode == "velocity":
+            # The watchdog the driver arms for FVEL is fed between cycles only while this
+            # loop shows signs of life (as in a run).
+            executor.beat()
+            executor.driver.enable_watchdog(executor.loop_alive)
         target = m.user_deg.copy()
         target[plan.index] = plan.end_deg
         velocity, acceleration = executor.limits_in_force.maxima()
@@ -201,11 +255,14 @@ def run_jog(executor, plan: JogPlan, deadman: Deadman) -> tuple[str, int, str]:
                                  max_acceleration_deg_s2=acceleration)
         executor.emit("jog_started", joint=plan.joint, direction=plan.direction,
                       velocity_deg_s=round(plan.velocity_deg_s, 3),
-                      end_deg=round(plan.end_deg, 3), end_reason=plan.why_end)
+                      end_deg=round(plan.end_deg, 3), end_reason=plan.why_end, mode=plan.mode)
         try:
-            executor.move(target, [plan.index], limits,
-                          tolerance_deg=arm.control.position_tolerance_deg, timeout_s=None,
-                          start=m)
+            if plan.mode == "velocity":
+                _follow_in_velocity_mode(executor, plan, target, limits, m)
+            else:
+                executor.move(target, [plan.index], limits,
+                              tolerance_deg=arm.control.position_tolerance_deg,
+                              timeout_s=None, start=m)
             message = f"jog {plan.joint}: stopped at the end of its range ({plan.why_end})"
         except OperatorAbort:  # the deadman or jog_stop: the arm holds after the stop
             message = f"jog {plan.joint}: {deadman.reason or 'stopped'}; controlled stop"

@@ -178,6 +178,16 @@ class Motion:
             raise Refused(f"{what}: {self._own_words(check.errors[0])}")
         return loaded
 
+    def validated_step(self, kind: str, step: str, what: str):
+        """A one-step sequence of ``step`` (YAML text), validated from the measured joints
+        (Refused on errors): what a face's command runs (the gripper's too)."""
+        return self._validated_move(kind, step, what)
+
+    def start_steps(self, kind: str, loaded, detail: dict,
+                    by: str | None = None) -> Activity:
+        """Run a validated one-off sequence as the session's activity (non-blocking)."""
+        return self._start_move(kind, loaded, detail, by)
+
     def _own_words(self, error) -> str:
         """A finding about a session command in the operator's terms: where it is when that
         is a file of theirs (a pose file), never the session's private one-step file."""
@@ -244,12 +254,15 @@ class Motion:
         return self._start_move("move", loaded, {"joints": targets}, by)
 
     # ------------------------------------------------------------------ jog
-    def jog(self, joint: str, speed_scale: float, *, by: str | None = None) -> Activity:
+    def jog(self, joint: str, speed_scale: float, *, by: str | None = None,
+            mode: str = "position") -> Activity:
         """Jog one joint at ``speed_scale`` (-1..1) of its move velocity. Call again at
         least every :data:`JOG_DEADMAN_S` (same joint and direction: renews; the speed
         stays the first call's) or the jog ends with a controlled stop. Refused near a
         limit (moving towards it) or outside the workspace guards, like a move; another
-        joint or the other direction while jogging is refused (release first)."""
+        joint or the other direction while jogging is refused (release first). ``mode``:
+        "position" (FRAMP setpoints) or "velocity" (FVEL, the thesis GUI's jog, with the
+        modules' watchdog armed while it moves)."""
         import numpy as np
 
         from seqrun.service.jog import Deadman, plan_jog, run_jog
@@ -261,7 +274,8 @@ class Motion:
             if (plan is not None and plan.joint == joint
                     and isinstance(speed_scale, (int, float))
                     and not isinstance(speed_scale, bool)
-                    and speed_scale * plan.direction > 0 and not deadman.expired):
+                    and speed_scale * plan.direction > 0 and plan.mode == mode
+                    and not deadman.expired):
                 deadman.renew()  # the speed stays the jog's first
                 return current
             raise Refused("jog: another jog is under way (release it first)")
@@ -269,9 +283,10 @@ class Motion:
         speed_scale = finite(speed_scale, "jog: speed scale")
         joints = np.array(s.telemetry.condition().joints, dtype=float)
         velocity = self._velocities.get(joint, 0.0)
-        plan = plan_jog(s.arm, joint, float(speed_scale), joints, velocity)
+        plan = plan_jog(s.arm, joint, float(speed_scale), joints, velocity, mode)
         deadman = Deadman(s.clock, self.jog_deadman_s)
-        activity = activities.begin("jog", {"joint": joint, "speed_scale": speed_scale}, by)
+        activity = activities.begin("jog", {"joint": joint, "speed_scale": speed_scale,
+                                            "mode": mode}, by)
         activities.deadman, activities.jog_plan = deadman, plan
 
         def work() -> ActivityResult:

@@ -51,6 +51,7 @@ from seqrun.events import Event, EventHub, Subscription, make_event
 from seqrun.service.activities import (EXIT_FAULT_CODE, Activities, Activity,
                                        ActivityResult)
 from seqrun.service.control import ControlDesk
+from seqrun.service.gripper import GripperControl
 from seqrun.service.motion import DEFAULT_MOVE_SHARE, JOG_DEADMAN_S, Motion
 from seqrun.service.questions import Questions
 from seqrun.service.runs import Runs
@@ -118,6 +119,7 @@ class ArmSession:
         self.telemetry = ArmTelemetry(self, self._hub, self._t0)
         self.stopping = Stopping(self)
         self.motion = Motion(self, jog_deadman_s=jog_deadman_s)
+        self.gripper = GripperControl(self)
         self.runs = Runs(self)
         #: Who holds control and who watches (every face of this session shares it).
         self.control = ControlDesk(publish=self.publish, clock=self.clock.now)
@@ -280,11 +282,22 @@ class ArmSession:
                        velocity_scale: float | None = None, by: str | None = None) -> Activity:
         return self.motion.move_to_joints(joints_deg, velocity_scale=velocity_scale, by=by)
 
-    def jog(self, joint: str, speed_scale: float, *, by: str | None = None) -> Activity:
-        return self.motion.jog(joint, speed_scale, by=by)
+    def jog(self, joint: str, speed_scale: float, *, by: str | None = None,
+            mode: str = "position") -> Activity:
+        return self.motion.jog(joint, speed_scale, by=by, mode=mode)
 
     def jog_stop(self) -> ActivityResult | None:
         return self.motion.jog_stop()
+
+    def grip(self, part_width_mm: float, force_n: float, *,
+             by: str | None = None) -> Activity:
+        return self.gripper.grip(part_width_mm, force_n, by=by)
+
+    def release(self, width_mm: float, *, by: str | None = None) -> Activity:
+        return self.gripper.release(width_mm, by=by)
+
+    def gripper_state(self) -> dict[str, Any] | None:
+        return self.gripper.state()
 
     # ------------------------------------------------------------------ sequences
     def run_sequence(self, file: str | Path, *, speed: float = 1.0, step_mode: bool = False,

@@ -101,6 +101,12 @@ class SimArm:
         given = dict(serials or {})
         self._modules = {m: SimModule(m, clock, options=self.options, parameters={
             ParamId.DEF_CUBE_SERIAL: given.pop(m, base + m)}) for m in modules}
+        #: The gripper's module id (``options.gripper_module``), None without one.
+        self.gripper_id: int | None = None
+        self._serial_base = base
+        if self.options.gripper_module:
+            self._add_gripper(self.options.gripper_module, self.options.gripper_part_mm,
+                              given.pop(self.options.gripper_module, None))
         if given:
             raise ValueError(f"serials for module(s) {sorted(given)}: the simulated arm has "
                              f"modules {sorted(self._modules)}")
@@ -126,6 +132,30 @@ class SimArm:
             self.inject(fault)
 
     # -- inspection and set-up ------------------------------------------------------------
+
+    def add_gripper(self, module_id: int, part_mm: float = 0.0) -> None:
+        """Give the arm a gripper module (PG 70 model) at ``module_id`` with a part of
+        ``part_mm`` between its jaws (0: none): the arm file's gripper on the built-in
+        simulator. Nothing changes when it has one at that id already."""
+        with self._lock:
+            if self.gripper_id == module_id:
+                return
+            if self.gripper_id is not None:
+                raise ValueError(f"the simulated arm has a gripper at {self.gripper_id}")
+            self._add_gripper(module_id, part_mm, None)
+            self._rng[module_id] = random.Random(f"{self.seed}:{module_id}")
+            self._unsent_acks[module_id] = 0
+
+    def _add_gripper(self, module_id: int, part_mm: float, serial: int | None) -> None:
+        from seqrun.sim.gripper import SimGripper
+
+        if module_id in self._modules or not 1 <= module_id <= 31:
+            raise ValueError(f"gripper_module {module_id}: a joint's id or not 1..31")
+        self._modules[module_id] = SimGripper(
+            module_id, self.clock, part_m=part_mm / 1000.0, options=self.options,
+            parameters={ParamId.DEF_CUBE_SERIAL: serial if serial is not None
+                        else self._serial_base + module_id})
+        self.gripper_id = module_id
 
     @property
     def serials(self) -> dict[int, int]:
@@ -177,10 +207,11 @@ class SimArm:
         with self._lock:
             if not isinstance(positions, Mapping):
                 values = list(positions)
-                if len(values) != len(self._modules):
-                    raise ValueError(f"expected {len(self._modules)} positions, "
+                joints = [m for m in self.module_ids if m != self.gripper_id]
+                if len(values) != len(joints):
+                    raise ValueError(f"expected {len(joints)} positions, "
                                      f"got {len(values)}")
-                positions = dict(zip(self.module_ids, values))
+                positions = dict(zip(joints, values))
             t = self._now(None)
             for module_id, position in positions.items():
                 if module_id not in self._modules:

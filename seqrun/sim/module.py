@@ -180,6 +180,12 @@ class ModuleOptions:
     #: simulated arm draws a base of its own (two ``seqrun sim serve`` are two arms, as
     #: the zero reference, keyed by the serials, must see them).
     serial_base: int = 0
+    #: The simulated arm also carries a PowerCube gripper (PG 70 model,
+    #: :mod:`seqrun.sim.gripper`) at this module id; 0: none.
+    gripper_module: int = 0
+    #: Width (mm) of the part standing between the gripper's jaws; 0: no part (a grip
+    #: closes fully).
+    gripper_part_mm: float = 0.0
 
 
 #: Environment variable the command line reads simulator options from, e.g.

@@ -16,7 +16,7 @@ if TYPE_CHECKING:
     import numpy as np
 
     from seqrun.arm.description import ArmDescription
-    from seqrun.drivers.base import JointState, LimitValues
+    from seqrun.drivers.base import GripperReading, JointState, LimitValues
     from seqrun.arm.kinematics import Chain
     from seqrun.arm.limits import LimitsInForce
     from seqrun.arm.planner import Limits
@@ -104,6 +104,13 @@ class StepContext(Protocol):
     def wait(self, seconds: float) -> None: ...
 
     def wait_in_position(self, tolerance_deg: float, timeout_s: float) -> float: ...
+
+    # -- the gripper (the arm file's ``gripper``), in mm and A
+    def gripper_current_limit(self, current_a: float) -> float: ...
+
+    def gripper_move(self, width_mm: float, speed_mm_s: float) -> None: ...
+
+    def gripper_read(self) -> GripperReading: ...
 
     # -- the operator and the record
     def ask_operator(self, question: Callable[[Any], bool], arg: Any) -> bool: ...

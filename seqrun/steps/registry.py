@@ -13,8 +13,9 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from seqrun.steps import (checkpoint, confirm, halt, home, move, move_linear, power_off, reset,
-                          set_limits, signal, wait, wait_for)
+from seqrun.steps import (check_gripper, checkpoint, confirm, grip, halt, home, move,
+                          move_linear, move_velocity, power_off, release, reset, set_limits,
+                          signal, wait, wait_for)
 from seqrun.steps.kind import StepKind
 
 __all__ = ["HANDLERS", "KINDS", "Handler", "StepKind", "step_kind"]
@@ -26,8 +27,12 @@ KINDS: tuple[StepKind, ...] = (
     set_limits.KIND,
     move.KIND,
     move_linear.KIND,
+    move_velocity.KIND,
     wait.KIND,
     checkpoint.KIND,
+    grip.KIND,
+    release.KIND,
+    check_gripper.KIND,
     confirm.KIND,
     power_off.KIND,
     signal.KIND,

@@ -581,13 +581,34 @@ $("#cmd-allvel").addEventListener("click", () => {
   command("ALLVEL", "POST", "/velocities", { joints });
 });
 
+// ---- gripper: its state (read when the session is idle), Grip and Release (need control)
+async function showGripper() {
+  let g;
+  try { g = await api("GET", "/gripper"); } catch (err) { return; }
+  const panel = $("#gripper-panel");
+  panel.hidden = g === null;
+  if (g === null) return;
+  $("#gripper-name").textContent = `(${g.name}, stroke ${g.stroke_mm} mm, at most ${g.max_force_n} N)`;
+  $("#gripper-state").textContent = g.error ? `no reading: ${g.error}`
+    : `${g.width_mm.toFixed(1)} mm open, ${g.holding ? "holding a part" : "not holding"}${g.faulted ? ", FAULT " + g.state : ""}`;
+}
+$("#cmd-grip").addEventListener("click", () => {
+  command("Grip", "POST", "/gripper/grip", { part_width_mm: Number($("#grip-width").value), force_n: Number($("#grip-force").value) });
+});
+$("#cmd-release").addEventListener("click", () => {
+  command("Release", "POST", "/gripper/release", { width_mm: Number($("#release-width").value) });
+});
+showGripper();
+setInterval(showGripper, 2000);
+
 // ---- jog: hold to move, renewed every 100 ms (the server stops it 200 ms after the last)
 $("#jog-scale").addEventListener("input", () => { $("#jog-scale-value").textContent = `${Math.round($("#jog-scale").value * 100)} %`; });
 
 function sendJog() {
   if (!state.jog || !state.ws || state.ws.readyState !== WebSocket.OPEN) return;
   const scale = Number($("#jog-scale").value) * state.jog.direction;
-  state.ws.send(JSON.stringify({ op: "jog", id: ++state.msgId, joint: state.jog.joint, speed_scale: scale }));
+  const mode = $("#jog-velocity-mode").checked ? "velocity" : "position";
+  state.ws.send(JSON.stringify({ op: "jog", id: ++state.msgId, joint: state.jog.joint, speed_scale: scale, mode }));
 }
 
 function holdToJog(button, joint, direction) {

@@ -132,6 +132,10 @@ class PowerCubeDriver:
         self._law: SetpointLaw | None = None
         self._keeper: threading.Thread | None = None
         self._keeper_stop = threading.Event()
+        #: What says the control loop is alive (given to :meth:`enable_watchdog`).
+        self._alive: Callable[[float], bool] | None = None
+        #: The watchdog was armed for a velocity motion (the arm file leaves it off).
+        self._velocity_watchdog = False
 
     # ------------------------------------------------------------------ the family
     @classmethod
@@ -242,6 +246,9 @@ class PowerCubeDriver:
             raise RuntimeError("PowerCubeDriver.configure() was not called")
         if command_mode is not None and command_mode != self.command_mode:
             law = setpoint_law(command_mode, self.arm, self.cycle_s, self.run_limits)
+        if command_mode == "velocity":
+            # FVEL is open-ended on the module: never without its watchdog (item D.5).
+            self._arm_watchdog_for_velocity()
         self._law = law
         start = law.start(moving, limits)
         if start:
@@ -255,7 +262,15 @@ class PowerCubeDriver:
         return self._cycle(law.cycle(plan, t, moving, measured_deg), moving, halt_early=True)
 
     def end_motion(self) -> None:
-        self._law = self._run_law
+        law, self._law = self._law, self._run_law
+        finish = getattr(law, "finish", None)  # a velocity law: FVEL 0, never left standing
+        if finish is not None:
+            requests = finish()
+            if requests:
+                try:
+                    self.transact(requests)
+                except BusError as exc:  # a failing motion: the executor's Halt follows
+                    self.emit("velocity_zero_failed", error=str(exc))
 
     def _cycle(self, requests: list[Request], moving: list[int], *,
                halt_early: bool = False) -> JointReading:
@@ -495,12 +510,65 @@ class PowerCubeDriver:
                                  f"{read:.3f}{unit}, wrote {wrote:.3f}{unit}", module=module)
         return len(writes)
 
+    # ------------------------------------------------------------------ the gripper
+    def _gripper(self):
+        spec = self.arm.gripper
+        if spec is None:
+            raise RunAborted("no_gripper", "the arm file has no gripper")
+        return spec
+
+    def gripper_current_limit(self, current_a: float) -> float:
+        from seqrun.drivers.powercube.gripper import CURRENT_TOLERANCE_A
+
+        module = self._gripper().module
+        self.transact([SetParam(module, ParamId.MAX_CUR, float(current_a))])
+        [ack] = self.transact([GetParam(module, ParamId.MAX_CUR)], idempotent=True)
+        read = float(ack.value)
+        if abs(read - current_a) > CURRENT_TOLERANCE_A:
+            raise RunAborted("limits_not_written", f"gripper (module {module}): MaxCur reads "
+                             f"back {read:.3f} A, wrote {current_a:.3f} A", module=module)
+        return read
+
+    def gripper_move(self, width_mm: float, speed_mm_s: float) -> None:
+        from seqrun.drivers.powercube.gripper import move_requests
+
+        spec = self._gripper()
+        acks = self.transact(move_requests(spec, width_mm, speed_mm_s))
+        motion = acks[-1]
+        if isinstance(motion, MotionExtAck) and motion.state.refuses_motion:
+            state = self.read_state(spec.module)
+            raise RunAborted("gripper_refused", f"gripper (module {spec.module}) refuses "
+                             f"to move: {state.text}", module=spec.module)
+
+    def gripper_read(self):
+        from seqrun.drivers.powercube.gripper import read_requests, reading
+
+        position, velocity, state = self.transact(read_requests(self._gripper()),
+                                                  idempotent=True)
+        return reading(float(position.value), float(velocity.value), int(state.value))
+
     # ------------------------------------------------------------------ watchdog
     def enable_watchdog(self, alive: Callable[[float], bool]) -> None:
         """Arm the modules' watchdogs (read-modify-write of Config) and keep them fed."""
+        self._alive = alive  # a velocity motion arms the watchdog even when the file does not
         wd = self.arm.can.watchdog
         if not wd.enabled:
             return
+        self._arm_watchdog(alive)
+
+    def _arm_watchdog_for_velocity(self) -> None:
+        """Before the first FVEL of a motion: the watchdog armed (once) and refreshed by
+        every exchange from now on, whatever the arm file says, so that the joints stop
+        within the modules' watchdog timeout when this process stops talking. Stays armed
+        until :meth:`disable_watchdog` (a clean end) or the end of the session."""
+        if self.client.watchdog_period is not None:
+            return  # armed already (the arm file asks for it, or an earlier motion)
+        self._velocity_watchdog = True
+        alive = self._alive if self._alive is not None else (lambda within_s: False)
+        self._arm_watchdog(alive)
+
+    def _arm_watchdog(self, alive: Callable[[float], bool]) -> None:
+        wd = self.arm.can.watchdog
         # Due at half the period: a refresh sent late (a loaded host, the GIL) still comes
         # within refresh_period_s of the last one, well inside the modules' timeout.
         self.client.watchdog_period = wd.refresh_period_s / 2
@@ -534,8 +602,9 @@ class PowerCubeDriver:
 
     def disable_watchdog(self) -> None:
         """After a clean end the arm keeps holding: clear WATCHDOG_ENABLE again."""
-        if not self.arm.can.watchdog.enabled:
+        if not self.arm.can.watchdog.enabled and not self._velocity_watchdog:
             return
+        self._velocity_watchdog = False
         self._keeper_stop.set()
         try:
             configs = self.transact([GetParam(m, ParamId.CONFIG) for m in self.bus_modules],

@@ -11,6 +11,8 @@ Pure: a law turns (plan, plan time, measured joints) into request objects in mod
   arm keeps moving smoothly through a late cycle.
 - :class:`StepSetpoints` ("step"): FSTEP_ACK to the plan's position one cycle ahead, reached
   by linear interpolation in exactly one cycle.
+- :class:`VelocitySetpoints` ("velocity", never a run's mode: a velocity move or a jog in
+  velocity mode asks for it per motion): FVEL_ACK with the plan's velocity.
 
 Both ask for extended acknowledges, which report every commanded module's position and
 short state: monitoring costs no extra frames.
@@ -127,8 +129,58 @@ class RampSetpoints(_Law):
         return requests
 
 
-LAWS: dict[str, type[RampSetpoints] | type[StepSetpoints]] = {
-    "ramp": RampSetpoints, "step": StepSetpoints}
+class VelocitySetpoints(_Law):
+    """FVEL_ACK: the plan's velocity one cycle ahead plus a bounded pull towards its
+    position (a velocity move, a jog in velocity mode).
+
+    FVEL is open-ended on the module: it keeps the velocity until told otherwise. The
+    driver arms the modules' watchdog before the first FVEL of a motion (see
+    :meth:`PowerCubeDriver.start_motion`), so a host that goes silent stops the joints
+    within the watchdog's timeout; and every cycle sends the velocity afresh, so the plan's
+    end (velocity 0) is the stop.
+    """
+
+    #: Gain (1/s) of the position pull: a joint that lags its plan is sped up, one ahead
+    #: is slowed, so the following error stays small.
+    CATCH_UP_GAIN = 10.0
+
+    def __init__(self, arm: ArmDescription, cycle_s: float, run_limits: Limits) -> None:
+        super().__init__(arm, cycle_s, run_limits)
+        self._commanded: list[int] = []
+
+    def start(self, moving: list[int], limits: Limits) -> list[Request]:
+        self._commanded = list(moving)
+        # FVEL changes velocity at min(TargetAcc, MaxAcc): the module must be able to
+        # follow the plan's ramps (as for FRAMP).
+        factor = self.arm.control.module_acceleration_factor
+        return [SetParam(self.modules[i], ParamId.TARGET_ACC,
+                         float(limits.acceleration[i] * factor)) for i in moving]
+
+    def cycle(self, plan: MovePlan, t: float, moving: list[int],
+              measured_deg: np.ndarray) -> list[Request]:
+        pos_now = plan.at(t)[0]
+        vel_next = plan.at(t + self.cycle_s)[1]
+        gain = min(self.CATCH_UP_GAIN, 0.5 / self.cycle_s)
+        measured_rad = np.radians(np.asarray(measured_deg))
+        requests: list[Request] = []
+        for i in moving:
+            ceiling = math.radians(self.arm.joints[i].max_velocity_deg_s)
+            # Rates have no offset: user rad/s are module rad/s (units.py).
+            velocity = float(vel_next[i]) + gain * float(pos_now[i] - measured_rad[i])
+            velocity = min(max(velocity, -ceiling), ceiling)
+            requests.append(SetMotion(self.modules[i], MotionMode.FVEL_ACK, velocity))
+        return requests
+
+    def finish(self) -> list[Request]:
+        """When the motion ends (in position, stopped or failed): FVEL 0 to every joint it
+        commanded. The last cycle's velocity held the position pull of a small residual
+        error; left standing, FVEL would keep the joint creeping."""
+        commanded, self._commanded = self._commanded, []
+        return [SetMotion(self.modules[i], MotionMode.FVEL_ACK, 0.0) for i in commanded]
+
+
+LAWS: dict[str, type[RampSetpoints] | type[StepSetpoints] | type[VelocitySetpoints]] = {
+    "ramp": RampSetpoints, "step": StepSetpoints, "velocity": VelocitySetpoints}
 
 
 def setpoint_law(mode: str, arm: ArmDescription, cycle_s: float,
@@ -136,4 +188,4 @@ def setpoint_law(mode: str, arm: ArmDescription, cycle_s: float,
     try:
         return LAWS[mode](arm, cycle_s, run_limits)
     except KeyError:
-        raise ValueError(f"unknown command mode '{mode}' (ramp or step)") from None
+        raise ValueError(f"unknown command mode '{mode}' (ramp, step or velocity)") from None
