@@ -141,6 +141,8 @@ class Executor:
         #: The checks of every reading (guard heights and clearances kept for the report).
         self.checks = ReadingChecks(arm, self.chain, self.read_state_word)
         self.not_verified: list[str] = []
+        #: Lost answers the driver retried (``retry`` events): time spent on the bus.
+        self.bus_retries = 0
         #: The step under way (its result is filled in as it runs).
         self.current_step: StepResult | None = None
         #: Joint solutions of end-effector targets as validated from the measured start
@@ -199,6 +201,8 @@ class Executor:
         recorders (``listeners``: the run log, which must be on disk before the next
         instant) and to the hub's subscribers (each on its own queue: never waits)."""
         now = self.clock.now()
+        if type_ == "retry":
+            self.bus_retries += 1
         if self.current_step is not None and "step" not in data:
             data["step"] = self.current_step.number
         derived = self._fields.derive(type_, data) if self.events.subscribers else {}

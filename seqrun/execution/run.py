@@ -75,6 +75,7 @@ class Run(Protocol):
     halt_result: HaltConfirmation | None
     interrupted_result: RunResult | None
     not_verified: list[str]
+    bus_retries: int
     validated_targets: dict[int, np.ndarray]
     limits_in_force: LimitsInForce
     # -- its other parts

@@ -186,18 +186,21 @@ class Streaming:
         measured = run.last.user_deg if run.last is not None else np.degrees(plan.start)
         k = 0
         last_t: float | None = None
+        waited = False
         while True:
             t_cycle = t_start + k * run.cycle
             run.idle_until(t_cycle)
             t = run.clock.now() - t_start
-            stalled = t - last_t - run.cycle if last_t is not None else 0.0
+            # (Time spent waiting for an answer that did not come, a lost read retried, is
+            # the bus's, not a stall.)
+            stalled = t - last_t - run.cycle if last_t is not None and not waited else 0.0
             if stalled > self.STALL_CYCLES * run.cycle:
                 # This process was not run (a loaded PC): nothing was commanded meanwhile
                 # and the joints went on to their last targets, then stopped. Resume the
                 # plan where the arm is, so that it does not run ahead of the arm and
                 # count a lag the arm never had as a following error.
                 measured = run.read_arm().user_deg
-                t_arm = plan_time_of(plan, measured, moving, t - stalled - run.cycle, t)
+                t_arm = plan_time_of(plan, measured, moving, last_t, t)
                 held = t - t_arm
                 t_start, t = t_start + held, t_arm
                 k = int(t / run.cycle)  # the cycle slots move with the plan
@@ -216,8 +219,11 @@ class Streaming:
                 plan = plan_move(np.radians(m.user_deg), plan.target, self.move_limits, moving)
                 t_start, k = run.clock.now(), 0
                 deadline = plan.duration + run.arm.control.settle_timeout_s
+                last_t = None  # (a pause is no stall)
                 continue
+            retries = run.bus_retries
             m = self.cycle(plan, t, moving, measured)
+            waited = run.bus_retries != retries
             measured = m.user_deg
             run.check_states(m)
             run.check_guards(m)
