@@ -45,7 +45,15 @@ class RunsSection(_Strict):
         "runs", description="Run folders, relative to the campaign folder.")
 
 
+class RosSection(_Strict):
+    distribution: Literal["humble", "jazzy", "kilted"] = Field(
+        "jazzy", description="The ROS 2 distribution whose message definitions run.mcap is "
+                             "written with (docs/ros2.md).")
+    mcap: bool = Field(True, description="Write run.mcap (a ROS 2 bag) into every run folder.")
+
+
 class CampaignConfig(_Strict):
     campaign: CampaignSection = CampaignSection()
     bus: BusSection = BusSection()
     runs: RunsSection = RunsSection()
+    ros: RosSection = RosSection()
