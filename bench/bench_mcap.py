@@ -12,7 +12,11 @@ Reported per mode (all runs pooled): cycles, p50 / p99 / max period, p99 period 
 periods >= 12 ms, the process's CPU seconds per run, and for "on" run.mcap's size. Goal:
 the "on" row matches the "off" one (p99 within 2 ms).
 
-Run: ``python bench/bench_mcap.py [--pairs 2] [--sequence opsafe]``
+``--rt-priority N``: the loop's thread at SCHED_FIFO N, as ``seqrun run --rt-priority N``
+(the writer thread then puts itself at SCHED_RR 1, below the loop): the figure on a host
+that other work loads.
+
+Run: ``python bench/bench_mcap.py [--pairs 2] [--sequence opsafe] [--rt-priority 10]``
 """
 
 from __future__ import annotations
@@ -63,14 +67,17 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--pairs", type=int, default=2)
     ap.add_argument("--sequence", default="opsafe")
+    ap.add_argument("--rt-priority", type=int, default=None)
     args = ap.parse_args()
+    if args.rt_priority is not None:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(args.rt_priority))
     runs: dict[str, list] = {"off": [], "on": []}
     load0 = os.getloadavg()
     for k in range(args.pairs):
         for mode in (("off", "on") if k % 2 == 0 else ("on", "off")):
             runs[mode].append(one_run(args.sequence, mode == "on"))
     out = {"machine": machine(), "load_before": load0, "load_after": os.getloadavg(),
-           "sequence": args.sequence}
+           "sequence": args.sequence, "rt_priority": args.rt_priority}
     for mode in ("off", "on"):
         s = summary(runs[mode], 0.01)
         s["cpu_s_per_run"] = [round(r["cpu_s"], 2) for r in runs[mode]]

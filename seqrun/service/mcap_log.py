@@ -200,6 +200,20 @@ def _encoded(record: Any, names: RosNames) -> tuple[str, bytes] | None:
     return None
 
 
+def _below_the_loop() -> None:
+    """This thread under the control loop: a thread inherits the real-time scheduling of
+    the thread that starts it (``seqrun run --rt-priority``: the loop's SCHED_FIFO), and
+    the writer must never hold the CPU the loop wants; SCHED_RR priority 1 is the level of
+    the process's other threads (seqrun/service/realtime.py)."""
+    import os
+
+    try:
+        if os.sched_getscheduler(0) == os.SCHED_FIFO:
+            os.sched_setscheduler(0, os.SCHED_RR, os.sched_param(1))
+    except (OSError, AttributeError):
+        pass
+
+
 class McapLog:
     """``run.mcap`` of one run, fed by the run log (:meth:`put`) and written by a thread of
     its own. ``on_error(text)`` is told once when writing fails (from that thread)."""
@@ -236,6 +250,7 @@ class McapLog:
             self.dropped += 1
 
     def _run(self) -> None:
+        _below_the_loop()
         bag = self._bag
         assert bag is not None
         while True:
