@@ -312,6 +312,17 @@ class Retry(Event):
 
 
 @dataclass(frozen=True, kw_only=True)
+class HostStall(Event):
+    type: ClassVar[str] = "host_stall"
+    when: ClassVar[str] = ("the control loop was not run for more than two cycles (this "
+                           "computer did not schedule it): the plan resumes where the arm "
+                           "went meanwhile instead of running ahead of it")
+    seconds: float
+    held_s: float
+    plan_t: float
+
+
+@dataclass(frozen=True, kw_only=True)
 class FrameDiscarded(Event):
     type: ClassVar[str] = "frame_discarded"
     when: ClassVar[str] = "a received frame was not used as an answer (stale, foreign, malformed)"

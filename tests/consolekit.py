@@ -154,7 +154,10 @@ class Setup:
         self.session.close()
 
 
-def console_setup(folder: Path, *, session_class: Any = None, **session_kw: Any) -> Setup:
+def console_setup(folder: Path, *, session_class: Any = None, arm_extra: str = "",
+                  **session_kw: Any) -> Setup:
+    """A campaign in ``folder`` and an arm session on the simulated arm; ``arm_extra``:
+    YAML appended to the campaign's arm file (tools, say)."""
     import sys
 
     sys.path.insert(0, str(Path(__file__).parent))
@@ -166,6 +169,9 @@ def console_setup(folder: Path, *, session_class: Any = None, **session_kw: Any)
     from seqrun.service.session import ArmSession
 
     project_tree(folder)
+    if arm_extra:
+        arm_file = folder / "arms" / "lwa3.yaml"
+        arm_file.write_text(arm_file.read_text() + "\n" + arm_extra)
     project = open_project(folder)
     arm = load_arm(folder / "arms" / "lwa3.yaml").with_zero_reference("park")
     connection = open_connection(force_sim=True, default_bitrate=arm.can.bitrate)

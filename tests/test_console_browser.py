@@ -483,3 +483,47 @@ def test_park_is_no_move_target_and_says_why(page):
     title = park.get_attribute("title")
     assert "park.yaml" in title and "j4 -120.32° is outside its limits" in title
     assert not page.locator("[data-pose=totem]").is_disabled()
+
+
+PROBE = """tools:
+  - {name: probe, xyz_mm: [0, 0, -300], rpy_deg: [0, 0, 0],
+     capsules: [{name: shaft, end_mm: [0, 0, -300], radius_mm: 12}]}
+  - {name: pointer, xyz_mm: [40, 0, -150], rpy_deg: [0, 0, 0]}
+default_tool: probe
+"""
+
+
+def test_the_3d_view_draws_the_tools_where_the_validator_checks_them(browser, tmp_path):
+    """A tool is part of the arm's volume (issue 23): the page draws each tool's capsule
+    (a tip line without capsules) in the end-effector frame, at the validator's place."""
+    import numpy as np
+
+    from seqrun.arm.kinematics import Chain, frame_transforms
+
+    setup = console_setup(tmp_path, arm_extra=PROBE)
+    try:
+        with LiveServer(setup.app()) as server:
+            context = browser.new_context(viewport={"width": 1200, "height": 900})
+            page = context.new_page()
+            page.goto(server.url)
+            page.wait_for_function("window.seqrunConsole && window.seqrunConsole.ready "
+                                   "&& window.seqrunConsole.statusCount > 1", timeout=20000)
+            q = [20, -30, 0, 45, -10, 60, 15]
+            page.evaluate(f"window.seqrunConsole.view.solid.set({q})")
+            tools = page.evaluate("""window.seqrunConsole.view.solid.tools.map((t) => ({
+                a: t.ends[0].position.toArray(), b: t.ends[1].position.toArray(),
+                r: t.mesh.geometry.parameters.radiusTop}))""")
+            context.close()
+    finally:
+        setup.close()
+    flange = frame_transforms(Chain.from_arm(setup.arm), np.radians(q))[-1]
+
+    def at(xyz):
+        return (flange @ np.array([*xyz, 1.0]))[:3]
+
+    assert len(tools) == 2
+    shaft, pointer = tools
+    assert np.allclose(shaft["a"], at([0, 0, 0]), atol=1e-3)
+    assert np.allclose(shaft["b"], at([0, 0, -300]), atol=1e-3)
+    assert shaft["r"] == 12
+    assert np.allclose(pointer["b"], at([40, 0, -150]), atol=1e-3)  # its tip line

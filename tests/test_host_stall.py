@@ -7,6 +7,7 @@ advances the clock by 60 ms (the host was descheduled while the modules answered
 from __future__ import annotations
 
 import itertools
+import json
 
 from projecttree import ROOT
 from seqrun.arm.description import load_arm
@@ -116,3 +117,51 @@ def test_a_stalled_loop_does_not_invent_velocity_in_the_report(tmp_path):
     for step in moves:
         peak = np.array(step["peak_measured_velocity_deg_s"])
         assert np.all(peak <= commanded * 1.03 + 0.2), (step.get("label"), peak, commanded)
+
+
+def _opsafe_with_one_long_stall(tmp_path, seconds: float):
+    loaded = load_sequence(ROOT / "sequences" / "opsafe.yaml")
+    arm = load_arm(loaded.arm_path)
+    clock = VirtualClock()
+    inner = SimBus(channel=f"test-stall-{next(_channels)}", clock=clock)
+    state = {"stalled": False}
+
+    def before_recv(timeout):  # once, well inside Park -> Totem (the joints at speed)
+        if not state["stalled"] and bus.sends >= 2500:
+            state["stalled"] = True
+            clock.advance(seconds)
+
+    bus = WrapBus(inner, before_recv=before_recv)
+    connection = Connection(bus, clock, True, "simulator with one long host stall")
+    try:
+        outcome = run_sequence(loaded, arm, connection, log_dir=tmp_path / "run",
+                               confirm=lambda prompt: True, html_report=False)
+    finally:
+        connection.close()
+    assert state["stalled"]
+    events = [json.loads(line) for line in (tmp_path / "run" / "events.jsonl").open()]
+    return outcome, events
+
+
+def test_a_long_host_stall_mid_move_holds_the_plan_instead_of_faulting(tmp_path):
+    """Issue 23.7: with every core busy, the loop was not run for 0.4 s; the plan ran on
+    meanwhile while the joints stopped at their last targets, and the run faulted on a
+    following error of 10° that the arm never had. The plan resumes where the arm is."""
+    outcome, events = _opsafe_with_one_long_stall(tmp_path, 0.8)
+    assert outcome.result.exit_code == EXIT_OK, outcome.result.message
+    stalls = [e for e in events if e["type"] == "host_stall"]
+    assert len(stalls) == 1 and 0.78 <= stalls[0]["seconds"] <= 0.81, stalls
+    # The joints went on to their look-ahead targets for part of the stall: the plan
+    # resumes there, not where the stall began (that would leave the arm ahead of it).
+    assert 0.2 < stalls[0]["held_s"] < stalls[0]["seconds"], stalls
+
+
+def test_without_the_hold_the_same_stall_is_a_following_error(tmp_path, monkeypatch):
+    """The test above can fail: with the hold switched off, the stall is the fault seen on
+    the loaded PC."""
+    from seqrun.execution.streaming import Streaming
+
+    monkeypatch.setattr(Streaming, "STALL_CYCLES", 1e9)
+    outcome, events = _opsafe_with_one_long_stall(tmp_path, 0.8)
+    assert outcome.result.fault["cause"] == "following_error", outcome.result.message
+    assert not [e for e in events if e["type"] == "host_stall"]

@@ -4,6 +4,7 @@ never behind a busy lock or a slow subscriber, questions answered from another t
 
 from __future__ import annotations
 
+import json
 import math
 import threading
 import time
@@ -535,3 +536,28 @@ def test_the_deadman_fires_in_real_time_even_when_the_loop_has_no_idle_time():
         assert len(posted) == 1
     finally:
         deadman.disarm()
+
+
+def test_a_run_started_through_the_session_leaves_its_record(tmp_path):
+    """The console's runs keep what ran as seqrun run does: record.json and inputs/, from
+    the bytes validated (an edit to the file after the start changes neither)."""
+    sequence = tmp_path / "short.yaml"
+    text = ("name: Short\ndescription: one move\n"
+            "steps:\n  - move: {joints: {j1: 5}, label: A little}\n")
+    sequence.write_text(text)
+    s = open_session(tmp_path, arm_path=ARM)
+    try:
+        s.poll_status()
+        assert s.arm_up().ok and s.home().ok
+        s.poll_status()
+        run = s.run_sequence(sequence, html_report=False)
+        sequence.write_text(text.replace("j1: 5", "j1: 50"))  # edited while it runs
+        result = run.wait(120)
+    finally:
+        s.close()
+    assert result.ok, result.message
+    record = json.loads((result.run_dir / "record.json").read_text())
+    kept = {Path(i["path"]).name: result.run_dir / i["copy"] for i in record["inputs"]}
+    assert set(kept) == {"short.yaml", "lwa3.yaml"}
+    assert kept["short.yaml"].read_text() == text
+    assert kept["lwa3.yaml"].read_bytes() == ARM.read_bytes()

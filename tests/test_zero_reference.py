@@ -379,3 +379,34 @@ def test_every_campaign_shares_the_arms_one_record(tmp_path, state_dir, served_a
             connection.close()
         assert zero.pose == "totem" and zero.store.path.parent == state_dir / "arms"
     assert not (tmp_path / "a" / ".seqrun" / "zero.json").exists()
+
+
+def test_an_older_per_type_record_is_named_but_never_used(state_dir, tmp_path, monkeypatch):
+    # An older seqrun kept one zero per arm type and user: after the upgrade the arm must be
+    # recorded again, and the refusal says why the old file does not count.
+    old = tmp_path / "xdg" / "seqrun" / "zero-lwa3.json"
+    old.parent.mkdir(parents=True)
+    old.write_text(json.dumps({"arms": {"lwa3": {"record": {"pose": "park"}}}}))
+    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "xdg"))
+    monkeypatch.chdir(tmp_path)
+    connection = hardware()
+    try:
+        with pytest.raises(UserInputError) as info:
+            zero_at_run_start(connection, ARM, None, lambda q: True, print)
+    finally:
+        connection.close()
+    message = str(info.value)
+    assert message.startswith("no zero reference recorded for this arm")
+    assert f"{old} is an older seqrun's record per arm type, not of this arm: it is not " \
+           "used" in message
+
+
+def test_an_older_campaign_record_above_the_current_folder_is_found(tmp_path):
+    from seqrun.service.zero import older_records
+
+    campaign = tmp_path / "campaign"
+    (campaign / ".seqrun").mkdir(parents=True)
+    (campaign / ".seqrun" / "zero.json").write_text("{}")
+    (campaign / "sequences").mkdir()
+    assert campaign / ".seqrun" / "zero.json" in older_records(campaign / "sequences")
+    assert campaign / ".seqrun" / "zero.json" not in older_records(tmp_path)

@@ -111,7 +111,8 @@ def console_command(
     from seqrun.service.session import ArmSession
 
     session = ArmSession(arm, connection, project=project, log_root=runs, zero=zero,
-                         response_timeout_s=timeout, loop_priority=rt_priority)
+                         response_timeout_s=timeout, loop_priority=rt_priority,
+                         arm_path=context.arm_path)
     _serve_control_socket(connection, session)
     live_foxglove = None
     try:

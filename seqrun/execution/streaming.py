@@ -31,6 +31,30 @@ def _round(x: float | None, nd: int = 4) -> float | None:
     return None if x is None else round(float(x), nd)
 
 
+def plan_time_of(plan: MovePlan, measured_deg: np.ndarray, moving: list[int],
+                 earliest: float, latest: float) -> float:
+    """The plan time in [earliest, latest] at which the plan stands where the arm is, read on
+    the joint with the longest way (a point-to-point plan moves each joint one way)."""
+    if not moving:
+        return latest
+    start, target = np.degrees(plan.start), np.degrees(plan.target)
+    j = max(moving, key=lambda i: abs(target[i] - start[i]))
+    direction = math.copysign(1.0, target[j] - start[j])
+
+    def ahead_of_arm(tau: float) -> bool:
+        return (math.degrees(plan.at(tau)[0][j]) - measured_deg[j]) * direction > 0
+
+    if ahead_of_arm(earliest):
+        return earliest
+    if not ahead_of_arm(latest):
+        return latest
+    lo, hi = earliest, latest
+    while hi - lo > 1e-3:
+        mid = (lo + hi) / 2
+        lo, hi = (lo, mid) if ahead_of_arm(mid) else (mid, hi)
+    return lo
+
+
 class Streaming:
     """The moves and waits of one run (the executor it streams for: its driver, clock,
     checks, stop requests and events)."""
@@ -43,6 +67,8 @@ class Streaming:
         self.move_limits = run.limits
         #: Extra check of every streamed cycle (a straight-line move's deviation).
         self.path_check: Callable[[Measurement], None] | None = None
+        #: Host stalls (s) the plans were held for, this run (``host_stall`` events).
+        self.stalls: list[float] = []
 
     # ------------------------------------------------------------------ moves
     def move(self, target_deg: np.ndarray, active: list[int], limits: Limits, *,
@@ -159,10 +185,26 @@ class Streaming:
         bound = run.arm.control.max_following_error_deg
         measured = run.last.user_deg if run.last is not None else np.degrees(plan.start)
         k = 0
+        last_t: float | None = None
         while True:
             t_cycle = t_start + k * run.cycle
             run.idle_until(t_cycle)
             t = run.clock.now() - t_start
+            stalled = t - last_t - run.cycle if last_t is not None else 0.0
+            if stalled > self.STALL_CYCLES * run.cycle:
+                # This process was not run (a loaded PC): nothing was commanded meanwhile
+                # and the joints went on to their last targets, then stopped. Resume the
+                # plan where the arm is, so that it does not run ahead of the arm and
+                # count a lag the arm never had as a following error.
+                measured = run.read_arm().user_deg
+                t_arm = plan_time_of(plan, measured, moving, t - stalled - run.cycle, t)
+                held = t - t_arm
+                t_start, t = t_start + held, t_arm
+                k = int(t / run.cycle)  # the cycle slots move with the plan
+                self.stalls.append(stalled)
+                run.emit("host_stall", seconds=round(stalled, 4), held_s=round(held, 4),
+                         plan_t=round(t, 4))
+            last_t = t
             run.check_halt_request()
             if stop_on_abort and (stops.aborts or stops.paused.is_set()):
                 self.controlled_stop(plan, t, moving)
@@ -219,6 +261,10 @@ class Streaming:
             # Next cycle slot; slots missed while waiting on the bus are skipped, not
             # made up in a burst.
             k = max(k + 1, math.ceil((run.clock.now() - t_start) / run.cycle))
+
+    #: A gap between two cycles longer than (1 + this) cycles is a host stall: the plan is
+    #: held for the time beyond one cycle.
+    STALL_CYCLES = 1.0
 
     #: Joints that answered further apart than this (s) in one reading get a time each in
     #: the log (a host stall split the cycle's exchange); closer, one time stands for all.

@@ -127,8 +127,10 @@ def arm_scene(arm: ArmDescription) -> dict[str, Any]:
     """What a 3D view needs of the arm: the joints (limits, locked value), the chain as 4x4
     frames (the view multiplies them with Rz(q) per joint, the reference convention of
     :mod:`seqrun.arm.kinematics`, computed by the code the validator uses), the guards,
-    link volumes and obstacles."""
+    link volumes, the tools' volumes (in the end-effector frame; radius 0: a tip line) and
+    obstacles."""
     from seqrun.arm.kinematics import Chain
+    from seqrun.arm.tools import tool_parts
 
     def rows(matrix: Any) -> list[list[float]]:
         return [[round(float(v), 9) for v in row] for row in matrix]
@@ -145,6 +147,9 @@ def arm_scene(arm: ArmDescription) -> dict[str, Any]:
                    for g in arm.workspace.guards],
         "capsules": [{"name": c.name, "start": c.start, "end": c.end,
                       "radius_mm": c.radius_mm} for c in arm.geometry.capsules],
+        "tool_parts": [{"label": t.label, "tool": t.tool, "start_mm": list(t.start_mm),
+                        "end_mm": list(t.end_mm), "radius_mm": t.radius_mm}
+                       for t in tool_parts(arm)],
         "obstacles": [o.model_dump(mode="json", exclude_none=True)
                       for o in arm.geometry.obstacles],
     }

@@ -39,6 +39,8 @@ class Runs:
         from seqrun.errors import SequenceInvalid, UserInputError
         from seqrun.sequence.loader import load_sequence
         from seqrun.sequence.validation import validate_sequence
+        from seqrun.service.campaign_records import record_run
+        from seqrun.service.checking import override_notes
         from seqrun.service.runlog import prepare_run_folder
 
         s = self._session
@@ -72,6 +74,13 @@ class Runs:
             folder = prepare_run_folder(log_dir, loaded.name, s.log_root)
         except OSError as exc:
             raise Refused(f"cannot create the run folder: {exc.strerror or exc}") from None
+        try:  # what ran is what is recorded: the bytes validated, as seqrun run keeps them
+            record_run(folder, loaded, s.arm_path or loaded.arm_path,
+                       s.connection.description, s.zero, arm=s.arm,
+                       overrides=override_notes(loaded, s.arm_path))
+        except OSError as exc:
+            raise Refused(f"cannot write the run record in {folder} "
+                          f"({exc.strerror or exc}); nothing was sent") from None
         activity = s.activities.begin("run", {"file": str(file), "run_dir": str(folder)},
                                        by)
         s.activities.run_info = RunInfo(str(file), None, None, len(loaded.steps), str(folder))

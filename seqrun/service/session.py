@@ -74,6 +74,8 @@ class ArmSession:
         and the run records.
     :param status_hz: idle status poll rate; 0 disables polling (tests poll by hand with
         :meth:`poll_status`).
+    :param arm_path: the arm file ``arm`` was read from, named in the run records
+        (record.json, inputs/); default: the sequence's own arm file.
     :param loop_priority: run each activity's thread (the 100 Hz loop) at ``SCHED_FIFO``
         with this priority (1-99; that thread and the threads it starts:
         :mod:`seqrun.service.realtime`).
@@ -83,12 +85,13 @@ class ArmSession:
                  poses_dir=None, zero=None, status_hz: float = STATUS_POLL_HZ,
                  response_timeout_s: float | None = None, own_connection: bool = True,
                  jog_deadman_s: float = JOG_DEADMAN_S,
-                 loop_priority: int | None = None) -> None:
+                 loop_priority: int | None = None, arm_path: Path | None = None) -> None:
         from seqrun.drivers.registry import open_driver
         from seqrun.service.connection import response_timeout_s as default_timeout
         from seqrun.shipped import shipped_dir
 
         self.arm = arm
+        self.arm_path = Path(arm_path) if arm_path is not None else None
         self.connection = connection
         self.clock = connection.clock
         self.project = project

@@ -59,6 +59,23 @@ def state_dir() -> Path:
     return MACHINE_STATE_DIR
 
 
+def older_records(start: Path | None = None) -> list[Path]:
+    """Zero records an older seqrun kept per arm *type*: per user
+    (``$XDG_STATE_HOME/seqrun/zero-*.json``) and per campaign (``.seqrun/zero.json`` in the
+    current folder or above). They cannot say which physical arm they were taken on, so they
+    are never used; a refusal names them so that the operator knows why the arm is asked for
+    again."""
+    base = os.environ.get("XDG_STATE_HOME") or str(Path.home() / ".local" / "state")
+    found = sorted((Path(base) / "seqrun").glob("zero-*.json"))
+    here = (start or Path.cwd()).resolve()
+    for folder in (here, *here.parents):
+        campaign_file = folder / ".seqrun" / "zero.json"
+        if campaign_file.is_file():
+            found.append(campaign_file)
+            break
+    return found
+
+
 def _user() -> str:
     try:
         return getpass.getuser()
@@ -343,6 +360,8 @@ def zero_for_run(arm: ArmDescription, store: ZeroStore | None, *,
         hint = "".join(f"; {path} holds the record of an arm with module(s) "
                        f"{', '.join(map(str, shared))} of these serials (a module exchanged? "
                        "its zero is unknown)" for path, shared in related[:1])
+        hint += "".join(f"; {path} is an older seqrun's record per arm type, not of this "
+                        "arm: it is not used" for path in older_records()[:1])
         raise UserInputError(f"no zero reference recorded for this arm "
                              f"({store.identity.describe()}; {store.path}): nothing will "
                              f"move; {how}{hint}")

@@ -76,6 +76,15 @@ class ArmFigure {
       this.group.add(mesh);
       return mesh;
     });
+    // The tools' volumes, carried by the end-effector frame (a tip line: a thin rod, so a
+    // long probe is seen where the validator sees it).
+    this.tools = (arm.tool_parts || []).map((t) => {
+      const r = Math.max(t.radius_mm, 2);
+      const mesh = new THREE.Mesh(new THREE.CylinderGeometry(r, r, 1, 16), material);
+      const ends = [0, 1].map(() => new THREE.Mesh(new THREE.SphereGeometry(r, 16, 10), material));
+      this.group.add(mesh, ...ends);
+      return { start: new THREE.Vector3(...t.start_mm), end: new THREE.Vector3(...t.end_mm), mesh, ends };
+    });
     this.tcp = new THREE.AxesHelper(90);
     this.group.add(this.tcp);
     scene.add(this.group);
@@ -101,6 +110,17 @@ class ArmFigure {
       mesh.matrix.copy(m).multiply(new THREE.Matrix4().makeRotationX(Math.PI / 2));
     });
     const tool = f[f.length - 1];
+    const flange = new THREE.Matrix4().set(...tool.flat());
+    for (const part of this.tools) {
+      const a = part.start.clone().applyMatrix4(flange), b = part.end.clone().applyMatrix4(flange);
+      const d = new THREE.Vector3().subVectors(b, a);
+      const len = Math.max(d.length(), 1e-3);
+      part.mesh.position.copy(a).addScaledVector(d, 0.5);
+      part.mesh.quaternion.setFromUnitVectors(up, d.clone().divideScalar(len));
+      part.mesh.scale.set(1, len, 1);
+      part.ends[0].position.copy(a);
+      part.ends[1].position.copy(b);
+    }
     this.tcp.matrixAutoUpdate = false;
     this.tcp.matrix.set(...tool.flat());
   }
