@@ -30,6 +30,7 @@ COMMAND_MODULES = (
     "seqrun.cli.runs",
     "seqrun.cli.report",
     "seqrun.cli.console",
+    "seqrun.cli.ros",
 )
 
 
@@ -52,6 +53,7 @@ COMMAND_WORDS = {
     "runs": "seqrun.cli.runs",
     "report": "seqrun.cli.report",
     "console": "seqrun.cli.console",
+    "ros": "seqrun.cli.ros",
 }
 
 

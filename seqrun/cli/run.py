@@ -10,7 +10,6 @@ nothing sent (cli/questions.py).
 from __future__ import annotations
 
 import functools
-import os
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Callable, Optional
 
@@ -245,15 +244,25 @@ def _confirm_start(console: Console, run, yes: bool, zero_confirmed: str | None 
 
 
 def _use_realtime(console: Console, rt_priority: int | None) -> None:
+    """``--rt-priority N``: the control loop (this thread, and the threads it starts) at
+    SCHED_FIFO N; the threads already running (the control socket's, the display's) at
+    SCHED_RR 1, above every normal process, so that none of them is kept off the CPU
+    while it holds the interpreter lock the loop waits for; the lock handed over within
+    1 ms (seqrun/service/realtime.py, as the console does)."""
     if rt_priority is None:
         return
-    try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(rt_priority))
-        console.print(f"real-time scheduling: SCHED_FIFO priority {rt_priority}",
-                      highlight=False)
-    except (OSError, AttributeError) as exc:
-        console.print(f"warning: real-time scheduling not available ({exc}); running at "
-                      "normal priority", style="yellow", highlight=False, markup=False)
+    from seqrun.service.realtime import hand_over_the_lock_often, use_fifo, use_round_robin
+
+    why = use_round_robin()
+    if why is None:
+        why = use_fifo(rt_priority)
+    if why is None:
+        hand_over_the_lock_often()
+        console.print(f"real-time scheduling: SCHED_FIFO priority {rt_priority} (other "
+                      "threads SCHED_RR 1)", highlight=False)
+        return
+    console.print(f"warning: real-time scheduling not available ({why}); running at "
+                  "normal priority", style="yellow", highlight=False, markup=False)
 
 
 def _run_folder(console: Console, run, log_dir: Path | None) -> Path:

@@ -18,6 +18,7 @@ if TYPE_CHECKING:
     from seqrun.arm.kinematics import Pose
 
 __all__ = ["ForwardKinematics", "InverseKinematics", "arm_scene", "end_effector",
+           "link_transforms",
            "end_effector_pose", "forward_kinematics", "inverse_kinematics"]
 
 
@@ -153,3 +154,53 @@ def arm_scene(arm: ArmDescription) -> dict[str, Any]:
         "obstacles": [o.model_dump(mode="json", exclude_none=True)
                       for o in arm.geometry.obstacles],
     }
+
+
+def link_transforms(arm: ArmDescription, joints_deg: Sequence[float], prefix: str
+                    ) -> list[tuple[str, str, tuple[float, float, float],
+                                    tuple[float, float, float, float]]]:
+    """The chain at ``joints_deg`` (user degrees, every joint) as a tree of frames, each
+    relative to its parent: ``(parent, child, translation_m, quaternion_xyzw)``, from
+    ``{prefix}base`` through ``{prefix}<joint>`` (each joint's frame after its rotation) to
+    ``{prefix}end_effector``, by the forward kinematics the validator uses. What a ``/tf``
+    publisher sends."""
+    import numpy as np
+
+    from seqrun.arm.kinematics import Chain, frame_transforms
+
+    frames = frame_transforms(Chain.from_arm(arm),
+                              np.radians(np.asarray(joints_deg, dtype=float)))
+    names = [f"{prefix}base"] + [f"{prefix}{j.name}" for j in arm.joints] + [f"{prefix}end_effector"]
+    out = []
+    parent_frame = np.eye(4)
+    for k, frame in enumerate(frames):
+        relative = np.linalg.solve(parent_frame, frame)
+        translation = tuple(float(v) / 1000.0 for v in relative[:3, 3])
+        out.append((names[k], names[k + 1], translation, _quaternion_xyzw(relative[:3, :3])))
+        parent_frame = frame
+    return out  # type: ignore[return-value]
+
+
+def _quaternion_xyzw(rotation: Any) -> tuple[float, float, float, float]:
+    """The unit quaternion (x, y, z, w; w >= 0) of a rotation matrix (Shepperd's method:
+    the largest of the four terms first, so no division by a small number)."""
+    import math
+
+    m = rotation
+    trace = float(m[0, 0] + m[1, 1] + m[2, 2])
+    if trace > 0:
+        s = math.sqrt(trace + 1.0) * 2
+        q = ((m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, s / 4)
+    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
+        s = math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2]) * 2
+        q = (s / 4, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s, (m[2, 1] - m[1, 2]) / s)
+    elif m[1, 1] > m[2, 2]:
+        s = math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2]) * 2
+        q = ((m[0, 1] + m[1, 0]) / s, s / 4, (m[1, 2] + m[2, 1]) / s, (m[0, 2] - m[2, 0]) / s)
+    else:
+        s = math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1]) * 2
+        q = ((m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, s / 4, (m[1, 0] - m[0, 1]) / s)
+    norm = math.sqrt(sum(float(v) * float(v) for v in q))
+    sign = -1.0 if q[3] < 0 else 1.0
+    x, y, z, w = (sign * float(v) / norm for v in q)
+    return (x, y, z, w)

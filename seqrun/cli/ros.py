@@ -1,0 +1,135 @@
+"""``seqrun ros``: the arm session as a ROS 2 node (docs/ros2-node.md).
+
+    seqrun ros                          # simulator (no bus configured)
+    seqrun ros -i socketcan -c can0     # the real arm
+
+Needs the optional extra ``seqrun[ros]`` (or a sourced ROS 2 installation); without it the
+command prints one line saying how to install it (exit 2). rclpy is imported only when the
+command runs.
+"""
+
+from __future__ import annotations
+
+import signal
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from seqrun.cli.app import app
+from seqrun.cli.common import (EXIT_FAULT, EXIT_USAGE, ArmFileOption, BitrateOption,
+                               BusKwargsOption, CampaignOption, ChannelOption,
+                               InterfaceOption, ResponseTimeoutOption, SimOption, fail,
+                               user_errors)
+from seqrun.cli.questions import ask
+from seqrun.defaults import EXIT_OPERATOR_ABORT
+
+
+@app.command("ros")
+def ros_command(
+    interface: InterfaceOption = None,
+    channel: ChannelOption = None,
+    bitrate: BitrateOption = None,
+    bus_kwargs: BusKwargsOption = None,
+    sim: SimOption = False,
+    arm_file: ArmFileOption = None,
+    project_dir: CampaignOption = None,
+    log_dir: Annotated[Optional[Path], typer.Option(
+        "--log-dir", metavar="DIR", help="Where run folders go (default: the project's runs/).")]
+    = None,
+    arm_name: Annotated[Optional[str], typer.Option(
+        "--arm-name", metavar="NAME",
+        help="The <arm> of /<arm>/joint_states and /<arm>/joint_trajectory (default: the "
+             "arm file's name, e.g. lwa3).")] = None,
+    node_name: Annotated[str, typer.Option(
+        "--node-name", metavar="NAME",
+        help="The node's name: its services and events are /NAME/stop, /NAME/home, "
+             "/NAME/reset, /NAME/events (a second arm's node needs another).")] = "seqrun",
+    rate: Annotated[float, typer.Option(
+        "--rate", metavar="HZ", help="joint_states (and /tf) rate in Hz (at least 50).")]
+    = 100.0,
+    response_timeout_ms: ResponseTimeoutOption = None,
+    zero_confirmed: Annotated[Optional[str], typer.Option(
+        "--zero-confirmed", metavar="POSE", help="Answer 'does the arm stand in POSE?' after "
+        "a power-on without asking (a different record refuses to start).")] = None,
+) -> None:
+    """Serve the arm on ROS 2: joint_states, /tf, JointTrajectory, ~/stop ~/home ~/reset."""
+    from seqrun.ros import missing
+
+    absent = missing()
+    if absent is not None:
+        typer.echo(absent, err=True)
+        raise typer.Exit(EXIT_USAGE)
+    from seqrun.cli.zero import zero_at_run_start
+    from seqrun.errors import BusError
+    from seqrun.service.arm_context import resolve_context
+    from seqrun.service.connection import response_timeout_s
+
+    with user_errors():
+        if not 50 <= rate <= 1000:
+            fail(f"--rate must lie in 50-1000 Hz, got {rate:g}")
+        context = resolve_context(project_dir=project_dir, arm_file=arm_file,
+                                  log_dir=log_dir, interface=interface, channel=channel,
+                                  bitrate=bitrate, bus_kwargs=bus_kwargs or [], sim=sim,
+                                  response_timeout_ms=response_timeout_ms)
+        project, arm = context.project, context.arm
+        timeout = response_timeout_s(arm, response_timeout_ms)
+        context.refuse_private_simulator("ros")
+        connection = context.open_connection(live=True)
+    typer.echo(context.headline(connection))
+    try:
+        with user_errors():
+            try:
+                zero = zero_at_run_start(connection, arm, project,
+                                         lambda q: ask(q, False),
+                                         typer.echo, confirmed=zero_confirmed)
+            except BusError as exc:
+                fail(f"cannot read the modules' state: {exc}", EXIT_FAULT)
+            arm = zero.apply(arm)
+    except BaseException:
+        connection.close()
+        raise
+    runs = context.runs_dir
+    runs = runs if runs.is_absolute() else Path.cwd() / runs
+
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+
+    from seqrun.ros.node import SeqrunNode, spin
+    from seqrun.service.session import ArmSession
+
+    session = ArmSession(arm, connection, project=project, log_root=runs, zero=zero,
+                         response_timeout_s=timeout)
+    name = arm_name or Path(arm.source_file or "arm").stem
+    rclpy.init(args=[])
+    previous = signal.signal(signal.SIGTERM, _terminated)
+    node = None
+    try:
+        node = SeqrunNode(session, arm_name=name, rate_hz=rate, node_name=node_name)
+        banner = "SIMULATOR" if connection.is_simulator else connection.description
+        typer.echo(f"seqrun ros on {banner}: /{node.arm}/joint_states, "
+                   f"/{node.arm}/joint_trajectory, {node.node.get_fully_qualified_name()}/stop;"
+                   " Ctrl-C ends it (any motion is stopped first)")
+        spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        typer.echo("seqrun ros: ended by Ctrl-C; anything still moving is stopped")
+        raise typer.Exit(EXIT_OPERATOR_ABORT) from None
+    except _Terminated:
+        result = session.halt("SIGTERM (seqrun ros)")
+        typer.echo(f"seqrun ros: ended by SIGTERM; {result.describe()}")
+        raise typer.Exit(EXIT_OPERATOR_ABORT) from None
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+        if node is not None:
+            node.close()
+        session.close()  # controlled stop of anything still moving, then the bus
+        if rclpy.ok():
+            rclpy.shutdown()
+
+
+class _Terminated(Exception):
+    """SIGTERM: halt, then end."""
+
+
+def _terminated(signum, frame) -> None:  # noqa: ANN001 - a signal handler
+    raise _Terminated()
