@@ -20,7 +20,7 @@ DOC = ROOT / "docs" / "architecture.md"
 PACKAGE = ROOT / "seqrun"
 #: What a face must not import: it goes through seqrun.service and seqrun.events.
 FORBIDDEN_FOR_FACES = ("executor", "drivers", "drivers.*", "powercube", "powercube.*")
-FACES = ("cli", "cli.*", "console", "console.*", "ros", "ros.*")
+FACES = ("cli", "cli.*", "console", "console.*", "foxglove", "foxglove.*", "ros", "ros.*")
 
 
 def documented_layers(text: str) -> list[tuple[str, list[str]]]:

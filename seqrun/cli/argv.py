@@ -3,7 +3,8 @@
 python-can's tools take several ``KEY=VALUE`` after one ``--bus-kwargs`` (``python -m
 can.viewer -i socketcand --bus-kwargs host=127.0.0.1 port=29536``); click options take
 one value each. :func:`expand_bus_kwargs` turns the first form into repeated options; the
-same for the joint angles after ``seqrun zero set --deg`` (negative numbers included).
+same for the joint angles after ``seqrun zero set --deg`` (negative numbers included), and
+``--foxglove`` alone gets its default port (``--foxglove[=PORT]``).
 No imports beyond the standard library: this runs before every command.
 """
 
@@ -15,6 +16,9 @@ from collections.abc import Sequence
 _OPTION = "--bus-kwargs"
 _KEY_VALUE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*=")
 _DEGREES = "--deg"
+#: ``--foxglove`` alone serves on this port (seqrun.foxglove.DEFAULT_PORT); a port is
+#: given as ``--foxglove=PORT``.
+_FOXGLOVE, _FOXGLOVE_PORT = "--foxglove", "8766"
 _NUMBER = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
 
 
@@ -39,6 +43,8 @@ def expand_bus_kwargs(args: Sequence[str]) -> list[str]:
             while i < len(words) and _KEY_VALUE.match(words[i]):
                 out += [_OPTION, words[i]]
                 i += 1
+        elif word == _FOXGLOVE:   # an optional value: the next word is never it
+            out[-1] = f"{_FOXGLOVE}={_FOXGLOVE_PORT}"
         elif word == _DEGREES:
             if i < len(words):
                 out.append(words[i])  # its own value, whatever it is

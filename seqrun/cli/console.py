@@ -21,6 +21,7 @@ from seqrun.cli.app import app
 from seqrun.cli.common import (EXIT_FAULT, ArmFileOption, BitrateOption, BusKwargsOption,
                                CampaignOption, ChannelOption, InterfaceOption,
                                ResponseTimeoutOption, SimOption, fail, user_errors)
+from seqrun.cli.foxglove_option import FoxgloveOption, check_foxglove, start_foxglove
 from seqrun.cli.questions import ask
 from seqrun.defaults import EXIT_OPERATOR_ABORT
 
@@ -55,6 +56,7 @@ def console_command(
     zero_confirmed: Annotated[Optional[str], typer.Option(
         "--zero-confirmed", metavar="POSE", help="Answer 'does the arm stand in POSE?' after "
         "a power-on without asking (a different record refuses to start).")] = None,
+    foxglove: FoxgloveOption = None,
 ) -> None:
     """Serve the operator console (STOP, telemetry, 3D view, commands, sequences)."""
     from seqrun.cli.zero import zero_at_run_start
@@ -65,6 +67,7 @@ def console_command(
     with user_errors():
         if not 0 <= port <= 65535:
             fail(f"--port must lie in 0-65535, got {port}")
+        check_foxglove(foxglove)
         if rt_priority is not None and not _use_realtime(rt_priority):
             rt_priority = None  # (before any thread starts: they inherit the policy)
         # The arm context: the campaign here, its arm, its bus (seqrun/service/arm_context.py).
@@ -111,7 +114,12 @@ def console_command(
                          response_timeout_s=timeout, loop_priority=rt_priority,
                          arm_path=context.arm_path)
     _serve_control_socket(connection, session)
+    live_foxglove = None
     try:
+        try:
+            live_foxglove = start_foxglove(session, arm, foxglove, typer.echo)
+        except (OSError, RuntimeError) as exc:
+            fail(f"--foxglove: the Foxglove server could not start ({exc})")
         application = create_app(session, Catalog(project, runs), arm, token=token,
                                  local_only=is_loopback(listen), start_checker=True)
         url = url_of(sock, listen, token)
@@ -143,6 +151,8 @@ def console_command(
         finally:
             signal.signal(signal.SIGTERM, previous)
     finally:
+        if live_foxglove is not None:
+            live_foxglove.close()
         session.close()  # controlled stop of anything still moving, then the bus
 
 

@@ -29,6 +29,9 @@ arm = "{arm}"               # a shipped arm (lwa3) or a file in this folder (arm
 
 [runs]
 dir = "runs"                # run folders, relative to this folder
+
+[ros]                       # run.mcap, the run as a ROS 2 bag (docs/ros2.md)
+distribution = "jazzy"      # humble, jazzy or kilted
 """
 
 #: Where the YAML files' ``# yaml-language-server: $schema=../docs/schema/...`` comments

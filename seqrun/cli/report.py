@@ -3,6 +3,7 @@
     seqrun report runs/20261121-101500-Op-safe            # -> that folder's report.html
     seqrun report runs/20261121-101500-Op-safe --out r.html
     seqrun report runs/20261121-101500-Op-safe --csv exported/   # timeseries.csv, steps.csv
+    seqrun report runs/20261121-101500-Op-safe --mcap     # run.mcap anew (docs/ros2.md)
 
 A folder that is not a run folder is one ``error:`` line and exit 2.
 """
@@ -27,6 +28,10 @@ def report_command(
     csv_dir: Annotated[Optional[Path], typer.Option(
         "--csv", metavar="DIR", help="Export the time series as CSV into DIR instead of the "
                                      "HTML (both with --out).")] = None,
+    mcap: Annotated[bool, typer.Option(
+        "--mcap", help="Write RUN_DIR/run.mcap (the run as a ROS 2 bag) anew from events.jsonl "
+                       "instead of the HTML (both with --out); for runs of older versions or "
+                       "one killed before its run.mcap was ended.")] = False,
     arm_file: Annotated[Optional[Path], typer.Option(
         "--arm", metavar="FILE", help="Arm file, for run folders of versions that did not "
                                       "record the arm in events.jsonl.")] = None,
@@ -37,6 +42,14 @@ def report_command(
 
     with user_errors():
         arm = load_arm_file(arm_file) if arm_file is not None else None
+        if mcap:
+            from seqrun.service.mcap_log import rebuild_mcap
+
+            path, counts = rebuild_mcap(run_dir, arm)
+            total = sum(counts.values())
+            typer.echo(f"wrote {path} ({total} messages on {len(counts)} topics)")
+            if out is None and csv_dir is None:
+                return
         data = load_run(run_dir, arm=arm)
         if csv_dir is not None:
             for path in export_csv(run_dir, csv_dir, data=data):

@@ -18,6 +18,7 @@ import typer
 from seqrun.cli.app import app
 from seqrun.cli.common import (BitrateOption, BusKwargsOption, ChannelOption, InterfaceOption,
                                SimOption, fail, user_errors)
+from seqrun.cli.foxglove_option import FoxgloveOption
 from seqrun.defaults import EXIT_FAULT, EXIT_INVALID, EXIT_OPERATOR_ABORT
 from seqrun.errors import BusError, SequenceInvalid
 
@@ -123,6 +124,7 @@ def run_command(
         "a power-on without asking: the operator's word that the arm stands in the recorded "
         "power-off pose POSE (a different record refuses the run). --yes never answers it.")]
     = None,
+    foxglove: FoxgloveOption = None,
 ) -> None:
     """Run a sequence: validate, read the arm, re-validate from where it stands, move.
     In a campaign with several arms ([arms.ID]): every arm its track, together
@@ -150,6 +152,9 @@ def run_command(
 
     keep_running_on_broken_pipe()  # a closed stdout never ends a run
     console = make_console(stderr=False)
+    from seqrun.cli.foxglove_option import check_foxglove
+
+    check_foxglove(foxglove)   # (one line before anything is opened)
     request = RunRequest(file, interface, channel, bitrate, bus_kwargs or [], sim,
                          sim_fault or [], speed, from_step, log_dir, arm_file, command_mode,
                          start, started, virtual_time, project_dir, power_on_at)
@@ -177,7 +182,8 @@ def run_command(
     folder = _run_folder(console, run, log_dir)
     outcome = _run_in_session(console, run, zero, folder, control, requests, step=step,
                               yes=yes, plain=plain, speed=speed, from_step=from_step,
-                              command_mode=command_mode, no_report=no_report)
+                              command_mode=command_mode, no_report=no_report,
+                              foxglove=foxglove)
     try:  # the run has ended: a Ctrl-C now changes neither its exit code nor its story
         _print_outcome(console, outcome, folder)
     except KeyboardInterrupt:
@@ -296,7 +302,7 @@ def _run_folder(console: Console, run, log_dir: Path | None) -> Path:
 
 def _run_in_session(console: Console, run, zero, folder: Path, control, requests, *,
                     step: bool, yes: bool, plain: bool, speed: float, from_step: int,
-                    command_mode: str | None, no_report: bool):
+                    command_mode: str | None, no_report: bool, foxglove: int | None = None):
     """The run in an arm session (the same object the console and the other faces use),
     with the terminal's own questions, signals and displays (the session's subscribers)."""
     from seqrun.cli.display import LiveDisplay, PlainDisplay
@@ -339,6 +345,7 @@ def _run_in_session(console: Console, run, zero, folder: Path, control, requests
 
     session = ArmSession(arm, connection, project=loaded.project, zero=zero, status_hz=0,
                          own_connection=False)
+    live_foxglove = _start_foxglove(console, run, session, folder, foxglove)
     if live:  # its own queue of the session's events, rendered in the loop's slack
         view = LiveDisplay(console, arm, session.subscribe(maxsize=2000, name="live view"),
                            f"seqrun: {loaded.name}", connection.description,
@@ -369,10 +376,32 @@ def _run_in_session(console: Console, run, zero, folder: Path, control, requests
         elif displays:
             displays[0].close(timeout=5.0)  # every line printed before the summary
         try:
+            if live_foxglove is not None:
+                live_foxglove.close()
             session.close()
             connection.close()
         finally:  # until here a signal is a request: a Ctrl-C never cuts the closing short
             signals.restore()
+
+
+def _start_foxglove(console: Console, run, session, folder: Path, port: int | None):
+    """``--foxglove``: the session live for Foxglove before anything moves; a server that
+    cannot start ends the command in one line (exit 2), nothing sent."""
+    from seqrun.cli.foxglove_option import start_foxglove
+
+    try:
+        return start_foxglove(session, run.arm, port,
+                              lambda text: console.print(text, highlight=False, markup=False,
+                                                         soft_wrap=True))
+    except (OSError, RuntimeError) as exc:
+        from seqrun.service import campaign_records
+
+        session.close()
+        run.connection.close()
+        message = f"the Foxglove server could not start ({exc}); nothing was sent"
+        campaign_records.not_started(run.loaded, run.arm_path, folder, f"not started: {message}",
+                                     arm=run.arm, bus=run.connection.description, exit_code=2)
+        fail(f"--foxglove: {message}")
 
 
 def _print_outcome(console: Console, outcome, folder: Path) -> None:

@@ -194,7 +194,7 @@ class Streaming:
             # (Time spent waiting for an answer that did not come, a lost read retried, is
             # the bus's, not a stall.)
             stalled = t - last_t - run.cycle if last_t is not None and not waited else 0.0
-            if stalled > self.STALL_CYCLES * run.cycle:
+            if last_t is not None and stalled > self.STALL_CYCLES * run.cycle:
                 # This process was not run (a loaded PC): nothing was commanded meanwhile
                 # and the joints went on to their last targets, then stopped. Resume the
                 # plan where the arm is, so that it does not run ahead of the arm and

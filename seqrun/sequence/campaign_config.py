@@ -93,10 +93,18 @@ class ArmSection(_Strict):
                                                    "frame.")
 
 
+class RosSection(_Strict):
+    distribution: Literal["humble", "jazzy", "kilted"] = Field(
+        "jazzy", description="The ROS 2 distribution whose message definitions run.mcap is "
+                             "written with (docs/ros2.md).")
+    mcap: bool = Field(True, description="Write run.mcap (a ROS 2 bag) into every run folder.")
+
+
 class CampaignConfig(_Strict):
     campaign: CampaignSection = CampaignSection()
     bus: BusSection = BusSection()
     runs: RunsSection = RunsSection()
+    ros: RosSection = RosSection()
     arms: dict[str, ArmSection] = Field(
         {}, description="Several arms, by id ([arms.A], [arms.B]): each its arm file, bus and "
                         "base pose. None: the one arm of [campaign] arm and [bus].")

@@ -17,6 +17,9 @@
   junit.xml     one test case per step and one per checkpoint, measured values as
                 properties, for CI dashboards
   report.html   drawn after the run from the files above (seqrun/report/)
+  run.mcap      the run as a ROS 2 bag (MCAP): joint states and commands, /tf, plans,
+                events, markers (seqrun/service/mcap_log.py, docs/ros2.md); written by a
+                thread of its own from the events this log hands it
 
 Every line of the JSON files goes to disk as it is written (one write per line): a run
 killed with SIGKILL leaves a readable folder. The trace's compressed lines are made
@@ -145,7 +148,8 @@ class RunLog:
     """
 
     def __init__(self, folder: Path, meta: dict[str, Any], *, clock=None,
-                 channel: str | None = None, warn: Callable[[str], None] | None = None) -> None:
+                 channel: str | None = None, warn: Callable[[str], None] | None = None,
+                 mcap: Any = None) -> None:
         self.folder = Path(folder)
         self.folder.mkdir(parents=True, exist_ok=True)
         self.meta = dict(meta)
@@ -175,6 +179,8 @@ class RunLog:
         self._last_step: int | None = None
         self._report_written = -1e9
         self._joint_names: list[str] = []
+        #: run.mcap's writer (seqrun.service.mcap_log.McapLog): fed every event, never waited on.
+        self.mcap = mcap
         self._write_running()
 
     # Failures ----------------------------------------------------------------------
@@ -211,6 +217,8 @@ class RunLog:
             self._joint_names = [j.get("name", "") for j in
                                  (event.get("arm") or {}).get("joints", [])]
         self._events.write(json.dumps(event, separators=(",", ":"), default=str) + "\n")
+        if self.mcap is not None:
+            self.mcap.put(event)
         if kind not in _READINGS:   # what led up to a step boundary, fault or question
             self._trace_file.flush()
         if kind == "step_started":
@@ -242,6 +250,7 @@ class RunLog:
     # Final report -----------------------------------------------------------------
     def finish(self, result: RunResult) -> dict:
         """Write the final report.json and junit.xml; never raises (errors are recorded)."""
+        self._close_mcap()
         report = {
             "status": result.status,
             "exit_code": result.exit_code,
@@ -295,9 +304,22 @@ class RunLog:
             self._failed(self.folder / "report.json", error)
         return report
 
+    def _close_mcap(self) -> None:
+        """End run.mcap (its thread writes what is queued); its trouble goes to the report."""
+        if self.mcap is None:
+            return
+        mcap, self.mcap = self.mcap, None
+        mcap.close()
+        if mcap.dropped:
+            self.errors.append(f"run.mcap: {mcap.dropped} events were dropped (its writer "
+                               "fell behind); seqrun report RUN_DIR --mcap writes it whole")
+        if mcap.error:
+            self.errors.append(mcap.error)
+
     def close(self) -> None:
         if self._closed:
             return
+        self._close_mcap()
         self._closed = True
         self._events.close()
         self._steps_file.close()

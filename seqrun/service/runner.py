@@ -98,14 +98,18 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
     if log_dir is not None:
         from seqrun.service.runlog import RunLog  # python-can's log writer: only for a run folder
 
+        mcap = _mcap_log(log_dir, loaded, arm, warn)
+        ros = {"ros": {"namespace": mcap.names.namespace,
+                       "distribution": mcap.distribution}} if mcap is not None else {}
         log = RunLog(log_dir, {"sequence": loaded.name, "file": file or loaded.file,
                                "arm": arm.name, "bus": connection.description,
                                "simulator": connection.is_simulator,
                                "faults": [f.spec for f in connection.faults], "speed": speed,
                                "first_step": first_step, "seqrun": __version__,
-                               **(meta or {}), "inputs": _inputs(loaded, arm)},
+                               **(meta or {}), "inputs": _inputs(loaded, arm), **ros},
                      clock=connection.clock,
-                     channel=getattr(connection.bus, "channel", None) or "can0", warn=warn)
+                     channel=getattr(connection.bus, "channel", None) or "can0", warn=warn,
+                     mcap=mcap)
         driver.add_frame_listener(log.on_frame)
         executor.listeners.insert(0, log.on_event)
     if on_executor is not None:
@@ -131,6 +135,24 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
     if log is not None and log_dir is not None and html_report:
         report_error = write_html_report(log_dir)
     return RunOutcome(result, report, log_dir, executor, report_error)
+
+
+def _mcap_log(folder: Path, loaded: LoadedSequence, arm: ArmDescription,
+              warn: Callable[[str], None] | None) -> Any:
+    """run.mcap's writer (seqrun/service/mcap_log.py), unless the campaign's seqrun.toml
+    says ``[ros] mcap = false``; the ROS 2 distribution is the campaign's (default Jazzy)."""
+    config = getattr(getattr(loaded, "project", None), "config", None)
+    ros = getattr(config, "ros", None)
+    if ros is not None and not ros.mcap:
+        return None
+    from seqrun.service.mcap_log import DEFAULT_DISTRIBUTION, McapLog
+
+    def said(text: str) -> None:
+        if warn is not None:
+            warn(f"run log: {text}; the run goes on")
+
+    return McapLog(folder, arm, on_error=said,
+                   distribution=ros.distribution if ros is not None else DEFAULT_DISTRIBUTION)
 
 
 def write_html_report(folder: Path) -> str | None:

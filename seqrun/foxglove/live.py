@@ -1,0 +1,349 @@
+"""The session's data live on a Foxglove WebSocket server, and its services.
+
+Channels (the same data as run.mcap, :mod:`seqrun.ros_messages`; Foxglove's own schemas,
+protobuf): ``/<arm>/joint_states`` and ``/<arm>/joint_commands`` (foxglove.JointStates,
+radians), ``/tf`` (foxglove.FrameTransforms: every link of seqrun's FK),
+``/seqrun/scene`` (foxglove.SceneUpdate: link capsules, guards, obstacles),
+``/seqrun/log`` (foxglove.Log: one line per event) and ``/seqrun/events`` (JSON: the
+events.jsonl line of every event).
+
+Services (JSON requests and responses): ``/seqrun/stop`` is always accepted, like the
+console's STOP: the Halt broadcast goes out at once, then it is confirmed, and the answer
+says so. Everything else that commands the arm (``/seqrun/reset``, ``/seqrun/home``,
+``/seqrun/move_to_pose``) needs control, as in the console (:mod:`seqrun.service.control`):
+a client takes it with ``/seqrun/take_control`` (from nobody or from the holder, who is
+told) and gives it up with ``/seqrun/release_control``; a client that holds it and leaves
+(its subscriptions end) frees it.
+
+The session's events reach this face through a subscription of its own (a bounded queue and
+a thread): a slow Foxglove client, or none, never delays the control loop. Nothing is
+translated while no client subscribes.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, cast
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from seqrun.errors import SeqrunError
+from seqrun.events import Event, Measurement
+from seqrun.ros_messages.from_events import (EventLine, EventTranslator, Frames, Joints,
+                                             Record, Shapes)
+from seqrun.ros_messages.names import EVENTS_TOPIC, TF_TOPIC, RosNames
+from seqrun.ros_messages.values import Shape, static_shapes
+
+if TYPE_CHECKING:
+    from foxglove.websocket import ServerListener
+
+    from seqrun.arm.description import ArmDescription
+
+LOCALHOST = "127.0.0.1"
+SCENE_TOPIC = "/seqrun/scene"
+LOG_TOPIC = "/seqrun/log"
+#: Events waiting for this face; beyond this the oldest go (counted by the subscription).
+QUEUE_SIZE = 2000
+
+
+class _Body(BaseModel):
+    model_config = ConfigDict(extra="forbid", strict=True, frozen=True)
+
+
+class StopBody(_Body):
+    reason: str | None = Field(None, max_length=200, description="Said in the Halt's events.")
+
+
+class TakeControlBody(_Body):
+    name: str | None = Field(None, min_length=1, max_length=80,
+                             description="The name the other clients see.")
+
+
+class EmptyBody(_Body):
+    pass
+
+
+class PoseBody(_Body):
+    name: str = Field(min_length=1, max_length=200, description="A pose of the campaign.")
+    velocity_scale: float | None = Field(None, gt=0, le=1)
+
+
+#: name -> (request model, needs control, what it does)
+SERVICES: dict[str, tuple[type[_Body], bool, str]] = {
+    "/seqrun/stop": (StopBody, False, "STOP: Halt broadcast at once, then confirmed"),
+    "/seqrun/take_control": (TakeControlBody, False, "take control (commands need it)"),
+    "/seqrun/release_control": (EmptyBody, False, "give control up"),
+    "/seqrun/reset": (EmptyBody, True, "reset every module, confirmed"),
+    "/seqrun/home": (EmptyBody, True, "home every module, confirmed"),
+    "/seqrun/move_to_pose": (PoseBody, True, "move to a named pose (validated, planned)"),
+}
+
+
+def _schema(name: str, model: type[BaseModel] | None) -> Any:
+    import foxglove
+
+    data = json.dumps(model.model_json_schema() if model is not None else
+                      {"type": "object"}).encode()
+    return foxglove.MessageSchema(encoding="json", schema=foxglove.Schema(
+        name=name, encoding="jsonschema", data=data))
+
+
+class FoxgloveLive:
+    """A Foxglove WebSocket server on ``host:port`` (0: a free port) for ``session``."""
+
+    def __init__(self, session: Any, arm: ArmDescription, *, host: str = LOCALHOST,
+                 port: int = 8766, namespace: str | None = None, name: str = "seqrun") -> None:
+        import foxglove
+        from foxglove.channels import (FrameTransformsChannel, JointStatesChannel,
+                                       LogChannel, SceneUpdateChannel)
+        from foxglove.websocket import Capability
+
+        self.session = session
+        self.arm = arm
+        self.names = RosNames.of(arm, namespace)
+        self.translator = EventTranslator(arm, self.names, live=True)
+        self._lock = threading.Lock()          # the translator: one event at a time
+        self._subscribed: dict[int, set[int]] = {}
+        self._joined: set[int] = set()
+        self.context = ctx = foxglove.Context()
+        self.joint_states = JointStatesChannel(self.names.joint_states, context=ctx)
+        self.joint_commands = JointStatesChannel(self.names.joint_commands, context=ctx)
+        self.tf = FrameTransformsChannel(TF_TOPIC, context=ctx)
+        self.scene = SceneUpdateChannel(SCENE_TOPIC, context=ctx)
+        self.log = LogChannel(LOG_TOPIC, context=ctx)
+        self.events = foxglove.Channel(EVENTS_TOPIC, schema={"type": "object"}, context=ctx)
+        self._channels = (self.joint_states, self.joint_commands, self.tf, self.scene,
+                          self.log, self.events)
+        self._last_capsules: list[Shape] = []
+        services = [foxglove.Service(service, schema=foxglove.ServiceSchema(
+            f"seqrun{service.removeprefix('/seqrun')}", request=_schema(model.__name__, model),
+            response=_schema("Answer", None)), handler=self._handler(service))
+            for service, (model, _, _) in SERVICES.items()]
+        self.server = foxglove.start_server(
+            name=name, host=host, port=port, context=ctx, services=services,
+            capabilities=[Capability.Services], supported_encodings=["json"],
+            server_listener=cast("ServerListener", _Listener(self)))
+        self.port = self.server.port
+        self.subscription = session.events.add_listener(self._on_event, "foxglove",
+                                                        maxsize=QUEUE_SIZE)
+
+    @property
+    def url(self) -> str:
+        return f"ws://{LOCALHOST}:{self.port}"
+
+    # -- data ----------------------------------------------------------------------------
+    def _watched(self) -> bool:
+        return any(channel.has_sinks() for channel in self._channels)
+
+    def _on_event(self, event: Event) -> None:
+        if not self._watched():
+            return
+        data = event.as_dict()
+        if isinstance(event, Measurement) and event.velocities_deg_s is not None:
+            data["velocities_deg_s"] = list(event.velocities_deg_s)
+        with self._lock:
+            records = self.translator.translate(data)
+        for record in records:
+            self.publish(record)
+
+    def publish(self, record: Record) -> None:
+        from foxglove.messages import (FrameTransform, FrameTransforms, JointState,
+                                       JointStates, Log, LogLevel, Quaternion, SceneUpdate,
+                                       Timestamp, Vector3)
+        import math
+
+        if isinstance(record, Joints):
+            velocities = record.velocities_deg_s or (None,) * len(record.names)
+            message = JointStates(timestamp=_stamp(Timestamp, record.stamp_ns), joints=[
+                JointState(name=n, position=math.radians(p),
+                           velocity=None if v is None else math.radians(v))
+                for n, p, v in zip(record.names, record.positions_deg, velocities)])
+            channel = (self.joint_states if record.kind == "joint_states"
+                       else self.joint_commands)
+            channel.log(message, log_time=record.log_ns)
+        elif isinstance(record, Frames):
+            stamp = _stamp(Timestamp, record.stamp_ns)
+            self.tf.log(FrameTransforms(transforms=[
+                FrameTransform(timestamp=stamp, parent_frame_id=t.parent,
+                               child_frame_id=t.child, translation=Vector3(
+                                   x=t.translation_m[0], y=t.translation_m[1],
+                                   z=t.translation_m[2]),
+                               rotation=Quaternion(x=t.rotation_xyzw[0], y=t.rotation_xyzw[1],
+                                                   z=t.rotation_xyzw[2], w=t.rotation_xyzw[3]))
+                for t in record.transforms]), log_time=record.log_ns)
+        elif isinstance(record, Shapes):
+            if any(s.namespace == "capsules" for s in record.shapes):
+                self._last_capsules = [s for s in record.shapes if s.namespace == "capsules"]
+            self.scene.log(SceneUpdate(entities=self._entities(record.shapes, record.stamp_ns)),
+                           log_time=record.log_ns)
+        elif isinstance(record, EventLine):
+            level = {"error": LogLevel.Error, "warning": LogLevel.Warning}.get(
+                record.level, LogLevel.Info)
+            self.log.log(Log(timestamp=_stamp(Timestamp, record.stamp_ns), level=level,
+                             message=record.text, name="seqrun"), log_time=record.log_ns)
+            self.events.log(json.loads(record.line), log_time=record.log_ns)
+
+    def _entities(self, shapes: list[Shape] | tuple[Shape, ...], ns: int) -> list[Any]:
+        """One scene entity per capsule, guard and obstacle (its primitives together)."""
+        from foxglove.messages import (Color, CubePrimitive, CylinderPrimitive, Pose,
+                                       Quaternion, SceneEntity, SpherePrimitive, Timestamp,
+                                       Vector3)
+
+        groups: dict[tuple[str, str], list[Shape]] = {}
+        for shape in shapes:
+            groups.setdefault((shape.namespace, shape.label), []).append(shape)
+        entities = []
+        for (namespace, label), members in groups.items():
+            kinds: dict[str, list[Any]] = {"cube": [], "sphere": [], "cylinder": []}
+            for s in members:
+                pose = Pose(position=Vector3(x=s.position_m[0], y=s.position_m[1],
+                                             z=s.position_m[2]),
+                            orientation=Quaternion(x=s.rotation_xyzw[0], y=s.rotation_xyzw[1],
+                                                   z=s.rotation_xyzw[2], w=s.rotation_xyzw[3]))
+                size = Vector3(x=s.scale_m[0], y=s.scale_m[1], z=s.scale_m[2])
+                color = Color(r=s.rgba[0], g=s.rgba[1], b=s.rgba[2], a=s.rgba[3])
+                primitive = {"cube": CubePrimitive, "sphere": SpherePrimitive,
+                             "cylinder": CylinderPrimitive}[s.kind]
+                kinds[s.kind].append(primitive(pose=pose, size=size, color=color))
+            entities.append(SceneEntity(
+                timestamp=_stamp(Timestamp, ns), frame_id=self.names.base_frame,
+                id=f"{namespace}/{label}", cubes=kinds["cube"], spheres=kinds["sphere"],
+                cylinders=kinds["cylinder"]))
+        return entities
+
+    def _on_subscribe(self, client_id: int, topic: str) -> None:
+        with self._lock:
+            self._subscribed.setdefault(client_id, set()).add(hash(topic))
+        if topic == SCENE_TOPIC:   # a new viewer sees the scene at once, not at the next step
+            import time
+
+            from seqrun.ros_messages.values import stamp_ns
+
+            now = stamp_ns(time.time())
+            self.publish(Shapes(now, now, tuple(static_shapes(self.arm) +
+                                                self._last_capsules)))
+
+    def _on_unsubscribe(self, client_id: int, topic: str) -> None:
+        with self._lock:
+            topics = self._subscribed.get(client_id, set())
+            topics.discard(hash(topic))
+            gone = not topics
+            if gone:
+                self._subscribed.pop(client_id, None)
+        if gone and client_id in self._joined:   # it left: its control is freed
+            self._joined.discard(client_id)
+            self.session.control.leave(_client_id(client_id))
+
+    # -- services ------------------------------------------------------------------------
+    def _handler(self, service: str) -> Callable[[Any], bytes]:
+        model, needs_control, what = SERVICES[service]
+
+        def handle(request: Any) -> bytes:
+            if service == "/seqrun/stop":   # before the body is read: a bad body still stops
+                answer = self.session.halt_dict(f"STOP (Foxglove client {request.client_id})")
+                try:
+                    body = _parse(StopBody, request)
+                    if body.reason:
+                        answer["reason"] = body.reason
+                except ValueError as exc:
+                    answer["note"] = f"the arm was halted; the request was refused: {exc}"
+                return json.dumps(answer).encode()
+            body = _parse(model, request)
+            if needs_control:
+                self.session.control.require(_client_id(request.client_id), what)
+            return json.dumps(self._command(service, body, request.client_id)).encode()
+
+        return handle
+
+    def _command(self, service: str, body: Any, client: int) -> dict[str, Any]:
+        control = self.session.control
+        cid = _client_id(client)
+        if service == "/seqrun/take_control":
+            if control.client(cid) is None:
+                control.join(cid, body.name or f"Foxglove client {client}", "foxglove")
+                self._joined.add(client)
+            return control.take(cid).as_dict()
+        if service == "/seqrun/release_control":
+            return control.release(cid).as_dict()
+        if service == "/seqrun/reset":
+            return _activity_result(self.session.reset())
+        if service == "/seqrun/home":
+            return _activity_result(self.session.home())
+        if service == "/seqrun/move_to_pose":
+            self.session.move_to_pose(body.name, velocity_scale=body.velocity_scale,
+                                      by=control.name_of(cid))
+            return {"started": True, "pose": body.name}
+        raise ValueError(f"unknown service {service}")
+
+    # -- the end -------------------------------------------------------------------------
+    def close(self) -> None:
+        self.subscription.close(timeout=1.0)
+        for client in list(self._joined):
+            self.session.control.leave(_client_id(client))
+        self._joined.clear()
+        self.server.stop()
+
+
+def _stamp(timestamp: Any, ns: int) -> Any:
+    return timestamp(ns // 1_000_000_000, ns % 1_000_000_000)
+
+
+def _client_id(client: int) -> str:
+    return f"foxglove-{client}"
+
+
+def _parse(model: type[_Body], request: Any) -> Any:
+    """The request's JSON as ``model`` (strict); ValueError in one line otherwise."""
+    if request.encoding != "json":
+        raise ValueError(f"requests are JSON, not {request.encoding!r}")
+    payload = bytes(request.payload)
+    try:
+        data = json.loads(payload) if payload.strip() else {}
+    except (ValueError, RecursionError) as exc:
+        raise ValueError(f"not JSON: {exc}") from None
+    if not isinstance(data, dict):
+        raise ValueError("the request must be a JSON object")
+    try:
+        return model.model_validate(data)
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        where = ".".join(str(p) for p in first["loc"]) or "request"
+        raise ValueError(f"{where}: {first['msg']}") from None
+
+
+def _activity_result(result: Any) -> dict[str, Any]:
+    """A confirmed command's answer; one that did not succeed is a failure in one line."""
+    if not result.ok:
+        raise SeqrunError(f"{result.kind} {result.status}: {result.message}")
+    return {key: (str(value) if value is not None and not isinstance(
+        value, (bool, int, float, str)) else value)
+        for key, value in result.as_dict().items()}
+
+
+class _Listener:
+    """foxglove-sdk's server listener: who subscribes to what (a client whose last
+    subscription ends has left)."""
+
+    def __init__(self, live: FoxgloveLive) -> None:
+        self.live = live
+
+    def on_subscribe(self, client: Any, channel: Any) -> None:
+        self.live._on_subscribe(client.id, channel.topic)
+
+    def on_unsubscribe(self, client: Any, channel: Any) -> None:
+        self.live._on_unsubscribe(client.id, channel.topic)
+
+
+def serve(session: Any, arm: ArmDescription, port: int,
+          say: Callable[[str], None] | None = None) -> FoxgloveLive:
+    """Start serving ``session`` (``seqrun run``/``console --foxglove``); says the URL."""
+    live = FoxgloveLive(session, arm, port=port)
+    if say is not None:
+        say(f"Foxglove live on {live.url} (open it in Foxglove: Open connection -> "
+            "Foxglove WebSocket); STOP: /seqrun/stop")
+    return live
+
+
+__all__ = ["FoxgloveLive", "SERVICES", "serve"]
