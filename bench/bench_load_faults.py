@@ -189,7 +189,7 @@ def main() -> int:
     parser.add_argument("--runs", type=int, default=20)
     parser.add_argument("--silent-runs", type=int, default=5)
     parser.add_argument("--silent-module", type=int, default=4)
-    parser.add_argument("--silent-at", type=float, nargs="+", default=[10.0, 13.0, 16.0],
+    parser.add_argument("--silent-at", type=float, nargs="+", default=[5.0, 8.0, 11.0],
                         help="seconds after the run opened its bus (during the moves)")
     parser.add_argument("--sequence", type=Path, default=ROOT / "sequences" / "opsafe.yaml")
     parser.add_argument("--burners", type=int, default=os.cpu_count() or 2)
