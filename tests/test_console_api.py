@@ -262,7 +262,10 @@ def test_a_sequence_with_a_confirm_runs_to_the_end_and_is_listed(client, setup):
                 finished = message["event"]
         assert finished["status"] == "passed", finished
     assert joint(client, "j1") == pytest.approx(3, abs=0.3)
-    runs = client.get("/api/v1/runs").json()
+    # run_finished is published before the run folder is closed (report.json, run.mcap):
+    # the listing says "running" until then.
+    runs = wait_for(lambda: (r := client.get("/api/v1/runs").json())[0]["result"] != "running"
+                    and r, 20)
     assert runs[0]["sequence"] == "Confirm then nudge" and runs[0]["result"] == "passed"
     report = client.get(f"/api/v1/runs/{runs[0]['id']}/report.json")
     assert report.status_code == 200 and report.json()["status"] == "passed"

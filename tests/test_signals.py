@@ -65,7 +65,7 @@ def long_move_project(tmp_path: Path, *, watchdog: bool = False, acceleration: f
     (deg/s²) and ``jerk`` (deg/s³) and the watchdog on or off; returns the sequence path.
     Everything else (timeouts, the watchdog's refresh period) is the shipped arm file's."""
     j1 = ("- {name: j1, module: 1, limits_deg: [-180, 180], offset_deg: 0.0,\n"
-          "     max_velocity_deg_s: 30, max_acceleration_deg_s2: 60, max_jerk_deg_s3: 300}")
+          "     max_velocity_deg_s: 30, max_acceleration_deg_s2: 60, max_jerk_deg_s3: 300,")
     root = make_project(tmp_path / "project", campaign=False, arm_changes={
         j1: j1.replace("max_acceleration_deg_s2: 60, max_jerk_deg_s3: 300",
                        f"max_acceleration_deg_s2: {acceleration}, max_jerk_deg_s3: {jerk}"),

@@ -41,7 +41,12 @@ def test_ten_virtual_minutes_of_random_runs_and_faults():
     assert result.open_files[1] == result.open_files[0]
     assert result.threads[1] == result.threads[0]
     assert result.os_threads[1] == result.os_threads[0]
-    # The resident set after each run does not grow with the runs: the last is within a
-    # few MB of the second's.
+    # The resident set after each run does not grow with the runs: once the allocator has
+    # settled (~20 MB of arenas and caches over the first ten runs or so), the last third
+    # of the runs never rises above the middle third's peak by more than a few MB.
+    # (Comparing the last run with the second measured the settling: 19 MB with this
+    # round's code and the last round's alike.)
     rss = [kb for _, kb in result.rss_kb]
-    assert rss[-1] - rss[1] < 16 * 1024, (rss, log)
+    third = len(rss) // 3
+    middle, last = rss[third:2 * third], rss[2 * third:]
+    assert max(last) - max(middle) < 6 * 1024, (rss, log)
