@@ -310,3 +310,47 @@ def test_a_circle_is_found():
     graph = {"seqrun.a": ["seqrun.b"], "seqrun.b": ["seqrun.c"], "seqrun.c": ["seqrun.a"],
              "seqrun.d": ["seqrun.a"]}
     assert import_circles(graph) == [["a", "b", "c"]]
+
+
+# --------------------------------------------------------------------------- the floors
+#: Scripts beside the package that import it: rooms of the house too (on top of it).
+SCRIPT_FOLDERS = ("bench", "tools")
+
+
+def room_of(module: str) -> str:
+    """The room a module stands in: its folder of seqrun/ (``seqrun.service``), or the
+    module itself at the package's top (``seqrun.executor``); a script's folder."""
+    parts = module.split(".")
+    return parts[0] if parts[0] in SCRIPT_FOLDERS else ".".join(parts[:2])
+
+
+def room_graph() -> dict[str, list[str]]:
+    """Every room -> the rooms it imports, however (at the top, inside a function, for the
+    type checker only), the scripts of bench/ and tools/ with them."""
+    imports = {m: seqrun_imports(m, type_only=True) for m in MODULES}
+    for folder in SCRIPT_FOLDERS:
+        for path in sorted((ROOT / folder).glob("*.py")):
+            name = f"{folder}.{path.stem}"
+            found = imported_modules(path, name, type_only=True)
+            imports[name] = {m for m in found if m in MODULES}
+    graph: dict[str, set[str]] = {}
+    for module, targets in imports.items():
+        own = room_of(module)
+        graph.setdefault(own, set()).update(room_of(t) for t in targets)
+        graph[own].discard(own)
+    return {room: sorted(targets) for room, targets in graph.items()}
+
+
+def test_no_folders_import_each_other_in_a_circle():
+    """No arrow runs back up between rooms either: the service drew report.html with the
+    report's package, which read the run folder's files through the service's run log
+    (seqrun/runfolder/ is below both now)."""
+    assert import_circles(room_graph()) == []
+
+
+def test_a_circle_between_rooms_is_found():
+    assert room_of("seqrun.service.runlog") == "seqrun.service"
+    assert room_of("seqrun.executor") == "seqrun.executor"
+    assert room_of("bench.soak") == "bench"
+    graph = {"seqrun.service": ["seqrun.report"], "seqrun.report": ["seqrun.service"]}
+    assert import_circles(graph) == [["report", "service"]]
