@@ -43,7 +43,8 @@ from seqrun.arm.limits import LimitsInForce
 from seqrun.arm.planner import Limits
 from seqrun.arm.tracking import velocity_window
 from seqrun.clock import Clock
-from seqrun.drivers import ArmDriver, HaltConfirmation, JointState, LimitValues, as_driver
+from seqrun.arm.joint_values import JointState, LimitValues
+from seqrun.drivers import ArmDriver, HaltConfirmation, as_driver
 from seqrun.events import EventHub, make_event
 from seqrun.execution import ending
 from seqrun.execution.checks import ReadingChecks
@@ -59,7 +60,8 @@ from seqrun.stop_requests import OPERATOR_HALT, StopRequests
 
 if TYPE_CHECKING:
     from seqrun.arm.poses import PoseDirs
-    from seqrun.drivers.base import GripperDriver, GripperReading
+    from seqrun.arm.joint_values import GripperReading
+    from seqrun.drivers.base import GripperDriver
 
 #: A synchronous recorder: gets every typed event (it reads like the events.jsonl dict).
 Listener = Callable[[Any], None]

@@ -28,8 +28,9 @@ from seqrun.arm.planner import Limits, MovePlan
 from seqrun.arm.poses import pose_joints_deg
 from seqrun.clock import VirtualClock
 from seqrun.drivers import registry
-from seqrun.drivers.base import (ArmDriver, ArmIdentity, ArmPoll, CommandConfirmation, JointLimits,
-                                 JointReading, JointState, LimitValues, MotionRefused)
+from seqrun.arm.joint_values import JointLimits, JointState, LimitValues
+from seqrun.drivers.base import (ArmDriver, ArmIdentity, ArmPoll, CommandConfirmation,
+                                 JointReading, MotionRefused)
 from seqrun.errors import UserInputError
 from seqrun.executor import Executor
 from seqrun.results import EXIT_FAULT, EXIT_OK
