@@ -169,7 +169,7 @@ def powercube_paths(module: str) -> list[str]:
     """Import chains from ``module`` to seqrun.powercube that pass only through modules of
     the base and the arm-and-format layers (the drivers and the service may speak it)."""
     names = [name for name, _ in LAYERS]
-    through = {names.index("base"), names.index("arm"), names.index("sequence format")}
+    through = {names.index(name) for name in ("base", "arm", "step kinds", "sequence format")}
     found, seen = [], set()
     stack = [(module, (short(module),))]
     while stack:
