@@ -354,3 +354,47 @@ def test_a_circle_between_rooms_is_found():
     assert room_of("bench.soak") == "bench"
     graph = {"seqrun.service": ["seqrun.report"], "seqrun.report": ["seqrun.service"]}
     assert import_circles(graph) == [["report", "service"]]
+
+
+def floor_bound(text: str) -> int:
+    """The most floors the "Layers" section of docs/architecture.md allows the rooms."""
+    section = text.split("## Layers", 1)[1].split("\n## ", 1)[0]
+    (bound,) = re.findall(r"at most (\d+) floors", section)
+    return int(bound)
+
+
+def longest_chain(graph: dict[str, list[str]]) -> list[str]:
+    """The longest import chain of an import graph, top room first: its length is the
+    number of floors the rooms stand on (floor 1 imports no other room). An import that
+    closes a circle is not followed (the circle is a failure of its own, above)."""
+    chains: dict[str, list[str]] = {}
+    climbing: set[str] = set()
+
+    def chain(room: str) -> list[str]:
+        if room not in chains:
+            climbing.add(room)
+            below = [chain(t) for t in graph.get(room, ()) if t not in climbing]
+            climbing.discard(room)
+            chains[room] = [room] + max(below, key=len, default=[])
+        return chains[room]
+
+    return max((chain(room) for room in sorted(graph)), key=len, default=[])
+
+
+def test_the_rooms_stand_on_at_most_the_floors_the_doc_allows():
+    """Issue 25: the import picture on at most ~10 floors (there were 14: a program file
+    that only imported the entry module, the loop importing the validation, the step
+    kinds a floor above the drivers for three value types, ...). A room is a folder of
+    seqrun/ or a module at its top, bench/ or tools/; its floor is one above the highest
+    room it imports."""
+    bound = floor_bound(DOC.read_text(encoding="utf-8"))
+    chain = longest_chain(room_graph())
+    assert len(LAYERS) <= bound
+    assert len(chain) <= bound, f"{len(chain)} floors: " + " -> ".join(map(short, chain))
+
+
+def test_the_floors_are_counted():
+    graph = {"seqrun.cli": ["seqrun.service", "seqrun.errors"],
+             "seqrun.service": ["seqrun.errors"], "seqrun.errors": [], "bench": ["seqrun.cli"]}
+    assert longest_chain(graph) == ["bench", "seqrun.cli", "seqrun.service", "seqrun.errors"]
+    assert floor_bound("## Layers\nat most 9 floors (the rooms)\n## Next\nat most 3 floors") == 9
