@@ -156,7 +156,7 @@ class ConsoleProcess:
             command = [sys.executable, "-c",
                        f"import sys; sys.setswitchinterval({switch_interval}); "
                        f"sys.argv = ['seqrun'] + {args!r}; "
-                       "from seqrun.entry import main; main()"]
+                       "from seqrun.__main__ import main; main()"]
         if nice is not None:  # an experiment: the whole process (every thread) at nice N
             command = ["nice", "-n", str(nice), *command]
         if prefix:  # an experiment: e.g. "chrt -r 1" (every thread of the process)

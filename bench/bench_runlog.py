@@ -27,7 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import can  # noqa: E402
 
-from seqrun.service import logfile  # noqa: E402
+from seqrun.runfolder import logfile  # noqa: E402
 from seqrun.clock import VirtualClock  # noqa: E402
 from seqrun.results import RunResult, StepResult
 from seqrun.service.runlog import RunLog  # noqa: E402

@@ -32,6 +32,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from seqrun.arm.description import load_arm
 from seqrun.clock import VirtualClock
 from seqrun.executor import Executor
+from seqrun.sequence.checks import check_from_arm
 from seqrun.powercube.client import PowerCubeClient
 from seqrun.sequence.loader import load_sequence
 from seqrun.powercube import can_timing
@@ -51,7 +52,8 @@ def one(loaded, arm, i: int, cold: bool = False, cycle_hz: float | None = None):
     clock = VirtualClock()
     bus = SimBus(channel=f"perf{i}", clock=clock)
     client = PowerCubeClient(bus, clock)
-    ex = Executor(client, arm, clock, poses_dir=loaded.poses_dir, dry_run=True,
+    ex = Executor(client, arm, clock, sequence_check=check_from_arm,
+                  poses_dir=loaded.poses_dir, dry_run=True,
                   cycle_hz=cycle_hz or arm.control.cycle_hz)
     w, c = time.perf_counter(), time.thread_time()
     res = ex.run(loaded)

@@ -43,12 +43,13 @@ from seqrun.arm.limits import LimitsInForce
 from seqrun.arm.planner import Limits
 from seqrun.arm.tracking import velocity_window
 from seqrun.clock import Clock
-from seqrun.drivers import ArmDriver, HaltConfirmation, JointState, LimitValues, as_driver
+from seqrun.arm.joint_values import JointState, LimitValues
+from seqrun.drivers import ArmDriver, HaltConfirmation, as_driver
 from seqrun.events import EventHub, make_event
 from seqrun.execution import ending
 from seqrun.execution.checks import ReadingChecks
 from seqrun.execution.latched import LatchedFaults
-from seqrun.execution.preflight import preflight
+from seqrun.execution.preflight import Findings, SequenceCheck, preflight
 from seqrun.execution.run import Measurement, rounded
 from seqrun.execution.stops import StopControl
 from seqrun.execution.streaming import Streaming
@@ -59,7 +60,8 @@ from seqrun.stop_requests import OPERATOR_HALT, StopRequests
 
 if TYPE_CHECKING:
     from seqrun.arm.poses import PoseDirs
-    from seqrun.drivers.base import GripperDriver, GripperReading
+    from seqrun.arm.joint_values import GripperReading
+    from seqrun.drivers.base import GripperDriver
 
 #: A synchronous recorder: gets every typed event (it reads like the events.jsonl dict).
 Listener = Callable[[Any], None]
@@ -78,6 +80,7 @@ class Executor:
     sync: Any = None
 
     def __init__(self, driver: ArmDriver | Any, arm: ArmDescription, clock: Clock, *,
+                 sequence_check: SequenceCheck,
                  poses_dir: PoseDirs | None = None, speed: float = 1.0,
                  command_mode: str | None = None, cycle_hz: float | None = None,
                  confirm: Callable[[str], bool] | None = None,
@@ -89,6 +92,9 @@ class Executor:
         if not 0 < speed <= 1:
             raise ValueError("speed must lie in (0, 1]")
         self.driver: ArmDriver = as_driver(driver, arm)
+        #: The preflight's check of the sequence from the measured arm (the service gives
+        #: seqrun.sequence.checks.check_from_arm): nothing moves when it finds an error.
+        self.sequence_check = sequence_check
         self.arm = arm
         self.clock = clock
         self.poses_dir = poses_dir
@@ -419,10 +425,10 @@ class Executor:
         return ending.emergency_halt(self)
 
     # ------------------------------------------------------------------ preflight
-    def preflight(self, loaded, first_step: int = 1):
-        """Read the arm and validate the sequence (from ``first_step``) from the measured
-        state (seqrun/execution/preflight.py). Returns the ValidationResult."""
-        return preflight(self, loaded, first_step)
+    def preflight(self, loaded, first_step: int = 1) -> Findings:
+        """Read the arm and check the sequence (from ``first_step``) from the measured
+        state (seqrun/execution/preflight.py). Returns what :attr:`sequence_check` found."""
+        return preflight(self, self.sequence_check, loaded, first_step)
 
     @property
     def latched_at_start(self) -> list[dict[str, Any]]:

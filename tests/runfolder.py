@@ -10,7 +10,8 @@ from pathlib import Path
 
 import can
 
-from seqrun.service.runlog import read_trace, trace_path, trace_text
+from seqrun.runfolder.names import trace_path
+from seqrun.service.runlog import read_trace, trace_text
 
 
 @dataclass(frozen=True)

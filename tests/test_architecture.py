@@ -169,7 +169,7 @@ def powercube_paths(module: str) -> list[str]:
     """Import chains from ``module`` to seqrun.powercube that pass only through modules of
     the base and the arm-and-format layers (the drivers and the service may speak it)."""
     names = [name for name, _ in LAYERS]
-    through = {names.index("base"), names.index("arm"), names.index("sequence format")}
+    through = {names.index(name) for name in ("base", "arm", "step kinds", "sequence format")}
     found, seen = [], set()
     stack = [(module, (short(module),))]
     while stack:
@@ -310,3 +310,91 @@ def test_a_circle_is_found():
     graph = {"seqrun.a": ["seqrun.b"], "seqrun.b": ["seqrun.c"], "seqrun.c": ["seqrun.a"],
              "seqrun.d": ["seqrun.a"]}
     assert import_circles(graph) == [["a", "b", "c"]]
+
+
+# --------------------------------------------------------------------------- the floors
+#: Scripts beside the package that import it: rooms of the house too (on top of it).
+SCRIPT_FOLDERS = ("bench", "tools")
+
+
+def room_of(module: str) -> str:
+    """The room a module stands in: its folder of seqrun/ (``seqrun.service``), or the
+    module itself at the package's top (``seqrun.executor``); a script's folder."""
+    parts = module.split(".")
+    return parts[0] if parts[0] in SCRIPT_FOLDERS else ".".join(parts[:2])
+
+
+def room_graph() -> dict[str, list[str]]:
+    """Every room -> the rooms it imports, however (at the top, inside a function, for the
+    type checker only), the scripts of bench/ and tools/ with them."""
+    imports = {m: seqrun_imports(m, type_only=True) for m in MODULES}
+    for folder in SCRIPT_FOLDERS:
+        for path in sorted((ROOT / folder).glob("*.py")):
+            name = f"{folder}.{path.stem}"
+            found = imported_modules(path, name, type_only=True)
+            imports[name] = {m for m in found if m in MODULES}
+    graph: dict[str, set[str]] = {}
+    for module, targets in imports.items():
+        own = room_of(module)
+        graph.setdefault(own, set()).update(room_of(t) for t in targets)
+        graph[own].discard(own)
+    return {room: sorted(targets) for room, targets in graph.items()}
+
+
+def test_no_folders_import_each_other_in_a_circle():
+    """No arrow runs back up between rooms either: the service drew report.html with the
+    report's package, which read the run folder's files through the service's run log
+    (seqrun/runfolder/ is below both now)."""
+    assert import_circles(room_graph()) == []
+
+
+def test_a_circle_between_rooms_is_found():
+    assert room_of("seqrun.service.runlog") == "seqrun.service"
+    assert room_of("seqrun.executor") == "seqrun.executor"
+    assert room_of("bench.soak") == "bench"
+    graph = {"seqrun.service": ["seqrun.report"], "seqrun.report": ["seqrun.service"]}
+    assert import_circles(graph) == [["report", "service"]]
+
+
+def floor_bound(text: str) -> int:
+    """The most floors the "Layers" section of docs/architecture.md allows the rooms."""
+    section = text.split("## Layers", 1)[1].split("\n## ", 1)[0]
+    (bound,) = re.findall(r"at most (\d+) floors", section)
+    return int(bound)
+
+
+def longest_chain(graph: dict[str, list[str]]) -> list[str]:
+    """The longest import chain of an import graph, top room first: its length is the
+    number of floors the rooms stand on (floor 1 imports no other room). An import that
+    closes a circle is not followed (the circle is a failure of its own, above)."""
+    chains: dict[str, list[str]] = {}
+    climbing: set[str] = set()
+
+    def chain(room: str) -> list[str]:
+        if room not in chains:
+            climbing.add(room)
+            below = [chain(t) for t in graph.get(room, ()) if t not in climbing]
+            climbing.discard(room)
+            chains[room] = [room] + max(below, key=len, default=[])
+        return chains[room]
+
+    return max((chain(room) for room in sorted(graph)), key=len, default=[])
+
+
+def test_the_rooms_stand_on_at_most_the_floors_the_doc_allows():
+    """Issue 25: the import picture on at most ~10 floors (there were 14: a program file
+    that only imported the entry module, the loop importing the validation, the step
+    kinds a floor above the drivers for three value types, ...). A room is a folder of
+    seqrun/ or a module at its top, bench/ or tools/; its floor is one above the highest
+    room it imports."""
+    bound = floor_bound(DOC.read_text(encoding="utf-8"))
+    chain = longest_chain(room_graph())
+    assert len(LAYERS) <= bound
+    assert len(chain) <= bound, f"{len(chain)} floors: " + " -> ".join(map(short, chain))
+
+
+def test_the_floors_are_counted():
+    graph = {"seqrun.cli": ["seqrun.service", "seqrun.errors"],
+             "seqrun.service": ["seqrun.errors"], "seqrun.errors": [], "bench": ["seqrun.cli"]}
+    assert longest_chain(graph) == ["bench", "seqrun.cli", "seqrun.service", "seqrun.errors"]
+    assert floor_bound("## Layers\nat most 9 floors (the rooms)\n## Next\nat most 3 floors") == 9

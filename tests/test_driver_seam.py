@@ -28,10 +28,12 @@ from seqrun.arm.planner import Limits, MovePlan
 from seqrun.arm.poses import pose_joints_deg
 from seqrun.clock import VirtualClock
 from seqrun.drivers import registry
-from seqrun.drivers.base import (ArmDriver, ArmIdentity, ArmPoll, CommandConfirmation, JointLimits,
-                                 JointReading, JointState, LimitValues, MotionRefused)
+from seqrun.arm.joint_values import JointLimits, JointState, LimitValues
+from seqrun.drivers.base import (ArmDriver, ArmIdentity, ArmPoll, CommandConfirmation,
+                                 JointReading, MotionRefused)
 from seqrun.errors import UserInputError
 from seqrun.executor import Executor
+from seqrun.sequence.checks import check_from_arm
 from seqrun.results import EXIT_FAULT, EXIT_OK
 from seqrun.sequence.loader import load_sequence
 from seqrun.service.runner import run_sequence
@@ -357,7 +359,8 @@ def test_measurements_carry_the_flags_and_faults_the_driver_decoded():
     cycle code 1 read "NOT_OK" and its full state "HOT HALTED HOMED" no fault at all)."""
     driver = IdealArm(park(), overheat=(3, 1.0))
     loaded = load_sequence(ROOT / "sequences" / "opsafe.yaml")
-    executor = Executor(driver, IDEAL, VirtualClock(), poses_dir=loaded.poses_dir,
+    executor = Executor(driver, IDEAL, VirtualClock(), sequence_check=check_from_arm,
+                        poses_dir=loaded.poses_dir,
                         confirm=lambda prompt: True)
     subscription = executor.events.subscribe(maxsize=100_000, name="test")
     result = executor.run(loaded)

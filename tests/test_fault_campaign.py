@@ -641,7 +641,7 @@ def test_disk_full_with_a_fault(budget, phase, clean, tmp_path, monkeypatch):
     """A tow error of j4 while the disk is full (from the start, or filled up during the
     run before the fault): the Halt is sent all the same (the executor's own Halt, recorded as
     it returns), exit 3, one line about the log, whole lines on disk, no *.tmp."""
-    from seqrun.service import logfile
+    from seqrun.runfolder import logfile
     from seqrun.executor import Executor
 
     monkeypatch.setattr(logfile, "_write", _FullDisk(budget))

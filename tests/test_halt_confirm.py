@@ -17,6 +17,7 @@ from projecttree import ROOT, shipped_arm
 from seqrun.clock import VirtualClock
 from seqrun.service.connection import Connection
 from seqrun.executor import Executor
+from seqrun.sequence.checks import check_from_arm
 from seqrun.results import EXIT_FAULT
 from seqrun.drivers.powercube import halt_and_confirm
 from seqrun.powercube.client import PowerCubeClient
@@ -59,7 +60,7 @@ def test_halt_goes_out_before_a_flooded_receive_queue_is_read():
         client.home()
         flood(bus, clock, 1156)
         bus.calls.clear()
-        executor = Executor(client, ARM, clock)
+        executor = Executor(client, ARM, clock, sequence_check=check_from_arm)
         assert executor.emergency_halt() is True
         first = bus.calls[0]
         assert first[0] == "send" and is_halt(first[1]), bus.calls[:3]

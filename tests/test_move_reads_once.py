@@ -10,6 +10,7 @@ from projecttree import ROOT
 from seqrun.arm.description import load_arm
 from seqrun.clock import VirtualClock
 from seqrun.executor import Executor
+from seqrun.sequence.checks import check_from_arm
 from seqrun.powercube.client import PowerCubeClient
 from seqrun.sequence.loader import load_sequence
 from seqrun.sim.bus import SimBus
@@ -35,7 +36,8 @@ def frames_per_step(sequence: str) -> dict[int, list[tuple[int, bytes]]]:
             if event.type == "step_started":
                 step["n"] = event.step
 
-        executor = Executor(client, arm, clock, poses_dir=loaded.poses_dir, dry_run=True,
+        executor = Executor(client, arm, clock, sequence_check=check_from_arm,
+                            poses_dir=loaded.poses_dir, dry_run=True,
                             cycle_hz=10, confirm=lambda prompt: True, listeners=[on_event])
         assert executor.run(loaded).exit_code == 0
     finally:

@@ -22,7 +22,7 @@ PROGRAM = """\
 import atexit, os, sys
 atexit.register(lambda: print("variable:", os.environ.get("PYDANTIC_DISABLE_PLUGINS"),
                               file=sys.stderr))
-from seqrun.entry import main
+from seqrun.__main__ import main
 main()
 """
 

@@ -19,7 +19,7 @@ from typer.testing import CliRunner
 import seqrun.cli  # noqa: F401  (registers the commands on the app)
 from projecttree import ROOT
 from runfolder import RunFolder
-from seqrun.service import logfile
+from seqrun.runfolder import logfile
 from seqrun.arm.description import load_arm
 from seqrun.cli.app import app
 from seqrun.clock import VirtualClock

@@ -25,7 +25,7 @@ from rich.console import Console
 
 from projecttree import ROOT
 from runfolder import RunFolder
-from seqrun.service import logfile
+from seqrun.runfolder import logfile
 from seqrun.arm.description import load_arm
 from seqrun.cli.display import LiveDisplay, PlainDisplay
 from seqrun.cli.interrupts import RunSignals

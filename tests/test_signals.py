@@ -506,7 +506,7 @@ class Slow:
         return None
 sys.meta_path.insert(0, Slow())
 sys.argv = ["seqrun", "--help"]
-from seqrun.entry import main
+from seqrun.__main__ import main
 main()
 """
 
@@ -540,7 +540,7 @@ def slow(*args, **kwargs):
     time.sleep(5)
     return real(*args, **kwargs)
 checking.check_for_run = slow
-from seqrun.entry import main
+from seqrun.__main__ import main
 main(sys.argv[1:])
 """
 

@@ -28,6 +28,7 @@ from projecttree import ROOT
 from seqrun.arm.description import load_arm
 from seqrun.clock import VirtualClock
 from seqrun.executor import Executor
+from seqrun.sequence.checks import check_from_arm
 from seqrun.powercube.client import PowerCubeClient
 from seqrun.powercube.codec import GetParam
 from seqrun.powercube.protocol import ParamId
@@ -102,7 +103,8 @@ def test_opsafe_golden_trace():
     try:
         client = PowerCubeClient(bus, clock)
         recorder = _Recorder(bus, client)
-        executor = Executor(client, arm, clock, poses_dir=loaded.poses_dir, dry_run=True,
+        executor = Executor(client, arm, clock, sequence_check=check_from_arm,
+                            poses_dir=loaded.poses_dir, dry_run=True,
                             cycle_hz=10)
         result = executor.run(loaded)
         assert result.exit_code == 0, result.message

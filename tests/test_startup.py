@@ -158,7 +158,7 @@ def test_each_command_word_loads_the_module_that_defines_it():
 MODULES_AT_EXIT = """\
 import atexit, sys
 atexit.register(lambda: print(sorted(sys.modules), file=sys.stderr))
-from seqrun.entry import main
+from seqrun.__main__ import main
 main()
 """
 
@@ -175,7 +175,7 @@ def test_a_command_runs_with_only_its_own_module_loaded():
 THREADS_AT_EXIT = """\
 import atexit, os
 atexit.register(lambda: print(len(os.listdir("/proc/self/task")), file=os.sys.stderr))
-from seqrun.entry import main
+from seqrun.__main__ import main
 main()
 """
 

@@ -172,6 +172,7 @@ def test_the_executor_provides_the_step_context():
     from seqrun.clock import VirtualClock
     from seqrun.service.connection import open_connection
     from seqrun.executor import Executor
+    from seqrun.sequence.checks import check_from_arm
     from seqrun.powercube.client import PowerCubeClient
     from seqrun.arm.description import load_arm
 
@@ -180,7 +181,7 @@ def test_the_executor_provides_the_step_context():
     connection = open_connection(force_sim=True, clock=clock)
     try:
         client = PowerCubeClient(connection.bus, clock)
-        executor = Executor(client, arm, clock, dry_run=True)
+        executor = Executor(client, arm, clock, dry_run=True, sequence_check=check_from_arm)
         missing = sorted(m for m in CONTEXT_MEMBERS if not hasattr(executor, m))
         assert missing == []
     finally:

@@ -15,6 +15,7 @@ from seqrun.arm.description import load_arm
 from seqrun.clock import VirtualClock
 from seqrun.service.connection import open_connection
 from seqrun.executor import Executor
+from seqrun.sequence.checks import check_from_arm
 from seqrun.results import EXIT_OK
 from seqrun.powercube.client import PowerCubeClient
 from seqrun.sequence.loader import load_sequence
@@ -53,7 +54,8 @@ def run_with_clock(name: str, make_clock) -> tuple:
     events: list[dict] = []
     try:
         client = PowerCubeClient(connection.bus, inner, response_timeout=arm.can.response_timeout_s)
-        executor = Executor(client, arm, make_clock(inner), poses_dir=loaded.poses_dir,
+        executor = Executor(client, arm, make_clock(inner), sequence_check=check_from_arm,
+                            poses_dir=loaded.poses_dir,
                             confirm=lambda prompt: True, listeners=[events.append])
         result = executor.run(loaded)
         client.close()

@@ -84,10 +84,14 @@ def main(argv: list[str] | None = None) -> None:
 
 
 def _starting_command_line() -> Sequence[str] | None:
-    """The command line the ``seqrun`` program (:mod:`seqrun.entry`) is starting with; None
-    when anything else imports this package (tests, tools: they get every command)."""
-    entry = sys.modules.get("seqrun.entry")
-    return getattr(entry, "command_line", None)
+    """The command line the ``seqrun`` program (:mod:`seqrun.__main__`) is starting with;
+    None when anything else imports this package (tests, tools: they get every command).
+    ``python -m seqrun`` runs the program as ``__main__``, the ``seqrun`` script imports it."""
+    for program in (sys.modules.get("seqrun.__main__"), sys.modules.get("__main__")):
+        spec = getattr(program, "__spec__", None)
+        if spec is not None and spec.name == "seqrun.__main__":
+            return getattr(program, "command_line", None)
+    return None
 
 
 _load_commands(_starting_command_line())

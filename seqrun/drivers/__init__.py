@@ -13,12 +13,11 @@ from typing import Any
 from seqrun.arm.description import ArmDescription
 from seqrun.drivers.base import (ArmDriver, ArmPoll, CommandConfirmation, CycleState,
                                  DriverFamily, EventSink, ForeignTraffic, HaltConfirmation,
-                                 JointLimits, JointReading, JointState, LimitValues,
-                                 MotionRefused)
+                                 JointReading, MotionRefused)
 
 __all__ = ["ArmDriver", "ArmPoll", "CommandConfirmation", "CycleState", "DriverFamily",
-           "EventSink", "ForeignTraffic", "HaltConfirmation", "JointLimits", "JointReading",
-           "JointState", "LimitValues", "MotionRefused", "as_driver"]
+           "EventSink", "ForeignTraffic", "HaltConfirmation", "JointReading", "MotionRefused",
+           "as_driver"]
 
 
 def as_driver(driver_or_client: Any, arm: ArmDescription) -> ArmDriver:

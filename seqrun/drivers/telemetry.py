@@ -18,7 +18,8 @@ from typing import TYPE_CHECKING
 from seqrun.arm.tracking import MIN_SPAN_FRACTION, VELOCITY_WINDOW_S
 
 if TYPE_CHECKING:
-    from seqrun.drivers.base import CycleState, JointState
+    from seqrun.arm.joint_values import JointState
+    from seqrun.drivers.base import CycleState
 
 
 class VelocityWindow:

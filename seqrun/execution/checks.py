@@ -21,7 +21,8 @@ if TYPE_CHECKING:
     from seqrun.arm.geometry import Geometry
     from seqrun.arm.description import ArmDescription
     from seqrun.arm.planner import MovePlan
-    from seqrun.drivers.base import CycleState, JointState
+    from seqrun.arm.joint_values import JointState
+    from seqrun.drivers.base import CycleState
 
 #: Below this share of its planned travel a lagging joint counts as hardly moving.
 SLOW_SHARE = 0.5

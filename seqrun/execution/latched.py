@@ -15,7 +15,7 @@ from seqrun.results import OperatorAbort, latched_message
 
 if TYPE_CHECKING:
     from seqrun.arm.description import ArmDescription
-    from seqrun.drivers.base import JointState
+    from seqrun.arm.joint_values import JointState
 
 
 class LatchedFaults:

@@ -9,25 +9,51 @@ fault the modules had latched before the run is told (:mod:`.latched`).
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any, Protocol
 
 from seqrun.drivers.telemetry import joint_flags
 from seqrun.events import make_event
 from seqrun.execution.run import rounded
 
 if TYPE_CHECKING:
+    import numpy as np
+
+    from seqrun.arm.description import ArmDescription
+    from seqrun.errors import SourceError
     from seqrun.execution.run import Run
+
+
+class Findings(Protocol):
+    """What a check of the sequence found (the sequence layer's ValidationResult)."""
+
+    @property
+    def errors(self) -> list[SourceError]: ...
+
+    @property
+    def notes(self) -> list[SourceError]: ...
+
+    @property
+    def targets_deg(self) -> Mapping[int, np.ndarray]: ...
+
+
+class SequenceCheck(Protocol):
+    """How the preflight checks the sequence again from where the arm stands
+    (:func:`seqrun.sequence.checks.check_from_arm`): given to the executor by whoever
+    makes it, so the loop needs nothing of the sequence layer but the steps it runs."""
+
+    def __call__(self, loaded: Any, arm: ArmDescription, start_deg: dict[str, float], *,
+                 first_step: int, started: bool, speed: float,
+                 module_limits: Mapping[str, tuple[float, float]]) -> Findings: ...
 
 #: MinPos/MaxPos the drives hold count as the arm file's within this (the float32 a drive
 #: stores, 1e-5 rad).
 LIMITS_MATCH_DEG = math.degrees(1e-5)
 
 
-def preflight(run: Run, loaded, first_step: int = 1):
-    """Read the arm and validate ``loaded`` (from ``first_step``) from the measured state.
-    Returns the ValidationResult; only reads reach the bus."""
-    from seqrun.sequence.validation import validate_sequence
-
+def preflight(run: Run, check: SequenceCheck, loaded, first_step: int = 1) -> Findings:
+    """Read the arm and ``check`` ``loaded`` (from ``first_step``) from the measured state.
+    Returns what the check found; only reads reach the bus."""
     arm = run.arm
     m = run.read_arm()
     states = run.read_state_words()
@@ -43,20 +69,9 @@ def preflight(run: Run, loaded, first_step: int = 1):
     run.latched.record(states)
     started = ready and written
     start_deg = {j.name: float(v) for j, v in zip(arm.joints, m.user_deg)}
-    steps_before, steps_from = loaded.split_at(first_step)  # as `seqrun run --from`
-    result = validate_sequence(steps_from, arm, start_deg, started=started, speed=run.speed,
-                               module_limits=module_limits)
-    if first_step > 1:
-        before = validate_sequence(steps_before, arm)
-        tol = max(1.0, 5 * arm.control.position_tolerance_deg)
-        for j in arm.joints:
-            expected = before.final_deg.get(j.name)
-            if expected is not None and abs(expected - start_deg[j.name]) > tol:
-                result.errors.append(loaded.steps[first_step - 1].location.error(
-                    f"--from {first_step}: the arm is not where this step expects it: "
-                    f"{j.name} at {start_deg[j.name]:.2f}°, expected {expected:.2f}° "
-                    f"(after steps 1-{first_step - 1})"))
-    run.validated_targets = dict(getattr(result, "targets_deg", {}))
+    result = check(loaded, arm, start_deg, first_step=first_step, started=started,
+                   speed=run.speed, module_limits=module_limits)
+    run.validated_targets = dict(result.targets_deg)
     run.emit("preflight", start_deg=rounded(m.user_deg), homed=ready, limits_written=written,
              module_limits={n: rounded(v) for n, v in module_limits.items()},
              states={str(k): v.describe() for k, v in states.items()},

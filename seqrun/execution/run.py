@@ -20,7 +20,8 @@ if TYPE_CHECKING:
     from seqrun.arm.limits import LimitsInForce
     from seqrun.arm.planner import Limits
     from seqrun.clock import Clock
-    from seqrun.drivers.base import ArmDriver, CycleState, HaltConfirmation, JointState
+    from seqrun.arm.joint_values import JointState
+    from seqrun.drivers.base import ArmDriver, CycleState, HaltConfirmation
     from seqrun.events import EventHub
     from seqrun.execution.checks import ReadingChecks
     from seqrun.execution.latched import LatchedFaults

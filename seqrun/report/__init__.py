@@ -14,7 +14,7 @@ from pathlib import Path
 
 from seqrun.arm.description import ArmDescription
 from seqrun.report.data import RunData, load_run
-from seqrun.service.logfile import write_streamed
+from seqrun.runfolder.logfile import write_streamed
 
 HTML_NAME = "report.html"
 

@@ -154,8 +154,8 @@ def _read_json(path: Path) -> dict:
 def _trace_summary(folder: Path) -> dict[str, Any] | None:
     """Frames sent and received (candump lines end in T or R); no full parse. A trace
     cut short (a killed run) counts what it holds."""
-    from seqrun.service.logfile import read_lines
-    from seqrun.service.runlog import trace_path
+    from seqrun.runfolder.logfile import read_lines
+    from seqrun.runfolder.names import trace_path
 
     path = trace_path(folder)
     if path is None:

@@ -4,7 +4,8 @@
 ``seqrun validate``): a file with its includes, its arm and the start pose, every problem
 in one pass. :func:`static_validation` is what ``seqrun run`` checks before it opens the
 bus, from the assumed start and, with ``--from N``, from where step N starts. The faces
-(the CLI today) print what these return; the executor checks again from the measured arm.
+(the CLI today) print what these return. The executor checks again from the measured arm
+with :func:`check_from_arm`, which the service hands every executor it makes.
 Imports stay inside the functions: importing this module is cheap.
 """
 
@@ -111,3 +112,28 @@ def static_validation(loaded: LoadedSequence, arm: ArmDescription, start: str | 
     before, rest = loaded.split_at(from_step)
     tracked = validate_sequence(before, arm, start_deg, started=started)
     return validate_sequence(rest, arm, tracked.final_deg, started=True)
+
+
+def check_from_arm(loaded: LoadedSequence, arm: ArmDescription, start_deg: dict[str, float],
+                   *, first_step: int = 1, started: bool, speed: float,
+                   module_limits: Mapping[str, tuple[float, float]]) -> ValidationResult:
+    """The run's own check, from where the arm stands (the executor's preflight): the
+    steps from ``first_step`` validated from the measured joints ``start_deg`` with the
+    limits the drives hold; with ``--from N`` the arm must also stand where the steps
+    before N leave it."""
+    from seqrun.sequence.validation import validate_sequence
+
+    steps_before, steps_from = loaded.split_at(first_step)  # as `seqrun run --from`
+    result = validate_sequence(steps_from, arm, start_deg, started=started, speed=speed,
+                               module_limits=module_limits)
+    if first_step > 1:
+        before = validate_sequence(steps_before, arm)
+        tol = max(1.0, 5 * arm.control.position_tolerance_deg)
+        for j in arm.joints:
+            expected = before.final_deg.get(j.name)
+            if expected is not None and abs(expected - start_deg[j.name]) > tol:
+                result.errors.append(loaded.steps[first_step - 1].location.error(
+                    f"--from {first_step}: the arm is not where this step expects it: "
+                    f"{j.name} at {start_deg[j.name]:.2f}°, expected {expected:.2f}° "
+                    f"(after steps 1-{first_step - 1})"))
+    return result

@@ -233,10 +233,11 @@ class Activities:
         """An executor on the session's driver, publishing to its hub; it is the current
         activity's from now on."""
         from seqrun.executor import Executor
+        from seqrun.sequence.checks import check_from_arm
         from seqrun.stop_requests import StopRequests
 
         s = self._session
-        executor = Executor(s.driver, s.arm, s.clock,
+        executor = Executor(s.driver, s.arm, s.clock, sequence_check=check_from_arm,
                             poses_dir=(loaded.pose_path or loaded.poses_dir) if loaded
                             else s.poses_dir, requests=StopRequests(), events=s.events,
                             **kw)

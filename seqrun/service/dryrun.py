@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 from seqrun import frozen_objects
 from seqrun.arm.description import ArmDescription
 from seqrun.clock import VirtualClock
-from seqrun.drivers.base import LimitValues
+from seqrun.arm.joint_values import LimitValues
 from seqrun.drivers.registry import open_driver, simulator_positions
 from seqrun.results import RunResult
 from seqrun.sequence.loader import LoadedSequence

@@ -326,7 +326,7 @@ def rebuild_mcap(folder: Path, arm: ArmDescription | None = None) -> tuple[Path,
     import json
 
     from seqrun.errors import UserInputError
-    from seqrun.service.logfile import read_lines
+    from seqrun.runfolder.logfile import read_lines
 
     folder = Path(folder)
     events_file = folder / "events.jsonl"

@@ -17,7 +17,8 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from seqrun.arm.description import ArmDescription, Joint
-    from seqrun.drivers.base import ArmDriver, JointLimits
+    from seqrun.arm.joint_values import JointLimits
+    from seqrun.drivers.base import ArmDriver
 
 __all__ = ["LIMIT_FIELDS", "LimitRow", "compare_limits", "read_module_limits",
            "write_arm_limits"]
@@ -92,7 +93,7 @@ def write_arm_limits(driver: ArmDriver, arm: ArmDescription,
     reads every value back; one that differs raises
     :class:`~seqrun.errors.RunAborted` (``limits_not_written``). Returns the number of
     values written."""
-    from seqrun.drivers.base import LimitValues
+    from seqrun.arm.joint_values import LimitValues
 
     names = arm.joint_names if joints is None else list(joints)
     values = {}

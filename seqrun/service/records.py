@@ -19,7 +19,7 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-from seqrun.service.logfile import write_whole
+from seqrun.runfolder.logfile import write_whole
 from seqrun.shipped import shipped_dir
 
 #: How long ``git rev-parse`` may take before the record says "unknown".

@@ -45,8 +45,9 @@ import can
 
 from seqrun.events import Event
 from seqrun.results import RunResult, StepResult
-from seqrun.service.logfile import (GzipLineFile, LineFile, overwrite_in_place, read_lines,
-                                    write_whole)
+from seqrun.runfolder.logfile import (GzipLineFile, LineFile, overwrite_in_place, read_lines,
+                                      write_whole)
+from seqrun.runfolder.names import TRACE_NAME, TRACE_NAMES, trace_path
 
 #: The running report.json is rewritten at most this often (seconds of real time).
 REPORT_INTERVAL_S = 1.0
@@ -59,9 +60,6 @@ REPORT_RESERVE_BYTES = 4096
 _ENDING_KEYS = ("sequence", "file", "start", "end", "status", "exit_code", "message",
                 "duration_s", "planned_duration_s")
 
-#: The CAN trace of a run; older versions wrote it uncompressed (the second name).
-TRACE_NAME = "trace.log.gz"
-TRACE_NAMES = (TRACE_NAME, "trace.log")
 #: The trace's lines are made decodable on disk at least this often (run clock, s).
 TRACE_FLUSH_S = 0.1
 #: Events that are a cycle's reading (the trace is not flushed for them).
@@ -69,12 +67,6 @@ _READINGS = ("setpoint", "measurement")
 
 #: Files whose presence says a folder holds a run.
 RUN_FILES = ("report.json", "events.jsonl", *TRACE_NAMES)
-
-
-def trace_path(folder: Path) -> Path | None:
-    """The run folder's CAN trace (compressed, or an older run's plain one), if any."""
-    return next((Path(folder) / name for name in TRACE_NAMES
-                 if (Path(folder) / name).is_file()), None)
 
 
 def default_run_dir(sequence_name: str, root: Path = Path("runs")) -> Path:

@@ -18,6 +18,7 @@ from seqrun.drivers.registry import open_driver
 from seqrun.events import EventHub
 from seqrun.executor import Executor, Listener
 from seqrun.results import EXIT_FAULT, RunResult, StepResult
+from seqrun.sequence.checks import check_from_arm
 from seqrun.sequence.loader import LoadedSequence
 from seqrun.service.connection import Connection, response_timeout_s
 from seqrun.service.run_control import halt_on_foreign_frames
@@ -51,7 +52,7 @@ def build_executor(loaded: LoadedSequence, arm: ArmDescription, connection: Conn
                              # (a dry run keeps the arm file's: deterministic results)
                              response_timeout_s=(arm.can.response_timeout_s if dry_run
                                                  else response_timeout_s(arm)))
-    executor = Executor(driver, arm, connection.clock,
+    executor = Executor(driver, arm, connection.clock, sequence_check=check_from_arm,
                         poses_dir=loaded.pose_path or loaded.poses_dir, speed=speed,
                         command_mode=command_mode, cycle_hz=cycle_hz, confirm=confirm,
                         before_step=before_step, listeners=list(listeners), dry_run=dry_run,

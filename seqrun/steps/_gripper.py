@@ -6,7 +6,7 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from seqrun.arm.gripper import GripperSpec
-    from seqrun.drivers.base import GripperReading
+    from seqrun.arm.joint_values import GripperReading
     from seqrun.steps.check_context import CheckContext
     from seqrun.steps.context import StepContext
     from seqrun.steps.resolved import ResolvedStep

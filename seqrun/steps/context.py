@@ -16,7 +16,7 @@ if TYPE_CHECKING:
     import numpy as np
 
     from seqrun.arm.description import ArmDescription
-    from seqrun.drivers.base import GripperReading, JointState, LimitValues
+    from seqrun.arm.joint_values import GripperReading, JointState, LimitValues
     from seqrun.arm.kinematics import Chain
     from seqrun.arm.limits import LimitsInForce
     from seqrun.arm.planner import Limits

@@ -115,7 +115,7 @@ def check(checker: CheckContext,
 
 
 def run(step: ResolvedStep[SetLimitsParams], ex: StepContext) -> dict:
-    from seqrun.drivers.base import LimitValues
+    from seqrun.arm.joint_values import LimitValues
 
     params = step.params
     values = {}

@@ -9,7 +9,7 @@ its current limit MaxCur (A). Above the driver everything is mm and N
 from __future__ import annotations
 
 from seqrun.arm.gripper import GripperSpec
-from seqrun.drivers.base import GripperReading
+from seqrun.arm.joint_values import GripperReading
 from seqrun.powercube.codec import GetParam, Request, SetMotion, SetParam
 from seqrun.powercube.protocol import MotionMode, ParamId, StateFlag
 

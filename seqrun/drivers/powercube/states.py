@@ -8,7 +8,8 @@ reading (:class:`~seqrun.powercube.protocol.ShortState`) is already a
 
 from __future__ import annotations
 
-from seqrun.drivers.base import CycleState, JointState
+from seqrun.arm.joint_values import JointState
+from seqrun.drivers.base import CycleState
 from seqrun.powercube.protocol import ShortState, StateFlag
 
 #: Most specific first: the cause named in the report.
