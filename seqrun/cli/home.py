@@ -45,11 +45,11 @@ def home_command(joints: JointsOption = None,
     console holds the bus. With no bus configured: exit 2 (a live console homes its arm
     with its Home button). In a campaign with several arms: every arm, one after the other
     (--arm-id ID: that one); an arm that fails does not keep the next from being homed."""
-    from seqrun.cli.arm_commands import _arm_ids, _each_arm
+    from seqrun.cli.arm_commands import arm_ids_of, each_arm
 
     with user_errors():
-        ids = _arm_ids(arm_id, project_dir, interface, channel, arm_file)
-    _each_arm(ids, lambda one: _home_arm(one, joints, arm_file, project_dir, interface,
+        ids = arm_ids_of(arm_id, project_dir, interface, channel, arm_file)
+    each_arm(ids, lambda one: _home_arm(one, joints, arm_file, project_dir, interface,
                                          channel, bitrate, bus_kwargs, sim,
                                          response_timeout_ms))
 
@@ -58,14 +58,14 @@ def _home_arm(arm_id, joints, arm_file, project_dir, interface, channel, bitrate
               sim, response_timeout_ms) -> None:
     """Home one arm (None: the one arm of the context) and confirm it; a failure is one
     ``error:`` line and ``typer.Exit`` with its code."""
-    from seqrun.cli.arm_commands import _context
+    from seqrun.cli.arm_commands import command_context
     from seqrun.cli.bus_owner import live_targets
     from seqrun.errors import Refused, UserInputError
     from seqrun.service.arm_access import home_and_confirm, modules_of
 
     arm = f"arm {arm_id}: " if arm_id is not None else ""
     with user_errors():
-        context = _context(arm_file, project_dir, interface, channel, bitrate, bus_kwargs,
+        context = command_context(arm_file, project_dir, interface, channel, bitrate, bus_kwargs,
                            sim, response_timeout_ms, arm_id)
         modules = modules_of(context.arm, _names(joints))
         try:

@@ -125,6 +125,7 @@ def run_tracks(tracks: Mapping[str, Any], arms: Mapping[str, Any],
                before_run: Callable[[str], None] | None = None,
                requests_by_arm: Mapping[str, Any] | None = None,
                runner: Callable[..., Any] | None = None,
+               parts: Mapping[str, Any] | None = None,
                **run: Any) -> ArmsOutcome:
     """Run every arm's track on its connection, each on a thread of its own (see the
     module doc). ``clock_views``: each arm's :class:`~seqrun.clock.LockstepView` (the dry
@@ -132,7 +133,9 @@ def run_tracks(tracks: Mapping[str, Any], arms: Mapping[str, Any],
     run (the dry run's start-up of ``--started``). ``requests_by_arm``: each arm's
     stop-request inbox (the signal handlers post to every one). ``runner(arm_id, loaded,
     **options)``: how one arm's run is made (default :func:`run_sequence` on its
-    connection; ``seqrun run``: the arm's session). ``run``: further options."""
+    connection; ``seqrun run``: the arm's session). ``parts``: each arm's
+    :class:`~seqrun.service.arm_part.ArmPart` (the run's one time base and run.mcap).
+    ``run``: further options."""
     from seqrun.service.runner import run_sequence
 
     board = EventBoard(signallers(tracks))
@@ -163,7 +166,8 @@ def run_tracks(tracks: Mapping[str, Any], arms: Mapping[str, Any],
                 before_run(arm_id)
             options = dict(run, log_dir=(log_dirs or {}).get(arm_id),
                            on_executor=hook(arm_id),
-                           requests=(requests_by_arm or {}).get(arm_id))
+                           requests=(requests_by_arm or {}).get(arm_id),
+                           part=(parts or {}).get(arm_id))
             if runner is not None:
                 outcome = runner(arm_id, tracks[arm_id], **options)
             else:
