@@ -9,8 +9,10 @@ says yes first. Every arm then runs its track on its own executor and thread
 confirmed by its executor) unless ``on_fault = "halt_faulted"``. Ctrl-C stops every arm
 (a controlled stop; a second one halts them), SIGTERM halts them all. ``seqrun halt`` /
 ``seqrun status`` in another terminal reach each arm's run through its bus claim. The
-run folder holds one part per arm (``<run>/A/``, ``<run>/B/``: each a whole run folder).
-Plain line output: each arm's steps as they start and end, prefixed by the arm.
+run folder holds one part per arm (``<run>/A/``, ``<run>/B/``: each a whole run folder),
+the run's one run.mcap and arms.json (its one time base). On a terminal a live view with
+one status line per arm (seqrun/cli/arms_display.py); into a pipe or file, or with
+``--plain``, plain lines: each arm's steps as they start and end, prefixed by the arm.
 """
 
 from __future__ import annotations
@@ -61,7 +63,7 @@ def _arm_faults(specs: list[str], ids: tuple[str, ...]) -> dict[str, list[str]]:
 def run_arms(file: Path, project: Any, *, sim: bool, sim_fault: list[str], speed: float,
              yes: bool, log_dir: Path | None, start: str | None, started: bool,
              virtual_time: bool, no_report: bool, command_mode: str | None,
-             refused: dict[str, bool]) -> NoReturn:
+             refused: dict[str, bool], plain: bool = False) -> NoReturn:
     from seqrun.service.arm_context import resolve_context
     from seqrun.service.arms_check import check_arms_sequence
 
@@ -105,7 +107,8 @@ def run_arms(file: Path, project: Any, *, sim: bool, sim_fault: list[str], speed
                 connections[arm_id] = context.open_connection(live=True, **extra)
         arms = _confirm_and_zero(contexts, connections, check, yes)
         code = _run(file, check, contexts, connections, arms, clock_views, speed=speed,
-                    yes=yes, log_dir=log_dir, no_report=no_report, command_mode=command_mode)
+                    yes=yes, log_dir=log_dir, no_report=no_report, command_mode=command_mode,
+                    plain=plain)
     finally:
         for connection in connections.values():
             connection.close()
@@ -147,7 +150,8 @@ def _say(text: str, end: str = "\n") -> None:
 
 
 def _run(file: Path, check, contexts, connections, arms, clock_views, *, speed: float,
-         yes: bool, log_dir: Path | None, no_report: bool, command_mode: str | None) -> int:
+         yes: bool, log_dir: Path | None, no_report: bool, command_mode: str | None,
+         plain: bool = False) -> int:
     from seqrun.cli.interrupts import RunSignals
     from seqrun.cli.questions import ask
     from seqrun.service import campaign_records
@@ -176,12 +180,17 @@ def _run(file: Path, check, contexts, connections, arms, clock_views, *, speed: 
                  "was sent")
         log_dirs[arm_id] = part
     lock = threading.Lock()
+    view = _live_view(check, {a: arms[a][0] for a in tracks}, plain)
 
     def confirm(prompt: str) -> bool:
         with lock:  # one question at a time
-            return ask(prompt, yes, say=_say)
+            if view is None:
+                return ask(prompt, yes, say=_say)
+            with view.asking():
+                return ask(prompt, yes, say=_say)
 
-    printers = {a: _printer(a) for a in tracks}
+    printers = {a: _printer(a) if view is None else
+                (lambda event, a=a: view(a, event)) for a in tracks}
     # the built-in simulator keeps no record: its zero is its power-on pose
     recorders = {a: None if connections[a].is_simulator or arms[a][1].store is None
                  else campaign_records.zero_recorder(arms[a][1].store, arms[a][0], tracks[a])
@@ -199,6 +208,8 @@ def _run(file: Path, check, contexts, connections, arms, clock_views, *, speed: 
              for a in tracks}
     signals = RunSignals(EveryArm(list(inboxes.values())))
     signals.install()
+    if view is not None:
+        view.__enter__()
     try:
         outcome = _arms_live(run_arms_live, tracks, {a: arms[a][0] for a in tracks}, connections,
                                 controls=controls, on_event=show,
@@ -207,8 +218,11 @@ def _run(file: Path, check, contexts, connections, arms, clock_views, *, speed: 
                                 on_fault=_on_fault(check.tracks.project), log_dirs=log_dirs,
                                 clock_views=clock_views, speed=speed, confirm=confirm,
                                 command_mode=command_mode, html_report=not no_report,
-                                requests_by_arm=inboxes, file=str(file), parts=parts)
+                                requests_by_arm=inboxes, file=str(file), parts=parts,
+                                on_idle=view.on_idle if view is not None else None)
     finally:
+        if view is not None:
+            view.__exit__(None, None, None)
         signals.restore()
         mcap_path = _close_arms_mcap(mcap)
     if outcome is None:
@@ -222,6 +236,21 @@ def _run(file: Path, check, contexts, connections, arms, clock_views, *, speed: 
     _write_summary(folder, check, outcome, contexts, time_base, mcap_path, mcap)
     typer.echo(f"log: {folder}")
     return outcome.exit_code
+
+
+def _live_view(check, arms: dict[str, Any], plain: bool) -> Any:
+    """On a terminal (and without --plain): one status line per arm
+    (seqrun/cli/arms_display.py); else None: plain lines."""
+    from seqrun.cli.output import make_console
+
+    console = make_console(stderr=False)
+    if plain or not console.is_terminal:
+        return None
+    from seqrun.cli.arms_display import ArmsLiveView
+
+    tracks = check.tracks.tracks
+    return ArmsLiveView(console, arms, {a: len(t.steps) for a, t in tracks.items()},
+                        f"seqrun: {check.tracks.name}")
 
 
 def _arms_live(run, *args: Any, **kwargs: Any) -> Any:
