@@ -319,7 +319,10 @@ def _write_summary(folder: Path, check, outcome, contexts, time_base, mcap_path,
                "time_base": time_base.as_dict(),
                "ros": ({"mcap": mcap_path.name if mcap_path is not None else None,
                         "distribution": mcap.distribution,
-                        **({"error": mcap.error} if mcap.error else {})}
+                        **({"error": mcap.error} if mcap.error else {}),
+                        **({"dropped_events": mcap.dropped} if mcap.dropped else {}),
+                        # logged later than an arm's lag allowed for (kept in order)
+                        **({"reordered": mcap.reordered} if mcap.reordered else {})}
                        if mcap is not None else {"mcap": None}),
                "arms": {a: {"status": o.result.status, "exit_code": o.result.exit_code,
                             "message": o.result.message, "halted_because_arm": o.halted_for,
