@@ -290,7 +290,7 @@ def test_cdr_encoders_write_the_bytes_of_rosbags_serializer(joints, velocities, 
         for record in records:
             ((topic, msgtype, fields),) = messages(record, NAMES)
             expected = bytes(store.serialize_cdr(builder.build(msgtype, fields), msgtype))
-            assert mcap_log._encoded(record, NAMES) == (topic, expected), (distribution, msgtype)
+            assert mcap_log.encoded_record(record, NAMES) == (topic, expected), (distribution, msgtype)
 
 
 @settings(max_examples=200, deadline=None)

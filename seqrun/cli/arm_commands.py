@@ -83,10 +83,10 @@ def status_command(
     several arms: every arm, one table each (--arm-id ID: that one; --watch: one arm).
     """
     with user_errors():
-        ids = _arm_ids(arm_id, project_dir, interface, channel, arm_file)
+        ids = arm_ids_of(arm_id, project_dir, interface, channel, arm_file)
     if len(ids) > 1 and watch:
         fail(f"--watch follows one arm: name it with --arm-id ({', '.join(map(str, ids))})")
-    _each_arm(ids, lambda one: _status_of(
+    each_arm(ids, lambda one: _status_of(
         one, watch, as_json, period, count, pid, arm_file, project_dir, interface, channel,
         bitrate, bus_kwargs, sim, response_timeout_ms))
 
@@ -100,7 +100,7 @@ def _status_of(arm_id, watch, as_json, period, count, pid, arm_file, project_dir
     from seqrun.cli.output import make_console
 
     with user_errors():
-        context = _context(arm_file, project_dir, interface, channel, bitrate, bus_kwargs,
+        context = command_context(arm_file, project_dir, interface, channel, bitrate, bus_kwargs,
                            sim, response_timeout_ms, arm_id)
         arm = context.arm
         through = live_targets(context, "status", pid)
@@ -168,7 +168,7 @@ PidOption = Annotated[Optional[int], typer.Option(
                                  "(when several are live on this machine).")]
 
 
-def _context(arm_file, project_dir, interface, channel, bitrate, bus_kwargs, sim,
+def command_context(arm_file, project_dir, interface, channel, bitrate, bus_kwargs, sim,
              response_timeout_ms, arm_id: str | None = None):
     """The arm context of these options (seqrun/service/arm_context.py); checks the
     response timeout first, as connecting would."""
@@ -183,7 +183,7 @@ def _context(arm_file, project_dir, interface, channel, bitrate, bus_kwargs, sim
     return context
 
 
-def _arm_ids(arm_ids, project_dir, interface=None, channel=None,
+def arm_ids_of(arm_ids, project_dir, interface=None, channel=None,
              arm_file=None) -> list[str | None]:
     """The arms a command acts on: ``--arm-id`` (checked), else every arm of a campaign
     with several, else the one arm (None). One bus or arm file on the command line for
@@ -195,7 +195,7 @@ def _arm_ids(arm_ids, project_dir, interface=None, channel=None,
     return [c.arm_id for c in contexts]
 
 
-def _each_arm(ids: list[str | None], act) -> None:
+def each_arm(ids: list[str | None], act) -> None:
     """``act(arm_id)`` for every arm; with several, one arm's failure (its own ``error:``
     line) does not keep the next from being acted on; the exit code is the worst."""
     if len(ids) == 1:
@@ -298,8 +298,8 @@ def halt_command(arm_file: ArmFileOption = None, project_dir: CampaignOption = N
     arms every arm is halted and confirms, one after the other (--arm-id ID: that one); one
     arm that does not confirm does not keep the next from being halted (exit 3)."""
     with user_errors():
-        ids = _arm_ids(arm_id, project_dir, interface, channel, arm_file)
-    _each_arm(ids, lambda one: _halt_arm(one, arm_file, project_dir, interface, channel,
+        ids = arm_ids_of(arm_id, project_dir, interface, channel, arm_file)
+    each_arm(ids, lambda one: _halt_arm(one, arm_file, project_dir, interface, channel,
                                          bitrate, bus_kwargs, sim, response_timeout_ms, pid))
 
 
@@ -308,7 +308,7 @@ def _halt_arm(arm_id, arm_file, project_dir, interface, channel, bitrate, bus_kw
     from seqrun.cli.bus_owner import live_targets
 
     with user_errors():
-        context = _context(arm_file, project_dir, interface, channel, bitrate, bus_kwargs,
+        context = command_context(arm_file, project_dir, interface, channel, bitrate, bus_kwargs,
                            sim, response_timeout_ms, arm_id)
         live = live_targets(context, "halt", pid)
     if live:
@@ -410,8 +410,8 @@ def reset_command(arm_file: ArmFileOption = None, project_dir: CampaignOption = 
     not confirm. With no bus configured: exit 2 (a live run or console resets its arm
     itself). In a campaign with several arms: every arm (--arm-id ID: that one)."""
     with user_errors():
-        ids = _arm_ids(arm_id, project_dir, interface, channel, arm_file)
-    _each_arm(ids, lambda one: _reset_arm(one, arm_file, project_dir, interface, channel,
+        ids = arm_ids_of(arm_id, project_dir, interface, channel, arm_file)
+    each_arm(ids, lambda one: _reset_arm(one, arm_file, project_dir, interface, channel,
                                           bitrate, bus_kwargs, sim, response_timeout_ms))
 
 
@@ -420,7 +420,7 @@ def _reset_arm(arm_id, arm_file, project_dir, interface, channel, bitrate, bus_k
     from seqrun.cli.bus_owner import live_targets
 
     with user_errors():
-        context = _context(arm_file, project_dir, interface, channel, bitrate, bus_kwargs,
+        context = command_context(arm_file, project_dir, interface, channel, bitrate, bus_kwargs,
                            sim, response_timeout_ms, arm_id)
         live_targets(context, "reset")
     _broadcast("reset", context)

@@ -6,6 +6,12 @@ the bus, and with no bus configured it never homes a private simulator of its ow
 console has a Home button). A module that is halted or in error is not homed: Home is
 not a Reset (exit 3, naming it). Success means every module named reported HOME_OK at
 rest; a module that travels to its home switch is waited for.
+
+In a campaign with several arms (``[arms.ID]``, docs/two-arms.md) it homes every arm, or
+those named with ``--arm-id``, one after the other, each confirmed as one arm is: the
+arm's line, then its verdict. An arm that fails (refused, not sent, not confirmed) does
+not keep the next from being homed; the command then exits with the worst code, naming
+the arms that failed.
 """
 
 from __future__ import annotations
@@ -18,6 +24,7 @@ from seqrun.cli.app import app
 from seqrun.cli.common import (EXIT_FAULT, ArmFileOption, BitrateOption, BusKwargsOption,
                                CampaignOption, ChannelOption, InterfaceOption,
                                ResponseTimeoutOption, SimOption, fail, user_errors)
+from seqrun.cli.arm_commands import ArmIdOption
 
 JointsOption = Annotated[Optional[str], typer.Option(
     "--joints", metavar="J1,J2", help="Home only these joints (names, comma-separated; "
@@ -30,26 +37,42 @@ def home_command(joints: JointsOption = None,
                  interface: InterfaceOption = None,
                  channel: ChannelOption = None, bitrate: BitrateOption = None,
                  bus_kwargs: BusKwargsOption = None, sim: SimOption = False,
-                 response_timeout_ms: ResponseTimeoutOption = None) -> None:
+                 response_timeout_ms: ResponseTimeoutOption = None,
+                 arm_id: ArmIdOption = None) -> None:
     """Home the modules (enables the motors; a PRL does not move). Confirmed by reading
     every module back (HOME_OK, not moving); exit 3 naming the modules that did not
     confirm, or that are halted or in error (seqrun reset first). Refused while a run or
     console holds the bus. With no bus configured: exit 2 (a live console homes its arm
-    with its Home button)."""
-    from seqrun.cli.bus_owner import live_targets
-    from seqrun.service.arm_access import home_and_confirm, modules_of
-    from seqrun.service.arm_context import resolve_context
-    from seqrun.service.connection import response_timeout_s
+    with its Home button). In a campaign with several arms: every arm, one after the other
+    (--arm-id ID: that one); an arm that fails does not keep the next from being homed."""
+    from seqrun.cli.arm_commands import arm_ids_of, each_arm
 
     with user_errors():
-        context = resolve_context(project_dir=project_dir, arm_file=arm_file,
-                                  interface=interface, channel=channel, bitrate=bitrate,
-                                  bus_kwargs=bus_kwargs or [], sim=sim,
-                                  response_timeout_ms=response_timeout_ms)
-        response_timeout_s(context.arm, response_timeout_ms)
+        ids = arm_ids_of(arm_id, project_dir, interface, channel, arm_file)
+    each_arm(ids, lambda one: _home_arm(one, joints, arm_file, project_dir, interface,
+                                         channel, bitrate, bus_kwargs, sim,
+                                         response_timeout_ms))
+
+
+def _home_arm(arm_id, joints, arm_file, project_dir, interface, channel, bitrate, bus_kwargs,
+              sim, response_timeout_ms) -> None:
+    """Home one arm (None: the one arm of the context) and confirm it; a failure is one
+    ``error:`` line and ``typer.Exit`` with its code."""
+    from seqrun.cli.arm_commands import command_context
+    from seqrun.cli.bus_owner import live_targets
+    from seqrun.errors import Refused, UserInputError
+    from seqrun.service.arm_access import home_and_confirm, modules_of
+
+    arm = f"arm {arm_id}: " if arm_id is not None else ""
+    with user_errors():
+        context = command_context(arm_file, project_dir, interface, channel, bitrate, bus_kwargs,
+                           sim, response_timeout_ms, arm_id)
         modules = modules_of(context.arm, _names(joints))
-        live_targets(context, "home")
-        connection, driver = context.open_arm()
+        try:
+            live_targets(context, "home")
+            connection, driver = context.open_arm()
+        except (UserInputError, Refused) as exc:  # which arm's bus is held, or missing
+            fail(f"{arm}{exc}")
     typer.echo(context.headline(connection))
     try:
         result = home_and_confirm(driver, modules)
@@ -57,12 +80,12 @@ def home_command(joints: JointsOption = None,
         driver.close()
         connection.close()
     if not result.sent:
-        fail(f"home not sent: {result.error}", EXIT_FAULT)
+        fail(f"{arm}home not sent: {result.error}", EXIT_FAULT)
     if not result.confirmed:
         error = f"; {result.error}" if result.error else ""
-        fail(f"Home sent, but not confirmed by {result.describe_unconfirmed()} "
+        fail(f"{arm}Home sent, but not confirmed by {result.describe_unconfirmed()} "
              f"({connection.description}{error})", EXIT_FAULT)
-    typer.echo(f"Home confirmed by modules {', '.join(map(str, sorted(result.states)))} "
+    typer.echo(f"{arm}Home confirmed by modules {', '.join(map(str, sorted(result.states)))} "
                f"in {result.duration_s:.2f} s ({connection.description})")
 
 

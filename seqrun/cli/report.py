@@ -4,8 +4,11 @@
     seqrun report runs/20261121-101500-Op-safe --out r.html
     seqrun report runs/20261121-101500-Op-safe --csv exported/   # timeseries.csv, steps.csv
     seqrun report runs/20261121-101500-Op-safe --mcap     # run.mcap anew (docs/ros2.md)
+    seqrun report runs/20261127-101500-Two-arm --mcap     # several arms: their one run.mcap
 
-A folder that is not a run folder is one ``error:`` line and exit 2.
+A folder that is not a run folder is one ``error:`` line and exit 2. A run of several arms
+(docs/two-arms.md) draws each arm's part (``RUN_DIR/A``); ``--mcap`` on the run's folder
+writes its one run.mcap of every arm.
 """
 
 from __future__ import annotations
@@ -43,16 +46,31 @@ def report_command(
     with user_errors():
         arm = load_arm_file(arm_file) if arm_file is not None else None
         if mcap:
+            from seqrun.service.arms_mcap import is_arms_run, rebuild_arms_mcap
             from seqrun.service.mcap_log import rebuild_mcap
 
-            path, counts = rebuild_mcap(run_dir, arm)
+            path, counts = (rebuild_arms_mcap(run_dir) if is_arms_run(run_dir)
+                            else rebuild_mcap(run_dir, arm))
             total = sum(counts.values())
             typer.echo(f"wrote {path} ({total} messages on {len(counts)} topics)")
             if out is None and csv_dir is None:
                 return
+        _one_arm(run_dir)
         data = load_run(run_dir, arm=arm)
         if csv_dir is not None:
             for path in export_csv(run_dir, csv_dir, data=data):
                 typer.echo(f"wrote {path}")
         if csv_dir is None or out is not None:
             typer.echo(f"wrote {write_html(run_dir, out, data=data)}")
+
+
+def _one_arm(run_dir: Path) -> None:
+    """The report and CSV draw one arm: a campaign run with several arms says which."""
+    from seqrun.errors import UserInputError
+    from seqrun.service.arms_mcap import is_arms_run
+
+    if is_arms_run(run_dir) and not (run_dir / "report.json").exists():
+        parts = sorted(p.name for p in run_dir.iterdir() if (p / "report.json").is_file())
+        raise UserInputError(f"{run_dir}: a run of several arms: each arm's part is a run "
+                             f"folder of its own ({', '.join(f'{run_dir / p}' for p in parts)}"
+                             "); --mcap writes the run's one run.mcap of every arm")

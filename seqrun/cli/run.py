@@ -145,7 +145,7 @@ def run_command(
                           "--from": from_step != 1, "--step": step,
                           "--power-on-at": power_on_at is not None,
                           "--zero-confirmed": zero_confirmed is not None,
-                          "--rt-priority": rt_priority is not None})
+                          "--rt-priority": rt_priority is not None}, plain=plain)
     # Imported here, not at the top: `seqrun --help` and the other commands stay light.
     from seqrun.cli.output import keep_running_on_broken_pipe, make_console
     from seqrun.service.run_preparation import RunInvalid, RunRequest, prepare_run

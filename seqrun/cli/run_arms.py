@@ -9,8 +9,10 @@ says yes first. Every arm then runs its track on its own executor and thread
 confirmed by its executor) unless ``on_fault = "halt_faulted"``. Ctrl-C stops every arm
 (a controlled stop; a second one halts them), SIGTERM halts them all. ``seqrun halt`` /
 ``seqrun status`` in another terminal reach each arm's run through its bus claim. The
-run folder holds one part per arm (``<run>/A/``, ``<run>/B/``: each a whole run folder).
-Plain line output: each arm's steps as they start and end, prefixed by the arm.
+run folder holds one part per arm (``<run>/A/``, ``<run>/B/``: each a whole run folder),
+the run's one run.mcap and arms.json (its one time base). On a terminal a live view with
+one status line per arm (seqrun/cli/arms_display.py); into a pipe or file, or with
+``--plain``, plain lines: each arm's steps as they start and end, prefixed by the arm.
 """
 
 from __future__ import annotations
@@ -25,6 +27,8 @@ import typer
 from seqrun.cli.common import fail, user_errors
 from seqrun.defaults import EXIT_FAULT, EXIT_INVALID, EXIT_OPERATOR_ABORT
 from seqrun.errors import BusError, UserInputError
+from seqrun.service.arm_part import ArmPart
+from seqrun.service.time_base import TimeBase
 from seqrun.stop_requests import OPERATOR_HALT, StopRequests
 
 
@@ -59,7 +63,7 @@ def _arm_faults(specs: list[str], ids: tuple[str, ...]) -> dict[str, list[str]]:
 def run_arms(file: Path, project: Any, *, sim: bool, sim_fault: list[str], speed: float,
              yes: bool, log_dir: Path | None, start: str | None, started: bool,
              virtual_time: bool, no_report: bool, command_mode: str | None,
-             refused: dict[str, bool]) -> NoReturn:
+             refused: dict[str, bool], plain: bool = False) -> NoReturn:
     from seqrun.service.arm_context import resolve_context
     from seqrun.service.arms_check import check_arms_sequence
 
@@ -103,7 +107,8 @@ def run_arms(file: Path, project: Any, *, sim: bool, sim_fault: list[str], speed
                 connections[arm_id] = context.open_connection(live=True, **extra)
         arms = _confirm_and_zero(contexts, connections, check, yes)
         code = _run(file, check, contexts, connections, arms, clock_views, speed=speed,
-                    yes=yes, log_dir=log_dir, no_report=no_report, command_mode=command_mode)
+                    yes=yes, log_dir=log_dir, no_report=no_report, command_mode=command_mode,
+                    plain=plain)
     finally:
         for connection in connections.values():
             connection.close()
@@ -145,7 +150,8 @@ def _say(text: str, end: str = "\n") -> None:
 
 
 def _run(file: Path, check, contexts, connections, arms, clock_views, *, speed: float,
-         yes: bool, log_dir: Path | None, no_report: bool, command_mode: str | None) -> int:
+         yes: bool, log_dir: Path | None, no_report: bool, command_mode: str | None,
+         plain: bool = False) -> int:
     from seqrun.cli.interrupts import RunSignals
     from seqrun.cli.questions import ask
     from seqrun.service import campaign_records
@@ -174,12 +180,17 @@ def _run(file: Path, check, contexts, connections, arms, clock_views, *, speed: 
                  "was sent")
         log_dirs[arm_id] = part
     lock = threading.Lock()
+    view = _live_view(check, {a: arms[a][0] for a in tracks}, plain)
 
     def confirm(prompt: str) -> bool:
         with lock:  # one question at a time
-            return ask(prompt, yes, say=_say)
+            if view is None:
+                return ask(prompt, yes, say=_say)
+            with view.asking():
+                return ask(prompt, yes, say=_say)
 
-    printers = {a: _printer(a) for a in tracks}
+    printers = {a: _printer(a) if view is None else
+                (lambda event, a=a: view(a, event)) for a in tracks}
     # the built-in simulator keeps no record: its zero is its power-on pose
     recorders = {a: None if connections[a].is_simulator or arms[a][1].store is None
                  else campaign_records.zero_recorder(arms[a][1].store, arms[a][0], tracks[a])
@@ -188,8 +199,17 @@ def _run(file: Path, check, contexts, connections, arms, clock_views, *, speed: 
     def show(arm_id: str, event: Any) -> None:
         printers[arm_id](event)
 
+    # One time base for every arm (their events and traces on one time line), one
+    # run.mcap at the top of the run folder (seqrun/service/arms_mcap.py).
+    time_base = TimeBase.of(connections[next(iter(tracks))].clock)
+    mcap = _arms_mcap(folder, check.tracks.project, {a: arms[a][0] for a in tracks},
+                      {a: contexts[a].base_transform() for a in tracks}, time_base)
+    parts = {a: ArmPart(a, time_base, mcap.for_arm(a) if mcap is not None else None)
+             for a in tracks}
     signals = RunSignals(EveryArm(list(inboxes.values())))
     signals.install()
+    if view is not None:
+        view.__enter__()
     try:
         outcome = _arms_live(run_arms_live, tracks, {a: arms[a][0] for a in tracks}, connections,
                                 controls=controls, on_event=show,
@@ -198,9 +218,13 @@ def _run(file: Path, check, contexts, connections, arms, clock_views, *, speed: 
                                 on_fault=_on_fault(check.tracks.project), log_dirs=log_dirs,
                                 clock_views=clock_views, speed=speed, confirm=confirm,
                                 command_mode=command_mode, html_report=not no_report,
-                                requests_by_arm=inboxes, file=str(file))
+                                requests_by_arm=inboxes, file=str(file), parts=parts,
+                                on_idle=view.on_idle if view is not None else None)
     finally:
+        if view is not None:
+            view.__exit__(None, None, None)
         signals.restore()
+        mcap_path = _close_arms_mcap(mcap)
     if outcome is None:
         fail(f"the run ended in an error (every arm was halted); log: {folder}", EXIT_FAULT)
     for arm_id, arm in outcome.arms.items():
@@ -209,9 +233,24 @@ def _run(file: Path, check, contexts, connections, arms, clock_views, *, speed: 
         typer.echo(f"arm {arm_id}: {r.status.upper()} (exit {r.exit_code}): {r.message}{why}")
     for note in outcome.notes:
         typer.echo(note)
-    _write_summary(folder, check, outcome)
+    _write_summary(folder, check, outcome, contexts, time_base, mcap_path, mcap)
     typer.echo(f"log: {folder}")
     return outcome.exit_code
+
+
+def _live_view(check, arms: dict[str, Any], plain: bool) -> Any:
+    """On a terminal (and without --plain): one status line per arm
+    (seqrun/cli/arms_display.py); else None: plain lines."""
+    from seqrun.cli.output import make_console
+
+    console = make_console(stderr=False)
+    if plain or not console.is_terminal:
+        return None
+    from seqrun.cli.arms_display import ArmsLiveView
+
+    tracks = check.tracks.tracks
+    return ArmsLiveView(console, arms, {a: len(t.steps) for a, t in tracks.items()},
+                        f"seqrun: {check.tracks.name}")
 
 
 def _arms_live(run, *args: Any, **kwargs: Any) -> Any:
@@ -224,18 +263,70 @@ def _arms_live(run, *args: Any, **kwargs: Any) -> Any:
         return None
 
 
-def _write_summary(folder: Path, check, outcome) -> None:
+def _arms_mcap(folder: Path, project: Any, arms: dict[str, Any], bases: dict[str, Any],
+               time_base: Any) -> Any:
+    """``<run>/run.mcap``'s live writer, unless seqrun.toml says ``[ros] mcap = false``."""
+    from seqrun.service.arms_mcap import ArmsMcapLog
+    from seqrun.service.mcap_log import DEFAULT_DISTRIBUTION
+
+    ros = getattr(getattr(project, "config", None), "ros", None)
+    if ros is not None and not ros.mcap:
+        return None
+
+    def said(text: str) -> None:
+        typer.echo(f"warning: run log: {text}; the run goes on", err=True)
+
+    return ArmsMcapLog(folder, arms, bases, time_base.epoch_s, on_error=said,
+                       distribution=ros.distribution if ros is not None
+                       else DEFAULT_DISTRIBUTION)
+
+
+def _close_arms_mcap(mcap: Any) -> Path | None:
+    """End run.mcap (every arm's run has ended); its trouble is one warning line."""
+    if mcap is None:
+        return None
+    path = mcap.close()
+    if mcap.dropped:
+        typer.echo(f"warning: run.mcap: {mcap.dropped} events were dropped (its writer fell "
+                   "behind); seqrun report RUN_DIR --mcap writes it whole", err=True)
+    return path
+
+
+def _write_summary(folder: Path, check, outcome, contexts, time_base, mcap_path,
+                   mcap) -> None:
     """``<run>/arms.json``: the campaign run at a glance (each arm's part is a whole run
-    folder of its own)."""
+    folder of its own): each arm's verdict, its base in the facility frame and its start
+    on the run's one time base."""
     import json
+
+    def start(o) -> dict | None:
+        report = getattr(o.outcome, "report", None) or {}
+        if "clock_s" not in report:
+            return None
+        return {"clock_s": report["clock_s"], "epoch_s": report.get("start_epoch_s"),
+                "utc": report.get("start_utc"),
+                "after_s": round(report["clock_s"] - time_base.clock_s, 6)}
+
+    def base(a: str) -> dict:
+        given = contexts[a].base
+        return {"position_mm": list(given.position_mm) if given else [0.0, 0.0, 0.0],
+                "rpy_deg": list(given.rpy_deg) if given else [0.0, 0.0, 0.0]}
 
     summary = {"sequence": check.tracks.name, "file": check.file,
                "exit_code": outcome.exit_code, "on_fault": outcome.on_fault,
                "first_fault": outcome.first_fault, "notes": list(outcome.notes),
                "between_arms": [b.as_dict() for b in check.between],
+               "time_base": time_base.as_dict(),
+               "ros": ({"mcap": mcap_path.name if mcap_path is not None else None,
+                        "distribution": mcap.distribution,
+                        **({"error": mcap.error} if mcap.error else {}),
+                        **({"dropped_events": mcap.dropped} if mcap.dropped else {}),
+                        # logged later than an arm's lag allowed for (kept in order)
+                        **({"reordered": mcap.reordered} if mcap.reordered else {})}
+                       if mcap is not None else {"mcap": None}),
                "arms": {a: {"status": o.result.status, "exit_code": o.result.exit_code,
                             "message": o.result.message, "halted_because_arm": o.halted_for,
-                            "part": a}
+                            "part": a, "start": start(o), "base": base(a)}
                         for a, o in outcome.arms.items()}}
     try:
         (folder / "arms.json").write_text(json.dumps(summary, indent=2) + "\n")

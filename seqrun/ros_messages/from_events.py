@@ -157,7 +157,9 @@ class EventTranslator:
             if event.get("type") != "run_started" or "start_epoch_s" not in event:
                 self._pending.append(event)
                 return []
-            self._epoch0 = float(event["start_epoch_s"]) - float(event.get("t") or 0.0)
+            # start_epoch_s is the wall-clock time of t = 0 (run_started itself comes a
+            # moment after it in real time)
+            self._epoch0 = float(event["start_epoch_s"])
             out: list[Record] = []
             for early in [*self._pending, event]:
                 out += self._translate(early)

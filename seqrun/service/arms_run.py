@@ -14,6 +14,7 @@ and the report says so. The dry run is the same on simulated buses at one virtua
 
 from __future__ import annotations
 
+import functools
 import threading
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -125,6 +126,7 @@ def run_tracks(tracks: Mapping[str, Any], arms: Mapping[str, Any],
                before_run: Callable[[str], None] | None = None,
                requests_by_arm: Mapping[str, Any] | None = None,
                runner: Callable[..., Any] | None = None,
+               parts: Mapping[str, Any] | None = None,
                **run: Any) -> ArmsOutcome:
     """Run every arm's track on its connection, each on a thread of its own (see the
     module doc). ``clock_views``: each arm's :class:`~seqrun.clock.LockstepView` (the dry
@@ -132,7 +134,9 @@ def run_tracks(tracks: Mapping[str, Any], arms: Mapping[str, Any],
     run (the dry run's start-up of ``--started``). ``requests_by_arm``: each arm's
     stop-request inbox (the signal handlers post to every one). ``runner(arm_id, loaded,
     **options)``: how one arm's run is made (default :func:`run_sequence` on its
-    connection; ``seqrun run``: the arm's session). ``run``: further options."""
+    connection; ``seqrun run``: the arm's session). ``parts``: each arm's
+    :class:`~seqrun.service.arm_part.ArmPart` (the run's one time base and run.mcap).
+    ``run``: further options."""
     from seqrun.service.runner import run_sequence
 
     board = EventBoard(signallers(tracks))
@@ -163,7 +167,8 @@ def run_tracks(tracks: Mapping[str, Any], arms: Mapping[str, Any],
                 before_run(arm_id)
             options = dict(run, log_dir=(log_dirs or {}).get(arm_id),
                            on_executor=hook(arm_id),
-                           requests=(requests_by_arm or {}).get(arm_id))
+                           requests=(requests_by_arm or {}).get(arm_id),
+                           part=(parts or {}).get(arm_id))
             if runner is not None:
                 outcome = runner(arm_id, tracks[arm_id], **options)
             else:
@@ -223,6 +228,7 @@ def run_arms_live(tracks: Mapping[str, Any], arms: Mapping[str, Any],
                   on_event: Callable[[str, Any], None] | None = None,
                   zeros: Mapping[str, Any] | None = None,
                   record_zero: Mapping[str, Any] | None = None,
+                  on_idle: Callable[[str, float], None] | None = None,
                   **options: Any) -> ArmsOutcome:
     """:func:`run_tracks` for ``seqrun run``: every arm runs in an arm session of its own
     (:class:`~seqrun.service.session.ArmSession`, its driver, zero and activities, as one
@@ -230,12 +236,16 @@ def run_arms_live(tracks: Mapping[str, Any], arms: Mapping[str, Any],
     where its bus has no claim) follows its run, and ``on_event(arm_id, event)`` gets
     every typed event of every arm (on that arm's loop thread: it must be quick).
     ``record_zero``: per arm, what records its zero at a power_off step (None: the
-    simulator)."""
+    simulator). ``on_idle(arm_id, slack)``: each arm's loop's idle hook (a live view
+    drawn in the slack before that arm's next cycle)."""
     from seqrun.service.session import ArmSession
 
     sessions = {a: ArmSession(arms[a], connections[a], project=tracks[a].project,
                               zero=(zeros or {}).get(a), status_hz=0, own_connection=False)
                 for a in tracks}
+    if on_idle is not None:
+        for arm_id, session in sessions.items():
+            session.add_idle_hook(functools.partial(on_idle, arm_id))
 
     def attach(arm_id: str, executor: Any) -> None:
         control = controls.get(arm_id)

@@ -149,7 +149,7 @@ class BagWriter:
             self._write(record)
 
     def _write(self, record: Any) -> None:
-        fast = _encoded(record, self.names)
+        fast = encoded_record(record, self.names)
         if fast is not None:
             self._put(fast[0], record.log_ns, fast[1])
             return
@@ -178,7 +178,7 @@ class BagWriter:
             pass
 
 
-def _encoded(record: Any, names: RosNames) -> tuple[str, bytes] | None:
+def encoded_record(record: Any, names: RosNames) -> tuple[str, bytes] | None:
     """The topic and CDR bytes of a record of every cycle (:mod:`seqrun.ros_messages.cdr`:
     the same bytes as rosbags' serializer, a fraction of its time); None for the others."""
     import math
@@ -200,7 +200,7 @@ def _encoded(record: Any, names: RosNames) -> tuple[str, bytes] | None:
     return None
 
 
-def _below_the_loop() -> None:
+def below_the_loop() -> None:
     """This thread under the control loop: a thread inherits the real-time scheduling of
     the thread that starts it (``seqrun run --rt-priority``: the loop's SCHED_FIFO), and
     the writer must never hold the CPU the loop wants; SCHED_RR priority 1 is the level of
@@ -250,7 +250,7 @@ class McapLog:
             self.dropped += 1
 
     def _run(self) -> None:
-        _below_the_loop()
+        below_the_loop()
         bag = self._bag
         assert bag is not None
         while True:

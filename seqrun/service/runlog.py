@@ -48,6 +48,7 @@ from seqrun.results import RunResult, StepResult
 from seqrun.runfolder.logfile import (GzipLineFile, LineFile, overwrite_in_place, read_lines,
                                       write_whole)
 from seqrun.runfolder.names import TRACE_NAME, TRACE_NAMES, trace_path
+from seqrun.service.time_base import TimeBase
 
 #: The running report.json is rewritten at most this often (seconds of real time).
 REPORT_INTERVAL_S = 1.0
@@ -137,11 +138,13 @@ class RunLog:
     :param clock: the run's clock; frame stamps (its readings) become wall-clock time.
     :param channel: the bus channel's name, written on every trace line.
     :param warn: told once, in one line, when writing the run folder fails.
+    :param time_base: the run clock's mapping to wall-clock time (default: taken now);
+        the arms of a campaign run share one.
     """
 
     def __init__(self, folder: Path, meta: dict[str, Any], *, clock=None,
                  channel: str | None = None, warn: Callable[[str], None] | None = None,
-                 mcap: Any = None) -> None:
+                 mcap: Any = None, time_base: TimeBase | None = None) -> None:
         self.folder = Path(folder)
         self.folder.mkdir(parents=True, exist_ok=True)
         self.meta = dict(meta)
@@ -149,14 +152,12 @@ class RunLog:
         self.errors: list[str] = []
         self._failed_files: set[str] = set()
         self.started_iso = _now_iso()
-        # One time base: a reading c of the run's clock happened at epoch0 + (c - clock0).
-        # At virtual time epoch0 is a whole second: the trace keeps microseconds, and with
-        # a whole-second origin every stamp rounds the same way in every run (the virtual
-        # times of two frames compare as exactly as the trace allows, run after run).
-        self._epoch0 = time.time()
-        if clock is not None and getattr(clock, "is_virtual", False):
-            self._epoch0 = float(int(self._epoch0))
-        self._clock0 = clock.now() if clock is not None else None
+        # One time base: a reading c of the run's clock happened at epoch0 + (c - clock0)
+        # (seqrun/service/time_base.py); ``time_base``: a campaign's, shared by its arms.
+        if time_base is None and clock is not None:
+            time_base = TimeBase.of(clock)
+        self._epoch0 = time_base.epoch_s if time_base is not None else time.time()
+        self._clock0 = time_base.clock_s if time_base is not None else None
         self.time_base: dict[str, Any] = {}
         self.channel = str(channel) if channel is not None else "can0"
         self._events = LineFile(self.folder / "events.jsonl", self._failed)

@@ -75,7 +75,7 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
                  requests: StopRequests | None = None,
                  warn: Callable[[str], None] | None = None,
                  driver: ArmDriver | None = None,
-                 events: EventHub | None = None) -> RunOutcome:
+                 events: EventHub | None = None, part: Any = None) -> RunOutcome:
     """Run ``loaded`` on ``connection``; writes the run folder when ``log_dir`` is given,
     with report.html drawn after the run (``html_report``).
 
@@ -84,7 +84,9 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
     is the inbox signal handlers post stop requests to; ``warn`` is told once when writing
     the run folder fails. The connection is not closed. Whichever way the run ends (even
     by an exception), the run folder is finished. ``driver`` (the arm session's) is used
-    and left open; otherwise the run's own driver is closed at the end.
+    and left open; otherwise the run's own driver is closed at the end. ``part``: one
+    arm's part of a campaign run (:class:`~seqrun.service.arm_part.ArmPart`: the run's
+    time base and its face of the run's one run.mcap).
     """
     own_driver = driver is None
     executor, driver = build_executor(loaded, arm, connection, speed=speed,
@@ -99,7 +101,7 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
     if log_dir is not None:
         from seqrun.service.runlog import RunLog  # python-can's log writer: only for a run folder
 
-        mcap = _mcap_log(log_dir, loaded, arm, warn)
+        mcap = part.mcap if part is not None else _mcap_log(log_dir, loaded, arm, warn)
         ros = {"ros": {"namespace": mcap.names.namespace,
                        "distribution": mcap.distribution}} if mcap is not None else {}
         log = RunLog(log_dir, {"sequence": loaded.name, "file": file or loaded.file,
@@ -110,7 +112,7 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
                                **(meta or {}), "inputs": _inputs(loaded, arm), **ros},
                      clock=connection.clock,
                      channel=getattr(connection.bus, "channel", None) or "can0", warn=warn,
-                     mcap=mcap)
+                     mcap=mcap, time_base=part.time_base if part is not None else None)
         driver.add_frame_listener(log.on_frame)
         executor.listeners.insert(0, log.on_event)
     if on_executor is not None:

@@ -121,14 +121,15 @@ class Runs:
                    warn: Callable[[str], None] | None = None, meta: dict | None = None,
                    html_report: bool = True, file: str | None = None,
                    bus_held: bool = False, cycle_hz: float | None = None,
-                   record_zero: Callable[[str], Any] | None = None):
+                   record_zero: Callable[[str], Any] | None = None, part: Any = None):
         """Run an already loaded and checked sequence on the caller's thread with the
         session's driver and event hub; returns the runner's outcome (result, report, run
         folder). This is how ``seqrun run`` runs (its prompts are the terminal's own); faces
         that answer questions through events use :meth:`run_sequence`. ``record_zero``:
         what a power_off step calls to record the pose the arm is switched off in;
         ``run_control``: the run's :class:`~seqrun.service.run_control.RunControl`
-        (``seqrun status|halt`` from another terminal), attached to the run's executor."""
+        (``seqrun status|halt`` from another terminal), attached to the run's executor;
+        ``part``: one arm's part of a campaign run (:mod:`seqrun.service.arm_part`)."""
         from seqrun.service.runner import run_sequence as run_with_log
         from seqrun.stop_requests import StopRequests
 
@@ -152,7 +153,7 @@ class Runs:
                                 confirm=confirm, before_step=before_step,
                                 on_executor=hook, confirm_clear_latched=confirm_clear_latched,
                                 meta=meta, html_report=html_report, requests=requests,
-                                warn=warn, driver=s.driver, events=s.events)
+                                warn=warn, driver=s.driver, events=s.events, part=part)
 
         if bus_held:  # run_sequence's worker: the activity is registered already
             return go()

@@ -1,0 +1,410 @@
+"""``<run>/run.mcap`` of a campaign run with several arms: every arm in one ROS 2 bag.
+
+Each arm's topics are namespaced by its arm id (docs/ros2.md, docs/two-arms.md):
+
+``/<id>/joint_states``, ``/<id>/joint_commands``, ``/<id>/planned``  as one arm's run.mcap
+``/<id>/events``   std_msgs/String: that arm's events.jsonl lines
+``/<id>/markers``  visualization_msgs/MarkerArray: its guards, obstacles, capsules
+``/tf``            every arm's links (frames ``<id>/base``, ``<id>/j1`` ... ``<id>/end_effector``)
+``/tf_static``     each arm's base in the facility frame (``facility`` -> ``<id>/base``,
+                   the campaign's ``base``), stamped at the run's start
+
+Every stamp is on the run's one time base (:mod:`seqrun.service.time_base`: each arm's
+event at ``t`` lies at its ``start_epoch_s + t``), and the messages are written in log-time
+order: each arm's records are queued and merged (a record is written once every arm still
+running has got as far, or once it is :data:`MERGE_LAG_S` older than the newest; a plan,
+known only when its move ends, is logged then, stamped at the move's start).
+
+:class:`ArmsMcapLog` writes it live: each arm's run log hands its events to that arm's
+face (:meth:`ArmsMcapLog.for_arm`, the same ``put``/``close`` as one arm's
+:class:`~seqrun.service.mcap_log.McapLog`), never waiting; one thread converts and writes.
+:func:`rebuild_arms_mcap` writes it afterwards from the arms' events.jsonl (``seqrun report
+<run> --mcap``).
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import json
+import queue
+import re
+import shutil
+import threading
+import time
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from seqrun.ros_messages import cdr
+from seqrun.ros_messages.from_events import EventTranslator
+from seqrun.ros_messages.names import EVENTS_TOPIC, MARKERS_TOPIC, TF_TOPIC, RosNames
+from seqrun.ros_messages.ros_fields import TF_MESSAGE, messages, topics
+from seqrun.ros_messages.values import Transform, quaternion_xyzw, stamp_ns
+from seqrun.service.mcap_log import (DEFAULT_DISTRIBUTION, MCAP_NAME, PARTIAL_NAME, QUEUE_SIZE,
+                                     MessageBuilder, below_the_loop, encoded_record, typestore_of)
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from seqrun.arm.description import ArmDescription
+
+#: The common frame of a campaign's arms (seqrun.toml ``[arms.ID] base``).
+FACILITY_FRAME = "facility"
+TF_STATIC_TOPIC = "/tf_static"
+#: A quiet arm (waiting, asking) holds the others' messages back at most this long (s).
+MERGE_LAG_S = 1.0
+#: The summary of a campaign run (seqrun/cli/run_arms.py writes it).
+ARMS_SUMMARY = "arms.json"
+
+_STOP = object()
+
+
+def arm_namespace(arm_id: str) -> str:
+    """An arm id as a ROS name token (``A`` -> ``A``; ``-`` is not one: ``_``)."""
+    return re.sub(r"[^A-Za-z0-9_]", "_", arm_id)
+
+
+def arm_topics(names: RosNames) -> dict[str, str]:
+    """One arm's topics in the combined bag (the per-arm names of its events and markers)
+    and their types; /tf is shared."""
+    own = {EVENTS_TOPIC: f"/{names.namespace}/events",
+           MARKERS_TOPIC: f"/{names.namespace}/markers"}
+    return {own.get(topic, topic): msgtype for topic, msgtype in topics(names).items()}
+
+
+class ArmsBag:
+    """The combined bag (rosbags' writer, MCAP storage); :meth:`write_event` per arm, in
+    each arm's order; :meth:`arm_ended` when an arm has no more; :meth:`close` ends it."""
+
+    def __init__(self, folder: Path, arms: Mapping[str, ArmDescription],
+                 bases: Mapping[str, np.ndarray], start_epoch_s: float, *,
+                 distribution: str = DEFAULT_DISTRIBUTION) -> None:
+        from rosbags.rosbag2 import StoragePlugin, Writer
+
+        self.folder = Path(folder)
+        self.store = typestore_of(distribution)
+        self.builder = MessageBuilder(self.store)
+        self.names = {a: RosNames.of(arm, arm_namespace(a)) for a, arm in arms.items()}
+        self.translators = {a: EventTranslator(arm, self.names[a]) for a, arm in arms.items()}
+        self._rename = {a: {EVENTS_TOPIC: f"/{n.namespace}/events",
+                            MARKERS_TOPIC: f"/{n.namespace}/markers"}
+                        for a, n in self.names.items()}
+        self.counts: dict[str, int] = {}
+        #: Records logged later than their arm's previous one would allow (kept in order).
+        self.reordered = 0
+        self.partial = self.folder / PARTIAL_NAME
+        if self.partial.exists():
+            shutil.rmtree(self.partial)
+        self.writer = Writer(self.partial, version=8 if distribution == "humble" else 9,
+                             storage_plugin=StoragePlugin.MCAP)
+        self.writer.open()
+        wanted = {TF_STATIC_TOPIC: TF_MESSAGE}
+        for names in self.names.values():
+            wanted.update(arm_topics(names))
+        self.connections = {topic: self.writer.add_connection(topic, msgtype,
+                                                              typestore=self.store)
+                            for topic, msgtype in wanted.items()}
+        # the merge: (log_ns, order, topic, data), each arm's last log time, who has ended
+        self._heap: list[tuple[int, int, str, bytes | memoryview]] = []
+        self._order = itertools.count()
+        self._last = {a: -1 for a in arms}
+        self._ended: set[str] = set()
+        self._started: set[str] = set()
+        self._written = stamp_ns(start_epoch_s)
+        self._lag_ns = stamp_ns(MERGE_LAG_S)
+        self._put(TF_STATIC_TOPIC, self._written, cdr.tf_message(self._written, [
+            _base_transform(self.names[a].base_frame, bases[a]) for a in arms]))
+
+    # -- feeding -------------------------------------------------------------------------
+    def write_event(self, arm_id: str, event: Mapping[str, Any]) -> None:
+        names = self.names[arm_id]
+        rename = self._rename[arm_id]
+        cap = None
+        if event.get("type") == "run_started" and arm_id not in self._started:
+            # The events before it (the zero reference) are timed from the executor's
+            # making, not from the run's t = 0: they are logged with run_started.
+            self._started.add(arm_id)
+            cap = stamp_ns(float(event["start_epoch_s"]) + float(event.get("t") or 0.0))
+        for record in self.translators[arm_id].translate(event):
+            log = record.log_ns if cap is None else min(record.log_ns, cap)
+            log = max(log, self._last[arm_id])   # a plan: logged when its move ended
+            self._last[arm_id] = log
+            fast = encoded_record(record, names)
+            if fast is not None:
+                self._queue(log, rename.get(fast[0], fast[0]), fast[1])
+                continue
+            for topic, msgtype, fields in messages(record, names):
+                self._queue(log, rename.get(topic, topic),
+                            self.store.serialize_cdr(self.builder.build(msgtype, fields),
+                                                     msgtype))
+        self._flush()
+
+    def arm_ended(self, arm_id: str) -> None:
+        """The arm's events are over: it holds the others back no longer."""
+        if arm_id in self._ended:
+            return
+        for record in self.translators[arm_id].finish():
+            log = max(record.log_ns, self._last[arm_id])
+            self._last[arm_id] = log
+            for topic, msgtype, fields in messages(record, self.names[arm_id]):
+                self._queue(log, self._rename[arm_id].get(topic, topic), self.store.serialize_cdr(
+                    self.builder.build(msgtype, fields), msgtype))
+        self._ended.add(arm_id)
+        self._flush()
+
+    def _queue(self, log_ns: int, topic: str, data: bytes | memoryview) -> None:
+        heapq.heappush(self._heap, (log_ns, next(self._order), topic, data))
+
+    def _flush(self, everything: bool = False) -> None:
+        running = [last for a, last in self._last.items() if a not in self._ended]
+        newest = max(self._last.values())
+        until = max(min(running) if running else newest, newest - self._lag_ns)
+        while self._heap and (everything or self._heap[0][0] <= until):
+            log_ns, _, topic, data = heapq.heappop(self._heap)
+            if log_ns < self._written:   # an arm later than the merge allowed for
+                self.reordered += 1
+                log_ns = self._written
+            self._put(topic, log_ns, data)
+
+    def _put(self, topic: str, log_ns: int, data: bytes | memoryview) -> None:
+        self.writer.write(self.connections[topic], log_ns, data)
+        self._written = log_ns
+        self.counts[topic] = self.counts.get(topic, 0) + 1
+
+    # -- the end ---------------------------------------------------------------------------
+    def close(self) -> Path:
+        """Write what is held, end the bag, put its MCAP file at ``folder/run.mcap``."""
+        for arm_id in list(self.names):
+            self.arm_ended(arm_id)
+        self._flush(everything=True)
+        self.writer.close()
+        target = self.folder / MCAP_NAME
+        (self.partial / f"{self.partial.name}.mcap").replace(target)
+        shutil.rmtree(self.partial, ignore_errors=True)
+        return target
+
+    def abort(self) -> None:
+        try:
+            self.writer.abort()
+        except Exception:  # noqa: BLE001 - already failing: keep what is on disk
+            pass
+
+
+def _base_transform(child: str, base: np.ndarray) -> Transform:
+    """The arm's base (4x4, mm) in the facility frame, as a tf transform (m)."""
+    return Transform(FACILITY_FRAME, child,
+                     (float(base[0, 3]) / 1000.0, float(base[1, 3]) / 1000.0,
+                      float(base[2, 3]) / 1000.0), quaternion_xyzw(base[:3, :3]))
+
+
+class ArmsMcapLog:
+    """``<run>/run.mcap`` of a campaign run, written live by a thread of its own from what
+    every arm's run log hands its face (:meth:`for_arm`); never waits, never stops a run
+    (a full queue drops and counts, a failing disk stops the file, each said once)."""
+
+    def __init__(self, folder: Path, arms: Mapping[str, ArmDescription],
+                 bases: Mapping[str, np.ndarray], start_epoch_s: float, *,
+                 distribution: str = DEFAULT_DISTRIBUTION,
+                 on_error: Callable[[str], None] | None = None,
+                 queue_size: int = QUEUE_SIZE) -> None:
+        self.folder = Path(folder)
+        self.distribution = distribution
+        self.on_error = on_error
+        self.error: str | None = None
+        self.path: Path | None = None
+        self._queue: queue.Queue[Any] = queue.Queue(maxsize=queue_size)
+        self._faces = {a: _ArmFace(self, a, RosNames.of(arm, arm_namespace(a)))
+                       for a, arm in arms.items()}
+        self._bag: ArmsBag | None = None
+        try:
+            self._bag = ArmsBag(self.folder, arms, bases, start_epoch_s,
+                                distribution=distribution)
+        except Exception as exc:  # noqa: BLE001 - run.mcap must never stop the run
+            self._fail(exc)
+        self._closed = False
+        self._thread = threading.Thread(target=self._run, name="seqrun-arms-mcap",
+                                        daemon=True)
+        if self._bag is not None:
+            self._thread.start()
+
+    def for_arm(self, arm_id: str) -> _ArmFace:
+        return self._faces[arm_id]
+
+    @property
+    def dropped(self) -> int:
+        return sum(face.dropped for face in self._faces.values())
+
+    @property
+    def reordered(self) -> int:
+        return self._bag.reordered if self._bag is not None else 0
+
+    @property
+    def counts(self) -> dict[str, int]:
+        return dict(self._bag.counts) if self._bag is not None else {}
+
+    def _put(self, face: _ArmFace, item: Any) -> None:
+        if self._bag is None or self._closed:
+            return
+        try:
+            self._queue.put_nowait((face.arm_id, item))
+        except queue.Full:
+            face.dropped += 1
+
+    def _run(self) -> None:
+        below_the_loop()
+        bag = self._bag
+        assert bag is not None
+        while True:
+            item = self._queue.get()
+            if item is _STOP:
+                break
+            if self.error is not None:
+                continue
+            arm_id, event = item
+            try:
+                if event is _STOP:
+                    bag.arm_ended(arm_id)
+                else:
+                    bag.write_event(arm_id, event)
+            except Exception as exc:  # noqa: BLE001 - a disk error or a bug: stop the file
+                self._fail(exc)
+                bag.abort()
+            time.sleep(0)   # hand the interpreter lock over: a control loop may wait for it
+        if self.error is None:
+            try:
+                self.path = bag.close()
+            except Exception as exc:  # noqa: BLE001
+                self._fail(exc)
+
+    def _fail(self, exc: BaseException) -> None:
+        if self.error is not None:
+            return
+        why = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
+        self.error = f"writing {self.folder / MCAP_NAME} failed ({why}); that file stops here"
+        if self.on_error is not None:
+            try:
+                self.on_error(self.error)
+            except Exception:  # noqa: BLE001
+                pass
+
+    def close(self, timeout: float = 60.0) -> Path | None:
+        """Write what is queued, end the file (after every arm's run has ended):
+        ``run.mcap``'s path, or None (failed)."""
+        if self._closed:
+            return self.path
+        self._closed = True
+        if self._bag is None:
+            return None
+        self._queue.put(_STOP)
+        self._thread.join(timeout)
+        if self._thread.is_alive():
+            self._fail(TimeoutError(f"still writing after {timeout:g} s"))
+        return self.path
+
+
+class _ArmFace:
+    """One arm's side of :class:`ArmsMcapLog`, as its run log sees a run.mcap writer:
+    ``put`` each event, ``close`` when the arm's run ends (the file stays open for the
+    others), ``dropped`` and ``error`` for the arm's report."""
+
+    def __init__(self, log: ArmsMcapLog, arm_id: str, names: RosNames) -> None:
+        self.log, self.arm_id, self.names = log, arm_id, names
+        self.dropped = 0
+        self._ended = False
+
+    @property
+    def distribution(self) -> str:
+        return self.log.distribution
+
+    @property
+    def error(self) -> str | None:
+        return self.log.error
+
+    def put(self, event: Mapping[str, Any]) -> None:
+        if not self._ended:
+            self.log._put(self, event)
+
+    def close(self) -> None:
+        if not self._ended:
+            self._ended = True
+            self.log._put(self, _STOP)
+
+
+# -- afterwards: from the arms' events.jsonl --------------------------------------------------
+def rebuild_arms_mcap(folder: Path) -> tuple[Path, dict[str, int]]:
+    """``seqrun report <run> --mcap`` of a campaign run (``arms.json`` at its top): write
+    ``<run>/run.mcap`` anew from every arm's ``<run>/<id>/events.jsonl``, merged on the
+    run's one time base. Raises :class:`seqrun.errors.UserInputError` for a folder that
+    cannot give one."""
+    from seqrun.arm.between_arms import base_transform
+    from seqrun.arm.description import ArmDescription
+    from seqrun.errors import UserInputError
+
+    folder = Path(folder)
+    try:
+        summary = json.loads((folder / ARMS_SUMMARY).read_text(encoding="utf-8"))
+        arm_entries = dict(summary["arms"])
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise UserInputError(f"{folder / ARMS_SUMMARY}: not a campaign run's summary "
+                             f"({exc})") from None
+    arms: dict[str, ArmDescription] = {}
+    bases: dict[str, np.ndarray] = {}
+    streams: list[list[tuple[float, str, dict]]] = []
+    starts: list[float] = []
+    for arm_id, entry in arm_entries.items():
+        part = folder / str((entry or {}).get("part") or arm_id)
+        events = _events(part / "events.jsonl")
+        started = next((e for e in events if e.get("type") == "run_started"), None)
+        if started is None or "start_epoch_s" not in started:
+            raise UserInputError(f"{part / 'events.jsonl'}: no run_started with its time "
+                                 "base; nothing to write run.mcap from")
+        try:
+            arms[arm_id] = ArmDescription.model_validate(started.get("arm"))
+        except ValueError:
+            raise UserInputError(f"{part / 'events.jsonl'}: the run did not record its "
+                                 "arm") from None
+        base = (entry or {}).get("base") or {}
+        bases[arm_id] = base_transform(base.get("position_mm") or (0, 0, 0),
+                                       base.get("rpy_deg") or (0, 0, 0))
+        epoch0 = float(started["start_epoch_s"])    # the wall-clock time of the arm's t = 0
+        starts.append(float(started["start_epoch_s"]))
+        stream, at = [], -float("inf")
+        for event in events:   # each arm in its own order: a key that never goes back
+            at = max(at, epoch0 + float(event.get("t") or 0.0))
+            stream.append((at, arm_id, event))
+        streams.append(stream)
+    time_base = summary.get("time_base") or {}
+    start = float(time_base.get("epoch_s", min(starts)))
+    distribution = (summary.get("ros") or {}).get("distribution") or DEFAULT_DISTRIBUTION
+    bag = ArmsBag(folder, arms, bases, min(start, *starts), distribution=distribution)
+    try:
+        for _, arm_id, event in heapq.merge(*streams, key=lambda item: item[0]):
+            bag.write_event(arm_id, event)
+    except BaseException:
+        bag.abort()
+        shutil.rmtree(bag.partial, ignore_errors=True)
+        raise
+    return bag.close(), dict(bag.counts)
+
+
+def is_arms_run(folder: Path) -> bool:
+    """Whether ``folder`` is a campaign run with several arms (``arms.json`` at its top)."""
+    return (Path(folder) / ARMS_SUMMARY).is_file()
+
+
+def _events(path: Path) -> list[dict]:
+    from seqrun.runfolder.logfile import read_lines
+
+    if not path.is_file():
+        return []
+    out = []
+    for raw in read_lines(path):
+        try:
+            event = json.loads(raw)
+        except ValueError:
+            continue
+        if isinstance(event, dict):
+            out.append(event)
+    return out
+
