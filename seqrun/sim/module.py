@@ -117,6 +117,7 @@ _MOTION_MASK = int(_MOTION_BITS)
 _MOTION, _RAMP_END = int(_F.MOTION), int(_F.RAMP_END)
 _INPROGRESS, _FULLBUFFER = int(_F.INPROGRESS), int(_F.FULLBUFFER)
 _ERROR_OR_HALTED, _HOME_OK = int(_F.ERROR | _F.HALTED), int(_F.HOME_OK)
+_SWR = int(_F.SWR)
 _SHORT_STATES = [ShortState(i) for i in range(256)]
 _FAULTS, _NOT_OK = int(StateFlag.FAULTS), int(ShortState.NOT_OK)
 _DISABLE_ACK, _WATCHDOG_ENABLE = int(ConfigFlag.DISABLE_ACK), int(ConfigFlag.WATCHDOG_ENABLE)
@@ -1119,7 +1120,11 @@ class SimModule:
                                    [(seconds, 0.0)], target))
 
     def _start(self, profile: _Profile | None, rest: float | None = None) -> None:
-        self._flags &= ~_F.SWR  # leaves the home switch (set again by homing's end)
+        # Leaves the home switch (set again by homing's end). (Tested on a plain int
+        # first: IntFlag arithmetic is several Python-level calls, and this runs for
+        # every motion command; with SWR clear the flags stay what they are.)
+        if int(self._flags) & _SWR:
+            self._flags &= ~_F.SWR
         if profile is not None and profile.end <= self._t:  # nothing to do: already there
             rest, profile = profile.sample(profile.end)[0], None
         self._profile = profile
