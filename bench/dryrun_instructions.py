@@ -15,7 +15,9 @@ operator pays it (the dry run's modules' imports included).
 main``). ``--digest``: no valgrind; prints a SHA-256 of every frame delivered on the dry
 run's wire (exact delivery time, sender, id, data) and of the dry run's report (wall time
 left out), to check that a change leaves the dry run bit-identical (compare with
-``--compare``).
+``--compare``): 29 dry runs (:data:`DIGEST_CASES`: both sequences, every fault kind,
+ramp and step mode), one line each and one digest over them all; with ``--compare`` it
+says whether the two checkouts' digests are equal (exit 1 when not).
 
 Run: ``.venv/bin/python bench/dryrun_instructions.py [--compare DIR] [--digest]
 [--sequence FILE]``
@@ -44,6 +46,9 @@ def inner(sequence: str, dry_runs: int, digest: bool) -> None:
     assert check.valid, check.errors
     import seqrun.service.dryrun as dryrun
 
+    if digest and dry_runs:
+        digest_matrix(sequence)
+        return
     opened = []
     if dry_runs:
         real_open = dryrun.open_connection
@@ -76,6 +81,68 @@ def inner(sequence: str, dry_runs: int, digest: bool) -> None:
         print(json.dumps(line))
 
 
+#: The digest's cases: (sequence, command mode, fault spec). Both shipped sequences under
+#: every fault kind (random acknowledge losses at three rates) in the arm's mode (ramp),
+#: and in step mode without and with a fault: 29 dry runs.
+DIGEST_FAULTS = (None, "4:tow_error@3", "4:halt@3", "4:no_ack@3", "4:stuck@3", "4:missing@3",
+                 "4:drop_acks=0.5@0", "7:drop_acks=0.01@0", "7:drop_acks=0.003@0",
+                 "all:halt@10")
+DIGEST_CASES = ([(name, None, spec) for name in ("opsafe", "totem") for spec in DIGEST_FAULTS]
+                + [(name, "step", spec) for name in ("opsafe", "totem")
+                   for spec in (None, "4:tow_error@3", "4:no_ack@3", "7:drop_acks=0.01@0")]
+                + [("opsafe", "step", "4:stuck@3")])
+
+
+def digest_matrix(sequence: str) -> None:
+    """Digests of every case of :data:`DIGEST_CASES` (``sequence`` names the folder of the
+    shipped sequences) and one over them all: what a change must leave equal."""
+    from seqrun.arm.description import load_arm
+    from seqrun.arm.poses import pose_joints_deg
+    from seqrun.defaults import START_POSE
+    from seqrun.sequence.loader import load_sequence
+    from seqrun.sim.faults import parse_fault_spec
+    import seqrun.service.dryrun as dryrun
+
+    folder = Path(sequence).parent
+    opened = []
+    real_open = dryrun.open_connection
+
+    def capture(**kwargs):
+        connection = real_open(**kwargs)
+        network = connection.bus.network
+        opened.append((network, network.attach(name="digest-sniffer")))
+        return connection
+
+    dryrun.open_connection = capture
+    everything = hashlib.sha256()
+    for name, mode, spec in DIGEST_CASES:
+        loaded = load_sequence(folder / f"{name}.yaml")
+        arm = load_arm(loaded.arm_path)
+        start = pose_joints_deg(START_POSE, loaded.pose_path or loaded.poses_dir)
+        run = dryrun.dry_run(loaded, arm, start, command_mode=mode,
+                             faults=[parse_fault_spec(spec)] if spec else [])
+        network, sniffer = opened[-1]
+        wire = hashlib.sha256()
+        while sniffer._inbox:
+            f = sniffer._inbox.popleft()
+            wire.update(f"{f.timestamp!r} {f.sender} {f.can_id:03X} {f.data.hex()}\n"
+                        .encode())
+        report = run.as_dict()
+        del report["wall_s"], report["speedup"]
+        line = {"case": f"{name} {mode or 'ramp'} {spec or '-'}",
+                "frames": network.frames_transmitted, "simulated_s": run.simulated_s,
+                "passed": run.passed, "wire_sha256": wire.hexdigest()[:16],
+                "result_sha256": hashlib.sha256(json.dumps(report, sort_keys=True,
+                                                           default=repr).encode()
+                                                ).hexdigest()[:16],
+                "events_sha256": hashlib.sha256(json.dumps(run.events, sort_keys=True,
+                                                           default=repr).encode()
+                                                ).hexdigest()[:16]}
+        everything.update(json.dumps(line, sort_keys=True).encode())
+        print(json.dumps(line), flush=True)
+    print(json.dumps({"cases": len(DIGEST_CASES), "all_sha256": everything.hexdigest()}))
+
+
 def environment(tree: Path) -> dict[str, str]:
     # The normal bytecode cache, as an installed seqrun has (see bench_startup.py).
     env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
@@ -99,7 +166,7 @@ def cli_instructions(tree: Path, sequence: str, static: bool) -> int | None:
 
 
 def run_inner(tree: Path, sequence: str, dry_runs: int, *, digest: bool = False,
-              callgrind: bool = False) -> tuple[int | None, dict]:
+              callgrind: bool = False, echo: bool = False) -> tuple[int | None, dict]:
     args = [sys.executable, str(Path(__file__).resolve()), "--inner", str(dry_runs),
             "--sequence", sequence] + (["--digest"] if digest else [])
     if callgrind:
@@ -110,6 +177,9 @@ def run_inner(tree: Path, sequence: str, dry_runs: int, *, digest: bool = False,
         raise SystemExit(f"{tree}: exit {proc.returncode}\n{proc.stderr[-3000:]}")
     match = re.search(r"Collected : (\d+)", proc.stderr)
     lines = [json.loads(x) for x in proc.stdout.splitlines() if x.startswith("{")]
+    if echo:
+        for line in lines[:-1]:
+            print(f"  {json.dumps(line)}")
     return (int(match.group(1)) if match else None), (lines[-1] if lines else {})
 
 
@@ -128,12 +198,15 @@ def main() -> int:
     trees = {"this": ROOT}
     if args.compare is not None:
         trees["compare"] = args.compare.resolve()
+    digests: dict[str, str | None] = {}
     for label, tree in trees.items():
-        for _ in range(2):  # first: writes the bytecode cache
-            _, info = run_inner(tree, args.sequence, 1, digest=args.digest)
         if args.digest:
+            _, info = run_inner(tree, args.sequence, 1, digest=True, echo=True)
             print(f"{label:8s} {tree}: {json.dumps(info)}")
+            digests[label] = info.get("all_sha256")
             continue
+        for _ in range(2):  # first: writes the bytecode cache
+            _, info = run_inner(tree, args.sequence, 1)
         static, _ = run_inner(tree, args.sequence, 0, callgrind=True)
         whole, info = run_inner(tree, args.sequence, 1, callgrind=True)
         if static is None or whole is None:
@@ -148,6 +221,11 @@ def main() -> int:
         if cli_static is not None and cli_whole is not None:
             print(f"{'':8s} seqrun validate --static {cli_static / 1e6:,.0f} M, seqrun validate "
                   f"{cli_whole / 1e6:,.0f} M: increment {(cli_whole - cli_static) / 1e6:,.1f} M")
+    if len(digests) == 2:
+        same = len(set(digests.values())) == 1
+        print("digests " + ("EQUAL: the dry runs are bit-identical" if same
+                            else "DIFFER: the dry runs are not bit-identical"))
+        return 0 if same else 1
     return 0
 
 

@@ -12,20 +12,32 @@ codec's decoded frames before every run, as a one-shot ``seqrun validate`` proce
 (the warm runs otherwise find them filled by the warm-up run, since the runs are
 deterministic).
 
+``--compare DIR`` measures this checkout against another (e.g. ``git worktree add
+/tmp/dr-main main``) side by side: each round runs ``--runs`` dry runs of each sequence
+given (default opsafe and totem) in a fresh process per checkout, the checkouts
+alternating, the way ``seqrun validate`` runs them (:func:`seqrun.service.dryrun.dry_run`:
+the simulator's python-can-free port); it prints the median thread CPU time and the
+speed (simulated s per CPU s and per wall s) of each and their ratio.
+
 Run: ``.venv/bin/python bench/perf_dryrun.py [--runs 15] [--cold] [--profile] [--sequence FILE]
-[--cycle-hz HZ] [--compare-hz HZ]``
+[--cycle-hz HZ] [--compare-hz HZ]``, or ``[--compare DIR] [--rounds 5] [--runs 3]
+[--sequence FILE ...]``
 """
 
 from __future__ import annotations
 
 import argparse
 import cProfile
+import json
 import os
 import pstats
 import statistics
+import subprocess
 import sys
 import time
 from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -63,18 +75,84 @@ def one(loaded, arm, i: int, cold: bool = False, cycle_hz: float | None = None):
     return res, w
 
 
+#: One process's share of ``--compare``: warm-up, then timed dry runs as validate runs them.
+_CHILD = r"""
+import json, os, sys, time
+sys.path.insert(0, os.getcwd())
+from pathlib import Path
+from seqrun.sequence.checks import static_check
+import seqrun.service.dryrun as dryrun
+check = static_check(Path(sys.argv[1]))
+dryrun.dry_run(check.loaded, check.arm, check.start_deg)
+cpu, wall = [], []
+for _ in range(int(sys.argv[2])):
+    w, c = time.perf_counter(), time.thread_time()
+    run = dryrun.dry_run(check.loaded, check.arm, check.start_deg)
+    cpu.append(time.thread_time() - c)
+    wall.append(time.perf_counter() - w)
+    assert run.passed, run.result.message
+print(json.dumps({"cpu": cpu, "wall": wall, "simulated_s": run.simulated_s}))
+"""
+
+
+def compare(other: Path, sequences: list[str], rounds: int, runs: int) -> int:
+    trees = {"this": ROOT, "compare": other.resolve()}
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    env.setdefault("OPENBLAS_NUM_THREADS", "1")
+    figures: dict[tuple[str, str], dict[str, list[float]]] = {}
+    simulated: dict[str, float] = {}
+    loads = [os.getloadavg()[0]]
+    for _ in range(rounds):
+        for sequence in sequences:
+            for label, tree in trees.items():
+                proc = subprocess.run([sys.executable, "-c", _CHILD, sequence, str(runs)],
+                                      cwd=tree, env={**env, "PYTHONPATH": str(tree)},
+                                      capture_output=True, text=True)
+                if proc.returncode != 0:
+                    raise SystemExit(f"{tree}: exit {proc.returncode}\n{proc.stderr[-2000:]}")
+                got = json.loads(proc.stdout.strip().splitlines()[-1])
+                entry = figures.setdefault((sequence, label), {"cpu": [], "wall": []})
+                entry["cpu"] += got["cpu"]
+                entry["wall"] += got["wall"]
+                simulated[sequence] = got["simulated_s"]
+        loads.append(os.getloadavg()[0])
+    print(f"{rounds} rounds x {runs} dry runs per checkout and sequence, 1-minute load "
+          f"{min(loads):.1f}-{max(loads):.1f}:")
+    for sequence in sequences:
+        cpus = {}
+        for label, tree in trees.items():
+            entry = figures[sequence, label]
+            cpu, wall = statistics.median(entry["cpu"]), statistics.median(entry["wall"])
+            cpus[label] = cpu
+            print(f"  {sequence} {label:8s} {tree}: median CPU {cpu * 1e3:.1f} ms "
+                  f"({simulated[sequence] / cpu:.1f}x real time), wall {wall * 1e3:.1f} ms "
+                  f"({simulated[sequence] / wall:.1f}x)")
+        print(f"  {sequence}: this / compare CPU time {cpus['this'] / cpus['compare']:.3f}")
+    return 0
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=15)
     parser.add_argument("--profile", action="store_true", help="cProfile top 25 by tottime")
     parser.add_argument("--cold", action="store_true",
                         help="empty the frame-length cache before each run")
-    parser.add_argument("--sequence", default="sequences/opsafe.yaml")
+    parser.add_argument("--sequence", action="append", default=None,
+                        help="sequence file (with --compare: repeatable; default opsafe and "
+                        "totem)")
+    parser.add_argument("--compare", type=Path, metavar="DIR",
+                        help="another checkout, measured side by side (see the docstring)")
+    parser.add_argument("--rounds", type=int, default=5, help="with --compare")
     parser.add_argument("--cycle-hz", type=float, default=None,
                         help="loop rate (default: the arm file's control.cycle_hz)")
     parser.add_argument("--compare-hz", type=float, default=None,
                         help="also this rate, alternating run by run with --cycle-hz's")
     args = parser.parse_args()
+    if args.compare is not None:
+        return compare(args.compare, args.sequence or ["sequences/opsafe.yaml",
+                                                       "sequences/totem.yaml"],
+                       args.rounds, 3 if args.runs == 15 else args.runs)
+    args.sequence = (args.sequence or ["sequences/opsafe.yaml"])[0]
 
     loaded = load_sequence(args.sequence)
     arm = load_arm(loaded.arm_path)

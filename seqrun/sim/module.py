@@ -117,6 +117,7 @@ _MOTION_MASK = int(_MOTION_BITS)
 _MOTION, _RAMP_END = int(_F.MOTION), int(_F.RAMP_END)
 _INPROGRESS, _FULLBUFFER = int(_F.INPROGRESS), int(_F.FULLBUFFER)
 _ERROR_OR_HALTED, _HOME_OK = int(_F.ERROR | _F.HALTED), int(_F.HOME_OK)
+_SWR = int(_F.SWR)
 _SHORT_STATES = [ShortState(i) for i in range(256)]
 _FAULTS, _NOT_OK = int(StateFlag.FAULTS), int(ShortState.NOT_OK)
 _DISABLE_ACK, _WATCHDOG_ENABLE = int(ConfigFlag.DISABLE_ACK), int(ConfigFlag.WATCHDOG_ENABLE)
@@ -488,6 +489,9 @@ _P_ACT_VEL = ParamId.ACT_VEL
 _P_CONFIG = ParamId.CONFIG
 _P_CUBE_STATE = ParamId.CUBE_STATE
 _P_CUR = ParamId.CUR
+_P_DEF_MAX_ACC = ParamId.DEF_MAX_ACC
+_P_DEF_MAX_CUR = ParamId.DEF_MAX_CUR
+_P_DEF_MAX_VEL = ParamId.DEF_MAX_VEL
 _P_DELTA_POS = ParamId.DELTA_POS
 _P_DIO_SETUP = ParamId.DIO_SETUP
 _P_FPOS_STATE_DIO = ParamId.FPOS_STATE_DIO
@@ -945,11 +949,12 @@ class SimModule:
         """Amperes a motion at ``acceleration`` (rad/s^2) and ``velocity`` (rad/s) needs
         (the motor model, module docstring); signed like the acceleration, else the
         velocity."""
-        rated = float(self._params[ParamId.DEF_MAX_CUR])
+        params = self._params
+        rated = float(params[_P_DEF_MAX_CUR])
         need = rated * (CURRENT_PER_ACCELERATION * abs(acceleration)
-                        / (float(self._params[ParamId.DEF_MAX_ACC]) or 1.0)
+                        / (float(params[_P_DEF_MAX_ACC]) or 1.0)
                         + CURRENT_PER_VELOCITY * abs(velocity)
-                        / (float(self._params[ParamId.DEF_MAX_VEL]) or 1.0))
+                        / (float(params[_P_DEF_MAX_VEL]) or 1.0))
         return math.copysign(need, acceleration if acceleration else velocity)
 
     def _current_scale(self, vmax: float, amax: float) -> float:
@@ -1115,7 +1120,11 @@ class SimModule:
                                    [(seconds, 0.0)], target))
 
     def _start(self, profile: _Profile | None, rest: float | None = None) -> None:
-        self._flags &= ~_F.SWR  # leaves the home switch (set again by homing's end)
+        # Leaves the home switch (set again by homing's end). (Tested on a plain int
+        # first: IntFlag arithmetic is several Python-level calls, and this runs for
+        # every motion command; with SWR clear the flags stay what they are.)
+        if int(self._flags) & _SWR:
+            self._flags &= ~_F.SWR
         if profile is not None and profile.end <= self._t:  # nothing to do: already there
             rest, profile = profile.sample(profile.end)[0], None
         self._profile = profile
@@ -1123,10 +1132,13 @@ class SimModule:
             self._rest = rest
 
 
+_F32_PACK, _F32_UNPACK = struct.Struct("<f").pack, struct.Struct("<f").unpack
+
+
 def _f32(value: float) -> float:
     """Round to float32 like the module's arithmetic (and the wire)."""
     try:
-        return struct.unpack("<f", struct.pack("<f", value))[0]
+        return _F32_UNPACK(_F32_PACK(value))[0]
     except OverflowError:
         return math.copysign(math.inf, value)
 

@@ -36,6 +36,8 @@ __all__ = ["SimMessage", "SimPort", "SimSetupError", "get_network"]
 
 #: Builds a WireFrame without the named tuple's Python-level ``__new__`` (once per frame).
 _new_tuple = tuple.__new__
+#: Makes a SimMessage without calling its ``__init__`` (SimPort.recv sets every slot).
+_new_object = object.__new__
 
 #: channel name -> [network, number of open ports on it]
 _channels: dict[str, list[Any]] = {}
@@ -256,14 +258,41 @@ class SimPort:
         if frame is None:
             return None
         can_id, data, extended, remote, dlc, timestamp, sender = frame
-        return SimMessage(timestamp, can_id, extended, remote, False, self.channel,
-                          dlc if remote and dlc is not None else len(data), data, False,
-                          sender != self.endpoint.name)
+        # SimMessage(timestamp, can_id, extended, remote, False, self.channel, <dlc>, data,
+        # False, <is_rx>), without the call of its __init__ (once per frame received)
+        msg = _new_object(SimMessage)
+        msg.timestamp = timestamp
+        msg.arbitration_id = can_id
+        msg.is_extended_id = extended
+        msg.is_remote_frame = remote
+        msg.is_error_frame = False
+        msg.channel = self.channel
+        msg.data = bytearray(data)
+        msg.dlc = dlc if remote and dlc is not None else len(data)
+        msg.is_fd = False
+        msg.is_rx = sender != self.endpoint.name
+        msg.bitrate_switch = False
+        msg.error_state_indicator = False
+        return msg
 
     def send(self, msg: Any, timeout: float | None = None) -> None:
         """Queue ``msg`` for the simulated wire (errors as :meth:`wire_frame` and
         :meth:`send_frame`)."""
-        self.send_frame(self.wire_frame(msg), timeout)
+        if msg.is_fd or msg.is_error_frame or msg.is_remote_frame:
+            self.send_frame(self.wire_frame(msg), timeout)
+            return
+        # wire_frame and send_frame for a data frame, without their calls (every request)
+        data = bytes(msg.data or b"")
+        if msg.dlc != len(data):
+            raise ValueError(f"dlc {msg.dlc} does not match {len(data)} data bytes")
+        frame = _new_tuple(WireFrame, (msg.arbitration_id, data, msg.is_extended_id, False,
+                                       None, 0.0, self.endpoint.name))
+        try:
+            self.network._send(self.endpoint, frame, timeout)
+        except NetworkClosedError:
+            raise
+        except ValueError as exc:
+            raise ValueError(f"seqrun-sim: {exc}") from None
 
     def shutdown(self) -> None:
         """Detach from the wire; the last port of a channel takes the arm with it. Safe to

@@ -70,6 +70,7 @@ class _NotOkAcknowledge(Exception):
 
 
 _FPOS_STATE_DIO, _CUBE_STATE = ParamId.FPOS_STATE_DIO, ParamId.CUBE_STATE
+_ACT_POS = ParamId.ACT_POS
 _NOT_OK = int(ShortState.NOT_OK)
 
 
@@ -136,6 +137,8 @@ class PowerCubeDriver:
         self._alive: Callable[[float], bool] | None = None
         #: The watchdog was armed for a velocity motion (the arm file leaves it off).
         self._velocity_watchdog = False
+        #: module -> its FPosStateDio read (see _reads)
+        self._fpos_reads: dict[int, GetParam] = {}
 
     # ------------------------------------------------------------------ the family
     @classmethod
@@ -215,7 +218,10 @@ class PowerCubeDriver:
         """How to read a module this cycle: FPosStateDio, or — while that request is in
         quarantine after a lost acknowledge — ActPos and CubeState, which tell the same and
         need not wait for the quarantine."""
-        primary = GetParam(module, ParamId.FPOS_STATE_DIO)
+        # (the same immutable request every cycle: made once per module)
+        primary = self._fpos_reads.get(module)
+        if primary is None:
+            primary = self._fpos_reads[module] = GetParam(module, _FPOS_STATE_DIO)
         if not self.client.is_tainted(primary):
             return [primary]
         return [GetParam(module, ParamId.ACT_POS), GetParam(module, ParamId.CUBE_STATE)]
@@ -319,19 +325,20 @@ class PowerCubeDriver:
         states: dict[int, ShortState] = {}
         # when each position was answered (the modules measure as they answer)
         answered: dict[int, float | None] = {}
+        # (module constants for the enum members: this runs for every acknowledge)
         for ack, at in zip(acks, times + [None] * (len(acks) - len(times))):
             if isinstance(ack, MotionExtAck):
                 positions[ack.module], states[ack.module] = ack.position, ack.state
                 answered[ack.module] = at
             elif isinstance(ack, GetParamAck):
-                if ack.param == ParamId.FPOS_STATE_DIO:
+                if ack.param == _FPOS_STATE_DIO:
                     positions[ack.module] = ack.value.position
                     states[ack.module] = ack.value.state
                     answered[ack.module] = at
-                elif ack.param == ParamId.ACT_POS:
+                elif ack.param == _ACT_POS:
                     positions[ack.module] = float(ack.value)
                     answered[ack.module] = at
-                elif ack.param == ParamId.CUBE_STATE:
+                elif ack.param == _CUBE_STATE:
                     states[ack.module] = short_state(StateFlag(ack.value))
         for module in self._absent:
             positions[module] = self._absent_module_rad(module)

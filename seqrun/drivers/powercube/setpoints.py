@@ -32,6 +32,10 @@ from seqrun.powercube.codec import Request, SetMotion, SetParam
 from seqrun.powercube.protocol import MotionMode, ParamId
 
 
+#: Enum members as module constants (looked up for every joint of every cycle).
+_TARGET_VEL, _FRAMP_ACK = ParamId.TARGET_VEL, MotionMode.FRAMP_ACK
+
+
 class SetpointLaw(Protocol):
     def start(self, moving: list[int], limits: Limits) -> list[Request]:
         """Requests sent once when a move (or a stop) starts."""
@@ -122,10 +126,9 @@ class RampSetpoints(_Law):
                       self.arm.joints[i].max_velocity_deg_s)
             module = self.modules[i]
             if self._sent_target_vel.get(module) != cap:
-                requests.append(SetParam(module, ParamId.TARGET_VEL, math.radians(cap)))
+                requests.append(SetParam(module, _TARGET_VEL, math.radians(cap)))
                 self._sent_target_vel[module] = cap
-            requests.append(SetMotion(module, MotionMode.FRAMP_ACK,
-                                      float(ahead[i])))
+            requests.append(SetMotion(module, _FRAMP_ACK, float(ahead[i])))
         return requests
 
 
