@@ -240,7 +240,9 @@ def _serve_arms(arm_ids: list[str] | None, *, project_dir: Path | None, sim: boo
         def started() -> None:
             for arm_id, connection in connections.items():
                 bus = "SIMULATOR" if connection.is_simulator else connection.description
-                typer.echo(f"arm {arm_id}: {bus}")
+                where = ", ".join(f"{k}={v}" for k, v in
+                                  contexts[arm_id].bus.kwargs.items())  # (host, port, ...)
+                typer.echo(f"arm {arm_id}: {bus}" + (f" ({where})" if where else ""))
             typer.echo(f"seqrun console of arms {', '.join(contexts)}: {url}")
             typer.echo(f"token (every request but STOP needs it; the URL carries it): {token}")
             typer.echo("STOP halts every arm. Ctrl-C ends the console (any motion is "
