@@ -268,8 +268,10 @@ def create_arms_app(sessions: Any, catalog: Catalog, contexts: dict[str, Any], *
     async def live_socket(ws: WebSocket) -> None:
         await live(console, ws)
 
-    app.add_api_route("/", lambda request: one_arm.index_page(request, "arms.html"),
-                      methods=["GET"], include_in_schema=False)
+    def page(request: Request) -> Any:
+        return one_arm.index_page(request, "arms.html")
+
+    app.add_api_route("/", page, methods=["GET"], include_in_schema=False)
     app.mount("/static", one_arm.StaticFiles(directory=str(one_arm.STATIC)), name="static")
     app.add_middleware(one_arm.CrashGuard, console=console)
     stops = frozenset({f"{API}/halt", *(f"{arm_path(a)}/halt" for a in console.arm_ids)})

@@ -191,8 +191,10 @@ function onStatus(id, status) {
 function onEvent(id, event) {
   state.eventCount += 1;
   const type = event.type;
-  if (type === "client_joined" || type === "client_left" || type === "control_taken" || type === "control_released") {
+  const controlEvent = type === "client_joined" || type === "client_left" || type === "control_taken" || type === "control_released";
+  if (controlEvent) {
     showControl(event.control || event);
+    id = null;  // the whole console's, not one arm's
   }
   if (type === "session_halt" && state.arms[id]) {
     // another page's STOP, or this one's arm by arm: what was read back
@@ -277,7 +279,7 @@ function buildArm(id, info) {
     el("table", { className: "joints" },
       el("thead", {}, el("tr", {}, ...["joint", "position", "velocity", "state"].map((t) => el("th", { textContent: t })))), rows),
     el("table", { className: "kv" },
-      el("tr", {}, el("th", { textContent: "fault" }), el("td", { className: "fault", textContent: "-" })),
+      el("tr", {}, el("th", { textContent: "fault" }), el("td", { className: "fault-text", textContent: "-" })),
       el("tr", {}, el("th", { textContent: "bus" }), el("td", { className: "bus", textContent: info.bus })),
       el("tr", {}, el("th", { textContent: "arm file" }), el("td", { className: "dim", textContent: info.arm_file || "-" }))));
   $("#arm-panels").append(panel);
@@ -313,7 +315,7 @@ function paintArm(id) {
     row.children[2].textContent = fmt(j.velocity_deg_s);
     row.children[3].textContent = (j.flags || []).join(" ");
   });
-  arm.panel.querySelector(".fault").textContent = s.fault ? (s.message || "a module reports a fault") : "none";
+  arm.panel.querySelector(".fault-text").textContent = s.fault ? (s.message || "a module reports a fault") : "none";
 }
 
 function paint() {

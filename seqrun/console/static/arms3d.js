@@ -40,14 +40,14 @@ export class ArmsView extends ArmView {
       const joints = this.material({ color: 0x2f6fd6, metalness: 0.3, roughness: 0.4 });
       const figure = new ArmFigure(holder, a.scene, body, joints);
       const tag = label(a.id);
-      tag.position.set(0, 0, 1300);
+      tag.position.set(0, 0, 1150);
       holder.add(tag);
       this.figures[a.id] = { id: a.id, figure, holder, tag, body, joints, grey, measured: null, drawn: null, lost: false };
       centre.add(new THREE.Vector3(a.base[0][3], a.base[1][3], a.base[2][3]));
     });
     if (arms.length) centre.divideScalar(arms.length);
-    this.target.set(centre.x, centre.y, 420);
-    this.orbit.distance = 2600;
+    this.target.set(centre.x, centre.y, 500);
+    this.orbit.distance = 3000;
   }
 
   // The measured joints of one arm (degrees), drawn at the next frame if it moved visibly.
