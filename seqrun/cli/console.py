@@ -198,7 +198,7 @@ def _serve_arms(arm_ids: list[str] | None, *, project_dir: Path | None, sim: boo
     from seqrun.service.connection import response_timeout_s
 
     with user_errors():
-        contexts = {c.arm_id: c for c in resolve_contexts(
+        contexts = {str(c.arm_id): c for c in resolve_contexts(
             arm_ids=arm_ids or None, project_dir=project_dir, sim=sim,
             response_timeout_ms=response_timeout_ms)}
         for context in contexts.values():

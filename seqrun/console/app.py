@@ -168,7 +168,7 @@ class CrashGuard:
     their faults itself; a bug in serving one request is no fault of the arm, and a Halt
     there would stop a run in the operator's name (a GET from any web page could do it)."""
 
-    def __init__(self, app: Any, console: Console) -> None:
+    def __init__(self, app: Any, console: Any) -> None:
         self.app = app
         self.console = console
 

@@ -33,7 +33,6 @@ class Console(Protocol):
 
     live_connections: int
     max_pages: int
-    session: Any
     telemetry: Any
     control: Any
     motions: Any
