@@ -52,7 +52,10 @@ class ArmsSetup:
 
 
 def arms_setup(folder: Path, *, faults: dict[str, list[str]] | None = None,
-               campaign: str = TWO_ARMS, **session_kw: Any) -> ArmsSetup:
+               campaign: str = TWO_ARMS, arm_files: dict[str, str] | None = None,
+               **session_kw: Any) -> ArmsSetup:
+    """``arm_files``: arm files to add to the campaign, name -> YAML appended to the
+    shipped LWA 3's (tools, say); ``campaign`` names them."""
     from wrapbus import WrapBus
 
     from seqrun.sequence.project import open_project
@@ -62,6 +65,9 @@ def arms_setup(folder: Path, *, faults: dict[str, list[str]] | None = None,
     from seqrun.service.session import ArmSession
 
     project_tree(folder)
+    for name, extra in (arm_files or {}).items():
+        lwa3 = (folder / "arms" / "lwa3.yaml").read_text()
+        (folder / "arms" / f"{name}.yaml").write_text(lwa3 + "\n" + extra)
     (folder / "seqrun.toml").write_text(campaign)
     project = open_project(folder)
     contexts = {c.arm_id: c for c in resolve_contexts(project=project, sim=True)}

@@ -9,9 +9,9 @@ import time
 
 import numpy as np
 import pytest
-from armsconsolekit import arms_setup
+from armsconsolekit import TWO_ARMS, arms_setup
 from consolekit import LiveServer, wait_for
-from test_console_browser import browser  # noqa: F401 (the fixture)
+from test_console_browser import PROBE, browser  # noqa: F401 (the fixture)
 
 pytestmark = pytest.mark.slow  # a browser, a server and real-time arms
 
@@ -32,10 +32,25 @@ def open_page(browser, server, tmp_path, name: str):  # noqa: F811
     return context, page
 
 
+#: Arm B carries a probe (its own arm file): the view draws each arm's tools.
+WITH_PROBE = TWO_ARMS.replace('[arms.B]\narm = "lwa3"', '[arms.B]\narm = "lwa3_probe"')
+
+
 @pytest.fixture
 def served(tmp_path, request):
     faults = getattr(request, "param", None)
-    setup = arms_setup(tmp_path, faults=faults)
+    setup = arms_setup(tmp_path, faults=faults, campaign=WITH_PROBE,
+                       arm_files={"lwa3_probe": PROBE})
+    with LiveServer(setup.app()) as server:
+        yield setup, server
+    setup.close()
+
+
+@pytest.fixture
+def plain(tmp_path):
+    """Two LWA 3 without tools (the probe's tip lies below the desk guard at Park, where
+    a jog is refused)."""
+    setup = arms_setup(tmp_path)
     with LiveServer(setup.app()) as server:
         yield setup, server
     setup.close()
@@ -76,6 +91,18 @@ def test_both_arms_in_one_view_where_their_bases_put_them(browser, served, tmp_p
             np.testing.assert_allclose(tcp, expected_tcp, atol=1e-6)
             for k, point in enumerate(drawn["joints"]):
                 np.testing.assert_allclose(point, (base @ fk[k])[:3, 3], atol=1e-6)
+            tools = page.evaluate("""(id) => window.seqrunArms.view.figures[id].figure.tools
+                .map((t) => t.ends.map((e) => { const m = e.matrixWorld.elements;
+                                               return [m[12], m[13], m[14]]; }))""", arm_id)
+            if arm_id == "A":
+                assert tools == []  # A carries no tool
+            else:  # B's probe: its shaft and the pointer's tip line, in the facility frame
+                def at(xyz):
+                    return (base @ fk[-1] @ np.array([*xyz, 1.0]))[:3]
+
+                assert len(tools) == 2
+                np.testing.assert_allclose(tools[0][1], at([0, 0, -300]), atol=1e-3)
+                np.testing.assert_allclose(tools[1][1], at([40, 0, -150]), atol=1e-3)
         # B stands 900 mm along y, turned: its figure's base is there, not at A's
         b_base = page.evaluate("window.seqrunArms.view.figures.B.holder.matrixWorld.elements")
         assert b_base[13] == pytest.approx(900)
@@ -138,8 +165,8 @@ def test_an_arm_that_does_not_confirm_says_stop_failed_and_greys(browser, served
         context.close()
 
 
-def test_commands_go_to_the_selected_arm_only(browser, served, tmp_path):  # noqa: F811
-    setup, server = served
+def test_commands_go_to_the_selected_arm_only(browser, plain, tmp_path):  # noqa: F811
+    setup, server = plain
     context, page = open_page(browser, server, tmp_path, "select-b")
     try:
         page.wait_for_function("document.querySelector('#control-state').textContent"
@@ -157,6 +184,25 @@ def test_commands_go_to_the_selected_arm_only(browser, served, tmp_path):  # noq
 
         assert commands("B", b_count), "B got no Reset"
         assert not commands("A", a_count), "A was commanded"
+        # Arm, Home, then a held jog button: B moves, A is never commanded
+        for button, label in (("#cmd-arm", "Arm"), ("#cmd-home", "Home")):
+            page.evaluate("document.querySelector('#message').textContent = ''")
+            page.click(button)
+            page.wait_for_function(f"document.querySelector('#message').textContent"
+                                   f".startsWith('arm B: {label}')", timeout=20000)
+            assert "error" not in (page.get_attribute("#message", "class") or ""), \
+                page.text_content("#message")
+        before = time.perf_counter()
+        jog = page.locator("[data-jog='j1+']")
+        jog.hover()
+        page.mouse.down()
+        time.sleep(0.8)
+        page.mouse.up()
+        wait_for(lambda: setup.sessions["B"].status().activity != "jogging", 5)
+        assert setup.wires["B"].motions(before) > 0, (page.evaluate("window.seqrunArms.lastReplies"), page.text_content("#message"))
+        assert setup.wires["A"].motions(before) == 0 and not commands("A", a_count)
+        assert setup.sessions["B"].status().joints[0].position_deg > 0.2
+        assert abs(setup.sessions["A"].status().joints[0].position_deg) < 1e-6
         assert not page.errors, page.errors
     finally:
         context.close()
