@@ -217,3 +217,70 @@ def test_commands_act_on_the_arm_they_address_only(client, setup):
                if data), "arm A got a command"
     # strict bodies per arm
     refused(client.post("/api/v1/arms/A/move/joints", json={"joints": {"j1": True}}), 422)
+
+
+BOTH_NUDGE = """\
+name: Both nudge
+description: both arms start up, a question, A nudges j1 then B does (after A's signal)
+steps:
+  - parallel:
+      - arm: A
+        steps: [include: startup.yaml]
+      - arm: B
+        steps: [include: startup.yaml]
+  - confirm: Is the floor between the arms clear?
+  - parallel:
+      - arm: A
+        steps:
+          - move: {joints: {j1: 3}, label: A nudges j1}
+          - signal: A_done
+      - arm: B
+        steps:
+          - wait_for: {event: A_done, timeout_s: 60}
+          - move: {joints: {j1: -3}, label: B nudges j1}
+"""
+
+
+@pytest.mark.slow  # both arms start up and move in real time
+def test_a_two_arm_sequence_runs_from_the_console(client, setup):
+    (setup.folder / "sequences" / "both_nudge.yaml").write_text(BOTH_NUDGE)
+    refused(client.post("/api/v1/run", json={"sequence": "both_nudge.yaml"}), 409,
+            "control")  # commands need control
+    take_control(client)
+    refused(client.post("/api/v1/run", json={"sequence": "both_nudge.yaml", "speed": "1"}),
+            422)
+    with client.websocket_connect(LIVE) as ws:
+        ws.receive_json()
+        r = client.post("/api/v1/run", json={"sequence": "both_nudge.yaml"})
+        assert r.status_code == 200, r.text
+        assert r.json()["arms"] == ["A", "B"]
+        # a second run while this one runs: refused
+        refused(client.post("/api/v1/run", json={"sequence": "both_nudge.yaml"}), 409, "busy")
+        seen: dict[str, set[str]] = {"A": set(), "B": set()}
+        question = None
+        deadline = time.monotonic() + 90
+        while time.monotonic() < deadline:
+            message = ws.receive_json()
+            if message["type"] != "event":
+                continue
+            event = message["event"]
+            seen[message["arm"]].add(event.get("label") or event["type"])
+            if event["type"] == "confirm_requested" and question is None:
+                question = (message["arm"], event["question_id"])
+                r = client.post(f"/api/v1/arms/{question[0]}/answer",
+                                json={"question_id": question[1], "yes": True})
+                assert r.status_code == 200, r.text
+            if client.get("/api/v1/run").json()["done"]:
+                break
+    state = client.get("/api/v1/run").json()
+    assert state["done"] and state["exit_code"] == 0, state
+    assert question is not None
+    # the events of both arms were on the live connection, each naming its arm
+    assert "A nudges j1" in seen["A"] and "B nudges j1" in seen["B"]
+    from pathlib import Path
+
+    folder = Path(state["run_dir"])
+    assert (folder / "A" / "events.jsonl").is_file() and (folder / "B" / "events.jsonl").is_file()
+    for arm_id, target in (("A", 3), ("B", -3)):
+        j1 = client.get(f"/api/v1/arms/{arm_id}/status").json()["joints"][0]["position_deg"]
+        assert j1 == pytest.approx(target, abs=0.3)

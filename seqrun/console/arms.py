@@ -180,6 +180,18 @@ class ArmsConsole:
         return await done
 
 
+class _ArmsRunActivity:
+    """A campaign run as a page's motion (:class:`seqrun.console.motions.Motions`: done,
+    and abort through the arm's session)."""
+
+    def __init__(self, run: Any) -> None:
+        self.run = run
+
+    @property
+    def done(self) -> bool:
+        return bool(self.run.done)
+
+
 def arm_path(arm_id: str) -> str:
     return f"{API}/arms/{arm_id}"
 
@@ -241,6 +253,32 @@ def create_arms_app(sessions: Any, catalog: Catalog, contexts: dict[str, Any], *
     @top.get("/arms", summary="The arms: id, arm file, bus, base pose in the facility frame")
     def arms() -> list[dict[str, Any]]:
         return console.arms_list()
+
+    @top.get("/sequences", summary="The project's sequences")
+    def sequences() -> list[dict[str, str]]:
+        return console.catalog.sequences()
+
+    @top.post("/run", summary="Run a sequence of several arms (validated as seqrun run: each "
+                              "arm, the arms against each other; a run folder part per arm)",
+              openapi_extra=one_arm.documented(models.ArmsRunBody))
+    def run(body: models.ArmsRunBody = one_arm.json_body(models.ArmsRunBody),
+            client: one_arm.ClientHeader = None) -> dict[str, Any]:
+        console.control.require(client, f"run {body.sequence}")
+        path = console.catalog.sequence_path(body.sequence)
+        started = sessions.run_sequence(path, speed=body.speed,
+                                        by=console.control.name_of(client))
+        for arm_id in started.arms:  # a page that goes stops its run, as for one arm
+            console.arms[arm_id].motions.started(client, "run", _ArmsRunActivity(started))
+        return {"accepted": True, **started.as_dict()}
+
+    @top.get("/run", summary="The sequence of several arms under way or last (null: none)")
+    def run_state() -> Any:
+        return None if sessions.run is None else sessions.run.as_dict()
+
+    @top.post("/run/abort", summary="A controlled stop of every arm (any client)")
+    def run_abort() -> dict[str, Any]:
+        sessions.abort("operator abort (console)")
+        return {"aborted": True}
 
     one_arm.control_routes(top, console)
     app.include_router(top)

@@ -59,6 +59,14 @@ class RunBody(_Strict):
     first_step: Annotated[int, Field(ge=1)] = 1
 
 
+class ArmsRunBody(_Strict):
+    """A sequence of several arms run from the console of several arms."""
+
+    sequence: str = Field(min_length=1, max_length=400,
+                          description="A sequence name as listed by GET /sequences.")
+    speed: Annotated[float, Field(gt=0, le=1, allow_inf_nan=False)] = 1.0
+
+
 class AnswerBody(_Strict):
     question_id: str = Field(min_length=1, max_length=40)
     yes: bool

@@ -223,6 +223,8 @@ def run_arms_live(tracks: Mapping[str, Any], arms: Mapping[str, Any],
                   on_event: Callable[[str, Any], None] | None = None,
                   zeros: Mapping[str, Any] | None = None,
                   record_zero: Mapping[str, Any] | None = None,
+                  sessions: Mapping[str, Any] | None = None,
+                  confirms: Mapping[str, Callable[[str], bool]] | None = None,
                   **options: Any) -> ArmsOutcome:
     """:func:`run_tracks` for ``seqrun run``: every arm runs in an arm session of its own
     (:class:`~seqrun.service.session.ArmSession`, its driver, zero and activities, as one
@@ -230,12 +232,17 @@ def run_arms_live(tracks: Mapping[str, Any], arms: Mapping[str, Any],
     where its bus has no claim) follows its run, and ``on_event(arm_id, event)`` gets
     every typed event of every arm (on that arm's loop thread: it must be quick).
     ``record_zero``: per arm, what records its zero at a power_off step (None: the
-    simulator)."""
+    simulator). ``sessions``: the arms' sessions already open (the console's; left open),
+    else one is made per arm for the run; ``confirms``: each arm's confirm (its questions,
+    instead of one ``confirm`` for every arm)."""
     from seqrun.service.session import ArmSession
 
-    sessions = {a: ArmSession(arms[a], connections[a], project=tracks[a].project,
-                              zero=(zeros or {}).get(a), status_hz=0, own_connection=False)
-                for a in tracks}
+    own = sessions is None
+    if sessions is None:
+        sessions = {a: ArmSession(arms[a], connections[a], project=tracks[a].project,
+                                  zero=(zeros or {}).get(a), status_hz=0,
+                                  own_connection=False)
+                    for a in tracks}
 
     def attach(arm_id: str, executor: Any) -> None:
         control = controls.get(arm_id)
@@ -246,6 +253,8 @@ def run_arms_live(tracks: Mapping[str, Any], arms: Mapping[str, Any],
 
     def runner(arm_id: str, loaded: Any, **run: Any) -> Any:
         zero = (zeros or {}).get(arm_id)
+        if confirms is not None:
+            run["confirm"] = confirms[arm_id]
         return sessions[arm_id].run_loaded(
             loaded, record_zero=(record_zero or {}).get(arm_id),
             meta={"arm_id": arm_id, **({"zero": zero.as_dict()} if zero is not None else {})},
@@ -255,5 +264,5 @@ def run_arms_live(tracks: Mapping[str, Any], arms: Mapping[str, Any],
         return run_tracks(tracks, arms, connections, on_executor=attach, runner=runner,
                           dry_run=False, **options)
     finally:
-        for session in sessions.values():
+        for session in sessions.values() if own else ():
             session.close()
