@@ -206,3 +206,29 @@ def test_commands_go_to_the_selected_arm_only(browser, plain, tmp_path):  # noqa
         assert not page.errors, page.errors
     finally:
         context.close()
+
+
+def test_a_two_arm_sequence_runs_from_the_page(browser, plain, tmp_path):  # noqa: F811
+    from test_console_arms_api import BOTH_NUDGE
+
+    setup, server = plain
+    (setup.folder / "sequences" / "both_nudge.yaml").write_text(BOTH_NUDGE)
+    context, page = open_page(browser, server, tmp_path, "run-both")
+    try:
+        page.wait_for_function("document.querySelector('#control-state').textContent"
+                               ".includes('this page')")
+        page.select_option("#sequence", "both_nudge.yaml")
+        page.click("#run")
+        page.wait_for_selector("#confirm-dialog:not([hidden])", timeout=30000)
+        assert "Is the floor between the arms clear?" in page.text_content("#confirm-text")
+        page.click("#confirm-yes")
+        page.wait_for_function("document.querySelector('#run-state').textContent"
+                               ".includes('ended')", timeout=60000)
+        assert "exit 0" in page.text_content("#run-state"), page.text_content("#run-state")
+        log = page.text_content("#events")
+        assert "[A]" in log and "[B]" in log and "A nudges j1" in log and "B nudges j1" in log
+        assert setup.sessions["B"].status().joints[0].position_deg == pytest.approx(-3, abs=0.3)
+        page.shot()
+        assert not page.errors, page.errors
+    finally:
+        context.close()

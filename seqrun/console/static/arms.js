@@ -200,6 +200,10 @@ function onEvent(id, event) {
     // another page's STOP, or this one's arm by arm: what was read back
     state.arms[id].stop = event.halt_confirmed ? { confirmed: true } : { failed: event.message };
   }
+  if (type === "confirm_requested" && id) ask(id, event);
+  if (type === "confirm_answered" && state.question
+      && state.question.id === event.question_id) closeQuestion();
+  if (type === "activity_finished" || type === "run_finished") showRun();
   const bad = /fault|halt|error|failed/i.test(type);
   const text = `${id ? `[${id}] ` : ""}${fmt(event.t)} s ${type}${event.message ? `: ${event.message}` : ""}${event.label ? `: ${event.label}` : ""}`;
   const li = el("li", { textContent: text, className: bad ? "bad" : "" });
@@ -396,6 +400,56 @@ $("#cmd-arm").addEventListener("click", () => command("Arm", "POST", "/arm-up"))
 $("#cmd-home").addEventListener("click", () => command("Home", "POST", "/home"));
 $("#cmd-reset").addEventListener("click", () => command("Reset", "POST", "/reset"));
 
+// ---------------------------------------------------------------- sequences of several arms
+async function loadSequences() {
+  const list = await api("GET", "/sequences").catch(() => []);
+  $("#sequence").replaceChildren(...list.map((q) => el("option", { value: q.name, textContent: q.name })));
+}
+
+async function showRun() {
+  const run = await api("GET", "/run").catch(() => null);
+  if (!run) { $("#run-state").textContent = ""; return; }
+  const results = run.results ? Object.entries(run.results).map(([a, r]) => `arm ${a}: ${r.status}`).join(", ") : "";
+  $("#run-state").textContent = run.done ? `${run.name}: ended (exit ${run.exit_code ?? "?"}) ${results}${run.error ? ` - ${run.error}` : ""}`
+    : `${run.name}: running on arms ${run.arms.join(", ")}`;
+}
+
+$("#run").addEventListener("click", async () => {
+  const name = $("#sequence").value;
+  if (!name) return;
+  try {
+    const run = await api("POST", "/run", { sequence: name });
+    say(`Run ${run.name} on arms ${run.arms.join(", ")}: started`);
+  } catch (err) { /* on screen */ }
+  showRun();
+});
+$("#abort").addEventListener("click", () => api("POST", "/run/abort").then(() => say("Abort: every arm stops (controlled)")).catch(() => {}));
+setInterval(() => { if (!state.lost) showRun(); }, 2000);
+
+// A run's confirm step: asked by one arm's run (its question), answered through that arm.
+function ask(arm, event) {
+  state.question = { arm, id: event.question_id };
+  $("#confirm-text").textContent = `arm ${arm} asks: ${event.text}`;
+  $("#confirm-dialog").hidden = false;
+  applyControl();
+}
+
+function closeQuestion() {
+  state.question = null;
+  $("#confirm-dialog").hidden = true;
+}
+
+async function answer(yes) {
+  const q = state.question;
+  if (!q) return;
+  try {
+    await api("POST", `/arms/${q.arm}/answer`, { question_id: q.id, yes });
+    closeQuestion();
+  } catch (err) { /* on screen */ }
+}
+$("#confirm-yes").addEventListener("click", () => answer(true));
+$("#confirm-no").addEventListener("click", () => answer(false));
+
 // ---------------------------------------------------------------- start
 async function start() {
   let arms;
@@ -417,6 +471,8 @@ async function start() {
     $("#view3d").textContent = `3D view unavailable: ${err.message}`;
   }
   connect();
+  loadSequences();
+  showRun();
   await select(state.ids[0]);
   nextPaint();
   state.ready = true;
