@@ -121,10 +121,11 @@ def one_run(console: Console, browser, arms: list[str], tabs: int) -> dict[str, 
         running = False
         for arm in arms:
             status = console.call("GET", f"/arms/{arm}/status")
-            if status.get("run") and status["run"].get("run_dir"):
-                folders[arm] = status["run"]["run_dir"]
             running |= status["activity"] in ("running", "paused")
             for event in console.call("GET", f"/arms/{arm}/events"):
+                if event["type"] == "activity_started" and event.get("kind") == "run" \
+                        and event.get("detail", {}).get("run_dir"):
+                    folders[arm] = event["detail"]["run_dir"]  # (the newest: this run's)
                 question = event.get("question_id")
                 if event["type"] == "confirm_requested" and question not in answered:
                     answered.add(question)
@@ -137,6 +138,10 @@ def one_run(console: Console, browser, arms: list[str], tabs: int) -> dict[str, 
             break
     for page in pages:
         page.context.close()
+    for arm in arms:
+        if arm not in folders:
+            print(f"   (arm {arm}: no run folder; its events: "
+                  f"{console.call('GET', f'/arms/{arm}/events')[-3:]})")
     return {arm: event_periods(Path(folders[arm])) if arm in folders else [] for arm in arms}
 
 
