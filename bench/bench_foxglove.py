@@ -31,7 +31,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_subscriber import periods, summary  # noqa: E402
+from loop_pairs import alternate, periods, row, summary, use_rt_priority  # noqa: E402
 from seqrun_runs import RESULTS, ROOT, load_shipped, machine, write_json  # noqa: E402
 
 from seqrun.clock import RealClock  # noqa: E402
@@ -113,17 +113,10 @@ def main() -> None:
     ap.add_argument("--sequence", default="opsafe")
     ap.add_argument("--rt-priority", type=int, default=None)
     args = ap.parse_args()
-    if args.rt_priority is not None:
-        from seqrun.service.realtime import hand_over_the_lock_often, use_fifo, use_round_robin
-
-        use_round_robin()
-        use_fifo(args.rt_priority)
-        hand_over_the_lock_often()
-    runs: dict[str, list] = {"off": [], "on": []}
+    use_rt_priority(args.rt_priority)
     load0 = os.getloadavg()
-    for k in range(args.pairs):
-        for mode in (("off", "on") if k % 2 == 0 else ("on", "off")):
-            runs[mode].append(one_run(args.sequence, mode == "on"))
+    runs = alternate(args.pairs, ("off", "on"),
+                     lambda mode: one_run(args.sequence, mode == "on"))
     out = {"machine": machine(), "load_before": load0, "load_after": os.getloadavg(),
            "sequence": args.sequence, "rt_priority": args.rt_priority}
     for mode in ("off", "on"):
@@ -131,10 +124,8 @@ def main() -> None:
         s["cpu_s_per_run"] = [round(r["cpu_s"], 2) for r in runs[mode]]
         s["client_received"] = [r["received"] for r in runs[mode]]
         out[f"foxglove_{mode}"] = s
-        print(f"Foxglove {mode:3s} cycles {s['cycles']:5d}  p50 {s['p50_ms']:.2f} ms  p99 "
-              f"{s['p99_ms']:.2f} ms  max {s['max_ms']:.2f} ms  p99 error "
-              f"{s['p99_error_ms']:.2f} ms  >=12 ms {s['over_12ms']}  CPU "
-              f"{s['cpu_s_per_run']} s  client {s['client_received']}  exit {s['exit_codes']}")
+        print(f"{row(f'Foxglove {mode:3s}', s)}  CPU {s['cpu_s_per_run']} s  "
+              f"client {s['client_received']}  exit {s['exit_codes']}")
     print(f"load average before {load0[0]:.1f}, after {out['load_after'][0]:.1f}")
     write_json(RESULTS / "foxglove.json", out)
 

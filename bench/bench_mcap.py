@@ -30,7 +30,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_subscriber import periods, summary  # noqa: E402
+from loop_pairs import alternate, periods, row, summary, use_rt_priority  # noqa: E402
 from seqrun_runs import RESULTS, machine, run_shipped, write_json  # noqa: E402
 
 from seqrun.clock import RealClock  # noqa: E402
@@ -69,13 +69,10 @@ def main() -> None:
     ap.add_argument("--sequence", default="opsafe")
     ap.add_argument("--rt-priority", type=int, default=None)
     args = ap.parse_args()
-    if args.rt_priority is not None:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(args.rt_priority))
-    runs: dict[str, list] = {"off": [], "on": []}
+    use_rt_priority(args.rt_priority)
     load0 = os.getloadavg()
-    for k in range(args.pairs):
-        for mode in (("off", "on") if k % 2 == 0 else ("on", "off")):
-            runs[mode].append(one_run(args.sequence, mode == "on"))
+    runs = alternate(args.pairs, ("off", "on"),
+                     lambda mode: one_run(args.sequence, mode == "on"))
     out = {"machine": machine(), "load_before": load0, "load_after": os.getloadavg(),
            "sequence": args.sequence, "rt_priority": args.rt_priority}
     for mode in ("off", "on"):
@@ -83,10 +80,8 @@ def main() -> None:
         s["cpu_s_per_run"] = [round(r["cpu_s"], 2) for r in runs[mode]]
         s["mcap_bytes"] = [r["mcap_bytes"] for r in runs[mode]]
         out[f"mcap_{mode}"] = s
-        print(f"run.mcap {mode:3s} cycles {s['cycles']:5d}  p50 {s['p50_ms']:.2f} ms  p99 "
-              f"{s['p99_ms']:.2f} ms  max {s['max_ms']:.2f} ms  p99 error "
-              f"{s['p99_error_ms']:.2f} ms  >=12 ms {s['over_12ms']}  CPU "
-              f"{s['cpu_s_per_run']} s  mcap {s['mcap_bytes']} B  exit {s['exit_codes']}")
+        print(f"{row(f'run.mcap {mode:3s}', s)}  CPU {s['cpu_s_per_run']} s  "
+              f"mcap {s['mcap_bytes']} B  exit {s['exit_codes']}")
     print(f"load average before {load0[0]:.1f}, after {out['load_after'][0]:.1f}")
     write_json(RESULTS / "mcap.json", out)
 

@@ -22,26 +22,12 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
-
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from loop_pairs import alternate, periods, row, summary  # noqa: E402
 from seqrun_runs import RESULTS, machine, run_shipped, write_json  # noqa: E402
 
 from seqrun.clock import RealClock  # noqa: E402
-
-
-def periods(events: list) -> list[float]:
-    """Spacing (s) of consecutive setpoints of the same step (one per cycle)."""
-    out, prev = [], None
-    for e in events:
-        if e["type"] != "setpoint":
-            prev = None if e["type"] in ("step_started", "controlled_stop") else prev
-            continue
-        if prev is not None and prev[0] == e.get("step"):
-            out.append(e["t"] - prev[1])
-        prev = (e.get("step"), e["t"])
-    return out
 
 
 def one_run(sequence: str, slow: bool) -> dict:
@@ -89,38 +75,19 @@ def one_run(sequence: str, slow: bool) -> dict:
     return {"exit_code": run.result.exit_code, "periods": p, "dropped": dropped}
 
 
-def summary(runs: list[dict], cycle_s: float) -> dict:
-    p = np.array([x for r in runs for x in r["periods"]])
-    err = np.abs(p - cycle_s)
-    return {"runs": len(runs), "exit_codes": [r["exit_code"] for r in runs],
-            "cycles": int(len(p)),
-            "p50_ms": round(float(np.percentile(p, 50)) * 1e3, 3),
-            "p99_ms": round(float(np.percentile(p, 99)) * 1e3, 3),
-            "max_ms": round(float(p.max()) * 1e3, 3),
-            "p99_error_ms": round(float(np.percentile(err, 99)) * 1e3, 3),
-            "over_12ms": int((p >= 0.012).sum()),
-            "dropped_events": sum(r["dropped"] for r in runs)}
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--pairs", type=int, default=2)
     ap.add_argument("--sequence", default="opsafe")
     args = ap.parse_args()
-    runs: dict[str, list] = {"none": [], "slow": []}
-    for k in range(args.pairs):
-        order = ("none", "slow") if k % 2 == 0 else ("slow", "none")
-        for mode in order:
-            runs[mode].append(one_run(args.sequence, mode == "slow"))
+    runs = alternate(args.pairs, ("none", "slow"),
+                     lambda mode: one_run(args.sequence, mode == "slow"))
     out = {"machine": machine(), "sequence": args.sequence,
            "no_subscriber": summary(runs["none"], 0.01),
            "slow_subscriber": summary(runs["slow"], 0.01)}
     for mode in ("no_subscriber", "slow_subscriber"):
         s = out[mode]
-        print(f"{mode:16s} cycles {s['cycles']:5d}  p50 {s['p50_ms']:.2f} ms  p99 "
-              f"{s['p99_ms']:.2f} ms  max {s['max_ms']:.2f} ms  p99 error "
-              f"{s['p99_error_ms']:.2f} ms  >=12 ms {s['over_12ms']}  dropped "
-              f"{s['dropped_events']}  exit {s['exit_codes']}")
+        print(f"{row(f'{mode:16s}', s)}  dropped {s['dropped_events']}  exit {s['exit_codes']}")
     write_json(RESULTS / "subscriber.json", out)
 
 

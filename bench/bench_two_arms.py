@@ -26,10 +26,9 @@ import sys
 import tempfile
 from pathlib import Path
 
-import numpy as np
-
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from loop_pairs import periods, row, summary  # noqa: E402
 from seqrun_runs import RESULTS, ROOT, machine, write_json  # noqa: E402
 
 SEQUENCE = """\
@@ -43,19 +42,6 @@ steps:
       - {arm: A, steps: [move: totem, move: opsafe, move: totem]}
       - {arm: B, steps: [move: totem, move: opsafe, move: totem]}
 """
-
-
-def periods(events: list) -> list[float]:
-    """Spacing (s) of consecutive setpoints of the same step (one per cycle)."""
-    out, prev = [], None
-    for e in events:
-        if e.type != "setpoint":
-            prev = None if e.type in ("step_started", "controlled_stop") else prev
-            continue
-        if prev is not None and prev[0] == getattr(e, "step", None):
-            out.append(e.t - prev[1])
-        prev = (getattr(e, "step", None), e.t)
-    return out
 
 
 def one_run(folder: Path, arms_wanted: tuple[str, ...]) -> dict:
@@ -98,18 +84,6 @@ def one_run(folder: Path, arms_wanted: tuple[str, ...]) -> dict:
                 "periods": periods(recorded[a])} for a in tracks}
 
 
-def summary(runs: list[dict], cycle_s: float = 0.01) -> dict:
-    p = np.array([x for r in runs for x in r["periods"]])
-    err = np.abs(p - cycle_s)
-    return {"runs": len(runs), "exit_codes": [r["exit_code"] for r in runs],
-            "cycles": int(len(p)),
-            "p50_ms": round(float(np.percentile(p, 50)) * 1e3, 3),
-            "p99_ms": round(float(np.percentile(p, 99)) * 1e3, 3),
-            "max_ms": round(float(p.max()) * 1e3, 3),
-            "p99_error_ms": round(float(np.percentile(err, 99)) * 1e3, 3),
-            "over_12ms": int((p >= 0.012).sum())}
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--pairs", type=int, default=2)
@@ -133,10 +107,9 @@ def main() -> None:
         arm: round(out[f"both {arm}"]["p99_ms"] - out["one A"]["p99_ms"], 3) for arm in "AB"}
     for mode in runs:
         s = out[mode]
-        print(f"{mode:7s} cycles {s['cycles']:5d}  p50 {s['p50_ms']:.2f} ms  p99 "
-              f"{s['p99_ms']:.2f} ms  max {s['max_ms']:.2f} ms  p99 error "
-              f"{s['p99_error_ms']:.2f} ms  >=12 ms {s['over_12ms']}  exit {s['exit_codes']}")
-    print(f"p99 both - one: {out['p99_both_minus_one_ms']} ms; load {out['machine'].get('loadavg_at_start')}")
+        print(f"{row(f'{mode:7s}', s)}  exit {s['exit_codes']}")
+    print(f"p99 both - one: {out['p99_both_minus_one_ms']} ms; "
+          f"load {out['machine'].get('loadavg_at_start')}")
     write_json(RESULTS / "two_arms.json", out)
 
 

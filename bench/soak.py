@@ -2,6 +2,10 @@
 
     .venv/bin/python bench/soak.py [--hours 8] [--seed 1] [--out bench/results/soak.json]
         [--keep DIR] [--clean 1] [--moves 8 40]
+    .venv/bin/python bench/soak.py --combine A.json B.json [--out bench/results/soak.json]
+
+Several soaks may run side by side, one process per core with different ``--seed``s;
+``--combine`` adds up their figures (the memory figures stay per process).
 
 Each run is ``seqrun run FILE --virtual-time --yes --plain [--sim-fault SPEC] --log-dir DIR``
 through the real CLI, in this process (the typer app, the arm session, the executor, the
@@ -429,6 +433,60 @@ def _count(out: SoakResult, fault: Fault | None, v: Verdict) -> None:
         out.spurious_faults += 1
 
 
+def combine(shards: list[dict]) -> dict:
+    """One soak's figures from several processes' (``--seed`` differing): counts added,
+    kinds merged, the worst halt latency per kind; RSS slopes, open files and threads stay
+    per process (each is its own process' memory)."""
+    counted = ("virtual_s", "runs", "faults_injected", "faults_ended_in_halt",
+               "faults_unobservable", "faults_unseen_late", "faults_after_the_end",
+               "missed_halts", "spurious_faults", "clean_runs")
+    out: dict = {name: sum(s[name] for s in shards) for name in counted}
+    out["wall_s"] = max(s["wall_s"] for s in shards)   # the processes ran side by side
+    kinds: dict[str, dict[str, int]] = {}
+    latency: dict[str, float] = {}
+    for s in shards:
+        for kind, outcomes in s["kinds"].items():
+            for outcome, n in outcomes.items():
+                kinds.setdefault(kind, {})[outcome] = kinds.get(kind, {}).get(outcome, 0) + n
+        for kind, t in s["halt_latency_max_s"].items():
+            latency[kind] = max(latency.get(kind, 0.0), t)
+    out["kinds"], out["halt_latency_max_s"] = kinds, latency
+    out["wrong"] = [w for s in shards for w in s["wrong"]]
+    out["shards"] = [{"seed": s["seed"], "hours": s["hours"], "runs": s["runs"],
+                      "rss_slope_kb_per_h": s["rss_slope_kb_per_h"],
+                      "rss_mb_first_last": [round(s["rss_kb"][0][1] / 1024),
+                                            round(s["rss_kb"][-1][1] / 1024)],
+                      "rss_mb_max": round(max(kb for _, kb in s["rss_kb"]) / 1024),
+                      "open_files": s["open_files"], "threads": s["threads"],
+                      "os_threads": s["os_threads"], "machine": s["machine"],
+                      "load_avg_at_end": s["load_avg_at_end"]} for s in shards]
+    return out
+
+
+def print_figures(r: dict) -> None:
+    print(f"\n{r['virtual_s'] / 3600:.2f} h of virtual motion in {r['wall_s'] / 60:.1f} min wall "
+          f"({r['virtual_s'] / max(r['wall_s'], 1e-9):.1f}x real time), {r['runs']} runs "
+          f"({r['clean_runs']} clean)")
+    print(f"faults injected {r['faults_injected']}: ended in Halt {r['faults_ended_in_halt']}, "
+          f"unobservable (passed) {r['faults_unobservable']}, in the last {UNSEEN_S} s and "
+          f"unseen {r['faults_unseen_late']}; drawn after the run's end "
+          f"{r['faults_after_the_end']}")
+    print(f"missed halts {r['missed_halts']}, spurious faults {r['spurious_faults']}")
+    for s in r.get("shards", [r]):
+        rss = s.get("rss_mb_first_last") or [round(s["rss_kb"][0][1] / 1024),
+                                             round(s["rss_kb"][-1][1] / 1024)]
+        slope_kb = s["rss_slope_kb_per_h"]
+        print(f"seed {s.get('seed')}: RSS slope "
+              f"{'-' if slope_kb is None else round(slope_kb)} KB/h (RSS {rss[0]} MB after "
+              f"the first run, {rss[1]} MB after the last); after the warm-up -> after the "
+              f"last run: open files {s['open_files'][0]} -> {s['open_files'][1]}, Python "
+              f"threads {s['threads'][0]} -> {s['threads'][1]}, OS threads "
+              f"{s['os_threads'][0]} -> {s['os_threads'][1]}")
+    print("per kind: " + "; ".join(f"{k} {v}" for k, v in sorted(r["kinds"].items())))
+    print("worst halt latency per kind (s): " + ", ".join(
+        f"{k} {v:.3f}" for k, v in sorted(r["halt_latency_max_s"].items())))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--hours", type=float, default=8.0, help="virtual motion (hours)")
@@ -438,28 +496,24 @@ def main() -> None:
     parser.add_argument("--moves", type=int, nargs=2, default=(8, 40), metavar=("MIN", "MAX"))
     parser.add_argument("--keep", type=Path, help="keep every run folder here")
     parser.add_argument("--out", type=Path, default=RESULTS / "soak.json")
+    parser.add_argument("--combine", type=Path, nargs="+", metavar="JSON",
+                        help="no soak: add up the figures of soaks run side by side (one "
+                             "process each, different --seed) and write them to --out")
     args = parser.parse_args()
+    if args.combine:
+        data = combine([json.loads(path.read_text()) for path in args.combine])
+        write_json(args.out, data)
+        print_figures(data)
+        print(f"written to {args.out}")
+        return
     info = machine()
     result = soak(args.hours * 3600, seed=args.seed, clean=args.clean,
                   moves=tuple(args.moves), keep=args.keep)
     data = {"machine": info, "load_avg_at_end": os.getloadavg(), "hours": args.hours,
             "seed": args.seed, **asdict(result)}
     write_json(args.out, data)
-    r = result
-    print(f"\n{r.virtual_s / 3600:.2f} h of virtual motion in {r.wall_s / 60:.1f} min wall "
-          f"({r.virtual_s / max(r.wall_s, 1e-9):.1f}x real time), {r.runs} runs "
-          f"({r.clean_runs} clean)")
-    print(f"faults injected {r.faults_injected}: ended in Halt {r.faults_ended_in_halt}, "
-          f"unobservable (passed) {r.faults_unobservable}, in the last {UNSEEN_S} s and unseen "
-          f"{r.faults_unseen_late}; drawn after the run's end {r.faults_after_the_end}")
-    print(f"missed halts {r.missed_halts}, spurious faults {r.spurious_faults}")
-    print(f"RSS slope {r.rss_slope_kb_per_h if r.rss_slope_kb_per_h is None else round(r.rss_slope_kb_per_h)} "
-          f"KB/h (RSS {r.rss_kb[0][1] / 1024:.0f} MB after the first run, "
-          f"{r.rss_kb[-1][1] / 1024:.0f} MB after the last)")
-    print(f"before the first run -> after the last: open files {r.open_files[0]} -> "
-          f"{r.open_files[1]}, Python threads {r.threads[0]} -> {r.threads[1]}, OS threads "
-          f"{r.os_threads[0]} -> {r.os_threads[1]} (before the warm-up: {r.before_warm_up})")
-    print("per kind: " + "; ".join(f"{k} {v}" for k, v in sorted(r.kinds.items())))
+    print_figures(data)
+    print(f"before the warm-up: {result.before_warm_up}")
     print(f"load average at start {info['loadavg_at_start']}; written to {args.out}")
 
 

@@ -50,3 +50,26 @@ def test_ten_virtual_minutes_of_random_runs_and_faults():
     third = len(rss) // 3
     middle, last = rss[third:2 * third], rss[2 * third:]
     assert max(last) - max(middle) < 6 * 1024, (rss, log)
+
+
+def _shard(seed: int, runs: int, halts: int, latency: float, rss_mb: tuple[int, int]) -> dict:
+    return {"seed": seed, "hours": 4.0, "virtual_s": 3600.0 * runs / 10, "wall_s": 60.0 * seed,
+            "runs": runs, "faults_injected": halts + 1, "faults_ended_in_halt": halts,
+            "faults_unobservable": 1, "faults_unseen_late": 0, "faults_after_the_end": 2,
+            "missed_halts": 0, "spurious_faults": 0, "clean_runs": runs - halts - 1,
+            "kinds": {"tow_error": {"halted": halts}, "none": {"clean": runs - halts - 1}},
+            "halt_latency_max_s": {"tow_error": latency}, "wrong": [],
+            "rss_kb": [(0.1, rss_mb[0] * 1024), (0.2, rss_mb[1] * 1024)],
+            "rss_slope_kb_per_h": 10.0 * seed, "open_files": (5, 5), "threads": (1, 1),
+            "os_threads": (2, 2), "machine": {}, "load_avg_at_end": (1.0, 1.0, 1.0)}
+
+
+def test_soaks_side_by_side_add_up_and_keep_memory_per_process():
+    both = soak.combine([_shard(1, 10, 4, 0.05, (120, 130)), _shard(2, 20, 9, 0.07, (125, 128))])
+    assert both["runs"] == 30 and both["virtual_s"] == 3600.0 * 3
+    assert both["faults_ended_in_halt"] == 13 and both["faults_injected"] == 15
+    assert both["kinds"] == {"tow_error": {"halted": 13}, "none": {"clean": 15}}
+    assert both["halt_latency_max_s"] == {"tow_error": 0.07}
+    assert both["wall_s"] == 120.0   # side by side: the longer one, not the sum
+    assert [s["rss_slope_kb_per_h"] for s in both["shards"]] == [10.0, 20.0]
+    assert [s["rss_mb_first_last"] for s in both["shards"]] == [[120, 130], [125, 128]]

@@ -38,8 +38,9 @@ def _write_all(fd: int, data: bytes) -> None:
         view = view[n:]
 
 
-class LineFile:
-    """An append-only text file written a whole line at a time."""
+class _AppendOnlyFile:
+    """What both kinds share: the file opened for appending, its first error reported once
+    and cut back to ``_size`` (the bytes on disk that end on a whole line)."""
 
     def __init__(self, path: Path, on_error: ErrorHandler) -> None:
         self.path = Path(path)
@@ -48,22 +49,9 @@ class LineFile:
         self._size = 0
         self._fd: int | None = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
 
-    def write(self, text: str) -> bool:
-        """Append ``text`` (whole lines); False once the file has failed."""
-        if self._fd is None or self.error is not None:
-            return False
-        data = text.encode("utf-8")
-        try:
-            _write_all(self._fd, data)
-        except OSError as exc:
-            self._fail(exc)
-            return False
-        self._size += len(data)
-        return True
-
     def _fail(self, exc: OSError) -> None:
         self.error = exc
-        try:   # cut off what went out of a partly written line: readers see whole lines
+        try:   # cut off what went out after the last whole line: readers see whole lines
             if self._fd is not None:
                 os.ftruncate(self._fd, self._size)
         except OSError:
@@ -83,7 +71,24 @@ class LineFile:
             self._fd = None
 
 
-class GzipLineFile:
+class LineFile(_AppendOnlyFile):
+    """An append-only text file written a whole line at a time."""
+
+    def write(self, text: str) -> bool:
+        """Append ``text`` (whole lines); False once the file has failed."""
+        if self._fd is None or self.error is not None:
+            return False
+        data = text.encode("utf-8")
+        try:
+            _write_all(self._fd, data)
+        except OSError as exc:
+            self._fail(exc)
+            return False
+        self._size += len(data)
+        return True
+
+
+class GzipLineFile(_AppendOnlyFile):
     """An append-only gzip file written a whole line at a time, readable (whole lines) up
     to the last :meth:`flush`: a run killed between two flushes loses only what came
     after the last one. Closing ends the gzip stream (its trailer)."""
@@ -92,14 +97,10 @@ class GzipLineFile:
     LEVEL = 6
 
     def __init__(self, path: Path, on_error: ErrorHandler) -> None:
-        self.path = Path(path)
-        self.on_error = on_error
-        self.error: OSError | None = None
-        self._size = 0          # bytes on disk at the last flush: whole lines
+        super().__init__(path, on_error)   # (_size: the bytes on disk at the last flush)
         self._written = 0       # bytes on disk
         self._pending = False   # lines written since the last flush
         self._z = zlib.compressobj(self.LEVEL, zlib.DEFLATED, 16 + zlib.MAX_WBITS)
-        self._fd: int | None = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
 
     def write(self, text: str) -> bool:
         """Append ``text`` (whole lines); False once the file has failed."""
@@ -132,29 +133,12 @@ class GzipLineFile:
         self._written += len(data)
         return True
 
-    def _fail(self, exc: OSError) -> None:
-        self.error = exc
-        try:   # back to the last flush: the file decodes to whole lines
-            if self._fd is not None:
-                os.ftruncate(self._fd, self._size)
-        except OSError:
-            pass
-        self.on_error(self.path, exc)
-
-    @property
-    def ok(self) -> bool:
-        return self.error is None
-
     def close(self) -> None:
         if self._fd is None:
             return
         if self.error is None:
             self._put(self._z.flush(zlib.Z_FINISH))
-        try:
-            os.close(self._fd)
-        except OSError:
-            pass
-        self._fd = None
+        super().close()
 
 
 def write_whole(path: Path, text: str | bytes) -> OSError | None:

@@ -46,6 +46,30 @@ def check_speed(checker: CheckContext, step: ResolvedStep, spec: GripperSpec,
             f"{f(spec.max_velocity_mm_s)} mm/s", "speed_mm_s"))
 
 
+def gripper_to_use(ex: StepContext, what: str) -> GripperSpec:
+    """The arm's gripper at run time (validation has refused a step without one)."""
+    from seqrun.errors import RunAborted
+
+    if ex.arm.gripper is None:
+        raise RunAborted("no_gripper", f"{what}: the arm file has no gripper")
+    return ex.arm.gripper
+
+
+def move_jaws(ex: StepContext, spec: GripperSpec, what: str, target_mm: float,
+              speed_mm_s: float | None, timeout_s: float | None, *, on_part: bool,
+              **command: Any) -> GripperReading:
+    """Drive the jaws to ``target_mm`` (default speed: the gripper's fastest; default time
+    allowed: their travel from where they stand plus the settle time) and wait for rest;
+    the ``gripper_command`` event carries ``command``'s fields too."""
+    start = ex.gripper_read()
+    speed = speed_mm_s or spec.max_velocity_mm_s
+    timeout = timeout_s or (spec.travel_time_s(target_mm - start.width_mm, speed)
+                            + spec.settle_timeout_s)
+    ex.emit("gripper_command", command=what, target_mm=target_mm, speed_mm_s=speed, **command)
+    ex.gripper_move(target_mm, speed)
+    return wait_for_rest(ex, spec, timeout, what, on_part=on_part)
+
+
 def wait_for_rest(ex: StepContext, spec: GripperSpec, timeout_s: float, what: str, *,
                   on_part: bool) -> GripperReading:
     """Monitor the arm every cycle and read the gripper until its jaws are at rest (its

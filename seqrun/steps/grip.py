@@ -59,22 +59,14 @@ def check(checker: CheckContext, step: ResolvedStep[GripParams], params: GripPar
 
 def run(step: ResolvedStep[GripParams], ex: StepContext) -> dict:
     from seqrun.errors import RunAborted
-    from seqrun.steps._gripper import reading_detail, wait_for_rest
+    from seqrun.steps._gripper import gripper_to_use, move_jaws, reading_detail
 
     params = step.params
-    spec = ex.arm.gripper
-    if spec is None:
-        raise RunAborted("no_gripper", "grip: the arm file has no gripper")
+    spec = gripper_to_use(ex, "grip")
     current = ex.gripper_current_limit(spec.current_for(params.force_n))
-    start = ex.gripper_read()
-    speed = params.speed_mm_s or spec.max_velocity_mm_s
-    timeout = params.timeout_s or (spec.travel_time_s(start.width_mm, speed)
-                                   + spec.settle_timeout_s)
-    ex.emit("gripper_command", command="grip", target_mm=0.0, speed_mm_s=speed,
-            force_n=params.force_n, current_a=round(current, 4))
     # Closing fully: the part stops the jaws; without one they close (and the step fails).
-    ex.gripper_move(0.0, speed)
-    reading = wait_for_rest(ex, spec, timeout, "grip", on_part=True)
+    reading = move_jaws(ex, spec, "grip", 0.0, params.speed_mm_s, params.timeout_s,
+                        on_part=True, force_n=params.force_n, current_a=round(current, 4))
     low, high = params.part_width_mm - params.window_mm, params.part_width_mm + params.window_mm
     if reading.width_mm < low:
         raise RunAborted("grip_failed",

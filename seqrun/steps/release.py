@@ -48,20 +48,12 @@ def check(checker: CheckContext, step: ResolvedStep[ReleaseParams],
 
 def run(step: ResolvedStep[ReleaseParams], ex: StepContext) -> dict:
     from seqrun.errors import RunAborted
-    from seqrun.steps._gripper import reading_detail, wait_for_rest
+    from seqrun.steps._gripper import gripper_to_use, move_jaws, reading_detail
 
     params = step.params
-    spec = ex.arm.gripper
-    if spec is None:
-        raise RunAborted("no_gripper", "release: the arm file has no gripper")
-    start = ex.gripper_read()
-    speed = params.speed_mm_s or spec.max_velocity_mm_s
-    timeout = params.timeout_s or (spec.travel_time_s(params.width_mm - start.width_mm, speed)
-                                   + spec.settle_timeout_s)
-    ex.emit("gripper_command", command="release", target_mm=params.width_mm,
-            speed_mm_s=speed)
-    ex.gripper_move(params.width_mm, speed)
-    reading = wait_for_rest(ex, spec, timeout, "release", on_part=False)
+    spec = gripper_to_use(ex, "release")
+    reading = move_jaws(ex, spec, "release", params.width_mm, params.speed_mm_s,
+                        params.timeout_s, on_part=False)
     if abs(reading.width_mm - params.width_mm) > spec.position_tolerance_mm:
         raise RunAborted("release_failed",
                          f"release: the jaws stopped at {reading.width_mm:.1f} mm, not at "
