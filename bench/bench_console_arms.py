@@ -39,8 +39,15 @@ from typing import Any
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-from bench_liveview import event_periods, summary  # noqa: E402
+from loop_pairs import periods as setpoint_periods  # noqa: E402
+from loop_pairs import summary  # noqa: E402
 from seqrun_runs import RESULTS, ROOT, machine, write_json  # noqa: E402
+
+
+def event_periods(folder: Path) -> list[float]:
+    """The loop's periods of one arm's run (its events.jsonl)."""
+    lines = (folder / "events.jsonl").read_text().splitlines()
+    return setpoint_periods([json.loads(line) for line in lines])
 
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 ARGS = ["--no-sandbox", "--use-gl=angle", "--use-angle=swiftshader",
@@ -114,7 +121,7 @@ def one_run(console: Console, browser, arms: list[str], tabs: int) -> dict[str, 
     for arm in arms:
         console.call("POST", f"/arms/{arm}/run", {"sequence": "opsafe.yaml"})
     folders: dict[str, str] = {}
-    answered: set[str] = set()
+    answered: set[tuple[str, str]] = set()
     started = time.monotonic()
     while time.monotonic() - started < 300:
         time.sleep(0.25)
@@ -126,9 +133,9 @@ def one_run(console: Console, browser, arms: list[str], tabs: int) -> dict[str, 
                 if event["type"] == "activity_started" and event.get("kind") == "run" \
                         and event.get("detail", {}).get("run_dir"):
                     folders[arm] = event["detail"]["run_dir"]  # (the newest: this run's)
-                question = event.get("question_id")
-                if event["type"] == "confirm_requested" and question not in answered:
-                    answered.add(question)
+                question = event.get("question_id")  # (ids are per arm's session)
+                if event["type"] == "confirm_requested" and (arm, question) not in answered:
+                    answered.add((arm, question))
                     try:
                         console.call("POST", f"/arms/{arm}/answer",
                                      {"question_id": question, "yes": True})
@@ -175,15 +182,16 @@ def main() -> None:
                 for arm, values in periods.items():
                     pooled[mode][arm] += values
                 print(f"  run {k + 1} {mode}: " + ", ".join(
-                    f"{a} p99 {summary(v).get('p99_ms')} ms" for a, v in periods.items()),
-                    flush=True)
+                    f"{a} p99 {summary([{'periods': v, 'exit_code': None}])['p99_ms']} ms"
+                    if v else f"{a}: no periods" for a, v in periods.items()), flush=True)
     finally:
         console.close()
         if browser is not None:
             browser.close()
     result = {"machine": machine(), "repeats": options.repeats, "tabs": options.tabs,
               "rt_priority": options.rt_priority,
-              "loop": {m: {a: summary(v) for a, v in arms.items() if v}
+              "loop": {m: {a: summary([{"periods": v, "exit_code": None}])
+                           for a, v in arms.items() if v}
                        for m, arms in pooled.items()}}
     for mode, arms in result["loop"].items():
         for arm, figures in arms.items():
