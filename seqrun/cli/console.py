@@ -18,6 +18,7 @@ from typing import Annotated, Optional
 import typer
 
 from seqrun.cli.app import app
+from seqrun.cli.arm_commands import ArmIdOption
 from seqrun.cli.common import (EXIT_FAULT, ArmFileOption, BitrateOption, BusKwargsOption,
                                CampaignOption, ChannelOption, InterfaceOption,
                                ResponseTimeoutOption, SimOption, fail, user_errors)
@@ -57,19 +58,40 @@ def console_command(
         "--zero-confirmed", metavar="POSE", help="Answer 'does the arm stand in POSE?' after "
         "a power-on without asking (a different record refuses to start).")] = None,
     foxglove: FoxgloveOption = None,
+    arm_id: ArmIdOption = None,
 ) -> None:
-    """Serve the operator console (STOP, telemetry, 3D view, commands, sequences)."""
+    """Serve the operator console (STOP, telemetry, 3D view, commands, sequences); in a
+    campaign with several arms, every arm (--arm-id ID: those) in one page."""
     from seqrun.cli.zero import zero_at_run_start
     from seqrun.errors import BusError
-    from seqrun.service.arm_context import resolve_context
+    from seqrun.service.arm_context import campaign_arm_ids, resolve_context
+    from seqrun.service.campaigns import campaign_here
     from seqrun.service.connection import response_timeout_s
 
     with user_errors():
         if not 0 <= port <= 65535:
             fail(f"--port must lie in 0-65535, got {port}")
         check_foxglove(foxglove)
+        several = bool(campaign_arm_ids(campaign_here(project_dir)))
+        if several:
+            refused = {"-i/--interface": interface, "-c/--channel": channel,
+                       "-b/--bitrate": bitrate, "--bus-kwargs": bus_kwargs,
+                       "--arm": arm_file, "--zero-confirmed": zero_confirmed,
+                       "--foxglove": foxglove}
+            given = [name for name, value in refused.items() if value]
+            if given:
+                fail(f"{', '.join(given)}: not for a campaign with several arms (each arm's "
+                     "arm file and bus are in seqrun.toml)")
+        elif arm_id:
+            resolve_context(project_dir=project_dir, arm_id=arm_id[0])  # says why
         if rt_priority is not None and not _use_realtime(rt_priority):
             rt_priority = None  # (before any thread starts: they inherit the policy)
+    if several:
+        _serve_arms(arm_id, project_dir=project_dir, sim=sim, port=port, host=host,
+                    log_dir=log_dir, response_timeout_ms=response_timeout_ms,
+                    rt_priority=rt_priority)
+        return
+    with user_errors():
         # The arm context: the campaign here, its arm, its bus (seqrun/service/arm_context.py).
         context = resolve_context(project_dir=project_dir, arm_file=arm_file,
                                   log_dir=log_dir, interface=interface, channel=channel,
@@ -130,30 +152,113 @@ def console_command(
             typer.echo(f"token (every request but STOP needs it; the URL carries it): {token}")
             typer.echo("Ctrl-C ends the console (any motion is stopped first).")
 
-        from seqrun.console.server import serve
-        from seqrun.service.realtime import keep_long_lived_objects_out_of_collections
-
-        keep_long_lived_objects_out_of_collections()  # (the session, the app: made by now)
-
-        # uvicorn shuts down gracefully on SIGINT/SIGTERM (the pages are disconnected, their
-        # motions stopped), then raises the signal again: Ctrl-C arrives here as
-        # KeyboardInterrupt, SIGTERM through this handler. SIGTERM halts, as for a run.
-        previous = signal.signal(signal.SIGTERM, _terminated)
-        try:
-            serve(application, sock, on_started=started)
-        except KeyboardInterrupt:
-            typer.echo("seqrun console: ended by Ctrl-C; anything still moving is stopped")
-            raise typer.Exit(EXIT_OPERATOR_ABORT) from None
-        except _Terminated:
-            result = session.halt("SIGTERM (seqrun console)")
-            typer.echo(f"seqrun console: ended by SIGTERM; {result.describe()}")
-            raise typer.Exit(EXIT_OPERATOR_ABORT) from None
-        finally:
-            signal.signal(signal.SIGTERM, previous)
+        _serve_until_ended(application, sock, started,
+                           lambda why: session.halt(why).describe())
     finally:
         if live_foxglove is not None:
             live_foxglove.close()
         session.close()  # controlled stop of anything still moving, then the bus
+
+
+def _serve_until_ended(application, sock, started, halt) -> None:
+    """Serve until Ctrl-C (a controlled stop of anything moving, by the caller's close)
+    or SIGTERM (``halt(reason)``: the Halt, its line)."""
+    from seqrun.console.server import serve
+    from seqrun.service.realtime import keep_long_lived_objects_out_of_collections
+
+    keep_long_lived_objects_out_of_collections()  # (the session, the app: made by now)
+
+    # uvicorn shuts down gracefully on SIGINT/SIGTERM (the pages are disconnected, their
+    # motions stopped), then raises the signal again: Ctrl-C arrives here as
+    # KeyboardInterrupt, SIGTERM through this handler. SIGTERM halts, as for a run.
+    previous = signal.signal(signal.SIGTERM, _terminated)
+    try:
+        serve(application, sock, on_started=started)
+    except KeyboardInterrupt:
+        typer.echo("seqrun console: ended by Ctrl-C; anything still moving is stopped")
+        raise typer.Exit(EXIT_OPERATOR_ABORT) from None
+    except _Terminated:
+        typer.echo(f"seqrun console: ended by SIGTERM; {halt('SIGTERM (seqrun console)')}")
+        raise typer.Exit(EXIT_OPERATOR_ABORT) from None
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _serve_arms(arm_ids: list[str] | None, *, project_dir: Path | None, sim: bool,
+                port: int, host: str | None, log_dir: Path | None,
+                response_timeout_ms: float | None, rt_priority: int | None) -> None:
+    """The console of several arms (docs/two-arms.md): each arm's bus opened and claimed
+    and its zero decided as ``seqrun run`` of a two-arm sequence does, one arm session
+    each, one page for all, one STOP for all."""
+    from seqrun.cli.run_arms import decide_zeros, open_buses
+    from seqrun.console.guard import new_token
+    from seqrun.console.server import LOCALHOST, bind, is_loopback, url_of
+    from seqrun.service.arm_context import resolve_contexts
+    from seqrun.service.arms_console import ArmSessions
+    from seqrun.service.connection import response_timeout_s
+
+    with user_errors():
+        contexts = {str(c.arm_id): c for c in resolve_contexts(
+            arm_ids=arm_ids or None, project_dir=project_dir, sim=sim,
+            response_timeout_ms=response_timeout_ms)}
+        for context in contexts.values():
+            context.refuse_private_simulator("console")
+            response_timeout_s(context.arm, response_timeout_ms)  # before any bus
+        listen = host or LOCALHOST
+        token = new_token()
+        try:
+            sock = bind(listen, port)  # before the buses: a port in use costs nothing
+        except OSError as exc:
+            fail(f"cannot listen on {listen}:{port}: {exc.strerror or exc}")
+    connections: dict = {}
+    made: dict = {}
+    try:
+        open_buses(contexts, connections)
+        for arm_id, context in contexts.items():
+            typer.echo(context.headline(connections[arm_id]))
+        arms = decide_zeros(contexts, connections)
+        first = next(iter(contexts.values()))
+        runs = first.runs_dir if first.runs_dir.is_absolute() else Path.cwd() / first.runs_dir
+
+        from seqrun.console.arms import create_arms_app
+        from seqrun.console.catalog import Catalog
+        from seqrun.service.session import ArmSession
+
+        for a, c in contexts.items():
+            made[a] = ArmSession(arms[a][0], connections[a], project=c.project,
+                                 log_root=runs, zero=arms[a][1], loop_priority=rt_priority,
+                                 arm_path=c.arm_path, response_timeout_s=response_timeout_s(
+                                     c.arm, response_timeout_ms))
+        sessions = ArmSessions(made)
+        for arm_id in contexts:
+            _serve_control_socket(connections[arm_id], sessions[arm_id])
+        application = create_arms_app(sessions, Catalog(first.project, runs), contexts,
+                                      token=token, local_only=is_loopback(listen),
+                                      start_checker=True)
+        url = url_of(sock, listen, token)
+
+        def started() -> None:
+            for arm_id, connection in connections.items():
+                bus = "SIMULATOR" if connection.is_simulator else connection.description
+                where = ", ".join(f"{k}={v}" for k, v in
+                                  contexts[arm_id].bus.kwargs.items())  # (host, port, ...)
+                typer.echo(f"arm {arm_id}: {bus}" + (f" ({where})" if where else ""))
+            typer.echo(f"seqrun console of arms {', '.join(contexts)}: {url}")
+            typer.echo(f"token (every request but STOP needs it; the URL carries it): {token}")
+            typer.echo("STOP halts every arm. Ctrl-C ends the console (any motion is "
+                       "stopped first).")
+
+        _serve_until_ended(application, sock, started,
+                           lambda why: sessions.halt(why).describe())  # noqa: B023
+    finally:
+        sock.close()
+        try:
+            if made:  # a controlled stop of anything still moving, then each bus
+                ArmSessions(made).close()
+        finally:
+            for arm_id, connection in connections.items():
+                if arm_id not in made:
+                    connection.close()
 
 
 def _use_realtime(priority: int) -> bool:

@@ -101,10 +101,7 @@ def run_arms(file: Path, project: Any, *, sim: bool, sim_fault: list[str], speed
         shared = LockstepClock()
         clock_views = {a: shared.view() for a in tracks}
     try:
-        with user_errors():
-            for arm_id, context in contexts.items():
-                extra = {"clock": clock_views[arm_id]} if virtual_time else {}
-                connections[arm_id] = context.open_connection(live=True, **extra)
+        open_buses(contexts, connections, clock_views)
         arms = _confirm_and_zero(contexts, connections, check, yes)
         code = _run(file, check, contexts, connections, arms, clock_views, speed=speed,
                     yes=yes, log_dir=log_dir, no_report=no_report, command_mode=command_mode,
@@ -115,10 +112,19 @@ def run_arms(file: Path, project: Any, *, sim: bool, sim_fault: list[str], speed
     raise typer.Exit(code)
 
 
+def open_buses(contexts: dict[str, Any], connections: dict[str, Any],
+               clock_views: dict[str, Any] | None = None) -> None:
+    """Open and claim each arm's bus into ``connections`` (the caller closes what was
+    opened, also when one fails). ``seqrun run`` and ``seqrun console`` of several arms."""
+    with user_errors():
+        for arm_id, context in contexts.items():
+            extra = {"clock": clock_views[arm_id]} if clock_views else {}
+            connections[arm_id] = context.open_connection(live=True, **extra)
+
+
 def _confirm_and_zero(contexts, connections, check, yes: bool) -> dict[str, Any]:
     """The banner per arm, the operator's yes on real hardware, each arm's zero."""
     from seqrun.cli.questions import ask
-    from seqrun.cli.zero import zero_at_run_start
 
     for arm_id, context in contexts.items():
         typer.echo(context.headline(connections[arm_id]))
@@ -127,6 +133,17 @@ def _confirm_and_zero(contexts, connections, check, yes: bool) -> dict[str, Any]
                         f"{', '.join(real)}?", yes, say=_say):
         typer.echo("Not started: the operator declined. Nothing was sent.")
         raise typer.Exit(EXIT_OPERATOR_ABORT)
+    return decide_zeros(contexts, connections)
+
+
+def decide_zeros(contexts: dict[str, Any], connections: dict[str, Any]
+                 ) -> dict[str, tuple[Any, Any]]:
+    """Each arm's zero reference, decided as for one arm (after a power-on on real
+    hardware the terminal asks per arm): arm id -> (the arm with it applied, the zero).
+    ``seqrun run`` and ``seqrun console`` of several arms."""
+    from seqrun.cli.questions import ask
+    from seqrun.cli.zero import zero_at_run_start
+
     arms = {}
     for arm_id, context in contexts.items():
         def ask_zero(question: str, arm_id: str = arm_id) -> bool:

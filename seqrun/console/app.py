@@ -82,19 +82,24 @@ def _validation_line(exc: RequestValidationError) -> str:
 class Console:
     """What the handlers share: the session, the project catalog, the page feeds."""
 
-    def __init__(self, session: Any, catalog: Catalog, arm: Any) -> None:
+    def __init__(self, session: Any, catalog: Catalog, arm: Any, *,
+                 arm_id: str | None = None, checker: CheckWorker | None = None,
+                 check_rate: RateLimit | None = None) -> None:
         self.session = session
         self.catalog = catalog
         self.arm = arm
+        #: The arm's id in a console of several arms (:mod:`seqrun.console.arms`); None:
+        #: the console of one arm.
+        self.arm_id = arm_id
         self.scene = arm_scene(arm)
         self.motions = Motions(session)
         #: Who holds control: the session's (shared with its other faces).
         self.control = session.control
-        self.checker = CheckWorker()
+        self.checker = checker if checker is not None else CheckWorker()
         self.max_pages = MAX_PAGES
         self.live_connections = 0
-        self.check_rate = RateLimit(what="check")
-        self.telemetry = Telemetry(session, status_dict=self.status_dict)
+        self.check_rate = check_rate if check_rate is not None else RateLimit(what="check")
+        self.telemetry = Telemetry(session, status_dict=self.status_dict, arm_id=arm_id)
         self._ids = itertools.count(1)
 
     def new_client_id(self) -> str:
@@ -102,6 +107,15 @@ class Console:
 
     def new_api_id(self) -> str:
         return f"api-{next(self._ids)}"
+
+    def arm_consoles(self, arm_id: str | None, *, every_if_none: bool = False
+                     ) -> list[Console]:
+        """The console of the arm a live message names: this one (one arm: a message
+        names none)."""
+        if arm_id is not None:
+            raise Refused(f"arm '{one_line(printable(arm_id))[:40]}': this console serves "
+                          "one arm; leave 'arm' out")
+        return [self]
 
     def status_dict(self) -> dict[str, Any]:
         return jsonable(self.session.status())
@@ -154,7 +168,7 @@ class CrashGuard:
     their faults itself; a bug in serving one request is no fault of the arm, and a Halt
     there would stop a run in the operator's name (a GET from any web page could do it)."""
 
-    def __init__(self, app: Any, console: Console) -> None:
+    def __init__(self, app: Any, console: Any) -> None:
         self.app = app
         self.console = console
 
@@ -211,8 +225,12 @@ def _confirmed(result: Any) -> Any:
     return body
 
 
-def build_router(console: Console) -> APIRouter:
-    api = APIRouter(prefix=API)
+def build_router(console: Console, *, prefix: str = API,
+                 console_wide: bool = True) -> APIRouter:
+    """The routes of one arm's console under ``prefix``; ``console_wide``: with the
+    routes of who holds control (a console of several arms serves those once, for all its
+    arms: :mod:`seqrun.console.arms`)."""
+    api = APIRouter(prefix=prefix)
     session = console.session
     catalog = console.catalog
     motions = console.motions
@@ -418,7 +436,14 @@ def build_router(console: Console) -> APIRouter:
         path = session.save_pose(body.name, overwrite=body.overwrite)
         return {"saved": str(path)}
 
-    # -- control ------------------------------------------------------------------------
+    if console_wide:
+        control_routes(api, console)
+    return api
+
+
+def control_routes(api: APIRouter, console: Any) -> None:
+    """Who holds control: ``/control``, take, release, leave (``console``: its ``control``
+    desk and ``new_api_id()``)."""
     @api.get("/control", summary="Who holds control and who is connected")
     def control_state() -> dict[str, Any]:
         return console.control.state().as_dict()
@@ -450,16 +475,52 @@ def build_router(console: Console) -> APIRouter:
                           "closing)")
         return console.control.leave(known.id).as_dict()
 
-    return api
 
-
-def index_page(request: Request) -> HTMLResponse:
-    html = (STATIC / "index.html").read_text(encoding="utf-8")
+def index_page(request: Request, page: str = "index.html") -> HTMLResponse:
+    html = (STATIC / page).read_text(encoding="utf-8")
     response = HTMLResponse(html, headers={"Cache-Control": "no-store"})
     token = request.query_params.get("token")
     if token:  # the URL printed at start: the page's own requests carry it as a cookie
         response.set_cookie(COOKIE, token, httponly=True, samesite="strict")
     return response
+
+
+def install_error_handlers(app: FastAPI, halter: Any) -> None:
+    """The one-line refusals of every route (see the module doc); ``halter(request)``: the
+    console whose arm a command that failed on the bus halts."""
+    @app.exception_handler(Refused)
+    async def refused(_: Request, exc: Refused) -> JSONResponse:
+        return JSONResponse({"error": one_line(str(exc))}, status_code=409)
+
+    @app.exception_handler(UserInputError)
+    async def bad_input(_: Request, exc: UserInputError) -> JSONResponse:
+        return JSONResponse({"error": one_line(str(exc))}, status_code=400)
+
+    @app.exception_handler(TooMany)
+    async def too_many(_: Request, exc: TooMany) -> JSONResponse:
+        return JSONResponse({"error": one_line(str(exc))}, status_code=429,
+                            headers={"Retry-After": str(max(1, round(exc.retry_after_s)))})
+
+    @app.exception_handler(StarletteHTTPException)
+    async def http_error(_: Request, exc: StarletteHTTPException) -> JSONResponse:
+        # 404, 405, ...: the documented {"error"} body, as every refusal
+        return JSONResponse({"error": one_line(printable(str(exc.detail)))},
+                            status_code=exc.status_code, headers=exc.headers)
+
+    @app.exception_handler(Malformed)
+    async def malformed_body(_: Request, exc: Malformed) -> JSONResponse:
+        return JSONResponse({"error": one_line(str(exc))}, status_code=exc.status)
+
+    @app.exception_handler(RequestValidationError)
+    async def malformed(_: Request, exc: RequestValidationError) -> JSONResponse:
+        return JSONResponse({"error": _validation_line(exc)}, status_code=422)
+
+    @app.exception_handler(SeqrunError)
+    async def failed(request: Request, exc: SeqrunError) -> JSONResponse:
+        # A command that could not do or confirm what it says (a bus or module fault).
+        outcome = await asyncio.to_thread(halter(request).halt_after_bus_fault,
+                                          request.url.path, exc)
+        return JSONResponse({"error": one_line(f"{exc}; {outcome}")}, status_code=503)
 
 
 def create_app(session: Any, catalog: Catalog, arm: Any, *, token: str | None = None,
@@ -492,39 +553,7 @@ def create_app(session: Any, catalog: Catalog, arm: Any, *, token: str | None = 
                               "facility coordinator or a second tool too.")
     app.state.console = console
 
-    @app.exception_handler(Refused)
-    async def refused(_: Request, exc: Refused) -> JSONResponse:
-        return JSONResponse({"error": one_line(str(exc))}, status_code=409)
-
-    @app.exception_handler(UserInputError)
-    async def bad_input(_: Request, exc: UserInputError) -> JSONResponse:
-        return JSONResponse({"error": one_line(str(exc))}, status_code=400)
-
-    @app.exception_handler(TooMany)
-    async def too_many(_: Request, exc: TooMany) -> JSONResponse:
-        return JSONResponse({"error": one_line(str(exc))}, status_code=429,
-                            headers={"Retry-After": str(max(1, round(exc.retry_after_s)))})
-
-    @app.exception_handler(StarletteHTTPException)
-    async def http_error(_: Request, exc: StarletteHTTPException) -> JSONResponse:
-        # 404, 405, ...: the documented {"error"} body, as every refusal
-        return JSONResponse({"error": one_line(printable(str(exc.detail)))},
-                            status_code=exc.status_code, headers=exc.headers)
-
-    @app.exception_handler(Malformed)
-    async def malformed_body(_: Request, exc: Malformed) -> JSONResponse:
-        return JSONResponse({"error": one_line(str(exc))}, status_code=exc.status)
-
-    @app.exception_handler(RequestValidationError)
-    async def malformed(_: Request, exc: RequestValidationError) -> JSONResponse:
-        return JSONResponse({"error": _validation_line(exc)}, status_code=422)
-
-    @app.exception_handler(SeqrunError)
-    async def failed(request: Request, exc: SeqrunError) -> JSONResponse:
-        # A command that could not do or confirm what it says (a bus or module fault).
-        outcome = await asyncio.to_thread(console.halt_after_bus_fault, request.url.path, exc)
-        return JSONResponse({"error": one_line(f"{exc}; {outcome}")}, status_code=503)
-
+    install_error_handlers(app, lambda _: console)
     app.include_router(build_router(console))
 
     @app.websocket(f"{API}/live")

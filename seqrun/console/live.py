@@ -33,12 +33,14 @@ class Console(Protocol):
 
     live_connections: int
     max_pages: int
-    session: Any
     telemetry: Any
     control: Any
     motions: Any
 
     def new_client_id(self) -> str: ...
+
+    def arm_consoles(self, arm_id: str | None, *, every_if_none: bool = False
+                     ) -> list[Any]: ...
 
     def halt_now(self, reason: str) -> Awaitable[Any]: ...
 
@@ -175,15 +177,17 @@ async def _live(console: Console, ws: WebSocket) -> None:
             message = await ops.get()
             try:
                 if isinstance(message, models.JogMessage):
+                    (arm,) = console.arm_consoles(message.arm)  # (several: the one named)
                     console.control.require(client, "jog")
-                    await asyncio.to_thread(console.session.jog, message.joint,
+                    await asyncio.to_thread(arm.session.jog, message.joint,
                                             message.speed_scale,
                                             by=console.control.name_of(client),
                                             mode=message.mode)
-                    console.motions.started(client, "jog")
-                else:
-                    await asyncio.to_thread(console.session.jog_stop)
-                    console.motions.jog_ended(client)
+                    arm.motions.started(client, "jog")
+                else:  # (several arms, none named: every arm's jog ends)
+                    for arm in console.arm_consoles(message.arm, every_if_none=True):
+                        await asyncio.to_thread(arm.session.jog_stop)
+                        arm.motions.jog_ended(client)
                 await reply(message.id, True)
             except (Refused, UserInputError) as exc:
                 await reply(message.id, False, error=one_line(str(exc)))

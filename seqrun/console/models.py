@@ -59,6 +59,14 @@ class RunBody(_Strict):
     first_step: Annotated[int, Field(ge=1)] = 1
 
 
+class ArmsRunBody(_Strict):
+    """A sequence of several arms run from the console of several arms."""
+
+    sequence: str = Field(min_length=1, max_length=400,
+                          description="A sequence name as listed by GET /sequences.")
+    speed: Annotated[float, Field(gt=0, le=1, allow_inf_nan=False)] = 1.0
+
+
 class AnswerBody(_Strict):
     question_id: str = Field(min_length=1, max_length=40)
     yes: bool
@@ -81,9 +89,14 @@ class HaltMessage(_Strict):
     reason: str = Field("STOP (console)", max_length=200)
 
 
+#: Which arm a live message addresses (a console of several arms; one arm: none).
+ArmId = Annotated[str, Field(min_length=1, max_length=40)] | None
+
+
 class JogMessage(_Strict):
     op: Literal["jog"]
     id: MessageId = None
+    arm: ArmId = None
     joint: str = Field(min_length=1, max_length=40)
     speed_scale: Annotated[float, Field(ge=-1, le=1, allow_inf_nan=False)]
     mode: Literal["position", "velocity"] = "position"
@@ -92,6 +105,8 @@ class JogMessage(_Strict):
 class JogStopMessage(_Strict):
     op: Literal["jog_stop"]
     id: MessageId = None
+    #: None in a console of several arms: every arm's jog ends.
+    arm: ArmId = None
 
 
 class PingMessage(_Strict):

@@ -83,7 +83,8 @@ class PageFeed:
     def __init__(self, loop: asyncio.AbstractEventLoop, max_events: int = PAGE_EVENTS) -> None:
         self.loop = loop
         self.events: collections.deque[str] = collections.deque(maxlen=max_events)
-        self.status: str | None = None
+        #: The newest status of each arm (key None: the console of one arm).
+        self.statuses: dict[str | None, str] = {}
         self.ready = asyncio.Event()
         #: Events dropped (the page did not take them in time) and statuses replaced by a
         #: newer one before they were sent.
@@ -96,10 +97,16 @@ class PageFeed:
         self.events.append(text)
         self.ready.set()
 
-    def push_status(self, text: str) -> None:
-        if self.status is not None:
+    @property
+    def status(self) -> str | None:
+        """The newest status not sent yet (of the one arm; of any arm with several)."""
+        return next(reversed(self.statuses.values()), None)
+
+    def push_status(self, text: str, arm_id: str | None = None) -> None:
+        """The newest status of ``arm_id`` (replaces that arm's older one only)."""
+        if self.statuses.pop(arm_id, None) is not None:
             self.replaced_statuses += 1
-        self.status = text
+        self.statuses[arm_id] = text
         self.ready.set()
 
     async def next_batch(self) -> list[str]:
@@ -107,16 +114,16 @@ class PageFeed:
         self.ready.clear()
         batch = list(self.events)
         self.events.clear()
-        if self.status is not None:
-            batch.append(self.status)
-            self.status = None
+        batch.extend(self.statuses.values())
+        self.statuses.clear()
         return batch
 
 
-def _deliver(feeds: list[PageFeed], text: str, status: bool) -> None:
+def _deliver(feeds: list[PageFeed], text: str, status: bool, arm_id: str | None = None
+             ) -> None:
     for feed in feeds:
         if status:
-            feed.push_status(text)
+            feed.push_status(text, arm_id)
         else:
             feed.push_event(text)
 
@@ -124,9 +131,13 @@ def _deliver(feeds: list[PageFeed], text: str, status: bool) -> None:
 class Telemetry:
     """The fan-out: ``attach()`` a page's feed, ``detach()`` it when the page goes."""
 
-    def __init__(self, session: Any, *, status_dict: Callable[[], dict[str, Any]]) -> None:
+    def __init__(self, session: Any, *, status_dict: Callable[[], dict[str, Any]],
+                 arm_id: str | None = None) -> None:
         self.session = session
         self.status_dict = status_dict
+        #: In a console of several arms, every message names its arm (``"arm": "B"``).
+        self.arm_id = arm_id
+        self._tag: dict[str, Any] = {"arm": arm_id} if arm_id is not None else {}
         self.history: collections.deque[str] = collections.deque(maxlen=HISTORY)
         self._feeds: set[PageFeed] = set()
         self._lock = threading.Lock()
@@ -185,7 +196,7 @@ class Telemetry:
                 by_loop.setdefault(feed.loop, []).append(feed)
         for loop, feeds in by_loop.items():
             try:
-                loop.call_soon_threadsafe(_deliver, feeds, text, status)
+                loop.call_soon_threadsafe(_deliver, feeds, text, status, self.arm_id)
             except RuntimeError:  # its loop has closed: the pages are gone
                 for feed in feeds:
                     self.detach(feed)
@@ -195,7 +206,8 @@ class Telemetry:
             if not self._feeds:
                 return  # no page open: no snapshot to build (GET /status builds its own)
         self.snapshots += 1
-        self._broadcast(dumps({"type": "status", "status": self.status_dict()}), status=True)
+        self._broadcast(dumps({"type": "status", **self._tag, "status": self.status_dict()}),
+                        status=True)
 
     def _run(self) -> None:
         last_status = 0.0
@@ -213,7 +225,7 @@ class Telemetry:
                         self.publish_status()
                         last_status = now
                     continue
-                text = dumps({"type": "event", "event": event.as_dict()})
+                text = dumps({"type": "event", **self._tag, "event": event.as_dict()})
                 self.history.append(text)
                 self._broadcast(text, status=False)
                 self.publish_status()  # the activity may have changed with this event

@@ -229,6 +229,8 @@ def run_arms_live(tracks: Mapping[str, Any], arms: Mapping[str, Any],
                   zeros: Mapping[str, Any] | None = None,
                   record_zero: Mapping[str, Any] | None = None,
                   on_idle: Callable[[str, float], None] | None = None,
+                  sessions: Mapping[str, Any] | None = None,
+                  confirms: Mapping[str, Callable[[str], bool]] | None = None,
                   **options: Any) -> ArmsOutcome:
     """:func:`run_tracks` for ``seqrun run``: every arm runs in an arm session of its own
     (:class:`~seqrun.service.session.ArmSession`, its driver, zero and activities, as one
@@ -237,12 +239,18 @@ def run_arms_live(tracks: Mapping[str, Any], arms: Mapping[str, Any],
     every typed event of every arm (on that arm's loop thread: it must be quick).
     ``record_zero``: per arm, what records its zero at a power_off step (None: the
     simulator). ``on_idle(arm_id, slack)``: each arm's loop's idle hook (a live view
-    drawn in the slack before that arm's next cycle)."""
+    drawn in the slack before that arm's next cycle). ``sessions``: the arms' sessions
+    already open (the console's; left open), else one is made per arm for the run;
+    ``confirms``: each arm's confirm (its questions, instead of one ``confirm`` for every
+    arm)."""
     from seqrun.service.session import ArmSession
 
-    sessions = {a: ArmSession(arms[a], connections[a], project=tracks[a].project,
-                              zero=(zeros or {}).get(a), status_hz=0, own_connection=False)
-                for a in tracks}
+    own = sessions is None
+    if sessions is None:
+        sessions = {a: ArmSession(arms[a], connections[a], project=tracks[a].project,
+                                  zero=(zeros or {}).get(a), status_hz=0,
+                                  own_connection=False)
+                    for a in tracks}
     if on_idle is not None:
         for arm_id, session in sessions.items():
             session.add_idle_hook(functools.partial(on_idle, arm_id))
@@ -256,6 +264,8 @@ def run_arms_live(tracks: Mapping[str, Any], arms: Mapping[str, Any],
 
     def runner(arm_id: str, loaded: Any, **run: Any) -> Any:
         zero = (zeros or {}).get(arm_id)
+        if confirms is not None:
+            run["confirm"] = confirms[arm_id]
         return sessions[arm_id].run_loaded(
             loaded, record_zero=(record_zero or {}).get(arm_id),
             meta={"arm_id": arm_id, **({"zero": zero.as_dict()} if zero is not None else {})},
@@ -265,5 +275,5 @@ def run_arms_live(tracks: Mapping[str, Any], arms: Mapping[str, Any],
         return run_tracks(tracks, arms, connections, on_executor=attach, runner=runner,
                           dry_run=False, **options)
     finally:
-        for session in sessions.values():
+        for session in sessions.values() if own else ():
             session.close()

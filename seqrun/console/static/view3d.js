@@ -59,7 +59,7 @@ function softwareRendered(gl) {
   }
 }
 
-class ArmFigure {
+export class ArmFigure {
   constructor(scene, arm, material, jointMaterial) {
     this.arm = arm;
     this.group = new THREE.Group();
@@ -128,6 +128,8 @@ class ArmFigure {
   set visible(v) { this.group.visible = v; }
 }
 
+// arm null: the scene, camera and controls only (a view of several arms adds its own
+// figures: arms3d.js).
 export class ArmView {
   constructor(container, arm) {
     this.arm = arm;
@@ -152,13 +154,16 @@ export class ArmView {
     grid.rotation.x = Math.PI / 2;
     this.scene.add(grid);
     this.scene.add(new THREE.AxesHelper(200));
-    for (const g of arm.guards || []) this.addGuard(g);
-    this.solid = new ArmFigure(this.scene, arm,
-      this.material({ color: 0x9aa7b4, metalness: 0.3, roughness: 0.5 }),
-      this.material({ color: 0x2f6fd6, metalness: 0.3, roughness: 0.4 }));
-    const ghostMaterial = this.material({ color: 0x5eead4, transparent: true, opacity: 0.28, depthWrite: false });
-    this.ghost = new ArmFigure(this.scene, arm, ghostMaterial, ghostMaterial);
-    this.ghost.visible = false;
+    this.solid = this.ghost = null;
+    if (arm) {
+      for (const g of arm.guards || []) this.addGuard(g);
+      this.solid = new ArmFigure(this.scene, arm,
+        this.material({ color: 0x9aa7b4, metalness: 0.3, roughness: 0.5 }),
+        this.material({ color: 0x2f6fd6, metalness: 0.3, roughness: 0.4 }));
+      const ghostMaterial = this.material({ color: 0x5eead4, transparent: true, opacity: 0.28, depthWrite: false });
+      this.ghost = new ArmFigure(this.scene, arm, ghostMaterial, ghostMaterial);
+      this.ghost.visible = false;
+    }
     this.measured = null;  // the newest measured joints (degrees), drawn at the next frame
     this.drawn = null;     // the joints the solid arm was last drawn at
     this.ghostKey = null;  // what the ghost shows (null: hidden)
@@ -203,15 +208,15 @@ export class ArmView {
     }), wait);
   }
 
-  addGuard(g) {
+  addGuard(g, parent = this.scene) {
     const plane = new THREE.Mesh(new THREE.PlaneGeometry(1800, 1800),
       new THREE.MeshBasicMaterial({ color: 0xef4444, transparent: true, opacity: 0.13, side: THREE.DoubleSide, depthWrite: false }));
     plane.position.z = g.min_z_mm;
-    this.scene.add(plane);
+    parent.add(plane);
     const edge = new THREE.LineSegments(new THREE.EdgesGeometry(new THREE.PlaneGeometry(1800, 1800)),
       new THREE.LineBasicMaterial({ color: 0xef4444 }));
     edge.position.z = g.min_z_mm;
-    this.scene.add(edge);
+    parent.add(edge);
   }
 
   attachControls() {
@@ -245,7 +250,7 @@ export class ArmView {
   }
 
   render() {
-    if (this.measured && this.measured !== this.drawn) {
+    if (this.solid && this.measured && this.measured !== this.drawn) {
       this.solid.set(this.measured);
       this.drawn = this.measured;
     }

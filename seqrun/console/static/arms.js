@@ -1,0 +1,480 @@
+// seqrun operator console of several arms: one page, one live connection, every arm.
+// STOP halts every arm (on the WebSocket; HTTP when it is down or slow) and the page shows
+// each arm's outcome: "halted" only for an arm whose Halt was read back, a STOP FAILED line
+// naming the arm otherwise. Commands address the arm selected (each arm's API lives under
+// /api/v1/arms/{id}); one operator holds control of the whole console.
+import { frames } from "/static/view3d.js";
+import { ArmsView } from "/static/arms3d.js";
+
+const API = "/api/v1";
+const $ = (sel) => document.querySelector(sel);
+const el = (tag, props = {}, ...children) => {
+  const node = Object.assign(document.createElement(tag), props);
+  for (const c of children) node.append(c);
+  return node;
+};
+const fmt = (v, digits = 2) => (v === null || v === undefined ? "-" : Number(v).toFixed(digits));
+// The console sends each arm's status at least every 0.5 s: none for LOST_MS, contact lost.
+const LOST_MS = 2000;
+const STOP_CONFIRM_MS = 1500;
+// Numbers painted at most this often (per second): the browser's painting is what costs the
+// CPU the control loop needs (docs/console.md).
+const PAINT_HZ = 10, PAINT_HZ_UNFOCUSED = 4;
+
+const state = {
+  ready: false, ids: [], arms: {}, selected: null, view: null, ws: null, client: null,
+  msgId: 0, control: null, lost: true, lastHeardAt: 0, pendingStop: null, jog: null,
+  statusCount: 0, eventCount: 0, lastReplies: [], lastStop: null, frames,
+};
+window.seqrunArms = state;  // for the browser tests and the bench
+
+function say(text, isError = false) {
+  const m = $("#message");
+  m.textContent = text;
+  m.className = isError ? "error" : "";
+  m.title = text;
+}
+
+async function api(method, path, body) {
+  const headers = { Accept: "application/json" };
+  if (state.client) headers["X-Seqrun-Client"] = state.client;
+  if (body !== undefined) headers["Content-Type"] = "application/json";
+  let response;
+  try {
+    response = await fetch(API + path, { method, headers, body: body === undefined ? undefined : JSON.stringify(body) });
+  } catch (err) {
+    say(`${method} ${path}: the console does not answer (${err.message})`, true);
+    throw err;
+  }
+  const data = await response.json().catch(() => ({}));
+  if (!response.ok) {
+    say(data.error || `${method} ${path}: HTTP ${response.status}`, true);
+    throw new Error(data.error || String(response.status));
+  }
+  return data;
+}
+
+async function command(label, method, path, body) {
+  const arm = state.selected;
+  try {
+    const result = await api(method, `/arms/${arm}${path}`, body);
+    say(result && result.message ? `arm ${arm}: ${label}: ${result.message}` : `arm ${arm}: ${label}: ok`);
+    if (path === "/reset" || path === "/arm-up") state.arms[arm].stop = null;  // cleared
+    return result;
+  } catch (err) {
+    return null;  // already on screen
+  }
+}
+
+// ---------------------------------------------------------------- STOP (every arm)
+function stop(event) {
+  $("#stop").classList.add("pressed");
+  setTimeout(() => $("#stop").classList.remove("pressed"), 200);
+  releaseJog(false);
+  // Until an arm's Halt is read back, the page does not say it is halted.
+  for (const id of state.ids) state.arms[id].stop = { pending: true };
+  paint();
+  if (state.ws && state.ws.readyState === WebSocket.OPEN && !state.lost) {
+    const id = ++state.msgId;
+    state.pendingStop = id;
+    state.ws.send(JSON.stringify({ op: "halt", id, reason: "STOP (console)" }));
+    say("STOP sent to every arm");
+    setTimeout(() => { if (state.pendingStop === id) stopOverHttp("the live connection did not confirm it"); }, STOP_CONFIRM_MS);
+  } else {
+    say("STOP sent (no live connection)");
+    stopOverHttp("no live connection");
+  }
+}
+
+async function stopOverHttp(why) {
+  const abort = new AbortController();
+  // (a silent arm takes a few seconds to give up its confirmation: wait for the answer)
+  const timer = setTimeout(() => abort.abort(), 15000);
+  try {
+    const response = await fetch(API + "/halt", {
+      method: "POST", headers: { "Content-Type": "application/json", Accept: "application/json" },
+      body: JSON.stringify({ reason: `STOP (console, ${why})` }), signal: abort.signal });
+    stopResult(await response.json());
+  } catch (err) {
+    state.pendingStop = null;
+    for (const id of state.ids) state.arms[id].stop = { failed: "the console is unreachable and the arm's state is unknown - use the emergency stop" };
+    const text = "STOP FAILED: the console is unreachable and the arms' state is unknown - use the emergency stop";
+    say(text, true);
+    if (!state.lost) setLost(true, "");
+    $("#lost-stop").textContent = text;
+    $("#lost-stop").hidden = false;
+    paint();
+  } finally {
+    clearTimeout(timer);
+  }
+}
+
+// The STOP's answer: each arm confirmed, or a STOP FAILED line naming it.
+function stopResult(result) {
+  state.pendingStop = null;
+  state.lastStop = result;
+  const arms = result.arms || {};
+  for (const id of state.ids) {
+    const r = arms[id];
+    if (!r) continue;
+    state.arms[id].stop = r.halt_confirmed ? { confirmed: true } : { failed: r.message };
+  }
+  const failed = state.ids.filter((id) => arms[id] && !arms[id].halt_confirmed);
+  if (failed.length) say(failed.map((id) => `STOP FAILED for arm ${id}: ${arms[id].message}`).join("; ") + " - use the emergency stop", true);
+  else say(`STOP: every arm halted (${state.ids.join(", ")})`);
+  paint();
+}
+
+window.addEventListener("keydown", (e) => {
+  const typing = e.target && e.target.tagName === "INPUT" && e.target.type === "text";
+  if (e.key === "Escape" || (e.code === "Space" && !typing)) {
+    e.preventDefault();
+    e.stopPropagation();
+    if (!e.repeat) stop(e);
+  }
+}, true);
+window.addEventListener("keyup", (e) => { if (e.code === "Space") { e.preventDefault(); e.stopPropagation(); } }, true);
+$("#stop").addEventListener("pointerdown", (e) => { if (e.button === 0) stop(e); });
+
+// ---------------------------------------------------------------- live connection
+function connect() {
+  const ws = new WebSocket(`${location.protocol === "https:" ? "wss" : "ws"}://${location.host}${API}/live`);
+  state.ws = ws;
+  let ping = null;
+  ws.onopen = () => {
+    $("#conn").textContent = "live"; $("#conn").className = "badge on";
+    ping = setInterval(() => { if (ws.readyState === WebSocket.OPEN) ws.send('{"op":"ping"}'); }, 500);
+  };
+  ws.onclose = () => {
+    clearInterval(ping);
+    $("#conn").textContent = "offline"; $("#conn").className = "badge off";
+    state.client = null;
+    releaseJog(false);
+    setLost(true, "The live connection closed.");
+    setTimeout(connect, 1000);
+  };
+  ws.onmessage = (msg) => {
+    state.lastHeardAt = performance.now();
+    if (state.lost && state.client) setLost(false);
+    const data = JSON.parse(msg.data);
+    if (data.type === "status") onStatus(data.arm, data.status);
+    else if (data.type === "event") onEvent(data.arm, data.event);
+    else if (data.type === "hello") {
+      state.client = data.client;
+      setLost(false);
+      showControl(data.control);
+      for (const [id, status] of Object.entries(data.status.arms || {})) onStatus(id, status);
+    } else if (data.type === "reply") onReply(data);
+  };
+}
+
+function onReply(reply) {
+  state.lastReplies.push(reply);
+  if (state.lastReplies.length > 50) state.lastReplies.shift();
+  if (reply.id !== null && reply.id === state.pendingStop) {
+    if (reply.ok && reply.result) stopResult(reply.result);
+    else state.pendingStop = null;
+  }
+  if (reply.note) say(reply.note, true);
+  else if (!reply.ok && reply.error) say(reply.error, true);
+}
+
+function onStatus(id, status) {
+  const arm = state.arms[id];
+  if (!arm) return;
+  state.statusCount += 1;
+  arm.status = status;
+  arm.heardAt = performance.now();
+  if (state.view) state.view.setArmMeasured(id, status.joints.map((j) => j.position_deg));
+}
+
+function onEvent(id, event) {
+  state.eventCount += 1;
+  const type = event.type;
+  const controlEvent = type === "client_joined" || type === "client_left" || type === "control_taken" || type === "control_released";
+  if (controlEvent) {
+    showControl(event.control || event);
+    id = null;  // the whole console's, not one arm's
+  }
+  if (type === "session_halt" && state.arms[id]) {
+    // another page's STOP, or this one's arm by arm: what was read back
+    state.arms[id].stop = event.halt_confirmed ? { confirmed: true } : { failed: event.message };
+  }
+  if (type === "confirm_requested" && id) ask(id, event);
+  if (type === "confirm_answered" && state.question
+      && state.question.id === event.question_id) closeQuestion();
+  if (type === "activity_finished" || type === "run_finished") showRun();
+  const bad = /fault|halt|error|failed/i.test(type);
+  const text = `${id ? `[${id}] ` : ""}${fmt(event.t)} s ${type}${event.message ? `: ${event.message}` : ""}${event.label ? `: ${event.label}` : ""}`;
+  const li = el("li", { textContent: text, className: bad ? "bad" : "" });
+  const list = $("#events");
+  list.append(li);
+  while (list.children.length > 300) list.firstChild.remove();
+  li.scrollIntoView({ block: "nearest" });
+}
+
+// Lost contact with the console: the whole page greys out, every arm's state is unknown.
+function setLost(lost, why = "") {
+  if (lost === state.lost && (!lost || !why)) return;
+  state.lost = lost;
+  document.body.classList.toggle("lost", lost);
+  $("#lost-banner").hidden = !lost;
+  $("#lost-why").textContent = why;
+  if (!lost) $("#lost-stop").hidden = true;
+  if (lost) say("The console is unreachable: the arms' state is unknown - use the emergency stop", true);
+  else if ($("#message").textContent.startsWith("The console is unreachable")) say("");
+  applyControl();
+  paint();
+}
+
+setInterval(() => {
+  if (!state.lost && performance.now() - state.lastHeardAt > LOST_MS) setLost(true, `No word from the console for ${LOST_MS / 1000} s.`);
+}, 250);
+
+// ---------------------------------------------------------------- control
+function showControl(control) {
+  if (!control || !("holder" in control)) return;
+  state.control = control;
+  applyControl();
+}
+
+function mine() {
+  return !!(state.control && state.control.holder && state.client && state.control.holder.id === state.client);
+}
+
+function applyControl() {
+  const badge = $("#control-state");
+  const holder = state.control && state.control.holder;
+  if (state.lost) { badge.textContent = "control: unknown"; badge.className = "badge unknown"; }
+  else if (mine()) { badge.textContent = "control: this page"; badge.className = "badge mine"; }
+  else { badge.textContent = holder ? `watching: ${holder.name} commands` : "watching: nobody commands"; badge.className = "badge watching"; }
+  $("#take-control").hidden = state.lost || mine();
+  for (const b of document.querySelectorAll(".needs-control")) b.disabled = !mine() || state.lost;
+  const clients = (state.control && state.control.clients) || [];
+  $("#clients").textContent = clients.length ? `connected: ${clients.map((c) => c.name).join(", ")}` : "";
+}
+
+$("#take-control").addEventListener("click", async () => {
+  try {
+    showControl(await api("POST", "/control/take", { name: "page" }));
+  } catch (err) { /* on screen */ }
+});
+
+// ---------------------------------------------------------------- the arms
+// An arm's condition as the page shows it: contact lost (grey), STOP FAILED, stopping
+// (a STOP not read back yet), or its activity ("halted" only once its Halt was read back).
+function condition(id) {
+  const arm = state.arms[id];
+  if (state.lost) return { text: "unknown", cls: "unknown", grey: true };
+  const noContact = !arm.status || arm.status.stale || performance.now() - (arm.heardAt || 0) > LOST_MS;
+  if (arm.stop && arm.stop.failed) return { text: "STOP FAILED", cls: "halted", grey: noContact };
+  if (noContact) return { text: "no contact", cls: "unknown", grey: true };
+  if (arm.stop && arm.stop.pending) return { text: "stopping", cls: "paused", grey: false };
+  return { text: arm.status.activity || "idle", cls: arm.status.activity || "idle", grey: false };
+}
+
+function buildArm(id, info) {
+  const rows = el("tbody");
+  const panel = el("div", { className: "arm-panel", id: `arm-${id}` },
+    el("h3", {}, el("span", { className: "arm-id", textContent: `arm ${id}` }), " ",
+      el("span", { className: "badge activity", textContent: "-" }), " ",
+      el("span", { className: "dim", textContent: info.name })),
+    el("div", { className: "stop-line", hidden: true }),
+    el("table", { className: "joints" },
+      el("thead", {}, el("tr", {}, ...["joint", "position", "velocity", "state"].map((t) => el("th", { textContent: t })))), rows),
+    el("table", { className: "kv" },
+      el("tr", {}, el("th", { textContent: "fault" }), el("td", { className: "fault-text", textContent: "-" })),
+      el("tr", {}, el("th", { textContent: "bus" }), el("td", { className: "bus", textContent: info.bus })),
+      el("tr", {}, el("th", { textContent: "arm file" }), el("td", { className: "dim", textContent: info.arm_file || "-" }))));
+  $("#arm-panels").append(panel);
+  const b = el("button", { type: "button", textContent: `arm ${id}`, className: "arm-choice" });
+  b.dataset.arm = id;
+  b.setAttribute("role", "radio");
+  b.addEventListener("click", () => select(id));
+  $("#arm-select").append(b);
+  return { panel, rows, status: null, heardAt: 0, stop: null, scene: null, info };
+}
+
+function paintArm(id) {
+  const arm = state.arms[id];
+  const c = condition(id);
+  const badge = arm.panel.querySelector(".activity");
+  if (badge.textContent !== c.text) badge.textContent = c.text;
+  badge.className = `badge activity ${c.cls}`;
+  arm.panel.classList.toggle("lost-arm", c.grey);
+  if (state.view) state.view.setArmLost(id, c.grey);
+  const line = arm.panel.querySelector(".stop-line");
+  line.hidden = !(arm.stop && arm.stop.failed);
+  if (arm.stop && arm.stop.failed) line.textContent = `STOP FAILED for arm ${id}: ${arm.stop.failed}`;
+  const s = arm.status;
+  if (!s) return;
+  if (arm.rows.children.length !== s.joints.length) {
+    arm.rows.replaceChildren(...s.joints.map((j) => el("tr", { id: `tlm-${id}-${j.name}` },
+      el("td", { textContent: j.name }), el("td", { className: "pos" }), el("td", { className: "vel" }), el("td", { className: "flags" }))));
+  }
+  s.joints.forEach((j, i) => {
+    const row = arm.rows.children[i];
+    row.classList.toggle("fault", !!j.fault);
+    row.children[1].textContent = fmt(j.position_deg);
+    row.children[2].textContent = fmt(j.velocity_deg_s);
+    row.children[3].textContent = (j.flags || []).join(" ");
+  });
+  arm.panel.querySelector(".fault-text").textContent = s.fault ? (s.message || "a module reports a fault") : "none";
+}
+
+function paint() {
+  for (const id of state.ids) paintArm(id);
+  if (state.view) state.view.requestRender();
+}
+
+function nextPaint() {
+  paint();
+  setTimeout(nextPaint, 1000 / (document.hasFocus() ? PAINT_HZ : PAINT_HZ_UNFOCUSED));
+}
+
+async function select(id) {
+  state.selected = id;
+  for (const b of document.querySelectorAll(".arm-choice")) {
+    b.classList.toggle("selected", b.dataset.arm === id);
+    b.setAttribute("aria-checked", String(b.dataset.arm === id));
+  }
+  releaseJog(true);
+  const arm = state.arms[id];
+  $("#jog").replaceChildren(...arm.scene.joints.map((j) => {
+    const minus = el("button", { type: "button", className: "needs-control", textContent: `${j.name} -` });
+    const plus = el("button", { type: "button", className: "needs-control", textContent: `${j.name} +` });
+    minus.dataset.jog = `${j.name}-`; plus.dataset.jog = `${j.name}+`;
+    holdToJog(minus, j.name, -1);
+    holdToJog(plus, j.name, 1);
+    return el("span", { className: "jog-pair" }, minus, plus);
+  }));
+  const poses = await api("GET", `/arms/${id}/poses`).catch(() => []);
+  if (state.selected !== id) return;
+  $("#poses").replaceChildren(...poses.map((p) => {
+    const b = el("button", { type: "button", className: "needs-control", textContent: p.name });
+    b.dataset.pose = p.name;
+    if (!p.move_target) { b.dataset.noTarget = "1"; b.title = p.why || "not a move target"; }
+    b.addEventListener("click", () => command(`move to ${p.name}`, "POST", "/move/pose", { name: p.name }));
+    return b;
+  }));
+  applyControl();
+  for (const b of document.querySelectorAll("#poses [data-no-target]")) b.disabled = true;
+}
+
+// ---- jog: the selected arm; hold to move, renewed every 100 ms (the server stops it 200 ms after)
+$("#jog-scale").addEventListener("input", () => { $("#jog-scale-value").textContent = `${Math.round($("#jog-scale").value * 100)} %`; });
+
+function sendJog() {
+  if (!state.jog || !state.ws || state.ws.readyState !== WebSocket.OPEN) return;
+  const scale = Number($("#jog-scale").value) * state.jog.direction;
+  state.ws.send(JSON.stringify({ op: "jog", id: ++state.msgId, arm: state.jog.arm, joint: state.jog.joint, speed_scale: scale }));
+}
+
+function holdToJog(button, joint, direction) {
+  button.addEventListener("pointerdown", (e) => {
+    e.preventDefault();
+    button.setPointerCapture(e.pointerId);
+    releaseJog(false);
+    state.jog = { arm: state.selected, joint, direction, button, timer: setInterval(sendJog, 100) };
+    button.classList.add("held");
+    sendJog();
+  });
+  for (const ev of ["pointerup", "pointercancel", "lostpointercapture"]) button.addEventListener(ev, () => releaseJog(true));
+  button.addEventListener("contextmenu", (e) => e.preventDefault());
+}
+
+function releaseJog(sendStop) {
+  const jog = state.jog;
+  if (!jog) return;
+  clearInterval(jog.timer);
+  jog.button.classList.remove("held");
+  state.jog = null;
+  if (sendStop && state.ws && state.ws.readyState === WebSocket.OPEN) {
+    state.ws.send(JSON.stringify({ op: "jog_stop", id: ++state.msgId, arm: jog.arm }));
+  }
+}
+window.addEventListener("blur", () => releaseJog(true));
+document.addEventListener("visibilitychange", () => { if (document.hidden) releaseJog(true); });
+
+$("#cmd-arm").addEventListener("click", () => command("Arm", "POST", "/arm-up"));
+$("#cmd-home").addEventListener("click", () => command("Home", "POST", "/home"));
+$("#cmd-reset").addEventListener("click", () => command("Reset", "POST", "/reset"));
+
+// ---------------------------------------------------------------- sequences of several arms
+async function loadSequences() {
+  const list = await api("GET", "/sequences").catch(() => []);
+  $("#sequence").replaceChildren(...list.map((q) => el("option", { value: q.name, textContent: q.name })));
+}
+
+async function showRun() {
+  const run = await api("GET", "/run").catch(() => null);
+  if (!run) { $("#run-state").textContent = ""; return; }
+  const results = run.results ? Object.entries(run.results).map(([a, r]) => `arm ${a}: ${r.status}`).join(", ") : "";
+  $("#run-state").textContent = run.done ? `${run.name}: ended (exit ${run.exit_code ?? "?"}) ${results}${run.error ? ` - ${run.error}` : ""}`
+    : `${run.name}: running on arms ${run.arms.join(", ")}`;
+}
+
+$("#run").addEventListener("click", async () => {
+  const name = $("#sequence").value;
+  if (!name) return;
+  try {
+    const run = await api("POST", "/run", { sequence: name });
+    say(`Run ${run.name} on arms ${run.arms.join(", ")}: started`);
+  } catch (err) { /* on screen */ }
+  showRun();
+});
+$("#abort").addEventListener("click", () => api("POST", "/run/abort").then(() => say("Abort: every arm stops (controlled)")).catch(() => {}));
+setInterval(() => { if (!state.lost) showRun(); }, 2000);
+
+// A run's confirm step: asked by one arm's run (its question), answered through that arm.
+function ask(arm, event) {
+  state.question = { arm, id: event.question_id };
+  $("#confirm-text").textContent = `arm ${arm} asks: ${event.text}`;
+  $("#confirm-dialog").hidden = false;
+  applyControl();
+}
+
+function closeQuestion() {
+  state.question = null;
+  $("#confirm-dialog").hidden = true;
+}
+
+async function answer(yes) {
+  const q = state.question;
+  if (!q) return;
+  try {
+    await api("POST", `/arms/${q.arm}/answer`, { question_id: q.id, yes });
+    closeQuestion();
+  } catch (err) { /* on screen */ }
+}
+$("#confirm-yes").addEventListener("click", () => answer(true));
+$("#confirm-no").addEventListener("click", () => answer(false));
+
+// ---------------------------------------------------------------- start
+async function start() {
+  let arms;
+  try {
+    arms = await api("GET", "/arms");
+  } catch (err) {
+    say("This page needs the console's token: open the URL seqrun console printed (STOP works without it).", true);
+    return;
+  }
+  state.ids = arms.map((a) => a.id);
+  document.title = `seqrun console: arms ${state.ids.join(", ")}${arms.every((a) => a.simulator) ? " (SIMULATOR)" : ""}`;
+  $("#title").textContent = `seqrun console: arms ${state.ids.join(", ")}`;
+  for (const a of arms) state.arms[a.id] = buildArm(a.id, a);
+  const scenes = await Promise.all(arms.map((a) => api("GET", `/arms/${a.id}/arm`)));
+  arms.forEach((a, i) => { state.arms[a.id].scene = scenes[i]; });
+  try {
+    state.view = new ArmsView($("#view3d"), arms.map((a, i) => ({ id: a.id, scene: scenes[i], base: a.base })));
+  } catch (err) {
+    $("#view3d").textContent = `3D view unavailable: ${err.message}`;
+  }
+  connect();
+  loadSequences();
+  showRun();
+  await select(state.ids[0]);
+  nextPaint();
+  state.ready = true;
+}
+start();
