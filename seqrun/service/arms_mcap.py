@@ -27,11 +27,8 @@ from __future__ import annotations
 import heapq
 import itertools
 import json
-import queue
 import re
 import shutil
-import threading
-import time
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -42,7 +39,8 @@ from seqrun.ros_messages.names import EVENTS_TOPIC, MARKERS_TOPIC, TF_TOPIC, Ros
 from seqrun.ros_messages.ros_fields import TF_MESSAGE, messages, topics
 from seqrun.ros_messages.values import Transform, quaternion_xyzw, stamp_ns
 from seqrun.service.mcap_log import (DEFAULT_DISTRIBUTION, MCAP_NAME, PARTIAL_NAME, QUEUE_SIZE,
-                                     MessageBuilder, below_the_loop, encoded_record, typestore_of)
+                                     MessageBuilder, QueuedBagWriter, encoded_record,
+                                     typestore_of)
 
 if TYPE_CHECKING:
     import numpy as np
@@ -57,7 +55,8 @@ MERGE_LAG_S = 1.0
 #: The summary of a campaign run (seqrun/cli/run_arms.py writes it).
 ARMS_SUMMARY = "arms.json"
 
-_STOP = object()
+#: What an arm's face queues when that arm's run has ended.
+_ARM_ENDED = object()
 
 
 def arm_namespace(arm_id: str) -> str:
@@ -198,35 +197,24 @@ def _base_transform(child: str, base: np.ndarray) -> Transform:
                       float(base[2, 3]) / 1000.0), quaternion_xyzw(base[:3, :3]))
 
 
-class ArmsMcapLog:
+class ArmsMcapLog(QueuedBagWriter):
     """``<run>/run.mcap`` of a campaign run, written live by a thread of its own from what
     every arm's run log hands its face (:meth:`for_arm`); never waits, never stops a run
-    (a full queue drops and counts, a failing disk stops the file, each said once)."""
+    (a full queue drops and counts, a failing disk stops the file, each said once). It is
+    ended (:meth:`close`) after every arm's run has ended."""
 
     def __init__(self, folder: Path, arms: Mapping[str, ArmDescription],
                  bases: Mapping[str, np.ndarray], start_epoch_s: float, *,
                  distribution: str = DEFAULT_DISTRIBUTION,
                  on_error: Callable[[str], None] | None = None,
                  queue_size: int = QUEUE_SIZE) -> None:
-        self.folder = Path(folder)
         self.distribution = distribution
-        self.on_error = on_error
-        self.error: str | None = None
-        self.path: Path | None = None
-        self._queue: queue.Queue[Any] = queue.Queue(maxsize=queue_size)
         self._faces = {a: _ArmFace(self, a, RosNames.of(arm, arm_namespace(a)))
                        for a, arm in arms.items()}
-        self._bag: ArmsBag | None = None
-        try:
-            self._bag = ArmsBag(self.folder, arms, bases, start_epoch_s,
-                                distribution=distribution)
-        except Exception as exc:  # noqa: BLE001 - run.mcap must never stop the run
-            self._fail(exc)
-        self._closed = False
-        self._thread = threading.Thread(target=self._run, name="seqrun-arms-mcap",
-                                        daemon=True)
-        if self._bag is not None:
-            self._thread.start()
+        super().__init__(folder, lambda: ArmsBag(Path(folder), arms, bases, start_epoch_s,
+                                                 distribution=distribution),
+                         thread_name="seqrun-arms-mcap", on_error=on_error,
+                         queue_size=queue_size)
 
     def for_arm(self, arm_id: str) -> _ArmFace:
         return self._faces[arm_id]
@@ -239,68 +227,16 @@ class ArmsMcapLog:
     def reordered(self) -> int:
         return self._bag.reordered if self._bag is not None else 0
 
-    @property
-    def counts(self) -> dict[str, int]:
-        return dict(self._bag.counts) if self._bag is not None else {}
-
     def _put(self, face: _ArmFace, item: Any) -> None:
-        if self._bag is None or self._closed:
-            return
-        try:
-            self._queue.put_nowait((face.arm_id, item))
-        except queue.Full:
+        if not self._offer((face.arm_id, item)):
             face.dropped += 1
 
-    def _run(self) -> None:
-        below_the_loop()
-        bag = self._bag
-        assert bag is not None
-        while True:
-            item = self._queue.get()
-            if item is _STOP:
-                break
-            if self.error is not None:
-                continue
-            arm_id, event = item
-            try:
-                if event is _STOP:
-                    bag.arm_ended(arm_id)
-                else:
-                    bag.write_event(arm_id, event)
-            except Exception as exc:  # noqa: BLE001 - a disk error or a bug: stop the file
-                self._fail(exc)
-                bag.abort()
-            time.sleep(0)   # hand the interpreter lock over: a control loop may wait for it
-        if self.error is None:
-            try:
-                self.path = bag.close()
-            except Exception as exc:  # noqa: BLE001
-                self._fail(exc)
-
-    def _fail(self, exc: BaseException) -> None:
-        if self.error is not None:
-            return
-        why = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
-        self.error = f"writing {self.folder / MCAP_NAME} failed ({why}); that file stops here"
-        if self.on_error is not None:
-            try:
-                self.on_error(self.error)
-            except Exception:  # noqa: BLE001
-                pass
-
-    def close(self, timeout: float = 60.0) -> Path | None:
-        """Write what is queued, end the file (after every arm's run has ended):
-        ``run.mcap``'s path, or None (failed)."""
-        if self._closed:
-            return self.path
-        self._closed = True
-        if self._bag is None:
-            return None
-        self._queue.put(_STOP)
-        self._thread.join(timeout)
-        if self._thread.is_alive():
-            self._fail(TimeoutError(f"still writing after {timeout:g} s"))
-        return self.path
+    def _write(self, bag: ArmsBag, item: tuple[str, Any]) -> None:
+        arm_id, event = item
+        if event is _ARM_ENDED:
+            bag.arm_ended(arm_id)
+        else:
+            bag.write_event(arm_id, event)
 
 
 class _ArmFace:
@@ -328,7 +264,7 @@ class _ArmFace:
     def close(self) -> None:
         if not self._ended:
             self._ended = True
-            self.log._put(self, _STOP)
+            self.log._put(self, _ARM_ENDED)
 
 
 # -- afterwards: from the arms' events.jsonl --------------------------------------------------

@@ -214,40 +214,42 @@ def below_the_loop() -> None:
         pass
 
 
-class McapLog:
-    """``run.mcap`` of one run, fed by the run log (:meth:`put`) and written by a thread of
-    its own. ``on_error(text)`` is told once when writing fails (from that thread)."""
+class QueuedBagWriter:
+    """A run.mcap written by a thread of its own from a bounded queue: handing an item over
+    never waits (a full queue drops and counts), a failing disk stops the file, said once
+    through ``on_error(text)`` (from that thread). Subclasses say how an item is written
+    (:meth:`_write`) and make the bag (``make_bag``)."""
 
-    def __init__(self, folder: Path, arm: ArmDescription, *, namespace: str | None = None,
-                 distribution: str = DEFAULT_DISTRIBUTION,
+    def __init__(self, folder: Path, make_bag: Callable[[], Any], *, thread_name: str,
                  on_error: Callable[[str], None] | None = None,
                  queue_size: int = QUEUE_SIZE) -> None:
         self.folder = Path(folder)
         self.on_error = on_error
         self.error: str | None = None
-        self.dropped = 0
         self.path: Path | None = None
         self._queue: queue.Queue[Any] = queue.Queue(maxsize=queue_size)
-        self._bag: BagWriter | None = None
-        self.names = RosNames.of(arm, namespace)
-        self.distribution = distribution
+        self._bag: Any = None
         try:
-            self._bag = BagWriter(self.folder, arm, self.names, distribution)
+            self._bag = make_bag()
         except Exception as exc:  # noqa: BLE001 - run.mcap must never stop the run
             self._fail(exc)
-        self._thread = threading.Thread(target=self._run, name="seqrun-mcap", daemon=True)
+        self._thread = threading.Thread(target=self._run, name=thread_name, daemon=True)
         self._closed = False
         if self._bag is not None:
             self._thread.start()
 
-    def put(self, event: Mapping[str, Any]) -> None:
-        """Hand one event (an events.jsonl line's dict) over; never waits."""
+    def _offer(self, item: Any) -> bool:
+        """Queue ``item`` without waiting; False when it was dropped (the queue full)."""
         if self._bag is None or self._closed:
-            return
+            return True
         try:
-            self._queue.put_nowait(event)
+            self._queue.put_nowait(item)
         except queue.Full:
-            self.dropped += 1
+            return False
+        return True
+
+    def _write(self, bag: Any, item: Any) -> None:
+        raise NotImplementedError
 
     def _run(self) -> None:
         below_the_loop()
@@ -260,11 +262,11 @@ class McapLog:
             if self.error is not None:
                 continue
             try:
-                bag.write_event(item)
+                self._write(bag, item)
             except Exception as exc:  # noqa: BLE001 - a disk error or a bug: stop the file
                 self._fail(exc)
                 bag.abort()
-            time.sleep(0)   # hand the interpreter lock over: the control loop may wait for it
+            time.sleep(0)   # hand the interpreter lock over: a control loop may wait for it
         if self.error is None:
             try:
                 self.path = bag.close()
@@ -298,6 +300,29 @@ class McapLog:
     @property
     def counts(self) -> dict[str, int]:
         return dict(self._bag.counts) if self._bag is not None else {}
+
+
+class McapLog(QueuedBagWriter):
+    """``run.mcap`` of one run, fed by the run log (:meth:`put`) and written by a thread of
+    its own. ``on_error(text)`` is told once when writing fails (from that thread)."""
+
+    def __init__(self, folder: Path, arm: ArmDescription, *, namespace: str | None = None,
+                 distribution: str = DEFAULT_DISTRIBUTION,
+                 on_error: Callable[[str], None] | None = None,
+                 queue_size: int = QUEUE_SIZE) -> None:
+        self.dropped = 0
+        self.names = RosNames.of(arm, namespace)
+        self.distribution = distribution
+        super().__init__(folder, lambda: BagWriter(Path(folder), arm, self.names, distribution),
+                         thread_name="seqrun-mcap", on_error=on_error, queue_size=queue_size)
+
+    def put(self, event: Mapping[str, Any]) -> None:
+        """Hand one event (an events.jsonl line's dict) over; never waits."""
+        if not self._offer(event):
+            self.dropped += 1
+
+    def _write(self, bag: BagWriter, item: Mapping[str, Any]) -> None:
+        bag.write_event(item)
 
 
 def write_mcap(folder: Path, events: Iterable[Mapping[str, Any]], arm: ArmDescription, *,
