@@ -7,44 +7,19 @@ from __future__ import annotations
 
 import io
 import re
-import shutil
-from pathlib import Path
 
 import pytest
 from rich.console import Console
 from typer.testing import CliRunner
 
 from seqrun.cli import app
-
-ROOT = Path(__file__).resolve().parents[1]
-EXAMPLE = ROOT / "examples" / "two-arms"
-
-SHORT = """\
-name: Short
-description: Both arms turn, B after A has.
-steps:
-  - parallel:
-      - arm: A
-        steps: [include: startup.yaml, {move: {joints: {j1: 10}}}, signal: A_turned]
-      - arm: B
-        steps: [include: startup.yaml, wait_for: A_turned, {move: {joints: {j1: -10}}}]
-  - parallel:
-      - {arm: A, steps: [{move: {joints: {j1: 0}}}]}
-      - {arm: B, steps: [{move: {joints: {j1: 0}}}]}
-"""
+from twoarmskit import two_arm_campaign
 
 
 @pytest.fixture
 def terminal(tmp_path, monkeypatch):
     """A two-arm campaign, and the run's screen: a recording console that is a terminal."""
-    for name in ("CAN_INTERFACE", "CAN_CHANNEL", "CAN_BITRATE", "CAN_CONFIG"):
-        monkeypatch.delenv(name, raising=False)
-    monkeypatch.setenv("HOME", str(tmp_path))
-    monkeypatch.setenv("SEQRUN_STATE_DIR", str(tmp_path / "state"))
-    folder = tmp_path / "two-arms"
-    shutil.copytree(EXAMPLE, folder)
-    (folder / "sequences" / "short.yaml").write_text(SHORT)
-    monkeypatch.chdir(folder)
+    two_arm_campaign(tmp_path, monkeypatch)
     screen = Console(record=True, file=io.StringIO(), force_terminal=True, width=200,
                      color_system=None)
     monkeypatch.setattr("seqrun.cli.output.make_console", lambda **kwargs: screen)

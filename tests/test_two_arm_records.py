@@ -16,39 +16,10 @@ from typer.testing import CliRunner
 from seqrun.cli import app
 from seqrun.powercube.protocol import CommandId
 from seqrun.service.runlog import read_trace
-
-ROOT = Path(__file__).resolve().parents[1]
-EXAMPLE = ROOT / "examples" / "two-arms"
-
-#: A moves and signals; B waits for it, then moves (test_two_arm_run.py's sequence).
-SHORT = """\
-name: Short
-description: Both arms turn, B after A has.
-steps:
-  - parallel:
-      - arm: A
-        steps: [include: startup.yaml, {move: {joints: {j1: 10}}}, signal: A_turned]
-      - arm: B
-        steps: [include: startup.yaml, wait_for: A_turned, {move: {joints: {j1: -10}}}]
-  - parallel:
-      - {arm: A, steps: [{move: {joints: {j1: 0}}}]}
-      - {arm: B, steps: [{move: {joints: {j1: 0}}}]}
-"""
+from twoarmskit import two_arm_campaign
 
 
-def _campaign(folder: Path, mp: pytest.MonkeyPatch, ros: str = "") -> Path:
-    for name in ("CAN_INTERFACE", "CAN_CHANNEL", "CAN_BITRATE", "CAN_CONFIG"):
-        mp.delenv(name, raising=False)
-    mp.setenv("HOME", str(folder))
-    mp.setenv("SEQRUN_STATE_DIR", str(folder / "state"))
-    campaign = folder / "two-arms"
-    shutil.copytree(EXAMPLE, campaign)
-    (campaign / "sequences" / "short.yaml").write_text(SHORT)
-    if ros:
-        with (campaign / "seqrun.toml").open("a") as f:
-            f.write(ros)
-    mp.chdir(campaign)
-    return campaign
+_campaign = two_arm_campaign
 
 
 def _run(folder: Path, *extra: str) -> Path:
