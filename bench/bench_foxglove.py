@@ -20,9 +20,7 @@ Run: ``python bench/bench_foxglove.py [--pairs 2] [--sequence opsafe] [--rt-prio
 
 from __future__ import annotations
 
-import argparse
 import json
-import os
 import subprocess
 import sys
 import tempfile
@@ -31,7 +29,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from loop_pairs import alternate, periods, row, summary, use_rt_priority  # noqa: E402
+from loop_pairs import off_on_main, periods  # noqa: E402
 from seqrun_runs import RESULTS, ROOT, load_shipped, machine, write_json  # noqa: E402
 
 from seqrun.clock import RealClock  # noqa: E402
@@ -104,30 +102,13 @@ def one_run(sequence: str, served: bool) -> dict:
         session.close()
         connection.close()
     return {"exit_code": result.result.exit_code, "periods": periods(setpoints), "dropped": 0,
-            "cpu_s": cpu, "received": received}
+            "cpu_s": cpu, "client_received": received}
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--pairs", type=int, default=2)
-    ap.add_argument("--sequence", default="opsafe")
-    ap.add_argument("--rt-priority", type=int, default=None)
-    args = ap.parse_args()
-    use_rt_priority(args.rt_priority)
-    load0 = os.getloadavg()
-    runs = alternate(args.pairs, ("off", "on"),
-                     lambda mode: one_run(args.sequence, mode == "on"))
-    out = {"machine": machine(), "load_before": load0, "load_after": os.getloadavg(),
-           "sequence": args.sequence, "rt_priority": args.rt_priority}
-    for mode in ("off", "on"):
-        s = summary(runs[mode], 0.01)
-        s["cpu_s_per_run"] = [round(r["cpu_s"], 2) for r in runs[mode]]
-        s["client_received"] = [r["received"] for r in runs[mode]]
-        out[f"foxglove_{mode}"] = s
-        print(f"{row(f'Foxglove {mode:3s}', s)}  CPU {s['cpu_s_per_run']} s  "
-              f"client {s['client_received']}  exit {s['exit_codes']}")
-    print(f"load average before {load0[0]:.1f}, after {out['load_after'][0]:.1f}")
-    write_json(RESULTS / "foxglove.json", out)
+    off_on_main(__doc__.splitlines()[0], one_run, label="Foxglove", key="foxglove",
+                extra="client_received", extra_unit="", results=RESULTS / "foxglove.json",
+                machine=machine, write_json=write_json)
 
 
 if __name__ == "__main__":

@@ -21,8 +21,6 @@ Run: ``python bench/bench_mcap.py [--pairs 2] [--sequence opsafe] [--rt-priority
 
 from __future__ import annotations
 
-import argparse
-import os
 import sys
 import tempfile
 import time
@@ -30,7 +28,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from loop_pairs import alternate, periods, row, summary, use_rt_priority  # noqa: E402
+from loop_pairs import off_on_main, periods  # noqa: E402
 from seqrun_runs import RESULTS, machine, run_shipped, write_json  # noqa: E402
 
 from seqrun.clock import RealClock  # noqa: E402
@@ -64,26 +62,9 @@ def one_run(sequence: str, mcap: bool) -> dict:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--pairs", type=int, default=2)
-    ap.add_argument("--sequence", default="opsafe")
-    ap.add_argument("--rt-priority", type=int, default=None)
-    args = ap.parse_args()
-    use_rt_priority(args.rt_priority)
-    load0 = os.getloadavg()
-    runs = alternate(args.pairs, ("off", "on"),
-                     lambda mode: one_run(args.sequence, mode == "on"))
-    out = {"machine": machine(), "load_before": load0, "load_after": os.getloadavg(),
-           "sequence": args.sequence, "rt_priority": args.rt_priority}
-    for mode in ("off", "on"):
-        s = summary(runs[mode], 0.01)
-        s["cpu_s_per_run"] = [round(r["cpu_s"], 2) for r in runs[mode]]
-        s["mcap_bytes"] = [r["mcap_bytes"] for r in runs[mode]]
-        out[f"mcap_{mode}"] = s
-        print(f"{row(f'run.mcap {mode:3s}', s)}  CPU {s['cpu_s_per_run']} s  "
-              f"mcap {s['mcap_bytes']} B  exit {s['exit_codes']}")
-    print(f"load average before {load0[0]:.1f}, after {out['load_after'][0]:.1f}")
-    write_json(RESULTS / "mcap.json", out)
+    off_on_main(__doc__.splitlines()[0], one_run, label="run.mcap", key="mcap",
+                extra="mcap_bytes", extra_unit=" B", results=RESULTS / "mcap.json",
+                machine=machine, write_json=write_json)
 
 
 if __name__ == "__main__":

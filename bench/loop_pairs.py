@@ -75,3 +75,35 @@ def use_rt_priority(priority: int | None) -> None:
     use_round_robin()
     use_fifo(priority)
     hand_over_the_lock_often()
+
+
+def off_on_main(description: str, one_run: Callable[[str, bool], dict], *, label: str,
+                key: str, extra: str, extra_unit: str, results: Any, machine: Callable[[], dict],
+                write_json: Callable[[Any, dict], None]) -> None:
+    """The command line of a benchmark that pairs runs without (``off``) and with (``on``)
+    something beside the loop: ``--pairs``, ``--sequence``, ``--rt-priority``; one row per
+    mode (``extra``: the per-run field shown and kept beside CPU time), JSON to ``results``
+    under ``{key}_{mode}``."""
+    import argparse
+    import os
+
+    ap = argparse.ArgumentParser(description=description)
+    ap.add_argument("--pairs", type=int, default=2)
+    ap.add_argument("--sequence", default="opsafe")
+    ap.add_argument("--rt-priority", type=int, default=None)
+    args = ap.parse_args()
+    use_rt_priority(args.rt_priority)
+    load0 = os.getloadavg()
+    runs = alternate(args.pairs, ("off", "on"),
+                     lambda mode: one_run(args.sequence, mode == "on"))
+    out = {"machine": machine(), "load_before": load0, "load_after": os.getloadavg(),
+           "sequence": args.sequence, "rt_priority": args.rt_priority}
+    for mode in ("off", "on"):
+        s = summary(runs[mode], 0.01)
+        s["cpu_s_per_run"] = [round(r["cpu_s"], 2) for r in runs[mode]]
+        s[extra] = [r[extra] for r in runs[mode]]
+        out[f"{key}_{mode}"] = s
+        print(f"{row(f'{label} {mode:3s}', s)}  CPU {s['cpu_s_per_run']} s  "
+              f"{extra} {s[extra]}{extra_unit}  exit {s['exit_codes']}")
+    print(f"load average before {load0[0]:.1f}, after {out['load_after'][0]:.1f}")
+    write_json(results, out)
