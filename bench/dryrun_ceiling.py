@@ -3,17 +3,23 @@ cost nothing.
 
 Runs the real executor (plan sampling, checks of every reading, guards and link volumes,
 following error, events, tracking) on a VirtualClock at the arm file's loop rate, as
-``seqrun validate`` does, but with an *ideal* driver: every control cycle and every
-reading is answered at once, without a frame, from the commanded plan (the joints are
-exactly where the plan says, every module at rest or in motion as the plan says). What is
-left is the executor's own per-cycle cost; ``--law`` also runs the setpoint law (the
-TargetVel + FRAMP requests it would send, built and thrown away), the driver's share that
-does not depend on the wire. Side by side in the same process and under the same load,
-the real dry run (simulator, wire, client) is timed too; the runs alternate.
+``seqrun validate`` does, four ways, alternating run by run in one process (same load):
 
-The ideal driver is a bench-only bound, not a simulator: its figures are not the run's
-(no following error, no module lag), and steps outside the stream (reset, home, limits,
-the preflight's reads) still go over the simulated wire, once each.
+- ``real``: the dry run as it is (SimPort, simulated wire, client, driver, modules);
+- ``modules``: a free wire and client (:class:`FreeWireClient`): every request handed to
+  the simulated modules at once, its acknowledge decoded and matched; the bound of any
+  cheaper exchange (a cycle-level one included);
+- ``law``: an *ideal* driver (:class:`IdealDriver`): every cycle and reading answered at
+  once, without a frame, from the plan (the joints exactly where the plan says, every
+  module at rest or in motion as the plan says), the setpoint law's requests still built
+  and thrown away;
+- ``ideal``: the ideal driver alone: the executor's own per-cycle cost.
+
+The free wire and the ideal driver are bench-only bounds, not simulators: their figures
+are not the run's (no wire time, no following error), and what happens outside the
+stream (reset, home, limits, broadcasts) still goes over the simulated wire. Fault cases
+are out of scope (a request without an answer stops the bench). The runs here use a bare
+executor, as ``perf_dryrun.py`` does (no foreign-frame watch, no run log).
 
 Run: ``.venv/bin/python bench/dryrun_ceiling.py [--runs 9] [--sequence FILE ...]
 [--profile real|modules|law|ideal]``
@@ -51,8 +57,8 @@ _MOVING = ShortState.MOTION
 class FreeWireClient(PowerCubeClient):
     """The client with a free wire: each addressed request of an exchange is handed to the
     simulated arm at once (encoded, ``SimArm.handle_frame``), its acknowledge decoded and
-    matched, the clock advanced by :attr:`PAIR_S` per pair. Broadcasts, and exchanges that
-    lose an answer, take the real wire. What is left of a dry run is what a cycle-level
+    matched, the clock advanced by :attr:`PAIR_S` per pair. Exchanges with a broadcast
+    take the real wire; a request without an answer stops the bench. What is left of a dry run is what a cycle-level
     exchange cannot save: the executor, the driver, the codec and the modules' physics."""
 
     #: Virtual seconds per request/acknowledge pair (about what the pipelined wire takes).
