@@ -10,11 +10,9 @@ import time
 
 import pytest
 from armsconsolekit import arms_setup
-from consolekit import take_control, wait_for
+from consolekit import LIVE, LOCAL, refused, take_control, wait_for
 from fastapi.testclient import TestClient
 
-LOCAL = "http://127.0.0.1:8765"
-LIVE = "ws://127.0.0.1:8765/api/v1/live"
 #: B's modules stop answering at once: its Halt cannot be confirmed (its status goes stale).
 B_SILENT = {"B": ["all:drop_acks=1.0@0"]}
 
@@ -32,15 +30,6 @@ def client(setup):
                     raise_server_exceptions=False) as c:
         c.headers["Authorization"] = "Bearer sesame"
         yield c
-
-
-def refused(response, status: int, *words: str) -> str:
-    assert response.status_code == status, response.text
-    message = response.json()["error"]
-    assert "\n" not in message and "Traceback" not in message
-    for word in words:
-        assert word in message, message
-    return message
 
 
 def test_every_arm_has_its_own_api_and_the_arms_their_bases(client, setup):

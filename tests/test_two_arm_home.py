@@ -9,7 +9,8 @@ from typer.testing import CliRunner
 
 from seqrun.cli import app
 from seqrun.powercube.protocol import StateFlag
-from test_two_arm_campaign import served
+from twoarmskit import served_campaign
+from twoarmskit import two_served as two_served_arms
 
 F = StateFlag
 
@@ -22,17 +23,10 @@ def two_arms(tmp_path, monkeypatch):
         monkeypatch.delenv(name, raising=False)
     monkeypatch.setenv("HOME", str(tmp_path))
     monkeypatch.setenv("SEQRUN_STATE_DIR", str(tmp_path / "state"))
-    first, second = served(5_100_000, "park"), served(5_200_000, "totem")
+    first, second = two_served_arms()
     folder = tmp_path / "dual"
     folder.mkdir()
-    (folder / "seqrun.toml").write_text(f"""\
-[arms.A]
-bus = {{ interface = "socketcand", channel = "can0", kwargs = {{ host = "127.0.0.1", port = {first.port} }} }}
-
-[arms.B]
-bus = {{ interface = "socketcand", channel = "can0", kwargs = {{ host = "127.0.0.1", port = {second.port} }} }}
-base = {{ position_mm = [0, 900, 0], rpy_deg = [0, 0, 180] }}
-""")
+    (folder / "seqrun.toml").write_text(served_campaign(first, second))
     monkeypatch.chdir(folder)
     yield {"A": first, "B": second}
     first.shutdown()
