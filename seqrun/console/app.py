@@ -19,6 +19,7 @@ import contextlib
 import itertools
 import json
 import logging
+import re
 import threading
 from collections.abc import AsyncIterator, Callable
 from pathlib import Path
@@ -48,6 +49,8 @@ log = logging.getLogger(__name__)
 API = "/api/v1"
 STATIC = Path(__file__).resolve().parent / "static"
 ClientHeader = Annotated[str | None, Header(alias="X-Seqrun-Client")]
+#: A part of the pages shared by both (``<!-- include parts/motion.html -->``).
+_INCLUDE = re.compile(r"<!-- include (parts/[a-z0-9_-]+\.html) -->")
 
 
 def json_body(model: type[Any]) -> Any:
@@ -487,7 +490,8 @@ def control_routes(api: APIRouter, console: Any) -> None:
 
 
 def index_page(request: Request, page: str = "index.html") -> HTMLResponse:
-    html = (STATIC / page).read_text(encoding="utf-8")
+    html = _INCLUDE.sub(lambda m: (STATIC / m[1]).read_text(encoding="utf-8"),
+                        (STATIC / page).read_text(encoding="utf-8"))
     response = HTMLResponse(html, headers={"Cache-Control": "no-store"})
     token = request.query_params.get("token")
     if token:  # the URL printed at start: the page's own requests carry it as a cookie

@@ -5,10 +5,10 @@
 // /api/v1/arms/{id}); one operator holds control of the whole console.
 import { frames } from "/static/view3d.js";
 import { ArmsView } from "/static/arms3d.js";
-import { API, $, el, fmt, say, apiOf, stopKeys, Jog, JointControls, GripperPanel } from "/static/controls.js";
+import { API, $, el, fmt, say, apiOf, stopKeys, LOST_MS, connectLive, watchContact, Jog, JointControls, GripperPanel } from "/static/controls.js";
 
-// The console sends each arm's status at least every 0.5 s: none for LOST_MS, contact lost.
-const LOST_MS = 2000;
+// (LOST_MS: the console sends each arm's status at least every 0.5 s: none for that long
+// from an arm, contact with it lost.)
 const STOP_CONFIRM_MS = 1500;
 // Numbers painted at most this often (per second): the browser's painting is what costs the
 // CPU the control loop needs (docs/console.md).
@@ -99,34 +99,18 @@ $("#stop").addEventListener("pointerdown", (e) => { if (e.button === 0) stop(e);
 
 // ---------------------------------------------------------------- live connection
 function connect() {
-  const ws = new WebSocket(`${location.protocol === "https:" ? "wss" : "ws"}://${location.host}${API}/live`);
-  state.ws = ws;
-  let ping = null;
-  ws.onopen = () => {
-    $("#conn").textContent = "live"; $("#conn").className = "badge on";
-    ping = setInterval(() => { if (ws.readyState === WebSocket.OPEN) ws.send('{"op":"ping"}'); }, 500);
-  };
-  ws.onclose = () => {
-    clearInterval(ping);
-    $("#conn").textContent = "offline"; $("#conn").className = "badge off";
-    state.client = null;
-    jog.release(false);
-    setLost(true, "The live connection closed.");
-    setTimeout(connect, 1000);
-  };
-  ws.onmessage = (msg) => {
-    state.lastHeardAt = performance.now();
-    if (state.lost && state.client) setLost(false);
-    const data = JSON.parse(msg.data);
-    if (data.type === "status") onStatus(data.arm, data.status);
-    else if (data.type === "event") onEvent(data.arm, data.event);
-    else if (data.type === "hello") {
-      state.client = data.client;
-      setLost(false);
-      showControl(data.control);
-      for (const [id, status] of Object.entries(data.status.arms || {})) onStatus(id, status);
-    } else if (data.type === "reply") onReply(data);
-  };
+  connectLive(state, {
+    setLost,
+    closed: () => jog.release(false),
+    onData: (data) => {
+      if (data.type === "status") onStatus(data.arm, data.status);
+      else if (data.type === "event") onEvent(data.arm, data.event);
+      else if (data.type === "hello") {
+        showControl(data.control);
+        for (const [id, status] of Object.entries(data.status.arms || {})) onStatus(id, status);
+      } else if (data.type === "reply") onReply(data);
+    },
+  });
 }
 
 function onReply(reply) {
@@ -192,9 +176,7 @@ function setLost(lost, why = "") {
   paint();
 }
 
-setInterval(() => {
-  if (!state.lost && performance.now() - state.lastHeardAt > LOST_MS) setLost(true, `No word from the console for ${LOST_MS / 1000} s.`);
-}, 250);
+watchContact(state, setLost);
 
 // ---------------------------------------------------------------- control
 function showControl(control) {

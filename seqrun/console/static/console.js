@@ -1,7 +1,7 @@
 // seqrun operator console: one page over the /api/v1 HTTP API and the live WebSocket.
 // STOP is sent on the WebSocket (HTTP when it is down) and never waits for anything else.
 import { ArmView, frames } from "/static/view3d.js";
-import { API, $, el, fmt, setText, say, apiOf, stopKeys, Jog, JointControls, GripperPanel } from "/static/controls.js";
+import { API, $, el, fmt, setText, say, apiOf, stopKeys, connectLive, watchContact, Jog, JointControls, GripperPanel } from "/static/controls.js";
 
 // ?draw=0 (benchmarks): count the telemetry, draw nothing (what drawing costs, isolated).
 const DRAW = new URLSearchParams(location.search).get("draw") !== "0";
@@ -83,47 +83,21 @@ function stopFailed() {
 stopKeys(stop);
 
 // ---------------------------------------------------------------- live connection
-// The console sends a status at least every 0.5 s: a page that heard nothing for LOST_MS
-// (a console killed, frozen or cut off without a TCP close) has lost contact.
-const LOST_MS = 2000;
-
 function connect() {
-  const ws = new WebSocket(`${location.protocol === "https:" ? "wss" : "ws"}://${location.host}${API}/live`);
-  state.ws = ws;
-  // A ping every 0.5 s: the server takes a page silent for 2 s during its motion as gone.
-  let ping = null;
-  ws.onopen = () => {
-    $("#conn").textContent = "live"; $("#conn").className = "badge on";
-    ping = setInterval(() => { if (ws.readyState === WebSocket.OPEN) ws.send('{"op":"ping"}'); }, 500);
-  };
-  ws.onclose = () => {
-    clearInterval(ping);
-    $("#conn").textContent = "offline"; $("#conn").className = "badge off";
-    state.client = null;
-    jog.release(false);
-    setLost(true, "The live connection closed.");
-    setTimeout(connect, 1000);
-  };
-  ws.onmessage = (msg) => {
-    state.lastHeardAt = performance.now();
-    if (state.lost && state.client) setLost(false);  // a console that was frozen, back
-    const data = JSON.parse(msg.data);
-    if (data.type === "status") showStatus(data.status);
-    else if (data.type === "event") showEvent(data.event);
-    else if (data.type === "hello") {
-      state.client = data.client;
-      setLost(false);
-      showControl(data.control);
-      showStatus(data.status);
-    } else if (data.type === "reply") onReply(data);
-  };
+  connectLive(state, {
+    setLost,
+    closed: () => jog.release(false),
+    onData: (data) => {
+      if (data.type === "status") showStatus(data.status);
+      else if (data.type === "event") showEvent(data.event);
+      else if (data.type === "hello") {
+        showControl(data.control);
+        showStatus(data.status);
+      } else if (data.type === "reply") onReply(data);
+    },
+  });
 }
-
-setInterval(() => {
-  if (!state.lost && performance.now() - state.lastHeardAt > LOST_MS) {
-    setLost(true, `No word from the console for ${LOST_MS / 1000} s.`);
-  }
-}, 250);
+watchContact(state, setLost);
 
 // Lost contact: whatever the page shows is old. Everything greys out under a banner, the
 // activity reads "unknown"; STOP stays red and still tries (and says if it fails).

@@ -68,6 +68,51 @@ export function stopKeys(stop) {
   }, true);
 }
 
+// ---------------------------------------------------------------- live connection
+// The console sends a status at least every 0.5 s: a page that heard nothing for LOST_MS
+// (a console killed, frozen or cut off without a TCP close) has lost contact.
+export const LOST_MS = 2000;
+
+// The live WebSocket (state.ws; state.client from its hello): a ping every 0.5 s (the
+// server takes a page silent for 2 s during its motion as gone), reconnected a second after
+// it closed. setLost(lost, why): the page's lost contact; closed(): its own clean-up (a
+// held jog); onData(message): every message, the hello after the client id is known.
+export function connectLive(state, handlers) {
+  const { setLost, closed, onData } = handlers;
+  const ws = new WebSocket(`${location.protocol === "https:" ? "wss" : "ws"}://${location.host}${API}/live`);
+  state.ws = ws;
+  let ping = null;
+  ws.onopen = () => {
+    $("#conn").textContent = "live"; $("#conn").className = "badge on";
+    ping = setInterval(() => { if (ws.readyState === WebSocket.OPEN) ws.send('{"op":"ping"}'); }, 500);
+  };
+  ws.onclose = () => {
+    clearInterval(ping);
+    $("#conn").textContent = "offline"; $("#conn").className = "badge off";
+    state.client = null;
+    closed();
+    setLost(true, "The live connection closed.");
+    setTimeout(() => connectLive(state, handlers), 1000);
+  };
+  ws.onmessage = (msg) => {
+    state.lastHeardAt = performance.now();
+    if (state.lost && state.client) setLost(false);  // a console that was frozen, back
+    const data = JSON.parse(msg.data);
+    if (data.type === "hello") {
+      state.client = data.client;
+      setLost(false);
+    }
+    onData(data);
+  };
+}
+
+// No word for LOST_MS on a connection that was live: contact lost.
+export function watchContact(state, setLost) {
+  setInterval(() => {
+    if (!state.lost && performance.now() - state.lastHeardAt > LOST_MS) setLost(true, `No word from the console for ${LOST_MS / 1000} s.`);
+  }, 250);
+}
+
 // ---------------------------------------------------------------- jog
 // Hold to move, renewed every 100 ms on the live connection (the server stops the joint
 // 200 ms after the last); released (or the page hidden or blurred): jog_stop.
