@@ -12,8 +12,7 @@ import pytest
 from seqrun.errors import UserInputError
 from seqrun.sequence.project import ConfigInvalid, open_project
 from seqrun.service.arm_context import resolve_context, resolve_contexts
-from twoarmskit import halted, served_campaign
-from twoarmskit import two_served as two_served_arms
+from twoarmskit import halted, quiet, two_served_campaign
 
 TWO_ARMS = """\
 [campaign]
@@ -32,11 +31,7 @@ base = { position_mm = [1200, 0, 0], rpy_deg = [0, 0, 180] }
 
 @pytest.fixture
 def quiet_env(tmp_path, monkeypatch):
-    for name in ("CAN_INTERFACE", "CAN_CHANNEL", "CAN_BITRATE", "CAN_CONFIG"):
-        monkeypatch.delenv(name, raising=False)
-    monkeypatch.setenv("HOME", str(tmp_path))
-    monkeypatch.setenv("SEQRUN_STATE_DIR", str(tmp_path / "state"))
-    return tmp_path
+    return quiet(tmp_path, monkeypatch)
 
 
 def campaign(folder, text: str):
@@ -104,17 +99,11 @@ def test_a_bad_arms_table_is_file_line_col(quiet_env, text, where, message):
 
 # ------------------------------------------------------------------ status / halt / reset
 @pytest.fixture
-def two_served(quiet_env, monkeypatch):
+def two_served(tmp_path, monkeypatch):
     """Two simulated arms, each its own server (own serials and power-on pose), named by
     a campaign with arms A and B."""
-    first, second = two_served_arms()
-    folder = quiet_env / "dual"
-    folder.mkdir()
-    (folder / "seqrun.toml").write_text(served_campaign(first, second))
-    monkeypatch.chdir(folder)
-    yield {"A": first, "B": second}
-    first.shutdown()
-    second.shutdown()
+    with two_served_campaign(tmp_path, monkeypatch) as arms:
+        yield arms
 
 
 def test_halt_halts_every_arm_and_confirms_each(two_served):

@@ -9,8 +9,7 @@ from typer.testing import CliRunner
 
 from seqrun.cli import app
 from seqrun.powercube.protocol import StateFlag
-from twoarmskit import served_campaign
-from twoarmskit import two_served as two_served_arms
+from twoarmskit import two_served_campaign
 
 F = StateFlag
 
@@ -19,18 +18,8 @@ F = StateFlag
 def two_arms(tmp_path, monkeypatch):
     """Two simulated arms on two servers (own serials and power-on pose), a campaign with
     arms A and B on them."""
-    for name in ("CAN_INTERFACE", "CAN_CHANNEL", "CAN_BITRATE", "CAN_CONFIG"):
-        monkeypatch.delenv(name, raising=False)
-    monkeypatch.setenv("HOME", str(tmp_path))
-    monkeypatch.setenv("SEQRUN_STATE_DIR", str(tmp_path / "state"))
-    first, second = two_served_arms()
-    folder = tmp_path / "dual"
-    folder.mkdir()
-    (folder / "seqrun.toml").write_text(served_campaign(first, second))
-    monkeypatch.chdir(folder)
-    yield {"A": first, "B": second}
-    first.shutdown()
-    second.shutdown()
+    with two_served_campaign(tmp_path, monkeypatch) as arms:
+        yield arms
 
 
 def homed(server, modules=range(1, 8)) -> bool:

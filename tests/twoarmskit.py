@@ -3,7 +3,9 @@ simulator) copied into a test's folder, with a short sequence in which B waits f
 
 from __future__ import annotations
 
+import contextlib
 import shutil
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -28,14 +30,20 @@ steps:
 """
 
 
-def two_arm_campaign(folder: Path, mp: pytest.MonkeyPatch, ros: str = "") -> Path:
-    """``folder/two-arms``: the example campaign with ``sequences/short.yaml`` (and ``ros``
-    appended to its seqrun.toml), made the working folder; no CAN bus from the environment,
-    HOME and the arms' state (zero records) inside ``folder``."""
+def quiet(folder: Path, mp: pytest.MonkeyPatch) -> Path:
+    """No CAN bus from the environment; HOME and the arms' state (zero records) inside
+    ``folder``."""
     for name in ("CAN_INTERFACE", "CAN_CHANNEL", "CAN_BITRATE", "CAN_CONFIG"):
         mp.delenv(name, raising=False)
     mp.setenv("HOME", str(folder))
     mp.setenv("SEQRUN_STATE_DIR", str(folder / "state"))
+    return folder
+
+
+def two_arm_campaign(folder: Path, mp: pytest.MonkeyPatch, ros: str = "") -> Path:
+    """``folder/two-arms``: the example campaign with ``sequences/short.yaml`` (and ``ros``
+    appended to its seqrun.toml), made the working folder, the environment :func:`quiet`."""
+    quiet(folder, mp)
     campaign = folder / "two-arms"
     shutil.copytree(EXAMPLE, campaign)
     (campaign / "sequences" / "short.yaml").write_text(SHORT)
@@ -79,6 +87,23 @@ bus = {{ interface = "socketcand", channel = "can0", kwargs = {{ host = "127.0.0
 bus = {{ interface = "socketcand", channel = "can0", kwargs = {{ host = "127.0.0.1", port = {second.port} }} }}
 base = {{ position_mm = [0, 900, 0], rpy_deg = [0, 0, 180] }}
 """
+
+
+@contextlib.contextmanager
+def two_served_campaign(folder: Path, mp: pytest.MonkeyPatch) -> Iterator[dict]:
+    """:func:`two_served` arms named by ``folder/dual/seqrun.toml`` (the working folder,
+    the environment :func:`quiet`): ``{"A": server, "B": server}``, shut down after."""
+    quiet(folder, mp)
+    first, second = two_served()
+    try:
+        campaign = folder / "dual"
+        campaign.mkdir()
+        (campaign / "seqrun.toml").write_text(served_campaign(first, second))
+        mp.chdir(campaign)
+        yield {"A": first, "B": second}
+    finally:
+        first.shutdown()
+        second.shutdown()
 
 
 def halted(server) -> bool:
