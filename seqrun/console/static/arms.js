@@ -5,7 +5,7 @@
 // /api/v1/arms/{id}); one operator holds control of the whole console.
 import { frames } from "/static/view3d.js";
 import { ArmsView } from "/static/arms3d.js";
-import { API, $, el, fmt, say, apiOf, stopKeys, LOST_MS, connectLive, watchContact, Jog, JointControls, GripperPanel } from "/static/controls.js";
+import { API, $, el, fmt, say, apiOf, stopKeys, LOST_MS, connectLive, watchContact, markLost, Jog, JointControls, GripperPanel } from "/static/controls.js";
 
 // (LOST_MS: the console sends each arm's status at least every 0.5 s: none for that long
 // from an arm, contact with it lost.)
@@ -164,14 +164,7 @@ function onEvent(id, event) {
 
 // Lost contact with the console: the whole page greys out, every arm's state is unknown.
 function setLost(lost, why = "") {
-  if (lost === state.lost && (!lost || !why)) return;
-  state.lost = lost;
-  document.body.classList.toggle("lost", lost);
-  $("#lost-banner").hidden = !lost;
-  $("#lost-why").textContent = why;
-  if (!lost) $("#lost-stop").hidden = true;
-  if (lost) say("The console is unreachable: the arms' state is unknown - use the emergency stop", true);
-  else if ($("#message").textContent.startsWith("The console is unreachable")) say("");
+  if (!markLost(state, lost, why, "The console is unreachable: the arms' state is unknown - use the emergency stop")) return;
   applyControl();
   paint();
 }

@@ -1,7 +1,7 @@
 // seqrun operator console: one page over the /api/v1 HTTP API and the live WebSocket.
 // STOP is sent on the WebSocket (HTTP when it is down) and never waits for anything else.
 import { ArmView, frames } from "/static/view3d.js";
-import { API, $, el, fmt, setText, say, apiOf, stopKeys, connectLive, watchContact, Jog, JointControls, GripperPanel } from "/static/controls.js";
+import { API, $, el, fmt, setText, say, apiOf, stopKeys, connectLive, watchContact, markLost, Jog, JointControls, GripperPanel } from "/static/controls.js";
 
 // ?draw=0 (benchmarks): count the telemetry, draw nothing (what drawing costs, isolated).
 const DRAW = new URLSearchParams(location.search).get("draw") !== "0";
@@ -102,20 +102,11 @@ watchContact(state, setLost);
 // Lost contact: whatever the page shows is old. Everything greys out under a banner, the
 // activity reads "unknown"; STOP stays red and still tries (and says if it fails).
 function setLost(lost, why = "") {
-  if (lost === state.lost && (!lost || !why)) return;
-  state.lost = lost;
-  document.body.classList.toggle("lost", lost);
-  $("#lost-banner").hidden = !lost;
-  $("#lost-why").textContent = why;
-  if (!lost) $("#lost-stop").hidden = true;
+  if (!markLost(state, lost, why, "The console is unreachable: the arm's state is unknown - use the emergency stop")) return;
   if (lost) {
     setText($("#activity"), "unknown");
     $("#activity").className = "badge unknown";
-    say("The console is unreachable: the arm's state is unknown - use the emergency stop", true);
-  } else {
-    if (state.status) drawBadges(state.status);
-    if ($("#message").textContent.startsWith("The console is unreachable")) say("");
-  }
+  } else if (state.status) drawBadges(state.status);
   applyControl();
 }
 

@@ -106,6 +106,21 @@ export function connectLive(state, handlers) {
   };
 }
 
+// Lost contact (lost: true) or back (false): the whole page greys out under the banner
+// (why: its line) and the message bar says so (text); STOP stays red and still tries.
+// False when nothing changed (lost again without a new reason, or back while not lost).
+export function markLost(state, lost, why, text) {
+  if (lost === state.lost && (!lost || !why)) return false;
+  state.lost = lost;
+  document.body.classList.toggle("lost", lost);
+  $("#lost-banner").hidden = !lost;
+  $("#lost-why").textContent = why;
+  if (!lost) $("#lost-stop").hidden = true;
+  if (lost) say(text, true);
+  else if ($("#message").textContent.startsWith("The console is unreachable")) say("");
+  return true;
+}
+
 // No word for LOST_MS on a connection that was live: contact lost.
 export function watchContact(state, setLost) {
   setInterval(() => {
