@@ -82,4 +82,5 @@ def arms_setup(folder: Path, *, faults: dict[str, list[str]] | None = None,
         arm = context.arm.with_zero_reference("park")
         made[arm_id] = ArmSession(arm, connection, project=project, log_root=runs,
                                   **session_kw)
-    return ArmsSetup(folder, project, contexts, ArmSessions(made), wires, runs)
+    sessions = ArmSessions(made, bases={a: c.base for a, c in contexts.items()})
+    return ArmsSetup(folder, project, contexts, sessions, wires, runs)

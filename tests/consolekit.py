@@ -218,6 +218,19 @@ class LiveServer:
 
 
 CLIENT = "X-Seqrun-Client"
+#: Where the test client's requests claim to go (the Host a local browser sends).
+LOCAL = "http://127.0.0.1:8765"
+LIVE = "ws://127.0.0.1:8765/api/v1/live"
+
+
+def refused(response, status: int, *words: str) -> str:
+    """The response is a refusal with ``status``: one line naming ``words``, no traceback."""
+    assert response.status_code == status, response.text
+    message = response.json()["error"]
+    assert "\n" not in message and "Traceback" not in message
+    for word in words:
+        assert word in message, message
+    return message
 
 
 def take_control(client: Any, name: str = "tests", page: str | None = None) -> str:

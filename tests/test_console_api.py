@@ -11,13 +11,10 @@ import math
 import time
 
 import pytest
-from consolekit import console_setup, take_control, wait_for
+from consolekit import LIVE, LOCAL, console_setup, refused, take_control, wait_for
 from fastapi.testclient import TestClient
 
 from seqrun.errors import Refused
-
-LOCAL = "http://127.0.0.1:8765"  # the Host a local browser sends
-LIVE = "ws://127.0.0.1:8765/api/v1/live"
 
 
 @pytest.fixture
@@ -49,15 +46,6 @@ def joint(client, name: str) -> float:
 def idle(client, timeout: float = 20.0) -> dict:
     return wait_for(lambda: (s := client.get("/api/v1/status").json())["activity"]
                     not in ("moving", "jogging", "running", "paused") and s, timeout)
-
-
-def refused(response, status: int, *words: str) -> str:
-    assert response.status_code == status, response.text
-    message = response.json()["error"]
-    assert "\n" not in message and "Traceback" not in message
-    for word in words:
-        assert word in message, message
-    return message
 
 
 # ------------------------------------------------------------------------- reading

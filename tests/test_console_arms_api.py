@@ -5,15 +5,14 @@ control desk for the whole console, the live connection carrying both arms."""
 
 from __future__ import annotations
 
+import json
 import time
 
 import pytest
 from armsconsolekit import arms_setup
-from consolekit import take_control, wait_for
+from consolekit import LIVE, LOCAL, refused, take_control, wait_for
 from fastapi.testclient import TestClient
 
-LOCAL = "http://127.0.0.1:8765"
-LIVE = "ws://127.0.0.1:8765/api/v1/live"
 #: B's modules stop answering at once: its Halt cannot be confirmed (its status goes stale).
 B_SILENT = {"B": ["all:drop_acks=1.0@0"]}
 
@@ -31,15 +30,6 @@ def client(setup):
                     raise_server_exceptions=False) as c:
         c.headers["Authorization"] = "Bearer sesame"
         yield c
-
-
-def refused(response, status: int, *words: str) -> str:
-    assert response.status_code == status, response.text
-    message = response.json()["error"]
-    assert "\n" not in message and "Traceback" not in message
-    for word in words:
-        assert word in message, message
-    return message
 
 
 def test_every_arm_has_its_own_api_and_the_arms_their_bases(client, setup):
@@ -284,3 +274,31 @@ def test_a_two_arm_sequence_runs_from_the_console(client, setup):
     for arm_id, target in (("A", 3), ("B", -3)):
         j1 = client.get(f"/api/v1/arms/{arm_id}/status").json()["joints"][0]["position_deg"]
         assert j1 == pytest.approx(target, abs=0.3)
+
+
+@pytest.mark.slow  # both arms start up and move in real time
+def test_a_two_arm_run_from_the_console_leaves_the_records_of_seqrun_run(client, setup):
+    """arms.json (one time base, each arm's start and base) and <run>/run.mcap (/A/...,
+    /B/..., /tf_static facility -> each base): read back by the checks of seqrun run's."""
+    from pathlib import Path
+
+    from armsrecordkit import (check_b_moves_after_a_signalled, check_one_time_base,
+                               check_run_mcap, check_traces_on_the_one_time_base)
+    from twoarmskit import SHORT
+
+    (setup.folder / "sequences" / "short.yaml").write_text(SHORT)
+    take_control(client)
+    r = client.post("/api/v1/run", json={"sequence": "short.yaml"})
+    assert r.status_code == 200, r.text
+    wait_for(lambda: client.get("/api/v1/run").json()["done"], 90)
+    state = client.get("/api/v1/run").json()
+    assert state["exit_code"] == 0 and state["warnings"] == [], state
+    run = Path(state["run_dir"])
+    summary = json.loads((run / "arms.json").read_text())
+    assert summary["sequence"] == "Short" and summary["exit_code"] == 0
+    assert summary["ros"]["mcap"] == "run.mcap"
+    assert {a: s["status"] for a, s in summary["arms"].items()} == {"A": "passed",
+                                                                     "B": "passed"}
+    check_one_time_base(run)
+    check_traces_on_the_one_time_base(run, check_b_moves_after_a_signalled(run))
+    check_run_mcap(run)

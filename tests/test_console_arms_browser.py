@@ -232,3 +232,61 @@ def test_a_two_arm_sequence_runs_from_the_page(browser, plain, tmp_path):  # noq
         assert not page.errors, page.errors
     finally:
         context.close()
+
+
+def test_move_allvel_and_gripper_act_on_the_selected_arm(browser, plain, tmp_path):  # noqa: F811
+    """The one-arm page's MOVE sliders, ALLVEL boxes and gripper panel (the same module,
+    static/controls.js) on the page of several arms, for the selected arm only."""
+    setup, server = plain
+    # a part between B's jaws only (each arm's simulator has the arm file's gripper)
+    setup.sessions["B"].connection.bus.inner.arm.module(8).part_m = 0.040
+    context, page = open_page(browser, server, tmp_path, "move-b")
+    try:
+        page.wait_for_function("document.querySelector('#control-state').textContent"
+                               ".includes('this page')")
+        page.click(".arm-choice[data-arm=B]")
+        for button, label in (("#cmd-arm", "Arm"), ("#cmd-home", "Home")):
+            page.evaluate("document.querySelector('#message').textContent = ''")
+            page.click(button)
+            page.wait_for_function(f"document.querySelector('#message').textContent"
+                                   f".startsWith('arm B: {label}')", timeout=20000)
+        a_velocities = setup.sessions["A"].move_velocities()
+        page.fill(".vel-box[data-joint=j1]", "6")
+        page.click("#cmd-allvel")
+        page.wait_for_function("document.querySelector('#message').textContent"
+                               ".startsWith('arm B: ALLVEL')", timeout=10000)
+        assert setup.sessions["B"].move_velocities()["j1"] == 6
+        assert setup.sessions["A"].move_velocities() == a_velocities
+        # MOVE: the slider's target for B's j1; A is never commanded
+        a_count = len(setup.wires["A"].frames)
+        before = time.perf_counter()
+        page.fill(".move-number[data-joint=j1]", "4")
+        assert page.input_value(".move-slider[data-joint=j1]") == "4"
+        page.click("#cmd-move")
+        wait_for(lambda: abs(setup.sessions["B"].status().joints[0].position_deg - 4) < 0.05
+                 and setup.sessions["B"].status().activity in ("idle", None), 20)
+        assert setup.wires["B"].motions(before) > 0
+        assert setup.wires["A"].motions(before) == 0
+        assert not [data for _, _, data, _ in setup.wires["A"].frames[a_count:]
+                    if data and data[0] != 0x0A], "arm A was commanded"
+        # the gripper panel is B's: its state read, Grip goes to B's gripper
+        page.wait_for_function("document.querySelector('#gripper-state').textContent"
+                               ".includes('mm open')", timeout=10000)
+        assert page.is_visible("#gripper-panel")
+        page.fill("#grip-width", "40")
+        page.fill("#grip-force", "50")
+        page.click("#cmd-grip")
+        page.wait_for_function("document.querySelector('#gripper-state').textContent"
+                               ".includes('holding a part')", timeout=20000)
+        assert not [data for _, _, data, _ in setup.wires["A"].frames[a_count:]
+                    if data and data[0] != 0x0A], "arm A was commanded"
+        # selecting A: the sliders are A's (where A stands), the gripper panel A's (open)
+        page.click(".arm-choice[data-arm=A]")
+        page.wait_for_function("document.querySelector('.move-number[data-joint=j1]')"
+                               ".value === '0.0'", timeout=5000)
+        page.wait_for_function("document.querySelector('#gripper-state').textContent"
+                               ".startsWith('70.0 mm open, not holding')", timeout=10000)
+        page.shot()
+        assert not page.errors, page.errors
+    finally:
+        context.close()

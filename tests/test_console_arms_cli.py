@@ -19,6 +19,7 @@ import pytest
 from armsconsolekit import TWO_ARMS
 from consolekit import project_tree
 from projecttree import ROOT
+from twoarmskit import halted, served_campaign, two_served
 
 pytestmark = pytest.mark.slow  # a console process each
 
@@ -127,38 +128,10 @@ def test_arm_id_serves_the_named_arms_only_and_bad_options_are_one_line(tmp_path
         assert len(said) == 1 and words in said[0] and "Traceback" not in said[0], said
 
 
-def served(serial_base: int, power_on_pose: str):
-    from seqrun.clock import RealClock
-    from seqrun.sim.arm import SimArm
-    from seqrun.sim.network import SimNetwork
-    from seqrun.sim.socketcand import SocketcandServer
-
-    clock = RealClock()
-    serials = {m: serial_base + m for m in range(1, 8)}
-    server = SocketcandServer(SimNetwork(clock, SimArm(clock, power_on_pose=power_on_pose,
-                                                       serials=serials),
-                                         spin_window=0.0), port=0)
-    server.start()
-    return server
-
-
-def halted(server) -> bool:
-    from seqrun.powercube.protocol import StateFlag
-
-    return all(StateFlag(s) & StateFlag.HALTED for s in server.network.arm.states().values())
-
-
 def test_two_served_arms_each_its_bus_and_zero_and_one_stop(tmp_path):
-    first, second = served(5_100_000, "park"), served(5_200_000, "totem")
+    first, second = two_served()
     try:
-        folder = campaign(tmp_path, f"""\
-[arms.A]
-bus = {{ interface = "socketcand", channel = "can0", kwargs = {{ host = "127.0.0.1", port = {first.port} }} }}
-
-[arms.B]
-bus = {{ interface = "socketcand", channel = "can0", kwargs = {{ host = "127.0.0.1", port = {second.port} }} }}
-base = {{ position_mm = [0, 900, 0], rpy_deg = [0, 0, 180] }}
-""")
+        folder = campaign(tmp_path, served_campaign(first, second))
         # where each arm was powered off, recorded per arm (its serials) as on the rig
         for server, pose in ((first, "park"), (second, "totem")):
             zero = subprocess.run(

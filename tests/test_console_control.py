@@ -6,14 +6,11 @@ from __future__ import annotations
 import time
 
 import pytest
-from consolekit import BusListener, console_setup, take_control, wait_for
+from consolekit import LIVE, LOCAL, BusListener, console_setup, take_control, wait_for
 from fastapi.testclient import TestClient
 
 from seqrun.errors import Refused
 from seqrun.service.control import ControlDesk, NotInControl
-
-LOCAL = "http://127.0.0.1:8765"
-LIVE = "ws://127.0.0.1:8765/api/v1/live"
 
 
 # ------------------------------------------------------------------ the service's desk

@@ -9,13 +9,11 @@ import json
 import time
 
 import pytest
-from consolekit import BusListener, console_setup, take_control
+from consolekit import LIVE, LOCAL, BusListener, console_setup, take_control
 from fastapi.testclient import TestClient
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-LOCAL = "http://127.0.0.1:8765"
-LIVE = "ws://127.0.0.1:8765/api/v1/live"
 JSON = {"Content-Type": "application/json"}
 
 

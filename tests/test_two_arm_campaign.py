@@ -12,6 +12,7 @@ import pytest
 from seqrun.errors import UserInputError
 from seqrun.sequence.project import ConfigInvalid, open_project
 from seqrun.service.arm_context import resolve_context, resolve_contexts
+from twoarmskit import halted, quiet, two_served_campaign
 
 TWO_ARMS = """\
 [campaign]
@@ -30,11 +31,7 @@ base = { position_mm = [1200, 0, 0], rpy_deg = [0, 0, 180] }
 
 @pytest.fixture
 def quiet_env(tmp_path, monkeypatch):
-    for name in ("CAN_INTERFACE", "CAN_CHANNEL", "CAN_BITRATE", "CAN_CONFIG"):
-        monkeypatch.delenv(name, raising=False)
-    monkeypatch.setenv("HOME", str(tmp_path))
-    monkeypatch.setenv("SEQRUN_STATE_DIR", str(tmp_path / "state"))
-    return tmp_path
+    return quiet(tmp_path, monkeypatch)
 
 
 def campaign(folder, text: str):
@@ -101,46 +98,12 @@ def test_a_bad_arms_table_is_file_line_col(quiet_env, text, where, message):
 
 
 # ------------------------------------------------------------------ status / halt / reset
-def served(serial_base: int, power_on_pose: str):
-    from seqrun.clock import RealClock
-    from seqrun.sim.arm import SimArm
-    from seqrun.sim.network import SimNetwork
-    from seqrun.sim.socketcand import SocketcandServer
-
-    clock = RealClock()
-    serials = {m: serial_base + m for m in range(1, 8)}
-    server = SocketcandServer(SimNetwork(clock, SimArm(clock, power_on_pose=power_on_pose,
-                                                       serials=serials),
-                                         spin_window=0.0), port=0)
-    server.start()
-    return server
-
-
 @pytest.fixture
-def two_served(quiet_env, monkeypatch):
+def two_served(tmp_path, monkeypatch):
     """Two simulated arms, each its own server (own serials and power-on pose), named by
     a campaign with arms A and B."""
-    first, second = served(5_100_000, "park"), served(5_200_000, "totem")
-    folder = quiet_env / "dual"
-    folder.mkdir()
-    (folder / "seqrun.toml").write_text(f"""\
-[arms.A]
-bus = {{ interface = "socketcand", channel = "can0", kwargs = {{ host = "127.0.0.1", port = {first.port} }} }}
-
-[arms.B]
-bus = {{ interface = "socketcand", channel = "can0", kwargs = {{ host = "127.0.0.1", port = {second.port} }} }}
-base = {{ position_mm = [0, 900, 0], rpy_deg = [0, 0, 180] }}
-""")
-    monkeypatch.chdir(folder)
-    yield {"A": first, "B": second}
-    first.shutdown()
-    second.shutdown()
-
-
-def halted(server) -> bool:
-    from seqrun.powercube.protocol import StateFlag
-
-    return all(StateFlag(s) & StateFlag.HALTED for s in server.network.arm.states().values())
+    with two_served_campaign(tmp_path, monkeypatch) as arms:
+        yield arms
 
 
 def test_halt_halts_every_arm_and_confirms_each(two_served):

@@ -9,7 +9,7 @@ from typer.testing import CliRunner
 
 from seqrun.cli import app
 from seqrun.powercube.protocol import StateFlag
-from test_two_arm_campaign import served
+from twoarmskit import two_served_campaign
 
 F = StateFlag
 
@@ -18,25 +18,8 @@ F = StateFlag
 def two_arms(tmp_path, monkeypatch):
     """Two simulated arms on two servers (own serials and power-on pose), a campaign with
     arms A and B on them."""
-    for name in ("CAN_INTERFACE", "CAN_CHANNEL", "CAN_BITRATE", "CAN_CONFIG"):
-        monkeypatch.delenv(name, raising=False)
-    monkeypatch.setenv("HOME", str(tmp_path))
-    monkeypatch.setenv("SEQRUN_STATE_DIR", str(tmp_path / "state"))
-    first, second = served(5_100_000, "park"), served(5_200_000, "totem")
-    folder = tmp_path / "dual"
-    folder.mkdir()
-    (folder / "seqrun.toml").write_text(f"""\
-[arms.A]
-bus = {{ interface = "socketcand", channel = "can0", kwargs = {{ host = "127.0.0.1", port = {first.port} }} }}
-
-[arms.B]
-bus = {{ interface = "socketcand", channel = "can0", kwargs = {{ host = "127.0.0.1", port = {second.port} }} }}
-base = {{ position_mm = [0, 900, 0], rpy_deg = [0, 0, 180] }}
-""")
-    monkeypatch.chdir(folder)
-    yield {"A": first, "B": second}
-    first.shutdown()
-    second.shutdown()
+    with two_served_campaign(tmp_path, monkeypatch) as arms:
+        yield arms
 
 
 def homed(server, modules=range(1, 8)) -> bool:

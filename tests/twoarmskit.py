@@ -3,7 +3,9 @@ simulator) copied into a test's folder, with a short sequence in which B waits f
 
 from __future__ import annotations
 
+import contextlib
 import shutil
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -28,14 +30,20 @@ steps:
 """
 
 
-def two_arm_campaign(folder: Path, mp: pytest.MonkeyPatch, ros: str = "") -> Path:
-    """``folder/two-arms``: the example campaign with ``sequences/short.yaml`` (and ``ros``
-    appended to its seqrun.toml), made the working folder; no CAN bus from the environment,
-    HOME and the arms' state (zero records) inside ``folder``."""
+def quiet(folder: Path, mp: pytest.MonkeyPatch) -> Path:
+    """No CAN bus from the environment; HOME and the arms' state (zero records) inside
+    ``folder``."""
     for name in ("CAN_INTERFACE", "CAN_CHANNEL", "CAN_BITRATE", "CAN_CONFIG"):
         mp.delenv(name, raising=False)
     mp.setenv("HOME", str(folder))
     mp.setenv("SEQRUN_STATE_DIR", str(folder / "state"))
+    return folder
+
+
+def two_arm_campaign(folder: Path, mp: pytest.MonkeyPatch, ros: str = "") -> Path:
+    """``folder/two-arms``: the example campaign with ``sequences/short.yaml`` (and ``ros``
+    appended to its seqrun.toml), made the working folder, the environment :func:`quiet`."""
+    quiet(folder, mp)
     campaign = folder / "two-arms"
     shutil.copytree(EXAMPLE, campaign)
     (campaign / "sequences" / "short.yaml").write_text(SHORT)
@@ -44,3 +52,62 @@ def two_arm_campaign(folder: Path, mp: pytest.MonkeyPatch, ros: str = "") -> Pat
             f.write(ros)
     mp.chdir(campaign)
     return campaign
+
+
+# -- two served arms: each a simulated arm behind a socketcand server of its own --------
+def served(serial_base: int, power_on_pose: str):
+    """A simulated arm (serials ``serial_base + module id``, powered on at
+    ``power_on_pose``) served over socketcand on a free port; ``shutdown()`` ends it."""
+    from seqrun.clock import RealClock
+    from seqrun.sim.arm import SimArm
+    from seqrun.sim.network import SimNetwork
+    from seqrun.sim.socketcand import SocketcandServer
+
+    clock = RealClock()
+    serials = {m: serial_base + m for m in range(1, 8)}
+    server = SocketcandServer(SimNetwork(clock, SimArm(clock, power_on_pose=power_on_pose,
+                                                       serials=serials),
+                                         spin_window=0.0), port=0)
+    server.start()
+    return server
+
+
+def two_served() -> tuple:
+    """Arm A powered on at Park, arm B at Totem, each with serials of its own."""
+    return served(5_100_000, "park"), served(5_200_000, "totem")
+
+
+def served_campaign(first, second) -> str:
+    """seqrun.toml of arms A and B on the two servers (B 900 mm away, turned 180°)."""
+    return f"""\
+[arms.A]
+bus = {{ interface = "socketcand", channel = "can0", kwargs = {{ host = "127.0.0.1", port = {first.port} }} }}
+
+[arms.B]
+bus = {{ interface = "socketcand", channel = "can0", kwargs = {{ host = "127.0.0.1", port = {second.port} }} }}
+base = {{ position_mm = [0, 900, 0], rpy_deg = [0, 0, 180] }}
+"""
+
+
+@contextlib.contextmanager
+def two_served_campaign(folder: Path, mp: pytest.MonkeyPatch) -> Iterator[dict]:
+    """:func:`two_served` arms named by ``folder/dual/seqrun.toml`` (the working folder,
+    the environment :func:`quiet`): ``{"A": server, "B": server}``, shut down after."""
+    quiet(folder, mp)
+    first, second = two_served()
+    try:
+        campaign = folder / "dual"
+        campaign.mkdir()
+        (campaign / "seqrun.toml").write_text(served_campaign(first, second))
+        mp.chdir(campaign)
+        yield {"A": first, "B": second}
+    finally:
+        first.shutdown()
+        second.shutdown()
+
+
+def halted(server) -> bool:
+    """Every module of the served arm reads HALTED."""
+    from seqrun.powercube.protocol import StateFlag
+
+    return all(StateFlag(s) & StateFlag.HALTED for s in server.network.arm.states().values())

@@ -223,7 +223,7 @@ def _serve_arms(arm_ids: list[str] | None, *, project_dir: Path | None, sim: boo
                                  log_root=runs, zero=arms[a][1], loop_priority=rt_priority,
                                  arm_path=c.arm_path, response_timeout_s=response_timeout_s(
                                      c.arm, response_timeout_ms))
-        sessions = ArmSessions(made)
+        sessions = ArmSessions(made, bases={a: c.base for a, c in contexts.items()})
         for arm_id in contexts:
             _serve_control_socket(connections[arm_id], sessions[arm_id])
         application = create_arms_app(sessions, Catalog(first.project, runs), contexts,

@@ -27,8 +27,6 @@ import typer
 from seqrun.cli.common import fail, user_errors
 from seqrun.defaults import EXIT_FAULT, EXIT_INVALID, EXIT_OPERATOR_ABORT
 from seqrun.errors import UserInputError
-from seqrun.service.arm_part import ArmPart
-from seqrun.service.time_base import TimeBase
 from seqrun.stop_requests import OPERATOR_HALT, StopRequests
 
 
@@ -167,7 +165,7 @@ def _run(file: Path, check, contexts, connections, arms, clock_views, *, speed: 
          plain: bool = False) -> int:
     from seqrun.cli.interrupts import RunSignals
     from seqrun.cli.questions import ask
-    from seqrun.service import campaign_records
+    from seqrun.service.arms_records import ArmOfRun, ArmsRunRecords
     from seqrun.service.arms_run import run_arms_live
     from seqrun.service.run_control import RunControl
     from seqrun.service.run_preparation import run_folder
@@ -180,18 +178,19 @@ def _run(file: Path, check, contexts, connections, arms, clock_views, *, speed: 
         fail(str(exc))
     inboxes = {a: StopRequests() for a in tracks}
     controls = {a: RunControl.serve(connections[a], arms[a][0], inboxes[a]) for a in tracks}
-    log_dirs = {}
-    for arm_id, loaded in tracks.items():
-        part = folder / arm_id
-        try:
-            part.mkdir(parents=True, exist_ok=True)
-            campaign_records.record_run(part, loaded, contexts[arm_id].arm_path,
-                                        connections[arm_id].description, arms[arm_id][1],
-                                        arm=arms[arm_id][0])
-        except OSError as exc:
-            fail(f"cannot write the run record in {part} ({exc.strerror or exc}); nothing "
-                 "was sent")
-        log_dirs[arm_id] = part
+    # each arm's part, one time base for every arm (their events and traces on one time
+    # line) and one run.mcap at the top of the run folder: seqrun/service/arms_records.py
+    try:
+        records = ArmsRunRecords.start(
+            folder, tracks, {a: ArmOfRun(arms[a][0], arms[a][1], contexts[a].arm_path,
+                                         connections[a].description,
+                                         connections[a].is_simulator, contexts[a].base)
+                             for a in tracks},
+            connections[next(iter(tracks))].clock, project=check.tracks.project,
+            warn=_warn)
+    except OSError as exc:
+        fail(f"cannot write the run record in {folder} ({exc.strerror or exc}); nothing "
+             "was sent")
     lock = threading.Lock()
     view = _live_view(check, {a: arms[a][0] for a in tracks}, plain)
 
@@ -204,40 +203,30 @@ def _run(file: Path, check, contexts, connections, arms, clock_views, *, speed: 
 
     printers = {a: _printer(a) if view is None else
                 (lambda event, a=a: view(a, event)) for a in tracks}
-    # the built-in simulator keeps no record: its zero is its power-on pose
-    recorders = {a: None if connections[a].is_simulator or arms[a][1].store is None
-                 else campaign_records.zero_recorder(arms[a][1].store, arms[a][0], tracks[a])
-                 for a in tracks}
 
     def show(arm_id: str, event: Any) -> None:
         printers[arm_id](event)
 
-    # One time base for every arm (their events and traces on one time line), one
-    # run.mcap at the top of the run folder (seqrun/service/arms_mcap.py).
-    time_base = TimeBase.of(connections[next(iter(tracks))].clock)
-    mcap = _arms_mcap(folder, check.tracks.project, {a: arms[a][0] for a in tracks},
-                      {a: contexts[a].base_transform() for a in tracks}, time_base)
-    parts = {a: ArmPart(a, time_base, mcap.for_arm(a) if mcap is not None else None)
-             for a in tracks}
     signals = RunSignals(EveryArm(list(inboxes.values())))
     signals.install()
     if view is not None:
         view.__enter__()
     try:
-        outcome = _arms_live(run_arms_live, tracks, {a: arms[a][0] for a in tracks}, connections,
-                                controls=controls, on_event=show,
-                                zeros={a: arms[a][1] for a in tracks},
-                                record_zero=recorders,
-                                on_fault=_on_fault(check.tracks.project), log_dirs=log_dirs,
-                                clock_views=clock_views, speed=speed, confirm=confirm,
-                                command_mode=command_mode, html_report=not no_report,
-                                requests_by_arm=inboxes, file=str(file), parts=parts,
-                                on_idle=view.on_idle if view is not None else None)
+        outcome = _arms_live(run_arms_live, tracks, {a: arms[a][0] for a in tracks},
+                             connections, controls=controls, on_event=show,
+                             zeros={a: arms[a][1] for a in tracks},
+                             record_zero=records.zero_recorders(),
+                             on_fault=_on_fault(check.tracks.project),
+                             log_dirs=records.log_dirs, clock_views=clock_views, speed=speed,
+                             confirm=confirm, command_mode=command_mode,
+                             html_report=not no_report, requests_by_arm=inboxes,
+                             file=str(file), parts=records.parts(),
+                             on_idle=view.on_idle if view is not None else None)
     finally:
         if view is not None:
             view.__exit__(None, None, None)
         signals.restore()
-        mcap_path = _close_arms_mcap(mcap)
+        records.close_mcap()
     if outcome is None:
         fail(f"the run ended in an error (every arm was halted); log: {folder}", EXIT_FAULT)
     for arm_id, arm in outcome.arms.items():
@@ -246,7 +235,7 @@ def _run(file: Path, check, contexts, connections, arms, clock_views, *, speed: 
         typer.echo(f"arm {arm_id}: {r.status.upper()} (exit {r.exit_code}): {r.message}{why}")
     for note in outcome.notes:
         typer.echo(note)
-    _write_summary(folder, check, outcome, contexts, time_base, mcap_path, mcap)
+    records.finish(check, outcome)
     typer.echo(f"log: {folder}")
     return outcome.exit_code
 
@@ -276,76 +265,8 @@ def _arms_live(run, *args: Any, **kwargs: Any) -> Any:
         return None
 
 
-def _arms_mcap(folder: Path, project: Any, arms: dict[str, Any], bases: dict[str, Any],
-               time_base: Any) -> Any:
-    """``<run>/run.mcap``'s live writer, unless seqrun.toml says ``[ros] mcap = false``."""
-    from seqrun.service.arms_mcap import ArmsMcapLog
-    from seqrun.service.mcap_log import DEFAULT_DISTRIBUTION
-
-    ros = getattr(getattr(project, "config", None), "ros", None)
-    if ros is not None and not ros.mcap:
-        return None
-
-    def said(text: str) -> None:
-        typer.echo(f"warning: run log: {text}; the run goes on", err=True)
-
-    return ArmsMcapLog(folder, arms, bases, time_base.epoch_s, on_error=said,
-                       distribution=ros.distribution if ros is not None
-                       else DEFAULT_DISTRIBUTION)
-
-
-def _close_arms_mcap(mcap: Any) -> Path | None:
-    """End run.mcap (every arm's run has ended); its trouble is one warning line."""
-    if mcap is None:
-        return None
-    path = mcap.close()
-    if mcap.dropped:
-        typer.echo(f"warning: run.mcap: {mcap.dropped} events were dropped (its writer fell "
-                   "behind); seqrun report RUN_DIR --mcap writes it whole", err=True)
-    return path
-
-
-def _write_summary(folder: Path, check, outcome, contexts, time_base, mcap_path,
-                   mcap) -> None:
-    """``<run>/arms.json``: the campaign run at a glance (each arm's part is a whole run
-    folder of its own): each arm's verdict, its base in the facility frame and its start
-    on the run's one time base."""
-    import json
-
-    def start(o) -> dict | None:
-        report = getattr(o.outcome, "report", None) or {}
-        if "clock_s" not in report:
-            return None
-        return {"clock_s": report["clock_s"], "epoch_s": report.get("start_epoch_s"),
-                "utc": report.get("start_utc"),
-                "after_s": round(report["clock_s"] - time_base.clock_s, 6)}
-
-    def base(a: str) -> dict:
-        given = contexts[a].base
-        return {"position_mm": list(given.position_mm) if given else [0.0, 0.0, 0.0],
-                "rpy_deg": list(given.rpy_deg) if given else [0.0, 0.0, 0.0]}
-
-    summary = {"sequence": check.tracks.name, "file": check.file,
-               "exit_code": outcome.exit_code, "on_fault": outcome.on_fault,
-               "first_fault": outcome.first_fault, "notes": list(outcome.notes),
-               "between_arms": [b.as_dict() for b in check.between],
-               "time_base": time_base.as_dict(),
-               "ros": ({"mcap": mcap_path.name if mcap_path is not None else None,
-                        "distribution": mcap.distribution,
-                        **({"error": mcap.error} if mcap.error else {}),
-                        **({"dropped_events": mcap.dropped} if mcap.dropped else {}),
-                        # logged later than an arm's lag allowed for (kept in order)
-                        **({"reordered": mcap.reordered} if mcap.reordered else {})}
-                       if mcap is not None else {"mcap": None}),
-               "arms": {a: {"status": o.result.status, "exit_code": o.result.exit_code,
-                            "message": o.result.message, "halted_because_arm": o.halted_for,
-                            "part": a, "start": start(o), "base": base(a)}
-                        for a, o in outcome.arms.items()}}
-    try:
-        (folder / "arms.json").write_text(json.dumps(summary, indent=2) + "\n")
-    except OSError as exc:
-        typer.echo(f"warning: {folder}/arms.json not written ({exc.strerror or exc})",
-                   err=True)
+def _warn(text: str) -> None:
+    typer.echo(f"warning: {text}", err=True)
 
 
 def _on_fault(project: Any) -> str:

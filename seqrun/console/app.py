@@ -19,8 +19,9 @@ import contextlib
 import itertools
 import json
 import logging
+import re
 import threading
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -48,6 +49,8 @@ log = logging.getLogger(__name__)
 API = "/api/v1"
 STATIC = Path(__file__).resolve().parent / "static"
 ClientHeader = Annotated[str | None, Header(alias="X-Seqrun-Client")]
+#: A part of the pages shared by both (``<!-- include parts/motion.html -->``).
+_INCLUDE = re.compile(r"<!-- include (parts/[a-z0-9_-]+\.html) -->")
 
 
 def json_body(model: type[Any]) -> Any:
@@ -125,20 +128,7 @@ class Console:
         return {**jsonable(result), "message": result.describe()}
 
     async def halt_now(self, reason: str) -> dict[str, Any]:
-        """:meth:`halt` on a thread of its own, started at once: a STOP never waits for the
-        web server's worker threads (all of them may be busy with blocking commands)."""
-        loop = asyncio.get_running_loop()
-        done: asyncio.Future[dict[str, Any]] = loop.create_future()
-
-        def run() -> None:
-            try:
-                result: Any = self.halt(reason)
-                loop.call_soon_threadsafe(_settle, done, result, None)
-            except BaseException as exc:  # noqa: BLE001 - handed to the awaiting request
-                loop.call_soon_threadsafe(_settle, done, None, exc)
-
-        threading.Thread(target=run, name="console-halt", daemon=True).start()
-        return await done
+        return await halt_on_thread(self.halt, reason, "console-halt")
 
     def halt_after_bus_fault(self, where: str, exc: BaseException) -> str:
         """A command could not do or confirm what it says on the bus: Halt, as ``seqrun
@@ -151,6 +141,24 @@ class Console:
             log.error("console: the Halt after a bus fault failed: %s",
                       printable(repr(halt_exc)))
             return "the Halt FAILED: use the emergency stop"
+
+
+async def halt_on_thread(halt: Callable[[str], dict[str, Any]], reason: str,
+                         name: str) -> dict[str, Any]:
+    """``halt(reason)`` on a thread of its own, started at once: a STOP never waits for the
+    web server's worker threads (all of them may be busy with blocking commands)."""
+    loop = asyncio.get_running_loop()
+    done: asyncio.Future[dict[str, Any]] = loop.create_future()
+
+    def run() -> None:
+        try:
+            result: Any = halt(reason)
+            loop.call_soon_threadsafe(_settle, done, result, None)
+        except BaseException as exc:  # noqa: BLE001 - handed to the awaiting request
+            loop.call_soon_threadsafe(_settle, done, None, exc)
+
+    threading.Thread(target=run, name=name, daemon=True).start()
+    return await done
 
 
 def _settle(future: asyncio.Future[Any], result: Any, exc: BaseException | None) -> None:
@@ -286,28 +294,8 @@ def build_router(console: Console, *, prefix: str = API,
         return Response("[" + ",".join(parts) + "]", media_type="application/json")
 
     # -- commands -----------------------------------------------------------------------
-    @api.post("/halt", summary="STOP: the Halt broadcast at once, then confirmed; never "
-                               "refused for its body", openapi_extra=documented(models.HaltBody))
-    async def halt(request: Request) -> Any:
-        # Nothing about the request is read before the Halt is on its way: a STOP with a
-        # malformed, oversized or slow body still stops the arm, then says what was wrong.
-        halting = asyncio.ensure_future(console.halt_now("STOP (console)"))
-        note = reason = None
-        try:
-            raw = await request.body()
-            data = check_body(raw, request.headers.get("content-type"),
-                              request.scope.get(BODY_CUT))
-            reason = to_model({} if data is None else data, models.HaltBody).reason
-        except Malformed as exc:
-            note = f"the arm was halted; the request body was refused: {exc}"
-        except Exception as exc:  # noqa: BLE001 - a lost connection: the Halt goes on
-            note = f"the arm was halted; the request body could not be read: {exc!r}"
-        answer = await halting
-        if reason is not None:
-            answer["reason"] = reason
-        if note is not None:
-            answer["note"] = one_line(note)
-        return answer
+    halt_route(api, console, "STOP: the Halt broadcast at once, then confirmed; never "
+                             "refused for its body", halted="the arm")
 
     def commander(client: str | None, what: str) -> str | None:
         """The name of the client that commands ``what``: it must hold control (else 409
@@ -441,6 +429,31 @@ def build_router(console: Console, *, prefix: str = API,
     return api
 
 
+def halt_route(api: APIRouter, console: Any, summary: str, *, halted: str) -> None:
+    """``POST /halt``, STOP: ``console.halt_now`` is started before anything about the
+    request is read, so a STOP with a malformed, oversized or slow body still stops
+    (``halted``: "the arm", "every arm"), then says what was wrong with it."""
+    @api.post("/halt", summary=summary, openapi_extra=documented(models.HaltBody))
+    async def halt(request: Request) -> Any:
+        halting = asyncio.ensure_future(console.halt_now("STOP (console)"))
+        note = reason = None
+        try:
+            raw = await request.body()
+            data = check_body(raw, request.headers.get("content-type"),
+                              request.scope.get(BODY_CUT))
+            reason = to_model({} if data is None else data, models.HaltBody).reason
+        except Malformed as exc:
+            note = f"{halted} was halted; the request body was refused: {exc}"
+        except Exception as exc:  # noqa: BLE001 - a lost connection: the Halt goes on
+            note = f"{halted} was halted; the request body could not be read: {exc!r}"
+        answer = await halting
+        if reason is not None:
+            answer["reason"] = reason
+        if note is not None:
+            answer["note"] = one_line(note)
+        return answer
+
+
 def control_routes(api: APIRouter, console: Any) -> None:
     """Who holds control: ``/control``, take, release, leave (``console``: its ``control``
     desk and ``new_api_id()``)."""
@@ -477,7 +490,8 @@ def control_routes(api: APIRouter, console: Any) -> None:
 
 
 def index_page(request: Request, page: str = "index.html") -> HTMLResponse:
-    html = (STATIC / page).read_text(encoding="utf-8")
+    html = _INCLUDE.sub(lambda m: (STATIC / m[1]).read_text(encoding="utf-8"),
+                        (STATIC / page).read_text(encoding="utf-8"))
     response = HTMLResponse(html, headers={"Cache-Control": "no-store"})
     token = request.query_params.get("token")
     if token:  # the URL printed at start: the page's own requests carry it as a cookie
@@ -533,37 +547,58 @@ def create_app(session: Any, catalog: Catalog, arm: Any, *, token: str | None = 
     (else at the first check)."""
     console = Console(session, catalog, arm)
     console.max_pages = max_pages
+    app = new_app(console, [console], start_checker=start_checker, title="seqrun console",
+                  description="The operator console's API: what the page uses, for a "
+                              "facility coordinator or a second tool too.",
+                  halter=lambda _: console)
+    app.include_router(build_router(console))
+    serve_page(app, console, "index.html", frozenset({f"{API}/halt"}), token=token,
+               local_only=local_only)
+    return app
 
+
+def new_app(console: Any, arms: list[Console], *, start_checker: bool, title: str,
+            description: str, halter: Callable[[Any], Any]) -> FastAPI:
+    """A console's application before its routes: the telemetry of each of its ``arms``
+    running while it serves, the check's worker (started with it: ``start_checker``), the
+    one-line refusals (``halter(request)``: whom a command that failed on the bus halts)."""
     @contextlib.asynccontextmanager
     async def lifespan(_: FastAPI) -> AsyncIterator[None]:
-        console.telemetry.start()
+        for arm in arms:
+            arm.telemetry.start()
         if start_checker:
             await asyncio.to_thread(console.checker.start)
         try:
             yield
         finally:
-            console.telemetry.stop()
+            for arm in arms:
+                arm.telemetry.stop()
             console.checker.close()
 
-    app = FastAPI(title="seqrun console", version="1", lifespan=lifespan,
+    app = FastAPI(title=title, version="1", lifespan=lifespan, description=description,
                   # No Swagger UI: it loads its scripts from a CDN (the facility has no
                   # internet); the OpenAPI document itself is served.
-                  openapi_url=f"{API}/openapi.json", docs_url=None, redoc_url=None,
-                  description="The operator console's API: what the page uses, for a "
-                              "facility coordinator or a second tool too.")
+                  openapi_url=f"{API}/openapi.json", docs_url=None, redoc_url=None)
     app.state.console = console
+    install_error_handlers(app, halter)
+    return app
 
-    install_error_handlers(app, lambda _: console)
-    app.include_router(build_router(console))
 
+def serve_page(app: FastAPI, console: Any, page: str, stops: frozenset[str], *,
+               token: str | None, local_only: bool) -> None:
+    """The live WebSocket, the page (``page`` of static/) and its files, and the guards:
+    every request but the STOPs (``stops``: paths of ``POST``) needs the token, and is
+    cut to the request limits (a STOP's body is read whatever it is)."""
     @app.websocket(f"{API}/live")
     async def live_socket(ws: WebSocket) -> None:
         await live(console, ws)
 
-    app.add_api_route("/", index_page, methods=["GET"], include_in_schema=False)
+    def index(request: Request) -> HTMLResponse:
+        return index_page(request, page)
+
+    app.add_api_route("/", index, methods=["GET"], include_in_schema=False)
     app.mount("/static", StaticFiles(directory=str(STATIC)), name="static")
     app.add_middleware(CrashGuard, console=console)
-    app.add_middleware(RequestLimits, always_read=frozenset({f"{API}/halt"}))
+    app.add_middleware(RequestLimits, always_read=stops)
     app.add_middleware(AccessGuard, token=token, local_only=local_only,
-                       open_to_all=frozenset({("POST", f"{API}/halt")}))
-    return app
+                       open_to_all=frozenset(("POST", path) for path in stops))

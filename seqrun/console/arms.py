@@ -19,24 +19,18 @@ which arms there are; an unknown arm id is 404 naming the arms.
 
 from __future__ import annotations
 
-import asyncio
-import contextlib
 import itertools
-import threading
-from collections.abc import AsyncIterator
 from typing import Any
 
-from fastapi import APIRouter, FastAPI, Request, WebSocket
+from fastapi import APIRouter, FastAPI
 from fastapi.responses import JSONResponse
 
 from seqrun.console import app as one_arm
 from seqrun.console import models
-from seqrun.console.bodies import BODY_CUT, Malformed, check_body, one_line, printable, to_model
+from seqrun.console.bodies import one_line, printable
 from seqrun.console.catalog import Catalog
 from seqrun.console.checker import CheckWorker, RateLimit
-from seqrun.console.guard import AccessGuard
-from seqrun.console.limits import RequestLimits
-from seqrun.console.live import MAX_PAGES, live
+from seqrun.console.live import MAX_PAGES
 from seqrun.errors import Refused
 
 API = one_arm.API
@@ -166,18 +160,7 @@ class ArmsConsole:
 
     async def halt_now(self, reason: str) -> dict[str, Any]:
         """:meth:`halt` on a thread of its own, started at once (as one arm's STOP)."""
-        loop = asyncio.get_running_loop()
-        done: asyncio.Future[dict[str, Any]] = loop.create_future()
-
-        def run() -> None:
-            try:
-                result: Any = self.halt(reason)
-                loop.call_soon_threadsafe(one_arm._settle, done, result, None)
-            except BaseException as exc:  # noqa: BLE001 - handed to the awaiting request
-                loop.call_soon_threadsafe(one_arm._settle, done, None, exc)
-
-        threading.Thread(target=run, name="console-halt-arms", daemon=True).start()
-        return await done
+        return await one_arm.halt_on_thread(self.halt, reason, "console-halt-arms")
 
 
 class _ArmsRunActivity:
@@ -205,50 +188,14 @@ def create_arms_app(sessions: Any, catalog: Catalog, contexts: dict[str, Any], *
     The options as :func:`seqrun.console.app.create_app`."""
     console = ArmsConsole(sessions, catalog, contexts)
     console.max_pages = max_pages
-
-    @contextlib.asynccontextmanager
-    async def lifespan(_: FastAPI) -> AsyncIterator[None]:
-        for arm in console.arms.values():
-            arm.telemetry.start()
-        if start_checker:
-            await asyncio.to_thread(console.checker.start)
-        try:
-            yield
-        finally:
-            for arm in console.arms.values():
-                arm.telemetry.stop()
-            console.checker.close()
-
-    app = FastAPI(title="seqrun console (several arms)", version="1", lifespan=lifespan,
-                  openapi_url=f"{API}/openapi.json", docs_url=None, redoc_url=None,
-                  description="The operator console of several arms: each arm's API under "
-                              "/api/v1/arms/{id}; STOP (/api/v1/halt) halts every arm.")
-    app.state.console = console
-    one_arm.install_error_handlers(app, console.halter)
-
+    app = one_arm.new_app(console, list(console.arms.values()), start_checker=start_checker,
+                          title="seqrun console (several arms)", halter=console.halter,
+                          description="The operator console of several arms: each arm's "
+                                      "API under /api/v1/arms/{id}; STOP (/api/v1/halt) "
+                                      "halts every arm.")
     top = APIRouter(prefix=API)
-
-    @top.post("/halt", summary="STOP: every arm halted at once, each confirmed; never "
-                               "refused for its body",
-              openapi_extra=one_arm.documented(models.HaltBody))
-    async def halt(request: Request) -> Any:
-        halting = asyncio.ensure_future(console.halt_now("STOP (console)"))
-        note = reason = None
-        try:
-            raw = await request.body()
-            data = check_body(raw, request.headers.get("content-type"),
-                              request.scope.get(BODY_CUT))
-            reason = to_model({} if data is None else data, models.HaltBody).reason
-        except Malformed as exc:
-            note = f"every arm was halted; the request body was refused: {exc}"
-        except Exception as exc:  # noqa: BLE001 - a lost connection: the Halt goes on
-            note = f"every arm was halted; the request body could not be read: {exc!r}"
-        answer = await halting
-        if reason is not None:
-            answer["reason"] = reason
-        if note is not None:
-            answer["note"] = one_line(note)
-        return answer
+    one_arm.halt_route(top, console, "STOP: every arm halted at once, each confirmed; never "
+                                     "refused for its body", halted="every arm")
 
     @top.get("/arms", summary="The arms: id, arm file, bus, base pose in the facility frame")
     def arms() -> list[dict[str, Any]]:
@@ -302,20 +249,8 @@ def create_arms_app(sessions: Any, catalog: Catalog, contexts: dict[str, Any], *
             f"{', '.join(console.arm_ids)}: address one, /api/v1/arms/ID/"
             f"{printable(rest)[:60]}")}, status_code=404)
 
-    @app.websocket(f"{API}/live")
-    async def live_socket(ws: WebSocket) -> None:
-        await live(console, ws)
-
-    def page(request: Request) -> Any:
-        return one_arm.index_page(request, "arms.html")
-
-    app.add_api_route("/", page, methods=["GET"], include_in_schema=False)
-    app.mount("/static", one_arm.StaticFiles(directory=str(one_arm.STATIC)), name="static")
-    app.add_middleware(one_arm.CrashGuard, console=console)
     stops = frozenset({f"{API}/halt", *(f"{arm_path(a)}/halt" for a in console.arm_ids)})
-    app.add_middleware(RequestLimits, always_read=stops)
-    app.add_middleware(AccessGuard, token=token, local_only=local_only,
-                       open_to_all=frozenset(("POST", path) for path in stops))
+    one_arm.serve_page(app, console, "arms.html", stops, token=token, local_only=local_only)
     return app
 
 

@@ -78,6 +78,8 @@ class ArmsRun:
     by: str | None = None
     outcome: Any = None
     error: str | None = None
+    #: What went wrong with its records (run.mcap, arms.json); the run went on.
+    warnings: list[str] = field(default_factory=list)
     finished: threading.Event = field(default_factory=threading.Event)
 
     @property
@@ -87,7 +89,7 @@ class ArmsRun:
     def as_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {"name": self.name, "run_dir": str(self.folder),
                                "arms": list(self.arms), "by": self.by, "done": self.done,
-                               "error": self.error}
+                               "error": self.error, "warnings": list(self.warnings)}
         if self.outcome is not None:
             out.update(exit_code=self.outcome.exit_code, first_fault=self.outcome.first_fault,
                        notes=list(self.outcome.notes),
@@ -103,10 +105,14 @@ class ArmSessions:
     session). The sessions share one :class:`ControlDesk` (its events on the first arm's
     hub). :meth:`close` closes every session (a controlled stop of anything moving)."""
 
-    def __init__(self, sessions: Mapping[str, Any]) -> None:
+    def __init__(self, sessions: Mapping[str, Any],
+                 bases: Mapping[str, Any] | None = None) -> None:
         if not sessions:
             raise ValueError("no arm session")
         self.sessions = dict(sessions)
+        #: Each arm's base in the facility frame (seqrun.toml ``[arms.ID] base``; missing
+        #: or None: the facility frame), for the records of a run.
+        self.bases = dict(bases or {})
         first = next(iter(self.sessions.values()))
         self.control = ControlDesk(publish=first.publish, clock=first.clock.now)
         for session in self.sessions.values():
@@ -159,8 +165,8 @@ class ArmSessions:
         from dataclasses import replace
 
         from seqrun.errors import Refused, UserInputError
-        from seqrun.service import campaign_records
         from seqrun.service.arms_check import check_arms_sequence
+        from seqrun.service.arms_records import ArmOfRun, ArmsRunRecords
         from seqrun.service.arms_run import run_arms_live
         from seqrun.service.run_preparation import run_folder
 
@@ -184,29 +190,23 @@ class ArmSessions:
             if missing:
                 raise Refused(f"run: the sequence names arm {', '.join(missing)}, which this "
                               f"console does not serve (arms {', '.join(self.sessions)})")
-            try:
+            sessions = {a: self.sessions[a] for a in tracks}
+            warnings: list[str] = []
+            try:  # the records of seqrun run's (seqrun/service/arms_records.py)
                 folder = run_folder(replace(next(iter(tracks.values())),
                                             name=check.tracks.name), None)
-                log_dirs = {}
-                for arm_id, loaded in tracks.items():
-                    session = self.sessions[arm_id]
-                    part = folder / arm_id
-                    part.mkdir(parents=True, exist_ok=True)
-                    campaign_records.record_run(part, loaded, session.arm_path
-                                                or loaded.arm_path,
-                                                session.connection.description, session.zero,
-                                                arm=session.arm)
-                    log_dirs[arm_id] = part
+                records = ArmsRunRecords.start(
+                    folder, tracks,
+                    {a: ArmOfRun(s.arm, s.zero, s.arm_path or tracks[a].arm_path,
+                                 s.connection.description, s.connection.is_simulator,
+                                 self.bases.get(a)) for a, s in sessions.items()},
+                    first.connection.clock, project=check.tracks.project,
+                    warn=warnings.append)
             except (OSError, UserInputError) as exc:
                 raise Refused(f"cannot write the run folder ({exc}); nothing was sent") \
                     from None
-            sessions = {a: self.sessions[a] for a in tracks}
-            recorders = {a: None if s.connection.is_simulator or s.zero is None
-                         or s.zero.store is None
-                         else campaign_records.zero_recorder(s.zero.store, s.arm, tracks[a])
-                         for a, s in sessions.items()}
             config = getattr(first.project, "config", None)
-            run = ArmsRun(check.tracks.name, folder, tuple(tracks), by)
+            run = ArmsRun(check.tracks.name, folder, tuple(tracks), by, warnings=warnings)
 
             def work() -> None:
                 try:
@@ -214,15 +214,22 @@ class ArmSessions:
                         tracks, {a: s.arm for a, s in sessions.items()},
                         {a: s.connection for a, s in sessions.items()}, controls={},
                         sessions=sessions, zeros={a: s.zero for a, s in sessions.items()},
-                        record_zero=recorders,
+                        record_zero=records.zero_recorders(), parts=records.parts(),
                         confirms={a: s.questions.ask for a, s in sessions.items()},
                         on_fault=config.campaign.on_fault if config is not None
-                        else "halt_all", log_dirs=log_dirs, speed=speed,
+                        else "halt_all", log_dirs=records.log_dirs, speed=speed,
                         html_report=html_report, file=str(file))
                 except Exception as exc:  # noqa: BLE001 - every arm halted by its run; said
                     run.error = f"{type(exc).__name__}: {exc}"
                 finally:
-                    run.finished.set()
+                    try:  # run.mcap ended and arms.json written before the run is done
+                        records.close_mcap()
+                        if run.outcome is not None:
+                            records.finish(check, run.outcome)
+                    except Exception as exc:  # noqa: BLE001 - the records' trouble, said
+                        warnings.append(f"the run's records: {type(exc).__name__}: {exc}")
+                    finally:
+                        run.finished.set()
 
             self.run = run
             threading.Thread(target=work, name="console-arms-run", daemon=True).start()

@@ -51,7 +51,7 @@ FACILITY_FRAME = "facility"
 TF_STATIC_TOPIC = "/tf_static"
 #: A quiet arm (waiting, asking) holds the others' messages back at most this long (s).
 MERGE_LAG_S = 1.0
-#: The summary of a campaign run (seqrun/cli/run_arms.py writes it).
+#: The summary of a campaign run (seqrun/service/arms_records.py writes it).
 ARMS_SUMMARY = "arms.json"
 
 #: What an arm's face queues when that arm's run has ended.

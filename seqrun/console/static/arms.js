@@ -5,17 +5,10 @@
 // /api/v1/arms/{id}); one operator holds control of the whole console.
 import { frames } from "/static/view3d.js";
 import { ArmsView } from "/static/arms3d.js";
+import { API, $, el, fmt, say, apiOf, stopKeys, LOST_MS, connectLive, watchContact, markLost, Jog, JointControls, GripperPanel } from "/static/controls.js";
 
-const API = "/api/v1";
-const $ = (sel) => document.querySelector(sel);
-const el = (tag, props = {}, ...children) => {
-  const node = Object.assign(document.createElement(tag), props);
-  for (const c of children) node.append(c);
-  return node;
-};
-const fmt = (v, digits = 2) => (v === null || v === undefined ? "-" : Number(v).toFixed(digits));
-// The console sends each arm's status at least every 0.5 s: none for LOST_MS, contact lost.
-const LOST_MS = 2000;
+// (LOST_MS: the console sends each arm's status at least every 0.5 s: none for that long
+// from an arm, contact with it lost.)
 const STOP_CONFIRM_MS = 1500;
 // Numbers painted at most this often (per second): the browser's painting is what costs the
 // CPU the control loop needs (docs/console.md).
@@ -23,36 +16,12 @@ const PAINT_HZ = 10, PAINT_HZ_UNFOCUSED = 4;
 
 const state = {
   ready: false, ids: [], arms: {}, selected: null, view: null, ws: null, client: null,
-  msgId: 0, control: null, lost: true, lastHeardAt: 0, pendingStop: null, jog: null,
+  msgId: 0, control: null, lost: true, lastHeardAt: 0, pendingStop: null,
   statusCount: 0, eventCount: 0, lastReplies: [], lastStop: null, frames,
 };
 window.seqrunArms = state;  // for the browser tests and the bench
 
-function say(text, isError = false) {
-  const m = $("#message");
-  m.textContent = text;
-  m.className = isError ? "error" : "";
-  m.title = text;
-}
-
-async function api(method, path, body) {
-  const headers = { Accept: "application/json" };
-  if (state.client) headers["X-Seqrun-Client"] = state.client;
-  if (body !== undefined) headers["Content-Type"] = "application/json";
-  let response;
-  try {
-    response = await fetch(API + path, { method, headers, body: body === undefined ? undefined : JSON.stringify(body) });
-  } catch (err) {
-    say(`${method} ${path}: the console does not answer (${err.message})`, true);
-    throw err;
-  }
-  const data = await response.json().catch(() => ({}));
-  if (!response.ok) {
-    say(data.error || `${method} ${path}: HTTP ${response.status}`, true);
-    throw new Error(data.error || String(response.status));
-  }
-  return data;
-}
+const api = apiOf(() => state.client);
 
 async function command(label, method, path, body) {
   const arm = state.selected;
@@ -70,7 +39,7 @@ async function command(label, method, path, body) {
 function stop(event) {
   $("#stop").classList.add("pressed");
   setTimeout(() => $("#stop").classList.remove("pressed"), 200);
-  releaseJog(false);
+  jog.release(false);
   // Until an arm's Halt is read back, the page does not say it is halted.
   for (const id of state.ids) state.arms[id].stop = { pending: true };
   paint();
@@ -125,47 +94,23 @@ function stopResult(result) {
   paint();
 }
 
-window.addEventListener("keydown", (e) => {
-  const typing = e.target && e.target.tagName === "INPUT" && e.target.type === "text";
-  if (e.key === "Escape" || (e.code === "Space" && !typing)) {
-    e.preventDefault();
-    e.stopPropagation();
-    if (!e.repeat) stop(e);
-  }
-}, true);
-window.addEventListener("keyup", (e) => { if (e.code === "Space") { e.preventDefault(); e.stopPropagation(); } }, true);
+stopKeys(stop);
 $("#stop").addEventListener("pointerdown", (e) => { if (e.button === 0) stop(e); });
 
 // ---------------------------------------------------------------- live connection
 function connect() {
-  const ws = new WebSocket(`${location.protocol === "https:" ? "wss" : "ws"}://${location.host}${API}/live`);
-  state.ws = ws;
-  let ping = null;
-  ws.onopen = () => {
-    $("#conn").textContent = "live"; $("#conn").className = "badge on";
-    ping = setInterval(() => { if (ws.readyState === WebSocket.OPEN) ws.send('{"op":"ping"}'); }, 500);
-  };
-  ws.onclose = () => {
-    clearInterval(ping);
-    $("#conn").textContent = "offline"; $("#conn").className = "badge off";
-    state.client = null;
-    releaseJog(false);
-    setLost(true, "The live connection closed.");
-    setTimeout(connect, 1000);
-  };
-  ws.onmessage = (msg) => {
-    state.lastHeardAt = performance.now();
-    if (state.lost && state.client) setLost(false);
-    const data = JSON.parse(msg.data);
-    if (data.type === "status") onStatus(data.arm, data.status);
-    else if (data.type === "event") onEvent(data.arm, data.event);
-    else if (data.type === "hello") {
-      state.client = data.client;
-      setLost(false);
-      showControl(data.control);
-      for (const [id, status] of Object.entries(data.status.arms || {})) onStatus(id, status);
-    } else if (data.type === "reply") onReply(data);
-  };
+  connectLive(state, {
+    setLost,
+    closed: () => jog.release(false),
+    onData: (data) => {
+      if (data.type === "status") onStatus(data.arm, data.status);
+      else if (data.type === "event") onEvent(data.arm, data.event);
+      else if (data.type === "hello") {
+        showControl(data.control);
+        for (const [id, status] of Object.entries(data.status.arms || {})) onStatus(id, status);
+      } else if (data.type === "reply") onReply(data);
+    },
+  });
 }
 
 function onReply(reply) {
@@ -201,6 +146,10 @@ function onEvent(id, event) {
     state.arms[id].stop = event.halt_confirmed ? { confirmed: true } : { failed: event.message };
   }
   if (type === "confirm_requested" && id) ask(id, event);
+  // the MOVE sliders follow the selected arm again once something else moves it and when
+  // an activity ends (this page's own MOVE keeps its targets on show while it runs)
+  if (id && id === state.selected && (type === "activity_finished"
+      || (type === "activity_started" && !ownMove(event)))) joints.follow();
   if (type === "confirm_answered" && state.question
       && state.question.id === event.question_id) closeQuestion();
   if (type === "activity_finished" || type === "run_finished") showRun();
@@ -215,27 +164,28 @@ function onEvent(id, event) {
 
 // Lost contact with the console: the whole page greys out, every arm's state is unknown.
 function setLost(lost, why = "") {
-  if (lost === state.lost && (!lost || !why)) return;
-  state.lost = lost;
-  document.body.classList.toggle("lost", lost);
-  $("#lost-banner").hidden = !lost;
-  $("#lost-why").textContent = why;
-  if (!lost) $("#lost-stop").hidden = true;
-  if (lost) say("The console is unreachable: the arms' state is unknown - use the emergency stop", true);
-  else if ($("#message").textContent.startsWith("The console is unreachable")) say("");
+  if (!markLost(state, lost, why, "The console is unreachable: the arms' state is unknown - use the emergency stop")) return;
   applyControl();
   paint();
 }
 
-setInterval(() => {
-  if (!state.lost && performance.now() - state.lastHeardAt > LOST_MS) setLost(true, `No word from the console for ${LOST_MS / 1000} s.`);
-}, 250);
+watchContact(state, setLost);
 
 // ---------------------------------------------------------------- control
 function showControl(control) {
   if (!control || !("holder" in control)) return;
   state.control = control;
   applyControl();
+}
+
+function myName() {
+  const clients = (state.control && state.control.clients) || [];
+  const me = clients.find((c) => c.id === state.client);
+  return me ? me.name : null;
+}
+
+function ownMove(e) {
+  return e.kind === "move" && e.detail && e.detail.joints && e.detail.by && e.detail.by === myName();
 }
 
 function mine() {
@@ -324,6 +274,7 @@ function paintArm(id) {
 
 function paint() {
   for (const id of state.ids) paintArm(id);
+  joints.measured(selectedStatus());
   if (state.view) state.view.requestRender();
 }
 
@@ -338,16 +289,12 @@ async function select(id) {
     b.classList.toggle("selected", b.dataset.arm === id);
     b.setAttribute("aria-checked", String(b.dataset.arm === id));
   }
-  releaseJog(true);
+  jog.release(true);
   const arm = state.arms[id];
-  $("#jog").replaceChildren(...arm.scene.joints.map((j) => {
-    const minus = el("button", { type: "button", className: "needs-control", textContent: `${j.name} -` });
-    const plus = el("button", { type: "button", className: "needs-control", textContent: `${j.name} +` });
-    minus.dataset.jog = `${j.name}-`; plus.dataset.jog = `${j.name}+`;
-    holdToJog(minus, j.name, -1);
-    holdToJog(plus, j.name, 1);
-    return el("span", { className: "jog-pair" }, minus, plus);
-  }));
+  $("#jog").replaceChildren(...arm.scene.joints.filter((j) => j.locked === null).map((j) => jog.buttons(j.name)));
+  joints.build(arm.scene.joints);
+  $("#gripper-panel").hidden = true;
+  gripper.show();
   const poses = await api("GET", `/arms/${id}/poses`).catch(() => []);
   if (state.selected !== id) return;
   $("#poses").replaceChildren(...poses.map((p) => {
@@ -361,40 +308,19 @@ async function select(id) {
   for (const b of document.querySelectorAll("#poses [data-no-target]")) b.disabled = true;
 }
 
-// ---- jog: the selected arm; hold to move, renewed every 100 ms (the server stops it 200 ms after)
-$("#jog-scale").addEventListener("input", () => { $("#jog-scale-value").textContent = `${Math.round($("#jog-scale").value * 100)} %`; });
-
-function sendJog() {
-  if (!state.jog || !state.ws || state.ws.readyState !== WebSocket.OPEN) return;
-  const scale = Number($("#jog-scale").value) * state.jog.direction;
-  state.ws.send(JSON.stringify({ op: "jog", id: ++state.msgId, arm: state.jog.arm, joint: state.jog.joint, speed_scale: scale }));
-}
-
-function holdToJog(button, joint, direction) {
-  button.addEventListener("pointerdown", (e) => {
-    e.preventDefault();
-    button.setPointerCapture(e.pointerId);
-    releaseJog(false);
-    state.jog = { arm: state.selected, joint, direction, button, timer: setInterval(sendJog, 100) };
-    button.classList.add("held");
-    sendJog();
-  });
-  for (const ev of ["pointerup", "pointercancel", "lostpointercapture"]) button.addEventListener(ev, () => releaseJog(true));
-  button.addEventListener("contextmenu", (e) => e.preventDefault());
-}
-
-function releaseJog(sendStop) {
-  const jog = state.jog;
-  if (!jog) return;
-  clearInterval(jog.timer);
-  jog.button.classList.remove("held");
-  state.jog = null;
-  if (sendStop && state.ws && state.ws.readyState === WebSocket.OPEN) {
-    state.ws.send(JSON.stringify({ op: "jog_stop", id: ++state.msgId, arm: jog.arm }));
-  }
-}
-window.addEventListener("blur", () => releaseJog(true));
-document.addEventListener("visibilitychange", () => { if (document.hidden) releaseJog(true); });
+// ---- jog, MOVE sliders, ALLVEL, gripper: the selected arm's (seqrun/console/static/controls.js)
+const jog = new Jog({ socket: () => state.ws, nextId: () => ++state.msgId, fields: () => ({ arm: state.selected }) });
+const selectedStatus = () => (state.selected ? state.arms[state.selected].status : null);
+const joints = new JointControls({ command, status: selectedStatus });
+const gripper = new GripperPanel({
+  command,
+  read: async () => {
+    const id = state.selected;
+    if (!id) return undefined;
+    const g = await api("GET", `/arms/${id}/gripper`);
+    return state.selected === id ? g : undefined;
+  },
+});
 
 $("#cmd-arm").addEventListener("click", () => command("Arm", "POST", "/arm-up"));
 $("#cmd-home").addEventListener("click", () => command("Home", "POST", "/home"));
@@ -474,6 +400,7 @@ async function start() {
   loadSequences();
   showRun();
   await select(state.ids[0]);
+  setInterval(() => { if (!state.lost) gripper.show(); }, 2000);
   nextPaint();
   state.ready = true;
 }

@@ -1,56 +1,22 @@
 // seqrun operator console: one page over the /api/v1 HTTP API and the live WebSocket.
 // STOP is sent on the WebSocket (HTTP when it is down) and never waits for anything else.
 import { ArmView, frames } from "/static/view3d.js";
+import { API, $, el, fmt, setText, say, apiOf, stopKeys, connectLive, watchContact, markLost, Jog, JointControls, GripperPanel } from "/static/controls.js";
 
-const API = "/api/v1";
-const $ = (sel) => document.querySelector(sel);
-const el = (tag, props = {}, ...children) => {
-  const node = Object.assign(document.createElement(tag), props);
-  for (const c of children) node.append(c);
-  return node;
-};
 // ?draw=0 (benchmarks): count the telemetry, draw nothing (what drawing costs, isolated).
 const DRAW = new URLSearchParams(location.search).get("draw") !== "0";
-const fmt = (v, digits = 2) => (v === null || v === undefined ? "-" : Number(v).toFixed(digits));
 
 const state = {
   arm: null, view: null, ws: null, client: null, msgId: 0, status: null,
-  latched: {}, poses: [], hoverPose: null, slidersTouched: false,
-  jog: null, question: null, selected: null, checked: null,
+  latched: {}, poses: [], hoverPose: null, question: null, selected: null, checked: null,
   statusCount: 0, eventCount: 0, lastReplies: [], stopTimes: [],
   control: null, lost: true, lastHeardAt: 0, pendingStop: null,
 };
 window.seqrunConsole = state;  // for the browser tests and the bench
 state.frames = frames;
 
-// ---------------------------------------------------------------- messages and HTTP
-function say(text, isError = false) {
-  const m = $("#message");
-  m.textContent = text;
-  m.className = isError ? "error" : "";
-  m.title = text;
-}
-
-async function api(method, path, body) {
-  const headers = { Accept: "application/json" };
-  if (state.client) headers["X-Seqrun-Client"] = state.client;
-  if (body !== undefined) headers["Content-Type"] = "application/json";
-  let response;
-  try {
-    response = await fetch(API + path, { method, headers, body: body === undefined ? undefined : JSON.stringify(body) });
-  } catch (err) {
-    say(`${method} ${path}: the console does not answer (${err.message})`, true);
-    throw err;
-  }
-  const data = await response.json().catch(() => ({}));
-  if (!response.ok) {
-    say(data.error || `${method} ${path}: HTTP ${response.status}`, true);
-    const error = new Error(data.error || String(response.status));
-    error.status = response.status;
-    throw error;
-  }
-  return data;
-}
+// ---------------------------------------------------------------- HTTP
+const api = apiOf(() => state.client);
 
 async function command(label, method, path, body) {
   try {
@@ -73,7 +39,7 @@ function stop(event) {
   state.stopTimes.push(performance.timeOrigin + (event ? event.timeStamp : performance.now()));
   $("#stop").classList.add("pressed");
   setTimeout(() => $("#stop").classList.remove("pressed"), 200);
-  releaseJog(false);
+  jog.release(false);
   if (state.ws && state.ws.readyState === WebSocket.OPEN && !state.lost) {
     const id = ++state.msgId;
     state.pendingStop = id;
@@ -114,82 +80,33 @@ function stopFailed() {
   $("#lost-stop").hidden = false;
 }
 
-function isTyping(target) {
-  return target && target.tagName === "INPUT" && target.type === "text";
-}
-
-window.addEventListener("keydown", (e) => {
-  if (e.key === "Escape" || (e.code === "Space" && !isTyping(e.target))) {
-    e.preventDefault();
-    e.stopPropagation();
-    if (!e.repeat) stop(e);
-  }
-}, true);
-// Space would also click a focused button on release: never let it.
-window.addEventListener("keyup", (e) => {
-  if (e.code === "Space" && !isTyping(e.target)) { e.preventDefault(); e.stopPropagation(); }
-}, true);
+stopKeys(stop);
 
 // ---------------------------------------------------------------- live connection
-// The console sends a status at least every 0.5 s: a page that heard nothing for LOST_MS
-// (a console killed, frozen or cut off without a TCP close) has lost contact.
-const LOST_MS = 2000;
-
 function connect() {
-  const ws = new WebSocket(`${location.protocol === "https:" ? "wss" : "ws"}://${location.host}${API}/live`);
-  state.ws = ws;
-  // A ping every 0.5 s: the server takes a page silent for 2 s during its motion as gone.
-  let ping = null;
-  ws.onopen = () => {
-    $("#conn").textContent = "live"; $("#conn").className = "badge on";
-    ping = setInterval(() => { if (ws.readyState === WebSocket.OPEN) ws.send('{"op":"ping"}'); }, 500);
-  };
-  ws.onclose = () => {
-    clearInterval(ping);
-    $("#conn").textContent = "offline"; $("#conn").className = "badge off";
-    state.client = null;
-    releaseJog(false);
-    setLost(true, "The live connection closed.");
-    setTimeout(connect, 1000);
-  };
-  ws.onmessage = (msg) => {
-    state.lastHeardAt = performance.now();
-    if (state.lost && state.client) setLost(false);  // a console that was frozen, back
-    const data = JSON.parse(msg.data);
-    if (data.type === "status") showStatus(data.status);
-    else if (data.type === "event") showEvent(data.event);
-    else if (data.type === "hello") {
-      state.client = data.client;
-      setLost(false);
-      showControl(data.control);
-      showStatus(data.status);
-    } else if (data.type === "reply") onReply(data);
-  };
+  connectLive(state, {
+    setLost,
+    closed: () => jog.release(false),
+    onData: (data) => {
+      if (data.type === "status") showStatus(data.status);
+      else if (data.type === "event") showEvent(data.event);
+      else if (data.type === "hello") {
+        showControl(data.control);
+        showStatus(data.status);
+      } else if (data.type === "reply") onReply(data);
+    },
+  });
 }
-
-setInterval(() => {
-  if (!state.lost && performance.now() - state.lastHeardAt > LOST_MS) {
-    setLost(true, `No word from the console for ${LOST_MS / 1000} s.`);
-  }
-}, 250);
+watchContact(state, setLost);
 
 // Lost contact: whatever the page shows is old. Everything greys out under a banner, the
 // activity reads "unknown"; STOP stays red and still tries (and says if it fails).
 function setLost(lost, why = "") {
-  if (lost === state.lost && (!lost || !why)) return;
-  state.lost = lost;
-  document.body.classList.toggle("lost", lost);
-  $("#lost-banner").hidden = !lost;
-  $("#lost-why").textContent = why;
-  if (!lost) $("#lost-stop").hidden = true;
+  if (!markLost(state, lost, why, "The console is unreachable: the arm's state is unknown - use the emergency stop")) return;
   if (lost) {
     setText($("#activity"), "unknown");
     $("#activity").className = "badge unknown";
-    say("The console is unreachable: the arm's state is unknown - use the emergency stop", true);
-  } else {
-    if (state.status) drawBadges(state.status);
-    if ($("#message").textContent.startsWith("The console is unreachable")) say("");
-  }
+  } else if (state.status) drawBadges(state.status);
   applyControl();
 }
 
@@ -200,7 +117,7 @@ function onReply(reply) {
   if (reply.note) say(reply.note, true);
   if (!reply.ok) {
     say(reply.error, true);
-    if (state.jog) releaseJog(false);
+    jog.release(false);
   } else if (reply.result && reply.result.message) {
     say(reply.result.message, !reply.result.confirmed && reply.result.confirmed !== undefined);
   }
@@ -280,11 +197,6 @@ for (const [target, kind] of [[document, "visibilitychange"], [window, "focus"]]
   target.addEventListener(kind, () => { scheduleNumbers(); scheduleView(); });
 }
 
-// textContent only when it changed: an unchanged field costs no layout.
-function setText(node, text) {
-  if (node.textContent !== text) node.textContent = text;
-}
-
 function drawBadges(s) {
   if (state.lost) return;  // "unknown" until contact is back
   const act = $("#activity");
@@ -324,8 +236,7 @@ function drawStatus(s) {
   const ee = s.end_effector;
   setText($("#ee-xyz"), ee ? ee.position_mm.map((v) => fmt(v, 1)).join("  ") : "-");
   setText($("#ee-rpy"), ee ? ee.rpy_deg.map((v) => fmt(v, 2)).join("  ") : "-");
-  const q = s.joints.map((j) => j.position_deg);
-  if (!state.slidersTouched) setSliders(q);
+  joints.measured(s);
   updateGhost();
   highlightStep(s.run);
 }
@@ -484,47 +395,14 @@ async function loadPoses() {
   applyControl();
 }
 
-// ---- MOVE sliders and ALLVEL boxes
+// ---- MOVE sliders and ALLVEL boxes, the gripper, the jog (seqrun/console/static/controls.js)
+const joints = new JointControls({ command, status: () => state.status, changed: () => updateGhost() });
+const jog = new Jog({ socket: () => state.ws, nextId: () => ++state.msgId });
+new GripperPanel({ command, read: () => api("GET", "/gripper") }).poll();
+
 function buildJointControls() {
-  const body = $("#move-table tbody");
-  const vel = $("#vel-boxes");
-  const jog = $("#jog");
-  for (const j of state.arm.joints) {
-    const [lo, hi] = j.limits_deg;
-    const slider = el("input", { type: "range", min: lo, max: hi, step: 0.1, value: 0, className: "move-slider", disabled: j.locked !== null });
-    const number = el("input", { type: "number", min: lo, max: hi, step: 0.1, value: 0, className: "move-number", disabled: j.locked !== null });
-    slider.dataset.joint = j.name; number.dataset.joint = j.name;
-    slider.addEventListener("input", () => { number.value = slider.value; state.slidersTouched = true; updateGhost(); });
-    number.addEventListener("input", () => { slider.value = number.value; state.slidersTouched = true; updateGhost(); });
-    body.append(el("tr", {}, el("td", { textContent: j.name }), el("td", {}, slider), el("td", {}, number)));
-    const box = el("input", { type: "number", min: 0.1, max: j.max_velocity_deg_s, step: 0.5, className: "vel-box", title: `${j.name}, at most ${j.max_velocity_deg_s} deg/s`, disabled: j.locked !== null });
-    box.dataset.joint = j.name;
-    box.placeholder = j.name;
-    vel.append(box);
-    if (j.locked === null) {
-      const minus = el("button", { type: "button", textContent: `${j.name} -`, className: "jog-minus needs-control" });
-      const plus = el("button", { type: "button", textContent: `${j.name} +`, className: "jog-plus needs-control" });
-      minus.dataset.joint = j.name; plus.dataset.joint = j.name;
-      holdToJog(minus, j.name, -1); holdToJog(plus, j.name, +1);
-      jog.append(el("span", { className: "jog-pair" }, minus, plus));
-    }
-  }
-}
-
-function setSliders(q) {
-  const numbers = document.querySelectorAll(".move-number");
-  document.querySelectorAll(".move-slider").forEach((s, i) => {
-    const v = q[state.arm.joints.findIndex((j) => j.name === s.dataset.joint)];
-    if (v === null || v === undefined) return;
-    const text = v.toFixed(1);
-    if (numbers[i].value !== text) { s.value = text; numbers[i].value = text; }
-  });
-}
-
-function sliderTargets() {
-  const out = {};
-  document.querySelectorAll(".move-number").forEach((n) => { if (!n.disabled) out[n.dataset.joint] = Number(n.value); });
-  return out;
+  joints.build(state.arm.joints);
+  $("#jog").replaceChildren(...state.arm.joints.filter((j) => j.locked === null).map((j) => jog.buttons(j.name)));
 }
 
 function updateGhost() {
@@ -534,8 +412,8 @@ function updateGhost() {
     state.view.setGhost(state.arm.joints.map((j) => state.hoverPose.joints_deg[j.name] ?? 0));
     return;
   }
-  if (state.slidersTouched) {
-    const targets = sliderTargets();
+  if (joints.touched) {
+    const targets = joints.targets();
     const q = state.arm.joints.map((j, i) => (j.name in targets ? targets[j.name] : measured[i]));
     const differs = q.some((v, i) => measured[i] !== null && Math.abs(v - measured[i]) > 0.1);
     state.view.setGhost(differs ? q : null);
@@ -548,94 +426,12 @@ function updateGhost() {
 // pose, a jog, another page) and when any activity ends; only this page's own MOVE keeps
 // its targets on show while it runs.
 function followArm() {
-  state.slidersTouched = false;
-  if (state.status) setSliders(state.status.joints.map((j) => j.position_deg));
-  updateGhost();
+  joints.follow();
 }
 
 function ownSliderMove(e) {
   return e.kind === "move" && e.detail && e.detail.joints && e.detail.by && e.detail.by === myName();
 }
-
-$("#move-from-arm").addEventListener("click", followArm);
-// MOVE sends the joints whose target differs from where they are: the others stay (and a
-// joint that stands just outside its limits, as j4 at Park, is not asked to go there).
-function changedTargets() {
-  const targets = sliderTargets();
-  const now = state.status ? state.status.joints : [];
-  const changed = {};
-  for (const [name, value] of Object.entries(targets)) {
-    const joint = now.find((j) => j.name === name);
-    if (!joint || joint.position_deg === null || Math.abs(value - joint.position_deg) > 0.05) changed[name] = value;
-  }
-  return changed;
-}
-$("#cmd-move").addEventListener("click", () => {
-  const joints = changedTargets();
-  if (Object.keys(joints).length === 0) { say("MOVE: every target is where the arm is already"); return; }
-  command("MOVE", "POST", "/move/joints", { joints });
-});
-$("#cmd-allvel").addEventListener("click", () => {
-  const joints = {};
-  document.querySelectorAll(".vel-box").forEach((b) => { if (b.value !== "") joints[b.dataset.joint] = Number(b.value); });
-  command("ALLVEL", "POST", "/velocities", { joints });
-});
-
-// ---- gripper: its state (read when the session is idle), Grip and Release (need control)
-async function showGripper() {
-  let g;
-  try { g = await api("GET", "/gripper"); } catch (err) { return; }
-  const panel = $("#gripper-panel");
-  panel.hidden = g === null;
-  if (g === null) return;
-  $("#gripper-name").textContent = `(${g.name}, stroke ${g.stroke_mm} mm, at most ${g.max_force_n} N)`;
-  $("#gripper-state").textContent = g.error ? `no reading: ${g.error}`
-    : `${g.width_mm.toFixed(1)} mm open, ${g.holding ? "holding a part" : "not holding"}${g.faulted ? ", FAULT " + g.state : ""}`;
-}
-$("#cmd-grip").addEventListener("click", () => {
-  command("Grip", "POST", "/gripper/grip", { part_width_mm: Number($("#grip-width").value), force_n: Number($("#grip-force").value) });
-});
-$("#cmd-release").addEventListener("click", () => {
-  command("Release", "POST", "/gripper/release", { width_mm: Number($("#release-width").value) });
-});
-showGripper();
-setInterval(showGripper, 2000);
-
-// ---- jog: hold to move, renewed every 100 ms (the server stops it 200 ms after the last)
-$("#jog-scale").addEventListener("input", () => { $("#jog-scale-value").textContent = `${Math.round($("#jog-scale").value * 100)} %`; });
-
-function sendJog() {
-  if (!state.jog || !state.ws || state.ws.readyState !== WebSocket.OPEN) return;
-  const scale = Number($("#jog-scale").value) * state.jog.direction;
-  const mode = $("#jog-velocity-mode").checked ? "velocity" : "position";
-  state.ws.send(JSON.stringify({ op: "jog", id: ++state.msgId, joint: state.jog.joint, speed_scale: scale, mode }));
-}
-
-function holdToJog(button, joint, direction) {
-  button.addEventListener("pointerdown", (e) => {
-    e.preventDefault();
-    button.setPointerCapture(e.pointerId);
-    releaseJog(false);
-    state.jog = { joint, direction, button, timer: setInterval(sendJog, 100) };
-    button.classList.add("held");
-    sendJog();
-  });
-  for (const ev of ["pointerup", "pointercancel", "lostpointercapture"]) button.addEventListener(ev, () => releaseJog(true));
-  button.addEventListener("contextmenu", (e) => e.preventDefault());  // a tablet's long press
-}
-
-function releaseJog(sendStop) {
-  const jog = state.jog;
-  if (!jog) return;
-  clearInterval(jog.timer);
-  jog.button.classList.remove("held");
-  state.jog = null;
-  if (sendStop && state.ws && state.ws.readyState === WebSocket.OPEN) {
-    state.ws.send(JSON.stringify({ op: "jog_stop", id: ++state.msgId }));
-  }
-}
-window.addEventListener("blur", () => releaseJog(true));
-document.addEventListener("visibilitychange", () => { if (document.hidden) releaseJog(true); });
 
 // ---------------------------------------------------------------- sequences
 async function loadSequences() {
