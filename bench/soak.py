@@ -166,7 +166,7 @@ class Verdict:
     wall_s: float = 0.0
 
 
-def run_cli(sequence: Path, folder: Path, fault: Fault | None):
+def run_cli(sequence: Path, folder: Path, fault: Fault | None, extra: list[str] = ()):
     from typer.testing import CliRunner
 
     import seqrun.cli  # noqa: F401  (registers the commands)
@@ -176,7 +176,7 @@ def run_cli(sequence: Path, folder: Path, fault: Fault | None):
             "--log-dir", str(folder)]
     if fault is not None:
         args += ["--sim-fault", fault.spec]
-    return CliRunner().invoke(app, args)
+    return CliRunner().invoke(app, [*args, *extra])
 
 
 def _frames(folder: Path, shift: float) -> list[tuple[float, int, str, bool]]:
