@@ -9,10 +9,12 @@ conftest.py is one of these.
 from __future__ import annotations
 
 import functools
+import importlib.util
 import shutil
 import textwrap
 from collections.abc import Iterable, Mapping
 from pathlib import Path
+from types import ModuleType
 
 from seqrun.arm.description import ArmDescription, load_arm
 
@@ -21,6 +23,16 @@ ARM_FILE = ROOT / "arms" / "lwa3.yaml"
 
 #: The campaign's config: its own arm file, so a test may change the arm.
 CONFIG = '[campaign]\nname = "test"\narm = "arms/lwa3.yaml"\n'
+
+
+@functools.cache
+def tool(name: str) -> ModuleType:
+    """``tools/<name>.py`` as a module (tools/ is a folder of scripts, not a package)."""
+    spec = importlib.util.spec_from_file_location(name, ROOT / "tools" / f"{name}.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 @functools.cache

@@ -14,7 +14,7 @@ import re
 from pathlib import Path
 
 import pytest
-from projecttree import ROOT
+from projecttree import ROOT, tool
 
 DOC = ROOT / "docs" / "architecture.md"
 PACKAGE = ROOT / "seqrun"
@@ -23,54 +23,17 @@ FORBIDDEN_FOR_FACES = ("executor", "drivers", "drivers.*", "powercube", "powercu
 FACES = ("cli", "cli.*", "console", "console.*", "foxglove", "foxglove.*", "ros", "ros.*")
 
 
-def documented_layers(text: str) -> list[tuple[str, list[str]]]:
-    """The (layer, module patterns) rows of the "Layers" table, in order."""
-    section = text.split("## Layers", 1)[1].split("\n## ", 1)[0]
-    rows = []
-    for line in section.splitlines():
-        cells = [c.strip() for c in line.strip().strip("|").split("|")]
-        if len(cells) == 2 and cells[1].startswith("`"):
-            rows.append((cells[0], re.findall(r"`([^`]+)`", cells[1])))
-    return rows
-
-
-def module_name(path: Path) -> str:
-    parts = list(path.relative_to(ROOT).with_suffix("").parts)
-    if parts[-1] == "__init__":
-        parts = parts[:-1]
-    return ".".join(parts)
+#: The import reader of the layer picture: the picture and these checks read one graph.
+_reader = tool("draw_layers")
+documented_layers = _reader.layer_table
+module_name = _reader.module_name
 
 
 def imported_modules(path: Path, name: str, *, type_only: bool = False) -> set[str]:
     """Every module ``path`` imports anywhere in its code, outside ``if TYPE_CHECKING``;
     ``type_only``: those inside it too (an import for the type checker is an arrow of the
     design as much as any other: a circle through one is still a circle)."""
-    is_package = path.name == "__init__.py"
-    found: set[str] = set()
-
-    class Imports(ast.NodeVisitor):
-        def visit_If(self, node: ast.If) -> None:
-            if "TYPE_CHECKING" in ast.unparse(node.test) and not type_only:
-                for child in node.orelse:
-                    self.visit(child)
-            else:
-                self.generic_visit(node)
-
-        def visit_Import(self, node: ast.Import) -> None:
-            found.update(alias.name for alias in node.names)
-
-        def visit_ImportFrom(self, node: ast.ImportFrom) -> None:
-            if node.level:
-                base = name.split(".") if is_package else name.split(".")[:-1]
-                base = base[:len(base) - (node.level - 1)]
-                module = ".".join(base + ([node.module] if node.module else []))
-            else:
-                module = node.module or ""
-            found.add(module)
-            found.update(f"{module}.{alias.name}" for alias in node.names)
-
-    Imports().visit(ast.parse(path.read_text(encoding="utf-8")))
-    return found
+    return _reader.imports_of(path, name, type_checking=type_only)
 
 
 def short(module: str) -> str:

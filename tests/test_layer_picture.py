@@ -3,19 +3,9 @@ imports by tools/draw_layers.py (re-run it when the imports change)."""
 
 from __future__ import annotations
 
-import importlib.util
+from projecttree import ROOT, tool
 
-from projecttree import ROOT
-
-
-def _load_drawer():
-    spec = importlib.util.spec_from_file_location("draw_layers", ROOT / "tools" / "draw_layers.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-draw_layers = _load_drawer()
+draw_layers = tool("draw_layers")
 
 
 def test_the_committed_picture_is_drawn_from_todays_imports(capsys):

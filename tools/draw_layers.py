@@ -53,21 +53,36 @@ def module_name(path: Path) -> str:
     return ".".join(parts)
 
 
-def imports_of(path: Path, name: str) -> set[str]:
-    """Every module ``path`` imports, wherever in its code (type-checking blocks too)."""
-    base = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
-    found = set()
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
-        if isinstance(node, ast.Import):
+def imports_of(path: Path, name: str, *, type_checking: bool = True) -> set[str]:
+    """Every module ``path`` (module ``name``) imports, wherever in its code; without
+    ``type_checking``, not those inside ``if TYPE_CHECKING`` (an import for the type checker
+    is an arrow of the design as much as any other: the picture and the circle check
+    count it)."""
+    is_package = path.name == "__init__.py"
+    found: set[str] = set()
+
+    class Imports(ast.NodeVisitor):
+        def visit_If(self, node: ast.If) -> None:
+            if "TYPE_CHECKING" in ast.unparse(node.test) and not type_checking:
+                for child in node.orelse:
+                    self.visit(child)
+            else:
+                self.generic_visit(node)
+
+        def visit_Import(self, node: ast.Import) -> None:
             found.update(alias.name for alias in node.names)
-        elif isinstance(node, ast.ImportFrom):
+
+        def visit_ImportFrom(self, node: ast.ImportFrom) -> None:
             if node.level:
-                module = ".".join(base[:len(base) - (node.level - 1)]
-                                  + ([node.module] if node.module else []))
+                base = name.split(".") if is_package else name.split(".")[:-1]
+                base = base[:len(base) - (node.level - 1)]
+                module = ".".join(base + ([node.module] if node.module else []))
             else:
                 module = node.module or ""
             found.add(module)
             found.update(f"{module}.{alias.name}" for alias in node.names)
+
+    Imports().visit(ast.parse(path.read_text(encoding="utf-8")))
     return found
 
 

@@ -262,6 +262,7 @@ def _watch_json(source, status: dict, period: float, count: int | None, warn) ->
 
 def _broadcast(what: str, context) -> None:
     """Broadcast Halt or Reset, then confirm it module by module (exit 3 if not all do)."""
+    from seqrun.cli.confirmation import confirmed_or_exit
     from seqrun.service.arm_access import broadcast_and_confirm
 
     with user_errors():
@@ -272,14 +273,8 @@ def _broadcast(what: str, context) -> None:
     finally:
         driver.close()
         connection.close()
-    if not result.sent:
-        fail(f"{what} not sent: {result.error}", EXIT_FAULT)
-    if not result.confirmed:
-        error = f"; {result.error}" if result.error else ""
-        fail(f"{what} broadcast sent, but not confirmed by {result.describe_unconfirmed()} "
-             f"after {result.attempts} attempts ({connection.description}{error})", EXIT_FAULT)
-    typer.echo(f"{what.capitalize()} confirmed by modules "
-               f"{', '.join(map(str, sorted(result.states)))} ({connection.description})")
+    confirmed_or_exit(result, connection.description, what=what, sent_as="broadcast sent",
+                      unconfirmed_after=f" after {result.attempts} attempts")
 
 
 @app.command("halt")

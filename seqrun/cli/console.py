@@ -19,7 +19,7 @@ import typer
 
 from seqrun.cli.app import app
 from seqrun.cli.arm_commands import ArmIdOption
-from seqrun.cli.common import (EXIT_FAULT, ArmFileOption, BitrateOption, BusKwargsOption,
+from seqrun.cli.common import (ArmFileOption, BitrateOption, BusKwargsOption,
                                CampaignOption, ChannelOption, InterfaceOption,
                                ResponseTimeoutOption, SimOption, fail, user_errors)
 from seqrun.cli.foxglove_option import FoxgloveOption, check_foxglove, start_foxglove
@@ -62,8 +62,7 @@ def console_command(
 ) -> None:
     """Serve the operator console (STOP, telemetry, 3D view, commands, sequences); in a
     campaign with several arms, every arm (--arm-id ID: those) in one page."""
-    from seqrun.cli.zero import zero_at_run_start
-    from seqrun.errors import BusError
+    from seqrun.cli.zero import zero_or_exit
     from seqrun.service.arm_context import campaign_arm_ids, resolve_context
     from seqrun.service.campaigns import campaign_here
     from seqrun.service.connection import response_timeout_s
@@ -113,14 +112,9 @@ def console_command(
         connection = context.open_connection(live=True)
     typer.echo(context.headline(connection))
     try:
-        with user_errors():
-            try:
-                zero = zero_at_run_start(connection, arm, project,
-                                         lambda q: ask(q, False),
-                                         typer.echo, confirmed=zero_confirmed)
-            except BusError as exc:
-                fail(f"cannot read the modules' state: {exc}", EXIT_FAULT)
-            arm = zero.apply(arm)
+        zero = zero_or_exit(connection, arm, lambda q: ask(q, False), typer.echo,
+                            confirmed=zero_confirmed)
+        arm = zero.apply(arm)
     except BaseException:
         sock.close()
         connection.close()

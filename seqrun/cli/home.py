@@ -21,7 +21,7 @@ from typing import Annotated, Optional
 import typer
 
 from seqrun.cli.app import app
-from seqrun.cli.common import (EXIT_FAULT, ArmFileOption, BitrateOption, BusKwargsOption,
+from seqrun.cli.common import (ArmFileOption, BitrateOption, BusKwargsOption,
                                CampaignOption, ChannelOption, InterfaceOption,
                                ResponseTimeoutOption, SimOption, fail, user_errors)
 from seqrun.cli.arm_commands import ArmIdOption
@@ -61,6 +61,7 @@ def _home_arm(arm_id, joints, arm_file, project_dir, interface, channel, bitrate
     from seqrun.cli.arm_commands import command_context
     from seqrun.cli.bus_owner import live_targets
     from seqrun.errors import Refused, UserInputError
+    from seqrun.cli.confirmation import confirmed_or_exit
     from seqrun.service.arm_access import home_and_confirm, modules_of
 
     arm = f"arm {arm_id}: " if arm_id is not None else ""
@@ -79,14 +80,8 @@ def _home_arm(arm_id, joints, arm_file, project_dir, interface, channel, bitrate
     finally:
         driver.close()
         connection.close()
-    if not result.sent:
-        fail(f"{arm}home not sent: {result.error}", EXIT_FAULT)
-    if not result.confirmed:
-        error = f"; {result.error}" if result.error else ""
-        fail(f"{arm}Home sent, but not confirmed by {result.describe_unconfirmed()} "
-             f"({connection.description}{error})", EXIT_FAULT)
-    typer.echo(f"{arm}Home confirmed by modules {', '.join(map(str, sorted(result.states)))} "
-               f"in {result.duration_s:.2f} s ({connection.description})")
+    confirmed_or_exit(result, connection.description, what="home", prefix=arm,
+                      confirmed_in=f" in {result.duration_s:.2f} s")
 
 
 def _names(joints: str | None) -> list[str] | None:

@@ -56,8 +56,8 @@ def jog_command(
     import math
 
     from seqrun.cli.questions import ask
-    from seqrun.cli.zero import zero_at_run_start
-    from seqrun.errors import BusError, Refused
+    from seqrun.cli.zero import zero_or_exit
+    from seqrun.errors import Refused
     from seqrun.service.arm_context import resolve_context
     from seqrun.service.connection import response_timeout_s
     from seqrun.service.session import ArmSession
@@ -77,11 +77,8 @@ def jog_command(
     session = None
     try:
         with user_errors():
-            try:
-                zero = zero_at_run_start(connection, arm, project, lambda q: ask(q, False),
-                                         typer.echo, confirmed=zero_confirmed)
-            except BusError as exc:
-                fail(f"cannot read the modules' state: {exc}", EXIT_FAULT)
+            zero = zero_or_exit(connection, arm, lambda q: ask(q, False), typer.echo,
+                                confirmed=zero_confirmed)
             runs = context.runs_dir
             session = ArmSession(zero.apply(arm), connection, project=project,
                                  log_root=runs if runs.is_absolute() else Path.cwd() / runs,

@@ -17,7 +17,7 @@ from typing import Annotated, Optional
 import typer
 
 from seqrun.cli.app import app
-from seqrun.cli.common import (EXIT_FAULT, EXIT_USAGE, ArmFileOption, BitrateOption,
+from seqrun.cli.common import (EXIT_USAGE, ArmFileOption, BitrateOption,
                                BusKwargsOption, CampaignOption, ChannelOption,
                                InterfaceOption, ResponseTimeoutOption, SimOption, fail,
                                user_errors)
@@ -60,8 +60,7 @@ def ros_command(
     if absent is not None:
         typer.echo(absent, err=True)
         raise typer.Exit(EXIT_USAGE)
-    from seqrun.cli.zero import zero_at_run_start
-    from seqrun.errors import BusError
+    from seqrun.cli.zero import zero_or_exit
     from seqrun.service.arm_context import resolve_context
     from seqrun.service.connection import response_timeout_s
 
@@ -78,14 +77,9 @@ def ros_command(
         connection = context.open_connection(live=True)
     typer.echo(context.headline(connection))
     try:
-        with user_errors():
-            try:
-                zero = zero_at_run_start(connection, arm, project,
-                                         lambda q: ask(q, False),
-                                         typer.echo, confirmed=zero_confirmed)
-            except BusError as exc:
-                fail(f"cannot read the modules' state: {exc}", EXIT_FAULT)
-            arm = zero.apply(arm)
+        zero = zero_or_exit(connection, arm, lambda q: ask(q, False), typer.echo,
+                            confirmed=zero_confirmed)
+        arm = zero.apply(arm)
     except BaseException:
         connection.close()
         raise

@@ -19,8 +19,8 @@ from seqrun.cli.app import app
 from seqrun.cli.common import (BitrateOption, BusKwargsOption, ChannelOption, InterfaceOption,
                                SimOption, fail, user_errors)
 from seqrun.cli.foxglove_option import FoxgloveOption
-from seqrun.defaults import EXIT_FAULT, EXIT_INVALID, EXIT_OPERATOR_ABORT
-from seqrun.errors import BusError, SequenceInvalid
+from seqrun.defaults import EXIT_INVALID, EXIT_OPERATOR_ABORT
+from seqrun.errors import SequenceInvalid
 
 if TYPE_CHECKING:
     from rich.console import Console
@@ -221,7 +221,7 @@ def _confirm_start_or_record(console: Console, run, yes: bool, log_dir: Path | N
 def _confirm_start(console: Console, run, yes: bool, zero_confirmed: str | None = None):
     """The bus banner, on real hardware the operator's yes, and the zero reference in
     force (on real hardware after a power-on, confirmed); the arm of the run gets it."""
-    from seqrun.cli.zero import zero_at_run_start
+    from seqrun.cli.zero import zero_or_exit
 
     connection, loaded = run.connection, run.loaded
     style = "bold black on yellow" if connection.is_simulator else "bold white on red"
@@ -246,16 +246,11 @@ def _confirm_start(console: Console, run, yes: bool, zero_confirmed: str | None 
         return _ask(console, question, False)
 
     try:
-        with user_errors():
-            try:
-                zero = zero_at_run_start(connection, run.arm, loaded.project, ask_zero,
-                                         lambda text: console.print(text, style="bold",
-                                                                    highlight=False,
-                                                                    markup=False),
-                                         confirmed=zero_confirmed)
-            except BusError as exc:  # before user_errors: a timeout is no usage error
-                fail(f"cannot read the modules' state: {exc}", EXIT_FAULT)
-            run.arm = zero.apply(run.arm)
+        zero = zero_or_exit(connection, run.arm, ask_zero,
+                            lambda text: console.print(text, style="bold", highlight=False,
+                                                       markup=False),
+                            confirmed=zero_confirmed)
+        run.arm = zero.apply(run.arm)
     except BaseException:
         connection.close()
         raise

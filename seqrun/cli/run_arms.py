@@ -26,7 +26,7 @@ import typer
 
 from seqrun.cli.common import fail, user_errors
 from seqrun.defaults import EXIT_FAULT, EXIT_INVALID, EXIT_OPERATOR_ABORT
-from seqrun.errors import BusError, UserInputError
+from seqrun.errors import UserInputError
 from seqrun.service.arm_part import ArmPart
 from seqrun.service.time_base import TimeBase
 from seqrun.stop_requests import OPERATOR_HALT, StopRequests
@@ -142,7 +142,7 @@ def decide_zeros(contexts: dict[str, Any], connections: dict[str, Any]
     hardware the terminal asks per arm): arm id -> (the arm with it applied, the zero).
     ``seqrun run`` and ``seqrun console`` of several arms."""
     from seqrun.cli.questions import ask
-    from seqrun.cli.zero import zero_at_run_start
+    from seqrun.cli.zero import zero_or_exit
 
     arms = {}
     for arm_id, context in contexts.items():
@@ -152,12 +152,8 @@ def decide_zeros(contexts: dict[str, Any], connections: dict[str, Any]
         def show_zero(text: str, arm_id: str = arm_id) -> None:
             typer.echo(f"arm {arm_id}: {text}")
 
-        with user_errors():
-            try:
-                zero = zero_at_run_start(connections[arm_id], context.arm, context.project,
-                                         ask_zero, show_zero)
-            except BusError as exc:
-                fail(f"arm {arm_id}: cannot read the modules' state: {exc}", EXIT_FAULT)
+        zero = zero_or_exit(connections[arm_id], context.arm, ask_zero, show_zero,
+                            arm_id=arm_id)
         arms[arm_id] = (zero.apply(context.arm), zero)
     return arms
 

@@ -21,7 +21,8 @@ import typer
 
 from seqrun.cli.app import app
 from seqrun.cli.common import (ArmFileOption, BitrateOption, BusKwargsOption, CampaignOption,
-                               ChannelOption, InterfaceOption, fail, user_errors)
+                               ChannelOption, EXIT_FAULT, InterfaceOption, fail,
+                               user_errors)
 from seqrun.cli.questions import ask
 from seqrun.errors import BusError, UserInputError
 from seqrun.service.zero import (POSE_IN_DEGREES, ZeroInForce, ZeroNotConfirmed, ZeroStore,
@@ -210,6 +211,19 @@ def zero_at_run_start(connection, arm, project, ask: Callable[[str], bool],
         raise typer.Exit(130) from None
 
 
+def zero_or_exit(connection, arm, ask: Callable[[str], bool], show: Callable[[str], None],
+                 confirmed: str | None = None, arm_id: str | None = None) -> ZeroInForce:
+    """:func:`zero_at_run_start` for a command: what it refuses is one line and the usage
+    exit code, a bus that does not answer is one line and the fault exit code (a timeout
+    is no usage error), ``arm ID:`` first when a campaign has several arms."""
+    with user_errors():
+        try:
+            return zero_at_run_start(connection, arm, None, ask, show, confirmed=confirmed)
+        except BusError as exc:
+            where = f"arm {arm_id}: " if arm_id else ""
+            fail(f"{where}cannot read the modules' state: {exc}", EXIT_FAULT)
+
+
 def zero_for_reading(connection, arm, project=None):
     """The arm with the zero reference in force for reading positions (status, pose save):
     ``(arm, text)``; see :func:`seqrun.service.zero.zero_for_reading`."""
@@ -218,4 +232,5 @@ def zero_for_reading(connection, arm, project=None):
     return reading(connection, arm)
 
 
-__all__ = ["zero_at_run_start", "zero_for_reading", "BusError", "UserInputError"]
+__all__ = ["zero_at_run_start", "zero_or_exit", "zero_for_reading", "BusError",
+           "UserInputError"]

@@ -35,12 +35,11 @@ from typing import TYPE_CHECKING, Any
 
 from seqrun.ros_messages import cdr
 from seqrun.ros_messages.from_events import EventTranslator
-from seqrun.ros_messages.names import EVENTS_TOPIC, MARKERS_TOPIC, TF_TOPIC, RosNames
+from seqrun.ros_messages.names import EVENTS_TOPIC, MARKERS_TOPIC, RosNames
 from seqrun.ros_messages.ros_fields import TF_MESSAGE, messages, topics
 from seqrun.ros_messages.values import Transform, quaternion_xyzw, stamp_ns
-from seqrun.service.mcap_log import (DEFAULT_DISTRIBUTION, MCAP_NAME, PARTIAL_NAME, QUEUE_SIZE,
-                                     MessageBuilder, QueuedBagWriter, encoded_record,
-                                     typestore_of)
+from seqrun.service.mcap_log import (DEFAULT_DISTRIBUTION, QUEUE_SIZE, McapFolder,
+                                     QueuedBagWriter, encoded_record)
 
 if TYPE_CHECKING:
     import numpy as np
@@ -72,38 +71,24 @@ def arm_topics(names: RosNames) -> dict[str, str]:
     return {own.get(topic, topic): msgtype for topic, msgtype in topics(names).items()}
 
 
-class ArmsBag:
+class ArmsBag(McapFolder):
     """The combined bag (rosbags' writer, MCAP storage); :meth:`write_event` per arm, in
     each arm's order; :meth:`arm_ended` when an arm has no more; :meth:`close` ends it."""
 
     def __init__(self, folder: Path, arms: Mapping[str, ArmDescription],
                  bases: Mapping[str, np.ndarray], start_epoch_s: float, *,
                  distribution: str = DEFAULT_DISTRIBUTION) -> None:
-        from rosbags.rosbag2 import StoragePlugin, Writer
-
-        self.folder = Path(folder)
-        self.store = typestore_of(distribution)
-        self.builder = MessageBuilder(self.store)
         self.names = {a: RosNames.of(arm, arm_namespace(a)) for a, arm in arms.items()}
         self.translators = {a: EventTranslator(arm, self.names[a]) for a, arm in arms.items()}
         self._rename = {a: {EVENTS_TOPIC: f"/{n.namespace}/events",
                             MARKERS_TOPIC: f"/{n.namespace}/markers"}
                         for a, n in self.names.items()}
-        self.counts: dict[str, int] = {}
         #: Records logged later than their arm's previous one would allow (kept in order).
         self.reordered = 0
-        self.partial = self.folder / PARTIAL_NAME
-        if self.partial.exists():
-            shutil.rmtree(self.partial)
-        self.writer = Writer(self.partial, version=8 if distribution == "humble" else 9,
-                             storage_plugin=StoragePlugin.MCAP)
-        self.writer.open()
         wanted = {TF_STATIC_TOPIC: TF_MESSAGE}
         for names in self.names.values():
             wanted.update(arm_topics(names))
-        self.connections = {topic: self.writer.add_connection(topic, msgtype,
-                                                              typestore=self.store)
-                            for topic, msgtype in wanted.items()}
+        super().__init__(folder, wanted, distribution)
         # the merge: (log_ns, order, topic, data), each arm's last log time, who has ended
         self._heap: list[tuple[int, int, str, bytes | memoryview]] = []
         self._order = itertools.count()
@@ -134,9 +119,7 @@ class ArmsBag:
                 self._queue(log, rename.get(fast[0], fast[0]), fast[1])
                 continue
             for topic, msgtype, fields in messages(record, names):
-                self._queue(log, rename.get(topic, topic),
-                            self.store.serialize_cdr(self.builder.build(msgtype, fields),
-                                                     msgtype))
+                self._queue(log, rename.get(topic, topic), self.cdr(msgtype, fields))
         self._flush()
 
     def arm_ended(self, arm_id: str) -> None:
@@ -147,8 +130,8 @@ class ArmsBag:
             log = max(record.log_ns, self._last[arm_id])
             self._last[arm_id] = log
             for topic, msgtype, fields in messages(record, self.names[arm_id]):
-                self._queue(log, self._rename[arm_id].get(topic, topic), self.store.serialize_cdr(
-                    self.builder.build(msgtype, fields), msgtype))
+                self._queue(log, self._rename[arm_id].get(topic, topic),
+                            self.cdr(msgtype, fields))
         self._ended.add(arm_id)
         self._flush()
 
@@ -167,9 +150,8 @@ class ArmsBag:
             self._put(topic, log_ns, data)
 
     def _put(self, topic: str, log_ns: int, data: bytes | memoryview) -> None:
-        self.writer.write(self.connections[topic], log_ns, data)
+        super()._put(topic, log_ns, data)
         self._written = log_ns
-        self.counts[topic] = self.counts.get(topic, 0) + 1
 
     # -- the end ---------------------------------------------------------------------------
     def close(self) -> Path:
@@ -177,17 +159,7 @@ class ArmsBag:
         for arm_id in list(self.names):
             self.arm_ended(arm_id)
         self._flush(everything=True)
-        self.writer.close()
-        target = self.folder / MCAP_NAME
-        (self.partial / f"{self.partial.name}.mcap").replace(target)
-        shutil.rmtree(self.partial, ignore_errors=True)
-        return target
-
-    def abort(self) -> None:
-        try:
-            self.writer.abort()
-        except Exception:  # noqa: BLE001 - already failing: keep what is on disk
-            pass
+        return self._finish()
 
 
 def _base_transform(child: str, base: np.ndarray) -> Transform:

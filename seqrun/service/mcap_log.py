@@ -120,19 +120,18 @@ class MessageBuilder:
         return [self._value((inner_node, inner), item) for item in items]
 
 
-class BagWriter:
-    """The rosbags side: one connection per topic, messages from :mod:`.ros_fields`'
-    records (used by the live log and by the rebuild from events.jsonl alike)."""
+class McapFolder:
+    """rosbags' writer (MCAP storage) into ``folder/run.mcap.partial/``, one connection per
+    topic of ``wanted`` (topic -> message type); :meth:`_finish` puts its MCAP file at
+    ``folder/run.mcap``. The bag of one arm and the bag of several share it."""
 
-    def __init__(self, folder: Path, arm: ArmDescription, names: RosNames,
+    def __init__(self, folder: Path, wanted: Mapping[str, str],
                  distribution: str = DEFAULT_DISTRIBUTION) -> None:
         from rosbags.rosbag2 import StoragePlugin, Writer
 
         self.folder = Path(folder)
-        self.names = names
         self.store = typestore_of(distribution)
         self.builder = MessageBuilder(self.store)
-        self.translator = EventTranslator(arm, names)
         self.counts: dict[str, int] = {}
         self.partial = self.folder / PARTIAL_NAME
         if self.partial.exists():
@@ -142,29 +141,17 @@ class BagWriter:
         self.writer.open()
         self.connections = {topic: self.writer.add_connection(topic, msgtype,
                                                               typestore=self.store)
-                            for topic, msgtype in topics(names).items()}
+                            for topic, msgtype in wanted.items()}
 
-    def write_event(self, event: Mapping[str, Any]) -> None:
-        for record in self.translator.translate(event):
-            self._write(record)
-
-    def _write(self, record: Any) -> None:
-        fast = encoded_record(record, self.names)
-        if fast is not None:
-            self._put(fast[0], record.log_ns, fast[1])
-            return
-        for topic, msgtype, fields in messages(record, self.names):
-            self._put(topic, record.log_ns,
-                      self.store.serialize_cdr(self.builder.build(msgtype, fields), msgtype))
+    def cdr(self, msgtype: str, fields: Mapping[str, Any] | None) -> bytes | memoryview:
+        """A message of rosbags' typestore from its fields, serialized."""
+        return self.store.serialize_cdr(self.builder.build(msgtype, fields), msgtype)
 
     def _put(self, topic: str, log_ns: int, data: bytes | memoryview) -> None:
         self.writer.write(self.connections[topic], log_ns, data)
         self.counts[topic] = self.counts.get(topic, 0) + 1
 
-    def close(self) -> Path:
-        """End the bag and put its MCAP file at ``folder/run.mcap``."""
-        for record in self.translator.finish():
-            self._write(record)
+    def _finish(self) -> Path:
         self.writer.close()
         target = self.folder / MCAP_NAME
         (self.partial / f"{self.partial.name}.mcap").replace(target)
@@ -176,6 +163,35 @@ class BagWriter:
             self.writer.abort()
         except Exception:  # noqa: BLE001 - already failing: keep what is on disk
             pass
+
+
+class BagWriter(McapFolder):
+    """The bag of one arm: messages from :mod:`.ros_fields`' records (used by the live log
+    and by the rebuild from events.jsonl alike)."""
+
+    def __init__(self, folder: Path, arm: ArmDescription, names: RosNames,
+                 distribution: str = DEFAULT_DISTRIBUTION) -> None:
+        self.names = names
+        self.translator = EventTranslator(arm, names)
+        super().__init__(folder, topics(names), distribution)
+
+    def write_event(self, event: Mapping[str, Any]) -> None:
+        for record in self.translator.translate(event):
+            self._write(record)
+
+    def _write(self, record: Any) -> None:
+        fast = encoded_record(record, self.names)
+        if fast is not None:
+            self._put(fast[0], record.log_ns, fast[1])
+            return
+        for topic, msgtype, fields in messages(record, self.names):
+            self._put(topic, record.log_ns, self.cdr(msgtype, fields))
+
+    def close(self) -> Path:
+        """End the bag and put its MCAP file at ``folder/run.mcap``."""
+        for record in self.translator.finish():
+            self._write(record)
+        return self._finish()
 
 
 def encoded_record(record: Any, names: RosNames) -> tuple[str, bytes] | None:
