@@ -43,6 +43,11 @@ caches, matplotlib's font files). Wall time depends on the host's load (reported
 
 Run folders are deleted after each run unless ``--keep`` (kept anyway: the folders of runs
 judged wrong).
+
+SIGTERM or Ctrl-C (SIGINT) ends the soak after the run under way, with the figures so far
+(exit 130). During a run the run's own handlers have the signal (it halts that run, exit
+130, as ``seqrun run`` does); the soak sees that exit and stops; between runs its own
+handlers take it. Without this the soak went on with the next run after each SIGTERM.
 """
 
 from __future__ import annotations
@@ -54,6 +59,7 @@ import os
 import random
 import re
 import shutil
+import signal
 import sys
 import tempfile
 import threading
@@ -166,7 +172,7 @@ class Verdict:
     wall_s: float = 0.0
 
 
-def run_cli(sequence: Path, folder: Path, fault: Fault | None):
+def run_cli(sequence: Path, folder: Path, fault: Fault | None, extra: list[str] = ()):
     from typer.testing import CliRunner
 
     import seqrun.cli  # noqa: F401  (registers the commands)
@@ -176,7 +182,7 @@ def run_cli(sequence: Path, folder: Path, fault: Fault | None):
             "--log-dir", str(folder)]
     if fault is not None:
         args += ["--sim-fault", fault.spec]
-    return CliRunner().invoke(app, args)
+    return CliRunner().invoke(app, [*args, *extra])
 
 
 def _frames(folder: Path, shift: float) -> list[tuple[float, int, str, bool]]:
@@ -318,6 +324,35 @@ class SoakResult:
     os_threads: tuple[int, int] = (0, 0)
     before_warm_up: dict[str, int] = field(default_factory=dict)
     wrong: list[dict] = field(default_factory=list)
+    #: The signal that ended the soak before its hours (None: it ran them all).
+    stopped_by: str | None = None
+
+
+#: The exit code of a run an operator stopped (SIGINT, SIGTERM): seqrun.results'.
+EXIT_OPERATOR_ABORT = 130
+
+
+class StopSignals:
+    """SIGINT and SIGTERM between runs: noted, the soak stops after the run under way
+    (the handlers the soak found are back when it ends)."""
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self) -> None:
+        self.received: str | None = None
+        self._saved: dict[int, object] = {}
+
+    def _note(self, signum: int, frame=None) -> None:
+        self.received = signal.Signals(signum).name
+
+    def __enter__(self) -> StopSignals:
+        for signum in self.SIGNALS:
+            self._saved[signum] = signal.signal(signum, self._note)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for signum, old in self._saved.items():
+            signal.signal(signum, old)  # type: ignore[arg-type]
 
 
 def slope(points: list[tuple[float, int]]) -> float | None:
@@ -333,7 +368,7 @@ def slope(points: list[tuple[float, int]]) -> float | None:
     return float(np.polyfit(x, y, 1)[0])
 
 
-def warm_up(sequences: Path, work: Path) -> None:
+def warm_up(sequences: Path, work: Path, stop: StopSignals | None = None) -> None:
     """A clean run and a faulted one (not counted): what every later run needs is then
     loaded for good (modules, caches, matplotlib's font files, the bold one of a fault's
     label), so that what is open after the last run compares with what was before."""
@@ -343,6 +378,10 @@ def warm_up(sequences: Path, work: Path) -> None:
     for n, fault in enumerate((None, Fault(4, "tow_error", 3.0))):
         folder = work / f"warm-up-{n}"
         result = run_cli(path, folder, fault)
+        if stop is not None and (stop.received or result.exit_code == EXIT_OPERATOR_ABORT):
+            stop.received = stop.received or "a signal during the warm-up"
+            shutil.rmtree(folder, ignore_errors=True)
+            break
         if result.exit_code != (0 if fault is None else 3):
             raise RuntimeError(f"warm-up run {n} exited {result.exit_code}:\n{result.output}")
         shutil.rmtree(folder, ignore_errors=True)
@@ -352,59 +391,76 @@ def warm_up(sequences: Path, work: Path) -> None:
 def soak(virtual_s: float, *, seed: int = 1, clean: int = 1,
          moves: tuple[int, int] = (8, 40), keep: Path | None = None,
          progress=print) -> SoakResult:
-    from seqrun.arm.description import load_arm
-
     rng = random.Random(seed)
     deck = FaultDeck(rng, clean)
     work = Path(tempfile.mkdtemp(prefix="seqrun-soak-"))
     out = SoakResult()
     try:
-        sequences = make_project(work / "project")
-        arm = load_arm(work / "project" / "arms" / "lwa3.yaml")
-        gc.collect()
-        out.before_warm_up = {"open_files": open_files(),
-                              "threads": threading.active_count(), "os_threads": os_threads()}
-        warm_up(sequences, work)
-        gc.collect()
-        files0, threads0, tasks0 = open_files(), threading.active_count(), os_threads()
-        wall0 = time.perf_counter()
-        while out.virtual_s < virtual_s:
-            n = out.runs + 1
-            sequence, planned = random_sequence(rng, sequences, f"soak-{n:04d}", moves)
-            fault = deck.draw(planned)
-            folder = (keep or work) / f"run-{n:04d}"
-            w0 = time.perf_counter()
-            result = run_cli(sequence, folder, fault)
-            verdict = judge(fault, result, folder, arm)
-            verdict.wall_s = round(time.perf_counter() - w0, 2)
-            _count(out, fault, verdict)
-            out.virtual_s += verdict.duration_s
-            out.runs = n
-            if verdict.outcome in ("missed_halt", "spurious"):
-                out.wrong.append({**asdict(verdict), "sequence": sequence.read_text(),
-                                  "folder": str(folder), "output": result.output[-2000:]})
-                kept = (keep or RESULTS) / "soak-wrong" / folder.name
-                if folder != kept:
-                    shutil.copytree(folder, kept, dirs_exist_ok=True)
-                    shutil.copy(sequence, kept / sequence.name)
-            if keep is None:
-                shutil.rmtree(folder, ignore_errors=True)
-            sequence.unlink()
-            gc.collect()
-            out.rss_kb.append((round(out.virtual_s / 3600, 4), rss_kb()))
-            progress(f"run {n:4d} {verdict.duration_s:8.1f} s virtual "
-                     f"{verdict.wall_s:6.1f} s wall  {verdict.spec or '-':<24} "
-                     f"exit {verdict.exit_code}  {verdict.outcome:<13} {verdict.detail}"[:160]
-                     + f"  | total {out.virtual_s / 3600:.2f} h, RSS {out.rss_kb[-1][1] / 1024:.0f} MB")
-        out.wall_s = round(time.perf_counter() - wall0, 1)
-        gc.collect()
-        out.open_files = (files0, open_files())
-        out.threads = (threads0, threading.active_count())
-        out.os_threads = (tasks0, os_threads())
-        out.rss_slope_kb_per_h = slope(out.rss_kb)
+        with StopSignals() as stop:
+            _soak(out, work, rng, deck, virtual_s, moves, keep, progress, stop)
     finally:
         shutil.rmtree(work, ignore_errors=True)
     return out
+
+
+def _soak(out: SoakResult, work: Path, rng: random.Random, deck: FaultDeck,
+          virtual_s: float, moves: tuple[int, int], keep: Path | None, progress,
+          stop: StopSignals) -> None:
+    from seqrun.arm.description import load_arm
+
+    sequences = make_project(work / "project")
+    arm = load_arm(work / "project" / "arms" / "lwa3.yaml")
+    gc.collect()
+    out.before_warm_up = {"open_files": open_files(),
+                          "threads": threading.active_count(), "os_threads": os_threads()}
+    warm_up(sequences, work, stop)
+    gc.collect()
+    files0, threads0, tasks0 = open_files(), threading.active_count(), os_threads()
+    wall0 = time.perf_counter()
+    while out.virtual_s < virtual_s and out.stopped_by is None:
+        if stop.received:
+            out.stopped_by = stop.received
+            break
+        n = out.runs + 1
+        sequence, planned = random_sequence(rng, sequences, f"soak-{n:04d}", moves)
+        fault = deck.draw(planned)
+        folder = (keep or work) / f"run-{n:04d}"
+        w0 = time.perf_counter()
+        result = run_cli(sequence, folder, fault)
+        if result.exit_code == EXIT_OPERATOR_ABORT or stop.received:
+            # The run took the signal (it halted, exit 130): the soak's, not the run's.
+            out.stopped_by = stop.received or "a signal during a run (the run halted)"
+            progress(f"run {n:4d} stopped by {out.stopped_by}: the soak ends here")
+            shutil.rmtree(folder, ignore_errors=True)
+            sequence.unlink()
+            break
+        verdict = judge(fault, result, folder, arm)
+        verdict.wall_s = round(time.perf_counter() - w0, 2)
+        _count(out, fault, verdict)
+        out.virtual_s += verdict.duration_s
+        out.runs = n
+        if verdict.outcome in ("missed_halt", "spurious"):
+            out.wrong.append({**asdict(verdict), "sequence": sequence.read_text(),
+                              "folder": str(folder), "output": result.output[-2000:]})
+            kept = (keep or RESULTS) / "soak-wrong" / folder.name
+            if folder != kept:
+                shutil.copytree(folder, kept, dirs_exist_ok=True)
+                shutil.copy(sequence, kept / sequence.name)
+        if keep is None:
+            shutil.rmtree(folder, ignore_errors=True)
+        sequence.unlink()
+        gc.collect()
+        out.rss_kb.append((round(out.virtual_s / 3600, 4), rss_kb()))
+        progress(f"run {n:4d} {verdict.duration_s:8.1f} s virtual "
+                 f"{verdict.wall_s:6.1f} s wall  {verdict.spec or '-':<24} "
+                 f"exit {verdict.exit_code}  {verdict.outcome:<13} {verdict.detail}"[:160]
+                 + f"  | total {out.virtual_s / 3600:.2f} h, RSS {out.rss_kb[-1][1] / 1024:.0f} MB")
+    out.wall_s = round(time.perf_counter() - wall0, 1)
+    gc.collect()
+    out.open_files = (files0, open_files())
+    out.threads = (threads0, threading.active_count())
+    out.os_threads = (tasks0, os_threads())
+    out.rss_slope_kb_per_h = slope(out.rss_kb)
 
 
 def _count(out: SoakResult, fault: Fault | None, v: Verdict) -> None:
@@ -515,6 +571,10 @@ def main() -> None:
     print_figures(data)
     print(f"before the warm-up: {result.before_warm_up}")
     print(f"load average at start {info['loadavg_at_start']}; written to {args.out}")
+    if result.stopped_by:
+        print(f"stopped by {result.stopped_by} before {args.hours} h: the figures are the "
+              "runs so far")
+        sys.exit(EXIT_OPERATOR_ABORT)
 
 
 if __name__ == "__main__":

@@ -73,3 +73,30 @@ def test_soaks_side_by_side_add_up_and_keep_memory_per_process():
     assert both["wall_s"] == 120.0   # side by side: the longer one, not the sum
     assert [s["rss_slope_kb_per_h"] for s in both["shards"]] == [10.0, 20.0]
     assert [s["rss_mb_first_last"] for s in both["shards"]] == [[120, 130], [125, 128]]
+
+
+@pytest.mark.slow  # the warm-up and a run or two: under a minute on an idle host
+def test_sigterm_ends_the_soak_after_the_run_under_way():
+    """SIGTERM ends the soak (the run it lands in halts, exit 130, as ``seqrun run``
+    does): it used to go on with the next run after each one, and only SIGKILL ended it."""
+    import os
+    import signal
+    import threading
+
+    got: list[int] = []
+    previous = signal.signal(signal.SIGTERM, lambda signum, frame: got.append(signum))
+    timers: list[threading.Timer] = []
+
+    def progress(line: str) -> None:
+        if not timers:  # after the first run: during the second or between runs
+            timers.append(threading.Timer(0.3, os.kill, (os.getpid(), signal.SIGTERM)))
+            timers[0].start()
+
+    try:
+        result = soak.soak(300, seed=3, moves=(1, 2), progress=progress)
+        timers[0].join()
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    assert result.stopped_by is not None
+    assert result.runs <= 2 and result.virtual_s < 300
+    assert got == []  # the soak's, not the caller's

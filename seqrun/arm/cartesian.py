@@ -14,6 +14,7 @@ measured joints), so both solve the same problem the same way:
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -44,7 +45,11 @@ class PathError(SeqrunError):
         self.unreachable = unreachable  # a sample no configuration reaches
 
 
-_SOLVERS: dict[tuple[int, str | None, bool], IkSolver] = {}
+#: The solvers built lately, newest last: a solver keeps its arm, and a process that runs one
+#: sequence after another loads the arm afresh for each run (the solvers of the arms before
+#: are dropped instead of kept for the life of the process). A few arms and their tools.
+_SOLVERS: OrderedDict[tuple[int, str | None, bool], IkSolver] = OrderedDict()
+_SOLVERS_KEPT = 16
 
 
 def solver_for(arm: ArmDescription, tool: str | None, *, tracking: bool = False) -> IkSolver:
@@ -55,6 +60,9 @@ def solver_for(arm: ArmDescription, tool: str | None, *, tracking: bool = False)
     if solver is None or solver.arm is not arm:
         solver = IkSolver(arm, tool, restarts=0 if tracking else 40)
         _SOLVERS[key] = solver
+        while len(_SOLVERS) > _SOLVERS_KEPT:
+            _SOLVERS.popitem(last=False)
+    _SOLVERS.move_to_end(key)
     return solver
 
 

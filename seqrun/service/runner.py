@@ -21,6 +21,7 @@ from seqrun.results import EXIT_FAULT, RunResult, StepResult
 from seqrun.sequence.checks import check_from_arm
 from seqrun.sequence.loader import LoadedSequence
 from seqrun.service.connection import Connection, response_timeout_s
+from seqrun.service.heap import keep_large_blocks_out_of_arenas, return_freed_memory
 from seqrun.service.run_control import halt_on_foreign_frames
 from seqrun.stop_requests import StopRequests
 
@@ -88,6 +89,7 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
     arm's part of a campaign run (:class:`~seqrun.service.arm_part.ArmPart`: the run's
     time base and its face of the run's one run.mcap).
     """
+    keep_large_blocks_out_of_arenas()  # run after run, the process keeps one run's memory
     own_driver = driver is None
     executor, driver = build_executor(loaded, arm, connection, speed=speed,
                                       command_mode=command_mode, cycle_hz=cycle_hz,
@@ -174,28 +176,7 @@ def write_html_report(folder: Path) -> str | None:
         return f"{type(exc).__name__}: {exc}"
     finally:
         gc.collect()
-        _return_freed_memory()
-
-
-def _return_freed_memory() -> None:
-    """Give the C heap's free pages back to the system (glibc's ``malloc_trim``; nothing
-    elsewhere). Freed memory otherwise stays with the process in fragments: a process
-    that runs one sequence after another (the console, a soak) would keep the resident
-    set of its largest run so far plus its fragments instead of one run's."""
-    global _malloc_trim
-    if _malloc_trim is None:
-        try:
-            import ctypes
-
-            _malloc_trim = ctypes.CDLL(None).malloc_trim   # the process's own C library
-        except (OSError, AttributeError):
-            _malloc_trim = False
-    if _malloc_trim:
-        _malloc_trim(0)
-
-
-#: glibc's malloc_trim once found (False: this C library has none).
-_malloc_trim: Any = None
+        return_freed_memory()
 
 
 def _inputs(loaded: LoadedSequence, arm: ArmDescription) -> list[dict[str, str]]:
