@@ -59,6 +59,7 @@ import os
 import random
 import re
 import shutil
+import socket
 import signal
 import sys
 import tempfile
@@ -334,18 +335,40 @@ EXIT_OPERATOR_ABORT = 130
 
 class StopSignals:
     """SIGINT and SIGTERM between runs: noted, the soak stops after the run under way
-    (the handlers the soak found are back when it ends)."""
+    (the handlers the soak found are back when it ends).
+
+    During a run the run's handlers have the signal; one that comes after the run's loop
+    has ended (its report being written) asks a loop that is gone and the run's exit code
+    does not show it. Python writes the number of every signal it handles, whoever's
+    handler, to the wake-up file descriptor: :meth:`came_during_run` reads it after each
+    run, so no SIGTERM is lost."""
 
     SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
     def __init__(self) -> None:
         self.received: str | None = None
         self._saved: dict[int, object] = {}
+        self._wake_read, self._wake_write = socket.socketpair()
+        self._saved_wakeup = -1
 
     def _note(self, signum: int, frame=None) -> None:
         self.received = signal.Signals(signum).name
 
+    def came_during_run(self) -> str | None:
+        """SIGINT or SIGTERM handled since the last call (by the soak's handler or a
+        run's), else None."""
+        try:
+            numbers = self._wake_read.recv(4096)
+        except BlockingIOError:
+            return None
+        names = [signal.Signals(n).name for n in numbers if n in self.SIGNALS]
+        return names[0] if names else None
+
     def __enter__(self) -> StopSignals:
+        for sock in (self._wake_read, self._wake_write):
+            sock.setblocking(False)
+        self._saved_wakeup = signal.set_wakeup_fd(self._wake_write.fileno(),
+                                                  warn_on_full_buffer=False)
         for signum in self.SIGNALS:
             self._saved[signum] = signal.signal(signum, self._note)
         return self
@@ -353,6 +376,9 @@ class StopSignals:
     def __exit__(self, *exc) -> None:
         for signum, old in self._saved.items():
             signal.signal(signum, old)  # type: ignore[arg-type]
+        signal.set_wakeup_fd(self._saved_wakeup)
+        self._wake_read.close()
+        self._wake_write.close()
 
 
 def slope(points: list[tuple[float, int]]) -> float | None:
@@ -427,9 +453,11 @@ def _soak(out: SoakResult, work: Path, rng: random.Random, deck: FaultDeck,
         folder = (keep or work) / f"run-{n:04d}"
         w0 = time.perf_counter()
         result = run_cli(sequence, folder, fault)
-        if result.exit_code == EXIT_OPERATOR_ABORT or stop.received:
+        during = stop.came_during_run()
+        if result.exit_code == EXIT_OPERATOR_ABORT or stop.received or during:
             # The run took the signal (it halted, exit 130): the soak's, not the run's.
-            out.stopped_by = stop.received or "a signal during a run (the run halted)"
+            out.stopped_by = (stop.received or during
+                              or "a signal during a run (the run halted)")
             progress(f"run {n:4d} stopped by {out.stopped_by}: the soak ends here")
             shutil.rmtree(folder, ignore_errors=True)
             sequence.unlink()

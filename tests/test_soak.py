@@ -100,3 +100,23 @@ def test_sigterm_ends_the_soak_after_the_run_under_way():
     assert result.stopped_by is not None
     assert result.runs <= 2 and result.virtual_s < 300
     assert got == []  # the soak's, not the caller's
+
+
+def test_a_sigterm_a_run_took_after_its_loop_ended_still_ends_the_soak():
+    """A SIGTERM that lands while a run writes its report goes to the run's handler, which
+    asks a control loop that has already ended: the run's exit code does not show it, and
+    the soak went on. The soak reads it from Python's wake-up descriptor instead."""
+    import os
+    import signal
+
+    with soak.StopSignals() as stop:
+        assert stop.came_during_run() is None
+        swallowed: list[int] = []
+        soaks = signal.signal(signal.SIGTERM, lambda signum, frame: swallowed.append(signum))
+        try:  # the run's handler, as seqrun.cli.interrupts installs it
+            os.kill(os.getpid(), signal.SIGTERM)
+        finally:
+            signal.signal(signal.SIGTERM, soaks)
+        assert swallowed == [signal.SIGTERM] and stop.received is None
+        assert stop.came_during_run() == "SIGTERM"
+        assert stop.came_during_run() is None   # read once
