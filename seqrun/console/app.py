@@ -151,11 +151,17 @@ async def halt_on_thread(halt: Callable[[str], dict[str, Any]], reason: str,
     done: asyncio.Future[dict[str, Any]] = loop.create_future()
 
     def run() -> None:
+        result: Any = None
+        failure: BaseException | None = None
         try:
-            result: Any = halt(reason)
-            loop.call_soon_threadsafe(_settle, done, result, None)
+            result = halt(reason)
         except BaseException as exc:  # noqa: BLE001 - handed to the awaiting request
-            loop.call_soon_threadsafe(_settle, done, None, exc)
+            failure = exc
+        try:
+            loop.call_soon_threadsafe(_settle, done, result, failure)
+        except RuntimeError:  # the server stopped meanwhile: no request awaits the answer
+            log.warning("console: %s ended after the server stopped: %s", name,
+                        printable(repr(failure)) if failure else "done")
 
     threading.Thread(target=run, name=name, daemon=True).start()
     return await done
