@@ -21,12 +21,17 @@ def test_a_halt_that_ends_after_the_server_stopped_ends_quietly(monkeypatch, cap
         halted.append(reason)
         return {"sent": True}
 
-    loop = asyncio.new_event_loop()
-    request = loop.create_task(halt_on_thread(halt, "STOP", "console-halt-test"))
-    loop.run_until_complete(asyncio.sleep(0.05))   # the thread is under way
-    request.cancel()
-    loop.run_until_complete(asyncio.gather(request, return_exceptions=True))
-    loop.close()                                   # the server has stopped
+    def server() -> None:  # a thread of its own: the test's thread may run a loop already
+        loop = asyncio.new_event_loop()
+        request = loop.create_task(halt_on_thread(halt, "STOP", "console-halt-test"))
+        loop.run_until_complete(asyncio.sleep(0.05))   # the thread is under way
+        request.cancel()
+        loop.run_until_complete(asyncio.gather(request, return_exceptions=True))
+        loop.close()                                   # the server has stopped
+
+    serving = threading.Thread(target=server)
+    serving.start()
+    serving.join(5)
     (thread,) = [t for t in threading.enumerate() if t.name == "console-halt-test"]
     with caplog.at_level(logging.WARNING, logger="seqrun.console.app"):
         release.set()
