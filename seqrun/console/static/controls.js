@@ -111,12 +111,14 @@ export function connectLive(state, handlers) {
 // False when nothing changed (lost again without a new reason, or back while not lost).
 export function markLost(state, lost, why, text) {
   if (lost === state.lost && (!lost || !why)) return false;
+  const already = state.lost;
   state.lost = lost;
   document.body.classList.toggle("lost", lost);
   $("#lost-banner").hidden = !lost;
   $("#lost-why").textContent = why;
   if (!lost) $("#lost-stop").hidden = true;
-  if (lost) say(text, true);
+  // said once when contact is lost: each failed reconnection must not cover a STOP FAILED
+  if (lost && !already) say(text, true);
   else if ($("#message").textContent.startsWith("The console is unreachable")) say("");
   return true;
 }
