@@ -29,7 +29,6 @@ from seqrun.drivers.base import ArmIdentity
 from seqrun.errors import UserInputError
 from seqrun.results import EXIT_OK
 from seqrun.sequence.loader import load_sequence
-from seqrun.sequence.project import open_project
 from seqrun.service.connection import Connection
 from seqrun.service.runner import run_sequence
 from seqrun.service.zero import ZeroStore
@@ -96,27 +95,25 @@ def invoke(*args, stdin: str = ""):
 
 
 # --------------------------------------------------------------------------- campaigns
-def test_campaign_b_after_a_power_cycle_at_totem_uses_the_arms_zero(tmp_path):
-    """Two campaigns on one arm. Campaign B confirmed Park at an earlier power-on; the
-    arm was shut down at Totem by campaign A and powered on again there, and A confirmed
-    Totem and started the modules. Campaign B now uses Totem (the arm's zero), not its
-    old Park: the move "to Totem" leaves the arm where it is."""
-    for name in ("a", "b"):
-        assert invoke("init", tmp_path / name).exit_code == 0
-    a, b = open_project(tmp_path / "a"), open_project(tmp_path / "b")
+def test_campaign_b_after_a_power_cycle_at_totem_uses_the_arms_zero():
+    """Two campaigns on one arm (a campaign is no input of the zero: the record is the
+    arm's). Campaign B confirmed Park at an earlier power-on; the arm was shut down at Totem
+    by campaign A and powered on again there, and A confirmed Totem and started the
+    modules. Campaign B now uses Totem (the arm's zero), not its old Park: the move "to
+    Totem" leaves the arm where it is."""
     store_of().set_record("park", by="test")
     first = power_on()  # session 1, at Park
     try:
-        zero_at_run_start(first, ARM, b, lambda q: True, print)
+        zero_at_run_start(first, ARM, lambda q: True, print)
     finally:
         first.close()
     store_of().set_record("totem", by="shutdown.yaml")  # campaign A's shutdown
     second = power_on()  # session 2, at Totem: the modules read 0 there
     questions = []
     try:
-        zero_a = zero_at_run_start(second, ARM, a, lambda q: True, print)
+        zero_a = zero_at_run_start(second, ARM, lambda q: True, print)
         assert run(second, "startup.yaml", zero_a.apply(ARM)).result.exit_code == EXIT_OK
-        zero_b = zero_at_run_start(second, ARM, b, lambda q: questions.append(q) or True,
+        zero_b = zero_at_run_start(second, ARM, lambda q: questions.append(q) or True,
                                    print)
         outcome = run(second, "totem.yaml", zero_b.apply(ARM))
         physical = module_deg(second)
@@ -144,7 +141,7 @@ def test_a_second_arm_is_not_shown_at_the_first_arms_zero(served):
     try:
         arm, text = zero_for_reading(connection, ARM)
         with pytest.raises(UserInputError) as refused:
-            zero_at_run_start(connection, ARM, None, lambda q: True, print)
+            zero_at_run_start(connection, ARM, lambda q: True, print)
     finally:
         connection.close()
     assert text.startswith("zero: unknown (no zero reference recorded for this arm "
@@ -159,7 +156,7 @@ def test_a_module_exchanged_is_named(served):
     connection = power_on({**FIRST, 4: 9_999_004})
     try:
         with pytest.raises(UserInputError) as refused:
-            zero_at_run_start(connection, ARM, None, lambda q: True, print)
+            zero_at_run_start(connection, ARM, lambda q: True, print)
     finally:
         connection.close()
     assert "holds the record of an arm with module(s) 1, 2, 3, 5, 6, 7" in str(refused.value)
@@ -174,7 +171,7 @@ def test_a_file_of_other_serials_is_refused():
     connection = power_on(FIRST)
     try:
         with pytest.raises(UserInputError) as refused:
-            zero_at_run_start(connection, ARM, None, lambda q: True, print)
+            zero_at_run_start(connection, ARM, lambda q: True, print)
     finally:
         connection.close()
     text = str(refused.value)
@@ -264,7 +261,7 @@ def test_zero_set_deg_records_a_power_loss_pose_and_the_run_uses_it(served):
     connection = power_on()
     questions = []
     try:
-        zero = zero_at_run_start(connection, ARM, None,
+        zero = zero_at_run_start(connection, ARM,
                                  lambda q: questions.append(q) or True, print)
         outcome = run(connection, "opsafe.yaml", zero.apply(ARM))
         physical = module_deg(connection)
@@ -321,8 +318,8 @@ def test_zero_confirmed_must_name_the_zero_in_force_on_the_simulator_too():
     try:
         with pytest.raises(UserInputError, match="--zero-confirmed totem: the zero "
                                                  "reference in force is Park"):
-            zero_at_run_start(connection, ARM, None, lambda q: True, print, confirmed="totem")
-        zero = zero_at_run_start(connection, ARM, None, lambda q: False, print,
+            zero_at_run_start(connection, ARM, lambda q: True, print, confirmed="totem")
+        zero = zero_at_run_start(connection, ARM, lambda q: False, print,
                                  confirmed="Park")
     finally:
         connection.close()

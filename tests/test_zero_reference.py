@@ -186,7 +186,7 @@ def test_the_built_in_simulator_needs_no_record_its_power_on_pose_is_the_zero():
         connection = open_connection(force_sim=True, clock=VirtualClock(), power_on_pose=pose)
         shown = []
         try:
-            zero = zero_at_run_start(connection, ARM, None, lambda q: False, shown.append)
+            zero = zero_at_run_start(connection, ARM, lambda q: False, shown.append)
         finally:
             connection.close()
         assert zero.pose == pose and zero.question is None
@@ -197,7 +197,7 @@ def test_real_hardware_without_a_record_refuses_with_the_command_that_sets_one(s
     connection = hardware()
     try:
         with pytest.raises(UserInputError) as info:
-            zero_at_run_start(connection, ARM, None, lambda q: True, print)
+            zero_at_run_start(connection, ARM, lambda q: True, print)
     finally:
         connection.close()
     assert "no zero reference recorded for this arm (serials 1:4200001" in str(info.value)
@@ -211,7 +211,7 @@ def test_after_a_power_on_the_record_is_shown_and_confirmed_then_in_use(state_di
     connection = hardware()
     questions, shown = [], []
     try:
-        zero = zero_at_run_start(connection, ARM, None,
+        zero = zero_at_run_start(connection, ARM,
                                  lambda q: questions.append(q) or True, shown.append)
     finally:
         connection.close()
@@ -238,7 +238,7 @@ def _run_after_power_on_at_totem(record: str, answer: bool):
     connection = hardware(clock)
     sent = []
     try:
-        zero = zero_at_run_start(connection, ARM, None, lambda q: answer, print)
+        zero = zero_at_run_start(connection, ARM, lambda q: answer, print)
         loaded = load_sequence(ROOT / "sequences" / "opsafe.yaml")
         outcome = run_sequence(loaded, ARM.with_zero_reference(zero.pose), connection,
                                log_dir=None, confirm=lambda q: True,
@@ -262,7 +262,7 @@ def test_a_wrong_record_is_stopped_by_the_confirm_before_anything_moves():
     connection.bus.arm  # the arm stands in Totem, its modules read zero there
     try:
         with pytest.raises(typer.Exit) as info:
-            zero_at_run_start(connection, ARM, None, lambda q: False, sent.append)
+            zero_at_run_start(connection, ARM, lambda q: False, sent.append)
         positions = connection.bus.arm.positions()
     finally:
         connection.close()
@@ -364,21 +364,21 @@ def test_status_and_pose_save_read_positions_with_the_recorded_zero():
 def test_every_campaign_shares_the_arms_one_record(tmp_path, state_dir, served_arm):
     """Recorded from campaign A, the record is the arm's: campaign B (and no campaign) use
     it; nothing is written into a campaign."""
-    from seqrun.sequence.project import open_project
-
     for name in ("a", "b"):
         assert CliRunner().invoke(app, ["init", str(tmp_path / name)]).exit_code == 0
     result = CliRunner().invoke(app, ["zero", "set", "totem", "--yes", "--project",
                                       str(tmp_path / "a"), *served_arm])
     assert result.exit_code == 0, result.output
-    for project in (open_project(tmp_path / "b"), None):
-        connection = hardware()
-        try:
-            zero = zero_at_run_start(connection, ARM, project, lambda q: True, print)
-        finally:
-            connection.close()
-        assert zero.pose == "totem" and zero.store.path.parent == state_dir / "arms"
-    assert not (tmp_path / "a" / ".seqrun" / "zero.json").exists()
+    shown = CliRunner().invoke(app, ["zero", "show", "--project", str(tmp_path / "b"),
+                                     *served_arm])
+    assert shown.exit_code == 0 and "record   Totem, recorded " in shown.output, shown.output
+    connection = hardware()
+    try:
+        zero = zero_at_run_start(connection, ARM, lambda q: True, print)
+    finally:
+        connection.close()
+    assert zero.pose == "totem" and zero.store.path.parent == state_dir / "arms"
+    assert not any((tmp_path / c / ".seqrun" / "zero.json").exists() for c in "ab")
 
 
 def test_an_older_per_type_record_is_named_but_never_used(state_dir, tmp_path, monkeypatch):
@@ -392,7 +392,7 @@ def test_an_older_per_type_record_is_named_but_never_used(state_dir, tmp_path, m
     connection = hardware()
     try:
         with pytest.raises(UserInputError) as info:
-            zero_at_run_start(connection, ARM, None, lambda q: True, print)
+            zero_at_run_start(connection, ARM, lambda q: True, print)
     finally:
         connection.close()
     message = str(info.value)

@@ -16,7 +16,7 @@ import numpy as np
 from seqrun.arm.geometry import Clearance, Geometry, segment_segment
 from seqrun.arm.kinematics import matrix_from_rpy
 
-__all__ = ["base_transform", "between_arms", "volumes_in_facility"]
+__all__ = ["base_transform", "base_of", "between_arms", "volumes_in_facility"]
 
 
 def base_transform(position_mm: Sequence[float], rpy_deg: Sequence[float]) -> np.ndarray:
@@ -26,6 +26,14 @@ def base_transform(position_mm: Sequence[float], rpy_deg: Sequence[float]) -> np
     frame[:3, :3] = matrix_from_rpy(np.radians(np.asarray(rpy_deg, dtype=float)))
     frame[:3, 3] = np.asarray(position_mm, dtype=float)
     return frame
+
+
+def base_of(base) -> np.ndarray:
+    """4x4 of a base pose given as ``position_mm`` and ``rpy_deg`` attributes
+    (``[arms.ID] base``); None is the facility frame itself."""
+    if base is None:
+        return np.eye(4)
+    return base_transform(base.position_mm, base.rpy_deg)
 
 
 def volumes_in_facility(geometry: Geometry, base: np.ndarray, q_rad: np.ndarray

@@ -191,13 +191,13 @@ def set_command(
                    "record is the zero of the next power-on")
 
 
-def zero_at_run_start(connection, arm, project, ask: Callable[[str], bool],
+def zero_at_run_start(connection, arm, ask: Callable[[str], bool],
                       show: Callable[[str], None], confirmed: str | None = None,
                       store: ZeroStore | None = None) -> ZeroInForce:
     """Decide the zero reference of a run, show it, and on real hardware after a power-on
     have the operator confirm the pose before anything moves (``ask``, or ``confirmed``:
-    ``--zero-confirmed POSE``; ``--yes`` never answers it). ``project`` is not used: the
-    record belongs to the arm, not to a campaign.
+    ``--zero-confirmed POSE``; ``--yes`` never answers it). The record belongs to the arm,
+    not to a campaign.
 
     Raises :class:`UserInputError` (no record, an untrusted file: nothing moves),
     :class:`BusError`, or ``typer.Exit(130)`` when the operator says the arm is not in that
@@ -218,7 +218,7 @@ def zero_or_exit(connection, arm, ask: Callable[[str], bool], show: Callable[[st
     is no usage error), ``arm ID:`` first when a campaign has several arms."""
     with user_errors():
         try:
-            return zero_at_run_start(connection, arm, None, ask, show, confirmed=confirmed)
+            return zero_at_run_start(connection, arm, ask, show, confirmed=confirmed)
         except BusError as exc:
             where = f"arm {arm_id}: " if arm_id else ""
             fail(f"{where}cannot read the modules' state: {exc}", EXIT_FAULT)

@@ -133,12 +133,9 @@ class ArmContext:
 
     def base_transform(self) -> np.ndarray:
         """4x4: the arm's base frame in the common facility frame (millimetres)."""
-        from seqrun.arm.between_arms import base_transform
+        from seqrun.arm.between_arms import base_of
 
-        base = self.base
-        if base is None:
-            return base_transform((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
-        return base_transform(base.position_mm, base.rpy_deg)
+        return base_of(self.base)
 
     # ------------------------------------------------------------------ the arm
     @cached_property

@@ -43,11 +43,9 @@ class ArmOfRun:
     base: Any = None
 
     def base_transform(self) -> Any:
-        from seqrun.arm.between_arms import base_transform
+        from seqrun.arm.between_arms import base_of
 
-        if self.base is None:
-            return base_transform((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
-        return base_transform(self.base.position_mm, self.base.rpy_deg)
+        return base_of(self.base)
 
     def base_dict(self) -> dict[str, list[float]]:
         given = self.base
