@@ -81,6 +81,6 @@ def arms_setup(folder: Path, *, faults: dict[str, list[str]] | None = None,
         connection.bus = WrapBus(connection.bus, before_send=wires[arm_id].record)
         arm = context.arm.with_zero_reference("park")
         made[arm_id] = ArmSession(arm, connection, project=project, log_root=runs,
-                                  **session_kw)
+                                  arm_id=arm_id, **session_kw)
     sessions = ArmSessions(made, bases={a: c.base for a, c in contexts.items()})
     return ArmsSetup(folder, project, contexts, sessions, wires, runs)

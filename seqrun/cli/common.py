@@ -28,6 +28,11 @@ ArmFileOption = Annotated[Optional[Path], typer.Option(
 CampaignOption = Annotated[Optional[Path], typer.Option(
     "--project", metavar="DIR", help="Campaign folder (default: the one holding the current "
                                      "directory).")]
+#: ``--arm-id ID``: in a campaign with several arms ([arms.ID]), the one arm a command of one
+#: arm acts on (its arm file, bus and zero); the commands of every arm take ArmIdOption.
+OneArmOption = Annotated[Optional[str], typer.Option(
+    "--arm-id", metavar="ID", help="In a campaign with several arms ([arms.ID] in "
+                                   "seqrun.toml): the arm.")]
 PosesDirOption = Annotated[Path, typer.Option(
     "--poses-dir", metavar="DIR", help="Directory of pose files (<name>.yaml).")]
 

@@ -128,7 +128,7 @@ def console_command(
 
     session = ArmSession(arm, connection, project=project, log_root=runs, zero=zero,
                          response_timeout_s=timeout, loop_priority=rt_priority,
-                         arm_path=context.arm_path)
+                         arm_path=context.arm_path, arm_id=context.arm_id)
     _serve_control_socket(connection, session)
     live_foxglove = None
     try:
@@ -221,7 +221,8 @@ def _serve_arms(arm_ids: list[str] | None, *, project_dir: Path | None, sim: boo
         for a, c in contexts.items():
             made[a] = ArmSession(arms[a][0], connections[a], project=c.project,
                                  log_root=runs, zero=arms[a][1], loop_priority=rt_priority,
-                                 arm_path=c.arm_path, response_timeout_s=response_timeout_s(
+                                 arm_path=c.arm_path, arm_id=a,
+                                 response_timeout_s=response_timeout_s(
                                      c.arm, response_timeout_ms))
         sessions = ArmSessions(made, bases={a: c.base for a, c in contexts.items()})
         for arm_id in contexts:

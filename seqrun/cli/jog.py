@@ -19,7 +19,7 @@ import typer
 
 from seqrun.cli.app import app
 from seqrun.cli.common import (EXIT_FAULT, ArmFileOption, BitrateOption, BusKwargsOption,
-                               CampaignOption, ChannelOption, InterfaceOption,
+                               CampaignOption, ChannelOption, InterfaceOption, OneArmOption,
                                ResponseTimeoutOption, SimOption, fail, user_errors)
 from seqrun.defaults import EXIT_OPERATOR_ABORT
 
@@ -51,6 +51,7 @@ def jog_command(
     zero_confirmed: Annotated[Optional[str], typer.Option(
         "--zero-confirmed", metavar="POSE", help="Answer 'does the arm stand in POSE?' after "
         "a power-on without asking.")] = None,
+    arm_id: OneArmOption = None,
 ) -> None:
     """Jog one joint at a velocity for a short time (FVEL; Ctrl-C stops it)."""
     import math
@@ -68,7 +69,7 @@ def jog_command(
         context = resolve_context(project_dir=project_dir, arm_file=arm_file, log_dir=None,
                                   interface=interface, channel=channel, bitrate=bitrate,
                                   bus_kwargs=bus_kwargs or [], sim=sim,
-                                  response_timeout_ms=response_timeout_ms)
+                                  response_timeout_ms=response_timeout_ms, arm_id=arm_id)
         project, arm = context.project, context.arm
         context.refuse_private_simulator("jog")
         timeout = response_timeout_s(arm, response_timeout_ms)
@@ -82,7 +83,8 @@ def jog_command(
             runs = context.runs_dir
             session = ArmSession(zero.apply(arm), connection, project=project,
                                  log_root=runs if runs.is_absolute() else Path.cwd() / runs,
-                                 zero=zero, response_timeout_s=timeout, status_hz=0)
+                                 zero=zero, response_timeout_s=timeout, status_hz=0,
+                                 arm_id=context.arm_id)
             session.poll_status()
             mode = "position" if position_mode else "velocity"
             try:

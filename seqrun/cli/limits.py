@@ -17,7 +17,7 @@ import typer
 
 from seqrun.cli.app import app
 from seqrun.cli.common import (EXIT_FAULT, ArmFileOption, BitrateOption, BusKwargsOption,
-                               CampaignOption, ChannelOption, InterfaceOption,
+                               CampaignOption, ChannelOption, InterfaceOption, OneArmOption,
                                ResponseTimeoutOption, SimOption, fail, user_errors)
 
 limits_app = typer.Typer(help="The limits stored in the modules (MinPos/MaxPos/MaxVel/"
@@ -30,7 +30,7 @@ JointsOption = Annotated[Optional[str], typer.Option(
 
 
 def _open(arm_file, project_dir, interface, channel, bitrate, bus_kwargs, sim,
-          response_timeout_ms, what: str):
+          response_timeout_ms, what: str, arm_id: str | None = None):
     from seqrun.cli.bus_owner import live_targets
     from seqrun.service.arm_context import resolve_context
     from seqrun.service.connection import response_timeout_s
@@ -38,7 +38,7 @@ def _open(arm_file, project_dir, interface, channel, bitrate, bus_kwargs, sim,
     context = resolve_context(project_dir=project_dir, arm_file=arm_file,
                               interface=interface, channel=channel, bitrate=bitrate,
                               bus_kwargs=bus_kwargs or [], sim=sim,
-                              response_timeout_ms=response_timeout_ms)
+                              response_timeout_ms=response_timeout_ms, arm_id=arm_id)
     response_timeout_s(context.arm, response_timeout_ms)
     live = live_targets(context, what)
     if live:   # no bus given, a run or console live: never a private simulator instead
@@ -96,7 +96,8 @@ def show_command(as_json: JsonOption = False,
                  interface: InterfaceOption = None,
                  channel: ChannelOption = None, bitrate: BitrateOption = None,
                  bus_kwargs: BusKwargsOption = None, sim: SimOption = False,
-                 response_timeout_ms: ResponseTimeoutOption = None) -> None:
+                 response_timeout_ms: ResponseTimeoutOption = None,
+                 arm_id: OneArmOption = None) -> None:
     """Read MinPos/MaxPos/MaxVel/MaxAcc/MaxCur from every module (reads only) and print
     them in user units beside the arm file's, marking every difference. Exit 0 either
     way (differences are information: `seqrun limits set` writes the arm file's)."""
@@ -106,7 +107,7 @@ def show_command(as_json: JsonOption = False,
     with user_errors():
         context, connection, driver = _open(arm_file, project_dir, interface, channel,
                                             bitrate, bus_kwargs, sim, response_timeout_ms,
-                                            "read the limits of")
+                                            "read the limits of", arm_id)
     try:
         rows = read_module_limits(driver, context.arm)
     except BusError as exc:
@@ -129,7 +130,8 @@ def set_command(joints: JointsOption = None, as_json: JsonOption = False,
                 interface: InterfaceOption = None,
                 channel: ChannelOption = None, bitrate: BitrateOption = None,
                 bus_kwargs: BusKwargsOption = None, sim: SimOption = False,
-                response_timeout_ms: ResponseTimeoutOption = None) -> None:
+                response_timeout_ms: ResponseTimeoutOption = None,
+                 arm_id: OneArmOption = None) -> None:
     """Write the arm file's MinPos/MaxPos/MaxVel/MaxAcc (and MaxCur where it gives one)
     into the modules, each confirmed by reading it back (exit 3 naming a value that
     reads back different), then show them as `limits show` does."""
@@ -141,7 +143,7 @@ def set_command(joints: JointsOption = None, as_json: JsonOption = False,
     with user_errors():
         context, connection, driver = _open(arm_file, project_dir, interface, channel,
                                             bitrate, bus_kwargs, sim, response_timeout_ms,
-                                            "write the limits of")
+                                            "write the limits of", arm_id)
     try:
         with user_errors():
             modules_of(context.arm, names)   # unknown joint names: one line, exit 2

@@ -9,7 +9,7 @@ import typer
 
 from seqrun.cli.app import pose_app
 from seqrun.cli.common import (BitrateOption, BusKwargsOption, CampaignOption, ChannelOption,
-                               InterfaceOption, SimOption, fail,
+                               InterfaceOption, OneArmOption, SimOption, fail,
                                EXIT_INVALID, ArmFileOption, PosesDirOption, user_errors)
 from seqrun.defaults import DEFAULT_POSES_DIR
 from seqrun.errors import UserInputError
@@ -25,12 +25,12 @@ def load_named_pose(name: str, poses_dir: Path) -> PoseFile:
 
 
 def _context(project_dir: Path | None = None, poses_dir: Path | None = None,
-             arm_file: Path | None = None, **bus):
+             arm_file: Path | None = None, arm_id: str | None = None, **bus):
     """The arm context of a pose command (seqrun/service/arm_context.py)."""
     from seqrun.service.arm_context import resolve_context
 
     return resolve_context(project_dir=project_dir, poses_dir=poses_dir, arm_file=arm_file,
-                           **bus)
+                           arm_id=arm_id, **bus)
 
 
 def format_numbers(values, decimals: int = 3) -> str:
@@ -42,11 +42,14 @@ def format_numbers(values, decimals: int = 3) -> str:
 @pose_app.command("list")
 def list_poses(poses_dir: PosesDirOption = DEFAULT_POSES_DIR,
                project_dir: CampaignOption = None) -> None:
-    """List the pose files: name, source and description."""
+    """List the pose files: name, source and description (a campaign's poses are every
+    arm's)."""
+    from seqrun.service.arm_context import campaign_folders
     from seqrun.service.poses import list_poses
 
     with user_errors():
-        poses = list_poses(_context(project_dir, poses_dir).pose_path)
+        _, pose_path, _ = campaign_folders(project_dir=project_dir, poses_dir=poses_dir)
+        poses = list_poses(pose_path)
         if not poses:
             raise UserInputError(f"no pose files in {poses_dir}")
         width = max(len(name) for name, *_ in poses)
@@ -64,12 +67,13 @@ def show_pose(
     poses_dir: PosesDirOption = DEFAULT_POSES_DIR,
     arm_file: ArmFileOption = None,
     project_dir: CampaignOption = None,
+    arm_id: OneArmOption = None,
 ) -> None:
     """Show a pose and check it against the arm (exit 1 if it has problems)."""
     from seqrun.service.poses import pose_findings
 
     with user_errors():
-        context = _context(project_dir, poses_dir, arm_file)
+        context = _context(project_dir, poses_dir, arm_file, arm_id)
         pose = load_named_pose(name, context.pose_path)
         arm = context.arm
     typer.echo(f"name          {pose.name}")
@@ -102,6 +106,7 @@ def save_pose_command(
     interface: InterfaceOption = None,
     channel: ChannelOption = None, bitrate: BitrateOption = None,
     bus_kwargs: BusKwargsOption = None, sim: SimOption = False,
+    arm_id: OneArmOption = None,
 ) -> None:
     """Read the arm's joints and write them as a pose file (with the FK pose and the time).
 
@@ -113,7 +118,7 @@ def save_pose_command(
 
     with user_errors():
         check_pose_name(name)  # before anything is opened
-        context = _context(project_dir, poses_dir, arm_file, interface=interface,
+        context = _context(project_dir, poses_dir, arm_file, arm_id, interface=interface,
                            channel=channel, bitrate=bitrate, bus_kwargs=bus_kwargs or [],
                            sim=sim)
         arm = context.arm

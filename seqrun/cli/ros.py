@@ -19,8 +19,8 @@ import typer
 from seqrun.cli.app import app
 from seqrun.cli.common import (EXIT_USAGE, ArmFileOption, BitrateOption,
                                BusKwargsOption, CampaignOption, ChannelOption,
-                               InterfaceOption, ResponseTimeoutOption, SimOption, fail,
-                               user_errors)
+                               InterfaceOption, OneArmOption, ResponseTimeoutOption,
+                               SimOption, fail, user_errors)
 from seqrun.cli.questions import ask
 from seqrun.defaults import EXIT_OPERATOR_ABORT
 
@@ -40,11 +40,13 @@ def ros_command(
     arm_name: Annotated[Optional[str], typer.Option(
         "--arm-name", metavar="NAME",
         help="The <arm> of /<arm>/joint_states and /<arm>/joint_trajectory (default: the "
-             "arm file's name, e.g. lwa3).")] = None,
-    node_name: Annotated[str, typer.Option(
+             "arm file's name, e.g. lwa3; in a campaign with several arms, the arm's id).")]
+    = None,
+    node_name: Annotated[Optional[str], typer.Option(
         "--node-name", metavar="NAME",
         help="The node's name: its services and events are /NAME/stop, /NAME/home, "
-             "/NAME/reset, /NAME/events (a second arm's node needs another).")] = "seqrun",
+             "/NAME/reset, /NAME/events (default seqrun; in a campaign with several arms, "
+             "seqrun_ID: each arm's node its own).")] = None,
     rate: Annotated[float, typer.Option(
         "--rate", metavar="HZ", help="joint_states (and /tf) rate in Hz (at least 50).")]
     = 100.0,
@@ -52,6 +54,7 @@ def ros_command(
     zero_confirmed: Annotated[Optional[str], typer.Option(
         "--zero-confirmed", metavar="POSE", help="Answer 'does the arm stand in POSE?' after "
         "a power-on without asking (a different record refuses to start).")] = None,
+    arm_id: OneArmOption = None,
 ) -> None:
     """Serve the arm on ROS 2: joint_states, /tf, JointTrajectory, ~/stop ~/home ~/reset."""
     from seqrun.ros import missing
@@ -70,7 +73,7 @@ def ros_command(
         context = resolve_context(project_dir=project_dir, arm_file=arm_file,
                                   log_dir=log_dir, interface=interface, channel=channel,
                                   bitrate=bitrate, bus_kwargs=bus_kwargs or [], sim=sim,
-                                  response_timeout_ms=response_timeout_ms)
+                                  response_timeout_ms=response_timeout_ms, arm_id=arm_id)
         project, arm = context.project, context.arm
         timeout = response_timeout_s(arm, response_timeout_ms)
         context.refuse_private_simulator("ros")
@@ -93,8 +96,15 @@ def ros_command(
     from seqrun.service.session import ArmSession
 
     session = ArmSession(arm, connection, project=project, log_root=runs, zero=zero,
-                         response_timeout_s=timeout)
-    name = arm_name or Path(arm.source_file or "arm").stem
+                         response_timeout_s=timeout, arm_id=context.arm_id)
+    from seqrun.ros.node import ros_name
+    from seqrun.service.arm_context import campaign_arm_ids
+
+    one_of_several = len(campaign_arm_ids(project)) > 1 and context.arm_id is not None
+    name = arm_name or (str(context.arm_id) if one_of_several
+                        else Path(arm.source_file or "arm").stem)
+    node_name = node_name or (f"seqrun_{ros_name(str(context.arm_id))}" if one_of_several
+                              else "seqrun")
     rclpy.init(args=[])
     previous = signal.signal(signal.SIGTERM, _terminated)
     node = None

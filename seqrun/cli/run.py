@@ -17,7 +17,7 @@ import typer
 
 from seqrun.cli.app import app
 from seqrun.cli.common import (BitrateOption, BusKwargsOption, ChannelOption, InterfaceOption,
-                               SimOption, fail, user_errors)
+                               OneArmOption, SimOption, fail, user_errors)
 from seqrun.cli.foxglove_option import FoxgloveOption
 from seqrun.defaults import EXIT_INVALID, EXIT_OPERATOR_ABORT
 from seqrun.errors import SequenceInvalid
@@ -125,14 +125,20 @@ def run_command(
         "power-off pose POSE (a different record refuses the run). --yes never answers it.")]
     = None,
     foxglove: FoxgloveOption = None,
+    arm_id: OneArmOption = None,
 ) -> None:
     """Run a sequence: validate, read the arm, re-validate from where it stands, move.
-    In a campaign with several arms ([arms.ID]): every arm its track, together
-    (docs/two-arms.md; --sim-fault ARM/SPEC)."""
+    In a campaign with several arms ([arms.ID]): a sequence that names them runs every arm
+    its track, together (docs/two-arms.md; --sim-fault ARM/SPEC); a sequence of one arm runs
+    on the arm --arm-id names."""
     with user_errors():
         from seqrun.service.arms_check import campaign_has_arms
 
         arms_project = campaign_has_arms(file, project_dir) if file.exists() else None
+    if arms_project is not None and arm_id is not None:
+        fail(f"--arm-id {arm_id}: {file} names the arms it moves (arms "
+             f"{', '.join(arms_project.config.arm_ids)}) and runs each; --arm-id is for a "
+             "sequence of one arm")
     if arms_project is not None:
         from seqrun.cli.run_arms import run_arms
 
@@ -157,7 +163,7 @@ def run_command(
     check_foxglove(foxglove)   # (one line before anything is opened)
     request = RunRequest(file, interface, channel, bitrate, bus_kwargs or [], sim,
                          sim_fault or [], speed, from_step, log_dir, arm_file, command_mode,
-                         start, started, virtual_time, project_dir, power_on_at)
+                         start, started, virtual_time, project_dir, power_on_at, arm_id)
     with user_errors():
         try:
             run = prepare_run(request)   # nothing is opened before the checks pass
@@ -201,7 +207,8 @@ def _confirm_start_or_record(console: Console, run, yes: bool, log_dir: Path | N
 
     def record(message: str) -> None:
         campaign_records.not_started(run.loaded, run.arm_path, log_dir, message,
-                                     arm=run.arm, bus=run.connection.description)
+                                     arm=run.arm, bus=run.connection.description,
+                                     arm_id=run.arm_id)
 
     try:
         with signals_end_the_question():
@@ -310,7 +317,8 @@ def _run_in_session(console: Console, run, zero, folder: Path, control, requests
     signals = RunSignals(requests)
     try:  # the bytes validated, not the files again (one may have changed meanwhile)
         campaign_records.record_run(folder, loaded, run.arm_path, connection.description,
-                                    zero, arm=arm, overrides=run.overrides)
+                                    zero, arm=arm, overrides=run.overrides,
+                                    arm_id=run.arm_id)
     except OSError as exc:
         connection.close()
         fail(f"cannot write the run record in {folder} ({exc.strerror or exc}); "
@@ -395,7 +403,8 @@ def _start_foxglove(console: Console, run, session, folder: Path, port: int | No
         run.connection.close()
         message = f"the Foxglove server could not start ({exc}); nothing was sent"
         campaign_records.not_started(run.loaded, run.arm_path, folder, f"not started: {message}",
-                                     arm=run.arm, bus=run.connection.description, exit_code=2)
+                                     arm=run.arm, bus=run.connection.description, exit_code=2,
+                                     arm_id=run.arm_id)
         fail(f"--foxglove: {message}")
 
 

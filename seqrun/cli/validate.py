@@ -23,7 +23,7 @@ from typing import Annotated
 import typer
 
 from seqrun.cli.app import app
-from seqrun.cli.common import EXIT_INVALID, EXIT_OK, EXIT_USAGE, fail
+from seqrun.cli.common import EXIT_INVALID, EXIT_OK, EXIT_USAGE, OneArmOption, fail
 from seqrun.defaults import START_POSE
 from seqrun.errors import UserInputError
 
@@ -153,6 +153,26 @@ def _faults(specs: list[str]) -> list:
         fail(str(exc))
 
 
+def _arm_file_of(arm_id: str | None, arm_file: Path | None, file: Path,
+                 project_dir: Path | None, as_json: bool) -> Path | None:
+    """The arm file a sequence of one arm is checked against: ``--arm``, else in a
+    campaign with several arms, arm ``arm_id``'s (none named: the one they share)."""
+    from seqrun.service.arm_context import one_arm_sequence_arm
+    from seqrun.service.campaigns import campaign_of
+
+    if arm_file is not None:
+        if arm_id is not None:
+            fail("--arm-id names the arm file (seqrun.toml's [arms.ID]): leave out --arm")
+        return arm_file
+    if arm_id is None and not file.is_file():
+        return None  # (said where the file is read)
+    try:
+        return one_arm_sequence_arm(campaign_of(file.resolve(), project_dir), arm_id)
+    except UserInputError as exc:
+        _unusable(str(exc), as_json)
+    return None
+
+
 def _cut(text: str, width: int) -> str:
     """``text`` in at most ``width`` characters; a cut one ends in "…"."""
     return text if len(text) <= width else text[:width - 1] + "…"
@@ -191,6 +211,7 @@ def validate_command(
     report_file: Annotated[Path | None, typer.Option(
         "--report", metavar="FILE", help="Write the dry run's report (HTML, plots, "
                                          "self-contained) to FILE.")] = None,
+    arm_id: OneArmOption = None,
 ) -> None:
     """Check a sequence file and its includes against the arm, then dry-run it on the
     simulator at virtual time. Nothing is sent to a real bus.
@@ -210,12 +231,17 @@ def validate_command(
             return
         except OSError:
             arms_project = None  # said below, where the file is read
+        if arms_project is not None and arm_id is not None:
+            fail(f"--arm-id {arm_id}: {file} names the arms it moves and is checked for "
+                 "each; --arm-id is for a sequence of one arm")
         if arms_project is not None:
             from seqrun.cli.validate_arms import validate_arms
 
             validate_arms(file, arms_project, as_json=as_json, start=start, arm_file=arm_file,
                           static=static, started=started, speed=speed, faults=sim_fault or [],
                           report_file=report_file)
+    if len(files) == 1 and not _is_dir(files[0]):  # one arm of several: its arm file
+        arm_file = _arm_file_of(arm_id, arm_file, files[0], project_dir, as_json)
     faults = _faults(sim_fault or [])
     if faults and static:
         fail("--sim-fault rehearses a fault in the dry run: leave out --static")

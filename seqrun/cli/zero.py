@@ -21,7 +21,7 @@ import typer
 
 from seqrun.cli.app import app
 from seqrun.cli.common import (ArmFileOption, BitrateOption, BusKwargsOption, CampaignOption,
-                               ChannelOption, EXIT_FAULT, InterfaceOption, fail,
+                               ChannelOption, EXIT_FAULT, InterfaceOption, OneArmOption, fail,
                                user_errors)
 from seqrun.cli.questions import ask
 from seqrun.errors import BusError, UserInputError
@@ -39,13 +39,14 @@ app.add_typer(zero_app, name="zero")
 
 
 def _context(arm_file: Optional[Path], project_dir: Optional[Path], interface, channel,
-             bitrate, bus_kwargs):
+             bitrate, bus_kwargs, arm_id: str | None = None):
     """The arm context (seqrun/service/arm_context.py): the arm file, and the arm's bus
     (the options, else the campaign's, else python-can's configuration)."""
     from seqrun.service.arm_context import resolve_context
 
     return resolve_context(project_dir=project_dir, arm_file=arm_file, interface=interface,
-                           channel=channel, bitrate=bitrate, bus_kwargs=bus_kwargs or ())
+                           channel=channel, bitrate=bitrate, bus_kwargs=bus_kwargs or (),
+                           arm_id=arm_id)
 
 
 def _arm_store(arm, connection) -> tuple[ZeroStore, bool]:
@@ -103,11 +104,13 @@ def show_command(
     channel: ChannelOption = None,
     bitrate: BitrateOption = None,
     bus_kwargs: BusKwargsOption = None,
+    arm_id: OneArmOption = None,
 ) -> None:
     """The connected arm's zero reference: where it was last powered off, and the zero in
     use since the last power-on. Without a bus: every arm recorded on this machine."""
     with user_errors():
-        context = _context(arm_file, project_dir, interface, channel, bitrate, bus_kwargs)
+        context = _context(arm_file, project_dir, interface, channel, bitrate, bus_kwargs,
+                           arm_id)
         arm = context.arm
         if context.bus.is_simulator:  # no arm named: what this machine has recorded
             _list_machine_records()
@@ -140,13 +143,15 @@ def set_command(
     channel: ChannelOption = None,
     bitrate: BitrateOption = None,
     bus_kwargs: BusKwargsOption = None,
+    arm_id: OneArmOption = None,
 ) -> None:
     """Record where the connected arm was powered off (after a sudden power loss); asks
     first. The arm is named by its modules' serial numbers, read over its bus."""
     import math
 
     with user_errors():
-        context = _context(arm_file, project_dir, interface, channel, bitrate, bus_kwargs)
+        context = _context(arm_file, project_dir, interface, channel, bitrate, bus_kwargs,
+                           arm_id)
         arm = context.arm
         if (pose is None) == (degrees is None):
             raise UserInputError("give the power-off pose (POSE) or the joint angles "

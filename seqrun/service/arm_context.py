@@ -43,8 +43,8 @@ if TYPE_CHECKING:
     from seqrun.service.bus_claim import Holder
     from seqrun.service.connection import Connection
 
-__all__ = ["ArmContext", "BusChoice", "NoArm", "SIMULATOR_CLAIM_INTERFACE", "resolve_context",
-           "resolve_contexts"]
+__all__ = ["ArmContext", "BusChoice", "NoArm", "SIMULATOR_CLAIM_INTERFACE", "campaign_folders",
+           "one_arm_sequence_arm", "resolve_context", "resolve_contexts"]
 
 #: The claim a run or console on the built-in simulator holds, so that ``seqrun halt`` and
 #: ``seqrun status`` in another terminal find it (its channel names the process).
@@ -344,19 +344,11 @@ def resolve_context(*, project_dir: Path | None = None, project: Project | None 
         only one; refused when there are several).
     :raises UserInputError: a campaign, arm or bus option that cannot be used.
     """
-    from seqrun.defaults import DEFAULT_POSES_DIR
-
-    if project is None:
-        from seqrun.service.campaigns import campaign_here
-
-        project = campaign_here(project_dir)
+    project, pose_path, runs = campaign_folders(project_dir=project_dir, project=project,
+                                                poses_dir=poses_dir, log_dir=log_dir)
     if arm_file is not None and not Path(arm_file).is_file():
         raise UserInputError(f"arm file {arm_file} not found (give one with --arm FILE)")
     given = arm_file if arm_file is not None else arm_path
-    pose_path: Any = project.pose_path
-    if poses_dir is not None and Path(poses_dir) != DEFAULT_POSES_DIR:
-        pose_path = Path(poses_dir)
-    runs = Path(log_dir) if log_dir is not None else project.runs_dir
     entry = _arm_entry(project, arm_id)
     return ArmContext(project, pose_path, runs, response_timeout_ms, tuple(faults),
                       Path(given) if given is not None else None,
@@ -366,6 +358,46 @@ def resolve_context(*, project_dir: Path | None = None, project: Project | None 
                       arm_ref=entry[1].arm if entry else None,
                       bus_section=entry[1].bus if entry else None,
                       base=entry[1].base if entry else None)
+
+
+def campaign_folders(*, project_dir: Path | None = None, project: Project | None = None,
+                     poses_dir: Path | None = None, log_dir: Path | None = None
+                     ) -> tuple[Project, Any, Path]:
+    """What every arm of a campaign shares: ``(campaign, pose search path, runs folder)``
+    (``poses_dir``: ``--poses-dir``; ``log_dir``: a run folder's parent given on the command
+    line). The commands that need no arm (``seqrun runs``, ``pose list``) stop here."""
+    from seqrun.defaults import DEFAULT_POSES_DIR
+
+    if project is None:
+        from seqrun.service.campaigns import campaign_here
+
+        project = campaign_here(project_dir)
+    pose_path: Any = project.pose_path
+    if poses_dir is not None and Path(poses_dir) != DEFAULT_POSES_DIR:
+        pose_path = Path(poses_dir)
+    return project, pose_path, Path(log_dir) if log_dir is not None else project.runs_dir
+
+
+def one_arm_sequence_arm(project: Project, arm_id: str | None) -> Path | None:
+    """The arm file a sequence of one arm is checked against in a campaign with several
+    arms: arm ``arm_id``'s; none named, the one arm file every arm shares. None: a
+    campaign of one arm (the sequence's own arm file).
+
+    :raises UserInputError: an unknown id, or no id while the arms' arm files differ
+        (which arm is it for?).
+    """
+    ids = campaign_arm_ids(project)
+    if arm_id is not None:
+        return resolve_context(project=project, arm_id=arm_id).arm_path
+    if len(ids) < 2:
+        return None
+    files = {a: resolve_context(project=project, arm_id=a).arm_path for a in ids}
+    if len(set(files.values())) > 1:
+        raise UserInputError(
+            f"{project.describe()} has arms {', '.join(ids)} with different arm files ("
+            + ", ".join(f"{a}: {_shown(p)}" for a, p in files.items())
+            + "): name the arm a sequence of one arm is for (--arm-id ID)")
+    return None
 
 
 def campaign_arm_ids(project: Project) -> tuple[str, ...]:

@@ -22,7 +22,8 @@ from typing import Any
 from seqrun.defaults import START_POSE
 from seqrun.errors import SequenceInvalid, SourceError
 
-__all__ = ["ArmsCheck", "ArmsDryRun", "campaign_has_arms", "check_arms_sequence"]
+__all__ = ["ArmsCheck", "ArmsDryRun", "addresses_arms", "campaign_has_arms",
+           "check_arms_sequence"]
 
 
 @dataclass
@@ -97,10 +98,10 @@ def campaign_has_arms(file: Path, project_dir: Path | None = None) -> Any:
     config = project.config
     if config is None or not config.arm_ids:
         return None
-    return project if _addresses_arms(Path(file)) else None
+    return project if addresses_arms(Path(file)) else None
 
 
-def _addresses_arms(file: Path) -> bool:
+def addresses_arms(file: Path) -> bool:
     """Whether a sequence file names arms (``arm:`` in a step, ``parallel:``); one that
     cannot be read is taken as one (its errors come from the arms' loader)."""
     import yaml

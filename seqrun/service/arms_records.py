@@ -81,7 +81,8 @@ class ArmsRunRecords:
             part = folder / arm_id
             part.mkdir(parents=True, exist_ok=True)
             of = arms[arm_id]
-            campaign_records.record_run(part, loaded, of.arm_path, of.bus, of.zero, arm=of.arm)
+            campaign_records.record_run(part, loaded, of.arm_path, of.bus, of.zero, arm=of.arm,
+                                        arm_id=arm_id)
             log_dirs[arm_id] = part
         time_base = TimeBase.of(clock)
         mcap = _open_mcap(folder, project, {a: arms[a] for a in tracks}, time_base, warn)

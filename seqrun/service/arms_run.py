@@ -249,7 +249,7 @@ def run_arms_live(tracks: Mapping[str, Any], arms: Mapping[str, Any],
     if sessions is None:
         sessions = {a: ArmSession(arms[a], connections[a], project=tracks[a].project,
                                   zero=(zeros or {}).get(a), status_hz=0,
-                                  own_connection=False)
+                                  own_connection=False, arm_id=a)
                     for a in tracks}
     if on_idle is not None:
         for arm_id, session in sessions.items():

@@ -20,27 +20,29 @@ def _errors(errors: list) -> list[dict]:
 
 
 def refuse(loaded: Any, arm_path: Path, errors: list, log_dir: Path | None,
-           arm: Any = None) -> None:
+           arm: Any = None, arm_id: str | None = None) -> None:
     """A run refused by validation leaves a short record (best effort: the refusal itself
     is what the operator must see, a full disk must not hide it)."""
     try:  # a --log-dir that holds a run gets a new folder inside: evidence is never overwritten
         folder = prepare_run_folder(log_dir, loaded.name, runs_dir(loaded))
         write_refusal(folder, sequence=loaded.name, file=str(loaded.file),
                       errors=_errors(errors), loaded=loaded, arm_path=Path(arm_path),
-                     arm=arm)
+                      arm=arm, arm_id=arm_id)
     except OSError:
         pass
 
 
 def not_started(loaded: Any, arm_path: Path, log_dir: Path | None, message: str, *,
-                arm: Any = None, bus: str | None = None, exit_code: int = 130) -> None:
+                arm: Any = None, bus: str | None = None, exit_code: int = 130,
+                arm_id: str | None = None) -> None:
     """The record of a run that ended at a question before it started (declined, or a
     signal): nothing was sent. Best effort, as a refusal."""
     try:
         folder = prepare_run_folder(log_dir, loaded.name, runs_dir(loaded))
         write_refusal(folder, sequence=loaded.name, file=str(loaded.file), errors=[],
                       loaded=loaded, arm_path=Path(arm_path), bus=bus, arm=arm,
-                      exit_code=exit_code, status="aborted", message=message)
+                      exit_code=exit_code, status="aborted", message=message,
+                      arm_id=arm_id)
     except OSError:
         pass
 
@@ -60,12 +62,13 @@ def refuse_unloadable(file: Path, project_dir: Path | None, errors: list,
 
 
 def record_run(folder: Path, loaded: Any, arm_path: Path, bus: str, zero: Any,
-               arm: Any = None, overrides: list | None = None) -> dict:
+               arm: Any = None, overrides: list | None = None,
+               arm_id: str | None = None) -> dict:
     """The run's record.json and inputs/: the bytes validated (of ``loaded`` and
     ``arm``), never the files read again. Raises OSError (a full disk)."""
     return write_record(folder, loaded=loaded, arm_path=Path(arm_path), bus=bus,
                         zero=zero.as_dict() if zero is not None else None, arm=arm,
-                        overrides=[str(n) for n in overrides or ()])
+                        overrides=[str(n) for n in overrides or ()], arm_id=arm_id)
 
 
 def zero_recorder(store: Any, arm: Any, loaded: Any) -> Callable[[str], str]:

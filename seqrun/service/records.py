@@ -133,9 +133,10 @@ def git_state(folder: Path) -> dict | None:
 
 def write_record(folder: Path, *, loaded: Any, arm_path: Path, bus: str,
                  zero: dict | None, inputs: list[dict] | None = None, arm: Any = None,
-                 overrides: list[str] | None = None) -> dict:
+                 overrides: list[str] | None = None, arm_id: str | None = None) -> dict:
     """Freeze the inputs (unless given: the bytes validated, of ``loaded`` and ``arm``)
-    and write ``record.json``; returns the record. Raises OSError (a full disk)."""
+    and write ``record.json``; returns the record (``arm_id``: the arm of a campaign's
+    ``[arms.ID]`` it ran on). Raises OSError (a full disk)."""
     from seqrun import __version__
 
     project = getattr(loaded, "project", None)
@@ -148,6 +149,7 @@ def write_record(folder: Path, *, loaded: Any, arm_path: Path, bus: str,
         "file": str(loaded.file),
         "campaign": str(root) if getattr(project, "is_campaign", False) else None,
         "git": git_state(root) if root is not None else None,
+        **({"arm_id": arm_id} if arm_id is not None else {}),
         "bus": bus,
         "zero": zero,
         "inputs": inputs,
@@ -163,7 +165,7 @@ def write_record(folder: Path, *, loaded: Any, arm_path: Path, bus: str,
 def write_refusal(folder: Path, *, sequence: str, file: str, errors: list[dict],
                   loaded: Any = None, arm_path: Path | None = None, bus: str | None = None,
                   exit_code: int = 1, arm: Any = None, status: str = "refused",
-                  message: str | None = None) -> None:
+                  message: str | None = None, arm_id: str | None = None) -> None:
     """The short record of a run that validation refused (or, with ``status`` and
     ``message``, that ended before it started): nothing was sent."""
     now = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="milliseconds")
@@ -180,7 +182,7 @@ def write_refusal(folder: Path, *, sequence: str, file: str, errors: list[dict],
     if loaded is not None:
         write_record(folder, loaded=loaded, arm_path=arm_path or loaded.arm_path,
                      bus=bus or "none (refused before the bus was opened)", zero=None,
-                     arm=arm)
+                     arm=arm, arm_id=arm_id)
 
 
 #: The result ``seqrun runs`` gives a folder whose files cannot be read as a run's.
@@ -189,15 +191,17 @@ CORRUPTED = "corrupted"
 
 def list_runs(runs_dir: Path) -> list[dict]:
     """One entry per run folder under ``runs_dir`` (oldest first): when, sequence, result,
-    duration, exit code, bus (and whether it was the simulator), folder. A folder whose
-    report.json is missing, unreadable or not a run's report is listed with the result
-    ``corrupted`` and the ``problem``: it never hides the other runs."""
+    duration, exit code, bus (and whether it was the simulator), folder, and which arm:
+    ``arm`` (the ``[arms.ID]`` a run of one arm ran on, else None) and ``arms`` (the arms
+    of a run of several, one part each; else None). A folder whose report.json is missing,
+    unreadable or not a run's report is listed with the result ``corrupted`` and the
+    ``problem``: it never hides the other runs."""
     runs: list[dict] = []
     if not Path(runs_dir).is_dir():
         return runs
     for folder in sorted(Path(runs_dir).iterdir()):
         if folder.is_dir():
-            entry = _run_entry(folder)
+            entry = _run_entry(folder) or _arms_run_entry(folder)
             if entry is not None:
                 runs.append(entry)
     runs.sort(key=lambda r: (r["when"] or "", r["folder"]))
@@ -241,10 +245,6 @@ def _run_entry(folder: Path) -> dict | None:
     def text(value: Any) -> str | None:
         return value if isinstance(value, str) else None
 
-    def number(value: Any) -> float | None:
-        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
-        return float(value) if ok and value == value else None
-
     exit_code = report.get("exit_code")
     exit_code = exit_code if isinstance(exit_code, int) and not isinstance(exit_code, bool) \
         else None
@@ -254,9 +254,68 @@ def _run_entry(folder: Path) -> dict | None:
     bus = text(record.get("bus")) or text(report.get("bus"))
     return {"when": text(report.get("start")), "sequence": text(report.get("sequence")),
             "result": CORRUPTED if problem else result,
-            "duration_s": number(report.get("duration_s")), "exit_code": exit_code,
+            "duration_s": _number(report.get("duration_s")), "exit_code": exit_code,
             "bus": bus, "simulator": _is_simulator(bus), "folder": str(folder),
+            "arm": text(record.get("arm_id")), "arms": None,
             **({"problem": problem} if problem else {})}
+
+
+def runs_of_arm(runs: list[dict], arm_id: str) -> list[dict]:
+    """The entries of :func:`list_runs` that moved the campaign's arm ``arm_id``: its runs
+    of one arm, the runs of several arms it was part of, and the runs that do not say
+    which arm they ran on (recorded before runs named their arm: they are not hidden)."""
+    return [r for r in runs if (r.get("arms") is None and r.get("arm") in (None, arm_id))
+            or arm_id in (r.get("arms") or ())]
+
+
+def _arms_run_entry(folder: Path) -> dict | None:
+    """The listing of a run of several arms (``arms.json``, one part folder per arm); None
+    when the folder holds none. While it runs (no arms.json yet) its parts say so."""
+    parts = {p.name: e for p in sorted(folder.iterdir())
+             if p.is_dir() and (e := _run_entry(p)) is not None}
+    summary_file = folder / "arms.json"
+    if not parts and not summary_file.is_file():
+        return None
+    summary, problem = _read_json(summary_file) if summary_file.is_file() else (
+        None, "no arms.json")
+    summary = summary if isinstance(summary, dict) else {}
+    if problem is None and not isinstance(summary.get("arms"), dict):
+        problem = "arms.json: no arms"
+    given = summary.get("arms")
+    arms: dict = given if isinstance(given, dict) else {}
+    ids = [str(a) for a in arms] or list(parts)
+    statuses = [s.get("status") for s in arms.values() if isinstance(s, dict)]
+    running = any(e["result"] == "running" for e in parts.values())
+    result: str | None
+    if problem and running:
+        problem, result = None, "running"
+    elif problem:
+        result = CORRUPTED
+    else:
+        result = next((s for s in statuses if s != "passed"), "passed")
+    exit_code = summary.get("exit_code")
+    exit_code = exit_code if isinstance(exit_code, int) and not isinstance(exit_code, bool) \
+        else None
+    time_base = summary.get("time_base")
+    base: dict = time_base if isinstance(time_base, dict) else {}
+    starts = [e["when"] for e in parts.values() if e["when"]]
+    durations = [e["duration_s"] for e in parts.values() if e["duration_s"] is not None]
+    buses = [e["simulator"] for e in parts.values()]
+    sequence = summary.get("sequence")
+    return {"when": base.get("utc") if isinstance(base.get("utc"), str)
+            else min(starts, default=None),
+            "sequence": sequence if isinstance(sequence, str) else None,
+            "result": result, "duration_s": max(durations, default=None),
+            "exit_code": exit_code,
+            "bus": "; ".join(f"{a}: {e['bus']}" for a, e in parts.items() if e["bus"]) or None,
+            "simulator": (None if not buses or None in buses else all(buses)),
+            "folder": str(folder), "arm": None, "arms": ids,
+            **({"problem": problem} if problem else {})}
+
+
+def _number(value: Any) -> float | None:
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+    return float(value) if ok and value == value else None
 
 
 def _is_simulator(bus: str | None) -> bool | None:

@@ -47,6 +47,8 @@ class RunRequest:
     virtual_time: bool = False
     project_dir: Path | None = None
     power_on_at: str | None = None
+    #: In a campaign with several arms: the arm a sequence of one arm runs on.
+    arm_id: str | None = None
 
 
 @dataclass
@@ -65,6 +67,11 @@ class PreparedRun:
     context: ArmContext | None = None
     #: The files used in place of shipped ones (arm, poses), as ``validate`` notes them.
     overrides: list = field(default_factory=list)
+
+    @property
+    def arm_id(self) -> str | None:
+        """The campaign's arm it runs on (``[arms.ID]``; None: a campaign of one arm)."""
+        return self.context.arm_id if self.context is not None else None
 
 
 class RunInvalid(SeqrunError):
@@ -112,10 +119,11 @@ def prepare_run(request: RunRequest) -> PreparedRun:
         raise SequenceInvalid(errors) from None
     # The arm context: the sequence's campaign and arm, the bus (command line, else the
     # campaign's, else python-can's configuration, else the simulator).
+    # One arm of several: its own arm file (from seqrun.toml), as the console runs it.
     context = resolve_context(project=loaded.project, arm_file=r.arm_file,
-                              arm_path=loaded.arm_path, interface=r.interface,
-                              channel=r.channel, bitrate=r.bitrate, bus_kwargs=extra,
-                              sim=r.sim)
+                              arm_path=loaded.arm_path if r.arm_id is None else None,
+                              interface=r.interface, channel=r.channel, bitrate=r.bitrate,
+                              bus_kwargs=extra, sim=r.sim, arm_id=r.arm_id)
     arm_path = context.arm_path
     arm = context.arm
     if r.power_on_at is not None:
@@ -127,7 +135,8 @@ def prepare_run(request: RunRequest) -> PreparedRun:
     # the measured state before the first motion.
     static = check_for_run(loaded, arm, r.start, r.started, r.from_step)
     if static.errors:
-        campaign_records.refuse(loaded, arm_path, static.errors, r.log_dir, arm=arm)
+        campaign_records.refuse(loaded, arm_path, static.errors, r.log_dir, arm=arm,
+                                arm_id=context.arm_id)
         raise RunInvalid(loaded.file, list(static.errors))
     if r.virtual_time and not context.bus.is_simulator:
         raise UserInputError("--virtual-time needs the simulator")

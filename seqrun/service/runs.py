@@ -77,7 +77,7 @@ class Runs:
         try:  # what ran is what is recorded: the bytes validated, as seqrun run keeps them
             record_run(folder, loaded, s.arm_path or loaded.arm_path,
                        s.connection.description, s.zero, arm=s.arm,
-                       overrides=override_notes(loaded, s.arm_path))
+                       overrides=override_notes(loaded, s.arm_path), arm_id=s.arm_id)
         except OSError as exc:
             raise Refused(f"cannot write the run record in {folder} "
                           f"({exc.strerror or exc}); nothing was sent") from None

@@ -86,13 +86,16 @@ class ArmSession:
                  poses_dir=None, zero=None, status_hz: float = STATUS_POLL_HZ,
                  response_timeout_s: float | None = None, own_connection: bool = True,
                  jog_deadman_s: float = JOG_DEADMAN_S,
-                 loop_priority: int | None = None, arm_path: Path | None = None) -> None:
+                 loop_priority: int | None = None, arm_path: Path | None = None,
+                 arm_id: str | None = None) -> None:
         from seqrun.drivers.registry import open_driver
         from seqrun.service.connection import response_timeout_s as default_timeout
         from seqrun.shipped import shipped_dir
 
         self.arm = arm
         self.arm_path = Path(arm_path) if arm_path is not None else None
+        #: In a campaign with several arms ([arms.ID]): which arm this is (its runs say so).
+        self.arm_id = arm_id
         self.connection = connection
         self.clock = connection.clock
         self.project = project
