@@ -302,3 +302,35 @@ def test_a_two_arm_run_from_the_console_leaves_the_records_of_seqrun_run(client,
     check_one_time_base(run)
     check_traces_on_the_one_time_base(run, check_b_moves_after_a_signalled(run))
     check_run_mcap(run)
+
+
+def test_each_arm_lists_its_own_runs_and_those_of_both(client, setup):
+    """A run of B alone is B's; a run of both is each arm's, by its part (its report);
+    the console's own list has every run, a run of both with its parts. The sequences say
+    which name the arms (POST /run) and which are of one arm (POST /arms/ID/run)."""
+    from typer.testing import CliRunner
+
+    from seqrun.cli import app
+
+    (setup.folder / "sequences" / "both_nudge.yaml").write_text(BOTH_NUDGE)
+    for args in (["sequences/both_nudge.yaml"], ["sequences/confirm_nudge.yaml", "--arm-id",
+                                                  "B"]):
+        result = CliRunner().invoke(app, ["run", str(setup.folder / args[0]), *args[1:],
+                                          "--virtual-time", "--yes", "--plain"])
+        assert result.exit_code == 0, result.output
+    of_a = client.get("/api/v1/arms/A/runs").json()
+    of_b = client.get("/api/v1/arms/B/runs").json()
+    assert [r["sequence"] for r in of_a] == ["Both nudge"]
+    assert [r["sequence"] for r in of_b] == ["Confirm then nudge", "Both nudge"]
+    assert of_b[0]["arm"] == "B" and of_b[1]["arms"] == ["A", "B"]
+    for arm_id, run in (("A", of_a[0]), ("B", of_b[1])):
+        assert run["id"].endswith(f"/{arm_id}") and run["report"] is True
+        report = client.get(f"/api/v1/arms/{arm_id}/runs/{run['id']}/report.json")
+        assert report.status_code == 200, report.text
+        assert report.json()["sequence"] == f"Both nudge (arm {arm_id})"
+    every = client.get("/api/v1/runs").json()
+    assert [r["sequence"] for r in every] == ["Confirm then nudge", "Both nudge"]
+    assert every[1]["parts"] == {a: {"id": f"{every[1]['id']}/{a}", "report": True}
+                                 for a in "AB"}
+    kinds = {s["name"]: s["arms"] for s in client.get("/api/v1/sequences").json()}
+    assert kinds["both_nudge.yaml"] is True and kinds["confirm_nudge.yaml"] is False

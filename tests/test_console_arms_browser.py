@@ -228,6 +228,16 @@ def test_a_two_arm_sequence_runs_from_the_page(browser, plain, tmp_path):  # noq
         log = page.text_content("#events")
         assert "[A]" in log and "[B]" in log and "A nudges j1" in log and "B nudges j1" in log
         assert setup.sessions["B"].status().joints[0].position_deg == pytest.approx(-3, abs=0.3)
+        # Past runs: the run of both, a link to each arm's part (its own report)
+        page.wait_for_function("(() => { const li = document.querySelector('#runs li'); "
+                               "return li && li.textContent.includes('Both nudge passed') "
+                               "&& li.querySelectorAll('a').length === 2; })()", timeout=20000)
+        parts = page.eval_on_selector_all("#runs li:first-child a",
+                                          "links => links.map(a => [a.textContent, a.href])")
+        assert [text for text, _ in parts] == ["arm A", "arm B"], parts
+        for (text, href), arm in zip(parts, "AB"):
+            assert f"/api/v1/arms/{arm}/runs/" in href and href.endswith(f"/{arm}/report.html")
+            assert page.request.get(href).status == 200
         page.shot()
         assert not page.errors, page.errors
     finally:
@@ -286,6 +296,42 @@ def test_move_allvel_and_gripper_act_on_the_selected_arm(browser, plain, tmp_pat
                                ".value === '0.0'", timeout=5000)
         page.wait_for_function("document.querySelector('#gripper-state').textContent"
                                ".startsWith('70.0 mm open, not holding')", timeout=10000)
+        page.shot()
+        assert not page.errors, page.errors
+    finally:
+        context.close()
+
+
+def test_a_one_arm_sequence_runs_on_the_selected_arm_and_is_listed(browser, plain,  # noqa: F811
+                                                                   tmp_path):
+    """A sequence of one arm runs on the arm selected (as ``seqrun run --arm-id B``), the
+    other arm is never commanded; Past runs lists it as B's, its report behind its link."""
+    setup, server = plain
+    context, page = open_page(browser, server, tmp_path, "run-one-arm")
+    try:
+        page.wait_for_function("document.querySelector('#control-state').textContent"
+                               ".includes('this page')")
+        assert "(one arm: the selected)" in page.inner_text(
+            "#sequence option[value='confirm_nudge.yaml']")
+        page.click(".arm-choice[data-arm=B]")
+        a_count = len(setup.wires["A"].frames)
+        page.select_option("#sequence", "confirm_nudge.yaml")
+        page.click("#run")
+        page.wait_for_selector("#confirm-dialog:not([hidden])", timeout=30000)
+        assert page.text_content("#confirm-text").startswith("arm B asks: Is the space")
+        assert page.text_content("#run-state").startswith("arm B: confirm_nudge.yaml ")
+        page.click("#confirm-yes")
+        wait_for(lambda: abs(setup.sessions["B"].status().joints[0].position_deg - 3) < 0.05
+                 and setup.sessions["B"].status().activity in ("idle", None), 30)
+        assert not [data for _, _, data, _ in setup.wires["A"].frames[a_count:]
+                    if data and data[0] != 0x0A], "arm A was commanded"
+        page.wait_for_function("[...document.querySelectorAll('#runs li a')].some(a => "
+                               "a.textContent.includes('Confirm then nudge passed') "
+                               "&& a.href.endsWith('/report.html'))", timeout=20000)
+        link = page.locator("#runs li a", has_text="(arm B)").first
+        href = link.get_attribute("href") or ""
+        assert "/api/v1/arms/B/runs/" in href and href.endswith("/report.html"), href
+        assert page.request.get(server.url.rstrip("/") + href).status == 200
         page.shot()
         assert not page.errors, page.errors
     finally:

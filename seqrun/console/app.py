@@ -279,11 +279,13 @@ def build_router(console: Console, *, prefix: str = API,
         finally:
             console.check_rate.give_back()
 
-    @api.get("/runs", summary="Past runs, newest first")
+    @api.get("/runs", summary="Past runs, newest first (in a campaign with several arms: "
+                               "this arm's, and those of several arms it was part of)")
     def runs() -> list[dict[str, Any]]:
-        return catalog.runs()
+        return catalog.runs(session.arm_id)
 
-    @api.get("/runs/{run_id}/{name}", summary="A file of a run folder (report.html, ...)")
+    @api.get("/runs/{run_id:path}/{name}", summary="A file of a run folder (report.html, "
+                                                 "...; a run of several arms: ID/ARM/...)")
     def run_file(run_id: str, name: str) -> FileResponse:
         return FileResponse(catalog.run_file(run_id, name))
 

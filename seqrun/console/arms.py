@@ -20,6 +20,7 @@ which arms there are; an unknown arm id is 404 naming the arms.
 from __future__ import annotations
 
 import itertools
+from pathlib import Path
 from typing import Any
 
 from fastapi import APIRouter, FastAPI
@@ -201,9 +202,19 @@ def create_arms_app(sessions: Any, catalog: Catalog, contexts: dict[str, Any], *
     def arms() -> list[dict[str, Any]]:
         return console.arms_list()
 
-    @top.get("/sequences", summary="The project's sequences")
-    def sequences() -> list[dict[str, str]]:
-        return console.catalog.sequences()
+    @top.get("/sequences", summary="The project's sequences; ``arms``: whether it names the "
+                                    "arms it moves (POST /run runs it), else it is a sequence "
+                                    "of one arm (POST /arms/{id}/run runs it on that arm)")
+    def sequences() -> list[dict[str, Any]]:
+        from seqrun.service.arms_check import addresses_arms
+
+        return [s | {"arms": addresses_arms(Path(s["file"]))}
+                for s in console.catalog.sequences()]
+
+    @top.get("/runs", summary="Every past run of the campaign, newest first (a run of several "
+                              "arms: its parts, each arm's run folder by arm id)")
+    def runs() -> list[dict[str, Any]]:
+        return console.catalog.runs()
 
     @top.post("/run", summary="Run a sequence of several arms (validated as seqrun run: each "
                               "arm, the arms against each other; a run folder part per arm)",

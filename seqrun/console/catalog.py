@@ -129,17 +129,26 @@ class Catalog:
         return out
 
     # -- runs --------------------------------------------------------------------------
-    def runs(self) -> list[dict[str, Any]]:
-        """Past runs, newest first, each with the id its files are served under."""
-        from seqrun.service.records import list_runs
+    def runs(self, arm_id: str | None = None) -> list[dict[str, Any]]:
+        """Past runs, newest first, each with the id its files are served under and
+        whether it has a report.html. A run of several arms: ``parts``, each arm's part
+        (a run folder of its own: its id and whether it has a report.html) by arm id. ``arm_id``: the runs of that arm of the
+        campaign's several, a run of several arms by that arm's part."""
+        from seqrun.service.records import list_runs, runs_of_arm
 
         root = self.runs_dir.resolve()
         found = []
-        for run in reversed(list_runs(root)):
+        listed = list_runs(root)
+        for run in reversed(listed if arm_id is None else runs_of_arm(listed, arm_id)):
             folder = Path(run["folder"]).resolve()
             run_id = folder.relative_to(root).as_posix()
-            found.append(run | {"id": run_id,
-                                "report": (folder / "report.html").is_file()})
+            parts = {a: {"id": f"{run_id}/{a}",
+                         "report": (folder / a / "report.html").is_file()}
+                     for a in run.get("arms") or ()}
+            if arm_id is not None and arm_id in parts:  # this arm's part of it
+                run_id, folder = parts[arm_id]["id"], folder / arm_id
+            found.append(run | {"id": run_id, "report": (folder / "report.html").is_file(),
+                                **({"parts": parts} if parts else {})})
         return found
 
     def run_file(self, run_id: str, name: str) -> Path:

@@ -153,6 +153,9 @@ function onEvent(id, event) {
   if (type === "confirm_answered" && state.question
       && state.question.id === event.question_id) closeQuestion();
   if (type === "activity_finished" || type === "run_finished") showRun();
+  // A run's folder is closed (its report drawn) when its activity ends (a run of several
+  // arms: when GET /run says done, showRun lists it).
+  if (type === "activity_finished") loadRuns();
   const bad = /fault|halt|error|failed/i.test(type);
   const text = `${id ? `[${id}] ` : ""}${fmt(event.t)} s ${type}${event.message ? `: ${event.message}` : ""}${event.label ? `: ${event.label}` : ""}`;
   const li = el("li", { textContent: text, className: bad ? "bad" : "" });
@@ -326,15 +329,34 @@ $("#cmd-arm").addEventListener("click", () => command("Arm", "POST", "/arm-up"))
 $("#cmd-home").addEventListener("click", () => command("Home", "POST", "/home"));
 $("#cmd-reset").addEventListener("click", () => command("Reset", "POST", "/reset"));
 
-// ---------------------------------------------------------------- sequences of several arms
+// ---------------------------------------------------------------- sequences
+// One that names the arms runs every arm it names (POST /run); one of one arm runs on the
+// arm selected when Run is pressed (POST /arms/ID/run), as `seqrun run --arm-id ID` does.
 async function loadSequences() {
   const list = await api("GET", "/sequences").catch(() => []);
-  $("#sequence").replaceChildren(...list.map((q) => el("option", { value: q.name, textContent: q.name })));
+  state.sequences = Object.fromEntries(list.map((q) => [q.name, q]));
+  $("#sequence").replaceChildren(...list.map((q) => el("option", {
+    value: q.name, textContent: `${q.name} ${q.arms ? "(every arm it names)" : "(one arm: the selected)"}` })));
+}
+
+// A run of one arm: its status says so (run: file, step), as the page of one arm shows it.
+function oneArmRuns() {
+  return state.ids.flatMap((a) => {
+    const status = state.arms[a] && state.arms[a].status;
+    const run = status && status.run;
+    if (!run || !["running", "paused"].includes(status.activity)) return [];
+    const file = String(run.file).split("/").pop();
+    return [`arm ${a}: ${file} ${status.activity}${run.step ? `, step ${run.step}/${run.steps}${run.label ? ` (${run.label})` : ""}` : ""}`];
+  });
 }
 
 async function showRun() {
   const run = await api("GET", "/run").catch(() => null);
+  const single = oneArmRuns();
+  if (single.length && (!run || run.done)) { $("#run-state").textContent = single.join("; "); return; }
   if (!run) { $("#run-state").textContent = ""; return; }
+  // done: its records are written (arms.json last), so Past runs can list it whole
+  if (run.done && state.runListed !== run.run_dir) { state.runListed = run.run_dir; loadRuns(); }
   const results = run.results ? Object.entries(run.results).map(([a, r]) => `arm ${a}: ${r.status}`).join(", ") : "";
   $("#run-state").textContent = run.done ? `${run.name}: ended (exit ${run.exit_code ?? "?"}) ${results}${run.error ? ` - ${run.error}` : ""}`
     : `${run.name}: running on arms ${run.arms.join(", ")}`;
@@ -343,12 +365,44 @@ async function showRun() {
 $("#run").addEventListener("click", async () => {
   const name = $("#sequence").value;
   if (!name) return;
+  const several = (state.sequences[name] || {}).arms !== false;
+  if (!several) {
+    await command(`Run ${name}`, "POST", "/run", { sequence: name });
+    showRun();
+    return;
+  }
   try {
     const run = await api("POST", "/run", { sequence: name });
     say(`Run ${run.name} on arms ${run.arms.join(", ")}: started`);
   } catch (err) { /* on screen */ }
   showRun();
 });
+
+// ---------------------------------------------------------------- past runs
+// Every run of the campaign: one of one arm links its report; one of several arms links
+// each arm's part (each a run folder with its own report).
+function runLink(arm, id, hasReport, text) {
+  const file = hasReport ? "report.html" : "report.json";
+  const path = id.split("/").map(encodeURIComponent).join("/");  // RUN or RUN/ARM (a part)
+  return el("a", { href: `${API}/arms/${arm}/runs/${path}/${file}`, target: "_blank", textContent: text });
+}
+
+async function loadRuns() {
+  const runs = await api("GET", "/runs").catch(() => []);
+  $("#runs").replaceChildren(...runs.slice(0, 50).map((r) => {
+    const text = `${r.when || "?"} ${r.sequence || "?"} ${r.result || "?"}${r.exit_code !== null && r.exit_code !== undefined ? ` (exit ${r.exit_code})` : ""}`;
+    const li = el("li", { className: r.result === "passed" ? "" : "failed" });
+    if (r.parts) {
+      li.append(`${text}: `, ...Object.entries(r.parts).flatMap(([a, part], i) => [i ? ", " : "", runLink(a, part.id, part.report, `arm ${a}`)]));
+    } else {
+      const arm = r.arm && state.ids.includes(r.arm) ? r.arm : state.ids[0];
+      li.append(runLink(arm, r.id, r.report, `${text}${r.arm ? ` (arm ${r.arm})` : ""}`));
+    }
+    li.dataset.run = r.id;
+    return li;
+  }));
+}
+$("#runs-refresh").addEventListener("click", loadRuns);
 $("#abort").addEventListener("click", () => api("POST", "/run/abort").then(() => say("Abort: every arm stops (controlled)")).catch(() => {}));
 setInterval(() => { if (!state.lost) showRun(); }, 2000);
 
@@ -398,6 +452,7 @@ async function start() {
   }
   connect();
   loadSequences();
+  loadRuns();
   showRun();
   await select(state.ids[0]);
   setInterval(() => { if (!state.lost) gripper.show(); }, 2000);
