@@ -117,11 +117,31 @@ def test_a_one_arm_run_on_b_uses_bs_arm_file_and_says_so(campaign):
         one_line_error(which)
 
 
+def test_fk_and_ik_use_the_arm_named(campaign):
+    """B's j1 turns ±20°: fk notes 30° as outside on B, not on A; with the arms' arm files
+    different, no arm named is asked for."""
+    on_b = invoke("fk", "--deg", "30", "0", "0", "0", "0", "0", "0", "--arm-id", "B")
+    assert on_b.exit_code == 0 and "j1 30 deg is outside its limits [-20, 20]" in on_b.output
+    on_a = invoke("fk", "--deg", "30", "0", "0", "0", "0", "0", "0", "--arm-id", "A")
+    assert on_a.exit_code == 0 and "outside" not in on_a.output, on_a.output
+    for command in (["fk", "--deg", "0", "0", "0", "0", "0", "0", "0"],
+                    ["ik", "--position-mm", "300", "0", "600", "--rpy-deg", "180", "0", "0"]):
+        which = invoke(*command)
+        assert which.exit_code == 2 and "different arm files" in one_line_error(which)
+    both = invoke("fk", "--deg", "0", "0", "0", "0", "0", "0", "0", "--arm-id", "A", "--arm",
+                  ROOT / "arms" / "lwa3.yaml")
+    assert both.exit_code == 2 and "leave out --arm" in one_line_error(both)
+    reached = invoke("ik", "--position-mm", "300", "0", "600", "--rpy-deg", "180", "0", "0",
+                     "--arm-id", "A")
+    assert reached.exit_code == 0, reached.output
+
+
 def test_a_sequence_of_one_arm_validates_against_the_arm_file_all_arms_share(tmp_path,
                                                                            monkeypatch):
     two_arm_campaign(tmp_path, monkeypatch)
     checked = invoke("validate", "sequences/startup.yaml", "--static")
     assert checked.exit_code == 0 and "valid (3 steps)" in checked.output, checked.output
+    assert invoke("fk", "--deg", "0", "0", "0", "0", "0", "0", "0").exit_code == 0
 
 
 def test_arm_id_is_refused_for_a_sequence_that_names_the_arms(campaign):

@@ -17,7 +17,8 @@ import typer
 from typer.core import TyperCommand
 
 from seqrun.cli.app import app
-from seqrun.cli.common import ArmOption, PosesDirOption, load_arm_file, user_errors
+from seqrun.cli.common import (ArmOption, OneArmOption, PosesDirOption, load_arm_file,
+                               user_errors)
 from seqrun.cli.pose import format_numbers, load_named_pose
 from seqrun.defaults import DEFAULT_ARM, DEFAULT_POSES_DIR
 from seqrun.errors import UserInputError
@@ -131,6 +132,7 @@ def forward_kinematics(
         "--json", help='Print {"position_mm", "rpy_deg", "rotation"} as JSON.')] = False,
     arm_file: ArmOption = DEFAULT_ARM,
     poses_dir: PosesDirOption = DEFAULT_POSES_DIR,
+    arm_id: OneArmOption = None,
 ) -> None:
     """End-effector pose (position mm, roll/pitch/yaw deg, rotation matrix) by forward
     kinematics, R = Rz(yaw) Ry(pitch) Rx(roll)."""
@@ -142,7 +144,7 @@ def forward_kinematics(
                                  "--pose NAME")
         if deg is not None and pose_name is not None:
             raise UserInputError("give either --deg or --pose, not both")
-        arm = load_arm_file(arm_file)
+        arm = load_arm_file(arm_file, arm_id)
         if deg is not None:
             joints: list[float] | dict[str, float] = parse_angles(deg, arm.joint_names)
         else:

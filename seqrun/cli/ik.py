@@ -18,7 +18,8 @@ from typing import Annotated
 import typer
 
 from seqrun.cli.app import app
-from seqrun.cli.common import EXIT_INVALID, ArmOption, PosesDirOption, fail, load_arm_file, user_errors
+from seqrun.cli.common import (EXIT_INVALID, ArmOption, OneArmOption, PosesDirOption, fail,
+                               load_arm_file, user_errors)
 from seqrun.cli.fk import ValuesAfterOption, parse_angles
 from seqrun.cli.pose import format_numbers, load_named_pose
 from seqrun.errors import UserInputError
@@ -67,6 +68,7 @@ def inverse_kinematics(
     ] = False,
     arm_file: ArmOption = DEFAULT_ARM,
     poses_dir: PosesDirOption = DEFAULT_POSES_DIR,
+    arm_id: OneArmOption = None,
 ) -> None:
     """Joint angles (user degrees) that put the tool at a position and orientation, inside
     the joint limits, with the locked joints at their value. Exit 1 if unreachable."""
@@ -79,7 +81,7 @@ def inverse_kinematics(
         rpy = _three(rpy_deg, "--rpy-deg")
         if near is not None and near_deg is not None:
             raise UserInputError("give either --near or --near-deg, not both")
-        arm = load_arm_file(arm_file)
+        arm = load_arm_file(arm_file, arm_id)
         if near_deg is not None:
             seed_values: list[float] | dict[str, float] = parse_angles(near_deg, arm.joint_names)
         elif near is not None:

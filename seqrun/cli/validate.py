@@ -157,7 +157,7 @@ def _arm_file_of(arm_id: str | None, arm_file: Path | None, file: Path,
                  project_dir: Path | None, as_json: bool) -> Path | None:
     """The arm file a sequence of one arm is checked against: ``--arm``, else in a
     campaign with several arms, arm ``arm_id``'s (none named: the one they share)."""
-    from seqrun.service.arm_context import one_arm_sequence_arm
+    from seqrun.service.arm_context import one_arm_file
     from seqrun.service.campaigns import campaign_of
 
     if arm_file is not None:
@@ -167,7 +167,7 @@ def _arm_file_of(arm_id: str | None, arm_file: Path | None, file: Path,
     if arm_id is None and not file.is_file():
         return None  # (said where the file is read)
     try:
-        return one_arm_sequence_arm(campaign_of(file.resolve(), project_dir), arm_id)
+        return one_arm_file(campaign_of(file.resolve(), project_dir), arm_id)
     except UserInputError as exc:
         _unusable(str(exc), as_json)
     return None

@@ -44,7 +44,7 @@ if TYPE_CHECKING:
     from seqrun.service.connection import Connection
 
 __all__ = ["ArmContext", "BusChoice", "NoArm", "SIMULATOR_CLAIM_INTERFACE", "campaign_folders",
-           "one_arm_sequence_arm", "resolve_context", "resolve_contexts"]
+           "one_arm_file", "resolve_context", "resolve_contexts"]
 
 #: The claim a run or console on the built-in simulator holds, so that ``seqrun halt`` and
 #: ``seqrun status`` in another terminal find it (its channel names the process).
@@ -378,10 +378,11 @@ def campaign_folders(*, project_dir: Path | None = None, project: Project | None
     return project, pose_path, Path(log_dir) if log_dir is not None else project.runs_dir
 
 
-def one_arm_sequence_arm(project: Project, arm_id: str | None) -> Path | None:
-    """The arm file a sequence of one arm is checked against in a campaign with several
-    arms: arm ``arm_id``'s; none named, the one arm file every arm shares. None: a
-    campaign of one arm (the sequence's own arm file).
+def one_arm_file(project: Project, arm_id: str | None) -> Path | None:
+    """The arm file of a command about one arm that needs no bus (a sequence of one arm
+    validated, fk, ik) in a campaign with several arms: arm ``arm_id``'s; none named, the
+    one arm file every arm shares. None: a campaign of one arm (the sequence's own arm
+    file, the campaign's).
 
     :raises UserInputError: an unknown id, or no id while the arms' arm files differ
         (which arm is it for?).
@@ -396,7 +397,7 @@ def one_arm_sequence_arm(project: Project, arm_id: str | None) -> Path | None:
         raise UserInputError(
             f"{project.describe()} has arms {', '.join(ids)} with different arm files ("
             + ", ".join(f"{a}: {_shown(p)}" for a, p in files.items())
-            + "): name the arm a sequence of one arm is for (--arm-id ID)")
+            + "): name the arm (--arm-id ID)")
     return None
 
 

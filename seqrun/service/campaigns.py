@@ -39,13 +39,23 @@ def campaign_here(project_dir: Path | None = None) -> Project:
 
 
 
-def load_arm_file(path: Path) -> ArmDescription:
+def load_arm_file(path: Path, arm_id: str | None = None) -> ArmDescription:
     """The arm file ``path``; for the default (``arms/lwa3.yaml``) where there is none, the
-    campaign's arm here (seqrun.toml), else the shipped one."""
+    campaign's arm here (seqrun.toml), else the shipped one. In a campaign with several
+    arms: arm ``arm_id``'s (none named: the one every arm shares; UserInputError when they
+    differ, as for ``--arm`` with ``arm_id``)."""
     from seqrun.defaults import DEFAULT_ARM
+    from seqrun.service.arm_context import campaign_arm_ids, one_arm_file
 
-    if path == DEFAULT_ARM and not path.is_file():
-        path = campaign_of(Path.cwd()).arm_path(None)
+    if arm_id is not None and path != DEFAULT_ARM:
+        raise UserInputError("--arm-id names the arm file (seqrun.toml's [arms.ID]): leave "
+                             "out --arm")
+    if path == DEFAULT_ARM:
+        project = campaign_of(Path.cwd())
+        if arm_id is not None or len(campaign_arm_ids(project)) > 1:
+            path = one_arm_file(project, arm_id) or project.arm_path(None)
+        elif not path.is_file():
+            path = project.arm_path(None)
     if not path.is_file():
         raise UserInputError(f"arm file {path} not found (give one with --arm FILE)")
     from seqrun.arm.description import load_arm  # pydantic: only for commands that read one
