@@ -192,3 +192,8 @@ def test_a_run_of_several_arms_under_way_or_broken_is_listed(campaign):
     (folder / "B" / "report.json").write_text(json.dumps(report | {"status": "running"}))
     (entry,) = list_runs(campaign / "runs")
     assert entry["result"] == "running" and entry["arms"] == ["A", "B"]
+    # a folder that only groups runs (a --log-dir of several) is no run of several arms
+    group = campaign / "runs" / "group"
+    (group / "one").mkdir(parents=True)
+    (group / "one" / "report.json").write_text((folder / "A" / "report.json").read_text())
+    assert [e["folder"] for e in list_runs(campaign / "runs")] == [str(folder)]

@@ -132,8 +132,9 @@ class Catalog:
     def runs(self, arm_id: str | None = None) -> list[dict[str, Any]]:
         """Past runs, newest first, each with the id its files are served under and
         whether it has a report.html. A run of several arms: ``parts``, each arm's part
-        (a run folder of its own: its id and whether it has a report.html) by arm id. ``arm_id``: the runs of that arm of the
-        campaign's several, a run of several arms by that arm's part."""
+        (a run folder of its own: its id and whether it has a report.html) by arm id.
+        ``arm_id``: the runs of that arm of the campaign's several, a run of several arms
+        by that arm's part."""
         from seqrun.service.records import list_runs, runs_of_arm
 
         root = self.runs_dir.resolve()

@@ -269,10 +269,11 @@ def runs_of_arm(runs: list[dict], arm_id: str) -> list[dict]:
 
 
 def _arms_run_entry(folder: Path) -> dict | None:
-    """The listing of a run of several arms (``arms.json``, one part folder per arm); None
-    when the folder holds none. While it runs (no arms.json yet) its parts say so."""
+    """The listing of a run of several arms (``arms.json``, one part folder per arm, named
+    by its arm); None when the folder holds none (a folder that only groups runs). While it
+    runs (no arms.json yet) its parts say so."""
     parts = {p.name: e for p in sorted(folder.iterdir())
-             if p.is_dir() and (e := _run_entry(p)) is not None}
+             if p.is_dir() and (e := _run_entry(p)) is not None and e["arm"] == p.name}
     summary_file = folder / "arms.json"
     if not parts and not summary_file.is_file():
         return None
