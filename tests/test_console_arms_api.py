@@ -334,3 +334,4 @@ def test_each_arm_lists_its_own_runs_and_those_of_both(client, setup):
                                  for a in "AB"}
     kinds = {s["name"]: s["arms"] for s in client.get("/api/v1/sequences").json()}
     assert kinds["both_nudge.yaml"] is True and kinds["confirm_nudge.yaml"] is False
+    assert [client.get(f"/api/v1/arms/{a}/arm").json()["arm_id"] for a in "AB"] == ["A", "B"]

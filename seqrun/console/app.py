@@ -94,7 +94,9 @@ class Console:
         #: The arm's id in a console of several arms (:mod:`seqrun.console.arms`); None:
         #: the console of one arm.
         self.arm_id = arm_id
-        self.scene = arm_scene(arm)
+        #: GET /arm: the arm's chain, limits and volumes, and which arm of the campaign's
+        #: several it is (``[arms.ID]``; None: a campaign of one arm).
+        self.scene = arm_scene(arm) | {"arm_id": getattr(session, "arm_id", None)}
         self.motions = Motions(session)
         #: Who holds control: the session's (shared with its other faces).
         self.control = session.control

@@ -206,7 +206,9 @@ function drawBadges(s) {
 
 function drawStatus(s) {
   state.drawCount += 1;
-  const title = s.simulator ? "seqrun console - SIMULATOR" : `seqrun console - ${s.bus}`;
+  // one arm of a campaign's several (seqrun console --arm-id B): the page names it
+  const which = state.arm && state.arm.arm_id ? ` - arm ${state.arm.arm_id}` : "";
+  const title = s.simulator ? `seqrun console${which} - SIMULATOR` : `seqrun console${which} - ${s.bus}`;
   if (document.title !== title) {
     document.title = title;
     $("#title").textContent = title;
