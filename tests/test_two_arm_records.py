@@ -85,12 +85,19 @@ def test_report_mcap_writes_the_same_run_mcap_again(virtual_run, tmp_path):
     assert result.exit_code == 0, result.output
     assert {topic for topic, _, _ in read_mcap(copy / "B" / "run.mcap")} >= {
         "/B/joint_states", "/seqrun/events"}
-    # the HTML report draws one arm: the run's folder says which parts there are
+    # the HTML report: each arm's in its part; one file holds one arm (name its part)
+    for arm in "AB":
+        (copy / arm / "report.html").unlink(missing_ok=True)
     result = CliRunner().invoke(app, ["report", str(copy)])
+    assert result.exit_code == 0, result.output
+    assert result.output.strip().splitlines() == [
+        f"wrote {copy / arm / 'report.html'}" for arm in "AB"]
+    assert "arm B" in (copy / "B" / "report.html").read_text()
+    result = CliRunner().invoke(app, ["report", str(copy), "--out", str(tmp_path / "r.html")])
     assert result.exit_code == 2
     assert result.output.strip().splitlines() == [
         f"error: {copy}: a run of several arms: each arm's part is a run folder of its own "
-        f"({copy / 'A'}, {copy / 'B'}); --mcap writes the run's one run.mcap of every arm"]
+        f"({copy / 'A'}, {copy / 'B'}): name one for --out"]
 
 
 def test_no_run_mcap_when_the_campaign_turns_it_off(tmp_path, monkeypatch):

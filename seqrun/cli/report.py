@@ -7,8 +7,9 @@
     seqrun report runs/20261127-101500-Two-arm --mcap     # several arms: their one run.mcap
 
 A folder that is not a run folder is one ``error:`` line and exit 2. A run of several arms
-(docs/two-arms.md) draws each arm's part (``RUN_DIR/A``); ``--mcap`` on the run's folder
-writes its one run.mcap of every arm.
+(docs/two-arms.md) draws each arm's report in its part (``RUN_DIR/A/report.html``; one
+part for ``--out``/``--csv``); ``--mcap`` on the run's folder writes its one run.mcap of
+every arm.
 """
 
 from __future__ import annotations
@@ -55,7 +56,11 @@ def report_command(
             typer.echo(f"wrote {path} ({total} messages on {len(counts)} topics)")
             if out is None and csv_dir is None:
                 return
-        _one_arm(run_dir)
+        parts = _parts(run_dir, out, csv_dir)
+        if parts:  # a run of several arms: each arm's report, in its part
+            for part in parts:
+                typer.echo(f"wrote {write_html(part, None, data=load_run(part, arm=arm))}")
+            return
         data = load_run(run_dir, arm=arm)
         if csv_dir is not None:
             for path in export_csv(run_dir, csv_dir, data=data):
@@ -64,13 +69,18 @@ def report_command(
             typer.echo(f"wrote {write_html(run_dir, out, data=data)}")
 
 
-def _one_arm(run_dir: Path) -> None:
-    """The report and CSV draw one arm: a campaign run with several arms says which."""
+def _parts(run_dir: Path, out: Path | None, csv_dir: Path | None) -> list[Path]:
+    """A run of several arms: its arms' parts, each a run folder with a report of its own
+    (none: a run of one arm). One file (``--out``) or one CSV export holds one arm: name
+    its part."""
     from seqrun.errors import UserInputError
     from seqrun.service.arms_mcap import is_arms_run
 
-    if is_arms_run(run_dir) and not (run_dir / "report.json").exists():
-        parts = sorted(p.name for p in run_dir.iterdir() if (p / "report.json").is_file())
+    if not is_arms_run(run_dir) or (run_dir / "report.json").exists():
+        return []
+    parts = sorted(p for p in run_dir.iterdir() if (p / "report.json").is_file())
+    if out is not None or csv_dir is not None:
         raise UserInputError(f"{run_dir}: a run of several arms: each arm's part is a run "
-                             f"folder of its own ({', '.join(f'{run_dir / p}' for p in parts)}"
-                             "); --mcap writes the run's one run.mcap of every arm")
+                             f"folder of its own ({', '.join(map(str, parts))}): name one "
+                             f"for --{'out' if out is not None else 'csv'}")
+    return parts
