@@ -117,6 +117,17 @@ def test_a_one_arm_run_on_b_uses_bs_arm_file_and_says_so(campaign):
         one_line_error(which)
 
 
+def test_a_campaigns_validation_checks_a_one_arm_sequence_for_each_arm_file(campaign):
+    """seqrun validate DIR (or several files): a sequence of one arm is checked against
+    every arm file of the campaign's arms, each finding naming its arms."""
+    checked = invoke("validate", "sequences/nudge.yaml", "sequences/startup.yaml", "--json")
+    assert checked.exit_code == 1, checked.output
+    nudge, startup = json.loads(checked.output)["results"]
+    assert nudge["result"] == "invalid" and startup["result"] == "valid"
+    assert nudge["errors"] == ["arm B: sequences/nudge.yaml:5:25: j1 target 45° is outside "
+                               "its limits -20…20"]
+
+
 def test_fk_and_ik_use_the_arm_named(campaign):
     """B's j1 turns ±20°: fk notes 30° as outside on B, not on A; with the arms' arm files
     different, no arm named is asked for."""

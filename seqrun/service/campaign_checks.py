@@ -92,6 +92,57 @@ def _sequence(path: Path, options: dict) -> FileResult:
     if arms is not None:
         return _arms_sequence(path, arms, options, result)
     try:
+        files = _arm_files(path, options)
+    except (UserInputError, OSError) as exc:
+        result.result = "error"
+        result.errors.append(str(exc))
+        return result
+    if len(files) > 1:
+        return _for_each_arm_file(path, options, files, result)
+    return _one_arm_sequence(path, options, result)
+
+
+def _arm_files(path: Path, options: dict) -> dict[str, Path]:
+    """A sequence of one arm in a campaign with several whose arm files differ (no --arm):
+    each arm file, by the arms that have it ("A, C"); else {} (the sequence's arm)."""
+    from seqrun.service.arm_context import campaign_arm_ids, resolve_context
+    from seqrun.service.campaigns import campaign_of
+
+    if options["arm_file"] is not None:
+        return {}
+    project = campaign_of(path.resolve(), options["project_dir"])
+    by_file: dict[Path, list[str]] = {}
+    for arm_id in campaign_arm_ids(project):
+        by_file.setdefault(resolve_context(project=project, arm_id=arm_id).arm_path,
+                           []).append(arm_id)
+    return {", ".join(ids): file for file, ids in by_file.items()} if len(by_file) > 1 else {}
+
+
+def _for_each_arm_file(path: Path, options: dict, files: dict[str, Path],
+                       result: FileResult) -> FileResult:
+    """Checked against each arm file: valid only when valid for every arm; each finding
+    says which arms; the longest dry run and the lowest clearance of all."""
+    for arms, file in files.items():
+        one = _one_arm_sequence(path, options | {"arm_file": file},
+                                FileResult(result.file, result.kind))
+        named = f"arm{'s' * (',' in arms)} {arms}"
+        if result.valid and not one.valid:
+            result.result = one.result
+        result.errors += [f"{named}: {e}" for e in one.errors]
+        result.notes += [f"{named}: {n}" for n in one.notes]
+        if one.simulated_s is not None:
+            result.simulated_s = max(result.simulated_s or 0.0, one.simulated_s)
+        if one.clearance_mm is not None and (result.clearance_mm is None
+                                             or one.clearance_mm < result.clearance_mm):
+            result.clearance_mm, result.clearance_at = (one.clearance_mm,
+                                                        f"{one.clearance_at} ({named})")
+    return result
+
+
+def _one_arm_sequence(path: Path, options: dict, result: FileResult) -> FileResult:
+    from seqrun.service.checking import check_sequence
+
+    try:
         check = check_sequence(path, start=options["start"], arm_file=options["arm_file"],
                                started=options["started"], project_dir=options["project_dir"],
                                dry_run=not options["static"], speed=options["speed"],
