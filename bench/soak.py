@@ -381,17 +381,26 @@ class StopSignals:
         self._wake_write.close()
 
 
-def slope(points: list[tuple[float, int]]) -> float | None:
-    """Least-squares slope (KB per virtual hour) of the RSS after the first run."""
-    if len(points) < 3:
+def slope(points: list[tuple[float, int]], after_h: float = 0.0) -> float | None:
+    """Least-squares slope (KB per virtual hour) of the RSS after the first run (and, with
+    ``after_h``, from that virtual hour on: once the allocator and caches have settled)."""
+    points = [p for p in points[1:] if p[0] >= after_h]
+    if len(points) < 2:
         return None
     import numpy as np
 
-    x = np.array([p[0] for p in points[1:]])
-    y = np.array([p[1] for p in points[1:]], dtype=float)
+    x = np.array([p[0] for p in points])
+    y = np.array([p[1] for p in points], dtype=float)
     if np.ptp(x) == 0:
         return None
     return float(np.polyfit(x, y, 1)[0])
+
+
+def rss_by_hour(points: list[tuple[float, int]]) -> list[int]:
+    """The RSS (MB) after the last run of each whole virtual hour: whether it settles."""
+    hours = int(points[-1][0]) if points else 0
+    return [round(max((p for p in points if p[0] <= h), key=lambda p: p[0])[1] / 1024)
+            for h in range(1, hours + 1) if any(p[0] <= h for p in points)]
 
 
 def warm_up(sequences: Path, work: Path, stop: StopSignals | None = None) -> None:
@@ -538,6 +547,8 @@ def combine(shards: list[dict]) -> dict:
     out["wrong"] = [w for s in shards for w in s["wrong"]]
     out["shards"] = [{"seed": s["seed"], "hours": s["hours"], "runs": s["runs"],
                       "rss_slope_kb_per_h": s["rss_slope_kb_per_h"],
+                      "rss_slope_after_1h_kb_per_h": slope(s["rss_kb"], after_h=1.0),
+                      "rss_mb_by_hour": rss_by_hour(s["rss_kb"]),
                       "rss_mb_first_last": [round(s["rss_kb"][0][1] / 1024),
                                             round(s["rss_kb"][-1][1] / 1024)],
                       "rss_mb_max": round(max(kb for _, kb in s["rss_kb"]) / 1024),
@@ -560,9 +571,12 @@ def print_figures(r: dict) -> None:
         rss = s.get("rss_mb_first_last") or [round(s["rss_kb"][0][1] / 1024),
                                              round(s["rss_kb"][-1][1] / 1024)]
         slope_kb = s["rss_slope_kb_per_h"]
+        settled = s.get("rss_slope_after_1h_kb_per_h")
         print(f"seed {s.get('seed')}: RSS slope "
-              f"{'-' if slope_kb is None else round(slope_kb)} KB/h (RSS {rss[0]} MB after "
-              f"the first run, {rss[1]} MB after the last); after the warm-up -> after the "
+              f"{'-' if slope_kb is None else round(slope_kb)} KB/h, after the first hour "
+              f"{'-' if settled is None else round(settled)} KB/h (RSS {rss[0]} MB after "
+              f"the first run, {rss[1]} MB after the last; after each hour "
+              f"{s.get('rss_mb_by_hour', '-')} MB); after the warm-up -> after the "
               f"last run: open files {s['open_files'][0]} -> {s['open_files'][1]}, Python "
               f"threads {s['threads'][0]} -> {s['threads'][1]}, OS threads "
               f"{s['os_threads'][0]} -> {s['os_threads'][1]}")

@@ -75,6 +75,18 @@ def test_soaks_side_by_side_add_up_and_keep_memory_per_process():
     assert [s["rss_mb_first_last"] for s in both["shards"]] == [[120, 130], [125, 128]]
 
 
+def test_the_rss_after_the_first_hour_is_fitted_apart_and_read_hour_by_hour():
+    """Growth that stops after the first hour (the allocator settling): the slope over
+    every run says it grew, the slope after the first hour that it no longer does."""
+    rss = [(0.1, 100 * 1024), (0.5, 120 * 1024), (0.9, 130 * 1024), (1.2, 131 * 1024),
+           (1.8, 130 * 1024), (2.5, 131 * 1024), (2.9, 130 * 1024)]
+    shard = _shard(1, 10, 4, 0.05, (100, 130)) | {"rss_kb": rss}
+    (one,) = soak.combine([shard])["shards"]
+    assert one["rss_mb_by_hour"] == [130, 130]
+    assert abs(one["rss_slope_after_1h_kb_per_h"]) < 0.5 * 1024
+    assert soak.slope(rss) > 2 * 1024
+
+
 @pytest.mark.slow  # the warm-up and a run or two: under a minute on an idle host
 def test_sigterm_ends_the_soak_after_the_run_under_way():
     """SIGTERM ends the soak (the run it lands in halts, exit 130, as ``seqrun run``
