@@ -375,6 +375,42 @@ def test_the_command_serves_the_arm_and_halts_on_sigterm(tmp_path, monkeypatch):
     assert "seqrun ros: ended by SIGTERM; " in out and "Traceback" not in out
 
 
+@pytest.mark.slow
+def test_one_arm_of_several_serves_under_its_id(tmp_path, monkeypatch):
+    """``seqrun ros --arm-id B`` in a campaign with several arms: B's topics under /B/ and
+    its node seqrun_B (each arm's node its own, as /A/, /B/ in the campaign's run.mcap)."""
+    import shutil
+    import signal as signals
+
+    campaign = tmp_path / "two-arms"
+    shutil.copytree(ROOT / "examples" / "two-arms", campaign)
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id()),
+               ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", HOME=str(tmp_path),
+               SEQRUN_STATE_DIR=str(tmp_path / "state"))
+    refused = subprocess.run([sys.executable, "-m", "seqrun", "ros", "--sim"], cwd=campaign,
+                             env=env, capture_output=True, text=True, timeout=60)
+    assert refused.returncode == 2 and "name one (--arm-id ID)" in refused.stderr
+    proc = subprocess.Popen([sys.executable, "-m", "seqrun", "ros", "--sim", "--arm-id", "B"],
+                            cwd=campaign, env=env, text=True, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT)
+    printed: list[str] = []
+    try:
+        for line in proc.stdout:
+            printed.append(line)
+            if line.startswith("seqrun ros on SIMULATOR"):
+                break
+        assert printed and printed[0].startswith("arm B: "), "".join(printed)
+        assert "/B/joint_states, /B/joint_trajectory, /seqrun_B/stop" in printed[-1], \
+            "".join(printed)
+        proc.send_signal(signals.SIGTERM)
+        out, _ = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 130, "".join(printed) + out
+
+
 # ---------------------------------------------------------------------- without the extra
 def test_without_rclpy_seqrun_ros_says_in_one_line_how_to_install_it(tmp_path):
     """rclpy made unimportable the public way: a package of that name that raises
