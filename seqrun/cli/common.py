@@ -13,7 +13,8 @@ import typer
 from seqrun.defaults import EXIT_FAULT, EXIT_INVALID, EXIT_OK, EXIT_USAGE  # noqa: F401
 from seqrun.errors import Refused, SequenceInvalid, UserInputError
 # The arm file and the poses a command reads (the campaign's, else the shipped ones).
-from seqrun.service.campaigns import load_arm_file, pose_search_path  # noqa: F401
+from seqrun.service.arm_context import load_arm_file  # noqa: F401
+from seqrun.service.campaigns import pose_search_path  # noqa: F401
 
 #: The help says what load_arm_file really does with the default (not "arms/lwa3.yaml").
 ArmOption = Annotated[Path, typer.Option(

@@ -164,12 +164,14 @@ def _arm_file_of(arm_id: str | None, arm_file: Path | None, file: Path,
         if arm_id is not None:
             fail("--arm-id names the arm file (seqrun.toml's [arms.ID]): leave out --arm")
         return arm_file
-    if arm_id is None and not file.is_file():
-        return None  # (said where the file is read)
     try:
+        if not file.is_file():
+            return None  # (said where the file is read)
         return one_arm_file(campaign_of(file.resolve(), project_dir), arm_id)
     except UserInputError as exc:
         _unusable(str(exc), as_json)
+    except OSError:  # a name the system refuses: said where the file is read, too
+        pass
     return None
 
 
@@ -231,7 +233,7 @@ def validate_command(
             return
         except OSError:
             arms_project = None  # said below, where the file is read
-        if arms_project is not None and arm_id is not None:
+        if arms_project is not None and arm_id is not None and file.is_file():
             fail(f"--arm-id {arm_id}: {file} names the arms it moves and is checked for "
                  "each; --arm-id is for a sequence of one arm")
         if arms_project is not None:

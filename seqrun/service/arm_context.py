@@ -44,7 +44,7 @@ if TYPE_CHECKING:
     from seqrun.service.connection import Connection
 
 __all__ = ["ArmContext", "BusChoice", "NoArm", "SIMULATOR_CLAIM_INTERFACE", "campaign_folders",
-           "one_arm_file", "resolve_context", "resolve_contexts"]
+           "load_arm_file", "one_arm_file", "resolve_context", "resolve_contexts"]
 
 #: The claim a run or console on the built-in simulator holds, so that ``seqrun halt`` and
 #: ``seqrun status`` in another terminal find it (its channel names the process).
@@ -399,6 +399,30 @@ def one_arm_file(project: Project, arm_id: str | None) -> Path | None:
             + ", ".join(f"{a}: {_shown(p)}" for a, p in files.items())
             + "): name the arm (--arm-id ID)")
     return None
+
+
+def load_arm_file(path: Path, arm_id: str | None = None) -> ArmDescription:
+    """The arm file ``path``; for the default (``arms/lwa3.yaml``) where there is none, the
+    campaign's arm here (seqrun.toml), else the shipped one. In a campaign with several
+    arms: arm ``arm_id``'s (none named: the one every arm shares; UserInputError when they
+    differ, as for ``--arm`` with ``arm_id``)."""
+    from seqrun.defaults import DEFAULT_ARM
+    from seqrun.service.campaigns import campaign_of
+
+    if arm_id is not None and path != DEFAULT_ARM:
+        raise UserInputError("--arm-id names the arm file (seqrun.toml's [arms.ID]): leave "
+                             "out --arm")
+    if path == DEFAULT_ARM:
+        project = campaign_of(Path.cwd())
+        if arm_id is not None or len(campaign_arm_ids(project)) > 1:
+            path = one_arm_file(project, arm_id) or project.arm_path(None)
+        elif not path.is_file():
+            path = project.arm_path(None)
+    if not path.is_file():
+        raise UserInputError(f"arm file {path} not found (give one with --arm FILE)")
+    from seqrun.arm.description import load_arm  # pydantic: only for commands that read one
+
+    return load_arm(path)
 
 
 def campaign_arm_ids(project: Project) -> tuple[str, ...]:

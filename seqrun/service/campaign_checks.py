@@ -78,8 +78,6 @@ def collect(paths: list[Path]) -> list[Path]:
 
 
 def _sequence(path: Path, options: dict) -> FileResult:
-    from seqrun.service.checking import check_sequence
-
     result = FileResult(str(path), "sequence")
     try:
         from seqrun.service.arms_check import campaign_has_arms

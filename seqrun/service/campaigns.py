@@ -11,14 +11,12 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from seqrun.errors import UserInputError
 from seqrun.sequence.project import CONFIG_NAME
 
 if TYPE_CHECKING:
-    from seqrun.arm.description import ArmDescription
     from seqrun.sequence.project import Project
 
-__all__ = ["CONFIG_NAME", "campaign_here", "campaign_of", "load_arm_file", "pose_search_path"]
+__all__ = ["CONFIG_NAME", "campaign_here", "campaign_of", "pose_search_path"]
 
 def campaign_of(path: Path, project_dir: Path | None = None) -> Project:
     """The campaign of a sequence (or folder) ``path``: ``project_dir`` if given, else the
@@ -37,30 +35,6 @@ def campaign_here(project_dir: Path | None = None) -> Project:
 
 
 
-
-
-def load_arm_file(path: Path, arm_id: str | None = None) -> ArmDescription:
-    """The arm file ``path``; for the default (``arms/lwa3.yaml``) where there is none, the
-    campaign's arm here (seqrun.toml), else the shipped one. In a campaign with several
-    arms: arm ``arm_id``'s (none named: the one every arm shares; UserInputError when they
-    differ, as for ``--arm`` with ``arm_id``)."""
-    from seqrun.defaults import DEFAULT_ARM
-    from seqrun.service.arm_context import campaign_arm_ids, one_arm_file
-
-    if arm_id is not None and path != DEFAULT_ARM:
-        raise UserInputError("--arm-id names the arm file (seqrun.toml's [arms.ID]): leave "
-                             "out --arm")
-    if path == DEFAULT_ARM:
-        project = campaign_of(Path.cwd())
-        if arm_id is not None or len(campaign_arm_ids(project)) > 1:
-            path = one_arm_file(project, arm_id) or project.arm_path(None)
-        elif not path.is_file():
-            path = project.arm_path(None)
-    if not path.is_file():
-        raise UserInputError(f"arm file {path} not found (give one with --arm FILE)")
-    from seqrun.arm.description import load_arm  # pydantic: only for commands that read one
-
-    return load_arm(path)
 
 
 def pose_search_path(poses_dir: Path) -> Any:
