@@ -19,6 +19,20 @@ from seqrun.arm.description import ArmDescription
 
 def pytest_configure(config: pytest.Config) -> None:
     tiers.configure(config.getoption("markexpr") or "")
+    _take_ctrl_c_back()
+
+
+def _take_ctrl_c_back() -> None:
+    """A shell starts a background job (``pytest ... &``, nohup) with SIGINT and SIGQUIT
+    ignored, and an ignored signal stays ignored in every child: the tests that press
+    Ctrl-C on a seqrun process would find it deaf (a console ending with exit 0, a run
+    timing out). The tests, like an operator's terminal, need them heard."""
+    import signal
+
+    if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    if signal.getsignal(signal.SIGQUIT) == signal.SIG_IGN:
+        signal.signal(signal.SIGQUIT, signal.SIG_DFL)
 
 
 @pytest.fixture(scope="session")
