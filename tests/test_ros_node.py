@@ -10,6 +10,7 @@ reason and moves nothing; ~/stop halts mid-move and says so only when every modu
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -307,6 +308,25 @@ def test_the_tf_body_is_the_chain_at_the_measured_joints(graph):
     assert frames[-1].transform.translation.x == pytest.approx(0, abs=1e-9)
 
 
+@contextlib.contextmanager
+def ros_command(*args: str, cwd: Path, env: dict):
+    """``seqrun ros ARGS`` as a process, read until it serves: ``(proc, printed)``; killed
+    on the way out if the test did not end it."""
+    proc = subprocess.Popen([sys.executable, "-m", "seqrun", "ros", *args], cwd=cwd, env=env,
+                            text=True, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    printed: list[str] = []
+    try:
+        for line in proc.stdout:
+            printed.append(line)
+            if line.startswith("seqrun ros on SIMULATOR"):
+                break
+        yield proc, printed
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
 @pytest.mark.slow
 def test_the_command_serves_the_arm_and_halts_on_sigterm(tmp_path, monkeypatch):
     """``seqrun ros --sim`` as a process: ~/reset and ~/home, a trajectory, then SIGTERM
@@ -318,16 +338,8 @@ def test_the_command_serves_the_arm_and_halts_on_sigterm(tmp_path, monkeypatch):
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain))
     token = uuid.uuid4().hex[:8]
     arm, name = f"lwa3_{token}", f"seqrun_{token}"
-    proc = subprocess.Popen([sys.executable, "-m", "seqrun", "ros", "--sim", "--log-dir",
-                             str(tmp_path / "runs"), "--arm-name", arm, "--node-name", name],
-                            cwd=ROOT, env=env, text=True,
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
-    printed: list[str] = []
-    try:
-        for line in proc.stdout:
-            printed.append(line)
-            if line.startswith("seqrun ros on SIMULATOR"):
-                break
+    with ros_command("--sim", "--log-dir", str(tmp_path / "runs"), "--arm-name", arm,
+                     "--node-name", name, cwd=ROOT, env=env) as (proc, printed):
         assert f"/{arm}/joint_trajectory" in printed[-1], "".join(printed)
         assert f"/{name}/stop" in printed[-1]
         context = rclpy.Context()
@@ -367,10 +379,6 @@ def test_the_command_serves_the_arm_and_halts_on_sigterm(tmp_path, monkeypatch):
             rclpy.shutdown(context=context)
         proc.send_signal(signals.SIGTERM)
         out, _ = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
     assert proc.returncode == 130, "".join(printed) + out
     assert "seqrun ros: ended by SIGTERM; " in out and "Traceback" not in out
 
@@ -390,24 +398,12 @@ def test_one_arm_of_several_serves_under_its_id(tmp_path, monkeypatch):
     refused = subprocess.run([sys.executable, "-m", "seqrun", "ros", "--sim"], cwd=campaign,
                              env=env, capture_output=True, text=True, timeout=60)
     assert refused.returncode == 2 and "name one (--arm-id ID)" in refused.stderr
-    proc = subprocess.Popen([sys.executable, "-m", "seqrun", "ros", "--sim", "--arm-id", "B"],
-                            cwd=campaign, env=env, text=True, stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT)
-    printed: list[str] = []
-    try:
-        for line in proc.stdout:
-            printed.append(line)
-            if line.startswith("seqrun ros on SIMULATOR"):
-                break
+    with ros_command("--sim", "--arm-id", "B", cwd=campaign, env=env) as (proc, printed):
         assert printed and printed[0].startswith("arm B: "), "".join(printed)
         assert "/B/joint_states, /B/joint_trajectory, /seqrun_B/stop" in printed[-1], \
             "".join(printed)
         proc.send_signal(signals.SIGTERM)
         out, _ = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
     assert proc.returncode == 130, "".join(printed) + out
 
 
