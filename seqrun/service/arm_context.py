@@ -43,8 +43,9 @@ if TYPE_CHECKING:
     from seqrun.service.bus_claim import Holder
     from seqrun.service.connection import Connection
 
-__all__ = ["ArmContext", "BusChoice", "NoArm", "SIMULATOR_CLAIM_INTERFACE", "campaign_folders",
-           "load_arm_file", "one_arm_file", "resolve_context", "resolve_contexts"]
+__all__ = ["ArmContext", "BusChoice", "NoArm", "SIMULATOR_CLAIM_INTERFACE", "arms_by_arm_file",
+           "campaign_folders", "load_arm_file", "one_arm_file", "resolve_context",
+           "resolve_contexts"]
 
 #: The claim a run or console on the built-in simulator holds, so that ``seqrun halt`` and
 #: ``seqrun status`` in another terminal find it (its channel names the process).
@@ -387,18 +388,26 @@ def one_arm_file(project: Project, arm_id: str | None) -> Path | None:
     :raises UserInputError: an unknown id, or no id while the arms' arm files differ
         (which arm is it for?).
     """
-    ids = campaign_arm_ids(project)
     if arm_id is not None:
         return resolve_context(project=project, arm_id=arm_id).arm_path
-    if len(ids) < 2:
-        return None
-    files = {a: resolve_context(project=project, arm_id=a).arm_path for a in ids}
-    if len(set(files.values())) > 1:
+    files = arms_by_arm_file(project)
+    if len(files) > 1:
         raise UserInputError(
-            f"{project.describe()} has arms {', '.join(ids)} with different arm files ("
-            + ", ".join(f"{a}: {_shown(p)}" for a, p in files.items())
+            f"{project.describe()} has arms {', '.join(campaign_arm_ids(project))} with "
+            "different arm files ("
+            + ", ".join(f"{', '.join(ids)}: {_shown(p)}" for p, ids in files.items())
             + "): name the arm (--arm-id ID)")
     return None
+
+
+def arms_by_arm_file(project: Project) -> dict[Path, list[str]]:
+    """The arm files of a campaign's several arms, each with the ids of the arms that have
+    it ({} for a campaign of one arm)."""
+    by_file: dict[Path, list[str]] = {}
+    for arm_id in campaign_arm_ids(project):
+        by_file.setdefault(resolve_context(project=project, arm_id=arm_id).arm_path,
+                           []).append(arm_id)
+    return by_file
 
 
 def load_arm_file(path: Path, arm_id: str | None = None) -> ArmDescription:

@@ -103,16 +103,12 @@ def _sequence(path: Path, options: dict) -> FileResult:
 def _arm_files(path: Path, options: dict) -> dict[str, Path]:
     """A sequence of one arm in a campaign with several whose arm files differ (no --arm):
     each arm file, by the arms that have it ("A, C"); else {} (the sequence's arm)."""
-    from seqrun.service.arm_context import campaign_arm_ids, resolve_context
+    from seqrun.service.arm_context import arms_by_arm_file
     from seqrun.service.campaigns import campaign_of
 
     if options["arm_file"] is not None:
         return {}
-    project = campaign_of(path.resolve(), options["project_dir"])
-    by_file: dict[Path, list[str]] = {}
-    for arm_id in campaign_arm_ids(project):
-        by_file.setdefault(resolve_context(project=project, arm_id=arm_id).arm_path,
-                           []).append(arm_id)
+    by_file = arms_by_arm_file(campaign_of(path.resolve(), options["project_dir"]))
     return {", ".join(ids): file for file, ids in by_file.items()} if len(by_file) > 1 else {}
 
 
