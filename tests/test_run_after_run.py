@@ -54,20 +54,27 @@ def _run(tmp_path, *args: str):
 def test_after_a_run_a_large_block_is_mapped_on_its_own_not_kept_in_an_arena(tmp_path):
     """glibc raises its mmap threshold to the size of each large block freed, after which
     blocks of that size stay in the arenas when freed (resident, fragmenting them: the
-    soak's growing RSS). A run fixes the threshold, so a large block freed later, however
-    large, leaves the next one of 1 MiB mapped on its own (and unmapped when freed)."""
+    soak's growing RSS). A run fixes the threshold, so after a larger block is freed, a
+    block too large for any free chunk the arenas hold is still mapped on its own (and
+    unmapped when freed) instead of growing an arena."""
     libc = _glibc()
     result = _run(tmp_path)
     assert result.exit_code == 0, result.output
-    libc.free(libc.malloc(16 << 20))  # with a sliding threshold: now 16 MiB
+    # More than all the free bytes the arenas keep: no free chunk can serve it, only a
+    # mapping of its own or a grown arena (a block that fits a free chunk is served from
+    # it whatever the threshold; how many there are depends on what ran before).
+    size = libc.mallinfo2().fordblks + (1 << 20)
+    larger = size + (1 << 20)
+    assert larger <= 32 << 20, f"the arenas keep {size >> 20} MiB free"  # glibc's cap
+    libc.free(libc.malloc(larger))  # with a sliding threshold: now above ``size``
     before = libc.mallinfo2()
-    block = libc.malloc(1 << 20)
+    block = libc.malloc(size)
     try:
         during = libc.mallinfo2()
     finally:
         libc.free(block)
     assert during.hblks == before.hblks + 1
-    assert during.hblkhd >= before.hblkhd + (1 << 20)
+    assert during.hblkhd >= before.hblkhd + size
 
 
 def test_the_ik_solvers_of_the_arms_of_earlier_runs_are_let_go():
