@@ -10,8 +10,12 @@ from __future__ import annotations
 
 import ctypes
 import gc
+import json
 import signal
+import subprocess
+import sys
 import weakref
+from pathlib import Path
 
 import pytest
 from typer.testing import CliRunner
@@ -49,32 +53,45 @@ def _run(tmp_path, *args: str):
                                     "--log-dir", str(tmp_path / "run"), *args])
 
 
+#: In a process of its own (a long test process's heap holds free chunks of any size, left
+#: by the tests before; a block that fits one is served from it whatever the threshold):
+#: a run, then a large block freed, then a block larger than every free byte the arenas
+#: keep, so that only a mapping of its own or a grown arena can serve it.
+_LARGE_BLOCK_AFTER_A_RUN = """
+import json, sys, tempfile
+sys.path.insert(0, sys.argv[1])
+from test_run_after_run import _glibc, _run
+from pathlib import Path
+libc = _glibc()
+result = _run(Path(tempfile.mkdtemp()))
+assert result.exit_code == 0, result.output
+size = libc.mallinfo2().fordblks + (1 << 20)
+libc.free(libc.malloc(size + (1 << 20)))  # with a sliding threshold: now above size
+before = libc.mallinfo2()
+block = libc.malloc(size)
+during = libc.mallinfo2()
+libc.free(block)
+print(json.dumps({"size": size, "mapped_blocks": [before.hblks, during.hblks],
+                  "mapped_bytes": [before.hblkhd, during.hblkhd]}))
+"""
+
+
 @pytest.mark.skipif(_glibc() is None, reason="glibc's malloc parameters (this is glibc's "
                                               "behaviour; other C libraries differ)")
-def test_after_a_run_a_large_block_is_mapped_on_its_own_not_kept_in_an_arena(tmp_path):
+def test_after_a_run_a_large_block_is_mapped_on_its_own_not_kept_in_an_arena():
     """glibc raises its mmap threshold to the size of each large block freed, after which
     blocks of that size stay in the arenas when freed (resident, fragmenting them: the
-    soak's growing RSS). A run fixes the threshold, so after a larger block is freed, a
-    block too large for any free chunk the arenas hold is still mapped on its own (and
-    unmapped when freed) instead of growing an arena."""
-    libc = _glibc()
-    result = _run(tmp_path)
-    assert result.exit_code == 0, result.output
-    # More than all the free bytes the arenas keep: no free chunk can serve it, only a
-    # mapping of its own or a grown arena (a block that fits a free chunk is served from
-    # it whatever the threshold; how many there are depends on what ran before).
-    size = libc.mallinfo2().fordblks + (1 << 20)
-    larger = size + (1 << 20)
-    assert larger <= 32 << 20, f"the arenas keep {size >> 20} MiB free"  # glibc's cap
-    libc.free(libc.malloc(larger))  # with a sliding threshold: now above ``size``
-    before = libc.mallinfo2()
-    block = libc.malloc(size)
-    try:
-        during = libc.mallinfo2()
-    finally:
-        libc.free(block)
-    assert during.hblks == before.hblks + 1
-    assert during.hblkhd >= before.hblkhd + size
+    soak's growing RSS). A run fixes the threshold, so after a larger block is freed a
+    large block is still mapped on its own (and unmapped when freed)."""
+    out = subprocess.run([sys.executable, "-c", _LARGE_BLOCK_AFTER_A_RUN,
+                          str(Path(__file__).parent)],
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    got = json.loads(out.stdout.splitlines()[-1])
+    assert got["size"] < 31 << 20  # below glibc's cap on the sliding threshold (32 MiB)
+    before, during = got["mapped_blocks"]
+    assert during == before + 1
+    assert got["mapped_bytes"][1] >= got["mapped_bytes"][0] + got["size"]
 
 
 def test_the_ik_solvers_of_the_arms_of_earlier_runs_are_let_go():
