@@ -18,7 +18,6 @@ from seqrun.arm.description import load_arm
 from seqrun.arm.geometry import Geometry
 from seqrun.cli import app
 from seqrun.clock import LockstepClock
-from seqrun.errors import SequenceInvalid
 from seqrun.sequence.arm_tracks import load_tracks
 from seqrun.sequence.project import open_project
 from seqrun.service.arms_check import campaign_has_arms, check_arms_sequence
