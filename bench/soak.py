@@ -545,17 +545,25 @@ def combine(shards: list[dict]) -> dict:
             latency[kind] = max(latency.get(kind, 0.0), t)
     out["kinds"], out["halt_latency_max_s"] = kinds, latency
     out["wrong"] = [w for s in shards for w in s["wrong"]]
-    out["shards"] = [{"seed": s["seed"], "hours": s["hours"], "runs": s["runs"],
-                      "rss_slope_kb_per_h": s["rss_slope_kb_per_h"],
-                      "rss_slope_after_1h_kb_per_h": slope(s["rss_kb"], after_h=1.0),
-                      "rss_mb_by_hour": rss_by_hour(s["rss_kb"]),
-                      "rss_mb_first_last": [round(s["rss_kb"][0][1] / 1024),
-                                            round(s["rss_kb"][-1][1] / 1024)],
-                      "rss_mb_max": round(max(kb for _, kb in s["rss_kb"]) / 1024),
-                      "open_files": s["open_files"], "threads": s["threads"],
-                      "os_threads": s["os_threads"], "machine": s["machine"],
-                      "load_avg_at_end": s["load_avg_at_end"]} for s in shards]
+    out["shards"] = [memory_figures(s) for s in shards]
     return out
+
+
+def memory_figures(s: dict) -> dict:
+    """One process's memory figures from its result: RSS slopes (all runs, and from the
+    first virtual hour on), RSS after each whole hour, first, last and largest; open files
+    and threads."""
+    points = s["rss_kb"]   # none when the soak was stopped before its first run
+    return {"seed": s["seed"], "hours": s["hours"], "runs": s["runs"],
+            "rss_slope_kb_per_h": s["rss_slope_kb_per_h"],
+            "rss_slope_after_1h_kb_per_h": slope(points, after_h=1.0),
+            "rss_mb_by_hour": rss_by_hour(points),
+            "rss_mb_first_last": ([round(points[0][1] / 1024), round(points[-1][1] / 1024)]
+                                  if points else ["-", "-"]),
+            "rss_mb_max": round(max(kb for _, kb in points) / 1024) if points else None,
+            "open_files": s["open_files"], "threads": s["threads"],
+            "os_threads": s["os_threads"], "machine": s["machine"],
+            "load_avg_at_end": s["load_avg_at_end"]}
 
 
 def print_figures(r: dict) -> None:
@@ -567,16 +575,15 @@ def print_figures(r: dict) -> None:
           f"unseen {r['faults_unseen_late']}; drawn after the run's end "
           f"{r['faults_after_the_end']}")
     print(f"missed halts {r['missed_halts']}, spurious faults {r['spurious_faults']}")
-    for s in r.get("shards", [r]):
-        rss = s.get("rss_mb_first_last") or [round(s["rss_kb"][0][1] / 1024),
-                                             round(s["rss_kb"][-1][1] / 1024)]
+    for s in r.get("shards") or [memory_figures(r)]:
+        rss = s["rss_mb_first_last"]
         slope_kb = s["rss_slope_kb_per_h"]
         settled = s.get("rss_slope_after_1h_kb_per_h")
         print(f"seed {s.get('seed')}: RSS slope "
               f"{'-' if slope_kb is None else round(slope_kb)} KB/h, after the first hour "
               f"{'-' if settled is None else round(settled)} KB/h (RSS {rss[0]} MB after "
               f"the first run, {rss[1]} MB after the last; after each hour "
-              f"{s.get('rss_mb_by_hour', '-')} MB); after the warm-up -> after the "
+              f"{s['rss_mb_by_hour']} MB); after the warm-up -> after the "
               f"last run: open files {s['open_files'][0]} -> {s['open_files'][1]}, Python "
               f"threads {s['threads'][0]} -> {s['threads'][1]}, OS threads "
               f"{s['os_threads'][0]} -> {s['os_threads'][1]}")
