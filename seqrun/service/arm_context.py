@@ -402,9 +402,12 @@ def one_arm_file(project: Project, arm_id: str | None) -> Path | None:
 
 def arms_by_arm_file(project: Project) -> dict[Path, list[str]]:
     """The arm files of a campaign's several arms, each with the ids of the arms that have
-    it ({} for a campaign of one arm)."""
+    it ({} for a campaign of one arm, even one written as a single ``[arms.ID]``)."""
+    ids = campaign_arm_ids(project)
+    if len(ids) < 2:
+        return {}
     by_file: dict[Path, list[str]] = {}
-    for arm_id in campaign_arm_ids(project):
+    for arm_id in ids:
         by_file.setdefault(resolve_context(project=project, arm_id=arm_id).arm_path,
                            []).append(arm_id)
     return by_file
