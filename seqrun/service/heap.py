@@ -64,8 +64,9 @@ def keep_large_blocks_out_of_arenas() -> None:
 
 
 def return_freed_memory() -> None:
-    """Give the main heap's free pages back to the system (glibc's ``malloc_trim``; nothing
-    elsewhere). Freed memory otherwise stays with the process in fragments: a process
+    """Give malloc's free pages back to the system (glibc's ``malloc_trim``: whole free
+    pages inside every arena, and the main heap's top; nothing on another C library).
+    Freed memory otherwise stays with the process in fragments: a process
     that runs one sequence after another (the console, a soak) would keep the resident
     set of its largest run so far plus its fragments instead of one run's."""
     libc = _glibc()
