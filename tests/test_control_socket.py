@@ -102,3 +102,12 @@ def test_an_owner_that_does_not_answer_in_time_is_an_error_not_a_hang(rundir, tm
         assert not reply["ok"] and reply["error"].startswith("no answer from pid")
     with pytest.raises(OSError):
         send_request(tmp_path / "nobody.sock", {"op": "status"})
+
+
+def test_released_with_the_claim_the_accept_thread_has_ended(rundir):
+    # A run's control thread must not outlive the run that served it (a console or a soak
+    # runs run after run in one process).
+    with claim_bus("socketcan", "can0", "seqrun run a.yaml") as claim:
+        serve_control(claim, Owner())
+        assert any(t.name == "seqrun-control" for t in threading.enumerate())
+    assert [t.name for t in threading.enumerate() if t.name == "seqrun-control"] == []

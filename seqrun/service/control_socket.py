@@ -143,11 +143,19 @@ class ControlServer:
         if self._closed.is_set():
             return
         self._closed.set()
+        try:
+            # wakes the accept loop now (Linux): close() alone leaves it blocked until
+            # its timeout, a thread outliving the run that served it
+            self._sock.shutdown(socket.SHUT_RDWR)
+        except OSError:
+            pass
         self._sock.close()
         try:
             self.path.unlink()
         except OSError:
             pass
+        if self._thread is not threading.current_thread():
+            self._thread.join(timeout=1.0)
 
 
 def _jsonable(value: Any) -> Any:
