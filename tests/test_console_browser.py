@@ -509,10 +509,15 @@ def test_the_3d_view_draws_the_tools_where_the_validator_checks_them(browser, tm
             page.wait_for_function("window.seqrunConsole && window.seqrunConsole.ready "
                                    "&& window.seqrunConsole.statusCount > 1", timeout=20000)
             q = [20, -30, 0, 45, -10, 60, 15]
-            page.evaluate(f"window.seqrunConsole.view.solid.set({q})")
-            tools = page.evaluate("""window.seqrunConsole.view.solid.tools.map((t) => ({
-                a: t.ends[0].position.toArray(), b: t.ends[1].position.toArray(),
-                r: t.mesh.geometry.parameters.radiusTop}))""")
+            # Set and read in one task: a status arriving in between would redraw the
+            # arm where it really is (seen on a loaded host).
+            tools = page.evaluate(f"""(() => {{
+                const solid = window.seqrunConsole.view.solid;
+                solid.set({q});
+                return solid.tools.map((t) => ({{
+                    a: t.ends[0].position.toArray(), b: t.ends[1].position.toArray(),
+                    r: t.mesh.geometry.parameters.radiusTop}}));
+            }})()""")
             context.close()
     finally:
         setup.close()
