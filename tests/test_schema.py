@@ -387,15 +387,16 @@ def test_unusable_top_files_are_user_input_errors(project):
         load_sequence("/dev/null")
 
 
-def test_the_docs_and_the_readme_agree_on_where_includes_may_reach():
-    """Issue 23 (item 8): the README said anywhere in the campaign, the reference said
-    inside the sequences folder. Both now say both rules, as the loader applies them."""
+def test_the_docs_and_the_campaign_guide_agree_on_where_includes_may_reach():
+    """Issue 23 (item 8): the README (now docs/campaigns.md) said anywhere in the campaign,
+    the reference said inside the sequences folder. Both now say both rules, as the loader
+    applies them."""
     import re
 
     def flat(text: str) -> str:
         return re.sub(r"\s+", " ", text.replace("`", ""))
 
-    readme = flat((ROOT / "README.md").read_text(encoding="utf-8"))
+    readme = flat((ROOT / "docs" / "campaigns.md").read_text(encoding="utf-8"))
     reference = flat((ROOT / "docs" / "sequence-format.md").read_text(encoding="utf-8"))
     for text in (readme, reference):
         assert "may be anywhere inside the campaign folder" in text
