@@ -545,11 +545,7 @@ class PowerCubeClient:
         self.stats.frames_sent += 1
         if can_id == BROADCAST_ID and data[:1] == b"\x07" and self._watchdog_period:
             self._watchdog_due = msg.timestamp + self._watchdog_period
-        for listener in self._listeners:  # self._notify(msg), without the call
-            try:
-                listener(msg)
-            except Exception:  # a broken trace writer must not break the bus exchange
-                logger.exception("frame listener %r failed", listener)
+        self._notify(msg)
 
     def _service_watchdog(self, now: float) -> bool:
         if self._watchdog_due is None or now < self._watchdog_due:
@@ -586,26 +582,10 @@ class PowerCubeClient:
                 self._service_watchdog(now)
                 continue
             else:
-                wake = until if until < due else due  # noqa: PLR1730 (min(), no call)
-            # self._recv(wake), without its call (once per acknowledge): the clock still
-            # reads ``now``
-            timeout = wake - now
-            msg = self._bus_recv(timeout if timeout > 0.0 else 0.0)
+                wake = min(until, due)
+            msg = self._recv(wake)
             if msg is None:
-                # A bus that does not know our virtual clock returns without advancing it.
-                clock = self.clock
-                if clock.is_virtual and clock.now() < wake:
-                    clock.sleep_until(wake)
                 continue
-            # self._decode(msg) for an acknowledge's frame, without the call
-            can_id = msg.arbitration_id
-            if (ACK_BASE <= can_id < ACK_BASE + 0x20 and not (
-                    msg.is_extended_id or msg.is_remote_frame or msg.is_error_frame)):
-                try:
-                    return msg, decode_ack(can_id, bytes(msg.data))
-                except CodecError as exc:
-                    self._discard(msg, f"{DiscardReason.MALFORMED}: {exc}")
-                    continue
             ack = self._decode(msg)
             if ack is not None:
                 return msg, ack
@@ -624,11 +604,7 @@ class PowerCubeClient:
             msg.is_rx = True
             msg.timestamp = now
             self.stats.frames_received += 1
-            for listener in self._listeners:  # self._notify(msg), without the call
-                try:
-                    listener(msg)
-                except Exception:  # a broken trace writer must not break the bus exchange
-                    logger.exception("frame listener %r failed", listener)
+            self._notify(msg)
         return msg
 
     def _recv(self, wake: float) -> can.Message | None:

@@ -570,8 +570,7 @@ class SimModule:
             if event is None:
                 self._t = t
                 return
-            if event_time > self._t:  # noqa: PLR1730 (as max(), without the call)
-                self._t = event_time
+            self._t = max(self._t, event_time)
             if event is _SOFT_LIMIT:
                 self._soft_limit_reached(limit)
             elif event is _PROFILE_END:
@@ -595,7 +594,7 @@ class SimModule:
             if end <= horizon and (best is None or end < best_time):
                 best_time, best = end, _PROFILE_END
             if self._stuck_at is None:
-                until = horizon if horizon <= end else end  # noqa: FURB136 (min(), no call)
+                until = min(horizon, end)
                 exit_ = self._limit_exit(profile, until)
                 if exit_ is not None:
                     at, limit = exit_

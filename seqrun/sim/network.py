@@ -317,32 +317,11 @@ class SimNetwork:
         last = None
         flight = self._in_flight
         delivered = False
-        active = self._active
         while True:
             if flight is None:
-                if len(active) == 1:
-                    # self._start_next(horizon, True) with one node ready, without the call
-                    # (the usual case: the host's request, then the module's answer)
-                    node = active[0]
-                    queue = node.queue
-                    pending = queue[0]
-                    start = pending.ready_at
-                    if start < self._bus_free_at:  # noqa: PLR1730
-                        start = self._bus_free_at
-                    if start > horizon:
-                        break
-                    queue.popleft()
-                    if not queue:
-                        active.clear()
-                    flight = self._in_flight = _new_tuple(
-                        _InFlight, (node, pending, start, start + pending.to_delivery))
-                    self._bus_free_at = start + pending.occupancy
-                    self.frames_transmitted += 1
-                    self.busy_time += pending.occupancy
-                else:
-                    flight = self._start_next(horizon, True)
-                    if flight is None:
-                        break
+                flight = self._start_next(horizon, True)
+                if flight is None:
+                    break
                 last = flight.start
             if flight.end > horizon:
                 break
@@ -367,13 +346,9 @@ class SimNetwork:
         if len(active) == 1:
             node = active[0]
             pending = node.queue[0]
-            start = pending.ready_at
-            if start < self._bus_free_at:  # noqa: PLR1730 (no max() call on this path)
-                start = self._bus_free_at
+            start = max(pending.ready_at, self._bus_free_at)
         else:
-            start = min([n.queue[0].ready_at for n in active])
-            if start < self._bus_free_at:  # noqa: PLR1730
-                start = self._bus_free_at
+            start = max(min([n.queue[0].ready_at for n in active]), self._bus_free_at)
             pending = None
             for n in active:
                 head = n.queue[0]
@@ -400,7 +375,7 @@ class SimNetwork:
         if not active:
             return None
         ready = min([node.queue[0].ready_at for node in active])
-        return ready if ready > self._bus_free_at else self._bus_free_at  # noqa: FURB136
+        return max(ready, self._bus_free_at)
 
     def _deliver(self, flight: _InFlight) -> None:
         sender, pending, _, end = flight
@@ -422,14 +397,7 @@ class SimNetwork:
                 self._module_nodes[module] = node
                 self._nodes.append(node)
             ack = _new_tuple(WireFrame, (ack_id, ack_data, False, False, None, 0.0, node.name))
-            # self._queue(node, ack, ready_at) for a module's standard data frame
-            durations = self._durations.get(ack[:5]) or self.frame_durations(ack)
-            queue = node.queue
-            if not queue:
-                self._active.append(node)
-            queue.append(_new_tuple(_Pending, (ack, ready_at,
-                                               ack_id << 21 << _SEQ_BITS | next(self._seq),
-                                               *durations)))
+            self._queue(node, ack, ready_at)
 
     def _queue(self, node: _Node, frame: WireFrame, ready_at: float,
                durations: tuple[float, float] | None = None) -> None:
@@ -438,10 +406,7 @@ class SimNetwork:
         queue = node.queue
         if not queue:
             self._active.append(node)
-        # (_arbitration_key of a standard data frame, every module's and nearly every
-        # host's, without the call)
-        key = ((frame.can_id << 21 if not (frame.is_extended or frame.is_remote)
-                else _arbitration_key(frame)) << _SEQ_BITS | next(self._seq))
+        key = _arbitration_key(frame) << _SEQ_BITS | next(self._seq)
         queue.append(_new_tuple(_Pending, (frame, ready_at, key, *durations)))
 
     def _notify_all(self) -> None:
@@ -487,18 +452,12 @@ class SimNetwork:
             time.sleep(0)
 
     def _send(self, endpoint: Endpoint, frame: WireFrame, timeout: float | None) -> None:
-        # ValueError for a frame CAN cannot carry (frame_durations, unless known)
-        durations = self._durations.get(frame[:5]) or self.frame_durations(frame)
+        durations = self.frame_durations(frame)  # ValueError for a frame CAN cannot carry
         with self._lock:
             if endpoint.closed:
                 raise NetworkClosedError(f"{endpoint.name} is closed")
             now = self.clock.now()
-            # self._advance(now, start_at_horizon=False), without the call when it would
-            # return at once (a frame on the wire ends later, or none can start by now)
-            flight = self._in_flight
-            if (flight.end <= now if flight is not None
-                    else self._active and self._bus_free_at <= now):
-                self._advance(now, start_at_horizon=False)
+            self._advance(now, start_at_horizon=False)
             node = endpoint._node
             if len(node.queue) >= endpoint.tx_queue_size:
                 deadline = None if timeout is None else now + timeout
@@ -518,8 +477,7 @@ class SimNetwork:
                 frame = WireFrame(frame.can_id, bytes(frame.data), frame.is_extended,
                                   frame.is_remote, frame.dlc, 0.0, endpoint.name)
             self._queue(node, frame, now, durations)
-            if self._cond._waiters:  # type: ignore[attr-defined]  # (_notify_all's test)
-                self._cond.notify_all()
+            self._notify_all()
 
     def _receive(self, endpoint: Endpoint, deadline: float | None) -> WireFrame | None:
         clock = self.clock
@@ -556,11 +514,7 @@ class SimNetwork:
                 if endpoint.closed:
                     raise NetworkClosedError(f"{endpoint.name} is closed")
                 now = clock.now()
-                # self._advance(now), without the call when it would return at once
-                flight = self._in_flight
-                if (flight.end <= now if flight is not None
-                        else self._active and self._bus_free_at <= now):
-                    self._advance(now)
+                self._advance(now)
                 if inbox:
                     return inbox.popleft()
                 if deadline is not None and now >= deadline:

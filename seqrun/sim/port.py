@@ -36,8 +36,6 @@ __all__ = ["SimMessage", "SimPort", "SimSetupError", "get_network"]
 
 #: Builds a WireFrame without the named tuple's Python-level ``__new__`` (once per frame).
 _new_tuple = tuple.__new__
-#: Makes a SimMessage without calling its ``__init__`` (SimPort.recv sets every slot).
-_new_object = object.__new__
 
 #: channel name -> [network, number of open ports on it]
 _channels: dict[str, list[Any]] = {}
@@ -196,10 +194,6 @@ class SimPort:
         self.receive_own_messages = receive_own_messages
         self.endpoint: Endpoint = self.network.attach(receive_own=receive_own_messages,
                                                       tx_queue_size=tx_queue_size)
-        # The network's receive for this clock, called without the endpoint's own layer
-        # (recv runs once per frame).
-        self._receive = (self.network._receive_virtual if self.clock.is_virtual
-                         else self.network._receive)
         self._closed = False
 
     # -- the wire's frames ----------------------------------------------------------------
@@ -242,7 +236,7 @@ class SimPort:
         :raises NetworkClosedError: the port is closed.
         """
         try:
-            self.network._send(self.endpoint, frame, timeout)  # Endpoint.send, one call less
+            self.endpoint.send(frame, timeout)
         except NetworkClosedError:
             raise
         except ValueError as exc:
@@ -254,45 +248,17 @@ class SimPort:
         """The next frame delivered within ``timeout`` seconds of the simulation clock
         (see :mod:`seqrun.sim.bus` for virtual time); None when none is."""
         deadline = None if timeout is None else self.clock.now() + max(timeout, 0.0)
-        frame = self._receive(self.endpoint, deadline)  # Endpoint.receive, one call less
+        frame = self.endpoint.receive(deadline)
         if frame is None:
             return None
         can_id, data, extended, remote, dlc, timestamp, sender = frame
-        # SimMessage(timestamp, can_id, extended, remote, False, self.channel, <dlc>, data,
-        # False, <is_rx>), without the call of its __init__ (once per frame received)
-        msg = _new_object(SimMessage)
-        msg.timestamp = timestamp
-        msg.arbitration_id = can_id
-        msg.is_extended_id = extended
-        msg.is_remote_frame = remote
-        msg.is_error_frame = False
-        msg.channel = self.channel
-        msg.data = bytearray(data)
-        msg.dlc = dlc if remote and dlc is not None else len(data)
-        msg.is_fd = False
-        msg.is_rx = sender != self.endpoint.name
-        msg.bitrate_switch = False
-        msg.error_state_indicator = False
-        return msg
+        return SimMessage(timestamp, can_id, extended, remote, False, self.channel,
+                          dlc if remote else None, data, False, sender != self.endpoint.name)
 
     def send(self, msg: Any, timeout: float | None = None) -> None:
         """Queue ``msg`` for the simulated wire (errors as :meth:`wire_frame` and
         :meth:`send_frame`)."""
-        if msg.is_fd or msg.is_error_frame or msg.is_remote_frame:
-            self.send_frame(self.wire_frame(msg), timeout)
-            return
-        # wire_frame and send_frame for a data frame, without their calls (every request)
-        data = bytes(msg.data or b"")
-        if msg.dlc != len(data):
-            raise ValueError(f"dlc {msg.dlc} does not match {len(data)} data bytes")
-        frame = _new_tuple(WireFrame, (msg.arbitration_id, data, msg.is_extended_id, False,
-                                       None, 0.0, self.endpoint.name))
-        try:
-            self.network._send(self.endpoint, frame, timeout)
-        except NetworkClosedError:
-            raise
-        except ValueError as exc:
-            raise ValueError(f"seqrun-sim: {exc}") from None
+        self.send_frame(self.wire_frame(msg), timeout)
 
     def shutdown(self) -> None:
         """Detach from the wire; the last port of a channel takes the arm with it. Safe to
