@@ -294,6 +294,25 @@ class Checkpoint(Event):
 
 
 @dataclass(frozen=True, kw_only=True)
+class Check(Event):
+    type: ClassVar[str] = "check"
+    when: ClassVar[str] = ("a check step evaluated its condition; ``extra`` holds the values "
+                           "it read and the requirements it verifies")
+    condition: str
+    passed: bool
+
+
+@dataclass(frozen=True, kw_only=True)
+class WaitTimedOut(Event):
+    type: ClassVar[str] = "wait_timed_out"
+    when: ClassVar[str] = ("a wait_until's condition did not hold within its timeout_s "
+                           "(on_timeout: fail ends the run, continue goes on)")
+    condition: str
+    timeout_s: float
+    on_timeout: str
+
+
+@dataclass(frozen=True, kw_only=True)
 class IkSolved(Event):
     type: ClassVar[str] = "ik_solved"
     when: ClassVar[str] = "an end-effector target (move_tool, move_linear) was solved from the measured joints"

@@ -172,8 +172,57 @@ A straight approach along the tool, checked sample by sample, is
   - checkpoint: {moved_mm: [0, 0, -100]}                       # 100 mm down, base frame
 ```
 
+## Expressions
+
+`wait_until: {until: ...}` and `check: ...` take an expression over the run's telemetry,
+read every time it is evaluated (one monitoring cycle: faults, guards and the watchdog are
+checked as in any wait). It is a small language, checked when the file is read, never
+handed to Python's `eval`: numbers, `true`/`false`, the names below, `+ - * /`,
+comparisons (chained: `-5 < pos_deg[1] < 5`), `and`/`or`/`not`, `abs`, `min`, `max`. A
+per-joint series takes the joint's number, counted from 1 as the arm file names them
+(`pos_deg[2]` is j2). Units come from the names (`_deg`, `_mm`, `_deg_s`, `_s`): comparing
+or adding degrees with millimetres is refused at its file:line:col; a plain number takes
+the unit of what it meets.
+
+{names}
+
+```yaml
+  - wait_until: {until: "gripper.holding and not moving", timeout_s: 5, persist_s: 0.5}
+  - wait_until: {until: "abs(vel_deg_s[1]) < 0.1", timeout_s: 3, on_timeout: continue}
+  - check: {that: "tool.z_mm > 40", verifies: [REQ-CAP-012]}
+```
+
 ## Steps
 """
+
+
+def _expression_names() -> str:
+    """The table of the names an expression reads."""
+    from seqrun.steps.expressions import JOINT_SERIES, NAMES
+
+    meaning = {
+        "pos_deg": "measured position of joint J, user degrees",
+        "vel_deg_s": "measured velocity of joint J (slope of the last two readings)",
+        "following_error_deg": "commanded minus measured position of joint J (no value "
+                               "before the first move or after a Halt)",
+        "target_deg": "what joint J was last commanded",
+        "tool.x_mm": "the end-effector's position (forward kinematics of the measured "
+                     "joints), base frame", "tool.y_mm": "", "tool.z_mm": "",
+        "tool.roll_deg": "the end-effector's roll, pitch, yaw (docs: Tools and frames)",
+        "tool.pitch_deg": "", "tool.yaw_deg": "",
+        "gripper.width_mm": "the gripper's opening (arm file's `gripper`)",
+        "gripper.holding": "the jaws at rest at their current limit: a part is held",
+        "gripper.moving": "the jaws move",
+        "step_time_s": "seconds since the step began",
+        "sequence_time_s": "seconds since the run began",
+        "moving": "any joint reports motion",
+    }
+    rows = ["| name | type | meaning |", "|---|---|---|"]
+    rows += [f"| `{name}[J]` | number, {unit} | {meaning[name]} |"
+             for name, unit in JOINT_SERIES.items()]
+    rows += [f"| `{name}` | {'true/false' if kind == 'bool' else f'number, {unit}'} | "
+             f"{meaning[name] or '(as above)'} |" for name, (kind, unit) in NAMES.items()]
+    return "\n".join(rows)
 
 
 def _type_text(prop: dict, defs: dict) -> str:
@@ -231,7 +280,8 @@ def reference_markdown() -> str:
                          f"{prop.get('description', '')} |")
         return "\n".join(lines)
 
-    parts = [_REFERENCE_INTRO.replace("{top}", rows(schema))]
+    parts = [_REFERENCE_INTRO.replace("{top}", rows(schema))
+             .replace("{names}", _expression_names())]
     for kind, model in PARAMS_MODELS.items():
         step = defs[STEP_MODELS[kind].__name__]["properties"][kind]
         parts.append(f"### `{kind}`\n\n{doc(model)}\n")

@@ -29,6 +29,7 @@ class JointReading(Protocol):
 
     t: float
     user_deg: np.ndarray  # every joint, user degrees, arm order
+    short_state: Mapping[int, Any]  # per module id: the state sent with the reading
 
 
 class ArmEvents(Protocol):
@@ -102,6 +103,8 @@ class StepContext(Protocol):
                start: JointReading | None = None) -> dict[str, Any]: ...
 
     def wait(self, seconds: float) -> None: ...
+
+    def elapsed_s(self) -> float: ...
 
     def wait_in_position(self, tolerance_deg: float, timeout_s: float) -> float: ...
 

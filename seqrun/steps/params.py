@@ -39,6 +39,7 @@ __all__ = [
     "doc",
     "either",
     "exactly_one",
+    "ExpressionText",
     "modules_value",
     "one_key_value",
 ]
@@ -103,6 +104,23 @@ if TYPE_CHECKING:
     AllOrJoints = Union[AllWord, JointsList]  # noqa: UP007
 else:
     AllOrJoints = either(_joints_pick, **{"joints:all": AllWord, "joints:list": JointsList})
+
+
+def _expression(value: str) -> str:
+    from seqrun.steps.expressions import ExpressionError, parse
+
+    try:
+        parse(value)
+    except ExpressionError as exc:
+        raise PydanticCustomError(
+            "expression", "{message} (at column {column} of '{text}')",
+            {"message": exc.message, "column": exc.column, "text": value.strip()}) from None
+    return value.strip()
+
+
+ExpressionText = Annotated[str, AfterValidator(_expression), Field(
+    min_length=1, description="An expression over the run's telemetry (docs/sequence-format.md, "
+                              "'Expressions'), e.g. 'tool.z_mm > 40 and not moving'.")]
 
 
 # --------------------------------------------------------------------------- models

@@ -13,9 +13,9 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from seqrun.steps import (check_gripper, checkpoint, confirm, grip, halt, home, move,
+from seqrun.steps import (check, check_gripper, checkpoint, confirm, grip, halt, home, move,
                           move_linear, move_velocity, power_off, release, reset, set_limits,
-                          signal, wait, wait_for)
+                          signal, wait, wait_for, wait_until)
 from seqrun.steps.kind import StepKind
 
 __all__ = ["HANDLERS", "KINDS", "Handler", "StepKind", "step_kind"]
@@ -29,7 +29,9 @@ KINDS: tuple[StepKind, ...] = (
     move_linear.KIND,
     move_velocity.KIND,
     wait.KIND,
+    wait_until.KIND,
     checkpoint.KIND,
+    check.KIND,
     grip.KIND,
     release.KIND,
     check_gripper.KIND,

@@ -1,0 +1,31 @@
+"""The static checks every expression of a step gets against the arm file."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from seqrun.steps.check_context import CheckContext
+    from seqrun.steps.resolved import ResolvedStep
+
+__all__ = ["check_expression"]
+
+
+def check_expression(checker: CheckContext, step: ResolvedStep[Any], text: str, key: str, *,
+                     condition: bool) -> None:
+    """The expression under ``key`` against the arm: its joint numbers, the gripper it
+    reads, and (``condition``) that it is a truth value; each problem at the key."""
+    from seqrun.steps.expressions import ExpressionError, parse
+
+    try:
+        expression = parse(text, joints=len(checker.arm.joints))
+    except ExpressionError as exc:
+        checker.errors.append(step.error(f"{exc.message} (at column {exc.column} of "
+                                         f"'{text}')", key))
+        return
+    if condition and not expression.is_condition:
+        checker.errors.append(step.error(
+            f"'{text}' is a number, not a condition: compare it (e.g. '{text} < 1')", key))
+    if any(n.startswith("gripper.") for n in expression.names) and checker.arm.gripper is None:
+        checker.errors.append(step.error(f"'{text}' reads the gripper, and the arm file has "
+                                         "none", key))
