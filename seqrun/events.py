@@ -313,6 +313,19 @@ class WaitTimedOut(Event):
 
 
 @dataclass(frozen=True, kw_only=True)
+class MonitorTripped(Event):
+    type: ClassVar[str] = "monitor_tripped"
+    when: ClassVar[str] = ("a step's monitor did not hold for persist_cycles readings in a "
+                           "row (action halt: the fault follows; warn: once until it holds "
+                           "again)")
+    condition: str
+    action: str
+    cycles: int
+    values: Mapping[str, Any]
+    message: str | None = _optional()
+
+
+@dataclass(frozen=True, kw_only=True)
 class IkSolved(Event):
     type: ClassVar[str] = "ik_solved"
     when: ClassVar[str] = "an end-effector target (move_tool, move_linear) was solved from the measured joints"

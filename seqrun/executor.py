@@ -49,6 +49,7 @@ from seqrun.events import EventHub, make_event
 from seqrun.execution import ending
 from seqrun.execution.checks import ReadingChecks
 from seqrun.execution.latched import LatchedFaults
+from seqrun.execution.monitors import Monitors
 from seqrun.execution.preflight import Findings, SequenceCheck, preflight
 from seqrun.execution.run import Measurement, rounded
 from seqrun.execution.stops import StopControl
@@ -144,8 +145,12 @@ class Executor:
         self._t0 = clock.now()
         self.last: Measurement | None = None
         self.commanded_deg: np.ndarray | None = None
+        #: The plan's position at this cycle while a plan streams (None: none streams).
+        self.setpoint_deg: np.ndarray | None = None
         #: The checks of every reading (guard heights and clearances kept for the report).
         self.checks = ReadingChecks(arm, self.chain, self.read_state_word)
+        #: The running step's monitors, held against every reading.
+        self.monitors = Monitors(arm, self.emit)
         self.not_verified: list[str] = []
         #: Lost answers the driver retried (``retry`` events): time spent on the bus.
         self.bus_retries = 0
@@ -294,6 +299,9 @@ class Executor:
         m = Measurement(self.clock.now(), reading.positions_deg, reading.states,
                         answered_at=getattr(reading, "answered_at", None))
         self.last = m
+        if self.monitors.active:
+            setpoint = self.setpoint_deg if self.setpoint_deg is not None else self.commanded_deg
+            self.monitors.observe(m, setpoint, self.elapsed_s())
         return m
 
     def read_state_word(self, module: int) -> JointState:
@@ -511,7 +519,11 @@ class Executor:
             self.current_step = result
             try:
                 self._start_step(step, result)
-                detail = HANDLERS[step.kind](step, self) or {}
+                try:
+                    detail = HANDLERS[step.kind](step, self) or {}
+                finally:
+                    self.monitors.stop()  # (the fault path reads the arm unwatched)
+                    self.setpoint_deg = None
                 self._step_passed(result, detail)
             except OperatorAbort as exc:
                 status, code, message, fault = ending.step_aborted(self, step, result, exc)
@@ -552,6 +564,7 @@ class Executor:
                   **({"include": list(step.include_labels)}
                      if getattr(step, "include_labels", ()) else {}))
         self.streaming.tracking = None
+        self.monitors.start_step(getattr(step.params, "monitors", ()), self.clock.now())
 
     def _step_passed(self, result: StepResult, detail: dict) -> None:
         result.detail.update({k: v for k, v in detail.items() if k != "planned_duration_s"})

@@ -48,6 +48,7 @@ from pydantic import (
     Field,
     Tag,
     TypeAdapter,
+    model_validator,
 )
 from pydantic_core import PydanticCustomError
 
@@ -146,6 +147,13 @@ class IncludeParams(StepParams):
     @classmethod
     def from_shorthand(cls, value: Any) -> StepParams:
         return value if isinstance(value, cls) else cls(file=value)
+
+    @model_validator(mode="after")
+    def _no_monitors(self) -> IncludeParams:
+        if self.monitors:
+            raise PydanticCustomError("include_monitors", "an include runs other steps: put "
+                                                          "the monitors on those steps")
+        return self
 
 
 #: Parameter model of each step type, in the order the docs list them: the step kinds

@@ -819,7 +819,10 @@ class FriendlyModel(BaseModel):
 
     @classmethod
     def unknown_key_message(cls, key: str) -> str:
-        allowed = sorted(cls.model_fields, key=lambda name: name == "label")  # label last
+        # the keys as written in a file (a field's alias where it has one: 'while')
+        last = ("monitors", "label")  # the keys every step has, after the step's own
+        allowed = sorted((field.alias or name for name, field in cls.model_fields.items()),
+                         key=lambda name: last.index(name) + 1 if name in last else 0)
         where = f" in {cls.yaml_name}" if cls.yaml_name else ""
         close = difflib.get_close_matches(key, allowed, n=1, cutoff=0.6)
         hint = f"did you mean '{close[0]}'? " if close else ""

@@ -192,3 +192,61 @@ def test_a_following_error_before_any_move_has_no_value_and_says_so(tmp_path, pr
     result = sim.outcome.result
     assert result.exit_code == 3
     assert "following_error_deg[1] has no value now" in result.message
+
+
+# --------------------------------------------------------------------------- monitors
+MOVE_UP = "- move: {pose: totem, monitors: [%s]}\n"
+
+
+def test_a_monitor_that_holds_lets_the_step_run(tmp_path, project):
+    write_sequence(project, UP + MOVE_UP % '{while: "abs(following_error_deg[4]) < 5"}',
+                   "m.yaml")
+    sim = run_on_sim("m", tmp_path, root=project)
+    assert sim.outcome.result.exit_code == 0, sim.outcome.result.message
+
+
+def test_a_halt_monitor_trips_before_the_runs_own_tracking_check(tmp_path, project):
+    """A stuck j4 (no fault bit: the module just stops following) is caught by the run's
+    own following-error check; a monitor with a tighter bound halts the arm earlier."""
+    write_sequence(project, UP + "- move: totem\n", "plain.yaml")
+    write_sequence(project, UP + MOVE_UP % (
+        '{while: "abs(following_error_deg[4]) < 1.0", persist_cycles: 2, '
+        'message: j4 lags its plan}'), "watched.yaml")
+    plain = run_on_sim("plain", tmp_path / "a", root=project, faults=["4:stuck@0.5"])
+    watched = run_on_sim("watched", tmp_path / "b", root=project, faults=["4:stuck@0.5"])
+    assert plain.outcome.result.exit_code == 3
+    result = watched.outcome.result
+    assert result.exit_code == 3 and result.fault["halt_confirmed"] is True
+    assert result.message.startswith("monitor 'abs(following_error_deg[4]) < 1.0' "
+                                     "(j4 lags its plan) did not hold: following_error_deg[4] = ")
+    assert result.fault["cause"] == "monitor"
+    assert plain.outcome.result.fault["cause"] == "following_error"
+    # the move's step ended (in the Halt) earlier with the monitor than without it
+    assert result.steps[3].finished < plain.outcome.result.steps[3].finished - 0.1
+
+
+def test_a_warn_monitor_warns_once_per_episode_and_the_run_goes_on(tmp_path, project):
+    write_sequence(project, UP + MOVE_UP % '{while: "tool.z_mm < 500", action: warn}',
+                   "w.yaml")
+    sim = run_on_sim("w", tmp_path, root=project)
+    assert sim.outcome.result.exit_code == 0, sim.outcome.result.message
+    from runfolder import RunFolder
+
+    tripped = [e for e in RunFolder(sim.outcome.log_dir).events()
+               if e["type"] == "monitor_tripped"]
+    assert len(tripped) == 1 and tripped[0]["action"] == "warn"
+    assert tripped[0]["values"]["tool.z_mm"] >= 500
+
+
+def test_a_monitor_on_the_gripper_is_refused_at_its_line(project):
+    path = write_sequence(project, UP + '- wait: {seconds: 1, monitors: [{while: "gripper.holding"}]}\n')
+    errors = [str(e) for e in validate_sequence(load_sequence(path), ARM).errors]
+    assert any("s.yaml:7:" in e and "the gripper is not read every cycle" in e
+               for e in errors), errors
+
+
+def test_a_monitor_with_a_wrong_key_names_the_keys_as_written(project):
+    path = write_sequence(project, UP + '- wait: {seconds: 1, monitors: [{whille: "moving"}]}\n')
+    with pytest.raises(SequenceInvalid, match=r"unknown key 'whille' in monitor \(did you mean "
+                                              r"'while'\? allowed: while, persist_cycles"):
+        load_sequence(path)

@@ -71,6 +71,8 @@ class Run(Protocol):
     # -- its state
     last: Measurement | None
     commanded_deg: np.ndarray | None
+    #: The plan's position at this cycle while a plan streams (None: none streams).
+    setpoint_deg: np.ndarray | None
     motion_start_deg: np.ndarray | None
     current_step: StepResult | None
     halt_result: HaltConfirmation | None

@@ -222,6 +222,9 @@ class Streaming:
                 last_t = None  # (a pause is no stall)
                 continue
             retries = run.bus_retries
+            planned_rad, planned_vel, _ = plan.at(t)
+            planned_deg = np.degrees(planned_rad)
+            run.setpoint_deg = planned_deg  # (what a monitor's following error is against)
             m = self.cycle(plan, t, moving, measured)
             waited = run.bus_retries != retries
             measured = m.user_deg
@@ -229,8 +232,6 @@ class Streaming:
             run.check_guards(m)
             if self.path_check is not None:
                 self.path_check(m)
-            planned_rad, planned_vel, _ = plan.at(t)
-            planned_deg = np.degrees(planned_rad)
             error = np.abs(planned_deg - measured)
             worst = int(error.argmax())  # (np.argmax's Python-level dispatch, once a cycle)
             if error[worst] > bound and t <= plan.duration + run.arm.control.settle_timeout_s:

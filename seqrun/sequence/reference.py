@@ -186,7 +186,19 @@ the unit of what it meets.
 
 {names}
 
+Every step takes `monitors:`, invariants held against every reading of the arm while the
+step runs (each control cycle of a move, each cycle of a wait): `{while: EXPR,
+persist_cycles: N, action: halt | warn, message: ...}`. One that has not held for N
+readings in a row trips: `halt` halts the arm at once and ends the run as a fault (exit 3)
+naming the monitor and the values it read; `warn` gives a `monitor_tripped` event (once,
+until it holds again) and the run goes on. The gripper is not read every cycle, so a
+monitor cannot watch it (a `wait_until` or `check` can). A monitor with a bound tighter
+than the arm file's `control.max_following_error_deg` halts a lagging joint sooner than
+the run's own check.
+
 ```yaml
+  - move: {pose: opsafe, monitors: [{while: "abs(following_error_deg[4]) < 1.0", persist_cycles: 2}]}
+  - move: {pose: capture, monitors: [{while: "tool.z_mm > 40", message: above the target}]}
   - wait_until: {until: "gripper.holding and not moving", timeout_s: 5, persist_s: 0.5}
   - wait_until: {until: "abs(vel_deg_s[1]) < 0.1", timeout_s: 3, on_timeout: continue}
   - check: {that: "tool.z_mm > 40", verifies: [REQ-CAP-012]}

@@ -41,6 +41,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from seqrun.steps._expression_checks import check_monitors
 from seqrun.arm.description import ArmDescription
 from seqrun.errors import PlanningError, SourceError
 from seqrun.formatting import format_number as _f
@@ -503,6 +504,7 @@ class Checker:
             if kind.motion:
                 self.motion_start_deg = self.tracked()
             kind.check(self, step, step.params)
+            check_monitors(self, step, step.params.monitors)
             # a step's findings in the order they appear in its text, then those in other
             # files (the pose file it names)
             here = step.location.file

@@ -8,7 +8,7 @@ if TYPE_CHECKING:
     from seqrun.steps.check_context import CheckContext
     from seqrun.steps.resolved import ResolvedStep
 
-__all__ = ["check_expression"]
+__all__ = ["check_expression", "check_monitors"]
 
 
 def check_expression(checker: CheckContext, step: ResolvedStep[Any], text: str, key: str, *,
@@ -29,3 +29,16 @@ def check_expression(checker: CheckContext, step: ResolvedStep[Any], text: str, 
     if any(n.startswith("gripper.") for n in expression.names) and checker.arm.gripper is None:
         checker.errors.append(step.error(f"'{text}' reads the gripper, and the arm file has "
                                          "none", key))
+
+
+def check_monitors(checker: CheckContext, step: ResolvedStep[Any], monitors: Any) -> None:
+    """A step's monitors: each a condition the arm can be read for every cycle (the
+    gripper is not read in the control loop, so a monitor cannot watch it)."""
+    for i, monitor in enumerate(monitors):
+        text = monitor.while_
+        errors = len(checker.errors)
+        check_expression(checker, step, text, "monitors", condition=True)
+        if len(checker.errors) == errors and "gripper." in text:
+            checker.errors.append(step.error(
+                f"monitor '{text}': the gripper is not read every cycle; watch it with a "
+                "wait_until or check step", "monitors", i, "while"))

@@ -18,7 +18,7 @@ if TYPE_CHECKING:
     from seqrun.steps.context import JointReading, StepContext
     from seqrun.steps.expressions import Expression
 
-__all__ = ["TelemetrySampler"]
+__all__ = ["TelemetrySampler", "reading_values", "values_read"]
 
 
 class TelemetrySampler:
@@ -46,42 +46,14 @@ class TelemetrySampler:
         reading = ex.monitor()
         if self.started_at is None:
             self.started_at = reading.t
-        values: dict[str, Any] = {
-            "pos_deg": [float(x) for x in reading.user_deg],
-            "step_time_s": reading.t - self.started_at,
-            "sequence_time_s": ex.elapsed_s(),
-            "moving": any(getattr(s, "moving", False) for s in reading.short_state.values()),
-        }
-        commanded = ex.commanded_deg
-        if commanded is not None:
-            values["target_deg"] = [float(x) for x in commanded]
-            values["following_error_deg"] = [float(c - m) for c, m
-                                             in zip(commanded, reading.user_deg, strict=True)]
-        else:  # after a Halt nothing is commanded: an expression reading these says so
-            values["target_deg"] = values["following_error_deg"] = [None] * len(reading.user_deg)
-        last = self._last
-        if last is not None and reading.t > last.t:
-            values["vel_deg_s"] = [float(v) for v in
-                                   (reading.user_deg - last.user_deg) / (reading.t - last.t)]
-        elif "vel_deg_s" in self.names:
-            values["vel_deg_s"] = [None] * len(reading.user_deg)
+        values = reading_values(ex.arm, reading, self._last, ex.commanded_deg, self.names,
+                                step_time_s=reading.t - self.started_at,
+                                sequence_time_s=ex.elapsed_s())
         self._last = reading
-        if any(n.startswith("tool.") for n in self.names):
-            values.update(self._tool(reading))
         if any(n.startswith("gripper.") for n in self.names):
             values.update(self._gripper())
         values.update({f"params.{k}": v for k, v in self.params.items()})
         return values
-
-    def _tool(self, reading: JointReading) -> dict[str, float]:
-        from seqrun.arm import kinematics
-        from seqrun.arm.cartesian import solver_for, tool_pose
-
-        T = tool_pose(solver_for(self.ex.arm, None), reading.user_deg)
-        rpy = np.degrees(kinematics.rpy_from_matrix(T[:3, :3]))
-        return {"tool.x_mm": float(T[0, 3]), "tool.y_mm": float(T[1, 3]),
-                "tool.z_mm": float(T[2, 3]), "tool.roll_deg": float(rpy[0]),
-                "tool.pitch_deg": float(rpy[1]), "tool.yaw_deg": float(rpy[2])}
 
     def _gripper(self) -> dict[str, Any]:
         from seqrun.errors import RunAborted
@@ -95,3 +67,70 @@ class TelemetrySampler:
                 "gripper.moving": reading.moving,
                 "gripper.holding": bool(reading.at_current_limit
                                         and abs(reading.velocity_mm_s) < REST_MM_S)}
+
+
+def reading_values(arm: Any, reading: JointReading, last: JointReading | None,
+                   commanded: Any, names: set[str] | frozenset[str], *,
+                   step_time_s: float, sequence_time_s: float) -> dict[str, Any]:
+    """The values of ``names`` (the gripper aside) at one reading: ``last`` is the reading
+    before (velocities; None: none yet), ``commanded`` what the joints are to be at now
+    (None: nothing, or a Halt since). Only what ``names`` reads is computed: a monitor
+    runs this every control cycle."""
+    values: dict[str, Any] = {"step_time_s": step_time_s, "sequence_time_s": sequence_time_s}
+    measured = reading.user_deg
+    n = len(measured)
+    if "pos_deg" in names:
+        values["pos_deg"] = measured.tolist()
+    if "moving" in names:
+        values["moving"] = any(getattr(s, "moving", False)
+                               for s in reading.short_state.values())
+    if "target_deg" in names:
+        values["target_deg"] = [None] * n if commanded is None else list(commanded)
+    if "following_error_deg" in names:
+        # nothing commanded: an expression reading it says it has no value
+        values["following_error_deg"] = ([None] * n if commanded is None
+                                         else (commanded - measured).tolist())
+    if "vel_deg_s" in names:
+        # between when the joints answered (a late-read answer is not a fast joint)
+        t, t_last = _answered(reading), None if last is None else _answered(last)
+        values["vel_deg_s"] = ((measured - last.user_deg) / (t - t_last)).tolist() \
+            if last is not None and t_last is not None and t > t_last else [None] * n
+    if any(name.startswith("tool.") for name in names):
+        values.update(_tool(arm, reading, names))
+    return values
+
+
+def _answered(reading: JointReading) -> float:
+    """When the joints answered (their mean, where the bus stamps them), else read."""
+    return float(getattr(reading, "at", reading.t))
+
+
+def _tool(arm: Any, reading: JointReading, names: set[str] | frozenset[str]
+          ) -> dict[str, float]:
+    from seqrun.arm import kinematics
+    from seqrun.arm.cartesian import solver_for, tool_pose
+
+    T = tool_pose(solver_for(arm, None), reading.user_deg)
+    values = {"tool.x_mm": float(T[0, 3]), "tool.y_mm": float(T[1, 3]),
+              "tool.z_mm": float(T[2, 3])}
+    if names & {"tool.roll_deg", "tool.pitch_deg", "tool.yaw_deg"}:
+        roll, pitch, yaw = np.degrees(kinematics.rpy_from_matrix(T[:3, :3])).tolist()
+        values.update({"tool.roll_deg": roll, "tool.pitch_deg": pitch, "tool.yaw_deg": yaw})
+    return values
+
+
+def values_read(values: dict[str, Any], expression: Expression) -> dict[str, Any]:
+    """The values ``expression`` read, for a report: per joint only the joints it indexes
+    (``pos_deg[2]``), numbers rounded."""
+    shown: dict[str, Any] = {}
+    for name in sorted(expression.names):
+        value = values.get(name)
+        if isinstance(value, list):
+            for j in sorted(expression.joints):
+                v = value[j - 1]
+                shown[f"{name}[{j}]"] = None if v is None else round(float(v), 4)
+        elif isinstance(value, float):
+            shown[name] = round(value, 4)
+        else:
+            shown[name] = value
+    return shown

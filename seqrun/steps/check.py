@@ -47,14 +47,13 @@ def check(checker: CheckContext, step: ResolvedStep[CheckParams], params: CheckP
 
 def run(step: ResolvedStep[CheckParams], ex: StepContext) -> dict:
     from seqrun.errors import RunAborted
-    from seqrun.steps._telemetry import TelemetrySampler
+    from seqrun.steps._telemetry import TelemetrySampler, values_read
     from seqrun.steps.expressions import ExpressionError, parse
 
     params = step.params
     condition = parse(params.that, joints=len(ex.arm.joints))
     values = TelemetrySampler(ex, [condition]).sample()
-    read = {name: values.get(name) for name in sorted(condition.names)}
-    detail: dict[str, Any] = {"condition": params.that, "values": _shown(read, condition)}
+    detail: dict[str, Any] = {"condition": params.that, "values": values_read(values, condition)}
     if params.verifies:
         detail["verifies"] = list(params.verifies)
     try:
@@ -68,21 +67,6 @@ def run(step: ResolvedStep[CheckParams], ex: StepContext) -> dict:
         why = f" ({params.message})" if params.message else ""
         raise RunAborted("checkpoint", f"check failed: {params.that}{why}", detail=detail)
     return detail
-
-
-def _shown(read: dict[str, Any], condition: Any) -> dict[str, Any]:
-    """The values the condition read, per joint only those it indexes (j2: ...)."""
-    shown: dict[str, Any] = {}
-    for name, value in read.items():
-        if isinstance(value, list):
-            for j in sorted(condition.joints):
-                v = value[j - 1]
-                shown[f"{name}[{j}]"] = None if v is None else round(float(v), 4)
-        elif isinstance(value, float):
-            shown[name] = round(value, 4)
-        else:
-            shown[name] = value
-    return shown
 
 
 KIND = StepKind(

@@ -93,7 +93,7 @@ class Expression:
     def __init__(self, text: str, tree: ast.expr, result: _Type, names: frozenset[str],
                  joints: frozenset[int]) -> None:
         self.text = text
-        self._tree = tree
+        self._evaluate = _compiled(tree)
         self.is_condition = result.kind == "bool"
         self.unit = result.unit
         #: Every telemetry name it reads (``pos_deg``, ``tool.z_mm``, ...).
@@ -108,54 +108,105 @@ class Expression:
         """The value with the telemetry ``values`` (name -> number, bool, or a per-joint
         sequence in joint order). :raises ExpressionError: a value it needs is missing or
         not a number (e.g. no target after a Halt)."""
-        return self._eval(self._tree, values)
+        return self._evaluate(values)
 
-    def _eval(self, node: ast.expr, values: Mapping[str, Any]) -> Any:
-        if isinstance(node, ast.Constant):
-            return node.value
-        if isinstance(node, ast.Name) and node.id in _WORDS:
-            return _WORDS[node.id]
-        if isinstance(node, (ast.Name, ast.Attribute)):
-            name = _dotted(node)
-            return self._value(name or "", values)
-        if isinstance(node, ast.Subscript):
-            series = self._value(_dotted(node.value) or "", values)
-            assert isinstance(node.slice, ast.Constant) and type(node.slice.value) is int
-            index: int = node.slice.value
-            value = series[index - 1]
-            if value is None or (isinstance(value, float) and math.isnan(value)):
-                raise ExpressionError(f"{_dotted(node.value)}[{index}] has no value now",
-                                      node.col_offset + 1)
-            return float(value)
-        if isinstance(node, ast.UnaryOp):
-            operand = self._eval(node.operand, values)
-            return (not operand) if isinstance(node.op, ast.Not) else -operand
-        if isinstance(node, ast.BinOp):
-            left, right = self._eval(node.left, values), self._eval(node.right, values)
-            if isinstance(node.op, ast.Div) and right == 0:
-                raise ExpressionError("division by zero", node.col_offset + 1)
-            return _ARITHMETIC[type(node.op)](left, right)
-        if isinstance(node, ast.BoolOp):
-            if isinstance(node.op, ast.And):
-                return all(self._eval(v, values) for v in node.values)
-            return any(self._eval(v, values) for v in node.values)
-        if isinstance(node, ast.Compare):
-            left = self._eval(node.left, values)
-            for op, comparator in zip(node.ops, node.comparators, strict=True):
-                right = self._eval(comparator, values)
-                if not _COMPARE[type(op)](left, right):
-                    return False
-                left = right
-            return True
-        if isinstance(node, ast.Call):
-            assert isinstance(node.func, ast.Name)
-            return _FUNCTIONS[node.func.id](*(self._eval(a, values) for a in node.args))
-        raise ExpressionError("cannot evaluate this", node.col_offset + 1)  # checked: never
 
-    def _value(self, name: str, values: Mapping[str, Any]) -> Any:
-        if name not in values or values[name] is None:
+Evaluator = Callable[[Mapping[str, Any]], Any]
+
+
+def _compiled(node: ast.expr) -> Evaluator:
+    """``node`` (checked by :class:`_Checker`) as a tree of closures: evaluated every
+    control cycle, it walks no syntax tree and dispatches on no node type."""
+    if isinstance(node, ast.Constant):
+        constant = node.value
+        return lambda values: constant
+    if isinstance(node, ast.Name) and node.id in _WORDS:
+        word = _WORDS[node.id]
+        return lambda values: word
+    if isinstance(node, (ast.Name, ast.Attribute)):
+        return _reader(_dotted(node) or "")
+    if isinstance(node, ast.Subscript):
+        return _joint_reader(node)
+    if isinstance(node, ast.UnaryOp):
+        operand = _compiled(node.operand)
+        if isinstance(node.op, ast.Not):
+            return lambda values: not operand(values)
+        if isinstance(node.op, ast.UAdd):
+            return operand
+        return lambda values: -operand(values)
+    if isinstance(node, ast.BinOp):
+        return _arithmetic(node)
+    if isinstance(node, ast.BoolOp):
+        parts = [_compiled(v) for v in node.values]
+        if isinstance(node.op, ast.And):
+            return lambda values: all(part(values) for part in parts)
+        return lambda values: any(part(values) for part in parts)
+    if isinstance(node, ast.Compare):
+        return _comparison(node)
+    if isinstance(node, ast.Call):
+        assert isinstance(node.func, ast.Name)
+        function = _FUNCTIONS[node.func.id]
+        args = [_compiled(a) for a in node.args]
+        return lambda values: function(*(arg(values) for arg in args))
+    raise ExpressionError("cannot evaluate this", node.col_offset + 1)  # checked: never
+
+
+def _reader(name: str) -> Evaluator:
+    def read(values: Mapping[str, Any]) -> Any:
+        value = values.get(name)
+        if value is None:
             raise ExpressionError(f"{name} has no value now")
-        return values[name]
+        return value
+    return read
+
+
+def _joint_reader(node: ast.Subscript) -> Evaluator:
+    series = _dotted(node.value) or ""
+    assert isinstance(node.slice, ast.Constant) and type(node.slice.value) is int
+    index: int = node.slice.value
+    column = node.col_offset + 1
+
+    def read(values: Mapping[str, Any]) -> Any:
+        joints = values.get(series)
+        value = None if joints is None else joints[index - 1]
+        if value is None or value != value:  # (NaN: no value either)
+            raise ExpressionError(f"{series}[{index}] has no value now", column)
+        return value
+    return read
+
+
+def _arithmetic(node: ast.BinOp) -> Evaluator:
+    left, right = _compiled(node.left), _compiled(node.right)
+    op = _ARITHMETIC[type(node.op)]
+    if not isinstance(node.op, ast.Div):
+        return lambda values: op(left(values), right(values))
+    column = node.col_offset + 1
+
+    def divide(values: Mapping[str, Any]) -> Any:
+        divisor = right(values)
+        if divisor == 0:
+            raise ExpressionError("division by zero", column)
+        return left(values) / divisor
+    return divide
+
+
+def _comparison(node: ast.Compare) -> Evaluator:
+    first = _compiled(node.left)
+    steps = [(_COMPARE[type(op)], _compiled(c)) for op, c in
+             zip(node.ops, node.comparators, strict=True)]
+    if len(steps) == 1:
+        (op, right), = steps
+        return lambda values: op(first(values), right(values))
+
+    def chain(values: Mapping[str, Any]) -> bool:
+        left = first(values)
+        for op, comparator in steps:
+            right = comparator(values)
+            if not op(left, right):
+                return False
+            left = right
+        return True
+    return chain
 
 
 def parse(text: str, *, params: Mapping[str, tuple[str, str | None]] | None = None,

@@ -12,7 +12,7 @@ from __future__ import annotations
 import inspect
 import re
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Annotated, Any, ClassVar, Protocol, Union
+from typing import TYPE_CHECKING, Annotated, Any, ClassVar, Literal, Protocol, Union
 
 from pydantic import AfterValidator, ConfigDict, Discriminator, Field, Tag
 from pydantic_core import PydanticCustomError
@@ -27,6 +27,7 @@ __all__ = [
     "JointsList",
     "LimitPair",
     "ModulesParams",
+    "MonitorSpec",
     "PoseName",
     "Positive",
     "Scale",
@@ -130,6 +131,24 @@ class StrictModel(FriendlyModel):
     model_config = ConfigDict(extra="forbid", strict=True, frozen=True)
 
 
+class MonitorSpec(StrictModel):
+    """An invariant watched every control cycle while its step runs: when ``while`` has
+    not held for ``persist_cycles`` cycles in a row, the action is taken."""
+
+    yaml_name: ClassVar[str] = "monitor"
+    while_: ExpressionText = Field(
+        alias="while", description="What must hold every cycle, e.g. "
+                                   "'abs(following_error_deg[4]) < 1.0' or 'tool.z_mm > 40'.")
+    persist_cycles: int = Field(1, ge=1, le=1000, description="How many cycles in a row it "
+                                                              "must fail before the action.")
+    action: Literal["halt", "warn"] = Field(
+        "halt", description="halt: the arm halts at once and the run ends as a fault (exit "
+                            "3) naming the monitor and the values; warn: an event and a line "
+                            "in the report, the run goes on.")
+    message: str | None = Field(None, min_length=1,
+                                description="What a trip means, for the operator.")
+
+
 class StepParams(StrictModel):
     """Parameters every step has."""
 
@@ -138,6 +157,10 @@ class StepParams(StrictModel):
         None, min_length=1,
         description="Text shown to the operator for this step (default: a description "
                     "generated from the step).")
+    monitors: list[MonitorSpec] = Field(
+        default_factory=list, max_length=32,
+        description="Invariants watched every control cycle while this step runs "
+                    "(docs/sequence-format.md, 'Expressions').")
 
     @classmethod
     def from_shorthand(cls, value: Any) -> StepParams:
