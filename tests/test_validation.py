@@ -77,8 +77,10 @@ EXPECTED = {
                               "outside the sequences folder"])],
     "include_loop_a.yaml": [("include_loop_b.yaml", 5, 14, [
         "include loop: include_loop_a.yaml -> include_loop_b.yaml -> include_loop_a.yaml"])],
+    # B homes before A's reset: a finding of its own, not hidden by the loop (issue 42)
     "include_loop_b.yaml": [("include_loop_a.yaml", 5, 14, [
-        "include loop: include_loop_b.yaml -> include_loop_a.yaml -> include_loop_b.yaml"])],
+        "include loop: include_loop_b.yaml -> include_loop_a.yaml -> include_loop_b.yaml"]),
+        ("include_loop_b.yaml", 4, 5, ["home before reset"])],
     "syntax_error.yaml": [("syntax_error.yaml", 7, 1, ["a closing '}' is missing",
                                                        "line 5"])],
     "python_tag.yaml": [("python_tag.yaml", 5, 14, ["'!!python/object/apply:os.system'",
@@ -302,10 +304,12 @@ def test_set_limits_overrides(project):
 
 def test_workspace_guard_along_a_move(project):
     result = validate(project, STARTUP + "- move: totem\n- move: {joints: {j2: 90, j4: 90}}\n")
-    # the link volumes find it too: the hand goes into the desk
-    collision, error = result.errors
-    assert collision.message.startswith("this move takes the hand into the desk")
-    assert (error.line, error.column) == (8, 3)
+    # the link volumes find it too: the hand, the wrist and the forearm go into the desk
+    # (every collision of the move, in time order, at the move's line)
+    *collisions, error = result.errors
+    assert [c.message.split(" (at")[0] for c in collisions] == [
+        f"this move takes the {link} into the desk" for link in ("hand", "wrist", "forearm")]
+    assert {(e.line, e.column) for e in result.errors} == {(8, 3)}
     assert error.message.startswith("this move takes the end-effector down to z = -155")
     assert "below the 'desk' guard at 10 mm" in error.message
 

@@ -24,22 +24,10 @@ from typing import Annotated
 import typer
 
 from seqrun.cli.app import app
-from seqrun.cli.common import (EXIT_FAULT, EXIT_INVALID, EXIT_OK, EXIT_USAGE, OneArmOption,
-                               fail)
+from seqrun.cli.common import EXIT_FAULT, EXIT_USAGE, OneArmOption, fail
+from seqrun.cli.common import validate_exit_code as exit_code
 from seqrun.defaults import START_POSE
 from seqrun.errors import UserInputError
-
-
-def exit_code(static_valid: bool, dry_run_exit: int | None, rehearsed: bool) -> int:
-    """``seqrun validate``'s exit code: 1 for a file that is not valid (its static checks,
-    or a dry run that fails on a healthy simulated arm); a dry run ended by a rehearsed
-    ``--sim-fault`` exits as ``seqrun run`` would have (3: aborted by a fault), so that 1
-    always means "invalid" (README "Exit codes")."""
-    if not static_valid:
-        return EXIT_INVALID
-    if not dry_run_exit:
-        return EXIT_OK
-    return EXIT_FAULT if rehearsed and dry_run_exit == EXIT_FAULT else EXIT_INVALID
 
 
 def print_report(check, file: Path, *, as_json: bool) -> None:

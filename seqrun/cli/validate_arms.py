@@ -14,7 +14,7 @@ from typing import Any, NoReturn
 
 import typer
 
-from seqrun.cli.common import EXIT_INVALID, EXIT_USAGE, fail
+from seqrun.cli.common import EXIT_INVALID, EXIT_USAGE, fail, validate_exit_code
 from seqrun.errors import UserInputError
 
 
@@ -110,9 +110,7 @@ def validate_arms(file: Path, project: Any, *, as_json: bool, start: str | None,
 
 
 def _exit_code(check, rehearsed: bool) -> int:
-    from seqrun.cli.validate import exit_code
-
     run = check.dry_run
     worst = None if run is None else max(
         (a.result.exit_code for a in run.outcome.arms.values()), default=0)
-    return exit_code(not check.errors, worst, rehearsed)
+    return validate_exit_code(not check.errors, worst, rehearsed)
