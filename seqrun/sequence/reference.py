@@ -73,7 +73,7 @@ Every step takes an optional `label`, the text the operator sees.
   before the first `move`; `reset` again after a `halt`.
 - Joints must exist; the locked joint (j3) is never commanded.
 - Every commanded target lies inside the joint limits in force. A joint that starts outside
-  them (Park's j4 at -120.32° against -120…120) may only move back inside (a note).
+  them (an arm powered off outside its limits) may only move back inside (a note).
 - Velocities and limit overrides stay within the arm file's maxima.
 - Every move is planned within the limits in force: the arm file's, those a `set_limits`
   wrote, and the MaxVel/MaxAcc the modules still hold from before (read back before the

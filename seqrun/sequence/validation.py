@@ -12,8 +12,8 @@ offending value:
   limits written before moving (the modules' stored limits are narrower), Reset before
   Home and before writing parameters, and Reset again after a Halt;
 - joints the arm does not have, and any command to a locked joint;
-- every commanded target inside the limits in force; a joint that *starts* outside
-  (Park's j4 at -120.32° against -120…120) may only move back inside, which is a note;
+- every commanded target inside the limits in force; a joint that *starts* outside (an
+  arm powered off outside its limits) may only move back inside, which is a note;
 - velocities and limit overrides within the arm file's maxima;
 - workspace guards (``workspace.guards`` of the arm file) along each move's ruckig plan,
   the trajectory the executor streams (sampled at 100 Hz), with the smallest clearance of
