@@ -143,7 +143,7 @@ def test_an_unknown_project_folder_is_one_line(tmp_path):
     ('[campaign]\nname = "x\n', "2:10", "invalid TOML: Illegal character"),
     ('[campaign]\nname = "x"\n\n[bus]\nbitrate = 99\n', "5:1", "bus.bitrate: "),
     ('[runs]\nfolder = "r"\n', "2:1", "runs.folder: unknown key (expected: dir)"),
-    ('[campain]\n', "1:1", "campain: unknown key (expected: campaign, bus, runs, ros, arms)"),
+    ('[campain]\n', "1:1", "campain: unknown key (expected: campaign, bus, runs, ros, sim, arms)"),
     # Hostile files (issue 23, item 6): one line at the toml's own line, never a traceback.
     ('[campaign]\nname = "x\0y"\n', "2:10", "invalid TOML: Illegal character"),
     ('[bus]\nbitrate = 500000.0\n', "2:1", "bus.bitrate: a bit rate is a whole number"),

@@ -53,10 +53,26 @@ def test_human_output_errors_then_notes_then_summary():
     assert result.stdout.splitlines() == [
         (f"{file}:9:28: velocity_deg_s of j1 45 deg/s is above its maximum 30 deg/s (from the "
         "arm file)"),
-        (f"{file}:8:13: note: j4 starts at -120.32°, 0.32° outside its limit -120…120; this "
-        "move brings it back inside"),
-        f"{file}: invalid (1 error, 1 note)",
+        f"{file}: invalid (1 error)",
     ]
+
+
+def test_human_output_notes_after_the_errors(tmp_path):
+    # an arm file whose j4 stops at -120: Park's j4 (-120.32) starts outside it
+    arm = tmp_path / "narrow.yaml"
+    arm.write_text((ROOT / "arms" / "lwa3.yaml").read_text().replace(
+        "limits_deg: [-120.32, 120]", "limits_deg: [-120, 120]"))
+    path = BAD / "velocity_above_max.yaml"
+    result = run("validate", path, "--arm", arm)
+    assert result.exit_code == 1
+    file = display_path(path)
+    lines = result.stdout.splitlines()
+    assert lines[0] == (f"{file}:9:28: velocity_deg_s of j1 45 deg/s is above its maximum 30 "
+                        "deg/s (from the arm file)")
+    # (and a note that the arm file lies outside the project's folder)
+    assert (f"{file}:8:13: note: j4 starts at -120.32°, 0.32° outside its limit -120…120; "
+            "this move brings it back inside") in lines[1:-1]
+    assert lines[-1] == f"{file}: invalid (1 error, 2 notes)"
 
 
 def test_json_output():
@@ -78,12 +94,16 @@ def test_json_output():
     }
 
 
-def test_json_output_of_a_valid_file_has_the_notes():
-    result = run("validate", ROOT / "sequences" / "opsafe.yaml", "--json")
+def test_json_output_of_a_valid_file_has_the_notes(tmp_path):
+    arm = tmp_path / "narrow.yaml"  # j4 stops at -120: Park's j4 starts outside it
+    arm.write_text((ROOT / "arms" / "lwa3.yaml").read_text().replace(
+        "limits_deg: [-120.32, 120]", "limits_deg: [-120, 120]"))
+    result = run("validate", ROOT / "sequences" / "opsafe.yaml", "--json", "--static",
+                 "--arm", arm)
     assert result.exit_code == 0
     report = json.loads(result.stdout)
     assert report["valid"] is True and report["errors"] == []
-    [note] = report["notes"]
+    [note] = [n for n in report["notes"] if n["message"].startswith("j4 ")]
     assert set(note) == {"file", "line", "column", "message"}
     assert note["message"].startswith("j4 starts at -120.32°")
 

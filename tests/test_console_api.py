@@ -440,12 +440,37 @@ def test_a_symlinked_sequence_is_listed_and_runnable_or_not_listed(client, setup
             "unknown sequence")
 
 
-def test_poses_say_whether_a_move_may_go_there(client):
+def test_poses_say_whether_a_move_may_go_there(client, setup):
+    from seqrun.arm.poses import pose_document, pose_yaml
+
+    # a pose 0.68° beyond j4's lower limit (Park's -120.32, arms/lwa3.yaml)
+    beyond = {"j1": 0, "j2": -90, "j3": 0, "j4": -121, "j5": 0, "j6": 115.74, "j7": 0}
+    (setup.folder / "poses" / "beyond.yaml").write_text(
+        pose_yaml(pose_document("beyond", setup.arm, beyond, "beyond j4's travel", "manual")),
+        encoding="utf-8")
     poses = {p["name"]: p for p in client.get("/api/v1/poses").json()}
     assert poses["totem"]["move_target"] is True and "why" not in poses["totem"]
-    park = poses["park"]  # the power-on pose: j4 0.32 deg beyond its limit (the facts)
-    assert park["move_target"] is False
-    assert park["why"].startswith(park["file"] + ": j4 -120.32° is outside its limits")
+    assert poses["park"]["move_target"] is True and "why" not in poses["park"]
+    outside = poses["beyond"]
+    assert outside["move_target"] is False
+    assert outside["why"].startswith(outside["file"] + ": j4 -121° is outside its limits")
     armed(client)
-    message = refused(client.post("/api/v1/move/pose", json={"name": "park"}), 409)
-    assert "park.yaml:13:7: j4 -120.32°" in message and "seqrun-session" not in message
+    message = refused(client.post("/api/v1/move/pose", json={"name": "beyond"}), 409)
+    assert "beyond.yaml:" in message and ": j4 -121°" in message
+    assert "seqrun-session" not in message
+
+
+def test_the_park_button_moves_the_arm_to_park(client):
+    """Park's j4 (-120.32) is j4's lower limit: the console's Park gets there (issue 42)."""
+    armed(client)
+    r = client.post("/api/v1/move/joints", json={"joints": {"j4": -116}})
+    assert r.status_code == 200, r.text
+    idle(client)
+    assert joint(client, "j4") == pytest.approx(-116, abs=0.3)
+    r = client.post("/api/v1/move/pose", json={"name": "park", "velocity_scale": 1.0})
+    assert r.status_code == 200 and r.json()["accepted"], r.text
+    status = idle(client)
+    assert status["activity"] == "idle", status
+    park = {"j1": 0, "j2": -90, "j3": 0, "j4": -120.32, "j5": 0, "j6": 115.74, "j7": 0}
+    for j in status["joints"]:
+        assert j["position_deg"] == pytest.approx(park[j["name"]], abs=0.2), j

@@ -97,7 +97,7 @@ def _validate(*args: str):
 def test_validate_rehearses_a_fault():
     result = _validate(str(ROOT / "sequences" / "opsafe.yaml"), "--sim-fault", "4:tow_error@3",
                        "--json")
-    assert result.exit_code == 1, result.output
+    assert result.exit_code == 3, result.output  # as `seqrun run --sim-fault` ends
     report = json.loads(result.output)
     assert report["valid"] is False and report["errors"] == []  # the file is fine
     run = report["dry_run"]
@@ -105,7 +105,7 @@ def test_validate_rehearses_a_fault():
     assert run["fault"]["cause"] == "tow_error" and run["fault"]["module"] == 4
     assert run["fault"]["step"] == 5 and run["fault"]["halt_sent"] is True
     human = _validate(str(ROOT / "sequences" / "opsafe.yaml"), "--sim-fault", "4:tow_error@3")
-    assert human.exit_code == 1
+    assert human.exit_code == 3
     assert "100 Hz loop, rehearsing 4:tow_error@3): FAILED" in human.output
     assert "fault: module 4 (j4): ERROR|HALTED|TOW_ERROR" in human.output
 
@@ -140,7 +140,7 @@ def test_validate_static_takes_no_fault():
 def test_several_files_rehearse_the_fault_in_every_dry_run():
     result = _validate(str(ROOT / "sequences" / "opsafe.yaml"),
                        str(ROOT / "sequences" / "totem.yaml"), "--sim-fault", "4:tow_error@3")
-    assert result.exit_code == 1, result.output
+    assert result.exit_code == 3, result.output
     rows = [line for line in result.output.splitlines() if "  dry run failed  3.01 s" in line]
     assert len(rows) == 2, result.output
     assert result.output.count("dry run failed: module 4 (j4): ERROR|HALTED|TOW_ERROR") == 2

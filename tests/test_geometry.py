@@ -171,10 +171,13 @@ STEPS = ("- reset\n- home\n- set_limits\n- move: totem\n- move: opsafe\n"
 
 def test_validation_refuses_a_move_into_an_obstacle_at_its_line(project):
     result = validate_sequence(_load(project, STEPS), _with_mock(ARM), PARK)
-    [error] = result.errors
-    assert (error.line, error.column) == (9, 3)
-    assert error.message.startswith("this move takes the ")
-    assert "target_mock" in error.message and "planned trajectory" in error.message
+    # every link that goes into it, in the order it happens, each at the move's line
+    hand, wrist = result.errors
+    assert hand.message.startswith("this move takes the hand into the target_mock (at 1.43 s")
+    assert wrist.message.startswith("this move takes the wrist into the target_mock (at 1.73 s")
+    for error in result.errors:
+        assert (error.line, error.column) == (9, 3)
+        assert "planned trajectory" in error.message
     assert result.proximities[6].distance_mm < ARM.geometry.margin_mm
 
 
@@ -190,7 +193,7 @@ def test_the_run_halts_before_the_obstacle(project, monkeypatch):
     off the executor streams the move and halts it at the margin."""
     from seqrun.sequence import validation
 
-    monkeypatch.setattr(validation.Checker, "_check_path_geometry", lambda *a, **k: None)
+    monkeypatch.setattr(validation.Checker, "_path_collisions", lambda *a, **k: [])
     run = dry_run(_load(project, STEPS), _with_mock(ARM), PARK)
     assert run.result.exit_code == 3
     assert run.result.fault["cause"] == "collision"

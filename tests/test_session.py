@@ -27,7 +27,8 @@ MOTION_COMMANDS = {0x0B}  # SetMotion (FRAMP, FSTEP, TargetVel ...): anything th
 def open_session(tmp_path: Path, clock=None, **kw) -> ArmSession:
     connection = open_connection(force_sim=True, clock=clock or VirtualClock())
     return ArmSession(load_arm(ARM), connection, status_hz=kw.pop("status_hz", 0),
-                      log_root=tmp_path / "runs", poses_dir=ROOT / "poses", **kw)
+                      log_root=tmp_path / "runs",
+                      poses_dir=kw.pop("poses_dir", ROOT / "poses"), **kw)
 
 
 class Frames:
@@ -358,12 +359,26 @@ def test_the_status_says_halted_once_the_halt_is_read_back_not_when_the_run_ends
     assert run.wait(60).exit_code == 130
 
 
-def test_a_refused_pose_names_its_pose_file_not_the_session_s(session):
-    """Park's j4 (-120.32) lies outside the +-120 limit: the refusal says where that is."""
-    with pytest.raises(Refused) as refused:
-        session.move_to_pose("park")
+def test_a_refused_pose_names_its_pose_file_not_the_session_s(tmp_path):
+    """A pose whose j4 lies beyond its limit: the refusal says where that is."""
+    from projecttree import make_project
+    from seqrun.sequence.project import open_project
+
+    root = make_project(tmp_path / "campaign")
+    park = root / "poses" / "park.yaml"
+    park.write_text(park.read_text(encoding="utf-8").replace("j4: -120.32", "j4: -121"),
+                    encoding="utf-8")
+    project = open_project(root)
+    s = open_session(tmp_path, project=project, poses_dir=tuple(project.pose_path))
+    try:
+        s.poll_status()
+        assert s.arm_up().ok and s.home().ok
+        with pytest.raises(Refused) as refused:
+            s.move_to_pose("park")
+    finally:
+        s.close()
     message = str(refused.value)
-    assert "park.yaml:13:7: j4 -120.32° is outside its limits" in message
+    assert "park.yaml:14:7: j4 -121° is outside its limits" in message
     assert "seqrun-session" not in message and "used at" not in message
 
 

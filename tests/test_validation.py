@@ -77,8 +77,10 @@ EXPECTED = {
                               "outside the sequences folder"])],
     "include_loop_a.yaml": [("include_loop_b.yaml", 5, 14, [
         "include loop: include_loop_a.yaml -> include_loop_b.yaml -> include_loop_a.yaml"])],
+    # B homes before A's reset: a finding of its own, not hidden by the loop (issue 42)
     "include_loop_b.yaml": [("include_loop_a.yaml", 5, 14, [
-        "include loop: include_loop_b.yaml -> include_loop_a.yaml -> include_loop_b.yaml"])],
+        "include loop: include_loop_b.yaml -> include_loop_a.yaml -> include_loop_b.yaml"]),
+        ("include_loop_b.yaml", 4, 5, ["home before reset"])],
     "syntax_error.yaml": [("syntax_error.yaml", 7, 1, ["a closing '}' is missing",
                                                        "line 5"])],
     "python_tag.yaml": [("python_tag.yaml", 5, 14, ["'!!python/object/apply:os.system'",
@@ -122,13 +124,12 @@ def test_every_shipped_sequence_validates_from_park(name):
 
 
 @pytest.mark.parametrize("name", ["totem", "opsafe", "park", "shutdown"])
-def test_shipped_motion_sequences_start_with_startup_and_note_park_j4(name):
+def test_shipped_motion_sequences_start_with_startup_from_park_within_the_limits(name):
+    # Park's j4 (-120.32) is j4's lower limit in the arm file (issue 42): no note
     loaded = load_sequence(ROOT / "sequences" / f"{name}.yaml")
     assert [s.kind for s in loaded.steps[:3]] == ["reset", "home", "set_limits"]
     result = validate_sequence(loaded, ARM, PARK)
-    assert [n.message for n in result.notes] == [
-        ("j4 starts at -120.32°, 0.32° outside its limit -120…120; this move brings it back "
-        "inside")]
+    assert result.errors == [] and result.notes == []
 
 
 def test_opsafe_goes_via_totem_and_its_checkpoint_is_the_fk_of_opsafe():
@@ -165,36 +166,52 @@ def test_direct_route_would_pass_static_validation(project):
 
 
 # --------------------------------------------------------------------------- start state
+#: An arm powered off 0.5° beyond j4's lower limit (Park's -120.32).
+BEYOND = dict(PARK, j4=-120.82)
+
+
 def test_start_outside_limits_is_a_note_at_the_move(project):
     # (the link volumes are left out: this move takes the forearm's capsule into the desk)
-    result = validate(project, STARTUP + "- move: {joints: {j4: -100}}\n", arm=NO_GEOMETRY)
+    result = validate(project, STARTUP + "- move: {joints: {j4: -100}}\n", start=BEYOND,
+                      arm=NO_GEOMETRY)
     assert result.errors == []
     [note] = result.notes
     assert (note.line, note.column) == (7, 23)
-    assert note.message == ("j4 starts at -120.32°, 0.32° outside its limit -120…120; this "
+    assert note.message == ("j4 starts at -120.82°, 0.5° outside its limit -120.32…120; this "
                             "move brings it back inside")
 
 
 def test_moving_further_out_is_an_error(project):
     result = validate(project, STARTUP + "- move: {joints: {j4: -125}}\n")
     assert [e.message for e in result.errors] == [
-        "j4 target -125° is outside its limits -120…120"]
+        "j4 target -125° is outside its limits -120.32…120"]
 
 
 def test_other_joints_may_move_while_one_is_still_outside(project):
-    result = validate(project, STARTUP + "- move: {joints: {j1: 30}}\n")
+    result = validate(project, STARTUP + "- move: {joints: {j1: 30}}\n", start=BEYOND)
     assert result.errors == [] and result.notes == []
-    assert result.final_deg["j4"] == -120.32
+    assert result.final_deg["j4"] == -120.82
 
 
-def test_moving_a_pose_with_park_j4_is_refused(project):
+def test_park_is_a_move_target(project):
+    # Park's j4 is j4's lower limit (arms/lwa3.yaml says why): `move: park` gets there
+    result = validate(project, STARTUP + "- move: totem\n- move: park\n- checkpoint: park\n")
+    assert result.errors == [] and result.notes == []
+    assert result.final_deg == PARK
+
+
+def test_moving_a_pose_outside_the_limits_is_refused(project):
     # The pose file's value is what is out of range: the error is at its line, naming the
     # step that uses the pose as a target.
+    pose = project / "poses" / "park.yaml"
+    pose.write_text(pose.read_text(encoding="utf-8").replace("j4: -120.32", "j4: -120.82"),
+                    encoding="utf-8")
     result = validate(project, STARTUP + "- move: totem\n- move: park\n")
-    [error] = result.errors
-    assert Path(error.file).name == "park.yaml" and (error.line, error.column) == (13, 7)
-    assert error.message.startswith("j4 -120.32° is outside its limits -120…120: pose 'park' "
-                                    "cannot be a move target (used at ")
+    errors = [e for e in result.errors if e.message.startswith("j4 -120.82°")]
+    [error] = errors
+    assert Path(error.file).name == "park.yaml" and (error.line, error.column) == (14, 7)
+    assert error.message.startswith("j4 -120.82° is outside its limits -120.32…120: pose "
+                                    "'park' cannot be a move target (used at ")
     assert error.message.endswith("s.yaml:8:9)")
 
 
@@ -302,10 +319,12 @@ def test_set_limits_overrides(project):
 
 def test_workspace_guard_along_a_move(project):
     result = validate(project, STARTUP + "- move: totem\n- move: {joints: {j2: 90, j4: 90}}\n")
-    # the link volumes find it too: the hand goes into the desk
-    collision, error = result.errors
-    assert collision.message.startswith("this move takes the hand into the desk")
-    assert (error.line, error.column) == (8, 3)
+    # the link volumes find it too: the hand, the wrist and the forearm go into the desk
+    # (every collision of the move, in time order, at the move's line)
+    *collisions, error = result.errors
+    assert [c.message.split(" (at")[0] for c in collisions] == [
+        f"this move takes the {link} into the desk" for link in ("hand", "wrist", "forearm")]
+    assert {(e.line, e.column) for e in result.errors} == {(8, 3)}
     assert error.message.startswith("this move takes the end-effector down to z = -155")
     assert "below the 'desk' guard at 10 mm" in error.message
 

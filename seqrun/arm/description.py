@@ -85,7 +85,15 @@ class Kinematics(_Strict):
 
 
 class Watchdog(_Strict):
-    enabled: bool = False
+    enabled: bool = Field(False, description="Arm the modules' watchdog for every run and "
+                                             "console activity (Config WATCHDOG_ENABLE, "
+                                             "refreshed); velocity moves and jogs arm it "
+                                             "anyway.")
+    with_rt_priority: bool = Field(
+        False, description="Arm it for every run and console activity whose control loop "
+                           "runs at real-time priority (--rt-priority): a loop that is not "
+                           "descheduled for the modules' timeout (about 50 ms). At normal "
+                           "priority a busy host deschedules it for longer (docs/safety.md).")
     refresh_period_s: Positive = 0.03
 
 
@@ -459,6 +467,16 @@ class ArmDescription(_Strict):
                   for j in self.joints]
         key = name if name in self.power_off_poses else name.lower()
         return self.model_copy(update={"joints": joints, "default_power_off": key})
+
+    def at_loop_priority(self, realtime: bool) -> "ArmDescription":
+        """This arm as a control loop at real-time priority (``realtime``) or not drives it:
+        with ``can.watchdog.with_rt_priority`` the watchdog is armed for whole runs at
+        real-time priority (as ``enabled``), never at normal priority."""
+        wd = self.can.watchdog
+        if not realtime or wd.enabled or not wd.with_rt_priority:
+            return self
+        can = self.can.model_copy(update={"watchdog": wd.model_copy(update={"enabled": True})})
+        return self.model_copy(update={"can": can})
 
     def with_power_off_joints(self, joints_deg: Mapping[str, float]) -> "ArmDescription":
         """This arm with its modules' zeros at ``joints_deg`` (user degrees by joint name):

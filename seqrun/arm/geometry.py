@@ -434,6 +434,27 @@ class Geometry:
                 best, best_name = d, name
         return Clearance(best, best_name, 0)
 
+    def within(self, q_rad: np.ndarray, origins: np.ndarray | None, margin_mm: float
+               ) -> tuple[Clearance | None, list[Clearance]]:
+        """Over a batch ``(k, dof)`` (``origins``: as for :meth:`endpoints`): the smallest
+        clearance, and every pair that comes within ``margin_mm``, each at the sample where
+        it is closest, in sample order (a move's collisions as they happen, not only the
+        worst one)."""
+        q = np.asarray(q_rad, dtype=float)
+        if not self._names:
+            return None, []
+        values, names = self.clearances(q, origins)
+        if not names or not values.size:
+            return None, []
+        values = values.reshape(-1, len(names))
+        at = np.argmin(values, axis=0)  # per pair: the sample where it is closest
+        closest = values[at, np.arange(len(names))]
+        worst = int(np.argmin(closest))
+        smallest = Clearance(float(closest[worst]), names[worst], int(at[worst]))
+        close = [Clearance(float(closest[k]), names[k], int(at[k]))
+                 for k in np.flatnonzero(closest < margin_mm)]
+        return smallest, sorted(close, key=lambda c: (c.index, c.distance_mm))
+
     def smallest(self, q_rad: np.ndarray, origins: np.ndarray | None = None
                  ) -> Clearance | None:
         """The smallest clearance over a batch ``(k, dof)`` (or one configuration);

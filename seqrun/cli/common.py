@@ -44,6 +44,18 @@ def fail(message: str, code: int = EXIT_USAGE) -> NoReturn:
     raise typer.Exit(code)
 
 
+def validate_exit_code(static_valid: bool, dry_run_exit: int | None, rehearsed: bool) -> int:
+    """``seqrun validate``'s exit code: 1 for a file that is not valid (its static checks,
+    or a dry run that fails on a healthy simulated arm); a dry run ended by a rehearsed
+    ``--sim-fault`` exits as ``seqrun run`` would have (3: aborted by a fault), so that 1
+    always means "invalid" (README "Exit codes")."""
+    if not static_valid:
+        return EXIT_INVALID
+    if not dry_run_exit:
+        return EXIT_OK
+    return EXIT_FAULT if rehearsed and dry_run_exit == EXIT_FAULT else EXIT_INVALID
+
+
 @contextmanager
 def user_errors() -> Iterator[None]:
     """Turn the user's mistakes (bad input, invalid files) into messages and exit codes."""

@@ -126,6 +126,8 @@ def console_command(
     from seqrun.console.catalog import Catalog
     from seqrun.service.session import ArmSession
 
+    # at real-time priority the arm file's can.watchdog.with_rt_priority arms the watchdog
+    arm = arm.at_loop_priority(rt_priority is not None)
     session = ArmSession(arm, connection, project=project, log_root=runs, zero=zero,
                          response_timeout_s=timeout, loop_priority=rt_priority,
                          arm_path=context.arm_path, arm_id=context.arm_id)
@@ -219,7 +221,8 @@ def _serve_arms(arm_ids: list[str] | None, *, project_dir: Path | None, sim: boo
         from seqrun.service.session import ArmSession
 
         for a, c in contexts.items():
-            made[a] = ArmSession(arms[a][0], connections[a], project=c.project,
+            made[a] = ArmSession(arms[a][0].at_loop_priority(rt_priority is not None),
+                                 connections[a], project=c.project,
                                  log_root=runs, zero=arms[a][1], loop_priority=rt_priority,
                                  arm_path=c.arm_path, arm_id=a,
                                  response_timeout_s=response_timeout_s(

@@ -32,6 +32,9 @@ dir = "runs"                # run folders, relative to this folder
 
 [ros]                       # run.mcap, the run as a ROS 2 bag (docs/ros2.md)
 distribution = "jazzy"      # humble, jazzy or kilted
+
+[sim]                       # the simulated arm of the dry run and every simulated run
+# gripper_part_mm = 40      # the part between the jaws (unset: the sequence's grip's)
 """
 
 #: Where the YAML files' ``# yaml-language-server: $schema=../docs/schema/...`` comments

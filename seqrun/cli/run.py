@@ -184,7 +184,8 @@ def run_command(
     requests = StopRequests()
     control = RunControl.serve(run.connection, run.arm, requests)
     zero = _confirm_start_or_record(console, run, yes, log_dir, zero_confirmed)
-    _use_realtime(console, rt_priority)
+    if _use_realtime(console, rt_priority):
+        _watchdog_at_real_time(console, run)
     folder = _run_folder(console, run, log_dir)
     outcome = _run_in_session(console, run, zero, folder, control, requests, step=step,
                               yes=yes, plain=plain, speed=speed, from_step=from_step,
@@ -264,14 +265,26 @@ def _confirm_start(console: Console, run, yes: bool, zero_confirmed: str | None 
     return zero
 
 
-def _use_realtime(console: Console, rt_priority: int | None) -> None:
+def _watchdog_at_real_time(console: Console, run) -> None:
+    """At real-time priority the arm file's ``can.watchdog.with_rt_priority`` arms the
+    modules' watchdog for the whole run: said once, recorded by its watchdog_enabled
+    event."""
+    arm = run.arm.at_loop_priority(True)
+    if arm is not run.arm:
+        run.arm = arm
+        console.print("watchdog: armed for the whole run (real-time priority; the arm "
+                      "file's can.watchdog.with_rt_priority): if this process stops talking "
+                      "the modules stop by themselves", highlight=False)
+
+
+def _use_realtime(console: Console, rt_priority: int | None) -> bool:
     """``--rt-priority N``: the control loop (this thread, and the threads it starts) at
     SCHED_FIFO N; the threads already running (the control socket's, the display's) at
     SCHED_RR 1, above every normal process, so that none of them is kept off the CPU
     while it holds the interpreter lock the loop waits for; the lock handed over within
     1 ms (seqrun/service/realtime.py, as the console does)."""
     if rt_priority is None:
-        return
+        return False
     from seqrun.service.realtime import hand_over_the_lock_often, use_fifo, use_round_robin
 
     why = use_round_robin()
@@ -281,9 +294,10 @@ def _use_realtime(console: Console, rt_priority: int | None) -> None:
         hand_over_the_lock_often()
         console.print(f"real-time scheduling: SCHED_FIFO priority {rt_priority} (other "
                       "threads SCHED_RR 1)", highlight=False)
-        return
+        return True
     console.print(f"warning: real-time scheduling not available ({why}); running at "
                   "normal priority", style="yellow", highlight=False, markup=False)
+    return False
 
 
 def _run_folder(console: Console, run, log_dir: Path | None) -> Path:

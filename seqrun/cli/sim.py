@@ -14,6 +14,7 @@ port=29536, channel="can0")``. Runs in real time until Ctrl-C.
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Annotated
 
 import typer
@@ -51,6 +52,10 @@ def serve(
     power_on_at: Annotated[str, typer.Option(
         "--power-on-at", metavar="POSE", help="The power-off pose the simulated arm stands in "
         "at power-on (its modules read zero there): park or totem.")] = "park",
+    project_dir: Annotated[Path | None, typer.Option(
+        "--project", metavar="DIR", help="Campaign folder (default: the nearest seqrun.toml "
+        "above the current folder): its [sim] gripper_part_mm puts the arm file's gripper "
+        "on the bus with that part between its jaws, as the dry run has it.")] = None,
     serial_base: Annotated[int, typer.Option(
         "--serial-base", metavar="N", help="Module M says serial number N+M (DefCubeSerial). "
         "Default: a base drawn for this server alone (every server is another arm); give "
@@ -69,6 +74,7 @@ def serve(
     if serial_base:
         switches["serial_base"] = serial_base
     try:
+        part = _campaign_gripper(project_dir, module_option or [], switches)
         served = serve_simulated_arm(host=host, port=port, channel=channel,
                                      faults=fault or [], bitrate=bitrate,
                                      module_options=module_option or [], switches=switches,
@@ -84,6 +90,8 @@ def serve(
         typer.echo(f"  fault {spec}")
     for switch, value in served.switches.items():
         typer.echo(f"  switch {switch}={value}")
+    if part is not None:
+        typer.echo(f"  {part.describe()}")
     typer.echo(f'  python-can: can.Bus(interface="socketcand", host="{server.host}", '
                f'port={server.port}, channel="{channel}")')
     typer.echo("Ctrl-C to stop.")
@@ -93,3 +101,25 @@ def serve(
         typer.echo("stopping")
     finally:
         server.shutdown()
+
+
+def _campaign_gripper(project_dir: Path | None, module_options: list[str],
+                      switches: dict[str, object]):
+    """The campaign's ``[sim] gripper_part_mm`` (seqrun.service.simulated_part): the arm
+    file's gripper in ``switches``, with that part between its jaws, so that a run over
+    this server finds what the campaign's dry run found. None: no such setting (or the
+    part given by hand with --module-option, which wins)."""
+    from seqrun.service.arm_context import resolve_context
+    from seqrun.service.simulated_part import PART_SWITCH, campaign_part, switch_given
+
+    given = {item.partition("=")[0].strip() for item in module_options}
+    if switch_given(dict.fromkeys(given)):
+        return None
+    context = resolve_context(project_dir=project_dir, sim=True)
+    part = campaign_part(context.project)
+    gripper = context.arm.gripper if part is not None else None
+    if part is None or gripper is None:
+        return None
+    switches["gripper_module"] = gripper.module
+    switches[PART_SWITCH] = part.width_mm
+    return part

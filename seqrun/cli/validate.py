@@ -1,6 +1,7 @@
 """``seqrun validate FILE`` and ``seqrun schema``.
 
     seqrun validate sequences/opsafe.yaml            # exit 0 valid, 1 invalid, 2 bad input
+    seqrun validate opsafe.yaml --sim-fault 4:tow_error@3   # exit 3: the rehearsed fault halted it
     seqrun validate sequences/opsafe.yaml --json
     seqrun validate my.yaml --start totem --arm arms/lwa3.yaml
     seqrun schema > sequence.schema.json
@@ -23,7 +24,8 @@ from typing import Annotated
 import typer
 
 from seqrun.cli.app import app
-from seqrun.cli.common import EXIT_INVALID, EXIT_OK, EXIT_USAGE, OneArmOption, fail
+from seqrun.cli.common import EXIT_FAULT, EXIT_USAGE, OneArmOption, fail
+from seqrun.cli.common import validate_exit_code as exit_code
 from seqrun.defaults import START_POSE
 from seqrun.errors import UserInputError
 
@@ -218,7 +220,8 @@ def validate_command(
     """Check a sequence file and its includes against the arm, then dry-run it on the
     simulator at virtual time. Nothing is sent to a real bus.
 
-    Exit 0 if valid, 1 if not, 2 if the input cannot be used.
+    Exit 0 if valid, 1 if not, 2 if the input cannot be used, 3 if a rehearsed
+    --sim-fault aborted the dry run (as it aborts seqrun run).
     """
     if not 0 < speed <= 1:
         fail(f"--speed must lie in (0, 1], got {speed:g}")
@@ -266,7 +269,9 @@ def validate_command(
             fail(str(exc))
         except OSError as exc:
             fail(f"{exc.filename}: {exc.strerror or exc}")
-        raise typer.Exit(EXIT_OK if valid else EXIT_INVALID)
+        faulted = [r for r in results if r.rehearsed_fault]
+        raise typer.Exit(exit_code(all(r.valid or r.rehearsed_fault for r in results),
+                                   EXIT_FAULT if faulted else None, True))
     from seqrun.service.checking import check_sequence
 
     file = files[0]
@@ -298,7 +303,8 @@ def validate_command(
             print_dry_run(run, check.loaded, check.arm)
         if run is not None and report_file is not None:
             typer.echo(f"report: {report_file}")
-    raise typer.Exit(EXIT_OK if valid else EXIT_INVALID)
+    raise typer.Exit(exit_code(check.valid, None if run is None else run.result.exit_code,
+                               bool(faults)))
 
 
 class SchemaKind(str, Enum):

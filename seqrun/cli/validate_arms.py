@@ -14,7 +14,7 @@ from typing import Any, NoReturn
 
 import typer
 
-from seqrun.cli.common import EXIT_INVALID, EXIT_OK, EXIT_USAGE, fail
+from seqrun.cli.common import EXIT_INVALID, EXIT_USAGE, fail, validate_exit_code
 from seqrun.errors import UserInputError
 
 
@@ -62,7 +62,7 @@ def validate_arms(file: Path, project: Any, *, as_json: bool, start: str | None,
         fail(f"{exc.filename}: {exc.strerror or exc}")
     if as_json:
         typer.echo(json.dumps(check.as_dict(), indent=2, ensure_ascii=False))
-        raise typer.Exit(EXIT_OK if check.valid else EXIT_INVALID)
+        raise typer.Exit(_exit_code(check, bool(parsed)))
     for error in check.errors:
         typer.echo(str(error))
     for note in check.notes:
@@ -106,4 +106,11 @@ def validate_arms(file: Path, project: Any, *, as_json: bool, start: str | None,
                 typer.echo(f"    {s.number:2d} {s.status:7s} {s.label[:46]:46s} {start_s}{took}")
         for note in run.outcome.notes:
             typer.echo(f"  {note}")
-    raise typer.Exit(EXIT_OK if check.valid else EXIT_INVALID)
+    raise typer.Exit(_exit_code(check, bool(parsed)))
+
+
+def _exit_code(check, rehearsed: bool) -> int:
+    run = check.dry_run
+    worst = None if run is None else max(
+        (a.result.exit_code for a in run.outcome.arms.values()), default=0)
+    return validate_exit_code(not check.errors, worst, rehearsed)

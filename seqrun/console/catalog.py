@@ -35,7 +35,7 @@ class Catalog:
     def poses(self, arm: Any = None) -> list[dict[str, Any]]:
         """Every pose file on the project's pose path (campaign first, then the shipped).
         With ``arm``: ``move_target`` says whether a move may go there, and ``why`` not (a
-        joint outside its limits: Park's j4, the power-on pose, lies 0.32° beyond -120°)."""
+        joint outside the arm file's limits)."""
         from seqrun.service.poses import list_poses
 
         found: list[dict[str, Any]] = []

@@ -100,11 +100,35 @@ class RosSection(_Strict):
     mcap: bool = Field(True, description="Write run.mcap (a ROS 2 bag) into every run folder.")
 
 
+class SimSection(_Strict):
+    """The campaign's simulated arm: what the dry run, ``run --virtual-time``, ``run --sim``,
+    ``console --sim`` and ``sim serve`` in this campaign all simulate alike."""
+
+    gripper_part_mm: Annotated[float, Field(ge=0)] | None = Field(
+        None, description="Width of the part between the simulated gripper's jaws, mm (0: no "
+                          "part). Unset: the part the sequence's first grip step names "
+                          "(part_width_mm); sim serve and console --sim: no part.")
+
+    @field_validator("gripper_part_mm", mode="before")
+    @classmethod
+    def _number(cls, value: Any) -> Any:
+        # strict refuses 40 where a float is due; a boolean or "40" is a typing mistake
+        if type(value) in (int, float):
+            if not math.isfinite(value):
+                raise ValueError(f"a width is a finite number of mm, got {value!r}")
+            return float(value)
+        if value is not None:
+            raise ValueError(f"a width is a number of mm, got {value!r}")
+        return value
+
+
 class CampaignConfig(_Strict):
     campaign: CampaignSection = CampaignSection()
     bus: BusSection = BusSection()
     runs: RunsSection = RunsSection()
     ros: RosSection = RosSection()
+    sim: SimSection = Field(SimSection(), description="The campaign's simulated arm (the "
+                                                      "part between the gripper's jaws).")
     arms: dict[str, ArmSection] = Field(
         {}, description="Several arms, by id ([arms.A], [arms.B]): each its arm file, bus and "
                         "base pose. None: the one arm of [campaign] arm and [bus].")

@@ -89,9 +89,10 @@ def static_check(file: Path, *, start: str | None = None,
     except SequenceInvalid as exc:
         check.errors = sort_errors(check.errors + list(exc.errors))
         return check
+    # The steps left out (check.loaded.left_out) make the checks that depend on them
+    # uncertain from there on; every other check is made.
     result: ValidationResult = validate_sequence(check.loaded, check.arm, check.start_deg,
-                                                 started=started, speed=speed,
-                                                 incomplete=bool(check.errors))
+                                                 started=started, speed=speed)
     check.errors = sort_errors(check.errors + result.errors)
     check.notes = check.arm.notes + result.notes
     check.clearances = [result.clearances[n] for n in sorted(result.clearances)]

@@ -68,6 +68,10 @@ class LoadedSequence:
     #: The arm these steps run on in a campaign with several arms (its track of the
     #: sequence, seqrun.sequence.arm_tracks); None: the one arm.
     arm_id: str | None = None
+    #: Steps left out because they failed on their own (:func:`load_sequence_partial`):
+    #: ``(steps kept before it, its kind or None when not even that is known)`` each, so
+    #: that validation knows from where the arm's state is uncertain, and how.
+    left_out: tuple[tuple[int, str | None], ...] = ()
 
     @property
     def location(self) -> Location:
@@ -159,6 +163,8 @@ class _Loader:
         self.sources: list[bytes] = []
         self.include_titles: dict[Location, str] = {}
         self.top: Any = None  # the top file's data, when it could be read
+        #: Steps left out (see LoadedSequence.left_out).
+        self.left_out: list[tuple[int, str | None]] = []
 
     def load(self, path: Path, *, chain: tuple[Path, ...] = (),
              include_chain: tuple[Location, ...] = (), include_step: Any = None) -> Any:
@@ -166,11 +172,14 @@ class _Loader:
             doc = load_document(path, file=display_path(path))
         except SequenceInvalid as exc:
             self.errors.extend(exc.errors)
+            if chain:
+                self.left_out.append((len(self.steps), None))  # an include's steps
             return None
         except UserInputError as exc:
             if include_step is None:
                 raise  # the file named on the command line
             self.errors.append(include_step.error(str(exc)))
+            self.left_out.append((len(self.steps), None))
             return None
         self.files.append(path)
         self.digests.append(doc.sha256)
@@ -197,13 +206,16 @@ class _Loader:
         data = doc.data.get("steps") if isinstance(doc.data, dict) else None
         if not isinstance(data, list):
             return
-        good, nodes = [], []
+        good: list[Any] = []
+        nodes = []
         for item, node in zip(data, doc.items(doc.child(doc.root, "steps"))):
             try:
                 good.append(step_adapter().validate_python(item))
-                nodes.append(node)
             except ValidationError:
-                continue  # already reported by the whole-file validation
+                # already reported by the whole-file validation; validation goes on past
+                # it, knowing what kind of step is missing
+                good.append(_LeftOut(_written_kind(item)))
+            nodes.append(node)
         self._steps(doc, path, good, nodes, chain, include_chain)
 
     def _steps(self, doc: Document, path: Path, steps: list, items: list,
@@ -213,6 +225,9 @@ class _Loader:
                 self.errors.append(doc.location(node).error(
                     f"the sequence expands to more than {MAX_STEPS} steps with its includes"))
                 return
+            if isinstance(raw, _LeftOut):
+                self.left_out.append((len(self.steps), raw.kind))
+                continue
             if isinstance(raw, str):
                 kind, params, params_node = raw, PARAMS_MODELS[raw](), node
             else:
@@ -267,6 +282,7 @@ class _Loader:
                  include_chain: tuple[Location, ...]) -> None:
         def error(message: str) -> None:
             self.errors.append(doc.error(("file",), message, start=node))
+            self.left_out.append((len(self.steps), None))  # the included steps
 
         try:
             target = (path.parent / params.file).resolve()
@@ -368,6 +384,23 @@ def load_sequence_partial(path: str | os.PathLike[str], *,
                           steps=tuple(loader.steps), files=tuple(loader.files),
                           pose_path=tuple(loader.pose_path), project=project,
                           poses=dict(loader.poses), digests=tuple(loader.digests),
-                          sources=tuple(loader.sources)), errors
+                          sources=tuple(loader.sources),
+                          left_out=tuple(loader.left_out)), errors
+
+
+@dataclass(frozen=True)
+class _LeftOut:
+    """A step that failed its schema, where it stood among the steps."""
+
+    kind: str | None
+
+
+def _written_kind(item: Any) -> str | None:
+    """The step kind a step that failed its schema was written as (None: not even that)."""
+    name = item if isinstance(item, str) else (
+        next(iter(item)) if isinstance(item, dict) and len(item) == 1 else None)
+    # an include brings steps of any kind: unknown
+    return name if isinstance(name, str) and name in PARAMS_MODELS and name != "include" \
+        else None
 
 

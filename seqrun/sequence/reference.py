@@ -73,7 +73,7 @@ Every step takes an optional `label`, the text the operator sees.
   before the first `move`; `reset` again after a `halt`.
 - Joints must exist; the locked joint (j3) is never commanded.
 - Every commanded target lies inside the joint limits in force. A joint that starts outside
-  them (Park's j4 at -120.32° against -120…120) may only move back inside (a note).
+  them (an arm powered off outside its limits) may only move back inside (a note).
 - Velocities and limit overrides stay within the arm file's maxima.
 - Every move is planned within the limits in force: the arm file's, those a `set_limits`
   wrote, and the MaxVel/MaxAcc the modules still hold from before (read back before the
@@ -97,7 +97,10 @@ Every step takes an optional `label`, the text the operator sees.
 - Workspace guards of the arm file hold along each move's planned trajectory (the ruckig plan
   the run streams, sampled at 100 Hz); `seqrun validate` reports the smallest clearance of each move.
 - The arm file's link volumes (capsules) keep `geometry.margin_mm` from its obstacles and
-  from each other along each move, and the closest pair of each move is reported.
+  from each other along each move, and the closest pair of each move is reported. Every
+  collision of a move is an error of its own (each link or tool volume, each guard's
+  lowest point: the hand and the tool it carries), in the order they happen, at the
+  move's line.
 - End-effector targets (`move` with `position_mm`, `move_linear`) are solved by inverse
   kinematics from the joints tracked so far (the solution nearest them); an unreachable
   target is an error at its `position_mm`. The run solves again from the measured joints
@@ -114,7 +117,11 @@ Every step takes an optional `label`, the text the operator sees.
   every joint (the locked one at its locked value), its `end_effector` agrees with forward
   kinematics of its joints, and a pose used as a move target lies inside the joint limits.
 - Every problem is reported in one pass: a step that is wrong on its own is left out and
-  the others are still checked against the arm.
+  the others are still checked against the arm. Only what the left-out step may have
+  changed goes unchecked after it: the start-up order after a left-out `reset`, `home`,
+  `set_limits`, `halt` or `power_off` (or an include that could not be read), and what
+  depends on where the joints are after a left-out motion, until a move to absolute
+  targets of every joint says it again.
 - A run uses exactly what was validated: the sequence, its includes, the poses and the arm
   file are read once; their SHA-256 is in the run report (`inputs`).
 - Validation starts from Park (`--start POSE` to choose another pose).

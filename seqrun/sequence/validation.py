@@ -12,8 +12,8 @@ offending value:
   limits written before moving (the modules' stored limits are narrower), Reset before
   Home and before writing parameters, and Reset again after a Halt;
 - joints the arm does not have, and any command to a locked joint;
-- every commanded target inside the limits in force; a joint that *starts* outside
-  (Park's j4 at -120.32° against -120…120) may only move back inside, which is a note;
+- every commanded target inside the limits in force; a joint that *starts* outside (an
+  arm powered off outside its limits) may only move back inside, which is a note;
 - velocities and limit overrides within the arm file's maxima;
 - workspace guards (``workspace.guards`` of the arm file) along each move's ruckig plan,
   the trajectory the executor streams (sampled at 100 Hz), with the smallest clearance of
@@ -70,6 +70,10 @@ __all__ = [
     "validate_sequence",
 ]
 
+
+#: Step kinds that change the modules' start-up state (reset, homed, limits, halted,
+#: powered off): one left out makes the start-up order unknown from there.
+STARTUP_STATE_KINDS = frozenset({"reset", "home", "set_limits", "halt", "power_off"})
 
 #: Sampling period (s) of a planned trajectory when guards are checked along it: the
 #: executor's control cycle at 100 Hz.
@@ -155,9 +159,16 @@ class Checker:
                  module_limits: Mapping[str, tuple[float, float]] | None = None,
                  incomplete: bool = False) -> None:
         self.loaded = loaded
-        # Steps were left out (they failed on their own): what depends on the steps before
-        # (start-up order, where the joints are) is not checked, the rest is.
+        # Steps were left out (they failed on their own): from the first one that may have
+        # changed the modules' start-up state (reset, home, limits, halt), that order is not
+        # checked (``incomplete``); from one that may have moved the arm, what depends on
+        # where the joints are is not checked until a move says where they are again
+        # (``position_unknown``). Everything else is, so that one pass shows every problem.
         self.incomplete = incomplete
+        self.position_unknown = incomplete
+        self._left_out: dict[int, list[str | None]] = {}
+        for before, kind in getattr(loaded, "left_out", ()):
+            self._left_out.setdefault(before, []).append(kind)
         self.arm = arm
         self.poses_dir = loaded.pose_path or loaded.poses_dir
         self.poses = loaded.poses
@@ -361,9 +372,11 @@ class Checker:
 
     def check_path_guards(self, step: ResolvedStep, times: np.ndarray, path_rad: np.ndarray,
                           *, what: str) -> None:
-        """Guards along sampled joint configurations (rad) at ``times`` (s): one error per
-        guard, at the watched point that goes lowest; the smallest clearance is kept. Then
-        the link volumes against the obstacles and each other (:meth:`_check_path_geometry`)."""
+        """Guards along sampled joint configurations (rad) at ``times`` (s): an error for
+        every watched point (the hand, the tool, ...) that goes below a guard, at its
+        lowest; the smallest clearance is kept. Then the link and tool volumes against the
+        obstacles and each other (:meth:`_path_collisions`). Every collision of the move
+        is reported, in the order they happen: one pass shows them all."""
         from seqrun.arm.geometry import Geometry
         from seqrun.arm.kinematics import Chain, frame_origins, points_of_origins
 
@@ -377,9 +390,21 @@ class Checker:
             self._geometry = Geometry(self.arm)
         # one forward kinematics of the samples for the link and tool volumes and the guards
         origins = frame_origins(self._chain, path_rad, self._geometry.ee_points)
-        self._check_path_geometry(step, times, path_rad, what=what, origins=origins)
+        found = self._path_collisions(step, times, path_rad, what=what, origins=origins)
+        found += self._guard_crossings(step, times, what=what, origins=origins)
+        found.sort(key=lambda item: item[0])  # stable: a guard's points in watched order
+        self.errors.extend(error for _, error in found)
+
+    def _guard_crossings(self, step: ResolvedStep, times: np.ndarray, *, what: str,
+                         origins: np.ndarray) -> list[tuple[float, SourceError]]:
+        """Every watched point below every guard (time of its lowest, error); the move's
+        smallest guard clearance is kept."""
+        from seqrun.arm.kinematics import points_of_origins
+
+        guards = self.arm.workspace.guards
         if not guards:
-            return
+            return []
+        assert self._chain is not None and self._geometry is not None
         dof = self._chain.dof
         points: dict[str, np.ndarray] = dict(points_of_origins(origins, dof))
         labels: dict[str, str] = {}
@@ -390,47 +415,55 @@ class Checker:
             points["tool"] = lowest_tool
             labels = {"tool": tools.parts[int(part[int(np.argmin(lowest_tool[:, 2]))])].label}
         duration = float(times[-1]) if len(times) else 0.0
+        found: list[tuple[float, SourceError]] = []
         for guard in guards:
             watched = list(guard.points)
             if "end_effector" in watched and "tool" in points:
                 watched.append("tool")
-            lowest = min(watched, key=lambda p: float(points[p][:, 2].min()))
-            heights = points[lowest][:, 2]
-            i = int(np.argmin(heights))
-            clearance = Clearance(step.number, guard.name, labels.get(lowest, lowest),
-                                  float(heights[i]), float(heights[i]) - guard.min_z_mm,
-                                  float(times[i]), duration)
-            kept = self.clearances.get(step.number)
-            if kept is None or clearance.margin_mm < kept.margin_mm:
-                self.clearances[step.number] = clearance
-            if heights[i] < guard.min_z_mm:
-                name = labels.get(lowest, lowest.replace('_', '-'))
-                self.errors.append(step.error(
-                    f"this move takes the {name} down to z = "
-                    f"{_f(heights[i])} mm (at {times[i]:.2f} s of {duration:.2f} s, {what}), "
-                    f"below the '{guard.name}' guard at {_f(guard.min_z_mm)} mm"))
+            for point in sorted(watched, key=lambda p: float(points[p][:, 2].min())):
+                heights = points[point][:, 2]
+                i = int(np.argmin(heights))
+                clearance = Clearance(step.number, guard.name, labels.get(point, point),
+                                      float(heights[i]), float(heights[i]) - guard.min_z_mm,
+                                      float(times[i]), duration)
+                kept = self.clearances.get(step.number)
+                if kept is None or clearance.margin_mm < kept.margin_mm:
+                    self.clearances[step.number] = clearance
+                if heights[i] < guard.min_z_mm:
+                    name = labels.get(point, point.replace('_', '-'))
+                    found.append((float(times[i]), step.error(
+                        f"this move takes the {name} down to z = "
+                        f"{_f(heights[i])} mm (at {times[i]:.2f} s of {duration:.2f} s, "
+                        f"{what}), below the '{guard.name}' guard at "
+                        f"{_f(guard.min_z_mm)} mm")))
+        return found
 
-    def _check_path_geometry(self, step: ResolvedStep, times: np.ndarray, path_rad: np.ndarray,
-                             *, what: str, origins: np.ndarray) -> None:
-        """Link capsules against obstacles and non-neighbouring links along the samples
-        (``origins``: their frames' origins, :func:`~seqrun.arm.kinematics.frame_origins`)."""
+    def _path_collisions(self, step: ResolvedStep, times: np.ndarray, path_rad: np.ndarray,
+                         *, what: str, origins: np.ndarray) -> list[tuple[float, SourceError]]:
+        """Link and tool capsules against obstacles and non-neighbouring links along the
+        samples (``origins``: their frames' origins,
+        :func:`~seqrun.arm.kinematics.frame_origins`): (time, error) of every pair that
+        comes within the margin, at its closest; the move's smallest clearance is kept."""
         if self._geometry is None or self._geometry.empty:
-            return
-        smallest = self._geometry.smallest(path_rad, origins)
-        if smallest is None:
-            return
-        duration = float(times[-1]) if len(times) else 0.0
-        at = float(times[smallest.index])
-        self.proximities[step.number] = Proximity(step.number, smallest.pair,
-                                                  smallest.distance_mm, at, duration)
+            return []
         margin = self._geometry.margin_mm
-        if smallest.distance_mm < margin:
-            a, b = smallest.pair.split("~", 1)
-            how = ("into" if smallest.distance_mm < 0 else "within "
-                   f"{_f(smallest.distance_mm)} mm of")
-            self.errors.append(step.error(
+        smallest, close = self._geometry.within(path_rad, origins, margin)
+        if smallest is None:
+            return []
+        duration = float(times[-1]) if len(times) else 0.0
+        self.proximities[step.number] = Proximity(step.number, smallest.pair,
+                                                  smallest.distance_mm,
+                                                  float(times[smallest.index]), duration)
+        found: list[tuple[float, SourceError]] = []
+        for pair in close:
+            a, b = pair.pair.split("~", 1)
+            at = float(times[pair.index])
+            how = ("into" if pair.distance_mm < 0 else "within "
+                   f"{_f(pair.distance_mm)} mm of")
+            found.append((at, step.error(
                 f"this move takes the {a} {how} the {b} (at {at:.2f} s of {duration:.2f} s, "
-                f"{what}); the arm file's geometry margin is {_f(margin)} mm"))
+                f"{what}); the arm file's geometry margin is {_f(margin)} mm")))
+        return found
 
     # -- end-effector targets (seqrun/arm/cartesian.py)
     def tool_target(self, step: ResolvedStep, params: ToolTargetParams) -> np.ndarray | None:
@@ -483,6 +516,7 @@ class Checker:
         for the run to compare its own solution with."""
         self.targets_deg[step.number] = np.asarray(joints_deg, dtype=float).copy()
         self.lost_at = None
+        self.position_unknown = False
         for name in self.unlocked_names():
             state = self.joints[name]
             value = float(joints_deg[self.arm.index(name)])
@@ -497,8 +531,18 @@ class Checker:
         self.notes.append(step.error(f"end-effector target solved: {values}{extra}",
                                      "position_mm"))
 
+    def _pass_left_out(self, kinds: list[str | None]) -> None:
+        """Steps left out here: what they may have changed is no longer known."""
+        for name in kinds:
+            kind = step_kind(name) if name is not None else None
+            if kind is None or kind.motion:
+                self.position_unknown = True
+            if kind is None or name in STARTUP_STATE_KINDS:
+                self.incomplete = True
+
     def run(self) -> ValidationResult:
-        for step in self.loaded.steps:
+        for index, step in enumerate(self.loaded.steps):
+            self._pass_left_out(self._left_out.get(index, []))
             kind = step_kind(step.kind)
             errors, notes = len(self.errors), len(self.notes)
             if kind.motion:

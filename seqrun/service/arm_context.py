@@ -40,6 +40,7 @@ if TYPE_CHECKING:
     from seqrun.drivers.base import ArmDriver
     from seqrun.sequence.campaign_config import BasePose, BusSection
     from seqrun.sequence.project import Project
+    from seqrun.service.simulated_part import SimulatedPart
     from seqrun.service.bus_claim import Holder
     from seqrun.service.connection import Connection
 
@@ -203,11 +204,15 @@ class ArmContext:
                 "it, name a bus with -i/-c, or give --sim for a private simulator")
 
     def open_connection(self, *, claim: bool = True, transient: bool = False,
-                        live: bool = False, **extra: Any) -> Connection:
+                        live: bool = False, part: SimulatedPart | None = None,
+                        **extra: Any) -> Connection:
         """Open the bus (:func:`seqrun.service.connection.open_connection`). ``live`` (a
         run, a console): on the built-in simulator the process also claims a name of its
-        own and serves its control socket there, so that ``seqrun halt`` finds it."""
+        own and serves its control socket there, so that ``seqrun halt`` finds it.
+        ``part``: the part between the simulated gripper's jaws (a run: the sequence's,
+        :func:`seqrun.service.simulated_part.simulated_part`; default the campaign's)."""
         from seqrun.service.connection import open_connection, parse_faults, response_timeout_s
+        from seqrun.service.simulated_part import campaign_part, switch_given
 
         arm = self.arm
         response_timeout_s(arm, self.response_timeout_ms)  # a bad value: before the bus
@@ -223,11 +228,17 @@ class ArmContext:
                                      sim_modules=extra.pop("sim_modules", None)
                                      or arm.present_module_ids, **extra)
         if arm.gripper is not None and connection.is_simulator:
-            # the built-in simulator carries the arm file's gripper (a part between its
-            # jaws only where the switches put one: gripper_part_mm)
+            # the built-in simulator carries the arm file's gripper, with the part the dry
+            # run places (seqrun.service.simulated_part); a part given by hand wins
             sim = getattr(connection.bus, "arm", None)
             if sim is not None and sim.gripper_id is None:
-                sim.add_gripper(arm.gripper.module, sim.options.gripper_part_mm)
+                part_mm = sim.options.gripper_part_mm
+                if not switch_given(b.kwargs):
+                    declared = part if part is not None else campaign_part(self.project)
+                    if declared is not None:
+                        part_mm = declared.width_mm
+                        connection.description += f"; {declared.describe()}"
+                sim.add_gripper(arm.gripper.module, part_mm)
         if live and connection.is_simulator and connection.claim is None:
             from seqrun.service.bus_claim import claim_bus
 

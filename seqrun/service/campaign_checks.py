@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from seqrun.defaults import EXIT_FAULT
 from seqrun.errors import SequenceInvalid, UserInputError
 
 __all__ = ["FileResult", "collect", "validate_files"]
@@ -31,6 +32,9 @@ class FileResult:
     clearance_at: str | None = None
     errors: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    #: The dry run was aborted by a rehearsed ``--sim-fault`` (exit 3, as ``seqrun run``),
+    #: the file itself being valid.
+    rehearsed_fault: bool = False
 
     @property
     def valid(self) -> bool:
@@ -166,6 +170,7 @@ def _one_arm_sequence(path: Path, options: dict, result: FileResult) -> FileResu
     if not run.passed:
         result.result = "dry run failed"
         result.errors.append(f"dry run {run.result.status}: {run.result.message}")
+        result.rehearsed_fault = bool(options.get("faults")) and run.result.exit_code == EXIT_FAULT
     return result
 
 

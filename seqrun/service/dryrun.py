@@ -177,12 +177,18 @@ def _dry_run_unfrozen(loaded: LoadedSequence, arm: ArmDescription,
 
 def gripper_switches(arm: ArmDescription, loaded: LoadedSequence) -> dict[str, object]:
     """The simulator's gripper for an arm file with one: at its module id, with the part
-    the sequence's first grip names between its jaws (the dry run assumes the part is
-    there; a run on the arm finds out)."""
+    a run on the built-in simulator has between its jaws too
+    (:mod:`seqrun.service.simulated_part`: the campaign's ``[sim] gripper_part_mm``, else
+    the sequence's first grip; a ``SEQRUN_SIM_OPTIONS`` part wins, as it does in a run)."""
+    from seqrun.service.simulated_part import simulated_part, switch_given
+
     if arm.gripper is None:
         return {}
-    part = next((s.params.part_width_mm for s in loaded.steps if s.kind == "grip"), 0.0)
-    return {"gripper_module": arm.gripper.module, "gripper_part_mm": part}
+    switches: dict[str, object] = {"gripper_module": arm.gripper.module}
+    if not switch_given({}):
+        part = simulated_part(loaded.steps, loaded.project)
+        switches["gripper_part_mm"] = 0.0 if part is None else part.width_mm
+    return switches
 
 
 def _bounded(seconds: float):

@@ -146,7 +146,10 @@ def prepare_run(request: RunRequest) -> PreparedRun:
         if fault.module is not None and fault.module not in arm.module_ids:
             raise UserInputError(f"--sim-fault '{fault.spec}': the arm has no module "
                                  f"{fault.module} (modules {', '.join(map(str, arm.module_ids))})")
+    from seqrun.service.simulated_part import simulated_part
+
     connection = context.open_connection(
+        part=simulated_part(loaded.steps, loaded.project),
         faults=faults, clock=VirtualClock() if r.virtual_time else None,
         power_on_pose=r.power_on_at.lower() if r.power_on_at else None, live=True)
     if r.virtual_time and not connection.is_simulator:

@@ -65,9 +65,12 @@ class CheckContext(Protocol):
     arm: ArmDescription
     poses: Mapping[str, FrozenPose]     # the poses frozen with the sequence
     speed: float                        # the run's speed override: the plans are checked at it
-    #: Steps were left out (they failed on their own): what depends on the steps before
-    #: (start-up order, where the joints are) is not checked.
+    #: A step left out before (it failed on its own) may have changed the modules'
+    #: start-up state: the start-up order (reset, home, limits, halt) is not checked.
     incomplete: bool
+    #: A step left out before may have moved the arm: what depends on where the joints are
+    #: is not checked until a move to absolute targets of every joint says it again.
+    position_unknown: bool
     # -- the state the steps so far leave (a check reads it and updates it)
     joints: dict[str, TrackedJoint]     # by joint name, arm order
     file_limits: LimitsInForce          # the limits the files set (exceeding them: an error)

@@ -167,7 +167,7 @@ def check(checker: CheckContext,
     except ValueError as exc:
         checker.errors.append(step.error(f"checkpoint: {exc}", "pose"))
         return
-    if checker.incomplete:
+    if checker.position_unknown:
         return  # where the joints are after the moves before is not known
     if _lost(checker, step):
         return
@@ -205,7 +205,7 @@ def _relative_checkpoint(checker: CheckContext, step: ResolvedStep[CheckpointPar
     from seqrun.formatting import format_number as f
 
     assert params.moved_mm is not None  # (check() comes here only for a moved_mm checkpoint)
-    if checker.incomplete or _lost(checker, step):
+    if checker.position_unknown or _lost(checker, step):
         return  # where the last move took the tool is not known
     if checker.motion_start_deg is None:
         checker.errors.append(step.error("a relative checkpoint (moved_mm) needs a move before "

@@ -19,7 +19,9 @@ class GripParams(StepParams):
     """Close the gripper on a part: the grip force is set as the module's current limit
     (the arm file's force <-> current table), the jaws close, and the step passes when they
     stop on the part, within window_mm of its width. Jaws that close past it (no part) or
-    stop short of it are a fault."""
+    stop short of it are a fault. On the simulator (the dry run and every simulated run
+    alike) a part of part_width_mm stands between the jaws, unless the campaign's
+    seqrun.toml sets another ([sim] gripper_part_mm; 0: none)."""
 
     kind: ClassVar[str] = "grip"
     yaml_name: ClassVar[str] = "grip"

@@ -197,7 +197,7 @@ def check(checker: CheckContext, step: ResolvedStep[MoveParams], params: MovePar
             "set_limits"
         if name in pose_limits:
             refused.add(name)  # outside the arm's limits: the pose file's error
-        elif params.relative and (checker.incomplete or checker.lost_at is not None):
+        elif params.relative and (checker.position_unknown or checker.lost_at is not None):
             refused.add(name)  # where it starts is not known
         elif not lo <= value <= hi:
             refused.add(name)
@@ -212,7 +212,7 @@ def check(checker: CheckContext, step: ResolvedStep[MoveParams], params: MovePar
             checker.notes.append(step.error(
                 f"{name} {verb} {f(state.position)}°, {f(outside)}° outside its limit "
                 f"{format_range(lo, hi)}; this move brings it back inside", *where[name]))
-    if not checker.incomplete and not refused and checker.lost_at is None:
+    if not checker.position_unknown and not refused and checker.lost_at is None:
         checker.guards_along_plan(step, params, target)  # (a target outside: that error only)
     _timeout(checker, step, params, target, [n for n in names if n not in refused])
     for name in names:
@@ -224,6 +224,7 @@ def check(checker: CheckContext, step: ResolvedStep[MoveParams], params: MovePar
         state.position = target[name]
     if not refused and not params.relative and set(names) >= set(checker.unlocked_names()):
         checker.lost_at = None  # every joint is where this move says again
+        checker.position_unknown = False
 
 
 def _velocities(checker: CheckContext, step: ResolvedStep[MoveParams], params: MoveParams) -> None:
@@ -263,7 +264,7 @@ def _timeout(checker: CheckContext, step: ResolvedStep[MoveParams], params: Move
             f"timeout_s {f(params.timeout_s)} s is longer than the arm file allows "
             f"(control.max_wait_s = {f(checker.arm.control.max_wait_s)} s)", "timeout_s"))
         return
-    duration = None if checker.incomplete else _planned_duration(checker, params, target, names)
+    duration = None if checker.position_unknown else _planned_duration(checker, params, target, names)
     if duration is not None and duration > params.timeout_s:
         checker.errors.append(step.error(
             f"timeout_s {f(params.timeout_s)} s is shorter than the move, planned to "

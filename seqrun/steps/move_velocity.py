@@ -154,7 +154,7 @@ def check(checker: CheckContext, step: ResolvedStep[MoveVelocityParams],
             checker.errors.append(step.error(
                 f"envelope_deg of {name} {format_range(lo, hi)} goes beyond the limits in "
                 f"force {format_range(llo, lhi)}", "envelope_deg", name))
-    if bad or checker.incomplete or checker.lost_at is not None:
+    if bad or checker.position_unknown or checker.lost_at is not None:
         return  # where the joints start (or may go) is not known well enough to say more
     _, acceleration = checker.limits.maxima()
     start = checker.tracked()

@@ -267,7 +267,8 @@ export class JointControls {
   }
 
   // MOVE sends the joints whose target differs from where they are: the others stay (and a
-  // joint that stands just outside its limits, as j4 at Park, is not asked to go there).
+  // joint that stands just outside its limits, after a power-off there, is not asked to go
+  // there).
   changedTargets() {
     const s = this.status();
     const now = s ? s.joints : [];
