@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import json
 import math
-import re
 import threading
 from pathlib import Path
 from typing import Any
@@ -43,7 +42,7 @@ from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory as JointTrajectoryMsg
 
 from seqrun.errors import Refused
-from seqrun.ros import optional_module
+from seqrun.ros import optional_module, ros_name
 from seqrun.service.trajectories import (JointTrajectory, TrajectoryPoint, in_trajectory_terms,
                                          run_trajectory)
 
@@ -54,13 +53,6 @@ NODE_NAME = "seqrun"
 DEFAULT_RATE_HZ = 100.0
 #: Session events not forwarded to ~/events: per control cycle (joint_states carries them).
 HIGH_RATE_EVENTS = frozenset({"measurement", "setpoint"})
-
-
-def ros_name(text: str) -> str:
-    """``text`` as one ROS name token (letters, digits, underscores; not starting with a
-    digit): an arm file's name ``lwa3`` stays ``lwa3``."""
-    name = re.sub(r"[^A-Za-z0-9_]", "_", text).strip("_") or "arm"
-    return name if not name[0].isdigit() else f"arm_{name}"
 
 
 def _seconds(duration: Any) -> float:

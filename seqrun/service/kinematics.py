@@ -4,7 +4,8 @@
 - the end effector of a reading: ``seqrun status``, the session's status, a run's status
   over its control socket, the live view;
 - ``seqrun fk`` and ``seqrun ik``: a pose of joint angles, joint angles of a tool target;
-- the console's 3D view: the chain as frames, guards, link volumes, obstacles.
+- the console's 3D view: the chain as frames, guards, link volumes, obstacles;
+- ``seqrun urdf``, the ROS node's ``robot_description``: the arm as a URDF document.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ if TYPE_CHECKING:
     from seqrun.arm.kinematics import Pose
 
 __all__ = ["ForwardKinematics", "InverseKinematics", "arm_scene", "end_effector",
-           "link_transforms",
+           "link_transforms", "robot_description",
            "end_effector_pose", "forward_kinematics", "inverse_kinematics"]
 
 
@@ -204,3 +205,12 @@ def _quaternion_xyzw(rotation: Any) -> tuple[float, float, float, float]:
     sign = -1.0 if q[3] < 0 else 1.0
     x, y, z, w = (sign * float(v) / norm for v in q)
     return (x, y, z, w)
+
+
+def robot_description(arm: ArmDescription, frame_prefix: str = "") -> str:
+    """The arm as a URDF document (:mod:`seqrun.arm.urdf`), its link names prefixed with
+    ``frame_prefix`` (``lwa3/``: the frames of seqrun's ``/tf``): what ``seqrun urdf``
+    writes, the ROS node publishes on ``robot_description`` and run.mcap carries."""
+    from seqrun.arm.urdf import urdf
+
+    return urdf(arm, frame_prefix)
