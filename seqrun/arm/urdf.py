@@ -260,11 +260,12 @@ def urdf(arm: ArmDescription, prefix: str = "", robot_name: str | None = None) -
     (default: the prefix without its slash, else the arm's name) names the robot."""
     name = robot_name or prefix.strip("/") or arm.name
     robot = ET.Element("robot", name=name)
+    # the arm's content only (not its file's path): the same arm gives the same text, so
+    # run.mcap rebuilt from events.jsonl is the bag written live
     robot.append(ET.Comment(
-        f" {arm.name}: made by `seqrun urdf` from "
-        f"{arm.source_file or 'an arm description'}"
-        + (f" (sha256 {arm.sha256})" if arm.sha256 else "")
-        + ". Lengths m, angles rad. Make it anew from the arm file rather than edit it. "))
+        f" {arm.name.replace('--', '- -')}: made by `seqrun urdf` from its arm file. "
+        "Lengths m, angles rad. "
+        "Make it anew from the arm file rather than edit it. "))
     for material, rgba in _MATERIALS.items():
         ET.SubElement(ET.SubElement(robot, "material", name=material), "color", rgba=rgba)
     links, joints, shapes = robot_tree(arm, prefix)

@@ -19,7 +19,7 @@ if TYPE_CHECKING:
     from seqrun.arm.kinematics import Pose
 
 __all__ = ["ForwardKinematics", "InverseKinematics", "arm_scene", "end_effector",
-           "link_transforms", "robot_description",
+           "fixed_transforms", "link_transforms", "robot_description",
            "end_effector_pose", "forward_kinematics", "inverse_kinematics"]
 
 
@@ -214,3 +214,18 @@ def robot_description(arm: ArmDescription, frame_prefix: str = "") -> str:
     from seqrun.arm.urdf import urdf
 
     return urdf(arm, frame_prefix)
+
+
+def fixed_transforms(arm: ArmDescription, prefix: str
+                     ) -> list[tuple[str, str, tuple[float, float, float],
+                                     tuple[float, float, float, float]]]:
+    """The frames that never move against their parent, as :func:`link_transforms` gives
+    them ``(parent, child, translation_m, quaternion_xyzw)``: the URDF's fixed joints (a
+    locked joint, the end-effector on the flange, the tools' TCPs): what ``/tf_static``
+    carries once, where ``/tf`` carries the others."""
+    from seqrun.arm.urdf import robot_tree
+
+    _, joints, _ = robot_tree(arm, prefix)
+    return [(j.parent, j.child, tuple(float(v) / 1000.0 for v in j.origin[:3, 3]),
+             _quaternion_xyzw(j.origin[:3, :3]))
+            for j in joints if j.kind == "fixed"]  # type: ignore[misc]
