@@ -34,6 +34,7 @@ from __future__ import annotations
 import math
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -117,20 +118,20 @@ class _Tree:
     def origin_in(self, b: int, k: int) -> np.ndarray | None:
         """The origin of frame ``b`` in frame ``k`` (mm) when no free joint moves it there;
         None otherwise."""
-        point: np.ndarray | None = np.array([0.0, 0.0, 0.0, 1.0])
+        point = np.array([0.0, 0.0, 0.0, 1.0])
         if b > k:  # F_{k+1}·Rz(q_{k+1}) ··· F_b·0
             point = self.steps[b] @ point
             for j in range(b - 1, k, -1):
-                point = self._turn(j, point, 1.0)
-                if point is None:
+                turned = self._turn(j, point, 1.0)
+                if turned is None:
                     return None
-                point = self.steps[j] @ point
+                point = self.steps[j] @ turned
         elif b < k:  # Rz(-q_k)·F_k⁻¹ ··· Rz(-q_{b+1})·F_{b+1}⁻¹·0
             for j in range(b + 1, k + 1):
-                point = np.linalg.solve(self.steps[j], point)
-                point = self._turn(j, point, -1.0)
-                if point is None:
+                turned = self._turn(j, np.linalg.solve(self.steps[j], point), -1.0)
+                if turned is None:
                     return None
+                point = turned
         return point[:3]
 
 
@@ -238,7 +239,7 @@ def _shape_elements(link: ET.Element, shape: UrdfShape) -> None:
     radius = _number(shape.radius_mm / 1000.0)
     kinds = ("visual", "collision") if shape.collision else ("visual",)
     for kind in kinds:
-        geometries = []
+        geometries: list[tuple[np.ndarray, Any, str, dict[str, str]]] = []
         length = float(np.linalg.norm(end - start))
         if length > 0:
             middle, rpy = _cylinder_pose(start, end)
@@ -249,7 +250,7 @@ def _shape_elements(link: ET.Element, shape: UrdfShape) -> None:
         for middle, rpy, what, attributes in geometries:
             element = ET.SubElement(link, kind, name=f"{shape.name} {what}")
             _origin(element, middle, rpy)
-            ET.SubElement(ET.SubElement(element, "geometry"), what, **attributes)
+            ET.SubElement(ET.SubElement(element, "geometry"), what, attributes)
             if kind == "visual":
                 ET.SubElement(element, "material", name=shape.material)
 

@@ -226,6 +226,10 @@ def fixed_transforms(arm: ArmDescription, prefix: str
     from seqrun.arm.urdf import robot_tree
 
     _, joints, _ = robot_tree(arm, prefix)
-    return [(j.parent, j.child, tuple(float(v) / 1000.0 for v in j.origin[:3, 3]),
-             _quaternion_xyzw(j.origin[:3, :3]))
-            for j in joints if j.kind == "fixed"]  # type: ignore[misc]
+    out = []
+    for joint in joints:
+        if joint.kind == "fixed":
+            x, y, z = (float(v) / 1000.0 for v in joint.origin[:3, 3])
+            out.append((joint.parent, joint.child, (x, y, z),
+                        _quaternion_xyzw(joint.origin[:3, :3])))
+    return out
