@@ -303,3 +303,23 @@ def test_seqrun_urdf_writes_the_file_and_prints_it(tmp_path):
     assert printed.stdout == urdf(shipped(), "left_arm/")
     missing = runner.invoke(app, ["urdf", "--arm", str(tmp_path / "none.yaml")])
     assert missing.exit_code == 2 and missing.stderr.startswith("error: arm file ")
+
+
+def test_one_arm_of_several_is_named_by_its_id(tmp_path, monkeypatch):
+    """In a campaign with several arms, --arm-id B: B's arm file, links B/base ... (the
+    frames `seqrun ros --arm-id B` publishes)."""
+    import shutil
+
+    import seqrun.cli.urdf  # noqa: F401  (registers `urdf`)
+    from seqrun.cli.app import app
+
+    campaign = tmp_path / "two-arms"
+    shutil.copytree(ROOT / "examples" / "two-arms", campaign)
+    monkeypatch.chdir(campaign)
+    monkeypatch.setenv("SEQRUN_STATE_DIR", str(tmp_path / "state"))
+    result = runner.invoke(app, ["urdf", "--arm-id", "B"])
+    assert result.exit_code == 0, result.output
+    model = Urdf(result.stdout)
+    assert model.root.get("name") == "B" and model.root_link == "B/base"
+    unknown = runner.invoke(app, ["urdf", "--arm-id", "C"])
+    assert unknown.exit_code == 2 and "C" in unknown.stderr
