@@ -323,3 +323,26 @@ def test_one_arm_of_several_is_named_by_its_id(tmp_path, monkeypatch):
     assert model.root.get("name") == "B" and model.root_link == "B/base"
     unknown = runner.invoke(app, ["urdf", "--arm-id", "C"])
     assert unknown.exit_code == 2 and "C" in unknown.stderr
+
+
+def test_the_fixed_frames_for_tf_static_are_the_chains_own():
+    """What /tf_static carries (the URDF's fixed joints) is what /tf carried for those
+    frames: the locked j3 in j2, the end-effector on the flange, each tool's TCP."""
+    from seqrun.service.kinematics import fixed_transforms, link_transforms
+
+    arm = ARMS["tools, j3 at 25"]
+    fixed = {child: (parent, xyz, q) for parent, child, xyz, q in
+             fixed_transforms(arm, "lwa3/")}
+    assert sorted(fixed) == ["lwa3/end_effector", "lwa3/j3", "lwa3/tool_camera",
+                             "lwa3/tool_pointer", "lwa3/tool_probe"]
+    degrees = [10, -30, 25, 40, -50, 60, -70]
+    moving = {child: (parent, xyz, q) for parent, child, xyz, q in
+              link_transforms(arm, degrees, "lwa3/")}
+    for child in ("lwa3/j3", "lwa3/end_effector"):
+        parent, xyz, q = fixed[child]
+        assert parent == moving[child][0]
+        assert np.allclose(xyz, moving[child][1], atol=1e-12)
+        assert np.allclose(q, moving[child][2], atol=1e-12) or \
+            np.allclose(q, -np.array(moving[child][2]), atol=1e-12)
+    parent, xyz, _ = fixed["lwa3/tool_probe"]
+    assert parent == "lwa3/end_effector" and np.allclose(xyz, (0, 0, -0.12))
