@@ -39,6 +39,7 @@ from __future__ import annotations
 import json
 import math
 import threading
+import time
 from pathlib import Path
 from typing import Any
 
@@ -212,16 +213,18 @@ class SeqrunNode:
         return self.session.poll_status()
 
     def _stamp(self, measured_at: float | None) -> Any:
-        """ROS time of a reading taken at ``measured_at`` (the session's clock): now, less
-        the reading's age."""
-        from rclpy.duration import Duration
+        """The stamp of a reading taken at ``measured_at`` (the session's clock) in ROS time
+        (the system clock): shifted by the clocks' difference now."""
+        from builtin_interfaces.msg import Time
 
-        now = self.node.get_clock().now()
         clock = self.session.clock
         if measured_at is None or getattr(clock, "is_virtual", False):
-            return now.to_msg()
-        age = max(0.0, clock.now() - measured_at)
-        return (now - Duration(nanoseconds=int(round(age * 1e9)))).to_msg()
+            return self.node.get_clock().now().to_msg()
+        # the largest of three back-to-back differences: a pair the scheduler splits only
+        # comes out smaller
+        offset = max(time.time() - clock.now() for _ in range(3))
+        ns = int(round((measured_at + offset) * 1e9))
+        return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
     def publish_state(self) -> None:
         """``joint_states`` (and ``/tf``) of the latest reading, each reading once, stamped
