@@ -275,6 +275,9 @@ class Measurement(Event):
     fault: bool = _derived(False)
     #: Where the reading came from: "monitor", "cycle", "preflight", "poll", "step".
     source: str = _derived("monitor")
+    #: The clock's reading when the modules answered (the driver's reading time, earlier
+    #: than ``clock_s`` by the exchange and what came after it), where known.
+    read_clock_s: float | None = _derived()
 
 
 @dataclass(frozen=True, kw_only=True)

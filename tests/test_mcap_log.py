@@ -68,7 +68,8 @@ def test_the_run_folder_holds_run_mcap_with_every_topic(opsafe):
                      "/tf": "tf2_msgs/msg/TFMessage",
                      "/lwa3/planned": "trajectory_msgs/msg/JointTrajectory",
                      "/seqrun/events": "std_msgs/msg/String",
-                     "/seqrun/markers": "visualization_msgs/msg/MarkerArray"}
+                     "/seqrun/markers": "visualization_msgs/msg/MarkerArray",
+                     "/robot_description": "std_msgs/msg/String"}
     assert all(c.message_encoding == "cdr" for c in by_topic.values())
     counts = {t: summary.statistics.channel_message_counts[c.id] for t, c in by_topic.items()}
     events = opsafe.events()
@@ -79,6 +80,7 @@ def test_the_run_folder_holds_run_mcap_with_every_topic(opsafe):
     assert counts["/tf"] == counts["/lwa3/joint_states"]
     assert counts["/lwa3/planned"] == len([e for e in events if e["type"] == "move_planned"]) == 2
     assert counts["/seqrun/events"] == len(events) - len(setpoints) - len(measurements)
+    assert counts["/robot_description"] == 1
     start = ns(opsafe.report()["start_epoch_s"])
     assert summary.statistics.message_start_time == start   # the zero reference, t = 0
     assert summary.statistics.message_end_time == ns(
@@ -307,3 +309,15 @@ def test_quaternions_turn_as_the_matrices_do(rpy):
 def test_cdr_string_is_utf8_with_its_terminator():
     data = cdr.string("ü")
     assert data == b"\x00\x01\x00\x00" + (3).to_bytes(4, "little") + "ü".encode() + b"\x00"
+
+
+def test_robot_description_is_the_urdf_once_at_the_start(opsafe):
+    """run.mcap carries the arm's URDF (what `seqrun urdf` writes, links named as the
+    frames of /tf), so a bag played into RViz or opened in Foxglove draws the model."""
+    from seqrun.service.kinematics import robot_description
+
+    bag = read_bag(opsafe.path / "run.mcap")
+    (stamp, message), = bag["/robot_description"]
+    assert message.data == robot_description(ARM, "lwa3/")
+    assert f'<link name="{NAMES.base_frame}"' in message.data
+    assert stamp == ns(opsafe.report()["start_epoch_s"])

@@ -322,19 +322,23 @@ def test_junit_has_a_case_per_step_and_per_checkpoint_with_measured_values(clean
     root = ET.parse(clean_run / "junit.xml").getroot()
     steps, checkpoints = root.findall("testsuite")
     assert len(steps.findall("testcase")) == 9 and steps.get("failures") == "0"
-    move = steps.findall("testcase")[4]
-    props = {p.get("name"): p.get("value") for p in move.iter("property")}
+    # the measured values are the suite's properties, stepNN.<value> (junit-10.xsd allows
+    # none on a test case: tests/test_junit_schema.py)
+    props = {p.get("name"): p.get("value") for p in steps.iter("property")}
     report = RunFolder(clean_run).report()
     figures = report["steps"][4]
-    assert float(props["max_following_error_deg.j4"]) == figures["max_following_error_deg"][3]
-    assert float(props["peak_measured_velocity_deg_s.j2"]) == \
+    assert float(props["step05.max_following_error_deg.j4"]) == \
+        figures["max_following_error_deg"][3]
+    assert float(props["step05.peak_measured_velocity_deg_s.j2"]) == \
         figures["peak_measured_velocity_deg_s"][1]
-    assert float(props["executed_duration_s"]) == pytest.approx(
+    assert float(props["step05.executed_duration_s"]) == pytest.approx(
         figures["executed_duration_s"], abs=1e-4)
     [case] = checkpoints.findall("testcase")
     assert case.get("classname").endswith(".checkpoints") and case.find("failure") is None
-    props = {p.get("name"): p.get("value") for p in case.iter("property")}
     [checkpoint] = report["checkpoints"]
+    prefix = f"step{checkpoint['step']:02d}."
+    props = {p.get("name").removeprefix(prefix): p.get("value")
+             for p in checkpoints.iter("property")}
     assert float(props["position_error_mm"]) == checkpoint["position_error_mm"]
     assert float(props["position_tolerance_mm"]) == checkpoint["position_tolerance_mm"]
     assert props["reached_position_mm"].split() == [f"{x:g}" for x in
@@ -346,8 +350,8 @@ def test_junit_of_a_faulted_run(fault_run):
     cases = steps.findall("testcase")
     assert cases[4].find("failure") is not None and "TOW_ERROR" in cases[4].find(
         "failure").get("message")
-    assert {p.get("name") for p in cases[4].iter("property")} >= {
-        "max_following_error_deg.j4", "peak_measured_velocity_deg_s.j4"}
+    assert {p.get("name") for p in steps.iter("property")} >= {
+        "step05.max_following_error_deg.j4", "step05.peak_measured_velocity_deg_s.j4"}
     assert checkpoints.find("testcase/skipped") is not None
 
 

@@ -34,6 +34,7 @@ COMMAND_MODULES = (
     "seqrun.cli.console",
     "seqrun.cli.ros",
     "seqrun.cli.jog",
+    "seqrun.cli.urdf",
 )
 
 
@@ -60,6 +61,7 @@ COMMAND_WORDS = {
     "console": "seqrun.cli.console",
     "ros": "seqrun.cli.ros",
     "jog": "seqrun.cli.jog",
+    "urdf": "seqrun.cli.urdf",
 }
 
 

@@ -3,7 +3,8 @@
 Each sequence gets the static checks and the dry run (``--static``: the checks only), each
 pose file the pose checks against the arm; then one summary table: file, result, simulated
 duration, lowest guard clearance, findings. ``--json`` prints the same as one object,
-``--junit FILE`` writes a JUnit report for CI. Exit 0 only when everything is valid. The
+``--junit FILE`` writes a JUnit report for CI (and its CTRF JSON beside it,
+``FILE``'s name with ``.ctrf.json``). Exit 0 only when everything is valid. The
 checks are the service's (:mod:`seqrun.service.campaign_checks`); this prints them.
 The pre-commit hook (``.pre-commit-hooks.yaml``) runs ``seqrun validate --static`` on the
 changed sequence and pose files.
@@ -39,6 +40,8 @@ def table(results: list[FileResult]) -> str:
 
 
 def junit(results: list[FileResult]) -> str:
+    """The JUnit report: a test case per file, valid against Jenkins xunit's junit-10.xsd
+    (``errors`` on the suite; no ``file`` on a test case: its name is the file)."""
     # (imported here: xml.sax.saxutils pulls in urllib, http and email, which a single
     # file's validation does not need)
     from xml.sax.saxutils import escape, quoteattr
@@ -47,10 +50,10 @@ def junit(results: list[FileResult]) -> str:
     total = sum(r.simulated_s or 0.0 for r in results)
     lines = ['<?xml version="1.0" encoding="UTF-8"?>',
              f'<testsuites><testsuite name="seqrun validate" tests="{len(results)}" '
-             f'failures="{failures}" time="{total:.3f}">']
+             f'failures="{failures}" errors="0" time="{total:.3f}">']
     for r in results:
         lines.append(f'  <testcase classname={quoteattr(r.kind)} name={quoteattr(r.file)} '
-                     f'file={quoteattr(r.file)} time="{r.simulated_s or 0.0:.3f}">')
+                     f'time="{r.simulated_s or 0.0:.3f}">')
         if not r.valid:
             text = "\n".join(r.errors) or r.result
             lines.append(f'    <failure message={quoteattr(r.result)}>{escape(text)}</failure>')
@@ -61,12 +64,34 @@ def junit(results: list[FileResult]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def report(results: list[FileResult], *, as_json: bool, junit_file: Path | None) -> bool:
+def ctrf(results: list[FileResult], start_s: float, stop_s: float) -> str:
+    """The same as CTRF JSON (seqrun/runfolder/ctrf.py), written beside the JUnit file."""
+    from seqrun import __version__
+    from seqrun.runfolder.ctrf import ctrf_report, ctrf_test
+
+    tests = [ctrf_test(r.file, "passed" if r.valid else "failed", r.simulated_s,
+                       suite="seqrun validate", location=r.file,
+                       message=None if r.valid else ("\n".join(r.errors) or r.result),
+                       extra={"kind": r.kind, "result": r.result,
+                              **({"notes": list(r.notes)} if r.notes else {})})
+             for r in results]
+    return ctrf_report(tests, start_s=start_s, stop_s=stop_s, version=__version__)
+
+
+def report(results: list[FileResult], *, as_json: bool, junit_file: Path | None,
+           began_s: float | None = None) -> bool:
     """Print the summary (and write the JUnit file); True when every file is valid."""
     valid = all(r.valid for r in results)
     if junit_file is not None:
+        import time
+
+        from seqrun.runfolder.ctrf import ctrf_path
+
         junit_file.parent.mkdir(parents=True, exist_ok=True)
         junit_file.write_text(junit(results), encoding="utf-8")
+        stop = time.time()
+        ctrf_path(junit_file).write_text(
+            ctrf(results, stop if began_s is None else began_s, stop), encoding="utf-8")
     if as_json:
         typer.echo(json.dumps({"valid": valid, "results": [r.as_dict() for r in results]},
                               indent=2, ensure_ascii=False))

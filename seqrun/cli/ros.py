@@ -2,6 +2,10 @@
 
     seqrun ros                          # simulator (no bus configured)
     seqrun ros -i socketcan -c can0     # the real arm
+    seqrun ros --ros-args -r __ns:=/cell1 -p rate:=50   # ROS arguments, to rclpy
+
+Everything from ``--ros-args`` on (to a ``--`` that ends it) is ROS's, handed to rclpy as
+it is (remapping, namespace, parameters, log levels); the rest is this command's options.
 
 Needs the optional extra ``seqrun[ros]`` (or a sourced ROS 2 installation); without it the
 command prints one line saying how to install it (exit 2). rclpy is imported only when the
@@ -12,9 +16,10 @@ from __future__ import annotations
 
 import signal
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated, Any, Optional
 
 import typer
+from typer.core import TyperCommand
 
 from seqrun.cli.app import app
 from seqrun.cli.common import (EXIT_USAGE, ArmFileOption, BitrateOption,
@@ -25,8 +30,42 @@ from seqrun.cli.questions import ask
 from seqrun.defaults import EXIT_OPERATOR_ABORT
 
 
-@app.command("ros")
+#: Where ``seqrun ros`` keeps the ROS arguments of its command line (``ctx.meta``).
+ROS_ARGS = "seqrun.ros_args"
+
+
+def split_ros_args(args: list[str]) -> tuple[list[str], list[str]]:
+    """``args`` as (this command's, ROS's): ROS's run from ``--ros-args`` to a ``--`` (which
+    ends them, as rcl reads it) or the end; there may be several such runs."""
+    ours: list[str] = []
+    ros: list[str] = []
+    inside = False
+    for token in args:
+        if token == "--ros-args":
+            inside = True
+            ros.append(token)
+        elif inside and token == "--":
+            inside = False
+        elif inside:
+            ros.append(token)
+        else:
+            ours.append(token)
+    return ours, ros
+
+
+class RosCommand(TyperCommand):
+    """``seqrun ros`` with ``--ros-args ...``: click never sees ROS's arguments (``-r``,
+    ``-p`` would be read as unknown options of this command)."""
+
+    def parse_args(self, ctx: Any, args: list[str]) -> list[str]:
+        ours, ros = split_ros_args(list(args))
+        ctx.meta[ROS_ARGS] = ros
+        return super().parse_args(ctx, ours)
+
+
+@app.command("ros", cls=RosCommand)
 def ros_command(
+    ctx: typer.Context,
     interface: InterfaceOption = None,
     channel: ChannelOption = None,
     bitrate: BitrateOption = None,
@@ -56,7 +95,8 @@ def ros_command(
         "a power-on without asking (a different record refuses to start).")] = None,
     arm_id: OneArmOption = None,
 ) -> None:
-    """Serve the arm on ROS 2: joint_states, /tf, JointTrajectory, ~/stop ~/home ~/reset."""
+    """Serve the arm on ROS 2: joint_states, robot_description, /tf, JointTrajectory,
+    ~/stop ~/home ~/reset. ROS arguments follow --ros-args (-r __ns:=/NS, -p rate:=50)."""
     from seqrun.ros import missing
 
     absent = missing()
@@ -105,14 +145,21 @@ def ros_command(
                         else Path(arm.source_file or "arm").stem)
     node_name = node_name or (f"seqrun_{ros_name(str(context.arm_id))}" if one_of_several
                               else "seqrun")
-    rclpy.init(args=[])
+    ros_args = list(ctx.meta.get(ROS_ARGS, []))
+    try:
+        rclpy.init(args=["seqrun", *ros_args])
+    except Exception as exc:  # noqa: BLE001 - rcl's parse error: one line, no traceback
+        session.close()
+        fail(f"--ros-args: {str(exc).strip().splitlines()[0] if str(exc).strip() else exc}")
     previous = signal.signal(signal.SIGTERM, _terminated)
     node = None
     try:
-        node = SeqrunNode(session, arm_name=name, rate_hz=rate, node_name=node_name)
+        with user_errors():  # a parameter out of range (-p rate:=5): one line
+            node = SeqrunNode(session, arm_name=name, rate_hz=rate, node_name=node_name)
         banner = "SIMULATOR" if connection.is_simulator else connection.description
-        typer.echo(f"seqrun ros on {banner}: /{node.arm}/joint_states, "
-                   f"/{node.arm}/joint_trajectory, {node.node.get_fully_qualified_name()}/stop;"
+        typer.echo(f"seqrun ros on {banner}: {node.joint_states.topic_name}, "
+                   f"{node.node.resolve_topic_name(node.arm + '/joint_trajectory')}, "
+                   f"{node.node.get_fully_qualified_name()}/stop;"
                    " Ctrl-C ends it (any motion is stopped first)")
         spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):

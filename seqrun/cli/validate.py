@@ -260,11 +260,14 @@ def validate_command(
         from seqrun.cli.campaign_validate import report
         from seqrun.service.campaign_checks import validate_files
 
+        import time
+
+        began = time.time()
         try:
             results = validate_files(files, start=start, arm_file=arm_file, started=started,
                                      static=static, speed=speed, faults=faults,
                                      project_dir=project_dir)
-            valid = report(results, as_json=as_json, junit_file=junit_file)
+            valid = report(results, as_json=as_json, junit_file=junit_file, began_s=began)
         except UserInputError as exc:
             fail(str(exc))
         except OSError as exc:

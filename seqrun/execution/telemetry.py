@@ -46,7 +46,8 @@ class SubscriberFields:
             run.arm.joint_names, run.modules, m.short_state if m is not None else {},
             m.state_words if m is not None and type_ == "measurement" else None)
         extra: dict[str, Any] = {"velocities_deg_s": self._velocity.velocity(),
-                                 "flags": flags, "fault": fault}
+                                 "flags": flags, "fault": fault,
+                                 "read_clock_s": m.at if m is not None else None}
         if type_ == "measurement":
             return {"measurement": {**extra, "source": "step" if "after" in data
                                     else "monitor"}}

@@ -8,6 +8,8 @@ there, in one line. docs/ros2-node.md.
 
 from __future__ import annotations
 
+import re
+
 #: The one line ``seqrun ros`` prints without the extra.
 INSTALL_HINT = ("seqrun ros needs ROS 2's Python packages: pip install 'seqrun[ros]' "
                 "(ROS 2 Jazzy wheels), or source a ROS 2 Jazzy installation first")
@@ -39,3 +41,11 @@ def optional_module(name: str):
         return importlib.import_module(name)
     except ImportError:
         return None
+
+
+def ros_name(text: str) -> str:
+    """``text`` as one ROS name token (letters, digits, underscores; not starting with a
+    digit): an arm file's name ``lwa3`` stays ``lwa3``. The node's names and frames, and
+    ``seqrun urdf``'s link names, are made with it."""
+    name = re.sub(r"[^A-Za-z0-9_]", "_", text).strip("_") or "arm"
+    return name if not name[0].isdigit() else f"arm_{name}"

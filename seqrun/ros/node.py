@@ -2,11 +2,16 @@
 
 What it offers (``<arm>``: the arm file's name, e.g. ``lwa3``; ``~``: the node, ``/seqrun``):
 
-- ``/<arm>/joint_states`` (``sensor_msgs/JointState``, radians in user coordinates, every
-  joint) at ``rate_hz`` from the session's latest measurement (never a bus read of its own);
-- ``/tf`` (``tf2_msgs/TFMessage``: ``<arm>/base``, ``<arm>/j1`` ... ``<arm>/end_effector``)
-  when ``tf2_msgs`` can be imported (a ROS host: Jazzy's wheels on the package index have no
-  ``tf2_msgs``);
+- ``<arm>/joint_states`` (``sensor_msgs/JointState``, radians in user coordinates, every
+  joint; relative names: under the node's namespace, ``/<arm>/...`` without one) at the
+  ``rate`` parameter, each message one reading of the arm stamped when the modules answered:
+  the control loop's during a motion, while idle one the session reads at that rate;
+- ``robot_description`` (``std_msgs/String``, transient local: a late subscriber gets it):
+  the arm as a URDF (``seqrun urdf``), link names the frames of ``/tf``;
+- ``/tf`` (``tf2_msgs/TFMessage``: ``<arm>/base``, ``<arm>/j1`` ... ``<arm>/j7``, the
+  frames that move) and ``/tf_static`` once (the fixed ones: a locked joint,
+  ``<arm>/end_effector``, the tools' TCPs) when ``tf2_msgs`` can be imported (a ROS host:
+  Jazzy's wheels on the package index have no ``tf2_msgs``) and ``publish_tf`` is true;
 - ``/<arm>/joint_trajectory`` (``trajectory_msgs/JointTrajectory``) accepted: each one checked
   as a sequence from where the arm stands and run through the session
   (:mod:`seqrun.service.trajectories`); a refusal is one line on ``~/events`` and the log;
@@ -22,14 +27,19 @@ What it offers (``<arm>``: the arm file's name, e.g. ``lwa3``; ``~``: the node, 
 
 STOP never waits behind anything: its service has a callback group of its own, and the
 session's halt takes no lock a run holds.
+
+Parameters (:data:`PARAMETERS`; ``--ros-args -p NAME:=VALUE`` overrides them at start):
+``rate`` and ``publish_tf``. Names follow ROS rules: ``--ros-args -r __ns:=/foo`` puts the
+topics and services under ``/foo``, ``-r __node:=NAME`` renames the node, ``-r FROM:=TO``
+remaps a topic (``/tf`` and ``/tf_static`` are absolute, as tf2's).
 """
 
 from __future__ import annotations
 
 import json
 import math
-import re
 import threading
+import time
 from pathlib import Path
 from typing import Any
 
@@ -42,25 +52,28 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory as JointTrajectoryMsg
 
-from seqrun.errors import Refused
-from seqrun.ros import optional_module
+from seqrun.errors import Refused, UserInputError
+from seqrun.ros import optional_module, ros_name
 from seqrun.service.trajectories import (JointTrajectory, TrajectoryPoint, in_trajectory_terms,
                                          run_trajectory)
 
-__all__ = ["DEFAULT_RATE_HZ", "NODE_NAME", "SeqrunNode", "ros_name"]
+__all__ = ["DEFAULT_RATE_HZ", "NODE_NAME", "PARAMETERS", "SeqrunNode", "ros_name"]
 
 NODE_NAME = "seqrun"
 #: joint_states (and /tf) rate; the issue asks for at least 50 Hz.
 DEFAULT_RATE_HZ = 100.0
 #: Session events not forwarded to ~/events: per control cycle (joint_states carries them).
 HIGH_RATE_EVENTS = frozenset({"measurement", "setpoint"})
-
-
-def ros_name(text: str) -> str:
-    """``text`` as one ROS name token (letters, digits, underscores; not starting with a
-    digit): an arm file's name ``lwa3`` stays ``lwa3``."""
-    name = re.sub(r"[^A-Za-z0-9_]", "_", text).strip("_") or "arm"
-    return name if not name[0].isdigit() else f"arm_{name}"
+#: The node's parameters: name -> what it is (docs/ros2-node.md lists them).
+PARAMETERS = {
+    "rate": "joint_states (and /tf) rate, Hz, 50-1000 (seqrun ros --rate): while idle the "
+            "arm is read at this rate, every message is a new reading",
+    "publish_tf": "publish /tf and /tf_static from seqrun's own forward kinematics (false: "
+                  "a robot_state_publisher on robot_description and joint_states does)",
+}
+#: robot_description and /tf_static: sent once, kept for late subscribers (RViz, a
+#: robot_state_publisher started later), as robot_state_publisher does.
+LATCHED_DEPTH = 1
 
 
 def _seconds(duration: Any) -> float:
@@ -90,17 +103,21 @@ class SeqrunNode:
         self.node = Node(ros_name(node_name), context=context)
         self._names = list(session.arm.joint_names)
         self._closed = False
+        rate_hz, self.publish_tf = self._parameters(rate_hz)
+        self._published_reading: float | None = None
         self._stop_group = MutuallyExclusiveCallbackGroup()
         self._command_group = MutuallyExclusiveCallbackGroup()
         self._state_group = MutuallyExclusiveCallbackGroup()
         node = self.node
-        self.joint_states = node.create_publisher(JointState, f"/{self.arm}/joint_states", 10)
+        self.joint_states = node.create_publisher(JointState, f"{self.arm}/joint_states", 10)
         self.events = node.create_publisher(String, "~/events", 100)
+        self.robot_description = self._publish_robot_description()
         tf2_msgs = optional_module("tf2_msgs.msg")
-        self._tf_message = getattr(tf2_msgs, "TFMessage", None)
+        self._tf_message = getattr(tf2_msgs, "TFMessage", None) if self.publish_tf else None
         self.tf = (node.create_publisher(self._tf_message, "/tf", 100)
                    if self._tf_message is not None else None)
-        node.create_subscription(JointTrajectoryMsg, f"/{self.arm}/joint_trajectory",
+        self._fixed_children = self._publish_tf_static()
+        node.create_subscription(JointTrajectoryMsg, f"{self.arm}/joint_trajectory",
                                  self._on_trajectory, 10, callback_group=self._command_group)
         node.create_service(Trigger, "~/stop", self._stop, callback_group=self._stop_group)
         node.create_service(Trigger, "~/home", self._home, callback_group=self._command_group)
@@ -112,9 +129,10 @@ class SeqrunNode:
         self._listener = session.events.add_listener(self._forward, "ros ~/events",
                                                      maxsize=10_000)
         log = node.get_logger()
-        log.info(f"/{self.arm}/joint_states at {rate_hz:g} Hz; "
-                 f"/{self.arm}/joint_trajectory accepted; ~/stop ~/home ~/reset")
-        if self.tf is None:
+        log.info(f"{self.joint_states.topic_name} at {rate_hz:g} Hz; "
+                 f"{self.robot_description.topic_name} (URDF); "
+                 f"{self.arm}/joint_trajectory accepted; ~/stop ~/home ~/reset")
+        if self.tf is None and self.publish_tf:
             log.warning("/tf not published: tf2_msgs is not installed (a ROS 2 host has it)")
         if self.action_server is None:
             log.info("FollowJointTrajectory not offered: control_msgs is not installed")
@@ -130,19 +148,101 @@ class SeqrunNode:
             self.action_server.destroy()
         self.node.destroy_node()
 
+    # ------------------------------------------------------------------ parameters
+    def _parameters(self, rate_hz: float) -> tuple[float, bool]:
+        """Declare :data:`PARAMETERS` (read-only: set at start, by the command's options or
+        ``--ros-args -p``); their values, checked (UserInputError in one line)."""
+        from rcl_interfaces.msg import ParameterDescriptor
+
+        from rclpy.exceptions import ParameterException
+
+        def declare(name: str, value: Any, **kinds: Any) -> Any:
+            descriptor = ParameterDescriptor(description=PARAMETERS[name], read_only=True,
+                                             **kinds)
+            try:
+                return self.node.declare_parameter(name, value, descriptor).value
+            except ParameterException as exc:  # an override of the wrong type
+                raise UserInputError(f"parameter {name}: {exc}") from None
+
+        # -p rate:=50 is an integer to ROS: a number of either kind is checked below
+        rate = declare("rate", float(rate_hz), dynamic_typing=True)
+        publish_tf = declare("publish_tf", True)
+        if isinstance(rate, bool) or not isinstance(rate, (int, float)) \
+                or not 50 <= rate <= 1000:
+            raise UserInputError(f"parameter rate must be a number of Hz in 50-1000, "
+                                 f"got {rate!r}")
+        if not isinstance(publish_tf, bool):
+            raise UserInputError(f"parameter publish_tf must be true or false, "
+                                 f"got {publish_tf!r}")
+        return float(rate), publish_tf
+
+    # ------------------------------------------------------------------ the model
+    def _latched(self) -> Any:
+        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+        return QoSProfile(depth=LATCHED_DEPTH, durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                          reliability=ReliabilityPolicy.RELIABLE)
+
+    def _publish_robot_description(self) -> Any:
+        """``robot_description``: the URDF, once (transient local)."""
+        from seqrun.service.kinematics import robot_description
+
+        publisher = self.node.create_publisher(String, "robot_description", self._latched())
+        publisher.publish(String(data=robot_description(self.session.arm, f"{self.arm}/")))
+        return publisher
+
+    def _publish_tf_static(self) -> set[str]:
+        """The fixed frames on ``/tf_static``, once (where /tf is published); the names of
+        their child frames, which ``/tf`` then leaves out."""
+        from seqrun.service.kinematics import fixed_transforms
+
+        if self._tf_message is None:
+            return set()
+        stamp = self.node.get_clock().now().to_msg()
+        transforms = [_transform(stamp, *frame)
+                      for frame in fixed_transforms(self.session.arm, f"{self.arm}/")]
+        self.tf_static = self.node.create_publisher(self._tf_message, "/tf_static",
+                                                    self._latched())
+        self.tf_static.publish(self._tf_message(transforms=transforms))
+        return {t.child_frame_id for t in transforms}
+
     # ------------------------------------------------------------------ state
+    def _reading(self) -> Any:
+        """The session's latest reading; while idle a new one (the session reads the arm
+        when nothing else uses the bus), so that joint_states comes at ``rate``."""
+        return self.session.poll_status()
+
+    def _stamp(self, measured_at: float | None) -> Any:
+        """The stamp of a reading taken at ``measured_at`` (the session's clock) in ROS time
+        (the system clock): shifted by the clocks' difference now."""
+        from builtin_interfaces.msg import Time
+
+        clock = self.session.clock
+        if measured_at is None or getattr(clock, "is_virtual", False):
+            return self.node.get_clock().now().to_msg()
+        # the largest of three back-to-back differences: a pair the scheduler splits only
+        # comes out smaller
+        offset = max(time.time() - clock.now() for _ in range(3))
+        ns = int(round((measured_at + offset) * 1e9))
+        return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
     def publish_state(self) -> None:
-        """``joint_states`` (and ``/tf``) from the session's latest measurement."""
+        """``joint_states`` (and ``/tf``) of the latest reading, each reading once, stamped
+        when the modules answered."""
         if self._closed:
             return
-        status = self.session.status()
+        status = self._reading()
         if status.updated_at is None:
             return  # nothing measured yet
         degrees = [j.position_deg for j in status.joints]
         if any(d is None for d in degrees):
             return
+        measured = status.measured_at if status.measured_at is not None else status.updated_at
+        if measured == self._published_reading:
+            return  # sent already: a reading is published once
+        self._published_reading = measured
         msg = JointState()
-        msg.header.stamp = self.node.get_clock().now().to_msg()
+        msg.header.stamp = self._stamp(measured)
         msg.name = self._names
         msg.position = [math.radians(d) for d in degrees]
         speeds = [j.velocity_deg_s for j in status.joints]
@@ -150,8 +250,9 @@ class SeqrunNode:
             msg.velocity = [math.radians(v) for v in speeds]
         self.joint_states.publish(msg)
         if self.tf is not None and self._tf_message is not None:
-            self.tf.publish(self._tf_message(transforms=self.transforms(degrees,
-                                                                        msg.header.stamp)))
+            self.tf.publish(self._tf_message(transforms=[
+                t for t in self.transforms(degrees, msg.header.stamp)
+                if t.child_frame_id not in self._fixed_children]))
 
     def transforms(self, degrees: list, stamp: Any) -> list:
         """``geometry_msgs/TransformStamped`` of every frame of the chain at ``degrees``
@@ -271,11 +372,23 @@ class SeqrunNode:
                 trajectory_of(goal_handle.request.trajectory), goal_handle, action.Result)
             return result
 
-        return ActionServer(self.node, action, f"/{self.arm}/follow_joint_trajectory",
+        return ActionServer(self.node, action, f"{self.arm}/follow_joint_trajectory",
                             execute_callback=execute,
                             goal_callback=lambda goal: GoalResponse.ACCEPT,
                             cancel_callback=lambda goal: CancelResponse.ACCEPT,
                             callback_group=ReentrantCallbackGroup())
+
+
+def _transform(stamp: Any, parent: str, child: str, xyz: Any, quaternion: Any) -> Any:
+    """One ``geometry_msgs/TransformStamped``."""
+    t = TransformStamped()
+    t.header.stamp = stamp
+    t.header.frame_id = parent
+    t.child_frame_id = child
+    t.transform.translation.x, t.transform.translation.y, t.transform.translation.z = xyz
+    (t.transform.rotation.x, t.transform.rotation.y, t.transform.rotation.z,
+     t.transform.rotation.w) = quaternion
+    return t
 
 
 def _follow(node: SeqrunNode, trajectory: JointTrajectory, goal: Any,

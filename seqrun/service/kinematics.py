@@ -4,7 +4,8 @@
 - the end effector of a reading: ``seqrun status``, the session's status, a run's status
   over its control socket, the live view;
 - ``seqrun fk`` and ``seqrun ik``: a pose of joint angles, joint angles of a tool target;
-- the console's 3D view: the chain as frames, guards, link volumes, obstacles.
+- the console's 3D view: the chain as frames, guards, link volumes, obstacles;
+- ``seqrun urdf``, the ROS node's ``robot_description``: the arm as a URDF document.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ if TYPE_CHECKING:
     from seqrun.arm.kinematics import Pose
 
 __all__ = ["ForwardKinematics", "InverseKinematics", "arm_scene", "end_effector",
-           "link_transforms",
+           "fixed_transforms", "link_transforms", "robot_description",
            "end_effector_pose", "forward_kinematics", "inverse_kinematics"]
 
 
@@ -204,3 +205,31 @@ def _quaternion_xyzw(rotation: Any) -> tuple[float, float, float, float]:
     sign = -1.0 if q[3] < 0 else 1.0
     x, y, z, w = (sign * float(v) / norm for v in q)
     return (x, y, z, w)
+
+
+def robot_description(arm: ArmDescription, frame_prefix: str = "") -> str:
+    """The arm as a URDF document (:mod:`seqrun.arm.urdf`), its link names prefixed with
+    ``frame_prefix`` (``lwa3/``: the frames of seqrun's ``/tf``): what ``seqrun urdf``
+    writes, the ROS node publishes on ``robot_description`` and run.mcap carries."""
+    from seqrun.arm.urdf import urdf
+
+    return urdf(arm, frame_prefix)
+
+
+def fixed_transforms(arm: ArmDescription, prefix: str
+                     ) -> list[tuple[str, str, tuple[float, float, float],
+                                     tuple[float, float, float, float]]]:
+    """The frames that never move against their parent, as :func:`link_transforms` gives
+    them ``(parent, child, translation_m, quaternion_xyzw)``: the URDF's fixed joints (a
+    locked joint, the end-effector on the flange, the tools' TCPs): what ``/tf_static``
+    carries once, where ``/tf`` carries the others."""
+    from seqrun.arm.urdf import robot_tree
+
+    _, joints, _ = robot_tree(arm, prefix)
+    out = []
+    for joint in joints:
+        if joint.kind == "fixed":
+            x, y, z = (float(v) / 1000.0 for v in joint.origin[:3, 3])
+            out.append((joint.parent, joint.child, (x, y, z),
+                        _quaternion_xyzw(joint.origin[:3, :3])))
+    return out

@@ -10,6 +10,8 @@ Topics (names and types: :mod:`seqrun.ros_messages`; docs/ros2.md):
 ``/<arm>/planned``         trajectory_msgs/JointTrajectory, one per move, as streamed
 ``/seqrun/events``         std_msgs/String, one per event: its events.jsonl line
 ``/seqrun/markers``        visualization_msgs/MarkerArray: guards, obstacles, capsules
+``/robot_description``     std_msgs/String, once at the start: the arm as a URDF
+                           (``seqrun urdf``, links named as the frames of ``/tf``)
 
 The control loop only hands each event (the dict the run log writes) to :meth:`McapLog.put`:
 a bounded queue, never waiting; the conversion (FK, CDR) and the writing are done by the
@@ -48,6 +50,8 @@ DISTRIBUTIONS = ("humble", "jazzy", "kilted")
 DEFAULT_DISTRIBUTION = "jazzy"
 #: Events waiting for the writer thread; beyond this they are dropped (counted).
 QUEUE_SIZE = 20_000
+#: The URDF's topic, as robot_state_publisher names it.
+ROBOT_DESCRIPTION_TOPIC = "/robot_description"
 
 _STOP = object()
 
@@ -171,12 +175,21 @@ class BagWriter(McapFolder):
 
     def __init__(self, folder: Path, arm: ArmDescription, names: RosNames,
                  distribution: str = DEFAULT_DISTRIBUTION) -> None:
+        from seqrun.service.kinematics import robot_description
+
         self.names = names
         self.translator = EventTranslator(arm, names)
-        super().__init__(folder, topics(names), distribution)
+        self._urdf: str | None = robot_description(arm, f"{names.namespace}/")
+        super().__init__(folder, {**topics(names), ROBOT_DESCRIPTION_TOPIC: "std_msgs/msg/String"},
+                         distribution)
 
     def write_event(self, event: Mapping[str, Any]) -> None:
-        for record in self.translator.translate(event):
+        records = self.translator.translate(event)
+        if records and self._urdf is not None:  # once, with the bag's first messages
+            self._put(ROBOT_DESCRIPTION_TOPIC, min(r.log_ns for r in records),
+                      cdr.string(self._urdf))
+            self._urdf = None
+        for record in records:
             self._write(record)
 
     def _write(self, record: Any) -> None:

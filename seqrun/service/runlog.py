@@ -14,8 +14,9 @@
                 says ``running`` and is rewritten at most once a second (it points to
                 steps.jsonl); at the end it is written whole. :func:`read_report` assembles
                 the report of a run that was killed from what is on disk.
-  junit.xml     one test case per step and one per checkpoint, measured values as
-                properties, for CI dashboards
+  junit.xml     one test case per step and one per checkpoint (valid against Jenkins
+                xunit's junit-10.xsd; junit.ctrf.json: the same in CTRF), measured values as
+                the suite's properties (stepNN.<value>), for CI dashboards
   report.html   drawn after the run from the files above (seqrun/report/)
   run.mcap      the run as a ROS 2 bag (MCAP): joint states and commands, /tf, plans,
                 events, markers (seqrun/service/mcap_log.py, docs/ros2.md); written by a
@@ -262,7 +263,21 @@ class RunLog:
         error = write_whole(self.folder / "junit.xml", junit)
         if error is not None:
             self._failed(self.folder / "junit.xml", error)
+        self._write_ctrf(result)
         return self._write_report(report, ended=True)
+
+    def _write_ctrf(self, result: RunResult) -> None:
+        """``junit.ctrf.json`` beside junit.xml: the same tests in CTRF's JSON."""
+        from seqrun.runfolder.ctrf import ctrf_path
+
+        stop = time.time()
+        start = float(self.time_base.get("start_epoch_s", stop - result.duration_s))
+        path = ctrf_path(self.folder / "junit.xml")
+        text = ctrf_json(self.meta.get("sequence", "sequence"), result, self._joint_names,
+                         start, stop)
+        error = write_whole(path, text)
+        if error is not None:
+            self._failed(path, error)
 
     def _write_running(self) -> None:
         self._report_written = time.monotonic()
@@ -406,33 +421,71 @@ def junit_xml(suite: str, result: RunResult, joint_names: list[str] | None = Non
 def _junit_suite(name: str, classname: str, result: RunResult, steps: list[StepResult],
                  keys: tuple[str, ...], joint_names: list[str], *,
                  checkpoint: bool = False) -> list[str]:
+    """One ``<testsuite>`` valid against Jenkins xunit's junit-10.xsd (what strict CI tools
+    check): ``errors`` given, the measured values as the suite's properties (a test case
+    may have none there), named ``stepNN.<value>``, each step's place in ``<system-out>``
+    (a test case has no ``file`` attribute there)."""
     failures = sum(1 for s in steps if s.status in ("failed", "aborted"))
     skipped = sum(1 for s in steps if s.status in ("skipped", "pending"))
     time = sum(s.duration_s or 0.0 for s in steps) if checkpoint else result.duration_s
     lines = [f'<testsuite name={quoteattr(name)} tests="{len(steps)}" '
-             f'failures="{failures}" skipped="{skipped}" time="{time:.3f}">']
+             f'failures="{failures}" errors="0" skipped="{skipped}" time="{max(time, 0.0):.3f}">']
+    properties = [(f"step{s.number:02d}.{key}", value) for s in steps
+                  for key, value in _junit_properties(s, keys, joint_names)]
+    if properties:
+        lines.append("  <properties>")
+        lines += [f"    <property name={quoteattr(k)} value={quoteattr(v)}/>"
+                  for k, v in properties]
+        lines.append("  </properties>")
     for s in steps:
-        # A step without a label is described starting with its kind ("confirm: …",
-        # "move to pose …"): no second kind in front of it.
-        kind = "" if s.label.split(":")[0].split(" ")[0] == s.kind else f"{s.kind}: "
-        title = f"{s.number:02d} {s.label}" if checkpoint else f"{s.number:02d} {kind}{s.label}"
         duration = f"{s.duration_s:.3f}" if s.duration_s is not None else "0"
-        lines.append(f'  <testcase classname={quoteattr(classname)} name={quoteattr(title)} '
-                     f'file={quoteattr(s.location)} time="{duration}">')
-        properties = _junit_properties(s, keys, joint_names)
-        if properties:
-            lines.append("    <properties>")
-            lines += [f"      <property name={quoteattr(k)} value={quoteattr(v)}/>"
-                      for k, v in properties]
-            lines.append("    </properties>")
+        lines.append(f'  <testcase classname={quoteattr(classname)} '
+                     f'name={quoteattr(step_title(s, checkpoint=checkpoint))} time="{duration}">')
         if s.status in ("failed", "aborted"):
-            msg = s.detail.get("error") or result.message
+            msg = _step_message(s, result)
             lines.append(f'    <failure message={quoteattr(str(msg))}>{escape(str(msg))}</failure>')
         elif s.status in ("skipped", "pending"):
             lines.append('    <skipped message="not run"/>')
+        if s.location:
+            lines.append(f"    <system-out>{escape(f'step at {s.location}')}</system-out>")
         lines.append("  </testcase>")
     lines.append("</testsuite>")
     return lines
+
+
+def step_title(step: StepResult, *, checkpoint: bool = False) -> str:
+    """A step's test name: its number and what it does."""
+    # A step without a label is described starting with its kind ("confirm: …",
+    # "move to pose …"): no second kind in front of it.
+    kind = "" if step.label.split(":")[0].split(" ")[0] == step.kind else f"{step.kind}: "
+    return f"{step.number:02d} {step.label}" if checkpoint else \
+        f"{step.number:02d} {kind}{step.label}"
+
+
+def _step_message(step: StepResult, result: RunResult) -> str:
+    return str(step.detail.get("error") or result.message)
+
+
+def ctrf_json(suite: str, result: RunResult, joint_names: list[str] | None,
+              start_s: float, stop_s: float) -> str:
+    """The run's CTRF report (seqrun/runfolder/ctrf.py): a test per step, as junit.xml's,
+    its measured values in ``extra``."""
+    from seqrun import __version__
+    from seqrun.runfolder.ctrf import ctrf_report, ctrf_test
+
+    names = joint_names or []
+    tests = []
+    for s in result.steps:
+        keys = _CHECKPOINT_PROPERTIES if s.kind == "checkpoint" else _JUNIT_PROPERTIES
+        values = dict(_junit_properties(s, keys, names))
+        failed = s.status in ("failed", "aborted")
+        tests.append(ctrf_test(step_title(s), s.status, s.duration_s, suite=suite,
+                               message=_step_message(s, result) if failed else None,
+                               location=s.location,
+                               extra={"kind": s.kind, **values} if values else
+                               {"kind": s.kind}))
+    return ctrf_report(tests, start_s=start_s, stop_s=stop_s, version=__version__,
+                       extra={"status": result.status, "exit_code": result.exit_code})
 
 
 def _junit_properties(step: StepResult, keys: tuple[str, ...],

@@ -83,6 +83,9 @@ class ArmStatus:
     #: The last poll got no answer: the values are the previous ones.
     stale: bool = False
     message: str = ""
+    #: Clock reading when the modules answered (the driver's reading time; None: not
+    #: known, ``updated_at`` stands for it): what a ROS message of the reading is stamped.
+    measured_at: float | None = None
 
     @property
     def joints_deg(self) -> dict[str, float | None]:
@@ -150,6 +153,7 @@ class ArmTelemetry:
         #: Clock time of the last successful reset: older fault events no longer count.
         self._cleared_at = -math.inf
         self._updated_at: float | None = None
+        self._measured_at: float | None = None
         self._stale = False
         self._message = ""
         self._poll_stop = threading.Event()
@@ -189,6 +193,7 @@ class ArmTelemetry:
                 self._velocities = [0.0] * len(self._joints)
         self._fault = bool(m.fault)
         self._updated_at = m.clock_s
+        self._measured_at = m.read_clock_s if m.read_clock_s is not None else m.clock_s
         self._stale = False
 
     # ------------------------------------------------------------------ what is known
@@ -203,6 +208,7 @@ class ArmTelemetry:
             targets = list(self._targets)
             flags = dict(self._flags)
             fault, updated, stale = self._fault, self._updated_at, self._stale
+            measured = self._measured_at
             message = self._message
             activity = activity or self._rest_state()
         rows = tuple(JointStatus(j.name, j.module, joints[i], velocities[i], targets[i],
@@ -221,7 +227,7 @@ class ArmTelemetry:
                          getattr(zero, "pose", None) if zero is not None
                          else getattr(arm, "zero_reference", None),
                          connection.description, bool(connection.is_simulator),
-                         activity, run, updated, stale, message)
+                         activity, run, updated, stale, message, measured)
 
     def _rest_state(self) -> str:
         if self._halted is not None or any("HALTED" in f for f in self._flags.values()):
@@ -272,6 +278,7 @@ class ArmTelemetry:
         from seqrun.service.arm_access import read_joints
 
         arm = self._session.arm
+        asked = self._session.clock.now()
         try:
             joints, velocities, states = read_joints(self._session.driver)
         except Exception as exc:  # noqa: BLE001 - a poll never raises: status goes stale
@@ -279,18 +286,20 @@ class ArmTelemetry:
             return
         flags, fault = joint_flags(arm.joint_names, arm.module_ids, {}, states)
         now = self._session.clock.now()
+        read_at = (asked + now) / 2  # the modules answered between the two
         self._hub.publish(make_event(
             "measurement", round(now - self._t0, 6),
             {"joints_deg": joints, "state": [s.cycle_code for s in states.values()],
              "states": {str(m): s.describe() for m, s in states.items()}},
             clock_s=now, velocities_deg_s=velocities, flags=flags, fault=fault,
-            source="poll"))
+            source="poll", read_clock_s=read_at))
         with self._lock:  # at once, not only when the listener gets to it
             self._joints = list[float | None](joints)
             self._velocities = list[float | None](velocities)
             self._flags, self._fault = flags, fault
             self._homed = all(s.homed for s in states.values())
             self._updated_at, self._stale = now, False
+            self._measured_at = read_at
 
     def _poll_failed(self, error: str) -> None:
         with self._lock:
