@@ -7,8 +7,11 @@ one-arm run does (the preflight, the checks every cycle, the Halt on a fault); t
 ``signal``/``wait_for`` steps meet on an :class:`EventBoard`. When an arm's run ends
 with a fault (or an operator's halt), the others are halted too, confirmed each by its
 own executor, unless the campaign says ``on_fault = "halt_faulted"``: then only the
-faulted arm is halted, the others go on until they would wait for it (they fault there),
-and the report says so. The dry run is the same on simulated buses at one virtual time
+faulted arm is halted, and another arm goes on only when its remaining planned motion is
+clear of the faulted arm where it stopped (else it is halted too); those that go on do so
+until they would wait for it (they fault there), and the report says so. Every control
+cycle of every arm checks it against the others from their measured joints and stopping
+distances (:mod:`seqrun.service.arm_separation`): too close, both are halted. The dry run is the same on simulated buses at one virtual time
 (:class:`~seqrun.clock.LockstepClock`).
 """
 
@@ -23,8 +26,8 @@ from typing import Any
 
 from seqrun.results import EXIT_OK, RunResult
 
-__all__ = ["ArmOutcome", "ArmsOutcome", "EventBoard", "OTHER_ARM_FAULT", "run_arms_live",
-           "run_tracks"]
+__all__ = ["ArmOutcome", "ArmsOutcome", "EventBoard", "OTHER_ARM_FAULT", "remaining_plan",
+           "run_arms_live", "run_tracks"]
 
 #: The stop cause of an arm halted because another arm faulted.
 OTHER_ARM_FAULT = "other_arm_fault"
@@ -127,6 +130,7 @@ def run_tracks(tracks: Mapping[str, Any], arms: Mapping[str, Any],
                requests_by_arm: Mapping[str, Any] | None = None,
                runner: Callable[..., Any] | None = None,
                parts: Mapping[str, Any] | None = None,
+               bases: Mapping[str, Any] | None = None,
                **run: Any) -> ArmsOutcome:
     """Run every arm's track on its connection, each on a thread of its own (see the
     module doc). ``clock_views``: each arm's :class:`~seqrun.clock.LockstepView` (the dry
@@ -136,7 +140,9 @@ def run_tracks(tracks: Mapping[str, Any], arms: Mapping[str, Any],
     **options)``: how one arm's run is made (default :func:`run_sequence` on its
     connection; ``seqrun run``: the arm's session). ``parts``: each arm's
     :class:`~seqrun.service.arm_part.ArmPart` (the run's one time base and run.mcap).
-    ``run``: further options."""
+    ``bases``: each arm's base frame (4x4) in the facility frame (default: the campaign's
+    ``[arms.ID] base``). ``run``: further options."""
+    from seqrun.service.arm_separation import Separation, bases_of_project
     from seqrun.service.runner import run_sequence
 
     board = EventBoard(signallers(tracks))
@@ -146,10 +152,18 @@ def run_tracks(tracks: Mapping[str, Any], arms: Mapping[str, Any],
     lock = threading.Lock()
     state: dict[str, str | None] = {"first_fault": None}
     errors: dict[str, BaseException] = {}
+    if bases is None:
+        project = getattr(next(iter(tracks.values()), None), "project", None)
+        bases = bases_of_project(project, tracks)
+    separation = Separation({a: arms[a] for a in tracks}, bases) if len(tracks) > 1 \
+        else None
 
     def hook(arm_id: str):
         def attach(executor) -> None:
             executor.sync = board.for_arm(arm_id)
+            if separation is not None:
+                executor.separation = separation.watch(
+                    arm_id, halt=executor.halt, plan=functools.partial(remaining_plan, executor))
             with lock:
                 executors[arm_id] = executor
                 stop = state["first_fault"] is not None and on_fault == "halt_all"
@@ -194,6 +208,12 @@ def run_tracks(tracks: Mapping[str, Any], arms: Mapping[str, Any],
                         if other != arm_id and other not in outcomes:
                             halted_for[other] = arm_id
                             executor.halt(f"arm {arm_id} faulted", OTHER_ARM_FAULT)
+                elif on_fault != "halt_all" and separation is not None \
+                        and arm_id in others:
+                    _halt_unless_clear(separation, arm_id, others, outcomes, halted_for,
+                                       state)
+            if separation is not None:
+                separation.release(arm_id)
             if view is not None:
                 view.leave()
 
@@ -211,16 +231,71 @@ def run_tracks(tracks: Mapping[str, Any], arms: Mapping[str, Any],
         if arm_id in outcomes and outcomes[arm_id].result.exit_code != EXIT_OK:
             outcomes[arm_id].halted_for = why
     result = ArmsOutcome({a: outcomes[a] for a in tracks}, on_fault, state["first_fault"])
+    result.notes += [str(n) for k, n in state.items() if k.startswith("note:") and n]
+    if separation is not None and separation.tripped is not None:
+        result.notes.append(separation.tripped)
     if state["first_fault"] is not None:
         first = state["first_fault"]
         if on_fault == "halt_all":
             result.notes.append(f"arm {first} faulted: every arm was halted "
                                 "(on_fault = halt_all)")
         else:
-            result.notes.append(f"arm {first} faulted: only arm {first} was halted "
-                                "(on_fault = halt_faulted in seqrun.toml); the other arms "
-                                "went on")
+            also = [a for a, why in halted_for.items() if why == first]
+            if also:
+                result.notes.append(f"arm {first} faulted: arm {first} was halted, and arm "
+                                    f"{', '.join(also)} too (on_fault = halt_faulted in "
+                                    "seqrun.toml, but its remaining motion was not clear of "
+                                    f"arm {first} where it stopped)")
+            else:
+                result.notes.append(f"arm {first} faulted: only arm {first} was halted "
+                                    "(on_fault = halt_faulted in seqrun.toml); the other "
+                                    "arms went on")
     return result
+
+
+def remaining_plan(executor: Any) -> Any:
+    """The joints (rad) an arm's run still plans to pass, and its planned speeds there
+    (rad/s): every move's planned path from the step under way on, ``(q, v)`` each
+    ``(k, dof)`` (None: not known yet)."""
+    import numpy as np
+
+    paths = executor.planned_paths
+    if paths is None:
+        return None
+    step = executor.current_step
+    first = step.number if step is not None else 0
+    qs, vs = [], []
+    for n in sorted(paths):
+        times, q = (np.asarray(x, dtype=float) for x in paths[n])
+        if n < first or not len(q):
+            continue
+        qs.append(q)
+        vs.append(np.gradient(q, times, axis=0) if len(q) > 1 else np.zeros_like(q))
+    if not qs:
+        empty = np.empty((0, len(executor.arm.joints)))
+        return empty, empty
+    return np.concatenate(qs), np.concatenate(vs)
+
+
+def _halt_unless_clear(separation: Any, faulted: str, executors: Mapping[str, Any],
+                       outcomes: Mapping[str, Any], halted_for: dict[str, str],
+                       state: dict[str, str | None]) -> None:
+    """``on_fault = "halt_faulted"``: the faulted arm stands where its confirmed Halt left
+    it; every other arm still running goes on only if its remaining planned motion is
+    clear of it there, else it is halted too (:meth:`Separation.clear_of_stopped`)."""
+    last = getattr(executors[faulted], "last", None)
+    if last is not None:
+        separation.stopped(faulted, last.user_deg)
+    for other, executor in executors.items():
+        if other == faulted or other in outcomes:
+            continue
+        clear, why = separation.clear_of_stopped(other, faulted)
+        if clear:
+            state[f"note:{other}"] = f"arm {other} went on: {why}"
+            continue
+        halted_for[other] = faulted
+        state[f"note:{other}"] = f"arm {other} halted too: {why}"
+        executor.halt(f"arm {faulted} faulted and {why}", OTHER_ARM_FAULT)
 
 
 def run_arms_live(tracks: Mapping[str, Any], arms: Mapping[str, Any],
