@@ -28,7 +28,7 @@ from seqrun.arm.geometry import Clearance, Geometry, segment_segment
 from seqrun.arm.kinematics import frame_origins, matrix_from_rpy
 
 __all__ = ["Swept", "base_transform", "base_of", "between_arms", "levers_mm",
-           "pair_clearance", "stopping_travel_mm", "swept", "swept_clearance",
+           "pair_clearance", "sphere_gap", "stopping_travel_mm", "swept", "swept_clearance",
            "volumes_in_facility"]
 
 
@@ -152,6 +152,17 @@ def pair_clearance(seg_a: np.ndarray, radii_a: np.ndarray, seg_b: np.ndarray,
     d = segment_segment(seg_a[..., :, None, 0, :], seg_a[..., :, None, 1, :],
                         seg_b[..., None, :, 0, :], seg_b[..., None, :, 1, :])
     return d - radii_a[..., :, None] - radii_b[..., None, :]
+
+
+def sphere_gap(seg_a: np.ndarray, radii_a: np.ndarray, seg_b: np.ndarray,
+               radii_b: np.ndarray) -> np.ndarray:
+    """A cheap lower bound of :func:`pair_clearance` (one configuration each): every
+    capsule's bounding sphere (its middle, half its length plus its radius)."""
+    mid_a, mid_b = seg_a.mean(axis=-2), seg_b.mean(axis=-2)
+    half_a = np.linalg.norm(seg_a[..., 1, :] - seg_a[..., 0, :], axis=-1) / 2 + radii_a
+    half_b = np.linalg.norm(seg_b[..., 1, :] - seg_b[..., 0, :], axis=-1) / 2 + radii_b
+    apart = np.linalg.norm(mid_a[:, None, :] - mid_b[None, :, :], axis=-1)
+    return apart - half_a[:, None] - half_b[None, :]
 
 
 def swept_clearance(first: tuple[str, Geometry, Swept], second: tuple[str, Geometry, Swept],

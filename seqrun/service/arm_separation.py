@@ -32,7 +32,7 @@ import numpy as np
 from seqrun.errors import Refused, RunAborted
 
 __all__ = ["ARMS_TOO_CLOSE", "ArmWatch", "SessionSeparation", "Separation",
-           "attach_other_arms", "attach_sessions", "bases_of_project"]
+           "attach_other_arms", "attach_sessions", "bases_of_project", "remaining_plan"]
 
 #: How far ahead a jog is checked against the other arms (s, beyond its dead-man period):
 #: the jog is watched every cycle after that.
@@ -48,6 +48,8 @@ class _Reading:
     q_rad: np.ndarray
     v_rad_s: np.ndarray
     cycle_s: float
+    #: The arm's capsule segments there, facility frame (worked out once per reading).
+    volumes: np.ndarray | None = None
 
 
 class _Arm:
@@ -66,9 +68,11 @@ class _Arm:
         self.margin_mm = float(arm.geometry.margin_mm)
 
     def volumes(self, q_rad: np.ndarray) -> np.ndarray:
+        """Capsule segments ``(k, capsules, 2, 3)`` of configurations ``(k, dof)``, or
+        ``(capsules, 2, 3)`` of one configuration ``(dof,)``."""
         from seqrun.arm.between_arms import volumes_in_facility
 
-        return volumes_in_facility(self.geometry, self.base, np.atleast_2d(q_rad))
+        return volumes_in_facility(self.geometry, self.base, q_rad)
 
     def travel_mm(self, reading: _Reading, extra_s: float = 0.0) -> float:
         from seqrun.arm.between_arms import stopping_travel_mm
@@ -126,17 +130,23 @@ class Separation:
             else:
                 v = before.v_rad_s if before is not None else np.zeros_like(q)
             reading = _Reading(t, q, v, cycle_s)
+        me = self._arms[arm_id]
+        if not me.geometry.empty:
+            reading.volumes = me.volumes(q)
+        with self._lock:
             self._readings[arm_id] = reading
-            return reading
+        return reading
 
     def stopped(self, arm_id: str, user_deg: Any) -> None:
         """Arm ``arm_id`` stands at ``user_deg`` (a confirmed Halt)."""
         q = np.radians(np.asarray(user_deg, dtype=float))
         with self._lock:
             before = self._readings.get(arm_id)
-            self._readings[arm_id] = _Reading(before.t if before is not None else 0.0, q,
-                                              np.zeros_like(q),
-                                              before.cycle_s if before is not None else 0.0)
+            self._readings[arm_id] = _Reading(
+                before.t if before is not None else 0.0, q, np.zeros_like(q),
+                before.cycle_s if before is not None else 0.0,
+                self._arms[arm_id].volumes(q) if not self._arms[arm_id].geometry.empty
+                else None)
 
     def watch(self, arm_id: str, halt: Callable[[str, str], None] | None = None,
               plan: Callable[[], tuple[np.ndarray, np.ndarray] | None] | None = None
@@ -163,25 +173,31 @@ class Separation:
                                                               float] | None:
         """The smallest clearance of ``arm_id`` at ``reading`` to any other arm's latest
         reading less both arms' stopping travel: ``(grown clearance mm, other arm, pair,
-        clearance mm, travel mm)``; None without another arm's reading."""
-        from seqrun.arm.between_arms import pair_clearance
+        clearance mm, travel mm)``; None without another arm's reading. Where the arms'
+        bounding spheres keep them apart by more than their travel, that lower bound is
+        what is returned (the exact distances are worked out only when it is close)."""
+        from seqrun.arm.between_arms import pair_clearance, sphere_gap
 
         me = self._arms[arm_id]
         with self._lock:
             others = {a: r for a, r in self._readings.items() if a != arm_id}
         if not others or me.geometry.empty:
             return None
-        mine = me.volumes(reading.q_rad)[0]
+        mine = reading.volumes if reading.volumes is not None else me.volumes(reading.q_rad)
         own_travel = me.travel_mm(reading)
         worst = None
         for other_id, theirs in others.items():
             other = self._arms[other_id]
             if other.geometry.empty:
                 continue
-            d = pair_clearance(mine, me.geometry.radii_mm, other.volumes(theirs.q_rad)[0],
-                               other.geometry.radii_mm)
-            i, j = np.unravel_index(int(np.argmin(d)), d.shape)
+            segments = theirs.volumes if theirs.volumes is not None \
+                else other.volumes(theirs.q_rad)
             travel = own_travel + other.travel_mm(theirs, reading.t - theirs.t)
+            d = sphere_gap(mine, me.geometry.radii_mm, segments, other.geometry.radii_mm)
+            if float(d.min()) - travel < 0.0:
+                d = pair_clearance(mine, me.geometry.radii_mm, segments,
+                                   other.geometry.radii_mm)
+            i, j = np.unravel_index(int(np.argmin(d)), d.shape)
             grown = float(d[i, j]) - travel
             if worst is None or grown < worst[0]:
                 pair = (f"{arm_id}.{me.geometry.volume_names[i]}~"
@@ -234,7 +250,7 @@ class Separation:
         travel = np.array([stopping_travel_mm(vk, me.deceleration, cycle, me.levers)
                            for vk in v])
         d = pair_clearance(me.volumes(q), me.geometry.radii_mm[None, :],
-                           other.volumes(stopped.q_rad)[0][None, :],
+                           other.volumes(stopped.q_rad)[None, :],
                            other.geometry.radii_mm[None, :])
         d = d - travel[:, None, None]
         k, i, j = np.unravel_index(int(np.argmin(d)), d.shape)
@@ -364,8 +380,6 @@ class SessionSeparation:
     def watch(self, executor: Any) -> None:
         """The session's executor checks this arm against the others every cycle, and its
         remaining plan counts for their motions while it runs."""
-        from seqrun.service.arms_run import remaining_plan
-
         separation, arm_id = self.separation, self.arm_id
         executor.separation = separation.watch(
             arm_id, halt=executor.halt, plan=lambda: remaining_plan(executor))
@@ -374,6 +388,28 @@ class SessionSeparation:
             if getattr(event, "type", None) == "run_finished":
                 separation.release(arm_id)
         executor.listeners.append(ended)
+
+
+def remaining_plan(executor: Any) -> Any:
+    """The joints (rad) an arm's run still plans to pass, and its planned speeds there
+    (rad/s): every move's planned path from the step under way on, ``(q, v)`` each
+    ``(k, dof)`` (None: not known yet)."""
+    paths = executor.planned_paths
+    if paths is None:
+        return None
+    step = executor.current_step
+    first = step.number if step is not None else 0
+    qs, vs = [], []
+    for n in sorted(paths):
+        times, q = (np.asarray(x, dtype=float) for x in paths[n])
+        if n < first or not len(q):
+            continue
+        qs.append(q)
+        vs.append(np.gradient(q, times, axis=0) if len(q) > 1 else np.zeros_like(q))
+    if not qs:
+        empty = np.empty((0, len(executor.arm.joints)))
+        return empty, empty
+    return np.concatenate(qs), np.concatenate(vs)
 
 
 def _telemetry_joints(session: Any) -> Callable[[], Any]:

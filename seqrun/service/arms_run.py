@@ -26,8 +26,8 @@ from typing import Any
 
 from seqrun.results import EXIT_OK, RunResult
 
-__all__ = ["ArmOutcome", "ArmsOutcome", "EventBoard", "OTHER_ARM_FAULT", "remaining_plan",
-           "run_arms_live", "run_tracks"]
+__all__ = ["ArmOutcome", "ArmsOutcome", "EventBoard", "OTHER_ARM_FAULT", "run_arms_live",
+           "run_tracks"]
 
 #: The stop cause of an arm halted because another arm faulted.
 OTHER_ARM_FAULT = "other_arm_fault"
@@ -142,7 +142,7 @@ def run_tracks(tracks: Mapping[str, Any], arms: Mapping[str, Any],
     :class:`~seqrun.service.arm_part.ArmPart` (the run's one time base and run.mcap).
     ``bases``: each arm's base frame (4x4) in the facility frame (default: the campaign's
     ``[arms.ID] base``). ``run``: further options."""
-    from seqrun.service.arm_separation import Separation, bases_of_project
+    from seqrun.service.arm_separation import Separation, bases_of_project, remaining_plan
     from seqrun.service.runner import run_sequence
 
     board = EventBoard(signallers(tracks))
@@ -163,7 +163,8 @@ def run_tracks(tracks: Mapping[str, Any], arms: Mapping[str, Any],
             executor.sync = board.for_arm(arm_id)
             if separation is not None:
                 executor.separation = separation.watch(
-                    arm_id, halt=executor.halt, plan=functools.partial(remaining_plan, executor))
+                    arm_id, halt=executor.halt,
+                    plan=functools.partial(remaining_plan, executor))
             with lock:
                 executors[arm_id] = executor
                 stop = state["first_fault"] is not None and on_fault == "halt_all"
@@ -251,30 +252,6 @@ def run_tracks(tracks: Mapping[str, Any], arms: Mapping[str, Any],
                                     "(on_fault = halt_faulted in seqrun.toml); the other "
                                     "arms went on")
     return result
-
-
-def remaining_plan(executor: Any) -> Any:
-    """The joints (rad) an arm's run still plans to pass, and its planned speeds there
-    (rad/s): every move's planned path from the step under way on, ``(q, v)`` each
-    ``(k, dof)`` (None: not known yet)."""
-    import numpy as np
-
-    paths = executor.planned_paths
-    if paths is None:
-        return None
-    step = executor.current_step
-    first = step.number if step is not None else 0
-    qs, vs = [], []
-    for n in sorted(paths):
-        times, q = (np.asarray(x, dtype=float) for x in paths[n])
-        if n < first or not len(q):
-            continue
-        qs.append(q)
-        vs.append(np.gradient(q, times, axis=0) if len(q) > 1 else np.zeros_like(q))
-    if not qs:
-        empty = np.empty((0, len(executor.arm.joints)))
-        return empty, empty
-    return np.concatenate(qs), np.concatenate(vs)
 
 
 def _halt_unless_clear(separation: Any, faulted: str, executors: Mapping[str, Any],
