@@ -319,9 +319,9 @@ class Separation:
                     pair = (f"{arm_id}.{me.geometry.volume_names[i]} - "
                             f"{other_id}.{other.geometry.volume_names[j]}")
             if smallest < margin:
-                where = "where it stands" if len(q_other) == 1 else "where it stands or moves"
+                place = "where it stands" if len(q_other) == 1 else "where it stands or moves"
                 how = "into" if smallest < 0 else f"within {smallest:.1f} mm of"
-                return (f"refused: arm {arm_id} would come {how} arm {other_id} {where} "
+                return (f"refused: arm {arm_id} would come {how} arm {other_id} {place} "
                         f"({pair} {smallest:.1f} mm; the arm files' geometry margin is "
                         f"{margin:g} mm); nothing was sent")
         return None
