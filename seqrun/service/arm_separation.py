@@ -181,6 +181,15 @@ class Separation:
         me = self._arms[arm_id]
         with self._lock:
             others = {a: r for a, r in self._readings.items() if a != arm_id}
+            idle = {a: w for a, w in self._where.items() if a != arm_id and a not in others}
+        for other_id, where in idle.items():  # no run reports it: where it stands (at rest)
+            stands = where()
+            if stands is not None:
+                q = np.radians(np.asarray(stands, dtype=float))
+                others[other_id] = _Reading(reading.t, q, np.zeros_like(q), 0.0,
+                                            self._arms[other_id].volumes(q)
+                                            if not self._arms[other_id].geometry.empty
+                                            else None)
         if not others or me.geometry.empty:
             return None
         mine = reading.volumes if reading.volumes is not None else me.volumes(reading.q_rad)
