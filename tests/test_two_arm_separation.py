@@ -398,3 +398,57 @@ def test_a_separation_refuses_a_path_into_the_other_arm_naming_it():
     # another arm whose pose cannot be had: refused, never waved through
     separation.stands_at("A", lambda: None)
     assert "where arm A stands is not known" in separation.refusal("B", out)
+
+
+@pytest.mark.slow  # two served arms, in real time
+def test_a_trajectory_for_one_arm_of_several_is_checked_against_the_other_served_arm(
+        tmp_path, monkeypatch):
+    """What ``seqrun ros --arm-id B`` does with a trajectory (its one call,
+    ``attach_other_arms``): arm A is another process's (here: nobody's, read from its
+    bus), B's trajectory into it is refused naming A, one clear of it is accepted."""
+    import math
+
+    from twoarmskit import quiet, two_served
+
+    from seqrun.errors import Refused
+    from seqrun.service.arm_context import resolve_context
+    from seqrun.service.arm_separation import attach_other_arms
+    from seqrun.service.session import ArmSession
+    from seqrun.service.trajectories import JointTrajectory, TrajectoryPoint, check_trajectory
+
+    quiet(tmp_path, monkeypatch)
+    first, second = two_served()  # A powered on at Park, B at Totem (straight up)
+    try:
+        campaign = tmp_path / "dual"
+        campaign.mkdir()
+        (campaign / "seqrun.toml").write_text(f"""\
+[arms.A]
+bus = {{ interface = "socketcand", channel = "can0", kwargs = {{ host = "127.0.0.1", port = {first.port} }} }}
+
+[arms.B]
+bus = {{ interface = "socketcand", channel = "can0", kwargs = {{ host = "127.0.0.1", port = {second.port} }} }}
+base = {{ position_mm = [0, 700, 0], rpy_deg = [0, 0, 180] }}
+""")
+        monkeypatch.chdir(campaign)
+        context = resolve_context(arm_id="B")
+        connection = context.open_connection(live=True)
+        session = ArmSession(context.arm.with_zero_reference("totem"), connection,
+                             project=context.project, arm_id="B")
+        try:
+            assert attach_other_arms(session, context) is not None
+            assert session.arm_up().exit_code == 0
+            assert session.home().exit_code == 0
+            into = JointTrajectory(("j1", "j2"), (TrajectoryPoint(
+                (-math.pi / 2, -math.pi / 2), 10.0),))
+            with pytest.raises(Refused) as caught:
+                check_trajectory(session, into, folder=tmp_path)
+            assert "arm B would come into arm A" in str(caught.value)
+            assert " mm" in str(caught.value) and "nothing was sent" in str(caught.value)
+            clear = JointTrajectory(("j1",), (TrajectoryPoint((0.1,), 2.0),))
+            check, file = check_trajectory(session, clear, folder=tmp_path)
+            assert check.valid
+        finally:
+            session.close()
+    finally:
+        first.shutdown()
+        second.shutdown()

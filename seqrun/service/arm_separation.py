@@ -470,25 +470,35 @@ def attach_other_arms(session: Any, context: Any) -> Separation | None:
 
 
 def _elsewhere(context: Any) -> Callable[[], Any]:
-    """Another process's arm, read when asked (None when it cannot be)."""
+    """Another process's arm, read when asked as ``seqrun status`` reads it (None when it
+    cannot be): the seqrun that holds its bus is asked over its control socket, else its
+    bus is read under a short claim, with the zero reference in force."""
     def where() -> Any:
         from seqrun.service.arm_access import read_status
+        from seqrun.service.bus_claim import claim_bus
         from seqrun.service.control_socket import ask_owner
+        from seqrun.service.zero import zero_for_reading
 
         key = context.bus.key
         if key is None:
             return None  # a built-in simulator of another process: nobody can read it
         try:
-            interface, channel = key
-            reply = ask_owner(interface, channel, "status")
+            reply = ask_owner(*key, "status")
             if reply is not None:
-                joints = (reply.get("status") or reply).get("joints") or []
+                if not reply.get("ok", True) or not isinstance(reply.get("status"), dict):
+                    return None
+                joints = reply["status"].get("joints") or []
             else:
-                connection, driver = context.open_arm(claim=False)
+                claim = claim_bus(*key, transient=True)
                 try:
-                    joints = read_status(driver, context.arm)["joints"]
+                    connection, driver = context.open_arm(claim=False)
+                    try:
+                        arm, _ = zero_for_reading(connection, context.arm)
+                        joints = read_status(driver, arm)["joints"]
+                    finally:
+                        connection.close()
                 finally:
-                    connection.close()
+                    claim.release()
             values = [j.get("position_deg") for j in joints]
             if len(values) != len(context.arm.joints) or any(v is None for v in values):
                 return None
