@@ -452,3 +452,22 @@ base = {{ position_mm = [0, 700, 0], rpy_deg = [0, 0, 180] }}
     finally:
         first.shutdown()
         second.shutdown()
+
+
+def test_a_jog_is_checked_over_the_stretch_it_can_go_before_its_dead_man():
+    from seqrun.errors import Refused
+    from seqrun.service.arm_separation import SessionSeparation
+
+    arm, separation = _separation(700.0)
+    park = np.array([0.0, -90.0, 0.0, -120.32, 0.0, 115.74, 0.0])
+    separation.stands_at("A", lambda: park)
+    b = SessionSeparation(separation, "B")
+    leaning = np.array([-90.0, -80.0, 0.0, 0.0, 0.0, 0.0, 0.0])  # B reaching towards A
+    # j2 on down towards its limit at 10 deg/s, a 0.5 s dead-man: 15 deg ahead is into A
+    with pytest.raises(Refused) as caught:
+        b.refuse_jog("jog", leaning, 1, -120.0, 10.0, 0.5)
+    assert str(caught.value).startswith("jog: refused: arm B would come into arm A")
+    # back up, away from A: free
+    b.refuse_jog("jog", leaning, 1, 120.0, 10.0, 0.5)
+    # from further away the next 15 deg stay clear (every cycle watches the rest)
+    b.refuse_jog("jog", np.array([-90.0, -45.0, 0, 0, 0, 0, 0]), 1, -120.0, 10.0, 0.5)
