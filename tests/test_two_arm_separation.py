@@ -88,6 +88,21 @@ def test_a_confirm_that_lets_the_arms_meet_for_a_late_answer_is_refused_there(ca
     assert between.distance_mm > 100
 
 
+def test_a_bounded_wait_until_in_position_counts_with_its_timeout(campaign):
+    """``wait: {until: in_position, timeout_s: 30}``: at most 30 s, enough for A to be
+    over the target when B comes; with 1 s it cannot be."""
+    def text(timeout: int) -> str:
+        return CONFIRM_INSIDE.replace(
+            "          - confirm: Is the target in place?\n",
+            f"          - wait: {{until: in_position, timeout_s: {timeout}}}\n")
+
+    found = check(write(campaign, "settles.yaml", text(30)), dry_run=False)
+    (error,) = found.errors
+    assert "waits until the arm is in position" in error.message
+    assert text(30).splitlines()[error.line - 1].strip().startswith("- wait:")
+    assert check(write(campaign, "settles_soon.yaml", text(1)), dry_run=False).errors == []
+
+
 def test_the_same_moves_ordered_with_signal_and_wait_for_validate(campaign):
     found = check(write(campaign, "ordered.yaml", ORDERED), dry_run=False)
     assert found.errors == []

@@ -307,6 +307,23 @@ def _stretch_text(arm_id: str, stretch: Stretch) -> str:
     return f"arm {arm_id}: where step {step.number} ({step.title}) left it"
 
 
+def _culprit(delays: set[int], first: Stamp, second: Stamp) -> int | None:
+    """The step to blame for an unknown offset between two moments: a delay that one of
+    them always waits for and the other never (the latest such), else the latest of
+    those that differ."""
+    def always(stamp: Stamp, d: int) -> bool:
+        return all(d in s for s, _ in stamp.terms)
+
+    def never(stamp: Stamp, d: int) -> bool:
+        return not any(d in s for s, _ in stamp.terms)
+
+    strong = [d for d in delays if (always(first, d) and never(second, d))
+              or (always(second, d) and never(first, d))]
+    if strong:
+        return max(strong)
+    return max(delays) if delays else None
+
+
 def _unknown_timing(planned: Schedule, pair: tuple[ArmPlan, ArmPlan], geometry: dict,
                     margin: float) -> list[SourceError]:
     """Stretches of two arms whose offset a step of unknown duration leaves open, checked
@@ -345,7 +362,7 @@ def _unknown_timing(planned: Schedule, pair: tuple[ArmPlan, ArmPlan], geometry: 
             culprits = uncertain_delays(sa.start, sb.start, *(
                 [sa.end] if sa.end is not None else []), *(
                 [sb.end] if sb.end is not None else []))
-            culprit = max(culprits) if culprits else None
+            culprit = _culprit(culprits, sa.start, sb.start)
             if culprit in errors:
                 continue
             lo, hi = offset_range(sb.start, sa.start, bounds)
