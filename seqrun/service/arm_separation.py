@@ -162,11 +162,14 @@ class Separation:
         return ArmWatch(self, arm_id)
 
     def release(self, arm_id: str) -> None:
-        """The arm's run ended: nobody halts it through here any more (its last reading
-        stays: where it stands)."""
+        """The arm's run ended: nobody halts it through here any more. Its last reading
+        stays where it stands, unless something else tells where it stands (a session's
+        telemetry, then at rest)."""
         with self._lock:
             self._halts.pop(arm_id, None)
             self._plans.pop(arm_id, None)
+            if arm_id in self._where:
+                self._readings.pop(arm_id, None)
 
     # ------------------------------------------------------------------ every cycle
     def closest(self, arm_id: str, reading: _Reading) -> tuple[float, str, str, float,

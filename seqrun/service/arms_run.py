@@ -11,7 +11,8 @@ faulted arm is halted, and another arm goes on only when its remaining planned m
 clear of the faulted arm where it stopped (else it is halted too); those that go on do so
 until they would wait for it (they fault there), and the report says so. Every control
 cycle of every arm checks it against the others from their measured joints and stopping
-distances (:mod:`seqrun.service.arm_separation`): too close, both are halted. The dry run is the same on simulated buses at one virtual time
+distances (:mod:`seqrun.service.arm_separation`): too close, both are halted. The dry
+run is the same on simulated buses at one virtual time
 (:class:`~seqrun.clock.LockstepClock`).
 """
 
@@ -152,6 +153,8 @@ def run_tracks(tracks: Mapping[str, Any], arms: Mapping[str, Any],
     lock = threading.Lock()
     state: dict[str, str | None] = {"first_fault": None}
     errors: dict[str, BaseException] = {}
+    #: What halt_faulted decided for the other arms (said in the outcome's notes).
+    went_on: list[str] = []
     if bases is None:
         project = getattr(next(iter(tracks.values()), None), "project", None)
         bases = bases_of_project(project, tracks)
@@ -212,7 +215,7 @@ def run_tracks(tracks: Mapping[str, Any], arms: Mapping[str, Any],
                 elif on_fault != "halt_all" and separation is not None \
                         and arm_id in others:
                     _halt_unless_clear(separation, arm_id, others, outcomes, halted_for,
-                                       state)
+                                       went_on)
             if separation is not None:
                 separation.release(arm_id)
             if view is not None:
@@ -232,7 +235,7 @@ def run_tracks(tracks: Mapping[str, Any], arms: Mapping[str, Any],
         if arm_id in outcomes and outcomes[arm_id].result.exit_code != EXIT_OK:
             outcomes[arm_id].halted_for = why
     result = ArmsOutcome({a: outcomes[a] for a in tracks}, on_fault, state["first_fault"])
-    result.notes += [str(n) for k, n in state.items() if k.startswith("note:") and n]
+    result.notes += went_on
     if separation is not None and separation.tripped is not None:
         result.notes.append(separation.tripped)
     if state["first_fault"] is not None:
@@ -256,7 +259,7 @@ def run_tracks(tracks: Mapping[str, Any], arms: Mapping[str, Any],
 
 def _halt_unless_clear(separation: Any, faulted: str, executors: Mapping[str, Any],
                        outcomes: Mapping[str, Any], halted_for: dict[str, str],
-                       state: dict[str, str | None]) -> None:
+                       notes: list[str]) -> None:
     """``on_fault = "halt_faulted"``: the faulted arm stands where its confirmed Halt left
     it; every other arm still running goes on only if its remaining planned motion is
     clear of it there, else it is halted too (:meth:`Separation.clear_of_stopped`)."""
@@ -268,10 +271,10 @@ def _halt_unless_clear(separation: Any, faulted: str, executors: Mapping[str, An
             continue
         clear, why = separation.clear_of_stopped(other, faulted)
         if clear:
-            state[f"note:{other}"] = f"arm {other} went on: {why}"
+            notes.append(f"arm {other} went on: {why}")
             continue
         halted_for[other] = faulted
-        state[f"note:{other}"] = f"arm {other} halted too: {why}"
+        notes.append(f"arm {other} halted too: {why}")
         executor.halt(f"arm {faulted} faulted and {why}", OTHER_ARM_FAULT)
 
 
