@@ -107,6 +107,9 @@ class Separation:
         #: Where an arm stands when no run of this process reports it (user degrees of
         #: every joint, None: not known): a session's telemetry, another process's arm.
         self._where: dict[str, Callable[[], Any]] = {}
+        #: Those of them too slow for a control cycle (another process's arm): asked
+        #: before a motion only; what they said then stands for the cycles after.
+        self._slow: set[str] = set()
         #: Set once the arms were halted for coming too close (what was said).
         self.tripped: str | None = None
 
@@ -114,9 +117,14 @@ class Separation:
     def arm_ids(self) -> tuple[str, ...]:
         return tuple(self._arms)
 
-    def stands_at(self, arm_id: str, where: Callable[[], Any]) -> None:
-        """``where()``: arm ``arm_id``'s measured joints (user degrees) when asked."""
+    def stands_at(self, arm_id: str, where: Callable[[], Any], *,
+                  every_cycle: bool = True) -> None:
+        """``where()``: arm ``arm_id``'s measured joints (user degrees) when asked;
+        ``every_cycle=False``: too slow to ask every control cycle (another process's arm:
+        asked before each motion, its answer standing for the cycles after)."""
         self._where[arm_id] = where
+        if not every_cycle:
+            self._slow.add(arm_id)
 
     # ------------------------------------------------------------------ readings
     def report(self, arm_id: str, t: float, user_deg: Any, cycle_s: float) -> _Reading:
@@ -184,7 +192,8 @@ class Separation:
         me = self._arms[arm_id]
         with self._lock:
             others = {a: r for a, r in self._readings.items() if a != arm_id}
-            idle = {a: w for a, w in self._where.items() if a != arm_id and a not in others}
+            idle = {a: w for a, w in self._where.items()
+                    if a != arm_id and a not in others and a not in self._slow}
         for other_id, where in idle.items():  # no run reports it: where it stands (at rest)
             stands = where()
             if stands is not None:
@@ -308,6 +317,11 @@ class Separation:
             stands = where() if where is not None else None
             if stands is not None:
                 q_now = np.radians(np.asarray(stands, dtype=float))
+                if other_id in self._slow:  # what the cycles after check against
+                    with self._lock:
+                        self._readings[other_id] = _Reading(
+                            readings[arm_id].t if arm_id in readings else 0.0, q_now,
+                            np.zeros_like(q_now), 0.0, other.volumes(q_now))
             elif other_id in readings:
                 q_now = readings[other_id].q_rad
             else:
@@ -467,7 +481,7 @@ def attach_other_arms(session: Any, context: Any) -> Separation | None:
     separation.stands_at(str(context.arm_id), _telemetry_joints(session))
     for arm_id, other in contexts.items():
         if arm_id != str(context.arm_id):
-            separation.stands_at(arm_id, _elsewhere(other))
+            separation.stands_at(arm_id, _elsewhere(other), every_cycle=False)
     session.separation = SessionSeparation(separation, str(context.arm_id))
     return separation
 
@@ -486,13 +500,14 @@ def _elsewhere(context: Any) -> Callable[[], Any]:
         if key is None:
             return None  # a built-in simulator of another process: nobody can read it
         try:
-            reply = ask_owner(*key, "status")
+            interface, channel = key
+            reply = ask_owner(interface, channel, "status")
             if reply is not None:
                 if not reply.get("ok", True) or not isinstance(reply.get("status"), dict):
                     return None
                 joints = reply["status"].get("joints") or []
             else:
-                claim = claim_bus(*key, transient=True)
+                claim = claim_bus(interface, channel, transient=True)
                 try:
                     connection, driver = context.open_arm(claim=False)
                     try:
