@@ -350,7 +350,8 @@ def test_halt_faulted_lets_the_other_arm_go_on_when_its_rest_is_clear(campaign):
 
 
 # ------------------------------------------------------------------ (d) the console
-#: The console's two arms 700 mm apart: B reaching out flat towards A meets A at Park.
+#: The console's two arms 400 mm apart, both at Park: B turning j1 by -90 degrees swings its
+#: folded arm into A.
 CLOSE_ARMS = """\
 [campaign]
 name = "Two arms close"
@@ -360,7 +361,7 @@ arm = "lwa3"
 
 [arms.B]
 arm = "lwa3"
-base = { position_mm = [0, 700, 0], rpy_deg = [0, 0, 180] }
+base = { position_mm = [0, 400, 0], rpy_deg = [0, 0, 180] }
 """
 
 
@@ -379,19 +380,11 @@ def test_the_console_refuses_a_move_that_places_one_arm_inside_the_other(tmp_pat
             for path in ("arm-up", "home"):
                 assert client.post(f"/api/v1/arms/B/{path}").status_code == 200
             wait_for(lambda: client.get("/api/v1/arms/B/status").json()["activity"]
-                     in ("idle", None), 20)
-            # B straight up (out of Park, above the desk), then flat out towards A
-            r = client.post("/api/v1/arms/B/move/joints",
-                            json={"joints": {"j2": 0, "j4": 0, "j6": 0}})
-            assert r.status_code == 200, r.text
-            wait_for(lambda: client.get("/api/v1/arms/B/status").json()["activity"]
-                     in ("idle", None) and abs(client.get("/api/v1/arms/B/status").json()[
-                         "joints"][1]["position_deg"]) < 0.3, 60)
+                     in ("idle", None), 60)
             before = time.perf_counter()
-            message = refused(
-                client.post("/api/v1/arms/B/move/joints",
-                            json={"joints": {"j1": -90, "j2": -90}}),
-                409, "arm A", "arm B", " mm", "nothing was sent")
+            message = refused(client.post("/api/v1/arms/B/move/joints",
+                                          json={"joints": {"j1": -90}}),
+                              409, "arm A", "arm B", " mm", "nothing was sent")
             assert message.startswith("move: refused: arm B would come into arm A")
             assert setup.wires["B"].motions(before) == 0  # nothing commanded
             # a move that keeps clear still goes
