@@ -79,6 +79,12 @@ class Executor:
     record_zero: Callable[[str], Any] | None = None
     #: The events between the arms of a campaign run (signal, wait_for; None: one arm).
     sync: Any = None
+    #: This arm against the other arms of a campaign run, every reading
+    #: (:class:`seqrun.service.arm_separation.ArmWatch`; None: one arm).
+    separation: Any = None
+    #: The planned path of each move as the preflight validated it from the measured
+    #: start (step number -> (times s, joints rad)); None before the preflight.
+    planned_paths: dict[int, Any] | None = None
 
     def __init__(self, driver: ArmDriver | Any, arm: ArmDescription, clock: Clock, *,
                  sequence_check: SequenceCheck,
@@ -356,8 +362,11 @@ class Executor:
         self.checks.check_states(m.short_state, require_homed=require_homed)
 
     def check_guards(self, m: Measurement) -> None:
-        """Workspace guards and link volumes at the measured joints."""
+        """Workspace guards and link volumes at the measured joints, and against the other
+        arms of a campaign run."""
         self.checks.check_guards(m.user_deg)
+        if self.separation is not None:
+            self.separation.check(m.t, m.user_deg, self.cycle)
 
     def module_fault(self, module: int, flags: JointState, context: str = ""):
         """A RunAborted naming the module, its joint and the decoded fault flags."""

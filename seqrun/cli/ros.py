@@ -137,6 +137,9 @@ def ros_command(
 
     session = ArmSession(arm, connection, project=project, log_root=runs, zero=zero,
                          response_timeout_s=timeout, arm_id=context.arm_id)
+    from seqrun.service.arm_separation import attach_other_arms
+
+    attach_other_arms(session, context)  # every trajectory against the other arms
     from seqrun.ros.node import ros_name
     from seqrun.service.arm_context import campaign_arm_ids
 

@@ -72,6 +72,7 @@ def preflight(run: Run, check: SequenceCheck, loaded, first_step: int = 1) -> Fi
     result = check(loaded, arm, start_deg, first_step=first_step, started=started,
                    speed=run.speed, module_limits=module_limits)
     run.validated_targets = dict(result.targets_deg)
+    run.planned_paths = dict(getattr(result, "paths", {}))
     run.emit("preflight", start_deg=rounded(m.user_deg), homed=ready, limits_written=written,
              module_limits={n: rounded(v) for n, v in module_limits.items()},
              states={str(k): v.describe() for k, v in states.items()},

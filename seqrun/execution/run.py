@@ -80,6 +80,7 @@ class Run(Protocol):
     not_verified: list[str]
     bus_retries: int
     validated_targets: dict[int, np.ndarray]
+    planned_paths: dict[int, Any] | None
     limits_in_force: LimitsInForce
     # -- its other parts
     latched: LatchedFaults

@@ -10,6 +10,14 @@ tools, :mod:`seqrun.arm.between_arms`) are checked against each other in the fac
 frame every :data:`~seqrun.sequence.validation.PLAN_SAMPLE_S` seconds. The smallest
 clearance is reported like the guard clearances; below the arm files' geometry margin
 the sequence is refused at the step that first moves into it.
+
+That time line takes every step that waits for the operator or the modules (``confirm``,
+``reset``, ``home``, ``wait: {until: in_position}``, ...) as 0 s. A run may take any time
+there, so each such step is an unknown delay (:mod:`seqrun.sequence.arm_timing`): where it
+leaves the offset between two stretches of the arms' tracks unknown, the stretches are
+checked for *every* offset they can take (each arm's path swept over the window in which
+the other can be anywhere along its own, :func:`seqrun.arm.between_arms.swept`), and a
+meeting is refused at that step, with the hint to order the arms with signal/wait_for.
 """
 
 from __future__ import annotations
@@ -20,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from seqrun.errors import SourceError
+from seqrun.sequence.arm_timing import Stamp, offset_range, rigid, uncertain_delays
 from seqrun.sequence.validation import PLAN_SAMPLE_S, ValidationResult
 from seqrun.steps.resolved import ResolvedStep
 
@@ -61,12 +70,48 @@ class ArmsClearance:
 
 
 @dataclass
+class Stretch:
+    """A stretch of one arm's track: a move (its planned path, ``times`` from its start)
+    or a rest (one configuration) from ``start`` to ``end`` (None: to the run's end)."""
+
+    start: Stamp
+    end: Stamp | None
+    times: np.ndarray
+    q: np.ndarray
+    step: ResolvedStep | None
+    moving: bool
+
+
+@dataclass
 class _Timeline:
     times: list[float]
     q: list[np.ndarray]
     spans: list[tuple[float, float, ResolvedStep, bool]] = field(default_factory=list)
     t: float = 0.0
     index: int = 0
+    #: When the arm gets here, for every timing the run can take.
+    stamp: Stamp = field(default_factory=Stamp.zero)
+    stretches: list[Stretch] = field(default_factory=list)
+    #: The rest the arm is in (where, since when, after which step).
+    rest: tuple[np.ndarray, Stamp, ResolvedStep | None] | None = None
+
+    def moves(self, step: ResolvedStep, times: np.ndarray, q: np.ndarray,
+              seconds: float) -> None:
+        if self.rest is not None:
+            where, since, after = self.rest
+            self.stretches.append(Stretch(since, self.stamp, np.zeros(1), where[None, :],
+                                          after, False))
+        self.stretches.append(Stretch(self.stamp, self.stamp.plus(seconds),
+                                      np.asarray(times, dtype=float), np.asarray(q), step,
+                                      True))
+        self.rest = (np.asarray(q)[-1], self.stamp.plus(seconds), step)
+
+    def ends(self) -> None:
+        if self.rest is not None:
+            where, since, after = self.rest
+            self.stretches.append(Stretch(since, None, np.zeros(1), where[None, :], after,
+                                          False))
+            self.rest = None
 
 
 @dataclass
@@ -78,6 +123,26 @@ class Schedule:
     errors: list[SourceError]
     #: When each event is signalled (s on the time line).
     signals: dict[str, float]
+    #: The steps of unknown duration: delay id -> (step, arm, largest value s or inf).
+    delays: dict[int, tuple[ResolvedStep, str, float]] = field(default_factory=dict)
+
+    @property
+    def bounds(self) -> dict[int, float]:
+        return {d: bound for d, (_, _, bound) in self.delays.items()}
+
+
+def _unknown_duration(step: ResolvedStep) -> float | None:
+    """The largest extra time (s; inf: unbounded) a step can take beyond its planned
+    duration, None when it takes exactly that (a move's plan, ``wait: N``) or its end is
+    worked out from the others (``signal``, ``wait_for``)."""
+    if step.kind in ("signal", "wait_for"):
+        return None
+    if step.kind == "wait":
+        if getattr(step.params, "seconds", None) is not None:
+            return None
+        timeout = getattr(step.params, "timeout_s", None)
+        return float(timeout) if timeout is not None else float("inf")
+    return float("inf")
 
 
 def _duration(step: ResolvedStep, result: ValidationResult) -> tuple[float, Any]:
@@ -97,7 +162,10 @@ def schedule(plans: list[ArmPlan]) -> Schedule:
     for plan in plans:
         q0 = np.radians([plan.start_deg.get(n, 0.0) for n in plan.arm.joint_names])
         lines[plan.arm_id] = _Timeline([0.0], [q0])
+        lines[plan.arm_id].rest = (q0, Stamp.zero(), None)
     signals: dict[str, float] = {}
+    signal_stamps: dict[str, Stamp] = {}
+    delays: dict[int, tuple[ResolvedStep, str, float]] = {}
     signal_steps: dict[str, ResolvedStep] = {}
     errors: list[SourceError] = []
     by_id = {p.arm_id: p for p in plans}
@@ -122,6 +190,7 @@ def schedule(plans: list[ArmPlan]) -> Schedule:
                             "timeout_s"))
                     start = line.t
                     line.t = max(line.t, come)
+                    line.stamp = line.stamp.later(signal_stamps[event])
                     line.spans.append((start, line.t, step, False))
                 elif step.kind == "signal":
                     event = step.params.event
@@ -132,6 +201,7 @@ def schedule(plans: list[ArmPlan]) -> Schedule:
                             "is signalled once per run", "event"))
                     else:
                         signals[event] = line.t
+                        signal_stamps[event] = line.stamp
                         signal_steps[event] = step
                     line.spans.append((line.t, line.t, step, False))
                 else:
@@ -141,6 +211,14 @@ def schedule(plans: list[ArmPlan]) -> Schedule:
                         times, q = path
                         line.times.extend((start + np.asarray(times)).tolist())
                         line.q.extend(np.asarray(q))
+                        if len(times):
+                            line.moves(step, times, q, seconds)
+                    line.stamp = line.stamp.plus(seconds)
+                    extra = _unknown_duration(step) if path is None else None
+                    if extra is not None:
+                        delay = len(delays)
+                        delays[delay] = (step, arm_id, extra)
+                        line.stamp = line.stamp.delayed(delay)
                     line.t = start + seconds
                     line.spans.append((start, line.t, step, path is not None))
                 line.index += 1
@@ -164,8 +242,10 @@ def schedule(plans: list[ArmPlan]) -> Schedule:
                 "earlier or put both in one parallel block)", "event"))
         else:
             errors.append(step.error(f"no step of any arm signals '{event}'", "event"))
+    for line in lines.values():
+        line.ends()
     end = max((line.t for line in lines.values()), default=0.0)
-    return Schedule(lines, end, errors, signals)
+    return Schedule(lines, end, errors, signals, delays)
 
 
 def _sample(line: _Timeline, grid: np.ndarray) -> np.ndarray:
@@ -210,6 +290,105 @@ def _refusal(planned: Schedule, pair: tuple[ArmPlan, ArmPlan], early: Any, t: fl
     return blamed.error(message)
 
 
+def _why(step: ResolvedStep) -> str:
+    if step.kind == "confirm":
+        return "waits for the operator's answer"
+    if step.kind == "wait":
+        return "waits until the arm is in position"
+    return f"takes as long as the modules take ({step.kind})"
+
+
+def _stretch_text(arm_id: str, stretch: Stretch) -> str:
+    step = stretch.step
+    if stretch.moving and step is not None:
+        return f"arm {arm_id}: step {step.number} ({step.title}) moving"
+    if step is None:
+        return f"arm {arm_id}: at its start"
+    return f"arm {arm_id}: where step {step.number} ({step.title}) left it"
+
+
+def _culprit(delays: set[int], first: Stamp, second: Stamp) -> int | None:
+    """The step to blame for an unknown offset between two moments: a delay that one of
+    them always waits for and the other never (the latest such), else the latest of
+    those that differ."""
+    def always(stamp: Stamp, d: int) -> bool:
+        return all(d in s for s, _ in stamp.terms)
+
+    def never(stamp: Stamp, d: int) -> bool:
+        return not any(d in s for s, _ in stamp.terms)
+
+    strong = [d for d in delays if (always(first, d) and never(second, d))
+              or (always(second, d) and never(first, d))]
+    if strong:
+        return max(strong)
+    return max(delays) if delays else None
+
+
+def _unknown_timing(planned: Schedule, pair: tuple[ArmPlan, ArmPlan], geometry: dict,
+                    margin: float) -> list[SourceError]:
+    """Stretches of two arms whose offset a step of unknown duration leaves open, checked
+    for every offset they can take (the module doc); one error per such step."""
+    from seqrun.arm.between_arms import swept, swept_clearance
+
+    first, second = pair
+    bounds = planned.bounds
+    cache: dict[int, Any] = {}
+
+    def sweep(plan: ArmPlan, stretch: Stretch) -> Any:
+        key = id(stretch)
+        if key not in cache:
+            until = None
+            if not stretch.moving:
+                until = (offset_range(stretch.end, stretch.start, bounds)[1]
+                         if stretch.end is not None else float("inf"))
+            per = max(1, int(round(0.1 / PLAN_SAMPLE_S)))
+            cache[key] = swept(geometry[plan.arm_id], plan.base, stretch.times, stretch.q,
+                               per=per, until_s=until)
+        return cache[key]
+
+    errors: dict[int, SourceError] = {}
+    for sa in planned.timelines[first.arm_id].stretches:
+        for sb in planned.timelines[second.arm_id].stretches:
+            # never at the same time: one always ends before the other starts
+            if sa.end is not None and offset_range(sa.end, sb.start, bounds)[1] <= 1e-9:
+                continue
+            if sb.end is not None and offset_range(sb.end, sa.start, bounds)[1] <= 1e-9:
+                continue
+            same = [(sa.start, sb.start)]
+            same += [(sa.end, sb.start)] if sa.end is not None else []
+            same += [(sb.end, sa.start)] if sb.end is not None else []
+            if rigid(same, bounds):
+                continue  # the planned time line is every run's: checked along it
+            culprits = uncertain_delays(sa.start, sb.start, *(
+                [sa.end] if sa.end is not None else []), *(
+                [sb.end] if sb.end is not None else []))
+            culprit = _culprit(culprits, sa.start, sb.start)
+            if culprit in errors:
+                continue
+            lo, hi = offset_range(sb.start, sa.start, bounds)
+            wa, wb = sweep(first, sa), sweep(second, sb)
+            # stretch i of A [a0, a1] and j of B [b0, b1] (each from its own start) meet
+            # for some offset of B's start after A's in [lo, hi]
+            can_meet = ((wa.start_s[:, None] - wb.end_s[None, :] <= hi)
+                        & (wa.end_s[:, None] - wb.start_s[None, :] >= lo))
+            found = swept_clearance((first.arm_id, geometry[first.arm_id], wa),
+                                    (second.arm_id, geometry[second.arm_id], wb), can_meet)
+            if found is None or found[0] >= margin or culprit is None:
+                continue
+            distance, names, _, _ = found
+            step, arm_id, _ = planned.delays[culprit]
+            a, b = names.split("~", 1)
+            how = "into" if distance < 0 else f"within {distance:.1f} mm of"
+            errors[culprit] = step.error(
+                f"arm {arm_id}: this step {_why(step)}, so from here the arms' timing is "
+                f"not known: for some timing {a} comes {how} {b} "
+                f"({_stretch_text(first.arm_id, sa)}, {_stretch_text(second.arm_id, sb)}); "
+                f"the arm files' geometry margin is {margin:g} mm. Order the arms with "
+                "signal/wait_for (the other arm waits for an event this arm signals) so "
+                "that these stretches cannot meet")
+    return list(errors.values())
+
+
 def check_arms(plans: list[ArmPlan]) -> tuple[list[SourceError], list[ArmsClearance],
                                               Schedule]:
     """The order's findings and the arms' volumes against each other (see the module
@@ -243,4 +422,5 @@ def check_arms(plans: list[ArmPlan]) -> tuple[list[SourceError], list[ArmsCleara
             if early is not None:
                 errors.append(_refusal(planned, (first, second), early,
                                        float(grid[early.index]), margin, clearance))
+            errors += _unknown_timing(planned, (first, second), geometry, margin)
     return errors, clearances, planned

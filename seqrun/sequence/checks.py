@@ -40,6 +40,8 @@ class StaticCheck:
     clearances: list = field(default_factory=list)
     #: Smallest link-volume clearance of each move (arm file geometry).
     proximities: list = field(default_factory=list)
+    #: The planned path of each move (step number -> (times s, joints rad)).
+    paths: dict = field(default_factory=dict, repr=False)
 
     @property
     def valid(self) -> bool:
@@ -97,6 +99,7 @@ def static_check(file: Path, *, start: str | None = None,
     check.notes = check.arm.notes + result.notes
     check.clearances = [result.clearances[n] for n in sorted(result.clearances)]
     check.proximities = [result.proximities[n] for n in sorted(result.proximities)]
+    check.paths = dict(result.paths)
     return check
 
 

@@ -242,6 +242,8 @@ class Activities:
                             else s.poses_dir, requests=StopRequests(), events=s.events,
                             **kw)
         self.adopt(executor)
+        if getattr(s, "separation", None) is not None:
+            s.separation.watch(executor)  # against the other arms, every cycle
         return executor
 
     def adopt(self, executor) -> None:

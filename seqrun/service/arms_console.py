@@ -117,6 +117,11 @@ class ArmSessions:
         self.control = ControlDesk(publish=first.publish, clock=first.clock.now)
         for session in self.sessions.values():
             session.control = self.control
+        from seqrun.service.arm_separation import attach_sessions
+
+        #: The arms against each other: every motion of a face checked before it is sent,
+        #: every cycle of a session's executor (seqrun/service/arm_separation.py).
+        self.separation = attach_sessions(self.sessions, self.bases)
         #: The campaign run under way or last (:meth:`run_sequence`).
         self.run: ArmsRun | None = None
         self._run_lock = threading.Lock()

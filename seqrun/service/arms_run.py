@@ -7,8 +7,12 @@ one-arm run does (the preflight, the checks every cycle, the Halt on a fault); t
 ``signal``/``wait_for`` steps meet on an :class:`EventBoard`. When an arm's run ends
 with a fault (or an operator's halt), the others are halted too, confirmed each by its
 own executor, unless the campaign says ``on_fault = "halt_faulted"``: then only the
-faulted arm is halted, the others go on until they would wait for it (they fault there),
-and the report says so. The dry run is the same on simulated buses at one virtual time
+faulted arm is halted, and another arm goes on only when its remaining planned motion is
+clear of the faulted arm where it stopped (else it is halted too); those that go on do so
+until they would wait for it (they fault there), and the report says so. Every control
+cycle of every arm checks it against the others from their measured joints and stopping
+distances (:mod:`seqrun.service.arm_separation`): too close, both are halted. The dry
+run is the same on simulated buses at one virtual time
 (:class:`~seqrun.clock.LockstepClock`).
 """
 
@@ -127,6 +131,7 @@ def run_tracks(tracks: Mapping[str, Any], arms: Mapping[str, Any],
                requests_by_arm: Mapping[str, Any] | None = None,
                runner: Callable[..., Any] | None = None,
                parts: Mapping[str, Any] | None = None,
+               bases: Mapping[str, Any] | None = None,
                **run: Any) -> ArmsOutcome:
     """Run every arm's track on its connection, each on a thread of its own (see the
     module doc). ``clock_views``: each arm's :class:`~seqrun.clock.LockstepView` (the dry
@@ -136,7 +141,9 @@ def run_tracks(tracks: Mapping[str, Any], arms: Mapping[str, Any],
     **options)``: how one arm's run is made (default :func:`run_sequence` on its
     connection; ``seqrun run``: the arm's session). ``parts``: each arm's
     :class:`~seqrun.service.arm_part.ArmPart` (the run's one time base and run.mcap).
-    ``run``: further options."""
+    ``bases``: each arm's base frame (4x4) in the facility frame (default: the campaign's
+    ``[arms.ID] base``). ``run``: further options."""
+    from seqrun.service.arm_separation import Separation, bases_of_project, remaining_plan
     from seqrun.service.runner import run_sequence
 
     board = EventBoard(signallers(tracks))
@@ -146,10 +153,21 @@ def run_tracks(tracks: Mapping[str, Any], arms: Mapping[str, Any],
     lock = threading.Lock()
     state: dict[str, str | None] = {"first_fault": None}
     errors: dict[str, BaseException] = {}
+    #: What halt_faulted decided for the other arms (said in the outcome's notes).
+    went_on: list[str] = []
+    if bases is None:
+        project = getattr(next(iter(tracks.values()), None), "project", None)
+        bases = bases_of_project(project, tracks)
+    separation = Separation({a: arms[a] for a in tracks}, bases) if len(tracks) > 1 \
+        else None
 
     def hook(arm_id: str):
         def attach(executor) -> None:
             executor.sync = board.for_arm(arm_id)
+            if separation is not None:
+                executor.separation = separation.watch(
+                    arm_id, halt=executor.halt,
+                    plan=functools.partial(remaining_plan, executor))
             with lock:
                 executors[arm_id] = executor
                 stop = state["first_fault"] is not None and on_fault == "halt_all"
@@ -194,6 +212,12 @@ def run_tracks(tracks: Mapping[str, Any], arms: Mapping[str, Any],
                         if other != arm_id and other not in outcomes:
                             halted_for[other] = arm_id
                             executor.halt(f"arm {arm_id} faulted", OTHER_ARM_FAULT)
+                elif on_fault != "halt_all" and separation is not None \
+                        and arm_id in others:
+                    _halt_unless_clear(separation, arm_id, others, outcomes, halted_for,
+                                       went_on)
+            if separation is not None:
+                separation.release(arm_id)
             if view is not None:
                 view.leave()
 
@@ -211,16 +235,47 @@ def run_tracks(tracks: Mapping[str, Any], arms: Mapping[str, Any],
         if arm_id in outcomes and outcomes[arm_id].result.exit_code != EXIT_OK:
             outcomes[arm_id].halted_for = why
     result = ArmsOutcome({a: outcomes[a] for a in tracks}, on_fault, state["first_fault"])
+    result.notes += went_on
+    if separation is not None and separation.tripped is not None:
+        result.notes.append(separation.tripped)
     if state["first_fault"] is not None:
         first = state["first_fault"]
         if on_fault == "halt_all":
             result.notes.append(f"arm {first} faulted: every arm was halted "
                                 "(on_fault = halt_all)")
         else:
-            result.notes.append(f"arm {first} faulted: only arm {first} was halted "
-                                "(on_fault = halt_faulted in seqrun.toml); the other arms "
-                                "went on")
+            also = [a for a, why in halted_for.items() if why == first]
+            if also:
+                result.notes.append(f"arm {first} faulted: arm {first} was halted, and arm "
+                                    f"{', '.join(also)} too (on_fault = halt_faulted in "
+                                    "seqrun.toml, but its remaining motion was not clear of "
+                                    f"arm {first} where it stopped)")
+            else:
+                result.notes.append(f"arm {first} faulted: only arm {first} was halted "
+                                    "(on_fault = halt_faulted in seqrun.toml); the other "
+                                    "arms went on")
     return result
+
+
+def _halt_unless_clear(separation: Any, faulted: str, executors: Mapping[str, Any],
+                       outcomes: Mapping[str, Any], halted_for: dict[str, str],
+                       notes: list[str]) -> None:
+    """``on_fault = "halt_faulted"``: the faulted arm stands where its confirmed Halt left
+    it; every other arm still running goes on only if its remaining planned motion is
+    clear of it there, else it is halted too (:meth:`Separation.clear_of_stopped`)."""
+    last = getattr(executors[faulted], "last", None)
+    if last is not None:
+        separation.stopped(faulted, last.user_deg)
+    for other, executor in executors.items():
+        if other == faulted or other in outcomes:
+            continue
+        clear, why = separation.clear_of_stopped(other, faulted)
+        if clear:
+            notes.append(f"arm {other} went on: {why}")
+            continue
+        halted_for[other] = faulted
+        notes.append(f"arm {other} halted too: {why}")
+        executor.halt(f"arm {faulted} faulted and {why}", OTHER_ARM_FAULT)
 
 
 def run_arms_live(tracks: Mapping[str, Any], arms: Mapping[str, Any],

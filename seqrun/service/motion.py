@@ -176,6 +176,8 @@ class Motion:
         check = validate_sequence(loaded, self._session.arm, start, started=True)
         if check.errors:
             raise Refused(f"{what}: {self._own_words(check.errors[0])}")
+        if self._session.separation is not None:  # against the other arms (and their plans)
+            self._session.separation.refuse_paths(what, check.paths)
         return loaded
 
     def validated_step(self, kind: str, step: str, what: str):
@@ -284,6 +286,9 @@ class Motion:
         joints = np.array(s.telemetry.condition().joints, dtype=float)
         velocity = self._velocities.get(joint, 0.0)
         plan = plan_jog(s.arm, joint, float(speed_scale), joints, velocity, mode)
+        if s.separation is not None:  # its next stretch against the other arms
+            s.separation.refuse_jog("jog", joints, plan.index, plan.end_deg,
+                                    plan.velocity_deg_s, self.jog_deadman_s)
         deadman = Deadman(s.clock, self.jog_deadman_s)
         activity = activities.begin("jog", {"joint": joint, "speed_scale": speed_scale,
                                             "mode": mode}, by)

@@ -70,6 +70,8 @@ class Runs:
             if check.errors:
                 more = len(check.errors) - 1
                 raise Refused(str(check.errors[0]) + (f" (and {more} more)" if more else ""))
+            if s.separation is not None:  # against the other arms where they stand (and go)
+                s.separation.refuse_paths("run", check.paths)
         try:
             folder = prepare_run_folder(log_dir, loaded.name, s.log_root)
         except OSError as exc:

@@ -126,6 +126,9 @@ class ArmSession:
         self.runs = Runs(self)
         #: Who holds control and who watches (every face of this session shares it).
         self.control = ControlDesk(publish=self.publish, clock=self.clock.now)
+        #: This arm against the other arms of a campaign served in this process
+        #: (:class:`seqrun.service.arm_separation.SessionSeparation`; None: one arm).
+        self.separation: Any = None
         self._status_listener = self._hub.add_listener(self._on_event, "session status",
                                                        maxsize=10_000)
         if status_hz > 0:

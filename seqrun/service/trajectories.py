@@ -214,6 +214,12 @@ def check_trajectory(session: Any, trajectory: JointTrajectory, folder: Path | N
         more = len(check.errors) - 1
         raise Refused(_in_operator_terms(check.errors[0], file, len(steps))
                       + (f" (and {more} more)" if more else ""))
+    if s.separation is not None:  # against the other arms where they stand (and go)
+        try:
+            s.separation.refuse_paths("trajectory", check.static.paths)
+        except Refused:
+            file.unlink(missing_ok=True)
+            raise
     return check, file
 
 
