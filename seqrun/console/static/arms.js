@@ -162,7 +162,8 @@ function onEvent(id, event) {
   const list = $("#events");
   list.append(li);
   while (list.children.length > 300) list.firstChild.remove();
-  li.scrollIntoView({ block: "nearest" });
+  // scroll the list only: scrollIntoView would scroll the page too, panels under STOP
+  list.scrollTop = list.scrollHeight;
 }
 
 // Lost contact with the console: the whole page greys out, every arm's state is unknown.
