@@ -17,6 +17,7 @@ from projecttree import ROOT
 from seqrun.cli.app import app
 from seqrun.runfolder import logfile
 from seqrun.runfolder.integrity import changed_inputs, incomplete
+from test_console_browser import browser  # noqa: F401 (the fixture)
 from test_runlog import FullDisk
 
 TOTEM = ROOT / "sequences" / "totem.yaml"
@@ -190,3 +191,33 @@ def test_report_mcap_that_fails_puts_the_recorded_bag_back(run):
     assert result.exit_code == 2, result.output
     assert (run / "run.mcap").read_bytes() == recorded_bag
     assert not (run / "run.mcap.orig").exists()
+
+
+# --------------------------------------------------------------------- the console's list
+@pytest.mark.slow  # a browser and a server
+def test_the_consoles_past_runs_mark_them_too(recorded, tmp_path, browser):  # noqa: F811
+    """The console lists the runs folder as `seqrun runs` does, marks included."""
+    from consolekit import LiveServer, console_setup
+
+    setup = console_setup(tmp_path / "camp")
+    for name, change in (("20261129-080000-Totem", cut_short),
+                         ("20261129-090000-Totem", None)):
+        shutil.copytree(recorded, setup.runs / name)
+        if change is not None:
+            change(setup.runs / name)
+    (setup.runs / "20261129-090000-Totem" / "inputs" / "sequences" / "totem.yaml").write_text(
+        "edited\n")
+    try:
+        with LiveServer(setup.app()) as server:
+            context = browser.new_context(viewport={"width": 1400, "height": 900})
+            page = context.new_page()
+            page.goto(server.url)
+            page.wait_for_function("document.querySelectorAll('#runs li').length === 2",
+                                   timeout=20000)
+            items = page.eval_on_selector_all("#runs li", "lis => lis.map(li => li.textContent)")
+            context.close()
+    finally:
+        setup.close()
+    newest, oldest = items   # newest first
+    assert "INPUTS CHANGED" in newest and "INCOMPLETE" not in newest, items
+    assert "INCOMPLETE" in oldest and "INPUTS CHANGED" not in oldest, items

@@ -391,7 +391,8 @@ function runLink(arm, id, hasReport, text) {
 async function loadRuns() {
   const runs = await api("GET", "/runs").catch(() => []);
   $("#runs").replaceChildren(...runs.slice(0, 50).map((r) => {
-    const text = `${r.when || "?"} ${r.sequence || "?"} ${r.result || "?"}${r.exit_code !== null && r.exit_code !== undefined ? ` (exit ${r.exit_code})` : ""}`;
+    const text = `${r.when || "?"} ${r.sequence || "?"} ${r.result || "?"}${r.exit_code !== null && r.exit_code !== undefined ? ` (exit ${r.exit_code})` : ""}`
+      + `${r.incomplete?.length ? " INCOMPLETE" : ""}${r.inputs_changed?.length ? " INPUTS CHANGED" : ""}`;  // (its report says what)
     const li = el("li", { className: r.result === "passed" ? "" : "failed" });
     if (r.parts) {
       li.append(`${text}: `, ...Object.entries(r.parts).flatMap(([a, part], i) => [i ? ", " : "", runLink(a, part.id, part.report, `arm ${a}`)]));
