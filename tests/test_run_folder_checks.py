@@ -184,6 +184,19 @@ def test_report_mcap_keeps_the_recorded_bag_as_orig(run):
     assert (run / "run.mcap.orig").read_bytes() == recorded_bag
 
 
+def test_report_mcap_keeps_a_killed_runs_partial_bag(run):
+    (run / "run.mcap").unlink()
+    partial = run / "run.mcap.partial"
+    partial.mkdir()
+    (partial / "run.mcap.partial.mcap").write_bytes(b"\x89MCAP0\r\n what the run wrote")
+    result = invoke("report", run, "--mcap")
+    assert result.exit_code == 0, result.output
+    assert "the run.mcap.partial the run recorded is kept as" in result.stdout
+    kept = run / "run.mcap.partial.orig" / "run.mcap.partial.mcap"
+    assert kept.read_bytes() == b"\x89MCAP0\r\n what the run wrote"
+    assert (run / "run.mcap").is_file() and not partial.exists()
+
+
 def test_report_mcap_that_fails_puts_the_recorded_bag_back(run):
     recorded_bag = (run / "run.mcap").read_bytes()
     (run / "events.jsonl").write_text("")   # nothing to write it from

@@ -92,23 +92,31 @@ RECORDED_MCAP = "run.mcap.orig"
 
 @contextmanager
 def _keeping_the_recorded_bag(run_dir: Path) -> Iterator[str]:
-    """Before run.mcap is written anew: the run's own run.mcap moves to run.mcap.orig (put
-    back if writing fails). A run.mcap beside an existing run.mcap.orig was written by an
-    earlier ``--mcap`` and is replaced; the recorded one stays. Yields the line's ending."""
-    current, recorded = Path(run_dir) / "run.mcap", Path(run_dir) / RECORDED_MCAP
-    if not current.is_file():
-        yield ""
-    elif recorded.exists():
-        yield (f"; it replaces the run.mcap an earlier --mcap wrote (the recorded one "
-               f"stays in {recorded})")
-    else:
-        current.replace(recorded)
-        try:
-            yield f"; the run.mcap the run recorded is kept as {recorded}"
-        except BaseException:
-            if not current.exists():
-                recorded.replace(current)
-            raise
+    """Before run.mcap is written anew: the run's own run.mcap moves to run.mcap.orig, and
+    a killed run's run.mcap.partial/ (which the writer would clear) to
+    run.mcap.partial.orig/; both are put back if writing fails. A run.mcap beside an
+    existing run.mcap.orig was written by an earlier ``--mcap`` and is replaced; the
+    recorded one stays. Yields the line's ending."""
+    from seqrun.service.mcap_log import PARTIAL_NAME
+
+    folder = Path(run_dir)
+    moves = []   # (what the run recorded, where it is kept)
+    for name, kept in (("run.mcap", RECORDED_MCAP), (PARTIAL_NAME, PARTIAL_NAME + ".orig")):
+        if (folder / name).exists() and not (folder / kept).exists():
+            moves.append((folder / name, folder / kept))
+    replaced = (folder / "run.mcap").is_file() and (folder / RECORDED_MCAP).exists()
+    for source, kept in moves:
+        source.replace(kept)
+    try:
+        yield ("".join(f"; the {source.name} the run recorded is kept as {kept}"
+                       for source, kept in moves)
+               + (f"; it replaces the run.mcap an earlier --mcap wrote (the recorded one "
+                  f"stays in {folder / RECORDED_MCAP})" if replaced else ""))
+    except BaseException:
+        for source, kept in moves:
+            if not source.exists():
+                kept.replace(source)
+        raise
 
 
 def _parts(run_dir: Path, out: Path | None, csv_dir: Path | None) -> list[Path]:
