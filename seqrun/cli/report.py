@@ -100,10 +100,11 @@ def _keeping_the_recorded_bag(run_dir: Path) -> Iterator[str]:
     from seqrun.service.mcap_log import PARTIAL_NAME
 
     folder = Path(run_dir)
-    moves = []   # (what the run recorded, where it is kept)
-    for name, kept in (("run.mcap", RECORDED_MCAP), (PARTIAL_NAME, PARTIAL_NAME + ".orig")):
-        if (folder / name).exists() and not (folder / kept).exists():
-            moves.append((folder / name, folder / kept))
+    moves: list[tuple[Path, Path]] = []   # (what the run recorded, where it is kept)
+    for name, kept_name in (("run.mcap", RECORDED_MCAP),
+                            (PARTIAL_NAME, PARTIAL_NAME + ".orig")):
+        if (folder / name).exists() and not (folder / kept_name).exists():
+            moves.append((folder / name, folder / kept_name))
     replaced = (folder / "run.mcap").is_file() and (folder / RECORDED_MCAP).exists()
     for source, kept in moves:
         source.replace(kept)
