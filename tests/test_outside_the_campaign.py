@@ -84,3 +84,41 @@ def test_a_runs_folder_outside_is_named_by_validate_and_run(camp):
     assert run.exit_code == 0, run.output
     assert any(f"run folders are written to {runs}" in n for n in notes(run.output))
     assert len(list(runs.iterdir())) == 1   # (and they are)
+
+
+def test_a_two_arm_campaign_names_them_too(tmp_path, monkeypatch):
+    """A campaign of several arms validates each arm's track: each names what it uses."""
+    monkeypatch.setenv("SEQRUN_STATE_DIR", str(tmp_path / "state"))
+    camp = tmp_path / "two-arms"
+    shutil.copytree(ROOT / "examples" / "two-arms", camp)
+    (tmp_path / "outside").mkdir()
+    shutil.copy(ROOT / "poses" / "totem.yaml", tmp_path / "outside" / "totem.yaml")
+    (camp / "poses").mkdir()
+    (camp / "poses" / "totem.yaml").symlink_to(tmp_path / "outside" / "totem.yaml")
+    monkeypatch.chdir(camp)
+    result = invoke("validate", "sequences/hold_and_approach.yaml", "--static")
+    assert result.exit_code == 0, result.output
+    found = [n for n in notes(result.output) if "is read from" in n]
+    # at each arm's first step naming the pose (A's at line 18, B's at line 28)
+    assert [n.split(": note")[0] for n in found] == [
+        "sequences/hold_and_approach.yaml:18:26", "sequences/hold_and_approach.yaml:28:26"]
+    assert all(f"pose 'totem' is read from {tmp_path / 'outside' / 'totem.yaml'}" in n
+               for n in found)
+
+
+@pytest.mark.slow  # a two-arm run
+def test_a_two_arm_run_names_them_before_it_starts(tmp_path, monkeypatch):
+    monkeypatch.setenv("SEQRUN_STATE_DIR", str(tmp_path / "state"))
+    camp = tmp_path / "two-arms"
+    shutil.copytree(ROOT / "examples" / "two-arms", camp)
+    (tmp_path / "outside").mkdir()
+    with (camp / "seqrun.toml").open("a") as config:
+        config.write('\n[runs]\ndir = "../outside/runs"\n')
+    monkeypatch.chdir(camp)
+    result = invoke("run", "sequences/hold_and_approach.yaml", "--sim", "--virtual-time",
+                    "--yes", "--plain")
+    assert result.exit_code == 0, result.output
+    [note] = [n for n in notes(result.output) if "[runs] dir" in n]
+    assert note.startswith("note: seqrun.toml:")
+    assert f"run folders are written to {(tmp_path / 'outside' / 'runs').resolve()}" in note
+    assert result.output.index(note) < result.output.index("A up to Totem")
