@@ -1,6 +1,6 @@
 """The sequence file format: the pydantic models of a file (the single source of truth).
 
-A sequence file is a mapping with ``name``, ``description``, an optional ``arm`` and
+A sequence file is a mapping with ``name``, an optional ``description`` and ``arm``, and
 ``steps``, a list whose items each name their step type by their single key::
 
     # yaml-language-server: $schema=../docs/schema/sequence.schema.json
@@ -282,7 +282,9 @@ class Sequence(_Model):
 
     name: str = Field(min_length=1, description="Short name of the sequence, shown to the "
                                                 "operator and in run reports.")
-    description: str = Field(description="What the sequence does and when to use it.")
+    description: str = Field("", description="What the sequence does and when to use it "
+                                             "(optional: without it the report and displays "
+                                             "show the name alone).")
     arm: str | None = Field(
         None, min_length=1,
         description=f"Arm file, relative to the project root (default: the campaign's arm, "

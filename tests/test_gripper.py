@@ -129,3 +129,19 @@ def test_the_driver_speaks_metres_and_amperes_to_the_module(tmp_path, monkeypatc
                if bytes(m.data[:2]) == b"\x08\x4c"]
     assert max_cur == pytest.approx([1.5])  # 100 N through the arm file's table
     assert sim.sim.module(8).position() == pytest.approx(0.060, abs=1e-4)
+
+
+def test_a_gripper_not_homed_is_no_fault_and_a_halted_one_is():
+    """A module powers on not homed with its brake on (thesis 5.1): that reads as not homed,
+    not as a fault, though the drive refuses motion until Home; HALTED is a fault."""
+    from seqrun.drivers.powercube.gripper import reading
+    from seqrun.powercube.protocol import StateFlag
+
+    power_on = reading(0.07, 0.0, int(StateFlag.BRAKEACTIVE | StateFlag.RAMP_END))
+    assert (power_on.homed, power_on.faulted, power_on.ready) == (False, False, False)
+    assert power_on.width_mm == pytest.approx(70.0)
+    homed = reading(0.07, 0.0, int(StateFlag.HOME_OK | StateFlag.RAMP_END))
+    assert (homed.homed, homed.faulted, homed.ready) == (True, False, True)
+    halted = reading(0.07, 0.0, int(StateFlag.HOME_OK | StateFlag.HALTED))
+    assert (halted.faulted, halted.ready) == (True, False)
+    assert "HALTED" in halted.text

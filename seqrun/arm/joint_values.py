@@ -73,6 +73,15 @@ class GripperReading:
     moving: bool
     #: The motor is at its current limit (CURLIMIT): it pushes against something.
     at_current_limit: bool
+    #: A fault bit is set (ERROR, HALTED, a power or limit fault): the drive refuses motion.
     faulted: bool
+    #: HOME_OK: a module powers on not homed (brake on) and is homed with the arm's Home;
+    #: not homed is no fault, but the drive refuses motion until then.
+    homed: bool
     #: Every state flag by the drive's names, for the operator.
     text: str
+
+    @property
+    def ready(self) -> bool:
+        """Homed and not faulted: the drive accepts a motion."""
+        return self.homed and not self.faulted

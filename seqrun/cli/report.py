@@ -3,7 +3,8 @@
     seqrun report runs/20261121-101500-Op-safe            # -> that folder's report.html
     seqrun report runs/20261121-101500-Op-safe --out r.html
     seqrun report runs/20261121-101500-Op-safe --csv exported/   # timeseries.csv, steps.csv
-    seqrun report runs/20261121-101500-Op-safe --mcap     # run.mcap anew (docs/ros2.md)
+    seqrun report runs/20261121-101500-Op-safe --mcap     # run.mcap anew (docs/ros2.md);
+                                                          # the recorded one -> run.mcap.orig
     seqrun report runs/20261127-101500-Two-arm --mcap     # several arms: their one run.mcap
 
 A folder that is not a run folder is one ``error:`` line and exit 2. A run of several arms
@@ -14,8 +15,10 @@ every arm.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated, Any, Optional
 
 import typer
 
@@ -35,7 +38,8 @@ def report_command(
     mcap: Annotated[bool, typer.Option(
         "--mcap", help="Write RUN_DIR/run.mcap (the run as a ROS 2 bag) anew from events.jsonl "
                        "instead of the HTML (both with --out); for runs of older versions or "
-                       "one killed before its run.mcap was ended.")] = False,
+                       "one killed before its run.mcap was ended. The run.mcap the run "
+                       "recorded is kept as run.mcap.orig.")] = False,
     arm_file: Annotated[Optional[Path], typer.Option(
         "--arm", metavar="FILE", help="Arm file, for run folders of versions that did not "
                                       "record the arm in events.jsonl.")] = None,
@@ -50,23 +54,70 @@ def report_command(
             from seqrun.service.arms_mcap import is_arms_run, rebuild_arms_mcap
             from seqrun.service.mcap_log import rebuild_mcap
 
-            path, counts = (rebuild_arms_mcap(run_dir) if is_arms_run(run_dir)
-                            else rebuild_mcap(run_dir, arm))
+            with _keeping_the_recorded_bag(run_dir) as kept:
+                path, counts = (rebuild_arms_mcap(run_dir) if is_arms_run(run_dir)
+                                else rebuild_mcap(run_dir, arm))
             total = sum(counts.values())
-            typer.echo(f"wrote {path} ({total} messages on {len(counts)} topics)")
+            typer.echo(f"wrote {path} ({total} messages on {len(counts)} topics){kept}")
             if out is None and csv_dir is None:
                 return
         parts = _parts(run_dir, out, csv_dir)
         if parts:  # a run of several arms: each arm's report, in its part
             for part in parts:
-                typer.echo(f"wrote {write_html(part, None, data=load_run(part, arm=arm))}")
+                data = load_run(part, arm=arm)
+                _warn(part, data)
+                typer.echo(f"wrote {write_html(part, None, data=data)}")
             return
         data = load_run(run_dir, arm=arm)
+        _warn(run_dir, data)
         if csv_dir is not None:
             for path in export_csv(run_dir, csv_dir, data=data):
                 typer.echo(f"wrote {path}")
         if csv_dir is None or out is not None:
             typer.echo(f"wrote {write_html(run_dir, out, data=data)}")
+
+
+def _warn(run_dir: Path, data: Any) -> None:
+    """One line each when the folder is cut short or its inputs/ were changed afterwards
+    (report.html carries them as banners)."""
+    for items, what in ((data.incomplete, "incomplete run folder"),
+                        (data.inputs_changed, "inputs/ changed after the run")):
+        if items:
+            typer.echo(f"warning: {run_dir}: {what}: {'; '.join(items)}", err=True)
+
+
+#: Where ``--mcap`` keeps the run.mcap the run recorded: a recorded bag is evidence.
+RECORDED_MCAP = "run.mcap.orig"
+
+
+@contextmanager
+def _keeping_the_recorded_bag(run_dir: Path) -> Iterator[str]:
+    """Before run.mcap is written anew: the run's own run.mcap moves to run.mcap.orig, and
+    a killed run's run.mcap.partial/ (which the writer would clear) to
+    run.mcap.partial.orig/; both are put back if writing fails. A run.mcap beside an
+    existing run.mcap.orig was written by an earlier ``--mcap`` and is replaced; the
+    recorded one stays. Yields the line's ending."""
+    from seqrun.service.mcap_log import PARTIAL_NAME
+
+    folder = Path(run_dir)
+    moves: list[tuple[Path, Path]] = []   # (what the run recorded, where it is kept)
+    for name, kept_name in (("run.mcap", RECORDED_MCAP),
+                            (PARTIAL_NAME, PARTIAL_NAME + ".orig")):
+        if (folder / name).exists() and not (folder / kept_name).exists():
+            moves.append((folder / name, folder / kept_name))
+    replaced = (folder / "run.mcap").is_file() and (folder / RECORDED_MCAP).exists()
+    for source, kept in moves:
+        source.replace(kept)
+    try:
+        yield ("".join(f"; the {source.name} the run recorded is kept as {kept}"
+                       for source, kept in moves)
+               + (f"; it replaces the run.mcap an earlier --mcap wrote (the recorded one "
+                  f"stays in {folder / RECORDED_MCAP})" if replaced else ""))
+    except BaseException:
+        for source, kept in moves:
+            if not source.exists():
+                kept.replace(source)
+        raise
 
 
 def _parts(run_dir: Path, out: Path | None, csv_dir: Path | None) -> list[Path]:

@@ -89,6 +89,11 @@ def run_arms(file: Path, project: Any, *, sim: bool, sim_fault: list[str], speed
                     for a in tracks}
         for context in contexts.values():
             context.refuse_private_simulator("run")
+    from seqrun.service.checking import override_notes
+
+    for note in dict.fromkeys(n for a, track in tracks.items()   # files used in place of
+                              for n in override_notes(track, contexts[a].arm_path)):  # shipped
+        typer.echo(f"note: {note}")                               # or from outside: said first
     if virtual_time and not all(c.bus.is_simulator for c in contexts.values()):
         fail("--virtual-time runs on simulators only: every arm's bus must be one")
     clock_views: dict[str, Any] = {}

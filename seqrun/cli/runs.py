@@ -34,7 +34,9 @@ def runs_command(
 ) -> None:
     """List past runs: when, sequence, result, duration, exit code (oldest first). In a
     campaign with several arms: every run of each arm, and the runs of several arms
-    (--arm-id ID: those that moved that arm)."""
+    (--arm-id ID: those that moved that arm). A run whose folder is cut short (a full
+    disk: events, trace or run.mcap stop mid-run) is marked INCOMPLETE, one whose inputs/
+    were changed after it ran INPUTS CHANGED (--json: "incomplete", "inputs_changed")."""
     from seqrun.service.arm_context import campaign_arm_ids, campaign_folders
 
     with user_errors():
@@ -67,8 +69,19 @@ def runs_command(
             line += " " + (",".join(run.get("arms") or ()) or run.get("arm") or "-")
         if run.get("problem"):  # what is wrong, and where
             line += f" {run['problem']} ({Path(run['folder']).name})"
+        line += "".join(f" {mark}: {run[key][0]}" + (f" (+{len(run[key]) - 1} more)"
+                                                     if len(run[key]) > 1 else "")
+                        for key, mark in _MARKS if run.get(key))
         typer.echo(line.rstrip())
     corrupted = sum(1 for run in runs if run.get("problem"))
+    marked = [f"{n} {mark.lower()}" for key, mark in _MARKS
+              if (n := sum(1 for run in runs if run.get(key)))]
     typer.echo(f"{len(runs)} run{'s' * (len(runs) != 1)} in {runs_dir}"
                + (f" of arm {arm_id}" if arm_id else "")
-               + (f", {corrupted} corrupted" if corrupted else ""))
+               + (f", {corrupted} corrupted" if corrupted else "")
+               + "".join(f", {m}" for m in marked)
+               + (" (seqrun report RUN_DIR says what)" if marked else ""))
+
+
+#: The marks of a run that is not what its result alone says (service.records' fields).
+_MARKS = (("incomplete", "INCOMPLETE"), ("inputs_changed", "INPUTS CHANGED"))

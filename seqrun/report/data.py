@@ -79,6 +79,10 @@ class RunData:
     dof: int = 0
     #: Where the events come from again (events.jsonl, or the list they were given as).
     source: Iterable[dict] = field(default=(), repr=False)
+    #: What of the folder is cut short or lacks its end (seqrun.runfolder.integrity).
+    incomplete: list[str] = field(default_factory=list)
+    #: inputs/ files that are not as record.json recorded them (changed after the run).
+    inputs_changed: list[str] = field(default_factory=list)
 
     @property
     def virtual_time(self) -> bool:
@@ -140,6 +144,10 @@ def load_run(folder: str | Path, *, arm: ArmDescription | None = None) -> RunDat
     data = from_records(report, lines, arm=arm, folder=folder, trace=_trace_summary(folder))
     data.torn_lines = lines.torn if isinstance(lines, EventLines) else 0
     data.record = _read_json(folder / "record.json")
+    from seqrun.runfolder.integrity import changed_inputs, incomplete
+
+    data.incomplete = incomplete(folder, thorough=True)
+    data.inputs_changed = changed_inputs(folder)
     return data
 
 

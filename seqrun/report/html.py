@@ -81,6 +81,7 @@ def html_parts(data: RunData, plots: Iterable[Plot], *, generated: str | None = 
         f"<title>{escape(kind)}: {escape(str(name))} - {escape(status.upper())}</title>",
         f"<style>{CSS}</style></head><body>",
         f"<h1>{escape(kind)} report: {escape(str(name))} {_badge(status)}</h1>",
+        _banners(data),
         _summary(data, status),
         _fault(data),
         "<h2>Identity</h2>", _identity(data),
@@ -103,6 +104,25 @@ def html_parts(data: RunData, plots: Iterable[Plot], *, generated: str | None = 
 def _badge(status: str) -> str:
     cls = status if status in ("passed", "failed", "aborted", "invalid", "running") else "other"
     return f'<span class="badge {cls}">{escape(status.upper())}</span>'
+
+
+def _banners(data: RunData) -> str:
+    """What makes the verdict above less than the whole story: a folder cut short, inputs
+    changed after the run."""
+    banners = []
+    for cls, items, title in (
+            ("incomplete", data.incomplete,
+             "INCOMPLETE RUN FOLDER: its log stops before the run's end (a full disk, a "
+             "killed run?); the verdict is the run's own, the figures only what was kept."),
+            ("inputs-changed", data.inputs_changed,
+             "INPUTS CHANGED AFTER THE RUN: inputs/ no longer holds the files as the run "
+             "used them (record.json's sha256); the sequence and poses shown there are not "
+             "evidence of this run.")):
+        if items:
+            lines = "".join(f'<li class="mono">{escape(str(i))}</li>' for i in items)
+            banners.append(f'<div class="fault banner {cls}" role="alert"><strong>'
+                           f"{escape(title)}</strong><ul>{lines}</ul></div>")
+    return "\n".join(banners)
 
 
 def _summary(data: RunData, status: str) -> str:

@@ -134,6 +134,7 @@ def check_arms_sequence(file: Path, project: Any, *, start: str | None = None,
     from seqrun.sequence.arm_tracks import load_tracks
     from seqrun.sequence.validation import validate_sequence
     from seqrun.service.arm_context import resolve_contexts
+    from seqrun.service.checking import override_notes
     from seqrun.yamlsource import display_path, sort_errors
 
     contexts = {str(c.arm_id): c for c in resolve_contexts(project=project)}
@@ -158,7 +159,8 @@ def check_arms_sequence(file: Path, project: Any, *, start: str | None = None,
         start_deg = pose_joints_deg(pose, track.pose_path or track.poses_dir)
         result = validate_sequence(track, arm, start_deg, started=started, speed=speed)
         check.errors += result.errors
-        check.notes += [n for n in arm.notes + result.notes
+        check.notes += [n for n in arm.notes + result.notes  # (files from outside: as one arm's)
+                        + override_notes(track, contexts[arm_id].arm_path)
                         if n not in check.notes]
         check.clearances[arm_id] = [result.clearances[n] for n in sorted(result.clearances)]
         check.proximities[arm_id] = [result.proximities[n] for n in sorted(result.proximities)]

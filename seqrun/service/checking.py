@@ -97,12 +97,14 @@ def check_sequence(file: Path, *, start: str | None = None,
 def override_notes(loaded: LoadedSequence, arm_path: Path | None = None) -> list:
     """A note for every file the sequence uses in place of a shipped one: each pose the
     campaign's poses/ overrides, an arm file that shadows the shipped arm of its name (its
-    guards, tools and limits are not the shipped ones) or lies outside the campaign.
+    guards, tools and limits are not the shipped ones) or lies outside the campaign; and
+    for every file or folder it uses from outside the campaign's folder (a pose file or a
+    whole poses/ symlinked from elsewhere, ``[runs] dir = ../elsewhere``).
     ``arm_path``: the arm file in use (``--arm``), default the sequence's."""
     from seqrun.arm.poses import pose_overrides
     from seqrun.steps.registry import step_kind
 
-    notes = _arm_notes(loaded, Path(arm_path or loaded.arm_path))
+    notes = _arm_notes(loaded, Path(arm_path or loaded.arm_path)) + _outside_notes(loaded)
     overrides = pose_overrides(loaded.pose_path or loaded.poses_dir)
     seen = set()
     for step in loaded.steps:
@@ -113,6 +115,60 @@ def override_notes(loaded: LoadedSequence, arm_path: Path | None = None) -> list
                 notes.append(step.error(f"pose '{name}' is the campaign's {used}, which "
                                         f"overrides {', '.join(str(h) for h in hidden)}",
                                         "pose"))
+    return notes
+
+
+def _outside_notes(loaded: LoadedSequence) -> list:
+    """A note for each pose file the steps use (symlinks resolved) and for the runs folder
+    of the campaign's ``[runs] dir`` that lie outside the campaign's folder: what a run
+    reads or writes there is not kept with the campaign (the arm file: :func:`_arm_notes`;
+    includes outside are refused by the loader)."""
+    import re
+
+    from seqrun.shipped import shipped_dir
+    from seqrun.steps.registry import step_kind
+    from seqrun.yamlsource import Location, display_path
+
+    project = loaded.project
+    root = Path(getattr(project, "root", loaded.project_root)).resolve()
+    what = "the campaign's" if getattr(project, "is_campaign", False) else "the project's"
+    shipped = [shipped_dir(kind).resolve() for kind in ("poses", "sequences")]
+
+    def outside(path: Path) -> Path | None:
+        try:
+            used = Path(path).resolve()
+        except (OSError, RuntimeError):
+            return None
+        if used.is_relative_to(root) or any(used.is_relative_to(s) for s in shipped):
+            return None
+        return used
+
+    notes = []
+    seen: set[str] = set()
+    for step in loaded.steps:
+        for name in step_kind(step.kind).poses(step.params):
+            frozen = loaded.poses.get(name)
+            if frozen is None or name in seen:
+                continue
+            seen.add(name)
+            used = outside(frozen.document.path)
+            if used is not None:
+                given = Path(frozen.document.path)
+                via = f" (through the link {given})" if given.absolute() != used else ""
+                notes.append(step.error(f"pose '{name}' is read from {used}{via}, outside "
+                                        f"{what} folder {root}", "pose"))
+    config = getattr(project, "config", None)
+    config_path = getattr(project, "config_path", None)
+    runs = getattr(getattr(config, "runs", None), "dir", None)
+    if runs is not None and config_path is not None:
+        used = outside(root / runs)
+        if used is not None:
+            source = getattr(project, "config_source", b"") or b""
+            line = next((n for n, raw in enumerate(source.splitlines(), start=1)
+                         if re.match(rb"\s*dir\s*=", raw)), 1)
+            notes.append(Location(display_path(Path(config_path)), line, 1).error(
+                f"[runs] dir = {runs!r}: run folders are written to {used}, outside "
+                f"{what} folder {root}"))
     return notes
 
 

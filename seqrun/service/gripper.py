@@ -79,11 +79,13 @@ class GripperControl:
                                       "holding": reading.at_current_limit
                                       and abs(reading.velocity_mm_s) < 0.5,
                                       "moving": reading.moving, "faulted": reading.faulted,
-                                      "state": reading.text, "stroke_mm": spec.stroke_mm,
+                                      "homed": reading.homed,
+                                      "state": reading.text, "module": spec.module,
+                                      "stroke_mm": spec.stroke_mm,
                                       "max_force_n": spec.max_force_n}
             except Exception as exc:  # noqa: BLE001 - a read never raises: state goes stale
                 with self._lock:
-                    self._last = {"name": spec.name, "error": str(exc),
+                    self._last = {"name": spec.name, "error": str(exc), "module": spec.module,
                                   "stroke_mm": spec.stroke_mm, "max_force_n": spec.max_force_n}
             finally:
                 bus.release()

@@ -257,7 +257,17 @@ def _run_entry(folder: Path) -> dict | None:
             "duration_s": _number(report.get("duration_s")), "exit_code": exit_code,
             "bus": bus, "simulator": _is_simulator(bus), "folder": str(folder),
             "arm": text(record.get("arm_id")), "arms": None,
+            **_checked(folder),
             **({"problem": problem} if problem else {})}
+
+
+def _checked(folder: Path) -> dict[str, list[str]]:
+    """``incomplete`` (what of the folder is cut short or lacks its end) and
+    ``inputs_changed`` (inputs/ files that are not as record.json recorded them): empty
+    lists for a whole run whose inputs are as it used them."""
+    from seqrun.runfolder.integrity import changed_inputs, incomplete
+
+    return {"incomplete": incomplete(folder), "inputs_changed": changed_inputs(folder)}
 
 
 def runs_of_arm(runs: list[dict], arm_id: str) -> list[dict]:
@@ -311,6 +321,8 @@ def _arms_run_entry(folder: Path) -> dict | None:
             "bus": "; ".join(f"{a}: {e['bus']}" for a, e in parts.items() if e["bus"]) or None,
             "simulator": (None if not buses or None in buses else all(buses)),
             "folder": str(folder), "arm": None, "arms": ids,
+            **{key: [f"{a}: {x}" for a, e in parts.items() for x in e[key]] + found
+               for key, found in _checked(folder).items()},   # each arm's part, the run's
             **({"problem": problem} if problem else {})}
 
 

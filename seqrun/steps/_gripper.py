@@ -83,9 +83,10 @@ def wait_for_rest(ex: StepContext, spec: GripperSpec, timeout_s: float, what: st
         ex.wait(cycle)
         waited += cycle
         reading = ex.gripper_read()
-        if reading.faulted:
+        if not reading.ready:
+            how = "faulted" if reading.faulted else "is not homed"
             raise RunAborted("gripper_fault", f"{what}: the gripper (module {spec.module}) "
-                             f"faulted: {reading.text}", module=spec.module)
+                             f"{how}: {reading.text}", module=spec.module)
         still = still + 1 if abs(reading.velocity_mm_s) < REST_MM_S else 0
         if still >= REST_READINGS and (not reading.moving
                                        or (on_part and reading.at_current_limit)):

@@ -162,7 +162,8 @@ function onEvent(id, event) {
   const list = $("#events");
   list.append(li);
   while (list.children.length > 300) list.firstChild.remove();
-  li.scrollIntoView({ block: "nearest" });
+  // scroll the list only: scrollIntoView would scroll the page too, panels under STOP
+  list.scrollTop = list.scrollHeight;
 }
 
 // Lost contact with the console: the whole page greys out, every arm's state is unknown.
@@ -390,7 +391,8 @@ function runLink(arm, id, hasReport, text) {
 async function loadRuns() {
   const runs = await api("GET", "/runs").catch(() => []);
   $("#runs").replaceChildren(...runs.slice(0, 50).map((r) => {
-    const text = `${r.when || "?"} ${r.sequence || "?"} ${r.result || "?"}${r.exit_code !== null && r.exit_code !== undefined ? ` (exit ${r.exit_code})` : ""}`;
+    const text = `${r.when || "?"} ${r.sequence || "?"} ${r.result || "?"}${r.exit_code !== null && r.exit_code !== undefined ? ` (exit ${r.exit_code})` : ""}`
+      + `${r.incomplete?.length ? " INCOMPLETE" : ""}${r.inputs_changed?.length ? " INPUTS CHANGED" : ""}`;  // (its report says what)
     const li = el("li", { className: r.result === "passed" ? "" : "failed" });
     if (r.parts) {
       li.append(`${text}: `, ...Object.entries(r.parts).flatMap(([a, part], i) => [i ? ", " : "", runLink(a, part.id, part.report, `arm ${a}`)]));

@@ -511,7 +511,8 @@ for (const verb of ["pause", "resume", "step", "abort"]) {
 async function loadRuns() {
   const runs = await api("GET", "/runs").catch(() => []);
   $("#runs").replaceChildren(...runs.slice(0, 50).map((r) => {
-    const text = `${r.when || "?"} ${r.sequence || "?"} ${r.result || "?"}${r.exit_code !== null && r.exit_code !== undefined ? ` (exit ${r.exit_code})` : ""}`;
+    const text = `${r.when || "?"} ${r.sequence || "?"} ${r.result || "?"}${r.exit_code !== null && r.exit_code !== undefined ? ` (exit ${r.exit_code})` : ""}`
+      + `${r.incomplete?.length ? " INCOMPLETE" : ""}${r.inputs_changed?.length ? " INPUTS CHANGED" : ""}`;  // (its report says what)
     const link = r.report
       ? el("a", { href: `${API}/runs/${encodeURIComponent(r.id)}/report.html`, target: "_blank", textContent: text })
       : el("a", { href: `${API}/runs/${encodeURIComponent(r.id)}/report.json`, target: "_blank", textContent: text });

@@ -296,6 +296,14 @@ export class JointControls {
 // ---------------------------------------------------------------- gripper
 // Its state (read while the arm's session is idle), Grip and Release (need control); the
 // panel hidden for an arm without one. read(): GET the arm's /gripper.
+// The module's condition as its state word says: a fault bit (FAULT and the word), else not
+// homed (a module powers on so: no fault, the arm's Home homes it too), else ready.
+export function gripperCondition(g) {
+  if (g.faulted) return `FAULT ${g.state}`;
+  if (!g.homed) return `not homed (${g.state}): Home homes it with the arm`;
+  return g.moving ? "moving" : "ready";
+}
+
 export class GripperPanel {
   constructor({ command, read }) {
     Object.assign(this, { command, read });
@@ -312,9 +320,10 @@ export class GripperPanel {
     const panel = $("#gripper-panel");
     panel.hidden = g === null;
     if (g === null) return;
-    $("#gripper-name").textContent = `(${g.name}, stroke ${g.stroke_mm} mm, at most ${g.max_force_n} N)`;
+    $("#gripper-name").textContent = `(${g.name}, module ${g.module}, stroke ${g.stroke_mm} mm, at most ${g.max_force_n} N)`;
     $("#gripper-state").textContent = g.error ? `no reading: ${g.error}`
-      : `${g.width_mm.toFixed(1)} mm open, ${g.holding ? "holding a part" : "not holding"}${g.faulted ? ", FAULT " + g.state : ""}`;
+      : `${g.width_mm.toFixed(1)} mm open, ${g.holding ? "holding a part" : "not holding"}, ${gripperCondition(g)}`;
+    $("#gripper-state").classList.toggle("fault", !g.error && g.faulted);
   }
 
   poll(everyMs = 2000) {

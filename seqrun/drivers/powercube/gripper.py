@@ -49,5 +49,5 @@ def reading(position: float, velocity: float, state: int) -> GripperReading:
         width_mm=millimetres(position), velocity_mm_s=millimetres(velocity),
         moving=bool(flags & StateFlag.MOTION),
         at_current_limit=bool(flags & StateFlag.CURLIMIT),
-        faulted=bool(flags & (StateFlag.ERROR | StateFlag.HALTED)) or not flags & StateFlag.HOME_OK,
+        faulted=flags.is_fault, homed=bool(flags & StateFlag.HOME_OK),
         text=flags.describe())
