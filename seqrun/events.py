@@ -24,11 +24,23 @@ line per event and stops writing on the first disk error).
 from __future__ import annotations
 
 import dataclasses
+import json
 import threading
 from collections import deque
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
+
+#: The one encoder of every events.jsonl line (and of the bag's copy of it): compact,
+#: anything JSON does not know as its str(). Made once: json.dumps with options builds a
+#: new encoder per call, a cost per event of the control loop.
+_LINE_ENCODER = json.JSONEncoder(separators=(",", ":"), default=str)
+
+
+def event_line(event: Mapping[str, Any]) -> str:
+    """An event's dict as its events.jsonl line (without the newline)."""
+    return _LINE_ENCODER.encode(event)
+
 
 #: Field metadata: not written to events.jsonl (derived for the faces).
 DERIVED = {"derived": True}

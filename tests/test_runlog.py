@@ -421,3 +421,62 @@ def test_an_uncompressed_trace_of_an_older_run_still_reads(tmp_path):
         assert f"{sent} frames sent" in (folder / "report.html").read_text()
     assert (old / "csv" / "timeseries.csv").read_bytes() == \
         (new / "csv" / "timeseries.csv").read_bytes()
+
+
+def test_the_trace_is_compressed_a_block_at_a_time(tmp_path, monkeypatch):
+    """Issue 42.8: python-can's writer hands the trace one frame at a time, and each line
+    was compressed by itself (one zlib call per CAN frame: most of the trace's CPU). The
+    lines now wait for the next flush and are compressed together; the file is still one
+    gzip stream that python-can's LogReader and zcat read whole."""
+    import subprocess
+    import types
+    import zlib
+
+    calls: list[int] = []
+
+    class Counted:
+        def __init__(self, *args: int) -> None:
+            self._z = zlib.compressobj(*args)
+
+        def compress(self, data: bytes) -> bytes:
+            calls.append(len(data))
+            return self._z.compress(data)
+
+        def flush(self, mode: int = zlib.Z_FINISH) -> bytes:
+            return self._z.flush(mode)
+
+    monkeypatch.setattr(logfile, "zlib", types.SimpleNamespace(
+        compressobj=Counted, DEFLATED=zlib.DEFLATED, MAX_WBITS=zlib.MAX_WBITS,
+        Z_SYNC_FLUSH=zlib.Z_SYNC_FLUSH, Z_FINISH=zlib.Z_FINISH, error=zlib.error))
+    clock = VirtualClock()
+    log = RunLog(tmp_path / "run", {"sequence": "blocks"}, clock=clock, channel="can0")
+    log.on_event({"t": 0.0, "type": "run_started", "clock_s": 0.0})
+    frames = 0
+    for cycle in range(200):              # 2 s at 100 Hz, 14 frames a cycle
+        for n in range(14):
+            log.on_frame(frame_at(clock, frames))
+            frames += 1
+        log.on_event({"t": clock.now(), "type": "setpoint", "step": 1})
+        clock.sleep(0.01)
+    log.close()
+    flushes = 2.0 / TRACE_FLUSH_S
+    assert 0 < len(calls) <= flushes + 3, (len(calls), frames)
+    path = tmp_path / "run" / "trace.log.gz"
+    text = subprocess.run(["gzip", "-dc", str(path)], capture_output=True, check=True).stdout
+    assert text.decode() == RunFolder(tmp_path / "run").trace_text()
+    assert len(text.splitlines()) == frames
+    read = list(can.LogReader(str(path)))                   # python-can reads the .gz itself
+    assert [m.data[2] for m in read] == [n % 256 for n in range(frames)]
+
+
+def test_a_block_of_the_trace_bigger_than_its_bound_goes_to_the_compressor(tmp_path):
+    """The lines held between two flushes are bounded in memory: a caller that never
+    flushes still gets a whole, readable file at close."""
+    trace = logfile.GzipLineFile(tmp_path / "t.log.gz", lambda path, exc: None)
+    line = "(1.000000) can0 0C1#0A3C R\n"
+    count = 3 * logfile.GzipLineFile.BLOCK_BYTES // len(line)
+    for _ in range(count):
+        assert trace.write(line)
+    assert (tmp_path / "t.log.gz").stat().st_size > 0       # went out before any flush
+    trace.close()
+    assert gzip.decompress((tmp_path / "t.log.gz").read_bytes()).decode() == line * count

@@ -43,7 +43,7 @@ from xml.sax.saxutils import escape, quoteattr
 
 import can
 
-from seqrun.events import Event
+from seqrun.events import Event, event_line
 from seqrun.results import RunResult, StepResult
 from seqrun.runfolder.logfile import (GzipLineFile, LineFile, overwrite_in_place, read_lines,
                                       write_whole)
@@ -189,7 +189,7 @@ class RunLog:
             except Exception:  # noqa: BLE001 - a broken terminal must not stop the run
                 pass
         if path != self._events.path:
-            self._events.write(json.dumps({"t": None, "type": "log_failed", "file": path.name,
+            self._events.write(event_line({"t": None, "type": "log_failed", "file": path.name,
                                            "error": str(exc)}) + "\n")
 
     # Listeners -------------------------------------------------------------------
@@ -209,7 +209,7 @@ class RunLog:
         if kind == "run_started":   # names for the per-joint JUnit properties
             self._joint_names = [j.get("name", "") for j in
                                  (event.get("arm") or {}).get("joints", [])]
-        self._events.write(json.dumps(event, separators=(",", ":"), default=str) + "\n")
+        self._events.write(event_line(event) + "\n")
         if self.mcap is not None:
             self.mcap.put(event)
         if kind not in _READINGS:   # what led up to a step boundary, fault or question
@@ -222,7 +222,7 @@ class RunLog:
             line = {"number": number, "kind": begun.get("kind"), "label": begun.get("label"),
                     "location": begun.get("location"),
                     **{k: v for k, v in event.items() if k not in ("type", "step")}}
-            self._steps_file.write(json.dumps(line, separators=(",", ":"), default=str) + "\n")
+            self._steps_file.write(event_line(line) + "\n")
             self._steps_done += 1
             self._last_step = number
             if time.monotonic() - self._report_written >= REPORT_INTERVAL_S:
