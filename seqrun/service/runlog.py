@@ -241,8 +241,9 @@ class RunLog:
             self._trace_file.flush()
 
     # Final report -----------------------------------------------------------------
-    def finish(self, result: RunResult) -> dict:
-        """Write the final report.json and junit.xml; never raises (errors are recorded)."""
+    def finish(self, result: RunResult, *, host: dict[str, Any] | None = None) -> dict:
+        """Write the final report.json and junit.xml; never raises (errors are recorded).
+        ``host``: what the computer did to the run (seqrun/service/host_watch.py)."""
         self._close_mcap()
         report = {
             "status": result.status,
@@ -258,6 +259,8 @@ class RunLog:
             "not_verified": result.not_verified,
             "min_heights_mm": result.min_heights_mm,
         }
+        if host is not None:
+            report["host"] = host
         junit = junit_xml(self.meta.get("sequence", "sequence"), result, self._joint_names)
         error = write_whole(self.folder / "junit.xml", junit)
         if error is not None:
