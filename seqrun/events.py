@@ -887,7 +887,8 @@ def events_markdown() -> str:
              "Generated from `seqrun/events.py` by `python -m seqrun.events > docs/events.md`; "
              "a test checks it is current and that every emitted type is listed.", "",
              "Every event has `t` (seconds since the start of the run or activity), `type`, "
-             "and `step` while a step runs. `events.jsonl` holds one event per line in the "
+             "and `step` while a step runs. `events.jsonl.gz` (gzip; older runs: "
+             "`events.jsonl`) holds one event per line in the "
              "shape of `Event.as_dict()`; fields marked *derived* are given to subscribers "
              "only (they are recomputed from the log). Fields not listed for a type (a step's "
              "result details, a checkpoint's figures) arrive in `extra` and in the line.", "",

@@ -19,6 +19,7 @@ from seqrun.service.runner import run_sequence
 from seqrun.sequence.loader import load_sequence
 from seqrun.sim.bus import SimBus
 from wrapbus import WrapBus
+from runfolder import RunFolder
 
 STALL_S = 0.060
 _channels = itertools.count()
@@ -139,7 +140,7 @@ def _opsafe_with_one_long_stall(tmp_path, seconds: float):
     finally:
         connection.close()
     assert state["stalled"]
-    events = [json.loads(line) for line in (tmp_path / "run" / "events.jsonl").open()]
+    events = RunFolder(tmp_path / "run").events()
     return outcome, events
 
 

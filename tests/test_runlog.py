@@ -72,8 +72,7 @@ def assert_readable(folder: Path) -> None:
     text = RunFolder(folder).trace_text()
     assert text == "" or text.endswith("\n")
     assert len(read_trace(folder)) == len(text.splitlines())
-    for line in (folder / "events.jsonl").read_text().splitlines():
-        json.loads(line)
+    RunFolder(folder).events()   # every line parses
     assert not list(folder.glob("*.tmp")), list(folder.iterdir())
 
 
@@ -113,7 +112,7 @@ def test_a_full_disk_at_the_record_copy_is_one_line_and_nothing_moves(tmp_path, 
     assert len(errors) == 1, result.output
     assert "cannot write the run record" in errors[0] and "nothing was sent" in errors[0]
     assert "No space left on device" in errors[0]
-    assert not list(folder.glob("trace.log*")) and not (folder / "events.jsonl").exists()
+    assert not list(folder.glob("trace.log*")) and not list(folder.glob("events.jsonl*"))
     assert not list(folder.rglob("*.tmp")), list(folder.rglob("*"))
 
 
@@ -480,3 +479,51 @@ def test_a_block_of_the_trace_bigger_than_its_bound_goes_to_the_compressor(tmp_p
     assert (tmp_path / "t.log.gz").stat().st_size > 0       # went out before any flush
     trace.close()
     assert gzip.decompress((tmp_path / "t.log.gz").read_bytes()).decode() == line * count
+
+
+# ----------------------------------------------------------------------------- compressed events
+def test_the_events_are_compressed_and_every_reader_takes_them(tmp_path):
+    """Issue 41.3: events.jsonl took ~97 MB per hour of motion (the 100 Hz readings). It
+    is written gzip-compressed as events.jsonl.gz (zcat reads it), and what reads a run
+    folder (report, runs, run.mcap's rebuild) takes it as it takes an older events.jsonl."""
+    import subprocess
+
+    folder = tmp_path / "run"
+    assert run_cli(folder).exit_code == 0
+    path = folder / "events.jsonl.gz"
+    assert path.is_file() and not (folder / "events.jsonl").exists()
+    text = subprocess.run(["gzip", "-dc", str(path)], capture_output=True, check=True).stdout
+    assert path.stat().st_size * 4 < len(text)
+    events = [json.loads(line) for line in text.splitlines()]
+    assert events == RunFolder(folder).events() and events[-1]["type"] == "run_finished"
+    assert len([e for e in events if e["type"] == "setpoint"]) > 300
+    result = CliRunner().invoke(app, ["report", str(folder), "--out", str(folder / "r.html")])
+    assert result.exit_code == 0, result.output
+    result = CliRunner().invoke(app, ["runs", "--dir", str(tmp_path)])
+    assert result.exit_code == 0 and "passed" in result.output, result.output
+
+
+def test_a_killed_run_keeps_every_event_but_its_last_readings(tmp_path):
+    """Nothing closed (SIGKILL): every event other than a reading is on disk as it was
+    written, the readings at most TRACE_FLUSH_S behind."""
+    clock = VirtualClock()
+    folder = tmp_path / "run"
+    log = RunLog(folder, {"sequence": "killed"}, clock=clock, channel="can0")
+    log.on_event({"t": 0.0, "type": "run_started", "clock_s": 0.0})
+    for n in range(100):
+        log.on_event({"t": round(n * 0.01, 6), "type": "setpoint", "step": 1, "k": n})
+    log.on_event({"t": 1.0, "type": "fault", "cause": "following_error", "step": 1})
+    for n in range(3):
+        log.on_event({"t": 1.0 + n * 0.01, "type": "setpoint", "step": 1, "k": 100 + n})
+    events = read_report_events(folder)
+    kinds = [e["type"] for e in events]
+    assert kinds[0] == "run_started" and "fault" in kinds
+    assert [e["k"] for e in events if "k" in e][:100] == list(range(100))
+    log.close()
+    assert len(read_report_events(folder)) == 105
+
+
+def read_report_events(folder: Path) -> list[dict]:
+    from seqrun.service.runlog import read_events
+
+    return read_events(folder)

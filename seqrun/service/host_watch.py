@@ -132,7 +132,9 @@ class HostWatch:
             return result
         before = self.stalls_before_fault()
         load, cores = load_average(), os.cpu_count() or 1
-        busy = self.wall_clock and load is not None and max(load[0], (self.load_start or [0.0])[0]) > cores
+        # the busier of the start and now (a minute's average lags a burst)
+        peak = max((load or [0.0])[0], (self.load_start or [0.0])[0])
+        busy = self.wall_clock and peak > cores
         silent = str(result.fault.get("cause")) in _SILENCE
         if not before and not (busy and silent):
             return result
@@ -147,9 +149,9 @@ class HostWatch:
                 f"{total:.2f} s in all, the longest {longest:.2f} s at t = {t:.2f} s{where}; "
                 "the modules kept their last command meanwhile")
         if busy and silent:
-            parts.append(f"the computer was busy (load {max(load[0], (self.load_start or [0.0])[0]):.1f} "
-                         f"on {cores} cores): a simulator or interface driver on it may not "
-                         "have been scheduled to answer")
+            parts.append(f"the computer was busy (load {peak:.1f} on {cores} cores): a "
+                         "simulator or interface driver on it may not have been scheduled "
+                         "to answer")
         if not real_time(self.scheduling):
             parts.append("the loop ran at normal priority (--rt-priority keeps it scheduled)")
         host = {"text": "; ".join(parts),

@@ -408,11 +408,12 @@ def rebuild_mcap(folder: Path, arm: ArmDescription | None = None) -> tuple[Path,
 
     from seqrun.errors import UserInputError
     from seqrun.runfolder.logfile import read_lines
+    from seqrun.runfolder.names import events_path
 
     folder = Path(folder)
-    events_file = folder / "events.jsonl"
-    if not events_file.is_file():
-        raise UserInputError(f"{folder}: no events.jsonl (not a run folder, or a run "
+    events_file = events_path(folder)
+    if events_file is None:
+        raise UserInputError(f"{folder}: no events.jsonl(.gz) (not a run folder, or a run "
                              "refused before it started): nothing to write run.mcap from")
     report: dict[str, Any] = {}
     try:
