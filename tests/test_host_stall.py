@@ -242,3 +242,17 @@ def test_a_run_without_stalls_has_no_host_line_in_its_fault(tmp_path):
     assert outcome.result.exit_code == 3 and "host" not in outcome.result.fault
     report = json.loads((tmp_path / "run" / "report.json").read_text())
     assert report["host"]["stalls"] == 0 and "host" not in report["fault"]
+
+
+def test_a_busy_host_at_normal_priority_is_told_what_rt_priority_changes():
+    """Issue 42.1: on a busy computer (load above its cores) a run at normal priority
+    says once at the start what --rt-priority would change; not when the host is idle or
+    the loop already runs at a real-time priority."""
+    from seqrun.service.host_watch import busy_host_note
+
+    normal = {"policy": "SCHED_OTHER", "priority": 0, "nice": 0}
+    note = busy_host_note([5.2, 4.0, 3.0], 2, normal)
+    assert note is not None and "load 5.2 on 2 cores" in note and "--rt-priority" in note
+    assert busy_host_note([1.5, 1.0, 1.0], 2, normal) is None
+    assert busy_host_note([5.2, 4.0, 3.0], 2, {"policy": "SCHED_FIFO", "priority": 20,
+                                                "nice": 0}) is None

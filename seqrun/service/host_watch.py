@@ -62,11 +62,14 @@ def real_time(sched: dict[str, Any]) -> bool:
     return sched.get("policy") in ("SCHED_FIFO", "SCHED_RR")
 
 
-def busy_host_note() -> str | None:
+def busy_host_note(load: list[float] | None = None, cores: int | None = None,
+                   sched: dict[str, Any] | None = None) -> str | None:
     """One line for the start of a run at normal priority on a busy computer (the load
-    average over the last minute above its core count); None otherwise."""
-    load, cores = load_average(), os.cpu_count() or 1
-    if load is None or load[0] <= cores or real_time(scheduling()):
+    average over the last minute above its core count); None otherwise. The load, the
+    core count and the scheduling are this process's unless given."""
+    load = load_average() if load is None else load
+    cores = (os.cpu_count() or 1) if cores is None else cores
+    if load is None or load[0] <= cores or real_time(scheduling() if sched is None else sched):
         return None
     return (f"note: this computer is busy (load {load[0]:.1f} on {cores} cores) and the run "
             "is at normal priority: other work can keep the control loop off the CPU for "
