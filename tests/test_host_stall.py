@@ -217,7 +217,7 @@ def test_a_fault_after_a_host_stall_names_it_in_the_verdict_and_the_reports(tmp_
     assert report["host"]["loop_period_ms"]["cycles"] > 100
     assert report["host"]["loop_period_ms"]["max"] >= 490     # the stall, on the loop's period
     assert report["host"]["loop_period_ms"]["p50"] == 10.0
-    assert report["host"]["scheduling"]["policy"]
+    assert report["host"]["scheduling"]["policy"] and report["host"]["clock"] == "virtual"
     # report.html: the fault names the stall, and the host section lists it
     assert write_html_report(folder) is None
     page = (folder / "report.html").read_text()

@@ -175,7 +175,9 @@ def _host(data: RunData) -> str:
                 period.get("p99"), period.get("max")) if period.get("cycles") else None),
             ("scheduling", priority),
             ("load average", f"{h.get('load_avg_start')} at the start, "
-                             f"{h.get('load_avg_end')} at the end, on {h.get('cpus')} cores")]
+                             f"{h.get('load_avg_end')} at the end, on {h.get('cpus')} cores"
+                             + (" (virtual time: the load does not change the run's timing)"
+                                if h.get("clock") == "virtual" else ""))]
     body = "".join(f"<tr><th>{escape(k)}</th><td>{escape(str(v))}</td></tr>"
                    for k, v in rows if v is not None)
     stalls = h.get("stall_list") or []

@@ -166,7 +166,8 @@ class HostWatch:
 
     def summary(self) -> dict[str, Any]:
         """report.json's ``host``: stalls, the loop's period, scheduling and load."""
-        return {"cpus": os.cpu_count(), "scheduling": self.scheduling,
+        return {"clock": "wall" if self.wall_clock else "virtual",
+                "cpus": os.cpu_count(), "scheduling": self.scheduling,
                 "load_avg_start": self.load_start, "load_avg_end": load_average(),
                 "stalls": self.count, "stalled_s": round(self.stalled_s, 4),
                 "longest_stall_s": round(self.longest_s, 4),
