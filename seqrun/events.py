@@ -24,11 +24,23 @@ line per event and stops writing on the first disk error).
 from __future__ import annotations
 
 import dataclasses
+import json
 import threading
 from collections import deque
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
+
+#: The one encoder of every events.jsonl line (and of the bag's copy of it): compact,
+#: anything JSON does not know as its str(). Made once: json.dumps with options builds a
+#: new encoder per call, a cost per event of the control loop.
+_LINE_ENCODER = json.JSONEncoder(separators=(",", ":"), default=str)
+
+
+def event_line(event: Mapping[str, Any]) -> str:
+    """An event's dict as its events.jsonl line (without the newline)."""
+    return _LINE_ENCODER.encode(event)
+
 
 #: Field metadata: not written to events.jsonl (derived for the faces).
 DERIVED = {"derived": True}
@@ -910,7 +922,8 @@ def events_markdown() -> str:
              "Generated from `seqrun/events.py` by `python -m seqrun.events > docs/events.md`; "
              "a test checks it is current and that every emitted type is listed.", "",
              "Every event has `t` (seconds since the start of the run or activity), `type`, "
-             "and `step` while a step runs. `events.jsonl` holds one event per line in the "
+             "and `step` while a step runs. `events.jsonl.gz` (gzip; older runs: "
+             "`events.jsonl`) holds one event per line in the "
              "shape of `Event.as_dict()`; fields marked *derived* are given to subscribers "
              "only (they are recomputed from the log). Fields not listed for a type (a step's "
              "result details, a checkpoint's figures) arrive in `extra` and in the line.", "",

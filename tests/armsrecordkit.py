@@ -16,11 +16,12 @@ from pathlib import Path
 import pytest
 
 from seqrun.powercube.protocol import CommandId
+from runfolder import RunFolder
 from seqrun.service.runlog import read_trace
 
 
 def events(part: Path) -> list[dict]:
-    return [json.loads(line) for line in (part / "events.jsonl").read_text().splitlines()]
+    return RunFolder(part).events()
 
 
 def on_run_clock(run: Path, arm: str) -> list[tuple[float, dict]]:

@@ -10,7 +10,8 @@ from pathlib import Path
 
 import can
 
-from seqrun.runfolder.names import trace_path
+from seqrun.runfolder.logfile import read_lines
+from seqrun.runfolder.names import events_path, trace_path
 from seqrun.service.runlog import read_trace, trace_text
 
 
@@ -30,8 +31,9 @@ class RunFolder:
     def events(self, type: str | None = None, *, live: bool = False) -> list[dict]:
         """The events in order; with ``type``, only those of that type. ``live``: the run
         may still be writing (no file yet: none; a line being written ends the list)."""
-        path = self.path / "events.jsonl"
-        if live and not path.exists():
+        path = events_path(self.path)   # events.jsonl.gz (older runs: events.jsonl)
+        if path is None:
+            assert live, f"no events in {self.path}"
             return []
         events = _json_lines(path, live=live)
         return events if type is None else [e for e in events if e["type"] == type]
@@ -60,7 +62,11 @@ class RunFolder:
 
 def _json_lines(path: Path, *, live: bool = False) -> list[dict]:
     out = []
-    for line in path.read_text(encoding="utf-8").splitlines():
+    if path.suffix == ".gz":   # whatever decodes (a file being written: its flushed part)
+        lines = [raw.decode("utf-8") for raw in read_lines(path)]
+    else:
+        lines = path.read_text(encoding="utf-8").splitlines()
+    for line in lines:
         try:
             out.append(json.loads(line))
         except json.JSONDecodeError:

@@ -270,7 +270,7 @@ def test_a_two_arm_sequence_runs_from_the_console(client, setup):
     from pathlib import Path
 
     folder = Path(state["run_dir"])
-    assert (folder / "A" / "events.jsonl").is_file() and (folder / "B" / "events.jsonl").is_file()
+    assert all((folder / arm / "events.jsonl.gz").is_file() for arm in ("A", "B"))
     for arm_id, target in (("A", 3), ("B", -3)):
         j1 = client.get(f"/api/v1/arms/{arm_id}/status").json()["joints"][0]["position_deg"]
         assert j1 == pytest.approx(target, abs=0.3)

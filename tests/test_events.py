@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 
+from runfolder import RunFolder
 from seqrun.events import (EVENT_TYPES, EventHub, Measurement, StepFinished, Unregistered,
                            events_markdown, make_event)
 
@@ -166,5 +167,5 @@ def test_a_run_emits_only_registered_events(tmp_path, faults):
     assert {"run_started", "preflight", "setpoint", "step_finished", "run_finished"} <= types
     if faults:
         assert {"fault", "halt_confirmed"} <= types
-    lines = (tmp_path / "run" / "events.jsonl").read_text().splitlines()
+    lines = RunFolder(tmp_path / "run").events()
     assert len(lines) == len(seen)

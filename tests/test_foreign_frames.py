@@ -22,6 +22,7 @@ from seqrun.sim.arm import SimArm
 from seqrun.sim.bus import SimBus
 from seqrun.sim.network import SimNetwork
 from seqrun.sim.socketcand import SocketcandServer
+from runfolder import RunFolder
 
 ROOT = Path(__file__).resolve().parents[1]
 ARM = load_arm(ROOT / "arms" / "lwa3.yaml")
@@ -173,7 +174,7 @@ def test_a_halt_broadcast_from_another_process_is_named(tmp_path):
     assert result.message.startswith(
         "Halt broadcast from another process (frame 0x100 [02 00])"), result.message
     assert "HALTED" in result.message
-    events = [json.loads(line) for line in (tmp_path / "run" / "events.jsonl").open()]
+    events = RunFolder(tmp_path / "run").events()
     assert [e["reason"] for e in events if e["type"] == "halt_requested"] == [
         "Halt broadcast from another process (frame 0x100 [02 00])"]
     assert halts and halts[0] - t_sent < 0.03

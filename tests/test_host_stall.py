@@ -19,6 +19,7 @@ from seqrun.service.runner import run_sequence
 from seqrun.sequence.loader import load_sequence
 from seqrun.sim.bus import SimBus
 from wrapbus import WrapBus
+from runfolder import RunFolder
 
 STALL_S = 0.060
 _channels = itertools.count()
@@ -139,7 +140,7 @@ def _opsafe_with_one_long_stall(tmp_path, seconds: float):
     finally:
         connection.close()
     assert state["stalled"]
-    events = [json.loads(line) for line in (tmp_path / "run" / "events.jsonl").open()]
+    events = RunFolder(tmp_path / "run").events()
     return outcome, events
 
 
@@ -165,3 +166,93 @@ def test_without_the_hold_the_same_stall_is_a_following_error(tmp_path, monkeypa
     outcome, events = _opsafe_with_one_long_stall(tmp_path, 0.8)
     assert outcome.result.fault["cause"] == "following_error", outcome.result.message
     assert not [e for e in events if e["type"] == "host_stall"]
+
+
+def test_a_fault_after_a_host_stall_names_it_in_the_verdict_and_the_reports(tmp_path):
+    """Issue 42.1: a run faulted after host stalls said only the fault ("does not follow
+    its plan"); its events.jsonl held the stalls, the verdict and the reports did not.
+    Now the verdict, report.json and report.html name the stall: how long this computer
+    did not run seqrun, when, and that the modules kept their last command meanwhile."""
+    from rich.console import Console
+
+    from seqrun.cli.run import _print_outcome
+    from seqrun.service.runner import write_html_report
+
+    loaded = load_sequence(ROOT / "sequences" / "opsafe.yaml")
+    arm = load_arm(loaded.arm_path)
+    clock = VirtualClock()
+    # module 4 trips 1.1 s after a stall of 0.5 s, both inside Park -> Totem
+    inner = SimBus(channel=f"test-stall-{next(_channels)}", clock=clock,
+                   faults=["4:tow_error@4.5"])
+    state = {"stalled": False}
+
+    def before_recv(timeout):
+        if not state["stalled"] and bus.sends >= 2500:
+            state["stalled"] = True
+            clock.advance(0.5)
+
+    bus = WrapBus(inner, before_recv=before_recv)
+    connection = Connection(bus, clock, True, "simulator with a host stall, then a fault")
+    folder = tmp_path / "run"
+    try:
+        outcome = run_sequence(loaded, arm, connection, log_dir=folder,
+                               confirm=lambda prompt: True, html_report=False)
+    finally:
+        connection.close()
+    assert state["stalled"] and outcome.result.exit_code == 3, outcome.result.message
+    host = outcome.result.fault["host"]
+    assert [round(s["seconds"], 1) for s in host["stalls"]] == [0.5]
+    assert "did not run seqrun for 0.50 s" in host["text"]
+    assert "kept their last command" in host["text"]
+    # the terminal verdict
+    console = Console(record=True, width=300)
+    _print_outcome(console, outcome, folder)
+    printed = console.export_text()
+    assert printed.startswith("FAILED (exit 3)")
+    assert "host: 1 host stall in the 10 s before the fault" in printed
+    # report.json: the fault's host, and the run's host section
+    report = json.loads((folder / "report.json").read_text())
+    assert report["fault"]["host"]["text"] == host["text"]
+    assert report["host"]["stalls"] == 1 and report["host"]["longest_stall_s"] >= 0.49
+    assert report["host"]["loop_period_ms"]["cycles"] > 100
+    assert report["host"]["loop_period_ms"]["max"] >= 490     # the stall, on the loop's period
+    assert report["host"]["loop_period_ms"]["p50"] == 10.0
+    assert report["host"]["scheduling"]["policy"] and report["host"]["clock"] == "virtual"
+    # report.html: the fault names the stall, and the host section lists it
+    assert write_html_report(folder) is None
+    page = (folder / "report.html").read_text()
+    assert host["text"] in page.replace("&#x27;", "'")
+    assert '<h2 id="host">Host</h2>' in page and 'id="host-stalls"' in page
+
+
+def test_a_run_without_stalls_has_no_host_line_in_its_fault(tmp_path):
+    """The same fault with no stall before it says nothing of the host (at virtual time
+    the computer's load is no cause)."""
+    loaded = load_sequence(ROOT / "sequences" / "opsafe.yaml")
+    arm = load_arm(loaded.arm_path)
+    clock = VirtualClock()
+    bus = SimBus(channel=f"test-stall-{next(_channels)}", clock=clock,
+                 faults=["4:tow_error@4.5"])
+    connection = Connection(bus, clock, True, "simulator with a fault")
+    try:
+        outcome = run_sequence(loaded, arm, connection, log_dir=tmp_path / "run",
+                               confirm=lambda prompt: True, html_report=False)
+    finally:
+        connection.close()
+    assert outcome.result.exit_code == 3 and "host" not in outcome.result.fault
+    report = json.loads((tmp_path / "run" / "report.json").read_text())
+    assert report["host"]["stalls"] == 0 and "host" not in report["fault"]
+
+
+def test_a_busy_host_at_normal_priority_is_told_what_rt_priority_changes():
+    """Issue 42.1: on a busy computer (load above its cores) a run at normal priority
+    says once at the start what --rt-priority would change; not when the host is idle or
+    the loop already runs at a real-time priority."""
+    from seqrun.service.host_watch import busy_host_note
+
+    normal = {"policy": "SCHED_OTHER", "priority": 0, "nice": 0}
+    note = busy_host_note([5.2, 4.0, 3.0], 2, normal)
+    assert note is not None and "load 5.2 on 2 cores" in note and "--rt-priority" in note
+    assert busy_host_note([1.5, 1.0, 1.0], 2, normal) is None
+    assert busy_host_note([5.2, 4.0, 3.0], 2, {"policy": "SCHED_FIFO", "priority": 20,
+                                                "nice": 0}) is None

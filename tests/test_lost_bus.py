@@ -123,8 +123,7 @@ def test_a_killed_socketcand_server_mid_move_ends_the_run_with_exit_3(tmp_path):
         # Kill the server once the first move is under way.
         deadline = time.monotonic() + 60
         while time.monotonic() < deadline:
-            events = folder / "events.jsonl"
-            if events.exists() and '"move_planned"' in events.read_text():
+            if RunFolder(folder).events("move_planned", live=True):
                 break
             time.sleep(0.05)
         time.sleep(1.0)

@@ -321,3 +321,95 @@ def test_robot_description_is_the_urdf_once_at_the_start(opsafe):
     assert message.data == robot_description(ARM, "lwa3/")
     assert f'<link name="{NAMES.base_frame}"' in message.data
     assert stamp == ns(opsafe.report()["start_epoch_s"])
+
+
+# -- a standard, compact bag (issue 41.3) ------------------------------------------------------
+def test_channels_offer_the_qos_rosbag2_records(opsafe):
+    """rosbag2 records each publisher's offered QoS in the channel metadata; run.mcap said
+    nothing (``offered_qos_profiles: []``), so a player made /tf_static volatile."""
+    import yaml
+
+    with open(opsafe.path / "run.mcap", "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    for channel in summary.channels.values():
+        profiles = yaml.safe_load(channel.metadata["offered_qos_profiles"])
+        assert len(profiles) == 1, channel.topic
+        (qos,) = profiles
+        assert qos["reliability"] == "reliable" and qos["history"] == "keep_last"
+        assert qos["durability"] == "volatile", channel.topic
+        assert qos["deadline"] == {"sec": 9223372036, "nsec": 854775807}
+    latched = {name: mcap_log.offered_qos(name) for name in
+               ("/tf_static", "/lwa3/robot_description", "/tf", "/lwa3/joint_states")}
+    assert [q.durability.name for q in latched.values()] == [
+        "TRANSIENT_LOCAL", "TRANSIENT_LOCAL", "VOLATILE", "VOLATILE"]
+    assert latched["/tf_static"].depth == 1
+
+
+def test_chunks_are_zstd_and_the_rosbag2_metadata_names_run_mcap(opsafe):
+    """zstd chunks (as rosbag2's zstd presets write them); the bag's own metadata gave its
+    file as ``run.mcap.partial.mcap``."""
+    import yaml
+
+    with open(opsafe.path / "run.mcap", "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        assert summary is not None and summary.chunk_indexes
+        assert {c.compression for c in summary.chunk_indexes} == {"zstd"}
+        packed = sum(c.compressed_size for c in summary.chunk_indexes)
+        assert packed * 3 < sum(c.uncompressed_size for c in summary.chunk_indexes)
+        (record,) = [m for m in reader.iter_metadata() if m.name == "rosbag2"]
+    metadata = yaml.safe_load(record.metadata["serialized_metadata"])
+    assert metadata["relative_file_paths"] == ["run.mcap"]
+    assert [f["path"] for f in metadata["files"]] == ["run.mcap"]
+    assert metadata["compression_mode"] == "" and metadata["storage_identifier"] == "mcap"
+    assert sum(t["message_count"] for t in metadata["topics_with_message_count"]) == \
+        metadata["message_count"] > 1000
+
+
+def test_joint_states_carry_the_measured_velocity(opsafe):
+    """The bag's joint_states had positions only; the node and Foxglove publish the
+    windowed velocity estimate: the same estimate, in rad/s, over the readings' times.
+    Effort stays empty (the streamed cycle does not read the modules' current)."""
+    from seqrun.arm.tracking import sample_time, velocity_window, windowed_velocity
+
+    bag = read_bag(opsafe.path / "run.mcap")
+    readings = [e for e in opsafe.events() if e["type"] in ("setpoint", "measurement")]
+    states = [msg for _, msg in bag["/lwa3/joint_states"]]
+    assert len(states) == len(readings)
+    t = np.array([sample_time(e["read_t"]) if e["type"] == "setpoint" else e["t"]
+                  for e in readings])
+    q = np.array([e.get("measured_deg", e.get("joints_deg")) for e in readings])
+    expected = windowed_velocity(t, q, velocity_window(1.0 / ARM.control.cycle_hz))
+    with_velocity = 0
+    for msg, row in zip(states, expected):
+        assert len(msg.effort) == 0
+        if len(msg.velocity) == 0:
+            continue
+        with_velocity += 1
+        np.testing.assert_allclose(msg.velocity, np.radians(row), atol=np.radians(1e-3))
+    assert with_velocity > 0.9 * len(states)
+    assert max(float(np.max(np.abs(m.velocity))) for m in states if len(m.velocity)) > 0.1
+
+
+def test_the_bag_converts_to_a_ros1_bag_and_a_db3_bag_with_every_message(opsafe, tmp_path):
+    """rosbags' converter (what ``rosbags-convert`` runs) reads run.mcap, zstd chunks and
+    all, into a ROS 1 bag and a rosbag2 SQLite bag with the same messages per topic."""
+    from rosbags.convert import convert
+
+    def counts(path: Path) -> dict[str, int]:
+        with AnyReader([path], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
+            out: dict[str, int] = {}
+            for conn, _, _ in reader.messages():
+                out[conn.topic] = out.get(conn.topic, 0) + 1
+            return out
+
+    source = counts(opsafe.path / "run.mcap")
+    assert source["/tf"] > 1000
+    for dst, storage, version in ((tmp_path / "run.bag", "sqlite3", 2),
+                                  (tmp_path / "run_db3", "sqlite3", 9)):
+        convert([opsafe.path / "run.mcap"], dst, storage, version, None, "file", None, None,
+                [], [], [], [])
+        assert counts(dst) == source, dst
+    assert (tmp_path / "run.bag").is_file()
+    assert list((tmp_path / "run_db3").glob("*.db3"))

@@ -25,6 +25,7 @@ from seqrun.sequence.validation import validate_sequence
 from seqrun.service.runlog import read_trace
 from seqrun.sim.module import ModuleOptions
 from simrun import run_on_sim
+from runfolder import RunFolder
 
 ARM = shipped_arm()
 PARK = {"j1": 0, "j2": -90, "j3": 0, "j4": -120.32, "j5": 0, "j6": 115.74, "j7": 0}
@@ -150,7 +151,7 @@ def test_a_dry_run_follows_the_velocities_inside_the_envelope(project):
 
 
 def events(folder: Path) -> list[dict]:
-    return [json.loads(line) for line in (folder / "events.jsonl").read_text().splitlines()]
+    return RunFolder(folder).events()
 
 
 def test_the_velocity_move_goes_out_as_fvel_with_the_watchdog_armed(tmp_path):

@@ -156,7 +156,7 @@ def test_a_trajectory_moves_the_simulated_arm(graph):
     assert accepted["points"] == 2
     finished = graph.event("trajectory_finished")
     assert finished["status"] == "passed" and finished["exit_code"] == 0
-    assert Path(finished["run_dir"], "events.jsonl").is_file()
+    assert Path(finished["run_dir"], "events.jsonl.gz").is_file()
     graph.wait_for(lambda: abs(graph.joints_deg()["j1"] - 12) < 0.1, "joint_states at j1 12°")
     assert graph.joints_deg()["j2"] == pytest.approx(-80, abs=0.1)
     assert graph.motion_frames()

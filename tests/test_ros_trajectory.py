@@ -131,7 +131,8 @@ def test_a_valid_trajectory_runs_as_a_sequence_with_its_run_folder(session):
     activity = run_trajectory(session, trajectory(("j1", "j2"), (10, -80, 1.0),
                                                   (20, -70, 2.0)), by="test")
     result = activity.wait(timeout=60)
-    assert result.ok and result.run_dir is not None and (result.run_dir / "events.jsonl").is_file()
+    assert result.ok and result.run_dir is not None
+    assert (result.run_dir / "events.jsonl.gz").is_file()
     assert sent  # it moved
     joints = session.poll_status().joints_deg
     assert joints["j1"] == pytest.approx(20, abs=0.1)

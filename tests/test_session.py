@@ -330,7 +330,7 @@ def test_halt_during_a_run_stops_it_and_is_confirmed(session):
     assert confirmation.sent and confirmation.confirmed
     result = run.wait(30)
     assert result.exit_code == 130 and result.run_dir is not None
-    assert (result.run_dir / "events.jsonl").exists()
+    assert (result.run_dir / "events.jsonl.gz").exists()
     assert session.status().activity == "halted"
     with pytest.raises(Refused, match="halted"):
         session.move_to_joints({"j1": 1})

@@ -184,7 +184,7 @@ def run_command(
     requests = StopRequests()
     control = RunControl.serve(run.connection, run.arm, requests)
     zero = _confirm_start_or_record(console, run, yes, log_dir, zero_confirmed)
-    if _use_realtime(console, rt_priority):
+    if _use_realtime(console, rt_priority, virtual_time):
         _watchdog_at_real_time(console, run)
     folder = _run_folder(console, run, log_dir)
     outcome = _run_in_session(console, run, zero, folder, control, requests, step=step,
@@ -277,13 +277,21 @@ def _watchdog_at_real_time(console: Console, run) -> None:
                       "the modules stop by themselves", highlight=False)
 
 
-def _use_realtime(console: Console, rt_priority: int | None) -> bool:
+def _use_realtime(console: Console, rt_priority: int | None,
+                  virtual_time: bool = False) -> bool:
     """``--rt-priority N``: the control loop (this thread, and the threads it starts) at
     SCHED_FIFO N; the threads already running (the control socket's, the display's) at
     SCHED_RR 1, above every normal process, so that none of them is kept off the CPU
     while it holds the interpreter lock the loop waits for; the lock handed over within
     1 ms (seqrun/service/realtime.py, as the console does)."""
     if rt_priority is None:
+        if virtual_time:   # no loop on the wall clock: the host's load changes nothing
+            return False
+        from seqrun.service.host_watch import busy_host_note
+
+        note = busy_host_note()
+        if note is not None:   # once, at the start: what --rt-priority would change
+            console.print(note, style="yellow", highlight=False, markup=False, soft_wrap=True)
         return False
     from seqrun.service.realtime import hand_over_the_lock_often, use_fifo, use_round_robin
 
@@ -435,6 +443,10 @@ def _print_outcome(console: Console, outcome, folder: Path) -> None:
         message = result.extra.get("summary") or result.message
         console.print(Text.assemble((result.status.upper(), colour),
                                     f" (exit {result.exit_code}): {message}"), highlight=False)
+        host = (result.fault or {}).get("host") or {}
+        if host.get("text"):   # the stalls (a busy host) that came before the fault
+            console.print(f"host: {host['text']}", style="yellow", highlight=False,
+                          markup=False, soft_wrap=True)
         if result.latched_at_start:
             console.print("note: " + latched_message(result.latched_at_start)
                           + (" - cleared by the sequence's Reset" if result.exit_code == 0

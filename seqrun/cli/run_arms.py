@@ -238,6 +238,9 @@ def _run(file: Path, check, contexts, connections, arms, clock_views, *, speed: 
         r = arm.result
         why = f" (halted because arm {arm.halted_for} faulted)" if arm.halted_for else ""
         typer.echo(f"arm {arm_id}: {r.status.upper()} (exit {r.exit_code}): {r.message}{why}")
+        host = (r.fault or {}).get("host") or {}
+        if host.get("text"):   # the host stalls (a busy host) before this arm's fault
+            typer.echo(f"arm {arm_id}: host: {host['text']}")
     for note in outcome.notes:
         typer.echo(note)
     records.finish(check, outcome)

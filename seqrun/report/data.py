@@ -28,6 +28,7 @@ from seqrun.errors import UserInputError
 from seqrun.arm.tracking import velocity_window
 from seqrun.report.readings import SAMPLE_EVENTS, EventLines, Series, split
 from seqrun.report.summary import Overview, StepSummary, SummaryBuilder
+from seqrun.runfolder.names import events_path
 
 #: Points per plotted line at most (a min/max envelope beyond).
 MAX_POINTS = 3000
@@ -135,11 +136,11 @@ def load_run(folder: str | Path, *, arm: ArmDescription | None = None) -> RunDat
     folder = Path(folder)
     if not folder.is_dir():
         raise UserInputError(f"{folder}: no such run folder")
-    events_path = folder / "events.jsonl"
-    if not events_path.is_file() and not (folder / "report.json").is_file():
+    log = events_path(folder)   # events.jsonl.gz, or an older run's events.jsonl
+    if log is None and not (folder / "report.json").is_file():
         raise UserInputError(f"{folder}: not a run folder (no events.jsonl, no report.json)")
     # A run refused by validation leaves report.json (and record.json) only.
-    lines: Iterable[dict] = EventLines(events_path) if events_path.is_file() else []
+    lines: Iterable[dict] = EventLines(log) if log is not None else []
     report = _read_json(folder / "report.json")
     data = from_records(report, lines, arm=arm, folder=folder, trace=_trace_summary(folder))
     data.torn_lines = lines.torn if isinstance(lines, EventLines) else 0

@@ -18,6 +18,7 @@ from typing import Callable, Iterable, Iterator
 import numpy as np
 
 from seqrun.arm.tracking import VelocityStream, sample_time
+from seqrun.runfolder.logfile import read_lines
 
 #: Event types that carry one reading of the whole arm.
 SAMPLE_EVENTS = ("setpoint", "measurement")
@@ -73,17 +74,27 @@ class EventLines:
 
     def __iter__(self) -> Iterator[dict]:
         self.torn = 0
+        if self.path.suffix == ".gz":   # events.jsonl.gz: what decodes, whole lines
+            for raw in read_lines(self.path):
+                event = self._parse(raw.decode("utf-8", errors="replace"))
+                if event is not None:
+                    yield event
+            return
         with open(self.path, encoding="utf-8", errors="replace") as f:
             for line in f:
-                if not line.strip():
-                    continue
-                try:
-                    event = json.loads(line)
-                except json.JSONDecodeError:
-                    self.torn += 1
-                    continue
-                if isinstance(event, dict) and "type" in event:
+                event = self._parse(line)
+                if event is not None:
                     yield event
+
+    def _parse(self, line: str) -> dict | None:
+        if not line.strip():
+            return None
+        try:
+            event = json.loads(line)
+        except json.JSONDecodeError:
+            self.torn += 1
+            return None
+        return event if isinstance(event, dict) and "type" in event else None
 
 
 def joints_of(event: dict) -> list:

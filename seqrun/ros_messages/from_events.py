@@ -15,12 +15,14 @@ a reading's shifted back by how long before the event the modules answered.
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
+from seqrun.arm.tracking import sample_time, velocity_window
+from seqrun.drivers.telemetry import VelocityWindow
+from seqrun.events import event_line
 from seqrun.ros_messages.names import RosNames
 from seqrun.ros_messages.values import (Shape, Transform, capsule_shapes, stamp_ns,
                                         static_shapes, transforms)
@@ -139,6 +141,9 @@ class EventTranslator:
         self._move: _Move | None = None
         self._capsules_at = -float("inf")
         self._joint_names = tuple(arm.joint_names)
+        # The measured velocity of a logged reading (events.jsonl has none): the windowed
+        # estimate the live faces and the report use, over the readings' own times.
+        self._velocity = VelocityWindow(velocity_window(1.0 / arm.control.cycle_hz))
 
     # -- time ----------------------------------------------------------------------------
     def _ns(self, event: Mapping[str, Any], t: Any = None) -> int:
@@ -198,7 +203,7 @@ class EventTranslator:
     def _line(self, event: Mapping[str, Any], kind: str) -> EventLine:
         ns = self._ns(event)
         data = dict(event)
-        return EventLine(ns, ns, kind, json.dumps(data, separators=(",", ":"), default=str),
+        return EventLine(ns, ns, kind, event_line(data),
                          level_of(kind), describe(event))
 
     def _reading_ns(self, event: Mapping[str, Any]) -> int:
@@ -234,16 +239,23 @@ class EventTranslator:
             self._move.positions.append(planned)
             self._move.velocities.append(planned_vel)
         if not self.live:   # live, the cycle's measurement event says it (with velocities)
-            out += self._joints_and_frames(event, event["measured_deg"],
-                                           self._reading_ns(event))
+            measured = event["measured_deg"]
+            read_t = event.get("read_t")
+            self._velocity.add(sample_time(read_t) if isinstance(read_t, (int, float, list))
+                               else float(event.get("t") or 0.0), measured)
+            out += self._joints_and_frames(event, measured, self._reading_ns(event),
+                                           self._velocity.velocity())
         return out
 
     def _measurement(self, event: Mapping[str, Any]) -> list[Record]:
         joints = event.get("joints_deg")
         if not joints or any(v is None for v in joints):
             return []
-        return self._joints_and_frames(event, joints, self._ns(event),
-                                       event.get("velocities_deg_s"))
+        velocities = event.get("velocities_deg_s")
+        if velocities is None and not self.live:   # a logged reading: estimated as above
+            self._velocity.add(float(event.get("t") or 0.0), joints)
+            velocities = self._velocity.velocity()
+        return self._joints_and_frames(event, joints, self._ns(event), velocities)
 
     def _close_move(self) -> Planned:
         move, self._move = self._move, None

@@ -262,15 +262,18 @@ def rebuild_arms_mcap(folder: Path) -> tuple[Path, dict[str, int]]:
     starts: list[float] = []
     for arm_id, entry in arm_entries.items():
         part = folder / str((entry or {}).get("part") or arm_id)
-        events = _events(part / "events.jsonl")
+        from seqrun.runfolder.names import EVENTS_NAME, events_path
+
+        log = events_path(part) or part / EVENTS_NAME
+        events = _events(log)
         started = next((e for e in events if e.get("type") == "run_started"), None)
         if started is None or "start_epoch_s" not in started:
-            raise UserInputError(f"{part / 'events.jsonl'}: no run_started with its time "
+            raise UserInputError(f"{log}: no run_started with its time "
                                  "base; nothing to write run.mcap from")
         try:
             arms[arm_id] = ArmDescription.model_validate(started.get("arm"))
         except ValueError:
-            raise UserInputError(f"{part / 'events.jsonl'}: the run did not record its "
+            raise UserInputError(f"{log}: the run did not record its "
                                  "arm") from None
         base = (entry or {}).get("base") or {}
         bases[arm_id] = base_transform(base.get("position_mm") or (0, 0, 0),

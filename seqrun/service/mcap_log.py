@@ -18,10 +18,17 @@ a bounded queue, never waiting; the conversion (FK, CDR) and the writing are don
 log's own thread. A full queue drops the event and counts it (said at the end, once);
 a failing disk stops this file, is said once and never disturbs the run.
 
-While the run goes, the bag is ``run.mcap.partial/`` (rosbags writes a bag folder); at the
-end its MCAP file becomes ``run.mcap`` beside the other run files and the folder goes. A
+While the run goes, the bag is ``run.mcap.partial/run/`` (rosbags writes a bag folder, its
+MCAP file named after the folder: ``run.mcap``, the name its rosbag2 metadata gives); at
+the end that file becomes ``run.mcap`` beside the other run files and the folder goes. A
 run killed before that leaves ``run.mcap.partial/``, whose whole chunks are readable;
 ``seqrun report RUN_DIR --mcap`` writes ``run.mcap`` anew from events.jsonl.
+
+As rosbag2 writes a bag: chunks compressed with zstd (rosbag2's ``zstd_fast`` storage
+preset does the same; rosbags' own zstd, no further dependency), and every channel's
+``offered_qos_profiles`` (:func:`offered_qos`): reliable, keep-last; transient local for
+``/tf_static`` and ``robot_description``, so that a player latches them as their
+publishers did.
 """
 
 from __future__ import annotations
@@ -45,6 +52,12 @@ if TYPE_CHECKING:
 
 MCAP_NAME = "run.mcap"
 PARTIAL_NAME = "run.mcap.partial"
+#: The bag folder inside ``run.mcap.partial/``: rosbags names the MCAP file after its
+#: folder, so this stem gives ``run.mcap`` (in the file and in its rosbag2 metadata).
+BAG_STEM = "run"
+#: How run.mcap's chunks are compressed: "zstd" (as rosbag2's zstd presets) or "none".
+COMPRESSIONS = ("zstd", "none")
+DEFAULT_COMPRESSION = "zstd"
 #: ROS 2 distributions run.mcap can be written for (seqrun.toml ``[ros] distribution``).
 DISTRIBUTIONS = ("humble", "jazzy", "kilted")
 DEFAULT_DISTRIBUTION = "jazzy"
@@ -54,6 +67,25 @@ QUEUE_SIZE = 20_000
 ROBOT_DESCRIPTION_TOPIC = "/robot_description"
 
 _STOP = object()
+
+#: Topics whose publishers latch (transient local): a late subscriber still gets them.
+LATCHED_TOPICS = ("/tf_static", "robot_description")
+
+
+def offered_qos(topic: str) -> Any:
+    """The QoS profile rosbag2 records for ``topic`` (rosbags' ``Qos``), as seqrun's node
+    offers it: reliable, keep last; transient local with depth 1 for a latched topic
+    (``/tf_static``, ``.../robot_description``), volatile otherwise; no deadline, lifespan
+    or lease (ROS 2's "infinite", as rosbag2 writes it)."""
+    from rosbags.interfaces import (Qos, QosDurability, QosHistory, QosLiveliness,
+                                    QosReliability, QosTime)
+
+    infinite = QosTime(9223372036, 854775807)
+    latched = topic == "/tf_static" or topic.rstrip("/").endswith("robot_description")
+    depth = 1 if latched else 100 if topic in (TF_TOPIC, EVENTS_TOPIC) else 10
+    return Qos(QosHistory.KEEP_LAST, depth, QosReliability.RELIABLE,
+               QosDurability.TRANSIENT_LOCAL if latched else QosDurability.VOLATILE,
+               infinite, infinite, QosLiveliness.AUTOMATIC, infinite, False)
 
 
 def typestore_of(distribution: str) -> Any:
@@ -130,9 +162,13 @@ class McapFolder:
     ``folder/run.mcap``. The bag of one arm and the bag of several share it."""
 
     def __init__(self, folder: Path, wanted: Mapping[str, str],
-                 distribution: str = DEFAULT_DISTRIBUTION) -> None:
-        from rosbags.rosbag2 import StoragePlugin, Writer
+                 distribution: str = DEFAULT_DISTRIBUTION, *,
+                 compression: str = DEFAULT_COMPRESSION) -> None:
+        from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
 
+        if compression not in COMPRESSIONS:
+            raise ValueError(f"unknown run.mcap compression {compression!r} "
+                             f"(one of {', '.join(COMPRESSIONS)})")
         self.folder = Path(folder)
         self.store = typestore_of(distribution)
         self.builder = MessageBuilder(self.store)
@@ -140,11 +176,15 @@ class McapFolder:
         self.partial = self.folder / PARTIAL_NAME
         if self.partial.exists():
             shutil.rmtree(self.partial)
-        self.writer = Writer(self.partial, version=8 if distribution == "humble" else 9,
+        self.writer = Writer(self.partial / BAG_STEM,
+                             version=8 if distribution == "humble" else 9,
                              storage_plugin=StoragePlugin.MCAP)
+        if compression == "zstd":   # the chunks (rosbag2's "storage" compression)
+            self.writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
         self.writer.open()
-        self.connections = {topic: self.writer.add_connection(topic, msgtype,
-                                                              typestore=self.store)
+        self.connections = {topic: self.writer.add_connection(
+                                topic, msgtype, typestore=self.store,
+                                offered_qos_profiles=[offered_qos(topic)])
                             for topic, msgtype in wanted.items()}
 
     def cdr(self, msgtype: str, fields: Mapping[str, Any] | None) -> bytes | memoryview:
@@ -158,7 +198,7 @@ class McapFolder:
     def _finish(self) -> Path:
         self.writer.close()
         target = self.folder / MCAP_NAME
-        (self.partial / f"{self.partial.name}.mcap").replace(target)
+        (self.partial / BAG_STEM / f"{BAG_STEM}.mcap").replace(target)
         shutil.rmtree(self.partial, ignore_errors=True)
         return target
 
@@ -381,11 +421,12 @@ def rebuild_mcap(folder: Path, arm: ArmDescription | None = None) -> tuple[Path,
 
     from seqrun.errors import UserInputError
     from seqrun.runfolder.logfile import read_lines
+    from seqrun.runfolder.names import events_path
 
     folder = Path(folder)
-    events_file = folder / "events.jsonl"
-    if not events_file.is_file():
-        raise UserInputError(f"{folder}: no events.jsonl (not a run folder, or a run "
+    events_file = events_path(folder)
+    if events_file is None:
+        raise UserInputError(f"{folder}: no events.jsonl(.gz) (not a run folder, or a run "
                              "refused before it started): nothing to write run.mcap from")
     report: dict[str, Any] = {}
     try:

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from seqrun.runfolder.logfile import write_whole
+from seqrun.runfolder.names import EVENTS_NAMES, TRACE_NAMES
 from seqrun.shipped import shipped_dir
 
 #: How long ``git rev-parse`` may take before the record says "unknown".
@@ -226,7 +227,7 @@ def _run_entry(folder: Path) -> dict | None:
     """The listing of one folder; None when it holds no run at all."""
     report_file = folder / "report.json"
     looks_like_a_run = any((folder / name).exists() for name in (
-        "report.json", "record.json", "events.jsonl", "trace.log"))
+        "report.json", "record.json", *EVENTS_NAMES, *TRACE_NAMES))
     if not looks_like_a_run:
         return None
     problem = None

@@ -6,9 +6,13 @@
                 canplayer`` replays it), wall-clock (epoch) time stamps, the bus channel's
                 name in both directions. Runs of older versions wrote ``trace.log``
                 (uncompressed); every reader here takes both.
-  events.jsonl  one executor event per line; ``run_started`` carries ``start_epoch_s``, the
-                wall-clock time of the run's t = 0 (an event at ``t`` happened at
-                ``start_epoch_s + t``, the trace's time base)
+  events.jsonl.gz  one executor event per JSON line, gzip-compressed (``zcat
+                events.jsonl.gz | jq``; the 100 Hz readings made events.jsonl ~97 MB per
+                hour of motion, 6-7x less compressed); ``run_started`` carries
+                ``start_epoch_s``, the wall-clock time of the run's t = 0 (an event at ``t``
+                happened at ``start_epoch_s + t``, the trace's time base). Runs of older
+                versions wrote ``events.jsonl`` (plain); every reader here takes both
+                (:func:`seqrun.runfolder.names.events_path`).
   steps.jsonl   one line per finished step (appended: constant cost per step)
   report.json   status, exit code, timing, per-step results, fault. While the run goes it
                 says ``running`` and is rewritten at most once a second (it points to
@@ -22,11 +26,12 @@
                 events, markers (seqrun/service/mcap_log.py, docs/ros2.md); written by a
                 thread of its own from the events this log hands it
 
-Every line of the JSON files goes to disk as it is written (one write per line): a run
-killed with SIGKILL leaves a readable folder. The trace's compressed lines are made
-decodable on disk at every event other than a cycle's reading (step boundaries, faults,
-questions, the end) and at least every :data:`TRACE_FLUSH_S` of the run's clock: a run
-killed mid-move loses at most that much of its trace. A failing disk never disturbs the
+Every line of the plain JSON files goes to disk as it is written (one write per line): a
+run killed with SIGKILL leaves a readable folder. The compressed files (the trace, the
+events) are made decodable on disk at every event other than a cycle's reading (step
+boundaries, faults, questions, the end: each of those is on disk before the loop goes on)
+and at least every :data:`TRACE_FLUSH_S` of the run's clock: a run killed mid-move loses at
+most that much of its readings and frames. A failing disk never disturbs the
 run: the first error stops that file, is reported once (``warn``, an event, the report)
 and leaves whole lines only.
 """
@@ -44,11 +49,12 @@ from xml.sax.saxutils import escape, quoteattr
 
 import can
 
-from seqrun.events import Event
+from seqrun.events import Event, event_line
 from seqrun.results import RunResult, StepResult
 from seqrun.runfolder.logfile import (GzipLineFile, LineFile, overwrite_in_place, read_lines,
                                       write_whole)
-from seqrun.runfolder.names import TRACE_NAME, TRACE_NAMES, trace_path
+from seqrun.runfolder.names import (EVENTS_NAME, EVENTS_NAMES, TRACE_NAME, TRACE_NAMES,
+                                    events_path, trace_path)
 from seqrun.service.time_base import TimeBase
 
 #: The running report.json is rewritten at most this often (seconds of real time).
@@ -68,7 +74,7 @@ TRACE_FLUSH_S = 0.1
 _READINGS = ("setpoint", "measurement")
 
 #: Files whose presence says a folder holds a run.
-RUN_FILES = ("report.json", "events.jsonl", *TRACE_NAMES)
+RUN_FILES = ("report.json", *EVENTS_NAMES, *TRACE_NAMES)
 
 
 def default_run_dir(sequence_name: str, root: Path = Path("runs")) -> Path:
@@ -161,7 +167,8 @@ class RunLog:
         self._clock0 = time_base.clock_s if time_base is not None else None
         self.time_base: dict[str, Any] = {}
         self.channel = str(channel) if channel is not None else "can0"
-        self._events = LineFile(self.folder / "events.jsonl", self._failed)
+        self._events = GzipLineFile(self.folder / EVENTS_NAME, self._failed)
+        self._events_flushed = -float("inf")   # event time of the events' last flush
         self._steps_file = LineFile(self.folder / "steps.jsonl", self._failed)
         self._trace_file = GzipLineFile(self.folder / TRACE_NAME, self._failed)
         self._trace_flushed = -float("inf")   # run clock of the trace's last flush
@@ -190,8 +197,9 @@ class RunLog:
             except Exception:  # noqa: BLE001 - a broken terminal must not stop the run
                 pass
         if path != self._events.path:
-            self._events.write(json.dumps({"t": None, "type": "log_failed", "file": path.name,
+            self._events.write(event_line({"t": None, "type": "log_failed", "file": path.name,
                                            "error": str(exc)}) + "\n")
+            self._events.flush()
 
     # Listeners -------------------------------------------------------------------
     def on_event(self, event: Event | dict) -> None:
@@ -210,7 +218,14 @@ class RunLog:
         if kind == "run_started":   # names for the per-joint JUnit properties
             self._joint_names = [j.get("name", "") for j in
                                  (event.get("arm") or {}).get("joints", [])]
-        self._events.write(json.dumps(event, separators=(",", ":"), default=str) + "\n")
+        self._events.write(event_line(event) + "\n")
+        if kind not in _READINGS:   # on disk before the loop goes on
+            self._events.flush()
+        else:
+            t = event.get("t")
+            if isinstance(t, (int, float)) and not t - self._events_flushed < TRACE_FLUSH_S:
+                self._events_flushed = t
+                self._events.flush()
         if self.mcap is not None:
             self.mcap.put(event)
         if kind not in _READINGS:   # what led up to a step boundary, fault or question
@@ -223,7 +238,7 @@ class RunLog:
             line = {"number": number, "kind": begun.get("kind"), "label": begun.get("label"),
                     "location": begun.get("location"),
                     **{k: v for k, v in event.items() if k not in ("type", "step")}}
-            self._steps_file.write(json.dumps(line, separators=(",", ":"), default=str) + "\n")
+            self._steps_file.write(event_line(line) + "\n")
             self._steps_done += 1
             self._last_step = number
             if time.monotonic() - self._report_written >= REPORT_INTERVAL_S:
@@ -242,8 +257,9 @@ class RunLog:
             self._trace_file.flush()
 
     # Final report -----------------------------------------------------------------
-    def finish(self, result: RunResult) -> dict:
-        """Write the final report.json and junit.xml; never raises (errors are recorded)."""
+    def finish(self, result: RunResult, *, host: dict[str, Any] | None = None) -> dict:
+        """Write the final report.json and junit.xml; never raises (errors are recorded).
+        ``host``: what the computer did to the run (seqrun/service/host_watch.py)."""
         self._close_mcap()
         report = {
             "status": result.status,
@@ -259,6 +275,8 @@ class RunLog:
             "not_verified": result.not_verified,
             "min_heights_mm": result.min_heights_mm,
         }
+        if host is not None:
+            report["host"] = host
         junit = junit_xml(self.meta.get("sequence", "sequence"), result, self._joint_names)
         error = write_whole(self.folder / "junit.xml", junit)
         if error is not None:
@@ -343,7 +361,7 @@ def read_report(folder: Path) -> dict:
     if report.get("status") != "running":
         return report
     report["steps"] = _json_lines(folder / report.get("steps_file", "steps.jsonl"))
-    events = _json_lines(folder / "events.jsonl")
+    events = read_events(folder)
     faults = [e for e in events if e.get("type") == "fault"]
     if faults:
         report["fault"] = {k: v for k, v in faults[-1].items() if k not in ("t", "type")}
@@ -367,12 +385,27 @@ def read_trace(folder: Path, *, run_clock: bool = False) -> list[can.Message]:
     folder = Path(folder)
     frames = list(can.CanutilsLogReader(io.StringIO(trace_text(folder))))
     if run_clock:
-        started = next(e for e in _json_lines(folder / "events.jsonl")
+        started = next(e for e in read_events(folder)
                        if e.get("type") == "run_started")
         shift = started["clock_s"] - started["start_epoch_s"]
         for msg in frames:
             msg.timestamp = round(msg.timestamp + shift, 6)
     return frames
+
+
+def read_events(folder: Path) -> list[dict]:
+    """The run folder's events (events.jsonl.gz, or an older run's events.jsonl), in
+    order, up to the first line that does not parse (a run killed mid-line)."""
+    path = events_path(folder)
+    if path is None:
+        return []
+    out = []
+    for line in read_lines(path):
+        try:
+            out.append(json.loads(line))
+        except json.JSONDecodeError:
+            break
+    return out
 
 
 def _json_lines(path: Path) -> list[dict]:

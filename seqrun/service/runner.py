@@ -13,6 +13,7 @@ from typing import Any, Callable, Iterable
 
 from seqrun import __version__
 from seqrun.arm.description import ArmDescription
+from seqrun.clock import VirtualClock
 from seqrun.drivers.base import ArmDriver
 from seqrun.drivers.registry import open_driver
 from seqrun.events import EventHub
@@ -22,6 +23,7 @@ from seqrun.sequence.checks import check_from_arm
 from seqrun.sequence.loader import LoadedSequence
 from seqrun.service.connection import Connection, response_timeout_s
 from seqrun.service.heap import keep_large_blocks_out_of_arenas, return_freed_memory
+from seqrun.service.host_watch import HostWatch
 from seqrun.service.run_control import halt_on_foreign_frames
 from seqrun.stop_requests import StopRequests
 
@@ -117,20 +119,24 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
                      mcap=mcap, time_base=part.time_base if part is not None else None)
         driver.add_frame_listener(log.on_frame)
         executor.listeners.insert(0, log.on_event)
+    # The host's part in the run: stalls named in a fault's verdict, report.json's "host".
+    host = HostWatch(wall_clock=not isinstance(connection.clock, VirtualClock))
+    executor.listeners.append(host)
     if on_executor is not None:
         on_executor(executor)
     result = None
     report = None
     try:
-        result = executor.run(loaded, first_step=first_step)
+        result = host.explain(executor.run(loaded, first_step=first_step))
     except BaseException as exc:
         if log is not None:
-            log.finish(executor.interrupted_result or _unfinished(executor, loaded, exc))
+            log.finish(executor.interrupted_result or _unfinished(executor, loaded, exc),
+                       host=host.summary())
         raise
     finally:
         if log is not None:
             if result is not None:
-                report = log.finish(result)
+                report = log.finish(result, host=host.summary())
             log.close()
             if not own_driver:
                 driver.remove_frame_listener(log.on_frame)
