@@ -55,9 +55,9 @@ def runs_json(runs_dir: Path) -> list[dict]:
 def cut_short(folder: Path) -> None:
     """What a full disk leaves of events.jsonl, the trace and run.mcap: each stops mid-run
     (whole lines, the trace at a flush), report.json untouched."""
-    events = (folder / "events.jsonl").read_bytes()
-    (folder / "events.jsonl").write_bytes(events[:len(events) // 2].rsplit(b"\n", 1)[0]
-                                          + b"\n")
+    events = (folder / "events.jsonl.gz").read_bytes()   # cut at a flush in its first half
+    (folder / "events.jsonl.gz").write_bytes(
+        events[:events.rfind(b"\x00\x00\xff\xff", 0, len(events) // 2) + 4])
     trace = (folder / "trace.log.gz").read_bytes()
     (folder / "trace.log.gz").write_bytes(trace[:trace.rfind(b"\x00\x00\xff\xff") + 4])
     bag = (folder / "run.mcap").read_bytes()
@@ -86,10 +86,10 @@ def test_a_run_cut_short_is_marked_incomplete_in_runs_and_report(run):
     [entry] = runs_json(run.parent)
     assert entry["result"] == "passed"   # the run's own verdict stays
     assert [line.split(":")[0] for line in entry["incomplete"]] == [
-        "events.jsonl", "trace.log.gz", "run.mcap"], entry["incomplete"]
+        "events.jsonl.gz", "trace.log.gz", "run.mcap"], entry["incomplete"]
     table = invoke("runs", "--dir", run.parent).stdout
     line = next(x for x in table.splitlines() if "Totem" in x)
-    assert "passed" in line and "INCOMPLETE: events.jsonl: no run_finished" in line, table
+    assert "passed" in line and "INCOMPLETE: events.jsonl.gz: cut short" in line, table
     assert "(+2 more)" in line and "1 incomplete" in table.splitlines()[-1], table
 
     report = invoke("report", run)
@@ -199,7 +199,7 @@ def test_report_mcap_keeps_a_killed_runs_partial_bag(run):
 
 def test_report_mcap_that_fails_puts_the_recorded_bag_back(run):
     recorded_bag = (run / "run.mcap").read_bytes()
-    (run / "events.jsonl").write_text("")   # nothing to write it from
+    (run / "events.jsonl.gz").write_bytes(b"")   # nothing to write it from
     result = invoke("report", run, "--mcap")
     assert result.exit_code == 2, result.output
     assert (run / "run.mcap").read_bytes() == recorded_bag

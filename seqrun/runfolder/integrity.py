@@ -26,7 +26,7 @@ import zlib
 from pathlib import Path
 from typing import Any
 
-from seqrun.runfolder.names import trace_path
+from seqrun.runfolder.names import EVENTS_NAME, events_path, trace_path
 
 __all__ = ["changed_inputs", "incomplete"]
 
@@ -34,7 +34,7 @@ __all__ = ["changed_inputs", "incomplete"]
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 #: The end of a deflate sync flush: a gzip trace cut back to its last flush ends so.
 SYNC_FLUSH_END = b"\x00\x00\xff\xff"
-#: How much of events.jsonl's end is read to find its last line.
+#: How much of the events' end is read to find their last line.
 TAIL_BYTES = 64 * 1024
 _CHUNK = 1 << 16
 
@@ -70,13 +70,20 @@ def incomplete(folder: Path, *, thorough: bool = False) -> list[str]:
                      + (f" (and {more} more)" if more > 0 else ""))
     if report.get("nothing_sent"):
         return found   # refused or ended before it started: no log to judge
-    events = folder / "events.jsonl"
-    if not events.is_file():
-        found.append("events.jsonl: missing")
-    else:
-        why = _events_end(events)
+    events = events_path(folder)
+    if events is None:
+        found.append(f"{EVENTS_NAME}: missing")
+    elif events.suffix == ".gz":
+        # Cheap: where the gzip stream ends; thorough: its last line, decompressed.
+        why = _gzip_end(events, thorough)
+        if why is None and thorough:
+            why = _last_event(_gzip_tail(events))
         if why:
-            found.append(f"events.jsonl: {why}")
+            found.append(f"{events.name}: {why}")
+    else:   # an older run's plain events.jsonl
+        why = _last_event(_tail(events))
+        if why:
+            found.append(f"{events.name}: {why}")
     trace = trace_path(folder)
     if trace is not None and trace.suffix == ".gz":
         why = _gzip_end(trace, thorough)
@@ -86,12 +93,33 @@ def incomplete(folder: Path, *, thorough: bool = False) -> list[str]:
     return found
 
 
-def _events_end(path: Path) -> str | None:
-    """Why events.jsonl does not end with its run's end marker, or None."""
+def _tail(path: Path) -> bytes:
     size = path.stat().st_size
     with open(path, "rb") as f:
         f.seek(max(0, size - TAIL_BYTES))
-        tail = f.read()
+        return f.read()
+
+
+def _gzip_tail(path: Path) -> bytes:
+    """The last TAIL_BYTES of a gzip file's text, decompressed as a stream (what a cut
+    file holds up to its cut)."""
+    decompressor, tail = zlib.decompressobj(31), b""
+    with open(path, "rb") as f:
+        while chunk := f.read(_CHUNK):
+            try:
+                tail = (tail + decompressor.decompress(chunk))[-TAIL_BYTES:]
+            except zlib.error:
+                break
+            if decompressor.eof:   # another member follows (appended): read it too
+                rest = decompressor.unused_data
+                decompressor = zlib.decompressobj(31)
+                if rest:
+                    tail = (tail + decompressor.decompress(rest))[-TAIL_BYTES:]
+    return tail
+
+
+def _last_event(tail: bytes) -> str | None:
+    """Why the events' text (its last bytes) does not end with the run's end marker."""
     if not tail:
         return "empty"
     if not tail.endswith(b"\n"):
