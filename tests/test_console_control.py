@@ -90,8 +90,12 @@ def hello(ws) -> dict:
     return message
 
 
-def next_event(ws, type_: str, where=lambda event: True) -> dict:
+def next_event(ws, type_: str, where=lambda event: True, pinging=()) -> dict:
+    """The next event ``type_`` on ``ws``; ``pinging``: pages kept alive meanwhile (a page
+    silent for 2 s during its motion is taken as gone)."""
     while True:
+        for page in pinging:
+            page.send_json({"op": "ping"})
         message = ws.receive_json()
         if (message["type"] == "event" and message["event"]["type"] == type_
                 and where(message["event"])):
@@ -180,6 +184,11 @@ def test_a_watching_page_that_sends_the_holder_s_id_commands_nothing(setup):
         wire.close()
 
 
+def j1(client) -> float:
+    status = client.get("/api/v1/status").json()
+    return next(j["position_deg"] for j in status["joints"] if j["name"] == "j1")
+
+
 def test_releasing_control_ends_the_holder_s_move_with_a_controlled_stop(setup):
     wire = BusListener(setup.connection)
     try:
@@ -188,15 +197,16 @@ def test_releasing_control_ends_the_holder_s_move_with_a_controlled_stop(setup):
             as_page = {CONTROL: hello(tab)["token"]}
             for path in ("/api/v1/arm-up", "/api/v1/home"):
                 assert client.post(path, headers=as_page).status_code == 200
+            start = j1(client)
+            tab.send_json({"op": "ping"})  # (a page that is silent for 2 s is taken as gone)
             r = client.post("/api/v1/move/joints", json={"joints": {"j1": 60}}, headers=as_page)
             assert r.status_code == 200, r.text
-            wait_for(lambda: abs(client.get("/api/v1/status").json()["joints"][0]
-                                 ["position_deg"] or 0) > 1.0)
+            wait_for(lambda: tab.send_json({"op": "ping"}) or j1(client) - start > 1.0)
             tab.send_json({"op": "release_control", "id": 1})
             assert reply(tab, 1)["ok"] is True
             status = client.get("/api/v1/status").json()
             assert status["activity"] == "idle", status
-            assert 1.0 < abs(status["joints"][0]["position_deg"]) < 50
+            assert 1.0 < j1(client) - start < 50
             assert client.get("/api/v1/control").json()["holder"] is None
             assert client.post("/api/v1/home", headers=as_page).status_code == 409
             assert not wire.halts()  # a controlled stop, not a Halt
@@ -212,13 +222,13 @@ def test_a_question_says_who_started_the_run_and_only_the_holder_answers(setup):
         as_a, as_b = {CONTROL: a["token"]}, {CONTROL: b["client"]}
         r = client.post("/api/v1/run", json={"sequence": "confirm_nudge.yaml"}, headers=as_a)
         assert r.status_code == 200, r.text
-        question = next_event(tab_b, "confirm_requested")
+        question = next_event(tab_b, "confirm_requested", pinging=(tab_a,))
         assert question["started_by"].startswith(a["client"] + " · ")  # tab A, named
         answer = {"question_id": question["question_id"], "yes": True}
         r = client.post("/api/v1/answer", json=answer, headers=as_b)
         assert r.status_code == 409 and "holds control" in r.json()["error"]
         assert client.post("/api/v1/answer", json=answer, headers=as_a).status_code == 200
-        finished = next_event(tab_a, "run_finished")
+        finished = next_event(tab_a, "run_finished", pinging=(tab_a,))
         assert finished["status"] == "passed", finished
 
 

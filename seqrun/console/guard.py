@@ -20,7 +20,7 @@ from __future__ import annotations
 import hmac
 import json
 import secrets
-from collections.abc import Awaitable, Callable, MutableMapping
+from collections.abc import Awaitable, Callable, Mapping, MutableMapping
 from http.cookies import SimpleCookie
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
@@ -69,6 +69,22 @@ def presented_token(scope: Scope) -> str | None:
     return None
 
 
+def foreign(headers: Mapping[str, str], *, local_only: bool,
+            server: str = "the console") -> str | None:
+    """Why a request is refused by the Host and Origin rules (None: it passes).
+    ``headers``: lower-case names; ``local_only``: the Host must name this machine;
+    ``server``: what it reaches, for the message. The console and the Foxglove server both
+    apply these rules (a browser page of another site must reach neither)."""
+    host = headers.get("host", "")
+    if local_only and _host_name(host) not in LOCAL_HOSTS:
+        return f"host '{host}' refused: {server} answers on 127.0.0.1 only"
+    origin = headers.get("origin")
+    if origin is not None and urlsplit(origin).netloc != host:  # "null" too (file://)
+        return (f"origin '{origin}' refused: a page of another site may not reach "
+                f"{server}")
+    return None
+
+
 class AccessGuard:
     """ASGI middleware: refuses (401/403) before the application sees the request."""
 
@@ -81,13 +97,9 @@ class AccessGuard:
         self.open_to_all = open_to_all
 
     def refusal(self, scope: Scope) -> tuple[int, str] | None:
-        headers = _headers(scope)
-        host = headers.get("host", "")
-        if self.local_only and _host_name(host) not in LOCAL_HOSTS:
-            return 403, f"host '{host}' refused: the console answers on 127.0.0.1 only"
-        origin = headers.get("origin")
-        if origin is not None and urlsplit(origin).netloc != host:  # "null" too (file://)
-            return 403, f"origin '{origin}' refused: only the console's own page may send commands"
+        reason = foreign(_headers(scope), local_only=self.local_only)
+        if reason is not None:
+            return 403, reason
         if self.token is not None and (scope.get("method"), scope.get("path")) \
                 not in self.open_to_all:
             given = presented_token(scope)
