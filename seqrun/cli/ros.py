@@ -92,7 +92,7 @@ def ros_command(
     import rclpy
     from rclpy.executors import ExternalShutdownException
 
-    from seqrun.ros.node import SeqrunNode, spin
+    from seqrun.ros.node import NodeTaken, SeqrunNode, spin
     from seqrun.service.session import ArmSession
 
     session = ArmSession(arm, connection, project=project, log_root=runs, zero=zero,
@@ -109,7 +109,10 @@ def ros_command(
     previous = signal.signal(signal.SIGTERM, _terminated)
     node = None
     try:
-        node = SeqrunNode(session, arm_name=name, rate_hz=rate, node_name=node_name)
+        try:
+            node = SeqrunNode(session, arm_name=name, rate_hz=rate, node_name=node_name)
+        except NodeTaken as exc:
+            fail(str(exc))
         banner = "SIMULATOR" if connection.is_simulator else connection.description
         typer.echo(f"seqrun ros on {banner}: /{node.arm}/joint_states, "
                    f"/{node.arm}/joint_trajectory, {node.node.get_fully_qualified_name()}/stop;"
