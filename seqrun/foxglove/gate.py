@@ -5,8 +5,8 @@ connects, so it cannot refuse a web page of another site by itself (a page open 
 operator's browser may open a WebSocket to 127.0.0.1). So the SDK listens on a loopback
 address of its own, drawn at random in 127.0.0.0/8 with a random port (a page cannot find
 it by trying), and this gate listens where seqrun says: it reads each connection's HTTP
-upgrade request, refuses (403, one line) what :func:`seqrun.console.guard.foreign` refuses
-for the console, and passes anything else through, byte for byte, both ways.
+upgrade request, refuses (403, one line) what :func:`seqrun.service.web_access.foreign`
+refuses for the console too, and passes anything else through, byte for byte, both ways.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ import secrets
 import socket
 import threading
 
-from seqrun.console.guard import foreign
+from seqrun.service.web_access import foreign
 
 #: The longest request head a client may send, and how long it has to send it.
 HEAD_LIMIT = 16 * 1024
