@@ -68,7 +68,7 @@ class Graph:
         assert self.session.arm_up().ok and self.session.home().ok
         self.session.poll_status()
         self.seqrun = SeqrunNode(self.session, arm_name=self.arm, context=self.context,
-                                 node_name=self.name, discovery_s=0.2)  # (names its own)
+                                 node_name=self.name)
         self.client = Node("seqrun_test_client", context=self.context)
         self.states: list = []
         self.events: list = []
@@ -145,6 +145,8 @@ class Graph:
 @pytest.fixture
 def graph(tmp_path, monkeypatch):
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    # (each test's names are its own: the node need not listen long for another of them)
+    monkeypatch.setattr("seqrun.ros.node.DISCOVERY_S", 0.2, raising=False)
     g = Graph(tmp_path)
     yield g
     g.close()
@@ -407,12 +409,15 @@ def test_one_arm_of_several_serves_under_its_id(tmp_path, monkeypatch):
     assert proc.returncode == 130, "".join(printed) + out
 
 
-def test_a_second_node_for_the_same_name_or_arm_refuses_to_start(graph, tmp_path):
+def test_a_second_node_for_the_same_name_or_arm_refuses_to_start(graph, tmp_path,
+                                                                  monkeypatch):
     """Issue 43: two ``seqrun ros`` nodes with the same arm name on one domain started
     without a word; one trajectory ran on both arms. Another context on the domain (as
     another process would be) and another simulated arm: the graph refuses, not the desk."""
-    from seqrun.ros.node import NodeTaken
+    import seqrun.ros.node
 
+    NodeTaken = getattr(seqrun.ros.node, "NodeTaken", RuntimeError)  # (before it: no such)
+    monkeypatch.setattr("seqrun.ros.node.DISCOVERY_S", 20.0, raising=False)  # (until seen)
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain_id())
     connection = open_connection(force_sim=True, clock=RealClock())
@@ -421,11 +426,11 @@ def test_a_second_node_for_the_same_name_or_arm_refuses_to_start(graph, tmp_path
     try:
         with pytest.raises(NodeTaken) as taken:
             SeqrunNode(other, arm_name=f"{graph.arm}_other", context=context,
-                       node_name=graph.name, discovery_s=20)   # (ends once it sees it)
+                       node_name=graph.name)
         assert f"/{graph.name} is already on the ROS domain" in str(taken.value)
         with pytest.raises(NodeTaken) as taken:
             SeqrunNode(other, arm_name=graph.arm, context=context,
-                       node_name=f"{graph.name}_other", discovery_s=20)
+                       node_name=f"{graph.name}_other")
         assert f"arm /{graph.arm} is already served" in str(taken.value)
         assert other.control.state().clients == ()   # nothing of it stayed on the desk
     finally:

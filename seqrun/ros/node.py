@@ -99,13 +99,13 @@ class SeqrunNode:
 
     def __init__(self, session: Any, *, arm_name: str, rate_hz: float = DEFAULT_RATE_HZ,
                  context: Any = None, log_dir: Path | None = None,
-                 node_name: str = NODE_NAME, discovery_s: float = DISCOVERY_S) -> None:
+                 node_name: str = NODE_NAME, discovery_s: float | None = None) -> None:
         self.session = session
         self.arm = ros_name(arm_name)
         self.log_dir = log_dir
         self.node = Node(ros_name(node_name), context=context)
         try:
-            self._refuse_if_taken(discovery_s)
+            self._refuse_if_taken(DISCOVERY_S if discovery_s is None else discovery_s)
             #: The node's control of its session: its commands present this secret.
             self._control = session.control.join_and_take(
                 f"ros-{self.node.get_name()}", f"ROS node {self.node.get_fully_qualified_name()}",
