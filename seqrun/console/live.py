@@ -17,6 +17,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import threading
 from collections.abc import Awaitable
 from typing import Any, Protocol
 
@@ -314,10 +315,23 @@ async def _live(console: Console, ws: WebSocket) -> None:
         for task in tasks + ([receiving] if receiving is not None else []):
             task.cancel()
         console.telemetry.detach(feed)
-        # (its motion ends with a controlled stop: the desk's rule, then the page's own)
-        await asyncio.to_thread(console.control.leave, client)
-        await asyncio.to_thread(console.motions.page_gone, client)
+        # Its motion ends with a controlled stop (the desk's rule, then the page's own), on
+        # a thread started at once: it runs to its end even if this connection's task is
+        # torn down before the stop is confirmed.
+        gone = threading.Thread(target=_page_gone, args=(console, client),
+                                name=f"console page {client} gone", daemon=True)
+        gone.start()
+        await asyncio.to_thread(gone.join)
         # (already closed by the page, or not; a page that does not read never takes the
         # close frame either: the server drops the connection when this returns)
         with contextlib.suppress(Exception):
             await asyncio.wait_for(ws.close(), 1.0)
+
+
+def _page_gone(console: Console, client: str) -> None:
+    """A page's connection ended: it leaves the desk (a holder's motion stopped), and what
+    it started stops (controlled)."""
+    try:
+        console.control.leave(client)
+    finally:
+        console.motions.page_gone(client)
