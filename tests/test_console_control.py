@@ -214,6 +214,32 @@ def test_releasing_control_ends_the_holder_s_move_with_a_controlled_stop(setup):
         wire.close()
 
 
+def test_taking_over_stops_the_holder_s_move_first_and_tells_it(setup):
+    wire = BusListener(setup.connection)
+    try:
+        with TestClient(setup.app(), base_url=LOCAL) as client, \
+                client.websocket_connect(LIVE) as tab_a, client.websocket_connect(LIVE) as tab_b:
+            a, b = hello(tab_a), hello(tab_b)
+            as_a = {CONTROL: a["token"]}
+            for path in ("/api/v1/arm-up", "/api/v1/home"):
+                assert client.post(path, headers=as_a).status_code == 200
+            start = j1(client)
+            tab_a.send_json({"op": "ping"})
+            r = client.post("/api/v1/move/joints", json={"joints": {"j1": 60}}, headers=as_a)
+            assert r.status_code == 200, r.text
+            wait_for(lambda: tab_a.send_json({"op": "ping"}) or j1(client) - start > 1.0)
+            tab_b.send_json({"op": "take_control", "take_over": True, "id": 1})
+            assert reply(tab_b, 1)["ok"] is True
+            assert client.get("/api/v1/status").json()["activity"] == "idle"  # stopped first
+            assert 1.0 < j1(client) - start < 50
+            taken = next_event(tab_a, "control_taken", lambda e: e["previous"] is not None)
+            assert taken["previous"]["id"] == a["client"]
+            assert taken["stopped"] == "move stopped (controlled stop)"
+            assert not wire.halts()  # a controlled stop, not a Halt
+    finally:
+        wire.close()
+
+
 @pytest.mark.slow  # a run with a question, in real time
 def test_a_question_says_who_started_the_run_and_only_the_holder_answers(setup):
     with TestClient(setup.app(), base_url=LOCAL) as client, \
