@@ -184,7 +184,7 @@ class ConsoleProcess:
         self.base = self.url.split("?", 1)[0]
         if found:
             self.token = found.group(1)
-            self.client = self.call("POST", "/control/take", {"name": "bench"})["client"]
+            self.client = self.call("POST", "/control/take", {"name": "bench"})["token"]
 
     def _drain(self) -> None:
         for line in self.proc.stdout:
@@ -195,7 +195,7 @@ class ConsoleProcess:
         if self.token:
             headers["Authorization"] = f"Bearer {self.token}"
         if self.client:
-            headers["X-Seqrun-Client"] = self.client
+            headers["X-Seqrun-Control"] = self.client
         return headers
 
     def call(self, method: str, path: str, body: dict | None = None) -> Any:

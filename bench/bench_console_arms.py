@@ -88,12 +88,12 @@ class Console:
         self.base = self.url.split("?", 1)[0].rstrip("/")
         self.token = self.url.split("token=", 1)[1]
         self.client = None
-        self.client = self.call("POST", "/control/take", {"name": "bench"})["client"]
+        self.client = self.call("POST", "/control/take", {"name": "bench"})["token"]
 
     def call(self, method: str, path: str, body: dict | None = None) -> Any:
         headers = {"Content-Type": "application/json", "Authorization": f"Bearer {self.token}"}
         if self.client:
-            headers["X-Seqrun-Client"] = self.client
+            headers["X-Seqrun-Control"] = self.client
         request = urllib.request.Request(self.base + "/api/v1" + path, method=method,
                                          data=None if body is None else json.dumps(body).encode(),
                                          headers=headers)

@@ -653,10 +653,12 @@ class ClientLeft(Event):
 @dataclass(frozen=True, kw_only=True)
 class ControlTaken(Event):
     type: ClassVar[str] = "control_taken"
-    when: ClassVar[str] = ("a client took control of the arm (holder), from nobody or from "
-                           "the previous holder (previous), who sees it")
+    when: ClassVar[str] = ("a client took control of the arm (holder), from nobody or, "
+                           "taking over, from the previous holder (previous), who sees it; "
+                           "stopped: what of the previous holder's motion was stopped first")
     holder: Mapping[str, Any] | None
     previous: Mapping[str, Any] | None = None
+    stopped: str | None = None
     clients: Sequence[Mapping[str, Any]] = ()
 
 

@@ -217,7 +217,8 @@ class LiveServer:
             pass
 
 
-CLIENT = "X-Seqrun-Client"
+#: The header that carries the control secret (seqrun/service/control.py).
+CONTROL = "X-Seqrun-Control"
 #: Where the test client's requests claim to go (the Host a local browser sends).
 LOCAL = "http://127.0.0.1:8765"
 LIVE = "ws://127.0.0.1:8765/api/v1/live"
@@ -233,16 +234,28 @@ def refused(response, status: int, *words: str) -> str:
     return message
 
 
-def take_control(client: Any, name: str = "tests", page: str | None = None) -> str:
-    """``client`` (a TestClient or an httpx client) takes control: as an API client named
-    ``name`` (its id then goes with every request it sends), or for the page ``page``."""
-    headers = {CLIENT: page} if page else {}
-    r = client.post("/api/v1/control/take", json={"name": name}, headers=headers)
+def take_control(client: Any, name: str = "tests", ws: Any = None,
+                 take_over: bool | None = None) -> str:
+    """``client`` (a TestClient or an httpx client) takes control and sends the secret it
+    got with every request from then on: as an API client named ``name``, or, given a
+    page's live connection ``ws``, as that page (the page's secret, as the page's script
+    keeps it). Returns the public client id (an API client) or the secret (a page).
+    ``take_over`` (default: a page does, as its operator confirms; an API client does not):
+    from the client that holds control."""
+    if ws is not None:
+        ws.send_json({"op": "take_control", "take_over": take_over is not False,
+                      "id": "take"})
+        while True:
+            message = ws.receive_json()
+            if message["type"] == "reply" and message["id"] == "take":
+                break
+        assert message["ok"] is True, message
+        client.headers[CONTROL] = message["token"]
+        return message["token"]
+    r = client.post("/api/v1/control/take", json={"name": name, "take_over": bool(take_over)})
     assert r.status_code == 200, r.text
-    ident = r.json()["client"]
-    if page is None:
-        client.headers[CLIENT] = ident
-    return ident
+    client.headers[CONTROL] = r.json()["token"]
+    return r.json()["client"]
 
 
 def free_port() -> int:

@@ -14,9 +14,9 @@ SUBPROTOCOL = "foxglove.sdk.v1"
 
 
 class FoxgloveClient:
-    def __init__(self, port: int) -> None:
+    def __init__(self, port: int, *, origin: str | None = None) -> None:
         self._connection = connect(f"ws://127.0.0.1:{port}", subprotocols=[SUBPROTOCOL],
-                                   open_timeout=5)
+                                   open_timeout=5, origin=origin)  # type: ignore[arg-type]
         self.ws = self._connection.__enter__()
         assert self.ws.subprotocol == SUBPROTOCOL
         self.info: dict[str, Any] = {}

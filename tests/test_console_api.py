@@ -230,8 +230,7 @@ def test_a_sequence_with_a_confirm_runs_to_the_end_and_is_listed(client, setup):
     with client.websocket_connect(LIVE) as ws:
         hello = ws.receive_json()
         assert hello["type"] == "hello" and hello["status"]["simulator"] is True
-        take_control(client, page=hello["client"])
-        client.headers["X-Seqrun-Client"] = hello["client"]  # the page's commands
+        take_control(client, ws=ws)  # the page's secret on the page's commands
         r = client.post("/api/v1/run", json={"sequence": "confirm_nudge.yaml"})
         assert r.status_code == 200, r.text
         question = None
@@ -303,7 +302,8 @@ def test_websocket_refuses_malformed_messages(client, setup):
     armed(client)
     before = time.perf_counter()
     with client.websocket_connect(LIVE) as ws:
-        take_control(client, page=ws.receive_json()["client"])
+        ws.receive_json()  # hello
+        take_control(client, ws=ws)
         for text, words in (("not json", "malformed"), ('["halt"]', "malformed"),
                             ('{"op": "fly", "id": 1}', "unknown op"),
                             ('{"op": "jog", "joint": "j1", "speed_scale": 9, "id": 2}',
@@ -321,7 +321,8 @@ def test_websocket_jog_hold_and_release(client, setup):
     armed(client)
     start = joint(client, "j2")
     with client.websocket_connect(LIVE) as ws:
-        take_control(client, page=ws.receive_json()["client"])
+        ws.receive_json()  # hello
+        take_control(client, ws=ws)
         for k in range(8):
             ws.send_json({"op": "jog", "joint": "j2", "speed_scale": 0.8, "id": k})
             time.sleep(0.1)
@@ -341,9 +342,8 @@ def test_a_page_that_goes_away_stops_its_move(client, setup):
     armed(client)
     with client.websocket_connect(LIVE) as ws:
         page = ws.receive_json()["client"]
-        take_control(client, page=page)
-        r = client.post("/api/v1/move/joints", json={"joints": {"j1": 60}},
-                        headers={"X-Seqrun-Client": page})
+        take_control(client, ws=ws)
+        r = client.post("/api/v1/move/joints", json={"joints": {"j1": 60}})
         assert r.status_code == 200, r.text
         wait_for(lambda: abs(joint(client, "j1")) > 1.0)
     # the page is gone: a controlled stop, far short of the target
@@ -362,9 +362,8 @@ def test_a_page_gone_silent_during_its_move_is_taken_as_gone(client, setup):
     armed(client)
     with client.websocket_connect(LIVE) as ws:
         page = ws.receive_json()["client"]
-        take_control(client, page=page)
-        r = client.post("/api/v1/move/joints", json={"joints": {"j1": 120}},
-                        headers={"X-Seqrun-Client": page})
+        take_control(client, ws=ws)
+        r = client.post("/api/v1/move/joints", json={"joints": {"j1": 120}})
         assert r.status_code == 200, r.text
         started = time.monotonic()
         status = wait_for(lambda: (s := client.get("/api/v1/status").json())["activity"]

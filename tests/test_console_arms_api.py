@@ -157,7 +157,7 @@ def test_a_live_stop_with_one_arm_silent_lists_each(tmp_path):
 def test_a_live_jog_names_its_arm(client, setup):
     with client.websocket_connect(LIVE) as ws:
         page = ws.receive_json()["client"]
-        take_control(client, page=page)
+        take_control(client, ws=ws)
         for text, words in (
                 ('{"op": "jog", "joint": "j1", "speed_scale": 0.5, "id": 1}', "which arm?"),
                 ('{"op": "jog", "arm": "C", "joint": "j1", "speed_scale": 0.5, "id": 2}',
@@ -177,7 +177,9 @@ def test_one_operator_holds_control_of_every_arm(client, setup):
     take_control(client, "coordinator")
     other = TestClient(client.app, base_url=LOCAL, raise_server_exceptions=False)
     other.headers["Authorization"] = "Bearer sesame"
-    r = other.post("/api/v1/control/take", json={"name": "second"}, headers={})
+    refused(other.post("/api/v1/control/take", json={"name": "second"}), 409, "coordinator",
+            "take over")  # never silently
+    r = other.post("/api/v1/control/take", json={"name": "second", "take_over": True})
     assert r.status_code == 200
     second = r.json()["client"]
     assert r.json()["holder"]["id"] == second

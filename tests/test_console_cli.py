@@ -50,7 +50,7 @@ class Api:
         self.url = url
         self.headers = {"Content-Type": "application/json",
                         "Authorization": f"Bearer {self.tokens[url]}"}
-        self.headers["X-Seqrun-Client"] = self.post("control/take", {"name": "tests"})["client"]
+        self.headers["X-Seqrun-Control"] = self.post("control/take", {"name": "tests"})["token"]
 
     def post(self, path: str, body: dict | None = None) -> dict:
         request = urllib.request.Request(self.url + "api/v1/" + path, method="POST",

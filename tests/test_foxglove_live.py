@@ -113,36 +113,92 @@ def test_stop_halts_a_move_in_progress(setup, client):
     assert result.exit_code != 0   # the move ended by the Halt, not at its target
 
 
+def take(client, name=None, take_over=False) -> str:
+    """``client`` subscribes (how the server sees it connected) and takes control: the
+    secret its commands carry."""
+    client.subscribe("/seqrun/events")
+    kind, answer = client.call("/seqrun/take_control",
+                               {"take_over": take_over} | ({"name": name} if name else {}))
+    assert kind == "ok", answer
+    return answer["token"]
+
+
 def test_commands_need_control_and_nothing_is_sent_without_it(setup, client, live):
     sent = len(setup.wire.frames)
     for service, body in (("/seqrun/home", {}), ("/seqrun/reset", {}),
                           ("/seqrun/move_to_pose", {"name": "totem"})):
         kind, message = client.call(service, body)
-        assert kind == "failure" and "nobody holds control" in message, message
+        assert kind == "failure" and "token" in message, message
     assert len(setup.wire.frames) == sent
-    kind, state = client.call("/seqrun/take_control", {"name": "Foxglove at the floor"})
-    assert kind == "ok" and state["holder"]["name"] == "Foxglove at the floor"
-    assert setup.session.control.state().holder.kind == "foxglove"
-    kind, result = client.call("/seqrun/reset")
+    token = take(client, "Foxglove at the floor")
+    holder = setup.session.control.state().holder
+    assert holder.kind == "foxglove" and holder.name.startswith("Foxglove at the floor (")
+    kind, result = client.call("/seqrun/reset", {"token": token})
     assert kind == "ok" and result["status"] == "passed", result
-    # another client takes control: the first one's commands are refused, naming it
+    # another client may not take control silently; taking over, the first one's secret
+    # is worth nothing and its commands are refused, naming the new holder
     other = FoxgloveClient(live.port)
     try:
-        assert other.call("/seqrun/take_control")[0] == "ok"
-        kind, message = client.call("/seqrun/home")
-        assert kind == "failure" and "Foxglove client" in message and "holds control" in message
-        assert other.call("/seqrun/release_control")[0] == "ok"
+        other.subscribe("/seqrun/events")
+        kind, message = other.call("/seqrun/take_control", {"name": "second"})
+        assert kind == "failure" and "take over" in message, message
+        other_token = take(other, "second", take_over=True)
+        kind, message = client.call("/seqrun/home", {"token": token})
+        assert kind == "failure" and "second" in message and "holds control" in message
+        assert other.call("/seqrun/release_control", {"token": other_token})[0] == "ok"
         assert setup.session.control.state().holder is None
     finally:
         other.close()
 
 
+def test_no_token_no_motion_and_stop_needs_none(setup, client, live):
+    """Issue 43: the --foxglove server had no token: any client commanded the arm."""
+    for command in (setup.session.arm_up, setup.session.home):
+        assert command().ok
+    take(client)   # someone holds control; another client without its secret ...
+    intruder = FoxgloveClient(live.port)
+    try:
+        sent = len(setup.wire.frames)
+        for body in ({"name": "totem"}, {"name": "totem", "token": "guess"},
+                     {"name": "totem", "token": setup.session.control.state().holder.id}):
+            kind, message = intruder.call("/seqrun/move_to_pose", body)
+            assert kind == "failure", message
+        assert len(setup.wire.frames) == sent   # ... moves nothing
+        before = time.perf_counter()
+        kind, answer = intruder.call("/seqrun/stop", raw=b"")   # ... but may STOP
+        assert kind == "ok" and answer["halt_confirmed"] is True
+        assert setup.wire.halts(before)
+    finally:
+        intruder.close()
+
+
+def test_a_page_of_another_site_cannot_connect(live):
+    """Issue 43: a web page on another origin, open in the operator's browser, took control
+    of the --foxglove server and started a move. The console's Origin and Host rules."""
+    import socket
+
+    from websockets.exceptions import InvalidStatus
+
+    with pytest.raises(InvalidStatus) as refused:
+        FoxgloveClient(live.port, origin="http://evil.example")
+    assert refused.value.response.status_code == 403
+    assert b"origin 'http://evil.example' refused" in refused.value.response.body
+    with socket.create_connection(("127.0.0.1", live.port), timeout=5) as raw:
+        raw.sendall(b"GET / HTTP/1.1\r\nHost: evil.example:80\r\nUpgrade: websocket\r\n"
+                    b"Connection: Upgrade\r\nSec-WebSocket-Version: 13\r\n"
+                    b"Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n\r\n")
+        answer = raw.recv(4096)
+    assert answer.startswith(b"HTTP/1.1 403") and b"host 'evil.example:80' refused" in answer
+    FoxgloveClient(live.port, origin=f"http://127.0.0.1:{live.port}").close()   # its own
+
+
 def test_bad_requests_are_one_line_and_move_nothing(setup, client):
     sent = len(setup.wire.frames)
+    client.subscribe("/seqrun/events")
     for service, raw, words in (("/seqrun/take_control", b'{"name": 5}', "name"),
                                 ("/seqrun/take_control", b'{"nme": "x"}', "nme"),
                                 ("/seqrun/take_control", b"[1]", "JSON object"),
-                                ("/seqrun/move_to_pose", b'{"name": "totem", '
+                                ("/seqrun/move_to_pose", b'{"name": "totem", "token": "x", '
                                  b'"velocity_scale": true}', "velocity_scale")):
         kind, message = client.call(service, raw=raw)
         assert kind == "failure" and words in message and "\n" not in message, message
@@ -151,12 +207,47 @@ def test_bad_requests_are_one_line_and_move_nothing(setup, client):
 
 def test_a_holder_that_leaves_frees_control(setup, live):
     client = FoxgloveClient(live.port)
-    client.subscribe("/lwa3/joint_states")
-    assert client.call("/seqrun/take_control")[0] == "ok"
+    take(client)
     assert setup.session.control.state().holder is not None
     client.close()
     wait_for(lambda: setup.session.control.state().holder is None, 5)
     assert setup.session.control.state().clients == ()
+
+
+def test_a_holder_that_disconnects_mid_move_ends_it_with_a_controlled_stop(setup, live):
+    """Issue 43: the move went on after its client disconnected, and it stayed the holder."""
+    for command in (setup.session.arm_up, setup.session.home):
+        assert command().ok
+    client = FoxgloveClient(live.port)
+    token = take(client)
+    kind, answer = client.call("/seqrun/move_to_pose", {"token": token, "name": "totem",
+                                                        "velocity_scale": 0.2})
+    assert kind == "ok", answer
+    activity = setup.session.activity
+    wait_for(lambda: setup.wire.motions() > 5, 10)
+    client.close()
+    result = activity.wait(timeout=30)
+    assert result.status != "passed", result   # stopped short of Totem ...
+    assert not setup.wire.halts()              # ... by a controlled stop, not a Halt
+    wait_for(lambda: setup.session.control.state().holder is None, 5)
+
+
+def test_arm_up_makes_a_powered_on_arm_movable(setup, client):
+    """Issue 43: /seqrun/reset did not write the limits, so after power-on a Foxglove user
+    could not make the arm movable, and the refusal blamed Home. Reset is the console's
+    Arm: Reset and the arm file's limits; then Home; then the arm moves."""
+    token = take(client)
+    for service in ("/seqrun/reset", "/seqrun/home"):
+        kind, answer = client.call(service, {"token": token})
+        assert kind == "ok" and answer["status"] == "passed", (service, answer)
+    kind, answer = client.call("/seqrun/move_to_pose", {"token": token, "name": "opsafe"})
+    assert kind == "ok", answer
+    assert setup.session.activity.wait(timeout=60).ok
+    # a refusal says its own cause: after a STOP, Home is refused because the arm is
+    # halted, not because it was never homed
+    assert client.call("/seqrun/stop")[0] == "ok"
+    kind, message = client.call("/seqrun/move_to_pose", {"token": token, "name": "totem"})
+    assert kind == "failure" and "halted" in message and "Home" not in message, message
 
 
 def test_nothing_is_translated_while_nobody_watches(setup, live, monkeypatch):

@@ -145,6 +145,8 @@ class Graph:
 @pytest.fixture
 def graph(tmp_path, monkeypatch):
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    # (each test's names are its own: the node need not listen long for another of them)
+    monkeypatch.setattr("seqrun.ros.node.DISCOVERY_S", 0.2, raising=False)
     g = Graph(tmp_path)
     yield g
     g.close()
@@ -405,6 +407,71 @@ def test_one_arm_of_several_serves_under_its_id(tmp_path, monkeypatch):
         proc.send_signal(signals.SIGTERM)
         out, _ = proc.communicate(timeout=60)
     assert proc.returncode == 130, "".join(printed) + out
+
+
+def test_a_second_node_for_the_same_name_or_arm_refuses_to_start(graph, tmp_path,
+                                                                  monkeypatch):
+    """Issue 43: two ``seqrun ros`` nodes with the same arm name on one domain started
+    without a word; one trajectory ran on both arms. Another context on the domain (as
+    another process would be) and another simulated arm: the graph refuses, not the desk."""
+    import seqrun.ros.node
+
+    NodeTaken = getattr(seqrun.ros.node, "NodeTaken", RuntimeError)  # (before it: no such)
+    monkeypatch.setattr("seqrun.ros.node.DISCOVERY_S", 20.0, raising=False)  # (until seen)
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain_id())
+    connection = open_connection(force_sim=True, clock=RealClock())
+    other = ArmSession(load_arm(ARM), connection, log_root=tmp_path / "other",
+                       poses_dir=ROOT / "poses")
+    try:
+        with pytest.raises(NodeTaken) as taken:
+            SeqrunNode(other, arm_name=f"{graph.arm}_other", context=context,
+                       node_name=graph.name)
+        assert f"/{graph.name} is already on the ROS domain" in str(taken.value)
+        with pytest.raises(NodeTaken) as taken:
+            SeqrunNode(other, arm_name=graph.arm, context=context,
+                       node_name=f"{graph.name}_other")
+        assert f"arm /{graph.arm} is already served" in str(taken.value)
+        assert other.control.state().clients == ()   # nothing of it stayed on the desk
+    finally:
+        other.close()
+        rclpy.shutdown(context=context)
+
+
+def test_the_node_commands_through_the_desk(graph):
+    """The node holds its session's control; a client that takes it over leaves the node's
+    commands refused, naming the holder (STOP still works)."""
+    holder = graph.session.control.state().holder
+    assert holder.kind == "ros" and holder.name == f"ROS node /{graph.name}"
+    graph.session.control.join_and_take("api-x", "console script (api-x)", "api",
+                                        take_over=True)
+    answer = graph.call("home")
+    assert answer.success is False and "console script (api-x) holds control" in \
+        answer.message
+    assert graph.call("stop").success is True
+
+
+@pytest.mark.slow
+def test_the_command_refuses_a_second_node_in_one_line(monkeypatch):
+    """``seqrun ros`` where a node of its name is on the domain: exit 2, one line."""
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    token = uuid.uuid4().hex[:8]
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain_id())
+    there = Node(f"seqrun_{token}", context=context)
+    try:
+        env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id()))
+        refused = subprocess.run([sys.executable, "-m", "seqrun", "ros", "--sim",
+                                  "--arm-name", f"lwa3_{token}", "--node-name",
+                                  f"seqrun_{token}"], cwd=ROOT, env=env, capture_output=True,
+                                 text=True, timeout=120, stdin=subprocess.DEVNULL)
+    finally:
+        there.destroy_node()
+        rclpy.shutdown(context=context)
+    assert refused.returncode == 2, refused.stdout + refused.stderr
+    lines = refused.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"error: ROS node /seqrun_{token} is "
+                                                   "already on the ROS domain"), lines
 
 
 # ---------------------------------------------------------------------- without the extra

@@ -82,6 +82,17 @@ def test_one_arm_options_are_refused_with_several_arms(campaign):
     assert result.exit_code == 2 and "ARM/SPEC" in result.output
 
 
+def test_foxglove_with_several_arms_is_refused_in_one_line(campaign, tmp_path):
+    """Issue 43: --foxglove was silently ignored for a run of two arms."""
+    result = run("sequences/short.yaml", "--foxglove=0", "--log-dir", str(tmp_path / "run"))
+    assert result.exit_code == 2, result.output
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: --foxglove: not for a run of "
+                                                   "several arms"), result.output
+    assert "A, B" in lines[0]
+    assert not (tmp_path / "run").exists()   # nothing opened, nothing moved
+
+
 def test_a_stop_request_goes_to_every_arm():
     """Ctrl-C and SIGTERM reach every arm's inbox (the signal handler posts once)."""
     from seqrun.cli.run_arms import EveryArm

@@ -11,9 +11,10 @@ and Home); like ``seqrun status``, with no bus configured it needs ``--sim``.
 
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated, Any, Optional
 
 import typer
 
@@ -87,10 +88,19 @@ def jog_command(
                                  arm_id=context.arm_id)
             session.poll_status()
             mode = "position" if position_mode else "velocity"
+            # This process takes control of its session for the jog, as every face does
+            # through the desk; each renewal presents the desk's secret.
+            control = session.control.join_and_take(
+                f"cli-{os.getpid()}", f"seqrun jog (pid {os.getpid()})", "cli")
+
+            def jog() -> Any:
+                holder = session.control.require(control.secret, "jog")
+                return session.jog(joint, math.copysign(1.0, velocity), mode=mode,
+                                   by=holder.name)
+
             try:
                 session.set_move_velocities({joint: abs(velocity)})
-                activity = session.jog(joint, math.copysign(1.0, velocity), mode=mode,
-                                       by="seqrun jog")
+                activity = jog()
             except Refused as exc:
                 fail(str(exc))
         typer.echo(f"jog {joint} at {velocity:+g} deg/s for {seconds:g} s ({mode} mode); "
@@ -98,7 +108,7 @@ def jog_command(
         end = time.monotonic() + seconds
         try:
             while time.monotonic() < end and not activity.done:
-                session.jog(joint, math.copysign(1.0, velocity), mode=mode, by="seqrun jog")
+                jog()
                 time.sleep(RENEW_S)
         except KeyboardInterrupt:
             session.jog_stop()

@@ -132,7 +132,7 @@ def ros_command(
     import rclpy
     from rclpy.executors import ExternalShutdownException
 
-    from seqrun.ros.node import SeqrunNode, spin
+    from seqrun.ros.node import NodeTaken, SeqrunNode, spin
     from seqrun.service.session import ArmSession
 
     session = ArmSession(arm, connection, project=project, log_root=runs, zero=zero,
@@ -157,8 +157,11 @@ def ros_command(
     previous = signal.signal(signal.SIGTERM, _terminated)
     node = None
     try:
-        with user_errors():  # a parameter out of range (-p rate:=5): one line
-            node = SeqrunNode(session, arm_name=name, rate_hz=rate, node_name=node_name)
+        try:
+            with user_errors():  # a parameter out of range (-p rate:=5): one line
+                node = SeqrunNode(session, arm_name=name, rate_hz=rate, node_name=node_name)
+        except NodeTaken as exc:
+            fail(str(exc))
         banner = "SIMULATOR" if connection.is_simulator else connection.description
         typer.echo(f"seqrun ros on {banner}: {node.joint_states.topic_name}, "
                    f"{node.node.resolve_topic_name(node.arm + '/joint_trajectory')}, "

@@ -139,6 +139,10 @@ def run_command(
         fail(f"--arm-id {arm_id}: {file} names the arms it moves (arms "
              f"{', '.join(arms_project.config.arm_ids)}) and runs each; --arm-id is for a "
              "sequence of one arm")
+    if arms_project is not None and foxglove is not None:
+        fail(f"--foxglove: not for a run of several arms yet ({file} moves arms "
+             f"{', '.join(arms_project.config.arm_ids)}; Foxglove live serves a run of one "
+             "arm): watch it in seqrun console, or open its run.mcap in Foxglove")
     if arms_project is not None:
         from seqrun.cli.run_arms import run_arms
 

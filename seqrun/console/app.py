@@ -43,12 +43,15 @@ from seqrun.console.motions import Motions
 from seqrun.service.kinematics import arm_scene
 from seqrun.console.telemetry import Telemetry, jsonable
 from seqrun.errors import Refused, SeqrunError, UserInputError
+from seqrun.service.control import Client
 
 log = logging.getLogger(__name__)
 
 API = "/api/v1"
 STATIC = Path(__file__).resolve().parent / "static"
-ClientHeader = Annotated[str | None, Header(alias="X-Seqrun-Client")]
+#: The control secret a client got when it took control (seqrun/service/control.py): every
+#: command presents it; the public client id is no credential.
+ControlHeader = Annotated[str | None, Header(alias="X-Seqrun-Control")]
 #: A part of the pages shared by both (``<!-- include parts/motion.html -->``).
 _INCLUDE = re.compile(r"<!-- include (parts/[a-z0-9_-]+\.html) -->")
 
@@ -307,65 +310,66 @@ def build_router(console: Console, *, prefix: str = API,
     halt_route(api, console, "STOP: the Halt broadcast at once, then confirmed; never "
                              "refused for its body", halted="the arm")
 
-    def commander(client: str | None, what: str) -> str | None:
-        """The name of the client that commands ``what``: it must hold control (else 409
-        naming the holder). STOP and the stops (abort, pause, end a jog) need no control."""
-        console.control.require(client, what)
-        return console.control.name_of(client)
+    def commander(token: str | None, what: str) -> Client:
+        """The client that commands ``what``: ``token`` must be the holder's secret (else
+        409 naming the holder). STOP and the stops (abort, pause, end a jog) need none."""
+        return console.control.require(token, what)
 
     @api.post("/reset", summary="Reset every module (clears a Halt), confirmed")
-    def reset(client: ClientHeader = None) -> Any:
-        commander(client, "reset")
+    def reset(token: ControlHeader = None) -> Any:
+        commander(token, "reset")
         return _confirmed(session.reset())
 
     @api.post("/home", summary="Home every module (enables the motors), confirmed")
-    def home(client: ClientHeader = None) -> Any:
-        commander(client, "home")
+    def home(token: ControlHeader = None) -> Any:
+        commander(token, "home")
         return _confirmed(session.home())
 
     @api.post("/arm-up", summary="Arm: reset, then write the arm file's limits")
-    def arm_up(client: ClientHeader = None) -> Any:
-        commander(client, "arm")
+    def arm_up(token: ControlHeader = None) -> Any:
+        commander(token, "arm")
         return _confirmed(session.arm_up())
 
     @api.post("/move/pose", summary="Move to a named pose (validated, planned, streamed)",
               openapi_extra=documented(models.PoseMove))
     def move_pose(body: models.PoseMove = json_body(models.PoseMove),
-                  client: ClientHeader = None) -> dict[str, Any]:
-        by = commander(client, f"move to {body.name}")
-        activity = session.move_to_pose(body.name, velocity_scale=body.velocity_scale, by=by)
-        motions.started(client, "move", activity)
+                  token: ControlHeader = None) -> dict[str, Any]:
+        by = commander(token, f"move to {body.name}")
+        activity = session.move_to_pose(body.name, velocity_scale=body.velocity_scale,
+                                        by=by.name)
+        motions.started(by.id, "move", activity)
         return _activity(activity)
 
     @api.post("/move/joints", summary="Move to joint targets in user degrees (MOVE)",
               openapi_extra=documented(models.JointMap))
     def move_joints(body: models.JointMap = json_body(models.JointMap),
-                    client: ClientHeader = None) -> dict[str, Any]:
-        by = commander(client, "move")
-        activity = session.move_to_joints(dict(body.joints), by=by)
-        motions.started(client, "move", activity)
+                    token: ControlHeader = None) -> dict[str, Any]:
+        by = commander(token, "move")
+        activity = session.move_to_joints(dict(body.joints), by=by.name)
+        motions.started(by.id, "move", activity)
         return _activity(activity)
 
     @api.post("/velocities", summary="Per-joint velocity of the console's moves, deg/s (ALLVEL)",
               openapi_extra=documented(models.JointMap))
     def velocities(body: models.JointMap = json_body(models.JointMap),
-                   client: ClientHeader = None) -> Any:
-        commander(client, "move velocities")
+                   token: ControlHeader = None) -> Any:
+        commander(token, "move velocities")
         return jsonable(session.set_move_velocities(dict(body.joints)))
 
     @api.post("/jog", summary="Jog one joint; renew within 200 ms or it stops (deadman)",
               openapi_extra=documented(models.JogBody))
     def jog(body: models.JogBody = json_body(models.JogBody),
-            client: ClientHeader = None) -> dict[str, Any]:
-        by = commander(client, "jog")
-        session.jog(body.joint, body.speed_scale, by=by, mode=body.mode)
-        motions.started(client, "jog")
+            token: ControlHeader = None) -> dict[str, Any]:
+        by = commander(token, "jog")
+        session.jog(body.joint, body.speed_scale, by=by.name, mode=body.mode)
+        motions.started(by.id, "jog")
         return {"accepted": True}
 
     @api.post("/jog/stop", summary="End the jog (controlled stop; any client)")
-    def jog_stop(client: ClientHeader = None) -> Any:
+    def jog_stop(token: ControlHeader = None) -> Any:
         result = session.jog_stop()  # a controlled stop
-        motions.jog_ended(client)
+        holder = console.control.holder_of(token)
+        motions.jog_ended(holder.id if holder is not None else None)
         return jsonable(result)
 
     @api.get("/gripper", summary="The gripper: width, holding, state (null: none)")
@@ -375,45 +379,45 @@ def build_router(console: Console, *, prefix: str = API,
     @api.post("/gripper/grip", summary="Grip a part of a width with a force (N)",
               openapi_extra=documented(models.GripBody))
     def grip(body: models.GripBody = json_body(models.GripBody),
-             client: ClientHeader = None) -> dict[str, Any]:
-        by = commander(client, "grip")
-        activity = session.grip(body.part_width_mm, body.force_n, by=by)
-        motions.started(client, "move", activity)
+             token: ControlHeader = None) -> dict[str, Any]:
+        by = commander(token, "grip")
+        activity = session.grip(body.part_width_mm, body.force_n, by=by.name)
+        motions.started(by.id, "move", activity)
         return _activity(activity)
 
     @api.post("/gripper/release", summary="Open the gripper to a width (mm)",
               openapi_extra=documented(models.ReleaseBody))
     def release(body: models.ReleaseBody = json_body(models.ReleaseBody),
-                client: ClientHeader = None) -> dict[str, Any]:
-        by = commander(client, "release")
-        activity = session.release(body.width_mm, by=by)
-        motions.started(client, "move", activity)
+                token: ControlHeader = None) -> dict[str, Any]:
+        by = commander(token, "release")
+        activity = session.release(body.width_mm, by=by.name)
+        motions.started(by.id, "move", activity)
         return _activity(activity)
 
     @api.post("/run", summary="Run a sequence (validated first; a run folder as seqrun run)",
               openapi_extra=documented(models.RunBody))
     def run(body: models.RunBody = json_body(models.RunBody),
-            client: ClientHeader = None) -> dict[str, Any]:
-        by = commander(client, f"run {body.sequence}")
+            token: ControlHeader = None) -> dict[str, Any]:
+        by = commander(token, f"run {body.sequence}")
         path = catalog.sequence_path(body.sequence)
         activity = session.run_sequence(path, speed=body.speed, step_mode=body.step_mode,
-                                        first_step=body.first_step, by=by)
-        motions.started(client, "run", activity)
+                                        first_step=body.first_step, by=by.name)
+        motions.started(by.id, "run", activity)
         return _activity(activity)
 
     @api.post("/shutdown", summary="Run the shutdown sequence (to Totem, then power-off)")
-    def shutdown(client: ClientHeader = None) -> dict[str, Any]:
-        by = commander(client, "shut down")
-        activity = session.run_sequence(catalog.shutdown_sequence(), by=by)
-        motions.started(client, "run", activity)
+    def shutdown(token: ControlHeader = None) -> dict[str, Any]:
+        by = commander(token, "shut down")
+        activity = session.run_sequence(catalog.shutdown_sequence(), by=by.name)
+        motions.started(by.id, "run", activity)
         return _activity(activity)
 
     for verb, needs_control in (("pause", False), ("resume", True), ("step", True),
                                 ("abort", False)):
-        def run_control(client: ClientHeader = None, verb: str = verb,
+        def run_control(token: ControlHeader = None, verb: str = verb,
                         needs_control: bool = needs_control) -> Any:
             if needs_control:
-                commander(client, verb)
+                commander(token, verb)
             return jsonable(getattr(session, verb)())
         api.add_api_route(f"/run/{verb}", run_control, methods=["POST"],
                           summary=f"{verb.capitalize()} the run under way"
@@ -422,15 +426,15 @@ def build_router(console: Console, *, prefix: str = API,
     @api.post("/answer", summary="Answer a confirm step (confirm_requested event)",
               openapi_extra=documented(models.AnswerBody))
     def answer(body: models.AnswerBody = json_body(models.AnswerBody),
-               client: ClientHeader = None) -> Any:
-        commander(client, "answer")
+               token: ControlHeader = None) -> Any:
+        commander(token, "answer")
         return jsonable(session.answer(body.question_id, body.yes))
 
     @api.post("/poses", summary="Save the arm's measured joints as a pose file",
               openapi_extra=documented(models.SavePoseBody))
     def save_pose(body: models.SavePoseBody = json_body(models.SavePoseBody),
-                  client: ClientHeader = None) -> dict[str, Any]:
-        commander(client, "save pose")
+                  token: ControlHeader = None) -> dict[str, Any]:
+        commander(token, "save pose")
         path = session.save_pose(body.name, overwrite=body.overwrite)
         return {"saved": str(path)}
 
@@ -466,37 +470,34 @@ def halt_route(api: APIRouter, console: Any, summary: str, *, halted: str) -> No
 
 def control_routes(api: APIRouter, console: Any) -> None:
     """Who holds control: ``/control``, take, release, leave (``console``: its ``control``
-    desk and ``new_api_id()``)."""
-    @api.get("/control", summary="Who holds control and who is connected")
+    desk and ``new_api_id()``). A page takes and gives control up on its live connection
+    (its secret comes back there, for that page alone); these routes are for API clients."""
+    @api.get("/control", summary="Who holds control and who is connected (public ids and "
+                                 "names; never a secret)")
     def control_state() -> dict[str, Any]:
         return console.control.state().as_dict()
 
-    @api.post("/control/take", summary="Take control (a page: its id in X-Seqrun-Client; an "
-                                        "API client without one joins with its name)",
+    @api.post("/control/take", summary="An API client joins and takes control: the answer's "
+                                        "token is its secret, sent as X-Seqrun-Control with "
+                                        "every command (take_over: from the holder, whose "
+                                        "motion is stopped first)",
               openapi_extra=documented(models.TakeControlBody))
-    def take_control(body: models.TakeControlBody = json_body(models.TakeControlBody),
-                     client: ClientHeader = None) -> dict[str, Any]:
-        if client is None:  # an API client: joins now, and is known by the id it gets
-            client = console.new_api_id()
-            console.control.join(client, f"{one_line(printable(body.name))} ({client})",
-                                 "api")
-        state = console.control.take(client)
-        return {"client": client, **state.as_dict()}
+    def take_control(body: models.TakeControlBody = json_body(models.TakeControlBody)
+                     ) -> dict[str, Any]:
+        client = console.new_api_id()
+        grant = console.control.join_and_take(
+            client, f"{one_line(printable(body.name))} ({client})", "api",
+            take_over=body.take_over)
+        return grant.as_dict()
 
-    @api.post("/control/release", summary="Give control up (the holder)")
-    def release_control(client: ClientHeader = None) -> dict[str, Any]:
-        if client is None:
-            raise Refused("release control: say who you are (X-Seqrun-Client)")
-        return console.control.release(client).as_dict()
+    @api.post("/control/release", summary="The holder gives control up (its motion ends "
+                                           "with a controlled stop; an API client leaves)")
+    def release_control(token: ControlHeader = None) -> dict[str, Any]:
+        return console.control.release(token).as_dict()
 
-    @api.post("/control/leave", summary="An API client leaves (gives control up if it holds "
-                                         "it)")
-    def leave(client: ClientHeader = None) -> dict[str, Any]:
-        known = console.control.client(client)
-        if known is None or known.kind != "api":
-            raise Refused("leave: not an API client of this console (a page leaves by "
-                          "closing)")
-        return console.control.leave(known.id).as_dict()
+    @api.post("/control/leave", summary="An API client leaves (as release)")
+    def leave(token: ControlHeader = None) -> dict[str, Any]:
+        return console.control.release(token).as_dict()
 
 
 def index_page(request: Request, page: str = "index.html") -> HTMLResponse:

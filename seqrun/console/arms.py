@@ -220,13 +220,12 @@ def create_arms_app(sessions: Any, catalog: Catalog, contexts: dict[str, Any], *
                               "arm, the arms against each other; a run folder part per arm)",
               openapi_extra=one_arm.documented(models.ArmsRunBody))
     def run(body: models.ArmsRunBody = one_arm.json_body(models.ArmsRunBody),
-            client: one_arm.ClientHeader = None) -> dict[str, Any]:
-        console.control.require(client, f"run {body.sequence}")
+            token: one_arm.ControlHeader = None) -> dict[str, Any]:
+        by = console.control.require(token, f"run {body.sequence}")
         path = console.catalog.sequence_path(body.sequence)
-        started = sessions.run_sequence(path, speed=body.speed,
-                                        by=console.control.name_of(client))
+        started = sessions.run_sequence(path, speed=body.speed, by=by.name)
         for arm_id in started.arms:  # a page that goes stops its run, as for one arm
-            console.arms[arm_id].motions.started(client, "run", _ArmsRunActivity(started))
+            console.arms[arm_id].motions.started(by.id, "run", _ArmsRunActivity(started))
         return {"accepted": True, **started.as_dict()}
 
     @top.get("/run", summary="The sequence of several arms under way or last (null: none)")

@@ -9,10 +9,10 @@ middleware, so nothing reaches the session first):
   printed at start, and WebSockets) or the cookie the page gets when it is opened with the
   token. Anything else: 401 — except STOP (``POST /api/v1/halt``): stopping the arm never
   needs a token.
-- **Host** (default, 127.0.0.1): the Host header must name this machine, so a web page of
-  another site cannot reach the console through a DNS name that resolves to 127.0.0.1.
-- **Origin**: a browser request from another site's page (its Origin is not this console)
-  is refused, so a page open in the operator's browser cannot send commands to the arm.
+- **Host** (default, 127.0.0.1) and **Origin**: :func:`seqrun.service.web_access.foreign`,
+  the rules the Foxglove server applies too: the Host header must name this machine, and a
+  browser request from another site's page (its Origin is not this console) is refused, so
+  a page open in the operator's browser cannot send commands to the arm.
 """
 
 from __future__ import annotations
@@ -23,7 +23,9 @@ import secrets
 from collections.abc import Awaitable, Callable, MutableMapping
 from http.cookies import SimpleCookie
 from typing import Any
-from urllib.parse import parse_qs, urlsplit
+from urllib.parse import parse_qs
+
+from seqrun.service.web_access import foreign
 
 Scope = MutableMapping[str, Any]
 Message = MutableMapping[str, Any]
@@ -32,7 +34,6 @@ Send = Callable[[Message], Awaitable[None]]
 ASGIApp = Callable[[Scope, Receive, Send], Awaitable[None]]
 
 COOKIE = "seqrun_console_token"
-LOCAL_HOSTS = frozenset({"127.0.0.1", "localhost", "::1", "[::1]"})
 
 
 def new_token() -> str:
@@ -41,13 +42,6 @@ def new_token() -> str:
 
 def _headers(scope: Scope) -> dict[str, str]:
     return {k.decode("latin-1").lower(): v.decode("latin-1") for k, v in scope["headers"]}
-
-
-def _host_name(host: str) -> str:
-    """``127.0.0.1:8765`` -> ``127.0.0.1``, ``[::1]:8765`` -> ``[::1]``."""
-    if host.startswith("["):
-        return host[:host.find("]") + 1]
-    return host.rsplit(":", 1)[0] if host.count(":") == 1 else host
 
 
 def presented_token(scope: Scope) -> str | None:
@@ -81,13 +75,9 @@ class AccessGuard:
         self.open_to_all = open_to_all
 
     def refusal(self, scope: Scope) -> tuple[int, str] | None:
-        headers = _headers(scope)
-        host = headers.get("host", "")
-        if self.local_only and _host_name(host) not in LOCAL_HOSTS:
-            return 403, f"host '{host}' refused: the console answers on 127.0.0.1 only"
-        origin = headers.get("origin")
-        if origin is not None and urlsplit(origin).netloc != host:  # "null" too (file://)
-            return 403, f"origin '{origin}' refused: only the console's own page may send commands"
+        reason = foreign(_headers(scope), local_only=self.local_only)
+        if reason is not None:
+            return 403, reason
         if self.token is not None and (scope.get("method"), scope.get("path")) \
                 not in self.open_to_all:
             given = presented_token(scope)

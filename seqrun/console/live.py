@@ -1,7 +1,10 @@
 """One page's live connection (``/api/v1/live``): telemetry and events out; STOP and jog in.
 
 In: ``{"op": "halt"}``, ``{"op": "jog", "joint": "j2", "speed_scale": 0.5}`` (renewed by the
-page every ~100 ms while the button is held), ``{"op": "jog_stop"}``, ``{"op": "ping"}``; an
+page every ~100 ms while the button is held; it needs control: this connection's secret, or
+the one in ``token``), ``{"op": "jog_stop"}``, ``{"op": "take_control", "take_over": false}``
+(the reply's ``token`` is this page's secret, sent to it alone; the hello carries it when the
+page got control on joining), ``{"op": "release_control"}``, ``{"op": "ping"}``; an
 ``id`` is echoed in the reply ``{"type": "reply", "id": ..., "ok": bool, "error"?: str}``.
 Messages are strict (:mod:`seqrun.console.models`): a repeated key, an unknown key or a value
 of the wrong type is refused — except that a message that asks to STOP halts whatever else is
@@ -14,6 +17,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import threading
 from collections.abc import Awaitable
 from typing import Any, Protocol
 
@@ -137,8 +141,12 @@ async def _live(console: Console, ws: WebSocket) -> None:
     client = console.new_client_id()
     feed = PageFeed(loop)
     history = console.telemetry.attach(feed)
-    # The first page of a console without a holder gets control; the others watch.
-    control = console.control.join(client, page_name(client, ws), "page", take_if_free=True)
+    # The first page of a console without a holder gets control; the others watch. The
+    # secret of this page's control lives here and in the page's memory only.
+    console.control.join(client, page_name(client, ws), "page")
+    grant = console.control.take_if_free(client)
+    secret: list[str | None] = [grant.secret if grant is not None else None]
+    control = console.control.state()
     send_lock = asyncio.Lock()
 
     # When the send under way started (None: none is): a send that waits for the page for
@@ -170,7 +178,7 @@ async def _live(console: Console, ws: WebSocket) -> None:
             if batch and batch[-1].startswith('{"type":"status"'):
                 await asyncio.sleep(gap())  # this page's share of the status budget
 
-    ops: asyncio.Queue[models.JogMessage | models.JogStopMessage] = asyncio.Queue()
+    ops: asyncio.Queue[Any] = asyncio.Queue()
 
     async def worker() -> None:  # jog/jog_stop in order: a renewal never follows its stop
         while True:
@@ -178,12 +186,23 @@ async def _live(console: Console, ws: WebSocket) -> None:
             try:
                 if isinstance(message, models.JogMessage):
                     (arm,) = console.arm_consoles(message.arm)  # (several: the one named)
-                    console.control.require(client, "jog")
+                    holder = console.control.require(message.token or secret[0], "jog")
                     await asyncio.to_thread(arm.session.jog, message.joint,
-                                            message.speed_scale,
-                                            by=console.control.name_of(client),
+                                            message.speed_scale, by=holder.name,
                                             mode=message.mode)
-                    arm.motions.started(client, "jog")
+                    arm.motions.started(holder.id, "jog")
+                elif isinstance(message, models.TakeControlMessage):
+                    taken = await asyncio.to_thread(console.control.take, client,
+                                                    take_over=message.take_over)
+                    secret[0] = taken.secret  # (this page's reply only: never broadcast)
+                    await reply(message.id, True, token=taken.secret,
+                                control=taken.state.as_dict())
+                    continue
+                elif isinstance(message, models.ReleaseControlMessage):
+                    released = await asyncio.to_thread(console.control.release, secret[0])
+                    secret[0] = None
+                    await reply(message.id, True, control=released.as_dict())
+                    continue
                 else:  # (several arms, none named: every arm's jog ends)
                     for arm in console.arm_consoles(message.arm, every_if_none=True):
                         await asyncio.to_thread(arm.session.jog_stop)
@@ -238,7 +257,8 @@ async def _live(console: Console, ws: WebSocket) -> None:
             return
         if isinstance(parsed, models.HaltMessage):
             await halt_task(parsed.id, parsed.reason, None)
-        elif isinstance(parsed, (models.JogMessage, models.JogStopMessage)):
+        elif isinstance(parsed, (models.JogMessage, models.JogStopMessage,
+                                 models.TakeControlMessage, models.ReleaseControlMessage)):
             ops.put_nowait(parsed)
         elif parsed.id is not None:  # a ping that wants an answer
             await reply(parsed.id, True)
@@ -257,7 +277,8 @@ async def _live(console: Console, ws: WebSocket) -> None:
     receiving: asyncio.Task[str] | None = None
     try:
         await send(dumps({"type": "hello", "client": client, "api_version": 1,
-                          "status": console.status_dict(), "control": control.as_dict()}))
+                          "status": console.status_dict(), "control": control.as_dict(),
+                          "token": secret[0]}))
         for text in history:
             await send(text)
         pumping = asyncio.create_task(pump())
@@ -294,9 +315,23 @@ async def _live(console: Console, ws: WebSocket) -> None:
         for task in tasks + ([receiving] if receiving is not None else []):
             task.cancel()
         console.telemetry.detach(feed)
-        console.control.leave(client)
-        await asyncio.to_thread(console.motions.page_gone, client)
+        # Its motion ends with a controlled stop (the desk's rule, then the page's own), on
+        # a thread started at once: it runs to its end even if this connection's task is
+        # torn down before the stop is confirmed.
+        gone = threading.Thread(target=_page_gone, args=(console, client),
+                                name=f"console page {client} gone", daemon=True)
+        gone.start()
+        await asyncio.to_thread(gone.join)
         # (already closed by the page, or not; a page that does not read never takes the
         # close frame either: the server drops the connection when this returns)
         with contextlib.suppress(Exception):
             await asyncio.wait_for(ws.close(), 1.0)
+
+
+def _page_gone(console: Console, client: str) -> None:
+    """A page's connection ended: it leaves the desk (a holder's motion stopped), and what
+    it started stops (controlled)."""
+    try:
+        console.control.leave(client)
+    finally:
+        console.motions.page_gone(client)

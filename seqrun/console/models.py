@@ -80,6 +80,8 @@ class SavePoseBody(_Strict):
 class TakeControlBody(_Strict):
     name: str = Field("API client", min_length=1, max_length=60,
                       description="Who takes control, as the others see it.")
+    take_over: bool = Field(False, description="Take control from the client that holds "
+                                               "it: its motion is stopped first, it is told.")
 
 
 # -- live WebSocket messages (page -> server) ----------------------------------------------
@@ -89,6 +91,8 @@ class HaltMessage(_Strict):
     reason: str = Field("STOP (console)", max_length=200)
 
 
+#: A control secret (seqrun/service/control.py), where a live message may carry one.
+Secret = Annotated[str, Field(min_length=1, max_length=100)] | None
 #: Which arm a live message addresses (a console of several arms; one arm: none).
 ArmId = Annotated[str, Field(min_length=1, max_length=40)] | None
 
@@ -100,6 +104,8 @@ class JogMessage(_Strict):
     joint: str = Field(min_length=1, max_length=40)
     speed_scale: Annotated[float, Field(ge=-1, le=1, allow_inf_nan=False)]
     mode: Literal["position", "velocity"] = "position"
+    #: The control secret; left out: the one this connection got when it took control.
+    token: Secret = None
 
 
 class JogStopMessage(_Strict):
@@ -109,10 +115,24 @@ class JogStopMessage(_Strict):
     arm: ArmId = None
 
 
+class TakeControlMessage(_Strict):
+    """This page takes control (the reply carries its secret, for this page alone)."""
+
+    op: Literal["take_control"]
+    id: MessageId = None
+    take_over: bool = False
+
+
+class ReleaseControlMessage(_Strict):
+    op: Literal["release_control"]
+    id: MessageId = None
+
+
 class PingMessage(_Strict):
     op: Literal["ping"]
     id: MessageId = None
 
 
 LIVE_MESSAGES: dict[str, type[_Strict]] = {
-    "halt": HaltMessage, "jog": JogMessage, "jog_stop": JogStopMessage, "ping": PingMessage}
+    "halt": HaltMessage, "jog": JogMessage, "jog_stop": JogStopMessage, "ping": PingMessage,
+    "take_control": TakeControlMessage, "release_control": ReleaseControlMessage}

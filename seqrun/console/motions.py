@@ -1,9 +1,10 @@
 """Which page started the motion under way, so that a page that goes away stops it.
 
-A page identifies itself by the client id its WebSocket was given (header
-``X-Seqrun-Client`` on its HTTP commands). When that WebSocket closes while a motion the
-page started is still under way, the server ends it: a jog with ``jog_stop()``, a move or a
-run with ``abort()`` (controlled stop). Motions started by API clients without a page
+A motion is the page's whose control secret commanded it (the desk names the holder: its
+public client id, given to its WebSocket). When that WebSocket closes, or the page falls
+silent, while a motion the page started is still under way, the server ends it: a jog with
+``jog_stop()``, a move or a run with ``abort()`` (controlled stop); the control desk stops it
+too when the page leaves (:mod:`seqrun.service.control`). Motions started by API clients
 (a coordinator's script) are not tied to any connection.
 """
 

@@ -8,16 +8,20 @@ radians), ``/tf`` (foxglove.FrameTransforms: every link of seqrun's FK),
 events.jsonl line of every event).
 
 Services (JSON requests and responses): ``/seqrun/stop`` is always accepted, like the
-console's STOP: the Halt broadcast goes out at once, then it is confirmed, and the answer
-says so. Everything else that commands the arm (``/seqrun/reset``, ``/seqrun/home``,
-``/seqrun/move_to_pose``) needs control, as in the console (:mod:`seqrun.service.control`):
-a client takes it with ``/seqrun/take_control`` (from nobody or from the holder, who is
-told) and gives it up with ``/seqrun/release_control``; a client that holds it and leaves
-(its subscriptions end) frees it.
+console's STOP, whatever its body: the Halt broadcast goes out at once, then it is confirmed,
+and the answer says so. Everything else that commands the arm (``/seqrun/reset``: Reset and
+the arm file's limits written, as the console's Arm; ``/seqrun/home``,
+``/seqrun/move_to_pose``) goes through the session's control desk
+(:mod:`seqrun.service.control`), as in the console: a client takes control with
+``/seqrun/take_control`` (it must be subscribed to a topic: its subscriptions are how the
+server sees it connected) and gets a secret in the answer's ``token``, which every command
+carries (``{"token": ...}``); held by another client, control is taken only with
+``take_over`` (that client's motion is stopped first, and it is told). A holder that
+releases control, or leaves (its last subscription ends: it closed the connection), ends
+its motion with a controlled stop.
 
-The session's events reach this face through a subscription of its own (a bounded queue and
-a thread): a slow Foxglove client, or none, never delays the control loop. Nothing is
-translated while no client subscribes.
+Who may connect: the console's Host and Origin rules (:mod:`seqrun.foxglove.gate`), so a
+web page of another site open in the operator's browser reaches nothing.
 """
 
 from __future__ import annotations
@@ -29,12 +33,14 @@ from typing import TYPE_CHECKING, Any, cast
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from seqrun.errors import SeqrunError
+from seqrun.errors import Refused, SeqrunError
 from seqrun.events import Event, Measurement
+from seqrun.foxglove.gate import Gate, inner_host
 from seqrun.ros_messages.from_events import (EventLine, EventTranslator, Frames, Joints,
                                              Record, Shapes)
 from seqrun.ros_messages.names import EVENTS_TOPIC, TF_TOPIC, RosNames
 from seqrun.ros_messages.values import Shape, static_shapes
+from seqrun.service.control import Client
 
 if TYPE_CHECKING:
     from foxglove.websocket import ServerListener
@@ -59,13 +65,20 @@ class StopBody(_Body):
 class TakeControlBody(_Body):
     name: str | None = Field(None, min_length=1, max_length=80,
                              description="The name the other clients see.")
+    take_over: bool = Field(False, description="From the client that holds control (its "
+                                               "motion is stopped first; it is told).")
 
 
-class EmptyBody(_Body):
-    pass
+Token = Field(min_length=1, max_length=100,
+              description="The secret /seqrun/take_control answered with.")
+
+
+class CommandBody(_Body):
+    token: str = Token
 
 
 class PoseBody(_Body):
+    token: str = Token
     name: str = Field(min_length=1, max_length=200, description="A pose of the campaign.")
     velocity_scale: float | None = Field(None, gt=0, le=1)
 
@@ -73,10 +86,12 @@ class PoseBody(_Body):
 #: name -> (request model, needs control, what it does)
 SERVICES: dict[str, tuple[type[_Body], bool, str]] = {
     "/seqrun/stop": (StopBody, False, "STOP: Halt broadcast at once, then confirmed"),
-    "/seqrun/take_control": (TakeControlBody, False, "take control (commands need it)"),
-    "/seqrun/release_control": (EmptyBody, False, "give control up"),
-    "/seqrun/reset": (EmptyBody, True, "reset every module, confirmed"),
-    "/seqrun/home": (EmptyBody, True, "home every module, confirmed"),
+    "/seqrun/take_control": (TakeControlBody, False, "take control: the answer's token is "
+                                                     "the secret every command carries"),
+    "/seqrun/release_control": (CommandBody, True, "give control up"),
+    "/seqrun/reset": (CommandBody, True, "reset every module and write the arm file's "
+                                         "limits (the console's Arm), confirmed"),
+    "/seqrun/home": (CommandBody, True, "home every module, confirmed"),
     "/seqrun/move_to_pose": (PoseBody, True, "move to a named pose (validated, planned)"),
 }
 
@@ -121,11 +136,25 @@ class FoxgloveLive:
             f"seqrun{service.removeprefix('/seqrun')}", request=_schema(model.__name__, model),
             response=_schema("Answer", None)), handler=self._handler(service))
             for service, (model, _, _) in SERVICES.items()]
-        self.server = foxglove.start_server(
-            name=name, host=host, port=port, context=ctx, services=services,
-            capabilities=[Capability.Services], supported_encodings=["json"],
-            server_listener=cast("ServerListener", _Listener(self)))
-        self.port = self.server.port
+
+        def start(inner: str) -> Any:
+            return foxglove.start_server(
+                name=name, host=inner, port=0, context=ctx, services=services,
+                capabilities=[Capability.Services], supported_encodings=["json"],
+                server_listener=cast("ServerListener", _Listener(self)))
+
+        inner = inner_host()
+        try:  # the SDK behind the gate, where no page finds it
+            self.server = start(inner)
+        except Exception:  # noqa: BLE001 - a host with 127.0.0.1 only: the gate still guards
+            inner = LOCALHOST
+            self.server = start(inner)
+        try:
+            self.gate = Gate(host, port, (inner, self.server.port))
+        except OSError:
+            self.server.stop()
+            raise
+        self.port = self.gate.port
         self.subscription = session.events.add_listener(self._on_event, "foxglove",
                                                         maxsize=QUEUE_SIZE)
 
@@ -232,9 +261,11 @@ class FoxgloveLive:
             gone = not topics
             if gone:
                 self._subscribed.pop(client_id, None)
-        if gone and client_id in self._joined:   # it left: its control is freed
+        if gone and client_id in self._joined:   # it left: its motion ends, control is freed
             self._joined.discard(client_id)
-            self.session.control.leave(_client_id(client_id))
+            # (the controlled stop waits for the arm: never on the server's own thread)
+            threading.Thread(target=self.session.control.leave, args=(_client_id(client_id),),
+                             name="foxglove client left", daemon=True).start()
 
     # -- services ------------------------------------------------------------------------
     def _handler(self, service: str) -> Callable[[Any], bytes]:
@@ -251,35 +282,47 @@ class FoxgloveLive:
                     answer["note"] = f"the arm was halted; the request was refused: {exc}"
                 return json.dumps(answer).encode()
             body = _parse(model, request)
-            if needs_control:
-                self.session.control.require(_client_id(request.client_id), what)
-            return json.dumps(self._command(service, body, request.client_id)).encode()
+            if service == "/seqrun/take_control":
+                return json.dumps(self._take(body, request.client_id)).encode()
+            if not needs_control:
+                raise ValueError(f"unknown service {service}")
+            holder = self.session.control.require(body.token, what)
+            return json.dumps(self._command(service, body, holder)).encode()
 
         return handle
 
-    def _command(self, service: str, body: Any, client: int) -> dict[str, Any]:
+    def _take(self, body: TakeControlBody, client: int) -> dict[str, Any]:
+        """``/seqrun/take_control``: the answer (with the secret) goes to this client only."""
         control = self.session.control
         cid = _client_id(client)
-        if service == "/seqrun/take_control":
-            if control.client(cid) is None:
-                control.join(cid, body.name or f"Foxglove client {client}", "foxglove")
-                self._joined.add(client)
-            return control.take(cid).as_dict()
+        with self._lock:
+            connected = client in self._subscribed
+        if not connected:
+            raise Refused("take control: subscribe to a topic first (/seqrun/events, say): "
+                          "control lasts while this client stays subscribed, and its motion "
+                          "stops when it leaves")
+        if control.client(cid) is None:
+            control.join(cid, f"{body.name or 'Foxglove client'} ({cid})", "foxglove")
+            self._joined.add(client)
+        return control.take(cid, take_over=body.take_over).as_dict()
+
+    def _command(self, service: str, body: Any, holder: Client) -> dict[str, Any]:
         if service == "/seqrun/release_control":
-            return control.release(cid).as_dict()
-        if service == "/seqrun/reset":
-            return _activity_result(self.session.reset())
+            return self.session.control.release(body.token).as_dict()
+        if service == "/seqrun/reset":   # Reset and the limits: the console's Arm
+            return _activity_result(self.session.arm_up())
         if service == "/seqrun/home":
             return _activity_result(self.session.home())
         if service == "/seqrun/move_to_pose":
             self.session.move_to_pose(body.name, velocity_scale=body.velocity_scale,
-                                      by=control.name_of(cid))
+                                      by=holder.name)
             return {"started": True, "pose": body.name}
         raise ValueError(f"unknown service {service}")
 
     # -- the end -------------------------------------------------------------------------
     def close(self) -> None:
         self.subscription.close(timeout=1.0)
+        self.gate.close()
         for client in list(self._joined):
             self.session.control.leave(_client_id(client))
         self._joined.clear()

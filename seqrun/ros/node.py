@@ -32,6 +32,14 @@ Parameters (:data:`PARAMETERS`; ``--ros-args -p NAME:=VALUE`` overrides them at 
 ``rate`` and ``publish_tf``. Names follow ROS rules: ``--ros-args -r __ns:=/foo`` puts the
 topics and services under ``/foo``, ``-r __node:=NAME`` renames the node, ``-r FROM:=TO``
 remaps a topic (``/tf`` and ``/tf_static`` are absolute, as tf2's).
+
+Who commands: the node takes control of its session at start, through the session's
+control desk (:mod:`seqrun.service.control`), as every face does; its trajectories,
+``~/home`` and ``~/reset`` present the desk's secret, ``~/stop`` needs nothing. One arm is
+served by one node: the node refuses to start (:class:`NodeTaken`, one line naming it)
+when its name is already on the ROS domain, or the arm's ``joint_states`` already has a
+publisher or its ``joint_trajectory`` a subscriber (another node drives that arm: one
+trajectory would move both).
 """
 
 from __future__ import annotations
@@ -57,7 +65,8 @@ from seqrun.ros import optional_module, ros_name
 from seqrun.service.trajectories import (JointTrajectory, TrajectoryPoint, in_trajectory_terms,
                                          run_trajectory)
 
-__all__ = ["DEFAULT_RATE_HZ", "NODE_NAME", "PARAMETERS", "SeqrunNode", "ros_name"]
+__all__ = ["DEFAULT_RATE_HZ", "DISCOVERY_S", "NODE_NAME", "NodeTaken", "PARAMETERS",
+           "SeqrunNode", "ros_name"]
 
 NODE_NAME = "seqrun"
 #: joint_states (and /tf) rate; the issue asks for at least 50 Hz.
@@ -74,6 +83,14 @@ PARAMETERS = {
 #: robot_description and /tf_static: sent once, kept for late subscribers (RViz, a
 #: robot_state_publisher started later), as robot_state_publisher does.
 LATCHED_DEPTH = 1
+#: How long a starting node listens for another node of its name or arm (s): discovery on
+#: the domain is not instantaneous (~0.1 s on an idle host, over a second on a busy one).
+DISCOVERY_S = 3.0
+
+
+class NodeTaken(Refused):
+    """Another node already serves this node's name or arm on the domain."""
+
 
 
 def _seconds(duration: Any) -> float:
@@ -96,11 +113,20 @@ class SeqrunNode:
 
     def __init__(self, session: Any, *, arm_name: str, rate_hz: float = DEFAULT_RATE_HZ,
                  context: Any = None, log_dir: Path | None = None,
-                 node_name: str = NODE_NAME) -> None:
+                 node_name: str = NODE_NAME, discovery_s: float | None = None) -> None:
         self.session = session
         self.arm = ros_name(arm_name)
         self.log_dir = log_dir
         self.node = Node(ros_name(node_name), context=context)
+        try:
+            self._refuse_if_taken(DISCOVERY_S if discovery_s is None else discovery_s)
+            #: The node's control of its session: its commands present this secret.
+            self._control = session.control.join_and_take(
+                f"ros-{self.node.get_name()}", f"ROS node {self.node.get_fully_qualified_name()}",
+                "ros")
+        except BaseException:
+            self.node.destroy_node()
+            raise
         self._names = list(session.arm.joint_names)
         self._closed = False
         rate_hz, self.publish_tf = self._parameters(rate_hz)
@@ -137,11 +163,46 @@ class SeqrunNode:
         if self.action_server is None:
             log.info("FollowJointTrajectory not offered: control_msgs is not installed")
 
+    def _refuse_if_taken(self, discovery_s: float) -> None:
+        """:class:`NodeTaken` if another node has this node's name or serves its arm (the
+        graph watched for ``discovery_s``, before this node publishes anything)."""
+        import time
+
+        node, me = self.node, self.node.get_fully_qualified_name()
+        states, trajectories = f"/{self.arm}/joint_states", f"/{self.arm}/joint_trajectory"
+        deadline = time.monotonic() + discovery_s
+        while True:
+            same = [n for n, ns in node.get_node_names_and_namespaces()
+                    if f"{ns.rstrip('/')}/{n}" == me]
+            if len(same) > 1:  # (this node is one of them)
+                raise NodeTaken(f"ROS node {me} is already on the ROS domain "
+                                f"{self._domain()}: one node per arm (--node-name, "
+                                "ROS_DOMAIN_ID)")
+            if node.count_publishers(states) or node.count_subscribers(trajectories):
+                raise NodeTaken(f"arm /{self.arm} is already served on the ROS domain "
+                                f"{self._domain()} ({states} has a publisher or "
+                                f"{trajectories} a subscriber): one node per arm "
+                                "(--arm-name, ROS_DOMAIN_ID)")
+            if time.monotonic() >= deadline:
+                return
+            time.sleep(0.05)
+
+    def _domain(self) -> Any:
+        try:
+            return self.node.context.get_domain_id()
+        except Exception:  # noqa: BLE001 - only for the message
+            return "?"
+
+    def _holder(self, what: str) -> Any:
+        """The node's control, checked at the desk (it may have been taken over)."""
+        return self.session.control.require(self._control.secret, what)
+
     # ------------------------------------------------------------------ lifetime
     def close(self) -> None:
         if self._closed:
             return
         self._closed = True
+        self.session.control.leave(self._control.client.id)
         self._timer.cancel()
         self._listener.close(timeout=1.0)
         if self.action_server is not None:
@@ -292,7 +353,9 @@ class SeqrunNode:
         in a thread of its own, the run's end."""
         points = len(trajectory.points)
         try:
-            activity = run_trajectory(self.session, trajectory, by=by, log_dir=self.log_dir)
+            holder = self._holder("trajectory")
+            activity = run_trajectory(self.session, trajectory, by=holder.name,
+                                      log_dir=self.log_dir)
         except Refused as exc:
             self.node.get_logger().error(f"trajectory refused: {exc}")
             self.announce("trajectory_refused", reason=str(exc), points=points, by=by)
@@ -330,6 +393,7 @@ class SeqrunNode:
 
     def _command(self, what: str, response: Any) -> Any:
         try:
+            self._holder(what.replace("arm_up", "reset"))
             result = getattr(self.session, what)()
         except Refused as exc:
             response.success = False

@@ -114,7 +114,8 @@ class ArmSessions:
         #: or None: the facility frame), for the records of a run.
         self.bases = dict(bases or {})
         first = next(iter(self.sessions.values()))
-        self.control = ControlDesk(publish=first.publish, clock=first.clock.now)
+        self.control = ControlDesk(publish=first.publish, clock=first.clock.now,
+                                   stop_motion=self.stop_motion_of)
         for session in self.sessions.values():
             session.control = self.control
         from seqrun.service.arm_separation import attach_sessions
@@ -239,6 +240,20 @@ class ArmSessions:
             self.run = run
             threading.Thread(target=work, name="console-arms-run", daemon=True).start()
             return run
+
+    def stop_motion_of(self, client: Any) -> str | None:
+        """End what ``client`` started on every arm (a controlled stop): the campaign run
+        it started, and each arm's motion (:meth:`ArmSession.stop_motion_of`)."""
+        done: list[str] = []
+        run = self.run
+        if run is not None and not run.done and getattr(run, "by", None) == client.name:
+            self.abort(f"{client.name} no longer holds control")
+            done.append("the run of several arms stopped (controlled stop)")
+        for arm_id, session in self.sessions.items():
+            stopped = session.stop_motion_of(client)
+            if stopped:
+                done.append(f"arm {arm_id}: {stopped}")
+        return "; ".join(done) or None
 
     def abort(self, reason: str = "operator abort") -> None:
         """A controlled stop of whatever moves on every arm."""

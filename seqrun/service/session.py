@@ -125,7 +125,8 @@ class ArmSession:
         self.gripper = GripperControl(self)
         self.runs = Runs(self)
         #: Who holds control and who watches (every face of this session shares it).
-        self.control = ControlDesk(publish=self.publish, clock=self.clock.now)
+        self.control = ControlDesk(publish=self.publish, clock=self.clock.now,
+                                   stop_motion=self.stop_motion_of)
         #: This arm against the other arms of a campaign served in this process
         #: (:class:`seqrun.service.arm_separation.SessionSeparation`; None: one arm).
         self.separation: Any = None
@@ -259,6 +260,25 @@ class ArmSession:
     def abort(self, reason: str = "operator abort") -> None:
         """Controlled stop of whatever moves (:meth:`Stopping.abort`)."""
         self.stopping.abort(reason)
+
+    def stop_motion_of(self, client: Any) -> str | None:
+        """End the motion a control desk's ``client`` started (its ``name`` is the activity's
+        ``started_by``), if one is under way, with a controlled stop, and wait for it (a Halt
+        if it does not end); what was done (None: nothing of its was under way). The desk
+        calls it when that client releases control, leaves, or is taken over."""
+        activity = self.activities.current
+        if activity is None or activity.done or activity.started_by != client.name:
+            return None
+        if activity.kind == "jog":
+            self.jog_stop()
+            return "jog stopped (controlled stop)"
+        self.abort(f"{client.name} no longer holds control")
+        try:
+            activity.wait(timeout=30.0)
+        except TimeoutError:
+            self.halt(f"{client.name} no longer holds control: the {activity.kind} did not stop")
+            return f"{activity.kind} halted"
+        return f"{activity.kind} stopped (controlled stop)"
 
     def control_handler(self) -> Any:
         """The object a control socket serves: ``status_dict()`` and ``halt(reason) -> dict``."""

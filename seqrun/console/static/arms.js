@@ -5,7 +5,7 @@
 // /api/v1/arms/{id}); one operator holds control of the whole console.
 import { frames } from "/static/view3d.js";
 import { ArmsView } from "/static/arms3d.js";
-import { API, $, el, fmt, say, apiOf, stopKeys, LOST_MS, connectLive, watchContact, markLost, Jog, JointControls, GripperPanel } from "/static/controls.js";
+import { API, $, el, fmt, say, apiOf, stopKeys, LOST_MS, connectLive, watchContact, markLost, takeControl, Jog, JointControls, GripperPanel } from "/static/controls.js";
 
 // (LOST_MS: the console sends each arm's status at least every 0.5 s: none for that long
 // from an arm, contact with it lost.)
@@ -15,13 +15,13 @@ const STOP_CONFIRM_MS = 1500;
 const PAINT_HZ = 10, PAINT_HZ_UNFOCUSED = 4;
 
 const state = {
-  ready: false, ids: [], arms: {}, selected: null, view: null, ws: null, client: null,
+  ready: false, ids: [], arms: {}, selected: null, view: null, ws: null, client: null, token: null,
   msgId: 0, control: null, lost: true, lastHeardAt: 0, pendingStop: null,
   statusCount: 0, eventCount: 0, lastReplies: [], lastStop: null, frames,
 };
 window.seqrunArms = state;  // for the browser tests and the bench
 
-const api = apiOf(() => state.client);
+const api = apiOf(() => state.token);
 
 async function command(label, method, path, body) {
   const arm = state.selected;
@@ -138,6 +138,10 @@ function onEvent(id, event) {
   const type = event.type;
   const controlEvent = type === "client_joined" || type === "client_left" || type === "control_taken" || type === "control_released";
   if (controlEvent) {
+    if (type === "control_taken" && event.previous && event.previous.id === state.client) {
+      state.token = null;  // taken over: this page's secret is worth nothing now
+      say(`Control taken by ${event.holder ? event.holder.name : "another client"}${event.stopped ? ` (${event.stopped})` : ""}: this page watches now (STOP still works)`, true);
+    }
     showControl(event.control || event);
     id = null;  // the whole console's, not one arm's
   }
@@ -210,8 +214,10 @@ function applyControl() {
 
 $("#take-control").addEventListener("click", async () => {
   try {
-    showControl(await api("POST", "/control/take", { name: "page" }));
-  } catch (err) { /* on screen */ }
+    const holder = state.control && state.control.holder;
+    if (holder && !window.confirm(`${holder.name} holds control. Take over? (Its motions are stopped first; it is told.)`)) return;
+    showControl(await takeControl(state, Boolean(holder)));
+  } catch (err) { say(`Take control: ${err.message}`, true); }
 });
 
 // ---------------------------------------------------------------- the arms

@@ -1,13 +1,13 @@
 // seqrun operator console: one page over the /api/v1 HTTP API and the live WebSocket.
 // STOP is sent on the WebSocket (HTTP when it is down) and never waits for anything else.
 import { ArmView, frames } from "/static/view3d.js";
-import { API, $, el, fmt, setText, say, apiOf, stopKeys, connectLive, watchContact, markLost, Jog, JointControls, GripperPanel } from "/static/controls.js";
+import { API, $, el, fmt, setText, say, apiOf, stopKeys, connectLive, watchContact, markLost, takeControl, Jog, JointControls, GripperPanel } from "/static/controls.js";
 
 // ?draw=0 (benchmarks): count the telemetry, draw nothing (what drawing costs, isolated).
 const DRAW = new URLSearchParams(location.search).get("draw") !== "0";
 
 const state = {
-  arm: null, view: null, ws: null, client: null, msgId: 0, status: null,
+  arm: null, view: null, ws: null, client: null, token: null, msgId: 0, status: null,
   latched: {}, poses: [], hoverPose: null, question: null, selected: null, checked: null,
   statusCount: 0, eventCount: 0, lastReplies: [], stopTimes: [],
   control: null, lost: true, lastHeardAt: 0, pendingStop: null,
@@ -16,7 +16,7 @@ window.seqrunConsole = state;  // for the browser tests and the bench
 state.frames = frames;
 
 // ---------------------------------------------------------------- HTTP
-const api = apiOf(() => state.client);
+const api = apiOf(() => state.token);
 
 async function command(label, method, path, body) {
   try {
@@ -275,7 +275,10 @@ function showEvent(e) {
   if (["control_taken", "control_released", "client_joined", "client_left"].includes(e.type)) {
     const took = e.type === "control_taken" && e.previous && e.previous.id === state.client
       && (!e.holder || e.holder.id !== state.client);
-    if (took) say(`Control taken by ${e.holder.name}: this page watches now (STOP still works)`, true);
+    if (took) {
+      state.token = null;
+      say(`Control taken by ${e.holder.name}${e.stopped ? ` (${e.stopped})` : ""}: this page watches now (STOP still works)`, true);
+    }
     showControl(e);
   }
   if (e.type === "confirm_requested") askOperator(e);
@@ -325,8 +328,9 @@ function applyControl() {
 
 $("#take-control").addEventListener("click", () => {
   const holder = state.control && state.control.holder;
-  if (holder && !window.confirm(`${holder.name} holds control. Take it? (That page is told.)`)) return;
-  command("Take control", "POST", "/control/take");
+  if (holder && !window.confirm(`${holder.name} holds control. Take over? (Its motion is stopped first; it is told.)`)) return;
+  takeControl(state, Boolean(holder)).then((control) => { showControl(control); say("Take control: this page holds control"); })
+    .catch((err) => say(`Take control: ${err.message}`, true));
 });
 
 // ---------------------------------------------------------------- confirm dialog

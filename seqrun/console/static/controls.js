@@ -23,13 +23,14 @@ export function say(text, isError = false) {
   m.title = text;
 }
 
-// The API over HTTP: JSON in and out, the page's live client id in a header (who commands);
-// a refusal is said in the message bar and thrown (with its HTTP status).
-export function apiOf(clientId) {
+// The API over HTTP: JSON in and out, the page's control secret in a header (the console
+// gave it to this page alone when it took control; kept in memory, never stored); a
+// refusal is said in the message bar and thrown (with its HTTP status).
+export function apiOf(secret) {
   return async function api(method, path, body) {
     const headers = { Accept: "application/json" };
-    const client = clientId();
-    if (client) headers["X-Seqrun-Client"] = client;
+    const token = secret();
+    if (token) headers["X-Seqrun-Control"] = token;
     if (body !== undefined) headers["Content-Type"] = "application/json";
     let response;
     try {
@@ -77,6 +78,29 @@ export const LOST_MS = 2000;
 // server takes a page silent for 2 s during its motion as gone), reconnected a second after
 // it closed. setLost(lost, why): the page's lost contact; closed(): its own clean-up (a
 // held jog); onData(message): every message, the hello after the client id is known.
+// Requests on the live connection that wait for their reply (id -> {resolve, reject}).
+const waiting = new Map();
+let liveIds = 0;
+
+// A request on the live connection; a promise of its reply (rejected with its error).
+export function liveRequest(state, fields) {
+  return new Promise((resolve, reject) => {
+    const ws = state.ws;
+    if (!ws || ws.readyState !== WebSocket.OPEN) { reject(new Error("the live connection is closed")); return; }
+    const id = `req-${++liveIds}`;
+    waiting.set(id, { resolve, reject });
+    ws.send(JSON.stringify({ ...fields, id }));
+  });
+}
+
+// This page takes control (takeOver: from the page or client holding it, whose motion is
+// stopped first and who is told); the secret comes back in the reply, for this page alone.
+export async function takeControl(state, takeOver) {
+  const answer = await liveRequest(state, { op: "take_control", take_over: takeOver });
+  state.token = answer.token;
+  return answer.control;
+}
+
 export function connectLive(state, handlers) {
   const { setLost, closed, onData } = handlers;
   const ws = new WebSocket(`${location.protocol === "https:" ? "wss" : "ws"}://${location.host}${API}/live`);
@@ -90,6 +114,9 @@ export function connectLive(state, handlers) {
     clearInterval(ping);
     $("#conn").textContent = "offline"; $("#conn").className = "badge off";
     state.client = null;
+    state.token = null;  // control ends with the connection
+    for (const w of waiting.values()) w.reject(new Error("the live connection closed"));
+    waiting.clear();
     closed();
     setLost(true, "The live connection closed.");
     setTimeout(() => connectLive(state, handlers), 1000);
@@ -100,7 +127,14 @@ export function connectLive(state, handlers) {
     const data = JSON.parse(msg.data);
     if (data.type === "hello") {
       state.client = data.client;
+      state.token = data.token || null;  // this page got control on joining
       setLost(false);
+    }
+    if (data.type === "reply" && waiting.has(data.id)) {
+      const w = waiting.get(data.id);
+      waiting.delete(data.id);
+      if (data.ok) w.resolve(data); else w.reject(new Error(data.error || "refused"));
+      return;
     }
     onData(data);
   };
