@@ -165,7 +165,11 @@ class Activities:
     # ------------------------------------------------------------------ start and end
     def begin(self, kind: str, detail: Mapping[str, Any] | None = None,
               by: str | None = None) -> Activity:
-        """Register ``kind`` as the activity under way; Refused if one is."""
+        """Register ``kind`` as the activity under way; Refused if one is, and for every
+        kind but a Reset (which moves nothing) unless the modules are still the arm whose
+        zero the session uses, powered since it was confirmed (service/arm_identity.py)."""
+        if kind != "reset":
+            self.check_identity()
         with self._state:
             if self._session.closed:
                 raise Refused("the session is closed")
@@ -181,6 +185,15 @@ class Activities:
             detail["by"] = by
         self._publish("activity_started", kind=kind, detail=detail)
         return activity
+
+    def check_identity(self) -> None:
+        """:func:`~seqrun.service.arm_identity.check_identity` on the session's arm, holding
+        the bus (an idle poll may be reading)."""
+        from seqrun.service.arm_identity import check_identity
+
+        session = self._session
+        with self.bus:
+            check_identity(session.driver, session.zero)
 
     def end(self, activity: Activity, result: ActivityResult) -> None:
         with self._state:
