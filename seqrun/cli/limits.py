@@ -32,10 +32,10 @@ JointsOption = Annotated[Optional[str], typer.Option(
 
 def _open(arm_file, project_dir, interface, channel, bitrate, bus_kwargs, sim,
           response_timeout_ms, what: str, arm_id: str | None = None, *,
-          moves: bool = False, zero_confirmed: str | None = None):
+          moves: bool = False, zero_confirmed: str | None = None, quiet: bool = False):
     """The context, its bus and the arm's driver; ``moves`` (limits set, which changes
     what the modules let the arm do): with the zero decided and the arm's identity checked
-    first, as before every motion."""
+    first, as before every motion; ``quiet`` (--json): what that says goes to stderr."""
     from seqrun.cli.bus_owner import live_targets
     from seqrun.service.arm_context import resolve_context
     from seqrun.service.connection import response_timeout_s
@@ -56,7 +56,8 @@ def _open(arm_file, project_dir, interface, channel, bitrate, bus_kwargs, sim,
     if moves:
         from seqrun.cli.zero import open_arm_at_zero
 
-        connection, driver, _ = open_arm_at_zero(context, zero_confirmed, arm_id)
+        connection, driver, _ = open_arm_at_zero(context, zero_confirmed, arm_id,
+                                                 to_stderr=quiet)
         return context, connection, driver
     connection, driver = context.open_arm()
     return context, connection, driver
@@ -157,7 +158,7 @@ def set_command(joints: JointsOption = None, as_json: JsonOption = False,
         context, connection, driver = _open(arm_file, project_dir, interface, channel,
                                             bitrate, bus_kwargs, sim, response_timeout_ms,
                                             "write the limits of", arm_id, moves=True,
-                                            zero_confirmed=zero_confirmed)
+                                            zero_confirmed=zero_confirmed, quiet=as_json)
     try:
         with user_errors():
             modules_of(context.arm, names)   # unknown joint names: one line, exit 2

@@ -248,23 +248,25 @@ ZeroConfirmedOption = Annotated[Optional[str], typer.Option(
     "power-on without asking (POSE must be where the arm was recorded powered off).")]
 
 
-def open_arm_at_zero(context, confirmed: str | None, arm_id: str | None = None):
+def open_arm_at_zero(context, confirmed: str | None, arm_id: str | None = None, *,
+                     to_stderr: bool = False):
     """For a command that moves without a session (home, limits set): open the context's
     bus, decide its zero as a run does (asked after a power-on, or ``confirmed``), open the
     arm's driver with it and check the arm's identity before anything moves
     (service/arm_identity.py). ``(connection, driver, zero)``; a refusal is one line and
-    its exit code, the bus closed again."""
+    its exit code, the bus closed again. ``to_stderr``: what it says goes to stderr (the
+    command's stdout is JSON)."""
     from seqrun.cli.questions import ask
     from seqrun.service.arm_identity import open_checked_driver
     from seqrun.service.connection import response_timeout_s
 
     where = f"arm {arm_id}: " if arm_id else ""
     connection = context.open_connection(transient=True)
-    typer.echo(context.headline(connection))
+    typer.echo(context.headline(connection), err=to_stderr)
     try:
         zero = zero_or_exit(connection, context.arm, lambda q: ask(where + q, False),
-                            lambda text: typer.echo(where + text), confirmed=confirmed,
-                            arm_id=arm_id)
+                            lambda text: typer.echo(where + text, err=to_stderr),
+                            confirmed=confirmed, arm_id=arm_id)
         timeout = response_timeout_s(context.arm, context.response_timeout_ms)
         with user_errors():
             driver = open_checked_driver(connection, context.arm, zero, timeout)
