@@ -168,8 +168,6 @@ class Activities:
         """Register ``kind`` as the activity under way; Refused if one is, and for every
         kind but a Reset (which moves nothing) unless the modules are still the arm whose
         zero the session uses, powered since it was confirmed (service/arm_identity.py)."""
-        if kind != "reset":
-            self.check_identity()
         with self._state:
             if self._session.closed:
                 raise Refused("the session is closed")
@@ -180,6 +178,13 @@ class Activities:
             activity = Activity(kind, self._ids, by)
             self._current = activity
             self.halt_read_back = False
+        if kind != "reset":  # (registered first: no second activity waits for the bus)
+            try:
+                self.check_identity()
+            except BaseException:
+                with self._state:
+                    self._current = None
+                raise
         detail = dict(detail or {})
         if by is not None:
             detail["by"] = by
