@@ -17,7 +17,7 @@ if TYPE_CHECKING:
     from seqrun.drivers.base import ArmDriver, ArmIdentity, CommandConfirmation
     from seqrun.service.connection import Connection
 
-__all__ = ["home_and_confirm", "identity_and_homed", "identity_and_session_mark",
+__all__ = ["home_and_confirm", "identity_and_session_mark",
            "leave_session_mark", "modules_homed", "modules_of",
            "read_joints", "read_status", "status_rows"]
 
@@ -83,19 +83,6 @@ def modules_homed(connection: Connection, arm: ArmDescription) -> bool:
     driver = open_driver(arm, connection)
     try:
         return driver.homed()
-    finally:
-        driver.close()
-
-
-def identity_and_homed(connection: Connection,
-                       arm: ArmDescription) -> tuple[ArmIdentity, bool]:
-    """Which physical arm is on the bus (its modules' serial numbers) and whether every
-    module reports homed; reads only."""
-    from seqrun.drivers.registry import open_driver
-
-    driver = open_driver(arm, connection)
-    try:
-        return driver.identity(), driver.homed()
     finally:
         driver.close()
 
