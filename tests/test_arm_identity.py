@@ -91,6 +91,20 @@ def test_the_mark_lives_in_the_modules_until_they_power_off():
         again.close()
 
 
+def test_the_mark_is_a_tiny_change_of_the_homing_velocity_and_reads_back():
+    from seqrun.drivers.powercube.session_mark import mark_of, marked_velocity
+
+    for stored in (0.1, -0.25, 1.0):
+        for mark in (1, 777, 4095):
+            velocity = marked_velocity(stored, mark)
+            assert velocity != stored and abs(velocity - stored) <= 5e-4 * abs(stored)
+            assert mark_of(velocity, stored) == mark
+        assert mark_of(stored, stored) is None        # a power-on: the stored value
+        assert mark_of(stored * 1.5, stored) is None  # somebody set another velocity
+    with pytest.raises(ValueError):
+        marked_velocity(0.1, 4096)
+
+
 def test_a_firmware_that_saves_the_value_reads_as_no_mark():
     """The pessimistic firmware (FHomeVel saved as the stored DefHomeVel): a mark that
     would outlive a power cycle is never believed."""

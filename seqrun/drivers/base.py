@@ -299,9 +299,9 @@ class ArmDriver(Protocol):
         told from a value that outlives a power cycle; reads only."""
 
     def write_session_mark(self, mark: int) -> bool:
-        """Leave ``mark`` (1 .. SESSION_MARK_LIMIT - 1) in the drives' volatile memory, where a power cycle
-        erases it, and read it back: False when the drives do not hold it (the caller
-        treats every command as the first after a power-on)."""
+        """Leave ``mark`` (1 .. SESSION_MARK_LIMIT - 1) in the drives' volatile memory,
+        where a power cycle erases it, and read it back: False when the drives do not hold
+        it (the caller treats every command as the first after a power-on)."""
 
     def watch_foreign(self, on_foreign: Callable[[ForeignTraffic], None]) -> None:
         """Call ``on_foreign`` for every request on the bus this process did not send."""
