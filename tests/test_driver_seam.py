@@ -133,6 +133,7 @@ class IdealArm:
         self.calls: list[str] = []
         self.cycles = 0
         self.closed = False
+        self.mark: int | None = None
 
     # -- the family (what the registry asks of the class)
     @classmethod
@@ -230,6 +231,13 @@ class IdealArm:
         getattr(self, command)(modules)
         return CommandConfirmation(command, tuple(self.modules), sent=True,
                                    states=self.read_states(), attempts=1)
+
+    def session_mark(self) -> int | None:
+        return self.mark
+
+    def write_session_mark(self, mark: int) -> bool:
+        self.mark = mark
+        return True
 
     def poll(self, *, tolerate_loss: bool = False) -> ArmPoll:
         return ArmPoll(self.positions.tolist(), [0.0] * len(self.modules), self.read_states())

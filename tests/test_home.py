@@ -131,13 +131,20 @@ def test_seqrun_home_of_an_unknown_joint_is_one_line():
         "j5, j6, j7"]
 
 
-def test_seqrun_home_of_a_halted_arm_exits_3_saying_reset_first():
+def test_seqrun_home_of_a_halted_arm_exits_3_saying_reset_first(tmp_path, monkeypatch):
+    from seqrun.drivers.base import ArmIdentity
+    from seqrun.service.zero import ZeroStore
+
+    monkeypatch.setenv("SEQRUN_STATE_DIR", str(tmp_path / "state"))
     clock = RealClock()
-    server = SocketcandServer(SimNetwork(clock, SimArm(clock, faults=["3:halt@0"]),
-                                         spin_window=0.0), port=0)
+    arm = SimArm(clock, faults=["3:halt@0"])
+    ZeroStore(ArmIdentity.of(arm.serials)).set_record(
+        "park", by="test", joints_deg=ARM.power_off_joints_deg("park"))
+    server = SocketcandServer(SimNetwork(clock, arm, spin_window=0.0), port=0)
     server.start()
     try:
-        result = CliRunner().invoke(app, ["home", "--joints", "j1,j3", "-i", "socketcand",
+        result = CliRunner().invoke(app, ["home", "--joints", "j1,j3", "--zero-confirmed",
+                                          "park", "-i", "socketcand",
                                           "--bus-kwargs", "host=127.0.0.1",
                                           f"port={server.port}"])
     finally:

@@ -17,9 +17,29 @@ F = StateFlag
 @pytest.fixture
 def two_arms(tmp_path, monkeypatch):
     """Two simulated arms on two servers (own serials and power-on pose), a campaign with
-    arms A and B on them."""
+    arms A and B on them, each arm's zero recorded (A: Park, B: Totem)."""
+    from projecttree import shipped_arm
+    from seqrun.drivers.base import ArmIdentity
+    from seqrun.service.zero import ZeroStore
+
+    arm = shipped_arm()
     with two_served_campaign(tmp_path, monkeypatch) as arms:
+        for server, pose in ((arms["A"], "park"), (arms["B"], "totem")):
+            ZeroStore(ArmIdentity.of(server.network.arm.serials)).set_record(
+                pose, by="test", joints_deg=arm.power_off_joints_deg(pose))
         yield arms
+
+
+def home(*args: str):
+    """``seqrun home``; the operator says yes to each arm's zero question (issue 43: the
+    zero is confirmed before every motion after a power-on)."""
+    return CliRunner().invoke(app, ["home", *args], input="y\ny\n")
+
+
+def lines_of(result) -> list[str]:
+    """The output's lines (an answer typed to a question ends its line: the test's input
+    is not echoed)."""
+    return result.output.replace("[y/N] ", "[y/N]\n").strip().splitlines()
 
 
 def homed(server, modules=range(1, 8)) -> bool:
@@ -33,9 +53,9 @@ def none_homed(server) -> bool:
 
 def test_home_homes_every_arm_and_confirms_each(two_arms):
     assert none_homed(two_arms["A"]) and none_homed(two_arms["B"])
-    result = CliRunner().invoke(app, ["home"])
+    result = home()
     assert result.exit_code == 0, result.output
-    lines = result.output.splitlines()
+    lines = lines_of(result)
     for arm in "AB":
         verdicts = [l for l in lines if l.startswith(f"arm {arm}: Home confirmed by modules "
                                                       "1, 2, 3, 4, 5, 6, 7 in ")]
@@ -44,7 +64,7 @@ def test_home_homes_every_arm_and_confirms_each(two_arms):
 
 
 def test_home_of_one_arm_by_its_id_touches_only_that_arm(two_arms):
-    result = CliRunner().invoke(app, ["home", "--arm-id", "B", "--joints", "j2,j3"])
+    result = home("--arm-id", "B", "--joints", "j2,j3")
     assert result.exit_code == 0, result.output
     assert "arm A" not in result.output
     assert "arm B: Home confirmed by modules 2, 3 in " in result.output
@@ -54,9 +74,9 @@ def test_home_of_one_arm_by_its_id_touches_only_that_arm(two_arms):
 
 def test_an_arm_that_fails_does_not_stop_the_others_and_is_named(two_arms):
     two_arms["A"].network.arm.module(3)._flags |= F.HALTED      # A's j3 is halted
-    result = CliRunner().invoke(app, ["home"])
+    result = home()
     assert result.exit_code == 3, result.output
-    lines = result.output.strip().splitlines()
+    lines = lines_of(result)
     assert any(l.startswith("error: arm A: home not sent: module(s) 3 halted or in error")
                for l in lines), result.output
     assert "arm B: Home confirmed by modules 1, 2, 3, 4, 5, 6, 7" in result.output
@@ -71,13 +91,13 @@ def test_home_is_refused_for_the_arm_whose_bus_a_run_holds(two_arms):
     key = resolve_context(arm_id="A").bus.key
     assert key is not None
     with claim_bus(*key, "seqrun run sequences/hold.yaml"):
-        result = CliRunner().invoke(app, ["home"])
+        result = home()
     assert result.exit_code == 2, result.output
-    refusal = [l for l in result.output.splitlines() if l.startswith("error: arm A: ")]
+    refusal = [l for l in lines_of(result) if l.startswith("error: arm A: ")]
     assert len(refusal) == 1 and "seqrun run sequences/hold.yaml" in refusal[0], \
         result.output
     assert none_homed(two_arms["A"]) and homed(two_arms["B"])
-    assert result.output.strip().splitlines()[-1] == \
+    assert lines_of(result)[-1] == \
         "error: not confirmed for arm A (every arm was asked)"
 
 

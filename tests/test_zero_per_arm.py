@@ -101,13 +101,14 @@ def test_campaign_b_after_a_power_cycle_at_totem_uses_the_arms_zero():
     by campaign A and powered on again there, and A confirmed Totem and started the
     modules. Campaign B now uses Totem (the arm's zero), not its old Park: the move "to
     Totem" leaves the arm where it is."""
-    store_of().set_record("park", by="test")
+    store_of().set_record("park", by="test", joints_deg=ARM.power_off_joints_deg("park"))
     first = power_on()  # session 1, at Park
     try:
         zero_at_run_start(first, ARM, lambda q: True, print)
     finally:
         first.close()
-    store_of().set_record("totem", by="shutdown.yaml")  # campaign A's shutdown
+    store_of().set_record("totem", by="shutdown.yaml",  # campaign A's shutdown
+                          joints_deg=ARM.power_off_joints_deg("totem"))
     second = power_on()  # session 2, at Totem: the modules read 0 there
     questions = []
     try:
@@ -130,7 +131,8 @@ def test_a_second_arm_is_not_shown_at_the_first_arms_zero(served):
     """Arm 1 was recorded at Totem. Arm 2 (other serials), powered on at Park, has no
     record: status says its zero is unknown and shows the arm file's Park offsets, and a
     run on it refuses before anything moves."""
-    store_of(FIRST).set_record("totem", by="shutdown.yaml")
+    store_of(FIRST).set_record("totem", by="shutdown.yaml",
+                               joints_deg=ARM.power_off_joints_deg("totem"))
     bus, _ = served(SECOND)
     status = invoke("status", "--json", *bus)
     assert status.exit_code == 0, status.output
@@ -152,7 +154,8 @@ def test_a_second_arm_is_not_shown_at_the_first_arms_zero(served):
 def test_a_module_exchanged_is_named(served):
     """One module of the recorded arm replaced: no record for this set of modules, and
     the refusal says which record shares the others."""
-    store_of(FIRST).set_record("totem", by="shutdown.yaml")
+    store_of(FIRST).set_record("totem", by="shutdown.yaml",
+                               joints_deg=ARM.power_off_joints_deg("totem"))
     connection = power_on({**FIRST, 4: 9_999_004})
     try:
         with pytest.raises(UserInputError) as refused:
@@ -164,7 +167,7 @@ def test_a_module_exchanged_is_named(served):
 
 def test_a_file_of_other_serials_is_refused():
     """A record copied over this arm's file: one line naming both sets of serials."""
-    store_of(SECOND).set_record("totem", by="test")
+    store_of(SECOND).set_record("totem", by="test", joints_deg=ARM.power_off_joints_deg("totem"))
     mine = store_of(FIRST)
     mine.folder.mkdir(parents=True, exist_ok=True)
     mine.path.write_bytes(store_of(SECOND).path.read_bytes())
@@ -191,7 +194,8 @@ def test_an_in_use_edited_by_hand_is_refused_not_used(served):
     """The arm was confirmed at Park and started; someone changes in_use to Totem in the
     file. seqrun refuses the file (one line, how to record again) instead of using it."""
     store = store_of()
-    store.set_in_use(store.set_record("park", by="test"))
+    store.set_in_use(store.set_record("park", by="test",
+                                      joints_deg=ARM.power_off_joints_deg("park")), 7)
     _edit(store, in_use={"pose": "totem"})
     # (the modules were started at this power-on: they report HOME_OK)
     bus, arm = served(FIRST, options=ModuleOptions(home_ok_at_power_on=True))
@@ -213,7 +217,7 @@ def test_yes_does_not_answer_does_the_arm_stand_in_totem(served, tmp_path, monke
     # (a real-time arm in this process on a loaded test machine: 200 ms per answer)
     monkeypatch.setenv("SEQRUN_RESPONSE_TIMEOUT_MS", "200")
     bus, arm = served(FIRST)
-    store_of().set_record("totem", by="shutdown.yaml")
+    store_of().set_record("totem", by="shutdown.yaml", joints_deg=ARM.power_off_joints_deg("totem"))
     sequence = ROOT / "sequences" / "totem.yaml"
     declined = invoke("run", sequence, "--yes", "--plain", "--no-report", *bus)
     assert declined.exit_code == 130, declined.output
@@ -233,7 +237,7 @@ def test_yes_does_not_answer_does_the_arm_stand_in_totem(served, tmp_path, monke
     assert confirmed.exit_code == 0, confirmed.output
     assert "Totem now (j1 0°, j2 0°, j3 0°, j4 0°, j5 0°, j6 0°, j7 0°)? yes " \
         "(--zero-confirmed totem)" in " ".join(confirmed.output.split())
-    assert store_of().in_use.pose == "totem"
+    assert store_of().in_use.record.pose == "totem"
 
 
 def test_zero_set_on_the_built_in_simulator_is_one_line():
@@ -297,16 +301,19 @@ def test_every_simulated_arm_has_serials_of_its_own_unless_named():
 
 
 def test_zero_set_while_the_modules_are_on_says_the_zero_in_use_stays(served):
-    """A record made while the modules are homed is the next power-on's zero: the runs
-    until then keep the one confirmed at this power-on, and zero set says so."""
+    """A record made while the modules are on (they hold the mark of the zero confirmed
+    at this power-on) is the next power-on's zero: the runs until then keep the one
+    confirmed at this power-on, and zero set says so."""
     store = store_of()
-    store.set_in_use(store.set_record("park", by="test"))
+    store.set_record("park", by="test", joints_deg=ARM.power_off_joints_deg("park"))
     bus, _ = served(FIRST, options=ModuleOptions(home_ok_at_power_on=True))
+    confirmed = invoke("home", "--zero-confirmed", "park", *bus)
+    assert confirmed.exit_code == 0, confirmed.output
     result = invoke("zero", "set", "totem", "--yes", *bus)
     assert result.exit_code == 0, result.output
-    assert "note: the modules are still on (homed): runs keep the zero confirmed at this " \
+    assert "note: the modules are still on: runs keep the zero confirmed at this " \
         "power-on (Park, recorded" in " ".join(result.output.split())
-    assert store.record.pose == "totem" and store.in_use.pose == "park"
+    assert store.record.pose == "totem" and store.in_use.record.pose == "park"
 
 
 def test_zero_confirmed_must_name_the_zero_in_force_on_the_simulator_too():

@@ -126,7 +126,8 @@ def test_shutdown_records_totem_through_the_power_off_step(state_dir):
     connection = hardware()
 
     def attach(executor):
-        executor.record_zero = lambda pose: str(store.set_record(pose, by="shutdown.yaml"))
+        executor.record_zero = lambda pose: str(store.set_record(
+            pose, by="shutdown.yaml", joints_deg=ARM.power_off_joints_deg(pose)))
     try:
         outcome = run_sequence(loaded, ARM, connection, log_dir=None, confirm=lambda q: True,
                                on_executor=attach)
@@ -207,7 +208,7 @@ def test_real_hardware_without_a_record_refuses_with_the_command_that_sets_one(s
 
 def test_after_a_power_on_the_record_is_shown_and_confirmed_then_in_use(state_dir):
     store = store_of()
-    store.set_record("totem", by="shutdown.yaml")
+    store.set_record("totem", by="shutdown.yaml", joints_deg=ARM.power_off_joints_deg("totem"))
     connection = hardware()
     questions, shown = [], []
     try:
@@ -218,22 +219,26 @@ def test_after_a_power_on_the_record_is_shown_and_confirmed_then_in_use(state_di
     assert zero.pose == "totem"
     assert shown[0].startswith("zero: Totem, recorded ") and "by shutdown.yaml" in shown[0]
     assert questions and "stand in Totem now (j1 0°, j2 0°" in questions[0]
-    assert store.in_use == store.record
+    assert store.in_use.record == store.record and store.in_use.session_mark is not None
 
 
-def test_homed_modules_keep_the_zero_in_use_even_after_a_new_record():
-    """power_off records Totem while the modules stay on: their zeros do not move."""
+def test_the_zero_in_use_stays_while_the_modules_hold_its_mark_even_after_a_new_record():
+    """power_off records Totem while the modules stay on: their zeros do not move. HOME_OK
+    plays no part: only the power-session mark the modules hold says they stayed on."""
     store = store_of()
-    store.set_in_use(store.set_record("park", by="test"))
-    store.set_record("totem", by="shutdown.yaml")
-    zero = zero_for_run(ARM, store, simulator_pose=None, homed=True)
-    assert zero.pose == "park" and zero.question is None
-    assert zero_for_run(ARM, store, simulator_pose=None, homed=False).pose == "totem"
+    store.set_in_use(store.set_record("park", by="test",
+                                      joints_deg=ARM.power_off_joints_deg("park")), 7)
+    store.set_record("totem", by="shutdown.yaml", joints_deg=ARM.power_off_joints_deg("totem"))
+    zero = zero_for_run(ARM, store, simulator_pose=None, session_mark=7)
+    assert zero.pose == "park" and zero.question is None and zero.session_mark == 7
+    assert store.in_use is not None
+    assert zero_for_run(ARM, store, simulator_pose=None, session_mark=8).pose == "totem"
+    assert store.in_use is None  # the stale entry is cleared, not kept for later
 
 
 def _run_after_power_on_at_totem(record: str, answer: bool):
     """The arm was powered off (and on) in Totem; the record says ``record``."""
-    store_of().set_record(record, by="test")
+    store_of().set_record(record, by="test", joints_deg=ARM.power_off_joints_deg(record))
     clock = VirtualClock()
     connection = hardware(clock)
     sent = []
@@ -256,7 +261,7 @@ def test_a_start_up_after_a_shutdown_at_totem_reaches_opsafe():
 
 
 def test_a_wrong_record_is_stopped_by_the_confirm_before_anything_moves():
-    store_of().set_record("park", by="test")
+    store_of().set_record("park", by="test", joints_deg=ARM.power_off_joints_deg("park"))
     connection = hardware()
     sent = []
     connection.bus.arm  # the arm stands in Totem, its modules read zero there
@@ -353,7 +358,8 @@ def test_status_and_pose_save_read_positions_with_the_recorded_zero():
         arm, text = zero_for_reading(connection, ARM)
         assert "zero: unknown (no zero reference recorded" in text
         assert [j.offset_deg for j in arm.joints] == [j.offset_deg for j in ARM.joints]
-        store_of().set_record("totem", by="shutdown.yaml")
+        store_of().set_record("totem", by="shutdown.yaml",
+                              joints_deg=ARM.power_off_joints_deg("totem"))
         arm, text = zero_for_reading(connection, ARM)
     finally:
         connection.close()

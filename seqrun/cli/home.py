@@ -25,6 +25,7 @@ from seqrun.cli.common import (ArmFileOption, BitrateOption, BusKwargsOption,
                                CampaignOption, ChannelOption, InterfaceOption,
                                ResponseTimeoutOption, SimOption, fail, user_errors)
 from seqrun.cli.arm_commands import ArmIdOption
+from seqrun.cli.zero import ZeroConfirmedOption
 
 JointsOption = Annotated[Optional[str], typer.Option(
     "--joints", metavar="J1,J2", help="Home only these joints (names, comma-separated; "
@@ -38,7 +39,8 @@ def home_command(joints: JointsOption = None,
                  channel: ChannelOption = None, bitrate: BitrateOption = None,
                  bus_kwargs: BusKwargsOption = None, sim: SimOption = False,
                  response_timeout_ms: ResponseTimeoutOption = None,
-                 arm_id: ArmIdOption = None) -> None:
+                 arm_id: ArmIdOption = None,
+                 zero_confirmed: ZeroConfirmedOption = None) -> None:
     """Home the modules (enables the motors; a PRL does not move). Confirmed by reading
     every module back (HOME_OK, not moving); exit 3 naming the modules that did not
     confirm, or that are halted or in error (seqrun reset first). Refused while a run or
@@ -51,17 +53,18 @@ def home_command(joints: JointsOption = None,
         ids = arm_ids_of(arm_id, project_dir, interface, channel, arm_file)
     each_arm(ids, lambda one: _home_arm(one, joints, arm_file, project_dir, interface,
                                          channel, bitrate, bus_kwargs, sim,
-                                         response_timeout_ms))
+                                         response_timeout_ms, zero_confirmed))
 
 
 def _home_arm(arm_id, joints, arm_file, project_dir, interface, channel, bitrate, bus_kwargs,
-              sim, response_timeout_ms) -> None:
+              sim, response_timeout_ms, zero_confirmed=None) -> None:
     """Home one arm (None: the one arm of the context) and confirm it; a failure is one
     ``error:`` line and ``typer.Exit`` with its code."""
     from seqrun.cli.arm_commands import command_context
     from seqrun.cli.bus_owner import live_targets
     from seqrun.errors import Refused, UserInputError
     from seqrun.cli.confirmation import confirmed_or_exit
+    from seqrun.cli.zero import open_arm_at_zero
     from seqrun.service.arm_access import home_and_confirm, modules_of
 
     arm = f"arm {arm_id}: " if arm_id is not None else ""
@@ -71,10 +74,9 @@ def _home_arm(arm_id, joints, arm_file, project_dir, interface, channel, bitrate
         modules = modules_of(context.arm, _names(joints))
         try:
             live_targets(context, "home")
-            connection, driver = context.open_arm()
+            connection, driver, _ = open_arm_at_zero(context, zero_confirmed, arm_id)
         except (UserInputError, Refused) as exc:  # which arm's bus is held, or missing
             fail(f"{arm}{exc}")
-    typer.echo(context.headline(connection))
     try:
         result = home_and_confirm(driver, modules)
     finally:

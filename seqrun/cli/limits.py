@@ -19,6 +19,7 @@ from seqrun.cli.app import app
 from seqrun.cli.common import (EXIT_FAULT, ArmFileOption, BitrateOption, BusKwargsOption,
                                CampaignOption, ChannelOption, InterfaceOption, OneArmOption,
                                ResponseTimeoutOption, SimOption, fail, user_errors)
+from seqrun.cli.zero import ZeroConfirmedOption
 
 limits_app = typer.Typer(help="The limits stored in the modules (MinPos/MaxPos/MaxVel/"
                               "MaxAcc/MaxCur) beside the arm file's.", no_args_is_help=True)
@@ -30,7 +31,11 @@ JointsOption = Annotated[Optional[str], typer.Option(
 
 
 def _open(arm_file, project_dir, interface, channel, bitrate, bus_kwargs, sim,
-          response_timeout_ms, what: str, arm_id: str | None = None):
+          response_timeout_ms, what: str, arm_id: str | None = None, *,
+          moves: bool = False, zero_confirmed: str | None = None, quiet: bool = False):
+    """The context, its bus and the arm's driver; ``moves`` (limits set, which changes
+    what the modules let the arm do): with the zero decided and the arm's identity checked
+    first, as before every motion; ``quiet`` (--json): what that says goes to stderr."""
     from seqrun.cli.bus_owner import live_targets
     from seqrun.service.arm_context import resolve_context
     from seqrun.service.connection import response_timeout_s
@@ -48,6 +53,12 @@ def _open(arm_file, project_dir, interface, channel, bitrate, bus_kwargs, sim,
             "no bus configured, and " + ", ".join(f"seqrun pid {h.pid} ({h.command})"
                                                   for h in live)
             + " live on this machine: name its bus with -i/-c (refused while it holds it)")
+    if moves:
+        from seqrun.cli.zero import open_arm_at_zero
+
+        connection, driver, _ = open_arm_at_zero(context, zero_confirmed, arm_id,
+                                                 to_stderr=quiet)
+        return context, connection, driver
     connection, driver = context.open_arm()
     return context, connection, driver
 
@@ -131,10 +142,13 @@ def set_command(joints: JointsOption = None, as_json: JsonOption = False,
                 channel: ChannelOption = None, bitrate: BitrateOption = None,
                 bus_kwargs: BusKwargsOption = None, sim: SimOption = False,
                 response_timeout_ms: ResponseTimeoutOption = None,
-                 arm_id: OneArmOption = None) -> None:
+                 arm_id: OneArmOption = None,
+                 zero_confirmed: ZeroConfirmedOption = None) -> None:
     """Write the arm file's MinPos/MaxPos/MaxVel/MaxAcc (and MaxCur where it gives one)
     into the modules, each confirmed by reading it back (exit 3 naming a value that
-    reads back different), then show them as `limits show` does."""
+    reads back different), then show them as `limits show` does. The positions are
+    converted with the zero in force: after a power-on the operator confirms it first (or
+    --zero-confirmed POSE)."""
     from seqrun.errors import BusError, RunAborted
     from seqrun.service.arm_access import modules_of
     from seqrun.service.module_limits import read_module_limits, write_arm_limits
@@ -143,7 +157,8 @@ def set_command(joints: JointsOption = None, as_json: JsonOption = False,
     with user_errors():
         context, connection, driver = _open(arm_file, project_dir, interface, channel,
                                             bitrate, bus_kwargs, sim, response_timeout_ms,
-                                            "write the limits of", arm_id)
+                                            "write the limits of", arm_id, moves=True,
+                                            zero_confirmed=zero_confirmed, quiet=as_json)
     try:
         with user_errors():
             modules_of(context.arm, names)   # unknown joint names: one line, exit 2

@@ -135,10 +135,14 @@ def save_pose_command(
     typer.secho(context.headline(connection), fg="yellow" if connection.is_simulator else None,
                 bold=True, err=True)
     try:
-        from seqrun.cli.zero import zero_for_reading
+        from seqrun.service.zero import confirmed_zero_for_reading
 
-        # The zero of the arm context: the same store every command reads.
-        arm, zero_text = zero_for_reading(connection, arm)
+        # The zero of the arm context, confirmed at this power-on: angles measured against
+        # an assumed zero would send every later move to this pose elsewhere.
+        try:
+            arm, zero_text = confirmed_zero_for_reading(connection, arm)
+        except UserInputError as exc:
+            fail(str(exc))
         typer.echo(zero_text)
         driver.use_arm(arm)
         reading = driver.read()

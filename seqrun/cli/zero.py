@@ -49,19 +49,27 @@ def _context(arm_file: Optional[Path], project_dir: Optional[Path], interface, c
                            arm_id=arm_id)
 
 
-def _arm_store(arm, connection) -> tuple[ZeroStore, bool]:
-    """The connected arm's store (its identity read from the modules) and whether its
-    modules are homed; UserInputError on the built-in simulator, whose zero is its
-    power-on pose."""
-    from seqrun.service.arm_access import identity_and_homed
+def _arm_store(arm, connection) -> tuple[ZeroStore, int | None]:
+    """The connected arm's store (its identity read from the modules) and the
+    power-session mark its modules hold; UserInputError on the built-in simulator, whose
+    zero is its power-on pose."""
+    from seqrun.service.arm_access import identity_and_session_mark
 
     if connection.is_simulator:
         raise UserInputError(NO_ARM_NAMED)
-    identity, homed = identity_and_homed(connection, arm)
-    return ZeroStore(identity), homed
+    identity, mark = identity_and_session_mark(connection, arm)
+    return ZeroStore(identity), mark
 
 
-def _connected_store(context) -> tuple[ZeroStore, bool]:
+def _in_force(store: ZeroStore, mark: int | None):
+    """The zero confirmed at this power-on while the modules hold its mark, else None."""
+    in_use = store.in_use
+    if in_use is None or in_use.session_mark is None or in_use.session_mark != mark:
+        return None
+    return in_use
+
+
+def _connected_store(context) -> tuple[ZeroStore, int | None]:
     """Open the context's bus (its first line said), and :func:`_arm_store` of the arm
     there; the bus is closed again. Exit 3 when the modules do not answer."""
     connection = context.open_connection(transient=True)
@@ -115,14 +123,14 @@ def show_command(
         if context.bus.is_simulator:  # no arm named: what this machine has recorded
             _list_machine_records()
             return
-        store, _ = _connected_store(context)
-        record, in_use = store.record, store.in_use
+        store, mark = _connected_store(context)
+        record, in_use = store.record, _in_force(store, mark)
     typer.echo(f"arm      {arm.name} ({store.identity.describe()})")
     typer.echo(f"file     {store.path}")
     typer.echo("record   " + (record.describe() if record else
                               f"none (set one with '{store.set_command}')"))
-    typer.echo("in use   " + (in_use.describe() if in_use else
-                              "none confirmed since a power-on"))
+    typer.echo("in use   " + (in_use.record.describe() if in_use else
+                              "none confirmed since the modules powered on"))
     typer.echo("poses    " + ", ".join(arm.power_off_poses or ["(the arm names none)"]))
 
 
@@ -164,19 +172,25 @@ def set_command(
                                      "angles")
             if not all(math.isfinite(q) for q in degrees):
                 raise UserInputError("--deg: angles must be finite numbers")
+            outside = [f"{j.name} {q:g}° (limits {j.limits_deg[0]:g} .. {j.limits_deg[1]:g}°)"
+                       for j, q in zip(arm.joints, degrees)
+                       if not j.limits_deg[0] <= q <= j.limits_deg[1]]
+            if outside:
+                raise UserInputError(f"--deg: outside the joint limits of arm '{arm.name}': "
+                                     f"{', '.join(outside)}; nothing recorded")
             joints = dict(zip(arm.joint_names, degrees))
             name, title = POSE_IN_DEGREES, "the pose"
         else:
             assert pose is not None
             arm.power_off_pose(pose)
             name = pose if pose in arm.power_off_poses else pose.lower()
-            joints, title = None, pose_title(name)
-        stands = joints if joints is not None else arm.power_off_joints_deg(name)
+            joints, title = arm.power_off_joints_deg(name), pose_title(name)
+        stands = joints
         if context.bus.is_simulator:
             raise UserInputError(NO_ARM_NAMED)
-        store, homed = _connected_store(context)
+        store, mark = _connected_store(context)
         try:
-            in_use = store.in_use if homed else None
+            in_use = _in_force(store, mark)
         except UserInputError:  # an untrusted file: this record replaces it
             in_use = None
     angles = ", ".join(f"{n} {v:g}°" for n, v in stands.items())
@@ -191,9 +205,9 @@ def set_command(
                                   arm_name=arm.name)
     typer.echo(f"zero reference recorded: {record.describe()} ({store.path})")
     if in_use is not None:
-        typer.echo(f"note: the modules are still on (homed): runs keep the zero confirmed at "
-                   f"this power-on ({in_use.describe()}) until they are powered off; the "
-                   "record is the zero of the next power-on")
+        typer.echo(f"note: the modules are still on: runs keep the zero confirmed at "
+                   f"this power-on ({in_use.record.describe()}) until they are powered off; "
+                   "the record is the zero of the next power-on")
 
 
 def zero_at_run_start(connection, arm, ask: Callable[[str], bool],
@@ -229,6 +243,39 @@ def zero_or_exit(connection, arm, ask: Callable[[str], bool], show: Callable[[st
             fail(f"{where}cannot read the modules' state: {exc}", EXIT_FAULT)
 
 
+ZeroConfirmedOption = Annotated[Optional[str], typer.Option(
+    "--zero-confirmed", metavar="POSE", help="Answer 'does the arm stand in POSE?' after a "
+    "power-on without asking (POSE must be where the arm was recorded powered off).")]
+
+
+def open_arm_at_zero(context, confirmed: str | None, arm_id: str | None = None, *,
+                     to_stderr: bool = False):
+    """For a command that moves without a session (home, limits set): open the context's
+    bus, decide its zero as a run does (asked after a power-on, or ``confirmed``), open the
+    arm's driver with it and check the arm's identity before anything moves
+    (service/arm_identity.py). ``(connection, driver, zero)``; a refusal is one line and
+    its exit code, the bus closed again. ``to_stderr``: what it says goes to stderr (the
+    command's stdout is JSON)."""
+    from seqrun.cli.questions import ask
+    from seqrun.service.arm_identity import open_checked_driver
+    from seqrun.service.connection import response_timeout_s
+
+    where = f"arm {arm_id}: " if arm_id else ""
+    connection = context.open_connection(transient=True)
+    typer.echo(context.headline(connection), err=to_stderr)
+    try:
+        zero = zero_or_exit(connection, context.arm, lambda q: ask(where + q, False),
+                            lambda text: typer.echo(where + text, err=to_stderr),
+                            confirmed=confirmed, arm_id=arm_id)
+        timeout = response_timeout_s(context.arm, context.response_timeout_ms)
+        with user_errors():
+            driver = open_checked_driver(connection, context.arm, zero, timeout)
+    except BaseException:
+        connection.close()
+        raise
+    return connection, driver, zero
+
+
 def zero_for_reading(connection, arm, project=None):
     """The arm with the zero reference in force for reading positions (status, pose save):
     ``(arm, text)``; see :func:`seqrun.service.zero.zero_for_reading`."""
@@ -237,5 +284,6 @@ def zero_for_reading(connection, arm, project=None):
     return reading(connection, arm)
 
 
-__all__ = ["zero_at_run_start", "zero_or_exit", "zero_for_reading", "BusError",
+__all__ = ["zero_at_run_start", "zero_or_exit", "zero_for_reading", "open_arm_at_zero",
+           "ZeroConfirmedOption", "BusError",
            "UserInputError"]

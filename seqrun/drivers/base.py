@@ -27,6 +27,9 @@ from seqrun.arm.planner import Limits, MovePlan
 if TYPE_CHECKING:
     from seqrun.arm.description import ArmDescription
 
+#: Power-session marks are 1 .. SESSION_MARK_LIMIT - 1 (:meth:`ArmDriver.write_session_mark`).
+SESSION_MARK_LIMIT = 4096
+
 #: Where a driver sends its events (the executor's ``emit``: type, then fields).
 EventSink = Callable[..., None]
 
@@ -289,6 +292,16 @@ class ArmDriver(Protocol):
     def homed(self) -> bool:
         """Every module reports homed (no power-on since the last start-up); reads only,
         a lost answer asked again."""
+
+    def session_mark(self) -> int | None:
+        """The power-session mark the drives hold (written by :meth:`write_session_mark`
+        since they last powered on), None when they hold none, differ, or one cannot be
+        told from a value that outlives a power cycle; reads only."""
+
+    def write_session_mark(self, mark: int) -> bool:
+        """Leave ``mark`` (1 .. SESSION_MARK_LIMIT - 1) in the drives' volatile memory,
+        where a power cycle erases it, and read it back: False when the drives do not hold
+        it (the caller treats every command as the first after a power-on)."""
 
     def watch_foreign(self, on_foreign: Callable[[ForeignTraffic], None]) -> None:
         """Call ``on_foreign`` for every request on the bus this process did not send."""

@@ -165,7 +165,9 @@ class Activities:
     # ------------------------------------------------------------------ start and end
     def begin(self, kind: str, detail: Mapping[str, Any] | None = None,
               by: str | None = None) -> Activity:
-        """Register ``kind`` as the activity under way; Refused if one is."""
+        """Register ``kind`` as the activity under way; Refused if one is, and for every
+        kind but a Reset (which moves nothing) unless the modules are still the arm whose
+        zero the session uses, powered since it was confirmed (service/arm_identity.py)."""
         with self._state:
             if self._session.closed:
                 raise Refused("the session is closed")
@@ -176,11 +178,27 @@ class Activities:
             activity = Activity(kind, self._ids, by)
             self._current = activity
             self.halt_read_back = False
+        if kind != "reset":  # (registered first: no second activity waits for the bus)
+            try:
+                self.check_identity()
+            except BaseException:
+                with self._state:
+                    self._current = None
+                raise
         detail = dict(detail or {})
         if by is not None:
             detail["by"] = by
         self._publish("activity_started", kind=kind, detail=detail)
         return activity
+
+    def check_identity(self) -> None:
+        """:func:`~seqrun.service.arm_identity.check_identity` on the session's arm, holding
+        the bus (an idle poll may be reading)."""
+        from seqrun.service.arm_identity import check_identity
+
+        session = self._session
+        with self.bus:
+            check_identity(session.driver, session.zero)
 
     def end(self, activity: Activity, result: ActivityResult) -> None:
         with self._state:

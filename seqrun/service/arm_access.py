@@ -17,7 +17,8 @@ if TYPE_CHECKING:
     from seqrun.drivers.base import ArmDriver, ArmIdentity, CommandConfirmation
     from seqrun.service.connection import Connection
 
-__all__ = ["home_and_confirm", "identity_and_homed", "modules_homed", "modules_of",
+__all__ = ["home_and_confirm", "identity_and_session_mark",
+           "leave_session_mark", "modules_homed", "modules_of",
            "read_joints", "read_status", "status_rows"]
 
 
@@ -86,15 +87,27 @@ def modules_homed(connection: Connection, arm: ArmDescription) -> bool:
         driver.close()
 
 
-def identity_and_homed(connection: Connection,
-                       arm: ArmDescription) -> tuple[ArmIdentity, bool]:
-    """Which physical arm is on the bus (its modules' serial numbers) and whether every
-    module reports homed; reads only."""
+def identity_and_session_mark(connection: Connection,
+                              arm: ArmDescription) -> tuple[ArmIdentity, int | None]:
+    """Which physical arm is on the bus (its modules' serial numbers) and the
+    power-session mark its modules hold (None: none since they powered on); reads only."""
     from seqrun.drivers.registry import open_driver
 
     driver = open_driver(arm, connection)
     try:
-        return driver.identity(), driver.homed()
+        return driver.identity(), driver.session_mark()
+    finally:
+        driver.close()
+
+
+def leave_session_mark(connection: Connection, arm: ArmDescription, mark: int) -> bool:
+    """Leave the power-session ``mark`` in the arm's modules; False when they do not keep
+    it (read back)."""
+    from seqrun.drivers.registry import open_driver
+
+    driver = open_driver(arm, connection)
+    try:
+        return driver.write_session_mark(mark)
     finally:
         driver.close()
 

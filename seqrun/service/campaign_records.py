@@ -79,7 +79,9 @@ def zero_recorder(store: Any, arm: Any, loaded: Any) -> Callable[[str], str]:
         from seqrun.errors import RunAborted, UserInputError
 
         try:
-            entry = store.set_record(pose, by=Path(str(loaded.file)).name, arm_name=arm.name)
+            entry = store.set_record(pose, by=Path(str(loaded.file)).name,
+                                     joints_deg=arm.power_off_joints_deg(pose),
+                                     arm_name=arm.name)
         except UserInputError as exc:  # (a folder this user may not write): the step fails
             raise RunAborted("power_off", f"power_off: {exc}; the zero reference of the "
                                           "next power-on is NOT recorded") from None

@@ -10,8 +10,17 @@ per arm:
   ``seqrun zero set --deg Q1 ... Q7``. It becomes the zero reference at the next
   power-on, once the operator has confirmed that the arm stands in that pose.
 - ``in_use``: the zero reference of the modules' current power session (confirmed at the
-  last power-on). While the modules stay homed, runs use it: a ``power_off`` step that
-  records Totem does not change the zeros of modules that are still on.
+  last power-on) and the power-session mark then left in the modules' RAM
+  (``ArmDriver.write_session_mark``). While the modules read that mark back, runs use it:
+  a ``power_off`` step that records Totem does not change the zeros of modules that are
+  still on. A power cycle erases the mark; HOME_OK says nothing about it (modules may
+  power on homed, ``seqrun home`` sets it). An ``in_use`` whose mark is gone is cleared.
+
+Both hold the pose's joint angles themselves (user degrees), with the pose's name: the
+offsets follow from the angles, never from what an arm file says that name means today.
+A record of an older seqrun (format 2) names a pose only: its angles are taken from the
+arm file in use and it always needs the operator's word again (its ``in_use`` is dropped:
+it has no mark), after which it is written in this format.
 
 Both belong to the physical arm, not to an arm file, a user or a campaign: the store is
 keyed by the arm's identity (its modules' serial numbers, read at connect through the
@@ -28,9 +37,10 @@ import datetime as _dt
 import getpass
 import hashlib
 import json
+import math
 import os
 from collections.abc import Callable, Mapping
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -45,7 +55,11 @@ STATE_DIR_ENV = "SEQRUN_STATE_DIR"
 #: This machine's state: shared by every user (docs/safety.md says how to create it).
 MACHINE_STATE_DIR = Path("/var/lib/seqrun")
 #: The file format (a file of another format is refused, not guessed at).
-FORMAT = "seqrun zero reference 2"
+FORMAT = "seqrun zero reference 3"
+#: The format before the joint angles and the power-session mark (read, then migrated).
+OLD_FORMAT = "seqrun zero reference 2"
+#: Two angles closer than this (degrees) are the same pose.
+SAME_ANGLE_DEG = 1e-6
 #: ``ZeroRecord.pose`` of a record given in degrees (``seqrun zero set --deg``).
 POSE_IN_DEGREES = "joints"
 #: The command that records the zero reference (the operator adds the arm's bus options).
@@ -87,20 +101,37 @@ def _degrees(values: Mapping[str, float]) -> str:
     return ", ".join(f"{n} {v:g}°" for n, v in values.items())
 
 
+def _same_angles(a: Mapping[str, float], b: Mapping[str, float]) -> bool:
+    return sorted(a) == sorted(b) and all(abs(a[n] - b[n]) <= SAME_ANGLE_DEG for n in a)
+
+
+def _finite_numbers(values: Any) -> bool:
+    return isinstance(values, dict) and all(
+        isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+        for v in values.values())
+
+
 @dataclass(frozen=True)
 class ZeroRecord:
-    """One zero-reference fact: the pose (a power-off pose of the arm file, or joint
-    angles given in degrees), when, by what (a sequence or a command), who."""
+    """One zero-reference fact: the pose (a power-off pose of the arm file by name, or
+    ``POSE_IN_DEGREES``) with its joint angles, when, by what (a sequence or a command),
+    who."""
 
     pose: str
     recorded_at: str  # ISO 8601, local time with offset
     by: str
     user: str = ""
-    #: User degrees by joint name when the pose was given in degrees (pose "joints").
+    #: User degrees by joint name: where the arm stood. None only in a record of an older
+    #: seqrun (a pose name alone): its angles are unknown until the operator confirms.
     joints_deg: dict[str, float] | None = None
 
+    @property
+    def by_name_only(self) -> bool:
+        """An older seqrun's record: a pose name, no angles."""
+        return self.joints_deg is None
+
     def title(self) -> str:
-        if self.joints_deg is not None:
+        if self.pose == POSE_IN_DEGREES and self.joints_deg is not None:
             return f"the pose {_degrees(self.joints_deg)}"
         return pose_title(self.pose)
 
@@ -114,24 +145,47 @@ class ZeroRecord:
         return f"{title or self.title()}, recorded {when} by {self.by}{who}"
 
     def stands_at(self, arm: ArmDescription) -> dict[str, float]:
-        """Where the arm stands (user degrees) in this pose."""
+        """Where the arm stands (user degrees) in this pose: the recorded angles (an older
+        record's: the arm file's angles of its pose name)."""
         if self.joints_deg is not None:
             return dict(self.joints_deg)
         return arm.power_off_joints_deg(self.pose)
 
     def check(self, arm: ArmDescription) -> None:
-        """UserInputError unless ``arm`` has this pose (or these joints)."""
+        """UserInputError unless ``arm`` agrees with this record: the same joints, and a
+        power-off pose of the same name at the same angles (an arm file whose "totem"
+        stands elsewhere than the recorded Totem must not drive with either)."""
         if self.joints_deg is None:
             arm.power_off_pose(self.pose)
-        elif sorted(self.joints_deg) != sorted(arm.joint_names):
+            return
+        if sorted(self.joints_deg) != sorted(arm.joint_names):
             raise UserInputError(f"the recorded pose names joints {', '.join(self.joints_deg)}"
                                  f"; the arm has {', '.join(arm.joint_names)}")
+        if self.pose != POSE_IN_DEGREES:
+            try:
+                file_angles = arm.power_off_joints_deg(self.pose)
+            except UserInputError:
+                return  # a pose this arm file does not name: the angles say it all
+            if not _same_angles(file_angles, self.joints_deg):
+                raise UserInputError(
+                    f"the recorded {pose_title(self.pose)} is {_degrees(self.joints_deg)}; "
+                    f"arm '{arm.name}' says {self.pose} is {_degrees(file_angles)}: the "
+                    "arm file and the record disagree, nothing will move")
 
     def apply(self, arm: ArmDescription) -> ArmDescription:
-        """``arm`` with the offsets of this power-off pose."""
+        """``arm`` with the offsets of this power-off pose (its angles; a pose of the arm
+        file at the same angles by its name, which keeps that name in force)."""
+        if self.joints_deg is None or (self.pose != POSE_IN_DEGREES
+                                       and self.pose.lower() in {
+                                           p.lower() for p in arm.power_off_poses}):
+            return arm.with_zero_reference(self.pose)
+        return arm.with_power_off_joints(self.joints_deg)
+
+    def with_angles(self, arm: ArmDescription) -> ZeroRecord:
+        """This record with its angles written down (an older record's from ``arm``)."""
         if self.joints_deg is not None:
-            return arm.with_power_off_joints(self.joints_deg)
-        return arm.with_zero_reference(self.pose)
+            return self
+        return replace(self, joints_deg=self.stands_at(arm))
 
     def as_dict(self) -> dict:
         data = asdict(self)
@@ -152,14 +206,35 @@ class ZeroRecord:
         if not isinstance(data, dict) or not isinstance(data.get("pose"), str):
             return None
         joints = data.get("joints_deg")
-        if joints is not None and not (isinstance(joints, dict) and all(
-                isinstance(v, (int, float)) and not isinstance(v, bool)
-                for v in joints.values())):
+        if joints is not None and not _finite_numbers(joints):
             return None
         return cls(pose=data["pose"], recorded_at=str(data.get("recorded_at", "")),
                    by=str(data.get("by", "")), user=str(data.get("user", "")),
                    joints_deg=None if joints is None else
                    {str(n): float(v) for n, v in joints.items()})
+
+
+@dataclass(frozen=True)
+class ZeroInUse:
+    """The zero confirmed at the modules' current power-on: the record confirmed (with
+    its angles) and the power-session mark then left in the modules (None: they could
+    not keep one, so every command asks again)."""
+
+    record: ZeroRecord
+    session_mark: int | None
+
+    def as_dict(self) -> dict:
+        return {**self.record.as_dict(), "session_mark": self.session_mark}
+
+    @classmethod
+    def from_dict(cls, data: Any) -> ZeroInUse | None:
+        record = ZeroRecord.from_dict(data)
+        if record is None or record.joints_deg is None:
+            return None  # an older seqrun's: no angles, no mark
+        mark = data.get("session_mark")
+        if mark is not None and (isinstance(mark, bool) or not isinstance(mark, int)):
+            return None
+        return cls(record, mark)
 
 
 def _checksum(fields: Mapping[str, Any]) -> str:
@@ -198,7 +273,7 @@ class ZeroStore:
         except (OSError, ValueError) as exc:
             raise UserInputError(f"zero-reference file {self.path} cannot be read ({exc}): "
                                  f"nothing will move; {self._again()}") from None
-        if not isinstance(data, dict) or data.get("format") != FORMAT:
+        if not isinstance(data, dict) or data.get("format") not in (FORMAT, OLD_FORMAT):
             raise UserInputError(f"zero-reference file {self.path} is not a seqrun zero "
                                  f"reference ({FORMAT!r}): nothing will move; "
                                  f"{self._again()}")
@@ -225,11 +300,14 @@ class ZeroStore:
         return ZeroRecord.from_dict(self._read().get("record"))
 
     @property
-    def in_use(self) -> ZeroRecord | None:
-        """The zero reference confirmed at the current power-on (modules still homed)."""
-        return ZeroRecord.from_dict(self._read().get("in_use"))
+    def in_use(self) -> ZeroInUse | None:
+        """The zero reference confirmed at a power-on, and the mark then left in the
+        modules (it is in use while they read that mark back). An older seqrun's entry
+        (no angles, no mark) is None."""
+        return ZeroInUse.from_dict(self._read().get("in_use"))
 
-    def _write(self, arm_name: str | None = None, **changes: ZeroRecord) -> None:
+    def _write(self, arm_name: str | None = None,
+               **changes: ZeroRecord | ZeroInUse | None) -> None:
         """Replace the file whole; a record that cannot be trusted is replaced too (it is
         what ``seqrun zero set`` is for)."""
         try:
@@ -242,7 +320,11 @@ class ZeroStore:
         if arm_name:
             arm["name"] = arm_name
         fields["arm"] = arm
-        fields.update({key: value.as_dict() for key, value in changes.items()})
+        for key, value in changes.items():
+            if value is None:
+                fields.pop(key, None)
+            else:
+                fields[key] = value.as_dict()
         fields["checksum"] = _checksum(fields)
         temporary = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
         try:
@@ -261,17 +343,35 @@ class ZeroStore:
                 f"(sudo install -d -m 2775 -g GROUP {self.folder}) or set {STATE_DIR_ENV}"
             ) from None
 
-    def set_record(self, pose: str, by: str, *, joints_deg: Mapping[str, float] | None = None,
+    def set_record(self, pose: str, by: str, *, joints_deg: Mapping[str, float],
                    arm_name: str | None = None) -> ZeroRecord:
-        """Record that the arm is (about to be) powered off in ``pose`` (for a pose given
-        in degrees: ``POSE_IN_DEGREES`` and ``joints_deg``)."""
+        """Record that the arm is (about to be) powered off in ``pose`` (a power-off pose's
+        name, or ``POSE_IN_DEGREES``) standing at ``joints_deg``."""
         record = ZeroRecord.now(pose, by, joints_deg)
         self._write(arm_name, record=record)
         return record
 
-    def set_in_use(self, record: ZeroRecord, arm_name: str | None = None) -> None:
-        """The operator confirmed ``record`` at a power-on: the modules' zeros are there."""
-        self._write(arm_name, in_use=record)
+    def set_in_use(self, record: ZeroRecord, session_mark: int | None,
+                   arm_name: str | None = None) -> ZeroInUse:
+        """The operator confirmed ``record`` (with its angles) at a power-on: the modules'
+        zeros are there, and they hold ``session_mark`` (None: they cannot keep one). An
+        older seqrun's record is written again with the angles confirmed."""
+        assert record.joints_deg is not None, "the angles confirmed are written down"
+        in_use = ZeroInUse(record, session_mark)
+        current = self.record
+        if current is not None and current.by_name_only and current.pose == record.pose:
+            self._write(arm_name, in_use=in_use, record=record)
+        else:
+            self._write(arm_name, in_use=in_use)
+        return in_use
+
+    def holds_in_use(self) -> bool:
+        """The file has an ``in_use`` entry (of any format)."""
+        return "in_use" in self._read()
+
+    def clear_in_use(self) -> None:
+        """The modules were powered off since the zero in use was confirmed: forget it."""
+        self._write(None, in_use=None)
 
     def related(self) -> list[tuple[Path, list[int]]]:
         """Other arms' records on this machine that share modules (by serial number) with
@@ -304,12 +404,21 @@ class ZeroInForce:
     question: str | None = None  # asked before anything moves (real hardware, power-on)
     #: The arm's own store (None for the simulator and an arm file without power-off poses).
     store: ZeroStore | None = field(default=None, compare=False, repr=False)
+    #: The power-session mark the modules hold while this zero is theirs (None: the
+    #: simulator, an arm file without power-off poses, modules that keep no mark).
+    session_mark: int | None = None
 
     def apply(self, arm: ArmDescription) -> ArmDescription:
         """``arm`` with the offsets of this zero reference."""
         if self.record is not None:
             return self.record.apply(arm)
         return arm.with_zero_reference(self.pose)
+
+    def stands_at(self, arm: ArmDescription) -> dict[str, float] | None:
+        """The angles of the power-off pose of this zero (None: the arm file's offsets)."""
+        if self.record is not None:
+            return self.record.stands_at(arm)
+        return None if self.pose is None else arm.power_off_joints_deg(self.pose)
 
     def as_dict(self) -> dict:
         return {"pose": self.pose, "text": self.text, "source": self.source,
@@ -325,35 +434,41 @@ def pose_title(name: str) -> str:
 
 
 def zero_for_run(arm: ArmDescription, store: ZeroStore | None, *,
-                 simulator_pose: str | None, homed: bool) -> ZeroInForce:
+                 simulator_pose: str | None, session_mark: int | None) -> ZeroInForce:
     """Which zero reference a run uses.
 
     ``simulator_pose``: the built-in simulator's power-on pose (its modules read zero
     there, so that is the truth; nobody needs asking). ``store``: the connected arm's own
-    record (None only with ``simulator_pose``). ``homed``: every module reports HOME_OK,
-    i.e. no power-on since the last confirmed start. Raises :class:`UserInputError` when
-    the arm may not move: no record, a record of a pose the arm file does not have, or a
-    file that cannot be trusted.
+    record (None only with ``simulator_pose``). ``session_mark``: the power-session mark
+    the modules hold now (``ArmDriver.session_mark``): the zero confirmed at this power-on
+    is in use only while it is the one left then; otherwise the modules were powered off
+    since (or never confirmed), that ``in_use`` is cleared, and the record needs the
+    operator's word. Raises :class:`UserInputError` when the arm may not move: no record,
+    a record the arm file disagrees with, or a file that cannot be trusted.
     """
     if not arm.power_off_poses:
         return ZeroInForce(None, "zero: the arm file's offsets (it names no power-off poses)",
-                           "arm_file", not homed)
+                           "arm_file", session_mark is None)
     if simulator_pose is not None:
         arm.power_off_pose(simulator_pose)  # a pose the arm has
         return ZeroInForce(simulator_pose.lower(),
                            f"zero: {pose_title(simulator_pose)} (the simulator's power-on pose)",
-                           "simulator", not homed)
+                           "simulator", True)
     assert store is not None, "a real arm's zero needs its store"
     how = (f"say where the arm was powered off with '{store.set_command}' on its bus "
            f"(POSE: {', '.join(arm.power_off_poses)}; any other pose: --deg Q1 ... Qn)")
-    record: ZeroRecord | None
-    if homed and (record := store.in_use) is not None:
+    in_use = store.in_use
+    if (in_use is not None and in_use.session_mark is not None
+            and in_use.session_mark == session_mark):
         try:
-            record.check(arm)
+            in_use.record.check(arm)
         except UserInputError as exc:
             raise UserInputError(f"zero reference in {store.path}: {exc}; {how}") from None
-        return ZeroInForce(record.pose, f"zero: {record.describe()} (confirmed at this "
-                           "power-on)", "in_use", False, record, store=store)
+        return ZeroInForce(in_use.record.pose, f"zero: {in_use.record.describe()} (confirmed "
+                           "at this power-on)", "in_use", False, in_use.record, store=store,
+                           session_mark=session_mark)
+    if in_use is not None or store.holds_in_use():
+        store.clear_in_use()  # its power session is over (or it has no mark to tell)
     record = store.record
     if record is None:
         related = store.related()
@@ -369,8 +484,10 @@ def zero_for_run(arm: ArmDescription, store: ZeroStore | None, *,
         record.check(arm)
     except UserInputError as exc:
         raise UserInputError(f"zero reference in {store.path}: {exc}; {how}") from None
+    older = (" (recorded by an older seqrun by name only: these are this arm file's angles "
+             "of it)" if record.by_name_only else "")
     question = (f"The modules take their zero where they were powered off. Does the arm "
-                f"stand in {record.title()} now ({_degrees(record.stands_at(arm))})?")
+                f"stand in {record.title()} now ({_degrees(record.stands_at(arm))}){older}?")
     return ZeroInForce(record.pose, f"zero: {record.describe()}", "record", True, record,
                        question, store=store)
 
@@ -380,9 +497,28 @@ class ZeroNotConfirmed(UserInputError):
     """The operator said the arm does not stand in the recorded pose: nothing moves."""
 
 
-def _confirmed_matches(zero: ZeroInForce, confirmed: str) -> bool:
-    said = confirmed.strip().lower()
-    return zero.pose is not None and said == zero.pose.lower()
+def _confirmed_matches(zero: ZeroInForce, arm: ArmDescription, confirmed: str) -> bool:
+    """``--zero-confirmed POSE`` names the pose of ``zero``: the same *angles* (a name
+    the arm file gives other angles than the record is not that pose)."""
+    truth = zero.stands_at(arm)
+    if truth is None:
+        return False
+    try:
+        said = arm.power_off_joints_deg(confirmed.strip())
+    except UserInputError:
+        return False
+    return _same_angles(said, truth)
+
+
+def _new_mark(previous: int | None) -> int:
+    import secrets
+
+    from seqrun.drivers.base import SESSION_MARK_LIMIT
+
+    while True:
+        mark = 1 + secrets.randbelow(SESSION_MARK_LIMIT - 1)
+        if mark != previous:
+            return mark
 
 
 def zero_at_start(connection: Any, arm: ArmDescription, *, ask: Callable[[str], bool],
@@ -391,7 +527,8 @@ def zero_at_start(connection: Any, arm: ArmDescription, *, ask: Callable[[str], 
     """Decide the zero reference of a run (or a console) on ``connection``, show it, and
     on real hardware after a power-on have the operator confirm the pose before anything
     moves: ``ask(question)``, or ``confirmed`` (``--zero-confirmed POSE``: the operator's
-    explicit word, never ``--yes``), which must name the zero reference in force.
+    explicit word, never ``--yes``), which must name the zero reference in force (its
+    angles). Once confirmed, a new power-session mark is left in the modules.
 
     ``store``: the arm's store when the caller holds it already; else the arm's identity
     is read from its modules and its store opened here.
@@ -401,21 +538,22 @@ def zero_at_start(connection: Any, arm: ArmDescription, *, ask: Callable[[str], 
     :raises ZeroNotConfirmed: the operator said no.
     :raises ~seqrun.errors.BusError: the modules did not answer.
     """
-    from seqrun.service.arm_access import identity_and_homed
+    from seqrun.service.arm_access import identity_and_session_mark, leave_session_mark
 
     if connection.is_simulator:
-        zero = zero_for_run(arm, None, homed=False, simulator_pose=connection.power_on_pose)
+        zero = zero_for_run(arm, None, session_mark=None,
+                            simulator_pose=connection.power_on_pose)
     else:
-        identity, homed = identity_and_homed(connection, arm)
+        identity, mark = identity_and_session_mark(connection, arm)
         if store is None:
             store = ZeroStore(identity)
         elif store.identity != identity:
             raise UserInputError(f"the zero reference given is that of the arm with "
                                  f"{store.identity.describe()}; the connected modules say "
                                  f"{identity.describe()}: refused, nothing will move")
-        zero = zero_for_run(arm, store, homed=homed, simulator_pose=None)
+        zero = zero_for_run(arm, store, session_mark=mark, simulator_pose=None)
     show(zero.text)
-    if confirmed is not None and not _confirmed_matches(zero, confirmed):
+    if confirmed is not None and not _confirmed_matches(zero, arm, confirmed):
         raise UserInputError(f"--zero-confirmed {confirmed}: the zero reference in force is "
                              f"{zero.text.removeprefix('zero: ')}; nothing was sent")
     if zero.question is not None:
@@ -427,26 +565,50 @@ def zero_at_start(connection: Any, arm: ArmDescription, *, ask: Callable[[str], 
                 "pose. Nothing was sent. Record the pose it was really powered off in with "
                 f"'{SET_COMMAND}' (or --deg Q1 ... Qn) and run again.")
         assert zero.record is not None and zero.store is not None  # asked about a record
-        zero.store.set_in_use(zero.record, arm.name)
+        record = zero.record.with_angles(arm)
+        new_mark = _new_mark(None)
+        kept = leave_session_mark(connection, arm, new_mark)
+        if not kept:
+            show("note: the modules do not keep a power-session mark: the zero is asked "
+                 "again at every command")
+        zero.store.set_in_use(record, new_mark if kept else None, arm.name)
+        zero = replace(zero, record=record, session_mark=new_mark if kept else None)
     return zero
 
 
+def _zero_now(connection: Any, arm: ArmDescription) -> ZeroInForce:
+    from seqrun.service.arm_access import identity_and_session_mark
+
+    if connection.is_simulator:
+        return zero_for_run(arm, None, session_mark=None,
+                            simulator_pose=connection.power_on_pose)
+    identity, mark = identity_and_session_mark(connection, arm)
+    return zero_for_run(arm, ZeroStore(identity), session_mark=mark, simulator_pose=None)
+
+
 def zero_for_reading(connection: Any, arm: ArmDescription) -> tuple[ArmDescription, str]:
-    """The arm with the zero reference in force for reading positions (status, pose save):
-    ``(arm, text)``. Never asks and never refuses (nothing moves); without a usable record
-    the text says the positions use the arm file's offsets."""
+    """The arm with the zero reference in force for reading positions (status): ``(arm,
+    text)``. Never asks and never refuses (nothing moves); without a usable record the
+    text says the positions use the arm file's offsets."""
     from seqrun.errors import BusError
-    from seqrun.service.arm_access import identity_and_homed
 
     try:
-        if connection.is_simulator:
-            zero = zero_for_run(arm, None, homed=False,
-                                simulator_pose=connection.power_on_pose)
-        else:
-            identity, homed = identity_and_homed(connection, arm)
-            zero = zero_for_run(arm, ZeroStore(identity), homed=homed, simulator_pose=None)
+        zero = _zero_now(connection, arm)
     except (UserInputError, BusError) as exc:
         return arm, (f"zero: unknown ({exc}); positions use the arm file's offsets "
                      f"({arm.default_power_off or 'as written'})")
     text = zero.text + (" (not yet confirmed at this power-on)" if zero.question else "")
     return zero.apply(arm), text
+
+
+def confirmed_zero_for_reading(connection: Any,
+                               arm: ArmDescription) -> tuple[ArmDescription, str]:
+    """As :func:`zero_for_reading`, for what is kept (``pose save``): UserInputError unless
+    the zero was confirmed at this power-on (angles measured against an assumed zero
+    would send every later move elsewhere)."""
+    zero = _zero_now(connection, arm)
+    if zero.question is not None:
+        raise UserInputError(
+            f"{zero.text.removeprefix('zero: ')} is not confirmed at this power-on: nothing "
+            "saved; confirm it first (seqrun home --zero-confirmed POSE, or any run)")
+    return zero.apply(arm), zero.text

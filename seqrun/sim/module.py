@@ -49,6 +49,10 @@ Behaviour (sources in the reference; **[I]** marks an assumption that is an opti
   acknowledged and ignored [I] — e.g. TargetPos, which the thesis believed writable.
   Integer twins (IMinPos, TargetVelInc, IPos, ...) convert with IncRatio (rad per tick).
 - Extended acks report the position and short state at receipt (before the command acts).
+- Written parameters live in the module's RAM: a power-on (a new module, e.g. at ``sim
+  serve`` restart) starts again from the stored ones (:func:`default_parameters`, the
+  ``DEF_*`` values). [I: ``fhome_vel_saved_on_write``, a firmware that saves FHomeVel to
+  its EEPROM as it is written: DefHomeVel then reads the written value too.]
 - Config DISABLE_ACK suppresses every acknowledge [I, from the bit's name only].
 
 - Current limit: a motion needs a current (a made-up, deterministic motor model: a fraction
@@ -187,6 +191,10 @@ class ModuleOptions:
     #: Width (mm) of the part standing between the gripper's jaws; 0: no part (a grip
     #: closes fully).
     gripper_part_mm: float = 0.0
+    #: SetExtended FHomeVel (0x64) is also saved as the stored DefHomeVel (0x0F), as if
+    #: the firmware kept it over a power cycle. False: it lives in RAM only, and a
+    #: power-on starts from DefHomeVel. No source says which [I].
+    fhome_vel_saved_on_write: bool = False
 
 
 #: Environment variable the command line reads simulator options from, e.g.
@@ -980,6 +988,8 @@ class SimModule:
         if PARAM_TYPES[param] is WireType.F32:
             value = _f32(float(value))
         self._params[param] = value
+        if param == ParamId.FHOME_VEL and self.options.fhome_vel_saved_on_write:
+            self._params[ParamId.DEF_HOME_VEL] = value
         if param == _P_CONFIG and not int(value) & ConfigFlag.WATCHDOG_ENABLE:
             self._watchdog_deadline = None
 

@@ -443,6 +443,27 @@ class PowerCubeDriver:
                     raise
         return all(StateFlag(a.value) & StateFlag.HOME_OK for a in acks)
 
+    def session_mark(self) -> int | None:
+        """The power-session mark every module carries (session_mark.py), None when one
+        carries none or they differ; reads only."""
+        from seqrun.drivers.powercube.session_mark import mark_of
+
+        reads = [GetParam(m, p) for m in self.bus_modules
+                 for p in (ParamId.FHOME_VEL, ParamId.DEF_HOME_VEL)]
+        acks = self.transact(reads, idempotent=True)
+        marks = {mark_of(float(acks[k].value), float(acks[k + 1].value))
+                 for k in range(0, len(acks), 2)}
+        return marks.pop() if len(marks) == 1 else None
+
+    def write_session_mark(self, mark: int) -> bool:
+        from seqrun.drivers.powercube.session_mark import marked_velocity
+
+        stored = self.transact([GetParam(m, ParamId.DEF_HOME_VEL) for m in self.bus_modules],
+                               idempotent=True)
+        self.transact([SetParam(m, ParamId.FHOME_VEL, marked_velocity(float(a.value), mark))
+                       for m, a in zip(self.bus_modules, stored)])
+        return self.session_mark() == mark
+
     def watch_foreign(self, on_foreign: Callable[[ForeignTraffic], None]) -> None:
         from seqrun.drivers.powercube.foreign import ForeignFrameWatch
 
