@@ -6,17 +6,14 @@ another arm."""
 
 from __future__ import annotations
 
-import shutil
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from projecttree import ROOT
-from seqrun.service.arms_check import campaign_has_arms, check_arms_sequence
-
-EXAMPLE = ROOT / "examples" / "two-arms"
+from seqrun.service.arms_check import campaign_has_arms
+from twoarmskit import check, copy_example, write
 
 #: A asks the operator inside its branch, then visits the spot B reaches for; B waits a
 #: fixed time: on the planned time line (the answer at once) A is gone before B comes,
@@ -53,24 +50,8 @@ ORDERED = CONFIRM_INSIDE.replace(
 
 @pytest.fixture
 def campaign(tmp_path, monkeypatch):
-    for name in ("CAN_INTERFACE", "CAN_CHANNEL", "CAN_BITRATE", "CAN_CONFIG"):
-        monkeypatch.delenv(name, raising=False)
-    monkeypatch.setenv("HOME", str(tmp_path))
-    monkeypatch.setenv("SEQRUN_STATE_DIR", str(tmp_path / "state"))
-    folder = tmp_path / "two-arms"
-    shutil.copytree(EXAMPLE, folder)
-    monkeypatch.chdir(folder)
-    return folder
-
-
-def write(folder: Path, name: str, text: str) -> Path:
-    path = folder / "sequences" / name
-    path.write_text(text)
-    return path
-
-
-def check(path: Path, **options):
-    return check_arms_sequence(path, campaign_has_arms(path), **options)
+    """A copy of the example campaign (arms A and B facing each other, 900 mm apart)."""
+    return copy_example(tmp_path, monkeypatch)
 
 
 # ------------------------------------------------------------------ (a) every timing

@@ -5,7 +5,6 @@ and the dry run runs both arms at one virtual time on two simulated buses."""
 
 from __future__ import annotations
 
-import shutil
 import threading
 from pathlib import Path
 
@@ -20,34 +19,16 @@ from seqrun.cli import app
 from seqrun.clock import LockstepClock
 from seqrun.sequence.arm_tracks import load_tracks
 from seqrun.sequence.project import open_project
-from seqrun.service.arms_check import campaign_has_arms, check_arms_sequence
+from seqrun.service.arms_check import campaign_has_arms
+from twoarmskit import check, copy_example, write
 from seqrun.shipped import shipped_arm
 
-ROOT = Path(__file__).resolve().parents[1]
-EXAMPLE = ROOT / "examples" / "two-arms"
 
 
 @pytest.fixture
 def campaign(tmp_path, monkeypatch):
     """A copy of the example campaign (arms A and B facing each other, 900 mm apart)."""
-    for name in ("CAN_INTERFACE", "CAN_CHANNEL", "CAN_BITRATE", "CAN_CONFIG"):
-        monkeypatch.delenv(name, raising=False)
-    monkeypatch.setenv("HOME", str(tmp_path))
-    monkeypatch.setenv("SEQRUN_STATE_DIR", str(tmp_path / "state"))
-    folder = tmp_path / "two-arms"
-    shutil.copytree(EXAMPLE, folder)
-    monkeypatch.chdir(folder)
-    return folder
-
-
-def write(folder: Path, name: str, text: str) -> Path:
-    path = folder / "sequences" / name
-    path.write_text(text)
-    return path
-
-
-def check(path: Path, **options):
-    return check_arms_sequence(path, campaign_has_arms(path), **options)
+    return copy_example(tmp_path, monkeypatch)
 
 
 # --------------------------------------------------------------------------- the examples

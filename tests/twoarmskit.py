@@ -111,3 +111,30 @@ def halted(server) -> bool:
     from seqrun.powercube.protocol import StateFlag
 
     return all(StateFlag(s) & StateFlag.HALTED for s in server.network.arm.states().values())
+
+
+def copy_example(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """A copy of the example campaign (arms A and B facing each other, 900 mm apart) as the
+    working folder, with no CAN configuration and a state folder of the test's own."""
+    for name in ("CAN_INTERFACE", "CAN_CHANNEL", "CAN_BITRATE", "CAN_CONFIG"):
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setenv("HOME", str(tmp_path))
+    monkeypatch.setenv("SEQRUN_STATE_DIR", str(tmp_path / "state"))
+    folder = tmp_path / "two-arms"
+    shutil.copytree(EXAMPLE, folder)
+    monkeypatch.chdir(folder)
+    return folder
+
+
+def write(folder: Path, name: str, text: str) -> Path:
+    """``folder/sequences/name`` holding ``text``."""
+    path = folder / "sequences" / name
+    path.write_text(text)
+    return path
+
+
+def check(path: Path, **options):
+    """The campaign check of a sequence of several arms (``dry_run=False``: static only)."""
+    from seqrun.service.arms_check import campaign_has_arms, check_arms_sequence
+
+    return check_arms_sequence(path, campaign_has_arms(path), **options)
