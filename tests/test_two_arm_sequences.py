@@ -6,7 +6,6 @@ and the dry run runs both arms at one virtual time on two simulated buses."""
 from __future__ import annotations
 
 import threading
-from pathlib import Path
 
 import numpy as np
 import pytest
