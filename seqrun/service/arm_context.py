@@ -170,9 +170,11 @@ class ArmContext:
 
     # ------------------------------------------------------------------ what it says
     def arm_text(self) -> str:
+        from seqrun.formatting import terminal_text
+
         where = _shown(self.arm_path)
         named = f"arm {self.arm_id}: " if self.arm_id else ""
-        return f"{named}arm '{self.arm.name}' ({where})"
+        return terminal_text(f"{named}arm '{self.arm.name}' ({where})")
 
     def headline(self, connection: Connection | None = None) -> str:
         """The first line of every command: which arm, on which bus, chosen by whom."""
