@@ -21,8 +21,8 @@ from typer.testing import CliRunner
 
 from consolekit import console_process
 from projecttree import ROOT, make_project
-from twoarmskit import halted, quiet, two_arm_campaign, two_served_campaign
-from zerostate import ZERO_CONFIRMED, serve_arm, socketcand_args
+from twoarmskit import halted, quiet, served, two_arm_campaign, two_served_campaign
+from zerostate import ZERO_CONFIRMED, serve_arm, socketcand_args, with_park_recorded
 
 from seqrun.cli import app
 from seqrun.service.bus_claim import Holder, read_holder
@@ -221,3 +221,44 @@ def test_every_line_naming_a_served_bus_says_its_host_and_port(tmp_path, monkeyp
                     named.append(arm)
             assert set(named) == {"A", "B"}, result.output
             assert halted(arms["A"]) == halted(arms["B"]) == (command == ["halt"])
+
+
+# ------------------------------------------------------------------ one arm, two endpoints
+@pytest.mark.slow
+def test_one_arm_reached_over_two_endpoints_has_one_controller(tmp_path):
+    """Two servers whose modules report the same serial numbers are one arm reached two
+    ways (its adapter and a socketcand bridge, say): a console on one (it holds the arm
+    until it is ended), and a run on the other is refused once it has read the serials,
+    before it resets or homes."""
+    first, second = served(5_300_000, "park"), served(5_300_000, "park")
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "SEQRUN_RESPONSE_TIMEOUT_MS": "200",
+           "PYTHONUNBUFFERED": "1"}
+    env = with_park_recorded(env, tmp_path, first.port, cwd=ROOT)   # (one record: one arm)
+    run = subprocess.Popen(
+        [sys.executable, "-m", "seqrun", "console", "--port", "0", "--log-dir",
+         str(tmp_path / "console"), *socketcand_args(first.port), *ZERO_CONFIRMED],
+        cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        key = ("socketcand", f"127.0.0.1:{first.port}/can0")
+        wait_for(lambda: (read_holder(*key) or Holder(0, "", 0)).serials,
+                 "the console's serials")
+        other = seqrun("run", "sequences/opsafe.yaml", *PLAIN_RUN, "--log-dir",
+                       str(tmp_path / "other"), *socketcand_args(second.port),
+                       *ZERO_CONFIRMED, cwd=ROOT, env=env)
+        assert other.returncode == 2, other.stdout + other.stderr
+        assert re.search(rf"the arm with serials 1:5300001, .* is driven by pid {run.pid} "
+                         rf"\(seqrun console .*\) since .* on socketcand:127\.0\.0\.1:"
+                         rf"{first.port}/can0: one controller per arm", other.stderr), \
+            other.stderr
+        # nothing was sent to make it move: its modules are still not homed
+        from seqrun.powercube.protocol import StateFlag
+
+        states = second.network.arm.states().values()
+        assert not any(StateFlag(s) & StateFlag.HOME_OK for s in states)
+        assert run.poll() is None
+    finally:
+        if run.poll() is None:
+            run.kill()
+            run.wait()
+        first.shutdown()
+        second.shutdown()

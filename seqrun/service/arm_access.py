@@ -94,9 +94,13 @@ def identity_and_homed(connection: Connection,
 
     driver = open_driver(arm, connection)
     try:
-        return driver.identity(), driver.homed()
+        identity, homed = driver.identity(), driver.homed()
     finally:
         driver.close()
+    if connection.claim is not None and not connection.is_simulator:
+        # one controller per arm, over whichever bus reaches it (bus_claim.py)
+        connection.claim.claim_arm(identity.key, identity.describe())
+    return identity, homed
 
 
 def broadcast_and_confirm(driver: ArmDriver, what: str) -> CommandConfirmation:

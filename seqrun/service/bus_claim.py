@@ -115,6 +115,8 @@ class Holder:
     #: The command-line options that reach its bus from another terminal (empty: a bus
     #: of its process only, the built-in simulator).
     reach: tuple[str, ...] = ()
+    #: The serial numbers of the modules it drives (ArmIdentity.key), once read.
+    serials: str = ""
 
     def describe(self) -> str:
         """``pid 1234 (seqrun run totem.yaml) since 14:02:11``."""
@@ -125,7 +127,7 @@ class Holder:
         return {"pid": self.pid, "command": self.command, "since": self.since,
                 "argv": list(self.argv), "socket": self.socket, "transient": self.transient,
                 "bus": self.bus, "started": self.started, "campaign": self.campaign,
-                "arm_id": self.arm_id, "reach": list(self.reach)}
+                "arm_id": self.arm_id, "reach": list(self.reach), "serials": self.serials}
 
     @classmethod
     def from_dict(cls, data: dict) -> Holder:
@@ -135,7 +137,8 @@ class Holder:
                    bus=str(data.get("bus") or ""),
                    started=None if data.get("started") is None else int(data["started"]),
                    campaign=data.get("campaign"), arm_id=data.get("arm_id"),
-                   reach=tuple(str(w) for w in data.get("reach") or ()))
+                   reach=tuple(str(w) for w in data.get("reach") or ()),
+                   serials=str(data.get("serials") or ""))
 
     def alive(self) -> bool:
         """Its process still runs: the pid exists and, where the record has it, started
@@ -183,10 +186,14 @@ def read_holder(interface: str, channel: str, *, directory: Path | None = None
 def holders(*, directory: Path | None = None) -> list[Holder]:
     """The records of every claim in the runtime directory (their holders may have died:
     the caller checks)."""
+    return [holder for _, holder in _records(directory or runtime_dir())]
+
+
+def _records(directory: Path) -> list[tuple[Path, Holder]]:
     found = []
-    for path in sorted((directory or runtime_dir()).glob("*.json")):
+    for path in sorted(directory.glob("*.json")):
         try:
-            found.append(Holder.from_dict(json.loads(path.read_text())))
+            found.append((path, Holder.from_dict(json.loads(path.read_text()))))
         except (OSError, ValueError, KeyError, TypeError):
             continue
     return found
@@ -244,6 +251,28 @@ class BusClaim:
 
         self._holder = replace(self._holder, campaign=campaign, arm_id=arm_id,
                                reach=tuple(reach))
+        if self.held:
+            self._write_record()
+
+    def claim_arm(self, serials: str, described: str) -> None:
+        """This claim's bus reaches the arm whose modules say ``serials``
+        (ArmIdentity.key; ``described`` for the operator): refused when another live
+        claim has the same arm through another bus (one arm reached over two endpoints,
+        e.g. its adapter and a socketcand bridge, is still one arm: one controller);
+        else the record names it.
+
+        :raises ~seqrun.errors.Refused: naming the other holder and its bus.
+        """
+        from dataclasses import replace
+
+        for other in _records(self.directory):
+            path, holder = other
+            if (path != self.record_path and holder.serials == serials
+                    and not holder.transient and holder.alive()):
+                raise Refused(f"the arm with {described} is driven by {holder.describe()} on "
+                              f"{holder.bus or 'another bus'}: one controller per arm, "
+                              "whichever bus reaches it")
+        self._holder = replace(self._holder, serials=serials)
         if self.held:
             self._write_record()
 
