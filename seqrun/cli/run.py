@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Annotated, Callable, Optional
 
 import typer
 
+from seqrun.cli import interrupts
 from seqrun.cli.app import app
 from seqrun.cli.common import (BitrateOption, BusKwargsOption, ChannelOption, InterfaceOption,
                                OneArmOption, SimOption, fail, user_errors)
@@ -24,7 +25,6 @@ from seqrun.errors import SequenceInvalid
 
 if TYPE_CHECKING:
     from rich.console import Console
-
 
 
 def _ask(console: Console, question: str, assume_yes: bool,
@@ -53,18 +53,6 @@ def _ask_shown(console: Console, displays: list, question: str, assume_yes: bool
         return _ask(console, question, assume_yes, read)
 
 
-class _RunProgress:
-    """How far the run of this command got, for a Ctrl-C outside the run's own handlers:
-    ``started`` once frames may have been sent, ``exit_code`` once its verdict is decided."""
-
-    def __init__(self) -> None:
-        self.started = False
-        self.exit_code: int | None = None
-
-
-_progress = _RunProgress()
-
-
 def _ctrl_c_outside_the_run_is_an_operator_abort(command):
     """Before the run's own signal handlers are in place (validation, opening the bus, the
     REAL-arm question), Ctrl-C is a KeyboardInterrupt: one line, exit 130 (click would say
@@ -72,8 +60,7 @@ def _ctrl_c_outside_the_run_is_an_operator_abort(command):
     verdict stands: its exit code, nothing more said (its lines and run folder tell)."""
     @functools.wraps(command)
     def wrapper(*args, **kwargs):
-        global _progress
-        _progress = progress = _RunProgress()
+        progress = interrupts.new_run()
         try:
             return command(*args, **kwargs)
         except KeyboardInterrupt:
@@ -379,7 +366,7 @@ def _run_in_session(console: Console, run, zero, folder: Path, control, requests
     else:  # its own queue and thread: a blocked stdout never delays the loop
         displays.append(session.events.add_listener(
             PlainDisplay(console, len(loaded.steps)), "plain display", maxsize=100_000))
-    _progress.started = True
+    interrupts.progress.started = True
     signals.install()
     try:
         outcome = session.run_loaded(
@@ -394,7 +381,7 @@ def _run_in_session(console: Console, run, zero, folder: Path, control, requests
             # The built-in simulator keeps no record: its zero is its power-on pose.
             record_zero=(None if connection.is_simulator or zero.store is None
                          else campaign_records.zero_recorder(zero.store, arm, loaded)))
-        _progress.exit_code = outcome.result.exit_code   # before the handlers go
+        interrupts.progress.exit_code = outcome.result.exit_code   # before the handlers go
         return outcome
     finally:
         if live and displays:
