@@ -69,9 +69,11 @@ def live_targets(context, what: str, pid: int | None = None) -> list | None:
         real = [h for h in everyone if h.reach]
         arm = f"arm {context.arm_id} of " if context.arm_id else ""
         if real:
-            raise NoArm(f"no {arm}{context.project.describe()} is live on this machine and "
-                        f"no bus is configured; another seqrun drives a real arm here, "
-                        f"not {doing}:\n" + "\n".join(reach_line(h, what) for h in real))
+            raise NoArm(f"no arm to {doing} in {arm}{context.project.describe()}: no bus "
+                        "configured, and none of its runs or consoles is live on this "
+                        f"machine; another seqrun drives a real bus here ({doing} it with "
+                        "the command after it):\n"
+                        + "\n".join(reach_line(h, what) for h in real))
         raise NoArm(f"no arm to {doing}: no bus configured (no -i/-c, no [bus] in a "
                     f"seqrun.toml, no python-can configuration) and no seqrun run or console "
                     f"of {arm}{context.project.describe()} is live on this machine; name "
