@@ -9,7 +9,9 @@ import re
 #: (bidirectional overrides and isolates, zero-width characters).
 _UNPRINTABLE = re.compile("[\x00-\x1f\x7f-\x9f\u200b-\u200f\u202a-\u202e\u2066-\u2069"
                           "\ufeff]")
-_CONTROL = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f]")
+#: What a file's text may not hold: the control characters that move the cursor or
+#: rewrite a line (NUL aside: it shows nothing, and a path that holds one is refused as such).
+_CONTROL = re.compile("[\x01-\x08\x0b-\x1f\x7f-\x9f]")
 
 
 def terminal_text(text: object, *, lines: bool = False) -> str:
@@ -27,8 +29,8 @@ def terminal_text(text: object, *, lines: bool = False) -> str:
 
 
 def control_character(text: str) -> str | None:
-    """The first C0 or C1 control character or DEL in ``text`` other than a tab or a line
-    break (a file's text may hold those; zero-width and bidirectional marks are text, only
+    """The first C0 (NUL aside) or C1 control character or DEL in ``text`` other than a tab
+    or a line break (a file's text may hold those; zero-width and bidirectional marks are text, only
     escaped when printed), shown escaped; None if none."""
     for match in _CONTROL.finditer(text):
         return terminal_text(match.group())

@@ -63,3 +63,16 @@ def test_the_zero_records_text_is_printed_escaped(tmp_path, monkeypatch):
             assert "\\x1b[2K\\x0dzero: Totem" in result.output, result.output
     finally:
         server.shutdown()
+
+
+def test_a_control_character_in_seqrun_toml_is_refused_where_it_stands(project,
+                                                                       monkeypatch):
+    """TOML spells an escape as \\u001b: the text read, not the file's bytes, is checked."""
+    monkeypatch.chdir(project)
+    (project / "seqrun.toml").write_text(
+        '[campaign]\nname = "Op\\u001b[2K\\rPASSED"\narm = "arms/lwa3.yaml"\n')
+    result = CliRunner().invoke(app, ["validate", "sequences/startup.yaml"])
+    assert result.exit_code == 2, result.output
+    assert result.output.strip() == (
+        "error: seqrun.toml:2:1: campaign.name: a control character (\\x1b) in a text: "
+        "seqrun files hold printable text (tabs and line breaks aside)")
