@@ -1,5 +1,5 @@
 """The ``seqrun`` program (``seqrun``, ``python -m seqrun``): Ctrl-C during start-up is one
-line, exit 130.
+line, exit 130; once the command has ended, Ctrl-C no longer changes its exit code.
 
 Importing the command line (typer, rich, numpy, python-can, ruckig) takes a moment. A
 Ctrl-C in that moment used to print a KeyboardInterrupt traceback. Nothing can have been
@@ -46,7 +46,13 @@ def main(argv: list[str] | None = None) -> None:
         from seqrun.cli import main as cli_main
     finally:
         signal.signal(signal.SIGINT, previous)
-    cli_main(command_line)
+    try:
+        cli_main(command_line)
+    finally:
+        # The command has decided its exit code and said so: a Ctrl-C while the process
+        # ends (threads joined, files closed) changes neither (a run that faulted, exit 3,
+        # was reported as killed by SIGINT, 130).
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -55,6 +55,7 @@ from yaml.events import AliasEvent, MappingStartEvent, SequenceStartEvent
 from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
 from seqrun.errors import SequenceInvalid, SourceError, UserInputError
+from seqrun.formatting import control_character
 
 __all__ = [
     "MAX_ALIAS_USES",
@@ -289,6 +290,11 @@ def _short_tag(tag: str) -> str:
 def _scalar(node: ScalarNode) -> Any:
     tag, text = node.tag, node.value
     if tag == STR:
+        bad = control_character(text)
+        if bad is not None:   # it would reach the operator's terminal
+            raise _Problem(node.start_mark, f"a control character ({bad}) in a text: seqrun "
+                                            "files hold printable text (tabs and line breaks "
+                                            "aside)")
         return text
     checks = {BOOL: _BOOL_RE, INT: _INT_RE, FLOAT: _FLOAT_RE, NULL: _NULL_RE}
     if tag not in checks:

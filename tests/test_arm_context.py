@@ -173,13 +173,16 @@ def live_console(nowhere):
     """A seqrun that is live on this machine on its built-in simulator (its claim and
     control socket, as ``seqrun console`` serves them)."""
     claim = claim_bus("seqrun-sim", "pid1-test", "seqrun console")
+    # the checkout's: the campaign of its sequences, and of the commands below
+    claim.describe_arm(campaign=str(ROOT.resolve()), arm_id=None, reach=())
     serve_control(claim, _Handler())
     yield claim
     claim.release()
 
 
 @pytest.mark.parametrize("command", [["run", str(ROOT / "sequences" / "opsafe.yaml")],
-                                     ["reset"], ["halt", "--sim"]])
+                                     ["reset", "--project", str(ROOT)],
+                                     ["halt", "--sim", "--project", str(ROOT)]])
 def test_no_private_simulator_beside_a_live_seqrun(live_console, command):
     result = CliRunner().invoke(app, command)
     assert result.exit_code == 2, result.output
@@ -209,8 +212,8 @@ def test_halt_and_status_with_no_bus_act_through_the_live_run(nowhere, tmp_path,
         deadline = time.monotonic() + 60
         status = None
         while time.monotonic() < deadline:   # live, and its executor under way
-            if live_owners():
-                result = CliRunner().invoke(app, ["status", "--json"])
+            if live_owners():   # (the run's campaign is the checkout, its sequence's)
+                result = CliRunner().invoke(app, ["status", "--json", "--project", str(ROOT)])
                 assert result.exit_code == 0, result.output
                 status = json.loads(result.output)
                 if status.get("activity") == "running":
@@ -218,7 +221,7 @@ def test_halt_and_status_with_no_bus_act_through_the_live_run(nowhere, tmp_path,
             time.sleep(0.1)
         assert status is not None and status["from"]["command"].startswith("seqrun run")
         assert "SIMULATOR" in status["bus"]
-        result = CliRunner().invoke(app, ["halt"])
+        result = CliRunner().invoke(app, ["halt", "--project", str(ROOT)])
         assert result.exit_code == 0, result.output
         assert "Halt confirmed by modules 1, 2, 3, 4, 5, 6, 7, read back by the running " \
                "seqrun" in result.output

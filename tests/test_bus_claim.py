@@ -120,3 +120,30 @@ def test_a_runtime_dir_of_someone_else_is_not_used(rundir):
 def test_command_line_reads_as_typed():
     assert command_line(["/x/seqrun/__main__.py", "run", "my file.yaml"]) == \
         "seqrun run 'my file.yaml'"
+
+
+def test_a_holder_is_alive_only_while_its_own_process_runs(rundir):
+    """A record outlives a killed holder; the system may give its pid to another process.
+    The record's start time tells them apart (a reused pid is not the holder)."""
+    from dataclasses import replace
+
+    from seqrun.service.bus_claim import Holder, process_start
+
+    other = subprocess.Popen(["sleep", "60"])
+    try:
+        started = process_start(other.pid)
+        assert isinstance(started, int) and started != process_start(os.getpid())
+        holder = Holder(pid=other.pid, command="seqrun run", since=time.time(),
+                        started=started)
+        assert holder.alive()
+        assert not replace(holder, started=started - 1).alive()   # another process, same pid
+        assert Holder.from_dict(json.loads(json.dumps(holder.as_dict()))) == holder
+    finally:
+        other.kill()
+        other.wait()
+    assert not holder.alive()
+    with claim_bus("socketcan", "can0", "seqrun run") as claim:
+        assert claim.holder().started == process_start(os.getpid())
+        claim.describe_arm(campaign="/c", arm_id="A", reach=("-i", "socketcan", "-c", "can0"))
+        assert read_holder("socketcan", "can0") == claim.holder()
+        assert claim.holder().reach == ("-i", "socketcan", "-c", "can0")

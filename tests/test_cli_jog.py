@@ -39,3 +39,47 @@ def test_a_jog_is_never_open_ended():
     assert done.returncode == 2 and "--for" in done.stderr
     done = seqrun("jog", "j1", "50", "--for", "1", *HOMED)
     assert done.returncode == 2 and "above its limit" in done.stderr
+
+
+def _thread_policies(pid: int) -> set[tuple[int, int]]:
+    """(scheduling policy, real-time priority) of every thread of ``pid`` (fields 41 and
+    40 of /proc/PID/task/TID/stat)."""
+    from pathlib import Path
+
+    found = set()
+    for stat in Path(f"/proc/{pid}/task").glob("*/stat"):
+        try:
+            fields = stat.read_text().rpartition(")")[2].split()
+        except OSError:
+            continue   # a thread that ended meanwhile
+        found.add((int(fields[38]), int(fields[37])))
+    return found
+
+
+def test_a_jog_with_rt_priority_runs_its_loop_at_sched_fifo(tmp_path):
+    """`seqrun jog --rt-priority N` as `run` and `console` have it: the jog's loop thread
+    at SCHED_FIFO N, the others at SCHED_RR 1 (a busy host otherwise delays the refresh of
+    the modules' watchdog: bench/bench_jog.py)."""
+    import os
+    import time
+
+    jog = subprocess.Popen([*SEQRUN, "jog", "j1", "5", "--for", "3", "--rt-priority", "7",
+                            *HOMED], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                           text=True)
+    seen: set[tuple[int, int]] = set()
+    try:
+        deadline = time.monotonic() + 60
+        while jog.poll() is None and time.monotonic() < deadline:
+            seen |= _thread_policies(jog.pid)
+            if (os.SCHED_FIFO, 7) in seen:
+                break
+            time.sleep(0.02)
+        out, err = jog.communicate(timeout=60)
+    finally:
+        if jog.poll() is None:
+            jog.kill()
+            jog.wait()
+    assert jog.returncode == 0, err
+    assert "real-time scheduling: the control loop at SCHED_FIFO priority 7, the jog's " \
+           "other threads at SCHED_RR 1" in out
+    assert (os.SCHED_FIFO, 7) in seen and (os.SCHED_RR, 1) in seen, seen

@@ -144,7 +144,8 @@ def test_two_served_arms_each_its_bus_and_zero_and_one_stop(tmp_path):
         proc, printed, url, token = start(folder, tmp_path, stdin="y\ny\n")
         try:
             # each arm's bus, told apart
-            assert f"arm A: CAN interface 'socketcand' channel 'can0' at 1000000 bit/s " \
+            assert f"arm A: CAN interface 'socketcand' 127.0.0.1:{first.port} channel 'can0' " \
+                   f"at 1000000 bit/s " \
                    f"(host=127.0.0.1, port={first.port})" in printed, printed
             assert f"port={second.port})" in printed, printed
             assert "arm A: " in printed and "arm B: " in printed

@@ -31,17 +31,22 @@ def live_targets(context, what: str, pid: int | None = None) -> list | None:
     acts on its bus as resolved). ``what``: "status", "halt", "reset" or "home".
 
     With no bus configured a command never acts on a private simulator of its own: it acts
-    through the live run or console (``status``: exactly one, or ``--pid``), and with
-    nothing live there is no arm (:class:`~seqrun.service.arm_context.NoArm`, exit 2).
-    ``--sim`` (a private simulator asked for) is refused for ``halt`` beside a live run or
-    console: its "confirmed" would be about the wrong arm.
+    through the live runs and consoles of *this* arm (started in this campaign, as this arm
+    id; ``status``: exactly one, or ``--pid``). Another folder's run or console is never
+    acted on nor reported on. With none of this arm live there is no arm
+    (:class:`~seqrun.service.arm_context.NoArm`, exit 2), and where another seqrun drives a
+    real bus on this machine the message lists it with the command that reaches it: an
+    operator's halt never silently misses an arm in motion. ``--pid`` picks any live run or
+    console by its pid. ``--sim`` (a private simulator asked for) is refused for ``halt``
+    beside a live run or console of this arm, or one on a real bus: its "confirmed" would
+    be about the wrong arm.
     """
     from seqrun.errors import UserInputError
     from seqrun.service.arm_context import NoArm
 
     bus = context.bus
     if bus.force_sim:
-        live = context.live_controllers() if what == "halt" else []
+        live = _meant(context) if what == "halt" else []
         if live:
             raise UserInputError(f"--sim halts a private simulator, not the arm "
                                  f"{_names(live)} drives on this machine: leave out --sim "
@@ -51,18 +56,28 @@ def live_targets(context, what: str, pid: int | None = None) -> list | None:
         if pid is not None:
             raise UserInputError("--pid applies when no bus is given")
         return None
-    live = context.live_controllers()
+    everyone = context.live_controllers()
     if pid is not None:
-        live = [h for h in live if h.pid == pid]
+        live = [h for h in everyone if h.pid == pid]
         if not live:
             raise UserInputError(f"no live seqrun run or console with pid {pid} on this "
                                  "machine")
+    else:
+        live = context.own_controllers(everyone)
     if not live:
         doing = {"status": "read"}.get(what, what)
+        real = [h for h in everyone if h.reach]
+        arm = f"arm {context.arm_id} of " if context.arm_id else ""
+        if real:
+            raise NoArm(f"no arm to {doing} in {arm}{context.project.describe()}: no bus "
+                        "configured, and none of its runs or consoles is live on this "
+                        f"machine; another seqrun drives a real bus here ({doing} it with "
+                        "the command after it):\n"
+                        + "\n".join(reach_line(h, what) for h in real))
         raise NoArm(f"no arm to {doing}: no bus configured (no -i/-c, no [bus] in a "
-                    "seqrun.toml, no python-can configuration) and no seqrun run or console "
-                    "is live on this machine; name the bus with -i/-c, or give --sim for a "
-                    "private simulator")
+                    f"seqrun.toml, no python-can configuration) and no seqrun run or console "
+                    f"of {arm}{context.project.describe()} is live on this machine; name "
+                    "the bus with -i/-c, or give --sim for a private simulator")
     if what == "reset":
         raise UserInputError(f"no bus configured, and {_names(live)} live on this machine: "
                              "reset the arm through it (the console's Reset, the run's "
@@ -76,8 +91,29 @@ def live_targets(context, what: str, pid: int | None = None) -> list | None:
     return live
 
 
+def _meant(context) -> list:
+    """The live runs/consoles an operator may mean by "the arm": this arm's, and any on a
+    real bus (another process's built-in simulator is nobody's arm)."""
+    return [h for h in context.live_controllers()
+            if h.reach or context.own_controllers([h])]
+
+
+def reach_line(holder, what: str) -> str:
+    """``  seqrun pid 4711 (seqrun run totem.yaml) on socketcand:127.0.0.1:29536/can0:
+    seqrun halt -i socketcand -c can0 --bus-kwargs host=127.0.0.1 port=29536``."""
+    import shlex
+
+    from seqrun.formatting import terminal_text
+
+    verb = what if what in ("status", "halt", "reset", "home") else "halt"
+    return (f"  seqrun pid {holder.pid} ({terminal_text(holder.command)}) on "
+            f"{terminal_text(holder.bus)}: {shlex.join(['seqrun', verb, *holder.reach])}")
+
+
 def _names(holders) -> str:
-    names = [f"seqrun pid {h.pid} ({h.command})" for h in holders]
+    from seqrun.formatting import terminal_text
+
+    names = [f"seqrun pid {h.pid} ({terminal_text(h.command)})" for h in holders]
     return names[0] + " is" if len(names) == 1 else ", ".join(names) + " are"
 
 

@@ -23,6 +23,7 @@ from seqrun.cli.common import (ArmFileOption, BitrateOption, BusKwargsOption,
                                CampaignOption, ChannelOption, InterfaceOption,
                                ResponseTimeoutOption, SimOption, fail, user_errors)
 from seqrun.cli.foxglove_option import FoxgloveOption, check_foxglove, start_foxglove
+from seqrun.cli.realtime_option import use_realtime
 from seqrun.cli.questions import ask
 from seqrun.defaults import EXIT_OPERATOR_ABORT
 
@@ -83,7 +84,8 @@ def console_command(
                      "arm file and bus are in seqrun.toml)")
         elif arm_id:
             resolve_context(project_dir=project_dir, arm_id=arm_id[0])  # says why
-        if rt_priority is not None and not _use_realtime(rt_priority):
+        if rt_priority is not None and not use_realtime(
+                rt_priority, "the console's other threads"):
             rt_priority = None  # (before any thread starts: they inherit the policy)
     if several:
         _serve_arms(arm_id, project_dir=project_dir, sim=sim, port=port, host=host,
@@ -257,38 +259,6 @@ def _serve_arms(arm_ids: list[str] | None, *, project_dir: Path | None, sim: boo
             for arm_id, connection in connections.items():
                 if arm_id not in made:
                     connection.close()
-
-
-def _use_realtime(priority: int) -> bool:
-    """``--rt-priority N``: every thread of the console at SCHED_RR 1 from now on, the loop's
-    thread (the session's activities) at SCHED_FIFO N, the interpreter lock's switch
-    interval shortened (seqrun.service.realtime). Says
-    whether it could; tried in a thread of its own first (this one must not keep FIFO)."""
-    import threading
-
-    from seqrun.service.realtime import (
-        SWITCH_INTERVAL_S,
-        hand_over_the_lock_often,
-        use_fifo,
-        use_round_robin,
-    )
-
-    outcome: list[str | None] = []
-    probe = threading.Thread(target=lambda: outcome.append(use_fifo(priority)))
-    probe.start()
-    probe.join()
-    why = outcome[0] if outcome else "?"
-    if why is None:
-        why = use_round_robin()
-    if why is None:
-        hand_over_the_lock_often()
-        typer.echo(f"real-time scheduling: the control loop at SCHED_FIFO priority "
-                   f"{priority}, the console's other threads at SCHED_RR 1, the interpreter "
-                   f"lock handed over within {SWITCH_INTERVAL_S * 1000:g} ms")
-        return True
-    typer.echo(f"warning: real-time scheduling not available ({why}); the control loop "
-               "runs at normal priority", err=True)
-    return False
 
 
 class _Terminated(Exception):

@@ -30,6 +30,8 @@ def check_foxglove(port: int | None) -> None:
         fail(f"--foxglove: the port must lie in 0-65535, got {port}")
     if port:
         with socket.socket() as probe:
+            # as the server binds: a port whose last client just left (TIME_WAIT) is free
+            probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             try:
                 probe.bind(("127.0.0.1", port))
             except OSError as exc:

@@ -89,3 +89,24 @@ class RunSignals:
         for signum, old in self._saved.items():
             signal.signal(signum, old)
         self._saved.clear()
+
+
+class RunProgress:
+    """How far the run of this command got, for a Ctrl-C outside the run's own handlers
+    (before they are installed, after they are gone: seqrun/cli/run.py): ``started`` once
+    frames may have been sent, ``exit_code`` once its verdict is decided."""
+
+    def __init__(self) -> None:
+        self.started = False
+        self.exit_code: int | None = None
+
+
+#: The run of this command (:func:`new_run` at its start).
+progress = RunProgress()
+
+
+def new_run() -> RunProgress:
+    """A new :data:`progress`, for the run a command is about to start."""
+    global progress
+    progress = RunProgress()
+    return progress

@@ -6,7 +6,9 @@ the same session jog, :mod:`seqrun.service.jog`): never open-ended (``--for`` at
 joint's limits and the workspace guards, in velocity mode (FVEL, the modules' watchdog
 armed: a terminal that dies stops the joint within the watchdog timeout) or position mode
 (FRAMP). The arm must be homed (``seqrun run sequences/startup.yaml`` or the console's Arm
-and Home); like ``seqrun status``, with no bus configured it needs ``--sim``.
+and Home); like ``seqrun status``, with no bus configured it needs ``--sim``. On a busy host
+``--rt-priority N`` keeps the loop (and so the watchdog's refresh) on time, as for ``run``
+and ``console`` (bench/bench_jog.py measures it).
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from seqrun.cli.app import app
 from seqrun.cli.common import (EXIT_FAULT, ArmFileOption, BitrateOption, BusKwargsOption,
                                CampaignOption, ChannelOption, InterfaceOption, OneArmOption,
                                ResponseTimeoutOption, SimOption, fail, user_errors)
+from seqrun.cli.realtime_option import RtPriorityOption, use_realtime
 from seqrun.defaults import EXIT_OPERATOR_ABORT
 
 #: The longest jog a command line may ask for (s): a jog is a nudge, not a move.
@@ -53,8 +56,11 @@ def jog_command(
         "--zero-confirmed", metavar="POSE", help="Answer 'does the arm stand in POSE?' after "
         "a power-on without asking.")] = None,
     arm_id: OneArmOption = None,
+    rt_priority: RtPriorityOption = None,
 ) -> None:
-    """Jog one joint at a velocity for a short time (FVEL; Ctrl-C stops it)."""
+    """Jog one joint at a velocity for a short time (FVEL; Ctrl-C stops it). On a busy
+    host give --rt-priority N: the modules' watchdog stops a joint whose refresh comes
+    late."""
     import math
 
     from seqrun.cli.questions import ask
@@ -74,6 +80,9 @@ def jog_command(
         project, arm = context.project, context.arm
         context.refuse_private_simulator("jog")
         timeout = response_timeout_s(arm, response_timeout_ms)
+        if rt_priority is not None and not use_realtime(rt_priority,
+                                                        "the jog's other threads"):
+            rt_priority = None  # (before any thread starts: they inherit the policy)
         connection = context.open_connection(live=True)
     typer.echo(context.headline(connection))
     session = None
@@ -85,7 +94,7 @@ def jog_command(
             session = ArmSession(zero.apply(arm), connection, project=project,
                                  log_root=runs if runs.is_absolute() else Path.cwd() / runs,
                                  zero=zero, response_timeout_s=timeout, status_hz=0,
-                                 arm_id=context.arm_id)
+                                 arm_id=context.arm_id, loop_priority=rt_priority)
             session.poll_status()
             mode = "position" if position_mode else "velocity"
             # This process takes control of its session for the jog, as every face does

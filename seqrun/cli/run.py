@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Annotated, Callable, Optional
 
 import typer
 
+from seqrun.cli import interrupts
 from seqrun.cli.app import app
 from seqrun.cli.common import (BitrateOption, BusKwargsOption, ChannelOption, InterfaceOption,
                                OneArmOption, SimOption, fail, user_errors)
@@ -24,7 +25,6 @@ from seqrun.errors import SequenceInvalid
 
 if TYPE_CHECKING:
     from rich.console import Console
-
 
 
 def _ask(console: Console, question: str, assume_yes: bool,
@@ -55,15 +55,23 @@ def _ask_shown(console: Console, displays: list, question: str, assume_yes: bool
 
 def _ctrl_c_outside_the_run_is_an_operator_abort(command):
     """Before the run's own signal handlers are in place (validation, opening the bus, the
-    REAL-arm question) and after they are gone, Ctrl-C is a KeyboardInterrupt: one line,
-    exit 130 (click would say "Aborted!", exit 1: the code of an invalid sequence)."""
+    REAL-arm question), Ctrl-C is a KeyboardInterrupt: one line, exit 130 (click would say
+    "Aborted!", exit 1: the code of an invalid sequence). After they are gone the run's
+    verdict stands: its exit code, nothing more said (its lines and run folder tell)."""
     @functools.wraps(command)
     def wrapper(*args, **kwargs):
+        progress = interrupts.new_run()
         try:
             return command(*args, **kwargs)
         except KeyboardInterrupt:
-            typer.echo("seqrun run: interrupted (Ctrl-C) while the arm was not moving; "
-                       "nothing was sent", err=True)
+            if progress.exit_code is not None:
+                raise typer.Exit(progress.exit_code) from None
+            if progress.started:
+                typer.echo("seqrun run: interrupted (Ctrl-C) after the run started; its run "
+                           "folder says what was sent", err=True)
+            else:
+                typer.echo("seqrun run: interrupted (Ctrl-C) while the arm was not moving; "
+                           "nothing was sent", err=True)
             raise typer.Exit(EXIT_OPERATOR_ABORT) from None
     return wrapper
 
@@ -384,9 +392,10 @@ def _run_in_session(console: Console, run, zero, folder: Path, control, requests
     else:  # its own queue and thread: a blocked stdout never delays the loop
         displays.append(session.events.add_listener(
             PlainDisplay(console, len(loaded.steps)), "plain display", maxsize=100_000))
+    interrupts.progress.started = True
     signals.install()
     try:
-        return session.run_loaded(
+        outcome = session.run_loaded(
             loaded, log_dir=folder, file=str(run.file), speed=speed, first_step=from_step,
             command_mode=command_mode, confirm=confirm, before_step=before_step,
             run_control=control, requests=requests, warn=warn,
@@ -398,6 +407,8 @@ def _run_in_session(console: Console, run, zero, folder: Path, control, requests
             # The built-in simulator keeps no record: its zero is its power-on pose.
             record_zero=(None if connection.is_simulator or zero.store is None
                          else campaign_records.zero_recorder(zero.store, arm, loaded)))
+        interrupts.progress.exit_code = outcome.result.exit_code   # before the handlers go
+        return outcome
     finally:
         if live and displays:
             session.remove_idle_hook(displays[0].on_idle)

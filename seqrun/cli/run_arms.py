@@ -168,6 +168,7 @@ def _say(text: str, end: str = "\n") -> None:
 def _run(file: Path, check, contexts, connections, arms, clock_views, *, speed: float,
          yes: bool, log_dir: Path | None, no_report: bool, command_mode: str | None,
          plain: bool = False) -> int:
+    from seqrun.cli import interrupts
     from seqrun.cli.interrupts import RunSignals
     from seqrun.cli.questions import ask
     from seqrun.service.arms_records import ArmOfRun, ArmsRunRecords
@@ -213,6 +214,7 @@ def _run(file: Path, check, contexts, connections, arms, clock_views, *, speed: 
         printers[arm_id](event)
 
     signals = RunSignals(EveryArm(list(inboxes.values())))
+    interrupts.progress.started = True
     signals.install()
     if view is not None:
         view.__enter__()

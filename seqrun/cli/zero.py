@@ -25,6 +25,7 @@ from seqrun.cli.common import (ArmFileOption, BitrateOption, BusKwargsOption, Ca
                                user_errors)
 from seqrun.cli.questions import ask
 from seqrun.errors import BusError, UserInputError
+from seqrun.formatting import terminal_text
 from seqrun.service.zero import (POSE_IN_DEGREES, ZeroInForce, ZeroNotConfirmed, ZeroStore,
                                  pose_title, zero_at_start)
 
@@ -99,8 +100,8 @@ def _list_machine_records() -> None:
             typer.echo(f"  {path.name}: unreadable")
             continue
         name = data["arm"].get("name") or "arm"
-        typer.echo(f"  {name} (serials {serials})")
-        typer.echo("    record " + (record.describe() if record else "none"))
+        typer.echo(terminal_text(f"  {name} (serials {serials})"))
+        typer.echo("    record " + (terminal_text(record.describe()) if record else "none"))
     typer.echo("name the arm's bus (-i/-c) to see whether its record can be used")
 
 
@@ -127,9 +128,9 @@ def show_command(
         record, in_use = store.record, _in_force(store, mark)
     typer.echo(f"arm      {arm.name} ({store.identity.describe()})")
     typer.echo(f"file     {store.path}")
-    typer.echo("record   " + (record.describe() if record else
+    typer.echo("record   " + (terminal_text(record.describe()) if record else
                               f"none (set one with '{store.set_command}')"))
-    typer.echo("in use   " + (in_use.record.describe() if in_use else
+    typer.echo("in use   " + (terminal_text(in_use.record.describe()) if in_use else
                               "none confirmed since the modules powered on"))
     typer.echo("poses    " + ", ".join(arm.power_off_poses or ["(the arm names none)"]))
 
@@ -222,11 +223,14 @@ def zero_at_run_start(connection, arm, ask: Callable[[str], bool],
     :class:`BusError`, or ``typer.Exit(130)`` when the operator says the arm is not in that
     pose.
     """
+    def shown(text: str) -> None:   # the record's fields are a file's text
+        show(terminal_text(text, lines=True))
+
     try:
-        return zero_at_start(connection, arm, ask=ask, show=show, confirmed=confirmed,
+        return zero_at_start(connection, arm, ask=ask, show=shown, confirmed=confirmed,
                              store=store)
     except ZeroNotConfirmed as exc:
-        show(str(exc))
+        shown(str(exc))
         raise typer.Exit(130) from None
 
 
@@ -281,7 +285,8 @@ def zero_for_reading(connection, arm, project=None):
     ``(arm, text)``; see :func:`seqrun.service.zero.zero_for_reading`."""
     from seqrun.service.zero import zero_for_reading as reading
 
-    return reading(connection, arm)
+    arm, text = reading(connection, arm)
+    return arm, terminal_text(text, lines=True)   # the record's fields are a file's text
 
 
 __all__ = ["zero_at_run_start", "zero_or_exit", "zero_for_reading", "open_arm_at_zero",

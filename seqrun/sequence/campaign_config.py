@@ -9,11 +9,22 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
+from seqrun.formatting import control_character
 from seqrun.shipped import DEFAULT_ARM_NAME
 
 
 class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
+
+    @field_validator("*", mode="after")
+    @classmethod
+    def _printable(cls, value: Any) -> Any:
+        # a text of seqrun.toml reaches the operator's terminal, as a YAML file's does
+        bad = control_character(value) if isinstance(value, str) else None
+        if bad is not None:
+            raise ValueError(f"a control character ({bad}) in a text: seqrun files hold "
+                             "printable text (tabs and line breaks aside)")
+        return value
 
 
 class CampaignSection(_Strict):

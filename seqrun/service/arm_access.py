@@ -95,9 +95,13 @@ def identity_and_session_mark(connection: Connection,
 
     driver = open_driver(arm, connection)
     try:
-        return driver.identity(), driver.session_mark()
+        identity, mark = driver.identity(), driver.session_mark()
     finally:
         driver.close()
+    if connection.claim is not None and not connection.is_simulator:
+        # one controller per arm, over whichever bus reaches it (bus_claim.py)
+        connection.claim.claim_arm(identity.key, identity.describe())
+    return identity, mark
 
 
 def leave_session_mark(connection: Connection, arm: ArmDescription, mark: int) -> bool:

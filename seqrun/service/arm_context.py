@@ -45,8 +45,8 @@ if TYPE_CHECKING:
     from seqrun.service.connection import Connection
 
 __all__ = ["ArmContext", "BusChoice", "NoArm", "SIMULATOR_CLAIM_INTERFACE", "arms_by_arm_file",
-           "campaign_folders", "load_arm_file", "one_arm_file", "resolve_context",
-           "resolve_contexts"]
+           "campaign_folders", "load_arm_file", "one_arm_file", "refuse_shared_buses",
+           "resolve_context", "resolve_contexts"]
 
 #: The claim a run or console on the built-in simulator holds, so that ``seqrun halt`` and
 #: ``seqrun status`` in another terminal find it (its channel names the process).
@@ -100,9 +100,9 @@ class BusChoice:
             why = "--sim" if self.force_sim else f"from {self.source}" \
                 if self.source != "nothing configured" else "no bus configured"
             return f"the built-in simulator ({why}): no hardware is moved"
-        config = self.config
-        return (f"CAN interface '{config.get('interface')}' channel '{config.get('channel')}'"
-                f" (from {self.source})")
+        from seqrun.service.connection import bus_text
+
+        return f"{bus_text(self.config)} (from {self.source})"
 
 
 @dataclass
@@ -171,9 +171,11 @@ class ArmContext:
 
     # ------------------------------------------------------------------ what it says
     def arm_text(self) -> str:
+        from seqrun.formatting import terminal_text
+
         where = _shown(self.arm_path)
         named = f"arm {self.arm_id}: " if self.arm_id else ""
-        return f"{named}arm '{self.arm.name}' ({where})"
+        return terminal_text(f"{named}arm '{self.arm.name}' ({where})")
 
     def headline(self, connection: Connection | None = None) -> str:
         """The first line of every command: which arm, on which bus, chosen by whom."""
@@ -185,18 +187,31 @@ class ArmContext:
     # ------------------------------------------------------------------ the bus
     def live_controllers(self) -> list[Holder]:
         """The seqrun runs and consoles live on this machine (this user's), serving a
-        control socket."""
+        control socket, whatever they drive."""
         from seqrun.service.control_socket import live_owners
 
         return live_owners()
 
+    @property
+    def campaign_key(self) -> str:
+        """This campaign as a live holder's record names it (its folder, resolved)."""
+        return str(Path(self.project.root).resolve())
+
+    def own_controllers(self, live: Sequence[Holder]) -> list[Holder]:
+        """Those of ``live`` that drive this arm: started in this campaign, as this arm id.
+        (Another folder's run, or another arm of this campaign, is not this arm.)"""
+        return [h for h in live if h.campaign == self.campaign_key and h.arm_id == self.arm_id]
+
     def refuse_private_simulator(self, what: str) -> None:
         """A command about to act on "the arm" (``what``: "halt", "reset", "run", ...)
         that would get a private simulator the operator did not ask for, while a seqrun
-        run or console is live on this machine: :class:`UserInputError` naming it."""
+        run or console drives a real bus on this machine (or this arm, on whatever bus):
+        :class:`UserInputError` naming it. Another process's built-in simulator is no arm
+        anybody means: it never blocks."""
         if not self.bus.defaulted_to_simulator:
             return
-        live = self.live_controllers()
+        live = [h for h in self.live_controllers()
+                if h.reach or h in self.own_controllers([h])]
         if live:
             raise UserInputError(
                 f"no bus configured, and {_list(live)} live on this machine: '{what}' would "
@@ -252,6 +267,10 @@ class ArmContext:
             lock = held.directory / f"{held.stem}.lock"
             held.on_release(lambda: lock.unlink(missing_ok=True))
             connection.claim = held
+        if connection.claim is not None:
+            # which arm: for 'seqrun halt' and 'seqrun status' in another terminal
+            connection.claim.describe_arm(campaign=self.campaign_key, arm_id=self.arm_id,
+                                          reach=connection.reach)
         return connection
 
     def open_arm(self, *, claim: bool = True, transient: bool = True
@@ -275,7 +294,9 @@ def _shown(path: Path) -> str:
 
 
 def _list(holders: Sequence[Holder]) -> str:
-    names = [f"seqrun pid {h.pid} ({h.command})" for h in holders]
+    from seqrun.formatting import terminal_text
+
+    names = [f"seqrun pid {h.pid} ({terminal_text(h.command)})" for h in holders]
     return names[0] + " is" if len(names) == 1 else ", ".join(names) + " are"
 
 
@@ -505,3 +526,26 @@ def resolve_contexts(*, arm_ids: Sequence[str] | None = None, **options: Any
         raise UserInputError("--arm names one arm file, and each arm of this campaign has its "
                              "own: name one arm (--arm-id ID)")
     return [resolve_context(project=project, arm_id=name, **options) for name in wanted]
+
+
+def refuse_shared_buses(project: Project, contexts: Sequence[ArmContext]) -> None:
+    """Two arms of one campaign on one bus (the same server and channel, however its host
+    is spelt: ``localhost`` and ``127.0.0.1`` are one server): :class:`UserInputError`
+    naming both (seqrun.toml's own check compares the text only)."""
+    seen: dict[tuple[str, str], str | None] = {}
+    for context in contexts:
+        if context.bus_section is None or context.bus_section.interface is None:
+            continue   # a simulated bus of its own
+        key = context.bus.key
+        if key is None:
+            continue
+        if key in seen:
+            from seqrun.service.bus_claim import bus_name
+
+            path = getattr(project, "config_path", None)
+            where = f"{_shown(path)}: " if path else ""
+            raise UserInputError(
+                f"{where}arms {seen[key]} and {context.arm_id} are on the same bus "
+                f"({bus_name(*key)}, however its host is spelt): one controller per bus; "
+                "give each arm a bus of its own")
+        seen[key] = context.arm_id

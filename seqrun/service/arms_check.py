@@ -133,11 +133,12 @@ def check_arms_sequence(file: Path, project: Any, *, start: str | None = None,
     from seqrun.sequence.arm_schedule import ArmPlan, check_arms
     from seqrun.sequence.arm_tracks import load_tracks
     from seqrun.sequence.validation import validate_sequence
-    from seqrun.service.arm_context import resolve_contexts
+    from seqrun.service.arm_context import refuse_shared_buses, resolve_contexts
     from seqrun.service.checking import override_notes
     from seqrun.yamlsource import display_path, sort_errors
 
     contexts = {str(c.arm_id): c for c in resolve_contexts(project=project)}
+    refuse_shared_buses(project, list(contexts.values()))
     check = ArmsCheck(display_path(file), tuple(contexts))
     for arm_id, context in contexts.items():
         try:

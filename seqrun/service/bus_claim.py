@@ -18,6 +18,11 @@ two) makes a second claimer wait for it briefly instead of being refused, so a w
 claims the bus for each refresh never keeps a run from starting.
 
 Claims are per user: two users on one machine do not see each other's claims.
+
+A record also says which arm its holder drives, for ``seqrun halt`` and ``seqrun status``
+with no bus (seqrun/cli/bus_owner.py): the campaign folder and arm id, the options that
+reach its bus (``-i … -c … --bus-kwargs …``), and the holder's process start time, so that
+a record left by a killed process whose pid was reused is not taken for a live holder.
 """
 
 from __future__ import annotations
@@ -102,6 +107,16 @@ class Holder:
     socket: str | None = None        # the control socket's path, when it serves one
     transient: bool = False
     bus: str = ""                    # the bus's name (bus_name), for a list of holders
+    #: The holder's process start time (clock ticks since boot, /proc/PID/stat); None
+    #: where the system does not say (then only the pid is checked).
+    started: int | None = None
+    campaign: str | None = None      # the campaign folder (resolved) of the arm it drives
+    arm_id: str | None = None        # its id in a campaign of several arms
+    #: The command-line options that reach its bus from another terminal (empty: a bus
+    #: of its process only, the built-in simulator).
+    reach: tuple[str, ...] = ()
+    #: The serial numbers of the modules it drives (ArmIdentity.key), once read.
+    serials: str = ""
 
     def describe(self) -> str:
         """``pid 1234 (seqrun run totem.yaml) since 14:02:11``."""
@@ -111,14 +126,51 @@ class Holder:
     def as_dict(self) -> dict:
         return {"pid": self.pid, "command": self.command, "since": self.since,
                 "argv": list(self.argv), "socket": self.socket, "transient": self.transient,
-                "bus": self.bus}
+                "bus": self.bus, "started": self.started, "campaign": self.campaign,
+                "arm_id": self.arm_id, "reach": list(self.reach), "serials": self.serials}
 
     @classmethod
     def from_dict(cls, data: dict) -> Holder:
         return cls(pid=int(data["pid"]), command=str(data.get("command", "?")),
                    since=float(data.get("since", 0.0)), argv=tuple(data.get("argv") or ()),
                    socket=data.get("socket"), transient=bool(data.get("transient", False)),
-                   bus=str(data.get("bus") or ""))
+                   bus=str(data.get("bus") or ""),
+                   started=None if data.get("started") is None else int(data["started"]),
+                   campaign=data.get("campaign"), arm_id=data.get("arm_id"),
+                   reach=tuple(str(w) for w in data.get("reach") or ()),
+                   serials=str(data.get("serials") or ""))
+
+    def alive(self) -> bool:
+        """Its process still runs: the pid exists and, where the record has it, started
+        when the holder did (a pid the system gave to another process is not alive)."""
+        if not pid_alive(self.pid):
+            return False
+        return self.started is None or process_start(self.pid) in (None, self.started)
+
+
+def pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def process_start(pid: int) -> int | None:
+    """When process ``pid`` started, in clock ticks since boot (field 22 of
+    /proc/PID/stat); None where there is no /proc or no such process."""
+    try:
+        text = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    # the command name (field 2) may hold spaces and parentheses: count after the last ')'
+    fields = text.rpartition(")")[2].split()
+    try:
+        return int(fields[19])
+    except (IndexError, ValueError):
+        return None
 
 
 def read_holder(interface: str, channel: str, *, directory: Path | None = None
@@ -134,10 +186,14 @@ def read_holder(interface: str, channel: str, *, directory: Path | None = None
 def holders(*, directory: Path | None = None) -> list[Holder]:
     """The records of every claim in the runtime directory (their holders may have died:
     the caller checks)."""
+    return [holder for _, holder in _records(directory or runtime_dir())]
+
+
+def _records(directory: Path) -> list[tuple[Path, Holder]]:
     found = []
-    for path in sorted((directory or runtime_dir()).glob("*.json")):
+    for path in sorted(directory.glob("*.json")):
         try:
-            found.append(Holder.from_dict(json.loads(path.read_text())))
+            found.append((path, Holder.from_dict(json.loads(path.read_text()))))
         except (OSError, ValueError, KeyError, TypeError):
             continue
     return found
@@ -185,6 +241,38 @@ class BusClaim:
         from dataclasses import replace
 
         self._holder = replace(self._holder, socket=path)
+        if self.held:
+            self._write_record()
+
+    def describe_arm(self, *, campaign: str | None, arm_id: str | None,
+                     reach: tuple[str, ...]) -> None:
+        """Name in the record the arm this claim is for (see the module docstring)."""
+        from dataclasses import replace
+
+        self._holder = replace(self._holder, campaign=campaign, arm_id=arm_id,
+                               reach=tuple(reach))
+        if self.held:
+            self._write_record()
+
+    def claim_arm(self, serials: str, described: str) -> None:
+        """This claim's bus reaches the arm whose modules say ``serials``
+        (ArmIdentity.key; ``described`` for the operator): refused when another live
+        claim has the same arm through another bus (one arm reached over two endpoints,
+        e.g. its adapter and a socketcand bridge, is still one arm: one controller);
+        else the record names it.
+
+        :raises ~seqrun.errors.Refused: naming the other holder and its bus.
+        """
+        from dataclasses import replace
+
+        for other in _records(self.directory):
+            path, holder = other
+            if (path != self.record_path and holder.serials == serials
+                    and not holder.transient and holder.alive()):
+                raise Refused(f"the arm with {described} is driven by {holder.describe()} on "
+                              f"{holder.bus or 'another bus'}: one controller per arm, "
+                              "whichever bus reaches it")
+        self._holder = replace(self._holder, serials=serials)
         if self.held:
             self._write_record()
 
@@ -269,7 +357,8 @@ def claim_bus(interface: str, channel: str, command: str | None = None, *,
         os.close(fd)
         raise
     holder = Holder(pid=os.getpid(), command=command or command_line(), since=time.time(),
-                    argv=tuple(sys.argv), transient=transient, bus=bus_name(interface, channel))
+                    argv=tuple(sys.argv), transient=transient, bus=bus_name(interface, channel),
+                    started=process_start(os.getpid()))
     return BusClaim(interface, channel, fd, holder, directory)
 
 

@@ -51,6 +51,8 @@ class Connection:
     claim: BusClaim | None = None
     #: The bus hands this process its own frames back (``receive_own_messages``).
     echoes_own: bool = False
+    #: The options that reach this bus from another terminal (:func:`reach_options`).
+    reach: tuple[str, ...] = ()
 
     def close(self) -> None:
         try:
@@ -133,10 +135,61 @@ def bus_key(config: Mapping[str, Any]) -> tuple[str, str] | None:
     if not interface or interface in PROCESS_LOCAL_INTERFACES:
         return None
     if interface == "socketcand":
-        return interface, (f"{config.get('host') or '127.0.0.1'}:"
+        return interface, (f"{endpoint_host(str(config.get('host') or '127.0.0.1'))}:"
                            f"{config.get('port') or DEFAULT_SOCKETCAND_PORT}/"
                            f"{config.get('channel') or 'can0'}")
     return str(interface), str(config.get("channel"))
+
+
+def endpoint_host(host: str) -> str:
+    """One spelling for every name of a socketcand server's host, so that a claim or a
+    same-bus check keys on the server reached, not on the text: ``localhost``,
+    ``127.0.0.1`` and this machine's own addresses are all ``127.0.0.1``; another host is
+    its IPv4 address (python-can's socketcand client connects over IPv4). A name that does
+    not resolve stays as given (connecting to it fails with its own line)."""
+    import ipaddress
+    import socket
+
+    try:
+        address = socket.gethostbyname(host)
+    except (OSError, UnicodeError):
+        return host
+    if ipaddress.ip_address(address).is_loopback:
+        return "127.0.0.1"
+    try:
+        # an address this machine can bind to is one of its own (0.0.0.0 included)
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+            probe.bind((address, 0))
+    except OSError:
+        return address
+    return "127.0.0.1"
+
+
+def bus_text(config: Mapping[str, Any]) -> str:
+    """How a bus is named in every line that names one: ``CAN interface 'socketcand'
+    127.0.0.1:29536 channel 'can0'`` (host:port for socketcand: two servers are two
+    arms), ``CAN interface 'socketcan' channel 'can0'``."""
+    interface = config.get("interface")
+    where = ""
+    if interface == "socketcand":
+        where = (f" {config.get('host') or '127.0.0.1'}:"
+                 f"{config.get('port') or DEFAULT_SOCKETCAND_PORT}")
+    return f"CAN interface '{interface}'{where} channel '{config.get('channel')}'"
+
+
+def reach_options(config: Mapping[str, Any]) -> tuple[str, ...]:
+    """The command-line options that reach this bus from another terminal (``-i … -c …
+    --bus-kwargs host=… port=…``); empty for a bus of one process only."""
+    interface = config.get("interface")
+    if not interface or interface in PROCESS_LOCAL_INTERFACES:
+        return ()
+    words = ["-i", str(interface)]
+    if config.get("channel") is not None:
+        words += ["-c", str(config["channel"])]
+    if interface == "socketcand":
+        words += ["--bus-kwargs", f"host={config.get('host') or '127.0.0.1'}",
+                  f"port={config.get('port') or DEFAULT_SOCKETCAND_PORT}"]
+    return tuple(words)
 
 
 def shared_bus(*, interface: str | None = None, channel: str | None = None,
@@ -289,10 +342,10 @@ def open_connection(*, interface: str | None = None, channel: str | None = None,
         if held is not None:
             held.release()
         raise
-    desc = (f"CAN interface '{config['interface']}' channel '{config.get('channel')}' "
-            f"at {config.get('bitrate')} bit/s")
+    desc = f"{bus_text(config)} at {config.get('bitrate')} bit/s"
     return Connection(real_bus, clock or RealClock(), False, desc, bus_key=claim_key, claim=held,
-                      echoes_own=bool(config.get("receive_own_messages")))
+                      echoes_own=bool(config.get("receive_own_messages")),
+                      reach=reach_options(config))
 
 
 #: Environment variable that overrides the arm file's response timeout, in milliseconds.

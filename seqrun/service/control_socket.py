@@ -191,16 +191,6 @@ def serve_control(claim: BusClaim, handler: ControlHandler) -> ControlServer | N
     return server
 
 
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
 def send_request(path: str | Path, request: dict, *, timeout: float = IO_TIMEOUT_S) -> dict:
     """One request to the socket at ``path``; the reply.
 
@@ -225,7 +215,7 @@ def send_request(path: str | Path, request: dict, *, timeout: float = IO_TIMEOUT
 def owner(interface: str, channel: str, *, directory: Path | None = None) -> Holder | None:
     """The holder of the bus, if it is alive and serves a control socket."""
     holder = read_holder(interface, channel, directory=directory)
-    if holder is None or not holder.socket or not _pid_alive(holder.pid):
+    if holder is None or not holder.socket or not holder.alive():
         return None
     return holder
 
@@ -234,7 +224,7 @@ def live_owners(*, directory: Path | None = None) -> list[Holder]:
     """Every live seqrun (run or console) of this user on this machine that serves a
     control socket, whatever its bus (the built-in simulator's included)."""
     return [h for h in holders(directory=directory)
-            if h.socket and not h.transient and _pid_alive(h.pid) and Path(h.socket).exists()]
+            if h.socket and not h.transient and h.alive() and Path(h.socket).exists()]
 
 
 def ask_holder(holder: Holder, op: str, *, reason: str | None = None,
