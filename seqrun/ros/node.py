@@ -4,8 +4,9 @@ What it offers (``<arm>``: the arm file's name, e.g. ``lwa3``; ``~``: the node, 
 
 - ``<arm>/joint_states`` (``sensor_msgs/JointState``, radians in user coordinates, every
   joint; relative names: under the node's namespace, ``/<arm>/...`` without one) at the
-  ``rate`` parameter, each message one reading of the arm stamped when the modules answered:
-  the control loop's during a motion, while idle one the session reads at that rate;
+  ``rate`` parameter from the session's latest measurement (never a bus read of its own),
+  each reading once, stamped when the modules answered: the control loop's during a
+  motion; while idle the session reads the arm at that rate (the node sets its poll);
 - ``robot_description`` (``std_msgs/String``, transient local: a late subscriber gets it):
   the arm as a URDF (``seqrun urdf``), link names the frames of ``/tf``;
 - ``/tf`` (``tf2_msgs/TFMessage``: ``<arm>/base``, ``<arm>/j1`` ... ``<arm>/j7``, the
@@ -80,6 +81,11 @@ PARAMETERS = {
     "publish_tf": "publish /tf and /tf_static from seqrun's own forward kinematics (false: "
                   "a robot_state_publisher on robot_description and joint_states does)",
 }
+#: No new reading for this long (s) while the arm was at rest (a run checking itself before
+#: it moves holds the bus): the last reading is sent again at the rate, stamped when sent.
+REPEAT_AFTER_S = 0.1
+#: Every joint slower than this (deg/s) in the last reading: the arm was at rest.
+AT_REST_DEG_S = 0.01
 #: robot_description and /tf_static: sent once, kept for late subscribers (RViz, a
 #: robot_state_publisher started later), as robot_state_publisher does.
 LATCHED_DEPTH = 1
@@ -131,6 +137,9 @@ class SeqrunNode:
         self._closed = False
         rate_hz, self.publish_tf = self._parameters(rate_hz)
         self._published_reading: float | None = None
+        self._fresh_at = -math.inf
+        # while idle the session reads the arm at this rate: every message a new reading
+        self._status_hz_before = session.set_status_rate(rate_hz)
         self._stop_group = MutuallyExclusiveCallbackGroup()
         self._command_group = MutuallyExclusiveCallbackGroup()
         self._state_group = MutuallyExclusiveCallbackGroup()
@@ -150,7 +159,8 @@ class SeqrunNode:
         node.create_service(Trigger, "~/reset", self._reset,
                             callback_group=self._command_group)
         self.action_server = self._follow_joint_trajectory()
-        self._timer = node.create_timer(1.0 / rate_hz, self.publish_state,
+        # twice the reading rate, so that no reading waits a whole period or is passed over
+        self._timer = node.create_timer(0.5 / rate_hz, self.publish_state,
                                         callback_group=self._state_group)
         self._listener = session.events.add_listener(self._forward, "ros ~/events",
                                                      maxsize=10_000)
@@ -204,6 +214,7 @@ class SeqrunNode:
         self._closed = True
         self.session.control.leave(self._control.client.id)
         self._timer.cancel()
+        self.session.set_status_rate(self._status_hz_before)
         self._listener.close(timeout=1.0)
         if self.action_server is not None:
             self.action_server.destroy()
@@ -268,11 +279,6 @@ class SeqrunNode:
         return {t.child_frame_id for t in transforms}
 
     # ------------------------------------------------------------------ state
-    def _reading(self) -> Any:
-        """The session's latest reading; while idle a new one (the session reads the arm
-        when nothing else uses the bus), so that joint_states comes at ``rate``."""
-        return self.session.poll_status()
-
     def _stamp(self, measured_at: float | None) -> Any:
         """The stamp of a reading taken at ``measured_at`` (the session's clock) in ROS time
         (the system clock): shifted by the clocks' difference now."""
@@ -292,21 +298,30 @@ class SeqrunNode:
         when the modules answered."""
         if self._closed:
             return
-        status = self._reading()
+        status = self.session.status()
         if status.updated_at is None:
             return  # nothing measured yet
         degrees = [j.position_deg for j in status.joints]
         if any(d is None for d in degrees):
             return
         measured = status.measured_at if status.measured_at is not None else status.updated_at
+        now = time.monotonic()
+        speeds = [j.velocity_deg_s for j in status.joints]
         if measured == self._published_reading:
-            return  # sent already: a reading is published once
-        self._published_reading = measured
+            # sent already: a reading is published once, unless none comes while a run
+            # checks itself before moving (it holds the bus): the arm, at rest when last
+            # read and not yet commanded, is sent again, stamped when sent
+            at_rest = all(v is not None and abs(v) < AT_REST_DEG_S for v in speeds)
+            if status.stale or not at_rest or now - self._fresh_at < REPEAT_AFTER_S:
+                return
+            stamp = self.node.get_clock().now().to_msg()
+        else:
+            stamp = self._stamp(measured)
+            self._published_reading, self._fresh_at = measured, now
         msg = JointState()
-        msg.header.stamp = self._stamp(measured)
+        msg.header.stamp = stamp
         msg.name = self._names
         msg.position = [math.radians(d) for d in degrees]
-        speeds = [j.velocity_deg_s for j in status.joints]
         if all(v is not None for v in speeds):
             msg.velocity = [math.radians(v) for v in speeds]
         self.joint_states.publish(msg)

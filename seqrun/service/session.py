@@ -132,9 +132,8 @@ class ArmSession:
         self.separation: Any = None
         self._status_listener = self._hub.add_listener(self._on_event, "session status",
                                                        maxsize=10_000)
-        if status_hz > 0:
-            self.telemetry.start_polling(status_hz, self.poll_status,
-                                         lambda: self.activities.current is None)
+        self._status_hz = 0.0
+        self.set_status_rate(status_hz)
 
     # ------------------------------------------------------------------ lifetime
     def __enter__(self) -> ArmSession:
@@ -234,6 +233,17 @@ class ArmSession:
     def status_dict(self) -> dict[str, Any]:
         """:meth:`status` as a JSON-ready dict (the control socket's ``status`` op)."""
         return self.status().as_dict()
+
+    def set_status_rate(self, hz: float) -> float:
+        """Read the arm ``hz`` times a second while idle (0: not at all; the ROS node reads
+        it at its joint_states rate); returns the rate before."""
+        before = self._status_hz
+        self.telemetry.stop_polling()
+        self._status_hz = float(hz)
+        if hz > 0:
+            self.telemetry.start_polling(hz, self.poll_status,
+                                         lambda: self.activities.current is None)
+        return before
 
     def poll_status(self) -> ArmStatus:
         """Read the arm once now (idle only; during an activity the executor feeds status)

@@ -312,9 +312,17 @@ class ArmTelemetry:
 
     def start_polling(self, hz: float, poll: Callable[[], Any],
                       idle: Callable[[], bool]) -> None:
-        """Call ``poll()`` ``hz`` times a second while ``idle()`` (a thread of its own)."""
+        """Call ``poll()`` ``hz`` times a second while ``idle()`` (a thread of its own; a
+        poll's own time counts in its period, so a reading that takes most of a period
+        still comes ``hz`` times a second)."""
+        import time
+
+        stop = self._poll_stop = threading.Event()
+
         def loop(period: float) -> None:
-            while not self._poll_stop.wait(period):
+            began = time.monotonic()
+            while not stop.wait(max(0.0, period - (time.monotonic() - began))):
+                began = time.monotonic()
                 if idle():
                     try:
                         poll()
