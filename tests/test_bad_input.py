@@ -516,43 +516,41 @@ def test_random_sequence_files(fuzz_places, text, as_bytes):
         assert (v.exit_code == 0) == (r.exit_code == 0), v.describe() + "\n" + r.describe()
 
 
-def outside_pose() -> str:
-    """Park with j4 beyond its limit: a pose file with an error of its own (Park itself had
-    one until the arm file's j4 limit admitted it)."""
-    text = (ROOT / "poses" / "park.yaml").read_text(encoding="utf-8")
-    assert text.count("j4: -120.32") == 1 and text.count("name: park") == 1
-    assert text.count("[365.903, -0.1, 47.921]") == 1 and text.count("[0.0, 85.42, 180.0]") == 1
-    return (text.replace("name: park", "name: outside").replace("j4: -120.32", "j4: -125.0")
-            .replace("[365.903, -0.1, 47.921]", "[345.209, -0.1, 45.669]")   # its FK
-            .replace("[0.0, 85.42, 180.0]", "[0.0, 80.74, 180.0]"))
+#: A pose 0.68° beyond j4's lower limit (Park's -120.32): no move target, its error at its
+#: own line (Park itself is a move target since issue 42).
+BEYOND = {"j1": 0, "j2": -90, "j3": 0, "j4": -121, "j5": 0, "j6": 115.74, "j7": 0}
 
 
 @pytest.mark.parametrize("text", [
     # Loads, so `run` reports the static validation's findings itself: the step order put
     # the pose file's error (the first step's target) between the two steps' own errors.
-    "name: Fuzz\ndescription: random\nsteps: [move: outside, home]\n",
-    "name: Fuzz\ndescription: random\nsteps:\n  - move: outside\n  - home\n"
+    "name: Fuzz\ndescription: random\nsteps: [move: beyond, home]\n",
+    "name: Fuzz\ndescription: random\nsteps:\n  - move: beyond\n  - home\n"
     "  - move: {joints: {j9: 1}}\n",
     # The move below the pose file's error line: still the sequence's errors first.
-    "name: Fuzz\ndescription: random\n" + "# padding\n" * 20
-    + "steps: [move: outside, home]\n",
+    "name: Fuzz\ndescription: random\n" + "# padding\n" * 20 + "steps: [move: beyond, home]\n",
     # Does not load: both commands merge the load errors with the findings the same way.
-    "steps: [move: outside, home]\n",
+    "steps: [move: beyond, home]\n",
 ], ids=["flow", "block", "far_down", "unloadable"])
 def test_validate_and_run_list_errors_in_one_order(tmp_path, places, text):
     """Found by test_random_sequence_files: both commands list the errors in one order, by
     position within a file, the files in the order the steps reach them (the sequence
     before the pose file its move names)."""
+    from seqrun.arm.poses import pose_document, pose_yaml
+
     sandbox, logs = places
     path = make_sequences(tmp_path / "project") / "s.yaml"
-    (path.parent.parent / "poses" / "outside.yaml").write_text(outside_pose(), encoding="utf-8")
+    arm = load_arm(tmp_path / "project" / "arms" / "lwa3.yaml")
+    (tmp_path / "project" / "poses" / "beyond.yaml").write_text(
+        pose_yaml(pose_document("beyond", arm, BEYOND, "beyond j4's travel", "manual")),
+        encoding="utf-8")
     path.write_text(text, encoding="utf-8")
     _, v, _ = check_file(path, sandbox=sandbox, logs=logs)   # asserts run lists them alike
     errors = [LOCATED.match(line) for line in v.stdout.splitlines()[:-1]
               if ": note: " not in line]
     files = [m["file"] for m in errors]
     assert files == sorted(files, key=lambda f: not f.endswith("s.yaml")), v.describe()
-    assert files[-1].endswith("outside.yaml"), v.describe()
+    assert files[-1].endswith("beyond.yaml"), v.describe()
     own = [(int(m["line"]), int(m["col"])) for m in errors if m["file"].endswith("s.yaml")]
     assert own == sorted(own) and len(own) >= 2, v.describe()
 

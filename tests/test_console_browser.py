@@ -477,12 +477,25 @@ def test_sliders_and_ghost_follow_the_arm_after_a_sequence(page, live):
     assert page.evaluate("window.seqrunConsole.view.ghost.group.visible") is False
 
 
-def test_park_is_no_move_target_and_says_why(page):
-    park = page.locator("[data-pose=park]")
-    assert park.is_disabled()
-    title = park.get_attribute("title")
-    assert "park.yaml" in title and "j4 -120.32° is outside its limits" in title
+def test_a_pose_beyond_the_limits_is_no_move_target_and_says_why(page, live):
+    from seqrun.arm.poses import pose_document, pose_yaml
+
+    setup, _ = live
+    beyond = {"j1": 0, "j2": -90, "j3": 0, "j4": -121, "j5": 0, "j6": 115.74, "j7": 0}
+    (setup.folder / "poses" / "beyond.yaml").write_text(
+        pose_yaml(pose_document("beyond", setup.arm, beyond, "beyond j4's travel", "manual")),
+        encoding="utf-8")
+    page.reload()
+    page.wait_for_function("window.seqrunConsole && window.seqrunConsole.ready "
+                           "&& window.seqrunConsole.statusCount > 1", timeout=20000)
+    page.wait_for_selector("[data-pose=beyond]", timeout=10000)
+    outside = page.locator("[data-pose=beyond]")
+    assert outside.is_disabled()
+    title = outside.get_attribute("title")
+    assert "beyond.yaml" in title and "j4 -121° is outside its limits" in title
     assert not page.locator("[data-pose=totem]").is_disabled()
+    # Park's j4 is j4's lower limit (issue 42): the Park button is a move target
+    assert not page.locator("[data-pose=park]").is_disabled()
 
 
 PROBE = """tools:

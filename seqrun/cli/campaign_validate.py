@@ -4,7 +4,9 @@ Each sequence gets the static checks and the dry run (``--static``: the checks o
 pose file the pose checks against the arm; then one summary table: file, result, simulated
 duration, lowest guard clearance, findings. ``--json`` prints the same as one object,
 ``--junit FILE`` writes a JUnit report for CI (and its CTRF JSON beside it,
-``FILE``'s name with ``.ctrf.json``). Exit 0 only when everything is valid. The
+``FILE``'s name with ``.ctrf.json``). Exit 0 only when everything is valid; 1 when a file
+is not; 3 when every file is valid but a rehearsed ``--sim-fault`` aborted a dry run (as
+``seqrun run`` exits; README "Exit codes"). The
 checks are the service's (:mod:`seqrun.service.campaign_checks`); this prints them.
 The pre-commit hook (``.pre-commit-hooks.yaml``) runs ``seqrun validate --static`` on the
 changed sequence and pose files.
