@@ -262,7 +262,8 @@ class RunLog:
         """Write the final report.json and junit.xml; never raises (errors are recorded).
         ``host``: what the computer did to the run (seqrun/service/host_watch.py)."""
         self._close_mcap()
-        report = {
+        steps = [s.as_dict() for s in result.steps]
+        report: dict[str, Any] = {
             "status": result.status,
             "exit_code": result.exit_code,
             "message": result.message,
@@ -270,13 +271,13 @@ class RunLog:
             "planned_duration_s": round(result.planned_duration_s, 4),
             "fault": result.fault,
             "latched_at_start": result.latched_at_start,
-            "steps": [s.as_dict() for s in result.steps],
+            "steps": steps,
             "checkpoints": [_checkpoint(s) for s in result.steps if s.kind == "checkpoint"
                             and s.status != "skipped"],
             "not_verified": result.not_verified,
             "min_heights_mm": result.min_heights_mm,
         }
-        requirements = requirement_results(report["steps"])
+        requirements = requirement_results(steps)
         if requirements:   # only when a step verifies one: other reports stay as they were
             report["requirements"] = requirements
         if host is not None:
