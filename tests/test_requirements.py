@@ -7,6 +7,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import re
 import shutil
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -180,3 +181,23 @@ def test_the_matrix_of_three_runs_including_an_old_one(project, tmp_path):
     assert (f'<td class="cell failed" data-requirement="REQ-2" data-run="{bad.name}">failed'
             in page)
     assert f'data-requirement="REQ-3" data-run="{good.name}">not run' in page
+
+
+def test_a_campaign_of_two_arms_counts_the_requirements_its_arms_verify(tmp_path, monkeypatch):
+    from twoarmskit import copy_example
+
+    folder = copy_example(tmp_path, monkeypatch)
+    (folder / "requirements.csv").write_text("id,text,method\nREQ-A,A holds,test\n"
+                                             "REQ-B,B approaches,test\n", encoding="utf-8")
+    path = folder / "sequences" / "hold_and_approach.yaml"
+    text = path.read_text(encoding="utf-8")
+    old = "label: A up to Totem}"
+    assert text.count(old) == 1
+    path.write_text(text.replace(old, "label: A up to Totem, verifies: [REQ-A, REQ-X]}"),
+                    encoding="utf-8")
+    result = cli("validate", str(folder), "--static")
+    # (the example's paths_cross.yaml is invalid on purpose: its arms collide)
+    assert re.search(r"hold_and_approach\.yaml +valid ", result.output), result.output
+    assert "requirement 'REQ-B' is verified by no sequence" in result.output
+    assert "'REQ-A' is verified by no sequence" not in result.output
+    assert "hold_and_approach.yaml:18:" in result.output and "'REQ-X' is not in" in result.output

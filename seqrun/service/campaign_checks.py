@@ -200,6 +200,9 @@ def _arms_sequence(path: Path, project: Any, options: dict, result: FileResult) 
         return result
     result.errors = [str(e) for e in check.errors]
     result.notes = [f"{n.file}:{n.line}:{n.column}: note: {n.message}" for n in check.notes]
+    if check.tracks is not None:
+        result.verifies = [rid for track in check.tracks.tracks.values() for step in track.steps
+                           for rid in getattr(step.params, "verifies", None) or ()]
     if check.errors:
         result.result = "invalid"
         return result
