@@ -201,3 +201,13 @@ def test_a_campaign_of_two_arms_counts_the_requirements_its_arms_verify(tmp_path
     assert "requirement 'REQ-B' is verified by no sequence" in result.output
     assert "'REQ-A' is verified by no sequence" not in result.output
     assert "hold_and_approach.yaml:18:" in result.output and "'REQ-X' is not in" in result.output
+
+
+def test_the_dry_run_sums_up_the_requirements_as_a_run_does(project):
+    from seqrun.service.checking import check_sequence
+
+    path = write_sequence(project, UP + "- move: {pose: opsafe, verifies: [REQ-1]}\n"
+                          + FAILING)
+    check = check_sequence(path)
+    assert check.dry_run is not None
+    assert check.dry_run.as_dict()["requirements"] == {"REQ-1": "passed", "REQ-2": "failed"}
