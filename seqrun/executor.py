@@ -500,7 +500,7 @@ class Executor:
         self._t0 = self.clock.now()
         self.poses = dict(getattr(loaded, "poses", {}))
         steps = list(loaded.steps)
-        results = [StepResult(s.number, s.kind, _label(s), _location(s)) for s in steps]
+        results = [StepResult.planned(s, _label(s), _location(s)) for s in steps]
         # clock_s: the run clock's reading at t = 0, so that the run log can put event
         # times and frame times on one (wall-clock) time base.
         self.emit("run_started", steps=len(steps), first_step=first_step, speed=self.speed,

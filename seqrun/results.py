@@ -35,6 +35,17 @@ class StepResult:
     finished: float | None = None
     planned_duration_s: float | None = None
     detail: dict[str, Any] = field(default_factory=dict)
+    #: The requirements the step verifies and its tags, as the sequence file says them.
+    verifies: list[str] = field(default_factory=list)
+    tags: list[str] = field(default_factory=list)
+
+    @classmethod
+    def planned(cls, step: Any, label: str, location: str) -> StepResult:
+        """The pending result of a loaded step (its ``verifies``/``tags`` from its params)."""
+        params = getattr(step, "params", None)
+        return cls(step.number, step.kind, label, location,
+                   verifies=list(getattr(params, "verifies", None) or ()),
+                   tags=list(getattr(params, "tags", None) or ()))
 
     @property
     def duration_s(self) -> float | None:
@@ -46,7 +57,11 @@ class StepResult:
         return {"number": self.number, "kind": self.kind, "label": self.label,
                 "location": self.location, "status": self.status,
                 "duration_s": _round(self.duration_s),
-                "planned_duration_s": _round(self.planned_duration_s), **self.detail}
+                "planned_duration_s": _round(self.planned_duration_s),
+                # Only when given: a file without them reports exactly as before.
+                **({"verifies": list(self.verifies)} if self.verifies else {}),
+                **({"tags": list(self.tags)} if self.tags else {}),
+                **self.detail}
 
 
 @dataclass

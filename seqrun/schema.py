@@ -153,6 +153,10 @@ class IncludeParams(StepParams):
         if self.monitors:
             raise PydanticCustomError("include_monitors", "an include runs other steps: put "
                                                           "the monitors on those steps")
+        given = [key for key in ("verifies", "tags") if getattr(self, key)]
+        if given:
+            raise PydanticCustomError("include_requirements", "an include runs other steps: "
+                                      "put {keys} on those steps", {"keys": " and ".join(given)})
         return self
 
 

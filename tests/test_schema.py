@@ -128,8 +128,9 @@ def test_step_titles_use_the_label_or_describe_the_step(project):
     ("- confirm: 42\n", 4, 12, ["expected text, got 42"]),
     ("- include: other.txt\n", 4, 12, [("an include names a sequence file ending in .yaml, "
                                         "got 'other.txt'")]),
-    ("- include: {file: x.yml, lable: y}\n", 4, 26, [("unknown key 'lable' in include (did "
-                                                     "you mean 'label'? allowed: file, monitors, label)")]),
+    ("- include: {file: x.yml, lable: y}\n", 4, 26, [(
+        "unknown key 'lable' in include (did you mean 'label'? allowed: file, monitors, "
+        "verifies, tags, label)")]),
     ("- reset: {label: ''}\n", 4, 18, ["must not be empty"]),
 ])
 def test_step_errors_are_located_and_explained(project, steps, line, col, words):

@@ -6,11 +6,14 @@
     seqrun report runs/20261121-101500-Op-safe --mcap     # run.mcap anew (docs/ros2.md);
                                                           # the recorded one -> run.mcap.orig
     seqrun report runs/20261127-101500-Two-arm --mcap     # several arms: their one run.mcap
+    seqrun report --requirements runs/2026112*  --out matrix.html --csv matrix.csv
+                                                          # requirement x run matrix
 
 A folder that is not a run folder is one ``error:`` line and exit 2. A run of several arms
 (docs/two-arms.md) draws each arm's report in its part (``RUN_DIR/A/report.html``; one
 part for ``--out``/``--csv``); ``--mcap`` on the run's folder writes its one run.mcap of
-every arm.
+every arm. ``--requirements`` takes any number of run folders and writes the requirement
+matrix (seqrun/report/matrix.py, docs/campaigns.md "Requirements").
 """
 
 from __future__ import annotations
@@ -28,13 +31,24 @@ from seqrun.cli.common import load_arm_file, user_errors
 
 @app.command("report")
 def report_command(
-    run_dir: Annotated[Path, typer.Argument(metavar="RUN_DIR", help="A run folder.")],
+    run_dirs: Annotated[list[Path], typer.Argument(
+        metavar="RUN_DIR…", help="A run folder (several with --requirements).")],
     out: Annotated[Optional[Path], typer.Option(
         "--out", "-o", metavar="FILE", help="Write the HTML here (default RUN_DIR/report.html)."
     )] = None,
     csv_dir: Annotated[Optional[Path], typer.Option(
         "--csv", metavar="DIR", help="Export the time series as CSV into DIR instead of the "
-                                     "HTML (both with --out).")] = None,
+                                     "HTML (both with --out); with --requirements: the "
+                                     "matrix as this CSV file.")] = None,
+    requirements: Annotated[bool, typer.Option(
+        "--requirements", help="Write the requirement matrix (requirement x run -> passed / "
+                               "failed / not run) of the RUN_DIRs as HTML (--out, default "
+                               "requirements.html beside the first run folder) and CSV "
+                               "(--csv).")] = False,
+    project: Annotated[Optional[Path], typer.Option(
+        "--project", metavar="DIR", help="With --requirements: the campaign whose "
+                                         "requirements.csv lists the requirements (default: "
+                                         "the runs' campaign).")] = None,
     mcap: Annotated[bool, typer.Option(
         "--mcap", help="Write RUN_DIR/run.mcap (the run as a ROS 2 bag) anew from events.jsonl "
                        "instead of the HTML (both with --out); for runs of older versions or "
@@ -49,6 +63,15 @@ def report_command(
     from seqrun.report import export_csv, load_run, write_html
 
     with user_errors():
+        if requirements:
+            _matrix(run_dirs, out, csv_dir, project)
+            return
+        if len(run_dirs) != 1:
+            from seqrun.errors import UserInputError
+
+            raise UserInputError(f"one RUN_DIR (got {len(run_dirs)}); several only with "
+                             "--requirements")
+        run_dir = run_dirs[0]
         arm = load_arm_file(arm_file) if arm_file is not None else None
         if mcap:
             from seqrun.service.arms_mcap import is_arms_run, rebuild_arms_mcap
@@ -75,6 +98,28 @@ def report_command(
                 typer.echo(f"wrote {path}")
         if csv_dir is None or out is not None:
             typer.echo(f"wrote {write_html(run_dir, out, data=data)}")
+
+
+def _matrix(run_dirs: list[Path], out: Path | None, csv_file: Path | None,
+            project: Path | None) -> None:
+    """The requirement matrix of ``run_dirs``: HTML (and CSV)."""
+    from seqrun.report.matrix import matrix_csv, matrix_html, requirement_matrix
+    from seqrun.runfolder.logfile import write_whole
+
+    matrix = requirement_matrix(run_dirs, project)
+    for line in matrix.problems:
+        typer.echo(f"warning: {line}", err=True)
+    if matrix.source is None:
+        typer.echo("warning: no requirements.csv found (give --project DIR): the matrix "
+                   "lists only the requirements the runs verified", err=True)
+    html = out if out is not None else Path(run_dirs[0]).parent / "requirements.html"
+    for path, text in ((html, matrix_html(matrix)),
+                       *(((csv_file, matrix_csv(matrix)),) if csv_file is not None else ())):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        error = write_whole(path, text)
+        if error is not None:
+            raise error
+        typer.echo(f"wrote {path}")
 
 
 def _warn(run_dir: Path, data: Any) -> None:

@@ -25,7 +25,7 @@ _KNOWN = {"sequence", "file", "start", "end", "arm", "bus", "simulator", "faults
           "first_step", "seqrun", "status", "exit_code", "message", "duration_s",
           "planned_duration_s", "fault", "steps", "checkpoints", "not_verified",
           "min_heights_mm", "inputs", "zero_reference", "zero", "steps_finished", "errors",
-          "overrides"}
+          "overrides", "requirements"}
 
 _FIGURE_ROWS = (
     ("max_following_error_deg", "largest following error (°)"),
@@ -306,7 +306,7 @@ def _steps(data: RunData) -> Iterator[str]:
             f"<td><strong>{escape(s.kind)}</strong>"
             f"{escape(s.label[len(s.kind):] if s.label.startswith(s.kind) else ': ' + s.label)}"
             "<br>"
-            f'<span class="note mono">{escape(s.location)}</span></td>'
+            f'<span class="note mono">{escape(s.location)}</span>{_marks(s)}</td>'
             f"<td>{escape(s.status)}</td><td class=\"num\">{_num(planned, 3)}</td>"
             f'<td class="num">{_num(executed, 3)}</td>'
             f'<td class="num" data-step="{s.number}" data-figure="duration_ratio">'
@@ -317,6 +317,18 @@ def _steps(data: RunData) -> Iterator[str]:
                     f'<td colspan="5">{extra}</td></tr>')
         yield row
     yield "</table>"
+
+
+def _marks(s: StepView) -> str:
+    """The requirements a step verifies and its tags (report.json's lists)."""
+    out = []
+    for key, title in (("verifies", "verifies"), ("tags", "tags")):
+        value = s.detail.get(key)
+        if isinstance(value, list) and value:
+            out.append(f'<br><span class="note">{title} <span class="mono" '
+                       f'data-step="{s.number}" data-figure="{key}">'
+                       f'{escape(", ".join(map(str, value)))}</span></span>')
+    return "".join(out)
 
 
 def _step_extra(data: RunData, s: StepView) -> str:
@@ -412,6 +424,12 @@ def _heights(data: RunData) -> str:
         out.append("<h2>Lowest guard points</h2><table>")
         for key, z in r["min_heights_mm"].items():
             out.append(f"<tr><th>{escape(str(key))}</th><td class=\"num\">{_num(z, 1)} mm</td></tr>")
+        out.append("</table>")
+    if isinstance(r.get("requirements"), dict) and r["requirements"]:
+        out.append('<h2>Requirements</h2><table id="requirements"><tr><th>requirement</th>'
+                   "<th>result</th></tr>")
+        out += [f'<tr><td class="mono">{escape(str(k))}</td><td>{escape(str(v))}</td></tr>'
+                for k, v in r["requirements"].items()]
         out.append("</table>")
     if r.get("not_verified"):
         out.append("<h2>Not verified</h2><ul>"

@@ -35,6 +35,8 @@ class FileResult:
     #: The dry run was aborted by a rehearsed ``--sim-fault`` (exit 3, as ``seqrun run``),
     #: the file itself being valid.
     rehearsed_fault: bool = False
+    #: The requirement ids the sequence's steps verify (for the campaign's coverage).
+    verifies: list[str] = field(default_factory=list)
 
     @property
     def valid(self) -> bool:
@@ -128,6 +130,7 @@ def _for_each_arm_file(path: Path, options: dict, files: dict[str, Path],
             result.result = one.result
         result.errors += [f"{named}: {e}" for e in one.errors]
         result.notes += [f"{named}: {n}" for n in one.notes]
+        result.verifies += one.verifies
         if one.simulated_s is not None:
             result.simulated_s = max(result.simulated_s or 0.0, one.simulated_s)
         if one.clearance_mm is not None and (result.clearance_mm is None
@@ -151,6 +154,9 @@ def _one_arm_sequence(path: Path, options: dict, result: FileResult) -> FileResu
         return result
     result.errors = [str(e) for e in check.errors]
     result.notes = [f"{n.file}:{n.line}:{n.column}: note: {n.message}" for n in check.notes]
+    if check.static.loaded is not None:
+        result.verifies = [rid for step in check.static.loaded.steps
+                           for rid in getattr(step.params, "verifies", None) or ()]
     if not check.static.valid:
         result.result = "invalid"
         return result
@@ -194,6 +200,9 @@ def _arms_sequence(path: Path, project: Any, options: dict, result: FileResult) 
         return result
     result.errors = [str(e) for e in check.errors]
     result.notes = [f"{n.file}:{n.line}:{n.column}: note: {n.message}" for n in check.notes]
+    if check.tracks is not None:
+        result.verifies = [rid for track in check.tracks.tracks.values() for step in track.steps
+                           for rid in getattr(step.params, "verifies", None) or ()]
     if check.errors:
         result.result = "invalid"
         return result
@@ -257,12 +266,38 @@ def _arm(path: Path) -> FileResult:
     return result
 
 
+def _requirements(root: Path, results: list[FileResult]) -> FileResult | None:
+    """The campaign's requirements.csv as one more result: a note per malformed row and
+    per requirement that no sequence of ``results`` verifies (notes: the sequences stay
+    valid); None when the campaign has none."""
+    from seqrun.runfolder.requirements import (campaign_requirements, read_requirements,
+                                               row_error_line)
+
+    path = campaign_requirements(root)
+    if path is None:
+        return None
+    result = FileResult(str(path), "requirements")
+    listed, bad_rows = read_requirements(path)
+    result.notes = [row_error_line(path, e) for e in bad_rows]
+    verified = {rid for r in results for rid in r.verifies}
+    result.notes += [f"{path}:{r.line}: requirement '{r.id}' is verified by no sequence"
+                     for r in listed if r.id not in verified]
+    return result
+
+
 def validate_files(paths: list[Path], **options: Any) -> list[FileResult]:
+    from seqrun.sequence.project import CONFIG_NAME
+
     results = []
     for path in collect(paths):
         kind = _kind(path)
         results.append(_pose(path, options) if kind == "pose" else
                        _arm(path) if kind == "arm" else _sequence(path, options))
+    for folder in dict.fromkeys(p.resolve() for p in paths if p.is_dir()):
+        if (folder / CONFIG_NAME).is_file():   # a campaign folder: its requirements' coverage
+            found = _requirements(folder, results)
+            if found is not None:
+                results.append(found)
     return results
 
 

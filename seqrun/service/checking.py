@@ -104,7 +104,8 @@ def override_notes(loaded: LoadedSequence, arm_path: Path | None = None) -> list
     from seqrun.arm.poses import pose_overrides
     from seqrun.steps.registry import step_kind
 
-    notes = _arm_notes(loaded, Path(arm_path or loaded.arm_path)) + _outside_notes(loaded)
+    notes = _arm_notes(loaded, Path(arm_path or loaded.arm_path)) + _outside_notes(loaded) \
+        + requirement_notes(loaded)
     overrides = pose_overrides(loaded.pose_path or loaded.poses_dir)
     seen = set()
     for step in loaded.steps:
@@ -115,6 +116,36 @@ def override_notes(loaded: LoadedSequence, arm_path: Path | None = None) -> list
                 notes.append(step.error(f"pose '{name}' is the campaign's {used}, which "
                                         f"overrides {', '.join(str(h) for h in hidden)}",
                                         "pose"))
+    return notes
+
+
+def requirement_notes(loaded: LoadedSequence) -> list:
+    """A note for each requirement id a step verifies that the campaign's requirements.csv
+    does not list (one note when the campaign has none), and for each malformed row of
+    it (docs/campaigns.md, "Requirements"). Outside a campaign: none."""
+    from seqrun.runfolder.requirements import (REQUIREMENTS_NAME, campaign_requirements,
+                                               read_requirements)
+    from seqrun.yamlsource import Location, display_path
+
+    project = loaded.project
+    if not getattr(project, "is_campaign", False):
+        return []
+    named = [(step, i, rid) for step in loaded.steps
+             for i, rid in enumerate(getattr(step.params, "verifies", None) or ())]
+    if not named:
+        return []
+    root = Path(project.root)
+    path = campaign_requirements(root)
+    if path is None:
+        step = named[0][0]
+        return [step.error(f"the steps verify requirements, but the campaign has no "
+                           f"{REQUIREMENTS_NAME} (at {root}) to list them", "verifies")]
+    listed, bad_rows = read_requirements(path)
+    shown = display_path(path)
+    notes = [Location(shown, line, 1).error(message) for line, message in bad_rows]
+    ids = {r.id for r in listed}
+    notes += [step.error(f"requirement '{rid}' is not in {shown}", "verifies", i)
+              for step, i, rid in named if rid not in ids]
     return notes
 
 

@@ -64,14 +64,19 @@ class DryRun:
         return self.simulated_s / self.wall_s if self.wall_s > 0 else math.inf
 
     def as_dict(self) -> dict[str, Any]:
+        from seqrun.runfolder.requirements import requirement_results
+
         r = self.result
+        steps = [s.as_dict() for s in r.steps]
+        requirements = requirement_results(steps)   # as a run's report.json has them
         return {
             "passed": self.passed, "status": r.status, "message": r.message,
             "start_pose": self.start_pose, "cycle_hz": self.cycle_hz, "faults": self.faults,
             "simulated_s": round(self.simulated_s, 4),
             "planned_motion_s": round(r.planned_duration_s, 4),
             "wall_s": round(self.wall_s, 4), "speedup": round(self.speedup, 1),
-            "steps": [s.as_dict() for s in r.steps],
+            "steps": steps,
+            **({"requirements": requirements} if requirements else {}),
             "min_heights_mm": r.min_heights_mm,
             "fault": r.fault,
             "not_verified": list(r.not_verified) + list(ALWAYS_UNVERIFIED),

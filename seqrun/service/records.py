@@ -1,7 +1,8 @@
 """Run records: what a run used, frozen in its run folder, and the list of past runs.
 
 Every run folder gets ``inputs/`` (a copy of every file the run read: the sequence and its
-includes, the pose files, the arm file, the campaign's ``seqrun.toml``) and ``record.json``
+includes, the pose files, the arm file, the campaign's ``seqrun.toml`` and
+``requirements.csv``) and ``record.json``
 (each input with its sha256, the seqrun version, the campaign's git commit and whether the
 work tree was dirty, the bus and the zero reference). A run refused by validation leaves a
 short folder too (``report.json`` with status ``refused`` and the errors), so a campaign's
@@ -21,6 +22,7 @@ from typing import Any
 
 from seqrun.runfolder.logfile import write_whole
 from seqrun.runfolder.names import EVENTS_NAMES, TRACE_NAMES
+from seqrun.runfolder.requirements import campaign_requirements
 from seqrun.shipped import shipped_dir
 
 #: How long ``git rev-parse`` may take before the record says "unknown".
@@ -103,6 +105,10 @@ def input_sources(loaded: Any, arm: Any = None,
         if source:
             sources.append((Path(config), source))
         elif (found := read(Path(config))) is not None:
+            sources.append(found)
+        # The requirements the run's steps verify, as they read then (the matrix's list).
+        listed = campaign_requirements(getattr(project, "root", None))
+        if listed is not None and (found := read(listed)) is not None:
             sources.append(found)
     return sources
 

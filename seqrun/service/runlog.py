@@ -55,6 +55,7 @@ from seqrun.runfolder.logfile import (GzipLineFile, LineFile, overwrite_in_place
                                       write_whole)
 from seqrun.runfolder.names import (EVENTS_NAME, EVENTS_NAMES, TRACE_NAME, TRACE_NAMES,
                                     events_path, trace_path)
+from seqrun.runfolder.requirements import requirement_results
 from seqrun.service.time_base import TimeBase
 
 #: The running report.json is rewritten at most this often (seconds of real time).
@@ -261,7 +262,8 @@ class RunLog:
         """Write the final report.json and junit.xml; never raises (errors are recorded).
         ``host``: what the computer did to the run (seqrun/service/host_watch.py)."""
         self._close_mcap()
-        report = {
+        steps = [s.as_dict() for s in result.steps]
+        report: dict[str, Any] = {
             "status": result.status,
             "exit_code": result.exit_code,
             "message": result.message,
@@ -269,12 +271,15 @@ class RunLog:
             "planned_duration_s": round(result.planned_duration_s, 4),
             "fault": result.fault,
             "latched_at_start": result.latched_at_start,
-            "steps": [s.as_dict() for s in result.steps],
+            "steps": steps,
             "checkpoints": [_checkpoint(s) for s in result.steps if s.kind == "checkpoint"
                             and s.status != "skipped"],
             "not_verified": result.not_verified,
             "min_heights_mm": result.min_heights_mm,
         }
+        requirements = requirement_results(steps)
+        if requirements:   # only when a step verifies one: other reports stay as they were
+            report["requirements"] = requirements
         if host is not None:
             report["host"] = host
         junit = junit_xml(self.meta.get("sequence", "sequence"), result, self._joint_names)
@@ -464,7 +469,8 @@ def _junit_suite(name: str, classname: str, result: RunResult, steps: list[StepR
     lines = [f'<testsuite name={quoteattr(name)} tests="{len(steps)}" '
              f'failures="{failures}" errors="0" skipped="{skipped}" time="{max(time, 0.0):.3f}">']
     properties = [(f"step{s.number:02d}.{key}", value) for s in steps
-                  for key, value in _junit_properties(s, keys, joint_names)]
+                  for key, value in [*_junit_properties(s, keys, joint_names),
+                                     *_junit_marks(s)]]
     if properties:
         lines.append("  <properties>")
         lines += [f"    <property name={quoteattr(k)} value={quoteattr(v)}/>"
@@ -510,7 +516,8 @@ def ctrf_json(suite: str, result: RunResult, joint_names: list[str] | None,
     tests = []
     for s in result.steps:
         keys = _CHECKPOINT_PROPERTIES if s.kind == "checkpoint" else _JUNIT_PROPERTIES
-        values = dict(_junit_properties(s, keys, names))
+        values: dict[str, Any] = dict(_junit_properties(s, keys, names))
+        values.update({k: v for k, v in (("verifies", s.verifies), ("tags", s.tags)) if v})
         failed = s.status in ("failed", "aborted")
         tests.append(ctrf_test(step_title(s), s.status, s.duration_s, suite=suite,
                                message=_step_message(s, result) if failed else None,
@@ -519,6 +526,12 @@ def ctrf_json(suite: str, result: RunResult, joint_names: list[str] | None,
                                {"kind": s.kind}))
     return ctrf_report(tests, start_s=start_s, stop_s=stop_s, version=__version__,
                        extra={"status": result.status, "exit_code": result.exit_code})
+
+
+def _junit_marks(step: StepResult) -> list[tuple[str, str]]:
+    """``verifies`` and ``tags`` of a step as properties (ids joined by spaces)."""
+    return [(key, " ".join(ids)) for key, ids in (("verifies", step.verifies),
+                                                  ("tags", step.tags)) if ids]
 
 
 def _junit_properties(step: StepResult, keys: tuple[str, ...],

@@ -197,8 +197,8 @@ def _inputs(loaded: LoadedSequence, arm: ArmDescription) -> list[dict[str, str]]
 def _unfinished(executor: Executor, loaded: LoadedSequence, exc: BaseException) -> RunResult:
     """The result of a run an exception ended outside any step (the executor did not get
     to say): failed, exit 3, whatever it was."""
-    steps = [StepResult(s.number, s.kind, getattr(s, "title", None) or s.kind,
-                        str(s.location)) for s in loaded.steps]
+    steps = [StepResult.planned(s, getattr(s, "title", None) or s.kind, str(s.location))
+             for s in loaded.steps]
     message = f"interrupted ({exc!r}) before the run could finish"
     return RunResult("failed", EXIT_FAULT, message, steps, 0.0,
                      executor.elapsed_s(),

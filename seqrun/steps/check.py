@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Annotated, Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 from pydantic import Field
 
@@ -14,9 +14,6 @@ if TYPE_CHECKING:
     from seqrun.steps.context import StepContext
     from seqrun.steps.resolved import ResolvedStep
 
-RequirementId = Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.:-]+$")]
-
-
 class CheckParams(StepParams):
     """Check a condition on the telemetry now; if it does not hold, the run ends as a
     failed checkpoint (exit 3, the arm halted)."""
@@ -26,9 +23,6 @@ class CheckParams(StepParams):
     that: ExpressionText = Field(description="The condition, e.g. 'tool.z_mm > 40'.")
     message: str | None = Field(None, min_length=1,
                                 description="What a failure means, for the operator.")
-    verifies: list[RequirementId] = Field(
-        default_factory=list, description="The requirements this check verifies "
-                                          "(kept in the report), e.g. [REQ-CAP-012].")
 
     @classmethod
     def from_shorthand(cls, value: Any) -> CheckParams:

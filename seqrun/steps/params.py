@@ -29,6 +29,7 @@ __all__ = [
     "ModulesParams",
     "MonitorSpec",
     "PoseName",
+    "RequirementId",
     "Positive",
     "Scale",
     "StepParams",
@@ -124,6 +125,11 @@ ExpressionText = Annotated[str, AfterValidator(_expression), Field(
                               "'Expressions'), e.g. 'tool.z_mm > 40 and not moving'.")]
 
 
+#: What a requirement id or a tag may be (docs/campaigns.md, "Requirements").
+REQUIREMENT_ID_RE = r"^[A-Za-z0-9_.:-]+$"
+RequirementId = Annotated[str, Field(min_length=1, max_length=64, pattern=REQUIREMENT_ID_RE)]
+
+
 # --------------------------------------------------------------------------- models
 class StrictModel(FriendlyModel):
     """Unknown keys, wrong types and changes after loading are errors."""
@@ -161,6 +167,15 @@ class StepParams(StrictModel):
         default_factory=list, max_length=32,
         description="Invariants watched every control cycle while this step runs "
                     "(docs/sequence-format.md, 'Expressions').")
+    verifies: list[RequirementId] = Field(
+        default_factory=list, max_length=64,
+        description="The requirements this step verifies (ids of the campaign's "
+                    "requirements.csv, kept in report.json, junit.xml and the requirement "
+                    "matrix), e.g. [REQ-CAP-012].")
+    tags: list[RequirementId] = Field(
+        default_factory=list, max_length=64,
+        description="Free tags of this step (kept in report.json and junit.xml), e.g. "
+                    "[capture, endurance].")
 
     @classmethod
     def from_shorthand(cls, value: Any) -> StepParams:
