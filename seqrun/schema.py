@@ -52,7 +52,6 @@ from pydantic import (
 )
 from pydantic_core import PydanticCustomError
 
-from seqrun.sequence.parameters import ParameterSpec
 from seqrun.steps.checkpoint import CheckpointParams
 from seqrun.steps.confirm import ConfirmParams
 from seqrun.steps.halt import HaltParams
@@ -78,6 +77,7 @@ from seqrun.steps.params import (  # noqa: F401  (the value types, re-exported)
 from seqrun.steps.power_off import PowerOffParams
 from seqrun.steps.registry import KINDS
 from seqrun.steps.reset import ResetParams
+from seqrun.steps.sequence_parameters import ParameterSpec
 from seqrun.steps.set_limits import SetLimitsParams
 from seqrun.steps.wait import WaitParams
 

@@ -310,7 +310,7 @@ def validate_command(
                                "clearances": [c.as_dict() for c in check.clearances],
                                "proximities": [p.as_dict() for p in check.proximities],
                                "dry_run": run.as_dict() if run is not None else None,
-                               "params": _values(check.loaded)},
+                               **_values(check.loaded)},
                               indent=2, ensure_ascii=False))
     else:
         print_report(check, file, as_json=False)
@@ -330,12 +330,12 @@ def validate_command(
 
 def _given_params(options: list[str], files: list[Path], junit_file: Path | None) -> dict:
     """``--param`` options as {name: text}: for one sequence file (one line, exit 2)."""
-    from seqrun.sequence.parameters import parse_options
+    from seqrun.service.checking import param_options
 
     if options and (len(files) != 1 or _is_dir(files[0]) or junit_file is not None):
         fail("--param gives a value to one sequence's parameter: give one sequence file")
     try:
-        return parse_options(options)
+        return param_options(options)
     except UserInputError as exc:
         fail(str(exc))
 
@@ -351,7 +351,9 @@ def _range_problems(file: Path, checked, given: dict, **check) -> list:
 
 
 def _values(loaded) -> dict:
-    return dict(loaded.param_values) if loaded is not None else {}
+    """``{"params": the values checked}`` of a sequence that declares any, else {}."""
+    values = dict(loaded.param_values) if loaded is not None else {}
+    return {"params": values} if values else {}
 
 
 class SchemaKind(str, Enum):

@@ -214,7 +214,7 @@ class _Loader:
         """``doc`` with the parameters' values put into its steps (the top file's
         declarations; an included file uses them too). Raises UserInputError for a bad or
         missing value (--param)."""
-        from seqrun.sequence.parameters import (
+        from seqrun.steps.sequence_parameters import (
             NAME_RE,
             ParameterSpec,
             expression_types,

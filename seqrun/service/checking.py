@@ -26,7 +26,8 @@ if TYPE_CHECKING:
     from seqrun.service.dryrun import DryRun
     from seqrun.sim.faults import Fault
 
-__all__ = ["RangeProblem", "SequenceCheck", "check_for_run", "check_parameter_ranges", "check_sequence", "errors_before_bus",
+__all__ = ["RangeProblem", "SequenceCheck", "check_for_run", "check_parameter_ranges",
+           "param_options", "check_sequence", "errors_before_bus",
            "override_notes"]
 
 
@@ -106,9 +107,17 @@ class RangeProblem:
     message: str      # the first error, or the dry run's verdict
 
     def __str__(self) -> str:
-        from seqrun.sequence.parameters import show_value
+        from seqrun.steps.sequence_parameters import show_value
 
         return f"params: {self.name} = {show_value(self.value)} (its {self.end}): {self.message}"
+
+
+def param_options(options: Sequence[str]) -> dict[str, str]:
+    """``--param NAME=VALUE`` options as ``{name: text}`` (their values are parsed by the
+    declared types when the sequence is loaded). Raises UserInputError for a bad one."""
+    from seqrun.steps.sequence_parameters import parse_options
+
+    return parse_options(options)
 
 
 def check_parameter_ranges(file: Path, loaded: LoadedSequence,
@@ -116,7 +125,7 @@ def check_parameter_ranges(file: Path, loaded: LoadedSequence,
     """``file`` checked (static and, with ``dry_run``, the dry run) with each numeric
     parameter at its min and at its max in turn, the others at their defaults: at most
     two checks per parameter. ``check``: :func:`check_sequence`'s other arguments."""
-    from seqrun.sequence.parameters import extremes, show_value
+    from seqrun.steps.sequence_parameters import extremes, show_value
 
     problems = []
     for name, value, end in extremes(loaded.parameters):

@@ -95,7 +95,7 @@ def prepare_run(request: RunRequest) -> PreparedRun:
     """
     from seqrun.clock import VirtualClock
     from seqrun.sequence.loader import load_sequence
-    from seqrun.sequence.parameters import parse_options
+    from seqrun.steps.sequence_parameters import parse_options
     from seqrun.service import campaign_records
     from seqrun.service.arm_context import resolve_context
     from seqrun.service.checking import check_for_run, errors_before_bus, override_notes
