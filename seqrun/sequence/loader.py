@@ -227,8 +227,8 @@ class _Loader:
             return doc
         declared = data.get("params")
         if top:
-            names = [n for n in declared if isinstance(n, str)] \
-                if isinstance(declared, dict) else []
+            given_specs = declared if isinstance(declared, dict) else {}
+            names = [n for n in given_specs if isinstance(n, str)]
             for name in self.given:
                 if name not in names:
                     raise UserInputError(f"--param {name}: {doc.file} declares no parameter "
@@ -236,7 +236,7 @@ class _Loader:
             for name in names:
                 try:
                     if NAME_RE.match(name):
-                        self.specs[name] = ParameterSpec.model_validate(declared[name])
+                        self.specs[name] = ParameterSpec.model_validate(given_specs[name])
                 except ValidationError:
                     pass  # reported with the whole file's errors
             self.declared = names
