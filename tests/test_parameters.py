@@ -110,6 +110,15 @@ def test_a_declaration_is_strictly_typed(project, declaration, message):
     assert any(":3:" in e and message in e for e in errors), errors
 
 
+def test_a_bad_default_is_located_at_the_default(project):
+    path = write(project, "", head="name: P\nparams:\n  n: {type: int, default: true}\n"
+                                   "steps:\n  - reset\n")
+    with pytest.raises(SequenceInvalid) as caught:
+        load_sequence(path)
+    assert [str(e).rsplit("/", 1)[-1] for e in caught.value.errors] == [
+        "p.yaml:3:27: default: expected a whole number, got true"]
+
+
 # --------------------------------------------------------------------------- --param
 def test_param_overrides_the_default_parsed_by_its_type(project):
     path = write(project, MOVE)

@@ -23,7 +23,7 @@ import re
 from collections.abc import Iterable, Mapping
 from typing import Any, ClassVar, Literal
 
-from pydantic import Field, model_validator
+from pydantic import Field, ValidationInfo, field_validator, model_validator
 from pydantic_core import PydanticCustomError
 
 from seqrun.errors import SourceError, UserInputError
@@ -70,12 +70,21 @@ class ParameterSpec(StrictModel):
         if (self.choices is None) != (self.type != "choice"):
             raise PydanticCustomError("param_choices", "a choice parameter lists its "
                                                        "'choices'; only a choice has them")
-        if self.default is not None:
-            problem = value_problem(self, self.default)
-            if problem is not None:
-                raise PydanticCustomError("param_default", "default: {problem}",
-                                          {"problem": problem})
         return self
+
+    @field_validator("default")
+    @classmethod
+    def _default_fits(cls, value: Any, info: ValidationInfo) -> Any:
+        """The default is a value of the declared type and range (at the default's place:
+        the fields before it are validated by then)."""
+        if value is None or "type" not in info.data:
+            return value
+        spec = cls.model_construct(**{**info.data, "default": None})
+        problem = value_problem(spec, value)
+        if problem is not None:
+            raise PydanticCustomError("param_default", "default: {problem}",
+                                      {"problem": problem})
+        return value
 
 
 def show_value(value: Any) -> str:
@@ -99,6 +108,8 @@ def value_problem(spec: ParameterSpec, value: Any) -> str | None:
     if kind == "choice" and (type(value) is bool or value not in (spec.choices or [])):
         options = ", ".join(show_value(c) for c in spec.choices or [])
         return f"expected one of {options}, got {_shown(value)}"
+    if kind not in NUMERIC:
+        return None
     if spec.min is not None and value < spec.min:
         return f"{show_value(value)} is below the minimum {show_value(spec.min)}"
     if spec.max is not None and value > spec.max:
