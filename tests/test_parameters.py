@@ -137,6 +137,8 @@ def test_param_overrides_the_default_parsed_by_its_type(project):
     ("sped=0.5", "--param sped: sequences/p.yaml declares no parameter 'sped' "
                  "(declared: speed, target, word, floor)"),
     ("speed", "--param 'speed': expected NAME=VALUE, e.g. --param speed=0.5"),
+    ("word=a\x1b[31m", "--param word='a\\x1b[31m': a value is printable text (no control "
+                        "characters)"),
 ])
 @pytest.mark.parametrize("command", ["validate", "run"])
 def test_a_bad_param_is_one_line_and_exit_2(project, option, message, command):

@@ -129,6 +129,8 @@ def parse_value(spec: ParameterSpec, text: str) -> Any:
     """The typed value of a command-line text; raises ValueError saying why not."""
     kind = spec.type
     value: Any = text
+    if not text.isprintable():  # it would reach the operator's terminal and the report
+        raise ValueError("a value is printable text (no control characters)")
     if kind == "int":
         if not _INT_RE.match(text):
             raise ValueError(f"expected a whole number, got '{text}'")
@@ -183,7 +185,8 @@ def resolve_values(specs: Mapping[str, ParameterSpec], given: Mapping[str, str],
             try:
                 values[name] = parse_value(spec, given[name])
             except ValueError as exc:
-                raise UserInputError(f"--param {name}={given[name]}: {exc}") from None
+                shown = given[name] if given[name].isprintable() else ascii(given[name])
+                raise UserInputError(f"--param {name}={shown}: {exc}") from None
         elif spec.default is not None:
             values[name] = float(spec.default) if spec.type == "float" else spec.default
         else:
