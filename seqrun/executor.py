@@ -573,7 +573,9 @@ class Executor:
                   **({"include": list(step.include_labels)}
                      if getattr(step, "include_labels", ()) else {}))
         self.streaming.tracking = None
-        self.monitors.start_step(getattr(step.params, "monitors", ()), self.clock.now())
+        self.monitors.start_step(getattr(step.params, "monitors", ()), self.clock.now(),
+                                 param_types=getattr(step, "param_types", None),
+                                 param_values=getattr(step, "param_values", None))
 
     def _step_passed(self, result: StepResult, detail: dict) -> None:
         result.detail.update({k: v for k, v in detail.items() if k != "planned_duration_s"})

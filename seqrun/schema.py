@@ -77,6 +77,7 @@ from seqrun.steps.params import (  # noqa: F401  (the value types, re-exported)
 from seqrun.steps.power_off import PowerOffParams
 from seqrun.steps.registry import KINDS
 from seqrun.steps.reset import ResetParams
+from seqrun.steps.sequence_parameters import ParameterSpec
 from seqrun.steps.set_limits import SetLimitsParams
 from seqrun.steps.wait import WaitParams
 
@@ -278,6 +279,9 @@ Step = Annotated[
 ]
 
 
+ParameterName = Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")]
+
+
 class Sequence(_Model):
     """A seqrun sequence file: what the arm does, step by step."""
 
@@ -295,6 +299,12 @@ class Sequence(_Model):
                     f"else {DEFAULT_ARM}), or the name of an arm (lwa3: the campaign's "
                     "arms/lwa3.yaml, else the shipped one). An included sequence must name "
                     "the same arm or none.")
+    params: dict[ParameterName, ParameterSpec] = Field(  # type: ignore[valid-type]
+        default_factory=dict,
+        description="Typed parameters, name -> declaration: '${name}' in any value of the "
+                    "steps is replaced by the value (the default, or --param name=value); "
+                    "expressions read them as params.NAME. Only the top file declares "
+                    "them; an included file uses the including file's.")
     steps: list[Step] = Field(min_length=1, description="The steps, in order.")
 
 

@@ -472,12 +472,13 @@ class Document:
         return list(real.value) if isinstance(real, SequenceNode) else []
 
     # -- validating
-    def validate(self, model: type[M]) -> M:
-        """Validate :attr:`data` against a model (or any type); raises SequenceInvalid."""
+    def validate(self, model: type[M], *, context: dict[str, Any] | None = None) -> M:
+        """Validate :attr:`data` against a model (or any type); raises SequenceInvalid.
+        ``context``: pydantic's validation context (a sequence's parameters)."""
         try:
             if isinstance(model, type) and issubclass(model, BaseModel):
-                return model.model_validate(self.data)
-            return TypeAdapter(model).validate_python(self.data)
+                return model.model_validate(self.data, context=context)
+            return TypeAdapter(model).validate_python(self.data, context=context)
         except ValidationError as exc:
             raise SequenceInvalid(self.validation_errors(exc)) from None
 

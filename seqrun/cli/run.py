@@ -134,6 +134,9 @@ def run_command(
     = None,
     foxglove: FoxgloveOption = None,
     arm_id: OneArmOption = None,
+    param: Annotated[Optional[list[str]], typer.Option(
+        "--param", metavar="NAME=VALUE", help="A value of one of the sequence's params "
+        "(over its default), checked against its type and range; repeatable.")] = None,
 ) -> None:
     """Run a sequence: validate, read the arm, re-validate from where it stands, move.
     In a campaign with several arms ([arms.ID]): a sequence that names them runs every arm
@@ -163,7 +166,8 @@ def run_command(
                           "--from": from_step != 1, "--step": step,
                           "--power-on-at": power_on_at is not None,
                           "--zero-confirmed": zero_confirmed is not None,
-                          "--rt-priority": rt_priority is not None}, plain=plain)
+                          "--rt-priority": rt_priority is not None,
+                          "--param": bool(param)}, plain=plain)
     # Imported here, not at the top: `seqrun --help` and the other commands stay light.
     from seqrun.cli.output import keep_running_on_broken_pipe, make_console
     from seqrun.service.run_preparation import RunInvalid, RunRequest, prepare_run
@@ -175,7 +179,8 @@ def run_command(
     check_foxglove(foxglove)   # (one line before anything is opened)
     request = RunRequest(file, interface, channel, bitrate, bus_kwargs or [], sim,
                          sim_fault or [], speed, from_step, log_dir, arm_file, command_mode,
-                         start, started, virtual_time, project_dir, power_on_at, arm_id)
+                         start, started, virtual_time, project_dir, power_on_at, arm_id,
+                         param or [])
     with user_errors():
         try:
             run = prepare_run(request)   # nothing is opened before the checks pass

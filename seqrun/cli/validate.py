@@ -216,6 +216,10 @@ def validate_command(
         "--report", metavar="FILE", help="Write the dry run's report (HTML, plots, "
                                          "self-contained) to FILE.")] = None,
     arm_id: OneArmOption = None,
+    param: Annotated[list[str] | None, typer.Option(
+        "--param", metavar="NAME=VALUE", help="Check with this value of one of the "
+        "sequence's params (over its default); repeatable. Without any, the declared range "
+        "of every numeric parameter is checked too (at its min and at its max).")] = None,
 ) -> None:
     """Check a sequence file and its includes against the arm, then dry-run it on the
     simulator at virtual time. Nothing is sent to a real bus.
@@ -225,6 +229,7 @@ def validate_command(
     """
     if not 0 < speed <= 1:
         fail(f"--speed must lie in (0, 1], got {speed:g}")
+    given = _given_params(param or [], files, junit_file)
     if len(files) == 1 and not _is_dir(files[0]) and junit_file is None:
         file = files[0]
         try:
@@ -239,6 +244,8 @@ def validate_command(
         if arms_project is not None and arm_id is not None and file.is_file():
             fail(f"--arm-id {arm_id}: {file} names the arms it moves and is checked for "
                  "each; --arm-id is for a sequence of one arm")
+        if arms_project is not None and given:
+            fail(f"--param: not for a sequence of several arms yet ({file})")
         if arms_project is not None:
             from seqrun.cli.validate_arms import validate_arms
 
@@ -281,7 +288,10 @@ def validate_command(
     try:
         checked = check_sequence(file, start=start, arm_file=arm_file, started=started,
                                  speed=speed, project_dir=project_dir, dry_run=not static,
-                                 faults=faults, report_html=report_file)
+                                 faults=faults, report_html=report_file, params=given)
+        ranges = _range_problems(file, checked, given, start=start, arm_file=arm_file,
+                                 started=started, speed=speed, project_dir=project_dir,
+                                 dry_run=not static)
     except UserInputError as exc:
         _unusable(str(exc), as_json)
         return
@@ -291,14 +301,16 @@ def validate_command(
     check, run = checked.static, checked.dry_run
     if run is not None and run.report_error:
         fail(f"cannot write the report: {run.report_error}")
-    valid = checked.valid
+    valid = checked.valid and not ranges
     if as_json:
         typer.echo(json.dumps({"valid": valid,
-                               "errors": [e.as_dict() for e in check.errors],
+                               "errors": [e.as_dict() for e in check.errors]
+                               + [{"message": str(p)} for p in ranges],
                                "notes": [n.as_dict() for n in check.notes],
                                "clearances": [c.as_dict() for c in check.clearances],
                                "proximities": [p.as_dict() for p in check.proximities],
-                               "dry_run": run.as_dict() if run is not None else None},
+                               "dry_run": run.as_dict() if run is not None else None,
+                               **_values(check.loaded)},
                               indent=2, ensure_ascii=False))
     else:
         print_report(check, file, as_json=False)
@@ -306,8 +318,42 @@ def validate_command(
             print_dry_run(run, check.loaded, check.arm)
         if run is not None and report_file is not None:
             typer.echo(f"report: {report_file}")
-    raise typer.Exit(exit_code(check.valid, None if run is None else run.result.exit_code,
-                               bool(faults)))
+        for problem in ranges:
+            typer.echo(str(problem))
+        if ranges:
+            count = len(ranges)
+            typer.echo(f"{file}: invalid over its declared params ({count} value"
+                       f"{'s' * (count != 1)} failed)")
+    raise typer.Exit(exit_code(check.valid and not ranges,
+                               None if run is None else run.result.exit_code, bool(faults)))
+
+
+def _given_params(options: list[str], files: list[Path], junit_file: Path | None) -> dict:
+    """``--param`` options as {name: text}: for one sequence file (one line, exit 2)."""
+    from seqrun.service.checking import param_options
+
+    if options and (len(files) != 1 or _is_dir(files[0]) or junit_file is not None):
+        fail("--param gives a value to one sequence's parameter: give one sequence file")
+    try:
+        return param_options(options)
+    except UserInputError as exc:
+        fail(str(exc))
+
+
+def _range_problems(file: Path, checked, given: dict, **check) -> list:
+    """Without --param, a sequence that is valid with its defaults is checked at each
+    end of every numeric parameter's range too."""
+    from seqrun.service.checking import check_parameter_ranges
+
+    if given or not checked.valid or checked.loaded is None:
+        return []
+    return check_parameter_ranges(file, checked.loaded, **check)
+
+
+def _values(loaded) -> dict:
+    """``{"params": the values checked}`` of a sequence that declares any, else {}."""
+    values = dict(loaded.param_values) if loaded is not None else {}
+    return {"params": values} if values else {}
 
 
 class SchemaKind(str, Enum):

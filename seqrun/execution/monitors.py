@@ -10,7 +10,7 @@ episode and the run goes on. Expressions are parsed once, at arming.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -43,10 +43,17 @@ class Monitors:
     _names: frozenset[str] = frozenset()
     _last: Any = None
     _step_t0: float = 0.0
+    _params: Mapping[str, Any] = field(default_factory=dict)
 
-    def start_step(self, monitors: Sequence[Any], t: float) -> None:
+    def start_step(self, monitors: Sequence[Any], t: float, *,
+                   param_types: Mapping[str, tuple[str, str | None]] | None = None,
+                   param_values: Mapping[str, Any] | None = None) -> None:
+        """Arm ``monitors`` (a step's); ``param_types``/``param_values``: the sequence's
+        parameters their expressions may read as ``params.NAME``."""
         joints = len(self.arm.joints)
-        self._armed = [_Armed(m, parse(m.while_, joints=joints)) for m in monitors]
+        self._armed = [_Armed(m, parse(m.while_, joints=joints, params=param_types))
+                       for m in monitors]
+        self._params = {f"params.{k}": v for k, v in (param_values or {}).items()}
         self._names = frozenset().union(*(a.expression.names for a in self._armed))
         self._last = None
         self._step_t0 = t
@@ -66,6 +73,7 @@ class Monitors:
         values = reading_values(self.arm, reading, self._last, commanded, self._names,
                                 step_time_s=reading.t - self._step_t0,
                                 sequence_time_s=sequence_time_s)
+        values.update(self._params)
         self._last = reading
         for armed in self._armed:
             try:

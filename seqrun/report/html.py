@@ -25,7 +25,7 @@ _KNOWN = {"sequence", "file", "start", "end", "arm", "bus", "simulator", "faults
           "first_step", "seqrun", "status", "exit_code", "message", "duration_s",
           "planned_duration_s", "fault", "steps", "checkpoints", "not_verified",
           "min_heights_mm", "inputs", "zero_reference", "zero", "steps_finished", "errors",
-          "overrides", "requirements"}
+          "overrides", "requirements", "params"}
 
 _FIGURE_ROWS = (
     ("max_following_error_deg", "largest following error (°)"),
@@ -216,6 +216,13 @@ def _host(data: RunData) -> str:
     return f'<h2 id="host">Host</h2><table>{body}</table>{listed}'
 
 
+def _parameters(values: Any) -> str | None:
+    """The sequence's parameter values as the run used them: ``speed = 0.5; target = totem``."""
+    if not isinstance(values, dict) or not values:
+        return None
+    return "; ".join(f"{name} = {json.dumps(value)}" for name, value in values.items())
+
+
 def _identity(data: RunData) -> str:
     r, started = data.report, data.run_started
     arm = data.arm
@@ -234,6 +241,7 @@ def _identity(data: RunData) -> str:
         ("zero reference", _zero(r.get("zero_reference", r.get("zero", data.record.get("zero"))))),
         ("files in place of shipped ones",
          "; ".join(map(str, r.get("overrides") or data.record.get("overrides") or [])) or None),
+        ("parameters", _parameters(r.get("params") or data.record.get("params"))),
         ("campaign", data.record.get("campaign")),
         ("campaign git", data.record.get("git")),
         ("result", r.get("status")), ("exit code", r.get("exit_code")),

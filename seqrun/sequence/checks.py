@@ -51,9 +51,11 @@ class StaticCheck:
 def static_check(file: Path, *, start: str | None = None,
                  start_deg: Mapping[str, float] | None = None,
                  arm_file: Path | None = None, started: bool = False,
-                 speed: float = 1.0, project_dir: Path | None = None) -> StaticCheck:
+                 speed: float = 1.0, project_dir: Path | None = None,
+                 params: Mapping[str, str] | None = None) -> StaticCheck:
     """Load ``file`` (with includes), its arm and the start pose (``start_deg``: joints in
-    user degrees instead, e.g. where the arm stands), and validate statically.
+    user degrees instead, e.g. where the arm stands), and validate statically
+    (``params``: the --param texts over the declared defaults).
 
     Invalid files (the sequence, an included one, the arm file, a pose file) end up in
     ``errors``; input that cannot be used at all raises :class:`UserInputError`.
@@ -67,7 +69,8 @@ def static_check(file: Path, *, start: str | None = None,
     check = StaticCheck()
     # Every problem in one pass: the steps that are valid on their own are still checked
     # against the arm when others are not (the loader leaves the broken ones out).
-    check.loaded, load_errors = load_sequence_partial(file, project_root=project_dir)
+    check.loaded, load_errors = load_sequence_partial(file, project_root=project_dir,
+                                                           params=params)
     check.errors = list(load_errors)
     if check.loaded is None:
         return check

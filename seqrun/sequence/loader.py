@@ -72,6 +72,10 @@ class LoadedSequence:
     #: ``(steps kept before it, its kind or None when not even that is known)`` each, so
     #: that validation knows from where the arm's state is uncertain, and how.
     left_out: tuple[tuple[int, str | None], ...] = ()
+    #: The parameters the file declares (name -> ParameterSpec) and the value of each
+    #: used here (the default or --param), already put into the steps.
+    parameters: Mapping[str, Any] = field(default_factory=dict)
+    param_values: Mapping[str, Any] = field(default_factory=dict)
 
     @property
     def location(self) -> Location:
@@ -147,7 +151,13 @@ def find_project_root(path: str | os.PathLike[str]) -> Path:
 
 
 class _Loader:
-    def __init__(self, top: Path, project: Any) -> None:
+    def __init__(self, top: Path, project: Any, given: Mapping[str, str] | None = None) -> None:
+        #: --param NAME=VALUE texts; the declarations, values and expression types.
+        self.given: Mapping[str, str] = given or {}
+        self.specs: dict[str, Any] = {}
+        self.declared: list[str] = []
+        self.values: dict[str, Any] = {}
+        self.param_types: dict[str, tuple[str, str | None]] = {}
         self.project = project  # seqrun.sequence.project.Project: lookups of poses, arm, includes
         self.root = project.root
         self.poses_dir = project.poses_dir
@@ -186,8 +196,9 @@ class _Loader:
         self.sources.append(doc.source)
         if not chain:
             self.top = doc.data
+        doc = self._parameters(doc, top=not chain)
         try:
-            seq = doc.validate(Sequence)
+            seq = doc.validate(Sequence, context={"params": self.param_types})
         except SequenceInvalid as exc:
             # Report every problem at once: go on with the steps that are valid on their own
             # (their includes and poses are checked too); the file's errors are known.
@@ -198,6 +209,55 @@ class _Loader:
         self._steps(doc, path, seq.steps, doc.items(doc.child(doc.root, "steps")), chain,
                     include_chain)
         return seq
+
+    def _parameters(self, doc: Document, *, top: bool) -> Document:
+        """``doc`` with the parameters' values put into its steps (the top file's
+        declarations; an included file uses them too). Raises UserInputError for a bad or
+        missing value (--param)."""
+        from seqrun.steps.sequence_parameters import (
+            NAME_RE,
+            ParameterSpec,
+            expression_types,
+            resolve_values,
+            substitute,
+        )
+
+        data = doc.data
+        if not isinstance(data, dict):
+            return doc
+        declared = data.get("params")
+        if top:
+            given_specs = declared if isinstance(declared, dict) else {}
+            names = [n for n in given_specs if isinstance(n, str)]
+            for name in self.given:
+                if name not in names:
+                    raise UserInputError(f"--param {name}: {doc.file} declares no parameter "
+                                         f"'{name}' (declared: {', '.join(names) or 'none'})")
+            for name in names:
+                try:
+                    if NAME_RE.match(name):
+                        self.specs[name] = ParameterSpec.model_validate(given_specs[name])
+                except ValidationError:
+                    pass  # reported with the whole file's errors
+            self.declared = names
+            self.values = resolve_values(
+                self.specs, {n: t for n, t in self.given.items() if n in self.specs},
+                file=doc.file)
+            self.param_types = expression_types(self.specs)
+        elif declared is not None:
+            self.errors.append(doc.error(("params",), "an included file cannot declare "
+                                                      "params: it uses the including "
+                                                      "sequence's", key=True))
+        steps = data.get("steps")
+        if steps is None:
+            return doc
+        new, errors = substitute(steps, self.values, self.declared,
+                                 lambda path, offset: _text_location(doc, path, offset),
+                                 ("steps",))
+        self.errors.extend(errors)
+        if new == steps and not errors:
+            return doc
+        return replace(doc, data={**data, "steps": new})
 
     def _partial(self, doc: Document, path: Path, chain: tuple[Path, ...],
                  include_chain: tuple[Location, ...]) -> None:
@@ -210,7 +270,8 @@ class _Loader:
         nodes = []
         for item, node in zip(data, doc.items(doc.child(doc.root, "steps"))):
             try:
-                good.append(step_adapter().validate_python(item))
+                good.append(step_adapter().validate_python(
+                    item, context={"params": self.param_types}))
             except ValidationError:
                 # already reported by the whole-file validation; validation goes on past
                 # it, knowing what kind of step is missing
@@ -245,7 +306,8 @@ class _Loader:
                                 document=doc, node=params_node,
                                 include_labels=tuple(self.include_titles.get(loc, "include")
                                                      for loc in include_chain),
-                                description=step_type.describe(params))
+                                description=step_type.describe(params),
+                                param_types=self.param_types, param_values=self.values)
             for pose in step_type.poses(params):
                 self._check_pose(step, pose)
             self.steps.append(step)
@@ -333,17 +395,19 @@ class _Loader:
 
 
 def load_sequence(path: str | os.PathLike[str], *,
-                  project_root: str | os.PathLike[str] | None = None) -> LoadedSequence:
+                  project_root: str | os.PathLike[str] | None = None,
+                  params: Mapping[str, str] | None = None) -> LoadedSequence:
     """Read a sequence file with its includes; every step keeps its own ``file:line:col``.
 
     Poses come from ``<project root>/poses/``, then the shipped poses; the project is the
     nearest campaign (``seqrun.toml``) above the file, or ``project_root`` (``--project``),
     else the nearest folder with ``arms/`` or ``poses/`` (see :mod:`seqrun.sequence.project`); an
-    unknown pose is a located error listing the available ones. Raises
+    unknown pose is a located error listing the available ones. ``params``: the
+    ``--param NAME=VALUE`` texts over the declared defaults. Raises
     :class:`SequenceInvalid` with every error found, :class:`UserInputError` if the file
     cannot be read.
     """
-    loaded, errors = load_sequence_partial(path, project_root=project_root)
+    loaded, errors = load_sequence_partial(path, project_root=project_root, params=params)
     if errors:
         raise SequenceInvalid(errors)
     assert loaded is not None
@@ -351,7 +415,8 @@ def load_sequence(path: str | os.PathLike[str], *,
 
 
 def load_sequence_partial(path: str | os.PathLike[str], *,
-                          project_root: str | os.PathLike[str] | None = None
+                          project_root: str | os.PathLike[str] | None = None,
+                          params: Mapping[str, str] | None = None
                           ) -> tuple[LoadedSequence | None, list[SourceError]]:
     """:func:`load_sequence` that keeps going: ``(loaded, errors)``, where ``loaded`` holds
     the steps that are valid on their own (a step that fails its schema is left out) so
@@ -366,7 +431,7 @@ def load_sequence_partial(path: str | os.PathLike[str], *,
     except (OSError, RuntimeError, ValueError) as exc:  # symlink loop, NUL byte, ...
         raise UserInputError(f"{path}: cannot resolve the path ({exc})") from None
     root = project.root
-    loader = _Loader(top, project)
+    loader = _Loader(top, project, params)
     seq = loader.load(top)
     errors = sort_errors(loader.errors)
     if seq is not None:
@@ -385,7 +450,23 @@ def load_sequence_partial(path: str | os.PathLike[str], *,
                           pose_path=tuple(loader.pose_path), project=project,
                           poses=dict(loader.poses), digests=tuple(loader.digests),
                           sources=tuple(loader.sources),
-                          left_out=tuple(loader.left_out)), errors
+                          left_out=tuple(loader.left_out),
+                          parameters=dict(loader.specs),
+                          param_values=dict(loader.values)), errors
+
+
+def _text_location(doc: Document, path: tuple, offset: int) -> Location:
+    """Where the character ``offset`` of the text at ``path`` stands: exact for a text on
+    one line written plain or in quotes without escapes, else the text's start."""
+    from yaml.nodes import ScalarNode
+
+    node = doc.find(path)
+    here = doc.location(node)
+    if isinstance(node, ScalarNode) and "\n" not in node.value and "\\" not in node.value \
+            and node.style in (None, "'", '"') and "''" not in node.value:
+        quote = 0 if node.style is None else 1
+        return Location(here.file, here.line, here.column + quote + offset)
+    return here
 
 
 @dataclass(frozen=True)

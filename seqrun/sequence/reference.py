@@ -211,6 +211,48 @@ the run's own check.
   - check: {that: "tool.z_mm > 40", verifies: [REQ-CAP-012]}
 ```
 
+## Parameters
+
+A sequence may declare typed parameters under `params:`, each `name: {type, unit, min,
+max, choices, default, description}` (a name is letters, digits and `_`, not starting with
+a digit). `${name}` in any value of the steps is replaced by the parameter's value before
+the steps are checked: a value that is exactly `${name}` takes the typed value (a number,
+true/false, a pose name), `${name}` inside a longer text is replaced as text. In a flow
+mapping (`{...}`) quote it (`{pose: "${target}"}`): YAML ends a plain value at `{`. An
+unknown `${x}` is an error at its file:line:col. Expressions read numbers and true/false
+as `params.NAME`, with the parameter's `unit` (a `float` with `unit: mm` compares with
+`tool.z_mm`).
+
+The values are the defaults, overridden by `seqrun run FILE --param name=value` or `seqrun
+validate FILE --param name=value` (repeatable); a value is read by its type (`true` is not
+an `int`, `12` is a number, not text) and checked against `min`, `max` and `choices`; a
+bad one is one line and exit 2, and so is a parameter with no default and no `--param`.
+`seqrun validate FILE` without `--param` also checks each `int` or `float` parameter with a
+range at its `min` and at its `max` (one at a time, the others at their defaults; static
+checks and the dry run) and names the value that fails, e.g. `params: speed = 1.0 (its
+max): ...`. A run keeps the values it used in record.json and report.json, and shows them
+in its report. Only the top file declares parameters; an included file uses the including
+file's (`include: {file, with: ...}` templates are not supported yet).
+
+```yaml
+params:
+  speed: {type: float, min: 0.1, max: 1.0, default: 0.5, description: velocity scale}
+  target: {type: pose, default: opsafe}
+  floor: {type: float, unit: mm, min: 20, max: 40, default: 30}
+  mode: {type: choice, choices: [slow, fast], default: slow}
+steps:
+  - include: startup.yaml
+  - move:
+      pose: ${target}
+      velocity_scale: ${speed}
+      label: To ${target} at ${speed} (${mode})
+      monitors: [{while: "tool.z_mm > params.floor"}]
+```
+
+| key | type | |
+|---|---|---|
+{parameter}
+
 ## Steps
 """
 
@@ -291,6 +333,10 @@ def reference_markdown() -> str:
                 lines.append(f"| `steps` | list of steps (below) — required | "
                              f"{prop.get('description', '')} |")
                 continue
+            if key == "params":
+                lines.append(f"| `params` | {{name: parameter}} (see Parameters) | "
+                             f"{prop.get('description', '')} |")
+                continue
             default = ("required" if key in required else
                        "" if prop.get("default") in (None, {}) else
                        f"default `{json_dumps(prop['default'])}`")
@@ -300,7 +346,8 @@ def reference_markdown() -> str:
         return "\n".join(lines)
 
     parts = [_REFERENCE_INTRO.replace("{top}", rows(schema))
-             .replace("{names}", _expression_names())]
+             .replace("{names}", _expression_names())
+             .replace("{parameter}", rows(defs["ParameterSpec"]))]
     for kind, model in PARAMS_MODELS.items():
         step = defs[STEP_MODELS[kind].__name__]["properties"][kind]
         parts.append(f"### `{kind}`\n\n{doc(model)}\n")

@@ -26,7 +26,8 @@ if TYPE_CHECKING:
     from seqrun.service.dryrun import DryRun
     from seqrun.sim.faults import Fault
 
-__all__ = ["SequenceCheck", "check_for_run", "check_sequence", "errors_before_bus",
+__all__ = ["RangeProblem", "SequenceCheck", "check_for_run", "check_parameter_ranges",
+           "param_options", "check_sequence", "errors_before_bus",
            "override_notes"]
 
 
@@ -64,7 +65,8 @@ def check_sequence(file: Path, *, start: str | None = None,
                    start_label: str | None = None, arm_file: Path | None = None,
                    started: bool = False, speed: float = 1.0, project_dir: Path | None = None,
                    dry_run: bool = True, faults: Sequence[Fault] = (),
-                   report_html: Path | None = None) -> SequenceCheck:
+                   report_html: Path | None = None,
+                   params: Mapping[str, str] | None = None) -> SequenceCheck:
     """Validate ``file`` (with its includes) against its arm from the start pose ``start``
     (default Park: freshly powered on) or from ``start_deg`` (user degrees: where the arm
     stands), then dry-run it when valid and ``dry_run``, rehearsing the simulator ``faults``. ``start_label`` names the start
@@ -73,7 +75,8 @@ def check_sequence(file: Path, *, start: str | None = None,
     from seqrun.sequence.checks import static_check
 
     static = static_check(file, start=start, start_deg=start_deg, arm_file=arm_file,
-                          started=started, speed=speed, project_dir=project_dir)
+                          started=started, speed=speed, project_dir=project_dir,
+                          params=params)
     if static.loaded is not None:
         static.notes = list(static.notes) + override_notes(static.loaded, arm_file)
     check = SequenceCheck(static)
@@ -92,6 +95,51 @@ def check_sequence(file: Path, *, start: str | None = None,
                                 started=started, speed=speed, faults=faults,
                                 report_html=report_html)
     return check
+
+
+@dataclass(frozen=True)
+class RangeProblem:
+    """A parameter at one end of its declared range with which the sequence fails."""
+
+    name: str
+    value: Any
+    end: str          # "min" or "max"
+    message: str      # the first error, or the dry run's verdict
+
+    def __str__(self) -> str:
+        from seqrun.steps.sequence_parameters import show_value
+
+        return f"params: {self.name} = {show_value(self.value)} (its {self.end}): {self.message}"
+
+
+def param_options(options: Sequence[str]) -> dict[str, str]:
+    """``--param NAME=VALUE`` options as ``{name: text}`` (their values are parsed by the
+    declared types when the sequence is loaded). Raises UserInputError for a bad one."""
+    from seqrun.steps.sequence_parameters import parse_options
+
+    return parse_options(options)
+
+
+def check_parameter_ranges(file: Path, loaded: LoadedSequence,
+                           **check: Any) -> list[RangeProblem]:
+    """``file`` checked (static and, with ``dry_run``, the dry run) with each numeric
+    parameter at its min and at its max in turn, the others at their defaults: at most
+    two checks per parameter. ``check``: :func:`check_sequence`'s other arguments."""
+    from seqrun.steps.sequence_parameters import extremes, show_value
+
+    problems = []
+    for name, value, end in extremes(loaded.parameters):
+        checked = check_sequence(file, params={name: show_value(value)}, **check)
+        if checked.errors:
+            message = str(checked.errors[0])
+        elif checked.dry_run is not None and not checked.dry_run.passed:
+            result = checked.dry_run.result
+            message = (f"the dry run {result.status}"
+                       + (f": {result.fault['message']}" if result.fault else ""))
+        else:
+            continue
+        problems.append(RangeProblem(name, value, end, message))
+    return problems
 
 
 def override_notes(loaded: LoadedSequence, arm_path: Path | None = None) -> list:

@@ -150,6 +150,8 @@ def write_record(folder: Path, *, loaded: Any, arm_path: Path, bus: str,
     root = getattr(project, "root", None)
     if inputs is None:
         inputs = freeze_sources(folder, input_sources(loaded, arm, arm_path), root)
+    # the values of the sequence's parameters the run used (defaults and --param)
+    params = dict(getattr(loaded, "param_values", None) or {})
     record = {
         "seqrun": __version__,
         "sequence": loaded.name,
@@ -161,6 +163,7 @@ def write_record(folder: Path, *, loaded: Any, arm_path: Path, bus: str,
         "zero": zero,
         "inputs": inputs,
         **({"overrides": list(overrides)} if overrides else {}),
+        **({"params": params} if params else {}),
     }
     Path(folder).mkdir(parents=True, exist_ok=True)
     error = write_whole(Path(folder) / "record.json", json.dumps(record, indent=2) + "\n")

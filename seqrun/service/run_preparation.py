@@ -49,6 +49,8 @@ class RunRequest:
     power_on_at: str | None = None
     #: In a campaign with several arms: the arm a sequence of one arm runs on.
     arm_id: str | None = None
+    #: ``--param NAME=VALUE`` options: the sequence's parameters over their defaults.
+    params: Sequence[str] = ()
 
 
 @dataclass
@@ -93,6 +95,7 @@ def prepare_run(request: RunRequest) -> PreparedRun:
     """
     from seqrun.clock import VirtualClock
     from seqrun.sequence.loader import load_sequence
+    from seqrun.steps.sequence_parameters import parse_options
     from seqrun.service import campaign_records
     from seqrun.service.arm_context import resolve_context
     from seqrun.service.checking import check_for_run, errors_before_bus, override_notes
@@ -107,14 +110,16 @@ def prepare_run(request: RunRequest) -> PreparedRun:
         raise UserInputError(f"sequence file {r.file} not found")
     faults = parse_faults(list(r.sim_faults))
     extra = parse_bus_kwargs(list(r.bus_kwargs))
+    given = parse_options(r.params)
     try:
-        loaded = load_sequence(r.file, project_root=r.project_dir)  # invalid -> no bus
+        loaded = load_sequence(r.file, project_root=r.project_dir,
+                               params=given)  # invalid -> no bus
     except SequenceInvalid as exc:
         # Every problem in one pass, exactly as `seqrun validate` reports them: the steps
         # that are valid on their own are still checked against the arm.
         errors = errors_before_bus(r.file, exc.errors, start=r.start, arm_file=r.arm_file,
                                    started=r.started, speed=r.speed,
-                                   project_dir=r.project_dir)
+                                   project_dir=r.project_dir, params=given)
         campaign_records.refuse_unloadable(r.file, r.project_dir, errors, r.log_dir)
         raise SequenceInvalid(errors) from None
     # The arm context: the sequence's campaign and arm, the bus (command line, else the

@@ -113,7 +113,9 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
                                "simulator": connection.is_simulator,
                                "faults": [f.spec for f in connection.faults], "speed": speed,
                                "first_step": first_step, "seqrun": __version__,
-                               **(meta or {}), "inputs": _inputs(loaded, arm), **ros},
+                               **(meta or {}), "inputs": _inputs(loaded, arm), **ros,
+                               **({"params": dict(loaded.param_values)}
+                                  if getattr(loaded, "param_values", None) else {})},
                      clock=connection.clock,
                      channel=getattr(connection.bus, "channel", None) or "can0", warn=warn,
                      mcap=mcap, time_base=part.time_base if part is not None else None)

@@ -18,7 +18,7 @@ def check_expression(checker: CheckContext, step: ResolvedStep[Any], text: str, 
     from seqrun.steps.expressions import ExpressionError, parse
 
     try:
-        expression = parse(text, joints=len(checker.arm.joints))
+        expression = parse(text, joints=len(checker.arm.joints), params=step.param_types)
     except ExpressionError as exc:
         checker.errors.append(step.error(f"{exc.message} (at column {exc.column} of "
                                          f"'{text}')", key))

@@ -45,8 +45,8 @@ def run(step: ResolvedStep[CheckParams], ex: StepContext) -> dict:
     from seqrun.steps.expressions import ExpressionError, parse
 
     params = step.params
-    condition = parse(params.that, joints=len(ex.arm.joints))
-    values = TelemetrySampler(ex, [condition]).sample()
+    condition = parse(params.that, joints=len(ex.arm.joints), params=step.param_types)
+    values = TelemetrySampler(ex, [condition], dict(step.param_values)).sample()
     detail: dict[str, Any] = {"condition": params.that, "values": values_read(values, condition)}
     if params.verifies:
         detail["verifies"] = list(params.verifies)

@@ -14,7 +14,7 @@ import re
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Annotated, Any, ClassVar, Literal, Protocol, Union
 
-from pydantic import AfterValidator, ConfigDict, Discriminator, Field, Tag
+from pydantic import AfterValidator, ConfigDict, Discriminator, Field, Tag, ValidationInfo
 from pydantic_core import PydanticCustomError
 
 from seqrun.yamlsource import FriendlyModel
@@ -108,11 +108,19 @@ else:
     AllOrJoints = either(_joints_pick, **{"joints:all": AllWord, "joints:list": JointsList})
 
 
-def _expression(value: str) -> str:
+def _expression(value: str, info: ValidationInfo) -> str:
     from seqrun.steps.expressions import ExpressionError, parse
 
+    # the sequence's parameters (params.NAME), which the loader gives as context; a
+    # model made in code (a shorthand's, after the loader's check) has none: its
+    # expression is checked again against the arm, with the parameters, by the step's check
+    context = info.context if isinstance(info.context, dict) else None
+    if context is None:
+        if "params." in value:
+            return value.strip()
+        context = {}
     try:
-        parse(value)
+        parse(value, params=context.get("params"))
     except ExpressionError as exc:
         raise PydanticCustomError(
             "expression", "{message} (at column {column} of '{text}')",

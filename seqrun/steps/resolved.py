@@ -10,6 +10,7 @@ uses these, never the file again. :mod:`seqrun.sequence.loader` builds both; a k
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from collections.abc import Mapping
 from typing import Any, Generic, TypeVar
 
 from seqrun.errors import SourceError
@@ -45,6 +46,11 @@ class ResolvedStep(Generic[P]):
     #: The kind's one-line description of the step (``StepKind.describe``), e.g. "move to
     #: pose totem": its title when it has no label.
     description: str = ""
+    #: The sequence's parameters an expression may read as ``params.NAME``: name ->
+    #: (expression type, unit); and the value of every parameter, for the run.
+    param_types: Mapping[str, tuple[str, str | None]] = field(default_factory=dict,
+                                                               repr=False)
+    param_values: Mapping[str, Any] = field(default_factory=dict, repr=False)
 
     def where(self, *path: Any, key: bool = False) -> Location:
         """Location of a parameter, e.g. ``where("joints", "j4")``; without a path, the step's

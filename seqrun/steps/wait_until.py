@@ -66,8 +66,8 @@ def run(step: ResolvedStep[WaitUntilParams], ex: StepContext) -> dict:
     from seqrun.steps.expressions import ExpressionError, parse
 
     params = step.params
-    condition = parse(params.until, joints=len(ex.arm.joints))
-    sampler = TelemetrySampler(ex, [condition])
+    condition = parse(params.until, joints=len(ex.arm.joints), params=step.param_types)
+    sampler = TelemetrySampler(ex, [condition], dict(step.param_values))
     period = 1.0 / (params.poll_hz or ex.arm.control.cycle_hz)
     held_since: float | None = None
     while True:
