@@ -108,7 +108,9 @@ def trajectory_of(msg: Any) -> JointTrajectory:
     return JointTrajectory(
         tuple(str(n) for n in msg.joint_names),
         tuple(TrajectoryPoint(tuple(float(x) for x in p.positions),
-                              _seconds(p.time_from_start)) for p in msg.points))
+                              _seconds(p.time_from_start),
+                              tuple(float(x) for x in p.velocities),
+                              tuple(float(x) for x in p.accelerations)) for p in msg.points))
 
 
 class SeqrunNode:
