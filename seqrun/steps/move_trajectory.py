@@ -20,7 +20,6 @@ import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar
 
-import numpy as np
 from pydantic import Field
 
 from seqrun.errors import RunAborted
@@ -28,6 +27,8 @@ from seqrun.steps.kind import StepKind
 from seqrun.steps.params import Positive, StepParams, one_key_value
 
 if TYPE_CHECKING:
+    import numpy as np
+
     from seqrun.arm.description import ArmDescription
     from seqrun.arm.trajectory_interp import InterpolatedTrajectory, TimedPoint
     from seqrun.steps.check_context import CheckContext
@@ -128,6 +129,8 @@ def plan_trajectory(arm: ArmDescription, path: Path, start_deg: np.ndarray, spee
                     acceleration_deg_s2: np.ndarray) -> InterpolatedTrajectory:
     """The file's points from ``start_deg`` as a checked sampled plan (times stretched by
     1/speed). PointsError with one line for the first problem."""
+    import numpy as np
+
     from seqrun.arm.trajectory_interp import (TimedPoint, TrajectoryError, first_violation,
                                               interpolate)
 
@@ -165,6 +168,8 @@ def check(checker: CheckContext, step: ResolvedStep[MoveTrajectoryParams],
     """The whole motion from the tracked joints: the points, the limits in force, the
     velocities (less the tracking reserve), accelerations and jerks, the guards and the
     link and tool volumes along the samples."""
+    import numpy as np
+
     arm = checker.arm
     checker.motion_allowed(step, checker.unlocked_names())
     names = arm.joint_names
@@ -188,6 +193,8 @@ def check(checker: CheckContext, step: ResolvedStep[MoveTrajectoryParams],
 def run(step: ResolvedStep[MoveTrajectoryParams], ex: StepContext) -> dict[str, Any]:
     """The points interpolated again from the measured joints, checked against the arm
     file, and streamed sample by sample."""
+    import numpy as np
+
     params = step.params
     reading = ex.read_arm()
     arm = ex.arm
