@@ -1,5 +1,6 @@
 """A joint trajectory from ROS 2 becomes a checked sequence (seqrun/service/trajectories.py),
-without ROS: the points file of its one move_trajectory step, every refusal (one line, nothing sent), the desk
+without ROS: the points file of its one move_trajectory step, every refusal (one line,
+nothing sent), the desk
 found on the path the move will really follow, and a run on the simulator at virtual time.
 And the chain as /tf's tree of frames (seqrun/service/kinematics.py: link_transforms)."""
 
@@ -106,7 +107,7 @@ def test_a_trajectory_into_the_desk_is_refused_on_its_planned_path_and_moves_not
     with pytest.raises(Refused) as caught:
         run_trajectory(session, into_the_desk, by="test")
     message = str(caught.value)
-    assert message.startswith("trajectory: ") and "desk" in message
+    assert message.startswith("trajectory point 1/1 (t=2 s): ") and "desk" in message
     assert "trajectory" in message and "ros_trajectory" not in message
     assert sent == [] and session.activity is None
 

@@ -31,6 +31,7 @@ if TYPE_CHECKING:
 
     from seqrun.arm.description import ArmDescription
     from seqrun.arm.trajectory_interp import InterpolatedTrajectory, TimedPoint
+    from seqrun.errors import SourceError
     from seqrun.steps.check_context import CheckContext
     from seqrun.steps.context import StepContext
     from seqrun.steps.resolved import ResolvedStep
@@ -186,8 +187,28 @@ def check(checker: CheckContext, step: ResolvedStep[MoveTrajectoryParams],
         checker.lost_at = step
         return
     plan = trajectory.plan
+    before = len(checker.errors)
     checker.check_path_guards(step, plan.times, plan.positions, what="trajectory")
+    checker.errors[before:] = [_at_point(e, trajectory.point_times)
+                               for e in checker.errors[before:]]
     checker.arrive(step, np.degrees(plan.target))
+
+
+def _at_point(error: SourceError, point_times: np.ndarray) -> SourceError:
+    """A finding along the path ("... at 2.08 s of 5.00 s ...") named by the point whose
+    segment it is in, as the trajectory's own findings are."""
+    import dataclasses
+    import re
+
+    import numpy as np
+
+    found = re.search(r"at (\d+(?:\.\d+)?) s of ", error.message)
+    if found is None:
+        return error
+    t = float(found.group(1))
+    k = min(int(np.searchsorted(point_times, t - 1e-9)), len(point_times) - 1)
+    return dataclasses.replace(error, message=f"trajectory point {k + 1}/{len(point_times)} "
+                                              f"(t={point_times[k]:g} s): {error.message}")
 
 
 def run(step: ResolvedStep[MoveTrajectoryParams], ex: StepContext) -> dict[str, Any]:
