@@ -172,7 +172,7 @@ def test_a_trajectory_through_the_desk_is_refused_with_the_reason_and_moves_noth
     before = graph.joints_deg()
     graph.send(("j2",), (-110, 2.0))
     refused = graph.event("trajectory_refused")
-    assert refused["reason"].startswith("trajectory point 1/1: ")
+    assert refused["reason"].startswith("trajectory point 1/1 (t=2 s): ")
     assert "desk" in refused["reason"]
     time.sleep(0.2)
     assert graph.motion_frames() == [] and graph.session.activity is None
@@ -259,7 +259,7 @@ def test_a_goal_through_the_desk_is_aborted_as_invalid_with_the_reason(graph):
     code, text = graph.seqrun.follow_trajectory(joint_trajectory(("j2",), (-110, 2.0)), goal,
                                                 Codes)
     assert (code, goal.ended) == (Codes.INVALID_GOAL, ["aborted"])
-    assert text.startswith("trajectory point 1/1: ") and "desk" in text
+    assert text.startswith("trajectory point 1/1 (t=2 s): ") and "desk" in text
     assert graph.motion_frames() == []
 
 
