@@ -79,6 +79,9 @@ def test_a_50_point_5_s_trajectory_runs_in_5_s_through_its_points(session):
     assert min(abs(e["planned_vel_deg_s"][0]) for e in middle) > 1.0  # never at rest
     joints = session.poll_status().joints_deg
     assert joints["j1"] == pytest.approx(start["j1"] + 20, abs=0.1)
+    # the points are in the run folder's inputs/, beside the sequence
+    (points,) = (result.run_dir / "inputs").rglob("ros_trajectory_*.csv")
+    assert len(points.read_text(encoding="utf-8").splitlines()) == 51
 
 
 def test_cubic_interpolation_passes_through_the_points_with_their_velocities():

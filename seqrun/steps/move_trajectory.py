@@ -239,4 +239,5 @@ def run(step: ResolvedStep[MoveTrajectoryParams], ex: StepContext) -> dict[str, 
 KIND = StepKind(
     name="move_trajectory", params=MoveTrajectoryParams, describe=describe, check=check,
     run=run, value=one_key_value("move_trajectory", MoveTrajectoryParams),
-    example="move_trajectory: {file: wave.csv}", motion=True)
+    example="move_trajectory: {file: wave.csv}", motion=True,
+    data_files=lambda params: (params.file,))
