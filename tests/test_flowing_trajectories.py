@@ -180,3 +180,34 @@ def test_move_trajectory_runs_a_csv_file_in_a_sequence(tmp_path):
                            dry_run=False)
     assert [str(e) for e in check.errors] and "point 2/2 (t=0.5 s)" in str(check.errors[0])
     assert "wave.yaml:3:" in str(check.errors[0])
+
+
+def test_a_dense_moveit_style_trajectory_with_velocities_runs_as_planned(session):
+    """More points than the old limit (500), a first point at 0 s from a reading of the
+    joints (0.05° off the measured state), velocities on every point: cubic."""
+    start = session.telemetry.joints_deg()
+    count, span_s = 601, 6.0
+    points = []
+    for i in range(count):
+        u = i / (count - 1)
+        f = 10 * u**3 - 15 * u**4 + 6 * u**5
+        df = (30 * u**2 - 60 * u**3 + 30 * u**4) / span_s
+        offset = 0.05 if i == 0 else 0.0
+        points.append(TrajectoryPoint((math.radians(start["j1"] + 30 * f + offset),),
+                                      span_s * u, (math.radians(30 * df),)))
+    result = run_trajectory(session, JointTrajectory(("j1",), tuple(points)),
+                            by="test").wait(timeout=120)
+    assert result.ok, result.message
+    (finished,) = [e for e in events(result.run_dir) if e["type"] == "step_finished"]
+    assert finished["interpolation"] == "cubic" and finished["points"] == count
+    assert finished["executed_duration_s"] == pytest.approx(span_s, abs=CYCLE_S)
+    assert session.poll_status().joints_deg["j1"] == pytest.approx(start["j1"] + 30, abs=0.1)
+
+
+def test_a_first_point_at_0_s_away_from_the_arm_is_refused(session):
+    start = session.telemetry.joints_deg()
+    points = (TrajectoryPoint((math.radians(start["j1"] + 3),), 0.0),
+              TrajectoryPoint((math.radians(start["j1"] + 4),), 1.0))
+    with pytest.raises(Refused, match=r"^trajectory point 1/2 \(t=0 s\): time_from_start 0 "
+                                      r"but 3\.000° away"):
+        run_trajectory(session, JointTrajectory(("j1",), points), by="test")

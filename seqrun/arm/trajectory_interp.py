@@ -22,10 +22,10 @@ import numpy as np
 
 from seqrun.arm.planner import SampledPlan
 
-__all__ = ["TimedPoint", "InterpolatedTrajectory", "first_violation", "interpolate",
-           "interpolation_kind"]
+__all__ = ["InterpolatedTrajectory", "TimedPoint", "TrajectoryError", "first_violation",
+           "interpolate", "interpolation_kind"]
 
-#: A first point at t = 0 must be this close to the current state (rad) to be accepted.
+#: A first point at t = 0 must be this close to the current state (rad) by default.
 START_TOLERANCE_RAD = 1e-4
 
 
@@ -98,10 +98,13 @@ def _evaluate(c: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, ...]:
 
 
 def interpolate(start: Sequence[float], points: Sequence[TimedPoint], cycle_s: float,
-                active: Sequence[int]) -> InterpolatedTrajectory:
+                active: Sequence[int], *,
+                start_tolerance_rad: float = START_TOLERANCE_RAD) -> InterpolatedTrajectory:
     """The points from ``start`` (every arm joint, rad, at rest at t = 0) as a sampled plan
-    at ``cycle_s``. TrajectoryError: no point, times not increasing, a first point at t = 0
-    away from the start, lengths that do not match."""
+    at ``cycle_s``; joints not ``active`` stay at ``start``. A first point at t = 0 is the
+    current state (within ``start_tolerance_rad``): the motion starts from ``start`` itself.
+    TrajectoryError: no point, times not increasing, a first point at t = 0 away from the
+    start, lengths that do not match."""
     begin = np.asarray(start, dtype=float)
     dof, total = len(begin), len(points)
     if not points:
@@ -116,7 +119,7 @@ def interpolate(start: Sequence[float], points: Sequence[TimedPoint], cycle_s: f
                 raise TrajectoryError(f"{where}: {len(values)} {what} for {dof} joints")
         if number == 1 and point.time_s == 0:
             off = np.abs(np.asarray(point.positions) - begin)
-            if np.max(off) > START_TOLERANCE_RAD:
+            if np.max(off) > start_tolerance_rad:
                 raise TrajectoryError(
                     f"{where}: time_from_start 0 but {np.degrees(np.max(off)):.3f}° away "
                     "from where the arm stands (a first point at 0 s must be the current "
@@ -161,17 +164,10 @@ def interpolate(start: Sequence[float], points: Sequence[TimedPoint], cycle_s: f
         a_all.append(acc)
         j_all.append(jerk)
         seg.append(np.full(len(times), numbers[k]))
-    times = np.concatenate(t_all)
+    times = np.concatenate(t_all)  # the first segment's grid starts at 0
     positions = np.vstack(p_all)
-    if times[0] > 0:  # a first point at 0 s: the plan starts there
-        times = np.insert(times, 0, 0.0)
-        positions = np.vstack([begin, positions])
-        v_all.insert(0, np.zeros((1, dof)))
-        a_all.insert(0, np.zeros((1, dof)))
-        j_all.insert(0, np.zeros((1, dof)))
-        seg.insert(0, np.zeros(1, dtype=int))
-    positions[:, [i for i in range(dof) if i not in set(active)]] = \
-        begin[[i for i in range(dof) if i not in set(active)]]
+    still = [i for i in range(dof) if i not in set(active)]
+    positions[:, still] = begin[still]
     plan = SampledPlan(tuple(active), times, positions)
     return InterpolatedTrajectory(plan, np.vstack(v_all), np.vstack(a_all), np.vstack(j_all),
                                   np.concatenate(seg).astype(int),
@@ -208,14 +204,11 @@ def first_violation(trajectory: InterpolatedTrajectory, names: Sequence[str],
     due = float(trajectory.point_times[point])
     total = len(trajectory.point_times)
     t = float(plan.times[row])
-    for name, values, lo, hi, unit, words in checks:
-        if name == what:
-            value = float(np.degrees(values[row, joint]))
-            if what == "position":
-                bound = (f"{np.degrees(lo[joint]):g}°..{np.degrees(hi[joint]):g}°")
-                return (f"point {point + 1}/{total} (t={due:g} s): {names[joint]} at "
-                        f"{value:.3f}° at t={t:.3f} s, {words} {bound}")
-            return (f"point {point + 1}/{total} (t={due:g} s): {names[joint]} {what} "
-                    f"{abs(value):.3f} {unit} at t={t:.3f} s, {words} of "
-                    f"{np.degrees(hi[joint]):g} {unit}")
-    return None
+    _, values, lo, hi, unit, words = next(c for c in checks if c[0] == what)
+    value = float(np.degrees(values[row, joint]))
+    where = f"point {point + 1}/{total} (t={due:g} s): {names[joint]}"
+    if what == "position":
+        return (f"{where} at {value:.3f}° at t={t:.3f} s, {words} "
+                f"{np.degrees(lo[joint]):g}°..{np.degrees(hi[joint]):g}°")
+    return (f"{where} {what} {abs(value):.3f} {unit} at t={t:.3f} s, {words} of "
+            f"{np.degrees(hi[joint]):g} {unit}")

@@ -143,8 +143,11 @@ def plan_trajectory(arm: ArmDescription, path: Path, start_deg: np.ndarray, spee
                              if p.accelerations else None) for p in points]
     active = [i for i, j in enumerate(arm.joints) if j.locked is None]
     try:
-        trajectory = interpolate(np.radians(start_deg), points, 1.0 / arm.control.cycle_hz,
-                                 active)
+        # a first point at 0 s from a client's reading of joint_states: the current state
+        # within the in-position tolerance (the motion starts from the measured joints)
+        trajectory = interpolate(
+            np.radians(start_deg), points, 1.0 / arm.control.cycle_hz, active,
+            start_tolerance_rad=math.radians(arm.control.position_tolerance_deg))
     except TrajectoryError as exc:
         raise PointsError(f"trajectory {exc}") from None
     jerk = np.radians([j.max_jerk_deg_s3 for j in arm.joints])
