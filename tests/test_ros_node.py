@@ -489,3 +489,17 @@ def test_without_rclpy_seqrun_ros_says_in_one_line_how_to_install_it(tmp_path):
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1, done.stderr
     assert "pip install 'seqrun[ros]'" in lines[0] and "Traceback" not in done.stderr
+
+
+def test_a_messages_velocities_and_accelerations_reach_the_service_layer():
+    from seqrun.ros.node import trajectory_of
+
+    msg = JointTrajectory(joint_names=["j1"], points=[
+        JointTrajectoryPoint(positions=[0.1], velocities=[0.2], accelerations=[0.3],
+                             time_from_start=Duration(sec=1, nanosec=500_000_000))])
+    (point,) = trajectory_of(msg).points
+    assert point.positions_rad == (0.1,) and point.time_from_start_s == 1.5
+    assert point.velocities_rad_s == (0.2,) and point.accelerations_rad_s2 == (0.3,)
+    bare = trajectory_of(JointTrajectory(joint_names=["j1"], points=[
+        JointTrajectoryPoint(positions=[0.1], time_from_start=Duration(sec=1))]))
+    assert bare.points[0].velocities_rad_s == ()
