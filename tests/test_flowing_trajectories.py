@@ -211,3 +211,19 @@ def test_a_first_point_at_0_s_away_from_the_arm_is_refused(session):
     with pytest.raises(Refused, match=r"^trajectory point 1/2 \(t=0 s\): time_from_start 0 "
                                       r"but 3\.000° away"):
         run_trajectory(session, JointTrajectory(("j1",), points), by="test")
+
+
+def test_after_a_step_that_loses_the_arm_only_the_points_file_is_checked(tmp_path):
+    from seqrun.service.checking import check_sequence
+
+    (tmp_path / "far.csv").write_text("t,j1\n1.0,170\n", encoding="utf-8")  # too fast
+    sequence = tmp_path / "far.yaml"
+    # the first refused: where the arm stands after it is not known, the second's motion
+    # (as fast) is not checked from a place the arm would not be
+    sequence.write_text("name: far\nsteps:\n  - move_trajectory: {file: far.csv}\n"
+                        "  - move_trajectory: {file: far.csv}\n", encoding="utf-8")
+    start = {"j1": 0.0, "j2": -90.0, "j3": 0.0, "j4": -120.32, "j5": 0.0, "j6": 115.74,
+             "j7": 0.0}
+    check = check_sequence(sequence, start_deg=start, started=True, arm_file=ARM,
+                           dry_run=False)
+    assert [e.line for e in check.errors] == [3], [str(e) for e in check.errors]

@@ -179,6 +179,14 @@ def check(checker: CheckContext, step: ResolvedStep[MoveTrajectoryParams],
     names = arm.joint_names
     keep = 1 - arm.control.tracking_reserve
     limits = [checker.joints[n].limits or checker.joints[n].joint.limits_deg for n in names]
+    if checker.position_unknown or checker.lost_at is not None:
+        # where the first segment starts is not known: the file only (no second error
+        # about a motion from a place the arm is not)
+        try:
+            read_points(_file(step, params), arm, checker.tracked())
+        except PointsError as exc:
+            checker.errors.append(step.error(str(exc), "file"))
+        return
     try:
         trajectory = plan_trajectory(
             arm, _file(step, params), checker.tracked(), checker.speed,
