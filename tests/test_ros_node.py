@@ -172,7 +172,7 @@ def test_a_trajectory_through_the_desk_is_refused_with_the_reason_and_moves_noth
     before = graph.joints_deg()
     graph.send(("j2",), (-110, 2.0))
     refused = graph.event("trajectory_refused")
-    assert refused["reason"].startswith("trajectory point 1/1: ")
+    assert refused["reason"].startswith("trajectory point 1/1 (t=2 s): ")
     assert "desk" in refused["reason"]
     time.sleep(0.2)
     assert graph.motion_frames() == [] and graph.session.activity is None
@@ -259,7 +259,7 @@ def test_a_goal_through_the_desk_is_aborted_as_invalid_with_the_reason(graph):
     code, text = graph.seqrun.follow_trajectory(joint_trajectory(("j2",), (-110, 2.0)), goal,
                                                 Codes)
     assert (code, goal.ended) == (Codes.INVALID_GOAL, ["aborted"])
-    assert text.startswith("trajectory point 1/1: ") and "desk" in text
+    assert text.startswith("trajectory point 1/1 (t=2 s): ") and "desk" in text
     assert graph.motion_frames() == []
 
 
@@ -489,3 +489,17 @@ def test_without_rclpy_seqrun_ros_says_in_one_line_how_to_install_it(tmp_path):
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1, done.stderr
     assert "pip install 'seqrun[ros]'" in lines[0] and "Traceback" not in done.stderr
+
+
+def test_a_messages_velocities_and_accelerations_reach_the_service_layer():
+    from seqrun.ros.node import trajectory_of
+
+    msg = JointTrajectory(joint_names=["j1"], points=[
+        JointTrajectoryPoint(positions=[0.1], velocities=[0.2], accelerations=[0.3],
+                             time_from_start=Duration(sec=1, nanosec=500_000_000))])
+    (point,) = trajectory_of(msg).points
+    assert point.positions_rad == (0.1,) and point.time_from_start_s == 1.5
+    assert point.velocities_rad_s == (0.2,) and point.accelerations_rad_s2 == (0.3,)
+    bare = trajectory_of(JointTrajectory(joint_names=["j1"], points=[
+        JointTrajectoryPoint(positions=[0.1], time_from_start=Duration(sec=1))]))
+    assert bare.points[0].velocities_rad_s == ()

@@ -1,5 +1,6 @@
 """A joint trajectory from ROS 2 becomes a checked sequence (seqrun/service/trajectories.py),
-without ROS: the steps it is written as, every refusal (one line, nothing sent), the desk
+without ROS: the points file of its one move_trajectory step, every refusal (one line,
+nothing sent), the desk
 found on the path the move will really follow, and a run on the simulator at virtual time.
 And the chain as /tf's tree of frames (seqrun/service/kinematics.py: link_transforms)."""
 
@@ -19,12 +20,11 @@ from seqrun.service import ArmSession
 from seqrun.service.connection import open_connection
 from seqrun.service.kinematics import end_effector, link_transforms
 from seqrun.service.trajectories import (MAX_POINTS, JointTrajectory, TrajectoryPoint,
-                                         check_trajectory, run_trajectory, trajectory_steps)
+                                         check_trajectory, run_trajectory, trajectory_csv)
 
 ROOT = Path(__file__).resolve().parents[1]
 ARM = ROOT / "arms" / "lwa3.yaml"
 PARK = {"j1": 0.0, "j2": -90.0, "j3": 0.0, "j4": -120.32, "j5": 0.0, "j6": 115.74, "j7": 0.0}
-SHARE = {f"j{i}": 5.0 for i in range(1, 8)}
 
 
 def trajectory(names, *points) -> JointTrajectory:
@@ -33,31 +33,28 @@ def trajectory(names, *points) -> JointTrajectory:
         TrajectoryPoint(tuple(math.radians(d) for d in p[:-1]), p[-1]) for p in points))
 
 
-def test_each_point_is_one_move_in_user_degrees_with_the_segment_velocity(arm):
-    steps = trajectory_steps(arm, trajectory(("j1", "j2"), (10, -80, 2.0), (10, -70, 4.0)),
-                             PARK, SHARE)
-    assert len(steps) == 2
-    assert '"joints": {"j1": 10.0, "j2": -80.0}' in steps[0]
-    # 10 degrees in 2 s: at most 5 deg/s for each joint that moves
-    assert '"velocity_deg_s": {"j1": 5.0, "j2": 5.0}' in steps[0]
-    # the second segment moves only j2: 10 degrees in 2 s
-    assert '"velocity_deg_s": {"j2": 5.0}' in steps[1]
+def test_the_points_are_written_in_user_degrees_with_their_times(arm):
+    text = trajectory_csv(arm, trajectory(("j1", "j2"), (10, -80, 2.0), (10, -70, 4.0)))
+    rows = [r.split(",") for r in text.splitlines()]
+    assert rows[0] == ["t", "j1", "j2"] and len(rows) == 3
+    assert [float(x) for x in rows[1]] == pytest.approx([2.0, 10.0, -80.0], abs=1e-12)
+    assert [float(x) for x in rows[2]] == pytest.approx([4.0, 10.0, -70.0], abs=1e-12)
 
 
-def test_a_point_without_time_moves_at_the_sessions_velocities_never_the_arms_maximum(arm):
-    (step,) = trajectory_steps(arm, trajectory(("j1",), (30, 0.0)), PARK, {"j1": 7.0})
-    assert '"velocity_deg_s": {"j1": 7.0}' in step
+def test_velocities_and_accelerations_are_written_when_every_point_gives_them(arm):
+    points = (TrajectoryPoint((0.1,), 1.0, (0.2,), (0.3,)),
+              TrajectoryPoint((0.2,), 2.0, (0.0,), (0.0,)))
+    text = trajectory_csv(arm, JointTrajectory(("j1",), points))
+    rows = [r.split(",") for r in text.splitlines()]
+    assert rows[0] == ["t", "j1", "j1_vel", "j1_acc"]
+    assert float(rows[1][2]) == pytest.approx(math.degrees(0.2))
+    only_some = (points[0], TrajectoryPoint((0.2,), 2.0))
+    assert trajectory_csv(arm, JointTrajectory(("j1",), only_some)).startswith("t,j1\n")
 
 
-def test_a_segment_faster_than_a_joint_can_go_is_capped_at_its_limit(arm):
-    (step,) = trajectory_steps(arm, trajectory(("j1",), (90, 0.1)), PARK, SHARE)
-    limit = arm.joint("j1").max_velocity_deg_s
-    assert f'"velocity_deg_s": {{"j1": {limit}}}' in step
-
-
-def test_the_locked_joint_at_its_locked_value_is_accepted_and_not_moved(arm):
-    (step,) = trajectory_steps(arm, trajectory(("j1", "j3"), (5, 0, 1.0)), PARK, SHARE)
-    assert '"j3"' not in step
+def test_the_locked_joint_at_its_locked_value_is_accepted(arm):
+    text = trajectory_csv(arm, trajectory(("j1", "j3"), (5, 0, 1.0)))
+    assert text.splitlines()[0] == "t,j1,j3"
 
 
 @pytest.mark.parametrize("bad, reason", [
@@ -66,17 +63,20 @@ def test_the_locked_joint_at_its_locked_value_is_accepted_and_not_moved(arm):
     (trajectory(("j1", "j1"), (5, 5, 1.0)), "j1 is named twice"),
     (trajectory(("j1",)), "no points"),
     (trajectory((), (1.0,)), "no joint names"),
-    (trajectory(("j1",), (5, 2.0), (6, 1.0)), "point 2/2: time_from_start 1 s is before"),
-    (trajectory(("j1",), (float("nan"), 1.0)), "point 1/1: j1: nan is not a finite number"),
+    (trajectory(("j1",), (5, 2.0), (6, 1.0)),
+     "point 2/2 (t=1 s): time_from_start must be after the previous point's 2 s"),
+    (trajectory(("j1",), (5, 2.0), (6, 2.0)), "point 2/2 (t=2 s): time_from_start must be"),
+    (trajectory(("j1",), (float("nan"), 1.0)),
+     "point 1/1 (t=1 s): j1: nan is not a finite number"),
     (JointTrajectory(("j1", "j2"), (TrajectoryPoint((0.1,), 1.0),)),
-     "point 1/1: 1 positions for 2 joints"),
+     "point 1/1 (t=1 s): 1 positions for 2 joints"),
     (JointTrajectory(("j1",), (TrajectoryPoint((True,), 1.0),)), "True is not a number"),
     (JointTrajectory(("j1",), tuple(TrajectoryPoint((0.0,), float(i))
-                                    for i in range(MAX_POINTS + 1))), "at most 500"),
+                                    for i in range(1, MAX_POINTS + 2))), "at most 10000"),
 ])
 def test_bad_trajectories_are_refused_in_one_line(arm, bad, reason):
     with pytest.raises(Refused) as caught:
-        trajectory_steps(arm, bad, PARK, SHARE)
+        trajectory_csv(arm, bad)
     assert reason in str(caught.value) and "\n" not in str(caught.value)
 
 
@@ -107,14 +107,16 @@ def test_a_trajectory_into_the_desk_is_refused_on_its_planned_path_and_moves_not
     with pytest.raises(Refused) as caught:
         run_trajectory(session, into_the_desk, by="test")
     message = str(caught.value)
-    assert message.startswith("trajectory point 1/1: ") and "desk" in message
-    assert "planned trajectory" in message and "ros_trajectory" not in message
+    assert message.startswith("trajectory point 1/1 (t=2 s): ") and "desk" in message
+    assert "trajectory" in message and "ros_trajectory" not in message
     assert sent == [] and session.activity is None
 
 
 def test_a_point_outside_the_limits_is_refused_naming_the_point(session):
-    with pytest.raises(Refused, match=r"trajectory point 2/2: j2 target -135° is outside"):
-        run_trajectory(session, trajectory(("j2",), (-80, 1.0), (-135, 2.0)))
+    # the first sample beyond -120° (the point itself, -135° at 4 s, is later)
+    with pytest.raises(Refused, match=r"^trajectory point 2/2 \(t=4 s\): j2 at -120\.\d+° at "
+                                      r"t=3\.\d+ s, outside its limits -120°\.\.120°"):
+        run_trajectory(session, trajectory(("j2",), (-80, 1.0), (-135, 4.0)))
 
 
 def test_a_trajectory_is_refused_while_the_arm_is_halted(session):
@@ -127,7 +129,8 @@ def test_a_valid_trajectory_runs_as_a_sequence_with_its_run_folder(session):
     sent = motion_frames(session)
     check, file = check_trajectory(session, trajectory(("j1", "j2"), (10, -80, 1.0),
                                                        (20, -70, 2.0)))
-    assert check.valid and len(check.loaded.steps) == 2 and file.is_file()
+    assert check.valid and len(check.loaded.steps) == 1 and file.is_file()
+    assert check.loaded.steps[0].kind == "move_trajectory"
     activity = run_trajectory(session, trajectory(("j1", "j2"), (10, -80, 1.0),
                                                   (20, -70, 2.0)), by="test")
     result = activity.wait(timeout=60)

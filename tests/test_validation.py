@@ -62,8 +62,9 @@ EXPECTED = {
     "unknown_step.yaml": [("unknown_step.yaml", 5, 5,
                            ["unknown step type 'mvoe'", "did you mean 'move'",
                             ("expected one of: reset, home, halt, set_limits, move, move_linear, "
-                             "move_velocity, wait, wait_until, checkpoint, check, grip, release, "
-                             "check_gripper, confirm, power_off, signal, wait_for, include")])],
+                             "move_trajectory, move_velocity, wait, wait_until, checkpoint, "
+                             "check, grip, release, check_gripper, confirm, power_off, signal, "
+                             "wait_for, include")])],
     "unknown_key.yaml": [("unknown_key.yaml", 9, 7, ["unknown key 'velocty' in move",
                                                      "velocity_deg_s"])],
     "nan.yaml": [("nan.yaml", 7, 25, ["expected a finite number, got .nan"])],

@@ -13,9 +13,11 @@ What it offers (``<arm>``: the arm file's name, e.g. ``lwa3``; ``~``: the node, 
   frames that move) and ``/tf_static`` once (the fixed ones: a locked joint,
   ``<arm>/end_effector``, the tools' TCPs) when ``tf2_msgs`` can be imported (a ROS host:
   Jazzy's wheels on the package index have no ``tf2_msgs``) and ``publish_tf`` is true;
-- ``/<arm>/joint_trajectory`` (``trajectory_msgs/JointTrajectory``) accepted: each one checked
-  as a sequence from where the arm stands and run through the session
-  (:mod:`seqrun.service.trajectories`); a refusal is one line on ``~/events`` and the log;
+- ``/<arm>/joint_trajectory`` (``trajectory_msgs/JointTrajectory``) accepted: each one one
+  continuous motion through its points (as joint_trajectory_controller), checked as a
+  sequence from where the arm stands and run through the session
+  (:mod:`seqrun.service.trajectories`); a refusal (also: one arriving while one runs) is one
+  line on ``~/events`` and the log;
 - ``~/stop`` (a Halt, confirmed by reading every module back), ``~/reset`` (Reset and the
   arm file's limits written: the console's Arm), ``~/home`` (``std_srvs/Trigger``:
   ``success`` is what the modules read back);
@@ -108,7 +110,9 @@ def trajectory_of(msg: Any) -> JointTrajectory:
     return JointTrajectory(
         tuple(str(n) for n in msg.joint_names),
         tuple(TrajectoryPoint(tuple(float(x) for x in p.positions),
-                              _seconds(p.time_from_start)) for p in msg.points))
+                              _seconds(p.time_from_start),
+                              tuple(float(x) for x in p.velocities),
+                              tuple(float(x) for x in p.accelerations)) for p in msg.points))
 
 
 class SeqrunNode:

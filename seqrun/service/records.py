@@ -92,6 +92,7 @@ def input_sources(loaded: Any, arm: Any = None,
         [s for s in map(read, files) if s is not None]
     for pose in (getattr(loaded, "poses", None) or {}).values():
         sources.append((Path(pose.document.path), pose.document.source))
+    sources.extend(_data_files(loaded, read))
     arm_file = Path(arm_path or loaded.arm_path)
     arm_bytes: bytes = getattr(arm, "source_bytes", None) or b""
     if arm_bytes:
@@ -111,6 +112,23 @@ def input_sources(loaded: Any, arm: Any = None,
         if listed is not None and (found := read(listed)) is not None:
             sources.append(found)
     return sources
+
+
+def _data_files(loaded: Any, read: Any) -> list[tuple[Path, bytes]]:
+    """The data files the steps read (a ``move_trajectory``'s points), each once."""
+    from seqrun.steps.registry import step_kind
+
+    found: dict[Path, tuple[Path, bytes]] = {}
+    for step in getattr(loaded, "steps", None) or ():
+        try:
+            names = step_kind(step.kind).data_files(step.params)
+        except KeyError:
+            continue
+        for name in names:
+            path = Path(step.location.file).parent / name
+            if path not in found and (source := read(path)) is not None:
+                found[path] = source
+    return list(found.values())
 
 
 def input_paths(loaded: Any, arm_path: Path | None = None) -> list[Path]:

@@ -1,24 +1,28 @@
 """A joint trajectory from another system (a ROS 2 ``JointTrajectory``), run as a sequence.
 
-A trajectory is never streamed as it comes: it is written as a sequence of ``move`` steps
-(one per point, joints in user degrees), checked by :func:`seqrun.service.checking.check_sequence`
-from where the arm stands (the limits of the arm file, the locked joint, the workspace guards
-and the link volumes along the ruckig trajectory each move will really stream) and then run by
-the arm session like any sequence (:meth:`~seqrun.service.session.ArmSession.run_sequence`:
-validated again from the measured joints, a run folder, the same per-cycle checks and Halt on
-any fault). Anything wrong is :class:`~seqrun.errors.Refused` with one line naming the point,
-before anything is sent.
+A trajectory is one continuous motion through its points, as ros2_control's
+joint_trajectory_controller runs it: it is written as a sequence of one ``move_trajectory``
+step (:mod:`seqrun.steps.move_trajectory`) whose CSV file holds the points, checked by
+:func:`seqrun.service.checking.check_sequence` from where the arm stands (the whole
+interpolated motion against the limits of the arm file, the velocity, acceleration and jerk
+bounds, the locked joint, the workspace guards and the link and tool volumes) and then run
+by the arm session like any sequence (:meth:`~seqrun.service.session.ArmSession.run_sequence`:
+checked again from the measured joints, a run folder, the same per-cycle checks and Halt on
+any fault). Anything wrong is :class:`~seqrun.errors.Refused` with one line naming the first
+violating point and time, before anything is sent. A trajectory arriving while one runs is
+refused (joint_trajectory_controller would replace it; seqrun does not).
 
 What a point means here:
 
 - ``positions`` are radians in seqrun's user coordinates (those of ``/<arm>/joint_states``:
-  Totem = 0, the zero reference in force applied by the arm's driver);
+  Totem = 0, the zero reference in force applied by the arm's driver); ``velocities`` (rad/s)
+  and ``accelerations`` (rad/s²), when every point gives them, make the interpolation cubic
+  or quintic (positions only: linear), as JTC;
+- ``time_from_start`` is when the point is reached: strictly increasing, the first after 0
+  (or at 0 only if it is where the arm stands); the motion starts from the measured joints
+  at rest;
 - joints the trajectory does not name stay where they are; a locked joint may be named only
-  at its locked value;
-- the arm comes to rest at every point (a seqrun move ends in position); ``time_from_start``
-  sets each segment's velocity caps (the distance over the time, at most the joint's limit),
-  so a segment never runs faster than asked, and takes longer where the jerk-limited profile
-  or a limit needs it; velocities and accelerations given per point are not used.
+  at its locked value.
 """
 
 from __future__ import annotations
@@ -28,7 +32,6 @@ import json
 import math
 import numbers
 import tempfile
-from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -36,23 +39,24 @@ from typing import Any
 from seqrun.errors import Refused
 
 __all__ = ["MAX_POINTS", "JointTrajectory", "TrajectoryPoint", "check_trajectory",
-           "in_trajectory_terms", "run_trajectory", "trajectory_steps"]
+           "in_trajectory_terms", "run_trajectory", "trajectory_csv"]
 
-#: More points than this is refused (each is a move that ends at rest).
-MAX_POINTS = 500
+#: More points than this is refused (a dense trajectory is one motion: 10,000 points is
+#: 100 s at the control cycle).
+MAX_POINTS = 10_000
 #: A locked joint named in a trajectory must be this close to its locked value (degrees).
 LOCKED_TOLERANCE_DEG = 0.01
-#: The sequence file's first step is on this line (name, description, steps: before it).
-_FIRST_STEP_LINE = 4
 
 
 @dataclass(frozen=True)
 class TrajectoryPoint:
-    """One point: every named joint's position (radians) and when it is due (seconds after
-    the trajectory starts)."""
+    """One point: every named joint's position (radians), when it is due (seconds after
+    the trajectory starts) and, optionally, its velocity (rad/s) and acceleration (rad/s²)."""
 
     positions_rad: tuple[float, ...]
     time_from_start_s: float = 0.0
+    velocities_rad_s: tuple[float, ...] = ()
+    accelerations_rad_s2: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -72,21 +76,18 @@ def _number(value: Any, what: str) -> float:
     return x
 
 
-def trajectory_steps(arm: Any, trajectory: JointTrajectory, start_deg: Mapping[str, float],
-                     move_velocities_deg_s: Mapping[str, float]) -> list[str]:
-    """The ``move`` steps (one YAML flow mapping each) of ``trajectory`` from ``start_deg``
-    (user degrees, every joint). A segment without time (``time_from_start`` not after the
-    previous point's) moves at ``move_velocities_deg_s`` (the session's). Refused: no point,
-    too many, an unknown, repeated or locked joint, a point of the wrong length, a position
-    that is not a finite number, times that go back."""
+def trajectory_csv(arm: Any, trajectory: JointTrajectory) -> str:
+    """``trajectory`` as the CSV file of a ``move_trajectory`` step (t in seconds, then the
+    named joints in user degrees, their velocities and accelerations where every point gives
+    them). Refused: no point, too many, an unknown, repeated or locked joint, a point of the
+    wrong length, a value that is not a finite number, times that do not increase."""
     names = list(trajectory.joint_names)
     if not names:
         raise Refused("trajectory: no joint names")
     if not trajectory.points:
         raise Refused("trajectory: no points")
     if len(trajectory.points) > MAX_POINTS:
-        raise Refused(f"trajectory: {len(trajectory.points)} points, at most {MAX_POINTS} "
-                      "(the arm comes to rest at each)")
+        raise Refused(f"trajectory: {len(trajectory.points)} points, at most {MAX_POINTS}")
     joints = {j.name: j for j in arm.joints}
     for name in names:
         if not isinstance(name, str) or name not in joints:
@@ -95,50 +96,43 @@ def trajectory_steps(arm: Any, trajectory: JointTrajectory, start_deg: Mapping[s
     repeated = sorted({n for n in names if names.count(n) > 1})
     if repeated:
         raise Refused(f"trajectory: joint {repeated[0]} is named twice")
-    steps = []
-    here = {n: float(v) for n, v in start_deg.items()}
+    points = trajectory.points
+    with_velocities = all(len(p.velocities_rad_s) for p in points)
+    with_accelerations = with_velocities and all(len(p.accelerations_rad_s2) for p in points)
+    header = ["t", *names]
+    if with_velocities:
+        header += [f"{n}_vel" for n in names]
+    if with_accelerations:
+        header += [f"{n}_acc" for n in names]
+    rows = [",".join(header)]
     before_s = 0.0
-    total = len(trajectory.points)
-    for number, point in enumerate(trajectory.points, start=1):
+    total = len(points)
+    for number, point in enumerate(points, start=1):
         where = f"trajectory point {number}/{total}"
-        if len(point.positions_rad) != len(names):
-            raise Refused(f"{where}: {len(point.positions_rad)} positions for "
-                          f"{len(names)} joints")
         due_s = _number(point.time_from_start_s, f"{where}: time_from_start")
-        if due_s < before_s:
-            raise Refused(f"{where}: time_from_start {due_s:g} s is before the previous "
-                          f"point's {before_s:g} s")
-        targets: dict[str, float] = {}
+        where = f"{where} (t={due_s:g} s)"
+        if due_s < 0 or (number > 1 and due_s <= before_s):
+            raise Refused(f"{where}: time_from_start must be after "
+                          + (f"the previous point's {before_s:g} s" if number > 1 else "0 s"))
+        columns = [("positions", point.positions_rad)]
+        if with_velocities:
+            columns.append(("velocities", point.velocities_rad_s))
+        if with_accelerations:
+            columns.append(("accelerations", point.accelerations_rad_s2))
+        values = [repr(due_s)]
+        for what, given in columns:
+            if len(given) != len(names):
+                raise Refused(f"{where}: {len(given)} {what} for {len(names)} joints")
+            for name, value in zip(names, given):
+                values.append(repr(math.degrees(_number(value, f"{where}: {name}"))))
         for name, value in zip(names, point.positions_rad):
-            degrees = math.degrees(_number(value, f"{where}: {name}"))
-            joint = joints[name]
-            if joint.locked is not None:
-                if abs(degrees - joint.locked) > LOCKED_TOLERANCE_DEG:
-                    raise Refused(f"{where}: {name} is locked at {joint.locked:g}° in the "
-                                  f"arm file; the trajectory asks {degrees:.3f}°")
-                continue
-            targets[name] = round(degrees, 6)
-        if not targets:
-            raise Refused(f"{where}: no joint that can move")
-        params: dict[str, Any] = {"joints": targets,
-                                  "label": f"ROS trajectory point {number}/{total}"
-                                           f" (t={due_s:g} s)"}
-        duration = due_s - before_s
-        caps = {}
-        for name, target in targets.items():
-            limit = joints[name].max_velocity_deg_s
-            distance = abs(target - here.get(name, target))
-            if duration > 0:
-                if distance > 0:
-                    caps[name] = round(min(limit, max(distance / duration, 1e-3)), 6)
-            else:
-                caps[name] = min(limit, float(move_velocities_deg_s.get(name, limit)))
-        if caps:
-            params["velocity_deg_s"] = caps
-        steps.append("move: " + json.dumps(params))
-        here.update(targets)
+            locked = joints[name].locked
+            if locked is not None and abs(math.degrees(value) - locked) > LOCKED_TOLERANCE_DEG:
+                raise Refused(f"{where}: {name} is locked at {locked:g}° in the arm file; "
+                              f"the trajectory asks {math.degrees(value):.3f}°")
+        rows.append(",".join(values))
         before_s = due_s
-    return steps
+    return "\n".join(rows) + "\n"
 
 
 _numbers = itertools.count(1)
@@ -153,10 +147,12 @@ def _private_folder() -> Path:
     return _folder[0]
 
 
-def _sequence_text(steps: Sequence[str]) -> str:
+def _sequence_text(points_file: str, points: int) -> str:
+    label = json.dumps(f"ROS trajectory ({points} points)")
     return ("name: ros_trajectory\n"
             "description: a joint trajectory received over ROS 2 (seqrun ros)\n"
-            "steps:\n" + "".join(f"  - {s}\n" for s in steps))
+            "steps:\n"
+            f"  - move_trajectory: {{file: {json.dumps(points_file)}, label: {label}}}\n")
 
 
 def in_trajectory_terms(text: str) -> str:
@@ -175,34 +171,45 @@ def _same_file(named: Any, file: Path) -> bool:
         return False
 
 
-def _in_operator_terms(error: Any, file: Path, steps: int) -> str:
-    """A finding about the generated file as the point it is about (a finding about
-    another file, the arm's or a pose's, keeps its ``file:line:col``)."""
+def _in_operator_terms(error: Any, file: Path) -> str:
+    """A finding about the generated files as the trajectory's (a finding about another
+    file, the arm's or a pose's, keeps its ``file:line:col``)."""
+    points = file.with_suffix(".csv")
     if isinstance(error, str):
-        return error.replace(f"{file}:", "trajectory:").replace(str(file), "the trajectory")
-    message = str(error.message).replace(str(file), "the trajectory")
+        return (error.replace(f"{file}:", "trajectory:").replace(str(file), "the trajectory")
+                .replace(str(points), "the trajectory"))
+    message = str(error.message).replace(str(points), "the trajectory")
     if _same_file(error.file, file):
-        point = int(error.line) - _FIRST_STEP_LINE + 1
-        if 1 <= point <= steps:
-            return f"trajectory point {point}/{steps}: {message}"
-        return f"trajectory: {message}"
+        # the step's own findings name the point (and time) they are about
+        return message if message.startswith("trajectory") else f"trajectory: {message}"
     return f"{error.file}:{error.line}:{error.column}: {message}"
 
 
 def check_trajectory(session: Any, trajectory: JointTrajectory, folder: Path | None = None):
-    """Write ``trajectory`` as a sequence and check it from where the arm stands (the one
-    validate call, :func:`~seqrun.service.checking.check_sequence`, without the dry run:
-    what ``seqrun run`` checks before the bus). Returns the check (valid) and the file;
-    Refused with the first finding, in terms of the trajectory's points."""
+    """Write ``trajectory`` as a sequence of one ``move_trajectory`` step (and its CSV file)
+    and check it from where the arm stands (the one validate call,
+    :func:`~seqrun.service.checking.check_sequence`, without the dry run: what ``seqrun run``
+    checks before the bus). Returns the check (valid) and the sequence file; Refused with
+    the first finding, naming the point and time where it has one."""
     from seqrun.service.checking import check_sequence
 
     s = session
     s.motion.check_movable("trajectory")
+    if s.activity is not None and not s.activity.done:
+        raise Refused("trajectory: another motion is running (a new trajectory does not "
+                      "replace it; stop it first)")
     start = s.telemetry.joints_deg()
-    steps = trajectory_steps(s.arm, trajectory, start, s.move_velocities())
+    text = trajectory_csv(s.arm, trajectory)
     folder = Path(folder) if folder is not None else _private_folder()
     file = folder / f"ros_trajectory_{next(_numbers)}.yaml"
-    file.write_text(_sequence_text(steps), encoding="utf-8")
+    points = file.with_suffix(".csv")
+    points.write_text(text, encoding="utf-8")
+    file.write_text(_sequence_text(points.name, len(trajectory.points)), encoding="utf-8")
+
+    def forget() -> None:
+        file.unlink(missing_ok=True)
+        points.unlink(missing_ok=True)
+
     arm_file = s.arm.source_file
     project = s.project
     check = check_sequence(file, start_deg=start, started=True,
@@ -210,15 +217,15 @@ def check_trajectory(session: Any, trajectory: JointTrajectory, folder: Path | N
                            project_dir=project.root if project is not None else None,
                            dry_run=False)
     if check.errors:
-        file.unlink(missing_ok=True)
+        forget()
         more = len(check.errors) - 1
-        raise Refused(_in_operator_terms(check.errors[0], file, len(steps))
+        raise Refused(_in_operator_terms(check.errors[0], file)
                       + (f" (and {more} more)" if more else ""))
     if s.separation is not None:  # against the other arms where they stand (and go)
         try:
             s.separation.refuse_paths("trajectory", check.static.paths)
         except Refused:
-            file.unlink(missing_ok=True)
+            forget()
             raise
     return check, file
 
@@ -235,4 +242,4 @@ def run_trajectory(session: Any, trajectory: JointTrajectory, *, by: str | None 
         return session.run_sequence(file, loaded=check.loaded, assume_yes=True, by=by,
                                     log_dir=log_dir, html_report=False)
     except Refused as exc:
-        raise Refused(_in_operator_terms(str(exc), file, len(check.loaded.steps))) from None
+        raise Refused(_in_operator_terms(str(exc), file)) from None

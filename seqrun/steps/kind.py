@@ -29,11 +29,16 @@ if TYPE_CHECKING:
     from seqrun.steps.params import StepParams
     from seqrun.steps.resolved import ResolvedStep
 
-__all__ = ["StepKind", "no_poses"]
+__all__ = ["StepKind", "no_files", "no_poses"]
 
 
 def no_poses(params: Any) -> tuple[str, ...]:
     """A step that names no pose file."""
+    return ()
+
+
+def no_files(params: Any) -> tuple[str, ...]:
+    """A step that reads no data file."""
     return ()
 
 
@@ -62,6 +67,9 @@ class StepKind:
     example: str = ""
     #: The pose files the step names (read and frozen when the sequence is loaded).
     poses: Callable[[Any], tuple[str, ...]] = no_poses
+    #: The data files the step reads, relative to its sequence file (copied into the run
+    #: folder's inputs/ with the sequence).
+    data_files: Callable[[Any], tuple[str, ...]] = no_files
     #: The step moves the arm: the checks know where its motion starts (relative
     #: checkpoints measure from there).
     motion: bool = False

@@ -14,8 +14,8 @@ from collections.abc import Callable
 from typing import Any
 
 from seqrun.steps import (check, check_gripper, checkpoint, confirm, grip, halt, home, move,
-                          move_linear, move_velocity, power_off, release, reset, set_limits,
-                          signal, wait, wait_for, wait_until)
+                          move_linear, move_trajectory, move_velocity, power_off, release,
+                          reset, set_limits, signal, wait, wait_for, wait_until)
 from seqrun.steps.kind import StepKind
 
 __all__ = ["HANDLERS", "KINDS", "Handler", "StepKind", "step_kind"]
@@ -27,6 +27,7 @@ KINDS: tuple[StepKind, ...] = (
     set_limits.KIND,
     move.KIND,
     move_linear.KIND,
+    move_trajectory.KIND,
     move_velocity.KIND,
     wait.KIND,
     wait_until.KIND,
