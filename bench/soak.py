@@ -200,8 +200,13 @@ def _frames(folder: Path, shift: float) -> list[tuple[float, int, str, bool]]:
 
 
 def _events(folder: Path) -> list[dict]:
-    with open(folder / "events.jsonl", encoding="utf-8") as f:
-        return [json.loads(line) for line in f if line.strip()]
+    from seqrun.runfolder.logfile import read_lines
+    from seqrun.runfolder.names import events_path
+
+    path = events_path(folder)
+    if path is None:
+        raise FileNotFoundError(f"{folder}: no events.jsonl.gz (nor an older events.jsonl)")
+    return [json.loads(line) for line in read_lines(path) if line.strip()]
 
 
 def judge(fault: Fault | None, result, folder: Path, arm) -> Verdict:

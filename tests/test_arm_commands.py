@@ -191,12 +191,18 @@ def test_pose_save_with_sim_says_so_and_marks_the_source(tmp_path):
     assert yaml.safe_load(out.read_text())["source"] == "simulator"
 
 
-def test_pose_save_from_a_bus_is_source_arm(tmp_path):
+def test_pose_save_from_a_bus_is_source_arm(tmp_path, monkeypatch):
+    monkeypatch.setenv("SEQRUN_STATE_DIR", str(tmp_path / "state"))
     server = serve()
     out = tmp_path / "p.yaml"
     try:
-        result = CliRunner().invoke(app, ["pose", "save", "p", "-o", str(out),
-                                          *over_socketcand(server)])
+        bus = over_socketcand(server)
+        # (a pose is saved only with the zero confirmed at this power-on: issue 43)
+        recorded = CliRunner().invoke(app, ["zero", "set", "park", *bus], input="y\n")
+        assert recorded.exit_code == 0, recorded.output
+        confirmed = CliRunner().invoke(app, ["home", "--zero-confirmed", "park", *bus])
+        assert confirmed.exit_code == 0, confirmed.output
+        result = CliRunner().invoke(app, ["pose", "save", "p", "-o", str(out), *bus])
     finally:
         server.shutdown()
     assert result.exit_code == 0, result.output

@@ -82,11 +82,14 @@ def test_file_key_order_is_readable():
 
 
 joint_values = st.floats(-180, 180, allow_nan=False).map(lambda v: round(v, 4))
-descriptions = st.text(st.characters(codec="utf-8", exclude_categories=("Cs",)), max_size=150)
+# (no control characters: a seqrun file holds printable text, and loading refuses them at
+# file:line:col since issue 43; tabs and line breaks are fine)
+descriptions = st.text(st.characters(codec="utf-8", exclude_categories=("Cs", "Cc"),
+                                     include_characters="\t\n"), max_size=150)
 
 
 @settings(max_examples=examples(40), deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@example(joints=[0.0] * 6, description="next\x85line", seconds=0, source=None)  # YAML line break
+@example(joints=[0.0] * 6, description="next\u2028line", seconds=0, source=None)  # YAML line break
 @example(joints=[0.0] * 6, description="yes", seconds=0, source=None)  # YAML 1.1 boolean
 @given(joints=st.lists(joint_values, min_size=6, max_size=6), description=descriptions,
        seconds=st.integers(0, 10**9), source=st.sampled_from(["reference", "arm", "manual", None]))

@@ -46,6 +46,8 @@ def test_a_control_character_in_a_sequence_is_refused_where_it_stands(project, m
 def test_the_zero_records_text_is_printed_escaped(tmp_path, monkeypatch):
     """The issue's reproduction: escape sequences in the zero record's fields rewrote the
     "zero:" line of status (and of every run)."""
+    from projecttree import ROOT
+    from seqrun.arm.poses import park_deg
     from seqrun.drivers.base import ArmIdentity
     from seqrun.service.zero import ZeroStore
     from test_arm_context import ARM, SERIALS, campaign_on, served_arm
@@ -54,7 +56,9 @@ def test_the_zero_records_text_is_printed_escaped(tmp_path, monkeypatch):
     server = served_arm("park")
     try:
         root = campaign_on(tmp_path, server)
-        ZeroStore(ArmIdentity.of(SERIALS)).set_record("park", by=FORGED, arm_name=ARM.name)
+        ZeroStore(ArmIdentity.of(SERIALS)).set_record(
+            "park", by=FORGED, arm_name=ARM.name,
+            joints_deg=park_deg(ROOT / "poses"))
         monkeypatch.chdir(root)
         for command in (["status"], ["zero", "show"]):
             result = CliRunner().invoke(app, command)

@@ -7,7 +7,6 @@ moves them again by itself."""
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 
@@ -16,6 +15,7 @@ from typer.testing import CliRunner
 
 import seqrun.cli  # noqa: F401  (registers the commands on the app)
 from projecttree import ROOT, make_project, shipped_arm
+from runfolder import RunFolder
 from seqrun.cli.app import app
 from seqrun.powercube.protocol import StateFlag
 from seqrun.results import EXIT_FAULT
@@ -43,8 +43,7 @@ def _run(tmp_path: Path, *extra: str) -> tuple[int, str, list[dict]]:
                                       "--virtual-time", "--yes", "--plain", "--no-report",
                                       "--log-dir", str(folder), *extra])
     assert result.exception is None or isinstance(result.exception, SystemExit), result.output
-    events = [json.loads(line) for line in
-              (folder / "events.jsonl").read_text(encoding="utf-8").splitlines()]
+    events = RunFolder(folder).events()
     return result.exit_code, result.output, events
 
 
