@@ -23,6 +23,7 @@ from typer.testing import CliRunner
 import seqrun.cli  # noqa: F401  (registers the commands)
 from projecttree import ROOT
 from runfolder import RunFolder
+from test_report import clean_run, fault_run  # noqa: F401  (the same two runs)
 from seqrun.cli.app import app
 
 SCHEMA = xmlschema.XMLSchema(str(ROOT / "tests" / "data" / "junit-10.xsd"))
@@ -31,27 +32,6 @@ OPSAFE = ROOT / "sequences" / "opsafe.yaml"
 
 def errors_of(path: Path) -> list[str]:
     return [f"{e.path}: {e.reason}" for e in SCHEMA.iter_errors(str(path))]
-
-
-def run(folder: Path, *extra: str):
-    result = CliRunner().invoke(app, ["run", str(OPSAFE), "--virtual-time", "--yes", "--plain",
-                                      "--log-dir", str(folder), *extra])
-    assert result.exception is None or isinstance(result.exception, SystemExit), result.output
-    return result
-
-
-@pytest.fixture(scope="module")
-def clean_run(tmp_path_factory) -> Path:
-    folder = tmp_path_factory.mktemp("clean") / "run"
-    assert run(folder).exit_code == 0
-    return folder
-
-
-@pytest.fixture(scope="module")
-def fault_run(tmp_path_factory) -> Path:
-    folder = tmp_path_factory.mktemp("fault") / "run"
-    assert run(folder, "--sim-fault", "4:tow_error@5").exit_code == 3
-    return folder
 
 
 def test_the_schema_refuses_what_strict_tools_refuse(tmp_path):
