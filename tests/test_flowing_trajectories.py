@@ -14,27 +14,13 @@ import pytest
 
 from seqrun.arm.description import load_arm
 from seqrun.arm.trajectory_interp import TimedPoint, TrajectoryError, interpolate
-from seqrun.clock import VirtualClock
 from seqrun.errors import Refused
-from seqrun.service import ArmSession
-from seqrun.service.connection import open_connection
 from seqrun.service.trajectories import JointTrajectory, TrajectoryPoint, run_trajectory
+from test_ros_trajectory import session  # noqa: F401  (an armed, homed session at virtual time)
 
 ROOT = Path(__file__).resolve().parents[1]
 ARM = ROOT / "arms" / "lwa3.yaml"
 CYCLE_S = 0.01
-
-
-@pytest.fixture
-def session(tmp_path):
-    connection = open_connection(force_sim=True, clock=VirtualClock())
-    s = ArmSession(load_arm(ARM), connection, status_hz=0, log_root=tmp_path / "runs",
-                   poses_dir=ROOT / "poses")
-    s.poll_status()
-    assert s.arm_up().ok and s.home().ok
-    s.poll_status()
-    yield s
-    s.close()
 
 
 def smooth(start_deg: dict[str, float], count: int = 50, span_s: float = 5.0,
