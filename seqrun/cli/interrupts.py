@@ -86,8 +86,11 @@ class RunSignals:
             self._saved[signum] = signal.signal(signum, self.handle)
 
     def restore(self) -> None:
+        """The handlers from before :meth:`install`; but SIGINT ignored once the verdict
+        holds (:func:`_verdict_holds`), in one step: no moment is left in between."""
+        quiet = _verdict_holds()
         for signum, old in self._saved.items():
-            signal.signal(signum, old)
+            signal.signal(signum, signal.SIG_IGN if quiet and signum == signal.SIGINT else old)
         self._saved.clear()
 
 
@@ -99,6 +102,20 @@ class RunProgress:
     def __init__(self) -> None:
         self.started = False
         self.exit_code: int | None = None
+
+
+def _verdict_holds() -> bool:
+    """True once this command's exit code is decided and the process is the ``seqrun``
+    program: then SIGINT is ignored from the run's handlers to the process's end. A Ctrl-C
+    between the command's return and the interpreter's exit (typer turns a KeyboardInterrupt
+    there into exit 130) reported a faulted run, exit 3, as an operator abort. In-process
+    callers (tests, tools) keep their handler: the command catches a KeyboardInterrupt once
+    the verdict stands."""
+    if progress.exit_code is None:
+        return False
+    from seqrun.cli import _starting_command_line
+
+    return _starting_command_line() is not None
 
 
 #: The run of this command (:func:`new_run` at its start).

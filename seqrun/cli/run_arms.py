@@ -229,6 +229,8 @@ def _run(file: Path, check, contexts, connections, arms, clock_views, *, speed: 
                              html_report=not no_report, requests_by_arm=inboxes,
                              file=str(file), parts=records.parts(),
                              on_idle=view.on_idle if view is not None else None)
+        if outcome is not None:   # before the handlers go: a Ctrl-C now keeps it
+            interrupts.progress.exit_code = outcome.exit_code
     finally:
         if view is not None:
             view.__exit__(None, None, None)
