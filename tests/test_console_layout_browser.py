@@ -19,7 +19,7 @@ SIZES = [(1920, 1080), (1600, 900), (1400, 900), (1366, 768), (1280, 800), (1280
 #: background or a border; not a bare layout box), its box clipped by the ancestors that
 #: clip it (overflow) and by the window, that meets STOP's box: [name, box, text] (STOP
 #: itself, its ancestors and the bar's background it is meant to stand on left out).
-UNDER_STOP = """() => {
+UNDER_STOP = r"""() => {
   const stop = document.querySelector('#stop').getBoundingClientRect();
   const meets = (r) => r.width > 0 && r.height > 0 && r.left < stop.right
     && r.right > stop.left && r.top < stop.bottom && r.bottom > stop.top;

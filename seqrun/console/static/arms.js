@@ -27,7 +27,8 @@ async function command(label, method, path, body) {
   const arm = state.selected;
   try {
     const result = await api(method, `/arms/${arm}${path}`, body);
-    say(result && result.message ? `arm ${arm}: ${label}: ${result.message}` : `arm ${arm}: ${label}: ok`);
+    // a reply after contact was lost says nothing of the arm now: the banner's words stay
+    if (!state.lost) say(result && result.message ? `arm ${arm}: ${label}: ${result.message}` : `arm ${arm}: ${label}: ok`);
     if (path === "/reset" || path === "/arm-up") state.arms[arm].stop = null;  // cleared
     return result;
   } catch (err) {

@@ -21,7 +21,9 @@ const api = apiOf(() => state.token);
 async function command(label, method, path, body) {
   try {
     const result = await api(method, path, body);
-    say(result && result.message ? `${label}: ${result.message}` : `${label}: ok`);
+    // A reply that arrives after contact was lost says nothing of the arm now: the
+    // banner's words stay (a "MOVE: ok" under it read as if the arm were fine).
+    if (!state.lost) say(result && result.message ? `${label}: ${result.message}` : `${label}: ok`);
     return result;
   } catch (err) {
     return null;  // already on screen
