@@ -31,16 +31,16 @@ def state_dir(tmp_path, monkeypatch):
     monkeypatch.setenv("SEQRUN_STATE_DIR", str(tmp_path / "state"))
 
 
-def serve(faults=()):
-    """A served arm powered on at Park, its zero recorded there (``limits set`` converts
+def serve(faults=(), pose: str = "park"):
+    """A served arm powered on at ``pose``, its zero recorded there (``limits set`` converts
     positions with the zero in force, confirmed after a power-on: issue 43)."""
     from seqrun.drivers.base import ArmIdentity
     from seqrun.service.zero import ZeroStore
 
     clock = RealClock()
-    arm = SimArm(clock, faults=list(faults))
+    arm = SimArm(clock, faults=list(faults), power_on_pose=pose)
     ZeroStore(ArmIdentity.of(arm.serials)).set_record(
-        "park", by="test", joints_deg=ARM.power_off_joints_deg("park"))
+        pose, by="test", joints_deg=ARM.power_off_joints_deg(pose))
     server = SocketcandServer(SimNetwork(clock, arm, spin_window=0.0), port=0)
     server.start()
     return server
@@ -80,6 +80,24 @@ def test_show_marks_every_difference_and_set_writes_the_arm_files_values():
         assert all(j["limits"]["max_current_a"]["module"] == 2.0 for j in after["joints"])
         text = CliRunner().invoke(app, ["limits", "show", *bus(server)]).output
         assert "every value as the arm file says" in text
+    finally:
+        server.shutdown()
+
+
+def test_show_reads_with_the_zero_in_force_not_the_arm_files_default():
+    """Powered off in Totem (zero record: totem): `limits set` writes the limits with the
+    Totem offsets; `limits show` read them with Park's and reported j2, j4 and j6 wrong."""
+    server = serve(pose="totem")
+    try:
+        result = CliRunner().invoke(app, ["limits", "set", "--json", "--zero-confirmed",
+                                          "totem", *bus(server)])
+        assert result.exit_code == 0, result.output
+        after = limits(server, "show")
+        assert after["differences"] == 0, after
+        assert "totem" in after["zero"].lower()
+        assert after["joints"][3]["limits"]["max_deg"]["module"] == 120.0
+        text = CliRunner().invoke(app, ["limits", "show", *bus(server)]).output
+        assert "zero: " in text and "totem" in text.lower()
     finally:
         server.shutdown()
 

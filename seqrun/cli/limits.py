@@ -30,12 +30,10 @@ JointsOption = Annotated[Optional[str], typer.Option(
     "--joints", metavar="J1,J2", help="Write only these joints (default: every joint).")]
 
 
-def _open(arm_file, project_dir, interface, channel, bitrate, bus_kwargs, sim,
-          response_timeout_ms, what: str, arm_id: str | None = None, *,
-          moves: bool = False, zero_confirmed: str | None = None, quiet: bool = False):
-    """The context, its bus and the arm's driver; ``moves`` (limits set, which changes
-    what the modules let the arm do): with the zero decided and the arm's identity checked
-    first, as before every motion; ``quiet`` (--json): what that says goes to stderr."""
+def _context(arm_file, project_dir, interface, channel, bitrate, bus_kwargs, sim,
+             response_timeout_ms, what: str, arm_id: str | None = None):
+    """The arm context whose bus the command opens: refused when no bus is given while a
+    run or console is live (never a private simulator instead)."""
     from seqrun.cli.bus_owner import live_targets
     from seqrun.service.arm_context import resolve_context
     from seqrun.service.connection import response_timeout_s
@@ -46,21 +44,34 @@ def _open(arm_file, project_dir, interface, channel, bitrate, bus_kwargs, sim,
                               response_timeout_ms=response_timeout_ms, arm_id=arm_id)
     response_timeout_s(context.arm, response_timeout_ms)
     live = live_targets(context, what)
-    if live:   # no bus given, a run or console live: never a private simulator instead
+    if live:
         from seqrun.errors import UserInputError
 
         raise UserInputError(
             "no bus configured, and " + ", ".join(f"seqrun pid {h.pid} ({h.command})"
                                                   for h in live)
             + " live on this machine: name its bus with -i/-c (refused while it holds it)")
-    if moves:
-        from seqrun.cli.zero import open_arm_at_zero
+    return context
 
-        connection, driver, _ = open_arm_at_zero(context, zero_confirmed, arm_id,
-                                                 to_stderr=quiet)
-        return context, connection, driver
-    connection, driver = context.open_arm()
-    return context, connection, driver
+
+def _open_for_reading(context):
+    """``(connection, driver, arm, zero text)``: the driver converts with the zero reference
+    in force (the record's, as `seqrun status` reads), not the arm file's default offsets:
+    after a power-off elsewhere than the default pose, MinPos/MaxPos read with the default
+    offsets would be shown (and compared) shifted by the difference."""
+    from seqrun.cli.zero import zero_for_reading
+    from seqrun.drivers.registry import open_driver
+    from seqrun.service.connection import response_timeout_s
+
+    connection = context.open_connection(transient=True)
+    try:
+        arm, text = zero_for_reading(connection, context.arm)
+        timeout = response_timeout_s(arm, context.response_timeout_ms)
+        driver = open_driver(arm, connection, response_timeout_s=timeout)
+    except BaseException:
+        connection.close()
+        raise
+    return connection, driver, arm, text
 
 
 def _number(value: float | None) -> str:
@@ -116,11 +127,11 @@ def show_command(as_json: JsonOption = False,
     from seqrun.service.module_limits import read_module_limits
 
     with user_errors():
-        context, connection, driver = _open(arm_file, project_dir, interface, channel,
-                                            bitrate, bus_kwargs, sim, response_timeout_ms,
-                                            "read the limits of", arm_id)
+        context = _context(arm_file, project_dir, interface, channel, bitrate, bus_kwargs,
+                           sim, response_timeout_ms, "read the limits of", arm_id)
+        connection, driver, arm, zero_text = _open_for_reading(context)
     try:
-        rows = read_module_limits(driver, context.arm)
+        rows = read_module_limits(driver, arm)
     except BusError as exc:
         fail(f"limits not read: {exc}", EXIT_FAULT)
     finally:
@@ -128,10 +139,12 @@ def show_command(as_json: JsonOption = False,
         connection.close()
     if as_json:
         typer.echo(json.dumps({"arm": context.arm.name, "bus": connection.description,
+                               "zero": zero_text,
                                "differences": sum(len(r.differences) for r in rows),
                                "joints": [r.as_dict() for r in rows]}))
         return
     typer.echo(context.headline(connection))
+    typer.echo(zero_text)
     _print_rows(rows, f"{context.arm.name}: limits in the modules")
 
 
@@ -149,16 +162,19 @@ def set_command(joints: JointsOption = None, as_json: JsonOption = False,
     reads back different), then show them as `limits show` does. The positions are
     converted with the zero in force: after a power-on the operator confirms it first (or
     --zero-confirmed POSE)."""
+    from seqrun.cli.zero import open_arm_at_zero
     from seqrun.errors import BusError, RunAborted
     from seqrun.service.arm_access import modules_of
     from seqrun.service.module_limits import read_module_limits, write_arm_limits
 
     names = None if joints is None else [n.strip() for n in joints.split(",") if n.strip()]
     with user_errors():
-        context, connection, driver = _open(arm_file, project_dir, interface, channel,
-                                            bitrate, bus_kwargs, sim, response_timeout_ms,
-                                            "write the limits of", arm_id, moves=True,
-                                            zero_confirmed=zero_confirmed, quiet=as_json)
+        context = _context(arm_file, project_dir, interface, channel, bitrate, bus_kwargs,
+                           sim, response_timeout_ms, "write the limits of", arm_id)
+        # What the modules let the arm do changes: the zero decided and the arm's identity
+        # checked first, as before every motion (--json: what that says goes to stderr).
+        connection, driver, _ = open_arm_at_zero(context, zero_confirmed, arm_id,
+                                                 to_stderr=as_json)
     try:
         with user_errors():
             modules_of(context.arm, names)   # unknown joint names: one line, exit 2
