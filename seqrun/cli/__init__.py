@@ -85,7 +85,7 @@ def main(argv: list[str] | None = None) -> None:
     app(args=args, prog_name="seqrun")
 
 
-def _starting_command_line() -> Sequence[str] | None:
+def starting_command_line() -> Sequence[str] | None:
     """The command line the ``seqrun`` program (:mod:`seqrun.__main__`) is starting with;
     None when anything else imports this package (tests, tools: they get every command).
     ``python -m seqrun`` runs the program as ``__main__``, the ``seqrun`` script imports it."""
@@ -96,4 +96,4 @@ def _starting_command_line() -> Sequence[str] | None:
     return None
 
 
-_load_commands(_starting_command_line())
+_load_commands(starting_command_line())

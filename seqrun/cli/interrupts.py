@@ -113,9 +113,9 @@ def _verdict_holds() -> bool:
     the verdict stands."""
     if progress.exit_code is None:
         return False
-    from seqrun.cli import _starting_command_line
+    from seqrun.cli import starting_command_line
 
-    return _starting_command_line() is not None
+    return starting_command_line() is not None
 
 
 #: The run of this command (:func:`new_run` at its start).

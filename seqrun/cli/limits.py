@@ -54,26 +54,6 @@ def _context(arm_file, project_dir, interface, channel, bitrate, bus_kwargs, sim
     return context
 
 
-def _open_for_reading(context):
-    """``(connection, driver, arm, zero text)``: the driver converts with the zero reference
-    in force (the record's, as `seqrun status` reads), not the arm file's default offsets:
-    after a power-off elsewhere than the default pose, MinPos/MaxPos read with the default
-    offsets would be shown (and compared) shifted by the difference."""
-    from seqrun.cli.zero import zero_for_reading
-    from seqrun.drivers.registry import open_driver
-    from seqrun.service.connection import response_timeout_s
-
-    connection = context.open_connection(transient=True)
-    try:
-        arm, text = zero_for_reading(connection, context.arm)
-        timeout = response_timeout_s(arm, context.response_timeout_ms)
-        driver = open_driver(arm, connection, response_timeout_s=timeout)
-    except BaseException:
-        connection.close()
-        raise
-    return connection, driver, arm, text
-
-
 def _number(value: float | None) -> str:
     from seqrun.cli.output import fixed
 
@@ -124,12 +104,16 @@ def show_command(as_json: JsonOption = False,
     them in user units beside the arm file's, marking every difference. Exit 0 either
     way (differences are information: `seqrun limits set` writes the arm file's)."""
     from seqrun.errors import BusError
+    from seqrun.formatting import terminal_text
     from seqrun.service.module_limits import read_module_limits
 
     with user_errors():
         context = _context(arm_file, project_dir, interface, channel, bitrate, bus_kwargs,
                            sim, response_timeout_ms, "read the limits of", arm_id)
-        connection, driver, arm, zero_text = _open_for_reading(context)
+        # MinPos/MaxPos converted with the zero in force: after a power-off elsewhere than
+        # the arm file's default pose, the default offsets would shift them
+        connection, driver, arm, zero_text = context.open_arm_for_reading()
+        zero_text = terminal_text(zero_text, lines=True)   # the record's text is a file's
     try:
         rows = read_module_limits(driver, arm)
     except BusError as exc:

@@ -283,6 +283,24 @@ class ArmContext:
         timeout = response_timeout_s(self.arm, self.response_timeout_ms)
         return connection, open_driver(self.arm, connection, response_timeout_s=timeout)
 
+    def open_arm_for_reading(self) -> tuple[Connection, ArmDriver, ArmDescription, str]:
+        """As :meth:`open_arm`, the driver converting with the zero reference in force (the
+        record's, as ``seqrun status`` reads; never asked: nothing moves), not the arm
+        file's default offsets: ``(connection, driver, arm at that zero, zero text)``."""
+        from seqrun.drivers.registry import open_driver
+        from seqrun.service.connection import response_timeout_s
+        from seqrun.service.zero import zero_for_reading
+
+        connection = self.open_connection(transient=True)
+        try:
+            arm, text = zero_for_reading(connection, self.arm)
+            timeout = response_timeout_s(arm, self.response_timeout_ms)
+            driver = open_driver(arm, connection, response_timeout_s=timeout)
+        except BaseException:
+            connection.close()
+            raise
+        return connection, driver, arm, text
+
 
 def _shown(path: Path) -> str:
     """A path inside the current directory relative to it, else whole."""
