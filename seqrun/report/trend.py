@@ -37,6 +37,9 @@ METRICS = ("clearance_mm", "duration_s", "checkpoint_error_mm", "peak_current_a"
 LOWER_LIMITS = ("clearance_mm",)
 NOT_RECORDED = "not recorded"
 NOT_RUN = "not run"
+#: A step's status in report.json when the run never got to it (a fault before, a run
+#: started at a later step).
+STEPS_NOT_RUN = ("pending", "skipped")
 #: The step name of the figures of a whole run (its duration, its lowest heights).
 RUN_STEP = "run"
 
@@ -311,9 +314,9 @@ def _step_metrics(step: dict) -> list[str]:
 
 
 def _step_point(run: TrendRun, step: dict | None, metric: str) -> Point:
-    if step is None:
-        return Point(run, NOT_RUN)
-    status = str(step.get("status") or NOT_RECORDED)
+    status = str(step.get("status") or NOT_RECORDED) if step is not None else NOT_RUN
+    if step is None or status in STEPS_NOT_RUN:
+        return Point(run, NOT_RUN, status=status)
     if metric == "duration_s":
         return Point(run, _or_not_recorded(_number(step.get("duration_s"))), status=status)
     if metric == "checkpoint_error_mm":
