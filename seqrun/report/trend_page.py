@@ -65,7 +65,6 @@ def _plot(s: Series, index: dict[int, int]) -> str:
     ax.set_xlabel("run (in the order they started)", fontsize=8)
     ax.set_ylabel(s.metric, fontsize=8)
     ax.legend(fontsize=7, loc="best", framealpha=0.7)
-    fig.suptitle(s.title, fontsize=9)
     svg = to_svg(fig, _anchor(s))
     gc.collect()
     return svg
@@ -100,7 +99,7 @@ def _series_section(s: Series, index: dict[int, int]) -> str:
             f'<figure class="plot">{_plot(s, index)}<figcaption>{escape(s.title)}: the value '
             "per run (dots: green when the step passed), the first run's value (dotted) and "
             f"the limit (red dashed).{source}</figcaption></figure>"
-            '<table class="figs"><tr><th>#</th><th>run</th><th>step</th><th>value</th>'
+            '<table class="figs"><tr><th>#</th><th>run</th><th>verdict</th><th>value</th>'
             "<th>drift vs first</th><th>limit</th><th>margin</th></tr>"
             f"{''.join(rows)}</table></section>")
 
