@@ -269,3 +269,10 @@ def test_the_page_renders_in_chromium_offline_without_errors(page, trend_out):
     assert box and box["width"] > 500 and box["height"] > 100
     assert page.locator("#flaky tr.flaky").count() == 1
     assert page.locator("#runs tr").count() == 1 + 6
+
+
+def test_a_folder_without_runs_says_so(tmp_path):
+    result = cli("trend", str(tmp_path))
+    assert result.exit_code == 0
+    assert result.output.strip() == f"no runs in {tmp_path}"
+    assert not (tmp_path / "trend.html").exists()

@@ -24,7 +24,7 @@ TREND_NAME = "trend.html"
 @app.command("trend")
 def trend_command(
     paths: Annotated[Optional[list[Path]], typer.Argument(
-        metavar="[RUNS_DIR|RUN_DIR]…", help="Folders of runs or run folders (default: the "
+        metavar="RUNS_DIR|RUN_DIR", help="Folders of runs or run folders (default: the "
                                             "campaign's runs, as `seqrun runs` lists them).",
         show_default=False)] = None,
     sequence: Annotated[Optional[str], typer.Option(
@@ -60,16 +60,18 @@ def trend_command(
     with user_errors():
         if paths:
             where = [Path(p) for p in paths]
+            named = ", ".join(map(str, where))
         else:
             from seqrun.service.arm_context import campaign_folders
 
             _, _, runs_dir = campaign_folders(project_dir=project_dir)
             where = [runs_dir] if runs_dir.is_dir() else []
+            named = str(runs_dir)
         result = trend(where, sequence=sequence, step=step, metric=metric, limit=limit)
         for line in result.skipped:
             typer.echo(f"warning: {line}", err=True)
         if not result.runs:
-            typer.echo("no runs in " + (", ".join(map(str, where)) or "the campaign's runs"))
+            typer.echo(f"no runs in {named}")
             return
         for line in summary_lines(result):
             typer.echo(line)
