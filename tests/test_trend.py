@@ -23,7 +23,8 @@ import seqrun.cli  # noqa: F401  (registers the commands)
 from projecttree import make_project
 from seqrun.cli.app import app
 
-pytestmark = pytest.mark.slow   # five runs of a sequence, and a browser
+#: The tests on the five runs (a minute on a busy machine) and the browser's.
+slow = pytest.mark.slow
 CHROMIUM = os.environ.get("SEQRUN_CHROMIUM") or shutil.which("chromium") or "/usr/bin/chromium"
 UP = "velocity_scale: 0.5, label: Up to Totem"
 #: (run folder, speed of the move up to Totem, --sim-fault)
@@ -90,6 +91,7 @@ def series_rows(rows: list[dict], metric: str, step: str, item: str = "") -> lis
             and r["item"] == item]
 
 
+@slow
 def test_runs_are_in_the_order_they_started_the_old_one_first(trend_out, campaign):
     _, rows, _ = trend_out
     order = [r["run"] for r in series_rows(rows, "duration_s", "run")]
@@ -99,6 +101,7 @@ def test_runs_are_in_the_order_they_started_the_old_one_first(trend_out, campaig
     assert order == [OLD, "r1", "r2", "r3", "r4", "r5"]
 
 
+@slow
 def test_csv_values_are_the_runs_report_json_figures(trend_out, campaign):
     _, rows, _ = trend_out
     runs = reports(campaign)
@@ -139,6 +142,7 @@ def test_csv_values_are_the_runs_report_json_figures(trend_out, campaign):
     assert float(margin["margin_to_limit"]) == pytest.approx(float(margin["value"]) - 10.0)
 
 
+@slow
 def test_drift_is_each_value_minus_the_first_recorded(trend_out):
     output, rows, _ = trend_out
     move = series_rows(rows, "duration_s", "5")
@@ -158,6 +162,7 @@ def test_drift_is_each_value_minus_the_first_recorded(trend_out):
                 float(r["value"]) - float(recorded[0]["value"]), abs=1e-9)
 
 
+@slow
 def test_the_same_inputs_with_another_verdict_are_flaky(trend_out, campaign):
     output, rows, page = trend_out
     flaky = [x for x in output.splitlines() if x.startswith("FLAKY")]
@@ -171,6 +176,7 @@ def test_the_same_inputs_with_another_verdict_are_flaky(trend_out, campaign):
     assert "1 flaky group(s)" in output
 
 
+@slow
 def test_an_older_run_folder_reads_as_not_recorded(trend_out):
     output, rows, _ = trend_out
     old = [r for r in rows if r["run"] == OLD]
@@ -185,6 +191,7 @@ def test_an_older_run_folder_reads_as_not_recorded(trend_out):
     assert "Traceback" not in output
 
 
+@slow
 def test_a_metric_no_run_recorded_is_never_filled_in(trend_out):
     output, rows, _ = trend_out
     currents = [r for r in rows if r["metric"] == "peak_current_a"]
@@ -192,6 +199,7 @@ def test_a_metric_no_run_recorded_is_never_filled_in(trend_out):
     assert "peak_current_a: not recorded in 6 run(s)" in output
 
 
+@slow
 def test_filters_and_a_limit_of_ones_own(campaign, tmp_path):
     result = cli("trend", str(campaign / "runs"), "--sequence", "opsafe", "--step", "5",
                  "--metric", "duration_s", "--limit", "9", "--csv", str(tmp_path / "t.csv"),
@@ -212,6 +220,7 @@ def test_filters_and_a_limit_of_ones_own(campaign, tmp_path):
     (["--sequence", "Nope"], "--sequence Nope: no run of it"),
     (["--step", "77"], "--step 77: no step"),
 ])
+@slow
 def test_bad_arguments_are_one_line(campaign, args, message):
     result = cli("trend", str(campaign / "runs"), *args)
     assert result.exit_code == 2
@@ -225,6 +234,7 @@ def test_a_folder_that_does_not_exist_is_one_line(tmp_path):
     assert result.output.strip() == f"error: {tmp_path / 'nothing'}: no such folder"
 
 
+@slow
 def test_an_unreadable_report_is_named_and_the_others_still_trend(campaign, tmp_path):
     runs = tmp_path / "runs"
     shutil.copytree(campaign / "runs" / "r1", runs / "r1")
@@ -248,6 +258,7 @@ def browser_type_launch_args(browser_type_launch_args):
                      "--no-first-run"]}
 
 
+@slow
 def test_the_page_renders_in_chromium_offline_without_errors(page, trend_out):
     _, rows, html = trend_out
     errors: list[str] = []
@@ -276,3 +287,55 @@ def test_a_folder_without_runs_says_so(tmp_path):
     assert result.exit_code == 0
     assert result.output.strip() == f"no runs in {tmp_path}"
     assert not (tmp_path / "trend.html").exists()
+
+
+# --------------------------------------------------------------------------- odd folders
+def _folder(root: Path, name: str, report: object, record: object = None) -> Path:
+    folder = root / name
+    folder.mkdir(parents=True)
+    (folder / "report.json").write_text(json.dumps(report), encoding="utf-8")
+    if record is not None:
+        (folder / "record.json").write_text(json.dumps(record), encoding="utf-8")
+    return folder
+
+
+def test_odd_and_older_report_fields_are_not_recorded_never_a_traceback(tmp_path):
+    runs = tmp_path / "runs"
+    _folder(runs, "a", {"status": "passed"})
+    _folder(runs, "b", {"sequence": 5, "steps": 7, "inputs": "x", "min_heights_mm": [1],
+                        "status": 3, "start": 12, "duration_s": "12", "faults": "no"},
+            record=["not", "a", "record"])
+    _folder(runs, "c", {"sequence": "S", "start": "2026-01-01T00:00:00", "status": "failed",
+                        "steps": [1, {"number": True}, {
+                            "number": 2, "kind": "checkpoint", "label": 5,
+                            "position_error_mm": "0.1", "position_tolerance_mm": None}]})
+    _folder(runs, "d", [])
+    result = cli("trend", str(runs), "--csv", str(tmp_path / "t.csv"))
+    assert result.exit_code == 0, result.output
+    assert f"warning: {runs / 'd'}: report.json unreadable" in result.output
+    rows = list(csv.DictReader(io.StringIO((tmp_path / "t.csv").read_text(encoding="utf-8"))))
+    checkpoint = [r for r in rows if r["metric"] == "checkpoint_error_mm"]
+    assert [(r["sequence"], r["step"], r["label"], r["value"], r["limit"])
+            for r in checkpoint] == [("S", "2", "5", "not recorded", "")]
+    assert {r["value"] for r in rows if r["run"] in ("a", "b")} == {"not recorded"}
+    assert "over 3 run(s)" in result.output
+
+
+def test_flaky_needs_the_same_inputs_and_two_verdicts(tmp_path):
+    def record(*hashes: str) -> dict:
+        return {"inputs": [{"copy": f"inputs/{h}.yaml", "sha256": h * 64} for h in hashes]}
+
+    runs = tmp_path / "runs"
+    for name, start, status, inputs in [("1", "01", "passed", ("a", "b")),
+                                        ("2", "02", "failed", ("b", "a")),   # same set
+                                        ("3", "03", "failed", ("a", "c")),
+                                        ("4", "04", "running", ("a", "c")),  # no verdict yet
+                                        ("5", "05", "passed", ("c",))]:
+        _folder(runs, name, {"sequence": "S", "start": f"2026-01-{start}", "status": status,
+                             "duration_s": 1.0, "steps": []}, record=record(*inputs))
+    result = cli("trend", str(runs), "--out", str(tmp_path / "t.html"))
+    assert result.exit_code == 0, result.output
+    flaky = [x for x in result.output.splitlines() if x.startswith("FLAKY")]
+    assert len(flaky) == 1 and "1 passed, 1 failed: 1 passed, 2 failed" in flaky[0], flaky
+    page = (tmp_path / "t.html").read_text(encoding="utf-8")
+    assert page.count('<tr class="flaky">') == 1

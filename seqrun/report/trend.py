@@ -271,7 +271,7 @@ def _arm_limits(folder: Path, report: dict,
                 ) -> tuple[dict[str, float], float | None]:
     """The guards' lines and the following-error bound of the arm file the run copied
     into inputs/ (``({}, None)`` when it has none or it does not load)."""
-    files = [str(i["file"]) for i in report.get("inputs") or ()
+    files = [str(i["file"]) for i in _list(report.get("inputs"))
              if isinstance(i, dict) and i.get("kind") == "arm" and isinstance(i.get("file"),
                                                                               str)]
     path = folder / "inputs" / files[0] if files else None
@@ -295,8 +295,13 @@ def _arm_limits(folder: Path, report: dict,
 
 
 # --------------------------------------------------------------------------- series
+def _list(value: Any) -> list:
+    """A field that should be a list (anything else, as an odd older file has it: none)."""
+    return value if isinstance(value, list) else []
+
+
 def _steps(report: dict) -> list[dict]:
-    return [s for s in report.get("steps") or () if isinstance(s, dict)
+    return [s for s in _list(report.get("steps")) if isinstance(s, dict)
             and isinstance(s.get("number"), int) and not isinstance(s.get("number"), bool)]
 
 
@@ -401,10 +406,11 @@ def _point(run: TrendRun, s: Series) -> Point:
 
 
 def flaky_groups(runs: list[TrendRun]) -> list[FlakyGroup]:
-    """Runs of a sequence with the same inputs and more than one verdict."""
+    """Runs of a sequence with the same inputs and more than one verdict (a run still
+    running, or killed while it ran, has none yet)."""
     groups: dict[tuple[str, str], list[TrendRun]] = {}
     for run in runs:
-        if run.inputs is not None and run.status != NOT_RECORDED:
+        if run.inputs is not None and run.status not in (NOT_RECORDED, "running"):
             groups.setdefault((run.sequence, run.inputs), []).append(run)
     return [FlakyGroup(sequence, inputs, members)
             for (sequence, inputs), members in groups.items()

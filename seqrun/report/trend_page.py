@@ -59,8 +59,10 @@ def _plot(s: Series, index: dict[int, int]) -> str:
     if missing:
         ax.plot(missing, [0.02] * len(missing), transform=ax.get_xaxis_transform(),
                 linestyle="none", marker="x", color="#999999", label="not recorded / not run")
-    ax.set_xticks(sorted(set(xs)))
-    ax.set_xticklabels([f"#{x}" for x in sorted(set(xs))])
+    # A label per run up to 25 runs; beyond, every k-th (the runs table names them all).
+    ticks = sorted(set(xs))[::max(1, -(-len(set(xs)) // 25))]
+    ax.set_xticks(ticks)
+    ax.set_xticklabels([f"#{x}" for x in ticks])
     ax.set_xlim(min(xs) - 0.5, max(xs) + 0.5)
     ax.set_xlabel("run (in the order they started)", fontsize=8)
     ax.set_ylabel(s.metric, fontsize=8)
