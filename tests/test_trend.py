@@ -339,3 +339,17 @@ def test_flaky_needs_the_same_inputs_and_two_verdicts(tmp_path):
     assert len(flaky) == 1 and "1 passed, 1 failed: 1 passed, 2 failed" in flaky[0], flaky
     page = (tmp_path / "t.html").read_text(encoding="utf-8")
     assert page.count('<tr class="flaky">') == 1
+
+
+def test_a_run_of_several_arms_is_a_run_per_arm(tmp_path):
+    run = tmp_path / "runs" / "both"
+    for arm, duration in (("left", 2.0), ("right", 3.0)):
+        _folder(run, arm, {"sequence": "Two", "start": "2026-01-01", "status": "passed",
+                           "duration_s": duration, "steps": []})
+    (run / "arms.json").write_text(json.dumps({"sequence": "Two"}), encoding="utf-8")
+    result = cli("trend", str(tmp_path / "runs"), "--csv", str(tmp_path / "t.csv"))
+    assert result.exit_code == 0, result.output
+    rows = list(csv.DictReader(io.StringIO((tmp_path / "t.csv").read_text(encoding="utf-8"))))
+    assert [(r["sequence"], r["run"], r["value"]) for r in rows] == [
+        ("Two (arm left)", "both/left", "2.0"), ("Two (arm right)", "both/right", "3.0")]
+    assert (tmp_path / "runs" / "trend.html").is_file()
