@@ -21,7 +21,7 @@ import numpy as np
 from seqrun.report.data import MAX_POINTS, RunData
 from seqrun.report.figures import loop_periods, period_stats, step_spans
 
-__all__ = ["MAX_POINTS", "Plot", "iter_plots", "render_plots"]
+__all__ = ["MAX_POINTS", "Plot", "iter_plots", "new_figure", "render_plots", "to_svg"]
 #: matplotlib drops path vertices closer than this (pixels) to the line: quantised noise
 #: (following errors in 0.001° steps) costs no bytes it could show.
 SIMPLIFY_THRESHOLD = 0.3
@@ -72,7 +72,7 @@ def iter_plots(data: RunData) -> Iterator[Plot]:
 
 
 # ---------------------------------------------------------------------------- helpers
-def _figure(height: float, rows: int = 1):
+def new_figure(height: float, rows: int = 1):
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(10, height))
@@ -87,7 +87,7 @@ def _figure(height: float, rows: int = 1):
     return fig, axes
 
 
-def _to_svg(fig, name: str) -> str:
+def to_svg(fig, name: str) -> str:
     import matplotlib
 
     buf = io.StringIO()
@@ -181,7 +181,7 @@ def _joint_plot(data: RunData, i: int) -> Plot:
     arm = data.arm
     assert arm is not None  # (plots() draws none without the arm)
     joint = arm.joints[i]
-    fig, (pos, vel, err) = _figure(6.4, rows=3)
+    fig, (pos, vel, err) = new_figure(6.4, rows=3)
     _line(pos, data, f"planned.{i}", PLANNED)
     _line(pos, data, f"measured.{i}", MEASURED)
     lo, hi = joint.limits_deg
@@ -229,13 +229,13 @@ def _joint_plot(data: RunData, i: int) -> Plot:
                f"measured; worst |planned − measured| {worst:.3f}° (bound {bound:g}°). "
                "Measured velocity: windowed estimate over "
                f"{data.velocity_window_s * 1e3:.0f} ms.")
-    return Plot(f"plot-{joint.name}", title, caption, _to_svg(fig, joint.name))
+    return Plot(f"plot-{joint.name}", title, caption, to_svg(fig, joint.name))
 
 
 def _guard_plot(data: RunData) -> Plot:
     arm = data.arm
     assert arm is not None  # (plots() draws none without the arm)
-    fig, (ax,) = _figure(3.6)
+    fig, (ax,) = new_figure(3.6)
     guard_colours = ["#d62728", "#8c564b", "#e377c2", "#7f7f7f"]
     point_colours = ["#1f77b4", "#2ca02c", "#9467bd", "#17becf", "#bcbd22", "#ff7f0e"]
     lines, k = [], 0
@@ -257,11 +257,11 @@ def _guard_plot(data: RunData) -> Plot:
     fig.suptitle("Guard points", fontsize=10)
     caption = ("Height of every guarded point (forward kinematics of the measured joints) "
                "against each guard's line; " + "; ".join(lines) + ".")
-    return Plot("plot-guards", "Guard points", caption, _to_svg(fig, "guards"))
+    return Plot("plot-guards", "Guard points", caption, to_svg(fig, "guards"))
 
 
 def _period_plot(data: RunData, periods_ms: np.ndarray, counts: np.ndarray) -> Plot:
-    fig, (ax,) = _figure(3.0)
+    fig, (ax,) = new_figure(3.0)
     ax.hist(periods_ms, bins=80, weights=counts, color="#1f77b4")
     ax.set_yscale("log")
     if data.cycle_s:
@@ -277,4 +277,4 @@ def _period_plot(data: RunData, periods_ms: np.ndarray, counts: np.ndarray) -> P
                f"max {stats['max_ms']:.2f} ms.")
     if data.fault:
         caption += " (Not a plot against time: the fault is marked on the others.)"
-    return Plot("plot-loop-period", "Control loop period", caption, _to_svg(fig, "period"))
+    return Plot("plot-loop-period", "Control loop period", caption, to_svg(fig, "period"))
