@@ -157,6 +157,30 @@ def test_markers_tf_and_events_decode_as_ros_messages(setup, live, client):
     assert "activity_started" in {line["type"] for line in lines}
 
 
+def test_the_campaigns_distribution_gives_the_definitions(tmp_path):
+    """A campaign whose run.mcap is written for Humble is served with Humble's message
+    definitions (its Marker differs from Jazzy's), as its bag."""
+    from rosbags.typesys import Stores, get_typestore
+
+    (tmp_path / "seqrun.toml").write_text('[ros]\ndistribution = "humble"\n')
+    setup = console_setup(tmp_path)
+    server = FoxgloveLive(setup.session, setup.arm, port=0, types="ros")
+    client = FoxgloveClient(server.port)
+    try:
+        humble = get_typestore(Stores.ROS2_HUMBLE)
+        markers = "visualization_msgs/msg/MarkerArray"
+        advertised = client.channels["/seqrun/markers"]["schema"]
+        assert advertised == humble.generate_msgdef(markers, ros_version=2)[0]
+        assert advertised != _typestore().generate_msgdef(markers, ros_version=2)[0]
+        client.subscribe("/seqrun/markers")
+        decoded = humble.deserialize_cdr(client.messages("/seqrun/markers")[0], markers)
+        assert {m.ns for m in decoded.markers} >= {"guards", "obstacles"}
+    finally:
+        client.close()
+        server.close()
+        setup.close()
+
+
 def test_services_and_stop_stay_as_they_are(setup, live, client):
     assert set(client.services) == {"/seqrun/stop", "/seqrun/take_control",
                                     "/seqrun/release_control", "/seqrun/reset",
