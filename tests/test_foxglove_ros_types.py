@@ -220,3 +220,45 @@ def test_seqrun_run_serves_ros_types_and_the_option_needs_foxglove(tmp_path):
     assert not (tmp_path / "alone").exists()
     console = CliRunner().invoke(app, ["console", "--port", "0", "--foxglove-types", "ros"])
     assert console.exit_code == 2 and "only with --foxglove" in console.output
+
+
+@pytest.mark.slow
+def test_seqrun_console_serves_ros_types(tmp_path):
+    """The console's face starts the same server: ``--foxglove-types ros`` there too."""
+    import os
+    import re
+    import subprocess
+    import sys
+
+    from projecttree import ROOT
+
+    proc = subprocess.Popen([sys.executable, "-m", "seqrun", "console", "--sim", "--port", "0",
+                             "--yes", "--log-dir", str(tmp_path / "runs"), "--foxglove=0",
+                             "--foxglove-types", "ros"], cwd=ROOT,
+                            env={**os.environ, "PYTHONPATH": str(ROOT)},
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        assert proc.stdout is not None
+        lines = []
+        for line in proc.stdout:
+            lines.append(line)
+            found = re.search(r"Foxglove live on ws://127\.0\.0\.1:(\d+) \(run\.mcap's ROS 2",
+                              line)
+            if found:
+                break
+        else:
+            raise AssertionError("no Foxglove line:\n" + "".join(lines))
+        client = FoxgloveClient(int(found.group(1)))
+        try:
+            assert client.channels["/lwa3/joint_states"]["schemaName"] == \
+                "sensor_msgs/msg/JointState"
+            assert {c["encoding"] for c in client.channels.values()} == {"cdr"}
+            client.subscribe("/lwa3/joint_states")
+            reading = _typestore().deserialize_cdr(client.messages("/lwa3/joint_states")[-1],
+                                                   "sensor_msgs/msg/JointState")
+            assert list(reading.name) == ["j1", "j2", "j3", "j4", "j5", "j6", "j7"]
+        finally:
+            client.close()
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)
