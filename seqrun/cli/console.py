@@ -22,7 +22,8 @@ from seqrun.cli.arm_commands import ArmIdOption
 from seqrun.cli.common import (ArmFileOption, BitrateOption, BusKwargsOption,
                                CampaignOption, ChannelOption, InterfaceOption,
                                ResponseTimeoutOption, SimOption, fail, user_errors)
-from seqrun.cli.foxglove_option import FoxgloveOption, check_foxglove, start_foxglove
+from seqrun.cli.foxglove_option import (FoxgloveOption, FoxgloveTypesOption, check_foxglove,
+                                        start_foxglove)
 from seqrun.cli.realtime_option import use_realtime
 from seqrun.cli.questions import ask
 from seqrun.defaults import EXIT_OPERATOR_ABORT
@@ -59,6 +60,7 @@ def console_command(
         "--zero-confirmed", metavar="POSE", help="Answer 'does the arm stand in POSE?' after "
         "a power-on without asking (a different record refuses to start).")] = None,
     foxglove: FoxgloveOption = None,
+    foxglove_types: FoxgloveTypesOption = None,
     arm_id: ArmIdOption = None,
 ) -> None:
     """Serve the operator console (STOP, telemetry, 3D view, commands, sequences); in a
@@ -71,13 +73,13 @@ def console_command(
     with user_errors():
         if not 0 <= port <= 65535:
             fail(f"--port must lie in 0-65535, got {port}")
-        check_foxglove(foxglove)
+        check_foxglove(foxglove, foxglove_types)
         several = bool(campaign_arm_ids(campaign_here(project_dir)))
         if several:
             refused = {"-i/--interface": interface, "-c/--channel": channel,
                        "-b/--bitrate": bitrate, "--bus-kwargs": bus_kwargs,
                        "--arm": arm_file, "--zero-confirmed": zero_confirmed,
-                       "--foxglove": foxglove}
+                       "--foxglove": foxglove, "--foxglove-types": foxglove_types}
             given = [name for name, value in refused.items() if value]
             if given:
                 fail(f"{', '.join(given)}: not for a campaign with several arms (each arm's "
@@ -137,7 +139,8 @@ def console_command(
     live_foxglove = None
     try:
         try:
-            live_foxglove = start_foxglove(session, arm, foxglove, typer.echo)
+            live_foxglove = start_foxglove(session, arm, foxglove, typer.echo,
+                                           foxglove_types)
         except (OSError, RuntimeError) as exc:
             fail(f"--foxglove: the Foxglove server could not start ({exc})")
         application = create_app(session, Catalog(project, runs), arm, token=token,

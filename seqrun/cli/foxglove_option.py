@@ -1,9 +1,10 @@
-"""``--foxglove[=PORT]`` of ``seqrun run`` and ``seqrun console``: the session's data live
-for Foxglove on 127.0.0.1 (seqrun/foxglove/, docs/ros2.md)."""
+"""``--foxglove[=PORT]`` and ``--foxglove-types`` of ``seqrun run`` and ``seqrun console``:
+the session's data live for Foxglove on 127.0.0.1 (seqrun/foxglove/, docs/ros2.md)."""
 
 from __future__ import annotations
 
 import socket
+from enum import Enum
 from typing import Annotated, Any, Callable, Optional
 
 import typer
@@ -17,10 +18,29 @@ FoxgloveOption = Annotated[Optional[int], typer.Option(
          "with control as in the console (docs/ros2.md). Needs seqrun[foxglove].")]
 
 
-def check_foxglove(port: int | None) -> None:
+
+
+class FoxgloveTypes(str, Enum):
+    """What the live channels carry (seqrun.foxglove.live.TYPES)."""
+
+    foxglove = "foxglove"
+    ros = "ros"
+
+
+FoxgloveTypesOption = Annotated[Optional[FoxgloveTypes], typer.Option(
+    "--foxglove-types", case_sensitive=False,
+    help="With --foxglove: 'foxglove' (default): Foxglove's own schemas, read by every "
+         "Foxglove and Lichtblick panel; 'ros': run.mcap's topics, ROS 2 types and CDR, so "
+         "one layout serves live and recorded runs (docs/ros2.md).")]
+
+
+def check_foxglove(port: int | None, types: FoxgloveTypes | None = None) -> None:
     """Before anything is opened: the extra is installed and the port is free (one line,
-    exit 2, otherwise)."""
+    exit 2, otherwise); ``--foxglove-types`` only with ``--foxglove``."""
     if port is None:
+        if types is not None:
+            fail(f"--foxglove-types {types.value}: only with --foxglove (it says what the "
+                 "live channels carry)")
         return
     from seqrun.foxglove import MISSING, available
 
@@ -39,11 +59,12 @@ def check_foxglove(port: int | None) -> None:
 
 
 def start_foxglove(session: Any, arm: Any, port: int | None,
-                   say: Callable[[str], None]) -> Any:
+                   say: Callable[[str], None], types: FoxgloveTypes | None = None) -> Any:
     """The Foxglove server on ``session`` (None without ``--foxglove``); raises OSError or
     RuntimeError when it cannot start."""
     if port is None:
         return None
-    from seqrun.foxglove.live import serve
+    from seqrun.foxglove.live import DEFAULT_TYPES, serve
 
-    return serve(session, arm, port, say)
+    return serve(session, arm, port, say,
+                 types=types.value if types is not None else DEFAULT_TYPES)

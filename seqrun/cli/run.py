@@ -19,7 +19,7 @@ from seqrun.cli import interrupts
 from seqrun.cli.app import app
 from seqrun.cli.common import (BitrateOption, BusKwargsOption, ChannelOption, InterfaceOption,
                                OneArmOption, SimOption, fail, user_errors)
-from seqrun.cli.foxglove_option import FoxgloveOption
+from seqrun.cli.foxglove_option import FoxgloveOption, FoxgloveTypes, FoxgloveTypesOption
 from seqrun.defaults import EXIT_INVALID, EXIT_OPERATOR_ABORT
 from seqrun.errors import SequenceInvalid
 
@@ -133,6 +133,7 @@ def run_command(
         "power-off pose POSE (a different record refuses the run). --yes never answers it.")]
     = None,
     foxglove: FoxgloveOption = None,
+    foxglove_types: FoxgloveTypesOption = None,
     arm_id: OneArmOption = None,
     param: Annotated[Optional[list[str]], typer.Option(
         "--param", metavar="NAME=VALUE", help="A value of one of the sequence's params "
@@ -167,6 +168,7 @@ def run_command(
                           "--power-on-at": power_on_at is not None,
                           "--zero-confirmed": zero_confirmed is not None,
                           "--rt-priority": rt_priority is not None,
+                          "--foxglove-types": foxglove_types is not None,
                           "--param": bool(param)}, plain=plain)
     # Imported here, not at the top: `seqrun --help` and the other commands stay light.
     from seqrun.cli.output import keep_running_on_broken_pipe, make_console
@@ -176,7 +178,7 @@ def run_command(
     console = make_console(stderr=False)
     from seqrun.cli.foxglove_option import check_foxglove
 
-    check_foxglove(foxglove)   # (one line before anything is opened)
+    check_foxglove(foxglove, foxglove_types)   # (one line before anything is opened)
     request = RunRequest(file, interface, channel, bitrate, bus_kwargs or [], sim,
                          sim_fault or [], speed, from_step, log_dir, arm_file, command_mode,
                          start, started, virtual_time, project_dir, power_on_at, arm_id,
@@ -207,7 +209,7 @@ def run_command(
     outcome = _run_in_session(console, run, zero, folder, control, requests, step=step,
                               yes=yes, plain=plain, speed=speed, from_step=from_step,
                               command_mode=command_mode, no_report=no_report,
-                              foxglove=foxglove)
+                              foxglove=foxglove, foxglove_types=foxglove_types)
     try:  # the run has ended: a Ctrl-C now changes neither its exit code nor its story
         _print_outcome(console, outcome, folder)
     except KeyboardInterrupt:
@@ -343,7 +345,8 @@ def _run_folder(console: Console, run, log_dir: Path | None) -> Path:
 
 def _run_in_session(console: Console, run, zero, folder: Path, control, requests, *,
                     step: bool, yes: bool, plain: bool, speed: float, from_step: int,
-                    command_mode: str | None, no_report: bool, foxglove: int | None = None):
+                    command_mode: str | None, no_report: bool, foxglove: int | None = None,
+                    foxglove_types: FoxgloveTypes | None = None):
     """The run in an arm session (the same object the console and the other faces use),
     with the terminal's own questions, signals and displays (the session's subscribers)."""
     from seqrun.cli.display import LiveDisplay, PlainDisplay
@@ -387,7 +390,7 @@ def _run_in_session(console: Console, run, zero, folder: Path, control, requests
 
     session = ArmSession(arm, connection, project=loaded.project, zero=zero, status_hz=0,
                          own_connection=False)
-    live_foxglove = _start_foxglove(console, run, session, folder, foxglove)
+    live_foxglove = _start_foxglove(console, run, session, folder, foxglove, foxglove_types)
     if live:  # its own queue of the session's events, rendered in the loop's slack
         view = LiveDisplay(console, arm, session.subscribe(maxsize=2000, name="live view"),
                            f"seqrun: {loaded.name}", connection.description,
@@ -429,7 +432,8 @@ def _run_in_session(console: Console, run, zero, folder: Path, control, requests
             signals.restore()
 
 
-def _start_foxglove(console: Console, run, session, folder: Path, port: int | None):
+def _start_foxglove(console: Console, run, session, folder: Path, port: int | None,
+                    types: FoxgloveTypes | None = None):
     """``--foxglove``: the session live for Foxglove before anything moves; a server that
     cannot start ends the command in one line (exit 2), nothing sent."""
     from seqrun.cli.foxglove_option import start_foxglove
@@ -437,7 +441,7 @@ def _start_foxglove(console: Console, run, session, folder: Path, port: int | No
     try:
         return start_foxglove(session, run.arm, port,
                               lambda text: console.print(text, highlight=False, markup=False,
-                                                         soft_wrap=True))
+                                                         soft_wrap=True), types)
     except (OSError, RuntimeError) as exc:
         from seqrun.service import campaign_records
 

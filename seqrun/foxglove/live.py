@@ -1,11 +1,15 @@
 """The session's data live on a Foxglove WebSocket server, and its services.
 
-Channels (the same data as run.mcap, :mod:`seqrun.ros_messages`; Foxglove's own schemas,
-protobuf): ``/<arm>/joint_states`` and ``/<arm>/joint_commands`` (foxglove.JointStates,
+Channels, ``types="foxglove"`` (the default; the same data as run.mcap,
+:mod:`seqrun.ros_messages`, in Foxglove's own schemas, protobuf): ``/<arm>/joint_states`` and ``/<arm>/joint_commands`` (foxglove.JointStates,
 radians), ``/tf`` (foxglove.FrameTransforms: every link of seqrun's FK),
 ``/seqrun/scene`` (foxglove.SceneUpdate: link capsules, guards, obstacles),
 ``/seqrun/log`` (foxglove.Log: one line per event) and ``/seqrun/events`` (JSON: the
 events.jsonl line of every event).
+
+``types="ros"`` (``--foxglove-types ros``): run.mcap's own channels instead, the same topics,
+ROS 2 types, ``ros2msg`` schemas and CDR bytes (:mod:`.ros_channels`), so that a layout made
+on a recorded run.mcap works live.
 
 Services (JSON requests and responses): ``/seqrun/stop`` is always accepted, like the
 console's STOP, whatever its body: the Halt broadcast goes out at once, then it is confirmed,
@@ -38,12 +42,15 @@ from seqrun.events import Event, Measurement
 from seqrun.foxglove.gate import Gate, inner_host
 from seqrun.ros_messages.from_events import (EventLine, EventTranslator, Frames, Joints,
                                              Record, Shapes)
-from seqrun.ros_messages.names import EVENTS_TOPIC, TF_TOPIC, RosNames
+from seqrun.ros_messages.names import EVENTS_TOPIC, MARKERS_TOPIC, TF_TOPIC, RosNames
 from seqrun.ros_messages.values import Shape, static_shapes
 from seqrun.service.control import Client
+from seqrun.service.mcap_log import ROBOT_DESCRIPTION_TOPIC
 
 if TYPE_CHECKING:
     from foxglove.websocket import ServerListener
+
+    from seqrun.foxglove.ros_channels import RosChannels
 
     from seqrun.arm.description import ArmDescription
 
@@ -52,6 +59,11 @@ SCENE_TOPIC = "/seqrun/scene"
 LOG_TOPIC = "/seqrun/log"
 #: Events waiting for this face; beyond this the oldest go (counted by the subscription).
 QUEUE_SIZE = 2000
+#: What the live channels carry: Foxglove's own schemas, or run.mcap's ROS 2 types.
+TYPES = ("foxglove", "ros")
+#: Foxglove's own: what every Foxglove and Lichtblick panel reads without a converter,
+#: and what this face served before ``ros`` existed.
+DEFAULT_TYPES = "foxglove"
 
 
 class _Body(BaseModel):
@@ -109,12 +121,20 @@ class FoxgloveLive:
     """A Foxglove WebSocket server on ``host:port`` (0: a free port) for ``session``."""
 
     def __init__(self, session: Any, arm: ArmDescription, *, host: str = LOCALHOST,
-                 port: int = 8766, namespace: str | None = None, name: str = "seqrun") -> None:
+                 port: int = 8766, namespace: str | None = None, name: str = "seqrun",
+                 types: str = DEFAULT_TYPES, distribution: str | None = None) -> None:
+        """``types``: "foxglove" or "ros" (:data:`TYPES`); ``distribution``: the ROS 2
+        distribution of the "ros" channels' definitions (default the session's campaign's,
+        as its run.mcap)."""
         import foxglove
-        from foxglove.channels import (FrameTransformsChannel, JointStatesChannel,
-                                       LogChannel, SceneUpdateChannel)
         from foxglove.websocket import Capability
 
+        from seqrun.service.mcap_log import distribution_of
+
+        if types not in TYPES:
+            raise ValueError(f"unknown Foxglove channel types {types!r} "
+                             f"(one of {', '.join(TYPES)})")
+        self.types = types
         self.session = session
         self.arm = arm
         self.names = RosNames.of(arm, namespace)
@@ -123,14 +143,15 @@ class FoxgloveLive:
         self._subscribed: dict[int, set[int]] = {}
         self._joined: set[int] = set()
         self.context = ctx = foxglove.Context()
-        self.joint_states = JointStatesChannel(self.names.joint_states, context=ctx)
-        self.joint_commands = JointStatesChannel(self.names.joint_commands, context=ctx)
-        self.tf = FrameTransformsChannel(TF_TOPIC, context=ctx)
-        self.scene = SceneUpdateChannel(SCENE_TOPIC, context=ctx)
-        self.log = LogChannel(LOG_TOPIC, context=ctx)
-        self.events = foxglove.Channel(EVENTS_TOPIC, schema={"type": "object"}, context=ctx)
-        self._channels = (self.joint_states, self.joint_commands, self.tf, self.scene,
-                          self.log, self.events)
+        self.ros: RosChannels | None = None
+        if types == "ros":
+            from seqrun.foxglove.ros_channels import RosChannels
+
+            self.ros = RosChannels(ctx, arm, self.names, distribution or distribution_of(
+                getattr(session, "project", None)))
+            self._channels: tuple[Any, ...] = tuple(self.ros.channels.values())
+        else:
+            self._channels = self._foxglove_channels(ctx)
         self._last_capsules: list[Shape] = []
         services = [foxglove.Service(service, schema=foxglove.ServiceSchema(
             f"seqrun{service.removeprefix('/seqrun')}", request=_schema(model.__name__, model),
@@ -158,6 +179,21 @@ class FoxgloveLive:
         self.subscription = session.events.add_listener(self._on_event, "foxglove",
                                                         maxsize=QUEUE_SIZE)
 
+    def _foxglove_channels(self, ctx: Any) -> tuple[Any, ...]:
+        """The channels in Foxglove's own schemas."""
+        import foxglove
+        from foxglove.channels import (FrameTransformsChannel, JointStatesChannel,
+                                       LogChannel, SceneUpdateChannel)
+
+        self.joint_states = JointStatesChannel(self.names.joint_states, context=ctx)
+        self.joint_commands = JointStatesChannel(self.names.joint_commands, context=ctx)
+        self.tf = FrameTransformsChannel(TF_TOPIC, context=ctx)
+        self.scene = SceneUpdateChannel(SCENE_TOPIC, context=ctx)
+        self.log = LogChannel(LOG_TOPIC, context=ctx)
+        self.events = foxglove.Channel(EVENTS_TOPIC, schema={"type": "object"}, context=ctx)
+        return (self.joint_states, self.joint_commands, self.tf, self.scene, self.log,
+                self.events)
+
     @property
     def url(self) -> str:
         return f"ws://{LOCALHOST}:{self.port}"
@@ -178,6 +214,11 @@ class FoxgloveLive:
             self.publish(record)
 
     def publish(self, record: Record) -> None:
+        if isinstance(record, Shapes) and any(s.namespace == "capsules" for s in record.shapes):
+            self._last_capsules = [s for s in record.shapes if s.namespace == "capsules"]
+        if self.ros is not None:
+            self.ros.publish(record)
+            return
         from foxglove.messages import (FrameTransform, FrameTransforms, JointState,
                                        JointStates, Log, LogLevel, Quaternion, SceneUpdate,
                                        Timestamp, Vector3)
@@ -203,8 +244,6 @@ class FoxgloveLive:
                                                    z=t.rotation_xyzw[2], w=t.rotation_xyzw[3]))
                 for t in record.transforms]), log_time=record.log_ns)
         elif isinstance(record, Shapes):
-            if any(s.namespace == "capsules" for s in record.shapes):
-                self._last_capsules = [s for s in record.shapes if s.namespace == "capsules"]
             self.scene.log(SceneUpdate(entities=self._entities(record.shapes, record.stamp_ns)),
                            log_time=record.log_ns)
         elif isinstance(record, EventLine):
@@ -245,14 +284,19 @@ class FoxgloveLive:
     def _on_subscribe(self, client_id: int, topic: str) -> None:
         with self._lock:
             self._subscribed.setdefault(client_id, set()).add(hash(topic))
-        if topic == SCENE_TOPIC:   # a new viewer sees the scene at once, not at the next step
+        # a new viewer sees the scene (and the robot) at once, not at the next step
+        scene = MARKERS_TOPIC if self.ros is not None else SCENE_TOPIC
+        if topic in (scene, ROBOT_DESCRIPTION_TOPIC):
             import time
 
             from seqrun.ros_messages.values import stamp_ns
 
             now = stamp_ns(time.time())
-            self.publish(Shapes(now, now, tuple(static_shapes(self.arm) +
-                                                self._last_capsules)))
+            if topic == scene:
+                self.publish(Shapes(now, now, tuple(static_shapes(self.arm) +
+                                                    self._last_capsules)))
+            elif self.ros is not None:
+                self.ros.describe(now)
 
     def _on_unsubscribe(self, client_id: int, topic: str) -> None:
         with self._lock:
@@ -380,13 +424,16 @@ class _Listener:
 
 
 def serve(session: Any, arm: ArmDescription, port: int,
-          say: Callable[[str], None] | None = None) -> FoxgloveLive:
-    """Start serving ``session`` (``seqrun run``/``console --foxglove``); says the URL."""
-    live = FoxgloveLive(session, arm, port=port)
+          say: Callable[[str], None] | None = None, *,
+          types: str = DEFAULT_TYPES) -> FoxgloveLive:
+    """Start serving ``session`` (``seqrun run``/``console --foxglove``, ``types`` from
+    ``--foxglove-types``); says the URL."""
+    live = FoxgloveLive(session, arm, port=port, types=types)
     if say is not None:
-        say(f"Foxglove live on {live.url} (open it in Foxglove: Open connection -> "
+        kind = ("run.mcap's ROS 2 types" if types == "ros" else "Foxglove's schemas")
+        say(f"Foxglove live on {live.url} ({kind}; open it in Foxglove: Open connection -> "
             "Foxglove WebSocket); STOP: /seqrun/stop")
     return live
 
 
-__all__ = ["FoxgloveLive", "SERVICES", "serve"]
+__all__ = ["DEFAULT_TYPES", "FoxgloveLive", "SERVICES", "TYPES", "serve"]

@@ -36,10 +36,10 @@ from typing import TYPE_CHECKING, Any
 from seqrun.ros_messages import cdr
 from seqrun.ros_messages.from_events import EventTranslator
 from seqrun.ros_messages.names import EVENTS_TOPIC, MARKERS_TOPIC, RosNames
-from seqrun.ros_messages.ros_fields import TF_MESSAGE, messages, topics
+from seqrun.ros_messages.ros_fields import TF_MESSAGE, topics
 from seqrun.ros_messages.values import Transform, quaternion_xyzw, stamp_ns
 from seqrun.service.mcap_log import (DEFAULT_DISTRIBUTION, QUEUE_SIZE, McapFolder,
-                                     QueuedBagWriter, encoded_record)
+                                     QueuedBagWriter, serialized_record)
 
 if TYPE_CHECKING:
     import numpy as np
@@ -114,12 +114,8 @@ class ArmsBag(McapFolder):
             log = record.log_ns if cap is None else min(record.log_ns, cap)
             log = max(log, self._last[arm_id])   # a plan: logged when its move ended
             self._last[arm_id] = log
-            fast = encoded_record(record, names)
-            if fast is not None:
-                self._queue(log, rename.get(fast[0], fast[0]), fast[1])
-                continue
-            for topic, msgtype, fields in messages(record, names):
-                self._queue(log, rename.get(topic, topic), self.cdr(msgtype, fields))
+            for topic, data in serialized_record(record, names, self.serializer):
+                self._queue(log, rename.get(topic, topic), data)
         self._flush()
 
     def arm_ended(self, arm_id: str) -> None:
@@ -129,9 +125,8 @@ class ArmsBag(McapFolder):
         for record in self.translators[arm_id].finish():
             log = max(record.log_ns, self._last[arm_id])
             self._last[arm_id] = log
-            for topic, msgtype, fields in messages(record, self.names[arm_id]):
-                self._queue(log, self._rename[arm_id].get(topic, topic),
-                            self.cdr(msgtype, fields))
+            for topic, data in serialized_record(record, self.names[arm_id], self.serializer):
+                self._queue(log, self._rename[arm_id].get(topic, topic), data)
         self._ended.add(arm_id)
         self._flush()
 

@@ -65,6 +65,7 @@ DEFAULT_DISTRIBUTION = "jazzy"
 QUEUE_SIZE = 20_000
 #: The URDF's topic, as robot_state_publisher names it.
 ROBOT_DESCRIPTION_TOPIC = "/robot_description"
+ROBOT_DESCRIPTION_TYPE = "std_msgs/msg/String"
 
 _STOP = object()
 
@@ -96,6 +97,13 @@ def typestore_of(distribution: str) -> Any:
         raise ValueError(f"unknown ROS 2 distribution {distribution!r} "
                          f"(one of {', '.join(DISTRIBUTIONS)})")
     return get_typestore(getattr(Stores, f"ROS2_{distribution.upper()}"))
+
+
+def distribution_of(project: Any) -> str:
+    """The ROS 2 distribution a campaign's run.mcap is written for (its seqrun.toml's
+    ``[ros] distribution``; Jazzy without one)."""
+    ros = getattr(getattr(project, "config", None), "ros", None)
+    return str(ros.distribution) if ros is not None else DEFAULT_DISTRIBUTION
 
 
 class MessageBuilder:
@@ -156,6 +164,41 @@ class MessageBuilder:
         return [self._value((inner_node, inner), item) for item in items]
 
 
+class RosSerializer:
+    """ROS 2 messages of one distribution (rosbags' typestore): a message from its fields
+    as CDR bytes, and a type's message definition as rosbag2 stores it in a bag's schema
+    (``ros2msg`` text). run.mcap and Foxglove live's ROS-typed channels
+    (``--foxglove-types ros``) both serialize through this, so their bytes agree."""
+
+    def __init__(self, distribution: str = DEFAULT_DISTRIBUTION) -> None:
+        self.distribution = distribution
+        self.store = typestore_of(distribution)
+        self.builder = MessageBuilder(self.store)
+
+    def cdr(self, msgtype: str, fields: Mapping[str, Any] | None) -> bytes | memoryview:
+        """A message of rosbags' typestore from its fields, serialized."""
+        return self.store.serialize_cdr(self.builder.build(msgtype, fields), msgtype)
+
+    def msgdef(self, msgtype: str) -> str:
+        """``msgtype``'s definition with its dependencies, as rosbags' bag writer puts it in
+        the MCAP schema of a channel (schema encoding ``ros2msg``)."""
+        text, _ = self.store.generate_msgdef(msgtype, ros_version=2)
+        return str(text)
+
+
+def bag_topics(names: RosNames) -> dict[str, str]:
+    """Every topic of one arm's run.mcap and its message type."""
+    return {**topics(names), ROBOT_DESCRIPTION_TOPIC: ROBOT_DESCRIPTION_TYPE}
+
+
+def robot_description_cdr(arm: ArmDescription, names: RosNames) -> bytes:
+    """``/robot_description``'s message (``std_msgs/String``): the arm as a URDF, its
+    links named as the frames of ``/tf``."""
+    from seqrun.service.kinematics import robot_description
+
+    return cdr.string(robot_description(arm, f"{names.namespace}/"))
+
+
 class McapFolder:
     """rosbags' writer (MCAP storage) into ``folder/run.mcap.partial/``, one connection per
     topic of ``wanted`` (topic -> message type); :meth:`_finish` puts its MCAP file at
@@ -170,8 +213,9 @@ class McapFolder:
             raise ValueError(f"unknown run.mcap compression {compression!r} "
                              f"(one of {', '.join(COMPRESSIONS)})")
         self.folder = Path(folder)
-        self.store = typestore_of(distribution)
-        self.builder = MessageBuilder(self.store)
+        self.serializer = RosSerializer(distribution)
+        self.store = self.serializer.store
+        self.builder = self.serializer.builder
         self.counts: dict[str, int] = {}
         self.partial = self.folder / PARTIAL_NAME
         if self.partial.exists():
@@ -189,7 +233,7 @@ class McapFolder:
 
     def cdr(self, msgtype: str, fields: Mapping[str, Any] | None) -> bytes | memoryview:
         """A message of rosbags' typestore from its fields, serialized."""
-        return self.store.serialize_cdr(self.builder.build(msgtype, fields), msgtype)
+        return self.serializer.cdr(msgtype, fields)
 
     def _put(self, topic: str, log_ns: int, data: bytes | memoryview) -> None:
         self.writer.write(self.connections[topic], log_ns, data)
@@ -215,36 +259,40 @@ class BagWriter(McapFolder):
 
     def __init__(self, folder: Path, arm: ArmDescription, names: RosNames,
                  distribution: str = DEFAULT_DISTRIBUTION) -> None:
-        from seqrun.service.kinematics import robot_description
-
         self.names = names
         self.translator = EventTranslator(arm, names)
-        self._urdf: str | None = robot_description(arm, f"{names.namespace}/")
-        super().__init__(folder, {**topics(names), ROBOT_DESCRIPTION_TOPIC: "std_msgs/msg/String"},
-                         distribution)
+        self._urdf: bytes | None = robot_description_cdr(arm, names)
+        super().__init__(folder, bag_topics(names), distribution)
 
     def write_event(self, event: Mapping[str, Any]) -> None:
         records = self.translator.translate(event)
         if records and self._urdf is not None:  # once, with the bag's first messages
-            self._put(ROBOT_DESCRIPTION_TOPIC, min(r.log_ns for r in records),
-                      cdr.string(self._urdf))
+            self._put(ROBOT_DESCRIPTION_TOPIC, min(r.log_ns for r in records), self._urdf)
             self._urdf = None
         for record in records:
             self._write(record)
 
     def _write(self, record: Any) -> None:
-        fast = encoded_record(record, self.names)
-        if fast is not None:
-            self._put(fast[0], record.log_ns, fast[1])
-            return
-        for topic, msgtype, fields in messages(record, self.names):
-            self._put(topic, record.log_ns, self.cdr(msgtype, fields))
+        for topic, data in serialized_record(record, self.names, self.serializer):
+            self._put(topic, record.log_ns, data)
 
     def close(self) -> Path:
         """End the bag and put its MCAP file at ``folder/run.mcap``."""
         for record in self.translator.finish():
             self._write(record)
         return self._finish()
+
+
+def serialized_record(record: Any, names: RosNames, serializer: RosSerializer
+                      ) -> list[tuple[str, bytes | memoryview]]:
+    """The topic and CDR bytes of every ROS message of ``record``: those of every cycle
+    by :func:`encoded_record`, the others by ``serializer``. run.mcap writes these, and
+    Foxglove live's ROS-typed channels serve them."""
+    fast = encoded_record(record, names)
+    if fast is not None:
+        return [fast]
+    return [(topic, serializer.cdr(msgtype, fields))
+            for topic, msgtype, fields in messages(record, names)]
 
 
 def encoded_record(record: Any, names: RosNames) -> tuple[str, bytes] | None:

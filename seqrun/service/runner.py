@@ -158,14 +158,14 @@ def _mcap_log(folder: Path, loaded: LoadedSequence, arm: ArmDescription,
     ros = getattr(config, "ros", None)
     if ros is not None and not ros.mcap:
         return None
-    from seqrun.service.mcap_log import DEFAULT_DISTRIBUTION, McapLog
+    from seqrun.service.mcap_log import McapLog, distribution_of
 
     def said(text: str) -> None:
         if warn is not None:
             warn(f"run log: {text}; the run goes on")
 
     return McapLog(folder, arm, on_error=said,
-                   distribution=ros.distribution if ros is not None else DEFAULT_DISTRIBUTION)
+                   distribution=distribution_of(getattr(loaded, "project", None)))
 
 
 def write_html_report(folder: Path) -> str | None:
