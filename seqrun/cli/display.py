@@ -51,12 +51,26 @@ def halt_line(event: dict) -> str | None:
     return f"HALT sent at {when}{check}: {cause}: {event.get('message', '')}"
 
 
+def iteration_text(event: dict) -> str:
+    """' (2/3)' for an iteration of a repeated step; '' for any other step."""
+    if event.get("iteration") is None:
+        return ""
+    return f" ({event['iteration']}/{event['iterations']})"
+
+
+def skipped_text(event: dict) -> str:
+    """Why a step did not run: its condition and the value it had."""
+    value = "true" if event["value"] else "false"
+    return f"skipped: {event['key']} '{event['condition']}' was {value}"
+
+
 class PlainDisplay:
     """One line per step and per fault: for logs, pipes and CI."""
 
     def __init__(self, console: Console, total: int) -> None:
         self.console = console
         self.total = total
+        self._label = ""   # the running step's, for the lines of its iterations
 
     def _print(self, text: str, **style: Any) -> None:
         self.console.print(text, highlight=False, markup=False, **style)
@@ -64,8 +78,19 @@ class PlainDisplay:
     def __call__(self, event: dict) -> None:
         kind = event["type"]
         if kind == "step_started":
+            self._label = event["label"]
+            self._print(f"[{event.get('step')}/{self.total}] {event['label']} "
+                        f"({event['location']}){iteration_text(event)}")
+        elif kind == "step_iteration":
+            self._print(f"[{event.get('step')}/{self.total}] {self._label}"
+                        f"{iteration_text(event)}")
+        elif kind == "step_skipped":
             self._print(f"[{event.get('step')}/{self.total}] {event['label']} "
                         f"({event['location']})")
+            self._print(f"      {skipped_text(event)}")
+        elif kind == "step_retry":
+            self._print(f"      retry {event['attempt']}/{event['times']} after: "
+                        f"{event['message']}")
         elif kind == "step_finished":
             extra = ""
             if "executed_duration_s" in event:
@@ -178,8 +203,14 @@ class LiveDisplay:
             self.measured = event
             return
         if kind == "step_started":
-            self.step_text = f"step {event.get('step')}/{self.total}: {event['label']}"
+            self.step_text = (f"step {event.get('step')}/{self.total}: {event['label']}"
+                              f"{iteration_text(event)}")
             self.move_duration = None
+        elif kind == "step_iteration":
+            self.step_text = self.step_text.rsplit(" (", 1)[0] + iteration_text(event)
+        elif kind == "step_skipped":
+            self.message, self.message_style = (f"step {event.get('step')}: "
+                                                f"{skipped_text(event)}", "yellow")
         elif kind == "move_planned":
             self.move_duration = event["duration_s"]
             self.move_t = 0.0

@@ -127,8 +127,13 @@ def print_dry_run(run, loaded, arm) -> None:
         typer.echo(f"  fault: {r.fault['message']}")
     for error in r.extra.get("errors", []):
         typer.echo(f"{error['file']}:{error['line']}:{error['column']}: {error['message']}")
-    for item in run.as_dict()["not_verified"]:
-        typer.echo(f"  not verified: {item}")
+    unverified = run.as_dict()["not_verified"]
+    if unverified:
+        # what this one path of the dry run could not show: the branches it did not take
+        # among them
+        typer.echo("  not verified:")
+    for item in unverified:
+        typer.echo(f"    - {item}")
 
 
 def _is_dir(path: Path) -> bool:
