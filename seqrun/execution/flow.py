@@ -27,7 +27,6 @@ from seqrun.results import OperatorAbort
 if TYPE_CHECKING:
     from seqrun.execution.stops import StopControl
     from seqrun.results import StepResult
-    from seqrun.steps.context import StepContext
     from seqrun.steps.resolved import ResolvedStep
 
 __all__ = ["StepFlow", "has_flow"]
@@ -53,7 +52,9 @@ class _Seen:
 class StepFlow:
     """Runs steps with flow keys and remembers which branches the run took."""
 
-    def __init__(self, ex: StepContext, stops: StopControl) -> None:
+    def __init__(self, ex: Any, stops: StopControl) -> None:
+        #: The executor as a step handler sees it (a StepContext; the handlers take it
+        #: untyped too, seqrun.steps.registry.Handler: its readings are the executor's).
         self.ex = ex
         self.stops = stops
         self._seen: dict[int, _Seen] = {}
