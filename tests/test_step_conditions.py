@@ -92,6 +92,20 @@ def test_skip_if_and_a_false_if_skip_the_step_in_the_dry_run_and_the_run(project
     assert 4 not in started and 5 not in started and 6 in started
 
 
+def test_the_report_shows_the_skipped_step_with_its_condition(project, tmp_path):
+    path = write(project, '  - wait: {seconds: 0.1, skip_if: "pos_deg[2] < 0"}\n')
+    folder = tmp_path / "run"
+    with contextlib.chdir(project):
+        result = runner.invoke(app, ["run", str(path), "--virtual-time", "--yes", "--plain",
+                                     "--log-dir", str(folder)])
+    assert result.exit_code == 0, result.output
+    html = (folder / "report.html").read_text(encoding="utf-8")
+    row = html[html.index('id="step-4"'):]
+    row = row[:row.index("</tr>", row.index("</tr>") + 1)]
+    assert "<td>skipped</td>" in row
+    assert "skipped_by: skip_if; condition: pos_deg[2] &lt; 0; value: yes" in row
+
+
 def test_the_dry_run_lists_each_branch_it_did_not_take(project):
     path = write(project, CONDITIONS + """\
   - check: {that: "tool.z_mm > 40", retry: {times: 2}}
