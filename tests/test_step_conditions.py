@@ -270,3 +270,27 @@ def test_a_bad_flow_key_is_refused_at_its_line_and_column(project, step, where, 
     located = [line for line in result.output.splitlines()
                if line.startswith(f"sequences/f.yaml:{where}: ")]
     assert any(message in line for line in located), result.output
+
+
+# --------------------------------------------------------------------------- two arms
+def test_each_arm_of_a_campaign_says_its_skipped_steps_and_iterations(tmp_path, monkeypatch):
+    from twoarmskit import two_arm_campaign
+
+    campaign = two_arm_campaign(tmp_path, monkeypatch)
+    (campaign / "sequences" / "flow.yaml").write_text("""\
+name: Flow
+steps:
+  - parallel:
+      - arm: A
+        steps: [include: startup.yaml, {wait: {seconds: 0.1, skip_if: "pos_deg[2] < 0"}}]
+      - arm: B
+        steps: [include: startup.yaml, {wait: {seconds: 0.1, repeat: {count: 2}}}]
+""")
+    result = runner.invoke(app, ["run", "sequences/flow.yaml", "--virtual-time", "--yes",
+                                 "--no-report", "--log-dir", str(tmp_path / "run")])
+    assert result.exit_code == 0, result.output
+    lines = result.output.splitlines()
+    assert any(line.startswith("[A]") and "skipped: skip_if 'pos_deg[2] < 0' was true" in line
+               for line in lines), result.output
+    assert any(line.startswith("[B]") and line.endswith("(2/2)") for line in lines), \
+        result.output
