@@ -294,3 +294,19 @@ steps:
                for line in lines), result.output
     assert any(line.startswith("[B]") and line.endswith("(2/2)") for line in lines), \
         result.output
+
+
+# --------------------------------------------------------------------------- the live view
+def test_the_displays_show_the_iteration_and_the_skipped_step(tmp_path):
+    from test_display import project, run_with_displays
+
+    path = project(tmp_path, "flow", "  - include: startup.yaml\n"
+                                     "  - wait: {seconds: 0.2, repeat: {count: 2}}\n"
+                                     "  - wait: {seconds: 0.1, if: 'pos_deg[2] > 0'}\n")
+    outcome, view, _, plain_console = run_with_displays(path, tmp_path)
+    assert outcome.result.exit_code == 0, outcome.result.message
+    # the live view's step line kept the last iteration of the repeated step (the skipped
+    # one never started)
+    assert view.step_text.endswith(": wait 0.2 s (2/2)"), view.step_text
+    plain = plain_console.export_text().splitlines()
+    assert "      skipped: if 'pos_deg[2] > 0' was false" in plain, plain
