@@ -92,6 +92,7 @@ def test_skip_if_and_a_false_if_skip_the_step_in_the_dry_run_and_the_run(project
     assert 4 not in started and 5 not in started and 6 in started
 
 
+@pytest.mark.slow  # draws report.html
 def test_the_report_shows_the_skipped_step_with_its_condition(project, tmp_path):
     path = write(project, '  - wait: {seconds: 0.1, skip_if: "pos_deg[2] < 0"}\n')
     folder = tmp_path / "run"
