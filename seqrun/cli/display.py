@@ -130,6 +130,7 @@ class LiveDisplay:
         self.bus = bus
         self.total = total
         self.step_text = "preflight: reading the arm"
+        self._step_head = ""   # the running step's line without its iteration
         self.move_duration: float | None = None
         self.move_t = 0.0
         self.message = ""
@@ -203,11 +204,11 @@ class LiveDisplay:
             self.measured = event
             return
         if kind == "step_started":
-            self.step_text = (f"step {event.get('step')}/{self.total}: {event['label']}"
-                              f"{iteration_text(event)}")
+            self._step_head = f"step {event.get('step')}/{self.total}: {event['label']}"
+            self.step_text = self._step_head + iteration_text(event)
             self.move_duration = None
         elif kind == "step_iteration":
-            self.step_text = self.step_text.rsplit(" (", 1)[0] + iteration_text(event)
+            self.step_text = self._step_head + iteration_text(event)
         elif kind == "step_skipped":
             self.message, self.message_style = (f"step {event.get('step')}: "
                                                 f"{skipped_text(event)}", "yellow")
