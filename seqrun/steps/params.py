@@ -231,14 +231,18 @@ class StepParams(StrictModel):
     if_: ExpressionText | None = Field(
         None, alias="if", description="Run the step only if this holds at its start (else "
                                       "it is reported as skipped), e.g. "
-                                      "'not gripper.holding'.")
+                                      "'not gripper.holding'. Not on a step that moves the "
+                                      "arm, changes the modules' start-up state or signals "
+                                      "the other arms ('Conditions, loops and retries').")
     skip_if: ExpressionText | None = Field(
-        None, description="Skip the step (reported as skipped) if this holds at its start.")
+        None, description="Skip the step (reported as skipped) if this holds at its start. "
+                          "Not where if is not.")
     repeat: RepeatSpec | None = Field(
-        None, description="Run the step several times (docs/sequence-format.md, "
-                          "'Conditions, loops and retries').")
+        None, description="Run the step several times: {count: N} or {while: EXPR, max: N} "
+                          "('Conditions, loops and retries'). Not where if is not.")
     retry: RetrySpec | None = Field(
-        None, description="Try the step again after a failure that may be retried "
+        None, description="Try the step again after a failed measurement: {times: N, "
+                          "delay_s: S}; check, wait_until, checkpoint and check_gripper only "
                           "(docs/safety.md, 'What may be retried').")
 
     @classmethod
