@@ -184,19 +184,22 @@ class StepStarted(Event):
     location: str
     #: Labels of the include files the step came through.
     include: Sequence[str] | None = _optional()
-    #: A repeated step: this is its first iteration of ``iterations`` (repeat's count,
-    #: or its max with while).
+    #: A repeated step: this is its first iteration of ``iterations`` (repeat's count)
+    #: or of at most ``max_iterations`` (repeat's max, with while).
     iteration: int | None = _optional()
     iterations: int | None = _optional()
+    max_iterations: int | None = _optional()
 
 
 @dataclass(frozen=True, kw_only=True)
 class StepIteration(Event):
     type: ClassVar[str] = "step_iteration"
     when: ClassVar[str] = ("a repeated step begins its next iteration (``repeat``: the "
-                           "first is its step_started)")
+                           "first is its step_started); ``iterations``: repeat's count, "
+                           "``max_iterations``: its max with while")
     iteration: int
-    iterations: int
+    iterations: int | None = _optional()
+    max_iterations: int | None = _optional()
 
 
 @dataclass(frozen=True, kw_only=True)

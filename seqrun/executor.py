@@ -577,19 +577,18 @@ class Executor:
             raise OperatorAbort("operator abort")
 
     def _begin_step(self, step, result: StepResult, *, iteration: int | None = None,
-                    iterations: int | None = None, attempt: int | None = None) -> None:
+                    bound: dict[str, int] | None = None, attempt: int | None = None) -> None:
         """The step's questions and event (its first start; an iteration of a repeat, a
         retry's attempt after that) and its monitors."""
         if iteration is not None and iteration > 1:
             self.check_halt_request()
             if self.stops.aborts:
                 raise OperatorAbort("operator abort")
-            self.emit("step_iteration", iteration=iteration, iterations=iterations)
+            self.emit("step_iteration", iteration=iteration, **(bound or {}))
         elif attempt is None:
             self._ask_before(step)
             result.started = self.elapsed_s()
-            counted = {} if iteration is None else {"iteration": iteration,
-                                                    "iterations": iterations}
+            counted = {} if iteration is None else {"iteration": iteration, **(bound or {})}
             self.emit("step_started", kind=step.kind, label=result.label,
                       location=result.location,
                       **({"include": list(step.include_labels)}

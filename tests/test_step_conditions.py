@@ -163,6 +163,8 @@ def test_repeat_while_stops_when_the_condition_no_longer_holds(project, tmp_path
     dry_step, run_step = dry["steps"][3], report(folder)["steps"][3]
     assert dry_step["iterations"] == run_step["iterations"]
     assert 2 <= run_step["iterations"] <= 5
+    assert "[4/4] wait 0.25 s (sequences/f.yaml:6:5) (1, at most 20)" in result.stdout
+    assert f"[4/4] wait 0.25 s ({run_step['iterations']}, at most 20)" in result.stdout
 
 
 def test_repeat_while_past_its_max_is_a_fault(project, tmp_path):

@@ -52,10 +52,13 @@ def halt_line(event: dict) -> str | None:
 
 
 def iteration_text(event: dict) -> str:
-    """' (2/3)' for an iteration of a repeated step; '' for any other step."""
+    """' (2/3)' for an iteration of a step repeated 3 times, ' (2, at most 10)' of one
+    repeated while a condition holds; '' for any other step."""
     if event.get("iteration") is None:
         return ""
-    return f" ({event['iteration']}/{event['iterations']})"
+    if event.get("iterations") is not None:
+        return f" ({event['iteration']}/{event['iterations']})"
+    return f" ({event['iteration']}, at most {event.get('max_iterations')})"
 
 
 def skipped_text(event: dict) -> str:

@@ -79,6 +79,9 @@ class StepFlow:
             begin(step, result)
             return self._attempts(step, result, begin, once, seen)
         bound = repeat.count if repeat.count is not None else repeat.max
+        # what the lines show: "(2/3)" for a count, "(2, at most 10)" for a while
+        told = ({"iterations": repeat.count} if repeat.count is not None
+                else {"max_iterations": repeat.max})
         detail: dict = {}
         iteration = 0
         while True:
@@ -95,7 +98,7 @@ class StepFlow:
             elif iteration == bound:
                 break
             iteration += 1
-            begin(step, result, iteration=iteration, iterations=bound)
+            begin(step, result, iteration=iteration, bound=told)
             detail = self._attempts(step, result, begin, once, seen)
         return {**detail, "iterations": iteration}
 
