@@ -265,7 +265,7 @@ checked when the file is read, each problem at its file:line:col, and read from 
 reading of the arm when needed; counts are whole numbers (`true` is not one). A skipped
 step is reported as `skipped` with its condition and the value it had (a `step_skipped`
 event, the terminal line, report.json and report.html); each iteration shows as
-`[5/9] label (2/3)`; each retry is a `step_retry` event and a line of the step's report.
+`[5/9] label (2/3)` (with while: `(2, at most 10)`); each retry is a `step_retry` event and a line of the step's report.
 
 Only `check`, `wait_until`, `checkpoint` and `check_gripper` take `retry`, and only a
 failed measurement is retried: a check that did not hold, a wait_until that timed out, a
