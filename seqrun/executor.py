@@ -551,9 +551,10 @@ class Executor:
                 ending.step_interrupted(self, step, result, results, exc)
                 raise
         self.current_step = None
+        untaken = self.flow.not_taken()
         if self.dry_run:
             # the branches this one path did not take: validation has not seen them run
-            self.not_verified.extend(self.flow.not_taken())
+            self.not_verified.extend(b.line for b in untaken)
         if code == EXIT_OK and self.stops.halt_request is not None:
             status, code, message, fault = ending.halt_after_last_step(self)
         if code in (EXIT_OK, EXIT_OPERATOR_ABORT) and self.stops.halt_request is None:
@@ -562,7 +563,9 @@ class Executor:
             self.driver.disable_watchdog()
         else:
             self.driver.stop_watchdog_keeper()
-        return ending.finish(self, results, status, code, message, fault)
+        ended = ending.finish(self, results, status, code, message, fault)
+        ended.branches_not_taken = untaken
+        return ended
 
     def _ask_before(self, step) -> None:
         """The step's questions and stop requests before it starts."""

@@ -129,6 +129,23 @@ def test_the_dry_run_lists_each_branch_it_did_not_take(project):
     assert sum(1 for item in unverified if item.startswith("step ")) == 4, unverified
 
 
+def test_a_branch_taken_at_a_parameters_range_end_is_not_listed(project):
+    """validate dry-runs each numeric parameter at its min and max too: a branch one of
+    those runs took was run; a branch no run took stays listed."""
+    path = project / "sequences" / "r.yaml"
+    path.write_text(HEAD.replace("steps:\n", "params:\n  n: {type: int, min: 1, max: 4, "
+                                             "default: 2}\nsteps:\n") + """\
+  - wait: {seconds: 0.1, if: "params.n > 3"}
+  - wait: {seconds: 0.1, if: "params.n > 9"}
+""", encoding="utf-8")
+    result = invoke("validate", path, cwd=project)
+    assert result.exit_code == 0, result.output
+    listed = [line for line in result.stdout.splitlines() if line.startswith("    - step")]
+    # n = 4 (its max) ran step 4; nothing ran step 5
+    assert listed == ["    - step 5 (sequences/r.yaml:9:5): if 'params.n > 9' was never "
+                      "true, so running the step was not exercised"], result.stdout
+
+
 def test_a_file_without_flow_keys_lists_no_branch(project):
     path = write(project, "  - wait: 0.1\n  - check: tool.z_mm > 40\n")
     unverified = validate_json(path, project)["dry_run"]["not_verified"]

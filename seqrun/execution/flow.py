@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from seqrun.errors import RunAborted
-from seqrun.results import OperatorAbort
+from seqrun.results import OperatorAbort, UntakenBranch
 
 if TYPE_CHECKING:
     from seqrun.execution.stops import StopControl
@@ -153,22 +153,25 @@ class StepFlow:
                      values=values)
 
     # ------------------------------------------------------------------ coverage
-    def not_taken(self) -> list[str]:
-        """Every branch of the steps with flow keys that this run did not take, one line
-        each (what a dry run lists as not verified)."""
-        lines = []
+    def not_taken(self) -> list[UntakenBranch]:
+        """Every branch of the steps with flow keys that this run did not take, each with
+        its line (what a dry run lists as not verified)."""
+        branches = []
         for number, seen in sorted(self._seen.items()):
             where = f"step {number} ({seen.location})"
             for key, (text, values) in seen.values.items():
                 for value in (True, False):
                     if value not in values:
-                        lines.append(f"{where}: {key} '{text}' was never "
-                                     f"{'true' if value else 'false'}, so "
-                                     f"{_branch(key, value)} was not exercised")
+                        branches.append(UntakenBranch(
+                            number, key, value,
+                            f"{where}: {key} '{text}' was never "
+                            f"{'true' if value else 'false'}, so {_branch(key, value)} was "
+                            "not exercised"))
             if seen.retry_possible and not seen.retried:
-                lines.append(f"{where}: its retry was never exercised (the step never "
-                             "failed in a way that may be retried)")
-        return lines
+                branches.append(UntakenBranch(
+                    number, "retry", None, f"{where}: its retry was never exercised (the "
+                                           "step never failed in a way that may be retried)"))
+        return branches
 
 
 def _branch(key: str, value: bool) -> str:

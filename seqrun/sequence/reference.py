@@ -277,7 +277,8 @@ move_linear, move_trajectory, move_velocity), that change what the modules are t
 wait_for) take no `if`, `skip_if` or `repeat`; an include takes none of these keys (put
 them on its steps). The dry run takes one path too: `seqrun validate` lists each branch
 it did not take (a condition that was never true or never false, a retry never needed)
-under "not verified", and so does its `--json` (`dry_run.not_verified`).
+under "not verified", and so does its `--json` (`dry_run.not_verified`); a branch that a
+dry run at a numeric parameter's `min` or `max` took (see "Parameters") is not listed.
 
 ```yaml
   - grip: {part_width_mm: 30, force_n: 40, if: "not gripper.holding"}   # nothing held yet
