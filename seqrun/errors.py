@@ -103,9 +103,13 @@ class RunAborted(SeqrunError):
     """The executor aborted a run; ``module`` names the culprit where there is one."""
 
     def __init__(self, cause: str, message: str, module: int | None = None,
-                 detail: dict | None = None) -> None:
+                 detail: dict | None = None, *, retryable: bool = False) -> None:
         self.cause = cause
         self.module = module
+        #: A measurement that did not meet its bound while nothing moved (a check, a
+        #: wait_until's timeout, a checkpoint, a gripper check): a step's ``retry`` may
+        #: run it again. Everything else (faults, Halts, guards, monitors) never is.
+        self.retryable = retryable
         #: Measured values for the step's report entry (e.g. a checkpoint's errors).
         self.detail = detail or {}
         super().__init__(message)

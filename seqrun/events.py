@@ -184,6 +184,49 @@ class StepStarted(Event):
     location: str
     #: Labels of the include files the step came through.
     include: Sequence[str] | None = _optional()
+    #: A repeated step: this is its first iteration of ``iterations`` (repeat's count)
+    #: or of at most ``max_iterations`` (repeat's max, with while).
+    iteration: int | None = _optional()
+    iterations: int | None = _optional()
+    max_iterations: int | None = _optional()
+
+
+@dataclass(frozen=True, kw_only=True)
+class StepIteration(Event):
+    type: ClassVar[str] = "step_iteration"
+    when: ClassVar[str] = ("a repeated step begins its next iteration (``repeat``: the "
+                           "first is its step_started); ``iterations``: repeat's count, "
+                           "``max_iterations``: its max with while")
+    iteration: int
+    iterations: int | None = _optional()
+    max_iterations: int | None = _optional()
+
+
+@dataclass(frozen=True, kw_only=True)
+class StepSkipped(Event):
+    type: ClassVar[str] = "step_skipped"
+    when: ClassVar[str] = ("a step did not run: its ``if`` was false, its ``skip_if`` true, "
+                           "or its ``repeat``'s while false at the start (no step_started "
+                           "or step_finished follows)")
+    kind: str
+    label: str
+    location: str
+    key: str
+    condition: str
+    value: bool
+    values: Mapping[str, Any]
+
+
+@dataclass(frozen=True, kw_only=True)
+class StepRetry(Event):
+    type: ClassVar[str] = "step_retry"
+    when: ClassVar[str] = ("a step with ``retry`` failed in a way that may be retried and "
+                           "runs again after ``delay_s``")
+    attempt: int
+    times: int
+    cause: str
+    message: str
+    delay_s: float
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import gc
 import time
+from functools import partial
 from dataclasses import replace
 from typing import TYPE_CHECKING, Any, Callable, Iterable
 
@@ -48,6 +49,7 @@ from seqrun.drivers import ArmDriver, HaltConfirmation, as_driver
 from seqrun.events import EventHub, make_event
 from seqrun.execution import ending
 from seqrun.execution.checks import ReadingChecks
+from seqrun.execution.flow import StepFlow, has_flow
 from seqrun.execution.latched import LatchedFaults
 from seqrun.execution.monitors import Monitors
 from seqrun.execution.preflight import Findings, SequenceCheck, preflight
@@ -171,6 +173,8 @@ class Executor:
         self.streaming = Streaming(self)
         #: The emergency Halt of this run and what confirmed it (None: no Halt yet).
         self.halt_result: HaltConfirmation | None = None
+        #: The steps' if/skip_if, repeat and retry, and the branches the run took.
+        self.flow = StepFlow(self, self.stops)
 
     # ------------------------------------------------------------------ control (any thread)
     def abort(self, reason: str = "operator abort") -> None:
@@ -527,13 +531,14 @@ class Executor:
                 continue
             self.current_step = result
             try:
-                self._start_step(step, result)
-                try:
-                    detail = HANDLERS[step.kind](step, self) or {}
-                finally:
-                    self.monitors.stop()  # (the fault path reads the arm unwatched)
-                    self.setpoint_deg = None
-                self._step_passed(result, detail)
+                if has_flow(step.params):
+                    flowed = self.flow.run(step, result, self._begin_step,
+                                           partial(self._handle, HANDLERS[step.kind], step))
+                    if flowed is not None:
+                        self._step_passed(result, flowed)
+                else:
+                    self._begin_step(step, result)
+                    self._step_passed(result, self._handle(HANDLERS[step.kind], step))
             except OperatorAbort as exc:
                 status, code, message, fault = ending.step_aborted(self, step, result, exc)
                 break
@@ -546,6 +551,10 @@ class Executor:
                 ending.step_interrupted(self, step, result, results, exc)
                 raise
         self.current_step = None
+        untaken = self.flow.not_taken()
+        if self.dry_run:
+            # the branches this one path did not take: validation has not seen them run
+            self.not_verified.extend(b.line for b in untaken)
         if code == EXIT_OK and self.stops.halt_request is not None:
             status, code, message, fault = ending.halt_after_last_step(self)
         if code in (EXIT_OK, EXIT_OPERATOR_ABORT) and self.stops.halt_request is None:
@@ -554,10 +563,12 @@ class Executor:
             self.driver.disable_watchdog()
         else:
             self.driver.stop_watchdog_keeper()
-        return ending.finish(self, results, status, code, message, fault)
+        ended = ending.finish(self, results, status, code, message, fault)
+        ended.branches_not_taken = untaken
+        return ended
 
-    def _start_step(self, step, result: StepResult) -> None:
-        """The step's questions and stop requests before it starts, then its event."""
+    def _ask_before(self, step) -> None:
+        """The step's questions and stop requests before it starts."""
         # A request that came before the question is acted on without asking.
         self.check_halt_request()
         if self.stops.aborts:
@@ -567,15 +578,36 @@ class Executor:
         self.check_halt_request()
         if self.stops.aborts:
             raise OperatorAbort("operator abort")
-        result.started = self.elapsed_s()
-        self.emit("step_started", kind=step.kind, label=result.label,
-                  location=result.location,
-                  **({"include": list(step.include_labels)}
-                     if getattr(step, "include_labels", ()) else {}))
+
+    def _begin_step(self, step, result: StepResult, *, iteration: int | None = None,
+                    bound: dict[str, int] | None = None, attempt: int | None = None) -> None:
+        """The step's questions and event (its first start; an iteration of a repeat, a
+        retry's attempt after that) and its monitors."""
+        if iteration is not None and iteration > 1:
+            self.check_halt_request()
+            if self.stops.aborts:
+                raise OperatorAbort("operator abort")
+            self.emit("step_iteration", iteration=iteration, **(bound or {}))
+        elif attempt is None:
+            self._ask_before(step)
+            result.started = self.elapsed_s()
+            counted = {} if iteration is None else {"iteration": iteration, **(bound or {})}
+            self.emit("step_started", kind=step.kind, label=result.label,
+                      location=result.location,
+                      **({"include": list(step.include_labels)}
+                         if getattr(step, "include_labels", ()) else {}), **counted)
         self.streaming.tracking = None
         self.monitors.start_step(getattr(step.params, "monitors", ()), self.clock.now(),
                                  param_types=getattr(step, "param_types", None),
                                  param_values=getattr(step, "param_values", None))
+
+    def _handle(self, handler: Callable[[Any, Any], dict | None], step) -> dict:
+        """The kind's handler on ``step``; its monitors end with it."""
+        try:
+            return handler(step, self) or {}
+        finally:
+            self.monitors.stop()  # (the fault path reads the arm unwatched)
+            self.setpoint_deg = None
 
     def _step_passed(self, result: StepResult, detail: dict) -> None:
         result.detail.update({k: v for k, v in detail.items() if k != "planned_duration_s"})

@@ -16,8 +16,8 @@ from seqrun.errors import (BusError, ModuleFaultError, ModuleTimeoutError, Plann
                            RunAborted, SeqrunError)
 
 __all__ = ["EXIT_FAULT", "EXIT_INVALID", "EXIT_OK", "EXIT_OPERATOR_ABORT", "EXIT_USAGE",
-           "OperatorAbort", "RunResult", "StepResult", "fault_cause", "halt_fields",
-           "latched_message"]
+           "OperatorAbort", "RunResult", "StepResult", "UntakenBranch", "fault_cause",
+           "halt_fields", "latched_message"]
 
 
 class OperatorAbort(SeqrunError):
@@ -64,6 +64,20 @@ class StepResult:
                 **self.detail}
 
 
+@dataclass(frozen=True)
+class UntakenBranch:
+    """A branch of a step's flow keys that a run did not take (seqrun/execution/flow.py)."""
+
+    step: int
+    key: str              # "if", "skip_if", "repeat while" or "retry"
+    value: bool | None    # the condition's value never seen (None: a retry never taken)
+    line: str             # as "not verified" lists it
+
+    def same_branch(self, other: UntakenBranch) -> bool:
+        """The same branch (of a run with other parameter values, whose texts may differ)."""
+        return (self.step, self.key, self.value) == (other.step, other.key, other.value)
+
+
 @dataclass
 class RunResult:
     status: str                          # passed | failed | aborted | invalid
@@ -79,6 +93,8 @@ class RunResult:
     #: Modules that reported a fault (ERROR, HALTED, ...) when the run started, before
     #: seqrun sent anything but reads: ``[{"module", "joint", "flags"}]``.
     latched_at_start: list[dict[str, Any]] = field(default_factory=list)
+    #: The branches of the steps' if/skip_if, repeat and retry this run did not take.
+    branches_not_taken: list[UntakenBranch] = field(default_factory=list)
 
     @property
     def duration_s(self) -> float:

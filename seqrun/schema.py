@@ -158,6 +158,12 @@ class IncludeParams(StepParams):
         if given:
             raise PydanticCustomError("include_requirements", "an include runs other steps: "
                                       "put {keys} on those steps", {"keys": " and ".join(given)})
+        flow = [alias for key, alias in (("if_", "if"), ("skip_if", "skip_if"),
+                                         ("repeat", "repeat"), ("retry", "retry"))
+                if getattr(self, key) is not None]
+        if flow:
+            raise PydanticCustomError("include_flow", "an include runs other steps: put "
+                                      "{keys} on those steps", {"keys": " and ".join(flow)})
         return self
 
 

@@ -51,12 +51,29 @@ def halt_line(event: dict) -> str | None:
     return f"HALT sent at {when}{check}: {cause}: {event.get('message', '')}"
 
 
+def iteration_text(event: dict) -> str:
+    """' (2/3)' for an iteration of a step repeated 3 times, ' (2, at most 10)' of one
+    repeated while a condition holds; '' for any other step."""
+    if event.get("iteration") is None:
+        return ""
+    if event.get("iterations") is not None:
+        return f" ({event['iteration']}/{event['iterations']})"
+    return f" ({event['iteration']}, at most {event.get('max_iterations')})"
+
+
+def skipped_text(event: dict) -> str:
+    """Why a step did not run: its condition and the value it had."""
+    value = "true" if event["value"] else "false"
+    return f"skipped: {event['key']} '{event['condition']}' was {value}"
+
+
 class PlainDisplay:
     """One line per step and per fault: for logs, pipes and CI."""
 
     def __init__(self, console: Console, total: int) -> None:
         self.console = console
         self.total = total
+        self._label = ""   # the running step's, for the lines of its iterations
 
     def _print(self, text: str, **style: Any) -> None:
         self.console.print(text, highlight=False, markup=False, **style)
@@ -64,8 +81,19 @@ class PlainDisplay:
     def __call__(self, event: dict) -> None:
         kind = event["type"]
         if kind == "step_started":
+            self._label = event["label"]
+            self._print(f"[{event.get('step')}/{self.total}] {event['label']} "
+                        f"({event['location']}){iteration_text(event)}")
+        elif kind == "step_iteration":
+            self._print(f"[{event.get('step')}/{self.total}] {self._label}"
+                        f"{iteration_text(event)}")
+        elif kind == "step_skipped":
             self._print(f"[{event.get('step')}/{self.total}] {event['label']} "
                         f"({event['location']})")
+            self._print(f"      {skipped_text(event)}")
+        elif kind == "step_retry":
+            self._print(f"      retry {event['attempt']}/{event['times']} after: "
+                        f"{event['message']}")
         elif kind == "step_finished":
             extra = ""
             if "executed_duration_s" in event:
@@ -105,6 +133,7 @@ class LiveDisplay:
         self.bus = bus
         self.total = total
         self.step_text = "preflight: reading the arm"
+        self._step_head = ""   # the running step's line without its iteration
         self.move_duration: float | None = None
         self.move_t = 0.0
         self.message = ""
@@ -178,8 +207,14 @@ class LiveDisplay:
             self.measured = event
             return
         if kind == "step_started":
-            self.step_text = f"step {event.get('step')}/{self.total}: {event['label']}"
+            self._step_head = f"step {event.get('step')}/{self.total}: {event['label']}"
+            self.step_text = self._step_head + iteration_text(event)
             self.move_duration = None
+        elif kind == "step_iteration":
+            self.step_text = self._step_head + iteration_text(event)
+        elif kind == "step_skipped":
+            self.message, self.message_style = (f"step {event.get('step')}: "
+                                                f"{skipped_text(event)}", "yellow")
         elif kind == "move_planned":
             self.move_duration = event["duration_s"]
             self.move_t = 0.0

@@ -289,12 +289,23 @@ def _on_fault(project: Any) -> str:
 def _printer(arm_id: str):
     """Each step's start and end, prefixed by the arm (the executor's listener: one
     short line per step)."""
+    from seqrun.cli.display import iteration_text, skipped_text
+
     def listener(event) -> None:
         kind = event.type
         step = getattr(event, "step", None)
         if kind == "step_started":
             typer.echo(f"[{arm_id}] {event.t:8.2f} s  step {step}: "
-                       f"{getattr(event, 'label', '')}")
+                       f"{getattr(event, 'label', '')}{iteration_text(event.as_dict())}")
+        elif kind == "step_iteration":
+            typer.echo(f"[{arm_id}] {event.t:8.2f} s  step {step}"
+                       f"{iteration_text(event.as_dict())}")
+        elif kind == "step_skipped":
+            typer.echo(f"[{arm_id}] {event.t:8.2f} s  step {step}: {event.label}: "
+                       f"{skipped_text(event.as_dict())}")
+        elif kind == "step_retry":
+            typer.echo(f"[{arm_id}] {event.t:8.2f} s  step {step}: retry {event.attempt}/"
+                       f"{event.times} after: {event.message}")
         elif kind == "step_finished" and getattr(event, "status", "passed") != "passed":
             typer.echo(f"[{arm_id}] {event.t:8.2f} s  step {step} {event.status}")
     return listener

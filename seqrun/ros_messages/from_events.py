@@ -38,7 +38,7 @@ READINGS = ("setpoint", "measurement")
 ERRORS = ("fault", "internal_error", "halt_failed", "halt_unconfirmed", "latched_fault",
           "listener_failed", "measurement_failed", "watchdog_disable_failed")
 WARNINGS = ("abort_requested", "halt_requested", "operator_abort", "controlled_stop",
-            "session_halt", "retry", "frame_discarded", "log_failed")
+            "session_halt", "retry", "step_retry", "frame_discarded", "log_failed")
 
 
 @dataclass(frozen=True)

@@ -253,6 +253,42 @@ steps:
 |---|---|---|
 {parameter}
 
+## Conditions, loops and retries
+
+Every step may take `if: EXPR` (run it only if EXPR holds at its start) or `skip_if: EXPR`
+(skip it if EXPR holds), `repeat: {count: N}` or `repeat: {while: EXPR, max: N}` (run it
+again while EXPR holds, checked before each iteration; `max` is required, and EXPR still
+holding after `max` iterations ends the run as a fault), and `retry: {times: N, delay_s:
+S}` (try it again, after S seconds of monitored waiting, when it failed in a way that may
+be retried). The expressions are those of `wait_until` and `check` (see "Expressions"),
+checked when the file is read, each problem at its file:line:col, and read from one
+reading of the arm when needed; counts are whole numbers (`true` is not one). A skipped
+step is reported as `skipped` with its condition and the value it had (a `step_skipped`
+event, the terminal line, report.json and report.html); each iteration shows as
+`[5/9] label (2/3)` (with while: `(2, at most 10)`); each retry is a `step_retry` event and a line of the step's report.
+
+Only `check`, `wait_until`, `checkpoint` and `check_gripper` take `retry`, and only a
+failed measurement is retried: a check that did not hold, a wait_until that timed out, a
+checkpoint outside its tolerance, a gripper check that failed. A module fault, a Halt, a
+guard or monitor halt and an operator abort are never retried (docs/safety.md, "What may
+be retried"). Validation follows one path of the arm, so steps that move it (move,
+move_linear, move_trajectory, move_velocity), that change what the modules are told
+(reset, home, set_limits, halt, power_off) or that speak to the other arms (signal,
+wait_for) take no `if`, `skip_if` or `repeat`; an include takes none of these keys (put
+them on its steps). The dry run takes one path too: `seqrun validate` lists each branch
+it did not take (a condition that was never true or never false, a retry never needed)
+under "not verified", and so does its `--json` (`dry_run.not_verified`); a branch that a
+dry run at a numeric parameter's `min` or `max` took (see "Parameters") is not listed.
+
+```yaml
+  - grip: {part_width_mm: 30, force_n: 40, if: "not gripper.holding"}   # nothing held yet
+  - confirm: {prompt: "Is the desk clear?", skip_if: "tool.z_mm > 400"}
+  - wait: {seconds: 0.5, repeat: {count: 3}}                     # [5/9] wait 0.5 s (2/3)
+  - wait: {seconds: 1, repeat: {while: "abs(vel_deg_s[4]) > 0.05", max: 10}}
+  - wait_until: {until: "gripper.holding", timeout_s: 2, retry: {times: 2, delay_s: 1}}
+  - checkpoint: {pose: capture, retry: {times: 1, delay_s: 0.5}}
+```
+
 ## Steps
 """
 

@@ -42,6 +42,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from seqrun.steps._expression_checks import check_monitors
+from seqrun.steps._flow_checks import check_flow
 from seqrun.arm.description import ArmDescription
 from seqrun.errors import PlanningError, SourceError
 from seqrun.formatting import format_number as _f
@@ -549,6 +550,7 @@ class Checker:
                 self.motion_start_deg = self.tracked()
             kind.check(self, step, step.params)
             check_monitors(self, step, step.params.monitors)
+            check_flow(self, step, step.params, motion=kind.motion)
             # a step's findings in the order they appear in its text, then those in other
             # files (the pose file it names)
             here = step.location.file

@@ -20,6 +20,7 @@ from seqrun.errors import UserInputError
 
 if TYPE_CHECKING:
     from seqrun.arm.description import ArmDescription
+    from seqrun.results import UntakenBranch
     from seqrun.sequence.checks import StaticCheck
     from seqrun.sequence.loader import LoadedSequence
     from seqrun.sequence.validation import ValidationResult
@@ -120,16 +121,23 @@ def param_options(options: Sequence[str]) -> dict[str, str]:
     return parse_options(options)
 
 
-def check_parameter_ranges(file: Path, loaded: LoadedSequence,
+def check_parameter_ranges(file: Path, loaded: LoadedSequence, *,
+                           untaken: list[UntakenBranch] | None = None,
                            **check: Any) -> list[RangeProblem]:
     """``file`` checked (static and, with ``dry_run``, the dry run) with each numeric
     parameter at its min and at its max in turn, the others at their defaults: at most
-    two checks per parameter. ``check``: :func:`check_sequence`'s other arguments."""
+    two checks per parameter. ``check``: :func:`check_sequence`'s other arguments.
+    ``untaken``: the flow branches the dry run with the defaults did not take; those a
+    passing dry run at a range's end took are removed from it (they were run)."""
     from seqrun.steps.sequence_parameters import extremes, show_value
 
     problems = []
     for name, value, end in extremes(loaded.parameters):
         checked = check_sequence(file, params={name: show_value(value)}, **check)
+        run = checked.dry_run
+        if untaken and not checked.errors and run is not None and run.passed:
+            still = run.result.branches_not_taken
+            untaken[:] = [b for b in untaken if any(b.same_branch(s) for s in still)]
         if checked.errors:
             message = str(checked.errors[0])
         elif checked.dry_run is not None and not checked.dry_run.passed:

@@ -11,24 +11,26 @@ if TYPE_CHECKING:
 __all__ = ["check_expression", "check_monitors"]
 
 
-def check_expression(checker: CheckContext, step: ResolvedStep[Any], text: str, key: str, *,
-                     condition: bool) -> None:
-    """The expression under ``key`` against the arm: its joint numbers, the gripper it
-    reads, and (``condition``) that it is a truth value; each problem at the key."""
+def check_expression(checker: CheckContext, step: ResolvedStep[Any], text: str,
+                     key: str | tuple[str, ...], *, condition: bool) -> None:
+    """The expression under ``key`` (a key of the step's parameters, or a path to it)
+    against the arm: its joint numbers, the gripper it reads, and (``condition``) that it
+    is a truth value; each problem at the key."""
     from seqrun.steps.expressions import ExpressionError, parse
 
+    path = key if isinstance(key, tuple) else (key,)
     try:
         expression = parse(text, joints=len(checker.arm.joints), params=step.param_types)
     except ExpressionError as exc:
         checker.errors.append(step.error(f"{exc.message} (at column {exc.column} of "
-                                         f"'{text}')", key))
+                                         f"'{text}')", *path))
         return
     if condition and not expression.is_condition:
         checker.errors.append(step.error(
-            f"'{text}' is a number, not a condition: compare it (e.g. '{text} < 1')", key))
+            f"'{text}' is a number, not a condition: compare it (e.g. '{text} < 1')", *path))
     if any(n.startswith("gripper.") for n in expression.names) and checker.arm.gripper is None:
         checker.errors.append(step.error(f"'{text}' reads the gripper, and the arm file has "
-                                         "none", key))
+                                         "none", *path))
 
 
 def check_monitors(checker: CheckContext, step: ResolvedStep[Any], monitors: Any) -> None:

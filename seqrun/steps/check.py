@@ -59,7 +59,8 @@ def run(step: ResolvedStep[CheckParams], ex: StepContext) -> dict:
     ex.emit("check", **detail)
     if not holds:
         why = f" ({params.message})" if params.message else ""
-        raise RunAborted("checkpoint", f"check failed: {params.that}{why}", detail=detail)
+        raise RunAborted("checkpoint", f"check failed: {params.that}{why}", detail=detail,
+                         retryable=True)
     return detail
 
 

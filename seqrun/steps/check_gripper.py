@@ -74,7 +74,7 @@ def run(step: ResolvedStep[CheckGripperParams], ex: StepContext) -> dict:
                         f"{params.tolerance_mm:g} mm")
     if problems:
         raise RunAborted("checkpoint_failed", "gripper check: the gripper "
-                         + " and ".join(problems), module=spec.module)
+                         + " and ".join(problems), module=spec.module, retryable=True)
     return {**reading_detail(reading), "holding": holding}
 
 

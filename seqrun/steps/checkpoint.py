@@ -262,7 +262,7 @@ def run(step: ResolvedStep[CheckpointParams], ex: StepContext) -> dict:
                          f"(tolerance {format_number(pos_tol)} mm) and "
                          f"{format_number(ang_err)}° (tolerance {format_number(ang_tol)}°) "
                          "from the expected pose",
-                         detail=detail)
+                         detail=detail, retryable=True)
     return detail
 
 
@@ -291,7 +291,8 @@ def _relative(step: ResolvedStep[CheckpointParams], ex: StepContext) -> dict:
                          f"relative checkpoint failed: the tool moved {detail['moved_mm']} mm "
                          f"({params.frame} frame), {off:.3f} mm from the expected "
                          f"{detail['expected_moved_mm']} (tolerance "
-                         f"{params.position_tolerance_mm} mm)", detail=detail)
+                         f"{params.position_tolerance_mm} mm)", detail=detail,
+                         retryable=True)
     return detail
 
 

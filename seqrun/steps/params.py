@@ -14,7 +14,8 @@ import re
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Annotated, Any, ClassVar, Literal, Protocol, Union
 
-from pydantic import AfterValidator, ConfigDict, Discriminator, Field, Tag, ValidationInfo
+from pydantic import (AfterValidator, ConfigDict, Discriminator, Field, Tag, ValidationInfo,
+                      model_validator)
 from pydantic_core import PydanticCustomError
 
 from seqrun.yamlsource import FriendlyModel
@@ -28,6 +29,8 @@ __all__ = [
     "LimitPair",
     "ModulesParams",
     "MonitorSpec",
+    "RepeatSpec",
+    "RetrySpec",
     "PoseName",
     "RequirementId",
     "Positive",
@@ -163,6 +166,47 @@ class MonitorSpec(StrictModel):
                                 description="What a trip means, for the operator.")
 
 
+class RepeatSpec(StrictModel):
+    """Run the step several times: ``count`` times, or while a condition holds (checked
+    before each iteration) up to ``max`` times; still holding after ``max``, the run ends
+    as a fault."""
+
+    yaml_name: ClassVar[str] = "repeat"
+    count: int | None = Field(None, ge=1, le=1000, description="How many times to run "
+                                                              "the step.")
+    while_: ExpressionText | None = Field(
+        None, alias="while", description="Run the step again while this holds (checked "
+                                         "before each iteration, e.g. 'not gripper.holding').")
+    max: int | None = Field(None, ge=1, le=1000, description="With while: at most this many "
+                                                            "iterations (required).")
+
+    @model_validator(mode="after")
+    def _one_form(self) -> RepeatSpec:
+        if (self.count is None) == (self.while_ is None):
+            raise PydanticCustomError("repeat", "repeat takes either count or while (with "
+                                                "max), not both or neither")
+        if self.while_ is not None and self.max is None:
+            raise PydanticCustomError("repeat", "repeat with while needs max (the most "
+                                                "iterations it may take)")
+        if self.count is not None and self.max is not None:
+            raise PydanticCustomError("repeat", "max belongs to repeat with while; count "
+                                                "says how many times already")
+        return self
+
+
+class RetrySpec(StrictModel):
+    """Run the step again when it failed in a way that may be retried (a check that did
+    not hold, a wait_until that timed out, a checkpoint outside its tolerance, a gripper
+    check that failed); never after a module fault, a Halt, a guard or monitor halt or an
+    operator abort (docs/safety.md, 'What may be retried')."""
+
+    yaml_name: ClassVar[str] = "retry"
+    times: int = Field(ge=1, le=100, description="How many times to try again at most.")
+    delay_s: float = Field(0.0, ge=0, allow_inf_nan=False,
+                           description="How long to wait (monitoring the arm) before each "
+                                       "retry, seconds.")
+
+
 class StepParams(StrictModel):
     """Parameters every step has."""
 
@@ -184,6 +228,22 @@ class StepParams(StrictModel):
         default_factory=list, max_length=64,
         description="Free tags of this step (kept in report.json and junit.xml), e.g. "
                     "[capture, endurance].")
+    if_: ExpressionText | None = Field(
+        None, alias="if", description="Run the step only if this holds at its start (else "
+                                      "it is reported as skipped), e.g. "
+                                      "'not gripper.holding'. Not on a step that moves the "
+                                      "arm, changes the modules' start-up state or signals "
+                                      "the other arms ('Conditions, loops and retries').")
+    skip_if: ExpressionText | None = Field(
+        None, description="Skip the step (reported as skipped) if this holds at its start. "
+                          "Not where if is not.")
+    repeat: RepeatSpec | None = Field(
+        None, description="Run the step several times: {count: N} or {while: EXPR, max: N} "
+                          "('Conditions, loops and retries'). Not where if is not.")
+    retry: RetrySpec | None = Field(
+        None, description="Try the step again after a failed measurement: {times: N, "
+                          "delay_s: S}; check, wait_until, checkpoint and check_gripper only "
+                          "(docs/safety.md, 'What may be retried').")
 
     @classmethod
     def from_shorthand(cls, value: Any) -> StepParams:

@@ -93,7 +93,7 @@ def run(step: ResolvedStep[WaitUntilParams], ex: StepContext) -> dict:
             if params.on_timeout == "continue":
                 return detail
             raise RunAborted("timeout", f"wait_until: '{params.until}' did not hold within "
-                             f"{params.timeout_s:g} s", detail=detail)
+                             f"{params.timeout_s:g} s", detail=detail, retryable=True)
         if period > sampler.cycle_s:
             ex.wait(period - sampler.cycle_s)
 
