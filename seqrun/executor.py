@@ -34,7 +34,7 @@ import gc
 import time
 from functools import partial
 from dataclasses import replace
-from typing import TYPE_CHECKING, Any, Callable, Iterable
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Sequence
 
 import numpy as np
 
@@ -475,6 +475,22 @@ class Executor:
 
     def gripper_current_limit(self, current_a: float) -> float:
         return self._gripper_driver().gripper_current_limit(current_a)
+
+    def joint_currents_a(self, joints: Sequence[int]) -> list[float | None]:
+        """The actual current (A) of the joints numbered ``joints`` (1-based, as an
+        expression's ``current_a[J]``), None for every other joint."""
+        from seqrun.drivers.base import CurrentReader
+        from seqrun.errors import RunAborted
+
+        if not isinstance(self.driver, CurrentReader):
+            raise RunAborted("no_current", f"the arm's driver ({self.arm.driver}) reads no "
+                             "motor currents")
+        modules = [self.arm.joints[j - 1].module for j in joints]
+        read = self.driver.read_currents(modules)
+        currents: list[float | None] = [None] * len(self.arm.joints)
+        for j, module in zip(joints, modules):
+            currents[j - 1] = read[module]
+        return currents
 
     def gripper_move(self, width_mm: float, speed_mm_s: float) -> None:
         self.beat()

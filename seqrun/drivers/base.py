@@ -359,6 +359,15 @@ class GripperDriver(Protocol):
         """Width, velocity and state of the gripper."""
 
 
+@runtime_checkable
+class CurrentReader(Protocol):
+    """A driver that reads its modules' actual motor current (optional: an expression that
+    reads ``current_a`` is refused on a driver without it)."""
+
+    def read_currents(self, modules: Sequence[int]) -> dict[int, float]:
+        """The actual current of each module in ``modules``, in A (reads only)."""
+
+
 class DriverFamily(Protocol):
     """What :mod:`seqrun.drivers.registry` asks of a driver class (no arm open yet)."""
 

@@ -198,8 +198,9 @@ step runs (each control cycle of a move, each cycle of a wait): `{while: EXPR,
 persist_cycles: N, action: halt | warn, message: ...}`. One that has not held for N
 readings in a row trips: `halt` halts the arm at once and ends the run as a fault (exit 3)
 naming the monitor and the values it read; `warn` gives a `monitor_tripped` event (once,
-until it holds again) and the run goes on. The gripper is not read every cycle, so a
-monitor cannot watch it (a `wait_until` or `check` can). A monitor with a bound tighter
+until it holds again) and the run goes on. The gripper and the motor currents
+(`current_a`) are not read every cycle (each would add an exchange to every cycle of the
+loop), so a monitor cannot watch them (a `wait_until` or `check` can). A monitor with a bound tighter
 than the arm file's `control.max_following_error_deg` halts a lagging joint sooner than
 the run's own check.
 
@@ -303,6 +304,9 @@ def _expression_names() -> str:
         "following_error_deg": "commanded minus measured position of joint J (no value "
                                "before the first move or after a Halt)",
         "target_deg": "what joint J was last commanded",
+        "current_a": "the actual motor current of joint J's module (PowerCube Cur), read "
+                     "when the expression is evaluated: in checks, waits and conditions, "
+                     "not in monitors (not read in the control loop)",
         "tool.x_mm": "the end-effector's position (forward kinematics of the measured "
                      "joints), base frame", "tool.y_mm": "", "tool.z_mm": "",
         "tool.roll_deg": "the end-effector's roll, pitch, yaw (docs: Tools and frames)",

@@ -35,12 +35,17 @@ def check_expression(checker: CheckContext, step: ResolvedStep[Any], text: str,
 
 def check_monitors(checker: CheckContext, step: ResolvedStep[Any], monitors: Any) -> None:
     """A step's monitors: each a condition the arm can be read for every cycle (the
-    gripper is not read in the control loop, so a monitor cannot watch it)."""
+    gripper and the motor currents are not read in the control loop, so a monitor cannot
+    watch them)."""
     for i, monitor in enumerate(monitors):
         text = monitor.while_
         errors = len(checker.errors)
         check_expression(checker, step, text, "monitors", condition=True)
-        if len(checker.errors) == errors and "gripper." in text:
-            checker.errors.append(step.error(
-                f"monitor '{text}': the gripper is not read every cycle; watch it with a "
-                "wait_until or check step", "monitors", i, "while"))
+        if len(checker.errors) > errors:
+            continue
+        for name, what in (("gripper.", "the gripper is"), ("current_a", "the currents are")):
+            if name in text:
+                checker.errors.append(step.error(
+                    f"monitor '{text}': {what} not read every cycle; watch it with a "
+                    "wait_until or check step", "monitors", i, "while"))
+                break

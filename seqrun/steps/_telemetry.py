@@ -29,6 +29,9 @@ class TelemetrySampler:
         self.ex = ex
         self.names: set[str] = set().union(*(e.names for e in expressions)) if expressions \
             else set()
+        #: The joints whose current an expression reads (a read each, when sampled).
+        self.current_joints = sorted(set().union(
+            *(e.joints for e in expressions if "current_a" in e.names)))
         self.params = params or {}
         self.started_at: float | None = None
         self._last: JointReading | None = None
@@ -52,6 +55,8 @@ class TelemetrySampler:
         self._last = reading
         if any(n.startswith("gripper.") for n in self.names):
             values.update(self._gripper())
+        if "current_a" in self.names:
+            values["current_a"] = ex.joint_currents_a(self.current_joints)
         values.update({f"params.{k}": v for k, v in self.params.items()})
         return values
 

@@ -9,7 +9,7 @@ second one (a console's single moves, a test double) implements the same members
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any, Protocol
 
 if TYPE_CHECKING:
@@ -114,6 +114,9 @@ class StepContext(Protocol):
     def gripper_move(self, width_mm: float, speed_mm_s: float) -> None: ...
 
     def gripper_read(self) -> GripperReading: ...
+
+    # -- the joints' actual motor current (A), read when asked (not in the control loop)
+    def joint_currents_a(self, joints: Sequence[int]) -> list[float | None]: ...
 
     # -- the operator and the record
     def ask_operator(self, question: Callable[[Any], bool], arg: Any) -> bool: ...

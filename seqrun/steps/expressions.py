@@ -41,6 +41,9 @@ JOINT_SERIES: dict[str, str] = {
     "vel_deg_s": "deg/s",               # measured velocity (slope of the last readings)
     "following_error_deg": "deg",       # commanded minus measured
     "target_deg": "deg",                # what the joint was last commanded
+    # the module's actual current (PowerCube Cur), read when the expression is evaluated:
+    # not in the control loop, so not in a monitor
+    "current_a": "A",
 }
 
 #: The scalar names: name -> (type, unit). Types: "number" or "bool".

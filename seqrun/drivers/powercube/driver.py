@@ -538,6 +538,12 @@ class PowerCubeDriver:
                                  f"{read:.3f}{unit}, wrote {wrote:.3f}{unit}", module=module)
         return len(writes)
 
+    # ------------------------------------------------------------------ currents
+    def read_currents(self, modules: Sequence[int]) -> dict[int, float]:
+        """Cur (0x4D) of each module, in A: one GetParam each, in one exchange."""
+        acks = self.transact([GetParam(m, ParamId.CUR) for m in modules], idempotent=True)
+        return {m: float(ack.value) for m, ack in zip(modules, acks)}
+
     # ------------------------------------------------------------------ the gripper
     def _gripper(self):
         spec = self.arm.gripper
