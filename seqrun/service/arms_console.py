@@ -168,13 +168,11 @@ class ArmSessions:
         several arms: one part of the run folder per arm, each arm's events on its
         session's hub, a confirm step asked as the arm's question (answered through its
         session). :class:`~seqrun.errors.Refused`: not valid, or an arm busy."""
-        from dataclasses import replace
-
         from seqrun.errors import Refused, UserInputError
         from seqrun.service.arms_check import check_arms_sequence
         from seqrun.service.arms_records import ArmOfRun, ArmsRunRecords
         from seqrun.service.arms_run import run_arms_live
-        from seqrun.service.run_preparation import run_folder
+        from seqrun.service.runlog import prepare_run_folder
 
         if not 0 < speed <= 1:
             raise Refused(f"speed {speed:g} must lie in (0, 1]")
@@ -199,8 +197,8 @@ class ArmSessions:
             sessions = {a: self.sessions[a] for a in tracks}
             warnings: list[str] = []
             try:  # the records of seqrun run's (seqrun/service/arms_records.py)
-                folder = run_folder(replace(next(iter(tracks.values())),
-                                            name=check.tracks.name), None)
+                # where this console's runs go (its --log-dir), as a run of one arm of it
+                folder = prepare_run_folder(None, check.tracks.name, first.log_root)
                 records = ArmsRunRecords.start(
                     folder, tracks,
                     {a: ArmOfRun(s.arm, s.zero, s.arm_path or tracks[a].arm_path,
