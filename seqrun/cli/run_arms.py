@@ -178,7 +178,7 @@ def _run(file: Path, check, contexts, connections, arms, clock_views, *, speed: 
     from seqrun.cli.interrupts import RunSignals
     from seqrun.cli.questions import ask
     from seqrun.service.arms_records import ArmOfRun, ArmsRunRecords
-    from seqrun.service.arms_run import run_arms_live
+    from seqrun.service.arms_run import on_fault_of, run_arms_live
     from seqrun.service.run_control import RunControl
     from seqrun.service.run_preparation import run_folder
 
@@ -228,12 +228,11 @@ def _run(file: Path, check, contexts, connections, arms, clock_views, *, speed: 
         outcome = _arms_live(run_arms_live, tracks, {a: arms[a][0] for a in tracks},
                              connections, controls=controls, on_event=show,
                              zeros={a: arms[a][1] for a in tracks},
-                             record_zero=records.zero_recorders(),
-                             on_fault=_on_fault(check.tracks.project),
-                             log_dirs=records.log_dirs, clock_views=clock_views, speed=speed,
+                             on_fault=on_fault_of(check.tracks.project),
+                             clock_views=clock_views, speed=speed,
                              confirm=confirm, command_mode=command_mode,
                              html_report=not no_report, requests_by_arm=inboxes,
-                             file=str(file), parts=records.parts(),
+                             file=str(file), **records.run_options(),
                              on_idle=view.on_idle if view is not None else None)
         if outcome is not None:   # before the handlers go: a Ctrl-C now keeps it
             interrupts.progress.exit_code = outcome.exit_code
@@ -285,11 +284,6 @@ def _arms_live(run, *args: Any, **kwargs: Any) -> Any:
 
 def _warn(text: str) -> None:
     typer.echo(f"warning: {text}", err=True)
-
-
-def _on_fault(project: Any) -> str:
-    config = getattr(project, "config", None)
-    return config.campaign.on_fault if config is not None else "halt_all"
 
 
 def _printer(arm_id: str):
