@@ -108,6 +108,7 @@ def test_a_stop_request_goes_to_every_arm():
 
 
 # -- --zero-confirmed per arm (issue 45: it was refused for several arms) -----------------
+@pytest.mark.slow  # three campaign runs
 def test_zero_confirmed_for_every_arm_or_per_arm_runs(campaign, tmp_path):
     """A bare POSE is every arm's word, ID=POSE one arm's: each checked as for one arm (on
     the built-in simulator it must name the pose it was powered on at)."""
