@@ -170,6 +170,8 @@ def test_status_watch_json_on_the_simulator():
     assert result.exit_code == 0, result.output
     lines = result.output.strip().splitlines()
     assert len(lines) == 3 and all(json.loads(line)["joints"] for line in lines)
+    # one arm, no campaign of several: every line carries the arm key, with no id
+    assert [json.loads(line)["arm"] for line in lines] == [None, None, None]
 
 
 # -- pose save -----------------------------------------------------------------------------------

@@ -337,3 +337,33 @@ def test_each_arm_lists_its_own_runs_and_those_of_both(client, setup):
     kinds = {s["name"]: s["arms"] for s in client.get("/api/v1/sequences").json()}
     assert kinds["both_nudge.yaml"] is True and kinds["confirm_nudge.yaml"] is False
     assert [client.get(f"/api/v1/arms/{a}/arm").json()["arm_id"] for a in "AB"] == ["A", "B"]
+
+
+#: Both arms only meet (no motion): a campaign run with nothing to wait for but each other.
+MEET = """\
+name: Meet
+description: A signals, B waits for it; nothing moves
+steps:
+  - parallel:
+      - arm: A
+        steps: [signal: here]
+      - arm: B
+        steps: [wait_for: here]
+"""
+
+
+def test_a_two_arm_run_goes_where_the_consoles_runs_go(setup, tmp_path):
+    """Issue 45: the console's run of several arms went to the campaign's runs/ whatever
+    the console's --log-dir (its log root), so its own list of runs did not show it; a run
+    of one arm went to the log root. Now both do, with arms.json and run.mcap there."""
+    elsewhere = tmp_path / "elsewhere"
+    for arm_id in setup.sessions.arm_ids:
+        setup.sessions[arm_id].log_root = elsewhere   # as `seqrun console --log-dir` sets
+    (setup.folder / "sequences" / "meet.yaml").write_text(MEET)
+    run = setup.sessions.run_sequence(setup.folder / "sequences" / "meet.yaml",
+                                      html_report=False)
+    assert run.finished.wait(60)
+    assert run.error is None and run.outcome.exit_code == 0, run.as_dict()
+    assert run.folder.parent == elsewhere
+    assert (run.folder / "arms.json").is_file() and (run.folder / "run.mcap").is_file()
+    assert not (setup.folder / "runs").exists() or not any((setup.folder / "runs").iterdir())

@@ -88,7 +88,8 @@ def campaign(tmp_path: Path, text: str = TWO_ARMS) -> Path:
 
 def test_the_console_serves_every_arm_and_stop_halts_both(tmp_path):
     folder = campaign(tmp_path)
-    proc, printed, url, token = start(folder, tmp_path, "--sim")
+    # (--zero-confirmed: every arm's word, checked per arm; issue 45: it was refused)
+    proc, printed, url, token = start(folder, tmp_path, "--sim", "--zero-confirmed", "park")
     try:
         lines = printed.splitlines()
         # the first lines: each arm, its file and its bus
@@ -119,13 +120,21 @@ def test_arm_id_serves_the_named_arms_only_and_bad_options_are_one_line(tmp_path
         stop(proc)
     for options, words in ((["--arm-id", "C"], "unknown arm 'C'"),
                            (["-i", "virtual", "-c", "x"], "not for a campaign with several"),
-                           (["--zero-confirmed", "park"], "--zero-confirmed")):
+                           (["--zero-confirmed", "C=park"], "no arm 'C' here (arms A, B)")):
         run = subprocess.run([sys.executable, "-m", "seqrun", "console", "--sim", "--port", "0",
                               *options], cwd=folder, env=env(tmp_path), capture_output=True,
                              text=True, timeout=60)
         assert run.returncode == 2, (options, run.stdout, run.stderr)
         said = (run.stdout + run.stderr).strip().splitlines()
         assert len(said) == 1 and words in said[0] and "Traceback" not in said[0], said
+    # one arm's --zero-confirmed that is not its zero: refused naming the arm
+    run = subprocess.run([sys.executable, "-m", "seqrun", "console", "--sim", "--port", "0",
+                          "--zero-confirmed", "A=park", "--zero-confirmed", "B=totem"],
+                         cwd=folder, env=env(tmp_path), capture_output=True, text=True,
+                         timeout=60)
+    assert run.returncode == 2, run.stdout + run.stderr
+    assert run.stderr.strip().splitlines()[-1].startswith(
+        "error: arm B: --zero-confirmed totem: the zero reference in force is Park"), run.stderr
 
 
 def test_two_served_arms_each_its_bus_and_zero_and_one_stop(tmp_path):

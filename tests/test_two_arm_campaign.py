@@ -151,7 +151,12 @@ def test_status_of_every_arm_reads_each_its_own_arm(two_served):
     result = CliRunner().invoke(app, ["status", "--json"])
     assert result.exit_code == 0, result.output
     a, b = [json.loads(line) for line in result.output.splitlines() if line.startswith("{")]
+    assert (a["arm"], b["arm"]) == ("A", "B")  # each line says whose arm it is
     assert "HALTED" not in (a["joints"][2]["state"] or "")
     assert "HALTED" in b["joints"][2]["state"]
     result = CliRunner().invoke(app, ["status", "--watch"])
     assert result.exit_code == 2 and "--watch follows one arm" in result.output
+    result = CliRunner().invoke(app, ["status", "--watch", "--json", "--count", "2",
+                                      "--period", "0", "--arm-id", "B"])
+    assert result.exit_code == 0, result.output
+    assert [json.loads(line)["arm"] for line in result.output.splitlines()] == ["B", "B"]

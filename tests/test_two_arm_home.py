@@ -106,3 +106,25 @@ def test_a_bus_on_the_command_line_is_refused_for_several_arms(two_arms):
     assert result.exit_code == 2
     assert "each arm of this campaign has its own" in result.output
     assert none_homed(two_arms["A"]) and none_homed(two_arms["B"])
+
+
+def test_zero_confirmed_per_arm_answers_each_arms_question(two_arms):
+    """Issue 45: --zero-confirmed for several arms. ID=POSE answers that arm's zero
+    question (checked as for one arm: A stands at Park, B at Totem); nothing is asked."""
+    result = CliRunner().invoke(app, ["home", "--zero-confirmed", "A=park",
+                                      "--zero-confirmed", "B=totem"], input="")
+    assert result.exit_code == 0, result.output
+    assert "(--zero-confirmed park)" in result.output
+    assert "(--zero-confirmed totem)" in result.output
+    assert homed(two_arms["A"]) and homed(two_arms["B"])
+
+
+def test_a_bare_zero_confirmed_is_every_arms_and_refused_for_the_arm_elsewhere(two_arms):
+    """A bare POSE is said for every arm: B's zero is Totem, so B is refused in one line
+    naming it, and A (at Park) is homed all the same."""
+    result = CliRunner().invoke(app, ["home", "--zero-confirmed", "park"], input="")
+    assert result.exit_code == 2, result.output
+    lines = lines_of(result)
+    assert any(l.startswith("error: arm B: --zero-confirmed park: the zero reference in "
+                            "force is ") for l in lines), result.output
+    assert homed(two_arms["A"]) and none_homed(two_arms["B"])

@@ -105,3 +105,41 @@ def test_a_stop_request_goes_to_every_arm():
     for inbox in inboxes:
         kinds = [(r.kind, r.reason) for r in inbox.take()]
         assert kinds == [("abort", "Ctrl-C: controlled stop"), ("halt", "SIGTERM")]
+
+
+# -- --zero-confirmed per arm (issue 45: it was refused for several arms) -----------------
+@pytest.mark.slow  # three campaign runs
+def test_zero_confirmed_for_every_arm_or_per_arm_runs(campaign, tmp_path):
+    """A bare POSE is every arm's word, ID=POSE one arm's: each checked as for one arm (on
+    the built-in simulator it must name the pose it was powered on at)."""
+    for n, given in enumerate((["park"], ["A=park", "B=park"], ["totem", "A=park", "B=park"])):
+        options = [w for pose in given for w in ("--zero-confirmed", pose)]
+        result = run("sequences/short.yaml", *options, "--log-dir", str(tmp_path / f"r{n}"))
+        assert result.exit_code == 0, (given, result.output)
+        assert "arm A: PASSED" in result.output and "arm B: PASSED" in result.output
+
+
+def test_zero_confirmed_of_another_pose_for_one_arm_is_refused_naming_it(campaign, tmp_path):
+    result = run("sequences/short.yaml", "--zero-confirmed", "A=park", "--zero-confirmed",
+                 "B=totem", "--log-dir", str(tmp_path / "run"))
+    assert result.exit_code == 2, result.output
+    assert result.output.strip().splitlines()[-1] == (
+        "error: arm B: --zero-confirmed totem: the zero reference in force is Park (the "
+        "simulator's power-on pose); nothing was sent")
+    assert not (tmp_path / "run").exists()   # no run started
+
+
+@pytest.mark.parametrize("given, line", [
+    (["C=park"], "error: --zero-confirmed C=park: no arm 'C' here (arms A, B)"),
+    (["A="], "error: --zero-confirmed A=: name the pose arm A stands in (e.g. A=park)"),
+    (["A=park", "A=totem"], "error: --zero-confirmed: arm A named twice (A=park, A=totem)"),
+    (["park", "totem"], "error: --zero-confirmed park and totem: one pose for every arm, "
+                        "or ID=POSE for each arm"),
+])
+def test_a_bad_zero_confirmed_is_one_line_before_anything_opens(campaign, tmp_path, given,
+                                                                line):
+    options = [w for pose in given for w in ("--zero-confirmed", pose)]
+    result = run("sequences/short.yaml", *options, "--log-dir", str(tmp_path / "run"))
+    assert result.exit_code == 2
+    assert result.output.strip() == line
+    assert not (tmp_path / "run").exists()

@@ -95,6 +95,46 @@ def test_halt_and_status_of_a_two_arm_campaign_leave_another_folders_simulator_a
 
 
 @pytest.mark.slow
+def test_status_and_halt_by_pid_of_a_two_arm_console_act_on_each_arm_once(tmp_path,
+                                                                           monkeypatch):
+    """A console of both arms holds one record per arm under one pid. `status --pid PID`
+    saw both records for each arm ("... are live: pick one with --pid PID") and ended with
+    "error: not confirmed"; `halt --pid PID` halted both arms for each arm. Now each arm is
+    read (and halted) through its own record, and status ends cleanly."""
+    campaign = two_arm_campaign(tmp_path / "mine", monkeypatch)
+    console, _ = console_process(tmp_path / "runs", "--project", str(campaign))
+    try:
+        wait_for(lambda: len([h for h in live_owners() if h.pid == console.pid]) == 2,
+                 "the console's two records")
+        status = seqrun("status", "--pid", str(console.pid), "--json", cwd=campaign)
+        assert status.returncode == 0, status.stdout + status.stderr
+        assert status.stderr == ""
+        lines = [json.loads(line) for line in status.stdout.splitlines()]
+        assert [(line["arm"], line["from"]["pid"]) for line in lines] == [
+            ("A", console.pid), ("B", console.pid)]
+        table = seqrun("status", "--pid", str(console.pid), cwd=campaign)
+        assert table.returncode == 0 and table.stderr == "", table.stdout + table.stderr
+        assert table.stdout.rstrip().splitlines()[-1].startswith("end-effector")
+        halt = seqrun("halt", "--pid", str(console.pid), cwd=campaign)
+        assert halt.returncode == 0, halt.stdout + halt.stderr
+        assert halt.stdout.count("Halt confirmed") == 2, halt.stdout
+    finally:
+        console.kill()
+        console.wait()
+
+
+def test_a_failing_arm_of_several_ends_status_with_not_read(tmp_path, monkeypatch):
+    """With no arm of the campaign live, each arm's status says so, and the last line
+    names the arms not read (it said "not confirmed", a halt's word)."""
+    two_arm_campaign(tmp_path / "mine", monkeypatch)
+    result = CliRunner().invoke(app, ["status"])
+    assert result.exit_code == 2, result.output
+    assert result.output.splitlines()[-1] == \
+        "error: status not read for arms A, B (every arm was asked)"
+    assert "not confirmed" not in result.output
+
+
+@pytest.mark.slow
 def test_the_readmes_first_command_works_beside_another_folders_simulator(tmp_path):
     theirs, _ = console_elsewhere(tmp_path)
     try:

@@ -349,3 +349,18 @@ def test_a_power_off_step_that_cannot_write_the_record_fails_the_run(tmp_path, m
     assert failed.value.cause == "power_off"
     assert "cannot write the zero reference" in str(failed.value)
     assert "NOT recorded" in str(failed.value) and "\n" not in str(failed.value)
+
+
+def test_zero_confirmed_per_arm_reads_bare_and_named_poses():
+    from seqrun.service.zero import confirmed_per_arm
+
+    assert confirmed_per_arm([], ["A", "B"]) == {}
+    assert confirmed_per_arm(["park"], ["A", "B"]) == {"A": "park", "B": "park"}
+    assert confirmed_per_arm(["B=totem"], ["A", "B"]) == {"B": "totem"}
+    assert confirmed_per_arm(["park", "B=totem"], ["A", "B"]) == {"A": "park", "B": "totem"}
+    assert confirmed_per_arm(["totem"], [None]) == {None: "totem"}
+    assert confirmed_per_arm(["A=totem"], ["A"]) == {"A": "totem"}
+    with pytest.raises(UserInputError, match="this arm has no id"):
+        confirmed_per_arm(["A=totem"], [None])
+    with pytest.raises(UserInputError, match="name the pose the arm stands in"):
+        confirmed_per_arm([""], ["A", "B"])

@@ -88,7 +88,7 @@ def status_command(
         fail(f"--watch follows one arm: name it with --arm-id ({', '.join(map(str, ids))})")
     each_arm(ids, lambda one: _status_of(
         one, watch, as_json, period, count, pid, arm_file, project_dir, interface, channel,
-        bitrate, bus_kwargs, sim, response_timeout_ms))
+        bitrate, bus_kwargs, sim, response_timeout_ms), failed="status not read")
 
 
 def _status_of(arm_id, watch, as_json, period, count, pid, arm_file, project_dir, interface,
@@ -125,12 +125,12 @@ def _status_of(arm_id, watch, as_json, period, count, pid, arm_file, project_dir
                 console.print(source.zero_text, highlight=False, markup=False)
         if not watch:
             if as_json:
-                typer.echo(json.dumps(_with_origin(status, source)))
+                typer.echo(json.dumps(_with_origin(status, source, arm_id)))
             else:
                 console.print(status_table(status, _title(arm, source, status)))
             return
         if as_json:
-            _watch_json(source, status, period, count, warn)
+            _watch_json(source, status, period, count, warn, arm_id)
             return
         if not console.is_terminal:  # a file or a pipe: one whole line per refresh
             from seqrun.cli.status_line import status_line
@@ -195,23 +195,25 @@ def arm_ids_of(arm_ids, project_dir, interface=None, channel=None,
     return [c.arm_id for c in contexts]
 
 
-def each_arm(ids: list[str | None], act) -> None:
+def each_arm(ids: list[str | None], act, *, failed: str = "not confirmed") -> None:
     """``act(arm_id)`` for every arm; with several, one arm's failure (its own ``error:``
-    line) does not keep the next from being acted on; the exit code is the worst."""
+    line) does not keep the next from being acted on; the exit code is the worst and the
+    last line names the arms that failed (``failed``: what went wrong for them, e.g. a
+    Halt "not confirmed", a status "not read")."""
     if len(ids) == 1:
         act(ids[0])
         return
-    failed: list[tuple[str, int]] = []
+    failures: list[tuple[str, int]] = []
     for arm_id in ids:
         try:
             act(arm_id)
         except typer.Exit as exc:
             if exc.exit_code:
-                failed.append((str(arm_id), exc.exit_code))
-    if failed:
-        fail(f"not confirmed for arm{'s' * (len(failed) > 1)} "
-             f"{', '.join(a for a, _ in failed)} (every arm was asked)",
-             max(code for _, code in failed))
+                failures.append((str(arm_id), exc.exit_code))
+    if failures:
+        fail(f"{failed} for arm{'s' * (len(failures) > 1)} "
+             f"{', '.join(a for a, _ in failures)} (every arm was asked)",
+             max(code for _, code in failures))
 
 
 def _title(arm, source, status: dict) -> str:
@@ -222,12 +224,15 @@ def _title(arm, source, status: dict) -> str:
     return f"{arm.name} (from seqrun pid {source.holder['pid']}{where})"
 
 
-def _with_origin(status: dict, source) -> dict:
-    """A reading from the bus owner says so (``"from": {"pid", "command"}``)."""
+def _with_origin(status: dict, source, arm_id: str | None) -> dict:
+    """A reading as ``status --json`` writes it: with its arm's id (``"arm"``: the id in a
+    campaign of several arms, else None), and, when it comes from the bus owner, saying so
+    (``"from": {"pid", "command"}``)."""
+    line = {"arm": arm_id, **status}
     if source.holder is None:
-        return status
-    return {**status, "from": {"pid": source.holder["pid"],
-                               "command": source.holder["command"]}}
+        return line
+    return {**line, "from": {"pid": source.holder["pid"],
+                             "command": source.holder["command"]}}
 
 
 def _next_reading(source, previous: dict, warn) -> dict:
@@ -251,12 +256,14 @@ def _refreshes(period: float, count: int | None) -> Iterator[int]:
         yield index
 
 
-def _watch_json(source, status: dict, period: float, count: int | None, warn) -> None:
+def _watch_json(source, status: dict, period: float, count: int | None, warn,
+                arm_id: str | None) -> None:
     """JSON lines: one object per refresh, flushed at once (for a pipe), with its time."""
     for index in _refreshes(period, count):
         if index:
             status = _next_reading(source, status, warn)
-        typer.echo(json.dumps({"time": round(time.time(), 3), **_with_origin(status, source)}))
+        typer.echo(json.dumps({"time": round(time.time(), 3),
+                               **_with_origin(status, source, arm_id)}))
         sys.stdout.flush()
 
 

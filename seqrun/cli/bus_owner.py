@@ -37,9 +37,9 @@ def live_targets(context, what: str, pid: int | None = None) -> list | None:
     (:class:`~seqrun.service.arm_context.NoArm`, exit 2), and where another seqrun drives a
     real bus on this machine the message lists it with the command that reaches it: an
     operator's halt never silently misses an arm in motion. ``--pid`` picks any live run or
-    console by its pid. ``--sim`` (a private simulator asked for) is refused for ``halt``
-    beside a live run or console of this arm, or one on a real bus: its "confirmed" would
-    be about the wrong arm.
+    console by its pid (of one driving several arms: this arm's record). ``--sim`` (a
+    private simulator asked for) is refused for ``halt`` beside a live run or console of
+    this arm, or one on a real bus: its "confirmed" would be about the wrong arm.
     """
     from seqrun.errors import UserInputError
     from seqrun.service.arm_context import NoArm
@@ -62,6 +62,8 @@ def live_targets(context, what: str, pid: int | None = None) -> list | None:
         if not live:
             raise UserInputError(f"no live seqrun run or console with pid {pid} on this "
                                  "machine")
+        # A run or console of several arms holds one record per arm: this arm's is meant.
+        live = context.own_controllers(live) or live
     else:
         live = context.own_controllers(everyone)
     if not live:

@@ -85,3 +85,22 @@ ResponseTimeoutOption = Annotated[Optional[float], typer.Option(
     "--response-timeout-ms", metavar="MS",
     help="How long to wait for each module's answer (default: $SEQRUN_RESPONSE_TIMEOUT_MS, "
          "else the arm file's can.response_timeout_s, 50 ms).")]
+
+
+#: ``--zero-confirmed`` of a command that may drive several arms (repeatable):
+#: ``POSE`` for every arm, ``ID=POSE`` for one (:func:`seqrun.service.zero.confirmed_per_arm`).
+ZeroConfirmedPerArmOption = Annotated[Optional[list[str]], typer.Option(
+    "--zero-confirmed", metavar="[ID=]POSE", help="Answer 'does the arm stand in POSE?' "
+    "after a power-on without asking: the operator's word that the arm stands in the "
+    "recorded power-off pose POSE (a different record refuses to start; --yes never "
+    "answers it). With several arms: ID=POSE for arm ID (repeatable), a bare POSE for "
+    "every arm.")]
+
+
+def zero_confirmed_of(values: list[str] | None, arm_ids: list[str | None]
+                      ) -> dict[str | None, str]:
+    """``--zero-confirmed`` per arm (one line and exit 2 on a bad value)."""
+    from seqrun.service.zero import confirmed_per_arm
+
+    with user_errors():
+        return confirmed_per_arm(values or [], arm_ids)

@@ -21,7 +21,8 @@ from seqrun.cli.app import app
 from seqrun.cli.arm_commands import ArmIdOption
 from seqrun.cli.common import (ArmFileOption, BitrateOption, BusKwargsOption,
                                CampaignOption, ChannelOption, InterfaceOption,
-                               ResponseTimeoutOption, SimOption, fail, user_errors)
+                               ResponseTimeoutOption, SimOption, ZeroConfirmedPerArmOption,
+                               fail, user_errors, zero_confirmed_of)
 from seqrun.cli.foxglove_option import (FoxgloveOption, FoxgloveTypesOption, check_foxglove,
                                         start_foxglove)
 from seqrun.cli.realtime_option import use_realtime
@@ -56,9 +57,7 @@ def console_command(
     yes: Annotated[bool, typer.Option(
         "--yes", "-y", help="Kept for scripts; it does not answer the zero question "
                             "(--zero-confirmed POSE does).")] = False,
-    zero_confirmed: Annotated[Optional[str], typer.Option(
-        "--zero-confirmed", metavar="POSE", help="Answer 'does the arm stand in POSE?' after "
-        "a power-on without asking (a different record refuses to start).")] = None,
+    zero_confirmed: ZeroConfirmedPerArmOption = None,
     foxglove: FoxgloveOption = None,
     foxglove_types: FoxgloveTypesOption = None,
     arm_id: ArmIdOption = None,
@@ -74,12 +73,14 @@ def console_command(
         if not 0 <= port <= 65535:
             fail(f"--port must lie in 0-65535, got {port}")
         check_foxglove(foxglove, foxglove_types)
-        several = bool(campaign_arm_ids(campaign_here(project_dir)))
+        campaign_ids = campaign_arm_ids(campaign_here(project_dir))
+        several = bool(campaign_ids)
+        confirmed = zero_confirmed_of(zero_confirmed, list(campaign_ids) or [None])
         if several:
             refused = {"-i/--interface": interface, "-c/--channel": channel,
                        "-b/--bitrate": bitrate, "--bus-kwargs": bus_kwargs,
-                       "--arm": arm_file, "--zero-confirmed": zero_confirmed,
-                       "--foxglove": foxglove, "--foxglove-types": foxglove_types}
+                       "--arm": arm_file, "--foxglove": foxglove,
+                       "--foxglove-types": foxglove_types}
             given = [name for name, value in refused.items() if value]
             if given:
                 fail(f"{', '.join(given)}: not for a campaign with several arms (each arm's "
@@ -92,7 +93,7 @@ def console_command(
     if several:
         _serve_arms(arm_id, project_dir=project_dir, sim=sim, port=port, host=host,
                     log_dir=log_dir, response_timeout_ms=response_timeout_ms,
-                    rt_priority=rt_priority)
+                    rt_priority=rt_priority, confirmed=confirmed)
         return
     with user_errors():
         # The arm context: the campaign here, its arm, its bus (seqrun/service/arm_context.py).
@@ -117,7 +118,7 @@ def console_command(
     typer.echo(context.headline(connection))
     try:
         zero = zero_or_exit(connection, arm, lambda q: ask(q, False), typer.echo,
-                            confirmed=zero_confirmed)
+                            confirmed=confirmed.get(None))
         arm = zero.apply(arm)
     except BaseException:
         sock.close()
@@ -187,7 +188,8 @@ def _serve_until_ended(application, sock, started, halt) -> None:
 
 def _serve_arms(arm_ids: list[str] | None, *, project_dir: Path | None, sim: bool,
                 port: int, host: str | None, log_dir: Path | None,
-                response_timeout_ms: float | None, rt_priority: int | None) -> None:
+                response_timeout_ms: float | None, rt_priority: int | None,
+                confirmed: dict[str | None, str] | None = None) -> None:
     """The console of several arms (docs/two-arms.md): each arm's bus opened and claimed
     and its zero decided as ``seqrun run`` of a two-arm sequence does, one arm session
     each, one page for all, one STOP for all."""
@@ -217,7 +219,7 @@ def _serve_arms(arm_ids: list[str] | None, *, project_dir: Path | None, sim: boo
         open_buses(contexts, connections)
         for arm_id, context in contexts.items():
             typer.echo(context.headline(connections[arm_id]))
-        arms = decide_zeros(contexts, connections)
+        arms = decide_zeros(contexts, connections, confirmed)
         first = next(iter(contexts.values()))
         runs = first.runs_dir if first.runs_dir.is_absolute() else Path.cwd() / first.runs_dir
 

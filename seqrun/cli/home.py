@@ -23,9 +23,9 @@ import typer
 from seqrun.cli.app import app
 from seqrun.cli.common import (ArmFileOption, BitrateOption, BusKwargsOption,
                                CampaignOption, ChannelOption, InterfaceOption,
-                               ResponseTimeoutOption, SimOption, fail, user_errors)
+                               ResponseTimeoutOption, SimOption, ZeroConfirmedPerArmOption,
+                               fail, user_errors, zero_confirmed_of)
 from seqrun.cli.arm_commands import ArmIdOption
-from seqrun.cli.zero import ZeroConfirmedOption
 
 JointsOption = Annotated[Optional[str], typer.Option(
     "--joints", metavar="J1,J2", help="Home only these joints (names, comma-separated; "
@@ -40,7 +40,7 @@ def home_command(joints: JointsOption = None,
                  bus_kwargs: BusKwargsOption = None, sim: SimOption = False,
                  response_timeout_ms: ResponseTimeoutOption = None,
                  arm_id: ArmIdOption = None,
-                 zero_confirmed: ZeroConfirmedOption = None) -> None:
+                 zero_confirmed: ZeroConfirmedPerArmOption = None) -> None:
     """Home the modules (enables the motors; a PRL does not move). Confirmed by reading
     every module back (HOME_OK, not moving); exit 3 naming the modules that did not
     confirm, or that are halted or in error (seqrun reset first). Refused while a run or
@@ -51,9 +51,10 @@ def home_command(joints: JointsOption = None,
 
     with user_errors():
         ids = arm_ids_of(arm_id, project_dir, interface, channel, arm_file)
+    confirmed = zero_confirmed_of(zero_confirmed, ids)
     each_arm(ids, lambda one: _home_arm(one, joints, arm_file, project_dir, interface,
                                          channel, bitrate, bus_kwargs, sim,
-                                         response_timeout_ms, zero_confirmed))
+                                         response_timeout_ms, confirmed.get(one)))
 
 
 def _home_arm(arm_id, joints, arm_file, project_dir, interface, channel, bitrate, bus_kwargs,

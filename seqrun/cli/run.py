@@ -18,7 +18,8 @@ import typer
 from seqrun.cli import interrupts
 from seqrun.cli.app import app
 from seqrun.cli.common import (BitrateOption, BusKwargsOption, ChannelOption, InterfaceOption,
-                               OneArmOption, SimOption, fail, user_errors)
+                               OneArmOption, SimOption, ZeroConfirmedPerArmOption, fail,
+                               user_errors, zero_confirmed_of)
 from seqrun.cli.foxglove_option import FoxgloveOption, FoxgloveTypes, FoxgloveTypesOption
 from seqrun.defaults import EXIT_INVALID, EXIT_OPERATOR_ABORT
 from seqrun.errors import SequenceInvalid
@@ -127,11 +128,7 @@ def run_command(
     no_report: Annotated[bool, typer.Option(
         "--no-report", help="Do not draw report.html after the run (bulk runs; "
                             "'seqrun report RUN_DIR' draws it later).")] = False,
-    zero_confirmed: Annotated[Optional[str], typer.Option(
-        "--zero-confirmed", metavar="POSE", help="Answer 'does the arm stand in POSE?' after "
-        "a power-on without asking: the operator's word that the arm stands in the recorded "
-        "power-off pose POSE (a different record refuses the run). --yes never answers it.")]
-    = None,
+    zero_confirmed: ZeroConfirmedPerArmOption = None,
     foxglove: FoxgloveOption = None,
     foxglove_types: FoxgloveTypesOption = None,
     arm_id: OneArmOption = None,
@@ -161,12 +158,11 @@ def run_command(
         run_arms(file, arms_project, sim=sim, sim_fault=sim_fault or [], speed=speed,
                  yes=yes, log_dir=log_dir, start=start, started=started,
                  virtual_time=virtual_time, no_report=no_report, command_mode=command_mode,
-                 refused={"--arm": arm_file is not None,
+                 zero_confirmed=zero_confirmed or [], refused={"--arm": arm_file is not None,
                           "-i/-c/-b/--bus-kwargs": bool(interface or channel or bitrate
                                                         or bus_kwargs),
                           "--from": from_step != 1, "--step": step,
                           "--power-on-at": power_on_at is not None,
-                          "--zero-confirmed": zero_confirmed is not None,
                           "--rt-priority": rt_priority is not None,
                           "--foxglove-types": foxglove_types is not None,
                           "--param": bool(param)}, plain=plain)
@@ -175,6 +171,7 @@ def run_command(
     from seqrun.service.run_preparation import RunInvalid, RunRequest, prepare_run
 
     keep_running_on_broken_pipe()  # a closed stdout never ends a run
+    confirmed = zero_confirmed_of(zero_confirmed, [arm_id]).get(arm_id)  # (a bad one: now)
     console = make_console(stderr=False)
     from seqrun.cli.foxglove_option import check_foxglove
 
@@ -202,7 +199,7 @@ def run_command(
 
     requests = StopRequests()
     control = RunControl.serve(run.connection, run.arm, requests)
-    zero = _confirm_start_or_record(console, run, yes, log_dir, zero_confirmed)
+    zero = _confirm_start_or_record(console, run, yes, log_dir, confirmed)
     if _use_realtime(console, rt_priority, virtual_time):
         _watchdog_at_real_time(console, run)
     folder = _run_folder(console, run, log_dir)

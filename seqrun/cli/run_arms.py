@@ -24,7 +24,7 @@ from typing import Any, NoReturn
 
 import typer
 
-from seqrun.cli.common import fail, user_errors
+from seqrun.cli.common import fail, user_errors, zero_confirmed_of
 from seqrun.defaults import EXIT_FAULT, EXIT_INVALID, EXIT_OPERATOR_ABORT
 from seqrun.errors import UserInputError
 from seqrun.stop_requests import OPERATOR_HALT, StopRequests
@@ -61,7 +61,8 @@ def _arm_faults(specs: list[str], ids: tuple[str, ...]) -> dict[str, list[str]]:
 def run_arms(file: Path, project: Any, *, sim: bool, sim_fault: list[str], speed: float,
              yes: bool, log_dir: Path | None, start: str | None, started: bool,
              virtual_time: bool, no_report: bool, command_mode: str | None,
-             refused: dict[str, bool], plain: bool = False) -> NoReturn:
+             refused: dict[str, bool], plain: bool = False,
+             zero_confirmed: list[str] | None = None) -> NoReturn:
     from seqrun.service.arm_context import resolve_context
     from seqrun.service.arms_check import check_arms_sequence
 
@@ -71,6 +72,7 @@ def run_arms(file: Path, project: Any, *, sim: bool, sim_fault: list[str], speed
              "and bus are in seqrun.toml)")
     ids = project.config.arm_ids
     faults = _arm_faults(sim_fault, ids)
+    confirmed = zero_confirmed_of(zero_confirmed, list(ids))  # a bad value: before anything
     with user_errors():
         check = check_arms_sequence(file, project, start=start, started=started, speed=speed,
                                     dry_run=False)
@@ -105,7 +107,7 @@ def run_arms(file: Path, project: Any, *, sim: bool, sim_fault: list[str], speed
         clock_views = {a: shared.view() for a in tracks}
     try:
         open_buses(contexts, connections, clock_views)
-        arms = _confirm_and_zero(contexts, connections, check, yes)
+        arms = _confirm_and_zero(contexts, connections, check, yes, confirmed)
         code = _run(file, check, contexts, connections, arms, clock_views, speed=speed,
                     yes=yes, log_dir=log_dir, no_report=no_report, command_mode=command_mode,
                     plain=plain)
@@ -125,8 +127,10 @@ def open_buses(contexts: dict[str, Any], connections: dict[str, Any],
             connections[arm_id] = context.open_connection(live=True, **extra)
 
 
-def _confirm_and_zero(contexts, connections, check, yes: bool) -> dict[str, Any]:
-    """The banner per arm, the operator's yes on real hardware, each arm's zero."""
+def _confirm_and_zero(contexts, connections, check, yes: bool,
+                      confirmed: dict[str | None, str]) -> dict[str, Any]:
+    """The banner per arm, the operator's yes on real hardware, each arm's zero
+    (``confirmed``: the poses ``--zero-confirmed`` says arms stand in)."""
     from seqrun.cli.questions import ask
 
     for arm_id, context in contexts.items():
@@ -136,14 +140,16 @@ def _confirm_and_zero(contexts, connections, check, yes: bool) -> dict[str, Any]
                         f"{', '.join(real)}?", yes, say=_say):
         typer.echo("Not started: the operator declined. Nothing was sent.")
         raise typer.Exit(EXIT_OPERATOR_ABORT)
-    return decide_zeros(contexts, connections)
+    return decide_zeros(contexts, connections, confirmed)
 
 
-def decide_zeros(contexts: dict[str, Any], connections: dict[str, Any]
+def decide_zeros(contexts: dict[str, Any], connections: dict[str, Any],
+                 confirmed: dict[str | None, str] | None = None
                  ) -> dict[str, tuple[Any, Any]]:
     """Each arm's zero reference, decided as for one arm (after a power-on on real
-    hardware the terminal asks per arm): arm id -> (the arm with it applied, the zero).
-    ``seqrun run`` and ``seqrun console`` of several arms."""
+    hardware the terminal asks per arm, unless ``confirmed`` names the pose that arm
+    stands in: ``--zero-confirmed``, checked as for one arm): arm id -> (the arm with it
+    applied, the zero). ``seqrun run`` and ``seqrun console`` of several arms."""
     from seqrun.cli.questions import ask
     from seqrun.cli.zero import zero_or_exit
 
@@ -156,7 +162,7 @@ def decide_zeros(contexts: dict[str, Any], connections: dict[str, Any]
             typer.echo(f"arm {arm_id}: {text}")
 
         zero = zero_or_exit(connections[arm_id], context.arm, ask_zero, show_zero,
-                            arm_id=arm_id)
+                            confirmed=(confirmed or {}).get(arm_id), arm_id=arm_id)
         arms[arm_id] = (zero.apply(context.arm), zero)
     return arms
 
@@ -172,7 +178,7 @@ def _run(file: Path, check, contexts, connections, arms, clock_views, *, speed: 
     from seqrun.cli.interrupts import RunSignals
     from seqrun.cli.questions import ask
     from seqrun.service.arms_records import ArmOfRun, ArmsRunRecords
-    from seqrun.service.arms_run import run_arms_live
+    from seqrun.service.arms_run import on_fault_of, run_arms_live
     from seqrun.service.run_control import RunControl
     from seqrun.service.run_preparation import run_folder
 
@@ -222,12 +228,11 @@ def _run(file: Path, check, contexts, connections, arms, clock_views, *, speed: 
         outcome = _arms_live(run_arms_live, tracks, {a: arms[a][0] for a in tracks},
                              connections, controls=controls, on_event=show,
                              zeros={a: arms[a][1] for a in tracks},
-                             record_zero=records.zero_recorders(),
-                             on_fault=_on_fault(check.tracks.project),
-                             log_dirs=records.log_dirs, clock_views=clock_views, speed=speed,
+                             on_fault=on_fault_of(check.tracks.project),
+                             clock_views=clock_views, speed=speed,
                              confirm=confirm, command_mode=command_mode,
                              html_report=not no_report, requests_by_arm=inboxes,
-                             file=str(file), parts=records.parts(),
+                             file=str(file), **records.run_options(),
                              on_idle=view.on_idle if view is not None else None)
         if outcome is not None:   # before the handlers go: a Ctrl-C now keeps it
             interrupts.progress.exit_code = outcome.exit_code
@@ -279,11 +284,6 @@ def _arms_live(run, *args: Any, **kwargs: Any) -> Any:
 
 def _warn(text: str) -> None:
     typer.echo(f"warning: {text}", err=True)
-
-
-def _on_fault(project: Any) -> str:
-    config = getattr(project, "config", None)
-    return config.campaign.on_fault if config is not None else "halt_all"
 
 
 def _printer(arm_id: str):

@@ -239,18 +239,19 @@ def zero_or_exit(connection, arm, ask: Callable[[str], bool], show: Callable[[st
     """:func:`zero_at_run_start` for a command: what it refuses is one line and the usage
     exit code, a bus that does not answer is one line and the fault exit code (a timeout
     is no usage error), ``arm ID:`` first when a campaign has several arms."""
+    where = f"arm {arm_id}: " if arm_id else ""
     with user_errors():
         try:
             return zero_at_run_start(connection, arm, ask, show, confirmed=confirmed)
         except BusError as exc:
-            where = f"arm {arm_id}: " if arm_id else ""
             fail(f"{where}cannot read the modules' state: {exc}", EXIT_FAULT)
+        except UserInputError as exc:   # (a --zero-confirmed of another arm's pose, ...)
+            fail(f"{where}{exc}")
 
 
 ZeroConfirmedOption = Annotated[Optional[str], typer.Option(
     "--zero-confirmed", metavar="POSE", help="Answer 'does the arm stand in POSE?' after a "
     "power-on without asking (POSE must be where the arm was recorded powered off).")]
-
 
 def open_arm_at_zero(context, confirmed: str | None, arm_id: str | None = None, *,
                      to_stderr: bool = False):

@@ -134,6 +134,7 @@ def check_arms_sequence(file: Path, project: Any, *, start: str | None = None,
     from seqrun.sequence.arm_tracks import load_tracks
     from seqrun.sequence.validation import validate_sequence
     from seqrun.service.arm_context import refuse_shared_buses, resolve_contexts
+    from seqrun.service.arms_run import on_fault_of
     from seqrun.service.checking import override_notes
     from seqrun.yamlsource import display_path, sort_errors
 
@@ -177,13 +178,8 @@ def check_arms_sequence(file: Path, project: Any, *, start: str | None = None,
     check.dry_run = dry_run_arms(check.tracks.tracks, check.arms,
                                  {p.arm_id: p.start_deg for p in plans}, start_pose=pose,
                                  started=started, speed=speed, faults=faults,
-                                 on_fault=_on_fault(project))
+                                 on_fault=on_fault_of(project))
     return check
-
-
-def _on_fault(project: Any) -> str:
-    config = getattr(project, "config", None)
-    return config.campaign.on_fault if config is not None else "halt_all"
 
 
 def dry_run_arms(tracks: dict[str, Any], arms: dict[str, Any],

@@ -168,13 +168,11 @@ class ArmSessions:
         several arms: one part of the run folder per arm, each arm's events on its
         session's hub, a confirm step asked as the arm's question (answered through its
         session). :class:`~seqrun.errors.Refused`: not valid, or an arm busy."""
-        from dataclasses import replace
-
         from seqrun.errors import Refused, UserInputError
         from seqrun.service.arms_check import check_arms_sequence
         from seqrun.service.arms_records import ArmOfRun, ArmsRunRecords
-        from seqrun.service.arms_run import run_arms_live
-        from seqrun.service.run_preparation import run_folder
+        from seqrun.service.arms_run import on_fault_of, run_arms_live
+        from seqrun.service.runlog import prepare_run_folder
 
         if not 0 < speed <= 1:
             raise Refused(f"speed {speed:g} must lie in (0, 1]")
@@ -199,8 +197,8 @@ class ArmSessions:
             sessions = {a: self.sessions[a] for a in tracks}
             warnings: list[str] = []
             try:  # the records of seqrun run's (seqrun/service/arms_records.py)
-                folder = run_folder(replace(next(iter(tracks.values())),
-                                            name=check.tracks.name), None)
+                # where this console's runs go (its --log-dir), as a run of one arm of it
+                folder = prepare_run_folder(None, check.tracks.name, first.log_root)
                 records = ArmsRunRecords.start(
                     folder, tracks,
                     {a: ArmOfRun(s.arm, s.zero, s.arm_path or tracks[a].arm_path,
@@ -211,7 +209,6 @@ class ArmSessions:
             except (OSError, UserInputError) as exc:
                 raise Refused(f"cannot write the run folder ({exc}); nothing was sent") \
                     from None
-            config = getattr(first.project, "config", None)
             run = ArmsRun(check.tracks.name, folder, tuple(tracks), by, warnings=warnings)
 
             def work() -> None:
@@ -220,11 +217,9 @@ class ArmSessions:
                         tracks, {a: s.arm for a, s in sessions.items()},
                         {a: s.connection for a, s in sessions.items()}, controls={},
                         sessions=sessions, zeros={a: s.zero for a, s in sessions.items()},
-                        record_zero=records.zero_recorders(), parts=records.parts(),
                         confirms={a: s.questions.ask for a, s in sessions.items()},
-                        on_fault=config.campaign.on_fault if config is not None
-                        else "halt_all", log_dirs=records.log_dirs, speed=speed,
-                        html_report=html_report, file=str(file))
+                        on_fault=on_fault_of(check.tracks.project), speed=speed,
+                        html_report=html_report, file=str(file), **records.run_options())
                 except Exception as exc:  # noqa: BLE001 - every arm halted by its run; said
                     run.error = f"{type(exc).__name__}: {exc}"
                 finally:

@@ -94,6 +94,13 @@ class ArmsRunRecords:
                            self.mcap.for_arm(a) if self.mcap is not None else None)
                 for a in self.tracks}
 
+    def run_options(self) -> dict[str, Any]:
+        """What :func:`seqrun.service.arms_run.run_arms_live` takes from the records, the
+        same for every face: each arm's part of the run folder (``log_dirs``), its
+        :class:`ArmPart` (``parts``) and its zero recorder (``record_zero``)."""
+        return {"log_dirs": self.log_dirs, "parts": self.parts(),
+                "record_zero": self.zero_recorders()}
+
     def zero_recorders(self) -> dict[str, Any]:
         """Each arm's zero recorder for a ``power_off`` step (None: a simulator, whose zero
         is its power-on pose, or no store)."""

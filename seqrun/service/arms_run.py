@@ -27,8 +27,8 @@ from typing import Any
 
 from seqrun.results import EXIT_OK, RunResult
 
-__all__ = ["ArmOutcome", "ArmsOutcome", "EventBoard", "OTHER_ARM_FAULT", "run_arms_live",
-           "run_tracks"]
+__all__ = ["ArmOutcome", "ArmsOutcome", "EventBoard", "OTHER_ARM_FAULT", "on_fault_of",
+           "run_arms_live", "run_tracks"]
 
 #: The stop cause of an arm halted because another arm faulted.
 OTHER_ARM_FAULT = "other_arm_fault"
@@ -114,6 +114,12 @@ class ArmsOutcome:
     @property
     def passed(self) -> bool:
         return self.exit_code == EXIT_OK
+
+
+def on_fault_of(project: Any) -> str:
+    """The campaign's ``on_fault`` (seqrun.toml ``[campaign]``; default ``halt_all``)."""
+    config = getattr(project, "config", None)
+    return config.campaign.on_fault if config is not None else "halt_all"
 
 
 def signallers(tracks: Mapping[str, Any]) -> dict[str, str]:

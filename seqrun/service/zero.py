@@ -39,7 +39,7 @@ import hashlib
 import json
 import math
 import os
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -508,6 +508,50 @@ def _confirmed_matches(zero: ZeroInForce, arm: ArmDescription, confirmed: str) -
     except UserInputError:
         return False
     return _same_angles(said, truth)
+
+
+def confirmed_per_arm(values: Sequence[str], arm_ids: Sequence[str | None]
+                      ) -> dict[str | None, str]:
+    """``--zero-confirmed`` as given (repeatable) for the arms of a command: arm id ->
+    the pose the operator says that arm stands in. ``ID=POSE`` names one arm's; a bare
+    ``POSE`` is every arm's (an ``ID=POSE`` overrides it for that arm). An arm named by
+    none is absent (its zero is asked as usual). The pose itself is checked where the
+    zero is decided (:func:`zero_at_start`), for each arm as for one.
+
+    :raises UserInputError: one line: an unknown arm, an empty pose, an arm (or every arm)
+        named twice, ``ID=POSE`` for an arm that has no id.
+    """
+    bare: str | None = None
+    named: dict[str | None, str] = {}
+    ids = [a for a in arm_ids if a is not None]
+    for value in values:
+        arm, sep, pose = value.partition("=")
+        arm, pose = arm.strip(), pose.strip()
+        if not sep:
+            if not arm:
+                raise UserInputError("--zero-confirmed '': name the pose the arm stands in "
+                                     "(e.g. park)")
+            if bare is not None:
+                raise UserInputError(f"--zero-confirmed {bare} and {arm}: one pose for every "
+                                     "arm, or ID=POSE for each arm")
+            bare = arm
+            continue
+        if not ids:
+            raise UserInputError(f"--zero-confirmed {value}: this arm has no id (it is not "
+                                 "one of a campaign's [arms.ID]): give the pose alone")
+        if arm not in ids:
+            raise UserInputError(f"--zero-confirmed {value}: no arm '{arm}' here (arms "
+                                 f"{', '.join(ids)})")
+        if not pose:
+            raise UserInputError(f"--zero-confirmed {value}: name the pose arm {arm} stands "
+                                 f"in (e.g. {arm}=park)")
+        if arm in named:
+            raise UserInputError(f"--zero-confirmed: arm {arm} named twice "
+                                 f"({arm}={named[arm]}, {value})")
+        named[arm] = pose
+    if bare is None:
+        return named
+    return {a: named.get(a, bare) for a in arm_ids}
 
 
 def _new_mark(previous: int | None) -> int:
