@@ -87,7 +87,8 @@ def arm_up(page) -> None:
         page.click(button)
         page.wait_for_function("document.querySelector('#message').textContent.includes(': ')",
                                timeout=20000)
-        assert "error" not in (page.get_attribute("#message", "class") or "")
+        assert "error" not in (page.get_attribute("#message", "class") or ""), (
+            button, page.text_content("#message"))
         page.wait_for_function(f"{FINISHED_SHOWN} > {finished}", timeout=20000)
         page.evaluate("document.querySelector('#message').textContent = ''")
 
