@@ -17,6 +17,7 @@ from seqrun.arm.description import load_arm
 from seqrun.arm.trajectory_tolerances import (TrajectoryTolerances, from_parameters, override,
                                               problems)
 from simrun import run_on_sim
+from test_ros_trajectory import session  # noqa: F401  (an armed, homed session at virtual time)
 
 ROOT = Path(__file__).resolve().parents[1]
 ARM = ROOT / "arms" / "lwa3.yaml"
@@ -105,6 +106,28 @@ def test_bad_tolerances_are_refused_at_file_line_col(tmp_path, keys, message, co
     assert message in first
 
 
+# ---------------------------------------------------------------------- the service layer
+def test_the_service_layer_runs_a_trajectory_with_its_tolerances_as_the_steps(session):
+    """seqrun ros's path: the tolerances become the move_trajectory step's keys."""
+    from seqrun.errors import Refused
+    from seqrun.service.trajectories import JointTrajectory, TrajectoryPoint, run_trajectory
+
+    start = session.telemetry.joints_deg()["j1"]
+    points = tuple(TrajectoryPoint((math.radians(start + i),), 0.1 * i) for i in range(1, 21))
+    trajectory = JointTrajectory(("j1",), points)
+    with pytest.raises(Refused, match=r"^trajectory: path_tolerance_deg: j1 5° is looser "
+                                      r"than the arm file's"):
+        run_trajectory(session, trajectory, by="test",
+                       tolerances=TrajectoryTolerances({"j1": 5.0}))
+    result = run_trajectory(session, trajectory, by="test", tolerances=TrajectoryTolerances(
+        {"j1": 1.0}, {"j1": 0.05}, 0.5)).wait(timeout=120)
+    assert result.ok, result.message
+    (copied,) = (result.run_dir / "inputs").rglob("ros_trajectory_*.yaml")
+    text = copied.read_text(encoding="utf-8")
+    assert ('path_tolerance_deg: {"j1": 1.0}, goal_tolerance_deg: {"j1": 0.05}, '
+            'goal_time_s: 0.5}') in text
+
+
 # ---------------------------------------------------------------------- the pure rules
 def test_jtc_parameters_are_radians_and_0_means_not_set():
     names = ["j1", "j2", "j4"]
@@ -144,3 +167,108 @@ def test_a_tolerance_looser_than_the_arm_files_bound_is_refused_not_capped():
     assert problems(TrajectoryTolerances({"j2": bound}), arm) == []
     ((key, joint, line),) = problems(TrajectoryTolerances({}, {"j2": bound + 0.1}), arm)
     assert (key, joint) == ("goal_tolerance_deg", "j2") and "looser" in line
+
+
+def test_the_constraint_parameters_are_documented():
+    from seqrun.arm.trajectory_tolerances import PARAMETERS
+
+    doc = (ROOT / "docs" / "ros2-node.md").read_text(encoding="utf-8")
+    table = doc[doc.index("## Parameters"):]
+    for name in PARAMETERS:
+        assert f"| `{name}` |" in table, f"{name} not in the docs' table"
+
+
+# ---------------------------------------------------------------------- seqrun ros
+def ros_node(tmp_path, monkeypatch, *parameters: str):
+    """A node (not spun) on a simulated arm, started with ``-p`` ``parameters``; returns
+    (node, close)."""
+    rclpy = pytest.importorskip("rclpy")
+    from test_ros_node import domain_id
+
+    from seqrun.clock import RealClock
+    from seqrun.ros.node import SeqrunNode
+    from seqrun.service import ArmSession
+    from seqrun.service.connection import open_connection
+
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    monkeypatch.setattr("seqrun.ros.node.DISCOVERY_S", 0.2, raising=False)
+    context = rclpy.Context()
+    args = ["seqrun", "--ros-args", *[x for p in parameters for x in ("-p", p)]]
+    rclpy.init(args=args, context=context, domain_id=domain_id())
+    session = ArmSession(load_arm(ARM), open_connection(force_sim=True, clock=RealClock()),
+                         log_root=tmp_path / "runs", poses_dir=ROOT / "poses")
+    session.poll_status()
+    assert session.arm_up().ok and session.home().ok
+
+    def close(node=None) -> None:
+        if node is not None:
+            node.close()
+        session.close()
+        rclpy.shutdown(context=context)
+
+    import uuid
+
+    token = uuid.uuid4().hex[:8]
+    try:
+        node = SeqrunNode(session, arm_name=f"lwa3_{token}", context=context,
+                          node_name=f"seqrun_{token}")
+    except BaseException:
+        close()
+        raise
+    return node, close
+
+
+@pytest.mark.slow
+def test_seqrun_ros_reads_jtcs_constraint_parameters(tmp_path, monkeypatch):
+    node, close = ros_node(tmp_path, monkeypatch, "constraints.j2.trajectory:=0.02",
+                           "constraints.j4.goal:=0.001", "constraints.goal_time:=0.5")
+    try:
+        assert node.tolerances.path_deg == pytest.approx({"j2": math.degrees(0.02)})
+        assert node.tolerances.goal_deg == pytest.approx({"j4": math.degrees(0.001)})
+        assert node.tolerances.goal_time_s == 0.5
+        assert node.node.describe_parameter("constraints.j1.trajectory").read_only
+        assert node.node.get_parameter("constraints.j1.goal").value == 0.0
+        assert not node.node.has_parameter("constraints.j3.goal")  # locked
+
+        # a goal's own tolerances override the parameters, joint by joint (JTC)
+        class Codes:
+            SUCCESSFUL, INVALID_GOAL, PATH_TOLERANCE_VIOLATED = 0, -1, -4
+            GOAL_TOLERANCE_VIOLATED = -5
+
+        class Goal:
+            is_cancel_requested = False
+
+            def __init__(self) -> None:
+                self.ended: list[str] = []
+
+            def abort(self) -> None:
+                self.ended.append("aborted")
+
+        from seqrun.service.trajectories import JointTrajectory, TrajectoryPoint
+
+        one = JointTrajectory(("j1",), (TrajectoryPoint((0.1,), 1.0),))
+        goal = Goal()
+        code, text = node.follow_trajectory(one, goal, Codes,
+                                            ([("j1", 0.01, 0.1, 0.0)], [], 0.0))
+        assert (code, goal.ended) == (Codes.INVALID_GOAL, ["aborted"])
+        assert text == ("trajectory: path_tolerance of j1: only position tolerances are "
+                        "supported (velocity and acceleration must be 0)")
+        goal = Goal()
+        code, text = node.follow_trajectory(one, goal, Codes,
+                                            ([("j2", 0.5, 0.0, 0.0)], [], 0.0))
+        assert (code, goal.ended) == (Codes.INVALID_GOAL, ["aborted"])
+        assert "path_tolerance_deg: j2 28.6479° is looser than the arm file's" in text
+    finally:
+        close(node)
+
+
+@pytest.mark.slow
+def test_seqrun_ros_refuses_a_constraint_looser_than_the_arm_files_bound(tmp_path,
+                                                                          monkeypatch):
+    from seqrun.errors import UserInputError
+
+    with pytest.raises(UserInputError, match=r"^parameter constraints: path_tolerance_deg: "
+                                             r"j2 57.2958° is looser"):
+        ros_node(tmp_path, monkeypatch, "constraints.j2.trajectory:=1.0")
+    with pytest.raises(UserInputError, match=r"must be a number >= 0, got 'x'"):
+        ros_node(tmp_path, monkeypatch, "constraints.goal_time:=x")

@@ -32,7 +32,7 @@ if TYPE_CHECKING:
 
 __all__ = ["PATH_TOLERANCE_VIOLATED", "GOAL_TOLERANCE_VIOLATED", "TrajectoryTolerances",
            "override", "problems", "from_parameters", "from_goal", "step_keys",
-           "PARAMETER_PREFIX"]
+           "PARAMETER_PREFIX", "PARAMETERS", "parameter_names"]
 
 #: The failures' names (control_msgs/FollowJointTrajectory's result codes).
 PATH_TOLERANCE_VIOLATED = "PATH_TOLERANCE_VIOLATED"
@@ -40,6 +40,19 @@ GOAL_TOLERANCE_VIOLATED = "GOAL_TOLERANCE_VIOLATED"
 #: JTC's parameter namespace: ``constraints.<joint>.trajectory``, ``constraints.<joint>.goal``
 #: (radians), ``constraints.goal_time`` (s).
 PARAMETER_PREFIX = "constraints."
+#: JTC's constraint parameters as ``seqrun ros`` declares them (``<joint>``: every joint
+#: not locked in the arm file): name -> what it is (docs/ros2-node.md lists them).
+PARAMETERS = {
+    "constraints.<joint>.trajectory": "path tolerance, rad: the largest following error "
+                                      "of the joint while a trajectory runs (0: none beyond "
+                                      "the arm file's control.max_following_error_deg)",
+    "constraints.<joint>.goal": "goal tolerance, rad: how far from its last point the joint "
+                                "may end (0: the arm file's control.position_tolerance_deg)",
+    "constraints.goal_time": "how long after a trajectory's end the goal tolerances must be "
+                             "met by, s (0: the arm file's control.settle_timeout_s)",
+    "constraints.stopped_velocity_tolerance": "0 only (not supported: the arm is at rest "
+                                              "when its joints are in their goal tolerance)",
+}
 
 
 @dataclass(frozen=True)
@@ -99,6 +112,17 @@ def problems(tolerances: TrajectoryTolerances,
     return found
 
 
+def parameter_names(joint_names: Iterable[str]) -> dict[str, str]:
+    """Every constraint parameter for these joints: name -> its :data:`PARAMETERS` key."""
+    names: dict[str, str] = {}
+    for joint in joint_names:
+        for what in ("trajectory", "goal"):
+            names[f"{PARAMETER_PREFIX}{joint}.{what}"] = f"{PARAMETER_PREFIX}<joint>.{what}"
+    for key in ("goal_time", "stopped_velocity_tolerance"):
+        names[f"{PARAMETER_PREFIX}{key}"] = f"{PARAMETER_PREFIX}{key}"
+    return names
+
+
 def _number(name: str, value: Any) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)) \
             or not math.isfinite(value) or value < 0:
@@ -111,8 +135,7 @@ def from_parameters(values: Mapping[str, Any], joint_names: Iterable[str]) -> Tr
     tolerances in degrees. ValueError in one line for a value that is not a number >= 0
     or a parameter under ``constraints.`` that is none of these."""
     names = list(joint_names)
-    known = {f"{PARAMETER_PREFIX}goal_time", f"{PARAMETER_PREFIX}stopped_velocity_tolerance"}
-    known |= {f"{PARAMETER_PREFIX}{n}.{what}" for n in names for what in ("trajectory", "goal")}
+    known = set(parameter_names(names))
     path: dict[str, float] = {}
     goal: dict[str, float] = {}
     goal_time: float | None = None

@@ -11,6 +11,11 @@ The file (relative to the sequence file): a header ``t`` then joint names (any o
 arm's; the others stay where they are), optionally ``<joint>_vel`` (deg/s) and
 ``<joint>_acc`` (deg/s²) columns; one row per point, ``t`` in seconds after the start,
 angles in user degrees.
+
+Optional tolerances, as JTC's constraints (seqrun/arm/trajectory_tolerances.py):
+``path_tolerance_deg`` (per joint, the following error that stops the motion),
+``goal_tolerance_deg`` and ``goal_time_s`` (per joint, within how much of its last point it
+must end, and by when); each at most the arm file's ``control.max_following_error_deg``.
 """
 
 from __future__ import annotations
