@@ -63,6 +63,7 @@ from seqrun.stop_requests import OPERATOR_HALT, StopRequests
 
 if TYPE_CHECKING:
     from seqrun.arm.poses import PoseDirs
+    from seqrun.arm.trajectory_tolerances import TrajectoryTolerances
     from seqrun.arm.joint_values import GripperReading
     from seqrun.drivers.base import GripperDriver
 
@@ -417,14 +418,16 @@ class Executor:
     def follow(self, plan, *, tolerance_deg: float, timeout_s: float | None,
                path_check: Callable[[Measurement], None] | None = None,
                command_mode: str | None = None,
-               start: Measurement | None = None) -> dict[str, Any]:
+               start: Measurement | None = None,
+               tolerances: TrajectoryTolerances | None = None) -> dict[str, Any]:
         """Stream a precomputed plan (a :class:`~seqrun.arm.planner.SampledPlan`) that starts
         where the arm stands (``start``: the reading it was planned from; None: read it
         now); ``path_check`` runs on every cycle's measurement; ``command_mode`` overrides
-        the run's setpoint law for this plan."""
+        the run's setpoint law for this plan; ``tolerances``: a trajectory's path and
+        goal tolerances (seqrun/arm/trajectory_tolerances.py)."""
         return self.streaming.follow(plan, tolerance_deg=tolerance_deg, timeout_s=timeout_s,
                                      path_check=path_check, command_mode=command_mode,
-                                     start=start)
+                                     start=start, tolerances=tolerances)
 
     def tracking_figures(self, target_deg=None) -> dict[str, Any]:
         """The current move's tracking figures (seqrun/arm/tracking.py) up to now."""

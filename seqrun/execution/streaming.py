@@ -18,6 +18,8 @@ import numpy as np
 
 from seqrun.arm.planner import Limits, MovePlan, plan_move, plan_stop
 from seqrun.arm.tracking import MoveTracking, velocity_window
+from seqrun.arm.trajectory_tolerances import (GOAL_TOLERANCE_VIOLATED, PATH_TOLERANCE_VIOLATED,
+                                              TrajectoryTolerances)
 from seqrun.drivers.base import MotionRefused
 from seqrun.errors import RunAborted
 from seqrun.execution.run import rounded
@@ -122,11 +124,24 @@ class Streaming:
         target = self.run.commanded_deg if target_deg is None else target_deg
         return self.tracking.figures(target)
 
-    def follow(self, plan, *, tolerance_deg: float, timeout_s: float | None,
+    def follow(self, plan, *, tolerance_deg: float | np.ndarray, timeout_s: float | None,
                path_check: Callable[[Measurement], None] | None = None,
                command_mode: str | None = None,
-               start: Measurement | None = None) -> dict[str, Any]:
+               start: Measurement | None = None,
+               tolerances: TrajectoryTolerances | None = None) -> dict[str, Any]:
+        """Stream ``plan``; ``tolerances`` (a trajectory's, JTC's): per-joint path
+        tolerances checked every cycle of the plan, per-joint goal tolerances (over
+        ``tolerance_deg``) and the time after the plan's end they must be met by."""
         run = self.run
+        names = run.arm.joint_names
+        path_tolerance = None
+        goal = False
+        if tolerances is not None and not tolerances.empty:
+            path_tolerance = tolerances.path_array(names) if tolerances.path_deg else None
+            tolerance_deg = tolerances.goal_array(names, float(np.max(tolerance_deg)))
+            goal = True
+            if tolerances.goal_time_s is not None:
+                timeout_s = plan.duration + tolerances.goal_time_s
         m = start if start is not None else run.read_arm()
         run.check_states(m)
         run.motion_start_deg = m.user_deg.copy()  # for relative checkpoints
@@ -146,7 +161,8 @@ class Streaming:
             try:
                 run.beat()
                 run.driver.start_motion(moving, run.limits, command_mode=command_mode)
-                self.stream(plan, moving, tolerance_deg, deadline, stop_on_abort=True)
+                self.stream(plan, moving, tolerance_deg, deadline, stop_on_abort=True,
+                            path_tolerance_deg=path_tolerance, goal=goal)
             finally:
                 self.path_check = None
                 run.driver.end_motion()
@@ -176,9 +192,13 @@ class Streaming:
             raise run.checks.fault_after_halt(refused.module, refused.state) from None
         return run.take_reading(reading)
 
-    def stream(self, plan: MovePlan, moving: list[int], tolerance_deg: float,
-               deadline: float, *, stop_on_abort: bool) -> None:
-        """Stream ``plan`` cycle by cycle until every moving joint is in tolerance."""
+    def stream(self, plan: MovePlan, moving: list[int], tolerance_deg: float | np.ndarray,
+               deadline: float, *, stop_on_abort: bool,
+               path_tolerance_deg: np.ndarray | None = None, goal: bool = False) -> None:
+        """Stream ``plan`` cycle by cycle until every moving joint is in tolerance
+        (``tolerance_deg``: one for all joints or one per joint). ``path_tolerance_deg``:
+        per joint, the following error that stops the motion while the plan runs (inf:
+        none); ``goal``: not in tolerance by ``deadline`` is GOAL_TOLERANCE_VIOLATED."""
         run = self.run
         stops = run.stops
         t_start = run.clock.now()
@@ -233,6 +253,9 @@ class Streaming:
             if self.path_check is not None:
                 self.path_check(m)
             error = np.abs(planned_deg - measured)
+            if path_tolerance_deg is not None and t <= plan.duration:
+                self.check_path_tolerance(plan, t, moving, measured, error,
+                                          path_tolerance_deg)
             worst = int(error.argmax())  # (np.argmax's Python-level dispatch, once a cycle)
             if error[worst] > bound and t <= plan.duration + run.arm.control.settle_timeout_s:
                 name = run.arm.joints[worst].name
@@ -256,8 +279,20 @@ class Streaming:
                      state=run.states_of(m))
             if t >= plan.duration:
                 final_error = np.abs(np.degrees(plan.target) - measured)[moving]
-                if np.all(final_error <= tolerance_deg):
+                allowed = (tolerance_deg[moving] if isinstance(tolerance_deg, np.ndarray)
+                           else tolerance_deg)
+                if np.all(final_error <= allowed):
                     return
+                if t > deadline and goal:
+                    assert isinstance(tolerance_deg, np.ndarray)
+                    over = final_error - allowed
+                    i = moving[int(np.argmax(over))]
+                    raise RunAborted(
+                        "goal_tolerance",
+                        f"{GOAL_TOLERANCE_VIOLATED}: {run.arm.joints[i].name} (module "
+                        f"{run.modules[i]}) {abs(np.degrees(plan.target[i]) - measured[i]):.3f}° "
+                        f"from its goal {t - plan.duration:.2f} s after the trajectory's end "
+                        f"(goal tolerance {tolerance_deg[i]:g}°)", module=run.modules[i])
                 if t > deadline:
                     i = moving[int(np.argmax(final_error))]
                     raise RunAborted("timeout",
@@ -268,6 +303,31 @@ class Streaming:
             # Next cycle slot; slots missed while waiting on the bus are skipped, not
             # made up in a burst.
             k = max(k + 1, math.ceil((run.clock.now() - t_start) / run.cycle))
+
+    def check_path_tolerance(self, plan: MovePlan, t: float, moving: list[int],
+                             measured: np.ndarray, error: np.ndarray,
+                             tolerance: np.ndarray) -> None:
+        """A joint beyond its path tolerance: a controlled stop, then RunAborted
+        (PATH_TOLERANCE_VIOLATED, the joint, its error and the plan time) so that the run
+        ends as every fault does."""
+        over = error - tolerance
+        i = int(over.argmax())
+        if over[i] <= 0:
+            return
+        run = self.run
+        name = run.arm.joints[i].name
+        message = (f"{PATH_TOLERANCE_VIOLATED}: {name} (module {run.modules[i]}) "
+                   f"{error[i]:.3f}° from its setpoint at t={t:.2f} s of the trajectory's "
+                   f"{plan.duration:.2f} s (path tolerance {tolerance[i]:g}°)")
+        try:
+            # from where the joints are (JTC holds the measured state): a lagging joint is
+            # not driven to where it should have been
+            self.controlled_stop(plan, t, moving, from_deg=measured)
+        except RunAborted as stop:
+            message += f"; the controlled stop did not end in position ({stop})"
+        else:
+            message += "; controlled stop"
+        raise RunAborted("path_tolerance", message, module=run.modules[i])
 
     #: A gap between two cycles longer than (1 + this) cycles is a host stall: the plan is
     #: held for the time beyond one cycle.
@@ -288,10 +348,15 @@ class Streaming:
             return [round(x, 6) for x in at]
         return round(sum(at) / len(at), 6)
 
-    def controlled_stop(self, plan: MovePlan, t: float, moving: list[int]) -> None:
-        """ruckig to zero velocity from the plan's current state, streamed, then hold."""
+    def controlled_stop(self, plan: MovePlan, t: float, moving: list[int],
+                        from_deg: np.ndarray | None = None) -> None:
+        """ruckig to zero velocity from the plan's current state, streamed, then hold.
+        ``from_deg``: start from these positions (where the arm was measured, a joint
+        that lags its plan) with the plan's velocities."""
         run = self.run
         pos, vel, acc = plan.at(t)
+        if from_deg is not None:
+            pos = np.radians(from_deg)
         velocity, acceleration = run.limits_in_force.maxima()
         limits = Limits.from_arm(run.arm, speed=run.speed, max_velocity_deg_s=velocity,
                                  max_acceleration_deg_s2=acceleration)

@@ -32,7 +32,9 @@ STOP never waits behind anything: its service has a callback group of its own, a
 session's halt takes no lock a run holds.
 
 Parameters (:data:`PARAMETERS`; ``--ros-args -p NAME:=VALUE`` overrides them at start):
-``rate`` and ``publish_tf``. Names follow ROS rules: ``--ros-args -r __ns:=/foo`` puts the
+``rate`` and ``publish_tf``; and joint_trajectory_controller's ``constraints.*`` (every
+trajectory's path and goal tolerances, :mod:`seqrun.arm.trajectory_tolerances`), which a
+FollowJointTrajectory goal's own tolerances override joint by joint. Names follow ROS rules: ``--ros-args -r __ns:=/foo`` puts the
 topics and services under ``/foo``, ``-r __node:=NAME`` renames the node, ``-r FROM:=TO``
 remaps a topic (``/tf`` and ``/tf_static`` are absolute, as tf2's).
 
@@ -65,8 +67,11 @@ from trajectory_msgs.msg import JointTrajectory as JointTrajectoryMsg
 
 from seqrun.errors import Refused, UserInputError
 from seqrun.ros import optional_module, ros_name
-from seqrun.service.trajectories import (JointTrajectory, TrajectoryPoint, in_trajectory_terms,
-                                         run_trajectory)
+from seqrun.service.trajectories import (GOAL_TOLERANCE_VIOLATED, JointTrajectory,
+                                         TrajectoryPoint, TrajectoryTolerances,
+                                         constraint_parameters, in_trajectory_terms,
+                                         run_trajectory, tolerances_from_goal,
+                                         tolerances_from_parameters)
 
 __all__ = ["DEFAULT_RATE_HZ", "DISCOVERY_S", "NODE_NAME", "NodeTaken", "PARAMETERS",
            "SeqrunNode", "ros_name"]
@@ -140,6 +145,8 @@ class SeqrunNode:
         self._names = list(session.arm.joint_names)
         self._closed = False
         rate_hz, self.publish_tf = self._parameters(rate_hz)
+        #: JTC's constraints.* parameters: every trajectory's default tolerances.
+        self.tolerances = self._constraints()
         self._published_reading: float | None = None
         self._fresh_at = -math.inf
         # while idle the session reads the arm at this rate: every message a new reading
@@ -251,6 +258,24 @@ class SeqrunNode:
             raise UserInputError(f"parameter publish_tf must be true or false, "
                                  f"got {publish_tf!r}")
         return float(rate), publish_tf
+
+    def _constraints(self) -> TrajectoryTolerances:
+        """Declare JTC's ``constraints.*`` parameters (read-only; radians and seconds, 0:
+        not set) for the joints not locked; the tolerances they give, checked against the
+        arm file (UserInputError in one line: not a number, looser than its bound)."""
+        from rcl_interfaces.msg import ParameterDescriptor
+
+        arm = self.session.arm
+        values = {}
+        for name, what in constraint_parameters(arm).items():
+            # dynamic: -p constraints.j2.goal:=0 is an integer to ROS; checked below
+            descriptor = ParameterDescriptor(description=what, read_only=True,
+                                             dynamic_typing=True)
+            values[name] = self.node.declare_parameter(name, 0.0, descriptor).value
+        try:
+            return tolerances_from_parameters(arm, values)
+        except Refused as exc:
+            raise UserInputError(str(exc)) from None
 
     # ------------------------------------------------------------------ the model
     def _latched(self) -> Any:
@@ -367,14 +392,18 @@ class SeqrunNode:
             self._send(event.as_dict())
 
     # ------------------------------------------------------------------ trajectories
-    def start_trajectory(self, trajectory: JointTrajectory, by: str) -> Any:
-        """Check and start ``trajectory`` (Refused with one line); announces the outcome and,
-        in a thread of its own, the run's end."""
+    def start_trajectory(self, trajectory: JointTrajectory, by: str,
+                         tolerances: TrajectoryTolerances | None = None) -> Any:
+        """Check and start ``trajectory`` (Refused with one line) with ``tolerances`` (None:
+        the ``constraints.*`` parameters'); announces the outcome and, in a thread of its
+        own, the run's end."""
         points = len(trajectory.points)
         try:
             holder = self._holder("trajectory")
             activity = run_trajectory(self.session, trajectory, by=holder.name,
-                                      log_dir=self.log_dir)
+                                      log_dir=self.log_dir,
+                                      tolerances=self.tolerances if tolerances is None
+                                      else tolerances)
         except Refused as exc:
             self.node.get_logger().error(f"trajectory refused: {exc}")
             self.announce("trajectory_refused", reason=str(exc), points=points, by=by)
@@ -433,11 +462,20 @@ class SeqrunNode:
         return self._command("arm_up", response)
 
     # ------------------------------------------------------------------ the action
-    def follow_trajectory(self, trajectory: JointTrajectory, goal: Any,
-                          codes: Any) -> tuple[int, str]:
+    def follow_trajectory(self, trajectory: JointTrajectory, goal: Any, codes: Any,
+                          given: Any = None) -> tuple[int, str]:
         """What a FollowJointTrajectory goal does (:func:`_follow`); the action server (on a
-        ROS host) calls it with its goal handle."""
-        return _follow(self, trajectory, goal, codes)
+        ROS host) calls it with its goal handle. ``given``: the goal's tolerances
+        (:func:`tolerances_of`), over the parameters' as JTC (the goal's fields override,
+        joint by joint)."""
+        if given is None:
+            return _follow(self, trajectory, goal, codes, self.tolerances)
+        try:
+            tolerances = tolerances_from_goal(self.tolerances, *given)
+        except Refused as exc:
+            goal.abort()
+            return codes.INVALID_GOAL, str(exc)
+        return _follow(self, trajectory, goal, codes, tolerances)
 
     def _follow_joint_trajectory(self) -> Any:
         """``control_msgs/FollowJointTrajectory`` on ``/<arm>/follow_joint_trajectory`` when
@@ -452,7 +490,8 @@ class SeqrunNode:
         def execute(goal_handle: Any) -> Any:
             result = action.Result()
             result.error_code, result.error_string = self.follow_trajectory(
-                trajectory_of(goal_handle.request.trajectory), goal_handle, action.Result)
+                trajectory_of(goal_handle.request.trajectory), goal_handle, action.Result,
+                tolerances_of(goal_handle.request))
             return result
 
         return ActionServer(self.node, action, f"{self.arm}/follow_joint_trajectory",
@@ -474,15 +513,26 @@ def _transform(stamp: Any, parent: str, child: str, xyz: Any, quaternion: Any) -
     return t
 
 
+def tolerances_of(request: Any) -> tuple[list, list, float]:
+    """A FollowJointTrajectory goal's ``path_tolerance``, ``goal_tolerance`` (as (name,
+    position, velocity, acceleration)) and ``goal_time_tolerance`` (s)."""
+    def rows(tolerances: Any) -> list:
+        return [(t.name, float(t.position), float(t.velocity), float(t.acceleration))
+                for t in tolerances]
+
+    return (rows(request.path_tolerance), rows(request.goal_tolerance),
+            _seconds(request.goal_time_tolerance))
+
+
 def _follow(node: SeqrunNode, trajectory: JointTrajectory, goal: Any,
-            codes: Any) -> tuple[int, str]:
+            codes: Any, tolerances: TrajectoryTolerances | None = None) -> tuple[int, str]:
     """FollowJointTrajectory's execution: the trajectory through :meth:`start_trajectory`,
     then the run watched until it ends or the client cancels (a controlled stop; a Halt if
     that does not end it). ``goal``: the goal handle (``is_cancel_requested``, ``succeed``,
     ``abort``, ``canceled``); ``codes``: the result's error codes. Returns (error_code,
     error_string)."""
     try:
-        activity = node.start_trajectory(trajectory, "ros action")
+        activity = node.start_trajectory(trajectory, "ros action", tolerances)
     except Refused as exc:
         goal.abort()
         return codes.INVALID_GOAL, str(exc)
@@ -506,6 +556,8 @@ def _follow(node: SeqrunNode, trajectory: JointTrajectory, goal: Any,
         goal.succeed()
         return codes.SUCCESSFUL, message
     goal.abort()
+    if GOAL_TOLERANCE_VIOLATED in message:
+        return codes.GOAL_TOLERANCE_VIOLATED, message
     return codes.PATH_TOLERANCE_VIOLATED, message
 
 

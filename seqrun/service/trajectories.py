@@ -23,6 +23,11 @@ What a point means here:
   at rest;
 - joints the trajectory does not name stay where they are; a locked joint may be named only
   at its locked value.
+
+Tolerances (:class:`~seqrun.arm.trajectory_tolerances.TrajectoryTolerances`: JTC's path and
+goal tolerances and goal time) become the step's ``path_tolerance_deg``,
+``goal_tolerance_deg`` and ``goal_time_s``: the same checks and the same execution as a
+sequence's ``move_trajectory``.
 """
 
 from __future__ import annotations
@@ -36,10 +41,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from seqrun.arm import trajectory_tolerances as tolerance_rules
+from seqrun.arm.trajectory_tolerances import (GOAL_TOLERANCE_VIOLATED, PATH_TOLERANCE_VIOLATED,
+                                              TrajectoryTolerances, step_keys)
 from seqrun.errors import Refused
 
-__all__ = ["MAX_POINTS", "JointTrajectory", "TrajectoryPoint", "check_trajectory",
-           "in_trajectory_terms", "run_trajectory", "trajectory_csv"]
+__all__ = ["GOAL_TOLERANCE_VIOLATED", "MAX_POINTS", "PATH_TOLERANCE_VIOLATED",
+           "JointTrajectory", "TrajectoryPoint", "TrajectoryTolerances", "check_trajectory",
+           "constraint_parameters", "in_trajectory_terms", "run_trajectory",
+           "tolerances_from_goal", "tolerances_from_parameters", "trajectory_csv"]
 
 #: More points than this is refused (a dense trajectory is one motion: 10,000 points is
 #: 100 s at the control cycle).
@@ -65,6 +75,40 @@ class JointTrajectory:
 
     joint_names: tuple[str, ...]
     points: tuple[TrajectoryPoint, ...]
+
+
+def constraint_parameters(arm: Any) -> dict[str, str]:
+    """JTC's ``constraints.*`` parameters for ``arm`` (its joints not locked): name -> what
+    it is, for a face to declare (0.0 each: not set)."""
+    joints = [j.name for j in arm.joints if j.locked is None]
+    return {name: tolerance_rules.PARAMETERS[what]
+            for name, what in tolerance_rules.parameter_names(joints).items()}
+
+
+def tolerances_from_parameters(arm: Any, values: dict[str, Any]) -> TrajectoryTolerances:
+    """The tolerances the ``constraints.*`` parameters ``values`` give (radians, seconds),
+    checked against the arm file. Refused in one line: not a number >= 0, unknown, looser
+    than ``control.max_following_error_deg``."""
+    joints = [j.name for j in arm.joints if j.locked is None]
+    try:
+        tolerances = tolerance_rules.from_parameters(values, joints)
+    except ValueError as exc:
+        raise Refused(str(exc)) from None
+    found = tolerance_rules.problems(tolerances, arm)
+    if found:
+        raise Refused(f"parameter constraints: {found[0][2]}")
+    return tolerances
+
+
+def tolerances_from_goal(base: TrajectoryTolerances, path: Any, goal: Any,
+                         goal_time_s: float) -> TrajectoryTolerances:
+    """A FollowJointTrajectory goal's tolerances over ``base``
+    (:func:`seqrun.arm.trajectory_tolerances.from_goal`: the goal's override, joint by
+    joint). Refused in one line (velocity or acceleration tolerances, not a number)."""
+    try:
+        return tolerance_rules.from_goal(base, path, goal, goal_time_s)
+    except ValueError as exc:
+        raise Refused(f"trajectory: {exc}") from None
 
 
 def _number(value: Any, what: str) -> float:
@@ -147,12 +191,14 @@ def _private_folder() -> Path:
     return _folder[0]
 
 
-def _sequence_text(points_file: str, points: int) -> str:
+def _sequence_text(points_file: str, points: int,
+                   tolerances: TrajectoryTolerances | None = None) -> str:
     label = json.dumps(f"ROS trajectory ({points} points)")
+    keys = step_keys(tolerances) if tolerances is not None else ""
     return ("name: ros_trajectory\n"
             "description: a joint trajectory received over ROS 2 (seqrun ros)\n"
             "steps:\n"
-            f"  - move_trajectory: {{file: {json.dumps(points_file)}, label: {label}}}\n")
+            f"  - move_trajectory: {{file: {json.dumps(points_file)}, label: {label}{keys}}}\n")
 
 
 def in_trajectory_terms(text: str) -> str:
@@ -185,9 +231,10 @@ def _in_operator_terms(error: Any, file: Path) -> str:
     return f"{error.file}:{error.line}:{error.column}: {message}"
 
 
-def check_trajectory(session: Any, trajectory: JointTrajectory, folder: Path | None = None):
-    """Write ``trajectory`` as a sequence of one ``move_trajectory`` step (and its CSV file)
-    and check it from where the arm stands (the one validate call,
+def check_trajectory(session: Any, trajectory: JointTrajectory, folder: Path | None = None,
+                     tolerances: TrajectoryTolerances | None = None):
+    """Write ``trajectory`` as a sequence of one ``move_trajectory`` step (and its CSV file;
+    ``tolerances``: its path and goal tolerances, the step's keys) and check it from where the arm stands (the one validate call,
     :func:`~seqrun.service.checking.check_sequence`, without the dry run: what ``seqrun run``
     checks before the bus). Returns the check (valid) and the sequence file; Refused with
     the first finding, naming the point and time where it has one."""
@@ -204,7 +251,8 @@ def check_trajectory(session: Any, trajectory: JointTrajectory, folder: Path | N
     file = folder / f"ros_trajectory_{next(_numbers)}.yaml"
     points = file.with_suffix(".csv")
     points.write_text(text, encoding="utf-8")
-    file.write_text(_sequence_text(points.name, len(trajectory.points)), encoding="utf-8")
+    file.write_text(_sequence_text(points.name, len(trajectory.points), tolerances),
+                    encoding="utf-8")
 
     def forget() -> None:
         file.unlink(missing_ok=True)
@@ -231,13 +279,16 @@ def check_trajectory(session: Any, trajectory: JointTrajectory, folder: Path | N
 
 
 def run_trajectory(session: Any, trajectory: JointTrajectory, *, by: str | None = None,
-                   log_dir: Path | None = None):
-    """Check ``trajectory`` (:func:`check_trajectory`) and run it as a sequence in the
+                   log_dir: Path | None = None,
+                   tolerances: TrajectoryTolerances | None = None):
+    """Check ``trajectory`` (:func:`check_trajectory`, with ``tolerances``: the path and
+    goal tolerances of joint_trajectory_controller, seqrun/arm/trajectory_tolerances.py)
+    and run it as a sequence in the
     session (non-blocking: the session's activity, with its run folder; no report.html,
     so that the next trajectory need not wait for one: ``seqrun report RUN_DIR`` draws it).
     Refused with one line before anything is sent when it is not valid or the arm cannot
     move now."""
-    check, file = check_trajectory(session, trajectory)
+    check, file = check_trajectory(session, trajectory, tolerances=tolerances)
     try:
         return session.run_sequence(file, loaded=check.loaded, assume_yes=True, by=by,
                                     log_dir=log_dir, html_report=False)

@@ -18,6 +18,7 @@ if TYPE_CHECKING:
     from seqrun.arm.description import ArmDescription
     from seqrun.arm.joint_values import GripperReading, JointState, LimitValues
     from seqrun.arm.kinematics import Chain
+    from seqrun.arm.trajectory_tolerances import TrajectoryTolerances
     from seqrun.arm.limits import LimitsInForce
     from seqrun.arm.planner import Limits
 
@@ -100,7 +101,8 @@ class StepContext(Protocol):
     def follow(self, plan: Any, *, tolerance_deg: float, timeout_s: float | None,
                path_check: Callable[[Any], None] | None = None,
                command_mode: str | None = None,
-               start: JointReading | None = None) -> dict[str, Any]: ...
+               start: JointReading | None = None,
+               tolerances: TrajectoryTolerances | None = None) -> dict[str, Any]: ...
 
     def wait(self, seconds: float) -> None: ...
 

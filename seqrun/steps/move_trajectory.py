@@ -11,6 +11,11 @@ The file (relative to the sequence file): a header ``t`` then joint names (any o
 arm's; the others stay where they are), optionally ``<joint>_vel`` (deg/s) and
 ``<joint>_acc`` (deg/s²) columns; one row per point, ``t`` in seconds after the start,
 angles in user degrees.
+
+Optional tolerances, as JTC's constraints (seqrun/arm/trajectory_tolerances.py):
+``path_tolerance_deg`` (per joint, the following error that stops the motion),
+``goal_tolerance_deg`` and ``goal_time_s`` (per joint, within how much of its last point it
+must end, and by when); each at most the arm file's ``control.max_following_error_deg``.
 """
 
 from __future__ import annotations
@@ -24,13 +29,14 @@ from pydantic import Field
 
 from seqrun.errors import RunAborted
 from seqrun.steps.kind import StepKind
-from seqrun.steps.params import Positive, StepParams, one_key_value
+from seqrun.steps.params import JointName, Positive, StepParams, one_key_value
 
 if TYPE_CHECKING:
     import numpy as np
 
     from seqrun.arm.description import ArmDescription
     from seqrun.arm.trajectory_interp import InterpolatedTrajectory, TimedPoint
+    from seqrun.arm.trajectory_tolerances import TrajectoryTolerances
     from seqrun.errors import SourceError
     from seqrun.steps.check_context import CheckContext
     from seqrun.steps.context import StepContext
@@ -56,6 +62,30 @@ class MoveTrajectoryParams(StepParams):
     tolerance_deg: Positive | None = Field(
         None, description="In-position tolerance per joint at the end, degrees (default: the "
                           "arm file's control.position_tolerance_deg).")
+    path_tolerance_deg: dict[JointName, Positive] | None = Field(
+        None, description="Per joint, the largest following error (degrees, measured against "
+                          "the interpolated setpoint) while the trajectory runs, as "
+                          "joint_trajectory_controller's constraints.<joint>.trajectory: "
+                          "exceeded, the motion ends in a controlled stop and the step fails "
+                          "PATH_TOLERANCE_VIOLATED. At most the arm file's "
+                          "control.max_following_error_deg (a looser one is refused).")
+    goal_tolerance_deg: dict[JointName, Positive] | None = Field(
+        None, description="Per joint, how far (degrees) from its last point the joint may "
+                          "end, as constraints.<joint>.goal: not met goal_time_s after the "
+                          "trajectory's end, the step fails GOAL_TOLERANCE_VIOLATED. Joints "
+                          "not named use tolerance_deg. At most the arm file's "
+                          "control.max_following_error_deg.")
+    goal_time_s: Positive | None = Field(
+        None, description="How long after the trajectory's end the goal tolerances must be "
+                          "met by, seconds (constraints.goal_time; default: the arm file's "
+                          "control.settle_timeout_s).")
+
+    def tolerances(self) -> TrajectoryTolerances:
+        """The step's path and goal tolerances (seqrun/arm/trajectory_tolerances.py)."""
+        from seqrun.arm.trajectory_tolerances import TrajectoryTolerances
+
+        return TrajectoryTolerances(dict(self.path_tolerance_deg or {}),
+                                    dict(self.goal_tolerance_deg or {}), self.goal_time_s)
 
 
 class PointsError(ValueError):
@@ -174,8 +204,13 @@ def check(checker: CheckContext, step: ResolvedStep[MoveTrajectoryParams],
     link and tool volumes along the samples."""
     import numpy as np
 
+    from seqrun.arm.trajectory_tolerances import problems
+
     arm = checker.arm
     checker.motion_allowed(step, checker.unlocked_names())
+    for key, joint, message in problems(params.tolerances(), arm):
+        unknown = joint not in arm.joint_names
+        checker.errors.append(step.error(message, key, joint, key=unknown))
     names = arm.joint_names
     keep = 1 - arm.control.tracking_reserve
     limits = [checker.joints[n].limits or checker.joints[n].joint.limits_deg for n in names]
@@ -241,8 +276,9 @@ def run(step: ResolvedStep[MoveTrajectoryParams], ex: StepContext) -> dict[str, 
     except PointsError as exc:
         raise RunAborted("trajectory", str(exc)) from None
     tolerance = params.tolerance_deg or arm.control.position_tolerance_deg
+    tolerances = params.tolerances()
     metrics = ex.follow(trajectory.plan, tolerance_deg=tolerance, timeout_s=None,
-                        start=reading)
+                        start=reading, tolerances=None if tolerances.empty else tolerances)
     return {**metrics, "points": len(trajectory.point_times),
             "interpolation": trajectory.kind}
 
