@@ -547,6 +547,35 @@ class ConfirmAnswered(Event):
     yes: bool
 
 
+@dataclass(frozen=True, kw_only=True)
+class ConfirmSigned(Event):
+    type: ClassVar[str] = "confirm_signed"
+    when: ClassVar[str] = ("a signed confirm was answered yes: who (``signed_by``), as what "
+                           "(``signed_role``), when (UTC) and the sha256 of the validated "
+                           "inputs they signed")
+    text: str
+    signed_by: str
+    signed_role: str | None = _optional()
+    signed_at_utc: str
+    inputs_sha256: str | None = _optional()
+
+
+@dataclass(frozen=True, kw_only=True)
+class BreakpointReached(Event):
+    type: ClassVar[str] = "breakpoint_reached"
+    when: ClassVar[str] = ("the run stopped before a step with ``breakpoint: true`` (the arm "
+                           "at rest) and asks the operator to continue")
+    label: str
+
+
+@dataclass(frozen=True, kw_only=True)
+class BreakpointAnswered(Event):
+    type: ClassVar[str] = "breakpoint_answered"
+    when: ClassVar[str] = ("the operator answered a breakpoint: ``go_on`` true continues, "
+                           "false ends the run as an operator abort")
+    go_on: bool
+
+
 # ====================================================================== faults and Halt
 @dataclass(frozen=True, kw_only=True)
 class Fault(Event):

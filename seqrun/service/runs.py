@@ -123,7 +123,8 @@ class Runs:
                    warn: Callable[[str], None] | None = None, meta: dict | None = None,
                    html_report: bool = True, file: str | None = None,
                    bus_held: bool = False, cycle_hz: float | None = None,
-                   record_zero: Callable[[str], Any] | None = None, part: Any = None):
+                   record_zero: Callable[[str], Any] | None = None, part: Any = None,
+                   attended: Any = None):
         """Run an already loaded and checked sequence on the caller's thread with the
         session's driver and event hub; returns the runner's outcome (result, report, run
         folder). This is how ``seqrun run`` runs (its prompts are the terminal's own); faces
@@ -131,7 +132,9 @@ class Runs:
         what a power_off step calls to record the pose the arm is switched off in;
         ``run_control``: the run's :class:`~seqrun.service.run_control.RunControl`
         (``seqrun status|halt`` from another terminal), attached to the run's executor;
-        ``part``: one arm's part of a campaign run (:mod:`seqrun.service.arm_part`)."""
+        ``part``: one arm's part of a campaign run (:mod:`seqrun.service.arm_part`);
+        ``attended``: who answers signed confirms and breakpoints
+        (:class:`~seqrun.steps.context.AttendedQuestions`; None: nobody, they end the run)."""
         from seqrun.service.runner import run_sequence as run_with_log
         from seqrun.stop_requests import StopRequests
 
@@ -143,6 +146,7 @@ class Runs:
             if s.zero is not None:  # for the log and any face
                 executor.emit("zero_reference", **s.zero.as_dict())
             executor.record_zero = record_zero
+            executor.attended = attended
             if run_control is not None:  # `seqrun status|halt` from another terminal
                 run_control.attach(executor)
             if on_executor is not None:
