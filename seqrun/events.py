@@ -531,12 +531,16 @@ class OperatorAbortEvent(Event):
 class ConfirmRequested(Event):
     type: ClassVar[str] = "confirm_requested"
     when: ClassVar[str] = ("a session run asks the operator (a confirm step, a before-step "
-                           "question, clearing a latched fault); answer with "
-                           "ArmSession.answer(question_id, yes)")
+                           "question, clearing a latched fault, a signed confirm, a "
+                           "breakpoint); answer with ArmSession.answer(question_id, yes, "
+                           "name) (name: a signed question's yes)")
     question_id: str
     text: str
     #: Who started the activity that asks (a face's client name; None: not said).
     started_by: str | None = _optional()
+    #: A signed question: a yes needs the name of who answers (and ``role``: as what).
+    sign: bool | None = _optional()
+    role: str | None = _optional()
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -545,6 +549,8 @@ class ConfirmAnswered(Event):
     when: ClassVar[str] = "a question was answered (or withdrawn: the run stopped meanwhile)"
     question_id: str
     yes: bool
+    #: Who answered a signed question yes.
+    name: str | None = _optional()
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import datetime as dt
 import json
 import shutil
+from pathlib import Path
 
 from typer.testing import CliRunner
 
@@ -139,3 +140,69 @@ def test_sign_and_breakpoint_are_strict_booleans(tmp_path):
         result = CliRunner().invoke(app, ["validate", str(path)])
         assert result.exit_code == 1, result.output
         assert f"signed.yaml:3:{col}" in result.output, result.output
+
+
+def test_a_run_of_several_arms_refuses_them_before_anything_is_sent(tmp_path):
+    root = tmp_path / "two-arms"
+    shutil.copytree(ROOT / "examples" / "two-arms", root)
+    path = root / "sequences" / "hold_and_approach.yaml"
+    text = path.read_text()
+    assert "  - confirm: Is the floor between the arms clear?\n" in text
+    path.write_text(text.replace("  - confirm: Is the floor between the arms clear?\n",
+                                 "  - confirm: {prompt: 'Is the floor clear?', sign: true}\n"))
+    result = CliRunner().invoke(app, ["run", str(path), "--virtual-time", "--plain",
+                                      "--log-dir", str(tmp_path / "run")], input="y\nAda\n")
+    assert result.exit_code == 2, result.output
+    assert "is a signed confirm: not in a run of several arms yet" in result.output
+    assert not (tmp_path / "run").exists()
+
+
+# ------------------------------------------------------------- the session (the console's way)
+def test_the_session_asks_a_signed_confirm_and_a_breakpoint_as_questions(tmp_path):
+    import threading
+
+    from seqrun.arm.description import load_arm
+    from seqrun.clock import VirtualClock
+    from seqrun.errors import Refused
+    from seqrun.service import ArmSession
+    from seqrun.service.connection import open_connection
+
+    path = campaign(tmp_path, SIGNED + "  - wait: {seconds: 0.5, breakpoint: true}\n")
+    connection = open_connection(force_sim=True, clock=VirtualClock())
+    session = ArmSession(load_arm(ROOT / "arms" / "lwa3.yaml"), connection, status_hz=0,
+                         log_root=tmp_path / "runs", poses_dir=ROOT / "poses")
+    try:
+        sub = session.subscribe(maxsize=100_000)
+        asked: list = []
+        refused: list[str] = []
+
+        def answer() -> None:
+            for event in sub:
+                if event.type == "confirm_requested":
+                    asked.append(event)
+                    if event.sign:
+                        try:   # a yes without a name is refused: the question stays open
+                            session.answer(event.question_id, True, "  ")
+                        except Refused as exc:
+                            refused.append(str(exc))
+                        session.answer(event.question_id, True, "Grace Hopper")
+                    else:
+                        session.answer(event.question_id, True)
+                if event.type == "activity_finished":
+                    return
+
+        answering = threading.Thread(target=answer, daemon=True)
+        answering.start()
+        # assume_yes answers plain confirms only: these two are still asked
+        result = session.run_sequence(path, assume_yes=True).wait(120)
+        answering.join(10)
+        assert result.ok, result.message
+        assert [(e.sign, e.role) for e in asked] == [(True, "test conductor"), (None, None)]
+        assert "Breakpoint before step 2" in asked[1].text
+        assert refused == ["answer: a signed question needs the name of who answers"]
+        step = json.loads((Path(result.run_dir) / "report.json").read_text())["steps"][0]
+        assert (step["signed_by"], step["signed_role"]) == ("Grace Hopper", "test conductor")
+        record = json.loads((Path(result.run_dir) / "record.json").read_text())
+        assert record["signatures"][0]["signed_by"] == "Grace Hopper"
+    finally:
+        session.close()

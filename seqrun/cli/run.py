@@ -84,18 +84,15 @@ class _Attended:
 
 def _refuse_yes_for_attended(loaded, yes: bool) -> str | None:
     """--yes answers plain confirm steps only: a sequence with a signed confirm or a
-    breakpoint needs a person at the run, so --yes refuses it before anything is opened
+    breakpoint needs a person at the run, so --yes refuses it before anything is sent
     (why, in one line; None: nothing to refuse)."""
-    if not yes:
+    from seqrun.cli.questions import first_attended
+
+    found = first_attended(loaded.steps) if yes else None
+    if found is None:
         return None
-    for step in loaded.steps:
-        params = step.params
-        what = ("a signed confirm" if getattr(params, "sign", False) else
-                "a breakpoint" if getattr(params, "breakpoint", False) else None)
-        if what is not None:
-            return (f"--yes: step {step.number} ({step.location}) is {what}, which only a "
-                    "person at the run answers; run without --yes; nothing was sent")
-    return None
+    return (f"--yes: {found}, which only a person at the run answers; run without --yes; "
+            "nothing was sent")
 
 
 def _ctrl_c_outside_the_run_is_an_operator_abort(command):

@@ -41,6 +41,7 @@ class Runs:
         from seqrun.sequence.validation import validate_sequence
         from seqrun.service.campaign_records import record_run
         from seqrun.service.checking import override_notes
+        from seqrun.service.questions import SessionAttended
         from seqrun.service.runlog import prepare_run_folder
 
         s = self._session
@@ -104,7 +105,9 @@ class Runs:
                                           None if s.connection.is_simulator
                                           else lambda q: s.questions.ask(q)),
                                       html_report=html_report, file=str(file),
-                                      bus_held=True)
+                                      bus_held=True,
+                                      # never assume_yes: only a person answers these
+                                      attended=SessionAttended(s.questions))
             result = activity_result("run", outcome.result, run_dir=folder)
             try:
                 s.telemetry.poll_once()

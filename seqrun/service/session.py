@@ -378,8 +378,8 @@ class ArmSession:
     def step(self) -> None:
         self.questions.step()
 
-    def answer(self, question_id: str, yes: bool) -> None:
-        self.questions.answer(question_id, yes)
+    def answer(self, question_id: str, yes: bool, name: str | None = None) -> None:
+        self.questions.answer(question_id, yes, name)
 
     def pending_questions(self) -> dict[str, str]:
         return self.questions.pending()
