@@ -15,15 +15,16 @@ from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 if TYPE_CHECKING:
     import numpy as np
 
-_Answer = TypeVar("_Answer")
-
     from seqrun.arm.description import ArmDescription
     from seqrun.arm.joint_values import GripperReading, JointState, LimitValues
     from seqrun.arm.kinematics import Chain
     from seqrun.arm.limits import LimitsInForce
     from seqrun.arm.planner import Limits
 
-__all__ = ["ArmEvents", "JointReading", "StepContext"]
+__all__ = ["ArmEvents", "AttendedQuestions", "JointReading", "StepContext"]
+
+#: What an operator's question answers (yes/no, a name).
+_Answer = TypeVar("_Answer")
 
 
 class JointReading(Protocol):
