@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import signal
 import sys
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Any
 
@@ -62,18 +62,6 @@ def ask(question: str, assume_yes: bool = False, *,
         say(END_OF_INPUT)  # the question's line ends, and the reason is on it
         return False
     return answer is not None and answer.strip().lower() in ("y", "yes")
-
-
-def first_attended(steps: Iterable[Any]) -> str | None:
-    """The first step that only a person answers (a signed confirm, a breakpoint), as
-    "step N (FILE:LINE:COL) is a …"; None when there is none."""
-    for step in steps:
-        params = step.params
-        what = ("a signed confirm" if getattr(params, "sign", False) else
-                "a breakpoint" if getattr(params, "breakpoint", False) else None)
-        if what is not None:
-            return f"step {step.number} ({step.location}) is {what}"
-    return None
 
 
 def ask_name(role: str | None, *, say: Callable[..., Any],

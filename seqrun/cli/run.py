@@ -86,7 +86,7 @@ def _refuse_yes_for_attended(loaded, yes: bool) -> str | None:
     """--yes answers plain confirm steps only: a sequence with a signed confirm or a
     breakpoint needs a person at the run, so --yes refuses it before anything is sent
     (why, in one line; None: nothing to refuse)."""
-    from seqrun.cli.questions import first_attended
+    from seqrun.service.attended import first_attended
 
     found = first_attended(loaded.steps) if yes else None
     if found is None:

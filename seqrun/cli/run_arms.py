@@ -84,7 +84,7 @@ def run_arms(file: Path, project: Any, *, sim: bool, sim_fault: list[str], speed
                    "(nothing was sent)", err=True)
         raise typer.Exit(EXIT_INVALID)
     tracks = check.tracks.tracks
-    from seqrun.cli.questions import first_attended
+    from seqrun.service.attended import first_attended
 
     for arm_id, track in tracks.items():   # each arm's thread has no one to ask them yet
         found = first_attended(track.steps)
