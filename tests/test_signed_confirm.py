@@ -94,10 +94,10 @@ def test_a_plain_confirm_is_still_answered_by_yes(tmp_path):
 
 
 def test_a_breakpoint_no_is_an_operator_abort_before_the_step(tmp_path):
-    path = campaign(tmp_path, "  - move: {pose: totem, velocity_scale: 0.5}\n"
-                              "  - move: {pose: park, velocity_scale: 0.5, breakpoint: true}\n",
+    path = campaign(tmp_path, "  - move: {joints: {j1: 2}}\n"
+                              "  - move: {joints: {j1: 0}, breakpoint: true}\n",
                     startup=True)
-    result = run(path, tmp_path / "run", "n\n")
+    result = run(path, tmp_path / "run", "n\n", "--no-report")
     assert result.exit_code == 130, result.output
     assert result.output.count("Continue? [y/N]") == 1
     folder = tmp_path / "run"
@@ -116,7 +116,7 @@ def test_a_breakpoint_no_is_an_operator_abort_before_the_step(tmp_path):
 
 def test_a_breakpoint_yes_goes_on(tmp_path):
     path = campaign(tmp_path, "  - wait: {seconds: 0.5, breakpoint: true}\n")
-    result = run(path, tmp_path / "run", "y\n")
+    result = run(path, tmp_path / "run", "y\n", "--no-report")
     assert result.exit_code == 0, result.output
     events = read_events(tmp_path / "run")
     assert [e["go_on"] for e in events if e["type"] == "breakpoint_answered"] == [True]
