@@ -531,12 +531,16 @@ class OperatorAbortEvent(Event):
 class ConfirmRequested(Event):
     type: ClassVar[str] = "confirm_requested"
     when: ClassVar[str] = ("a session run asks the operator (a confirm step, a before-step "
-                           "question, clearing a latched fault); answer with "
-                           "ArmSession.answer(question_id, yes)")
+                           "question, clearing a latched fault, a signed confirm, a "
+                           "breakpoint); answer with ArmSession.answer(question_id, yes, "
+                           "name) (name: a signed question's yes)")
     question_id: str
     text: str
     #: Who started the activity that asks (a face's client name; None: not said).
     started_by: str | None = _optional()
+    #: A signed question: a yes needs the name of who answers (and ``role``: as what).
+    sign: bool | None = _optional()
+    role: str | None = _optional()
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -545,6 +549,37 @@ class ConfirmAnswered(Event):
     when: ClassVar[str] = "a question was answered (or withdrawn: the run stopped meanwhile)"
     question_id: str
     yes: bool
+    #: Who answered a signed question yes.
+    name: str | None = _optional()
+
+
+@dataclass(frozen=True, kw_only=True)
+class ConfirmSigned(Event):
+    type: ClassVar[str] = "confirm_signed"
+    when: ClassVar[str] = ("a signed confirm was answered yes: who (``signed_by``), as what "
+                           "(``signed_role``), when (UTC) and the sha256 of the validated "
+                           "inputs they signed")
+    text: str
+    signed_by: str
+    signed_role: str | None = _optional()
+    signed_at_utc: str
+    inputs_sha256: str | None = _optional()
+
+
+@dataclass(frozen=True, kw_only=True)
+class BreakpointReached(Event):
+    type: ClassVar[str] = "breakpoint_reached"
+    when: ClassVar[str] = ("the run stopped before a step with ``breakpoint: true`` (the arm "
+                           "at rest) and asks the operator to continue")
+    label: str
+
+
+@dataclass(frozen=True, kw_only=True)
+class BreakpointAnswered(Event):
+    type: ClassVar[str] = "breakpoint_answered"
+    when: ClassVar[str] = ("the operator answered a breakpoint: ``go_on`` true continues, "
+                           "false ends the run as an operator abort")
+    go_on: bool
 
 
 # ====================================================================== faults and Halt

@@ -34,7 +34,7 @@ import gc
 import time
 from functools import partial
 from dataclasses import replace
-from typing import TYPE_CHECKING, Any, Callable, Iterable, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Sequence, TypeVar
 
 import numpy as np
 
@@ -64,8 +64,12 @@ from seqrun.stop_requests import OPERATOR_HALT, StopRequests
 if TYPE_CHECKING:
     from seqrun.arm.poses import PoseDirs
     from seqrun.arm.trajectory_tolerances import TrajectoryTolerances
+    from seqrun.steps.context import AttendedQuestions
     from seqrun.arm.joint_values import GripperReading
     from seqrun.drivers.base import GripperDriver
+
+#: What an operator's question answers (yes/no, a name).
+_Answer = TypeVar("_Answer")
 
 #: A synchronous recorder: gets every typed event (it reads like the events.jsonl dict).
 Listener = Callable[[Any], None]
@@ -88,6 +92,10 @@ class Executor:
     #: The planned path of each move as the preflight validated it from the measured
     #: start (step number -> (times s, joints rad)); None before the preflight.
     planned_paths: dict[int, Any] | None = None
+    #: Who answers a signed confirm and a breakpoint (never --yes; None: nobody attends).
+    attended: AttendedQuestions | None = None
+    #: The sha256 of the validated inputs, kept with a signature (None: not recorded).
+    inputs_sha256: str | None = None
 
     def __init__(self, driver: ArmDriver | Any, arm: ArmDescription, clock: Clock, *,
                  sequence_check: SequenceCheck,
@@ -198,7 +206,7 @@ class Executor:
     def abort_requested(self) -> bool:
         return self.stops.abort_requested
 
-    def ask_operator(self, question: Callable[[Any], bool], arg: Any) -> bool:
+    def ask_operator(self, question: Callable[[Any], _Answer], arg: Any) -> _Answer:
         """Ask the operator; while asking, Ctrl-C may interrupt the question."""
         self.waiting_for_operator = True
         try:
@@ -594,9 +602,29 @@ class Executor:
             raise OperatorAbort("operator abort")
         if self.before_step is not None and not self.ask_operator(self.before_step, step):
             raise OperatorAbort("operator declined the step")
+        if getattr(step.params, "breakpoint", False):
+            self._breakpoint(step)
         self.check_halt_request()
         if self.stops.aborts:
             raise OperatorAbort("operator abort")
+
+    def _breakpoint(self, step) -> None:
+        """Between steps, the arm at rest: go on only when a person says so (the dry run
+        passes through, and says so)."""
+        title = f"step {step.number}: {_label(step)}"
+        if self.dry_run:
+            self.not_verified.append(f"step {step.number}: breakpoint before '{_label(step)}' "
+                                     "(assumed continue)")
+            return
+        self.emit("breakpoint_reached", step=step.number, label=_label(step))
+        attended = self.attended
+        go_on = attended is not None and self.ask_operator(
+            attended.breakpoint, f"Breakpoint before {title}. Continue?")
+        self.emit("breakpoint_answered", step=step.number, go_on=go_on)
+        if not go_on:
+            raise OperatorAbort(f"operator stopped at the breakpoint before {title}"
+                                if attended is not None else
+                                f"breakpoint before {title}: nobody to ask")
 
     def _begin_step(self, step, result: StepResult, *, iteration: int | None = None,
                     bound: dict[str, int] | None = None, attempt: int | None = None) -> None:

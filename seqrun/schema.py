@@ -164,6 +164,9 @@ class IncludeParams(StepParams):
         if flow:
             raise PydanticCustomError("include_flow", "an include runs other steps: put "
                                       "{keys} on those steps", {"keys": " and ".join(flow)})
+        if self.breakpoint:
+            raise PydanticCustomError("include_breakpoint", "an include runs other steps: put "
+                                      "breakpoint on the first of them")
         return self
 
 

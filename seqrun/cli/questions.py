@@ -64,6 +64,25 @@ def ask(question: str, assume_yes: bool = False, *,
     return answer is not None and answer.strip().lower() in ("y", "yes")
 
 
+def ask_name(role: str | None, *, say: Callable[..., Any],
+             read: Callable[[], str | None]) -> str | None:
+    """Who answers a signed question: their name (asked again while empty); None at the
+    end of input or a signal (no name: no signature, a no)."""
+    as_what = f" ({role})" if role else ""
+    while True:
+        say(f"Signed by{as_what}, your name: ", end="")
+        answer = read()
+        if answer == "":
+            say(END_OF_INPUT)
+            return None
+        if answer is None:
+            return None
+        name = " ".join(answer.split())
+        if name:
+            return name
+        say("A signed answer needs the name of who gives it.")
+
+
 @contextmanager
 def signals_end_the_question() -> Iterator[None]:
     """SIGTERM, SIGHUP and SIGQUIT raise :class:`QuestionInterrupted` meanwhile (their

@@ -54,6 +54,47 @@ def _ask_shown(console: Console, displays: list, question: str, assume_yes: bool
         return _ask(console, question, assume_yes, read)
 
 
+class _Attended:
+    """Signed confirms and breakpoints on the terminal: asked of the person there, even
+    with --yes (which the run refuses beforehand: :func:`_refuse_yes_for_attended`)."""
+
+    def __init__(self, console: Console, displays: list,
+                 read: Callable[[], str | None]) -> None:
+        self.console, self.displays, self.read = console, displays, read
+
+    def sign(self, prompt: str, role: str | None) -> str | None:
+        from seqrun.cli.questions import ask_name
+
+        as_what = f" [signed by the {role}]" if role else " [signed]"
+        if not _ask_shown(self.console, self.displays, f"{prompt}{as_what}", False,
+                          read=self.read):
+            return None
+
+        def say(text: str, end: str = "\n") -> None:
+            self.console.print(text, end=end, highlight=False, markup=False, soft_wrap=True)
+
+        if self.displays and hasattr(self.displays[0], "asking"):
+            with self.displays[0].asking(None):
+                return ask_name(role, say=say, read=self.read)
+        return ask_name(role, say=say, read=self.read)
+
+    def breakpoint(self, prompt: str) -> bool:
+        return _ask_shown(self.console, self.displays, prompt, False, read=self.read)
+
+
+def _refuse_yes_for_attended(loaded, yes: bool) -> str | None:
+    """--yes answers plain confirm steps only: a sequence with a signed confirm or a
+    breakpoint needs a person at the run, so --yes refuses it before anything is sent
+    (why, in one line; None: nothing to refuse)."""
+    from seqrun.service.attended import first_attended
+
+    found = first_attended(loaded.steps) if yes else None
+    if found is None:
+        return None
+    return (f"--yes: {found}, which only a person at the run answers; run without --yes; "
+            "nothing was sent")
+
+
 def _ctrl_c_outside_the_run_is_an_operator_abort(command):
     """Before the run's own signal handlers are in place (validation, opening the bus, the
     REAL-arm question), Ctrl-C is a KeyboardInterrupt: one line, exit 130 (click would say
@@ -95,7 +136,8 @@ def run_command(
     from_step: Annotated[int, typer.Option("--from", metavar="N", help="Start at step N "
                                            "(after checking the arm is where N expects it).")] = 1,
     yes: Annotated[bool, typer.Option("--yes", "-y", help="Do not ask before moving a real "
-                                      "arm; answer yes to confirm steps.")] = False,
+                                      "arm; answer yes to confirm steps (never to a signed "
+                                      "confirm or a breakpoint: refused).")] = False,
     log_dir: Annotated[Optional[Path], typer.Option("--log-dir", metavar="DIR",
                                                     help="Run folder (default runs/<time>-<name>/).")] = None,
     arm_file: Annotated[Optional[Path], typer.Option("--arm", metavar="FILE",
@@ -193,6 +235,10 @@ def run_command(
                 typer.echo(f"error: {error}", err=True)
             typer.echo(str(RunInvalid(str(file), list(exc.errors))), err=True)
             raise typer.Exit(EXIT_INVALID) from None
+    refusal = _refuse_yes_for_attended(run.loaded, yes)
+    if refusal is not None:
+        run.connection.close()
+        fail(refusal)
     # From here `seqrun status` / `seqrun halt` in another terminal ask this run.
     from seqrun.service.run_control import RunControl
     from seqrun.stop_requests import StopRequests
@@ -403,6 +449,7 @@ def _run_in_session(console: Console, run, zero, folder: Path, control, requests
         outcome = session.run_loaded(
             loaded, log_dir=folder, file=str(run.file), speed=speed, first_step=from_step,
             command_mode=command_mode, confirm=confirm, before_step=before_step,
+            attended=_Attended(console, displays, signals.read_answer),
             run_control=control, requests=requests, warn=warn,
             confirm_clear_latched=(None if connection.is_simulator else confirm_clear_latched),
             meta={"zero": zero.as_dict(),

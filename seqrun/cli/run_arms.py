@@ -84,6 +84,13 @@ def run_arms(file: Path, project: Any, *, sim: bool, sim_fault: list[str], speed
                    "(nothing was sent)", err=True)
         raise typer.Exit(EXIT_INVALID)
     tracks = check.tracks.tracks
+    from seqrun.service.attended import first_attended
+
+    for arm_id, track in tracks.items():   # each arm's thread has no one to ask them yet
+        found = first_attended(track.steps)
+        if found is not None:
+            fail(f"arm {arm_id}: {found}: not in a run of several arms yet (run that arm's "
+                 "sequence on its own); nothing was sent")
     for between in check.between:
         typer.echo(f"  {between.text()}")
     with user_errors():

@@ -70,6 +70,8 @@ class ArmsRunBody(_Strict):
 class AnswerBody(_Strict):
     question_id: str = Field(min_length=1, max_length=40)
     yes: bool
+    #: Who answers a signed question yes (required there, asked again while empty).
+    name: str | None = Field(None, max_length=80)
 
 
 class SavePoseBody(_Strict):

@@ -353,7 +353,10 @@ def _step_extra(data: RunData, s: StepView) -> str:
                        "(report.json has none for this step)</span>")
     if s.detail.get("error"):
         out.append(f"<div><strong>error:</strong> {escape(str(s.detail['error']))}</div>")
+    out.append(_signature(s))
     shown = {k for k, _ in _FIGURE_ROWS} | {"executed_duration_s", "duration_ratio", "error",
+                                            "signed_by", "signed_role", "signed_at_utc",
+                                            "inputs_sha256",
                                             "expected_position_mm", "reached_position_mm",
                                             "reached_rpy_deg", "position_error_mm",
                                             "angle_error_deg", "position_tolerance_mm",
@@ -368,6 +371,19 @@ def _step_extra(data: RunData, s: StepView) -> str:
         out.append('<div class="note">' + "; ".join(f"{escape(k)}: {_value(v)}"
                                                     for k, v in rest.items()) + "</div>")
     return "".join(out)
+
+
+def _signature(s: StepView) -> str:
+    """Who answered a signed confirm, as what, when, and the inputs they signed."""
+    name = s.detail.get("signed_by")
+    if not name:
+        return ""
+    role = s.detail.get("signed_role")
+    as_what = f" ({escape(str(role))})" if role else ""
+    return (f'<div class="signature" data-step="{s.number}"><strong>signed by</strong> '
+            f"{escape(str(name))}{as_what} at {escape(str(s.detail.get('signed_at_utc')))} "
+            f'(UTC); inputs sha256 <span class="mono">'
+            f"{escape(str(s.detail.get('inputs_sha256')))}</span></div>")
 
 
 def _figure_table(data: RunData, number: int, figures: dict) -> str:

@@ -190,6 +190,13 @@ class ArmSessions:
                 more = len(check.errors) - 1
                 raise Refused(str(check.errors[0]) + (f" (and {more} more)" if more else ""))
             tracks = check.tracks.tracks
+            from seqrun.service.attended import first_attended
+
+            for arm_id, track in tracks.items():  # each arm's thread has no one to ask them
+                found = first_attended(track.steps)
+                if found is not None:
+                    raise Refused(f"run: arm {arm_id}: {found}: not in a run of several arms "
+                                  "yet")
             missing = [a for a in tracks if a not in self.sessions]
             if missing:
                 raise Refused(f"run: the sequence names arm {', '.join(missing)}, which this "

@@ -24,6 +24,10 @@ class Question:
     text: str
     step: bool = False
     yes: bool | None = None
+    #: A signed question: a yes needs the name of who gives it (kept in ``name``).
+    sign: bool = False
+    role: str | None = None
+    name: str | None = None
 
     def __post_init__(self) -> None:
         self.answered = threading.Event()
@@ -48,28 +52,43 @@ class Questions:
 
     def ask(self, text: str, *, step: bool = False) -> bool:
         """Publish ``text`` and wait for the answer (or the withdrawal: no)."""
+        return bool(self._wait(Question("", text, step)).yes)
+
+    def ask_signed(self, text: str, role: str | None) -> str | None:
+        """A signed question: the name of who answered yes, None for a no."""
+        q = self._wait(Question("", text, sign=True, role=role))
+        return q.name if q.yes else None
+
+    def _wait(self, q: Question) -> Question:
         with self._lock:
             self._ids += 1
-            q = Question(f"q{self._ids}", text, step)
+            q.id = f"q{self._ids}"
             self._open[q.id] = q
         by = self._started_by()  # who started the run the question is about
-        self._publish("confirm_requested", question_id=q.id, text=text,
+        signed = {"sign": True, **({"role": q.role} if q.role else {})} if q.sign else {}
+        self._publish("confirm_requested", question_id=q.id, text=q.text, **signed,
                       **({"started_by": by} if by is not None else {}))
         while not q.answered.wait(POLL_S):
             # A stop request posted meanwhile (abort, STOP) answers no at once.
             if self._stop_pending():
                 self._resolve(q, False)
-        return bool(q.yes)
+        return q
 
-    def answer(self, question_id: str, yes: bool) -> None:
-        """Answer a ``confirm_requested`` question (any thread). Refused: unknown or
-        already answered question."""
+    def answer(self, question_id: str, yes: bool, name: str | None = None) -> None:
+        """Answer a ``confirm_requested`` question (any thread); a signed one's yes with
+        the ``name`` of who gives it. Refused: unknown or already answered question, a
+        signed yes without a name (the question stays open: asked again)."""
         with self._lock:
             q = self._open.get(question_id)
         if q is None:
             raise Refused(f"answer: no open question {question_id!r}")
         if not isinstance(yes, bool):
             raise Refused(f"answer: yes must be true or false, got {yes!r}")
+        if q.sign and yes:
+            given = " ".join(name.split()) if isinstance(name, str) else ""
+            if not given:
+                raise Refused("answer: a signed question needs the name of who answers")
+            q.name = given
         self._resolve(q, yes)
 
     def step(self) -> None:
@@ -98,5 +117,21 @@ class Questions:
             if self._open.pop(q.id, None) is None:
                 return
             q.yes = yes
-        self._publish("confirm_answered", question_id=q.id, yes=yes)
+        self._publish("confirm_answered", question_id=q.id, yes=yes,
+                      **({"name": q.name} if q.sign and yes else {}))
         q.answered.set()
+
+
+class SessionAttended:
+    """Signed confirms and breakpoints asked through the session's questions (the
+    console's dialog): never answered by an ``assume_yes`` (:mod:`seqrun.steps.context`,
+    ``AttendedQuestions``)."""
+
+    def __init__(self, questions: Questions) -> None:
+        self._questions = questions
+
+    def sign(self, prompt: str, role: str | None) -> str | None:
+        return self._questions.ask_signed(prompt, role)
+
+    def breakpoint(self, prompt: str) -> bool:
+        return self._questions.ask(prompt)

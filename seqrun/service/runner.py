@@ -7,6 +7,8 @@ through :func:`run_sequence`, so what the tests prove is what the operator runs.
 from __future__ import annotations
 
 import gc
+import hashlib
+import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterable
@@ -18,6 +20,7 @@ from seqrun.drivers.base import ArmDriver
 from seqrun.drivers.registry import open_driver
 from seqrun.events import EventHub
 from seqrun.executor import Executor, Listener
+from seqrun.runfolder.logfile import write_whole
 from seqrun.results import EXIT_FAULT, RunResult, StepResult
 from seqrun.sequence.checks import check_from_arm
 from seqrun.sequence.loader import LoadedSequence
@@ -121,6 +124,8 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
                      mcap=mcap, time_base=part.time_base if part is not None else None)
         driver.add_frame_listener(log.on_frame)
         executor.listeners.insert(0, log.on_event)
+        # what a signed confirm signs: these inputs, as validated
+        executor.inputs_sha256 = inputs_digest(_inputs(loaded, arm))
     # The host's part in the run: stalls named in a fault's verdict, report.json's "host".
     host = HostWatch(wall_clock=not isinstance(connection.clock, VirtualClock))
     executor.listeners.append(host)
@@ -139,6 +144,8 @@ def run_sequence(loaded: LoadedSequence, arm: ArmDescription, connection: Connec
         if log is not None:
             if result is not None:
                 report = log.finish(result, host=host.summary())
+                if log_dir is not None:
+                    add_signatures(log_dir, result, warn)
             log.close()
             if not own_driver:
                 driver.remove_frame_listener(log.on_frame)
@@ -185,6 +192,39 @@ def write_html_report(folder: Path) -> str | None:
     finally:
         gc.collect()
         return_freed_memory()
+
+
+def inputs_digest(inputs: list[dict[str, str]]) -> str:
+    """One sha256 for a run's validated inputs: of the canonical JSON of report.json's
+    ``inputs`` (each file's kind, path and sha256), so that any changed byte changes it."""
+    canonical = json.dumps(inputs, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(canonical.encode()).hexdigest()
+
+
+def add_signatures(folder: Path, result: RunResult,
+                   warn: Callable[[str], None] | None = None) -> None:
+    """The run's signed confirms, added to record.json (``signatures``): who answered, as
+    what, when and the inputs they signed. Nothing is added to a run without one."""
+    signatures = [{"step": s.number, "text": s.label,
+                   **{k: s.detail.get(k) for k in SIGNATURE_KEYS}}
+                  for s in result.steps if s.detail.get("signed_by")]
+    record_file = Path(folder) / "record.json"
+    if not signatures or not record_file.is_file():
+        return
+    try:
+        record = json.loads(record_file.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        if warn is not None:
+            warn(f"record.json: signatures not added ({exc})")
+        return
+    record["signatures"] = signatures
+    error = write_whole(record_file, json.dumps(record, indent=2) + "\n")
+    if error is not None and warn is not None:
+        warn(f"record.json: signatures not added ({error})")
+
+
+#: What a signed confirm keeps (its step's detail in report.json, record.json's signatures).
+SIGNATURE_KEYS = ("signed_by", "signed_role", "signed_at_utc", "inputs_sha256")
 
 
 def _inputs(loaded: LoadedSequence, arm: ArmDescription) -> list[dict[str, str]]:

@@ -41,6 +41,7 @@ class Runs:
         from seqrun.sequence.validation import validate_sequence
         from seqrun.service.campaign_records import record_run
         from seqrun.service.checking import override_notes
+        from seqrun.service.questions import SessionAttended
         from seqrun.service.runlog import prepare_run_folder
 
         s = self._session
@@ -104,7 +105,9 @@ class Runs:
                                           None if s.connection.is_simulator
                                           else lambda q: s.questions.ask(q)),
                                       html_report=html_report, file=str(file),
-                                      bus_held=True)
+                                      bus_held=True,
+                                      # never assume_yes: only a person answers these
+                                      attended=SessionAttended(s.questions))
             result = activity_result("run", outcome.result, run_dir=folder)
             try:
                 s.telemetry.poll_once()
@@ -123,7 +126,8 @@ class Runs:
                    warn: Callable[[str], None] | None = None, meta: dict | None = None,
                    html_report: bool = True, file: str | None = None,
                    bus_held: bool = False, cycle_hz: float | None = None,
-                   record_zero: Callable[[str], Any] | None = None, part: Any = None):
+                   record_zero: Callable[[str], Any] | None = None, part: Any = None,
+                   attended: Any = None):
         """Run an already loaded and checked sequence on the caller's thread with the
         session's driver and event hub; returns the runner's outcome (result, report, run
         folder). This is how ``seqrun run`` runs (its prompts are the terminal's own); faces
@@ -131,7 +135,9 @@ class Runs:
         what a power_off step calls to record the pose the arm is switched off in;
         ``run_control``: the run's :class:`~seqrun.service.run_control.RunControl`
         (``seqrun status|halt`` from another terminal), attached to the run's executor;
-        ``part``: one arm's part of a campaign run (:mod:`seqrun.service.arm_part`)."""
+        ``part``: one arm's part of a campaign run (:mod:`seqrun.service.arm_part`);
+        ``attended``: who answers signed confirms and breakpoints
+        (:class:`~seqrun.steps.context.AttendedQuestions`; None: nobody, they end the run)."""
         from seqrun.service.runner import run_sequence as run_with_log
         from seqrun.stop_requests import StopRequests
 
@@ -143,6 +149,7 @@ class Runs:
             if s.zero is not None:  # for the log and any face
                 executor.emit("zero_reference", **s.zero.as_dict())
             executor.record_zero = record_zero
+            executor.attended = attended
             if run_control is not None:  # `seqrun status|halt` from another terminal
                 run_control.attach(executor)
             if on_executor is not None:

@@ -356,7 +356,8 @@ class ArmSession:
                    warn: Callable[[str], None] | None = None, meta: dict | None = None,
                    html_report: bool = True, file: str | None = None,
                    bus_held: bool = False, cycle_hz: float | None = None,
-                   record_zero: Callable[[str], Any] | None = None, part: Any = None):
+                   record_zero: Callable[[str], Any] | None = None, part: Any = None,
+                   attended: Any = None):
         """Run a loaded, checked sequence on this thread, the caller's prompts and signals
         (:meth:`Runs.run_loaded`)."""
         return self.runs.run_loaded(
@@ -365,7 +366,7 @@ class ArmSession:
             confirm_clear_latched=confirm_clear_latched, on_executor=on_executor,
             run_control=run_control, requests=requests, warn=warn, meta=meta,
             html_report=html_report, file=file, bus_held=bus_held, cycle_hz=cycle_hz,
-            record_zero=record_zero, part=part)
+            record_zero=record_zero, part=part, attended=attended)
 
     def pause(self) -> None:
         self.runs.pause()
@@ -377,8 +378,8 @@ class ArmSession:
     def step(self) -> None:
         self.questions.step()
 
-    def answer(self, question_id: str, yes: bool) -> None:
-        self.questions.answer(question_id, yes)
+    def answer(self, question_id: str, yes: bool, name: str | None = None) -> None:
+        self.questions.answer(question_id, yes, name)
 
     def pending_questions(self) -> dict[str, str]:
         return self.questions.pending()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import datetime as _dt
 from typing import TYPE_CHECKING, Annotated, Any, ClassVar
 
 from pydantic import Field
@@ -23,6 +24,14 @@ class ConfirmParams(StepParams):
     yaml_name: ClassVar[str] = "confirm"
     prompt: str = Field(min_length=1, description="The question or instruction shown to the "
                                                   "operator, e.g. 'Is the desk clear?'.")
+    role: str | None = Field(None, min_length=1, max_length=80,
+                             description="Who is to answer, e.g. 'test conductor' (shown "
+                                         "with the question, kept with the signature).")
+    sign: bool = Field(False, description="A signed confirm: whoever answers yes gives "
+                                          "their name, recorded with the role, the time "
+                                          "(UTC) and the sha256 of the validated inputs in "
+                                          "record.json, report.json and report.html; "
+                                          "--yes never answers it.")
 
     @classmethod
     def from_shorthand(cls, value: Any) -> StepParams:
@@ -30,7 +39,8 @@ class ConfirmParams(StepParams):
 
 
 def describe(params: ConfirmParams) -> str:
-    return f"confirm: {params.prompt}"
+    signed = f" (signed{f' by the {params.role}' if params.role else ''})" if params.sign else ""
+    return f"confirm: {params.prompt}{signed}"
 
 
 def check(checker: CheckContext, step: ResolvedStep[ConfirmParams], params: ConfirmParams) -> None:
@@ -39,6 +49,8 @@ def check(checker: CheckContext, step: ResolvedStep[ConfirmParams], params: Conf
 
 def run(step: ResolvedStep[ConfirmParams], ex: StepContext) -> dict:
     prompt = step.params.prompt
+    if step.params.sign:
+        return _signed(step, ex)
     if ex.confirm is None:  # dry run: nobody to ask
         ex.not_verified.append(f"step {step.number}: operator confirmation '{prompt}' "
                                "(assumed yes)")
@@ -46,6 +58,30 @@ def run(step: ResolvedStep[ConfirmParams], ex: StepContext) -> dict:
     if not ex.ask_operator(ex.confirm, prompt):
         raise OperatorAbort(f"operator declined: {prompt}")
     return {"confirmed": True}
+
+
+def _signed(step: ResolvedStep[ConfirmParams], ex: StepContext) -> dict:
+    """A signed confirm: only a person answers it, and their name is kept with what they
+    signed (the validated inputs' sha256) and when."""
+    params = step.params
+    role = f" by the {params.role}" if params.role else ""
+    if ex.dry_run:
+        ex.not_verified.append(f"step {step.number}: signed operator confirmation "
+                               f"'{params.prompt}'{role} (assumed yes)")
+        return {"confirmed": "assumed (dry run)"}
+    if ex.attended is None:
+        raise OperatorAbort(f"nobody to sign '{params.prompt}'{role} (a signed confirm is "
+                            "answered by a person, never by --yes)")
+    attended = ex.attended
+    name = ex.ask_operator(lambda text: attended.sign(text, params.role), params.prompt)
+    if not name:
+        raise OperatorAbort(f"operator declined: {params.prompt}")
+    signature = {"signed_by": str(name), "signed_role": params.role,
+                 "signed_at_utc": _dt.datetime.now(_dt.timezone.utc)
+                 .isoformat(timespec="seconds").replace("+00:00", "Z"),
+                 "inputs_sha256": ex.inputs_sha256}
+    ex.emit("confirm_signed", text=params.prompt, **signature)
+    return {"confirmed": True, **signature}
 
 
 KIND = StepKind(

@@ -10,7 +10,7 @@ second one (a console's single moves, a test double) implements the same members
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
 if TYPE_CHECKING:
     import numpy as np
@@ -22,7 +22,10 @@ if TYPE_CHECKING:
     from seqrun.arm.limits import LimitsInForce
     from seqrun.arm.planner import Limits
 
-__all__ = ["ArmEvents", "JointReading", "StepContext"]
+__all__ = ["ArmEvents", "AttendedQuestions", "JointReading", "StepContext"]
+
+#: What an operator's question answers (yes/no, a name).
+_Answer = TypeVar("_Answer")
 
 
 class JointReading(Protocol):
@@ -45,6 +48,17 @@ class ArmEvents(Protocol):
         run is stopping), else None."""
 
 
+class AttendedQuestions(Protocol):
+    """The questions only a person at the run answers (never ``--yes``): a signed confirm
+    and a breakpoint. None where nobody attends (a dry run passes through them)."""
+
+    def sign(self, prompt: str, role: str | None) -> str | None:
+        """Ask ``prompt``; the name of who answered yes (never empty), None for a no."""
+
+    def breakpoint(self, prompt: str) -> bool:
+        """Ask whether to go on; True to continue."""
+
+
 class StepContext(Protocol):
     """The executor as a step handler sees it."""
 
@@ -57,6 +71,11 @@ class StepContext(Protocol):
     dry_run: bool
     #: Asked at a confirm step (None: nobody to ask, a dry run assumes yes).
     confirm: Callable[[str], bool] | None
+    #: Asked at a signed confirm and a breakpoint (None: nobody attends, a dry run).
+    attended: AttendedQuestions | None
+    #: The sha256 of the validated inputs (a signature names what it signed; None: a
+    #: dry run, nothing recorded).
+    inputs_sha256: str | None
     #: Joint solutions validated from the measured start (step number -> user degrees).
     validated_targets: Mapping[int, np.ndarray]
     # -- state a handler reads or updates
@@ -121,6 +140,6 @@ class StepContext(Protocol):
     def joint_currents_a(self, joints: Sequence[int]) -> list[float | None]: ...
 
     # -- the operator and the record
-    def ask_operator(self, question: Callable[[Any], bool], arg: Any) -> bool: ...
+    def ask_operator(self, question: Callable[[Any], _Answer], arg: Any) -> _Answer: ...
 
     def emit(self, type_: str, **data: Any) -> None: ...

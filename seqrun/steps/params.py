@@ -240,6 +240,11 @@ class StepParams(StrictModel):
     repeat: RepeatSpec | None = Field(
         None, description="Run the step several times: {count: N} or {while: EXPR, max: N} "
                           "('Conditions, loops and retries'). Not where if is not.")
+    breakpoint: bool = Field(
+        False, description="Stop before this step, the arm at rest, until the operator "
+                           "says to go on (a terminal prompt, the console's question); "
+                           "--yes never answers it and the dry run passes through it "
+                           "(docs/safety.md, 'Who answers what').")
     retry: RetrySpec | None = Field(
         None, description="Try the step again after a failed measurement: {times: N, "
                           "delay_s: S}; check, wait_until, checkpoint and check_gripper only "

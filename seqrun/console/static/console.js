@@ -339,8 +339,14 @@ $("#take-control").addEventListener("click", () => {
 function askOperator(e) {
   state.question = e;
   $("#confirm-text").textContent = e.text;
+  // A signed question: whoever answers yes gives their name (kept in the run's record).
+  $("#confirm-sign").hidden = !e.sign;
+  $("#confirm-name-label").textContent = e.role ? `Signed by (${e.role}), your name` : "Signed by, your name";
+  $("#confirm-name").value = "";
+  $("#confirm-name-note").hidden = true;
   showQuestionWho(e);
   $("#confirm-dialog").hidden = false;
+  if (e.sign) $("#confirm-name").focus();
 }
 
 function showQuestionWho(e) {
@@ -361,6 +367,19 @@ async function answer(yes) {
     return;
   }
   const id = question.question_id;
+  if (question.sign && yes) {
+    const name = $("#confirm-name").value.trim();
+    if (!name) {  // asked again: a signed yes needs a name
+      state.question = question;
+      $("#confirm-dialog").hidden = false;
+      $("#confirm-name-note").hidden = false;
+      $("#confirm-name").focus();
+      return;
+    }
+    const answered = await command("Yes", "POST", "/answer", { question_id: id, yes, name });
+    if (answered === null && !state.question) askOperator(question);  // refused: still open
+    return;
+  }
   await command(yes ? "Yes" : "No", "POST", "/answer", { question_id: id, yes });
 }
 $("#confirm-yes").addEventListener("click", () => answer(true));
