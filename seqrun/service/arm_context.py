@@ -276,30 +276,31 @@ class ArmContext:
     def open_arm(self, *, claim: bool = True, transient: bool = True
                  ) -> tuple[Connection, ArmDriver]:
         """The bus and the arm's driver on it: ``(connection, driver)``."""
-        from seqrun.drivers.registry import open_driver
-        from seqrun.service.connection import response_timeout_s
-
         connection = self.open_connection(claim=claim, transient=transient)
-        timeout = response_timeout_s(self.arm, self.response_timeout_ms)
-        return connection, open_driver(self.arm, connection, response_timeout_s=timeout)
+        return connection, self._driver(connection, self.arm)
 
     def open_arm_for_reading(self) -> tuple[Connection, ArmDriver, ArmDescription, str]:
         """As :meth:`open_arm`, the driver converting with the zero reference in force (the
         record's, as ``seqrun status`` reads; never asked: nothing moves), not the arm
         file's default offsets: ``(connection, driver, arm at that zero, zero text)``."""
-        from seqrun.drivers.registry import open_driver
-        from seqrun.service.connection import response_timeout_s
         from seqrun.service.zero import zero_for_reading
 
         connection = self.open_connection(transient=True)
         try:
             arm, text = zero_for_reading(connection, self.arm)
-            timeout = response_timeout_s(arm, self.response_timeout_ms)
-            driver = open_driver(arm, connection, response_timeout_s=timeout)
+            driver = self._driver(connection, arm)
         except BaseException:
             connection.close()
             raise
         return connection, driver, arm, text
+
+    def _driver(self, connection: Connection, arm: ArmDescription) -> ArmDriver:
+        """``arm``'s driver on ``connection``, with this context's response timeout."""
+        from seqrun.drivers.registry import open_driver
+        from seqrun.service.connection import response_timeout_s
+
+        timeout = response_timeout_s(arm, self.response_timeout_ms)
+        return open_driver(arm, connection, response_timeout_s=timeout)
 
 
 def _shown(path: Path) -> str:
