@@ -15,6 +15,7 @@ command runs.
 from __future__ import annotations
 
 import signal
+import threading
 from pathlib import Path
 from typing import Annotated, Any, Optional
 
@@ -154,7 +155,10 @@ def ros_command(
     except Exception as exc:  # noqa: BLE001 - rcl's parse error: one line, no traceback
         session.close()
         fail(f"--ros-args: {str(exc).strip().splitlines()[0] if str(exc).strip() else exc}")
-    previous = signal.signal(signal.SIGTERM, _terminated)
+    terminated = threading.Event()
+    # the handler only sets a flag: an exception raised into the executor at any bytecode
+    # could leave a worker thread started but not registered, and the process never ends
+    previous = signal.signal(signal.SIGTERM, lambda signum, frame: terminated.set())
     node = None
     try:
         try:
@@ -167,13 +171,14 @@ def ros_command(
                    f"{node.node.resolve_topic_name(node.arm + '/joint_trajectory')}, "
                    f"{node.node.get_fully_qualified_name()}/stop;"
                    " Ctrl-C ends it (any motion is stopped first)")
-        spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        typer.echo("seqrun ros: ended by Ctrl-C; anything still moving is stopped")
-        raise typer.Exit(EXIT_OPERATOR_ABORT) from None
-    except _Terminated:
+        spin(node, until=terminated.is_set)
+        if not terminated.is_set():
+            raise ExternalShutdownException()  # the context was shut down (Ctrl-C)
         result = session.halt("SIGTERM (seqrun ros)")
         typer.echo(f"seqrun ros: ended by SIGTERM; {result.describe()}")
+        raise typer.Exit(EXIT_OPERATOR_ABORT)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        typer.echo("seqrun ros: ended by Ctrl-C; anything still moving is stopped")
         raise typer.Exit(EXIT_OPERATOR_ABORT) from None
     finally:
         signal.signal(signal.SIGTERM, previous)
@@ -183,10 +188,3 @@ def ros_command(
         if rclpy.ok():
             rclpy.shutdown()
 
-
-class _Terminated(Exception):
-    """SIGTERM: halt, then end."""
-
-
-def _terminated(signum, frame) -> None:  # noqa: ANN001 - a signal handler
-    raise _Terminated()

@@ -54,7 +54,7 @@ import math
 import threading
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import rclpy
 from geometry_msgs.msg import TransformStamped
@@ -144,6 +144,8 @@ class SeqrunNode:
             raise
         self._names = list(session.arm.joint_names)
         self._closed = False
+        # held while publishing: close() destroys no publisher under a callback using it
+        self._publishing = threading.Lock()
         rate_hz, self.publish_tf = self._parameters(rate_hz)
         #: JTC's constraints.* parameters: every trajectory's default tolerances.
         self.tolerances = self._constraints()
@@ -220,9 +222,10 @@ class SeqrunNode:
 
     # ------------------------------------------------------------------ lifetime
     def close(self) -> None:
-        if self._closed:
-            return
-        self._closed = True
+        with self._publishing:
+            if self._closed:
+                return
+            self._closed = True
         self.session.control.leave(self._control.client.id)
         self._timer.cancel()
         self.session.set_status_rate(self._status_hz_before)
@@ -325,8 +328,11 @@ class SeqrunNode:
     def publish_state(self) -> None:
         """``joint_states`` (and ``/tf``) of the latest reading, each reading once, stamped
         when the modules answered."""
-        if self._closed:
-            return
+        with self._publishing:
+            if not self._closed:
+                self._publish_state()
+
+    def _publish_state(self) -> None:
         status = self.session.status()
         if status.updated_at is None:
             return  # nothing measured yet
@@ -384,8 +390,9 @@ class SeqrunNode:
         self._send({"type": type_, **data})
 
     def _send(self, record: dict) -> None:
-        if not self._closed:
-            self.events.publish(String(data=json.dumps(record, default=str)))
+        with self._publishing:
+            if not self._closed:
+                self.events.publish(String(data=json.dumps(record, default=str)))
 
     def _forward(self, event: Any) -> None:
         if event.type not in HIGH_RATE_EVENTS:
@@ -561,14 +568,16 @@ def _follow(node: SeqrunNode, trajectory: JointTrajectory, goal: Any,
     return codes.PATH_TOLERANCE_VIOLATED, message
 
 
-def spin(node: SeqrunNode, *, threads: int = 4, context: Any = None) -> None:
-    """Serve ``node`` until the context shuts down (Ctrl-C)."""
+def spin(node: SeqrunNode, *, threads: int = 4, context: Any = None,
+         until: Callable[[], bool] = lambda: False, poll_s: float = 0.1) -> None:
+    """Serve ``node`` until the context shuts down (Ctrl-C) or ``until()`` is true (asked
+    at least every ``poll_s``: SIGTERM sets a flag, it raises nothing into the executor)."""
     from rclpy.executors import MultiThreadedExecutor
 
     spinner = MultiThreadedExecutor(num_threads=threads, context=context)
     spinner.add_node(node.node)
     try:
-        spinner.spin()
+        while spinner.context.ok() and not until():
+            spinner.spin_once(timeout_sec=poll_s)
     finally:
         spinner.shutdown()
-
