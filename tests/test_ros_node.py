@@ -24,7 +24,7 @@ from pathlib import Path
 import pytest
 import rclpy
 from builtin_interfaces.msg import Duration
-from rclpy.executors import MultiThreadedExecutor
+from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
@@ -80,11 +80,16 @@ class Graph:
                                                          f"/{self.arm}/joint_trajectory", 10)
         self.services = {name: self.client.create_client(Trigger, f"/{self.name}/{name}")
                          for name in ("stop", "home", "reset")}
+        # the node as `seqrun ros` spins it; the client on an executor of its own (one
+        # thread: appending messages needs no more), as another process's would be
         self.executor = MultiThreadedExecutor(num_threads=4, context=self.context)
         self.executor.add_node(self.seqrun.node)
-        self.executor.add_node(self.client)
         self.thread = threading.Thread(target=self.executor.spin, daemon=True)
         self.thread.start()
+        self.client_executor = SingleThreadedExecutor(context=self.context)
+        self.client_executor.add_node(self.client)
+        self.client_thread = threading.Thread(target=self.client_executor.spin, daemon=True)
+        self.client_thread.start()
         self.wait_for(lambda: self.trajectories.get_subscription_count() > 0
                       and all(c.service_is_ready() for c in self.services.values())
                       and len(self.states) > 0, "the node on the graph")
@@ -132,9 +137,11 @@ class Graph:
         return {n: math.degrees(p) for n, p in zip(last.name, last.position)}
 
     def close(self) -> None:
-        self.executor.shutdown()  # the spin ends before the nodes go ...
-        self.thread.join(timeout=10)
-        assert not self.thread.is_alive()
+        self.executor.shutdown()  # the spins end before the nodes go ...
+        self.client_executor.shutdown()
+        for thread in (self.thread, self.client_thread):
+            thread.join(timeout=10)
+            assert not thread.is_alive()
         time.sleep(0.5)  # ... and so do callbacks under way (shutdown does not wait for them)
         self.seqrun.close()
         self.client.destroy_node()
