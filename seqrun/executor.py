@@ -316,7 +316,8 @@ class Executor:
     def take_reading(self, reading) -> Measurement:
         """A driver's reading as the run's latest measurement."""
         m = Measurement(self.clock.now(), reading.positions_deg, reading.states,
-                        answered_at=getattr(reading, "answered_at", None))
+                        answered_at=getattr(reading, "answered_at", None),
+                        holds_at_rad=getattr(reading, "holds_at_rad", None))
         self.last = m
         if self.monitors.active:
             setpoint = self.setpoint_deg if self.setpoint_deg is not None else self.commanded_deg
@@ -379,7 +380,7 @@ class Executor:
         arms of a campaign run."""
         self.checks.check_guards(m.user_deg)
         if self.separation is not None:
-            self.separation.check(m.t, m.user_deg, self.cycle)
+            self.separation.check(m.t, m.user_deg, self.cycle, holds_at_rad=m.holds_at_rad)
 
     def module_fault(self, module: int, flags: JointState, context: str = ""):
         """A RunAborted naming the module, its joint and the decoded fault flags."""

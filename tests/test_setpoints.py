@@ -49,6 +49,29 @@ def test_ramp_law_targets_ahead_of_the_plan_and_caps_at_the_plan_velocity():
         assert (pos[module] - (plan.at(t)[0][i] + OFFSETS[i])) * direction > 0.01
 
 
+def test_each_law_says_where_its_position_commands_leave_the_joints():
+    """Where the commanded joints stop if no command follows (what bounds an arm whose
+    host stalls): a FRAMP's or an FSTEP's target in user radians, NaN for joints the
+    motion does not command, None for a velocity command."""
+    plan = plan_move(PARK, TOTEM, RUN, MOVING)
+    t = plan.duration / 2
+    for law in (RampSetpoints(ARM, 0.01, RUN), StepSetpoints(ARM, 0.01, RUN)):
+        law.start(MOVING, RUN)
+        requests = law.cycle(plan, t, MOVING, np.degrees(plan.at(t)[0]))
+        holds = law.holds_at_rad
+        assert holds is not None
+        sent = {r.module: r.value for r in requests if isinstance(r, SetMotion)}
+        for i in range(7):
+            if i in MOVING:
+                assert holds[i] + OFFSETS[i] == pytest.approx(sent[i + 1])
+            else:
+                assert math.isnan(holds[i])
+    velocity = setpoint_law("velocity", ARM, 0.01, RUN)
+    velocity.start(MOVING, RUN)
+    velocity.cycle(plan, t, MOVING, np.degrees(plan.at(t)[0]))
+    assert velocity.holds_at_rad is None
+
+
 def test_ramp_law_does_not_resend_an_unchanged_target_velocity():
     law = RampSetpoints(ARM, 0.01, RUN)
     law.start(MOVING, RUN)

@@ -171,6 +171,65 @@ def test_the_stopping_travel_is_reaction_plus_braking_times_the_levers():
     assert travel == pytest.approx(0.26 * levers[0])
 
 
+def test_a_joint_under_a_position_command_travels_no_farther_than_its_target():
+    """A module commanded to a position (FRAMP, FSTEP) stops there however long its host
+    is silent: the travel of a stalled reading is bounded by the target (plus one more
+    cycle's command, and never less than its braking), not grown with the reading's age.
+    Without a target (a velocity command) it grows as before."""
+    from seqrun.arm.between_arms import levers_mm, stopping_travel_mm
+    from seqrun.arm.geometry import Geometry
+
+    levers = levers_mm(Geometry(_lwa3()))
+    n = len(levers)
+    v, decel = np.zeros(n), np.full(n, 2.0)
+    v[0] = 0.5  # rad/s: braking 0.0625 rad
+    age = 0.4   # s the host was not run
+    free = stopping_travel_mm(v, decel, 0.01 + age, levers)
+    assert free == pytest.approx((0.5 * 0.41 + 0.0625) * levers[0])
+    gap = np.full(n, np.nan)
+    gap[0] = 0.08  # rad to the FRAMP target in force
+    held = stopping_travel_mm(v, decel, 0.01 + age, levers, rest_gap_rad=gap,
+                              next_command_rad=0.01)
+    assert held == pytest.approx(0.09 * levers[0])
+    assert held < free / 2
+    gap[0] = 0.01  # a target nearer than the braking distance: braking counts
+    near = stopping_travel_mm(v, decel, 0.01 + age, levers, rest_gap_rad=gap,
+                              next_command_rad=0.0)
+    assert near == pytest.approx(0.0625 * levers[0])
+    gap[0] = 10.0  # far: never more than the unbounded figure
+    assert stopping_travel_mm(v, decel, 0.01 + age, levers, rest_gap_rad=gap,
+                              next_command_rad=0.01) == pytest.approx(free)
+
+
+def test_a_stalled_reading_of_the_other_arm_with_a_near_target_does_not_trip():
+    """Issue 42: under load an arm's latest reading grew old (a host stall of 0.4 s) and
+    the travel it was grown by grew with it, so a run halted with the arms apart. The
+    same reading under a position command to a near target stays clear; without one (a
+    velocity command: it could run on) it still trips."""
+    from seqrun.errors import RunAborted
+
+    arm, separation = _separation(200.0)
+    watch_a = separation.watch("A", halt=lambda why, cause: None)
+    watch_b = separation.watch("B", halt=lambda why, cause: None)
+    up = np.zeros(len(arm.joints))
+    tipping = up.copy()
+    tipping[1] = 0.1  # deg in 10 ms: 10 deg/s towards A
+    target = np.radians(tipping)
+    target[1] += np.radians(0.5)  # half a degree on: where B's FRAMP ends
+    holds = np.full(len(arm.joints), np.nan)
+    holds[1] = target[1]
+    watch_b.check(0.0, up, 0.01, holds_at_rad=holds)
+    watch_b.check(0.01, tipping, 0.01, holds_at_rad=holds)
+    watch_a.check(0.51, up, 0.01)  # B's reading is 0.5 s old: it stops at its target
+    _, separation2 = _separation(200.0)
+    watch_a2 = separation2.watch("A", halt=lambda why, cause: None)
+    watch_b2 = separation2.watch("B", halt=lambda why, cause: None)
+    watch_b2.check(0.0, up, 0.01)
+    watch_b2.check(0.01, tipping, 0.01)
+    with pytest.raises(RunAborted):
+        watch_a2.check(0.51, up, 0.01)  # no target known: 0.5 s more at 10 deg/s
+
+
 def _run_unchecked(campaign: Path, text: str, faults=(), on_fault="halt_all"):
     """Run a sequence's tracks at virtual time on two simulators *without* the check of
     the arms against each other (as if the measured motion left the plan): only the

@@ -209,11 +209,24 @@ def levers_mm(geometry: Geometry) -> np.ndarray:
 
 
 def stopping_travel_mm(velocity_rad_s: np.ndarray, deceleration_rad_s2: np.ndarray,
-                       reaction_s: float, levers: np.ndarray) -> float:
+                       reaction_s: float, levers: np.ndarray, *,
+                       rest_gap_rad: np.ndarray | None = None,
+                       next_command_rad: np.ndarray | float = 0.0) -> float:
     """How far any point of the arm can still move before it stands, mm: each joint goes
     on for ``reaction_s`` at its speed, then brakes at ``deceleration_rad_s2``
     (v^2 / 2a), and a joint turning by an angle moves no point farther than the angle
-    times its lever (:func:`levers_mm`)."""
+    times its lever (:func:`levers_mm`).
+
+    ``rest_gap_rad``: per joint, how far the position command in force still takes it
+    (NaN: no such command): a module commanded to a position stops there, however long
+    the host is silent; one more command may follow before the next reading
+    (``next_command_rad``, its longest step), and a joint too fast to stop short of its
+    target still brakes at most v^2 / 2a beyond it."""
     v = np.abs(np.asarray(velocity_rad_s, dtype=float))
-    angle = v * reaction_s + v * v / (2.0 * np.asarray(deceleration_rad_s2, dtype=float))
+    braking = v * v / (2.0 * np.asarray(deceleration_rad_s2, dtype=float))
+    angle = v * reaction_s + braking
+    if rest_gap_rad is not None:
+        held = np.maximum(np.abs(np.asarray(rest_gap_rad, dtype=float)) + next_command_rad,
+                          braking)
+        angle = np.where(np.isnan(held), angle, np.minimum(angle, held))
     return float(angle @ levers)

@@ -64,6 +64,11 @@ class JointReading(NamedTuple):
     #: None: not known, the reader's clock is used). Velocities come from these times,
     #: never from when a possibly stalled host got round to the answers.
     answered_at: np.ndarray | None = None
+    #: Where each joint comes to rest if no command follows this cycle's (user radians,
+    #: joint order; NaN: a joint this motion does not command). None: not bounded (a
+    #: velocity command runs on until its watchdog). Bounds how far an arm whose host
+    #: stalls can still go (seqrun/service/arm_separation.py).
+    holds_at_rad: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

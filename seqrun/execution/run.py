@@ -47,6 +47,9 @@ class Measurement:
     #: When each joint answered (clock times, joint order, from the bus's own stamps;
     #: None: not known, ``t`` stands for all of them).
     answered_at: np.ndarray | None = None
+    #: Where each joint comes to rest if no command follows (the driver's
+    #: ``JointReading.holds_at_rad``); None: not known or not bounded.
+    holds_at_rad: np.ndarray | None = None
 
     @property
     def at(self) -> float:

@@ -50,6 +50,9 @@ class _Reading:
     cycle_s: float
     #: The arm's capsule segments there, facility frame (worked out once per reading).
     volumes: np.ndarray | None = None
+    #: Where each joint stops if no command follows (user rad, NaN: not commanded);
+    #: None: not bounded.
+    holds_at_rad: np.ndarray | None = None
 
 
 class _Arm:
@@ -65,6 +68,7 @@ class _Arm:
         self.geometry = Geometry(arm)
         self.levers = levers_mm(self.geometry)
         self.deceleration = np.radians([j.max_acceleration_deg_s2 for j in arm.joints])
+        self.max_velocity = np.radians([j.max_velocity_deg_s for j in arm.joints])
         self.margin_mm = float(arm.geometry.margin_mm)
 
     def volumes(self, q_rad: np.ndarray) -> np.ndarray:
@@ -75,10 +79,16 @@ class _Arm:
         return volumes_in_facility(self.geometry, self.base, q_rad)
 
     def travel_mm(self, reading: _Reading, extra_s: float = 0.0) -> float:
+        """How far the arm can go from ``reading`` before it stands, ``extra_s`` after it
+        (the reading's age): a joint under a position command goes no farther than its
+        target plus one more cycle's command, however long its host is silent."""
         from seqrun.arm.between_arms import stopping_travel_mm
 
-        return stopping_travel_mm(reading.v_rad_s, self.deceleration,
-                                  reading.cycle_s + max(0.0, extra_s), self.levers)
+        holds = reading.holds_at_rad
+        return stopping_travel_mm(
+            reading.v_rad_s, self.deceleration, reading.cycle_s + max(0.0, extra_s),
+            self.levers, rest_gap_rad=None if holds is None else holds - reading.q_rad,
+            next_command_rad=self.max_velocity * reading.cycle_s)
 
 
 def bases_of_project(project: Any, arm_ids: Any) -> dict[str, np.ndarray]:
@@ -127,8 +137,10 @@ class Separation:
             self._slow.add(arm_id)
 
     # ------------------------------------------------------------------ readings
-    def report(self, arm_id: str, t: float, user_deg: Any, cycle_s: float) -> _Reading:
-        """Arm ``arm_id`` was measured at ``user_deg`` at time ``t`` (s, the shared clock):
+    def report(self, arm_id: str, t: float, user_deg: Any, cycle_s: float, *,
+               holds_at_rad: np.ndarray | None = None) -> _Reading:
+        """Arm ``arm_id`` was measured at ``user_deg`` at time ``t`` (s, the shared clock),
+        its joints under position commands to ``holds_at_rad`` (see :class:`_Reading`):
         its speed is worked out from its reading before."""
         q = np.radians(np.asarray(user_deg, dtype=float))
         with self._lock:
@@ -137,7 +149,7 @@ class Separation:
                 v = (q - before.q_rad) / (t - before.t)
             else:
                 v = before.v_rad_s if before is not None else np.zeros_like(q)
-            reading = _Reading(t, q, v, cycle_s)
+            reading = _Reading(t, q, v, cycle_s, holds_at_rad=holds_at_rad)
         me = self._arms[arm_id]
         if not me.geometry.empty:
             reading.volumes = me.volumes(q)
@@ -360,11 +372,14 @@ class ArmWatch:
         self.separation = separation
         self.arm_id = arm_id
 
-    def check(self, t: float, user_deg: Any, cycle_s: float) -> None:
-        """This arm's reading: raises :class:`~seqrun.errors.RunAborted` (and halts the
-        others) when the arms could touch before they stand."""
+    def check(self, t: float, user_deg: Any, cycle_s: float, *,
+              holds_at_rad: np.ndarray | None = None) -> None:
+        """This arm's reading (its joints under position commands to ``holds_at_rad``):
+        raises :class:`~seqrun.errors.RunAborted` (and halts the others) when the arms
+        could touch before they stand."""
         separation = self.separation
-        reading = separation.report(self.arm_id, t, user_deg, cycle_s)
+        reading = separation.report(self.arm_id, t, user_deg, cycle_s,
+                                    holds_at_rad=holds_at_rad)
         found = separation.closest(self.arm_id, reading)
         if found is not None and found[0] < 0.0:
             raise separation.trip(self.arm_id, found)

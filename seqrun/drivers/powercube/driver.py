@@ -265,7 +265,9 @@ class PowerCubeDriver:
         law = self._law
         if law is None:
             raise RuntimeError("PowerCubeDriver.start_motion() was not called")
-        return self._cycle(law.cycle(plan, t, moving, measured_deg), moving, halt_early=True)
+        reading = self._cycle(law.cycle(plan, t, moving, measured_deg), moving,
+                              halt_early=True)
+        return reading._replace(holds_at_rad=law.holds_at_rad)
 
     def end_motion(self) -> None:
         law, self._law = self._law, self._run_law

@@ -44,6 +44,10 @@ class SetpointLaw(Protocol):
               measured_deg: np.ndarray) -> list[Request]:
         """Motion requests for plan time ``t`` given the measured joints (user deg)."""
 
+    #: After :meth:`cycle`: where each joint comes to rest if no request follows (user
+    #: rad, joint order; NaN: not commanded), None: nowhere in particular (velocity).
+    holds_at_rad: np.ndarray | None
+
 
 class _Law:
     def __init__(self, arm: ArmDescription, cycle_s: float, run_limits: Limits) -> None:
@@ -52,6 +56,13 @@ class _Law:
         self.run_limits = run_limits          # arm x speed override: sets the lookahead
         self.modules = arm.module_ids
         self.module_rad = ModuleUnits(arm).module_rad_of_user_rad
+        self.holds_at_rad: np.ndarray | None = None
+
+    def _holding(self, moving: list[int], user_rad: np.ndarray) -> None:
+        """The moving joints stop at ``user_rad`` (a position command's target)."""
+        holds = np.full(len(self.modules), np.nan)
+        holds[moving] = user_rad[moving]
+        self.holds_at_rad = holds
 
 
 class StepSetpoints(_Law):
@@ -62,7 +73,9 @@ class StepSetpoints(_Law):
 
     def cycle(self, plan: MovePlan, t: float, moving: list[int],
               measured_deg: np.ndarray) -> list[Request]:
-        target = self.module_rad(plan.at(t + self.cycle_s)[0])
+        user = plan.at(t + self.cycle_s)[0]
+        self._holding(moving, user)
+        target = self.module_rad(user)
         ms = max(1, int(round(self.cycle_s * 1000)))
         return [SetMotion(self.modules[i], MotionMode.FSTEP_ACK, float(target[i]), ms)
                 for i in moving]
@@ -104,7 +117,8 @@ class RampSetpoints(_Law):
         quantum = self.TARGET_VEL_QUANTUM_DEG_S
         requests: list[Request] = []
         # Joints with the same limits look equally far ahead: one plan sample serves them.
-        aheads: dict[float, np.ndarray] = {}
+        aheads: dict[float, tuple[np.ndarray, np.ndarray]] = {}  # lead -> (user, module)
+        holds = np.full(len(self.modules), np.nan)
         # Per joint on Python floats (.tolist()): the same IEEE double arithmetic as on
         # numpy's scalars, without a numpy call per operation.
         velocity, acceleration = (self.run_limits.velocity.tolist(),
@@ -115,7 +129,8 @@ class RampSetpoints(_Law):
             lead = velocity[i] / (2 * acceleration[i]) + 2 * self.cycle_s
             ahead = aheads.get(lead)
             if ahead is None:
-                ahead = aheads[lead] = self.module_rad(plan.at(t + lead)[0])
+                user = plan.at(t + lead)[0]
+                ahead = aheads[lead] = (user, self.module_rad(user))
             direction = math.copysign(1.0, target[i] - start[i])
             lag = (math.degrees(pos_now[i]) - measured[i]) * direction
             cap = abs(math.degrees(vel_next[i])) + gain * lag
@@ -128,7 +143,10 @@ class RampSetpoints(_Law):
             if self._sent_target_vel.get(module) != cap:
                 requests.append(SetParam(module, _TARGET_VEL, math.radians(cap)))
                 self._sent_target_vel[module] = cap
-            requests.append(SetMotion(module, _FRAMP_ACK, float(ahead[i])))
+            # FRAMP ends at its target: without another cycle the joint stops there
+            holds[i] = ahead[0][i]
+            requests.append(SetMotion(module, _FRAMP_ACK, float(ahead[1][i])))
+        self.holds_at_rad = holds
         return requests
 
 
