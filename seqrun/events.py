@@ -373,14 +373,17 @@ class WaitTimedOut(Event):
 @dataclass(frozen=True, kw_only=True)
 class MonitorTripped(Event):
     type: ClassVar[str] = "monitor_tripped"
-    when: ClassVar[str] = ("a step's monitor did not hold for persist_cycles readings in a "
-                           "row (action halt: the fault follows; warn: once until it holds "
-                           "again)")
+    when: ClassVar[str] = ("a step's or the sequence's monitor did not hold for "
+                           "persist_cycles readings in a row (action halt: the fault follows; "
+                           "stop: a controlled stop, then the fault; warn: once until it "
+                           "holds again)")
     condition: str
     action: str
     cycles: int
     values: Mapping[str, Any]
     message: str | None = _optional()
+    #: "sequence" for a monitor of the whole sequence (its top-level ``monitors:``).
+    scope: str | None = _optional()
 
 
 @dataclass(frozen=True, kw_only=True)

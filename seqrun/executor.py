@@ -531,6 +531,9 @@ class Executor:
             gc.collect()
         self._t0 = self.clock.now()
         self.poses = dict(getattr(loaded, "poses", {}))
+        monitors_at = getattr(loaded, "monitors_at", None)
+        self.monitors.start_sequence(getattr(loaded, "monitors", ()),
+                                     param_types=getattr(monitors_at, "param_types", None))
         steps = list(loaded.steps)
         results = [StepResult.planned(s, _label(s), _location(s)) for s in steps]
         # clock_s: the run clock's reading at t = 0, so that the run log can put event

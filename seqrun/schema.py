@@ -65,6 +65,7 @@ from seqrun.steps.params import (  # noqa: F401  (the value types, re-exported)
     Finite,
     JointName,
     LimitPair,
+    MonitorSpec,
     PoseName,
     Positive,
     Scale,
@@ -314,6 +315,12 @@ class Sequence(_Model):
                     "steps is replaced by the value (the default, or --param name=value); "
                     "expressions read them as params.NAME. Only the top file declares "
                     "them; an included file uses the including file's.")
+    monitors: list[MonitorSpec] = Field(
+        default_factory=list,
+        description="Invariants watched every control cycle of every step (as a step's "
+                    "monitors, beside them), e.g. 'tool.z_mm > 40' for the whole "
+                    "sequence. Only the top file declares them; an included file's steps "
+                    "are watched by the including sequence's.")
     steps: list[Step] = Field(min_length=1, description="The steps, in order.")
 
 

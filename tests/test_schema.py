@@ -147,7 +147,7 @@ def test_top_level_errors(project):
         ("s.yaml", 1, 7, "must not be empty"),
         ("s.yaml", 2, 8, "must not be empty"),
         ("s.yaml", 3, 1, ("unknown key 'nmae' in the sequence (did you mean 'name'? allowed: "
-                         "name, description, arm, params, steps)")),
+                         "name, description, arm, params, steps, monitors)")),
     ]
 
 

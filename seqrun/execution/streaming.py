@@ -22,6 +22,7 @@ from seqrun.arm.trajectory_tolerances import (GOAL_TOLERANCE_VIOLATED, PATH_TOLE
                                               TrajectoryTolerances)
 from seqrun.drivers.base import MotionRefused
 from seqrun.errors import RunAborted
+from seqrun.execution.monitors import MonitorTripped
 from seqrun.execution.run import rounded
 from seqrun.results import OperatorAbort
 
@@ -190,7 +191,12 @@ class Streaming:
         except MotionRefused as refused:
             run.emergency_halt()
             raise run.checks.fault_after_halt(refused.module, refused.state) from None
-        return run.take_reading(reading)
+        try:
+            return run.take_reading(reading)
+        except MonitorTripped as tripped:
+            if tripped.controlled:  # a monitor's ``stop``: brake smoothly, then the fault
+                self.controlled_stop(plan, t, moving, from_deg=reading.positions_deg)
+            raise
 
     def stream(self, plan: MovePlan, moving: list[int], tolerance_deg: float | np.ndarray,
                deadline: float, *, stop_on_abort: bool,

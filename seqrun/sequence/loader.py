@@ -76,6 +76,11 @@ class LoadedSequence:
     #: used here (the default or --param), already put into the steps.
     parameters: Mapping[str, Any] = field(default_factory=dict)
     param_values: Mapping[str, Any] = field(default_factory=dict)
+    #: The top file's ``monitors:`` (MonitorSpec each), watched during every step, and
+    #: where they are written (a ResolvedStep of kind "sequence" for their errors and
+    #: their expressions' parameter types); None without any.
+    monitors: tuple[Any, ...] = ()
+    monitors_at: ResolvedStep | None = None
 
     @property
     def location(self) -> Location:
@@ -175,6 +180,9 @@ class _Loader:
         self.top: Any = None  # the top file's data, when it could be read
         #: Steps left out (see LoadedSequence.left_out).
         self.left_out: list[tuple[int, str | None]] = []
+        #: The top file's monitors and where they are written (LoadedSequence.monitors).
+        self.monitors: list[Any] = []
+        self.monitors_at: ResolvedStep | None = None
 
     def load(self, path: Path, *, chain: tuple[Path, ...] = (),
              include_chain: tuple[Location, ...] = (), include_step: Any = None) -> Any:
@@ -206,9 +214,26 @@ class _Loader:
             self._partial(doc, path, chain, include_chain)
             return None
         self._check_arm(doc, seq, top=not chain)
+        self._monitors(doc, seq, top=not chain)
         self._steps(doc, path, seq.steps, doc.items(doc.child(doc.root, "steps")), chain,
                     include_chain)
         return seq
+
+    def _monitors(self, doc: Document, seq: Any, *, top: bool) -> None:
+        """The top file's ``monitors:``; an included file may declare none (its steps are
+        watched by the including sequence's)."""
+        if not seq.monitors:
+            return
+        if not top:
+            self.errors.append(doc.error(("monitors",), "an included file cannot declare "
+                                                        "monitors: the including sequence's "
+                                                        "watch its steps", key=True))
+            return
+        self.monitors = list(seq.monitors)
+        self.monitors_at = ResolvedStep(0, "sequence", seq, doc.locate(("monitors",)),
+                                        label="the sequence's monitors", document=doc,
+                                        node=doc.root, param_types=dict(self.param_types),
+                                        param_values=dict(self.values))
 
     def _parameters(self, doc: Document, *, top: bool) -> Document:
         """``doc`` with the parameters' values put into its steps (the top file's
@@ -452,7 +477,9 @@ def load_sequence_partial(path: str | os.PathLike[str], *,
                           sources=tuple(loader.sources),
                           left_out=tuple(loader.left_out),
                           parameters=dict(loader.specs),
-                          param_values=dict(loader.values)), errors
+                          param_values=dict(loader.values),
+                          monitors=tuple(loader.monitors),
+                          monitors_at=loader.monitors_at), errors
 
 
 def _text_location(doc: Document, path: tuple, offset: int) -> Location:

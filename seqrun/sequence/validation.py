@@ -542,6 +542,9 @@ class Checker:
                 self.incomplete = True
 
     def run(self) -> ValidationResult:
+        at = getattr(self.loaded, "monitors_at", None)
+        if at is not None:  # the sequence's monitors: once, where they are written
+            check_monitors(self, at, self.loaded.monitors)
         for index, step in enumerate(self.loaded.steps):
             self._pass_left_out(self._left_out.get(index, []))
             kind = step_kind(step.kind)

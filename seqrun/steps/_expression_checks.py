@@ -12,7 +12,7 @@ __all__ = ["check_expression", "check_monitors"]
 
 
 def check_expression(checker: CheckContext, step: ResolvedStep[Any], text: str,
-                     key: str | tuple[str, ...], *, condition: bool) -> None:
+                     key: str | tuple[str | int, ...], *, condition: bool) -> None:
     """The expression under ``key`` (a key of the step's parameters, or a path to it)
     against the arm: its joint numbers, the gripper it reads, and (``condition``) that it
     is a truth value; each problem at the key."""
@@ -40,7 +40,7 @@ def check_monitors(checker: CheckContext, step: ResolvedStep[Any], monitors: Any
     for i, monitor in enumerate(monitors):
         text = monitor.while_
         errors = len(checker.errors)
-        check_expression(checker, step, text, "monitors", condition=True)
+        check_expression(checker, step, text, ("monitors", i, "while"), condition=True)
         if len(checker.errors) > errors:
             continue
         for name, what in (("gripper.", "the gripper is"), ("current_a", "the currents are")):

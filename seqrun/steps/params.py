@@ -158,10 +158,12 @@ class MonitorSpec(StrictModel):
                                    "'abs(following_error_deg[4]) < 1.0' or 'tool.z_mm > 40'.")
     persist_cycles: int = Field(1, ge=1, le=1000, description="How many cycles in a row it "
                                                               "must fail before the action.")
-    action: Literal["halt", "warn"] = Field(
+    action: Literal["halt", "stop", "warn"] = Field(
         "halt", description="halt: the arm halts at once and the run ends as a fault (exit "
-                            "3) naming the monitor and the values; warn: an event and a line "
-                            "in the report, the run goes on.")
+                            "3) naming the monitor and the values; stop: a controlled "
+                            "(jerk-limited) stop of the motion under way, then the same "
+                            "fault; warn: an event and a line in the report, the run goes "
+                            "on.")
     message: str | None = Field(None, min_length=1,
                                 description="What a trip means, for the operator.")
 
