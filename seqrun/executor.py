@@ -380,7 +380,9 @@ class Executor:
         arms of a campaign run."""
         self.checks.check_guards(m.user_deg)
         if self.separation is not None:
-            self.separation.check(m.t, m.user_deg, self.cycle, holds_at_rad=m.holds_at_rad)
+            # (at when the joints answered: a reading handled late after a stall is not
+            # taken for a fast arm)
+            self.separation.check(m.at, m.user_deg, self.cycle, holds_at_rad=m.holds_at_rad)
 
     def module_fault(self, module: int, flags: JointState, context: str = ""):
         """A RunAborted naming the module, its joint and the decoded fault flags."""

@@ -230,6 +230,22 @@ def test_a_stalled_reading_of_the_other_arm_with_a_near_target_does_not_trip():
         watch_a2.check(0.51, up, 0.01)  # no target known: 0.5 s more at 10 deg/s
 
 
+def test_two_readings_a_moment_apart_tell_no_speed():
+    """A two-arm run on a loaded host halted with the arms 418 mm apart "within the 845.6
+    mm both can still travel": two readings a fraction of a cycle apart made a small
+    difference in position a huge speed. Readings are timed when the joints answered, and
+    a speed needs them at least half a cycle apart."""
+    arm, separation = _separation(900.0)
+    up = np.zeros(len(arm.joints))
+    nudged = up.copy()
+    nudged[1] = 0.05  # deg: the modules' resolution, not motion
+    separation.report("A", 0.0, up, 0.01)
+    close = separation.report("A", 0.001, nudged, 0.01)
+    assert np.all(close.v_rad_s == 0.0)
+    apart = separation.report("A", 0.011, up, 0.01)
+    assert apart.v_rad_s[1] == pytest.approx(-np.radians(0.05) / 0.01)
+
+
 def _run_unchecked(campaign: Path, text: str, faults=(), on_fault="halt_all"):
     """Run a sequence's tracks at virtual time on two simulators *without* the check of
     the arms against each other (as if the measured motion left the plan): only the

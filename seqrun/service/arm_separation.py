@@ -145,7 +145,10 @@ class Separation:
         q = np.radians(np.asarray(user_deg, dtype=float))
         with self._lock:
             before = self._readings.get(arm_id)
-            if before is not None and t > before.t and len(before.q_rad) == len(q):
+            # (two readings less than half a cycle apart tell no speed: their difference
+            # is the modules' resolution over a tiny time)
+            if (before is not None and t - before.t >= 0.5 * cycle_s
+                    and len(before.q_rad) == len(q)):
                 v = (q - before.q_rad) / (t - before.t)
             else:
                 v = before.v_rad_s if before is not None else np.zeros_like(q)
