@@ -10,6 +10,7 @@ moves the arm. The dry run lists a rescue it never ran under "not verified"."""
 from __future__ import annotations
 
 import contextlib
+import shutil
 import json
 from pathlib import Path
 
@@ -235,3 +236,22 @@ def test_the_block_shape_is_refused_at_its_line(project):
         assert "Traceback" not in result.output
         lines = [x for x in result.output.splitlines() if text in x]
         assert lines and lines[0].startswith(f"sequences/b.yaml:{line}:"), (steps, result.output)
+
+
+def test_a_campaign_of_several_arms_refuses_a_rescue_at_its_line(tmp_path):
+    from projecttree import ROOT
+
+    campaign = tmp_path / "two"
+    shutil.copytree(ROOT / "examples" / "two-arms", campaign,
+                    ignore=shutil.ignore_patterns("runs"))
+    path = campaign / "sequences" / "hold_and_approach.yaml"
+    text = path.read_text(encoding="utf-8")
+    move = "          - move: {pose: totem, velocity_scale: 0.5, label: A up to Totem}\n"
+    assert move in text
+    path.write_text(text.replace(move, "          - block:\n              steps:\n"
+                                       "        " + move + "              rescue:\n"
+                                       "                - wait: 0.1\n", 1), encoding="utf-8")
+    result = invoke("validate", "--static", path, cwd=campaign)
+    assert result.exit_code == 1, result.output
+    assert ("sequences/hold_and_approach.yaml:22:19: a block's rescue in a campaign of "
+            "several arms") in result.output

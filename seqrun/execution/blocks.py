@@ -170,7 +170,8 @@ class BlockRun:
                               f"step {block.first_rescue} ({_where(block.frame)}): the "
                               f"rescue of block {block.frame.block} never ran (no step of "
                               "the block failed in a way a rescue follows), so it was not "
-                              "exercised; rehearse it with --sim-fault or a failing check")
+                              "exercised (rehearse it with a check in the block that fails: a fault "
+                              "is never rescued)")
                 for block in self._blocks.values()
                 if block.first_rescue is not None and "steps" not in block.failed]
 

@@ -322,7 +322,9 @@ with where it is written (`block: "block 1 (Capture) rescue"`, nested ones joine
 passed, rescued, failed or not run), the terminal a line per block; events
 `block_step_failed` and `block_finished`. A rescue the dry run did not run is listed under
 "not verified": rehearse it with a failing `check` (a measurement a simulator fault cannot
-make fail; `--sim-fault` rehearses the faults, which are never rescued).
+make fail; `--sim-fault` rehearses the faults, which are never rescued). In a campaign of
+several arms a block takes no `rescue` or `always`: the arms are proven clear of each other
+along the normal path's timing, which a failure changes.
 
 ```yaml
   - block:

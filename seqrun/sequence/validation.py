@@ -42,7 +42,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from seqrun.steps._expression_checks import check_monitors
-from seqrun.steps._flow_checks import check_flow
+from seqrun.steps._flow_checks import check_block, check_flow
 from seqrun.arm.description import ArmDescription
 from seqrun.errors import PlanningError, SourceError
 from seqrun.formatting import format_number as _f
@@ -552,6 +552,8 @@ class Checker:
             kind.check(self, step, step.params)
             check_monitors(self, step, step.params.monitors)
             check_flow(self, step, step.params, motion=kind.motion)
+            if step.blocks:
+                check_block(self, step)
             # a step's findings in the order they appear in its text, then those in other
             # files (the pose file it names)
             here = step.location.file
