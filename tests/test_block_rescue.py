@@ -255,3 +255,29 @@ def test_a_campaign_of_several_arms_refuses_a_rescue_at_its_line(tmp_path):
     assert result.exit_code == 1, result.output
     assert ("sequences/hold_and_approach.yaml:22:19: a block's rescue in a campaign of "
             "several arms") in result.output
+
+
+def test_an_operator_abort_in_a_block_stops_the_arm_without_rescue_or_always(project,
+                                                                               tmp_path):
+    from seqrun.results import EXIT_OPERATOR_ABORT
+    from simrun import run_on_sim
+
+    write(project, block("        - move: {pose: totem, velocity_scale: 0.5}\n",
+                         rescue="        - move: {pose: opsafe, velocity_scale: 0.5}\n",
+                         always="        - move: {pose: park, velocity_scale: 0.5}\n"))
+
+    def abort_during_the_move(executor):
+        def listener(event):
+            if event["type"] == "setpoint" and event["plan_t"] >= 2.0 and event.get("step") == 4:
+                executor.abort("operator abort")
+        executor.listeners.append(listener)
+
+    outcome, _, _ = run_on_sim("b", tmp_path, root=project, on_executor=abort_during_the_move)
+    assert outcome.result.exit_code == EXIT_OPERATOR_ABORT, outcome.result.message
+    folder = RunFolder(outcome.log_dir)
+    assert statuses(folder.report()["steps"]) == ["passed"] * 3 + ["aborted", "pending",
+                                                                  "pending"]
+    events = folder.events()
+    assert [e["step"] for e in events if e["type"] == "step_started"] == [1, 2, 3, 4]
+    assert any(e["type"] == "controlled_stop" for e in events)
+    assert not any(e["type"].startswith("block_") for e in events)
