@@ -281,3 +281,28 @@ def test_an_operator_abort_in_a_block_stops_the_arm_without_rescue_or_always(pro
     assert [e["step"] for e in events if e["type"] == "step_started"] == [1, 2, 3, 4]
     assert any(e["type"] == "controlled_stop" for e in events)
     assert not any(e["type"].startswith("block_") for e in events)
+
+
+def test_the_path_after_an_early_failure_is_checked_from_the_measured_arm(project, tmp_path):
+    """Validation checks the rescue after the block's last step (the arm up at Op-safe, where
+    going 100 mm down is clear); the check fails before the move, with the arm at Park,
+    where it is not: the run refuses the rescue before anything moves."""
+    down = ("        - move_linear: {position_mm: [0, 0, -100], relative: true, "
+            "frame: base, speed_mm_s: 5}\n")
+    path = write(project, block(f"        - {FAILING}\n"
+                                "        - move: {pose: opsafe, velocity_scale: 0.5}\n",
+                                rescue=down))
+    code, out = validate_json(path, project, "--static")
+    assert code == 0, out
+    folder = tmp_path / "run"
+    result = run_virtual(path, project, folder)
+    assert result.exit_code == 3, result.output
+    report = RunFolder(folder).report()
+    assert report["fault"]["cause"] == "block_recheck"
+    assert "not valid from where the arm stands" in report["message"]
+    recheck = RunFolder(folder).events("block_recheck")
+    assert len(recheck) == 1 and recheck[0]["errors"], recheck
+    assert statuses(report["steps"]) == ["passed"] * 3 + ["failed", "skipped", "failed"]
+    # nothing moved after the failed check
+    trace = RunFolder(folder).trace()
+    assert not any(is_motion(m) for m in trace)
