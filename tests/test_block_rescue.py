@@ -306,3 +306,21 @@ def test_the_path_after_an_early_failure_is_checked_from_the_measured_arm(projec
     # nothing moved after the failed check
     trace = RunFolder(folder).trace()
     assert not any(is_motion(m) for m in trace)
+
+
+def test_a_wait_until_that_times_out_is_rescued_and_report_html_says_so(project, tmp_path):
+    path = write(project, block('        - wait_until: {until: "pos_deg[2] > 1000", '
+                                "timeout_s: 0.5, label: Never}\n",
+                                rescue="        - wait: {seconds: 0.1, label: Rescue}\n"))
+    folder = tmp_path / "run"
+    result = run_virtual(path, project, folder)
+    assert result.exit_code == 0, result.output
+    report = RunFolder(folder).report()
+    assert statuses(report["steps"]) == ["passed"] * 3 + ["failed", "passed"]
+    assert report["blocks"][0]["status"] == "rescued"
+    drawn = invoke("report", folder, cwd=project)
+    assert drawn.exit_code == 0, drawn.output
+    html = (folder / "report.html").read_text(encoding="utf-8")
+    table = html[html.index('<table id="blocks">'):]
+    table = table[:table.index("</table>")]
+    assert "rescued" in table and "sequences/b.yaml:6:5" in table
