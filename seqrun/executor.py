@@ -47,8 +47,8 @@ from seqrun.clock import Clock
 from seqrun.arm.joint_values import JointState, LimitValues
 from seqrun.drivers import ArmDriver, HaltConfirmation, as_driver
 from seqrun.events import EventHub, make_event
-from seqrun.execution import ending
 from seqrun.errors import RunAborted
+from seqrun.execution import ending
 from seqrun.execution.blocks import BlockRun, recoverable
 from seqrun.execution.checks import ReadingChecks
 from seqrun.execution.flow import StepFlow, has_flow
@@ -708,7 +708,6 @@ class Executor:
         """After a recoverable failure, before the next step: the steps the run goes on
         with, checked from where the arm stands (the preflight's check); a refusal ends
         the run before anything moves."""
-
         found = recheck(self, self.sequence_check, replace(loaded, steps=tuple(path)))
         self.emit("block_recheck", first_step=step.number, steps=len(path),
                   errors=[str(e) for e in found.errors])
