@@ -123,6 +123,10 @@ def test_a_failing_check_runs_the_rescue_then_the_always_and_the_run_passes(proj
     dry = out["dry_run"]
     assert code == 0 and dry["passed"] is True, out
     assert not any("rescue of block 1" in line for line in dry["not_verified"])
+    human = invoke("validate", path, cwd=project)
+    assert human.exit_code == 0, human.output
+    assert ("  block 1 (Capture) at sequences/b.yaml:6:5: rescued (step 4 failed)"
+            in human.output.splitlines())
     folder = tmp_path / "run"
     result = run_virtual(path, project, folder)
     assert result.exit_code == 0, result.output
