@@ -328,3 +328,27 @@ def test_a_wait_until_that_times_out_is_rescued_and_report_html_says_so(project,
     table = html[html.index('<table id="blocks">'):]
     table = table[:table.index("</table>")]
     assert "rescued" in table and "sequences/b.yaml:6:5" in table
+
+
+def test_the_paths_of_nested_blocks():
+    from types import SimpleNamespace
+
+    from seqrun.steps.blocks import has_rescue, normal_path, rescue_paths
+    from seqrun.steps.resolved import BlockFrame
+    from seqrun.yamlsource import Location
+
+    def frame(block: int, part: str) -> BlockFrame:
+        return BlockFrame(block, part, Location("f.yaml", block, 1))
+
+    a_steps, a_rescue, a_always = frame(1, "steps"), frame(1, "rescue"), frame(1, "always")
+    steps = [SimpleNamespace(n=1, blocks=(a_steps,)),
+             SimpleNamespace(n=2, blocks=(a_rescue,)),
+             SimpleNamespace(n=3, blocks=(a_rescue, frame(2, "steps"))),
+             SimpleNamespace(n=4, blocks=(a_rescue, frame(2, "rescue"))),
+             SimpleNamespace(n=5, blocks=(a_always,)),
+             SimpleNamespace(n=6, blocks=())]
+    assert has_rescue(steps) and not has_rescue([steps[0], steps[5]])
+    assert [s.n for s in normal_path(steps)] == [1, 5, 6]
+    paths = {block: [s.n for s in path] for block, path in rescue_paths(steps).items()}
+    # block 2 sits in block 1's rescue: its rescue runs only after block 1's failed
+    assert paths == {1: [1, 2, 3, 5, 6], 2: [1, 2, 3, 4, 5, 6]}
