@@ -336,7 +336,7 @@ along the normal path's timing, which a failure changes.
       rescue:
         - move: {pose: opsafe, velocity_scale: 0.3, label: Retreat to Op-safe}
       always:
-        - release: {}
+        - release: {width_mm: 60}
 ```
 
 ## Steps
