@@ -240,10 +240,52 @@ class StepFinished(Event):
 
 
 @dataclass(frozen=True, kw_only=True)
+class BlockStepFailed(Event):
+    type: ClassVar[str] = "block_step_failed"
+    when: ClassVar[str] = ("a step written in a block failed in a way a rescue may follow "
+                           "(a check, a wait_until timing out, a checkpoint or check_gripper "
+                           "out of tolerance): nothing is halted; ``part``: the block's list "
+                           "it is in (steps, rescue, always); ``rescue``: the block's rescue "
+                           "runs next")
+    block: int
+    part: str
+    location: str
+    cause: str
+    message: str
+    rescue: bool
+
+
+@dataclass(frozen=True, kw_only=True)
+class BlockRecheck(Event):
+    type: ClassVar[str] = "block_recheck"
+    when: ClassVar[str] = ("after a block's step failed, before the next step: the "
+                           "``steps`` steps the run goes on with (the rescue, the always, "
+                           "what follows) checked from the measured arm as the preflight "
+                           "does; any ``errors`` end the run before anything moves")
+    first_step: int
+    steps: int
+    errors: Sequence[str]
+
+
+@dataclass(frozen=True, kw_only=True)
+class BlockFinished(Event):
+    type: ClassVar[str] = "block_finished"
+    when: ClassVar[str] = ("the run left a block: ``status`` passed, rescued (a step "
+                           "failed and the rescue passed), failed (the failure goes on to "
+                           "the block around it, else ends the run) or not run")
+    block: int
+    label: str
+    location: str
+    status: str
+    failed_step: int | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
 class RunFinished(Event):
     type: ClassVar[str] = "run_finished"
     when: ClassVar[str] = ("last event of a run, whatever ended it; ``extra`` may carry "
-                           "``errors`` and ``summary`` (a run not valid from the measured state)")
+                           "``errors`` and ``summary`` (a run not valid from the measured "
+                           "state) and ``blocks`` (how each block ended)")
     status: str
     exit_code: int
     message: str

@@ -47,12 +47,14 @@ from seqrun.clock import Clock
 from seqrun.arm.joint_values import JointState, LimitValues
 from seqrun.drivers import ArmDriver, HaltConfirmation, as_driver
 from seqrun.events import EventHub, make_event
+from seqrun.errors import RunAborted
 from seqrun.execution import ending
+from seqrun.execution.blocks import BlockRun, recoverable
 from seqrun.execution.checks import ReadingChecks
 from seqrun.execution.flow import StepFlow, has_flow
 from seqrun.execution.latched import LatchedFaults
 from seqrun.execution.monitors import Monitors
-from seqrun.execution.preflight import Findings, SequenceCheck, preflight
+from seqrun.execution.preflight import Findings, SequenceCheck, preflight, recheck
 from seqrun.execution.run import Measurement, rounded
 from seqrun.execution.stops import StopControl
 from seqrun.execution.streaming import Streaming
@@ -184,6 +186,8 @@ class Executor:
         self.halt_result: HaltConfirmation | None = None
         #: The steps' if/skip_if, repeat and retry, and the branches the run took.
         self.flow = StepFlow(self, self.stops)
+        #: How each block of the sequence ended (block/rescue/always; empty: none).
+        self.block_outcomes: list[dict[str, Any]] = []
 
     # ------------------------------------------------------------------ control (any thread)
     def abort(self, reason: str = "operator abort") -> None:
@@ -538,6 +542,9 @@ class Executor:
                                      param_types=getattr(monitors_at, "param_types", None))
         steps = list(loaded.steps)
         results = [StepResult.planned(s, _label(s), _location(s)) for s in steps]
+        for step, planned in zip(steps, results):
+            if step.blocks:   # where the step is written: "block 1 (Try) rescue", nested " > "
+                planned.detail["block"] = " > ".join(f.name for f in step.blocks)
         # clock_s: the run clock's reading at t = 0, so that the run log can put event
         # times and frame times on one (wall-clock) time base.
         self.emit("run_started", steps=len(steps), first_step=first_step, speed=self.speed,
@@ -558,12 +565,25 @@ class Executor:
             self.driver.enable_watchdog(self.loop_alive)
         except Exception as exc:  # noqa: BLE001 - nothing moves yet, but be sure
             return ending.finish(self, results, *ending.preflight_failed(self, exc))
-        for step, result in zip(steps, results):
+        # blocks (block/rescue/always): None for a sequence without any
+        blocks = BlockRun(self.emit, steps) if any(s.blocks for s in steps) else None
+        recheck_due = False  # a recoverable failure: the path on is checked again first
+        for index, (step, result) in enumerate(zip(steps, results)):
             if step.number < first_step:
                 result.status = "skipped"
                 continue
+            if blocks is not None and not blocks.enter(step):
+                if blocks.failure is not None:
+                    break
+                result.status = "skipped"
+                result.detail["skipped_by"] = ("rescue" if step.blocks[-1].part == "rescue"
+                                               else "block")
+                continue
             self.current_step = result
             try:
+                if recheck_due and blocks is not None:
+                    recheck_due = False
+                    self._recheck(loaded, [step, *blocks.path(steps[index + 1:])], step)
                 if has_flow(step.params):
                     flowed = self.flow.run(step, result, self._begin_step,
                                            partial(self._handle, HANDLERS[step.kind], step))
@@ -576,6 +596,13 @@ class Executor:
                 status, code, message, fault = ending.step_aborted(self, step, result, exc)
                 break
             except Exception as exc:  # noqa: BLE001 - every failure, even a bug, halts
+                if (blocks is not None and step.blocks and isinstance(exc, RunAborted)
+                        and recoverable(exc, self.stops)):
+                    # a block's step: its rescue, its always, then the block's verdict
+                    self._block_step_failed(result, exc)
+                    blocks.fail(step, result, exc)
+                    recheck_due = True
+                    continue
                 status, code, message, fault = ending.step_failed(self, step, result, exc)
                 break
             except BaseException as exc:
@@ -585,6 +612,16 @@ class Executor:
                 raise
         self.current_step = None
         untaken = self.flow.not_taken()
+        if blocks is not None:
+            if code == EXIT_OK:
+                blocks.finish()
+            if code == EXIT_OK and blocks.failure is not None:
+                # no block rescued it: the run ends as that step would without a block
+                failed = blocks.failure
+                status, code, message, fault = ending.step_failed(self, failed.step,
+                                                                  failed.result, failed.error)
+            untaken += blocks.not_taken()
+            self.block_outcomes = blocks.outcomes
         if self.dry_run:
             # the branches this one path did not take: validation has not seen them run
             self.not_verified.extend(b.line for b in untaken)
@@ -596,7 +633,9 @@ class Executor:
             self.driver.disable_watchdog()
         else:
             self.driver.stop_watchdog_keeper()
-        ended = ending.finish(self, results, status, code, message, fault)
+        ended = ending.finish(self, results, status, code, message, fault,
+                              **({"blocks": self.block_outcomes} if self.block_outcomes
+                                 else {}))
         ended.branches_not_taken = untaken
         return ended
 
@@ -661,6 +700,27 @@ class Executor:
         finally:
             self.monitors.stop()  # (the fault path reads the arm unwatched)
             self.setpoint_deg = None
+
+    def _block_step_failed(self, result: StepResult, exc: RunAborted) -> None:
+        """A step of a block failed in a way a rescue may follow: nothing is halted, the
+        step is reported failed (the block says whether it was rescued)."""
+        self.monitors.stop()
+        result.status = "failed"
+        result.finished = self.elapsed_s()
+        result.detail.update(ending.jsonable(exc.detail or {}))
+        result.detail["error"] = self.describe_error(exc)
+
+    def _recheck(self, loaded, path: list, step) -> None:
+        """After a recoverable failure, before the next step: the steps the run goes on
+        with, checked from where the arm stands (the preflight's check); a refusal ends
+        the run before anything moves."""
+        found = recheck(self, self.sequence_check, replace(loaded, steps=tuple(path)))
+        self.emit("block_recheck", first_step=step.number, steps=len(path),
+                  errors=[str(e) for e in found.errors])
+        if found.errors:
+            raise RunAborted("block_recheck", "the steps after the failure are not valid "
+                             "from where the arm stands: "
+                             + "; ".join(str(e) for e in found.errors))
 
     def _step_passed(self, result: StepResult, detail: dict) -> None:
         result.detail.update({k: v for k, v in detail.items() if k != "planned_duration_s"})

@@ -93,6 +93,7 @@ __all__ = [
     "ConfirmParams",
     "HaltParams",
     "HomeParams",
+    "BlockParams",
     "IncludeParams",
     "MoveLinearParams",
     "MoveParams",
@@ -171,10 +172,49 @@ class IncludeParams(StepParams):
         return self
 
 
+class BlockParams(StepParams):
+    """Steps run together, as a test engineer knows from Ansible (block/rescue/always)
+    and RAPID (ERROR handlers): when one of them fails in a way that may be recovered
+    (a check, a wait_until timing out, a checkpoint or check_gripper out of tolerance),
+    the rescue steps run and the block counts as rescued if they pass; the always steps
+    run after the block and its rescue, passed or failed. A module fault, a Halt (guard,
+    monitor, separation, operator STOP), a lost bus and an operator abort are never
+    rescued: the run ends as without a block, and neither rescue nor always moves the arm
+    (docs/safety.md, 'What a rescue may follow')."""
+
+    kind: ClassVar[str] = "block"
+    yaml_name: ClassVar[str] = "block"
+    steps: list[Step] = Field(min_length=1, description="The block's steps, in order.")
+    rescue: list[Step] | None = Field(
+        None, min_length=1,
+        description="Steps run when a step of the block fails in a way that may be "
+                    "recovered (e.g. a retreat to a safe pose); the block is then reported "
+                    "as rescued if they pass, and the run fails if they fail.")
+    always: list[Step] | None = Field(
+        None, min_length=1,
+        description="Steps run after the block and its rescue, whether they passed or "
+                    "failed (e.g. release the gripper, go to Op-safe); not after a fault, a "
+                    "Halt or an operator abort.")
+
+    @model_validator(mode="after")
+    def _only_label(self) -> BlockParams:
+        given = [alias for key, alias in (("monitors", "monitors"), ("verifies", "verifies"),
+                                          ("tags", "tags"), ("if_", "if"),
+                                          ("skip_if", "skip_if"), ("repeat", "repeat"),
+                                          ("retry", "retry"), ("breakpoint", "breakpoint"))
+                 if getattr(self, key)]
+        if given:
+            raise PydanticCustomError("block_keys", "a block takes steps, rescue, always and "
+                                      "label: put {keys} on its steps",
+                                      {"keys": " and ".join(given)})
+        return self
+
+
 #: Parameter model of each step type, in the order the docs list them: the step kinds
 #: (seqrun/steps/registry.py), then include (the loader's: its steps run in its place).
 PARAMS_MODELS: dict[str, type[StepParams]] = {
-    **{kind.name: kind.params for kind in KINDS}, "include": IncludeParams}
+    **{kind.name: kind.params for kind in KINDS}, "include": IncludeParams,
+    "block": BlockParams}
 STEP_KINDS: tuple[str, ...] = tuple(PARAMS_MODELS)
 #: Step types that may be written as a bare word (``- reset``).
 BARE_STEPS: tuple[str, ...] = tuple(kind.name for kind in KINDS if kind.bare)
@@ -213,9 +253,17 @@ class IncludeStep(_Step):
         description=doc(IncludeParams) + " Shorthand: 'include: startup.yaml'.")
 
 
+class BlockStep(_Step):
+    """A block step: steps, their rescue and the steps always run after them."""
+
+    kind: ClassVar[str] = "block"
+    block: BlockParams = Field(description=doc(BlockParams))
+
+
 #: The one-key mapping model of each step type (MoveStep, ...), as PARAMS_MODELS.
 STEP_MODELS: dict[str, type[_Step]] = {
-    **{kind.name: _step_model(kind) for kind in KINDS}, "include": IncludeStep}
+    **{kind.name: _step_model(kind) for kind in KINDS}, "include": IncludeStep,
+    "block": BlockStep}
 assert tuple(STEP_MODELS) == STEP_KINDS, "one step model per parameter model"
 
 BareStep = Annotated[Literal[BARE_STEPS], Field(  # type: ignore[valid-type]
@@ -266,7 +314,8 @@ def _check_step(value: Any) -> Any:
 
 #: An example of each step that needs parameters (the error for its bare word).
 _EXAMPLES = {**{kind.name: kind.example for kind in KINDS if kind.example},
-             "include": "include: startup.yaml"}
+             "include": "include: startup.yaml",
+             "block": "block: {steps: [...], rescue: [...], always: [...]}"}
 
 
 def _step_pick(value: Any) -> str | None:
@@ -288,6 +337,9 @@ Step = Annotated[
                       f"({', '.join(STEP_KINDS)}), or a bare {', '.join(BARE_STEPS)}."),
 ]
 
+# the block's lists hold steps, blocks among them
+BlockParams.model_rebuild()
+BlockStep.model_rebuild()
 
 ParameterName = Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")]
 
@@ -343,6 +395,8 @@ def describe(kind: str, params: StepParams) -> str:
     """A one-line description of a step for people, e.g. ``move to pose totem``."""
     if isinstance(params, IncludeParams):
         return f"include {params.file}"
+    if isinstance(params, BlockParams):
+        return "block"
     from seqrun.steps.registry import step_kind
 
     try:

@@ -34,10 +34,11 @@ def capture_run(log_dir: Path, *options: str, sequence: Path = CAPTURE) -> tuple
 def test_the_example_validates_over_its_declared_params():
     result = run("validate", str(CAPTURE))
     assert result.exit_code == 0, result.output
-    assert "valid (16 steps)" in result.output
+    assert "valid (18 steps)" in result.output
     assert "invalid over its declared params" not in result.output
     # what the dry run did not take is said, not hidden
     assert "if 'params.check_open' was never false" in result.output
+    assert "the rescue of block 1 never ran" in result.output
 
 
 def test_the_example_passes_and_traces_every_requirement(tmp_path):

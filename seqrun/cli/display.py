@@ -67,6 +67,15 @@ def skipped_text(event: dict) -> str:
     return f"skipped: {event['key']} '{event['condition']}' was {value}"
 
 
+def block_text(event: dict) -> str:
+    """A block's step that failed (and what follows), or how a block ended."""
+    if event["type"] == "block_step_failed":
+        then = "the block's rescue runs" if event["rescue"] else "the block fails"
+        return f"failed: {event['message']} ({then})"
+    shown = f" ({event['label']})" if event["label"] != "block" else ""
+    return f"block {event['block']}{shown} at {event['location']}: {event['status']}"
+
+
 class PlainDisplay:
     """One line per step and per fault: for logs, pipes and CI."""
 
@@ -94,6 +103,8 @@ class PlainDisplay:
         elif kind == "step_retry":
             self._print(f"      retry {event['attempt']}/{event['times']} after: "
                         f"{event['message']}")
+        elif kind in ("block_step_failed", "block_finished"):
+            self._print(f"      {block_text(event)}")
         elif kind == "step_finished":
             extra = ""
             if "executed_duration_s" in event:
@@ -215,6 +226,8 @@ class LiveDisplay:
         elif kind == "step_skipped":
             self.message, self.message_style = (f"step {event.get('step')}: "
                                                 f"{skipped_text(event)}", "yellow")
+        elif kind in ("block_step_failed", "block_finished"):
+            self.message, self.message_style = block_text(event), "yellow"
         elif kind == "move_planned":
             self.move_duration = event["duration_s"]
             self.move_t = 0.0

@@ -123,6 +123,10 @@ def print_dry_run(run, loaded, arm) -> None:
         guard, point = key.split(":", 1)
         typer.echo(f"  lowest {point}: {z:.1f} mm above the base plane (guard '{guard}': "
                    f"{guards.get(guard, float('nan')):g} mm)")
+    for b in r.extra.get("blocks", []):
+        failed = f" (step {b['failed_step']} failed)" if "failed_step" in b else ""
+        shown = f" ({b['label']})" if b["label"] != "block" else ""
+        typer.echo(f"  block {b['block']}{shown} at {b['location']}: {b['status']}{failed}")
     if r.fault:
         typer.echo(f"  fault: {r.fault['message']}")
     for error in r.extra.get("errors", []):

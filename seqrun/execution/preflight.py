@@ -55,15 +55,7 @@ def preflight(run: Run, check: SequenceCheck, loaded, first_step: int = 1) -> Fi
     """Read the arm and ``check`` ``loaded`` (from ``first_step``) from the measured state.
     Returns what the check found; only reads reach the bus."""
     arm = run.arm
-    m = run.read_arm()
-    states = run.read_state_words()
-    run.beat()
-    stored = run.driver.read_limits()
-    written = all(abs(held.min_deg - j.limits_deg[0]) < LIMITS_MATCH_DEG
-                  and abs(held.max_deg - j.limits_deg[1]) < LIMITS_MATCH_DEG
-                  for j, held in zip(arm.joints, stored))
-    module_limits = {j.name: (held.max_velocity_deg_s, held.max_acceleration_deg_s2)
-                     for j, held in zip(arm.joints, stored)}
+    m, states, module_limits, written = _measure(run)
     run.limits_in_force.read_back(module_limits)
     ready = all(f.ready for f in states.values())
     run.latched.record(states)
@@ -88,4 +80,37 @@ def preflight(run: Run, check: SequenceCheck, loaded, first_step: int = 1) -> Fi
              "state": [states[k].cycle_code if k in states else int(m.short_state[k])
                        for k in run.modules]},
             clock_s=now, flags=flags, fault=fault, source="preflight"))
+    return result
+
+
+def _measure(run: Run) -> tuple[Any, dict, dict[str, tuple[float, float]], bool]:
+    """One reading of the arm, every module's full state, MaxVel/MaxAcc per joint as the
+    drives hold them and whether they hold the arm file's position limits: only reads
+    reach the bus."""
+    m = run.read_arm()
+    states = run.read_state_words()
+    run.beat()
+    stored = run.driver.read_limits()
+    joints = run.arm.joints
+    written = all(abs(held.min_deg - j.limits_deg[0]) < LIMITS_MATCH_DEG
+                  and abs(held.max_deg - j.limits_deg[1]) < LIMITS_MATCH_DEG
+                  for j, held in zip(joints, stored))
+    module_limits = {j.name: (held.max_velocity_deg_s, held.max_acceleration_deg_s2)
+                     for j, held in zip(joints, stored)}
+    return m, states, module_limits, written
+
+
+def recheck(run: Run, check: SequenceCheck, loaded: Any) -> Findings:
+    """``loaded`` (the steps a run goes on with after a recoverable failure: a block's
+    rescue, its always, what follows) checked from where the arm stands now, as the
+    preflight checks the whole sequence: nothing moves if it finds an error. The targets
+    and paths it validated replace those of the same steps."""
+    m, states, module_limits, written = _measure(run)
+    start_deg = {j.name: float(v) for j, v in zip(run.arm.joints, m.user_deg)}
+    started = written and all(f.ready for f in states.values())
+    result = check(loaded, run.arm, start_deg, first_step=1, started=started,
+                   speed=run.speed, module_limits=module_limits)
+    run.validated_targets.update(result.targets_deg)
+    if run.planned_paths is not None:
+        run.planned_paths.update(getattr(result, "paths", {}))
     return result

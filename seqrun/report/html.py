@@ -25,7 +25,7 @@ _KNOWN = {"sequence", "file", "start", "end", "arm", "bus", "simulator", "faults
           "first_step", "seqrun", "status", "exit_code", "message", "duration_s",
           "planned_duration_s", "fault", "steps", "checkpoints", "not_verified",
           "min_heights_mm", "inputs", "zero_reference", "zero", "steps_finished", "errors",
-          "overrides", "requirements", "params"}
+          "overrides", "requirements", "params", "blocks"}
 
 _FIGURE_ROWS = (
     ("max_following_error_deg", "largest following error (°)"),
@@ -454,6 +454,15 @@ def _heights(data: RunData) -> str:
                    "<th>result</th></tr>")
         out += [f'<tr><td class="mono">{escape(str(k))}</td><td>{escape(str(v))}</td></tr>'
                 for k, v in r["requirements"].items()]
+        out.append("</table>")
+    if isinstance(r.get("blocks"), list) and r["blocks"]:
+        out.append('<h2>Blocks</h2><table id="blocks"><tr><th>block</th><th>written at</th>'
+                   "<th>result</th><th>failed step</th></tr>")
+        out += [f'<tr><td>{escape(str(b.get("block")))} {escape(str(b.get("label", "")))}</td>'
+                f'<td class="mono">{escape(str(b.get("location", "")))}</td>'
+                f'<td>{escape(str(b.get("status", "")))}</td>'
+                f'<td class="num">{escape(str(b.get("failed_step", "")))}</td></tr>'
+                for b in r["blocks"] if isinstance(b, dict)]
         out.append("</table>")
     if r.get("not_verified"):
         out.append("<h2>Not verified</h2><ul>"

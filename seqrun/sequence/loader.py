@@ -23,13 +23,14 @@ from seqrun.schema import (
     MAX_INCLUDE_DEPTH,
     MAX_STEPS,
     PARAMS_MODELS,
+    BlockParams,
     IncludeParams,
     Sequence,
     describe,
     step_adapter,
 )
 from seqrun.steps.registry import step_kind
-from seqrun.steps.resolved import FrozenPose, ResolvedStep
+from seqrun.steps.resolved import BlockFrame, FrozenPose, ResolvedStep
 from seqrun.yamlsource import Document, Location, display_path, load_document, sort_errors
 
 __all__ = [
@@ -177,6 +178,9 @@ class _Loader:
         self.digests: list[str] = []
         self.sources: list[bytes] = []
         self.include_titles: dict[Location, str] = {}
+        #: The blocks around the steps being read, outermost first; blocks read so far.
+        self.blocks: tuple[BlockFrame, ...] = ()
+        self.block_count = 0
         self.top: Any = None  # the top file's data, when it could be read
         #: Steps left out (see LoadedSequence.left_out).
         self.left_out: list[tuple[int, str | None]] = []
@@ -320,6 +324,9 @@ class _Loader:
                 kind = raw.kind
                 params, params_node = raw.params(), doc.child(node, kind)
             here = doc.location(node)
+            if isinstance(params, BlockParams):
+                self._block(doc, path, params, params_node, here, chain, include_chain)
+                continue
             if isinstance(params, IncludeParams):
                 self.include_titles[here] = params.label or describe(kind, params)
                 self._include(doc, path, params, params_node, here, chain + (path,),
@@ -332,10 +339,28 @@ class _Loader:
                                 include_labels=tuple(self.include_titles.get(loc, "include")
                                                      for loc in include_chain),
                                 description=step_type.describe(params),
-                                param_types=self.param_types, param_values=self.values)
+                                param_types=self.param_types, param_values=self.values,
+                                blocks=self.blocks)
             for pose in step_type.poses(params):
                 self._check_pose(step, pose)
             self.steps.append(step)
+
+    def _block(self, doc: Document, path: Path, params: BlockParams, node: Any,
+               here: Location, chain: tuple[Path, ...],
+               include_chain: tuple[Location, ...]) -> None:
+        """A block's steps, rescue and always, each step knowing the blocks it is in."""
+        self.block_count += 1
+        number, outer = self.block_count, self.blocks
+        for part in ("steps", "rescue", "always"):
+            steps = getattr(params, part)
+            if not steps:
+                continue
+            self.blocks = outer + (BlockFrame(number, part, here, params.label or "block"),)
+            try:
+                self._steps(doc, path, steps, list(doc.items(doc.child(node, part))), chain,
+                            include_chain)
+            finally:
+                self.blocks = outer
 
     def _check_arm(self, doc: Document, seq: Sequence, *, top: bool) -> None:
         if top:
@@ -508,7 +533,8 @@ def _written_kind(item: Any) -> str | None:
     name = item if isinstance(item, str) else (
         next(iter(item)) if isinstance(item, dict) and len(item) == 1 else None)
     # an include brings steps of any kind: unknown
-    return name if isinstance(name, str) and name in PARAMS_MODELS and name != "include" \
+    return name if isinstance(name, str) and name in PARAMS_MODELS \
+        and name not in ("include", "block") \
         else None
 
 

@@ -290,6 +290,55 @@ dry run at a numeric parameter's `min` or `max` took (see "Parameters") is not l
   - checkpoint: {pose: capture, retry: {times: 1, delay_s: 0.5}}
 ```
 
+## Blocks: rescue and always
+
+A `block` groups steps (`steps:`, at least one) with a `rescue:` (steps run when a step of
+the block fails in a way a rescue may follow) and an `always:` (steps run after the block
+and its rescue, passed or failed), as Ansible's block/rescue/always and RAPID's ERROR
+handlers do. Either list may be left out, never empty; a block takes a `label` and no
+other key (put `if`, `monitors`, `retry` ... on its steps); blocks nest, in any of the
+three lists.
+
+A rescue follows only the failures `retry` follows: a `check` that did not hold, a
+`wait_until` that timed out (`on_timeout: fail`), a `checkpoint` or `check_gripper` out of
+tolerance. Nothing is halted then: the block's later steps are skipped, its rescue runs,
+then its always. If the rescue passes, the block is reported `rescued` (the failed step
+stays `failed` in the report, with its error) and the run goes on; if the rescue fails, or
+there is none, the block fails and so does the block around it (whose rescue may take
+it), else the run, after the always steps, ending as that failure would without a block
+(exit 3, Halt with the arm at rest). A module fault, a Halt (guard, monitor `halt`, arm
+separation, operator STOP), a lost bus and an operator abort are never rescued: the run
+ends at once as without a block, and neither the rescue nor the always moves the arm
+(docs/safety.md, "What a rescue may follow"; the rescue then needs the operator).
+
+Validation follows the normal path (no rescue runs) and, for each block with a rescue,
+the path where the block's last step fails (its steps, its rescue, its always, what
+follows), every plan-time check on both. In a run, after a recoverable failure and before
+the next step, the steps the run goes on with are checked again from the measured arm, as
+the preflight does (a `block_recheck` event): the failure may come earlier in the block,
+and nothing moves if they are not valid from there. Every step in a block is reported
+with where it is written (`block: "block 1 (Capture) rescue"`, nested ones joined with
+` > `); report.json and the dry run's `--json` carry `blocks` (each block's status:
+passed, rescued, failed or not run), the terminal a line per block; events
+`block_step_failed` and `block_finished`. A rescue the dry run did not run is listed under
+"not verified": rehearse it with a failing `check` (a measurement a simulator fault cannot
+make fail; `--sim-fault` rehearses the faults, which are never rescued). In a campaign of
+several arms a block takes no `rescue` or `always`: the arms are proven clear of each other
+along the normal path's timing, which a failure changes.
+
+```yaml
+  - block:
+      label: Capture
+      steps:
+        - move: {pose: capture, velocity_scale: 0.3}
+        - wait_until: {until: "gripper.holding", timeout_s: 2}
+        - checkpoint: {pose: capture}
+      rescue:
+        - move: {pose: opsafe, velocity_scale: 0.3, label: Retreat to Op-safe}
+      always:
+        - release: {width_mm: 60}
+```
+
 ## Steps
 """
 
@@ -369,8 +418,9 @@ def reference_markdown() -> str:
         props = definition["properties"]
         for key in sorted(props, key=lambda k: k == "label"):  # label last
             prop = props[key]
-            if key == "steps":
-                lines.append(f"| `steps` | list of steps (below) — required | "
+            if key in ("steps", "rescue", "always"):   # (a block's lists too)
+                need = " — required" if key in required else ""
+                lines.append(f"| `{key}` | list of steps (below){need} | "
                              f"{prop.get('description', '')} |")
                 continue
             if key == "params":

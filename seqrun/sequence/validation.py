@@ -35,14 +35,14 @@ or a checkpoint goes is its kind's own (``seqrun.steps.move.resolve_move_target`
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from seqrun.steps._expression_checks import check_monitors
-from seqrun.steps._flow_checks import check_flow
+from seqrun.steps._flow_checks import check_block, check_flow
 from seqrun.arm.description import ArmDescription
 from seqrun.errors import PlanningError, SourceError
 from seqrun.formatting import format_number as _f
@@ -50,6 +50,7 @@ from seqrun.formatting import format_range
 from seqrun.arm.limits import READBACK, LimitsInForce
 from seqrun.arm.poses import park_deg
 from seqrun.steps.check_context import TrackedJoint
+from seqrun.steps.blocks import has_rescue, normal_path, rescue_paths
 from seqrun.steps.registry import step_kind
 from seqrun.yamlsource import sort_errors
 
@@ -554,6 +555,8 @@ class Checker:
             kind.check(self, step, step.params)
             check_monitors(self, step, step.params.monitors)
             check_flow(self, step, step.params, motion=kind.motion)
+            if step.blocks:
+                check_block(self, step)
             # a step's findings in the order they appear in its text, then those in other
             # files (the pose file it names)
             here = step.location.file
@@ -596,6 +599,38 @@ def validate_sequence(loaded: LoadedSequence, arm: ArmDescription,
     """
     if start_deg is None:
         start_deg = park_deg(loaded.pose_path or loaded.poses_dir)
-    checker = Checker(loaded, arm, start_deg, started, module_limits, incomplete)
-    checker.speed = speed
-    return checker.run()
+
+    def check(steps: Sequence[ResolvedStep] | None = None) -> ValidationResult:
+        checked = loaded if steps is None else _on_path(loaded, steps)
+        checker = Checker(checked, arm, start_deg, started, module_limits, incomplete)
+        checker.speed = speed
+        return checker.run()
+
+    if not has_rescue(loaded.steps):
+        return check()
+    # the normal path, then each block's rescue path: every step is checked where it can
+    # run (docs/safety.md, 'What a rescue may follow')
+    result = check(normal_path(loaded.steps))
+    for path in rescue_paths(loaded.steps).values():
+        other = check(path)
+        result.errors = sort_errors(result.errors + other.errors)
+        result.notes = list(dict.fromkeys(result.notes + other.notes))
+        for mine, theirs in ((result.clearances, other.clearances),
+                             (result.targets_deg, other.targets_deg),
+                             (result.proximities, other.proximities),
+                             (result.paths, other.paths)):
+            for number, value in theirs.items():
+                mine.setdefault(number, value)  # type: ignore[attr-defined]
+    return result
+
+
+def _on_path(loaded: LoadedSequence, steps: Sequence[ResolvedStep]) -> LoadedSequence:
+    """``loaded`` with only ``steps`` (the steps left out counted where they stood)."""
+    from dataclasses import replace
+
+    kept = {id(s) for s in steps}
+    before = [0]
+    for step in loaded.steps:
+        before.append(before[-1] + (id(step) in kept))
+    left_out = tuple((before[index], kind) for index, kind in getattr(loaded, "left_out", ()))
+    return replace(loaded, steps=tuple(steps), left_out=left_out)

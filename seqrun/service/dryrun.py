@@ -81,6 +81,7 @@ class DryRun:
             "fault": r.fault,
             "not_verified": list(r.not_verified) + list(ALWAYS_UNVERIFIED),
             **({"errors": r.extra["errors"]} if r.extra.get("errors") else {}),
+            **({"blocks": r.extra["blocks"]} if r.extra.get("blocks") else {}),
         }
 
 

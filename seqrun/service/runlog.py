@@ -280,6 +280,8 @@ class RunLog:
         requirements = requirement_results(steps)
         if requirements:   # only when a step verifies one: other reports stay as they were
             report["requirements"] = requirements
+        if result.extra.get("blocks"):   # how each block ended (passed, rescued, failed)
+            report["blocks"] = result.extra["blocks"]
         if host is not None:
             report["host"] = host
         junit = junit_xml(self.meta.get("sequence", "sequence"), result, self._joint_names)

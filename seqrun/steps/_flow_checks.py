@@ -17,7 +17,7 @@ if TYPE_CHECKING:
     from seqrun.steps.check_context import CheckContext
     from seqrun.steps.resolved import ResolvedStep
 
-__all__ = ["FIXED_FLOW_KINDS", "RETRYABLE_KINDS", "check_flow"]
+__all__ = ["FIXED_FLOW_KINDS", "RETRYABLE_KINDS", "check_block", "check_flow"]
 
 #: Step kinds that always run once, where they are written (besides the kinds that move).
 FIXED_FLOW_KINDS = frozenset({"reset", "home", "set_limits", "halt", "power_off", "signal",
@@ -58,3 +58,26 @@ def check_flow(checker: CheckContext, step: ResolvedStep[Any], params: Any,
             checker.errors.append(step.error(
                 f"delay_s {f(params.retry.delay_s)} s is longer than the arm file allows "
                 f"(control.max_wait_s = {f(bound)} s)", "retry", "delay_s"))
+
+
+#: Step kinds that speak to the other arms: never in a rescue or always, whose timing the
+#: arms' schedule cannot know (it follows the normal path).
+SIGNAL_KINDS = frozenset({"signal", "wait_for"})
+
+
+def check_block(checker: CheckContext, step: ResolvedStep[Any]) -> None:
+    """A step written in a block's rescue or always: not in a campaign of several arms,
+    never one that signals the other arms."""
+    handler = [f for f in step.blocks if f.part in ("rescue", "always")]
+    if handler and checker.arm_id is not None:
+        # after a failure these run earlier than on the normal path: the proof that the
+        # arms stay clear of each other holds for the normal path's timing only
+        checker.errors.append(step.error(
+            f"a block's {handler[-1].part} in a campaign of several arms: the arms are "
+            "checked against each other along the normal path's timing, which a failure "
+            "changes (leave it out: there a failure ends the run and the operator "
+            "decides)"))
+    elif handler and step.kind in SIGNAL_KINDS:
+        checker.errors.append(step.error(
+            f"a {step.kind} step in a block's {handler[-1].part} (the arms' schedule follows "
+            "the normal path and cannot know when it runs): put it before or after the block"))

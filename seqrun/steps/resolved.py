@@ -17,7 +17,25 @@ from seqrun.errors import SourceError
 from seqrun.steps.params import StepParams
 from seqrun.yamlsource import Document, Location
 
-__all__ = ["FrozenPose", "ResolvedStep"]
+__all__ = ["BlockFrame", "FrozenPose", "ResolvedStep"]
+
+
+@dataclass(frozen=True)
+class BlockFrame:
+    """A block a step is written in: the block's number (1-based, in the order blocks are
+    written), which of its lists holds the step (``steps``, ``rescue`` or ``always``),
+    where the block is written and what the operator sees of it."""
+
+    block: int
+    part: str
+    location: Location
+    title: str = "block"
+
+    @property
+    def name(self) -> str:
+        """E.g. ``block 2 (capture) rescue``."""
+        shown = f" ({self.title})" if self.title != "block" else ""
+        return f"block {self.block}{shown} {self.part}"
 
 
 #: The parameter model of a step (``ResolvedStep[MoveParams]``).
@@ -51,6 +69,8 @@ class ResolvedStep(Generic[P]):
     param_types: Mapping[str, tuple[str, str | None]] = field(default_factory=dict,
                                                                repr=False)
     param_values: Mapping[str, Any] = field(default_factory=dict, repr=False)
+    #: The blocks the step is written in, outermost first (empty: none).
+    blocks: tuple[BlockFrame, ...] = ()
 
     def where(self, *path: Any, key: bool = False) -> Location:
         """Location of a parameter, e.g. ``where("joints", "j4")``; without a path, the step's
