@@ -59,11 +59,16 @@ def campaign(work: Path, ports: dict[str, int]) -> Path:
 
 def stalls(runs: Path) -> dict:
     """Host stalls (count, longest s) in every events.jsonl under ``runs``."""
+    import gzip
+
     seconds = []
-    for events in runs.rglob("events.jsonl"):
-        for line in events.read_text(encoding="utf-8").splitlines():
-            if '"host_stall"' in line:
-                seconds.append(float(json.loads(line).get("seconds", 0.0)))
+    for events in [*runs.rglob("events.jsonl"), *runs.rglob("events.jsonl.gz")]:
+        opened = gzip.open(events, "rt", encoding="utf-8") if events.suffix == ".gz" \
+            else events.open(encoding="utf-8")
+        with opened as lines:
+            for line in lines:
+                if '"host_stall"' in line:
+                    seconds.append(float(json.loads(line).get("seconds", 0.0)))
     return {"host_stalls": len(seconds), "longest_stall_s": max(seconds, default=0.0)}
 
 
