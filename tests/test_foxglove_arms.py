@@ -272,3 +272,19 @@ def _typestore():
     from rosbags.typesys import Stores, get_typestore
 
     return get_typestore(Stores.ROS2_JAZZY)
+
+
+def test_closing_with_a_client_connected_prints_no_traceback(setups, caplog):
+    """A run ends while a Foxglove client is still connected: the gate closes its
+    connection quietly (asyncio printed "Exception in callback ... CancelledError")."""
+    import logging
+
+    live = serve(setups)
+    client = FoxgloveClient(live.port)
+    client.subscribe("/A/joint_states")
+    with caplog.at_level(logging.ERROR, logger="asyncio"):
+        live.close()
+        time.sleep(0.2)
+    assert not [r for r in caplog.records if r.name == "asyncio"], caplog.text
+    with pytest.raises(Exception):   # the connection has ended
+        client.pump(lambda: False, timeout=2)
