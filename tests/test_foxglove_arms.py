@@ -288,3 +288,53 @@ def test_closing_with_a_client_connected_prints_no_traceback(setups, caplog):
     assert not [r for r in caplog.records if r.name == "asyncio"], caplog.text
     with pytest.raises(Exception):   # the connection has ended
         client.pump(lambda: False, timeout=2)
+
+
+@pytest.mark.slow
+def test_seqrun_console_of_two_arms_serves_both(tmp_path, monkeypatch):
+    """``seqrun console --foxglove`` in a campaign of two arms: the same server on the
+    console's sessions (their polls live on each arm's channel); STOP halts both."""
+    import os
+    import re
+    import signal
+    import subprocess
+    import sys
+
+    from projecttree import ROOT
+    from twoarmskit import two_arm_campaign
+
+    campaign = two_arm_campaign(tmp_path / "c", monkeypatch)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "seqrun", "console", "--port", "0", "--sim",
+         "--zero-confirmed", "park", "--foxglove=0"], cwd=campaign,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        assert proc.stdout is not None
+        lines = []
+        for line in proc.stdout:
+            lines.append(line)
+            found = re.search(r"Foxglove live on ws://127\.0\.0\.1:(\d+) .*arms A, B", line)
+            if found:
+                break
+        else:
+            raise AssertionError("no Foxglove line:\n" + "".join(lines))
+        client = FoxgloveClient(int(found.group(1)))
+        try:
+            client.subscribe("/A/joint_states", "/B/joint_states")
+            for arm in "AB":
+                assert "j1" in joint_states(client.messages(f"/{arm}/joint_states")[-1])
+            kind, answer = client.call("/seqrun/stop")
+            assert kind == "ok", answer
+            assert {a: answer["arms"][a]["halt_confirmed"] for a in "AB"} == \
+                {"A": True, "B": True}, answer
+        finally:
+            client.close()
+    finally:
+        proc.send_signal(signal.SIGINT)
+        try:
+            out, _ = proc.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            out, _ = proc.communicate()
+    assert "Traceback" not in out, "".join(lines) + out
