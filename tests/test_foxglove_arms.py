@@ -241,6 +241,13 @@ def test_seqrun_run_of_two_arms_serves_both(tmp_path, monkeypatch, types):
                 assert client.channels[f"/{arm}/joint_states"]["schemaName"] == schema
             assert "/lwa3/joint_states" not in client.channels
             client.subscribe("/A/joint_states", "/B/joint_states")
+            client.messages("/A/joint_states")   # A's run has begun (its first reading)
+            # read-only while the run goes on: a command through A's control is refused by
+            # A's session, as for one arm's run
+            kind, answer = client.call("/A/seqrun/take_control", {"name": "test"})
+            assert kind == "ok", answer
+            kind, message = client.call("/A/seqrun/home", {"token": answer["token"]})
+            assert kind == "failure", message
             turned = {"A": 6.0, "B": -6.0}
 
             def j1(arm: str) -> list[float]:

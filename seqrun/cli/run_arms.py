@@ -18,6 +18,7 @@ one status line per arm (seqrun/cli/arms_display.py); into a pipe or file, or wi
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, NoReturn
@@ -193,16 +194,22 @@ def _run_watched(file: Path, check, contexts, connections, arms, clock_views, *,
     tracks = check.tracks.tracks
     sessions = open_sessions(tracks, {a: arms[a][0] for a in tracks}, connections,
                              {a: arms[a][1] for a in tracks})
-    live = None
+    live: list[Any] = []
+
+    def stop_serving() -> None:
+        # as soon as every track has ended: no client commands an arm of this run after
+        # it (nor between the records' end and the sessions' close)
+        while live:
+            live.pop().close()
+
     try:
         port, types = foxglove
         if port is not None:
-            live = _start_foxglove(sessions, arms, contexts, port, types)
+            live.append(_start_foxglove(sessions, arms, contexts, port, types))
         return _run(file, check, contexts, connections, arms, clock_views,
-                    sessions=sessions, **options)
+                    sessions=sessions, tracks_ended=stop_serving, **options)
     finally:
-        if live is not None:
-            live.close()
+        stop_serving()
         for session in sessions.values():
             session.close()
 
@@ -222,7 +229,8 @@ def _start_foxglove(sessions: dict[str, Any], arms: dict[str, Any],
 
 def _run(file: Path, check, contexts, connections, arms, clock_views, *, speed: float,
          yes: bool, log_dir: Path | None, no_report: bool, command_mode: str | None,
-         plain: bool = False, sessions: dict[str, Any] | None = None) -> int:
+         plain: bool = False, sessions: dict[str, Any] | None = None,
+         tracks_ended: Callable[[], None] | None = None) -> int:
     from seqrun.cli import interrupts
     from seqrun.cli.interrupts import RunSignals
     from seqrun.cli.questions import ask
@@ -289,7 +297,11 @@ def _run(file: Path, check, contexts, connections, arms, clock_views, *, speed: 
         if view is not None:
             view.__exit__(None, None, None)
         signals.restore()
-        records.close_mcap()
+        try:
+            if tracks_ended is not None:
+                tracks_ended()
+        finally:
+            records.close_mcap()
     if outcome is None:
         fail(f"the run ended in an error (every arm was halted); log: {folder}", EXIT_FAULT)
     for arm_id, arm in outcome.arms.items():

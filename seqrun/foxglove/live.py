@@ -476,9 +476,9 @@ class FoxgloveLive:
         with self._lock:
             connected = client in self._subscribed
         if not connected:
-            raise Refused("take control: subscribe to a topic first (/seqrun/events, say): "
-                          "control lasts while this client stays subscribed, and its motion "
-                          "stops when it leaves")
+            raise Refused(f"take control: subscribe to a topic first ({feed.events_topic}, "
+                          "say): control lasts while this client stays subscribed, and its "
+                          "motion stops when it leaves")
         if control.client(cid) is None:
             control.join(cid, f"{body.name or 'Foxglove client'} ({cid})", "foxglove")
             with self._lock:
