@@ -202,16 +202,15 @@ class FoxgloveLive:
         if types not in TYPES:
             raise ValueError(f"unknown Foxglove channel types {types!r} "
                              f"(one of {', '.join(TYPES)})")
-        if (arms is None) == (arm is None) or (arms is not None and not arms):
-            raise ValueError("serve one arm (session and arm) or the arms of a campaign")
-        self.types = types
-        if arms is None:
-            assert arm is not None
+        if arms is None and arm is not None:
             self.feeds = [_Feed(None, session, arm, RosNames.of(arm, namespace))]
-        else:
+        elif arms and arm is None:
             self.feeds = [_Feed(a, one.session, one.arm,
                                 RosNames.of(one.arm, arm_namespace(a)), one.base)
                           for a, one in arms.items()]
+        else:
+            raise ValueError("serve one arm (session and arm) or the arms of a campaign")
+        self.types = types
         first = self.feeds[0]
         # one arm's server as it always was: its session, arm, names and translator
         self.session, self.arm, self.names, self.translator = (
@@ -241,7 +240,6 @@ class FoxgloveLive:
             channels += shared.values()
             self.ros = first.ros
             if self.campaign:
-                self._serializer = serializer
                 self.tf_static = ros_channel(ctx, serializer, TF_STATIC_TOPIC, TF_MESSAGE)
         else:
             from foxglove.channels import FrameTransformsChannel
