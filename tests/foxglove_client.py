@@ -16,7 +16,8 @@ SUBPROTOCOL = "foxglove.sdk.v1"
 class FoxgloveClient:
     def __init__(self, port: int, *, origin: str | None = None) -> None:
         self._connection = connect(f"ws://127.0.0.1:{port}", subprotocols=[SUBPROTOCOL],
-                                   open_timeout=5, origin=origin)  # type: ignore[arg-type]
+                                   open_timeout=5, origin=origin,  # type: ignore[arg-type]
+                                   max_queue=None)
         self.ws = self._connection.__enter__()
         assert self.ws.subprotocol == SUBPROTOCOL
         self.info: dict[str, Any] = {}

@@ -82,14 +82,24 @@ def test_one_arm_options_are_refused_with_several_arms(campaign):
     assert result.exit_code == 2 and "ARM/SPEC" in result.output
 
 
-def test_foxglove_with_several_arms_is_refused_in_one_line(campaign, tmp_path):
-    """Issue 43: --foxglove was silently ignored for a run of two arms."""
-    result = run("sequences/short.yaml", "--foxglove=0", "--log-dir", str(tmp_path / "run"))
+def test_foxglove_with_several_arms_is_checked_before_anything_opens(campaign, tmp_path):
+    """Issue 45: --foxglove serves a run of several arms (tests/test_foxglove_arms.py); a
+    port it cannot listen on, or --foxglove-types alone, is one line, nothing opened."""
+    import socket
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen(1)
+        port = taken.getsockname()[1]
+        result = run("sequences/short.yaml", f"--foxglove={port}", "--log-dir",
+                     str(tmp_path / "run"))
     assert result.exit_code == 2, result.output
     lines = result.output.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("error: --foxglove: not for a run of "
-                                                   "several arms"), result.output
-    assert "A, B" in lines[0]
+    assert len(lines) == 1 and lines[0].startswith(f"error: --foxglove: cannot listen on "
+                                                   f"127.0.0.1:{port}"), result.output
+    result = run("sequences/short.yaml", "--foxglove-types", "ros", "--log-dir",
+                 str(tmp_path / "run"))
+    assert result.exit_code == 2 and "only with --foxglove" in result.output, result.output
     assert not (tmp_path / "run").exists()   # nothing opened, nothing moved
 
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import signal
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated, Any, Optional
 
 import typer
 
@@ -79,8 +79,7 @@ def console_command(
         if several:
             refused = {"-i/--interface": interface, "-c/--channel": channel,
                        "-b/--bitrate": bitrate, "--bus-kwargs": bus_kwargs,
-                       "--arm": arm_file, "--foxglove": foxglove,
-                       "--foxglove-types": foxglove_types}
+                       "--arm": arm_file}
             given = [name for name, value in refused.items() if value]
             if given:
                 fail(f"{', '.join(given)}: not for a campaign with several arms (each arm's "
@@ -93,7 +92,8 @@ def console_command(
     if several:
         _serve_arms(arm_id, project_dir=project_dir, sim=sim, port=port, host=host,
                     log_dir=log_dir, response_timeout_ms=response_timeout_ms,
-                    rt_priority=rt_priority, confirmed=confirmed)
+                    rt_priority=rt_priority, confirmed=confirmed,
+                    foxglove=(foxglove, foxglove_types))
         return
     with user_errors():
         # The arm context: the campaign here, its arm, its bus (seqrun/service/arm_context.py).
@@ -189,10 +189,13 @@ def _serve_until_ended(application, sock, started, halt) -> None:
 def _serve_arms(arm_ids: list[str] | None, *, project_dir: Path | None, sim: bool,
                 port: int, host: str | None, log_dir: Path | None,
                 response_timeout_ms: float | None, rt_priority: int | None,
-                confirmed: dict[str | None, str] | None = None) -> None:
+                confirmed: dict[str | None, str] | None = None,
+                foxglove: tuple[int | None, Any] = (None, None)) -> None:
     """The console of several arms (docs/two-arms.md): each arm's bus opened and claimed
     and its zero decided as ``seqrun run`` of a two-arm sequence does, one arm session
-    each, one page for all, one STOP for all."""
+    each, one page for all, one STOP for all; ``--foxglove``: one Foxglove server, every
+    arm under its id (seqrun/foxglove/live.py), its commands through the same sessions and
+    control desk as the page's."""
     from seqrun.cli.run_arms import decide_zeros, open_buses
     from seqrun.console.guard import new_token
     from seqrun.console.server import LOCALHOST, bind, is_loopback, url_of
@@ -215,6 +218,7 @@ def _serve_arms(arm_ids: list[str] | None, *, project_dir: Path | None, sim: boo
             fail(f"cannot listen on {listen}:{port}: {exc.strerror or exc}")
     connections: dict = {}
     made: dict = {}
+    live_foxglove = None
     try:
         open_buses(contexts, connections)
         for arm_id, context in contexts.items():
@@ -237,6 +241,16 @@ def _serve_arms(arm_ids: list[str] | None, *, project_dir: Path | None, sim: boo
         sessions = ArmSessions(made, bases={a: c.base for a, c in contexts.items()})
         for arm_id in contexts:
             _serve_control_socket(connections[arm_id], sessions[arm_id])
+        if foxglove[0] is not None:
+            from seqrun.foxglove.live import LiveArm
+
+            try:
+                live_foxglove = start_foxglove(None, None, foxglove[0], typer.echo,
+                                               foxglove[1], arms={
+                    a: LiveArm(made[a], made[a].arm, c.base_transform())
+                    for a, c in contexts.items()})
+            except (OSError, RuntimeError) as exc:
+                fail(f"--foxglove: the Foxglove server could not start ({exc})")
         application = create_arms_app(sessions, Catalog(first.project, runs), contexts,
                                       token=token, local_only=is_loopback(listen),
                                       start_checker=True)
@@ -257,6 +271,8 @@ def _serve_arms(arm_ids: list[str] | None, *, project_dir: Path | None, sim: boo
                            lambda why: sessions.halt(why).describe())  # noqa: B023
     finally:
         sock.close()
+        if live_foxglove is not None:
+            live_foxglove.close()
         try:
             if made:  # a controlled stop of anything still moving, then each bus
                 ArmSessions(made).close()

@@ -59,12 +59,14 @@ def check_foxglove(port: int | None, types: FoxgloveTypes | None = None) -> None
 
 
 def start_foxglove(session: Any, arm: Any, port: int | None,
-                   say: Callable[[str], None], types: FoxgloveTypes | None = None) -> Any:
-    """The Foxglove server on ``session`` (None without ``--foxglove``); raises OSError or
-    RuntimeError when it cannot start."""
+                   say: Callable[[str], None], types: FoxgloveTypes | None = None, *,
+                   arms: Any = None) -> Any:
+    """The Foxglove server on ``session`` (None without ``--foxglove``), or on every arm of
+    a campaign's run (``arms``: arm id -> :class:`seqrun.foxglove.live.LiveArm`); raises
+    OSError or RuntimeError when it cannot start."""
     if port is None:
         return None
     from seqrun.foxglove.live import DEFAULT_TYPES, serve
 
     return serve(session, arm, port, say,
-                 types=types.value if types is not None else DEFAULT_TYPES)
+                 types=types.value if types is not None else DEFAULT_TYPES, arms=arms)

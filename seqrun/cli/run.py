@@ -190,23 +190,19 @@ def run_command(
         fail(f"--arm-id {arm_id}: {file} names the arms it moves (arms "
              f"{', '.join(arms_project.config.arm_ids)}) and runs each; --arm-id is for a "
              "sequence of one arm")
-    if arms_project is not None and foxglove is not None:
-        fail(f"--foxglove: not for a run of several arms yet ({file} moves arms "
-             f"{', '.join(arms_project.config.arm_ids)}; Foxglove live serves a run of one "
-             "arm): watch it in seqrun console, or open its run.mcap in Foxglove")
     if arms_project is not None:
         from seqrun.cli.run_arms import run_arms
 
         run_arms(file, arms_project, sim=sim, sim_fault=sim_fault or [], speed=speed,
                  yes=yes, log_dir=log_dir, start=start, started=started,
                  virtual_time=virtual_time, no_report=no_report, command_mode=command_mode,
-                 zero_confirmed=zero_confirmed or [], refused={"--arm": arm_file is not None,
+                 zero_confirmed=zero_confirmed or [], foxglove=foxglove,
+                 foxglove_types=foxglove_types, refused={"--arm": arm_file is not None,
                           "-i/-c/-b/--bus-kwargs": bool(interface or channel or bitrate
                                                         or bus_kwargs),
                           "--from": from_step != 1, "--step": step,
                           "--power-on-at": power_on_at is not None,
                           "--rt-priority": rt_priority is not None,
-                          "--foxglove-types": foxglove_types is not None,
                           "--param": bool(param)}, plain=plain)
     # Imported here, not at the top: `seqrun --help` and the other commands stay light.
     from seqrun.cli.output import keep_running_on_broken_pipe, make_console

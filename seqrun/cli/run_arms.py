@@ -18,6 +18,7 @@ one status line per arm (seqrun/cli/arms_display.py); into a pipe or file, or wi
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, NoReturn
@@ -62,7 +63,9 @@ def run_arms(file: Path, project: Any, *, sim: bool, sim_fault: list[str], speed
              yes: bool, log_dir: Path | None, start: str | None, started: bool,
              virtual_time: bool, no_report: bool, command_mode: str | None,
              refused: dict[str, bool], plain: bool = False,
-             zero_confirmed: list[str] | None = None) -> NoReturn:
+             zero_confirmed: list[str] | None = None, foxglove: int | None = None,
+             foxglove_types: Any = None) -> NoReturn:
+    from seqrun.cli.foxglove_option import check_foxglove
     from seqrun.service.arm_context import resolve_context
     from seqrun.service.arms_check import check_arms_sequence
 
@@ -70,6 +73,7 @@ def run_arms(file: Path, project: Any, *, sim: bool, sim_fault: list[str], speed
     if given:
         fail(f"{', '.join(given)}: not for a campaign with several arms (each arm's arm file "
              "and bus are in seqrun.toml)")
+    check_foxglove(foxglove, foxglove_types)   # (one line before anything is opened)
     ids = project.config.arm_ids
     faults = _arm_faults(sim_fault, ids)
     confirmed = zero_confirmed_of(zero_confirmed, list(ids))  # a bad value: before anything
@@ -115,9 +119,10 @@ def run_arms(file: Path, project: Any, *, sim: bool, sim_fault: list[str], speed
     try:
         open_buses(contexts, connections, clock_views)
         arms = _confirm_and_zero(contexts, connections, check, yes, confirmed)
-        code = _run(file, check, contexts, connections, arms, clock_views, speed=speed,
-                    yes=yes, log_dir=log_dir, no_report=no_report, command_mode=command_mode,
-                    plain=plain)
+        code = _run_watched(file, check, contexts, connections, arms, clock_views,
+                            speed=speed, yes=yes, log_dir=log_dir, no_report=no_report,
+                            command_mode=command_mode, plain=plain,
+                            foxglove=(foxglove, foxglove_types))
     finally:
         for connection in connections.values():
             connection.close()
@@ -178,9 +183,54 @@ def _say(text: str, end: str = "\n") -> None:
     typer.echo(text, nl=end == "\n")
 
 
+def _run_watched(file: Path, check, contexts, connections, arms, clock_views, *,
+                 foxglove: tuple[int | None, Any], **options: Any) -> int:
+    """The run in an arm session per arm, opened first so that ``--foxglove`` serves every
+    arm (one server, each arm's topics under its id: seqrun/foxglove/live.py) before
+    anything moves; a server that cannot start ends the command in one line (exit 2),
+    nothing sent."""
+    from seqrun.service.arms_run import open_sessions
+
+    tracks = check.tracks.tracks
+    sessions = open_sessions(tracks, {a: arms[a][0] for a in tracks}, connections,
+                             {a: arms[a][1] for a in tracks})
+    live: list[Any] = []
+
+    def stop_serving() -> None:
+        # as soon as every track has ended: no client commands an arm of this run after
+        # it (nor between the records' end and the sessions' close)
+        while live:
+            live.pop().close()
+
+    try:
+        port, types = foxglove
+        if port is not None:
+            live.append(_start_foxglove(sessions, arms, contexts, port, types))
+        return _run(file, check, contexts, connections, arms, clock_views,
+                    sessions=sessions, tracks_ended=stop_serving, **options)
+    finally:
+        stop_serving()
+        for session in sessions.values():
+            session.close()
+
+
+def _start_foxglove(sessions: dict[str, Any], arms: dict[str, Any],
+                    contexts: dict[str, Any], port: int, types: Any) -> Any:
+    from seqrun.cli.foxglove_option import start_foxglove
+    from seqrun.foxglove.live import LiveArm
+
+    try:
+        return start_foxglove(None, None, port, _say, types, arms={
+            a: LiveArm(session, arms[a][0], contexts[a].base_transform())
+            for a, session in sessions.items()})
+    except (OSError, RuntimeError) as exc:
+        fail(f"--foxglove: the Foxglove server could not start ({exc}); nothing was sent")
+
+
 def _run(file: Path, check, contexts, connections, arms, clock_views, *, speed: float,
          yes: bool, log_dir: Path | None, no_report: bool, command_mode: str | None,
-         plain: bool = False) -> int:
+         plain: bool = False, sessions: dict[str, Any] | None = None,
+         tracks_ended: Callable[[], None] | None = None) -> int:
     from seqrun.cli import interrupts
     from seqrun.cli.interrupts import RunSignals
     from seqrun.cli.questions import ask
@@ -239,7 +289,7 @@ def _run(file: Path, check, contexts, connections, arms, clock_views, *, speed: 
                              clock_views=clock_views, speed=speed,
                              confirm=confirm, command_mode=command_mode,
                              html_report=not no_report, requests_by_arm=inboxes,
-                             file=str(file), **records.run_options(),
+                             file=str(file), sessions=sessions, **records.run_options(),
                              on_idle=view.on_idle if view is not None else None)
         if outcome is not None:   # before the handlers go: a Ctrl-C now keeps it
             interrupts.progress.exit_code = outcome.exit_code
@@ -247,7 +297,11 @@ def _run(file: Path, check, contexts, connections, arms, clock_views, *, speed: 
         if view is not None:
             view.__exit__(None, None, None)
         signals.restore()
-        records.close_mcap()
+        try:
+            if tracks_ended is not None:
+                tracks_ended()
+        finally:
+            records.close_mcap()
     if outcome is None:
         fail(f"the run ended in an error (every arm was halted); log: {folder}", EXIT_FAULT)
     for arm_id, arm in outcome.arms.items():

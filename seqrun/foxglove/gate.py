@@ -92,6 +92,10 @@ class Gate:
         except (OSError, asyncio.IncompleteReadError, asyncio.LimitOverrunError,
                 asyncio.TimeoutError, ValueError):
             pass  # a client that went, or sent no request: nothing to pass on
+        except asyncio.CancelledError:
+            # the gate closes with a client connected (a run's end): the connection ends
+            # here; re-raised, asyncio would print a traceback after the run's summary
+            pass
         finally:
             if task is not None:
                 self._connections.discard(task)

@@ -24,15 +24,28 @@ carries (``{"token": ...}``); held by another client, control is taken only with
 releases control, or leaves (its last subscription ends: it closed the connection), ends
 its motion with a controlled stop.
 
+A campaign's run of several arms (``arms``: one server for every arm): each arm's channels
+under its arm id, as the campaign's run.mcap names them (:mod:`seqrun.service.arms_mcap`),
+in either ``types``: ``/<id>/joint_states``, ``/<id>/joint_commands`` (``/<id>/planned``
+with "ros"), one ``/tf`` for every arm (frames ``<id>/base``, ``<id>/j1`` ...),
+``/tf_static`` (``facility`` -> ``<id>/base``: each arm's base, seqrun.toml ``[arms.ID]
+base``), ``/<id>/events``, and ``/<id>/scene`` and ``/<id>/log`` ("foxglove") or
+``/<id>/markers`` ("ros"; a campaign's run.mcap has no ``/robot_description``).
+``/seqrun/stop`` halts every arm at once; each arm's other services are under its id
+(``/<id>/seqrun/take_control`` ...), each going through that arm's session and its control
+desk as one arm's do.
+
 Who may connect: the console's Host and Origin rules (:mod:`seqrun.foxglove.gate`), so a
 web page of another site open in the operator's browser reaches nothing.
 """
 
 from __future__ import annotations
 
+import functools
 import json
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, cast
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
@@ -117,10 +130,64 @@ def _schema(name: str, model: type[BaseModel] | None) -> Any:
         name=name, encoding="jsonschema", data=data))
 
 
-class FoxgloveLive:
-    """A Foxglove WebSocket server on ``host:port`` (0: a free port) for ``session``."""
+@dataclass(frozen=True)
+class LiveArm:
+    """One arm of a campaign served by one Foxglove server: its session, its arm (with its
+    zero applied) and its base in the campaign's facility frame (4x4, mm; seqrun.toml
+    ``[arms.ID] base``)."""
 
-    def __init__(self, session: Any, arm: ArmDescription, *, host: str = LOCALHOST,
+    session: Any
+    arm: ArmDescription
+    base: Any
+
+
+class _Feed:
+    """One arm's side of the server: its topic names, its translator, its channels and its
+    session's events. ``arm_id`` None: the one arm of a run of one (its topics as one arm's
+    run.mcap names them); else an arm of a campaign (its topics under its arm id, as the
+    campaign's run.mcap names them: :mod:`seqrun.service.arms_mcap`)."""
+
+    def __init__(self, arm_id: str | None, session: Any, arm: ArmDescription,
+                 names: RosNames, base: Any = None) -> None:
+        self.arm_id, self.session, self.arm, self.names, self.base = (arm_id, session, arm,
+                                                                      names, base)
+        self.translator = EventTranslator(arm, names, live=True)
+        self.ros: RosChannels | None = None
+        self.last_capsules: list[Shape] = []
+        own = "/seqrun" if arm_id is None else f"/{names.namespace}"
+        self.scene_topic = f"{own}/scene"
+        self.log_topic = f"{own}/log"
+        self.events_topic = f"{own}/events"
+        self.log_name = "seqrun" if arm_id is None else f"seqrun/{arm_id}"
+        #: Where its services are: ``/seqrun/...`` for one arm, ``/<id>/seqrun/...``.
+        self.service_prefix = "" if arm_id is None else f"/{names.namespace}"
+        self.subscription: Any = None
+
+    @property
+    def markers_topic(self) -> str:
+        return MARKERS_TOPIC if self.arm_id is None else f"/{self.names.namespace}/markers"
+
+    def foxglove_channels(self, ctx: Any) -> tuple[Any, ...]:
+        """Its channels in Foxglove's own schemas (``/tf`` is the server's, shared)."""
+        import foxglove
+        from foxglove.channels import JointStatesChannel, LogChannel, SceneUpdateChannel
+
+        self.joint_states = JointStatesChannel(self.names.joint_states, context=ctx)
+        self.joint_commands = JointStatesChannel(self.names.joint_commands, context=ctx)
+        self.scene = SceneUpdateChannel(self.scene_topic, context=ctx)
+        self.log = LogChannel(self.log_topic, context=ctx)
+        self.events = foxglove.Channel(self.events_topic, schema={"type": "object"},
+                                       context=ctx)
+        return (self.joint_states, self.joint_commands, self.scene, self.log, self.events)
+
+
+class FoxgloveLive:
+    """A Foxglove WebSocket server on ``host:port`` (0: a free port) for ``session`` (one
+    arm: ``arm``), or for every arm of a campaign's run (``arms``: arm id -> :class:`LiveArm`;
+    each arm's channels and services under its arm id, see the module doc)."""
+
+    def __init__(self, session: Any = None, arm: ArmDescription | None = None, *,
+                 arms: Mapping[str, LiveArm] | None = None, host: str = LOCALHOST,
                  port: int = 8766, namespace: str | None = None, name: str = "seqrun",
                  types: str = DEFAULT_TYPES, distribution: str | None = None) -> None:
         """``types``: "foxglove" or "ros" (:data:`TYPES`); ``distribution``: the ROS 2
@@ -129,34 +196,76 @@ class FoxgloveLive:
         import foxglove
         from foxglove.websocket import Capability
 
-        from seqrun.service.mcap_log import distribution_of
+        from seqrun.service.arms_mcap import arm_namespace
+        from seqrun.service.mcap_log import RosSerializer, distribution_of
 
         if types not in TYPES:
             raise ValueError(f"unknown Foxglove channel types {types!r} "
                              f"(one of {', '.join(TYPES)})")
+        if arms is None and arm is not None:
+            self.feeds = [_Feed(None, session, arm, RosNames.of(arm, namespace))]
+        elif arms and arm is None:
+            self.feeds = [_Feed(a, one.session, one.arm,
+                                RosNames.of(one.arm, arm_namespace(a)), one.base)
+                          for a, one in arms.items()]
+        else:
+            raise ValueError("serve one arm (session and arm) or the arms of a campaign")
         self.types = types
-        self.session = session
-        self.arm = arm
-        self.names = RosNames.of(arm, namespace)
-        self.translator = EventTranslator(arm, self.names, live=True)
-        self._lock = threading.Lock()          # the translator: one event at a time
+        first = self.feeds[0]
+        # one arm's server as it always was: its session, arm, names and translator
+        self.session, self.arm, self.names, self.translator = (
+            first.session, first.arm, first.names, first.translator)
+        self.campaign = arms is not None
+        self._lock = threading.Lock()          # the translators: one event at a time
         self._subscribed: dict[int, set[int]] = {}
-        self._joined: set[int] = set()
+        self._joined: dict[int, set[int]] = {}   # client -> the feeds whose desk it joined
         self.context = ctx = foxglove.Context()
         self.ros: RosChannels | None = None
+        self.tf_static: Any = None
+        channels: list[Any] = []
         if types == "ros":
-            from seqrun.foxglove.ros_channels import RosChannels
+            from seqrun.foxglove.ros_channels import RosChannels, ros_channel
+            from seqrun.ros_messages.ros_fields import TF_MESSAGE
+            from seqrun.service.arms_mcap import TF_STATIC_TOPIC, arm_renames
 
-            self.ros = RosChannels(ctx, arm, self.names, distribution or distribution_of(
-                getattr(session, "project", None)))
-            self._channels: tuple[Any, ...] = tuple(self.ros.channels.values())
+            serializer = RosSerializer(distribution or distribution_of(
+                getattr(first.session, "project", None)))
+            shared: dict[str, Any] = {}
+            for feed in self.feeds:
+                feed.ros = RosChannels(
+                    ctx, feed.arm, feed.names, serializer.distribution, shared=shared,
+                    serializer=serializer,
+                    rename=None if feed.arm_id is None else arm_renames(feed.names))
+                channels += feed.ros.own
+            channels += shared.values()
+            self.ros = first.ros
+            if self.campaign:
+                self.tf_static = ros_channel(ctx, serializer, TF_STATIC_TOPIC, TF_MESSAGE)
         else:
-            self._channels = self._foxglove_channels(ctx)
-        self._last_capsules: list[Shape] = []
-        services = [foxglove.Service(service, schema=foxglove.ServiceSchema(
-            f"seqrun{service.removeprefix('/seqrun')}", request=_schema(model.__name__, model),
-            response=_schema("Answer", None)), handler=self._handler(service))
-            for service, (model, _, _) in SERVICES.items()]
+            from foxglove.channels import FrameTransformsChannel
+
+            for feed in self.feeds:
+                channels += feed.foxglove_channels(ctx)
+            self.tf = FrameTransformsChannel(TF_TOPIC, context=ctx)
+            channels.append(self.tf)
+            if self.campaign:
+                from seqrun.service.arms_mcap import TF_STATIC_TOPIC
+
+                self.tf_static = FrameTransformsChannel(TF_STATIC_TOPIC, context=ctx)
+        if self.tf_static is not None:
+            channels.append(self.tf_static)
+        self._channels: tuple[Any, ...] = tuple(channels)
+        services = [foxglove.Service(
+            f"{feed.service_prefix}{service}", schema=foxglove.ServiceSchema(
+                f"seqrun{service.removeprefix('/seqrun')}",
+                request=_schema(model.__name__, model), response=_schema("Answer", None)),
+            handler=self._handler(service, feed))
+            for feed in self.feeds for service, (model, _, _) in SERVICES.items()
+            if not (service == "/seqrun/stop" and feed.arm_id is not None)]
+        if self.campaign:   # STOP: every arm at once
+            services.append(foxglove.Service("/seqrun/stop", schema=foxglove.ServiceSchema(
+                "seqrun/stop", request=_schema(StopBody.__name__, StopBody),
+                response=_schema("Answer", None)), handler=self._handler("/seqrun/stop")))
 
         def start(inner: str) -> Any:
             return foxglove.start_server(
@@ -176,23 +285,11 @@ class FoxgloveLive:
             self.server.stop()
             raise
         self.port = self.gate.port
-        self.subscription = session.events.add_listener(self._on_event, "foxglove",
-                                                        maxsize=QUEUE_SIZE)
-
-    def _foxglove_channels(self, ctx: Any) -> tuple[Any, ...]:
-        """The channels in Foxglove's own schemas."""
-        import foxglove
-        from foxglove.channels import (FrameTransformsChannel, JointStatesChannel,
-                                       LogChannel, SceneUpdateChannel)
-
-        self.joint_states = JointStatesChannel(self.names.joint_states, context=ctx)
-        self.joint_commands = JointStatesChannel(self.names.joint_commands, context=ctx)
-        self.tf = FrameTransformsChannel(TF_TOPIC, context=ctx)
-        self.scene = SceneUpdateChannel(SCENE_TOPIC, context=ctx)
-        self.log = LogChannel(LOG_TOPIC, context=ctx)
-        self.events = foxglove.Channel(EVENTS_TOPIC, schema={"type": "object"}, context=ctx)
-        return (self.joint_states, self.joint_commands, self.tf, self.scene, self.log,
-                self.events)
+        for feed in self.feeds:
+            who = "foxglove" if feed.arm_id is None else f"foxglove {feed.arm_id}"
+            feed.subscription = feed.session.events.add_listener(
+                functools.partial(self._on_event, feed), who, maxsize=QUEUE_SIZE)
+        self.subscription = first.subscription
 
     @property
     def url(self) -> str:
@@ -202,62 +299,69 @@ class FoxgloveLive:
     def _watched(self) -> bool:
         return any(channel.has_sinks() for channel in self._channels)
 
-    def _on_event(self, event: Event) -> None:
+    def _on_event(self, feed: _Feed, event: Event) -> None:
         if not self._watched():
             return
         data = event.as_dict()
         if isinstance(event, Measurement) and event.velocities_deg_s is not None:
             data["velocities_deg_s"] = list(event.velocities_deg_s)
         with self._lock:
-            records = self.translator.translate(data)
+            records = feed.translator.translate(data)
         for record in records:
-            self.publish(record)
+            self.publish(record, feed)
 
-    def publish(self, record: Record) -> None:
+    def publish(self, record: Record, feed: _Feed | None = None) -> None:
+        """``record`` of ``feed``'s arm (default the first) on its channels."""
+        feed = feed or self.feeds[0]
         if isinstance(record, Shapes) and any(s.namespace == "capsules" for s in record.shapes):
-            self._last_capsules = [s for s in record.shapes if s.namespace == "capsules"]
-        if self.ros is not None:
-            self.ros.publish(record)
+            feed.last_capsules = [s for s in record.shapes if s.namespace == "capsules"]
+        if feed.ros is not None:
+            feed.ros.publish(record)
             return
-        from foxglove.messages import (FrameTransform, FrameTransforms, JointState,
-                                       JointStates, Log, LogLevel, Quaternion, SceneUpdate,
-                                       Timestamp, Vector3)
+        from foxglove.messages import JointState, JointStates, Log, LogLevel, SceneUpdate
         import math
 
         if isinstance(record, Joints):
             velocities = record.velocities_deg_s or (None,) * len(record.names)
-            message = JointStates(timestamp=_stamp(Timestamp, record.stamp_ns), joints=[
+            message = JointStates(timestamp=_timestamp(record.stamp_ns), joints=[
                 JointState(name=n, position=math.radians(p),
                            velocity=None if v is None else math.radians(v))
                 for n, p, v in zip(record.names, record.positions_deg, velocities)])
-            channel = (self.joint_states if record.kind == "joint_states"
-                       else self.joint_commands)
+            channel = (feed.joint_states if record.kind == "joint_states"
+                       else feed.joint_commands)
             channel.log(message, log_time=record.log_ns)
         elif isinstance(record, Frames):
-            stamp = _stamp(Timestamp, record.stamp_ns)
-            self.tf.log(FrameTransforms(transforms=[
-                FrameTransform(timestamp=stamp, parent_frame_id=t.parent,
-                               child_frame_id=t.child, translation=Vector3(
-                                   x=t.translation_m[0], y=t.translation_m[1],
-                                   z=t.translation_m[2]),
-                               rotation=Quaternion(x=t.rotation_xyzw[0], y=t.rotation_xyzw[1],
-                                                   z=t.rotation_xyzw[2], w=t.rotation_xyzw[3]))
-                for t in record.transforms]), log_time=record.log_ns)
+            self.tf.log(_frame_transforms(record.transforms, record.stamp_ns),
+                        log_time=record.log_ns)
         elif isinstance(record, Shapes):
-            self.scene.log(SceneUpdate(entities=self._entities(record.shapes, record.stamp_ns)),
+            feed.scene.log(SceneUpdate(entities=self._entities(feed, record.shapes,
+                                                               record.stamp_ns)),
                            log_time=record.log_ns)
         elif isinstance(record, EventLine):
             level = {"error": LogLevel.Error, "warning": LogLevel.Warning}.get(
                 record.level, LogLevel.Info)
-            self.log.log(Log(timestamp=_stamp(Timestamp, record.stamp_ns), level=level,
-                             message=record.text, name="seqrun"), log_time=record.log_ns)
-            self.events.log(json.loads(record.line), log_time=record.log_ns)
+            feed.log.log(Log(timestamp=_timestamp(record.stamp_ns), level=level,
+                             message=record.text, name=feed.log_name), log_time=record.log_ns)
+            feed.events.log(json.loads(record.line), log_time=record.log_ns)
 
-    def _entities(self, shapes: list[Shape] | tuple[Shape, ...], ns: int) -> list[Any]:
+    def _publish_bases(self, log_ns: int) -> None:
+        """``/tf_static`` of a campaign: each arm's base in the facility frame (as its
+        run.mcap has it once, at the start; live, each new subscriber gets it at once)."""
+        from seqrun.service.arms_mcap import facility_transform
+
+        transforms = [facility_transform(f.names.base_frame, f.base) for f in self.feeds]
+        if self.ros is not None:
+            from seqrun.ros_messages import cdr
+
+            self.tf_static.log(cdr.tf_message(log_ns, transforms), log_time=log_ns)
+        else:
+            self.tf_static.log(_frame_transforms(transforms, log_ns), log_time=log_ns)
+
+    def _entities(self, feed: _Feed, shapes: list[Shape] | tuple[Shape, ...],
+                  ns: int) -> list[Any]:
         """One scene entity per capsule, guard and obstacle (its primitives together)."""
         from foxglove.messages import (Color, CubePrimitive, CylinderPrimitive, Pose,
-                                       Quaternion, SceneEntity, SpherePrimitive, Timestamp,
-                                       Vector3)
+                                       Quaternion, SceneEntity, SpherePrimitive, Vector3)
 
         groups: dict[tuple[str, str], list[Shape]] = {}
         for shape in shapes:
@@ -276,7 +380,7 @@ class FoxgloveLive:
                              "cylinder": CylinderPrimitive}[s.kind]
                 kinds[s.kind].append(primitive(pose=pose, size=size, color=color))
             entities.append(SceneEntity(
-                timestamp=_stamp(Timestamp, ns), frame_id=self.names.base_frame,
+                timestamp=_timestamp(ns), frame_id=feed.names.base_frame,
                 id=f"{namespace}/{label}", cubes=kinds["cube"], spheres=kinds["sphere"],
                 cylinders=kinds["cylinder"]))
         return entities
@@ -284,19 +388,23 @@ class FoxgloveLive:
     def _on_subscribe(self, client_id: int, topic: str) -> None:
         with self._lock:
             self._subscribed.setdefault(client_id, set()).add(hash(topic))
-        # a new viewer sees the scene (and the robot) at once, not at the next step
-        scene = MARKERS_TOPIC if self.ros is not None else SCENE_TOPIC
-        if topic in (scene, ROBOT_DESCRIPTION_TOPIC):
-            import time
+        # a new viewer sees the scene (and the robot, the arms' bases) at once, not at the
+        # next step
+        import time
 
-            from seqrun.ros_messages.values import stamp_ns
+        from seqrun.ros_messages.values import stamp_ns
+        from seqrun.service.arms_mcap import TF_STATIC_TOPIC
 
-            now = stamp_ns(time.time())
+        now = stamp_ns(time.time())
+        if topic == TF_STATIC_TOPIC and self.tf_static is not None:
+            self._publish_bases(now)
+        for feed in self.feeds:
+            scene = feed.markers_topic if feed.ros is not None else feed.scene_topic
             if topic == scene:
-                self.publish(Shapes(now, now, tuple(static_shapes(self.arm) +
-                                                    self._last_capsules)))
-            elif self.ros is not None:
-                self.ros.describe(now)
+                self.publish(Shapes(now, now, tuple(static_shapes(feed.arm) +
+                                                    feed.last_capsules)), feed)
+            elif topic == ROBOT_DESCRIPTION_TOPIC and feed.ros is not None:
+                feed.ros.describe(now)
 
     def _on_unsubscribe(self, client_id: int, topic: str) -> None:
         with self._lock:
@@ -305,19 +413,21 @@ class FoxgloveLive:
             gone = not topics
             if gone:
                 self._subscribed.pop(client_id, None)
-        if gone and client_id in self._joined:   # it left: its motion ends, control is freed
-            self._joined.discard(client_id)
+            joined = self._joined.pop(client_id, set()) if gone else set()
+        for index in sorted(joined):   # it left: its motion ends, control is freed
             # (the controlled stop waits for the arm: never on the server's own thread)
-            threading.Thread(target=self.session.control.leave, args=(_client_id(client_id),),
+            threading.Thread(target=self.feeds[index].session.control.leave,
+                             args=(_client_id(client_id),),
                              name="foxglove client left", daemon=True).start()
 
     # -- services ------------------------------------------------------------------------
-    def _handler(self, service: str) -> Callable[[Any], bytes]:
+    def _handler(self, service: str, feed: _Feed | None = None) -> Callable[[Any], bytes]:
+        """``feed``: the arm whose service it is (None: ``/seqrun/stop``, every arm)."""
         model, needs_control, what = SERVICES[service]
 
         def handle(request: Any) -> bytes:
             if service == "/seqrun/stop":   # before the body is read: a bad body still stops
-                answer = self.session.halt_dict(f"STOP (Foxglove client {request.client_id})")
+                answer = self._halt(f"STOP (Foxglove client {request.client_id})")
                 try:
                     body = _parse(StopBody, request)
                     if body.reason:
@@ -325,52 +435,101 @@ class FoxgloveLive:
                 except ValueError as exc:
                     answer["note"] = f"the arm was halted; the request was refused: {exc}"
                 return json.dumps(answer).encode()
+            assert feed is not None
             body = _parse(model, request)
             if service == "/seqrun/take_control":
-                return json.dumps(self._take(body, request.client_id)).encode()
+                return json.dumps(self._take(feed, body, request.client_id)).encode()
             if not needs_control:
                 raise ValueError(f"unknown service {service}")
-            holder = self.session.control.require(body.token, what)
-            return json.dumps(self._command(service, body, holder)).encode()
+            holder = feed.session.control.require(body.token, what)
+            return json.dumps(self._command(feed, service, body, holder)).encode()
 
         return handle
 
-    def _take(self, body: TakeControlBody, client: int) -> dict[str, Any]:
+    def _halt(self, reason: str) -> dict[str, Any]:
+        """STOP: one arm's Halt (its answer), or every arm's at once (their answers under
+        ``arms``, each Halt sent without waiting for another's confirmation)."""
+        if not self.campaign:
+            return cast("dict[str, Any]", self.session.halt_dict(reason))
+        answers: dict[str, Any] = {}
+
+        def halt(feed: _Feed) -> None:
+            try:
+                answers[str(feed.arm_id)] = feed.session.halt_dict(reason)
+            except Exception as exc:  # noqa: BLE001 - said in the answer, the others halt
+                answers[str(feed.arm_id)] = {"error": f"{type(exc).__name__}: {exc}"}
+
+        threads = [threading.Thread(target=halt, args=(feed,), daemon=True,
+                                    name=f"foxglove STOP {feed.arm_id}") for feed in self.feeds]
+        for thread in threads:
+            thread.start()
+        for thread in threads:
+            thread.join()
+        return {"arms": {str(f.arm_id): answers.get(str(f.arm_id)) for f in self.feeds}}
+
+    def _take(self, feed: _Feed, body: TakeControlBody, client: int) -> dict[str, Any]:
         """``/seqrun/take_control``: the answer (with the secret) goes to this client only."""
-        control = self.session.control
+        control = feed.session.control
         cid = _client_id(client)
         with self._lock:
             connected = client in self._subscribed
         if not connected:
-            raise Refused("take control: subscribe to a topic first (/seqrun/events, say): "
-                          "control lasts while this client stays subscribed, and its motion "
-                          "stops when it leaves")
+            raise Refused(f"take control: subscribe to a topic first ({feed.events_topic}, "
+                          "say): control lasts while this client stays subscribed, and its "
+                          "motion stops when it leaves")
         if control.client(cid) is None:
             control.join(cid, f"{body.name or 'Foxglove client'} ({cid})", "foxglove")
-            self._joined.add(client)
-        return control.take(cid, take_over=body.take_over).as_dict()
+            with self._lock:
+                self._joined.setdefault(client, set()).add(self.feeds.index(feed))
+        return cast("dict[str, Any]", control.take(cid, take_over=body.take_over).as_dict())
 
-    def _command(self, service: str, body: Any, holder: Client) -> dict[str, Any]:
+    def _command(self, feed: _Feed, service: str, body: Any,
+                 holder: Client) -> dict[str, Any]:
+        session = feed.session
         if service == "/seqrun/release_control":
-            return self.session.control.release(body.token).as_dict()
+            return cast("dict[str, Any]", session.control.release(body.token).as_dict())
         if service == "/seqrun/reset":   # Reset and the limits: the console's Arm
-            return _activity_result(self.session.arm_up())
+            return _activity_result(session.arm_up())
         if service == "/seqrun/home":
-            return _activity_result(self.session.home())
+            return _activity_result(session.home())
         if service == "/seqrun/move_to_pose":
-            self.session.move_to_pose(body.name, velocity_scale=body.velocity_scale,
-                                      by=holder.name)
+            session.move_to_pose(body.name, velocity_scale=body.velocity_scale,
+                                 by=holder.name)
             return {"started": True, "pose": body.name}
         raise ValueError(f"unknown service {service}")
 
     # -- the end -------------------------------------------------------------------------
     def close(self) -> None:
-        self.subscription.close(timeout=1.0)
+        for feed in self.feeds:
+            feed.subscription.close(timeout=1.0)
         self.gate.close()
-        for client in list(self._joined):
-            self.session.control.leave(_client_id(client))
-        self._joined.clear()
+        with self._lock:
+            joined, self._joined = self._joined, {}
+        for client, feeds in joined.items():
+            for index in feeds:
+                self.feeds[index].session.control.leave(_client_id(client))
         self.server.stop()
+
+
+def _frame_transforms(transforms: Any, stamp_ns: int) -> Any:
+    """tf transforms (:class:`~seqrun.ros_messages.values.Transform`) as Foxglove's
+    FrameTransforms."""
+    from foxglove.messages import FrameTransform, FrameTransforms, Quaternion, Vector3
+
+    stamp = _timestamp(stamp_ns)
+    return FrameTransforms(transforms=[
+        FrameTransform(timestamp=stamp, parent_frame_id=t.parent, child_frame_id=t.child,
+                       translation=Vector3(x=t.translation_m[0], y=t.translation_m[1],
+                                           z=t.translation_m[2]),
+                       rotation=Quaternion(x=t.rotation_xyzw[0], y=t.rotation_xyzw[1],
+                                           z=t.rotation_xyzw[2], w=t.rotation_xyzw[3]))
+        for t in transforms])
+
+
+def _timestamp(ns: int) -> Any:
+    from foxglove.messages import Timestamp
+
+    return _stamp(Timestamp, ns)
 
 
 def _stamp(timestamp: Any, ns: int) -> Any:
@@ -423,17 +582,21 @@ class _Listener:
         self.live._on_unsubscribe(client.id, channel.topic)
 
 
-def serve(session: Any, arm: ArmDescription, port: int,
+def serve(session: Any, arm: ArmDescription | None, port: int,
           say: Callable[[str], None] | None = None, *,
-          types: str = DEFAULT_TYPES) -> FoxgloveLive:
+          types: str = DEFAULT_TYPES, arms: Mapping[str, LiveArm] | None = None
+          ) -> FoxgloveLive:
     """Start serving ``session`` (``seqrun run``/``console --foxglove``, ``types`` from
-    ``--foxglove-types``); says the URL."""
-    live = FoxgloveLive(session, arm, port=port, types=types)
+    ``--foxglove-types``), or every arm of a campaign's run (``arms``, ``session`` and
+    ``arm`` None); says the URL."""
+    live = FoxgloveLive(session, arm, arms=arms, port=port, types=types)
     if say is not None:
         kind = ("run.mcap's ROS 2 types" if types == "ros" else "Foxglove's schemas")
-        say(f"Foxglove live on {live.url} ({kind}; open it in Foxglove: Open connection -> "
-            "Foxglove WebSocket); STOP: /seqrun/stop")
+        which = "" if arms is None else (
+            f"; arms {', '.join(arms)}: each arm's topics and services under /<arm id>/")
+        say(f"Foxglove live on {live.url} ({kind}{which}; open it in Foxglove: Open "
+            "connection -> Foxglove WebSocket); STOP: /seqrun/stop")
     return live
 
 
-__all__ = ["DEFAULT_TYPES", "FoxgloveLive", "SERVICES", "TYPES", "serve"]
+__all__ = ["DEFAULT_TYPES", "FoxgloveLive", "LiveArm", "SERVICES", "TYPES", "serve"]

@@ -63,11 +63,17 @@ def arm_namespace(arm_id: str) -> str:
     return re.sub(r"[^A-Za-z0-9_]", "_", arm_id)
 
 
+def arm_renames(names: RosNames) -> dict[str, str]:
+    """One arm's own names, in the combined bag, of the topics one arm's run.mcap calls
+    seqrun's (its events and markers)."""
+    return {EVENTS_TOPIC: f"/{names.namespace}/events",
+            MARKERS_TOPIC: f"/{names.namespace}/markers"}
+
+
 def arm_topics(names: RosNames) -> dict[str, str]:
     """One arm's topics in the combined bag (the per-arm names of its events and markers)
     and their types; /tf is shared."""
-    own = {EVENTS_TOPIC: f"/{names.namespace}/events",
-           MARKERS_TOPIC: f"/{names.namespace}/markers"}
+    own = arm_renames(names)
     return {own.get(topic, topic): msgtype for topic, msgtype in topics(names).items()}
 
 
@@ -80,9 +86,7 @@ class ArmsBag(McapFolder):
                  distribution: str = DEFAULT_DISTRIBUTION) -> None:
         self.names = {a: RosNames.of(arm, arm_namespace(a)) for a, arm in arms.items()}
         self.translators = {a: EventTranslator(arm, self.names[a]) for a, arm in arms.items()}
-        self._rename = {a: {EVENTS_TOPIC: f"/{n.namespace}/events",
-                            MARKERS_TOPIC: f"/{n.namespace}/markers"}
-                        for a, n in self.names.items()}
+        self._rename = {a: arm_renames(n) for a, n in self.names.items()}
         #: Records logged later than their arm's previous one would allow (kept in order).
         self.reordered = 0
         wanted = {TF_STATIC_TOPIC: TF_MESSAGE}
@@ -98,7 +102,7 @@ class ArmsBag(McapFolder):
         self._written = stamp_ns(start_epoch_s)
         self._lag_ns = stamp_ns(MERGE_LAG_S)
         self._put(TF_STATIC_TOPIC, self._written, cdr.tf_message(self._written, [
-            _base_transform(self.names[a].base_frame, bases[a]) for a in arms]))
+            facility_transform(self.names[a].base_frame, bases[a]) for a in arms]))
 
     # -- feeding -------------------------------------------------------------------------
     def write_event(self, arm_id: str, event: Mapping[str, Any]) -> None:
@@ -157,8 +161,9 @@ class ArmsBag(McapFolder):
         return self._finish()
 
 
-def _base_transform(child: str, base: np.ndarray) -> Transform:
-    """The arm's base (4x4, mm) in the facility frame, as a tf transform (m)."""
+def facility_transform(child: str, base: np.ndarray) -> Transform:
+    """The arm's base (4x4, mm) in the facility frame, as a tf transform (m): ``/tf_static``
+    of the combined bag and of Foxglove live serving several arms."""
     return Transform(FACILITY_FRAME, child,
                      (float(base[0, 3]) / 1000.0, float(base[1, 3]) / 1000.0,
                       float(base[2, 3]) / 1000.0), quaternion_xyzw(base[:3, :3]))

@@ -28,7 +28,7 @@ from typing import Any
 from seqrun.results import EXIT_OK, RunResult
 
 __all__ = ["ArmOutcome", "ArmsOutcome", "EventBoard", "OTHER_ARM_FAULT", "on_fault_of",
-           "run_arms_live", "run_tracks"]
+           "open_sessions", "run_arms_live", "run_tracks"]
 
 #: The stop cause of an arm halted because another arm faulted.
 OTHER_ARM_FAULT = "other_arm_fault"
@@ -284,6 +284,20 @@ def _halt_unless_clear(separation: Any, faulted: str, executors: Mapping[str, An
         executor.halt(f"arm {faulted} faulted and {why}", OTHER_ARM_FAULT)
 
 
+def open_sessions(tracks: Mapping[str, Any], arms: Mapping[str, Any],
+                  connections: Mapping[str, Any], zeros: Mapping[str, Any] | None = None
+                  ) -> dict[str, Any]:
+    """An arm session per arm of a campaign's run (on its connection, which it leaves open;
+    the caller closes the sessions): what :func:`run_arms_live` runs each arm in, opened
+    before it when a face watches them from the start (``seqrun run --foxglove``)."""
+    from seqrun.service.session import ArmSession
+
+    return {a: ArmSession(arms[a], connections[a], project=tracks[a].project,
+                          zero=(zeros or {}).get(a), status_hz=0, own_connection=False,
+                          arm_id=a)
+            for a in tracks}
+
+
 def run_arms_live(tracks: Mapping[str, Any], arms: Mapping[str, Any],
                   connections: Mapping[str, Any], *, controls: Mapping[str, Any],
                   on_event: Callable[[str, Any], None] | None = None,
@@ -304,14 +318,9 @@ def run_arms_live(tracks: Mapping[str, Any], arms: Mapping[str, Any],
     already open (the console's; left open), else one is made per arm for the run;
     ``confirms``: each arm's confirm (its questions, instead of one ``confirm`` for every
     arm)."""
-    from seqrun.service.session import ArmSession
-
     own = sessions is None
     if sessions is None:
-        sessions = {a: ArmSession(arms[a], connections[a], project=tracks[a].project,
-                                  zero=(zeros or {}).get(a), status_hz=0,
-                                  own_connection=False, arm_id=a)
-                    for a in tracks}
+        sessions = open_sessions(tracks, arms, connections, zeros)
     if on_idle is not None:
         for arm_id, session in sessions.items():
             session.add_idle_hook(functools.partial(on_idle, arm_id))
