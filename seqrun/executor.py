@@ -54,7 +54,7 @@ from seqrun.execution.latched import LatchedFaults
 from seqrun.execution.monitors import Monitors
 from seqrun.execution.preflight import Findings, SequenceCheck, preflight
 from seqrun.execution.run import Measurement, rounded
-from seqrun.execution.stops import StopControl
+from seqrun.execution.stops import ResumeAsk, StopControl
 from seqrun.execution.streaming import Streaming
 from seqrun.execution.telemetry import SubscriberFields
 from seqrun.results import (EXIT_FAULT, EXIT_INVALID, EXIT_OK,  # noqa: F401 (re-exported)
@@ -182,6 +182,8 @@ class Executor:
         self.streaming = Streaming(self)
         #: The emergency Halt of this run and what confirmed it (None: no Halt yet).
         self.halt_result: HaltConfirmation | None = None
+        # The sequence under way (a Resume checks the rest of it again).
+        self._loaded: Any = None
         #: The steps' if/skip_if, repeat and retry, and the branches the run took.
         self.flow = StepFlow(self, self.stops)
 
@@ -197,10 +199,12 @@ class Executor:
         self.stops.halt(reason, cause)
 
     def pause(self) -> None:
+        """Hold before the next step (the step under way finishes first)."""
         self.stops.pause()
 
-    def resume(self) -> None:
-        self.stops.resume()
+    def resume(self) -> ResumeAsk:
+        """Go on after a pause: the loop answers the returned ask (seqrun/execution/stops.py)."""
+        return self.stops.resume()
 
     @property
     def abort_requested(self) -> bool:
@@ -530,6 +534,7 @@ class Executor:
             gc.collect()
         self._t0 = self.clock.now()
         self.poses = dict(getattr(loaded, "poses", {}))
+        self._loaded = loaded  # (a Resume validates the rest of it again)
         steps = list(loaded.steps)
         results = [StepResult.planned(s, _label(s), _location(s)) for s in steps]
         # clock_s: the run clock's reading at t = 0, so that the run log can put event
@@ -600,6 +605,8 @@ class Executor:
         self.check_halt_request()
         if self.stops.aborts:
             raise OperatorAbort("operator abort")
+        if not self.dry_run and self.stops.begin_hold():
+            self._hold_paused(step)
         if self.before_step is not None and not self.ask_operator(self.before_step, step):
             raise OperatorAbort("operator declined the step")
         if getattr(step.params, "breakpoint", False):
@@ -607,6 +614,36 @@ class Executor:
         self.check_halt_request()
         if self.stops.aborts:
             raise OperatorAbort("operator abort")
+
+    def _hold_paused(self, step) -> None:
+        """Paused: hold before ``step``, the arm at rest and read every cycle (nothing is
+        commanded), until a Resume whose check of the rest of the sequence from the measured
+        pose passes (the preflight's check, as ``--from N``), an abort or a Halt."""
+        self.emit("run_paused", step=step.number, label=_label(step), location=_location(step))
+        stops = self.stops
+        ended = "the run was stopped while paused"
+        try:
+            while True:
+                self.check_halt_request()
+                if stops.aborts:
+                    raise OperatorAbort(f"operator abort while paused before step {step.number}")
+                ask = stops.next_resume()
+                if ask is not None:
+                    check = self.preflight(self._loaded, step.number)
+                    if not check.errors:
+                        ended = ""
+                        ask.answer(None)
+                        break
+                    reason = ("not valid from the arm's measured pose: "
+                              + "; ".join(str(e) for e in check.errors))
+                    self.emit("resume_refused", step=step.number, reason=reason)
+                    ask.answer(reason)
+                    continue
+                self.monitor()
+                self.idle(self.cycle)
+        finally:
+            stops.end_hold(ended or None)
+        self.emit("run_resumed", step=step.number)
 
     def _breakpoint(self, step) -> None:
         """Between steps, the arm at rest: go on only when a person says so (the dry run
