@@ -622,6 +622,7 @@ class Executor:
         self.emit("run_paused", step=step.number, label=_label(step), location=_location(step))
         stops = self.stops
         ended = "the run was stopped while paused"
+        since, refusals = self.elapsed_s(), 0
         try:
             while True:
                 self.check_halt_request()
@@ -637,12 +638,17 @@ class Executor:
                     reason = ("not valid from the arm's measured pose: "
                               + "; ".join(str(e) for e in check.errors))
                     self.emit("resume_refused", step=step.number, reason=reason)
+                    refusals += 1
                     ask.answer(reason)
                     continue
                 self.monitor()
                 self.idle(self.cycle)
         finally:
             stops.end_hold(ended or None)
+            if self.current_step is not None:  # (kept with the step in report.json)
+                self.current_step.detail["paused_s"] = round(self.elapsed_s() - since, 3)
+                if refusals:
+                    self.current_step.detail["resumes_refused"] = refusals
         self.emit("run_resumed", step=step.number)
 
     def _breakpoint(self, step) -> None:

@@ -122,7 +122,13 @@ def test_pause_holds_between_steps_and_resume_checks_the_measured_pose(tmp_path)
     held = [t for t in sent if paused["t"] < t < resumed["t"]]
     assert held == [] and any(t > resumed["t"] for t in sent)
     # Steps 2 and 3 ran after the Resume: the arm ends at j1 = 0.
-    assert [s["status"] for s in folder.report()["steps"]] == ["passed"] * 3
+    steps = folder.report()["steps"]
+    assert [s["status"] for s in steps] == ["passed"] * 3
+    # The report keeps the hold with the step it came before (not in its duration).
+    assert steps[1]["paused_s"] == pytest.approx(resumed["t"] - paused["t"], abs=1e-3)
+    assert steps[1]["resumes_refused"] == 1
+    assert "paused_s" not in steps[0] and "paused_s" not in steps[2]
+    assert steps[1]["duration_s"] < 5.0
     assert math.degrees(sim.module(1).position()) == pytest.approx(0.0, abs=0.3)
 
 
