@@ -621,7 +621,7 @@ class Executor:
         pose passes (the preflight's check, as ``--from N``), an abort or a Halt."""
         self.emit("run_paused", step=step.number, label=_label(step), location=_location(step))
         stops = self.stops
-        ended = "the run was stopped while paused"
+        ended: str | None = "the run was stopped while paused"  # (None: resumed)
         since, refusals = self.elapsed_s(), 0
         try:
             while True:
@@ -632,7 +632,7 @@ class Executor:
                 if ask is not None:
                     check = self.preflight(self._loaded, step.number)
                     if not check.errors:
-                        ended = ""
+                        ended = None
                         ask.answer(None)
                         break
                     reason = ("not valid from the arm's measured pose: "
@@ -644,7 +644,7 @@ class Executor:
                 self.monitor()
                 self.idle(self.cycle)
         finally:
-            stops.end_hold(ended or None)
+            stops.end_hold(ended)
             if self.current_step is not None:  # (kept with the step in report.json)
                 self.current_step.detail["paused_s"] = round(self.elapsed_s() - since, 3)
                 if refusals:

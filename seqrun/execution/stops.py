@@ -90,11 +90,6 @@ class StopControl:
         ask.answer(None)
         return ask
 
-    @property
-    def holding(self) -> bool:
-        """The loop holds before a step (any thread)."""
-        return self._holding
-
     # ------------------------------------------------------------------ the run loop: pause
     def begin_hold(self) -> bool:
         """Run loop, between steps: True when a pause is asked for (the loop now holds)."""
