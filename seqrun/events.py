@@ -536,25 +536,38 @@ class HaltRequested(Event):
 @dataclass(frozen=True, kw_only=True)
 class PauseRequested(Event):
     type: ClassVar[str] = "pause_requested"
-    when: ClassVar[str] = "pause() was called (any thread)"
+    when: ClassVar[str] = ("Pause was asked for (any thread): the step under way finishes, then "
+                           "the run holds before the next one")
 
 
 @dataclass(frozen=True, kw_only=True)
-class Paused(Event):
-    type: ClassVar[str] = "paused"
-    when: ClassVar[str] = "the arm stopped (controlled) and holds until resume or abort"
+class RunPaused(Event):
+    type: ClassVar[str] = "run_paused"
+    when: ClassVar[str] = ("the run holds before ``step`` (the arm at rest, read every cycle, "
+                           "nothing commanded) until Resume, abort or STOP")
+    label: str
+    location: str
 
 
 @dataclass(frozen=True, kw_only=True)
-class Resumed(Event):
-    type: ClassVar[str] = "resumed"
-    when: ClassVar[str] = "resume() was called (any thread)"
+class ResumeRefused(Event):
+    type: ClassVar[str] = "resume_refused"
+    when: ClassVar[str] = ("Resume was asked for, but the rest of the sequence (from ``step``) "
+                           "is not valid from the arm's measured pose: the run stays paused")
+    reason: str
+
+
+@dataclass(frozen=True, kw_only=True)
+class RunResumed(Event):
+    type: ClassVar[str] = "run_resumed"
+    when: ClassVar[str] = ("the rest of the sequence was validated again from the arm's "
+                           "measured pose and the run goes on with ``step``")
 
 
 @dataclass(frozen=True, kw_only=True)
 class ControlledStop(Event):
     type: ClassVar[str] = "controlled_stop"
-    when: ClassVar[str] = "a controlled stop (ruckig to zero velocity) starts: abort, pause, jog release"
+    when: ClassVar[str] = "a controlled stop (ruckig to zero velocity) starts: abort, jog release"
     duration_s: float | None
 
 

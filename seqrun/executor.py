@@ -56,7 +56,7 @@ from seqrun.execution.latched import LatchedFaults
 from seqrun.execution.monitors import Monitors
 from seqrun.execution.preflight import Findings, SequenceCheck, preflight, recheck
 from seqrun.execution.run import Measurement, rounded
-from seqrun.execution.stops import StopControl
+from seqrun.execution.stops import ResumeAsk, StopControl
 from seqrun.execution.streaming import Streaming
 from seqrun.execution.telemetry import SubscriberFields
 from seqrun.results import (EXIT_FAULT, EXIT_INVALID, EXIT_OK,  # noqa: F401 (re-exported)
@@ -184,6 +184,8 @@ class Executor:
         self.streaming = Streaming(self)
         #: The emergency Halt of this run and what confirmed it (None: no Halt yet).
         self.halt_result: HaltConfirmation | None = None
+        # The sequence under way (a Resume checks the rest of it again).
+        self._loaded: Any = None
         #: The steps' if/skip_if, repeat and retry, and the branches the run took.
         self.flow = StepFlow(self, self.stops)
         #: How each block of the sequence ended (block/rescue/always; empty: none).
@@ -201,10 +203,12 @@ class Executor:
         self.stops.halt(reason, cause)
 
     def pause(self) -> None:
+        """Hold before the next step (the step under way finishes first)."""
         self.stops.pause()
 
-    def resume(self) -> None:
-        self.stops.resume()
+    def resume(self) -> ResumeAsk:
+        """Go on after a pause: the loop answers the returned ask (seqrun/execution/stops.py)."""
+        return self.stops.resume()
 
     @property
     def abort_requested(self) -> bool:
@@ -540,6 +544,7 @@ class Executor:
         monitors_at = getattr(loaded, "monitors_at", None)
         self.monitors.start_sequence(getattr(loaded, "monitors", ()),
                                      param_types=getattr(monitors_at, "param_types", None))
+        self._loaded = loaded  # (a Resume validates the rest of it again)
         steps = list(loaded.steps)
         results = [StepResult.planned(s, _label(s), _location(s)) for s in steps]
         for step, planned in zip(steps, results):
@@ -645,6 +650,8 @@ class Executor:
         self.check_halt_request()
         if self.stops.aborts:
             raise OperatorAbort("operator abort")
+        if not self.dry_run and self.stops.begin_hold():
+            self._hold_paused(step)
         if self.before_step is not None and not self.ask_operator(self.before_step, step):
             raise OperatorAbort("operator declined the step")
         if getattr(step.params, "breakpoint", False):
@@ -652,6 +659,42 @@ class Executor:
         self.check_halt_request()
         if self.stops.aborts:
             raise OperatorAbort("operator abort")
+
+    def _hold_paused(self, step) -> None:
+        """Paused: hold before ``step``, the arm at rest and read every cycle (nothing is
+        commanded), until a Resume whose check of the rest of the sequence from the measured
+        pose passes (the preflight's check, as ``--from N``), an abort or a Halt."""
+        self.emit("run_paused", step=step.number, label=_label(step), location=_location(step))
+        stops = self.stops
+        ended: str | None = "the run was stopped while paused"  # (None: resumed)
+        since, refusals = self.elapsed_s(), 0
+        try:
+            while True:
+                self.check_halt_request()
+                if stops.aborts:
+                    raise OperatorAbort(f"operator abort while paused before step {step.number}")
+                ask = stops.next_resume()
+                if ask is not None:
+                    check = self.preflight(self._loaded, step.number)
+                    if not check.errors:
+                        ended = None
+                        ask.answer(None)
+                        break
+                    reason = ("not valid from the arm's measured pose: "
+                              + "; ".join(str(e) for e in check.errors))
+                    self.emit("resume_refused", step=step.number, reason=reason)
+                    refusals += 1
+                    ask.answer(reason)
+                    continue
+                self.monitor()
+                self.idle(self.cycle)
+        finally:
+            stops.end_hold(ended)
+            if self.current_step is not None:  # (kept with the step in report.json)
+                self.current_step.detail["paused_s"] = round(self.elapsed_s() - since, 3)
+                if refusals:
+                    self.current_step.detail["resumes_refused"] = refusals
+        self.emit("run_resumed", step=step.number)
 
     def _breakpoint(self, step) -> None:
         """Between steps, the arm at rest: go on only when a person says so (the dry run

@@ -274,7 +274,8 @@ def test_pause_resume_and_abort_a_run(client, setup):
     wait_for(lambda: client.get("/api/v1/status").json()["activity"] == "running"
              and any(e["type"] == "move_planned" for e in client.get("/api/v1/events").json()))
     assert client.post("/api/v1/run/pause").status_code == 200
-    wait_for(lambda: client.get("/api/v1/status").json()["activity"] == "paused")
+    # (the move under way ends first: up to Totem at half speed, several seconds)
+    wait_for(lambda: client.get("/api/v1/status").json()["activity"] == "paused", 60)
     assert client.post("/api/v1/run/resume").status_code == 200
     wait_for(lambda: client.get("/api/v1/status").json()["activity"] == "running")
     assert client.post("/api/v1/run/abort").status_code == 200

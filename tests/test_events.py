@@ -95,7 +95,7 @@ def test_publish_never_waits_for_a_slow_subscriber_and_drops_the_oldest():
     fast = hub.subscribe(maxsize=1000)
     t0 = time.perf_counter()
     for k in range(500):
-        hub.publish(make_event("paused", float(k), {}))
+        hub.publish(make_event("pause_requested", float(k), {}))
     elapsed = time.perf_counter() - t0
     release.set()
     listener.close(timeout=5)
@@ -115,13 +115,13 @@ def test_a_failing_listener_stops_alone():
 
     bad = hub.add_listener(broken, "broken")
     good = hub.subscribe()
-    hub.publish(make_event("paused", 0.0, {}))
-    hub.publish(make_event("resumed", 0.1, {}))
+    hub.publish(make_event("pause_requested", 0.0, {}))
+    hub.publish(make_event("run_resumed", 0.1, {}))
     deadline = time.monotonic() + 5
     while bad.error is None and time.monotonic() < deadline:
         time.sleep(0.01)
     assert isinstance(bad.error, RuntimeError)
-    assert [e.type for e in good.drain()] == ["paused", "resumed"]
+    assert [e.type for e in good.drain()] == ["pause_requested", "run_resumed"]
     assert hub.subscribers == 1
 
 
@@ -129,9 +129,9 @@ def test_get_times_out_and_close_ends_iteration():
     hub = EventHub()
     sub = hub.subscribe()
     assert sub.get(timeout=0.01) is None
-    hub.publish(make_event("paused", 0.0, {}))
+    hub.publish(make_event("pause_requested", 0.0, {}))
     threading.Timer(0.05, sub.close).start()
-    assert [e.type for e in sub] == ["paused"]
+    assert [e.type for e in sub] == ["pause_requested"]
 
 
 @pytest.mark.parametrize("bad", [0, -1])

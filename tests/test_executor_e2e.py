@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import math
 import shutil
-import threading
 import xml.etree.ElementTree as ET
 
 import can
@@ -135,35 +134,6 @@ def test_second_abort_halts(tmp_path):
     halts = [i for i, m in enumerate(trace) if is_halt(m)]
     assert halts, "a second abort must broadcast Halt"
     assert not any(is_motion(m) for m in trace[halts[0]:])
-
-
-def test_pause_and_resume_from_another_thread(tmp_path):
-    """pause() from another thread stops the arm under control; resume() finishes the move."""
-    done = threading.Event()
-
-    def pause_then_resume(executor):
-        state = {"paused_cycles": 0}
-
-        def listener(event):
-            if event["type"] == "setpoint" and event.get("step") == 5 and event["plan_t"] >= 1.0 \
-                    and not state.get("paused"):
-                state["paused"] = True
-                threading.Thread(target=executor.pause).start()
-            if event["type"] == "measurement" and state.get("paused") and not state.get("resumed"):
-                state["paused_cycles"] += 1
-                if state["paused_cycles"] == 50:
-                    state["resumed"] = True
-                    t = threading.Thread(target=executor.resume)
-                    t.start()
-                    t.join()
-                    done.set()
-        executor.listeners.append(listener)
-
-    outcome, sim, _ = run_on_sim("opsafe", tmp_path, on_executor=pause_then_resume)
-    assert done.is_set()
-    assert outcome.result.exit_code == EXIT_OK, outcome.result.message
-    kinds = [e["type"] for e in RunFolder(outcome.log_dir).events()]
-    assert kinds.index("controlled_stop") < kinds.index("paused") < kinds.index("resumed")
 
 
 def test_speed_override_slows_every_move(tmp_path):

@@ -150,7 +150,8 @@ class ArmsLiveView:
             line.halt = halt_line(event) or line.halt
         elif kind == "latched_fault":
             line.message, line.style = event["message"], "bold yellow"
-        elif kind in ("controlled_stop", "abort_requested", "halt_requested", "paused"):
+        elif kind in ("controlled_stop", "abort_requested", "halt_requested", "run_paused",
+                      "resume_refused"):
             line.message, line.style = kind.replace("_", " "), "yellow"
             if kind == "controlled_stop":
                 line.move_duration = None

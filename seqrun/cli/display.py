@@ -240,7 +240,8 @@ class LiveDisplay:
             self.move_duration = None
         elif kind == "latched_fault":
             self.message, self.message_style = event["message"], "bold yellow"
-        elif kind in ("controlled_stop", "abort_requested", "halt_requested", "paused"):
+        elif kind in ("controlled_stop", "abort_requested", "halt_requested", "run_paused",
+                      "resume_refused"):
             self.message = kind.replace("_", " ")
             if kind == "controlled_stop":
                 self.move_duration = None   # the move's progress ends where it stopped

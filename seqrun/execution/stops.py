@@ -1,6 +1,11 @@
 """Stop requests as the run loop takes them: abort (a controlled stop; a second one is a
 Halt), Halt (STOP, SIGTERM, another master on the bus), pause and resume.
 
+A pause is not a stop of the motion: the step under way finishes (a move to rest), then the
+run holds before the next step (:meth:`StopControl.begin_hold`). A resume is an ask the loop
+answers (:class:`ResumeAsk`): it validates the rest of the sequence from the measured pose
+first, and refuses with the reason when that fails.
+
 Requests are posted from any thread or signal handler into a lock-free inbox
 (:mod:`seqrun.stop_requests`); the loop takes them at its next look and acts within a
 cycle. Taking them is a sign of life of the loop (the watchdog keeper feeds the modules
@@ -10,11 +15,28 @@ only while the loop shows one).
 from __future__ import annotations
 
 import threading
+from collections import deque
 from collections.abc import Callable
 
 
 from seqrun.errors import RunAborted
 from seqrun.stop_requests import OPERATOR_HALT, StopRequest, StopRequests
+
+
+class ResumeAsk:
+    """One Resume request: the loop answers it (None: resumed; a text: refused, why)."""
+
+    def __init__(self) -> None:
+        self._done = threading.Event()
+        self.refused: str | None = None
+
+    def answer(self, refused: str | None) -> None:
+        self.refused = refused
+        self._done.set()
+
+    def wait(self, timeout_s: float) -> bool:
+        """True once answered within ``timeout_s`` (real seconds)."""
+        return self._done.wait(timeout_s)
 
 
 class StopControl:
@@ -33,8 +55,13 @@ class StopControl:
         self._aborts = 0
         self._halt: StopRequest | None = None
         self._taking = False
-        #: Set while a pause is asked for (any thread); the loop stops and holds.
+        #: Set while a pause is asked for (any thread); the loop holds before the next step.
         self.paused = threading.Event()
+        # Whether the loop holds (a pause taken), and the Resume asks it has to answer;
+        # the lock orders a Resume against the loop's taking the pause.
+        self._hold_lock = threading.Lock()
+        self._holding = False
+        self._resume_asks: deque[ResumeAsk] = deque()
 
     # ------------------------------------------------------------------ any thread
     def abort(self, reason: str) -> None:
@@ -46,12 +73,46 @@ class StopControl:
         self.requests.halt(reason, cause)
 
     def pause(self) -> None:
+        """Hold before the next step (the step under way finishes first)."""
         self.paused.set()
         self._emit("pause_requested")
 
-    def resume(self) -> None:
-        self.paused.clear()
-        self._emit("resumed")
+    def resume(self) -> ResumeAsk:
+        """Go on after a pause: the loop answers the returned ask once it has validated the
+        rest of the sequence from the measured pose. A pause the loop has not taken yet (the
+        step still runs) is withdrawn at once: nothing stopped, nothing to check."""
+        ask = ResumeAsk()
+        with self._hold_lock:
+            if self._holding:
+                self._resume_asks.append(ask)
+                return ask
+            self.paused.clear()
+        ask.answer(None)
+        return ask
+
+    # ------------------------------------------------------------------ the run loop: pause
+    def begin_hold(self) -> bool:
+        """Run loop, between steps: True when a pause is asked for (the loop now holds)."""
+        with self._hold_lock:
+            self._holding = self.paused.is_set()
+            return self._holding
+
+    def next_resume(self) -> ResumeAsk | None:
+        """Run loop, holding: the oldest Resume ask not answered yet."""
+        try:
+            return self._resume_asks.popleft()
+        except IndexError:
+            return None
+
+    def end_hold(self, refused: str | None = None) -> None:
+        """Run loop: the hold is over (resumed: None; ended otherwise: why). Every Resume
+        ask still waiting gets that answer."""
+        with self._hold_lock:
+            self._holding = False
+            self.paused.clear()
+            asks, self._resume_asks = list(self._resume_asks), deque()
+        for ask in asks:
+            ask.answer(refused)
 
     @property
     def abort_requested(self) -> bool:

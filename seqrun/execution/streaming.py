@@ -66,7 +66,7 @@ class Streaming:
         self.run = run
         #: The figures of the move under way (seqrun/arm/tracking.py).
         self.tracking: MoveTracking | None = None
-        #: The limits the move under way was planned with (a resumed move plans again).
+        #: The limits the move under way was planned with.
         self.move_limits = run.limits
         #: Extra check of every streamed cycle (a straight-line move's deviation).
         self.path_check: Callable[[Measurement], None] | None = None
@@ -235,18 +235,9 @@ class Streaming:
                          plan_t=round(t, 4))
             last_t = t
             run.check_halt_request()
-            if stop_on_abort and (stops.aborts or stops.paused.is_set()):
+            if stop_on_abort and stops.aborts:
                 self.controlled_stop(plan, t, moving)
-                if stops.aborts:
-                    raise OperatorAbort("operator abort: controlled stop, arm holding")
-                self.wait_while_paused()
-                # Resumed: re-plan from where the arm stands to the same target.
-                m = run.read_arm()
-                plan = plan_move(np.radians(m.user_deg), plan.target, self.move_limits, moving)
-                t_start, k = run.clock.now(), 0
-                deadline = plan.duration + run.arm.control.settle_timeout_s
-                last_t = None  # (a pause is no stall)
-                continue
+                raise OperatorAbort("operator abort: controlled stop, arm holding")
             retries = run.bus_retries
             planned_rad, planned_vel, _ = plan.at(t)
             planned_deg = np.degrees(planned_rad)
@@ -373,17 +364,6 @@ class Streaming:
         run.emit("holding", joints_deg=rounded(run.last.user_deg) if run.last else None)
 
     # ------------------------------------------------------------------ waiting
-    def wait_while_paused(self) -> None:
-        run = self.run
-        stops = run.stops
-        run.emit("paused")
-        while stops.paused.is_set() and not stops.aborts and stops.halt_request is None:
-            run.monitor()
-            run.idle(run.cycle)
-        run.check_halt_request()
-        if stops.aborts:
-            raise OperatorAbort("operator abort while paused")
-
     def wait(self, seconds: float) -> None:
         """Wait while monitoring every cycle (keeps faults and watchdog in view)."""
         run = self.run

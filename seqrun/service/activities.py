@@ -149,18 +149,35 @@ class Activities:
 
     def on_event(self, event) -> None:
         """The run's progress from its events (the session's status listener)."""
-        from seqrun.events import StepStarted
+        from dataclasses import replace
+
+        from seqrun.events import RunPaused, StepStarted
         from seqrun.service.status import RunInfo
 
         with self._state:
-            if isinstance(event, StepStarted) and self.run_info is not None:
-                info = self.run_info
+            info = self.run_info
+            if isinstance(event, StepStarted) and info is not None:
                 self.run_info = RunInfo(info.file, event.step, event.label, info.steps,
-                                        info.run_dir)
-            elif event.type == "paused":
+                                        info.run_dir, info.pause)
+            elif event.type == "pause_requested" and info is not None and not self.paused:
+                self.run_info = replace(info, pause="requested")
+            elif isinstance(event, RunPaused):
                 self.paused = True
-            elif event.type in ("resumed", "run_finished"):
+                if info is not None:
+                    self.run_info = replace(info, pause="paused", paused_before=(
+                        f"Paused before step {event.step} ({event.location})"))
+            elif event.type in ("run_resumed", "run_finished"):
                 self.paused = False
+                if info is not None:
+                    self.run_info = replace(info, pause=None, paused_before=None)
+
+    def pause_withdrawn(self) -> None:
+        """A Resume came before the run took its pause: the run never held."""
+        from dataclasses import replace
+
+        with self._state:
+            if self.run_info is not None and not self.paused:
+                self.run_info = replace(self.run_info, pause=None, paused_before=None)
 
     # ------------------------------------------------------------------ start and end
     def begin(self, kind: str, detail: Mapping[str, Any] | None = None,
@@ -171,6 +188,11 @@ class Activities:
         with self._state:
             if self._session.closed:
                 raise Refused("the session is closed")
+            if self._current is not None and self.paused:
+                # (a jog while paused would move the arm the Resume then checks again; it
+                # is refused instead, like every other motion while a run is under way)
+                raise Refused(f"{self.run_info.paused_before if self.run_info else 'paused'}:"
+                              f" no {kind} while a run is paused (Abort the run first)")
             if self._current is not None:
                 raise Refused(f"a {self._current.kind} is under way: wait for it to end, "
                               "or stop it first")

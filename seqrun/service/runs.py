@@ -20,6 +20,11 @@ from seqrun.service.motion import finite
 from seqrun.service.status import RunInfo
 
 
+#: How long a Resume waits for the run's check of the rest of the sequence (real seconds;
+#: the check plans every remaining move: a long sequence takes a few seconds on a slow PC).
+RESUME_ANSWER_S = 30.0
+
+
 class Runs:
     """The sequence runs of one session (its ``arm``, ``project``, ``connection``,
     ``driver``, ``events``, ``zero``, ``log_root``, ``activities``, ``telemetry``,
@@ -181,17 +186,26 @@ class Runs:
 
     # ------------------------------------------------------------------ the run under way
     def pause(self) -> None:
-        """Pause the run (controlled stop, hold); :meth:`resume` goes on."""
+        """Pause the run: the step under way finishes, then the run holds before the next
+        one (``run_paused``), the arm at rest; :meth:`resume` goes on."""
         executor = self._running_executor("pause")
         executor.pause()
-        self._session.activities.paused = True
 
-    def resume(self) -> None:
+    def resume(self, timeout_s: float = RESUME_ANSWER_S) -> None:
+        """Go on after a pause, once the run has validated the rest of the sequence from
+        the arm's measured pose; Refused with the reason when that fails (the run stays
+        paused). A pause not taken yet (its step still runs) is withdrawn."""
         executor = self._running_executor("resume")
         if self._session.telemetry.halted() is not None:
             raise Refused("resume: the arm was halted; nothing restarts it")
-        executor.resume()
-        self._session.activities.paused = False
+        ask = executor.resume()
+        if not ask.wait(timeout_s):
+            raise Refused(f"resume: the run did not answer within {timeout_s:g} s; "
+                          "it stays paused")
+        if ask.refused is not None:
+            raise Refused(f"resume refused: {ask.refused}")
+        if not self._session.activities.paused:
+            self._session.activities.pause_withdrawn()
 
     def _running_executor(self, what: str):
         activities = self._session.activities

@@ -57,10 +57,15 @@ class RunInfo:
     label: str | None
     steps: int
     run_dir: str | None = None
+    #: A pause: None (none), "requested" (the step under way finishes first) or "paused".
+    pause: str | None = None
+    #: Where the run holds: "Paused before step N (FILE:LINE:COL)" (None: it does not).
+    paused_before: str | None = None
 
     def as_dict(self) -> dict[str, Any]:
         return {"file": self.file, "step": self.step, "label": self.label,
-                "steps": self.steps, "run_dir": self.run_dir}
+                "steps": self.steps, "run_dir": self.run_dir, "pause": self.pause,
+                "paused_before": self.paused_before}
 
 
 @dataclass(frozen=True)

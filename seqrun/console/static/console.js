@@ -243,6 +243,14 @@ function drawStatus(s) {
   joints.measured(s);
   updateGhost();
   highlightStep(s.run);
+  drawPause(s.run);
+}
+
+// A pause: asked for (the step under way finishes first), then where the run holds.
+function drawPause(run) {
+  const pause = run && run.pause;
+  setText($("#run-pause"), pause === "paused" ? run.paused_before
+    : pause === "requested" ? "Pause requested: the run holds after the step under way" : "");
 }
 
 $("#ack-faults").addEventListener("click", () => {
@@ -264,7 +272,7 @@ function summary(e) {
 function showEvent(e) {
   state.eventCount += 1;
   const bad = ["fault", "internal_error", "halt_unconfirmed", "halt_failed", "latched_fault", "session_halt", "halt_requested"];
-  const warn = ["controlled_stop", "operator_abort", "abort_requested", "paused", "status_poll_failed"];
+  const warn = ["controlled_stop", "operator_abort", "abort_requested", "pause_requested", "run_paused", "resume_refused", "status_poll_failed"];
   const item = el("li", { className: bad.includes(e.type) ? "bad" : warn.includes(e.type) ? "warn" : "",
     textContent: `${fmt(e.t, 2)} ${e.type}${e.step ? ` [${e.step}]` : ""} ${summary(e)}` });
   const log = $("#events");
