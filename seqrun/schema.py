@@ -146,6 +146,13 @@ class IncludeParams(StepParams):
     yaml_name: ClassVar[str] = "include"
     file: IncludeFile = Field(  # type: ignore[valid-type]
         description=INCLUDE_REACH)
+    with_: dict[Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")],
+                bool | int | float | str] = Field(
+        default_factory=dict, alias="with",
+        description="Values of the included file's own params (a template): name -> value, "
+                    "each checked against its declaration; the ones not given take their "
+                    "defaults. A file that declares no params takes none (it uses the "
+                    "including sequence's).")
 
     @classmethod
     def from_shorthand(cls, value: Any) -> StepParams:
@@ -365,8 +372,9 @@ class Sequence(_Model):
         default_factory=dict,
         description="Typed parameters, name -> declaration: '${name}' in any value of the "
                     "steps is replaced by the value (the default, or --param name=value); "
-                    "expressions read them as params.NAME. Only the top file declares "
-                    "them; an included file uses the including file's.")
+                    "expressions read them as params.NAME. An included file without "
+                    "params: uses the including file's; one with params: of its own is a "
+                    "template: its include gives their values under with:.")
     monitors: list[MonitorSpec] = Field(
         default_factory=list,
         description="Invariants watched every control cycle of every step (as a step's "

@@ -103,6 +103,19 @@ class LoadedSequence:
         return items
 
 
+@dataclass(frozen=True)
+class _TemplateCall:
+    """An include's ``with:`` values (name -> typed value, as written) and where its
+    parameters are written (for its errors)."""
+
+    values: Mapping[str, Any]
+    doc: Document
+    node: Any  # the include step's parameters
+
+    def error(self, message: str, *path: Any, key: bool = False) -> SourceError:
+        return self.doc.error(("with", *path), message, start=self.node, key=key)
+
+
 class StepCollector:
     """Collects resolved steps handed to it one file's items at a time, includes expanded
     and poses frozen as :func:`load_sequence` does: each arm of a campaign with several
@@ -189,7 +202,8 @@ class _Loader:
         self.monitors_at: ResolvedStep | None = None
 
     def load(self, path: Path, *, chain: tuple[Path, ...] = (),
-             include_chain: tuple[Location, ...] = (), include_step: Any = None) -> Any:
+             include_chain: tuple[Location, ...] = (), include_step: Any = None,
+             call: _TemplateCall | None = None) -> Any:
         try:
             doc = load_document(path, file=display_path(path))
         except SequenceInvalid as exc:
@@ -208,20 +222,32 @@ class _Loader:
         self.sources.append(doc.source)
         if not chain:
             self.top = doc.data
-        doc = self._parameters(doc, top=not chain)
+        # a template (an included file with params of its own) has them for its steps only
+        scope = (self.specs, self.declared, self.values, self.param_types)
         try:
-            seq = doc.validate(Sequence, context={"params": self.param_types})
-        except SequenceInvalid as exc:
-            # Report every problem at once: go on with the steps that are valid on their own
-            # (their includes and poses are checked too); the file's errors are known.
-            self.errors.extend(exc.errors)
-            self._partial(doc, path, chain, include_chain)
-            return None
-        self._check_arm(doc, seq, top=not chain)
-        self._monitors(doc, seq, top=not chain)
-        self._steps(doc, path, seq.steps, doc.items(doc.child(doc.root, "steps")), chain,
-                    include_chain)
-        return seq
+            errors = len(self.errors)
+            doc = self._parameters(doc, top=not chain, call=call)
+            if chain and call is not None and len(self.errors) > errors:
+                # the include's with: is wrong: its steps would only repeat it
+                self.left_out.append((len(self.steps), None))
+                return None
+            try:
+                seq = doc.validate(Sequence, context={"params": self.param_types})
+            except SequenceInvalid as exc:
+                # Report every problem at once: go on with the steps that are valid on
+                # their own (their includes and poses are checked too); the file's errors
+                # are known.
+                self.errors.extend(exc.errors)
+                self._partial(doc, path, chain, include_chain)
+                return None
+            self._check_arm(doc, seq, top=not chain)
+            self._monitors(doc, seq, top=not chain)
+            self._steps(doc, path, seq.steps, doc.items(doc.child(doc.root, "steps")), chain,
+                        include_chain)
+            return seq
+        finally:
+            if chain:
+                self.specs, self.declared, self.values, self.param_types = scope
 
     def _monitors(self, doc: Document, seq: Any, *, top: bool) -> None:
         """The top file's ``monitors:``; an included file may declare none (its steps are
@@ -239,10 +265,57 @@ class _Loader:
                                         node=doc.root, param_types=dict(self.param_types),
                                         param_values=dict(self.values))
 
-    def _parameters(self, doc: Document, *, top: bool) -> Document:
-        """``doc`` with the parameters' values put into its steps (the top file's
-        declarations; an included file uses them too). Raises UserInputError for a bad or
-        missing value (--param)."""
+    def _template(self, doc: Document, declared: dict, call: _TemplateCall | None) -> None:
+        """An included file's own ``params:``: their values from the include's ``with:``
+        (typed as written, each checked against its declaration) over the defaults."""
+        from seqrun.steps.sequence_parameters import (
+            NAME_RE,
+            ParameterSpec,
+            expression_types,
+            value_problem,
+        )
+
+        names = [n for n in declared if isinstance(n, str)]
+        specs: dict[str, Any] = {}
+        for name in names:
+            try:
+                if NAME_RE.match(name):
+                    specs[name] = ParameterSpec.model_validate(declared[name])
+            except ValidationError:
+                pass  # reported with the file's errors
+        given = dict(call.values) if call is not None else {}
+        values: dict[str, Any] = {}
+        for name, value in given.items():
+            if name not in specs:
+                assert call is not None
+                self.errors.append(call.error(
+                    f"{doc.file} declares no parameter '{name}' (declared: "
+                    f"{', '.join(names) or 'none'})", name, key=True))
+        for name, spec in specs.items():
+            if name in given:
+                problem = value_problem(spec, given[name])
+                if problem is None:
+                    values[name] = float(given[name]) if spec.type == "float" else given[name]
+                    continue
+                assert call is not None
+                self.errors.append(call.error(f"with {name}: {problem}", name))
+            elif spec.default is None:
+                where = call.error if call is not None else None
+                message = (f"parameter '{name}' of {doc.file} has no default: give it with "
+                           f"'with: {{{name}: VALUE}}'")
+                self.errors.append(where(message, key=True) if where is not None
+                                   else doc.error(("params", name), message, key=True))
+            if name not in values and spec.default is not None:
+                values[name] = float(spec.default) if spec.type == "float" else spec.default
+        self.specs, self.declared, self.values = specs, names, values
+        self.param_types = expression_types(specs)
+
+    def _parameters(self, doc: Document, *, top: bool,
+                    call: _TemplateCall | None = None) -> Document:
+        """``doc`` with the parameters' values put into its steps: the top file's
+        declarations (an included file uses them too), or an included file's own (a
+        template: the values its include gives ``with:``). Raises UserInputError for a bad
+        or missing value (--param)."""
         from seqrun.steps.sequence_parameters import (
             NAME_RE,
             ParameterSpec,
@@ -273,10 +346,12 @@ class _Loader:
                 self.specs, {n: t for n, t in self.given.items() if n in self.specs},
                 file=doc.file)
             self.param_types = expression_types(self.specs)
-        elif declared is not None:
-            self.errors.append(doc.error(("params",), "an included file cannot declare "
-                                                      "params: it uses the including "
-                                                      "sequence's", key=True))
+        elif isinstance(declared, dict):
+            self._template(doc, declared, call)
+        elif call is not None and call.values:
+            self.errors.append(call.error(f"{doc.file} declares no params: 'with' gives "
+                                          "values to a template's (an included file's own "
+                                          "params:)", key=True))
         steps = data.get("steps")
         if steps is None:
             return doc
@@ -423,7 +498,8 @@ class _Loader:
             error(f"include '{params.file}': no such file ({target})")
             return
         self.load(target, chain=chain, include_chain=include_chain + (here,),
-                  include_step=doc.locate(("file",), start=node))
+                  include_step=doc.locate(("file",), start=node),
+                  call=_TemplateCall(params.with_, doc, node))
 
     def _check_pose(self, step: ResolvedStep, name: str) -> None:
         from seqrun.arm.poses import PoseFile, find_pose

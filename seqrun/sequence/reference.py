@@ -232,8 +232,15 @@ bad one is one line and exit 2, and so is a parameter with no default and no `--
 range at its `min` and at its `max` (one at a time, the others at their defaults; static
 checks and the dry run) and names the value that fails, e.g. `params: speed = 1.0 (its
 max): ...`. A run keeps the values it used in record.json and report.json, and shows them
-in its report. Only the top file declares parameters; an included file uses the including
-file's (`include: {file, with: ...}` templates are not supported yet).
+in its report. An included file without `params:` uses the including file's.
+
+An included file with `params:` of its own is a **template**: `include: {file: approach.yaml,
+with: {to: opsafe, speed: 0.3}}` gives its values (typed as written: `0.3` is a number,
+`"0.3"` text), each checked against the template's declaration at its file:line:col; the
+ones not given take their defaults, and one without a default must be given. Inside the
+template `${name}` and `params.NAME` read its own values; the including file's parameters
+are its own again after the include, and a `with:` value may be one of them
+(`speed: "${slow}"`).
 
 ```yaml
 params:
@@ -425,6 +432,10 @@ def reference_markdown() -> str:
                 continue
             if key == "params":
                 lines.append(f"| `params` | {{name: parameter}} (see Parameters) | "
+                             f"{prop.get('description', '')} |")
+                continue
+            if key == "with":
+                lines.append(f"| `with` | {{parameter: value}} (see Parameters) | "
                              f"{prop.get('description', '')} |")
                 continue
             default = ("required" if key in required else
