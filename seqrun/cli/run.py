@@ -181,7 +181,25 @@ def run_command(
     """Run a sequence: validate, read the arm, re-validate from where it stands, move.
     In a campaign with several arms ([arms.ID]): a sequence that names them runs every arm
     its track, together (docs/two-arms.md; --sim-fault ARM/SPEC); a sequence of one arm runs
-    on the arm --arm-id names."""
+    on the arm --arm-id names. A suite file (top level ``suite:``, docs/suites.md) runs
+    its sequences one after another in one arm session."""
+    from seqrun.service.suites import is_suite_file
+
+    if is_suite_file(file):
+        from seqrun.cli.suite import run_suite_file
+
+        run_suite_file(file, yes=yes, plain=plain, log_dir=log_dir, no_report=no_report,
+                       speed=speed, command_mode=command_mode, rt_priority=rt_priority,
+                       project_dir=project_dir, zero_confirmed=zero_confirmed or [],
+                       request_options=dict(
+                           interface=interface, channel=channel, bitrate=bitrate,
+                           bus_kwargs=bus_kwargs or [], sim=sim, sim_faults=sim_fault or [],
+                           arm_file=arm_file, start=start, started=started,
+                           virtual_time=virtual_time, power_on_at=power_on_at),
+                       refused={"--from": from_step != 1, "--step": step,
+                                "--foxglove": foxglove is not None,
+                                "--foxglove-types": foxglove_types is not None,
+                                "--arm-id": arm_id is not None, "--param": bool(param)})
     with user_errors():
         from seqrun.service.arms_check import campaign_has_arms
 
