@@ -109,7 +109,8 @@ def _check_line(check: SuiteCheck) -> str:
     verdict = "valid" if check.valid else "INVALID"
     run = check.check.dry_run if check.check is not None else None
     dry = "" if run is None else (f", dry run {'passed' if run.passed else 'FAILED'} "
-                                  f"{run.simulated_s:.2f} s")
+                                  f"{run.simulated_s:.2f} s"
+                                  + ("" if run.passed else f": {run.result.message}"))
     errors = len(check.check.errors) if check.check is not None else 0
     found = f", {errors} error{'s' * (errors != 1)}" if errors else ""
     return f"  {_role(check.item):9s} {check.item.shown}: {verdict} from {check.start}{dry}{found}"
