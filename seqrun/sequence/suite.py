@@ -61,7 +61,8 @@ class SuiteEntry(_SuiteModel):
         "(typed as in the sequence: 0.3 for a float, true for a bool), over their defaults.")
 
 
-Entry = Annotated[SuiteEntry, BeforeValidator(_entry_shorthand)]
+Entry = Annotated[SuiteEntry, BeforeValidator(_entry_shorthand,
+                                              json_schema_input_type=Union[str, SuiteEntry])]
 
 
 class SuiteBody(_SuiteModel):
