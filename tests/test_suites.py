@@ -376,14 +376,19 @@ suite:
   teardown: sequences/start.yaml
   on_error: continue
 """)
-    folder = tmp_path / "suite"
-    result = run_virtual(suite, campaign, folder, "--sim-fault", "4:tow_error@1")
+    result = invoke("run", suite, "--virtual-time", "--yes", "--plain", "--no-report",
+                    "--sim-fault", "4:tow_error@1", cwd=campaign)
     assert result.exit_code == 3, result.output
     assert "nothing moves the arm by itself now (no teardown)" in result.output
+    (folder,) = (campaign / "runs").glob("*-suite-Fault")   # the campaign's runs folder
     assert sorted(p.name for p in folder.iterdir() if p.is_dir()) == ["01-start",
                                                                       "02-speedy"]
     assert [t["status"] for t in ctrf(folder)["tests"]] == ["passed", "failed", "skipped",
                                                            "skipped"]
+    # seqrun runs lists the suite's runs among the campaign's
+    listed = json.loads(invoke("runs", "--json", cwd=campaign).stdout)
+    assert [(Path(r["folder"]).name, r["result"]) for r in listed] == [
+        ("01-start", "passed"), ("02-speedy", "failed")]
 
 
 @pytest.mark.slow

@@ -292,23 +292,30 @@ def suite_ctrf(outcome: SuiteOutcome) -> str:
 
 
 def write_suite_reports(folder: Path, outcome: SuiteOutcome) -> str | None:
-    """junit.xml, ctrf.json and a copy of the suite file in the suite's folder; the
-    error text when one could not be written (the runs' own folders hold the record)."""
+    """junit.xml and ctrf.json in the suite's folder; the error text when one could not
+    be written (the runs' own folders hold the record)."""
     from seqrun.runfolder.logfile import write_whole
 
     for name, text in (("junit.xml", suite_junit(outcome)), ("ctrf.json", suite_ctrf(outcome))):
         error = write_whole(folder / name, text)
         if error:
             return f"{name}: {error}"
-    error = write_whole(folder / "suite.yaml", outcome.suite.source)
-    return f"suite.yaml: {error}" if error else None
+    return None
 
 
 def suite_folder(suite: Suite, log_dir: Path | None, runs_root: Path) -> Path:
-    """The suite's folder: ``--log-dir``, else ``<runs>/<time>-suite-<name>/``."""
+    """The suite's folder (``--log-dir``, else ``<runs>/<time>-suite-<name>/``) with the
+    suite file as read: what tells it from a run's folder (``seqrun runs`` and ``seqrun
+    trend`` list the runs inside). An unusable one: OSError."""
+    from seqrun.runfolder.logfile import write_whole
+    from seqrun.runfolder.names import SUITE_NAME
     from seqrun.service.runlog import prepare_run_folder
 
-    return prepare_run_folder(log_dir, f"suite-{suite.name}", runs_root)
+    folder = prepare_run_folder(log_dir, f"suite-{suite.name}", runs_root)
+    error = write_whole(folder / SUITE_NAME, suite.source)
+    if error is not None:
+        raise error
+    return folder
 
 
 def several_arms(suite: Suite, project_dir: Path | None = None) -> str | None:
