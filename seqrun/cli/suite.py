@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import typer
@@ -152,8 +153,8 @@ def run_suite_file(file: Path, *, yes: bool, plain: bool, log_dir: Path | None,
     from seqrun.cli import interrupts
     from seqrun.cli.common import user_errors, zero_confirmed_of
     from seqrun.cli.output import keep_running_on_broken_pipe, make_console
-    from seqrun.cli.run import (_confirm_start_or_record, _refuse_yes_for_attended,
-                                _use_realtime, _watchdog_at_real_time)
+    from seqrun.cli.run_start import (confirm_start_or_record, refuse_yes_for_attended,
+                                use_realtime, watchdog_at_real_time)
     from seqrun.service.run_preparation import RunInvalid, RunRequest, prepare_run
     from seqrun.service.suites import load_entry, param_texts
 
@@ -201,7 +202,7 @@ def run_suite_file(file: Path, *, yes: bool, plain: bool, log_dir: Path | None,
                 raise
     assert run is not None
     for sequence in loaded.values():
-        refusal = _refuse_yes_for_attended(sequence, yes)
+        refusal = refuse_yes_for_attended(sequence, yes)
         if refusal is not None:
             run.connection.close()
             fail(refusal)
@@ -210,9 +211,9 @@ def run_suite_file(file: Path, *, yes: bool, plain: bool, log_dir: Path | None,
 
     requests = StopRequests()
     control = RunControl.serve(run.connection, run.arm, requests)
-    zero = _confirm_start_or_record(console, run, yes, None, confirmed)
-    if _use_realtime(console, rt_priority, bool(request_options.get("virtual_time"))):
-        _watchdog_at_real_time(console, run)
+    zero = confirm_start_or_record(console, run, yes, None, confirmed)
+    if use_realtime(console, rt_priority, bool(request_options.get("virtual_time"))):
+        watchdog_at_real_time(console, run)
     folder = _suite_folder(console, suite, run, log_dir)
     outcome = _run_in_one_session(console, suite, run, zero, folder, control, requests,
                                   loaded, yes=yes, speed=speed, command_mode=command_mode,
@@ -249,7 +250,7 @@ def _run_in_one_session(console: Console, suite: Suite, run, zero, folder: Path,
     from seqrun.cli.display import PlainDisplay
     from seqrun.cli.interrupts import RunSignals
     from seqrun.cli.questions import ask
-    from seqrun.cli.run import _ask_shown, _Attended
+    from seqrun.cli.run_start import Attended, ask_shown
     from seqrun.service import ArmSession, campaign_records
     from seqrun.service.suites import SuiteRun, run_of, run_suite, write_suite_reports
 
@@ -274,20 +275,22 @@ def _run_in_one_session(console: Console, suite: Suite, run, zero, folder: Path,
             return SuiteRun(item, "failed", EXIT_INVALID,
                             f"cannot write the run record in {where} "
                             f"({exc.strerror or exc}); nothing was sent")
-        displays: list = [session.events.add_listener(
-            PlainDisplay(console, len(sequence.steps)), "plain display", maxsize=100_000)]
+        # (PlainDisplay reads an event by its keys, as events.jsonl has it)
+        lines: Callable[[Any], None] = PlainDisplay(console, len(sequence.steps))
+        displays: list = [session.events.add_listener(lines, "plain display",
+                                                      maxsize=100_000)]
         began = time.time()
         try:
             outcome = session.run_loaded(
                 sequence, log_dir=where, file=str(item.path), speed=speed,
                 command_mode=command_mode,
-                confirm=lambda prompt: _ask_shown(console, displays, prompt, yes,
+                confirm=lambda prompt: ask_shown(console, displays, prompt, yes,
                                                   read=signals.read_answer),
-                attended=_Attended(console, displays, signals.read_answer),
+                attended=Attended(console, displays, signals.read_answer),
                 run_control=control, requests=requests,
                 warn=lambda text: say(f"  !!  {text}"),
                 confirm_clear_latched=(None if connection.is_simulator else
-                                       lambda q: _ask_shown(console, displays, q, False,
+                                       lambda q: ask_shown(console, displays, q, False,
                                                             read=signals.read_answer)),
                 meta={"zero": zero.as_dict(), "suite": suite.name,
                       "suite_entry": item.location},

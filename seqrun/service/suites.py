@@ -152,7 +152,8 @@ class SuiteOutcome:
     def exit_code(self) -> int:
         """0 all passed; 130 the operator stopped it; 3 a sequence failed with a fault
         (or the Halt of a failed check); 1 one was refused before it moved."""
-        codes = {r.exit_code for r in self.runs if r.status != "not run"}
+        codes = {r.exit_code for r in self.runs
+                 if r.status != "not run" and r.exit_code is not None}
         for code in (EXIT_OPERATOR_ABORT, EXIT_FAULT, EXIT_INVALID):
             if code in codes:
                 return code
