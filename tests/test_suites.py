@@ -406,3 +406,24 @@ def test_the_qualification_example_validates_and_runs(tmp_path):
         "loop 1 #2: sequences/out_to_opsafe.yaml", "loop 1 #3: sequences/back_to_totem.yaml",
         "teardown: sequences/park.yaml"]
     assert ctrf(folder)["summary"]["passed"] == 5
+
+
+@pytest.mark.parametrize("answer, ran", [("", 2), ("y\n", 3)])
+def test_pause_asks_the_person_at_the_terminal_and_yes_does_not_answer(campaign, tmp_path,
+                                                                        answer, ran):
+    """--yes answers confirm steps, never the pause: with no one to answer (end of input)
+    the suite stops; a person's yes goes on."""
+    suite = write_suite(campaign, """\
+suite:
+  name: Pause
+  sequences: [sequences/good.yaml, sequences/bad.yaml, sequences/good.yaml]
+  on_error: pause
+""")
+    folder = tmp_path / "suite"
+    with contextlib.chdir(campaign):
+        result = runner.invoke(app, ["run", str(suite), "--virtual-time", "--yes", "--plain",
+                                     "--no-report", "--log-dir", str(folder)], input=answer)
+    assert result.exit_code == 3, result.output
+    assert "sequences/bad.yaml failed (check failed: tool.z_mm < 0 (the tool is below the " \
+           "floor)). Continue the suite with the next sequence?" in result.output
+    assert len([p for p in folder.iterdir() if p.is_dir()]) == ran

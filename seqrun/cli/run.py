@@ -265,8 +265,8 @@ def _run_in_session(console: Console, run, zero, folder: Path, control, requests
             return True
         mark = "" if s.title.endswith("?") else "?"
         return ask_shown(console, displays, f"Run step {s.number}/{len(loaded.steps)}: "
-                          f"{s.title}{mark}", False, read=signals.read_answer,
-                          context=f"step {s.number}/{len(loaded.steps)}: {s.title} (asking)")
+                         f"{s.title}{mark}", False, read=signals.read_answer,
+                         context=f"step {s.number}/{len(loaded.steps)}: {s.title} (asking)")
 
     live = console.is_terminal and not plain
 

@@ -31,8 +31,8 @@ def _ask(console: Console, question: str, assume_yes: bool,
 
 
 def ask_shown(console: Console, displays: list, question: str, assume_yes: bool, *,
-               read: Callable[[], str | None] | None = None,
-               context: str | None = None) -> bool:
+              read: Callable[[], str | None] | None = None,
+              context: str | None = None) -> bool:
     """:func:`_ask` where the operator looks: the live view (if any) is off meanwhile, so
     its redraw cannot erase the question."""
     if not displays or not hasattr(displays[0], "asking"):
@@ -56,7 +56,7 @@ class Attended:
 
         as_what = f" [signed by the {role}]" if role else " [signed]"
         if not ask_shown(self.console, self.displays, f"{prompt}{as_what}", False,
-                          read=self.read):
+                         read=self.read):
             return None
 
         def say(text: str, end: str = "\n") -> None:
@@ -85,7 +85,7 @@ def refuse_yes_for_attended(loaded, yes: bool) -> str | None:
 
 
 def confirm_start_or_record(console: Console, run, yes: bool, log_dir: Path | None,
-                             zero_confirmed: str | None = None):
+                            zero_confirmed: str | None = None, what: str | None = None):
     """:func:`_confirm_start`, where SIGTERM, SIGHUP or SIGQUIT at a question (the REAL
     arm's, the zero reference's) end the command in one line, exit 130, and a run not
     started (a no, a signal) leaves a run folder saying that nothing was sent."""
@@ -99,7 +99,7 @@ def confirm_start_or_record(console: Console, run, yes: bool, log_dir: Path | No
 
     try:
         with signals_end_the_question():
-            return _confirm_start(console, run, yes, zero_confirmed)
+            return _confirm_start(console, run, yes, zero_confirmed, what)
     except QuestionInterrupted as exc:
         run.connection.close()  # (closing twice is harmless)
         record(f"not started: {exc.name} before the run started; nothing was sent")
@@ -112,12 +112,14 @@ def confirm_start_or_record(console: Console, run, yes: bool, log_dir: Path | No
         raise
 
 
-def _confirm_start(console: Console, run, yes: bool, zero_confirmed: str | None = None):
+def _confirm_start(console: Console, run, yes: bool, zero_confirmed: str | None = None,
+                   what: str | None = None):
     """The bus banner, on real hardware the operator's yes, and the zero reference in
     force (on real hardware after a power-on, confirmed); the arm of the run gets it."""
     from seqrun.cli.zero import zero_or_exit
 
     connection, loaded = run.connection, run.loaded
+    what = what or f"'{loaded.name}'"   # a suite names itself
     style = "bold black on yellow" if connection.is_simulator else "bold white on red"
     headline = run.context.headline(connection) if run.context else connection.description
     console.print(f" {headline} ", style=style, highlight=False, markup=False, soft_wrap=True)
@@ -125,7 +127,7 @@ def _confirm_start(console: Console, run, yes: bool, zero_confirmed: str | None 
         console.print(f"note: {note}", style="yellow", highlight=False, markup=False,
                       soft_wrap=True)
     if not connection.is_simulator and not _ask(
-            console, f"Run '{loaded.name}' on the REAL arm?", yes):
+            console, f"Run {what} on the REAL arm?", yes):
         console.print("Not started: the operator declined. Nothing was sent.")
         connection.close()
         raise typer.Exit(EXIT_OPERATOR_ABORT)
@@ -164,7 +166,7 @@ def watchdog_at_real_time(console: Console, run) -> None:
 
 
 def use_realtime(console: Console, rt_priority: int | None,
-                  virtual_time: bool = False) -> bool:
+                 virtual_time: bool = False) -> bool:
     """``--rt-priority N``: the control loop (this thread, and the threads it starts) at
     SCHED_FIFO N; the threads already running (the control socket's, the display's) at
     SCHED_RR 1, above every normal process, so that none of them is kept off the CPU

@@ -211,7 +211,8 @@ def run_suite_file(file: Path, *, yes: bool, plain: bool, log_dir: Path | None,
 
     requests = StopRequests()
     control = RunControl.serve(run.connection, run.arm, requests)
-    zero = confirm_start_or_record(console, run, yes, None, confirmed)
+    zero = confirm_start_or_record(console, run, yes, None, confirmed,
+                                   what=f"suite '{suite.name}' ({len(plan)} sequence runs)")
     if use_realtime(console, rt_priority, bool(request_options.get("virtual_time"))):
         watchdog_at_real_time(console, run)
     folder = _suite_folder(console, suite, run, log_dir)
