@@ -427,3 +427,17 @@ suite:
     assert "sequences/bad.yaml failed (check failed: tool.z_mm < 0 (the tool is below the " \
            "floor)). Continue the suite with the next sequence?" in result.output
     assert len([p for p in folder.iterdir() if p.is_dir()]) == ran
+
+
+def test_static_validation_chains_the_planned_ends(campaign):
+    suite = write_suite(campaign, """\
+suite:
+  name: Static
+  setup: sequences/start.yaml
+  sequences: [sequences/speedy.yaml, sequences/speedy.yaml]
+""")
+    result = invoke("validate", "--static", suite, cwd=campaign)
+    assert result.exit_code == 0, result.output
+    assert "  #2        sequences/speedy.yaml: valid from the planned end of " \
+           "sequences/speedy.yaml" in result.output
+    assert "not checked: --static: no dry run" in result.output

@@ -129,8 +129,8 @@ def _not_checked(suite: Suite, static: bool) -> list[str]:
     """What validation of a suite does not show (said, never implied)."""
     lines = []
     if static:
-        lines.append("--static: no dry run, so each entry is checked from the suite's "
-                     "start pose, not from where the one before leaves the arm")
+        lines.append("--static: no dry run; each entry is checked from where the plans of "
+                     "the one before leave the arm (not where a simulated run leaves it)")
     if suite.loop > 1:
         lines.append(f"loops 3-{suite.loop} start where loop 2 does (the last sequence's "
                      "end): not checked again" if suite.loop > 2 else

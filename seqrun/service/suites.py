@@ -67,7 +67,8 @@ def check_suite(suite: Suite, *, start: str | None = None, started: bool = False
                 project_dir: Path | None = None, dry_run: bool = True,
                 each: Callable[[SuiteCheck], None] | None = None) -> list[SuiteCheck]:
     """Check every entry once (setup, sequences, teardown, in that order), each from where
-    the one before leaves the arm in its dry run (the first from ``start``, default Park).
+    the one before leaves the arm in its dry run (without one, ``dry_run=False``: where its
+    plans leave it; the first from ``start``, default Park).
     After an entry that is not valid the arm's place is unknown: the rest are checked on
     their own from ``start`` and say so. A loop's second pass starts where the last
     sequence ended: that start is checked too when ``loop`` > 1 (the first sequence again,
@@ -97,6 +98,11 @@ def check_suite(suite: Suite, *, start: str | None = None, started: bool = False
             end, label = run.end_deg, f"the end of {item.shown}"
             homed = homed or any(s.kind == "home" and s.status == "passed"
                                  for s in run.result.steps)
+        elif (checked.valid and run is None and checked.static.final_deg
+              and checked.loaded is not None):
+            # no dry run (--static): where the plans leave the arm
+            end, label = checked.static.final_deg, f"the planned end of {item.shown}"
+            homed = homed or any(s.kind == "home" for s in checked.loaded.steps)
         else:   # unknown from here: the next from the suite's start again
             end, label, homed = None, start or START_POSE, started
     return checks
