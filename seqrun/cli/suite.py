@@ -150,7 +150,6 @@ def run_suite_file(file: Path, *, yes: bool, plain: bool, log_dir: Path | None,
     """``seqrun run SUITE``: every sequence loaded and checked before the bus is opened,
     then one arm session for the whole suite; each sequence through the same run path
     as ``seqrun run FILE``."""
-    from seqrun.cli import interrupts
     from seqrun.cli.common import user_errors, zero_confirmed_of
     from seqrun.cli.output import keep_running_on_broken_pipe, make_console
     from seqrun.cli.run_start import (confirm_start_or_record, refuse_yes_for_attended,
@@ -219,7 +218,6 @@ def run_suite_file(file: Path, *, yes: bool, plain: bool, log_dir: Path | None,
     outcome = _run_in_one_session(console, suite, run, zero, folder, control, requests,
                                   loaded, yes=yes, speed=speed, command_mode=command_mode,
                                   no_report=no_report)
-    interrupts.progress.exit_code = outcome.exit_code
     try:
         _print_suite_outcome(console, outcome, folder)
     except KeyboardInterrupt:
@@ -314,6 +312,7 @@ def _run_in_one_session(console: Console, suite: Suite, run, zero, folder: Path,
     try:
         outcome = run_suite(suite, folder, one, ask_continue=ask_continue,
                             told=lambda text, _o: say(text))
+        interrupts.progress.exit_code = outcome.exit_code   # before the handlers go
         error = write_suite_reports(folder, outcome)
         if error:
             say(f"warning: the suite's report was not written ({error})")
