@@ -234,9 +234,12 @@ def validate_command(
     """
     if not 0 < speed <= 1:
         fail(f"--speed must lie in (0, 1], got {speed:g}")
-    if len(files) == 1 and junit_file is None:
+    if len(files) == 1:
         from seqrun.service.suites import is_suite_file
 
+        if is_suite_file(files[0]) and junit_file is not None:
+            fail(f"--junit: {files[0]} is a suite; its junit.xml is written by seqrun run "
+                 "(validate --junit reports sequence files and campaign folders)")
         if is_suite_file(files[0]):   # a suite (top level suite:): each entry in turn
             from seqrun.cli.suite import validate_suite
 
