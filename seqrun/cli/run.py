@@ -123,7 +123,7 @@ def run_command(
     if is_suite_file(file):
         from seqrun.cli.suite import run_suite_file
 
-        run_suite_file(file, yes=yes, plain=plain, log_dir=log_dir, no_report=no_report,
+        run_suite_file(file, yes=yes, log_dir=log_dir, no_report=no_report,
                        speed=speed, command_mode=command_mode, rt_priority=rt_priority,
                        project_dir=project_dir, zero_confirmed=zero_confirmed or [],
                        request_options=dict(

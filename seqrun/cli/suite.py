@@ -142,18 +142,19 @@ def _not_checked(suite: Suite, static: bool) -> list[str]:
 
 
 # -------------------------------------------------------------------------------- run
-def run_suite_file(file: Path, *, yes: bool, plain: bool, log_dir: Path | None,
+def run_suite_file(file: Path, *, yes: bool, log_dir: Path | None,
                    no_report: bool, speed: float, command_mode: str | None,
                    rt_priority: int | None, project_dir: Path | None,
                    zero_confirmed: list[str], request_options: dict[str, Any],
                    refused: dict[str, bool]) -> None:
     """``seqrun run SUITE``: every sequence loaded and checked before the bus is opened,
     then one arm session for the whole suite; each sequence through the same run path
-    as ``seqrun run FILE``."""
+    as ``seqrun run FILE``. Its lines are the plain ones (one per step), whatever the
+    terminal: the suite's own lines go between them."""
     from seqrun.cli.common import user_errors, zero_confirmed_of
     from seqrun.cli.output import keep_running_on_broken_pipe, make_console
     from seqrun.cli.run_start import (confirm_start_or_record, refuse_yes_for_attended,
-                                use_realtime, watchdog_at_real_time)
+                                      use_realtime, watchdog_at_real_time)
     from seqrun.service.run_preparation import RunInvalid, RunRequest, prepare_run
     from seqrun.service.suites import load_entry, param_texts
 
@@ -214,7 +215,7 @@ def run_suite_file(file: Path, *, yes: bool, plain: bool, log_dir: Path | None,
                                    what=f"suite '{suite.name}' ({len(plan)} sequence runs)")
     if use_realtime(console, rt_priority, bool(request_options.get("virtual_time"))):
         watchdog_at_real_time(console, run)
-    folder = _suite_folder(console, suite, run, log_dir)
+    folder = _suite_folder(suite, run, log_dir)
     outcome = _run_in_one_session(console, suite, run, zero, folder, control, requests,
                                   loaded, yes=yes, speed=speed, command_mode=command_mode,
                                   no_report=no_report)
@@ -230,7 +231,7 @@ def _close(run) -> None:
         run.connection.close()
 
 
-def _suite_folder(console: Console, suite: Suite, run, log_dir: Path | None) -> Path:
+def _suite_folder(suite: Suite, run, log_dir: Path | None) -> Path:
     from seqrun.service import campaign_records
     from seqrun.service.suites import suite_folder
 
