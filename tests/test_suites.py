@@ -396,6 +396,9 @@ def test_the_qualification_example_validates_and_runs(tmp_path):
     result = invoke("validate", EXAMPLE, cwd=ROOT)
     assert result.exit_code == 0, result.output
     assert result.output.splitlines()[-1].endswith("suite.yaml: valid (5 checks)")
+    folder_check = invoke("validate", EXAMPLE.parent, cwd=ROOT)   # the campaign folder
+    assert folder_check.exit_code == 0, folder_check.output
+    assert folder_check.output.splitlines()[-1] == "1 file: all valid"
     folder = tmp_path / "q"
     result = run_virtual(EXAMPLE, ROOT, folder)
     assert result.exit_code == 0, result.output
@@ -441,3 +444,25 @@ suite:
     assert "  #2        sequences/speedy.yaml: valid from the planned end of " \
            "sequences/speedy.yaml" in result.output
     assert "not checked: --static: no dry run" in result.output
+
+
+def test_a_campaign_folder_checks_its_suite_and_its_sequences_in_the_suites_order(project):
+    """at_totem.yaml is not valid alone (from Park) but is in its suite's order: the
+    campaign's table has the suite's row, not the sequences it checked."""
+    for name, text in (("start.yaml", START), ("speedy.yaml", SPEEDY),
+                       ("at_totem.yaml", AT_TOTEM)):
+        (project / "sequences" / name).write_text(text, encoding="utf-8")
+    write_suite(project, """\
+suite:
+  name: Campaign
+  setup: sequences/start.yaml
+  sequences: [{file: sequences/speedy.yaml, params: {speed: 0.8}}, sequences/at_totem.yaml]
+""")
+    result = invoke("validate", ".", cwd=project)
+    assert result.exit_code == 0, result.output
+    rows = [line.split()[:2] for line in result.output.splitlines()
+            if line.startswith(("suite.yaml ", "sequences/")) and "note:" not in line]
+    assert rows == [["suite.yaml", "valid"], ["sequences/startup.yaml", "valid"]], result.output
+    assert "its 3 sequence files are checked in its order" in result.output
+    alone = invoke("validate", "sequences/at_totem.yaml", cwd=project)
+    assert alone.exit_code == 1
