@@ -16,7 +16,7 @@ import pytest
 PROBE = r"""
 import json, os, sys, threading
 from rich.console import Console
-from seqrun.cli.run import _use_realtime
+from seqrun.cli.run import use_realtime
 
 ready, done = threading.Event(), threading.Event()
 other = {}
@@ -27,7 +27,7 @@ def control_socket():  # a thread started before the run switched to real time
 t = threading.Thread(target=control_socket)
 t.start()
 ready.wait()
-_use_realtime(Console(file=sys.stderr), 5)
+use_realtime(Console(file=sys.stderr), 5)
 mine = threading.get_native_id()
 print(json.dumps({
     "loop": [os.sched_getscheduler(mine), os.sched_getparam(mine).sched_priority],

@@ -38,12 +38,19 @@ def _sequence_schema() -> dict:
     return sequence_json_schema()
 
 
+def _suite_schema() -> dict:
+    from seqrun.sequence.suite import suite_json_schema
+
+    return suite_json_schema()
+
+
 #: File name in docs/schema/ -> function returning the schema (imports stay lazy, so one
 #: module that does not import yet does not stop the others from being generated).
 SCHEMAS: dict[str, Callable[[], dict]] = {
     "arm.schema.json": _arm_schema,
     "pose.schema.json": _pose_schema,
     "sequence.schema.json": _sequence_schema,
+    "suite.schema.json": _suite_schema,
 }
 
 

@@ -238,6 +238,21 @@ def validate_command(
     """
     if not 0 < speed <= 1:
         fail(f"--speed must lie in (0, 1], got {speed:g}")
+    if len(files) == 1:
+        from seqrun.service.suites import is_suite_file
+
+        if is_suite_file(files[0]) and junit_file is not None:
+            fail(f"--junit: {files[0]} is a suite; its junit.xml is written by seqrun run "
+                 "(validate --junit reports sequence files and campaign folders)")
+        if is_suite_file(files[0]):   # a suite (top level suite:): each entry in turn
+            from seqrun.cli.suite import validate_suite
+
+            validate_suite(files[0], as_json=as_json, start=start, arm_file=arm_file,
+                           static=static, started=started, speed=speed,
+                           project_dir=project_dir,
+                           refused={"--sim-fault": bool(sim_fault),
+                                    "--report": report_file is not None,
+                                    "--param": bool(param), "--arm-id": arm_id is not None})
     given = _given_params(param or [], files, junit_file)
     if len(files) == 1 and not _is_dir(files[0]) and junit_file is None:
         file = files[0]

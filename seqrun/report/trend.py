@@ -206,8 +206,19 @@ def run_folders(paths: list[Path]) -> list[Path]:
         if _is_run(path):
             folders.append(path)
             continue
-        folders += sorted(p for p in path.iterdir() if p.is_dir() and _is_run(p))
+        folders += sorted(p for p in _with_suites(path) if _is_run(p))
     return folders
+
+
+def _with_suites(path: Path) -> list[Path]:
+    """The folders in ``path``, a suite's folder replaced by its runs (docs/suites.md)."""
+    from seqrun.runfolder.names import is_suite_folder, runs_of_suite
+
+    found: list[Path] = []
+    for p in sorted(path.iterdir()):
+        if p.is_dir():
+            found += runs_of_suite(p) if is_suite_folder(p) else [p]
+    return found
 
 
 def _is_run(folder: Path) -> bool:

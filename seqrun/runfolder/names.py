@@ -26,3 +26,18 @@ def events_path(folder: Path) -> Path | None:
     """The run folder's event log (compressed, or an older run's plain one), if any."""
     return next((Path(folder) / name for name in EVENTS_NAMES
                  if (Path(folder) / name).is_file()), None)
+
+
+#: The copy of the suite file a suite's folder holds (written when the folder is made):
+#: what tells a suite's folder, whose runs are its subfolders, from a run's.
+SUITE_NAME = "suite.yaml"
+
+
+def is_suite_folder(folder: Path) -> bool:
+    """A suite's folder (docs/suites.md): its runs are its subfolders."""
+    return (folder / SUITE_NAME).is_file() and not (folder / "report.json").exists()
+
+
+def runs_of_suite(folder: Path) -> list[Path]:
+    """The subfolders of a suite's folder, in the order the suite ran them."""
+    return sorted(p for p in folder.iterdir() if p.is_dir())

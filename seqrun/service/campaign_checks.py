@@ -285,11 +285,75 @@ def _requirements(root: Path, results: list[FileResult]) -> FileResult | None:
     return result
 
 
+def _suites_of(folder: Path) -> list[Path]:
+    """A campaign folder's suites (docs/suites.md): ``suite.yaml`` and ``suites/*.yaml``."""
+    from seqrun.service.suites import is_suite_file
+
+    found = [folder / "suite.yaml"] + (sorted((folder / "suites").glob("*.yaml"))
+                                       if (folder / "suites").is_dir() else [])
+    return [p for p in found if is_suite_file(p)]
+
+
+def _suite(path: Path, options: dict) -> tuple[FileResult, set[Path]]:
+    """A suite checked as ``seqrun validate SUITE`` checks it (each entry from where the
+    one before leaves the arm), and the sequence files it checked that way."""
+    from seqrun.service.suites import check_suite, load_suite, several_arms
+
+    result = FileResult(str(path), "suite")
+    try:
+        suite = load_suite(path)
+        why = several_arms(suite, options["project_dir"])
+        if why is not None:
+            raise UserInputError(why)
+        checks = check_suite(suite, start=options["start"], started=options["started"],
+                             arm_file=options["arm_file"], speed=options["speed"],
+                             project_dir=options["project_dir"],
+                             dry_run=not options["static"])
+    except SequenceInvalid as exc:
+        result.result, result.errors = "invalid", [str(e) for e in exc.errors]
+        return result, set()
+    except (UserInputError, OSError) as exc:
+        result.result, result.errors = "error", [str(exc)]
+        return result, set()
+    members = {item.path.resolve() for item in suite.entries()}
+    simulated = 0.0
+    for check in checks:
+        found = check.check
+        result.errors += [str(e) for e in found.errors] if found is not None else []
+        run = found.dry_run if found is not None else None
+        if run is not None:
+            simulated += run.simulated_s
+            if not run.passed:
+                result.errors.append(f"{check.item.shown} from {check.start}: dry run "
+                                     f"{run.result.status}: {run.result.message}")
+        if found is not None and found.loaded is not None:
+            result.verifies += [rid for step in found.loaded.steps
+                                for rid in getattr(step.params, "verifies", None) or ()]
+    result.simulated_s = None if options["static"] else round(simulated, 2)
+    result.notes.append(f"{path}: note: its {len(members)} sequence files are checked in "
+                        "its order, each from where the one before leaves the arm, not alone")
+    if options.get("faults"):
+        result.notes.append(f"{path}: note: --sim-fault is not rehearsed in a suite")
+    result.result = "valid" if all(c.valid for c in checks) else "invalid"
+    return result, members
+
+
 def validate_files(paths: list[Path], **options: Any) -> list[FileResult]:
     from seqrun.sequence.project import CONFIG_NAME
+    from seqrun.service.suites import is_suite_file
 
+    files = collect(paths)
+    suites = [p for p in paths if p.is_dir() for p in _suites_of(p)]
+    suites += [p for p in files if p not in suites and is_suite_file(p)]
     results = []
-    for path in collect(paths):
+    checked: set[Path] = set()   # the sequences a suite checked in its order
+    for path in dict.fromkeys(suites):
+        result, members = _suite(path, options)
+        results.append(result)
+        checked |= members
+    for path in files:
+        if path in suites or path.resolve() in checked:
+            continue
         kind = _kind(path)
         results.append(_pose(path, options) if kind == "pose" else
                        _arm(path) if kind == "arm" else _sequence(path, options))

@@ -50,6 +50,9 @@ class DryRun:
     report_error: str | None = None
     #: The simulator faults rehearsed (spec strings, as ``--sim-fault`` takes them).
     faults: list[str] = field(default_factory=list)
+    #: Where the simulated arm stood at the end (user degrees by joint; None: never
+    #: measured): where the next sequence of a suite starts.
+    end_deg: dict[str, float] | None = None
 
     @property
     def passed(self) -> bool:
@@ -175,10 +178,11 @@ def _dry_run_unfrozen(loaded: LoadedSequence, arm: ArmDescription,
                                on_executor=_bounded(time_limit_s or arm.control.max_dry_run_s),
                                html_report=False)
         wall = time.perf_counter() - wall
+        end = _where_it_stands(connection, arm) if outcome.result.exit_code == 0 else None
     finally:
         connection.close()
     return DryRun(outcome.result, start_pose, hz, wall, events,
-                  faults=[f.spec for f in faults])
+                  faults=[f.spec for f in faults], end_deg=end)
 
 
 def gripper_switches(arm: ArmDescription, loaded: LoadedSequence) -> dict[str, object]:
@@ -201,6 +205,16 @@ def _bounded(seconds: float):
     def hook(executor) -> None:
         executor.time_limit_s = seconds
     return hook
+
+
+def _where_it_stands(connection, arm: ArmDescription) -> dict[str, float]:
+    """The simulated arm's joints (user degrees) once the run is over: read through the
+    arm's driver, after the run (the run's frames and figures are not touched)."""
+    driver = open_driver(arm, connection)
+    try:
+        return {name: float(deg) for name, deg in zip(arm.joint_names, driver.read().positions_deg)}
+    finally:
+        driver.close()
 
 
 def _keep_summary(events: list[dict]):

@@ -227,9 +227,14 @@ def list_runs(runs_dir: Path) -> list[dict]:
     runs: list[dict] = []
     if not Path(runs_dir).is_dir():
         return runs
+    from seqrun.runfolder.names import is_suite_folder, runs_of_suite
+
     for folder in sorted(Path(runs_dir).iterdir()):
-        if folder.is_dir():
-            entry = _run_entry(folder) or _arms_run_entry(folder)
+        if not folder.is_dir():
+            continue
+        # a suite's folder holds its runs: each listed as any other, named by its folder
+        for run in runs_of_suite(folder) if is_suite_folder(folder) else [folder]:
+            entry = _run_entry(run) or _arms_run_entry(run)
             if entry is not None:
                 runs.append(entry)
     runs.sort(key=lambda r: (r["when"] or "", r["folder"]))

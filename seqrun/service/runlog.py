@@ -458,6 +458,14 @@ def junit_xml(suite: str, result: RunResult, joint_names: list[str] | None = Non
     return "\n".join(lines) + "\n"
 
 
+def junit_testsuite(name: str, result: RunResult,
+                    joint_names: list[str] | None = None) -> list[str]:
+    """The lines of one ``<testsuite>`` of a run's steps, as junit.xml's first one: what a
+    test suite's junit.xml holds per sequence run (seqrun/service/suites.py)."""
+    return _junit_suite(name, name, result, result.steps, _JUNIT_PROPERTIES,
+                        joint_names or [])
+
+
 def _junit_suite(name: str, classname: str, result: RunResult, steps: list[StepResult],
                  keys: tuple[str, ...], joint_names: list[str], *,
                  checkpoint: bool = False) -> list[str]:
