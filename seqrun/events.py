@@ -230,6 +230,33 @@ class StepRetry(Event):
 
 
 @dataclass(frozen=True, kw_only=True)
+class OperatorChoice(Event):
+    type: ClassVar[str] = "operator_choice"
+    when: ClassVar[str] = ("a step with ``on_fail: pause`` failed in a way that may be "
+                           "retried (its own retries spent) and the operator chose, the arm "
+                           "at rest: ``choice`` retry (the step runs again), skip (the step "
+                           "stays failed, the run goes on once the rest is checked from the "
+                           "measured arm) or abort (an operator abort); ``by`` says who "
+                           "answered where (terminal, console), ``cause`` and ``message`` "
+                           "the failure")
+    choice: str
+    by: str
+    cause: str
+    message: str
+
+
+@dataclass(frozen=True, kw_only=True)
+class SkipRecheck(Event):
+    type: ClassVar[str] = "skip_recheck"
+    when: ClassVar[str] = ("the operator skipped a failed step (``on_fail: pause``): the "
+                           "``steps`` steps after it checked from the measured arm as the "
+                           "preflight does; any ``errors`` end the run before anything moves")
+    first_step: int
+    steps: int
+    errors: Sequence[str]
+
+
+@dataclass(frozen=True, kw_only=True)
 class StepFinished(Event):
     type: ClassVar[str] = "step_finished"
     when: ClassVar[str] = ("a step passed; ``extra`` carries its result details (a move's "
@@ -590,8 +617,9 @@ class ConfirmRequested(Event):
     type: ClassVar[str] = "confirm_requested"
     when: ClassVar[str] = ("a session run asks the operator (a confirm step, a before-step "
                            "question, clearing a latched fault, a signed confirm, a "
-                           "breakpoint); answer with ArmSession.answer(question_id, yes, "
-                           "name) (name: a signed question's yes)")
+                           "breakpoint, a step's on_fail: pause); answer with "
+                           "ArmSession.answer(question_id, yes, name, choice) (name: a signed "
+                           "question's yes; choice: one of ``choices``)")
     question_id: str
     text: str
     #: Who started the activity that asks (a face's client name; None: not said).
@@ -599,6 +627,9 @@ class ConfirmRequested(Event):
     #: A signed question: a yes needs the name of who answers (and ``role``: as what).
     sign: bool | None = _optional()
     role: str | None = _optional()
+    #: A question with choices (a step's ``on_fail: pause``: retry, skip, abort): a yes
+    #: names one of them (``ArmSession.answer(question_id, True, choice=...)``).
+    choices: Sequence[str] | None = _optional()
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -609,6 +640,8 @@ class ConfirmAnswered(Event):
     yes: bool
     #: Who answered a signed question yes.
     name: str | None = _optional()
+    #: What a yes to a question with choices chose.
+    choice: str | None = _optional()
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -54,6 +54,7 @@ from seqrun.execution.checks import ReadingChecks
 from seqrun.execution.flow import StepFlow, has_flow
 from seqrun.execution.latched import LatchedFaults
 from seqrun.execution.monitors import Monitors
+from seqrun.execution.on_fail import pause_on_failure
 from seqrun.execution.preflight import Findings, SequenceCheck, preflight, recheck
 from seqrun.execution.run import Measurement, rounded
 from seqrun.execution.stops import ResumeAsk, StopControl
@@ -94,7 +95,8 @@ class Executor:
     #: The planned path of each move as the preflight validated it from the measured
     #: start (step number -> (times s, joints rad)); None before the preflight.
     planned_paths: dict[int, Any] | None = None
-    #: Who answers a signed confirm and a breakpoint (never --yes; None: nobody attends).
+    #: Who answers a signed confirm, a breakpoint and an on_fail: pause (never --yes;
+    #: None: nobody attends).
     attended: AttendedQuestions | None = None
     #: The sha256 of the validated inputs, kept with a signature (None: not recorded).
     inputs_sha256: str | None = None
@@ -713,6 +715,12 @@ class Executor:
             raise OperatorAbort(f"operator stopped at the breakpoint before {title}"
                                 if attended is not None else
                                 f"breakpoint before {title}: nobody to ask")
+
+    def pause_on_failure(self, step, result: StepResult, exc: RunAborted) -> str:
+        """``on_fail: pause`` after a failure that may be retried: the operator's Retry or
+        Skip (seqrun/execution/on_fail.py); an Abort raises OperatorAbort."""
+        return pause_on_failure(self, self._loaded, step, result, exc,
+                                f"step {step.number}: {_label(step)}")
 
     def _begin_step(self, step, result: StepResult, *, iteration: int | None = None,
                     bound: dict[str, int] | None = None, attempt: int | None = None) -> None:

@@ -69,8 +69,8 @@ class UntakenBranch:
     """A branch of a step's flow keys that a run did not take (seqrun/execution/flow.py)."""
 
     step: int
-    key: str              # "if", "skip_if", "repeat while" or "retry"
-    value: bool | None    # the condition's value never seen (None: a retry never taken)
+    key: str              # "if", "skip_if", "repeat while", "retry" or "on_fail"
+    value: bool | None    # the condition's value never seen (None: retry, on_fail)
     line: str             # as "not verified" lists it
 
     def same_branch(self, other: UntakenBranch) -> bool:

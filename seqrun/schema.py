@@ -168,7 +168,8 @@ class IncludeParams(StepParams):
             raise PydanticCustomError("include_requirements", "an include runs other steps: "
                                       "put {keys} on those steps", {"keys": " and ".join(given)})
         flow = [alias for key, alias in (("if_", "if"), ("skip_if", "skip_if"),
-                                         ("repeat", "repeat"), ("retry", "retry"))
+                                         ("repeat", "repeat"), ("retry", "retry"),
+                                         ("on_fail", "on_fail"))
                 if getattr(self, key) is not None]
         if flow:
             raise PydanticCustomError("include_flow", "an include runs other steps: put "
@@ -208,7 +209,8 @@ class BlockParams(StepParams):
         given = [alias for key, alias in (("monitors", "monitors"), ("verifies", "verifies"),
                                           ("tags", "tags"), ("if_", "if"),
                                           ("skip_if", "skip_if"), ("repeat", "repeat"),
-                                          ("retry", "retry"), ("breakpoint", "breakpoint"))
+                                          ("retry", "retry"), ("breakpoint", "breakpoint"),
+                                          ("on_fail", "on_fail"))
                  if getattr(self, key)]
         if given:
             raise PydanticCustomError("block_keys", "a block takes steps, rescue, always and "

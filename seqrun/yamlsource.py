@@ -828,8 +828,8 @@ class FriendlyModel(BaseModel):
     def unknown_key_message(cls, key: str) -> str:
         # the keys as written in a file (a field's alias where it has one: 'while')
         # the keys every step has, after the step's own
-        last = ("monitors", "verifies", "tags", "if", "skip_if", "repeat", "retry", "breakpoint",
-                "label")
+        last = ("monitors", "verifies", "tags", "if", "skip_if", "repeat", "retry", "on_fail",
+                "breakpoint", "label")
         allowed = sorted((field.alias or name for name, field in cls.model_fields.items()),
                          key=lambda name: last.index(name) + 1 if name in last else 0)
         where = f" in {cls.yaml_name}" if cls.yaml_name else ""

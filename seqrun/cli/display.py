@@ -103,6 +103,9 @@ class PlainDisplay:
         elif kind == "step_retry":
             self._print(f"      retry {event['attempt']}/{event['times']} after: "
                         f"{event['message']}")
+        elif kind == "operator_choice":  # on_fail: pause
+            self._print(f"      the operator chose {event['choice']} ({event['by']}) after: "
+                        f"{event['message']}")
         elif kind in ("block_step_failed", "block_finished"):
             self._print(f"      {block_text(event)}")
         elif kind == "step_finished":

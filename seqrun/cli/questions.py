@@ -64,6 +64,26 @@ def ask(question: str, assume_yes: bool = False, *,
     return answer is not None and answer.strip().lower() in ("y", "yes")
 
 
+def ask_choice(question: str, choices: tuple[str, ...], *, say: Callable[..., Any],
+               read: Callable[[], str | None]) -> str | None:
+    """One of ``choices`` by its name or first letter (asked again for anything else);
+    None at the end of input or a signal (no answer). Never answered by --yes."""
+    keys = "/".join(c[0] for c in choices)
+    while True:
+        say(f"{question} [{keys}] ", end="")
+        answer = read()
+        if answer == "":
+            say(END_OF_INPUT)
+            return None
+        if answer is None:
+            return None
+        given = answer.strip().lower()
+        for choice in choices:
+            if given in (choice, choice[0]):
+                return choice
+        say(f"Answer one of: {', '.join(f'{c[0]} ({c})' for c in choices)}.")
+
+
 def ask_name(role: str | None, *, say: Callable[..., Any],
              read: Callable[[], str | None]) -> str | None:
     """Who answers a signed question: their name (asked again while empty); None at the

@@ -44,8 +44,12 @@ def ask_shown(console: Console, displays: list, question: str, assume_yes: bool,
 
 
 class Attended:
-    """Signed confirms and breakpoints on the terminal: asked of the person there, even
+    """Signed confirms, breakpoints and on_fail: pause on the terminal: asked of the
+    person there, even
     with --yes (which the run refuses beforehand: :func:`refuse_yes_for_attended`)."""
+
+    #: Where its answers come from (an on_fail: pause's operator_choice event says).
+    where = "terminal"
 
     def __init__(self, console: Console, displays: list,
                  read: Callable[[], str | None]) -> None:
@@ -69,6 +73,19 @@ class Attended:
 
     def breakpoint(self, prompt: str) -> bool:
         return ask_shown(self.console, self.displays, prompt, False, read=self.read)
+
+    def choose(self, prompt: str, choices: tuple[str, ...]) -> str | None:
+        from seqrun.cli.questions import ask_choice
+
+        def say(text: str, end: str = "\n") -> None:
+            self.console.print(text, end=end, highlight=False, markup=False, soft_wrap=True)
+
+        if self.displays and hasattr(self.displays[0], "asking"):
+            with self.displays[0].asking(None):
+                return ask_choice(prompt, choices, say=say, read=self.read)
+        for display in self.displays:  # the plain lines so far come before the question
+            getattr(display, "flush", lambda: None)()
+        return ask_choice(prompt, choices, say=say, read=self.read)
 
 
 def refuse_yes_for_attended(loaded, yes: bool) -> str | None:

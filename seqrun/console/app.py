@@ -428,7 +428,7 @@ def build_router(console: Console, *, prefix: str = API,
     def answer(body: models.AnswerBody = json_body(models.AnswerBody),
                token: ControlHeader = None) -> Any:
         commander(token, "answer")
-        return jsonable(session.answer(body.question_id, body.yes, body.name))
+        return jsonable(session.answer(body.question_id, body.yes, body.name, body.choice))
 
     @api.post("/poses", summary="Save the arm's measured joints as a pose file",
               openapi_extra=documented(models.SavePoseBody))

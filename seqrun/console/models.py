@@ -72,6 +72,8 @@ class AnswerBody(_Strict):
     yes: bool
     #: Who answers a signed question yes (required there, asked again while empty).
     name: str | None = Field(None, max_length=80)
+    #: A yes to a question with choices (its confirm_requested lists them) names one.
+    choice: str | None = Field(None, min_length=1, max_length=40)
 
 
 class SavePoseBody(_Strict):

@@ -34,8 +34,13 @@ __all__ = ["StepFlow", "has_flow"]
 
 def has_flow(params: Any) -> bool:
     """Whether a step's parameters use any flow key."""
-    return any(getattr(params, key, None) is not None
-               for key in ("if_", "skip_if", "repeat", "retry"))
+    return (any(getattr(params, key, None) is not None
+                for key in ("if_", "skip_if", "repeat", "retry"))
+            or getattr(params, "on_fail", None) == "pause")
+
+
+class _SkippedByOperator(Exception):
+    """The operator chose Skip at a step's ``on_fail: pause`` (the step's result says so)."""
 
 
 @dataclass
@@ -47,6 +52,8 @@ class _Seen:
     values: dict[str, tuple[str, set[bool]]] = field(default_factory=dict)
     retry_possible: bool = False
     retried: bool = False
+    pause_possible: bool = False
+    paused: bool = False
 
 
 class StepFlow:
@@ -63,9 +70,17 @@ class StepFlow:
     def run(self, step: ResolvedStep[Any], result: StepResult,
             begin: Callable[..., None], once: Callable[[], dict]) -> dict | None:
         """Run ``step`` as its flow keys say; returns the detail of its last run, or
-        None when it did not run (``result`` then says skipped, and why)."""
-        params = step.params
+        None when it did not run or the operator skipped it after a failure (``result``
+        then says skipped, or failed and skipped by the operator)."""
         seen = self._seen.setdefault(step.number, _Seen(result.location))
+        try:
+            return self._run(step, result, begin, once, seen)
+        except _SkippedByOperator:
+            return None
+
+    def _run(self, step: ResolvedStep[Any], result: StepResult,
+             begin: Callable[..., None], once: Callable[[], dict], seen: _Seen) -> dict | None:
+        params = step.params
         for key, text, runs_when in (("if", params.if_, True),
                                      ("skip_if", params.skip_if, False)):
             if text is None:
@@ -104,25 +119,37 @@ class StepFlow:
 
     def _attempts(self, step: ResolvedStep[Any], result: StepResult,
                   begin: Callable[..., None], once: Callable[[], dict], seen: _Seen) -> dict:
-        """The step's run, retried as its ``retry`` allows."""
+        """The step's run, retried as its ``retry`` allows, then (``on_fail: pause``) as
+        the operator chooses: Retry, Skip or Abort. The dry run never pauses: its failure
+        ends it as without on_fail (what the operator would choose is not verified)."""
         retry = step.params.retry
+        pause = step.params.on_fail == "pause"
         seen.retry_possible = seen.retry_possible or retry is not None
-        attempt = 0
+        seen.pause_possible = seen.pause_possible or pause
+        attempt = retried = 0   # every run again; those of the step's own retry
         while True:
             try:
                 return once()
             except RunAborted as exc:
-                if (retry is None or attempt >= retry.times or not exc.retryable
-                        or self.stops.halt_request is not None or self.stops.aborts):
+                if (not exc.retryable or self.stops.halt_request is not None
+                        or self.stops.aborts):
+                    raise
+                if retry is not None and retried < retry.times:
+                    retried += 1
+                    seen.retried = True
+                    self.ex.emit("step_retry", attempt=retried, times=retry.times,
+                                 cause=exc.cause, message=str(exc), delay_s=retry.delay_s)
+                    result.detail.setdefault("retries", []).append(
+                        {"attempt": retried, "after": str(exc)})
+                    if retry.delay_s > 0:
+                        self.ex.wait(retry.delay_s)
+                elif pause and not self.ex.dry_run:
+                    seen.paused = True
+                    if self.ex.pause_on_failure(step, result, exc) == "skip":
+                        raise _SkippedByOperator() from None
+                else:
                     raise
                 attempt += 1
-                seen.retried = True
-                self.ex.emit("step_retry", attempt=attempt, times=retry.times,
-                             cause=exc.cause, message=str(exc), delay_s=retry.delay_s)
-                result.detail.setdefault("retries", []).append(
-                    {"attempt": attempt, "after": str(exc)})
-            if retry.delay_s > 0:
-                self.ex.wait(retry.delay_s)
             if self.stops.aborts:
                 raise OperatorAbort("operator abort")
             begin(step, result, attempt=attempt)
@@ -171,6 +198,10 @@ class StepFlow:
                 branches.append(UntakenBranch(
                     number, "retry", None, f"{where}: its retry was never exercised (the "
                                            "step never failed in a way that may be retried)"))
+            if seen.pause_possible and not seen.paused:
+                branches.append(UntakenBranch(
+                    number, "on_fail", None, f"{where}: on_fail: pause: the operator's "
+                                             "choice (retry, skip, abort) is not verified"))
         return branches
 
 

@@ -28,6 +28,10 @@ class Question:
     sign: bool = False
     role: str | None = None
     name: str | None = None
+    #: A question with choices (e.g. retry, skip, abort): a yes names one of them (kept in
+    #: ``choice``); a no (or the withdrawal) chooses none.
+    choices: tuple[str, ...] = ()
+    choice: str | None = None
 
     def __post_init__(self) -> None:
         self.answered = threading.Event()
@@ -59,6 +63,11 @@ class Questions:
         q = self._wait(Question("", text, sign=True, role=role))
         return q.name if q.yes else None
 
+    def ask_choice(self, text: str, choices: tuple[str, ...]) -> str | None:
+        """A question with ``choices``: the one chosen, None for a no or the withdrawal."""
+        q = self._wait(Question("", text, choices=tuple(choices)))
+        return q.choice if q.yes else None
+
     def _wait(self, q: Question) -> Question:
         with self._lock:
             self._ids += 1
@@ -66,7 +75,8 @@ class Questions:
             self._open[q.id] = q
         by = self._started_by()  # who started the run the question is about
         signed = {"sign": True, **({"role": q.role} if q.role else {})} if q.sign else {}
-        self._publish("confirm_requested", question_id=q.id, text=q.text, **signed,
+        chosen = {"choices": list(q.choices)} if q.choices else {}
+        self._publish("confirm_requested", question_id=q.id, text=q.text, **signed, **chosen,
                       **({"started_by": by} if by is not None else {}))
         while not q.answered.wait(POLL_S):
             # A stop request posted meanwhile (abort, STOP) answers no at once.
@@ -74,10 +84,13 @@ class Questions:
                 self._resolve(q, False)
         return q
 
-    def answer(self, question_id: str, yes: bool, name: str | None = None) -> None:
+    def answer(self, question_id: str, yes: bool, name: str | None = None,
+               choice: str | None = None) -> None:
         """Answer a ``confirm_requested`` question (any thread); a signed one's yes with
-        the ``name`` of who gives it. Refused: unknown or already answered question, a
-        signed yes without a name (the question stays open: asked again)."""
+        the ``name`` of who gives it, a yes to a question with choices with the ``choice``.
+        Refused: unknown or already answered question, a signed yes without a name, a yes
+        without one of the choices, a choice to a question without them (the question
+        stays open)."""
         with self._lock:
             q = self._open.get(question_id)
         if q is None:
@@ -89,6 +102,12 @@ class Questions:
             if not given:
                 raise Refused("answer: a signed question needs the name of who answers")
             q.name = given
+        if q.choices and yes:
+            if choice not in q.choices:
+                raise Refused(f"answer: choose one of {', '.join(q.choices)}, got {choice!r}")
+            q.choice = choice
+        elif choice is not None and not q.choices:
+            raise Refused(f"answer: question {question_id!r} offers no choices")
         self._resolve(q, yes)
 
     def step(self) -> None:
@@ -118,14 +137,18 @@ class Questions:
                 return
             q.yes = yes
         self._publish("confirm_answered", question_id=q.id, yes=yes,
-                      **({"name": q.name} if q.sign and yes else {}))
+                      **({"name": q.name} if q.sign and yes else {}),
+                      **({"choice": q.choice} if q.choice is not None and yes else {}))
         q.answered.set()
 
 
 class SessionAttended:
-    """Signed confirms and breakpoints asked through the session's questions (the
+    """Signed confirms, breakpoints and on_fail: pause asked through the session's questions (the
     console's dialog): never answered by an ``assume_yes`` (:mod:`seqrun.steps.context`,
     ``AttendedQuestions``)."""
+
+    #: Where its answers come from (an on_fail: pause's operator_choice event says).
+    where = "console"
 
     def __init__(self, questions: Questions) -> None:
         self._questions = questions
@@ -135,3 +158,6 @@ class SessionAttended:
 
     def breakpoint(self, prompt: str) -> bool:
         return self._questions.ask(prompt)
+
+    def choose(self, prompt: str, choices: tuple[str, ...]) -> str | None:
+        return self._questions.ask_choice(prompt, choices)

@@ -378,8 +378,9 @@ class ArmSession:
     def step(self) -> None:
         self.questions.step()
 
-    def answer(self, question_id: str, yes: bool, name: str | None = None) -> None:
-        self.questions.answer(question_id, yes, name)
+    def answer(self, question_id: str, yes: bool, name: str | None = None,
+               choice: str | None = None) -> None:
+        self.questions.answer(question_id, yes, name, choice)
 
     def pending_questions(self) -> dict[str, str]:
         return self.questions.pending()

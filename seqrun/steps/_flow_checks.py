@@ -1,4 +1,5 @@
-"""The static checks of a step's flow keys: ``if``, ``skip_if``, ``repeat`` and ``retry``.
+"""The static checks of a step's flow keys: ``if``, ``skip_if``, ``repeat``, ``retry`` and
+``on_fail``.
 
 Validation follows one path of the arm: the steps that move it or change what the modules
 have been told (reset, home, limits, halt, power off) and the signals between arms run
@@ -58,6 +59,23 @@ def check_flow(checker: CheckContext, step: ResolvedStep[Any], params: Any,
             checker.errors.append(step.error(
                 f"delay_s {f(params.retry.delay_s)} s is longer than the arm file allows "
                 f"(control.max_wait_s = {f(bound)} s)", "retry", "delay_s"))
+    if params.on_fail == "pause":
+        check_pause(checker, step)
+
+
+def check_pause(checker: CheckContext, step: ResolvedStep[Any]) -> None:
+    """``on_fail: pause``: on a step whose failure may be retried, outside a block (its
+    rescue decides there) and outside a campaign of several arms (a pause changes the
+    timing the arms were checked against each other along)."""
+    why = (f"a {step.kind} step does not fail in a way the operator may retry or skip "
+           f"(only {', '.join(sorted(RETRYABLE_KINDS))} do; a fault is never offered)"
+           if step.kind not in RETRYABLE_KINDS else
+           "a step in a block: its rescue decides what a failure does (put on_fail on a "
+           "step outside the block)" if step.blocks else
+           "a campaign of several arms: a pause changes the timing the arms are checked "
+           "against each other along" if checker.arm_id is not None else None)
+    if why is not None:
+        checker.errors.append(step.error(f"on_fail: pause: {why}", "on_fail", key=True))
 
 
 #: Step kinds that speak to the other arms: never in a rescue or always, whose timing the

@@ -49,14 +49,18 @@ class ArmEvents(Protocol):
 
 
 class AttendedQuestions(Protocol):
-    """The questions only a person at the run answers (never ``--yes``): a signed confirm
-    and a breakpoint. None where nobody attends (a dry run passes through them)."""
+    """The questions only a person at the run answers (never ``--yes``): a signed confirm,
+    a breakpoint and a step's ``on_fail: pause``. None where nobody attends (a dry run passes through them)."""
 
     def sign(self, prompt: str, role: str | None) -> str | None:
         """Ask ``prompt``; the name of who answered yes (never empty), None for a no."""
 
     def breakpoint(self, prompt: str) -> bool:
         """Ask whether to go on; True to continue."""
+
+    def choose(self, prompt: str, choices: tuple[str, ...]) -> str | None:
+        """Ask for one of ``choices`` (a step's ``on_fail: pause``); None: no answer (the
+        input ended, the question was withdrawn), taken as an abort."""
 
 
 class StepContext(Protocol):

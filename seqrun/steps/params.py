@@ -251,6 +251,14 @@ class StepParams(StrictModel):
         None, description="Try the step again after a failed measurement: {times: N, "
                           "delay_s: S}; check, wait_until, checkpoint and check_gripper only "
                           "(docs/safety.md, 'What may be retried').")
+    on_fail: Literal["fail", "pause"] | None = Field(
+        None, description="What a failure that may be retried does once the step's own "
+                          "retries are spent: fail (the default) ends the run; pause holds "
+                          "the arm at rest and asks the operator Retry, Skip or Abort (a "
+                          "terminal prompt, the console's question); never after a fault "
+                          "or a Halt, never answered by --yes; check, wait_until, "
+                          "checkpoint and check_gripper only, not in a block "
+                          "(docs/safety.md, 'Who answers what').")
 
     @classmethod
     def from_shorthand(cls, value: Any) -> StepParams:

@@ -1,0 +1,178 @@
+"""Issue 39, item 6 (the last part): ``on_fail: pause`` hands the operator Retry / Skip /
+Abort after a step's failure that may be retried (its own retries spent), at the terminal
+and in the console, each answer an ``operator_choice`` event and a line of the step's
+report. A fault is never offered; ``--yes`` never answers it; a dry run never pauses."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+import seqrun.cli  # noqa: F401  (registers every command)
+from runfolder import RunFolder
+from seqrun.cli.app import app
+
+runner = CliRunner()
+
+HEAD = """\
+name: Pause
+steps:
+  - reset
+  - home
+  - set_limits
+"""  # the steps below start on line 6
+
+#: Fails its first attempt (0.2 s, from a start well before 0.5 s), passes on a retry.
+LATE = ("  - wait_until: {until: 'sequence_time_s > 0.5', timeout_s: 0.3, on_fail: pause, "
+        "label: Late}\n")
+#: Never holds.
+NEVER = "  - check: {that: 'tool.z_mm > 5000', on_fail: pause, label: Never}\n"
+AFTER = "  - move: {joints: {j1: 5}, label: After}\n"
+
+
+def write(project: Path, steps: str) -> Path:
+    path = project / "sequences" / "p.yaml"
+    path.write_text(HEAD + steps, encoding="utf-8")
+    return path
+
+
+def invoke(*args, cwd: Path, stdin: str = ""):
+    with contextlib.chdir(cwd):
+        result = runner.invoke(app, [str(a) for a in args], input=stdin)
+    assert "Traceback" not in result.output, result.output
+    return result
+
+
+def run_virtual(path: Path, project: Path, folder: Path, stdin: str, *extra: str):
+    return invoke("run", path, "--virtual-time", "--plain", "--no-report", "--log-dir",
+                  folder, *extra, cwd=project, stdin=stdin)
+
+
+def report(folder: Path) -> dict:
+    return json.loads((folder / "report.json").read_text(encoding="utf-8"))
+
+
+def choices(folder: Path) -> list[tuple[int, str, str]]:
+    return [(e["step"], e["choice"], e["by"]) for e in RunFolder(folder).events()
+            if e["type"] == "operator_choice"]
+
+
+def test_retry_runs_the_step_again_and_the_run_passes(project, tmp_path):
+    path = write(project, LATE)
+    folder = tmp_path / "run"
+    result = run_virtual(path, project, folder, "r\n")
+    assert result.exit_code == 0, result.output
+    assert result.output.count("Retry, skip or abort? [r/s/a]") == 1
+    assert choices(folder) == [(4, "retry", "terminal")]
+    step = report(folder)["steps"][3]
+    assert step["status"] == "passed"
+    assert [c["choice"] for c in step["operator_choices"]] == ["retry"]
+    assert "did not hold within 0.3 s" in step["operator_choices"][0]["after"]
+
+
+def test_skip_leaves_the_step_failed_and_the_run_goes_on_and_passes(project, tmp_path):
+    path = write(project, NEVER + AFTER)
+    folder = tmp_path / "run"
+    result = run_virtual(path, project, folder, "x\nskip\n")   # asked again after "x"
+    assert result.exit_code == 0, result.output
+    assert "Answer one of: r (retry), s (skip), a (abort)." in result.output
+    assert choices(folder) == [(4, "skip", "terminal")]
+    data = report(folder)
+    never, after = data["steps"][3], data["steps"][4]
+    assert never["status"] == "failed" and never["skipped_by"] == "operator"
+    assert never["error"] == never["operator_choices"][0]["after"]
+    assert after["status"] == "passed"
+    events = RunFolder(folder).events()
+    [recheck] = [e for e in events if e["type"] == "skip_recheck"]
+    assert (recheck["first_step"], recheck["steps"], recheck["errors"]) == (5, 1, [])
+    # the rest was checked before anything moved again
+    order = [e["type"] for e in events]
+    assert order.index("skip_recheck") < max(i for i, t in enumerate(order)
+                                             if t == "step_started")
+
+
+def test_abort_is_an_operator_abort_and_nothing_moves_after(project, tmp_path):
+    path = write(project, NEVER + AFTER)
+    folder = tmp_path / "run"
+    result = run_virtual(path, project, folder, "a\n")
+    assert result.exit_code == 130, result.output
+    assert choices(folder) == [(4, "abort", "terminal")]
+    data = report(folder)
+    assert [s["status"] for s in data["steps"][3:]] == ["aborted", "not_run"] or \
+        data["steps"][3]["status"] == "aborted", data["steps"]
+    events = RunFolder(folder).events()
+    chosen = next(i for i, e in enumerate(events) if e["type"] == "operator_choice")
+    later = [e["type"] for e in events[chosen:]]
+    assert "step_started" not in later and "fault" not in later
+    assert not any(t.startswith("move") or t == "plan" for t in later), later
+
+
+def test_no_answer_at_the_end_of_input_is_an_abort(project, tmp_path):
+    path = write(project, NEVER)
+    folder = tmp_path / "run"
+    result = run_virtual(path, project, folder, "")
+    assert result.exit_code == 130, result.output
+    assert choices(folder) == [(4, "abort", "nobody answered")]
+
+
+def test_a_module_fault_is_never_offered(project, tmp_path):
+    path = write(project, "  - wait_until: {until: 'sequence_time_s > 100', timeout_s: 2, "
+                          "on_fail: pause}\n")
+    folder = tmp_path / "run"
+    result = run_virtual(path, project, folder, "r\nr\n", "--sim-fault", "4:tow_error@0.5")
+    assert result.exit_code == 3, result.output
+    assert "Retry, skip or abort?" not in result.output
+    data = report(folder)
+    assert data["fault"]["cause"] == "tow_error" and data["fault"]["halt_confirmed"] is True
+    assert choices(folder) == []
+
+
+def test_yes_never_answers_it_and_nothing_is_sent(project, tmp_path):
+    path = write(project, NEVER)
+    folder = tmp_path / "run"
+    result = run_virtual(path, project, folder, "s\n", "--yes")
+    assert result.exit_code == 2, result.output
+    [line] = result.output.strip().splitlines()[-1:]
+    assert "--yes" in line and "nothing was sent" in line
+    assert "p.yaml:6:5" in line and "on_fail: pause" in line
+    assert not folder.exists()
+
+
+def test_the_dry_run_never_pauses_and_lists_the_choice_as_not_verified(project):
+    path = write(project, LATE.replace("0.5", "0.01"))
+    result = invoke("validate", "--json", path, cwd=project)
+    dry = json.loads(result.stdout)["dry_run"]
+    assert dry["passed"] is True, dry
+    assert any("on_fail: pause: the operator's choice (retry, skip, abort) is not "
+               "verified" in item and item.startswith("step 4") for item in dry["not_verified"])
+    # a failure in the dry run fails it as without on_fail
+    path = write(project, NEVER)
+    result = invoke("validate", "--json", path, cwd=project)
+    assert json.loads(result.stdout)["dry_run"]["passed"] is False
+
+
+@pytest.mark.parametrize("steps, where, message", [
+    ("  - wait: {seconds: 1, on_fail: pause}\n", "6:24",
+     "on_fail: pause: a wait step does not fail in a way the operator may retry"),
+    ("  - check: {that: 'tool.z_mm > 0', on_fail: stop}\n", "6:45", "'fail' or 'pause'"),
+    ("  - block:\n      steps:\n        - check: {that: 'tool.z_mm > 0', on_fail: pause}\n",
+     "8:42", "on_fail: pause: a step in a block: its rescue decides"),
+    ("  - include: {file: startup.yaml, on_fail: pause}\n", "6:14", "on_fail"),
+])
+def test_on_fail_is_refused_where_it_cannot_hold(project, steps, where, message):
+    path = write(project, steps)
+    result = invoke("validate", path, cwd=project)
+    assert result.exit_code == 1, result.output
+    assert f"p.yaml:{where}:" in result.output and message in result.output, result.output
+
+
+def test_a_sequence_without_on_fail_ends_at_the_failure_as_before(project, tmp_path):
+    path = write(project, NEVER.replace(", on_fail: pause", "") + AFTER)
+    folder = tmp_path / "run"
+    result = run_virtual(path, project, folder, "", "--yes")
+    assert result.exit_code == 3, result.output
+    assert choices(folder) == [] and "Retry, skip or abort?" not in result.output
