@@ -176,3 +176,50 @@ def test_a_sequence_without_on_fail_ends_at_the_failure_as_before(project, tmp_p
     result = run_virtual(path, project, folder, "", "--yes")
     assert result.exit_code == 3, result.output
     assert choices(folder) == [] and "Retry, skip or abort?" not in result.output
+
+
+# --------------------------------------------------------------------------- the console
+def test_the_console_offers_the_choices_and_only_the_control_holder_answers(tmp_path):
+    from consolekit import CONTROL, LIVE, LOCAL, console_setup
+    from fastapi.testclient import TestClient
+
+    setup = console_setup(tmp_path)
+    (setup.folder / "sequences" / "pause.yaml").write_text(
+        "name: Pause\nsteps:\n" + NEVER + "  - wait: {seconds: 0.1, label: After}\n")
+
+    def next_event(ws, type_: str, pinging=()) -> dict:
+        while True:
+            for page in pinging:
+                page.send_json({"op": "ping"})
+            message = ws.receive_json()
+            if message["type"] == "event" and message["event"]["type"] == type_:
+                return message["event"]
+
+    try:
+        with TestClient(setup.app(), base_url=LOCAL) as client, \
+                client.websocket_connect(LIVE) as tab_a, \
+                client.websocket_connect(LIVE) as tab_b:
+            a, b = tab_a.receive_json(), tab_b.receive_json()
+            as_a, as_b = {CONTROL: a["token"]}, {CONTROL: b["client"]}
+            r = client.post("/api/v1/run", json={"sequence": "pause.yaml"}, headers=as_a)
+            assert r.status_code == 200, r.text
+            question = next_event(tab_b, "confirm_requested", pinging=(tab_a,))
+            assert question["choices"] == ["retry", "skip", "abort"]
+            assert "Retry, skip or abort?" in question["text"]
+            skip = {"question_id": question["question_id"], "yes": True, "choice": "skip"}
+            r = client.post("/api/v1/answer", json=skip, headers=as_b)
+            assert r.status_code == 409 and "holds control" in r.json()["error"]
+            r = client.post("/api/v1/answer", json={**skip, "choice": "later"}, headers=as_a)
+            assert r.status_code == 409 and "choose one of retry, skip, abort" in r.text
+            assert client.post("/api/v1/answer", json=skip, headers=as_a).status_code == 200
+            chosen = next_event(tab_a, "operator_choice", pinging=(tab_a,))
+            assert (chosen["choice"], chosen["by"], chosen["step"]) == ("skip", "console", 1)
+            finished = next_event(tab_a, "run_finished", pinging=(tab_a,))
+            assert finished["status"] == "passed", finished
+    finally:
+        setup.close()
+    [folder] = [p for p in setup.runs.rglob("report.json")]
+    steps = json.loads(folder.read_text())["steps"]
+    assert [s["status"] for s in steps] == ["failed", "passed"]
+    assert steps[0]["skipped_by"] == "operator"
+    assert steps[0]["operator_choices"][0]["by"] == "console"

@@ -352,9 +352,32 @@ function askOperator(e) {
   $("#confirm-name-label").textContent = e.role ? `Signed by (${e.role}), your name` : "Signed by, your name";
   $("#confirm-name").value = "";
   $("#confirm-name-note").hidden = true;
+  // A question with choices (a step's on_fail: pause: retry, skip, abort): a button each.
+  const choices = Array.isArray(e.choices) ? e.choices : [];
+  $("#confirm-yes").hidden = $("#confirm-no").hidden = choices.length > 0;
+  const row = $("#confirm-choices");
+  row.replaceChildren(...choices.map((choice) => {
+    const button = document.createElement("button");
+    button.type = "button";
+    button.className = "needs-control";
+    button.dataset.choice = choice;
+    button.textContent = choice.charAt(0).toUpperCase() + choice.slice(1);
+    button.disabled = !holdsControl();
+    button.addEventListener("click", () => answerChoice(choice));
+    return button;
+  }));
+  row.hidden = choices.length === 0;
   showQuestionWho(e);
   $("#confirm-dialog").hidden = false;
   if (e.sign) $("#confirm-name").focus();
+}
+
+async function answerChoice(choice) {
+  if (!state.question) return;
+  const id = state.question.question_id;
+  closeQuestion();
+  await command(choice.charAt(0).toUpperCase() + choice.slice(1), "POST", "/answer",
+                { question_id: id, yes: true, choice });
 }
 
 function showQuestionWho(e) {
