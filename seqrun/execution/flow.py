@@ -1,5 +1,5 @@
-"""A step's flow: ``if`` / ``skip_if`` at its start, ``repeat``, ``retry``, and which
-branches a run took.
+"""A step's flow: ``if`` / ``skip_if`` at its start, ``repeat``, ``retry``, ``on_fail``, and
+which branches a run took.
 
 The executor hands each step with flow keys to :meth:`StepFlow.run` with two callables of
 its own: ``begin`` (the step's event and monitors for an iteration or an attempt) and
@@ -12,7 +12,8 @@ telemetry as ``wait_until`` and ``check``. A retry follows only a failure the st
 retryable (:attr:`seqrun.errors.RunAborted.retryable`: a measurement that did not meet its
 bound while nothing moved), and only while no Halt or abort is pending: a module fault, a
 Halt, a guard or monitor halt and an operator abort end the run as before
-(docs/safety.md, "What may be retried").
+(docs/safety.md, "What may be retried"). After the same failures, ``on_fail: pause`` asks
+the operator (seqrun/execution/on_fail.py) once the step's own retries are spent.
 """
 
 from __future__ import annotations

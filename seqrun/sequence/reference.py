@@ -288,6 +288,14 @@ it did not take (a condition that was never true or never false, a retry never n
 under "not verified", and so does its `--json` (`dry_run.not_verified`); a branch that a
 dry run at a numeric parameter's `min` or `max` took (see "Parameters") is not listed.
 
+`on_fail: pause` (on the same four kinds, outside blocks and campaigns of several arms)
+hands the failure to the operator once the step's own `retry` is spent, the arm at rest:
+Retry runs the step again, Skip leaves it failed ("skipped by the operator") and goes on
+once the rest of the sequence is checked from the measured pose, Abort ends the run as an
+operator abort (exit 130); each answer is an `operator_choice` event and a line of the
+step's report. A fault is never offered, `--yes` never answers it and the dry run never
+pauses (docs/safety.md, "Who answers what"). The default, `on_fail: fail`, ends the run.
+
 ```yaml
   - grip: {part_width_mm: 30, force_n: 40, if: "not gripper.holding"}   # nothing held yet
   - confirm: {prompt: "Is the desk clear?", skip_if: "tool.z_mm > 400"}
@@ -295,6 +303,7 @@ dry run at a numeric parameter's `min` or `max` took (see "Parameters") is not l
   - wait: {seconds: 1, repeat: {while: "abs(vel_deg_s[4]) > 0.05", max: 10}}
   - wait_until: {until: "gripper.holding", timeout_s: 2, retry: {times: 2, delay_s: 1}}
   - checkpoint: {pose: capture, retry: {times: 1, delay_s: 0.5}}
+  - check: {that: "gripper.holding", on_fail: pause}     # Retry / Skip / Abort
 ```
 
 ## Blocks: rescue and always
