@@ -130,7 +130,7 @@ def test_step_titles_use_the_label_or_describe_the_step(project):
                                         "got 'other.txt'")]),
     ("- include: {file: x.yml, lable: y}\n", 4, 26, [(
         "unknown key 'lable' in include (did you mean 'label'? allowed: file, with, "
-        "monitors, verifies, tags, if, skip_if, repeat, retry, breakpoint, label)")]),
+        "monitors, verifies, tags, if, skip_if, repeat, retry, on_fail, breakpoint, label)")]),
     ("- reset: {label: ''}\n", 4, 18, ["must not be empty"]),
 ])
 def test_step_errors_are_located_and_explained(project, steps, line, col, words):
