@@ -223,3 +223,23 @@ def test_the_console_offers_the_choices_and_only_the_control_holder_answers(tmp_
     assert [s["status"] for s in steps] == ["failed", "passed"]
     assert steps[0]["skipped_by"] == "operator"
     assert steps[0]["operator_choices"][0]["by"] == "console"
+
+
+def test_a_campaign_of_several_arms_refuses_it_at_its_line(tmp_path):
+    import shutil
+
+    from projecttree import ROOT
+
+    campaign = tmp_path / "two"
+    shutil.copytree(ROOT / "examples" / "two-arms", campaign,
+                    ignore=shutil.ignore_patterns("runs"))
+    path = campaign / "sequences" / "hold_and_approach.yaml"
+    text = path.read_text(encoding="utf-8")
+    move = "          - move: {pose: totem, velocity_scale: 0.5, label: A up to Totem}\n"
+    assert move in text
+    path.write_text(text.replace(move, move + "          - check: {that: 'tool.z_mm > 0', "
+                                              "on_fail: pause}\n", 1), encoding="utf-8")
+    result = invoke("validate", "--static", path, cwd=campaign)
+    assert result.exit_code == 1, result.output
+    assert ("sequences/hold_and_approach.yaml:19:44: on_fail: pause: a campaign of several "
+            "arms") in result.output, result.output
