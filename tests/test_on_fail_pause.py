@@ -77,7 +77,8 @@ def test_retry_runs_the_step_again_and_the_run_passes(project, tmp_path):
 def test_skip_leaves_the_step_failed_and_the_run_goes_on_and_passes(project, tmp_path):
     path = write(project, NEVER + AFTER)
     folder = tmp_path / "run"
-    result = run_virtual(path, project, folder, "x\nskip\n")   # asked again after "x"
+    result = invoke("run", path, "--virtual-time", "--plain", "--log-dir", folder,
+                    cwd=project, stdin="x\nskip\n")   # asked again after "x"
     assert result.exit_code == 0, result.output
     assert "Answer one of: r (retry), s (skip), a (abort)." in result.output
     assert choices(folder) == [(4, "skip", "terminal")]
@@ -86,6 +87,9 @@ def test_skip_leaves_the_step_failed_and_the_run_goes_on_and_passes(project, tmp
     assert never["status"] == "failed" and never["skipped_by"] == "operator"
     assert never["error"] == never["operator_choices"][0]["after"]
     assert after["status"] == "passed"
+    html = (folder / "report.html").read_text(encoding="utf-8")
+    assert ('<div class="operator-choice" data-step="4"><strong>the operator chose skip'
+            '</strong> (terminal) after: check failed: tool.z_mm &gt; 5000</div>') in html
     events = RunFolder(folder).events()
     [recheck] = [e for e in events if e["type"] == "skip_recheck"]
     assert (recheck["first_step"], recheck["steps"], recheck["errors"]) == (5, 1, [])

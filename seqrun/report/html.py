@@ -354,7 +354,9 @@ def _step_extra(data: RunData, s: StepView) -> str:
     if s.detail.get("error"):
         out.append(f"<div><strong>error:</strong> {escape(str(s.detail['error']))}</div>")
     out.append(_signature(s))
+    out.append(_operator_choices(s))
     shown = {k for k, _ in _FIGURE_ROWS} | {"executed_duration_s", "duration_ratio", "error",
+                                            "operator_choices",
                                             "signed_by", "signed_role", "signed_at_utc",
                                             "inputs_sha256",
                                             "expected_position_mm", "reached_position_mm",
@@ -371,6 +373,17 @@ def _step_extra(data: RunData, s: StepView) -> str:
         out.append('<div class="note">' + "; ".join(f"{escape(k)}: {_value(v)}"
                                                     for k, v in rest.items()) + "</div>")
     return "".join(out)
+
+
+def _operator_choices(s: StepView) -> str:
+    """What the operator chose after the step failed (its ``on_fail: pause``), in order."""
+    choices = s.detail.get("operator_choices")
+    if not isinstance(choices, list):
+        return ""
+    return "".join(
+        f'<div class="operator-choice" data-step="{s.number}"><strong>the operator chose '
+        f"{escape(str(c.get('choice')))}</strong> ({escape(str(c.get('by')))}) after: "
+        f"{escape(str(c.get('after')))}</div>" for c in choices if isinstance(c, dict))
 
 
 def _signature(s: StepView) -> str:
