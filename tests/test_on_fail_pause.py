@@ -247,3 +247,46 @@ def test_a_campaign_of_several_arms_refuses_it_at_its_line(tmp_path):
     assert result.exit_code == 1, result.output
     assert ("sequences/hold_and_approach.yaml:19:44: on_fail: pause: a campaign of several "
             "arms") in result.output, result.output
+
+
+def test_a_choice_answers_only_a_question_that_offers_it():
+    import threading
+
+    from consolekit import wait_for
+    from seqrun.errors import Refused
+    from seqrun.service.questions import Questions
+
+    published: list[tuple[str, dict]] = []
+    questions = Questions(lambda type_, **fields: published.append((type_, fields)),
+                          lambda: False)
+    got: dict[str, object] = {}
+    asking = [threading.Thread(target=lambda: got.setdefault(
+                  "choice", questions.ask_choice("Retry?", ("retry", "skip", "abort")))),
+              threading.Thread(target=lambda: got.setdefault("yes", questions.ask("Go?")))]
+    for thread in asking:
+        thread.start()
+    wait_for(lambda: len(published) == 2)
+    asked = {f["text"]: f for t, f in published if t == "confirm_requested"}
+    choose, plain = asked["Retry?"]["question_id"], asked["Go?"]["question_id"]
+    assert asked["Retry?"]["choices"] == ["retry", "skip", "abort"]
+    assert "choices" not in asked["Go?"]
+    for bad in (None, "later", "Retry"):
+        with pytest.raises(Refused, match="choose one of retry, skip, abort"):
+            questions.answer(choose, True, choice=bad)
+    with pytest.raises(Refused, match="offers no choices"):
+        questions.answer(plain, True, choice="skip")
+    questions.answer(choose, True, choice="retry")
+    questions.answer(plain, True)
+    for thread in asking:
+        thread.join(5)
+    assert got == {"choice": "retry", "yes": True}
+    answered = [f for t, f in published if t == "confirm_answered"]
+    assert [(f["yes"], f.get("choice")) for f in answered] == [(True, "retry"), (True, None)]
+    # a no (or the withdrawal) chooses nothing: the run takes it as an abort
+    thread = threading.Thread(target=lambda: got.update(
+        late=questions.ask_choice("Again?", ("retry", "skip", "abort"))))
+    thread.start()
+    wait_for(lambda: questions.pending())
+    questions.withdraw()
+    thread.join(5)
+    assert got["late"] is None
