@@ -290,3 +290,15 @@ def test_a_choice_answers_only_a_question_that_offers_it():
     questions.withdraw()
     thread.join(5)
     assert got["late"] is None
+
+
+def test_own_retries_come_first_and_a_failed_retry_asks_again(project, tmp_path):
+    path = write(project, NEVER.replace("on_fail: pause", "on_fail: pause, retry: {times: 2}"))
+    folder = tmp_path / "run"
+    result = run_virtual(path, project, folder, "r\nr\na\n")
+    assert result.exit_code == 130, result.output
+    assert [c[1] for c in choices(folder)] == ["retry", "retry", "abort"]
+    events = RunFolder(folder).events()
+    kinds = [e["type"] for e in events if e["type"] in ("step_retry", "operator_choice")]
+    assert kinds == ["step_retry", "step_retry"] + ["operator_choice"] * 3
+    assert len(report(folder)["steps"][3]["retries"]) == 2

@@ -290,7 +290,8 @@ dry run at a numeric parameter's `min` or `max` took (see "Parameters") is not l
 
 `on_fail: pause` (on the same four kinds, outside blocks and campaigns of several arms)
 hands the failure to the operator once the step's own `retry` is spent, the arm at rest:
-Retry runs the step again, Skip leaves it failed ("skipped by the operator") and goes on
+Retry runs the step again (failing again, it asks again: the step's own retries are not
+spent twice), Skip leaves it failed ("skipped by the operator") and goes on
 once the rest of the sequence is checked from the measured pose, Abort ends the run as an
 operator abort (exit 130); each answer is an `operator_choice` event and a line of the
 step's report. A fault is never offered, `--yes` never answers it and the dry run never
