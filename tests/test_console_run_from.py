@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import gzip
 import json
+import re
 import time
 from pathlib import Path
 
@@ -127,6 +128,9 @@ def test_run_from_a_step_runs_only_the_steps_from_there(client, setup):
     assert report["status"] == "passed", report
     assert report["first_step"] == 2
     assert [s["status"] for s in report["steps"]] == ["skipped", "passed", "passed"]
+    html = wait_for(lambda: (folder / "report.html").exists()
+                    and (folder / "report.html").read_text())
+    assert re.search(r"first step</th>\s*<td>2<", html), "report.html does not say step 2"
     events = [json.loads(line) for line in
               gzip.decompress((folder / "events.jsonl.gz").read_bytes()).splitlines()]
     started = [e for e in events if e["type"] == "run_started"]
