@@ -119,7 +119,8 @@ def test_run_from_a_step_runs_only_the_steps_from_there(client, setup):
     assert j1(client) == pytest.approx(6, abs=0.3)
     r = client.post("/api/v1/run", json={"sequence": "from_here.yaml", "first_step": 2})
     assert r.status_code == 200, r.text
-    wait_for(lambda: status(client)["activity"] in ("running", "moving") or run_folders(setup))
+    running = wait_for(lambda: (s := status(client))["run"] and s["run"]["step"] and s, 30)
+    assert running["run"]["first_step"] == 2 and running["run"]["step"] >= 2, running["run"]
     idle(client)
     assert j1(client) == pytest.approx(0, abs=0.3)
     (folder,) = run_folders(setup)

@@ -80,6 +80,8 @@ def test_run_from_a_step_on_the_page(from_here, page, tmp_path):
                              ".map(li => li.textContent)")
     assert finished and "passed" in finished[-1], finished
     page.wait_for_selector("#seq-steps li[data-step='3'].current", timeout=10000)
+    assert page.get_attribute("#seq-steps li[data-step='1']", "class") == "not-run"
+    assert page.get_attribute("#seq-steps li[data-step='2']", "class") == "done"
     # the telemetry after the run's end (the page's status lags the run's events)
     page.wait_for_function("Math.abs(window.seqrunConsole.status.joints[0].position_deg)"
                            " < 0.3", timeout=10000)

@@ -100,7 +100,8 @@ class Runs:
                           f"({exc.strerror or exc}); nothing was sent") from None
         activity = s.activities.begin("run", {"file": str(file), "run_dir": str(folder)},
                                        by)
-        s.activities.run_info = RunInfo(str(file), None, None, len(loaded.steps), str(folder))
+        s.activities.run_info = RunInfo(str(file), None, None, len(loaded.steps), str(folder),
+                                        first_step=first_step)
         total = len(loaded.steps)
 
         def before_step(step) -> bool:
@@ -183,7 +184,8 @@ class Runs:
         activity = s.activities.begin("run", {"file": file or loaded.file,
                                               "run_dir": str(log_dir)})
         s.activities.run_info = RunInfo(file or loaded.file, None, None, len(loaded.steps),
-                                        str(log_dir) if log_dir is not None else None)
+                                        str(log_dir) if log_dir is not None else None,
+                                        first_step=first_step)
         result = ActivityResult("run", "failed", EXIT_FAULT_CODE, "interrupted")
         try:
             with s.activities.bus:

@@ -295,7 +295,7 @@ function showEvent(e) {
   else if (e.type === "confirm_answered" && state.question && state.question.question_id === e.question_id) closeQuestion();
   else if (e.type === "run_finished" || e.type === "activity_finished") { if (e.type === "run_finished") loadRuns(); closeQuestionIfRunEnded(e); }
   else if (e.type === "step_started") markStep(e.step);
-  else if (e.type === "run_started") markStep(0);
+  else if (e.type === "run_started") { state.firstStep = e.first_step || 1; markStep(0); }
 }
 
 // ---------------------------------------------------------------- control
@@ -528,11 +528,14 @@ async function openSequence(name) {
   if (state.status) highlightStep(state.status.run);
 }
 
+// A run from step N: the steps before N are not run (marked so, never "done").
 function markStep(step) {
+  const first = state.firstStep || 1;
   document.querySelectorAll("#seq-steps li").forEach((li) => {
     const n = Number(li.dataset.step);
     li.classList.toggle("current", n === step);
-    li.classList.toggle("done", n < step);
+    li.classList.toggle("done", n < step && n >= first);
+    li.classList.toggle("not-run", n < first);
   });
 }
 
@@ -540,6 +543,7 @@ function markStep(step) {
 function highlightStep(run) {
   if (!run || !state.checked || !run.file) return;
   if (!run.file.endsWith(state.checked.sequence)) return;
+  state.firstStep = run.first_step || 1;
   if (run.step) markStep(run.step);
 }
 
