@@ -152,13 +152,12 @@ class Activities:
         from dataclasses import replace
 
         from seqrun.events import RunPaused, StepStarted
-        from seqrun.service.status import RunInfo
 
         with self._state:
             info = self.run_info
             if isinstance(event, StepStarted) and info is not None:
-                self.run_info = RunInfo(info.file, event.step, event.label, info.steps,
-                                        info.run_dir, info.pause)
+                self.run_info = replace(info, step=event.step, label=event.label,
+                                        paused_before=None)
             elif event.type == "pause_requested" and info is not None and not self.paused:
                 self.run_info = replace(info, pause="requested")
             elif isinstance(event, RunPaused):

@@ -42,6 +42,7 @@ class Runs:
         ``step_mode``'s before-step question, clearing a latched fault) are published as
         ``confirm_requested`` events; answer them with the session's ``answer``."""
         from seqrun.errors import SequenceInvalid, UserInputError
+        from seqrun.sequence.checks import check_from_arm
         from seqrun.sequence.loader import load_sequence
         from seqrun.sequence.validation import validate_sequence
         from seqrun.service.campaign_records import record_run
@@ -65,7 +66,8 @@ class Runs:
                     from None
             except UserInputError as exc:
                 raise Refused(str(exc)) from None
-        if not isinstance(first_step, int) or not 1 <= first_step <= len(loaded.steps):
+        if (isinstance(first_step, bool) or not isinstance(first_step, int)
+                or not 1 <= first_step <= len(loaded.steps)):  # `true` is not step 1
             raise Refused(f"first step {first_step!r}: the sequence has steps "
                           f"1-{len(loaded.steps)}")
         now = s.telemetry.condition()
@@ -73,11 +75,18 @@ class Runs:
         if first_step == 1:  # the executor checks again from the arm's measured state
             check = validate_sequence(loaded, s.arm, start, speed=speed,
                                       started=bool(s.telemetry.homed))
-            if check.errors:
-                more = len(check.errors) - 1
-                raise Refused(str(check.errors[0]) + (f" (and {more} more)" if more else ""))
-            if s.separation is not None:  # against the other arms where they stand (and go)
-                s.separation.refuse_paths("run", check.paths)
+        elif start is None:
+            raise Refused(f"run from step {first_step}: the arm's position is not measured "
+                          "yet (nothing read back), so where step "
+                          f"{first_step} starts is unknown")
+        else:  # as `seqrun run --from N`: the arm must stand where steps 1..N-1 leave it
+            check = check_from_arm(loaded, s.arm, start, first_step=first_step, speed=speed,
+                                   started=bool(s.telemetry.homed), module_limits={})
+        if check.errors:
+            more = len(check.errors) - 1
+            raise Refused(str(check.errors[0]) + (f" (and {more} more)" if more else ""))
+        if s.separation is not None:  # against the other arms where they stand (and go)
+            s.separation.refuse_paths("run", check.paths)
         try:
             folder = prepare_run_folder(log_dir, loaded.name, s.log_root)
         except OSError as exc:
@@ -91,7 +100,8 @@ class Runs:
                           f"({exc.strerror or exc}); nothing was sent") from None
         activity = s.activities.begin("run", {"file": str(file), "run_dir": str(folder)},
                                        by)
-        s.activities.run_info = RunInfo(str(file), None, None, len(loaded.steps), str(folder))
+        s.activities.run_info = RunInfo(str(file), None, None, len(loaded.steps), str(folder),
+                                        first_step=first_step)
         total = len(loaded.steps)
 
         def before_step(step) -> bool:
@@ -174,7 +184,8 @@ class Runs:
         activity = s.activities.begin("run", {"file": file or loaded.file,
                                               "run_dir": str(log_dir)})
         s.activities.run_info = RunInfo(file or loaded.file, None, None, len(loaded.steps),
-                                        str(log_dir) if log_dir is not None else None)
+                                        str(log_dir) if log_dir is not None else None,
+                                        first_step=first_step)
         result = ActivityResult("run", "failed", EXIT_FAULT_CODE, "interrupted")
         try:
             with s.activities.bus:

@@ -61,11 +61,13 @@ class RunInfo:
     pause: str | None = None
     #: Where the run holds: "Paused before step N (FILE:LINE:COL)" (None: it does not).
     paused_before: str | None = None
+    #: The step the run started from (a run from step N: the steps before are not run).
+    first_step: int = 1
 
     def as_dict(self) -> dict[str, Any]:
         return {"file": self.file, "step": self.step, "label": self.label,
                 "steps": self.steps, "run_dir": self.run_dir, "pause": self.pause,
-                "paused_before": self.paused_before}
+                "paused_before": self.paused_before, "first_step": self.first_step}
 
 
 @dataclass(frozen=True)

@@ -295,7 +295,7 @@ function showEvent(e) {
   else if (e.type === "confirm_answered" && state.question && state.question.question_id === e.question_id) closeQuestion();
   else if (e.type === "run_finished" || e.type === "activity_finished") { if (e.type === "run_finished") loadRuns(); closeQuestionIfRunEnded(e); }
   else if (e.type === "step_started") markStep(e.step);
-  else if (e.type === "run_started") markStep(0);
+  else if (e.type === "run_started") { state.firstStep = e.first_step || 1; markStep(0); }
 }
 
 // ---------------------------------------------------------------- control
@@ -514,6 +514,7 @@ async function openSequence(name) {
   $("#seq-findings").replaceChildren(el("p", { className: "dim", textContent: "validating and dry-running..." }));
   $("#seq-dryrun").replaceChildren();
   $("#seq-steps").replaceChildren();
+  $("#run-refused").textContent = "";
   let check;
   try { check = await api("POST", `/sequences/${encodeURI(name)}/check`); } catch (err) { $("#seq-findings").replaceChildren(); return; }
   if (state.selected !== name) return;
@@ -533,18 +534,31 @@ async function openSequence(name) {
       el("table", { className: "joints", id: "dry-run-steps" }, el("thead", {}, el("tr", {}, ...["#", "step", "result", "planned", "simulated"].map((h) => el("th", { textContent: h })))), el("tbody", {}, ...rows)));
   }
   $("#seq-steps").replaceChildren(...check.steps.map((s) => {
-    const li = el("li", { textContent: s.label });
+    const li = el("li", {}, el("span", { textContent: s.label }));
     li.dataset.step = s.number;
+    // Run from here (step 1 is Run itself): as `seqrun run --from N`, checked by the
+    // console from where the arm stands before anything moves.
+    if (s.number > 1) {
+      const b = el("button", { type: "button", className: "small from-here needs-control", textContent: "run from here",
+        title: `Run steps ${s.number}-${check.steps.length} only; refused unless the arm stands where step ${s.number} expects it` });
+      b.dataset.step = s.number;
+      b.addEventListener("click", () => runFrom(s.number, s.label));
+      li.append(b);
+    }
     return li;
   }));
+  applyControl();
   if (state.status) highlightStep(state.status.run);
 }
 
+// A run from step N: the steps before N are not run (marked so, never "done").
 function markStep(step) {
+  const first = state.firstStep || 1;
   document.querySelectorAll("#seq-steps li").forEach((li) => {
     const n = Number(li.dataset.step);
     li.classList.toggle("current", n === step);
-    li.classList.toggle("done", n < step);
+    li.classList.toggle("done", n < step && n >= first);
+    li.classList.toggle("not-run", n < first);
   });
 }
 
@@ -552,12 +566,34 @@ function markStep(step) {
 function highlightStep(run) {
   if (!run || !state.checked || !run.file) return;
   if (!run.file.endsWith(state.checked.sequence)) return;
+  state.firstStep = run.first_step || 1;
   if (run.step) markStep(run.step);
+}
+
+// A refused run says why below the buttons in full (the message bar is one line, cut).
+async function runSequence(label, firstStep) {
+  const name = state.selected;
+  $("#run-refused").textContent = "";
+  const body = { sequence: name, speed: Number($("#run-speed").value), step_mode: $("#run-step-mode").checked };
+  if (firstStep > 1) body.first_step = firstStep;
+  try {
+    const result = await api("POST", "/run", body);
+    if (!state.lost) say(`${label}: ${result && result.message ? result.message : "ok"}`);
+  } catch (err) {
+    if (err.status && state.selected === name) $("#run-refused").textContent = `${label} refused: ${err.message}`;
+  }
+}
+
+function runFrom(step, label) {
+  if (!state.selected) return;
+  const notRun = step === 2 ? "Step 1 is not run." : `Steps 1-${step - 1} are not run.`;
+  if (!window.confirm(`Run from step ${step} (${label})? ${notRun}`)) return;
+  runSequence(`Run ${state.selected} from step ${step}`, step);
 }
 
 $("#run").addEventListener("click", () => {
   if (!state.selected) return;
-  command(`Run ${state.selected}`, "POST", "/run", { sequence: state.selected, speed: Number($("#run-speed").value), step_mode: $("#run-step-mode").checked });
+  runSequence(`Run ${state.selected}`, 1);
 });
 for (const verb of ["pause", "resume", "step", "abort"]) {
   $(`#${verb}`).addEventListener("click", () => command(verb, "POST", `/run/${verb}`));
