@@ -184,7 +184,7 @@ def run_command(
                 typer.echo(f"error: {error}", err=True)
             typer.echo(str(RunInvalid(str(file), list(exc.errors))), err=True)
             raise typer.Exit(EXIT_INVALID) from None
-    refusal = refuse_yes_for_attended(run.loaded, yes)
+    refusal = refuse_yes_for_attended(run.loaded, yes, run.hazards)
     if refusal is not None:
         run.connection.close()
         fail(refusal)

@@ -36,7 +36,8 @@ def print_report(check, file: Path, *, as_json: bool) -> None:
                                "errors": [e.as_dict() for e in check.errors],
                                "notes": [n.as_dict() for n in check.notes],
                                "clearances": [c.as_dict() for c in check.clearances],
-                               "proximities": [p.as_dict() for p in check.proximities]},
+                               "proximities": [p.as_dict() for p in check.proximities],
+                               "hazards": [h.as_dict() for h in check.hazards]},
                               indent=2, ensure_ascii=False))
         return
     for error in check.errors:
@@ -64,6 +65,8 @@ def print_clearances(check) -> None:
         a, b = p.pair.split("~", 1)
         typer.echo(f"  step {p.step}: closest {a} - {b} {p.distance_mm:.1f} mm (link volumes), "
                    f"at {p.t_s:.2f} s of {p.duration_s:.2f} s")
+    for h in getattr(check, "hazards", ()):  # the steps of class caution or hazardous
+        typer.echo(f"  {h.line()}")
 
 
 def print_dry_run(run, loaded, arm) -> None:
@@ -333,6 +336,7 @@ def validate_command(
                                "notes": [n.as_dict() for n in check.notes],
                                "clearances": [c.as_dict() for c in check.clearances],
                                "proximities": [p.as_dict() for p in check.proximities],
+                               "hazards": [h.as_dict() for h in check.hazards],
                                "dry_run": run.as_dict() if run is not None else None,
                                **_values(check.loaded)},
                               indent=2, ensure_ascii=False))

@@ -1,19 +1,27 @@
-"""The steps only a person at the run answers: a signed confirm and a breakpoint (never
-``--yes`` or the console's assume-yes; docs/safety.md, "Who answers what")."""
+"""The steps only a person at the run answers: a signed confirm, a breakpoint and a
+hazardous step (never ``--yes`` or the console's assume-yes; docs/safety.md, "Who answers
+what")."""
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from typing import Any
 
 
-def first_attended(steps: Iterable[Any]) -> str | None:
-    """The first step that only a person answers (a signed confirm, a breakpoint), as
-    "step N (FILE:LINE:COL) is a …"; None when there is none."""
+def first_attended(steps: Iterable[Any], hazards: Mapping[int, Any] | None = None) -> str | None:
+    """The first step that only a person answers (a signed confirm, a breakpoint, a step
+    of class hazardous: given by its ``hazard`` key, or derived by the validation as
+    ``hazards`` hold it), as "step N (FILE:LINE:COL) is …"; None when there is none."""
+    found = hazards or {}
     for step in steps:
         params = step.params
+        hazard = found.get(step.number)
         what = ("a signed confirm" if getattr(params, "sign", False) else
-                "a breakpoint" if getattr(params, "breakpoint", False) else None)
+                "a breakpoint" if getattr(params, "breakpoint", False) else
+                f"hazardous ({hazard.reason}; a signed confirm before it)"
+                if hazard is not None and hazard.needs_signature else
+                "hazardous (a signed confirm before it)"
+                if getattr(params, "hazard", None) == "hazardous" else None)
         if what is not None:
             return f"step {step.number} ({step.location}) is {what}"
     return None

@@ -69,6 +69,9 @@ class PreparedRun:
     context: ArmContext | None = None
     #: The files used in place of shipped ones (arm, poses), as ``validate`` notes them.
     overrides: list = field(default_factory=list)
+    #: The steps of class caution or hazardous as validated from the assumed start (step
+    #: number -> HazardFinding): a hazardous one makes --yes refuse the run.
+    hazards: dict = field(default_factory=dict)
 
     @property
     def arm_id(self) -> str | None:
@@ -165,7 +168,7 @@ def prepare_run(request: RunRequest) -> PreparedRun:
         raise UserInputError("--power-on-at applies to the built-in simulator (seqrun sim "
                              "serve has its own)")
     return PreparedRun(loaded, arm, connection, Path(arm_path), r.file, context,
-                       override_notes(loaded, Path(arm_path)))
+                       override_notes(loaded, Path(arm_path)), dict(static.hazards))
 
 
 def run_folder(loaded: LoadedSequence, log_dir: Path | None) -> Path:

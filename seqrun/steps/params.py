@@ -247,6 +247,13 @@ class StepParams(StrictModel):
                            "says to go on (a terminal prompt, the console's question); "
                            "--yes never answers it and the dry run passes through it "
                            "(docs/safety.md, 'Who answers what').")
+    hazard: Literal["normal", "caution", "hazardous"] | None = Field(
+        None, description="A motion step's hazard class: caution and hazardous moves run at "
+                          "most at their class's speed cap (the arm file's hazards), a "
+                          "hazardous one starts only after a signed confirm (--yes never "
+                          "answers it). Default: normal, or what the arm file's "
+                          "hazards.*.within_mm derive from the move's smallest clearance; "
+                          "lower than that is an error (docs/safety.md, 'Hazard classes').")
     retry: RetrySpec | None = Field(
         None, description="Try the step again after a failed measurement: {times: N, "
                           "delay_s: S}; check, wait_until, checkpoint and check_gripper only "

@@ -1,0 +1,178 @@
+"""Hazard classes of motion steps (issue 40, item 4): ``hazard: normal | caution |
+hazardous`` on a move, classes derived from a move's smallest planned clearance where the
+arm file's ``hazards.*.within_mm`` say so, a speed cap per class (the dry run and the run
+alike) and a signed confirm before a hazardous step, which --yes never answers. All at
+virtual time."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+from typer.testing import CliRunner
+
+import seqrun.cli  # noqa: F401  (registers every command)
+from projecttree import ROOT
+from seqrun.cli.app import app
+from seqrun.service.runlog import read_events
+
+#: Park -> Totem passes the desk closest (wrist to desk 15.9 mm, link volumes); Totem ->
+#: Op-safe comes no closer than 72 mm (forearm to hand).
+TO_TOTEM = "  - move: {pose: totem%s}\n"
+TO_OPSAFE = "  - move: {pose: opsafe%s}\n"
+#: Derived classes: closer than 20 mm hazardous, than 100 mm caution.
+DERIVING = ("hazards:\n  caution: {within_mm: 100}\n"
+            "  hazardous: {within_mm: 20, role: test conductor}\n")
+
+
+def campaign(tmp_path, steps: str, *, arm_extra: str = ""):
+    root = tmp_path / "campaign"
+    for folder in ("sequences", "arms", "poses"):
+        shutil.copytree(ROOT / folder, root / folder)
+    if arm_extra:
+        arm = root / "arms" / "lwa3.yaml"
+        arm.write_text(arm.read_text() + arm_extra)
+    path = root / "sequences" / "hazard.yaml"
+    path.write_text("name: hazard\nsteps:\n  - include: startup.yaml\n" + steps)
+    return path
+
+
+def run(path, folder, stdin: str = "", *extra: str):
+    return CliRunner().invoke(app, ["run", str(path), "--virtual-time", "--plain",
+                                    "--no-report", "--log-dir", str(folder), *extra],
+                              input=stdin)
+
+
+def validate_json(path) -> dict:
+    result = CliRunner().invoke(app, ["validate", "--json", str(path)])
+    assert result.exit_code in (0, 1), result.output
+    return json.loads(result.output)
+
+
+def step_report(folder, number: int) -> dict:
+    steps = json.loads((folder / "report.json").read_text())["steps"]
+    return next(s for s in steps if s["number"] == number)
+
+
+def test_caution_caps_the_speed_in_the_dry_run_and_the_run_alike(tmp_path):
+    durations = {}
+    for name, extra in (("normal", ""), ("caution", ", hazard: caution"),
+                        ("scaled", ", velocity_scale: 0.5")):
+        path = campaign(tmp_path / name, TO_TOTEM % extra)
+        folder = tmp_path / name / "run"
+        result = run(path, folder)
+        assert result.exit_code == 0, result.output
+        step = step_report(folder, 4)
+        planned = next(s for s in validate_json(path)["dry_run"]["steps"] if s["number"] == 4)
+        assert planned["planned_duration_s"] == step["planned_duration_s"]
+        durations[name] = step["planned_duration_s"], step["duration_s"]
+        if name == "caution":
+            assert step["hazard"] == "caution" and step["hazard_speed_scale"] == 0.5
+        else:
+            assert "hazard" not in step
+    # the arm file's caution cap (default 0.5 of the velocity limits) plans the move as
+    # velocity_scale 0.5 does, and it runs as long; longer than at full speed
+    assert durations["caution"] == durations["scaled"]
+    assert durations["caution"][0] > 1.2 * durations["normal"][0]
+    assert durations["caution"][1] > 1.2 * durations["normal"][1]
+
+
+def test_the_smaller_of_velocity_scale_and_the_cap_wins(tmp_path):
+    planned = {}
+    for name, extra in (("slow", ", velocity_scale: 0.2"),
+                        ("slow_caution", ", velocity_scale: 0.2, hazard: caution")):
+        data = validate_json(campaign(tmp_path / name, TO_TOTEM % extra))
+        planned[name] = next(s["planned_duration_s"] for s in data["dry_run"]["steps"]
+                             if s["number"] == 4)
+    assert planned["slow"] == planned["slow_caution"]
+
+
+def test_classes_are_derived_from_the_smallest_clearance(tmp_path):
+    path = campaign(tmp_path, TO_TOTEM % "" + TO_OPSAFE % "", arm_extra=DERIVING)
+    data = validate_json(path)
+    assert data["valid"], data["errors"]
+    hazards = {h["step"]: h for h in data["hazards"]}
+    assert hazards[4]["hazard"] == "hazardous"
+    assert hazards[4]["reason"].startswith("within 15.") and "wrist to desk" in hazards[4]["reason"]
+    assert hazards[4]["speed_scale"] == 0.25 and hazards[4]["role"] == "test conductor"
+    assert hazards[5]["hazard"] == "caution" and hazards[5]["speed_scale"] == 0.5
+    result = CliRunner().invoke(app, ["validate", "--static", str(path)])
+    assert result.exit_code == 0, result.output
+    assert ("step 4 (" in result.output and "hazard.yaml:4:5): hazardous — within 15."
+            in result.output)
+    assert "speed capped at 25 %; needs a signed confirm by the test conductor" in result.output
+
+
+def test_without_within_mm_nothing_is_derived(tmp_path):
+    data = validate_json(campaign(tmp_path, TO_TOTEM % "" + TO_OPSAFE % ""))
+    assert data["valid"] and data["hazards"] == []
+
+
+def test_an_explicit_class_lower_than_the_derived_one_is_refused_at_its_key(tmp_path):
+    path = campaign(tmp_path, TO_TOTEM % ", hazard: caution", arm_extra=DERIVING)
+    result = CliRunner().invoke(app, ["validate", "--static", str(path)])
+    assert result.exit_code == 1, result.output
+    [line] = [x for x in result.output.splitlines() if "hazard:" in x]
+    assert line.startswith(f"{path}:4:33: hazard: caution, but the move comes within 15.")
+    assert "wrist to desk: at least hazardous" in line
+
+
+def test_hazard_on_a_step_that_does_not_move_and_wrong_values_are_refused(tmp_path):
+    for steps, col, words in (("  - wait: {seconds: 1, hazard: caution}\n", 32,
+                               "a wait step does not move the arm"),
+                              ("  - move: {pose: totem, hazard: risky}\n", 33, "hazard"),
+                              ("  - move: {pose: totem, hazard: 2}\n", 33, "hazard")):
+        path = campaign(tmp_path / str(len(steps)) / str(col), steps)
+        result = CliRunner().invoke(app, ["validate", "--static", str(path)])
+        assert result.exit_code == 1, result.output
+        assert f"hazard.yaml:4:{col}" in result.output and words in result.output, \
+            result.output
+
+
+def test_a_hazardous_step_asks_a_signed_confirm_before_it_starts(tmp_path):
+    path = campaign(tmp_path, TO_TOTEM % "" + TO_OPSAFE % ", hazard: hazardous")
+    folder = tmp_path / "run"
+    result = run(path, folder, "y\nAda Lovelace\n")
+    assert result.exit_code == 0, result.output
+    assert "is hazardous: given in the step. Go on?" in result.output
+    step = step_report(folder, 5)
+    assert step["hazard"] == "hazardous" and step["hazard_speed_scale"] == 0.25
+    assert step["signed_by"] == "Ada Lovelace" and len(step["inputs_sha256"]) == 64
+    record = json.loads((folder / "record.json").read_text())
+    assert [s["step"] for s in record["signatures"]] == [5]
+    events = read_events(folder)
+    signed = next(i for i, e in enumerate(events) if e["type"] == "confirm_signed")
+    started = next(i for i, e in enumerate(events)
+                   if e["type"] == "step_started" and e.get("step") == 5)
+    assert signed < started
+
+
+def test_a_no_at_the_hazardous_step_moves_nothing(tmp_path):
+    path = campaign(tmp_path, TO_TOTEM % ", hazard: hazardous")
+    folder = tmp_path / "run"
+    result = run(path, folder, "n\n")
+    assert result.exit_code == 130, result.output
+    assert step_report(folder, 4)["status"] != "passed"
+    events = read_events(folder)
+    assert not any(e["type"] == "step_started" and e.get("step") == 4 for e in events)
+
+
+def test_yes_refuses_a_hazardous_step_given_or_derived_before_anything_is_sent(tmp_path):
+    for name, steps, arm_extra in (("given", TO_TOTEM % ", hazard: hazardous", ""),
+                                   ("derived", TO_TOTEM % "", DERIVING)):
+        path = campaign(tmp_path / name, steps, arm_extra=arm_extra)
+        folder = tmp_path / name / "run"
+        result = run(path, folder, "y\nAda\n", "--yes")
+        assert result.exit_code == 2, result.output
+        last = result.output.strip().splitlines()[-1]
+        assert "--yes: step 4 (" in last and "hazard.yaml:4:5) is hazardous" in last, last
+        assert "nothing was sent" in last
+        assert not folder.exists()
+
+
+def test_the_dry_run_assumes_the_signature_and_says_so(tmp_path):
+    path = campaign(tmp_path, TO_TOTEM % ", hazard: hazardous")
+    result = CliRunner().invoke(app, ["validate", str(path)])
+    assert result.exit_code == 0, result.output
+    unverified = result.output.split("not verified:")[1]
+    assert "step 4: signed operator confirmation 'Step 4" in unverified
