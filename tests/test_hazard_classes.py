@@ -118,8 +118,8 @@ def test_an_explicit_class_lower_than_the_derived_one_is_refused_at_its_key(tmp_
 
 
 def test_hazard_on_a_step_that_does_not_move_and_wrong_values_are_refused(tmp_path):
-    for steps, col, words in (("  - wait: {seconds: 1, hazard: caution}\n", 32,
-                               "a wait step does not move the arm"),
+    for steps, col, words in (("  - wait: {seconds: 1, hazard: caution}\n", 24,
+                               "unknown key 'hazard' in wait"),
                               ("  - move: {pose: totem, hazard: risky}\n", 33, "hazard"),
                               ("  - move: {pose: totem, hazard: 2}\n", 33, "hazard")):
         path = campaign(tmp_path / str(len(steps)) / str(col), steps)

@@ -17,7 +17,6 @@ from seqrun.formatting import format_number as _f
 if TYPE_CHECKING:
     from seqrun.arm.description import ArmDescription
     from seqrun.errors import SourceError
-    from seqrun.sequence.validation import Clearance, Proximity
     from seqrun.steps.resolved import ResolvedStep
 
 __all__ = ["CAPPED_KINDS", "HazardFinding", "classify"]
@@ -62,22 +61,13 @@ class HazardFinding:
                 **({"role": self.role} if self.role else {})}
 
 
-def _closest(clearance: Clearance | None,
-             proximity: Proximity | None) -> tuple[float, str] | None:
-    """The move's smallest planned clearance (mm) and what it is to."""
-    found: list[tuple[float, str]] = []
-    if clearance is not None:
-        found.append((clearance.margin_mm, f"guard {clearance.guard}"))
-    if proximity is not None:
-        found.append((proximity.distance_mm, proximity.pair.replace("~", " to ")))
-    return min(found, default=None)
-
-
 def classify(step: ResolvedStep, arm: ArmDescription, *, motion: bool,
-             clearance: Clearance | None,
-             proximity: Proximity | None) -> tuple[HazardFinding | None, SourceError | None]:
+             closest: tuple[float, str] | None) -> tuple[HazardFinding | None,
+                                                         SourceError | None]:
     """The step's class (None: normal) and an error at its ``hazard`` key (a class on a
-    step that does not move, or lower than its clearance makes it)."""
+    step that does not move, or lower than its clearance makes it). ``closest``: the
+    move's smallest planned clearance (mm) and what it is to ("guard desk", "wrist to
+    desk"), None where none was planned."""
     given = getattr(step.params, "hazard", None)
     if not motion:
         if given is None:
@@ -86,7 +76,6 @@ def classify(step: ResolvedStep, arm: ArmDescription, *, motion: bool,
                                 "hazard class belongs to motion steps (move, move_linear, "
                                 "move_velocity, move_trajectory)", "hazard")
     hazard, reason = given or "normal", "given in the step"
-    closest = _closest(clearance, proximity)
     if closest is not None:
         derived = arm.hazards.derived(closest[0])
         if derived is not None and rank(derived[0]) > rank(hazard):

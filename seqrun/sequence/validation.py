@@ -390,10 +390,20 @@ class Checker:
     def hazard_speed_scale(self, step: ResolvedStep) -> float:
         """The speed cap of ``step``'s hazard class as far as it is known (given, or
         derived from the clearances recorded so far); 1.0: none."""
-        finding, _ = classify(step, self.arm, motion=True,
-                              clearance=self.clearances.get(step.number),
-                              proximity=self.proximities.get(step.number))
+        finding, _ = classify(step, self.arm, motion=True, closest=self.closest(step))
         return finding.speed_scale if finding is not None else 1.0
+
+    def closest(self, step: ResolvedStep) -> tuple[float, str] | None:
+        """The move's smallest planned clearance (mm) so far, to a guard or between link
+        volumes and obstacles, and what it is to (None: none recorded)."""
+        found: list[tuple[float, str]] = []
+        clearance = self.clearances.get(step.number)
+        if clearance is not None:
+            found.append((clearance.margin_mm, f"guard {clearance.guard}"))
+        proximity = self.proximities.get(step.number)
+        if proximity is not None:
+            found.append((proximity.distance_mm, proximity.pair.replace("~", " to ")))
+        return min(found, default=None)
 
     def check_path_guards(self, step: ResolvedStep, times: np.ndarray, path_rad: np.ndarray,
                           *, what: str) -> None:
@@ -581,8 +591,7 @@ class Checker:
             if step.blocks:
                 check_block(self, step)
             finding, wrong = classify(step, self.arm, motion=kind.motion,
-                                      clearance=self.clearances.get(step.number),
-                                      proximity=self.proximities.get(step.number))
+                                      closest=self.closest(step))
             if wrong is not None:
                 self.errors.append(wrong)
             if finding is not None:

@@ -15,6 +15,7 @@ from pydantic_core import PydanticCustomError
 
 from seqrun.steps.kind import StepKind
 from seqrun.steps.params import (
+    HazardKey,
     Finite,
     JointName,
     PoseName,
@@ -80,6 +81,7 @@ class MoveParams(StepParams):
     timeout_s: Positive | None = Field(
         None, description="Time allowed for the whole move in seconds (default: the planned "
                           "duration plus the arm file's control.settle_timeout_s).")
+    hazard: HazardKey = None
 
     @model_validator(mode="after")
     def _target(self) -> MoveParams:

@@ -12,7 +12,8 @@ from pydantic import Field, model_validator
 
 from seqrun.errors import RunAborted
 from seqrun.steps.kind import StepKind
-from seqrun.steps.params import Positive, StepParams, Vector3, check_pose_target, one_key_value
+from seqrun.steps.params import (HazardKey, Positive, StepParams, Vector3, check_pose_target,
+                                 one_key_value)
 
 if TYPE_CHECKING:
     from seqrun.steps.check_context import CheckContext
@@ -60,6 +61,7 @@ class MoveLinearParams(StepParams):
     timeout_s: Positive | None = Field(
         None, description="Time allowed for the whole move in seconds (default: the planned "
                           "duration plus the arm file's control.settle_timeout_s).")
+    hazard: HazardKey = None
 
     @model_validator(mode="after")
     def _target(self) -> MoveLinearParams:
