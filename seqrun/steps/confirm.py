@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import datetime as _dt
-from typing import TYPE_CHECKING, Annotated, Any, ClassVar
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Annotated, Any, ClassVar, Protocol, TypeVar
 
 from pydantic import Field
 
@@ -13,8 +14,27 @@ from seqrun.steps.params import StepParams, one_key_value
 
 if TYPE_CHECKING:
     from seqrun.steps.check_context import CheckContext
-    from seqrun.steps.context import StepContext
+    from seqrun.steps.context import AttendedQuestions, StepContext
     from seqrun.steps.resolved import ResolvedStep
+
+
+_Answer = TypeVar("_Answer")
+
+
+class Signing(Protocol):
+    """What asking for a signature needs of the run (a step's context, the executor
+    before a hazardous step)."""
+
+    dry_run: bool
+    not_verified: list[str]
+    inputs_sha256: str | None
+
+    @property
+    def attended(self) -> AttendedQuestions | None: ...
+
+    def ask_operator(self, question: Callable[[Any], _Answer], arg: Any) -> _Answer: ...
+
+    def emit(self, type_: str, **data: Any) -> None: ...
 
 
 class ConfirmParams(StepParams):
@@ -67,7 +87,7 @@ def _signed(step: ResolvedStep[ConfirmParams], ex: StepContext) -> dict:
     return ask_signature(ex, step.number, params.prompt, params.role)
 
 
-def ask_signature(ex: StepContext, number: int, prompt: str, role: str | None) -> dict:
+def ask_signature(ex: Signing, number: int, prompt: str, role: str | None) -> dict:
     """Ask ``prompt`` of the person at the run, who answers yes with their name (never
     --yes); the signature as a step's detail keeps it. A no, or nobody to ask:
     OperatorAbort. The dry run assumes yes and says so."""

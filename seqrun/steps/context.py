@@ -90,7 +90,9 @@ class StepContext(Protocol):
     validated_targets: Mapping[int, np.ndarray]
     #: The steps of class caution or hazardous as validated from the measured start
     #: (step number -> their class: its speed cap, docs/safety.md "Hazard classes").
-    hazards: Mapping[int, HazardOfStep]
+    @property
+    def hazards(self) -> Mapping[int, HazardOfStep]: ...
+
     # -- state a handler reads or updates
     limits_in_force: LimitsInForce      # MaxVel/MaxAcc the modules hold (set_limits writes)
     motion_start_deg: np.ndarray | None  # measured joints where the last move started
