@@ -37,10 +37,10 @@ def campaign(tmp_path, steps: str, *, arm_extra: str = ""):
     return path
 
 
-def run(path, folder, stdin: str = "", *extra: str):
+def run(path, folder, stdin: str = "", *extra: str, report: bool = False):
     return CliRunner().invoke(app, ["run", str(path), "--virtual-time", "--plain",
-                                    "--no-report", "--log-dir", str(folder), *extra],
-                              input=stdin)
+                                    *([] if report else ["--no-report"]),
+                                    "--log-dir", str(folder), *extra], input=stdin)
 
 
 def validate_json(path) -> dict:
@@ -132,7 +132,7 @@ def test_hazard_on_a_step_that_does_not_move_and_wrong_values_are_refused(tmp_pa
 def test_a_hazardous_step_asks_a_signed_confirm_before_it_starts(tmp_path):
     path = campaign(tmp_path, TO_TOTEM % "" + TO_OPSAFE % ", hazard: hazardous")
     folder = tmp_path / "run"
-    result = run(path, folder, "y\nAda Lovelace\n")
+    result = run(path, folder, "y\nAda Lovelace\n", report=True)
     assert result.exit_code == 0, result.output
     assert "is hazardous: given in the step. Go on?" in result.output
     step = step_report(folder, 5)
@@ -145,6 +145,10 @@ def test_a_hazardous_step_asks_a_signed_confirm_before_it_starts(tmp_path):
     started = next(i for i, e in enumerate(events)
                    if e["type"] == "step_started" and e.get("step") == 5)
     assert signed < started
+    html = (folder / "report.html").read_text()
+    assert ('<div class="hazard" data-step="5"><strong>hazard: hazardous</strong> — given in '
+            'the step; speed capped at 25 %</div>') in html
+    assert "Ada Lovelace" in html
 
 
 def test_a_no_at_the_hazardous_step_moves_nothing(tmp_path):

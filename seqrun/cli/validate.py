@@ -90,6 +90,11 @@ def print_dry_run(run, loaded, arm) -> None:
         took = "not run" if s.duration_s is None else f"simulated {s.duration_s:6.2f} s"
         label = ("  " * len(chain) + s.label)
         typer.echo(f"  {s.number:2d} {s.status:7s} {_cut(label, 44):44s} {planned}{took}")
+        if s.detail.get("hazard"):
+            scale = s.detail.get("hazard_speed_scale", 1.0)
+            capped = f"; speed capped at {scale * 100:g} %" if scale < 1 else ""
+            typer.echo(f"       hazard: {s.detail['hazard']} — {s.detail.get('hazard_reason')}"
+                       f"{capped}")
         in_force = s.detail.get("limits_in_force") or {}
         peak = s.detail.get("peak_measured_velocity_deg_s")
         if peak:
