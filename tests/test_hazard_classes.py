@@ -180,3 +180,18 @@ def test_the_dry_run_assumes_the_signature_and_says_so(tmp_path):
     assert result.exit_code == 0, result.output
     unverified = result.output.split("not verified:")[1]
     assert "step 4: signed operator confirmation 'Step 4" in unverified
+
+
+def test_a_straight_line_must_stay_within_its_class_s_cap(tmp_path):
+    line = ("  - move: {pose: totem}\n  - move: {pose: opsafe}\n"
+            "  - move: {position_mm: [0, 500, 300], rpy_deg: [0, 0, 90]}\n"
+            "  - move_linear: {position_mm: [0, 0, -100], relative: true, frame: tool, "
+            "speed_mm_s: 100%s}\n")
+    fine = campaign(tmp_path / "normal", line % "")
+    assert CliRunner().invoke(app, ["validate", "--static", str(fine)]).exit_code == 0
+    capped = campaign(tmp_path / "hazardous", line % ", hazard: hazardous")
+    result = CliRunner().invoke(app, ["validate", "--static", str(capped)])
+    assert result.exit_code == 1, result.output
+    assert "hazard.yaml:7:" in result.output
+    assert "would have to turn at" in result.output
+    assert "(the speed cap of its hazard class, 25 %)" in result.output

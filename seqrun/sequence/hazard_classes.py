@@ -21,8 +21,9 @@ if TYPE_CHECKING:
 
 __all__ = ["CAPPED_KINDS", "HazardFinding", "classify"]
 
-#: The motion kinds whose plans the class's speed cap narrows (a fraction of the joints'
-#: velocity limits); move_velocity and move_trajectory give their own velocities and time.
+#: The motion kinds the class's speed cap bounds (a fraction of the joints' velocity
+#: limits): a move is planned at it, a straight line must stay within it; move_velocity
+#: and move_trajectory give their own velocities and times.
 CAPPED_KINDS = frozenset({"move", "move_linear"})
 
 
