@@ -105,7 +105,7 @@ def test_classes_are_derived_from_the_smallest_clearance(tmp_path):
 
 def test_without_within_mm_nothing_is_derived(tmp_path):
     data = validate_json(campaign(tmp_path, TO_TOTEM % "" + TO_OPSAFE % ""))
-    assert data["valid"] and data["hazards"] == []
+    assert data["valid"] and "hazards" not in data
 
 
 def test_an_explicit_class_lower_than_the_derived_one_is_refused_at_its_key(tmp_path):

@@ -37,7 +37,7 @@ def print_report(check, file: Path, *, as_json: bool) -> None:
                                "notes": [n.as_dict() for n in check.notes],
                                "clearances": [c.as_dict() for c in check.clearances],
                                "proximities": [p.as_dict() for p in check.proximities],
-                               "hazards": [h.as_dict() for h in check.hazards]},
+                               **_hazards(check)},
                               indent=2, ensure_ascii=False))
         return
     for error in check.errors:
@@ -53,6 +53,13 @@ def print_report(check, file: Path, *, as_json: bool) -> None:
     else:
         count = len(check.errors)
         typer.echo(f"{name}: invalid ({count} error{'s' * (count != 1)}{notes})")
+
+
+def _hazards(check) -> dict:
+    """The steps of class caution or hazardous, only when there are any (a sequence without
+    them reports exactly as before)."""
+    found = getattr(check, "hazards", None)
+    return {"hazards": [h.as_dict() for h in found]} if found else {}
 
 
 def print_clearances(check) -> None:
@@ -341,7 +348,7 @@ def validate_command(
                                "notes": [n.as_dict() for n in check.notes],
                                "clearances": [c.as_dict() for c in check.clearances],
                                "proximities": [p.as_dict() for p in check.proximities],
-                               "hazards": [h.as_dict() for h in check.hazards],
+                               **_hazards(check),
                                "dry_run": run.as_dict() if run is not None else None,
                                **_values(check.loaded)},
                               indent=2, ensure_ascii=False))
