@@ -72,7 +72,8 @@ def run_command(
                                            "(after checking the arm is where N expects it).")] = 1,
     yes: Annotated[bool, typer.Option("--yes", "-y", help="Do not ask before moving a real "
                                       "arm; answer yes to confirm steps (never to a signed "
-                                      "confirm or a breakpoint: refused).")] = False,
+                                      "confirm, a breakpoint or a hazardous step: "
+                                      "refused).")] = False,
     log_dir: Annotated[Optional[Path], typer.Option("--log-dir", metavar="DIR",
                                                     help="Run folder (default runs/<time>-<name>/).")] = None,
     arm_file: Annotated[Optional[Path], typer.Option("--arm", metavar="FILE",
