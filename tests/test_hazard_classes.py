@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from pathlib import Path
 
 from typer.testing import CliRunner
 
@@ -195,3 +196,41 @@ def test_a_straight_line_must_stay_within_its_class_s_cap(tmp_path):
     assert "hazard.yaml:7:" in result.output
     assert "would have to turn at" in result.output
     assert "(the speed cap of its hazard class, 25 %)" in result.output
+
+
+def test_the_console_s_session_asks_a_derived_hazardous_step_even_with_assume_yes(tmp_path):
+    import threading
+
+    from seqrun.arm.description import load_arm
+    from seqrun.clock import VirtualClock
+    from seqrun.service import ArmSession
+    from seqrun.service.connection import open_connection
+
+    path = campaign(tmp_path, TO_TOTEM % "", arm_extra=DERIVING)
+    connection = open_connection(force_sim=True, clock=VirtualClock())
+    session = ArmSession(load_arm(path.parent.parent / "arms" / "lwa3.yaml"), connection,
+                         status_hz=0, log_root=tmp_path / "runs",
+                         poses_dir=path.parent.parent / "poses")
+    try:
+        sub = session.subscribe(maxsize=100_000)
+        asked: list = []
+
+        def answer() -> None:
+            for event in sub:
+                if event.type == "confirm_requested":
+                    asked.append(event)
+                    session.answer(event.question_id, True, "Grace Hopper")
+                if event.type == "activity_finished":
+                    return
+
+        answering = threading.Thread(target=answer, daemon=True)
+        answering.start()
+        result = session.run_sequence(path, assume_yes=True).wait(120)
+        answering.join(10)
+        assert result.ok, result.message
+        assert [(e.sign, e.role) for e in asked] == [(True, "test conductor")]
+        assert "is hazardous: within 15." in asked[0].text
+        step = step_report(Path(result.run_dir), 4)
+        assert (step["hazard"], step["signed_by"]) == ("hazardous", "Grace Hopper")
+    finally:
+        session.close()
