@@ -10,6 +10,7 @@ import json
 import shutil
 from pathlib import Path
 
+import pytest
 from typer.testing import CliRunner
 
 import seqrun.cli  # noqa: F401  (registers every command)
@@ -55,6 +56,7 @@ def step_report(folder, number: int) -> dict:
     return next(s for s in steps if s["number"] == number)
 
 
+@pytest.mark.slow  # three runs and three dry runs at virtual time
 def test_caution_caps_the_speed_in_the_dry_run_and_the_run_alike(tmp_path):
     durations = {}
     for name, extra in (("normal", ""), ("caution", ", hazard: caution"),
@@ -130,6 +132,7 @@ def test_hazard_on_a_step_that_does_not_move_and_wrong_values_are_refused(tmp_pa
             result.output
 
 
+@pytest.mark.slow  # a run at virtual time with its report
 def test_a_hazardous_step_asks_a_signed_confirm_before_it_starts(tmp_path):
     path = campaign(tmp_path, TO_TOTEM % "" + TO_OPSAFE % ", hazard: hazardous")
     folder = tmp_path / "run"
@@ -198,6 +201,7 @@ def test_a_straight_line_must_stay_within_its_class_s_cap(tmp_path):
     assert "(the speed cap of its hazard class, 25 %)" in result.output
 
 
+@pytest.mark.slow  # a session's run at virtual time
 def test_the_console_s_session_asks_a_derived_hazardous_step_even_with_assume_yes(tmp_path):
     import threading
 
