@@ -238,3 +238,20 @@ def test_the_console_s_session_asks_a_derived_hazardous_step_even_with_assume_ye
         assert (step["hazard"], step["signed_by"]) == ("hazardous", "Grace Hopper")
     finally:
         session.close()
+
+
+def test_run_preparation_refuses_yes_before_it_opens_the_bus(tmp_path):
+    """The derived class is known after the static validation, which comes before the bus
+    is opened: prepare_run refuses there (a --sim run would open the simulator next)."""
+    from seqrun.errors import UserInputError
+    from seqrun.service.run_preparation import RunRequest, prepare_run
+
+    path = campaign(tmp_path, TO_TOTEM % "", arm_extra=DERIVING)
+    with pytest.raises(UserInputError, match=r"--yes: step 4 \(.*hazard.yaml:4:5\) is "
+                                             r"hazardous \(within 15\.\d mm of wrist to desk"):
+        prepare_run(RunRequest(path, sim=True, virtual_time=True, assume_yes=True))
+    prepared = prepare_run(RunRequest(path, sim=True, virtual_time=True))
+    try:
+        assert prepared.hazards[4].hazard == "hazardous"
+    finally:
+        prepared.connection.close()

@@ -171,7 +171,7 @@ def run_command(
     request = RunRequest(file, interface, channel, bitrate, bus_kwargs or [], sim,
                          sim_fault or [], speed, from_step, log_dir, arm_file, command_mode,
                          start, started, virtual_time, project_dir, power_on_at, arm_id,
-                         param or [])
+                         param or [], assume_yes=yes)
     with user_errors():
         try:
             run = prepare_run(request)   # nothing is opened before the checks pass

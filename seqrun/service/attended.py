@@ -25,3 +25,13 @@ def first_attended(steps: Iterable[Any], hazards: Mapping[int, Any] | None = Non
         if what is not None:
             return f"step {step.number} ({step.location}) is {what}"
     return None
+
+
+def yes_refusal(steps: Iterable[Any], hazards: Mapping[int, Any] | None = None) -> str | None:
+    """Why ``--yes`` refuses a run of ``steps`` (one line; None: it does not): a run
+    started to go unattended must not stop halfway to wait for a person."""
+    found = first_attended(steps, hazards)
+    if found is None:
+        return None
+    return (f"--yes: {found}, which only a person at the run answers; run without --yes; "
+            "nothing was sent")

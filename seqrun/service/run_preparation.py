@@ -51,6 +51,9 @@ class RunRequest:
     arm_id: str | None = None
     #: ``--param NAME=VALUE`` options: the sequence's parameters over their defaults.
     params: Sequence[str] = ()
+    #: ``--yes``: a run nobody attends, refused before the bus is opened when a step needs
+    #: a person (a signed confirm, a breakpoint, a hazardous step, given or derived).
+    assume_yes: bool = False
 
 
 @dataclass
@@ -146,6 +149,12 @@ def prepare_run(request: RunRequest) -> PreparedRun:
         campaign_records.refuse(loaded, arm_path, static.errors, r.log_dir, arm=arm,
                                 arm_id=context.arm_id)
         raise RunInvalid(loaded.file, list(static.errors))
+    if r.assume_yes:   # (derived hazard classes are known from here on)
+        from seqrun.service.attended import yes_refusal
+
+        refusal = yes_refusal(loaded.steps, static.hazards)
+        if refusal is not None:
+            raise UserInputError(refusal)
     if r.virtual_time and not context.bus.is_simulator:
         raise UserInputError("--virtual-time needs the simulator")
     if not r.virtual_time:   # (virtual time is the simulator, asked for)
