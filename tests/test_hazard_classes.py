@@ -255,3 +255,21 @@ def test_run_preparation_refuses_yes_before_it_opens_the_bus(tmp_path):
         assert prepared.hazards[4].hazard == "hazardous"
     finally:
         prepared.connection.close()
+
+
+def test_a_run_of_several_arms_refuses_a_hazardous_step_before_anything_is_sent(tmp_path):
+    root = tmp_path / "two-arms"
+    shutil.copytree(ROOT / "examples" / "two-arms", root)
+    path = root / "sequences" / "hold_and_approach.yaml"
+    text = path.read_text()
+    given = "move: {pose: totem, velocity_scale: 0.5, label: A up to Totem}"
+    assert given in text
+    path.write_text(text.replace(given, given.replace("label:", "hazard: hazardous, label:")))
+    result = CliRunner().invoke(app, ["run", str(path), "--virtual-time", "--plain",
+                                      "--log-dir", str(tmp_path / "run")], input="y\nAda\n")
+    assert result.exit_code == 2, result.output
+    said = "".join(result.output.splitlines())   # (a long line may wrap)
+    assert "hold_and_approach.yaml:18:" in said
+    assert ("is hazardous (given in the step; a signed confirm before it): not in a run of "
+            "several arms yet") in said
+    assert not (tmp_path / "run").exists()
