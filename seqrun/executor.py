@@ -180,6 +180,10 @@ class Executor:
         #: Joint solutions of end-effector targets as validated from the measured start
         #: (step number -> user degrees); the steps solve again and must land close.
         self.validated_targets: dict[int, np.ndarray] = {}
+        #: The steps of class caution or hazardous as the preflight validated them (step
+        #: number -> seqrun.sequence.hazard_classes.HazardFinding): their speed caps, and
+        #: the signed confirm before a hazardous one.
+        self.hazards: dict[int, Any] = {}
         #: Measured joints where the last move started (relative checkpoints).
         self.motion_start_deg: np.ndarray | None = None
         #: The moves and waits (seqrun/execution/streaming.py).
@@ -658,6 +662,9 @@ class Executor:
             raise OperatorAbort("operator declined the step")
         if getattr(step.params, "breakpoint", False):
             self._breakpoint(step)
+        hazard = self.hazards.get(step.number)
+        if hazard is not None:
+            self._hazard_class(step, hazard)
         self.check_halt_request()
         if self.stops.aborts:
             raise OperatorAbort("operator abort")
@@ -721,6 +728,22 @@ class Executor:
         Skip (seqrun/execution/on_fail.py); an Abort raises OperatorAbort."""
         return pause_on_failure(self, self._loaded, step, result, exc,
                                 f"step {step.number}: {_label(step)}")
+
+    def _hazard_class(self, step, hazard) -> None:
+        """A step of class caution or hazardous: its class in its detail (report.json,
+        report.html); a hazardous one starts only after a signed confirm (the person at
+        the run, never --yes; the dry run assumes it and says so)."""
+        from seqrun.steps.confirm import ask_signature
+
+        detail = self.current_step.detail if self.current_step is not None else {}
+        detail.update({"hazard": hazard.hazard, "hazard_reason": hazard.reason,
+                       "hazard_speed_scale": hazard.speed_scale})
+        if not hazard.needs_signature:
+            return
+        prompt = (f"Step {step.number} ({_label(step)}) is hazardous: {hazard.reason}. "
+                  "Go on?")
+        signed = ask_signature(self, step.number, prompt, hazard.role)
+        detail.update({k: v for k, v in signed.items() if k != "confirmed"})
 
     def _begin_step(self, step, result: StepResult, *, iteration: int | None = None,
                     bound: dict[str, int] | None = None, attempt: int | None = None) -> None:

@@ -399,11 +399,22 @@ def test_the_qualification_example_validates_and_runs(tmp_path):
     folder_check = invoke("validate", EXAMPLE.parent, cwd=ROOT)   # the campaign folder
     assert folder_check.exit_code == 0, folder_check.output
     assert folder_check.output.splitlines()[-1] == "1 file: all valid"
+    # its hazardous step (out_to_opsafe.yaml) needs a signature: --yes refuses the suite
+    refused = run_virtual(EXAMPLE, ROOT, tmp_path / "yes")
+    assert refused.exit_code == 2, refused.output
+    assert "out_to_opsafe.yaml:8:5) is hazardous" in refused.output
+    assert not (tmp_path / "yes").exists()
     folder = tmp_path / "q"
-    result = run_virtual(EXAMPLE, ROOT, folder)
+    with contextlib.chdir(ROOT):   # the person at the run signs for it
+        result = runner.invoke(app, ["run", str(EXAMPLE), "--virtual-time", "--plain",
+                                     "--no-report", "--log-dir", str(folder)],
+                               input="y\nAda Lovelace\n")
     assert result.exit_code == 0, result.output
     assert "SUITE PASSED (exit 0): Qualification: 5 passed, 0 failed, 0 not run" in \
         result.output
+    [signed] = [r for r in folder.glob("*/record.json")
+                if "signatures" in json.loads(r.read_text())]
+    assert json.loads(signed.read_text())["signatures"][0]["signed_by"] == "Ada Lovelace"
     assert [s.get("name") for s in junit_suites(folder)] == [
         "setup: sequences/startup.yaml", "loop 1 #1: sequences/up_to_totem.yaml",
         "loop 1 #2: sequences/out_to_opsafe.yaml", "loop 1 #3: sequences/back_to_totem.yaml",

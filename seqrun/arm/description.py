@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Annotated, Literal
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, field_validator, model_validator
 
 from seqrun.arm.gripper import GripperSpec
+from seqrun.arm.hazards import Hazards
 
 if TYPE_CHECKING:
     from seqrun.errors import SourceError
@@ -324,6 +325,11 @@ class ArmDescription(_Strict):
     gripper: GripperSpec | None = Field(
         None, description="A PowerCube gripper module on the same bus (e.g. Schunk PG 70), "
                           "for the grip/release/check_gripper steps; none when absent.")
+    hazards: Hazards = Field(
+        Hazards(), description="The hazard classes of motion steps (caution, hazardous): "
+                               "each one's speed cap, the clearance that makes a move one "
+                               "(within_mm) and who signs a hazardous step "
+                               "(docs/safety.md, 'Hazard classes').")
     # SHA-256 of the file it was loaded from (recorded in run folders); not a file key.
     _sha256: str = PrivateAttr("")
     _file: str = PrivateAttr("")

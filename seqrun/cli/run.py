@@ -72,7 +72,8 @@ def run_command(
                                            "(after checking the arm is where N expects it).")] = 1,
     yes: Annotated[bool, typer.Option("--yes", "-y", help="Do not ask before moving a real "
                                       "arm; answer yes to confirm steps (never to a signed "
-                                      "confirm, a breakpoint or an on_fail: pause: "
+                                      "confirm, a breakpoint, an on_fail: pause or a hazardous "
+                                      "step: "
                                       "refused).")] = False,
     log_dir: Annotated[Optional[Path], typer.Option("--log-dir", metavar="DIR",
                                                     help="Run folder (default runs/<time>-<name>/).")] = None,
@@ -171,7 +172,7 @@ def run_command(
     request = RunRequest(file, interface, channel, bitrate, bus_kwargs or [], sim,
                          sim_fault or [], speed, from_step, log_dir, arm_file, command_mode,
                          start, started, virtual_time, project_dir, power_on_at, arm_id,
-                         param or [])
+                         param or [], assume_yes=yes)
     with user_errors():
         try:
             run = prepare_run(request)   # nothing is opened before the checks pass
@@ -185,7 +186,7 @@ def run_command(
                 typer.echo(f"error: {error}", err=True)
             typer.echo(str(RunInvalid(str(file), list(exc.errors))), err=True)
             raise typer.Exit(EXIT_INVALID) from None
-    refusal = refuse_yes_for_attended(run.loaded, yes)
+    refusal = refuse_yes_for_attended(run.loaded, yes, run.hazards)
     if refusal is not None:
         run.connection.close()
         fail(refusal)

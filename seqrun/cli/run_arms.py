@@ -91,7 +91,7 @@ def run_arms(file: Path, project: Any, *, sim: bool, sim_fault: list[str], speed
     from seqrun.service.attended import first_attended
 
     for arm_id, track in tracks.items():   # each arm's thread has no one to ask them yet
-        found = first_attended(track.steps)
+        found = first_attended(track.steps, check.hazards.get(arm_id))
         if found is not None:
             fail(f"arm {arm_id}: {found}: not in a run of several arms yet (run that arm's "
                  "sequence on its own); nothing was sent")

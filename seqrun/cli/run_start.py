@@ -88,17 +88,14 @@ class Attended:
         return ask_choice(prompt, choices, say=say, read=self.read)
 
 
-def refuse_yes_for_attended(loaded, yes: bool) -> str | None:
+def refuse_yes_for_attended(loaded, yes: bool, hazards=None) -> str | None:
     """--yes answers plain confirm steps only: a sequence with a signed confirm or a
-    breakpoint needs a person at the run, so --yes refuses it before anything is sent
-    (why, in one line; None: nothing to refuse)."""
-    from seqrun.service.attended import first_attended
+    breakpoint (or a hazardous step: ``hazards``, the validation's classes by step number)
+    needs a person at the run, so --yes refuses it before anything is sent (why, in one
+    line; None: nothing to refuse)."""
+    from seqrun.service.attended import yes_refusal
 
-    found = first_attended(loaded.steps) if yes else None
-    if found is None:
-        return None
-    return (f"--yes: {found}, which only a person at the run answers; run without --yes; "
-            "nothing was sent")
+    return yes_refusal(loaded.steps, hazards) if yes else None
 
 
 def confirm_start_or_record(console: Console, run, yes: bool, log_dir: Path | None,

@@ -202,7 +202,8 @@ def run_suite_file(file: Path, *, yes: bool, log_dir: Path | None,
                 raise
     assert run is not None
     for sequence in loaded.values():
-        refusal = refuse_yes_for_attended(sequence, yes)
+        refusal = refuse_yes_for_attended(
+            sequence, yes, run.hazards if sequence is run.loaded else None)
         if refusal is not None:
             run.connection.close()
             fail(refusal)

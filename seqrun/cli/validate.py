@@ -36,7 +36,8 @@ def print_report(check, file: Path, *, as_json: bool) -> None:
                                "errors": [e.as_dict() for e in check.errors],
                                "notes": [n.as_dict() for n in check.notes],
                                "clearances": [c.as_dict() for c in check.clearances],
-                               "proximities": [p.as_dict() for p in check.proximities]},
+                               "proximities": [p.as_dict() for p in check.proximities],
+                               **_hazards(check)},
                               indent=2, ensure_ascii=False))
         return
     for error in check.errors:
@@ -54,6 +55,13 @@ def print_report(check, file: Path, *, as_json: bool) -> None:
         typer.echo(f"{name}: invalid ({count} error{'s' * (count != 1)}{notes})")
 
 
+def _hazards(check) -> dict:
+    """The steps of class caution or hazardous, only when there are any (a sequence without
+    them reports exactly as before)."""
+    found = getattr(check, "hazards", None)
+    return {"hazards": [h.as_dict() for h in found]} if found else {}
+
+
 def print_clearances(check) -> None:
     """Per move: the smallest guard clearance along its planned trajectory, and where."""
     for c in check.clearances:
@@ -64,6 +72,8 @@ def print_clearances(check) -> None:
         a, b = p.pair.split("~", 1)
         typer.echo(f"  step {p.step}: closest {a} - {b} {p.distance_mm:.1f} mm (link volumes), "
                    f"at {p.t_s:.2f} s of {p.duration_s:.2f} s")
+    for h in getattr(check, "hazards", ()):  # the steps of class caution or hazardous
+        typer.echo(f"  {h.line()}")
 
 
 def print_dry_run(run, loaded, arm) -> None:
@@ -87,6 +97,11 @@ def print_dry_run(run, loaded, arm) -> None:
         took = "not run" if s.duration_s is None else f"simulated {s.duration_s:6.2f} s"
         label = ("  " * len(chain) + s.label)
         typer.echo(f"  {s.number:2d} {s.status:7s} {_cut(label, 44):44s} {planned}{took}")
+        if s.detail.get("hazard"):
+            scale = s.detail.get("hazard_speed_scale", 1.0)
+            capped = f"; speed capped at {scale * 100:g} %" if scale < 1 else ""
+            typer.echo(f"       hazard: {s.detail['hazard']} — {s.detail.get('hazard_reason')}"
+                       f"{capped}")
         in_force = s.detail.get("limits_in_force") or {}
         peak = s.detail.get("peak_measured_velocity_deg_s")
         if peak:
@@ -333,6 +348,7 @@ def validate_command(
                                "notes": [n.as_dict() for n in check.notes],
                                "clearances": [c.as_dict() for c in check.clearances],
                                "proximities": [p.as_dict() for p in check.proximities],
+                               **_hazards(check),
                                "dry_run": run.as_dict() if run is not None else None,
                                **_values(check.loaded)},
                               indent=2, ensure_ascii=False))

@@ -65,6 +65,7 @@ def preflight(run: Run, check: SequenceCheck, loaded, first_step: int = 1) -> Fi
                    speed=run.speed, module_limits=module_limits)
     run.validated_targets = dict(result.targets_deg)
     run.planned_paths = dict(getattr(result, "paths", {}))
+    run.hazards = dict(getattr(result, "hazards", {}))
     run.emit("preflight", start_deg=rounded(m.user_deg), homed=ready, limits_written=written,
              module_limits={n: rounded(v) for n, v in module_limits.items()},
              states={str(k): v.describe() for k, v in states.items()},
@@ -113,4 +114,5 @@ def recheck(run: Run, check: SequenceCheck, loaded: Any) -> Findings:
     run.validated_targets.update(result.targets_deg)
     if run.planned_paths is not None:
         run.planned_paths.update(getattr(result, "paths", {}))
+    run.hazards.update(getattr(result, "hazards", {}))
     return result

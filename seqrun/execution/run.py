@@ -84,6 +84,7 @@ class Run(Protocol):
     bus_retries: int
     validated_targets: dict[int, np.ndarray]
     planned_paths: dict[int, Any] | None
+    hazards: dict[int, Any]
     limits_in_force: LimitsInForce
     # -- its other parts
     latched: LatchedFaults

@@ -353,12 +353,14 @@ def _step_extra(data: RunData, s: StepView) -> str:
                        "(report.json has none for this step)</span>")
     if s.detail.get("error"):
         out.append(f"<div><strong>error:</strong> {escape(str(s.detail['error']))}</div>")
+    out.append(_hazard(s))
     out.append(_signature(s))
     out.append(_operator_choices(s))
     shown = {k for k, _ in _FIGURE_ROWS} | {"executed_duration_s", "duration_ratio", "error",
                                             "operator_choices",
                                             "signed_by", "signed_role", "signed_at_utc",
-                                            "inputs_sha256",
+                                            "inputs_sha256", "hazard", "hazard_reason",
+                                            "hazard_speed_scale",
                                             "expected_position_mm", "reached_position_mm",
                                             "reached_rpy_deg", "position_error_mm",
                                             "angle_error_deg", "position_tolerance_mm",
@@ -384,6 +386,19 @@ def _operator_choices(s: StepView) -> str:
         f'<div class="operator-choice" data-step="{s.number}"><strong>the operator chose '
         f"{escape(str(c.get('choice')))}</strong> ({escape(str(c.get('by')))}) after: "
         f"{escape(str(c.get('after')))}</div>" for c in choices if isinstance(c, dict))
+
+
+def _hazard(s: StepView) -> str:
+    """A step of class caution or hazardous: its class, why, and its speed cap."""
+    hazard = s.detail.get("hazard")
+    if not hazard:
+        return ""
+    scale = s.detail.get("hazard_speed_scale")
+    capped = (f"; speed capped at {scale * 100:g} %"
+              if isinstance(scale, (int, float)) and scale < 1 else "")
+    return (f'<div class="hazard" data-step="{s.number}"><strong>hazard: '
+            f"{escape(str(hazard))}</strong> — {escape(str(s.detail.get('hazard_reason', '')))}"
+            f"{capped}</div>")
 
 
 def _signature(s: StepView) -> str:

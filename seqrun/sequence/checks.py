@@ -42,6 +42,8 @@ class StaticCheck:
     proximities: list = field(default_factory=list)
     #: The planned path of each move (step number -> (times s, joints rad)).
     paths: dict = field(default_factory=dict, repr=False)
+    #: The steps of class caution or hazardous (HazardFinding), in step order.
+    hazards: list = field(default_factory=list)
     #: Where the steps leave the joints (user degrees; empty when not validated).
     final_deg: dict[str, float] = field(default_factory=dict)
 
@@ -105,6 +107,7 @@ def static_check(file: Path, *, start: str | None = None,
     check.clearances = [result.clearances[n] for n in sorted(result.clearances)]
     check.proximities = [result.proximities[n] for n in sorted(result.proximities)]
     check.paths = dict(result.paths)
+    check.hazards = [result.hazards[n] for n in sorted(result.hazards)]
     check.final_deg = dict(result.final_deg)
     return check
 

@@ -49,6 +49,7 @@ from seqrun.formatting import format_number as _f
 from seqrun.formatting import format_range
 from seqrun.arm.limits import READBACK, LimitsInForce
 from seqrun.arm.poses import park_deg
+from seqrun.sequence.hazard_classes import HazardFinding, classify
 from seqrun.steps.check_context import TrackedJoint
 from seqrun.steps.blocks import has_rescue, normal_path, rescue_paths
 from seqrun.steps.registry import step_kind
@@ -143,6 +144,9 @@ class ValidationResult:
     #: The sampled planned path of each move (step number -> (times s, joints rad)).
     paths: dict[int, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict,
                                                             repr=False)
+    #: Each motion step of class caution or hazardous (step number -> HazardFinding):
+    #: its speed cap and whether it needs a signed confirm (docs/safety.md).
+    hazards: dict[int, HazardFinding] = field(default_factory=dict)
 
     @property
     def valid(self) -> bool:
@@ -183,6 +187,7 @@ class Checker:
         self.clearances: dict[int, Clearance] = {}
         self.targets_deg: dict[int, np.ndarray] = {}
         self.proximities: dict[int, Proximity] = {}
+        self.hazards: dict[int, HazardFinding] = {}
         self.motion_start_deg: np.ndarray | None = None  # where the last move started
         # The step after which where the arm stands is not known (an unreachable target):
         # the checks that compare with it are left out until a move says again.
@@ -358,19 +363,47 @@ class Checker:
         if not moving:
             return
         velocity, acceleration = self.limits.maxima()  # the limits in force, as the run
-        try:
-            limits = Limits.from_arm(self.arm, velocity_scale=params.velocity_scale,
-                                     acceleration_scale=params.acceleration_scale,
-                                     speed=self.speed, velocity_deg_s={
-                                         n: v for n, v in params.velocity_deg_s.items()
-                                         if n in self.joints},
-                                     max_velocity_deg_s=velocity,
-                                     max_acceleration_deg_s2=acceleration)
-            plan = plan_move(np.radians(start), np.radians(end), limits, moving)
-        except PlanningError as exc:
-            self.errors.append(step.error(f"this move cannot be planned: {exc}"))
-            return
-        self.check_path_guards(step, *plan_samples(plan), what="planned trajectory")
+        # The hazard class's speed cap narrows the plan, and the plan it narrows is the
+        # one checked: a class derived from this plan's clearance that caps it lower is
+        # planned and checked again (at most twice: there are two capped classes).
+        cap, errors = self.hazard_speed_scale(step), len(self.errors)
+        for _ in range(3):
+            try:
+                limits = Limits.from_arm(self.arm,
+                                         velocity_scale=min(params.velocity_scale, cap),
+                                         acceleration_scale=params.acceleration_scale,
+                                         speed=self.speed, velocity_deg_s={
+                                             n: v for n, v in params.velocity_deg_s.items()
+                                             if n in self.joints},
+                                         max_velocity_deg_s=velocity,
+                                         max_acceleration_deg_s2=acceleration)
+                plan = plan_move(np.radians(start), np.radians(end), limits, moving)
+            except PlanningError as exc:
+                self.errors.append(step.error(f"this move cannot be planned: {exc}"))
+                return
+            self.check_path_guards(step, *plan_samples(plan), what="planned trajectory")
+            derived = self.hazard_speed_scale(step)
+            if len(self.errors) > errors or derived >= cap:
+                return
+            cap = derived
+
+    def hazard_speed_scale(self, step: ResolvedStep) -> float:
+        """The speed cap of ``step``'s hazard class as far as it is known (given, or
+        derived from the clearances recorded so far); 1.0: none."""
+        finding, _ = classify(step, self.arm, motion=True, closest=self.closest(step))
+        return finding.speed_scale if finding is not None else 1.0
+
+    def closest(self, step: ResolvedStep) -> tuple[float, str] | None:
+        """The move's smallest planned clearance (mm) so far, to a guard or between link
+        volumes and obstacles, and what it is to (None: none recorded)."""
+        found: list[tuple[float, str]] = []
+        clearance = self.clearances.get(step.number)
+        if clearance is not None:
+            found.append((clearance.margin_mm, f"guard {clearance.guard}"))
+        proximity = self.proximities.get(step.number)
+        if proximity is not None:
+            found.append((proximity.distance_mm, proximity.pair.replace("~", " to ")))
+        return min(found, default=None)
 
     def check_path_guards(self, step: ResolvedStep, times: np.ndarray, path_rad: np.ndarray,
                           *, what: str) -> None:
@@ -557,6 +590,12 @@ class Checker:
             check_flow(self, step, step.params, motion=kind.motion)
             if step.blocks:
                 check_block(self, step)
+            finding, wrong = classify(step, self.arm, motion=kind.motion,
+                                      closest=self.closest(step))
+            if wrong is not None:
+                self.errors.append(wrong)
+            if finding is not None:
+                self.hazards[step.number] = finding
             # a step's findings in the order they appear in its text, then those in other
             # files (the pose file it names)
             here = step.location.file
@@ -573,6 +612,7 @@ class Checker:
         result.targets_deg = dict(self.targets_deg)
         result.proximities = dict(self.proximities)
         result.paths = dict(self.paths)
+        result.hazards = dict(self.hazards)
         return result
 
 
@@ -618,7 +658,8 @@ def validate_sequence(loaded: LoadedSequence, arm: ArmDescription,
         for mine, theirs in ((result.clearances, other.clearances),
                              (result.targets_deg, other.targets_deg),
                              (result.proximities, other.proximities),
-                             (result.paths, other.paths)):
+                             (result.paths, other.paths),
+                             (result.hazards, other.hazards)):
             for number, value in theirs.items():
                 mine.setdefault(number, value)  # type: ignore[attr-defined]
     return result

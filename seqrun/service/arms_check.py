@@ -67,6 +67,8 @@ class ArmsCheck:
     notes: list[SourceError] = field(default_factory=list)
     #: Per arm: the smallest guard clearance / link-volume clearance of each move.
     clearances: dict[str, list] = field(default_factory=dict)
+    #: Per arm: its steps of class caution or hazardous (step number -> HazardFinding).
+    hazards: dict[str, dict] = field(default_factory=dict)
     proximities: dict[str, list] = field(default_factory=dict)
     #: The smallest clearance between each pair of arms (ArmsClearance).
     between: list = field(default_factory=list)
@@ -166,6 +168,7 @@ def check_arms_sequence(file: Path, project: Any, *, start: str | None = None,
                         if n not in check.notes]
         check.clearances[arm_id] = [result.clearances[n] for n in sorted(result.clearances)]
         check.proximities[arm_id] = [result.proximities[n] for n in sorted(result.proximities)]
+        check.hazards[arm_id] = dict(result.hazards)
         plans.append(ArmPlan(arm_id, arm, contexts[arm_id].base_transform(), track, result,
                              start_deg))
     if check.errors:

@@ -193,7 +193,7 @@ class ArmSessions:
             from seqrun.service.attended import first_attended
 
             for arm_id, track in tracks.items():  # each arm's thread has no one to ask them
-                found = first_attended(track.steps)
+                found = first_attended(track.steps, check.hazards.get(arm_id))
                 if found is not None:
                     raise Refused(f"run: arm {arm_id}: {found}: not in a run of several arms "
                                   "yet")

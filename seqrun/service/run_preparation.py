@@ -51,6 +51,9 @@ class RunRequest:
     arm_id: str | None = None
     #: ``--param NAME=VALUE`` options: the sequence's parameters over their defaults.
     params: Sequence[str] = ()
+    #: ``--yes``: a run nobody attends, refused before the bus is opened when a step needs
+    #: a person (a signed confirm, a breakpoint, a hazardous step, given or derived).
+    assume_yes: bool = False
 
 
 @dataclass
@@ -69,6 +72,9 @@ class PreparedRun:
     context: ArmContext | None = None
     #: The files used in place of shipped ones (arm, poses), as ``validate`` notes them.
     overrides: list = field(default_factory=list)
+    #: The steps of class caution or hazardous as validated from the assumed start (step
+    #: number -> HazardFinding): a hazardous one makes --yes refuse the run.
+    hazards: dict = field(default_factory=dict)
 
     @property
     def arm_id(self) -> str | None:
@@ -143,6 +149,12 @@ def prepare_run(request: RunRequest) -> PreparedRun:
         campaign_records.refuse(loaded, arm_path, static.errors, r.log_dir, arm=arm,
                                 arm_id=context.arm_id)
         raise RunInvalid(loaded.file, list(static.errors))
+    if r.assume_yes:   # (derived hazard classes are known from here on)
+        from seqrun.service.attended import yes_refusal
+
+        refusal = yes_refusal(loaded.steps, static.hazards)
+        if refusal is not None:
+            raise UserInputError(refusal)
     if r.virtual_time and not context.bus.is_simulator:
         raise UserInputError("--virtual-time needs the simulator")
     if not r.virtual_time:   # (virtual time is the simulator, asked for)
@@ -165,7 +177,7 @@ def prepare_run(request: RunRequest) -> PreparedRun:
         raise UserInputError("--power-on-at applies to the built-in simulator (seqrun sim "
                              "serve has its own)")
     return PreparedRun(loaded, arm, connection, Path(arm_path), r.file, context,
-                       override_notes(loaded, Path(arm_path)))
+                       override_notes(loaded, Path(arm_path)), dict(static.hazards))
 
 
 def run_folder(loaded: LoadedSequence, log_dir: Path | None) -> Path:

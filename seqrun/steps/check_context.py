@@ -90,6 +90,11 @@ class CheckContext(Protocol):
     notes: list[SourceError]
 
     # -- the checks more than one kind needs
+    def hazard_speed_scale(self, step: ResolvedStep) -> float:
+        """The speed cap of the step's hazard class (given, or derived from its planned
+        clearance so far); 1.0: none."""
+        ...
+
     def pose(self, step: ResolvedStep, name: str, *,
              target: bool) -> dict[str, float] | None: ...
 

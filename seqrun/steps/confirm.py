@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import datetime as _dt
-from typing import TYPE_CHECKING, Annotated, Any, ClassVar
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Annotated, Any, ClassVar, Protocol, TypeVar
 
 from pydantic import Field
 
@@ -13,8 +14,27 @@ from seqrun.steps.params import StepParams, one_key_value
 
 if TYPE_CHECKING:
     from seqrun.steps.check_context import CheckContext
-    from seqrun.steps.context import StepContext
+    from seqrun.steps.context import AttendedQuestions, StepContext
     from seqrun.steps.resolved import ResolvedStep
+
+
+_Answer = TypeVar("_Answer")
+
+
+class Signing(Protocol):
+    """What asking for a signature needs of the run (a step's context, the executor
+    before a hazardous step)."""
+
+    dry_run: bool
+    not_verified: list[str]
+    inputs_sha256: str | None
+
+    @property
+    def attended(self) -> AttendedQuestions | None: ...
+
+    def ask_operator(self, question: Callable[[Any], _Answer], arg: Any) -> _Answer: ...
+
+    def emit(self, type_: str, **data: Any) -> None: ...
 
 
 class ConfirmParams(StepParams):
@@ -64,23 +84,30 @@ def _signed(step: ResolvedStep[ConfirmParams], ex: StepContext) -> dict:
     """A signed confirm: only a person answers it, and their name is kept with what they
     signed (the validated inputs' sha256) and when."""
     params = step.params
-    role = f" by the {params.role}" if params.role else ""
+    return ask_signature(ex, step.number, params.prompt, params.role)
+
+
+def ask_signature(ex: Signing, number: int, prompt: str, role: str | None) -> dict:
+    """Ask ``prompt`` of the person at the run, who answers yes with their name (never
+    --yes); the signature as a step's detail keeps it. A no, or nobody to ask:
+    OperatorAbort. The dry run assumes yes and says so."""
+    by = f" by the {role}" if role else ""
     if ex.dry_run:
-        ex.not_verified.append(f"step {step.number}: signed operator confirmation "
-                               f"'{params.prompt}'{role} (assumed yes)")
+        ex.not_verified.append(f"step {number}: signed operator confirmation "
+                               f"'{prompt}'{by} (assumed yes)")
         return {"confirmed": "assumed (dry run)"}
     if ex.attended is None:
-        raise OperatorAbort(f"nobody to sign '{params.prompt}'{role} (a signed confirm is "
+        raise OperatorAbort(f"nobody to sign '{prompt}'{by} (a signed confirm is "
                             "answered by a person, never by --yes)")
     attended = ex.attended
-    name = ex.ask_operator(lambda text: attended.sign(text, params.role), params.prompt)
+    name = ex.ask_operator(lambda text: attended.sign(text, role), prompt)
     if not name:
-        raise OperatorAbort(f"operator declined: {params.prompt}")
-    signature = {"signed_by": str(name), "signed_role": params.role,
+        raise OperatorAbort(f"operator declined: {prompt}")
+    signature = {"signed_by": str(name), "signed_role": role,
                  "signed_at_utc": _dt.datetime.now(_dt.timezone.utc)
                  .isoformat(timespec="seconds").replace("+00:00", "Z"),
                  "inputs_sha256": ex.inputs_sha256}
-    ex.emit("confirm_signed", text=params.prompt, **signature)
+    ex.emit("confirm_signed", text=prompt, **signature)
     return {"confirmed": True, **signature}
 
 

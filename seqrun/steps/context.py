@@ -63,6 +63,16 @@ class AttendedQuestions(Protocol):
         input ended, the question was withdrawn), taken as an abort."""
 
 
+class HazardOfStep(Protocol):
+    """A step's hazard class as the validation found it (what a handler reads of it)."""
+
+    @property
+    def hazard(self) -> str: ...
+
+    @property
+    def speed_scale(self) -> float: ...
+
+
 class StepContext(Protocol):
     """The executor as a step handler sees it."""
 
@@ -82,6 +92,11 @@ class StepContext(Protocol):
     inputs_sha256: str | None
     #: Joint solutions validated from the measured start (step number -> user degrees).
     validated_targets: Mapping[int, np.ndarray]
+    #: The steps of class caution or hazardous as validated from the measured start
+    #: (step number -> their class: its speed cap, docs/safety.md "Hazard classes").
+    @property
+    def hazards(self) -> Mapping[int, HazardOfStep]: ...
+
     # -- state a handler reads or updates
     limits_in_force: LimitsInForce      # MaxVel/MaxAcc the modules hold (set_limits writes)
     motion_start_deg: np.ndarray | None  # measured joints where the last move started

@@ -15,6 +15,7 @@ from pydantic_core import PydanticCustomError
 
 from seqrun.steps.kind import StepKind
 from seqrun.steps.params import (
+    HazardKey,
     Finite,
     JointName,
     PoseName,
@@ -80,6 +81,7 @@ class MoveParams(StepParams):
     timeout_s: Positive | None = Field(
         None, description="Time allowed for the whole move in seconds (default: the planned "
                           "duration plus the arm file's control.settle_timeout_s).")
+    hazard: HazardKey = None
 
     @model_validator(mode="after")
     def _target(self) -> MoveParams:
@@ -264,7 +266,7 @@ def _timeout(checker: CheckContext, step: ResolvedStep[MoveParams], params: Move
             f"timeout_s {f(params.timeout_s)} s is longer than the arm file allows "
             f"(control.max_wait_s = {f(checker.arm.control.max_wait_s)} s)", "timeout_s"))
         return
-    duration = None if checker.position_unknown else _planned_duration(checker, params, target, names)
+    duration = None if checker.position_unknown else _planned_duration(checker, step, params, target, names)
     if duration is not None and duration > params.timeout_s:
         checker.errors.append(step.error(
             f"timeout_s {f(params.timeout_s)} s is shorter than the move, planned to "
@@ -273,7 +275,8 @@ def _timeout(checker: CheckContext, step: ResolvedStep[MoveParams], params: Move
             "timeout_s"))
 
 
-def _planned_duration(checker: CheckContext, params: MoveParams, target: dict[str, float],
+def _planned_duration(checker: CheckContext, step: ResolvedStep[MoveParams],
+                      params: MoveParams, target: dict[str, float],
                       names: list[str]) -> float | None:
     import numpy as np
 
@@ -286,7 +289,8 @@ def _planned_duration(checker: CheckContext, params: MoveParams, target: dict[st
               if abs(target[n] - checker.joints[n].position) > 1e-9]
     velocity, acceleration = checker.limits.maxima()
     try:
-        limits = Limits.from_arm(checker.arm, velocity_scale=params.velocity_scale,
+        limits = Limits.from_arm(checker.arm, velocity_scale=min(
+                                     params.velocity_scale, checker.hazard_speed_scale(step)),
                                  acceleration_scale=params.acceleration_scale,
                                  velocity_deg_s=params.velocity_deg_s,
                                  max_velocity_deg_s=velocity,
@@ -343,7 +347,7 @@ def run(step: ResolvedStep[MoveParams], ex: StepContext) -> dict:
     named = set(ex.arm.joint_names) if params.pose is not None else set(params.joints or {})
     active = [i for i in ex.movable if ex.arm.joints[i].name in named]
     velocity, acceleration = ex.limits_in_force.maxima()
-    limits = Limits.from_arm(ex.arm, velocity_scale=params.velocity_scale,
+    limits = Limits.from_arm(ex.arm, velocity_scale=_capped(step, ex),
                              acceleration_scale=params.acceleration_scale, speed=ex.speed,
                              velocity_deg_s=params.velocity_deg_s,
                              max_velocity_deg_s=velocity, max_acceleration_deg_s2=acceleration)
@@ -376,7 +380,7 @@ def _run_to_tool_pose(step: ResolvedStep[MoveParams], ex: StepContext) -> dict:
     except Unreachable as exc:
         raise RunAborted("unreachable", f"end-effector target {exc}") from None
     detail = agree(step, ex, solution.joints_deg)
-    limits = Limits.from_arm(ex.arm, velocity_scale=params.velocity_scale,
+    limits = Limits.from_arm(ex.arm, velocity_scale=_capped(step, ex),
                              acceleration_scale=params.acceleration_scale, speed=ex.speed,
                              velocity_deg_s=params.velocity_deg_s)
     tolerance = params.tolerance_deg or ex.arm.control.position_tolerance_deg
@@ -384,6 +388,13 @@ def _run_to_tool_pose(step: ResolvedStep[MoveParams], ex: StepContext) -> dict:
     metrics = ex.move(solution.joints_deg, list(ex.movable), limits, tolerance_deg=tolerance,
                       timeout_s=params.timeout_s, start=reading)
     return {**detail, **metrics}
+
+
+def _capped(step: ResolvedStep[MoveParams], ex: StepContext) -> float:
+    """The step's velocity scale under its hazard class's speed cap (the smaller), as
+    the validation planned it (docs/safety.md, 'Hazard classes')."""
+    hazard = ex.hazards.get(step.number)
+    return min(step.params.velocity_scale, hazard.speed_scale if hazard is not None else 1.0)
 
 
 KIND = StepKind(

@@ -12,7 +12,8 @@ from pydantic import Field, model_validator
 
 from seqrun.errors import RunAborted
 from seqrun.steps.kind import StepKind
-from seqrun.steps.params import Positive, StepParams, Vector3, check_pose_target, one_key_value
+from seqrun.steps.params import (HazardKey, Positive, StepParams, Vector3, check_pose_target,
+                                 one_key_value)
 
 if TYPE_CHECKING:
     from seqrun.steps.check_context import CheckContext
@@ -60,6 +61,7 @@ class MoveLinearParams(StepParams):
     timeout_s: Positive | None = Field(
         None, description="Time allowed for the whole move in seconds (default: the planned "
                           "duration plus the arm file's control.settle_timeout_s).")
+    hazard: HazardKey = None
 
     @model_validator(mode="after")
     def _target(self) -> MoveLinearParams:
@@ -89,15 +91,26 @@ def check(checker: CheckContext,
     keep = 1 - checker.arm.control.tracking_reserve
     max_velocity = np.array([checker.limits.velocity(n).value
                              for n in checker.arm.joint_names]) * keep
-    try:
-        linear = plan_linear(
-            checker.arm, params.tool, checker.tracked(), target,
+    start = checker.tracked()
+
+    def plan(cap: float):
+        # The hazard class's speed cap bounds the joint speeds the line may need (the line
+        # is not slowed down: a line too fast for it is refused, lower speed_mm_s).
+        return plan_linear(
+            checker.arm, params.tool, start, target,
             speed_mm_s=params.speed_mm_s * checker.speed,
             rotation_speed_deg_s=params.rotation_speed_deg_s * checker.speed,
             acceleration_mm_s2=params.acceleration_mm_s2 * checker.speed,
-            jerk_mm_s3=params.jerk_mm_s3 * checker.speed, max_velocity_deg_s=max_velocity)
+            jerk_mm_s3=params.jerk_mm_s3 * checker.speed,
+            max_velocity_deg_s=max_velocity * cap)
+
+    cap = checker.hazard_speed_scale(step)
+    try:
+        linear = plan(cap)
     except PathError as exc:
         hint = pointing_up_hint(checker.arm, params.tool, target) if exc.unreachable else ""
+        if cap < 1 and not exc.unreachable:
+            hint += f" (the speed cap of its hazard class, {cap * 100:g} %)"
         checker.errors.append(step.error(f"straight line: {exc}{hint}", "position_mm"))
         checker.lost_at = step  # the run ends here: no second error about the steps after
         return
@@ -106,6 +119,14 @@ def check(checker: CheckContext,
         return
     checker.check_path_guards(step, linear.plan.times, linear.plan.positions,
                               what="straight line of the tool")
+    derived = checker.hazard_speed_scale(step)  # a class its clearance derives
+    if derived < cap:
+        try:
+            plan(derived)
+        except PathError as exc:
+            checker.errors.append(step.error(
+                f"straight line: {exc} (the speed cap of its hazard class, "
+                f"{derived * 100:g} %)", "speed_mm_s"))
     checker.solution_note(step, linear.joints_deg[-1],
                           f" ({linear.path.length_mm:.1f} mm in {linear.plan.duration:.2f} s, "
                           f"smallest manipulability {linear.min_manipulability:.3f})")
@@ -124,7 +145,10 @@ def run(step: ResolvedStep[MoveLinearParams], ex: StepContext) -> dict:
     reading = ex.read_arm()
     measured = reading.user_deg
     keep = 1 - ex.arm.control.tracking_reserve
-    max_velocity = np.array([j.max_velocity_deg_s for j in ex.arm.joints]) * keep * ex.speed
+    hazard = ex.hazards.get(step.number)  # its class's speed cap, as validated
+    cap = hazard.speed_scale if hazard is not None else 1.0
+    max_velocity = (np.array([j.max_velocity_deg_s for j in ex.arm.joints]) * keep * ex.speed
+                    * cap)
     try:
         linear = plan_linear(ex.arm, params.tool, measured, tool_target(params, ex, measured),
                              speed_mm_s=params.speed_mm_s * ex.speed,

@@ -29,7 +29,7 @@ from pydantic import Field
 
 from seqrun.errors import RunAborted
 from seqrun.steps.kind import StepKind
-from seqrun.steps.params import JointName, Positive, StepParams, one_key_value
+from seqrun.steps.params import HazardKey, JointName, Positive, StepParams, one_key_value
 
 if TYPE_CHECKING:
     import numpy as np
@@ -79,6 +79,7 @@ class MoveTrajectoryParams(StepParams):
         None, description="How long after the trajectory's end the goal tolerances must be "
                           "met by, seconds (constraints.goal_time; default: the arm file's "
                           "control.settle_timeout_s).")
+    hazard: HazardKey = None
 
     def tolerances(self) -> TrajectoryTolerances:
         """The step's path and goal tolerances (seqrun/arm/trajectory_tolerances.py)."""

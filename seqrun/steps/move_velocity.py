@@ -19,8 +19,8 @@ from pydantic import Field, model_validator
 from pydantic_core import PydanticCustomError
 
 from seqrun.steps.kind import StepKind
-from seqrun.steps.params import (Finite, JointName, LimitPair, Positive, Scale, StepParams,
-                                 one_key_value)
+from seqrun.steps.params import (Finite, HazardKey, JointName, LimitPair, Positive, Scale,
+                                 StepParams, one_key_value)
 
 if TYPE_CHECKING:
     from seqrun.arm.description import ArmDescription
@@ -61,6 +61,7 @@ class MoveVelocityParams(StepParams):
     tolerance_deg: Positive | None = Field(
         None, description="In-position tolerance at the stop in degrees (default: the arm "
                           "file's control.position_tolerance_deg).")
+    hazard: HazardKey = None
 
     @model_validator(mode="after")
     def _envelope(self) -> MoveVelocityParams:

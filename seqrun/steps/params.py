@@ -45,6 +45,7 @@ __all__ = [
     "either",
     "exactly_one",
     "ExpressionText",
+    "HazardKey",
     "modules_value",
     "one_key_value",
 ]
@@ -134,6 +135,17 @@ def _expression(value: str, info: ValidationInfo) -> str:
 ExpressionText = Annotated[str, AfterValidator(_expression), Field(
     min_length=1, description="An expression over the run's telemetry (docs/sequence-format.md, "
                               "'Expressions'), e.g. 'tool.z_mm > 40 and not moving'.")]
+
+
+#: A motion step's hazard class (docs/safety.md, "Hazard classes"): its own key on the
+#: kinds that move the arm (any other step refuses it as an unknown key).
+HazardKey = Annotated[Literal["normal", "caution", "hazardous"] | None, Field(
+    description="The step's hazard class: caution and hazardous moves run at most at "
+                "their class's speed cap (the arm file's hazards; on move steps), a "
+                "hazardous one starts only after a signed confirm (--yes never answers "
+                "it). Default: normal, or what the arm file's hazards.*.within_mm derive "
+                "from the move's smallest planned clearance; lower than that is an error "
+                "(docs/safety.md, 'Hazard classes').")]
 
 
 #: What a requirement id or a tag may be (docs/campaigns.md, "Requirements").
