@@ -49,7 +49,8 @@ def missing_parts(kind: StepKind) -> list[str]:
 
 def protocol_members(protocol: type) -> set[str]:
     names = set(getattr(protocol, "__annotations__", {}))
-    names |= {n for n, v in vars(protocol).items() if callable(v) and not n.startswith("_")}
+    names |= {n for n, v in vars(protocol).items()
+              if (callable(v) or isinstance(v, property)) and not n.startswith("_")}
     return names
 
 
@@ -85,17 +86,19 @@ def test_every_step_module_with_a_kind_is_registered():
 # --------------------------------------------------------------------------- agreement
 def test_schema_union_and_registry_agree():
     names = [kind.name for kind in KINDS]
-    assert list(schema.PARAMS_MODELS) == names + ["include"]
-    assert list(schema.STEP_KINDS) == names + ["include"]
+    assert list(schema.PARAMS_MODELS) == names + ["include", "block"]
+    assert list(schema.STEP_KINDS) == names + ["include", "block"]
     assert set(schema.BARE_STEPS) == {k.name for k in KINDS if k.bare}
     for kind in KINDS:
         assert schema.PARAMS_MODELS[kind.name] is kind.params
         assert schema.STEP_MODELS[kind.name].kind == kind.name
-    # the union the files are validated with: one tagged member per kind (+ bare, include)
+    # the union the files are validated with: one tagged member per kind (+ bare, include,
+    # block)
     union = schema.step_adapter().core_schema
     while union.get("type") != "tagged-union":
         union = union["schema"]
-    assert set(union["choices"]) == {f"step:{n}" for n in names} | {"step:bare", "step:include"}
+    assert set(union["choices"]) == ({f"step:{n}" for n in names}
+                                     | {"step:bare", "step:include", "step:block"})
     # and the JSON Schema editors see
     defs = schema.sequence_json_schema()["$defs"]
     for kind in KINDS:

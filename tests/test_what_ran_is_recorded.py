@@ -13,7 +13,7 @@ import pytest
 from typer.testing import CliRunner
 
 import seqrun.cli  # noqa: F401  (registers the commands)
-import seqrun.cli.run as cli_run
+import seqrun.cli.run_start as run_start  # (where a terminal run asks its first question)
 from seqrun.cli.app import app
 from seqrun.sequence.loader import load_sequence
 from seqrun.service import campaign_records
@@ -49,14 +49,14 @@ def test_a_pose_edited_while_the_run_waits_is_recorded_as_validated(campaign, mo
     totem = campaign / "poses" / "totem.yaml"
     totem.write_bytes(shipped_totem)
     validated = totem.read_bytes()
-    real_confirm_start = cli_run._confirm_start
+    real_confirm_start = run_start._confirm_start
 
     def edit_while_asking(console, run, yes, *more):  # the operator takes their time
         totem.write_bytes(validated.replace(b"j2:", b"j2: 0  # edited\n  old_j2:", 1)
                           + b"# edited during the question\n")
         return real_confirm_start(console, run, yes, *more)
 
-    monkeypatch.setattr(cli_run, "_confirm_start", edit_while_asking)
+    monkeypatch.setattr(run_start, "_confirm_start", edit_while_asking)
     result = invoke("run", campaign / "sequences" / "first.yaml", "--yes", "--virtual-time",
                     "--plain", "--no-report")
     assert result.exit_code == 0, result.output
