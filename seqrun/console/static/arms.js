@@ -305,6 +305,7 @@ async function select(id) {
   $("#jog").replaceChildren(...arm.scene.joints.filter((j) => j.locked === null).map((j) => jog.buttons(j.name)));
   joints.build(arm.scene.joints);
   $("#gripper-panel").hidden = true;
+  $("#gripper-state").textContent = "";  // (never the other arm's state, even hidden)
   gripper.show();
   const poses = await api("GET", `/arms/${id}/poses`).catch(() => []);
   if (state.selected !== id) return;
