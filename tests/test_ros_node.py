@@ -476,7 +476,9 @@ def test_the_command_refuses_a_second_node_in_one_line(monkeypatch):
     rclpy.init(context=context, domain_id=domain_id())
     there = Node(f"seqrun_{token}", context=context)
     try:
-        env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id()))
+        # (watched until seen: on a busy host discovery takes longer than the default 3 s,
+        # and a node that did not see the other would serve)
+        env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id()), SEQRUN_ROS_DISCOVERY_S="60")
         refused = subprocess.run([sys.executable, "-m", "seqrun", "ros", "--sim",
                                   "--arm-name", f"lwa3_{token}", "--node-name",
                                   f"seqrun_{token}"], cwd=ROOT, env=env, capture_output=True,

@@ -163,7 +163,8 @@ def ros_command(
     try:
         try:
             with user_errors():  # a parameter out of range (-p rate:=5): one line
-                node = SeqrunNode(session, arm_name=name, rate_hz=rate, node_name=node_name)
+                node = SeqrunNode(session, arm_name=name, rate_hz=rate, node_name=node_name,
+                                  discovery_s=_discovery_s())
         except NodeTaken as exc:
             fail(str(exc))
         banner = "SIMULATOR" if connection.is_simulator else connection.description
@@ -188,3 +189,24 @@ def ros_command(
         if rclpy.ok():
             rclpy.shutdown()
 
+
+#: How long the node watches the ROS graph for another node of its name or arm before it
+#: serves (s): ``$SEQRUN_ROS_DISCOVERY_S``, else the node's default (a busy host may need
+#: more: discovery there takes over a second).
+DISCOVERY_ENV = "SEQRUN_ROS_DISCOVERY_S"
+
+
+def _discovery_s() -> float | None:
+    import math
+    import os
+
+    text = os.environ.get(DISCOVERY_ENV)
+    if text is None:
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value) or not 0 < value <= 300:
+        fail(f"${DISCOVERY_ENV}={text!r}: expected seconds, more than 0 and at most 300")
+    return value
